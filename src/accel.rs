@@ -1,0 +1,1 @@
+//! BVHs over the triangles of one frame.

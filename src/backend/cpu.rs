@@ -1,0 +1,1 @@
+//! CPU ray backend.

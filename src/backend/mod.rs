@@ -1,0 +1,116 @@
+//! The batched ray interface. Methods trace rays only through
+//! [`RayBackend`]; the CPU backend ([`cpu::CpuBackend`]) works everywhere and
+//! a GPU backend can replace it without any method changing.
+//!
+//! `Ray` and `Hit` are `#[repr(C)]` plain data so that a GPU backend can upload
+//! and read them back as they are.
+
+pub mod cpu;
+
+use crate::scene::Snapshot;
+use bytemuck::{Pod, Zeroable};
+use glam::Vec3;
+
+/// A ray segment `origin + t·dir`, `t ∈ [tmin, tmax]`. `dir` need not be
+/// unit length; `t` is in units of `dir`.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct Ray {
+    pub origin: [f32; 3],
+    pub tmin: f32,
+    pub dir: [f32; 3],
+    pub tmax: f32,
+}
+
+impl Ray {
+    pub fn new(origin: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
+        Ray {
+            origin: origin.to_array(),
+            tmin,
+            dir: dir.to_array(),
+            tmax,
+        }
+    }
+
+    /// A shadow segment from `from` towards `to`, stopping just short of `to`.
+    pub fn segment(from: Vec3, to: Vec3) -> Self {
+        Ray::new(from, to - from, 0.0, 1.0 - SHADOW_EPSILON)
+    }
+
+    pub fn origin(&self) -> Vec3 {
+        Vec3::from_array(self.origin)
+    }
+
+    pub fn dir(&self) -> Vec3 {
+        Vec3::from_array(self.dir)
+    }
+
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin() + self.dir() * t
+    }
+}
+
+/// Relative shortening of shadow segments so they do not hit the light they
+/// aim at (its triangle lies exactly at t = 1).
+pub const SHADOW_EPSILON: f32 = 1e-4;
+
+/// Closest hit: the triangle (snapshot triangle id), its object, the
+/// barycentrics `(u, v)` of the hit (`p = p0(1−u−v) + p1·u + p2·v`) and `t`.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct Hit {
+    pub t: f32,
+    pub triangle: u32,
+    pub object: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+impl Hit {
+    pub const MISS: Hit = Hit {
+        t: f32::INFINITY,
+        triangle: u32::MAX,
+        object: u32::MAX,
+        u: 0.0,
+        v: 0.0,
+    };
+
+    pub fn is_hit(&self) -> bool {
+        self.triangle != u32::MAX
+    }
+}
+
+/// Statistics a backend keeps: rays traced since creation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayCounts {
+    pub closest: u64,
+    pub any: u64,
+}
+
+impl RayCounts {
+    pub fn total(&self) -> u64 {
+        self.closest + self.any
+    }
+}
+
+/// Batched ray tracing over the geometry of one frame.
+pub trait RayBackend: Send + Sync {
+    /// Human-readable name, e.g. "cpu (2 threads)".
+    fn name(&self) -> String;
+
+    /// Makes `snapshot` the geometry rays are traced against. Static
+    /// triangles are (re)built only when they changed; dynamic ones every call.
+    fn set_geometry(&mut self, snapshot: &Snapshot);
+
+    /// For each ray, the closest intersection in `[tmin, tmax]` or [`Hit::MISS`].
+    fn closest_hit(&self, rays: &[Ray], hits: &mut [Hit]);
+
+    /// For each ray, whether anything intersects it in `[tmin, tmax]`.
+    fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]);
+
+    /// Rays traced so far.
+    fn ray_counts(&self) -> RayCounts;
+
+    /// Batch size that keeps this backend busy.
+    fn preferred_batch(&self) -> usize;
+}

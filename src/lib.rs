@@ -1,0 +1,31 @@
+//! radcache: a renderer for animated scenes with global illumination that
+//! reuses lighting work across frames.
+//!
+//! The crate is laid out one module per concept (see `DESIGN.md` in the
+//! shared design folder for the full picture):
+//!
+//! | module      | owns                                                          |
+//! |-------------|---------------------------------------------------------------|
+//! | [`scene`]   | scene description, glTF loading, built-in scenes, animation   |
+//! | [`accel`]   | BVHs over the triangles of one frame (obvhs)                   |
+//! | [`backend`] | the batched ray interface and its CPU implementation          |
+//! | [`sampling`]| deterministic random numbers keyed by (seed, frame, pixel, sample) |
+//! | [`material`]| BSDFs: Lambertian and energy-conserving modified Phong         |
+//! | [`light`]   | light sampling: emissive triangles by power, point and spot   |
+//! | [`method`]  | rendering methods behind one trait (`path`, later `ic`, `trc`) |
+//! | [`film`]    | RGB f32 images, EXR and PNG input/output                        |
+//! | [`metrics`] | RMSE, relative RMSE, block bias and flicker; `compare`         |
+//! | [`render`]  | the frame loop: animation → geometry → method → files         |
+//! | [`cli`]     | the `radcache` command line                                    |
+
+pub mod accel;
+pub mod backend;
+pub mod cli;
+pub mod film;
+pub mod light;
+pub mod material;
+pub mod method;
+pub mod metrics;
+pub mod render;
+pub mod sampling;
+pub mod scene;

@@ -1,0 +1,173 @@
+//! Keyframed node animation with glTF 2.0 semantics (glTF spec §3.11 and
+//! Appendix C): translation/rotation/scale channels, `LINEAR` (slerp for
+//! rotations), `STEP` and `CUBICSPLINE` (Hermite with per-key tangents).
+//! Before the first key the first value holds, after the last the last.
+
+use super::Trs;
+use glam::{Quat, Vec3, Vec4};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Property {
+    Translation,
+    Rotation,
+    Scale,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interpolation {
+    Linear,
+    Step,
+    CubicSpline,
+}
+
+/// One animated property of one node. Values are stored as `Vec4`
+/// (xyz for translation and scale, xyzw for rotation quaternions). For
+/// `CubicSpline`, `values` holds three entries per key, as glTF does:
+/// in-tangent, value, out-tangent.
+#[derive(Clone, Debug)]
+pub struct Channel {
+    pub node: usize,
+    pub property: Property,
+    pub interpolation: Interpolation,
+    pub times: Vec<f32>,
+    pub values: Vec<Vec4>,
+}
+
+impl Channel {
+    /// Checks the invariants the sampler relies on; `Err` says what is wrong.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.times.is_empty() {
+            return Err("animation channel has no keyframes".into());
+        }
+        if self.times.iter().any(|t| !t.is_finite()) {
+            return Err("animation channel has a non-finite key time".into());
+        }
+        if self.times.windows(2).any(|w| w[1] < w[0]) {
+            return Err("animation key times are not increasing".into());
+        }
+        let per_key = if self.interpolation == Interpolation::CubicSpline { 3 } else { 1 };
+        if self.values.len() != self.times.len() * per_key {
+            return Err(format!(
+                "animation channel has {} values for {} keys (expected {})",
+                self.values.len(),
+                self.times.len(),
+                self.times.len() * per_key
+            ));
+        }
+        if self.values.iter().any(|v| !v.is_finite()) {
+            return Err("animation channel has a NaN or infinite value".into());
+        }
+        Ok(())
+    }
+
+    /// The key value `k` (the middle of the triple for cubic splines).
+    fn key(&self, k: usize) -> Vec4 {
+        match self.interpolation {
+            Interpolation::CubicSpline => self.values[3 * k + 1],
+            _ => self.values[k],
+        }
+    }
+
+    /// Samples the channel at time `t`.
+    pub fn sample(&self, t: f32) -> Vec4 {
+        let times = &self.times;
+        let last = times.len() - 1;
+        if t <= times[0] {
+            return self.key(0);
+        }
+        if t >= times[last] {
+            return self.key(last);
+        }
+        // First key strictly after t; t lies in [times[k0], times[k1]).
+        let k1 = times.partition_point(|&x| x <= t);
+        let k0 = k1 - 1;
+        let dt = times[k1] - times[k0];
+        let s = if dt > 0.0 { (t - times[k0]) / dt } else { 0.0 };
+        let rotation = self.property == Property::Rotation;
+        match self.interpolation {
+            Interpolation::Step => self.key(k0),
+            Interpolation::Linear if rotation => {
+                let a = Quat::from_vec4(self.key(k0)).normalize();
+                let b = Quat::from_vec4(self.key(k1)).normalize();
+                Vec4::from(a.slerp(b, s))
+            }
+            Interpolation::Linear => self.key(k0).lerp(self.key(k1), s),
+            Interpolation::CubicSpline => {
+                // glTF Appendix C: p(s) = (2s³−3s²+1)v0 + (s³−2s²+s)·dt·b0
+                //                        + (−2s³+3s²)v1 + (s³−s²)·dt·a1
+                let v0 = self.values[3 * k0 + 1];
+                let b0 = self.values[3 * k0 + 2];
+                let a1 = self.values[3 * k1];
+                let v1 = self.values[3 * k1 + 1];
+                let (s2, s3) = (s * s, s * s * s);
+                let p = v0 * (2.0 * s3 - 3.0 * s2 + 1.0)
+                    + b0 * (dt * (s3 - 2.0 * s2 + s))
+                    + v1 * (-2.0 * s3 + 3.0 * s2)
+                    + a1 * (dt * (s3 - s2));
+                if rotation {
+                    p.normalize_or_zero()
+                } else {
+                    p
+                }
+            }
+        }
+    }
+}
+
+/// All animation channels of a scene (glTF animations are merged: they all
+/// play from t = 0).
+#[derive(Clone, Debug, Default)]
+pub struct Animation {
+    pub channels: Vec<Channel>,
+}
+
+impl Animation {
+    pub fn animates(&self, node: usize) -> bool {
+        self.channels.iter().any(|c| c.node == node)
+    }
+
+    /// Last key time over all channels (0 for a still scene).
+    pub fn duration(&self) -> f32 {
+        self.channels
+            .iter()
+            .filter_map(|c| c.times.last().copied())
+            .fold(0.0, f32::max)
+    }
+
+    /// Local transform of `node` at time `t`: `rest` with animated properties
+    /// replaced by their sampled values.
+    pub fn local_trs(&self, node: usize, rest: Trs, t: f32) -> Trs {
+        let mut trs = rest;
+        for channel in self.channels.iter().filter(|c| c.node == node) {
+            let v = channel.sample(t);
+            match channel.property {
+                Property::Translation => trs.translation = v.truncate(),
+                Property::Scale => trs.scale = v.truncate(),
+                Property::Rotation => trs.rotation = Quat::from_vec4(v).normalize(),
+            }
+        }
+        trs
+    }
+}
+
+/// Helper for built-in scenes and tests: a linear channel from (time, value) keys.
+pub fn linear_translation(node: usize, keys: &[(f32, Vec3)]) -> Channel {
+    Channel {
+        node,
+        property: Property::Translation,
+        interpolation: Interpolation::Linear,
+        times: keys.iter().map(|k| k.0).collect(),
+        values: keys.iter().map(|k| k.1.extend(0.0)).collect(),
+    }
+}
+
+/// Helper for built-in scenes and tests: a linear (slerped) rotation channel.
+pub fn linear_rotation(node: usize, keys: &[(f32, Quat)]) -> Channel {
+    Channel {
+        node,
+        property: Property::Rotation,
+        interpolation: Interpolation::Linear,
+        times: keys.iter().map(|k| k.0).collect(),
+        values: keys.iter().map(|k| Vec4::from(k.1)).collect(),
+    }
+}

@@ -1,0 +1,469 @@
+//! Scene description: a node hierarchy with keyframed TRS animation, triangle
+//! meshes attached to nodes ("objects"), materials, punctual lights and a
+//! camera. A [`Scene`] is time-independent; [`Scene::snapshot`] evaluates it at
+//! a time `t` into world-space geometry ([`Snapshot`]) that the ray backends
+//! and methods consume.
+//!
+//! Conventions (shared with glTF 2.0): right-handed, +Y up, the camera looks
+//! down its local −Z axis, lengths in metres, radiance in W·sr⁻¹·m⁻², punctual
+//! light intensity in W·sr⁻¹.
+
+pub mod animation;
+pub mod builtin;
+pub mod gltf_loader;
+
+use glam::{Mat3, Mat4, Quat, Vec3};
+use std::path::Path;
+
+pub use animation::{Animation, Channel, Interpolation, Property};
+
+/// Frames per second used when the command line does not say (DESIGN.md).
+pub const DEFAULT_FPS: f32 = 24.0;
+
+/// Errors from loading or validating a scene. Every variant names the source
+/// (file path or built-in name) so that the user knows what to fix.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("{source_name}: {message}")]
+    Invalid {
+        source_name: String,
+        message: String,
+    },
+    #[error("{0}: unknown built-in scene (known: {known})", known = builtin::NAMES.join(", "))]
+    UnknownBuiltin(String),
+}
+
+impl SceneError {
+    pub fn invalid(source_name: impl Into<String>, message: impl Into<String>) -> Self {
+        SceneError::Invalid {
+            source_name: source_name.into(),
+            message: message.into(),
+        }
+    }
+}
+
+/// Translation, rotation, scale: the local transform of a node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trs {
+    pub translation: Vec3,
+    pub rotation: Quat,
+    pub scale: Vec3,
+}
+
+impl Default for Trs {
+    fn default() -> Self {
+        Trs {
+            translation: Vec3::ZERO,
+            rotation: Quat::IDENTITY,
+            scale: Vec3::ONE,
+        }
+    }
+}
+
+impl Trs {
+    pub fn to_mat4(&self) -> Mat4 {
+        Mat4::from_scale_rotation_translation(self.scale, self.rotation, self.translation)
+    }
+}
+
+/// One node of the transform hierarchy. `rest` is the transform used when no
+/// animation channel overrides a property.
+#[derive(Clone, Debug)]
+pub struct Node {
+    pub name: String,
+    pub parent: Option<usize>,
+    pub rest: Trs,
+}
+
+/// A triangle mesh in its node's local space. `normals` has one entry per
+/// position (smooth shading); `materials` one entry per triangle.
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
+    pub materials: Vec<u32>,
+}
+
+/// A mesh placed in the scene by a node. The index of an object in
+/// [`Scene::objects`] is its object id, stable over the whole animation.
+#[derive(Clone, Debug)]
+pub struct Object {
+    pub name: String,
+    pub node: usize,
+    pub mesh: Mesh,
+}
+
+/// Surface material. Lambertian when `specular` is zero, otherwise the
+/// energy-conserving modified Phong BRDF of Lafortune & Willems (1994):
+/// `f = kd/π + ks·(n+2)/(2π)·cos^n α`, with `kd + ks ≤ 1` per channel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Diffuse albedo `kd`.
+    pub diffuse: Vec3,
+    /// Specular albedo `ks` of the Phong lobe.
+    pub specular: Vec3,
+    /// Phong exponent `n`.
+    pub exponent: f32,
+    /// Emitted radiance (W·sr⁻¹·m⁻²).
+    pub emission: Vec3,
+    /// Emits from the back face too (glTF `doubleSided`).
+    pub double_sided: bool,
+}
+
+impl Material {
+    /// Roughness below which a glTF material becomes glossy (DESIGN.md).
+    pub const GLOSSY_ROUGHNESS: f32 = 0.3;
+    /// Specular reflectance of a dielectric ("plastic") surface at normal
+    /// incidence, IOR 1.5: ((1.5−1)/(1.5+1))² = 0.04. The reference renders
+    /// use a rough plastic there; we keep its normal-incidence energy split.
+    pub const DIELECTRIC_SPECULAR: f32 = 0.04;
+
+    pub fn diffuse(name: &str, albedo: Vec3) -> Self {
+        Material {
+            name: name.to_string(),
+            diffuse: albedo,
+            specular: Vec3::ZERO,
+            exponent: 1.0,
+            emission: Vec3::ZERO,
+            double_sided: false,
+        }
+    }
+
+    pub fn glossy(name: &str, diffuse: Vec3, specular: Vec3, exponent: f32) -> Self {
+        Material {
+            specular,
+            exponent,
+            ..Material::diffuse(name, diffuse)
+        }
+    }
+
+    pub fn emitter(name: &str, radiance: Vec3) -> Self {
+        Material {
+            emission: radiance,
+            ..Material::diffuse(name, Vec3::ZERO)
+        }
+    }
+
+    /// Map glTF metallic-roughness factors as DESIGN.md and the reference
+    /// renders do: roughness ≥ 0.3 is Lambertian; below, modified Phong with
+    /// `n = 2/α² − 2`, `α = roughness²`; metals put all of `baseColor` in the
+    /// lobe, dielectrics keep a diffuse base under a 4 % white lobe.
+    pub fn from_metallic_roughness(
+        name: &str,
+        base_color: Vec3,
+        metallic: f32,
+        roughness: f32,
+    ) -> Self {
+        if roughness >= Self::GLOSSY_ROUGHNESS {
+            return Material::diffuse(name, base_color);
+        }
+        // α is clamped as the reference does (max(α, 0.001)), which also keeps n finite.
+        let alpha = (roughness * roughness).max(1e-3);
+        let exponent = (2.0 / (alpha * alpha) - 2.0).max(1.0);
+        if metallic >= 0.5 {
+            Material::glossy(name, Vec3::ZERO, base_color, exponent)
+        } else {
+            let ks = Self::DIELECTRIC_SPECULAR;
+            Material::glossy(name, base_color * (1.0 - ks), Vec3::splat(ks), exponent)
+        }
+    }
+
+    pub fn is_emissive(&self) -> bool {
+        self.emission.max_element() > 0.0
+    }
+
+    pub fn is_glossy(&self) -> bool {
+        self.specular.max_element() > 0.0
+    }
+}
+
+/// Spot cone of a punctual light (glTF `KHR_lights_punctual` spot).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spot {
+    pub inner_cone: f32,
+    pub outer_cone: f32,
+}
+
+/// A point or spot light attached to a node; it shines down the node's −Z.
+#[derive(Clone, Debug)]
+pub struct PunctualLight {
+    pub name: String,
+    pub node: usize,
+    /// Radiant intensity (W·sr⁻¹) per colour channel.
+    pub intensity: Vec3,
+    pub spot: Option<Spot>,
+}
+
+/// Perspective camera attached to a node; looks down the node's −Z.
+#[derive(Clone, Debug)]
+pub struct CameraDef {
+    pub node: usize,
+    /// Vertical field of view in radians.
+    pub yfov: f32,
+}
+
+/// A whole animated scene.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub name: String,
+    pub nodes: Vec<Node>,
+    pub objects: Vec<Object>,
+    pub materials: Vec<Material>,
+    pub lights: Vec<PunctualLight>,
+    pub camera: CameraDef,
+    pub animation: Animation,
+    /// Number of frames the animation is meant to be rendered for.
+    pub frame_count: u32,
+}
+
+/// World-space triangle with per-vertex shading normals.
+#[derive(Clone, Copy, Debug)]
+pub struct Triangle {
+    pub p: [Vec3; 3],
+    pub n: [Vec3; 3],
+}
+
+impl Triangle {
+    /// Unnormalised geometric normal (counter-clockwise front), length = 2·area.
+    pub fn cross(&self) -> Vec3 {
+        (self.p[1] - self.p[0]).cross(self.p[2] - self.p[0])
+    }
+
+    pub fn area(&self) -> f32 {
+        0.5 * self.cross().length()
+    }
+
+    pub fn geometric_normal(&self) -> Vec3 {
+        self.cross().normalize_or_zero()
+    }
+
+    /// Point at barycentrics (u, v): `p0·(1−u−v) + p1·u + p2·v`.
+    pub fn point(&self, u: f32, v: f32) -> Vec3 {
+        self.p[0] * (1.0 - u - v) + self.p[1] * u + self.p[2] * v
+    }
+
+    /// Interpolated shading normal at (u, v); falls back to the geometric one.
+    pub fn shading_normal(&self, u: f32, v: f32) -> Vec3 {
+        let n = self.n[0] * (1.0 - u - v) + self.n[1] * u + self.n[2] * v;
+        let n = n.normalize_or_zero();
+        if n == Vec3::ZERO {
+            self.geometric_normal()
+        } else {
+            n
+        }
+    }
+}
+
+/// A punctual light evaluated at one time.
+#[derive(Clone, Copy, Debug)]
+pub struct PointLight {
+    pub position: Vec3,
+    /// Unit direction the spot points to (node −Z).
+    pub direction: Vec3,
+    pub intensity: Vec3,
+    pub spot: Option<Spot>,
+}
+
+impl PointLight {
+    /// Intensity toward unit direction `w` (from the light), with the glTF
+    /// spot falloff (smooth between the outer and inner cone).
+    pub fn intensity_toward(&self, w: Vec3) -> Vec3 {
+        match self.spot {
+            None => self.intensity,
+            Some(spot) => {
+                let cos = self.direction.dot(w);
+                let (ci, co) = (spot.inner_cone.cos(), spot.outer_cone.cos());
+                let s = if ci - co > 1e-6 {
+                    ((cos - co) / (ci - co)).clamp(0.0, 1.0)
+                } else if cos >= co {
+                    1.0
+                } else {
+                    0.0
+                };
+                self.intensity * (s * s)
+            }
+        }
+    }
+}
+
+/// The camera evaluated at one time.
+#[derive(Clone, Copy, Debug)]
+pub struct Camera {
+    pub position: Vec3,
+    /// Columns: right (+X), up (+Y), backward (+Z) in world space, orthonormal.
+    pub basis: Mat3,
+    pub yfov: f32,
+}
+
+impl Camera {
+    /// Direction of the ray through film point (sx, sy) ∈ [0,1]², (0,0) at the
+    /// top-left corner, for an image of the given aspect ratio (width/height).
+    pub fn direction(&self, sx: f32, sy: f32, aspect: f32) -> Vec3 {
+        let tan_half = (0.5 * self.yfov).tan();
+        let x = (2.0 * sx - 1.0) * tan_half * aspect;
+        let y = (1.0 - 2.0 * sy) * tan_half;
+        (self.basis * Vec3::new(x, y, -1.0)).normalize()
+    }
+}
+
+/// The scene evaluated at one time `t`: world-space triangles (static objects
+/// first, then dynamic ones, in object order so that triangle ids are stable
+/// across frames), lights and camera.
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    pub time: f32,
+    pub triangles: Vec<Triangle>,
+    /// Object id of each triangle.
+    pub tri_object: Vec<u32>,
+    /// Material id of each triangle.
+    pub tri_material: Vec<u32>,
+    /// Triangles `0..static_count` belong to objects that never move.
+    pub static_count: usize,
+    /// World transform of every object at `time`.
+    pub object_to_world: Vec<Mat4>,
+    pub lights: Vec<PointLight>,
+    pub camera: Camera,
+}
+
+impl Scene {
+    /// Loads a scene from a `.gltf`/`.glb` file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        gltf_loader::load(path)
+    }
+
+    /// A built-in scene by name (see [`builtin::NAMES`]).
+    pub fn builtin(name: &str) -> Result<Scene, SceneError> {
+        builtin::build(name)
+    }
+
+    /// Whether a node moves: it or one of its ancestors is animated.
+    pub fn node_is_dynamic(&self, node: usize) -> bool {
+        let mut current = Some(node);
+        while let Some(n) = current {
+            if self.animation.animates(n) {
+                return true;
+            }
+            current = self.nodes[n].parent;
+        }
+        false
+    }
+
+    pub fn object_is_dynamic(&self, object: usize) -> bool {
+        self.node_is_dynamic(self.objects[object].node)
+    }
+
+    /// World transforms of all nodes at time `t`.
+    pub fn node_world_transforms(&self, t: f32) -> Vec<Mat4> {
+        let mut world: Vec<Option<Mat4>> = vec![None; self.nodes.len()];
+        for i in 0..self.nodes.len() {
+            self.resolve_world(i, t, &mut world);
+        }
+        world.into_iter().map(|m| m.unwrap_or(Mat4::IDENTITY)).collect()
+    }
+
+    fn resolve_world(&self, node: usize, t: f32, world: &mut [Option<Mat4>]) -> Mat4 {
+        if let Some(m) = world[node] {
+            return m;
+        }
+        let local = self.animation.local_trs(node, self.nodes[node].rest, t).to_mat4();
+        let m = match self.nodes[node].parent {
+            // Loaders guarantee the hierarchy is a forest (no cycles).
+            Some(parent) => self.resolve_world(parent, t, world) * local,
+            None => local,
+        };
+        world[node] = Some(m);
+        m
+    }
+
+    /// Rigid motion of an object from time `t0` to `t1`: the matrix taking a
+    /// world point on the object at `t0` to where it is at `t1`.
+    pub fn object_motion(&self, object: usize, t0: f32, t1: f32) -> Mat4 {
+        let node = self.objects[object].node;
+        let w0 = self.node_world_transforms(t0)[node];
+        let w1 = self.node_world_transforms(t1)[node];
+        w1 * w0.inverse()
+    }
+
+    /// Objects ordered static first, then dynamic (the triangle order of
+    /// every snapshot).
+    pub fn object_order(&self) -> Vec<usize> {
+        let (mut order, dynamic): (Vec<usize>, Vec<usize>) =
+            (0..self.objects.len()).partition(|&o| !self.object_is_dynamic(o));
+        order.extend(dynamic);
+        order
+    }
+
+    /// Evaluates the scene at time `t`.
+    pub fn snapshot(&self, t: f32) -> Snapshot {
+        let world = self.node_world_transforms(t);
+        let mut snap = Snapshot {
+            time: t,
+            triangles: Vec::new(),
+            tri_object: Vec::new(),
+            tri_material: Vec::new(),
+            static_count: 0,
+            object_to_world: self.objects.iter().map(|o| world[o.node]).collect(),
+            lights: self
+                .lights
+                .iter()
+                .map(|l| {
+                    let m = world[l.node];
+                    PointLight {
+                        position: m.transform_point3(Vec3::ZERO),
+                        direction: m.transform_vector3(-Vec3::Z).normalize_or_zero(),
+                        intensity: l.intensity,
+                        spot: l.spot,
+                    }
+                })
+                .collect(),
+            camera: camera_at(&world[self.camera.node], self.camera.yfov),
+        };
+        for object in self.object_order() {
+            if !self.object_is_dynamic(object) {
+                snap.static_count = snap.triangles.len() + self.objects[object].mesh.triangles.len();
+            }
+            append_object(&mut snap, object as u32, &self.objects[object].mesh, &world[self.objects[object].node]);
+        }
+        snap
+    }
+}
+
+fn camera_at(m: &Mat4, yfov: f32) -> Camera {
+    let (_, rotation, translation) = m.to_scale_rotation_translation();
+    Camera {
+        position: translation,
+        basis: Mat3::from_quat(rotation.normalize()),
+        yfov,
+    }
+}
+
+fn append_object(snap: &mut Snapshot, object: u32, mesh: &Mesh, to_world: &Mat4) {
+    // Normals transform with the inverse transpose (non-uniform scale).
+    let normal_matrix = Mat3::from_mat4(*to_world).inverse().transpose();
+    let flip = to_world.determinant() < 0.0;
+    for (tri, &material) in mesh.triangles.iter().zip(&mesh.materials) {
+        let mut idx = tri.map(|i| i as usize);
+        if flip {
+            // A mirroring transform reverses winding; keep the front face.
+            idx.swap(1, 2);
+        }
+        let p = idx.map(|i| to_world.transform_point3(mesh.positions[i]));
+        let n = idx.map(|i| {
+            mesh.normals
+                .get(i)
+                .map(|&n| (normal_matrix * n).normalize_or_zero())
+                .unwrap_or(Vec3::ZERO)
+        });
+        snap.triangles.push(Triangle { p, n });
+        snap.tri_object.push(object);
+        snap.tri_material.push(material);
+    }
+}
+
+impl Snapshot {
+    pub fn dynamic_count(&self) -> usize {
+        self.triangles.len() - self.static_count
+    }
+}
