@@ -1,1 +1,209 @@
-//! BVHs over the triangles of one frame.
+//! Acceleration structures over the triangles of one frame, built with
+//! obvhs. The scene is split in two BVHs: the static triangles (built once
+//! per render, rebuilt only if they change) and the dynamic ones (rebuilt
+//! every frame — dynamic parts are small; `radcache bench-rays` measures the
+//! rebuild). A ray is traced through both and keeps the nearer hit.
+//!
+//! We use obvhs's compressed wide BVH (CWBVH, Ylitie et al. 2017) on the CPU:
+//! STACK.md measured it faster than BVH2 for incoherent rays.
+
+use crate::backend::{Hit, Ray};
+use crate::scene::Snapshot;
+use glam::Vec3A;
+use obvhs::cwbvh::builder::build_cwbvh_from_tris;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::RayHit;
+use obvhs::triangle::Triangle as ObTriangle;
+use obvhs::BvhBuildParams;
+use std::time::{Duration, Instant};
+
+/// One BVH over a subset of the snapshot's triangles, with the triangles
+/// stored in BVH leaf order so traversal reads them contiguously.
+pub struct TriangleBvh {
+    bvh: CwBvh,
+    triangles: Vec<ObTriangle>,
+    /// Snapshot triangle id of each BVH-ordered triangle.
+    ids: Vec<u32>,
+    /// Object id of each BVH-ordered triangle.
+    objects: Vec<u32>,
+}
+
+fn to_obvhs(tri: &crate::scene::Triangle) -> ObTriangle {
+    ObTriangle {
+        v0: tri.p[0].into(),
+        v1: tri.p[1].into(),
+        v2: tri.p[2].into(),
+    }
+}
+
+fn to_obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
+    obvhs::ray::Ray::new(
+        Vec3A::from_array(ray.origin),
+        Vec3A::from_array(ray.dir),
+        ray.tmin,
+        ray.tmax,
+    )
+}
+
+/// Möller–Trumbore in the formulation obvhs uses, returning `(t, u, v)`
+/// with the hit at `v0·(1−u−v) + v1·u + v2·v`, or `None` outside
+/// `[tmin, tmax]`. Rays along the plane of the triangle never hit.
+#[inline(always)]
+pub fn intersect_triangle(tri: &ObTriangle, ray: &obvhs::ray::Ray) -> Option<(f32, f32, f32)> {
+    let e1 = tri.v0 - tri.v1;
+    let e2 = tri.v2 - tri.v0;
+    let n = e1.cross(e2);
+    let c = tri.v0 - ray.origin;
+    let r = ray.direction.cross(c);
+    let det = n.dot(ray.direction);
+    if det == 0.0 {
+        return None;
+    }
+    let inv_det = 1.0 / det;
+    let u = r.dot(e2) * inv_det;
+    let v = r.dot(e1) * inv_det;
+    if u < 0.0 || v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    let t = n.dot(c) * inv_det;
+    (t >= ray.tmin && t <= ray.tmax).then_some((t, u, v))
+}
+
+impl TriangleBvh {
+    /// Builds a BVH over snapshot triangles `range`; `None` when empty.
+    pub fn build(snapshot: &Snapshot, range: std::ops::Range<usize>) -> Option<Self> {
+        if range.is_empty() {
+            return None;
+        }
+        let source: Vec<ObTriangle> = snapshot.triangles[range.clone()]
+            .iter()
+            .map(to_obvhs)
+            .collect();
+        let params = if range.len() > 10_000 {
+            BvhBuildParams::medium_build()
+        } else {
+            BvhBuildParams::fast_build()
+        };
+        let bvh = build_cwbvh_from_tris(&source, params, &mut Duration::default());
+        let order = &bvh.primitive_indices;
+        let ids: Vec<u32> = order
+            .iter()
+            .map(|&i| (range.start + i as usize) as u32)
+            .collect();
+        Some(TriangleBvh {
+            triangles: order.iter().map(|&i| source[i as usize]).collect(),
+            objects: ids
+                .iter()
+                .map(|&i| snapshot.tri_object[i as usize])
+                .collect(),
+            ids,
+            bvh,
+        })
+    }
+
+    /// Nearest hit along `ray` closer than `best.t`; updates `best`.
+    #[inline]
+    fn closest_hit(&self, ray: &obvhs::ray::Ray, best: &mut Hit) {
+        let mut ray = *ray;
+        ray.tmax = ray.tmax.min(best.t);
+        let mut found: Option<(usize, f32, f32, f32)> = None;
+        let mut rayhit = RayHit::none();
+        self.bvh.ray_traverse(ray, &mut rayhit, |r, i| {
+            match intersect_triangle(&self.triangles[i], r) {
+                Some((t, u, v)) if t < r.tmax => {
+                    found = Some((i, t, u, v));
+                    t
+                }
+                _ => f32::INFINITY,
+            }
+        });
+        if let Some((i, t, u, v)) = found {
+            *best = Hit {
+                t,
+                triangle: self.ids[i],
+                object: self.objects[i],
+                u,
+                v,
+            };
+        }
+    }
+
+    #[inline]
+    fn occluded(&self, ray: &obvhs::ray::Ray) -> bool {
+        !self.bvh.ray_traverse_miss(*ray, |r, i| {
+            intersect_triangle(&self.triangles[i], r).map_or(f32::INFINITY, |h| h.0)
+        })
+    }
+}
+
+/// Time spent building BVHs for one frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BuildTimes {
+    pub static_build: Option<Duration>,
+    pub dynamic_build: Duration,
+}
+
+/// The static and dynamic BVHs of the current frame.
+#[derive(Default)]
+pub struct SceneBvh {
+    static_part: Option<TriangleBvh>,
+    /// Hash of the static triangles the static BVH was built from.
+    static_fingerprint: Option<u64>,
+    dynamic_part: Option<TriangleBvh>,
+}
+
+/// FNV-1a over the bits of the static triangles' vertices: detects a change
+/// of static geometry (a new scene) without keeping a copy of it.
+fn fingerprint(snapshot: &Snapshot) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for tri in &snapshot.triangles[..snapshot.static_count] {
+        for p in tri.p {
+            for x in p.to_array() {
+                h = (h ^ u64::from(x.to_bits())).wrapping_mul(0x0100_0000_01b3);
+            }
+        }
+    }
+    h ^ snapshot.static_count as u64
+}
+
+impl SceneBvh {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Makes the BVHs match `snapshot`.
+    pub fn update(&mut self, snapshot: &Snapshot) -> BuildTimes {
+        let mut times = BuildTimes::default();
+        let fp = fingerprint(snapshot);
+        if self.static_fingerprint != Some(fp) {
+            let start = Instant::now();
+            self.static_part = TriangleBvh::build(snapshot, 0..snapshot.static_count);
+            self.static_fingerprint = Some(fp);
+            times.static_build = Some(start.elapsed());
+        }
+        let start = Instant::now();
+        self.dynamic_part =
+            TriangleBvh::build(snapshot, snapshot.static_count..snapshot.triangles.len());
+        times.dynamic_build = start.elapsed();
+        times
+    }
+
+    pub fn closest_hit(&self, ray: &Ray) -> Hit {
+        let r = to_obvhs_ray(ray);
+        let mut hit = Hit::MISS;
+        if let Some(part) = &self.static_part {
+            part.closest_hit(&r, &mut hit);
+        }
+        if let Some(part) = &self.dynamic_part {
+            part.closest_hit(&r, &mut hit);
+        }
+        hit
+    }
+
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        let r = to_obvhs_ray(ray);
+        // Dynamic parts are usually small: test them first.
+        self.dynamic_part.as_ref().is_some_and(|p| p.occluded(&r))
+            || self.static_part.as_ref().is_some_and(|p| p.occluded(&r))
+    }
+}

@@ -1,4 +1,250 @@
-//! The `radcache` command line.
-pub fn main() -> std::process::ExitCode {
-    std::process::ExitCode::SUCCESS
+//! The `radcache` command line (DESIGN.md "Command line"). Every verb parses
+//! its arguments, calls the library and maps errors to a message and a
+//! non-zero exit status; no input makes it panic.
+
+use crate::method::path::PathSettings;
+use crate::metrics;
+use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
+use anyhow::{bail, Context, Result};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::ops::Range;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "radcache",
+    version,
+    about = "Global illumination for animations, reusing lighting work across frames"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render frames of an animated scene to DIR/frame_NNNN.{exr,png}.
+    Render(RenderArgs),
+    /// Compare two directories of frame_NNNN.exr: RMSE, relative RMSE, block bias, flicker.
+    Compare(CompareArgs),
+}
+
+/// Rendering methods available in this build.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MethodName {
+    /// Unbiased path tracer (NEE + MIS + Russian roulette): the accuracy yardstick.
+    Path,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// glTF 2.0 scene (.gltf or .glb). Without it, the built-in `cube-in-box`.
+    pub scene: Option<PathBuf>,
+    /// Built-in scene: cube-in-box, moving-light, spheres, glossy-cornell, chairs-room.
+    #[arg(long, conflicts_with = "scene")]
+    pub builtin: Option<String>,
+    #[arg(long, value_enum, default_value = "path")]
+    pub method: MethodName,
+    /// Half-open frame range START..END (0..24 is frames 0 to 23).
+    #[arg(long, default_value = "0..24", value_parser = parse_frames)]
+    pub frames: Range<u32>,
+    /// Image size WxH.
+    #[arg(long, default_value = "256x256", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Samples per pixel (path).
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub spp: u32,
+    /// Frames per second: frame f is rendered at t = f / fps.
+    #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, value_parser = parse_fps)]
+    pub fps: f32,
+    /// Random seed; the same seed gives the same frames.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Use the same random sequence in every frame (reference sequences for the flicker figure).
+    #[arg(long)]
+    pub same_pattern: bool,
+    /// Output directory.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Ray backend.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendArg,
+    /// Hard limit on path length in bounces (default: unbounded, Russian roulette).
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    /// Directory of reference frames (frame_NNNN.exr).
+    pub reference: PathBuf,
+    /// Directory of frames to judge.
+    pub test: PathBuf,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Largest image side accepted; beyond it a typo is likelier than intent.
+const MAX_SIDE: u32 = 16384;
+
+fn parse_frames(s: &str) -> Result<Range<u32>, String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("'{s}' is not a frame range; expected START..END, e.g. 0..24"))?;
+    let start: u32 = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{a}' is not a frame number"))?;
+    let end: u32 = b
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{b}' is not a frame number"))?;
+    if end <= start {
+        return Err(format!(
+            "frame range {start}..{end} is empty (END is exclusive)"
+        ));
+    }
+    Ok(start..end)
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("'{s}' is not an image size; expected WxH, e.g. 256x256"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{w}' is not a width"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{h}' is not a height"))?;
+    if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
+        return Err(format!(
+            "image size {w}x{h} is out of range (1..={MAX_SIDE} per side)"
+        ));
+    }
+    Ok((w, h))
+}
+
+fn parse_fps(s: &str) -> Result<f32, String> {
+    let fps: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !fps.is_finite() || fps <= 0.0 {
+        return Err(format!("fps must be a positive number, got {s}"));
+    }
+    Ok(fps)
+}
+
+/// Runs the CLI on the process arguments.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Render(args) => run_render(args),
+        Command::Compare(args) => run_compare(args),
+    }
+}
+
+fn run_render(args: RenderArgs) -> Result<()> {
+    let source = match (&args.scene, &args.builtin) {
+        (Some(path), _) => SceneSource::File(path.clone()),
+        (None, Some(name)) => SceneSource::Builtin(name.clone()),
+        (None, None) => SceneSource::Builtin("cube-in-box".into()),
+    };
+    let scene = source.load()?;
+    let method = match args.method {
+        MethodName::Path => MethodSettings::Path(PathSettings {
+            spp: args.spp,
+            max_depth: args.max_depth,
+            ..PathSettings::default()
+        }),
+    };
+    let backend = render::make_backend(match args.backend {
+        BackendArg::Auto => BackendChoice::Auto,
+        BackendArg::Cpu => BackendChoice::Cpu,
+        BackendArg::Gpu => BackendChoice::Gpu,
+    })?;
+    let settings = FrameSettings {
+        width: args.size.0,
+        height: args.size.1,
+        fps: args.fps,
+        seed: args.seed,
+        same_pattern: args.same_pattern,
+    };
+    let (w, h) = args.size;
+    if !args.quiet {
+        eprintln!(
+            "rendering {source} frames {}..{} at {w}x{h}, method {}, {} spp, backend {}",
+            args.frames.start,
+            args.frames.end,
+            method_label(&method),
+            args.spp,
+            backend.name()
+        );
+    }
+    let mut renderer = Renderer::new(scene, method.instantiate(), backend, settings);
+    let summary = render::render_to_dir(&mut renderer, args.frames.clone(), &args.out, args.quiet)?;
+    let secs = summary.elapsed.as_secs_f64();
+    let samples = u64::from(w) * u64::from(h) * u64::from(args.spp) * u64::from(summary.frames);
+    println!(
+        "rendered {} frames in {:.2} s ({:.3} s/frame, {:.2} Mrays/s, {:.2} M samples/s) → {}/frame_{:04}..{:04}.{{exr,png}}",
+        summary.frames,
+        secs,
+        secs / summary.frames.max(1) as f64,
+        summary.rays_per_second() / 1e6,
+        samples as f64 / secs.max(1e-9) / 1e6,
+        summary.out_dir.display(),
+        args.frames.start,
+        args.frames.end - 1,
+    );
+    Ok(())
+}
+
+fn method_label(m: &MethodSettings) -> &'static str {
+    match m {
+        MethodSettings::Path(_) => "path",
+    }
+}
+
+fn run_compare(args: CompareArgs) -> Result<()> {
+    if !args.reference.is_dir() {
+        bail!(
+            "reference directory {} does not exist",
+            args.reference.display()
+        );
+    }
+    let report = metrics::compare_dirs(&args.reference, &args.test).with_context(|| {
+        format!(
+            "comparing {} with {}",
+            args.test.display(),
+            args.reference.display()
+        )
+    })?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print!("{}", report.to_text());
+    }
+    Ok(())
 }

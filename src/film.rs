@@ -36,3 +36,31 @@ impl Film {
 pub fn frame_path(dir: &Path, frame: u32, ext: &str) -> PathBuf {
     dir.join(format!("frame_{frame:04}.{ext}"))
 }
+
+/// Writes `frame_NNNN.exr` and `frame_NNNN.png` (temporary: replaced by the
+/// full film I/O module).
+pub fn write_frame(film: &Film, dir: &Path, frame: u32) -> anyhow::Result<()> {
+    use exr::prelude::*;
+    let path = frame_path(dir, frame, "exr");
+    let (w, h) = (film.width as usize, film.height as usize);
+    write_rgb_file(&path, w, h, |x, y| {
+        let p = film.pixels[y * w + x];
+        (p.x, p.y, p.z)
+    })?;
+    let mut png = image::RgbImage::new(film.width, film.height);
+    for (i, px) in png.pixels_mut().enumerate() {
+        let p = film.pixels[i];
+        let enc = |v: f32| {
+            let v = v.clamp(0.0, 1.0);
+            let s = if v <= 0.0031308 {
+                12.92 * v
+            } else {
+                1.055 * v.powf(1.0 / 2.4) - 0.055
+            };
+            (s * 255.0 + 0.5) as u8
+        };
+        *px = image::Rgb([enc(p.x), enc(p.y), enc(p.z)]);
+    }
+    png.save(frame_path(dir, frame, "png"))?;
+    Ok(())
+}

@@ -1,1 +1,210 @@
-//! Light sampling.
+//! Light sampling for next-event estimation: one light is picked with
+//! probability proportional to its emitted power, then a point on it.
+//! Area lights are the emissive triangles of the snapshot (sampled uniformly
+//! by area); point and spot lights are delta lights.
+
+use crate::material::luminance;
+use crate::sampling::uniform_triangle;
+use crate::scene::{Snapshot, Triangle};
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// Where the light of a sample comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Source {
+    /// Emissive triangle (snapshot triangle id).
+    Triangle(u32),
+    /// Punctual light (index into `Snapshot::lights`).
+    Point(usize),
+}
+
+/// A point on a light as seen from a shading point.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    /// Point on the light.
+    pub position: Vec3,
+    /// Unit direction from the shading point to the light.
+    pub wi: Vec3,
+    pub distance: f32,
+    /// Radiance arriving along `wi` (area light) or intensity/d² (punctual),
+    /// before visibility.
+    pub radiance: Vec3,
+    /// Solid-angle pdf of this sample (including the pick probability); for
+    /// punctual lights the pick probability alone.
+    pub pdf: f32,
+    /// Punctual lights cannot be hit by BSDF sampling, so they get no MIS.
+    pub is_delta: bool,
+}
+
+/// Power-proportional sampler over all lights of one snapshot.
+#[derive(Clone, Debug, Default)]
+pub struct LightSampler {
+    sources: Vec<Source>,
+    /// Cumulative pick probabilities, last entry 1.
+    cdf: Vec<f32>,
+    /// Pick probability of each snapshot triangle (0 for non-emitters), so
+    /// that a BSDF ray hitting an emitter can compute the light pdf for MIS.
+    triangle_pick: Vec<f32>,
+}
+
+/// Emitted power of a one- or two-sided Lambertian emitter: `π·A·L`.
+fn triangle_power(tri: &Triangle, radiance: Vec3, double_sided: bool) -> f32 {
+    let sides = if double_sided { 2.0 } else { 1.0 };
+    PI * tri.area() * luminance(radiance) * sides
+}
+
+impl LightSampler {
+    pub fn new(snapshot: &Snapshot, materials: &[crate::scene::Material]) -> Self {
+        let mut sources = Vec::new();
+        let mut power = Vec::new();
+        for (i, tri) in snapshot.triangles.iter().enumerate() {
+            let m = &materials[snapshot.tri_material[i] as usize];
+            if m.is_emissive() && tri.area() > 0.0 {
+                sources.push(Source::Triangle(i as u32));
+                power.push(triangle_power(tri, m.emission, m.double_sided));
+            }
+        }
+        for (i, light) in snapshot.lights.iter().enumerate() {
+            // 4π·I for a point light; spots are weighted the same way, which
+            // only changes variance, not the expectation.
+            let p = 4.0 * PI * luminance(light.intensity);
+            if p > 0.0 {
+                sources.push(Source::Point(i));
+                power.push(p);
+            }
+        }
+        let total: f32 = power.iter().sum();
+        let mut cdf = Vec::with_capacity(power.len());
+        let mut acc = 0.0;
+        for p in &power {
+            acc += p / total;
+            cdf.push(acc);
+        }
+        if let Some(last) = cdf.last_mut() {
+            *last = 1.0;
+        }
+        let mut triangle_pick = vec![0.0; snapshot.triangles.len()];
+        for (k, source) in sources.iter().enumerate() {
+            if let Source::Triangle(t) = source {
+                triangle_pick[*t as usize] = power[k] / total;
+            }
+        }
+        LightSampler {
+            sources,
+            cdf,
+            triangle_pick,
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.sources.is_empty()
+    }
+
+    fn pick_probability(&self, k: usize) -> f32 {
+        self.cdf[k] - if k == 0 { 0.0 } else { self.cdf[k - 1] }
+    }
+
+    /// Samples a light point for shading point `p`. `None` when there are no
+    /// lights or the sampled point cannot send light towards `p` (back side
+    /// of a one-sided emitter, outside a spot cone, degenerate geometry).
+    pub fn sample(
+        &self,
+        snapshot: &Snapshot,
+        materials: &[crate::scene::Material],
+        p: Vec3,
+        pick: f32,
+        u: Vec2,
+    ) -> Option<LightSample> {
+        if self.sources.is_empty() {
+            return None;
+        }
+        let k = self
+            .cdf
+            .partition_point(|&c| c <= pick)
+            .min(self.cdf.len() - 1);
+        let pick_pdf = self.pick_probability(k);
+        match self.sources[k] {
+            Source::Triangle(t) => {
+                let tri = &snapshot.triangles[t as usize];
+                let (bu, bv) = uniform_triangle(u);
+                let position = tri.point(bu, bv);
+                let to_light = position - p;
+                let d2 = to_light.length_squared();
+                if d2 <= 0.0 {
+                    return None;
+                }
+                let distance = d2.sqrt();
+                let wi = to_light / distance;
+                let m = &materials[snapshot.tri_material[t as usize] as usize];
+                let cos_light = emitting_cosine(tri, m.double_sided, -wi)?;
+                // Area pdf 1/A converted to solid angle: d²/(A·cosθ_l).
+                let pdf = pick_pdf * d2 / (tri.area() * cos_light);
+                Some(LightSample {
+                    position,
+                    wi,
+                    distance,
+                    radiance: m.emission,
+                    pdf,
+                    is_delta: false,
+                })
+            }
+            Source::Point(i) => {
+                let light = &snapshot.lights[i];
+                let to_light = light.position - p;
+                let d2 = to_light.length_squared();
+                if d2 <= 0.0 {
+                    return None;
+                }
+                let distance = d2.sqrt();
+                let wi = to_light / distance;
+                let radiance = light.intensity_toward(-wi) / d2;
+                if radiance.max_element() <= 0.0 {
+                    return None;
+                }
+                Some(LightSample {
+                    position: light.position,
+                    wi,
+                    distance,
+                    radiance,
+                    pdf: pick_pdf,
+                    is_delta: true,
+                })
+            }
+        }
+    }
+
+    /// Solid-angle pdf with which [`LightSampler::sample`] would have chosen
+    /// the point `hit` on emissive triangle `triangle` from `origin` (for MIS
+    /// when a BSDF-sampled ray hits an emitter).
+    pub fn pdf_triangle(&self, tri: &Triangle, triangle: u32, origin: Vec3, hit: Vec3) -> f32 {
+        let pick = self
+            .triangle_pick
+            .get(triangle as usize)
+            .copied()
+            .unwrap_or(0.0);
+        if pick <= 0.0 {
+            return 0.0;
+        }
+        let d = hit - origin;
+        let d2 = d.length_squared();
+        let cos_light = tri.geometric_normal().dot(d / d2.sqrt()).abs();
+        if cos_light <= 0.0 {
+            return 0.0;
+        }
+        pick * d2 / (tri.area() * cos_light)
+    }
+}
+
+/// Cosine between the emitter's normal and the emitted direction `w` (unit,
+/// leaving the light), or `None` if that side does not emit. Front faces are
+/// counter-clockwise (glTF); `double_sided` emitters emit from both sides.
+pub fn emitting_cosine(tri: &Triangle, double_sided: bool, w: Vec3) -> Option<f32> {
+    let cos = tri.geometric_normal().dot(w);
+    if cos > 0.0 {
+        Some(cos)
+    } else if double_sided && cos < 0.0 {
+        Some(-cos)
+    } else {
+        None
+    }
+}

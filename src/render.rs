@@ -1,1 +1,208 @@
-//! The frame loop.
+//! The frame loop: evaluate the animation at `t = frame / fps`, hand the
+//! frame's geometry to the ray backend, let the method render, write the
+//! files. [`Renderer`] is the library entry point (tests and the server use
+//! it); [`render_to_dir`] adds files, a progress bar and a summary for the CLI.
+
+use crate::backend::cpu::CpuBackend;
+use crate::backend::RayBackend;
+use crate::film::{self, Film};
+use crate::light::LightSampler;
+use crate::method::path::{PathSettings, PathTracer};
+use crate::method::{FrameContext, Method};
+use crate::scene::{Scene, SceneError};
+use anyhow::{bail, Context, Result};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Where a scene comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SceneSource {
+    Builtin(String),
+    File(PathBuf),
+}
+
+impl SceneSource {
+    pub fn load(&self) -> Result<Scene, SceneError> {
+        match self {
+            SceneSource::Builtin(name) => Scene::builtin(name),
+            SceneSource::File(path) => Scene::load(path),
+        }
+    }
+}
+
+impl std::fmt::Display for SceneSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SceneSource::Builtin(name) => write!(f, "builtin:{name}"),
+            SceneSource::File(path) => write!(f, "{}", path.display()),
+        }
+    }
+}
+
+/// Which rendering method, with its settings.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MethodSettings {
+    Path(PathSettings),
+}
+
+impl MethodSettings {
+    pub fn instantiate(&self) -> Box<dyn Method> {
+        match self {
+            MethodSettings::Path(s) => Box::new(PathTracer::new(s.clone())),
+        }
+    }
+}
+
+/// Which ray backend to use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum BackendChoice {
+    /// The GPU when one is usable, else the CPU.
+    #[default]
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+/// Picks the backend. There is no GPU backend in this build yet, so `auto`
+/// is the CPU and `gpu` is an error rather than a silent fallback.
+pub fn make_backend(choice: BackendChoice) -> Result<Box<dyn RayBackend>> {
+    match choice {
+        BackendChoice::Auto | BackendChoice::Cpu => Ok(Box::new(CpuBackend::new())),
+        BackendChoice::Gpu => {
+            bail!("--backend gpu: this build has no GPU ray backend yet; use --backend cpu or auto")
+        }
+    }
+}
+
+/// Settings of a render that do not depend on the method.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameSettings {
+    pub width: u32,
+    pub height: u32,
+    pub fps: f32,
+    pub seed: u64,
+    /// Same random sequence in every frame (`--same-pattern`).
+    pub same_pattern: bool,
+}
+
+impl Default for FrameSettings {
+    fn default() -> Self {
+        FrameSettings {
+            width: 256,
+            height: 256,
+            fps: crate::scene::DEFAULT_FPS,
+            seed: 0,
+            same_pattern: false,
+        }
+    }
+}
+
+/// Renders frames of one scene with one method and one backend.
+pub struct Renderer {
+    pub scene: Scene,
+    pub settings: FrameSettings,
+    method: Box<dyn Method>,
+    backend: Box<dyn RayBackend>,
+}
+
+impl Renderer {
+    pub fn new(
+        scene: Scene,
+        method: Box<dyn Method>,
+        backend: Box<dyn RayBackend>,
+        settings: FrameSettings,
+    ) -> Self {
+        Renderer {
+            scene,
+            settings,
+            method,
+            backend,
+        }
+    }
+
+    pub fn backend(&self) -> &dyn RayBackend {
+        self.backend.as_ref()
+    }
+
+    pub fn method_name(&self) -> &'static str {
+        self.method.name()
+    }
+
+    /// Renders frame `frame` (time `frame / fps`).
+    pub fn render_frame(&mut self, frame: u32) -> Film {
+        let t = frame as f32 / self.settings.fps;
+        let snapshot = self.scene.snapshot(t);
+        self.backend.set_geometry(&snapshot);
+        let lights = LightSampler::new(&snapshot, &self.scene.materials);
+        let ctx = FrameContext {
+            scene: &self.scene,
+            snapshot: &snapshot,
+            lights: &lights,
+            backend: self.backend.as_ref(),
+            frame,
+            width: self.settings.width,
+            height: self.settings.height,
+            seed: self.settings.seed,
+            same_pattern: self.settings.same_pattern,
+        };
+        self.method.render_frame(&ctx)
+    }
+}
+
+/// What a finished render reports.
+#[derive(Clone, Debug)]
+pub struct RenderSummary {
+    pub frames: u32,
+    pub elapsed: Duration,
+    pub rays: u64,
+    pub out_dir: PathBuf,
+}
+
+impl RenderSummary {
+    pub fn rays_per_second(&self) -> f64 {
+        self.rays as f64 / self.elapsed.as_secs_f64().max(1e-9)
+    }
+}
+
+/// Renders `frames` into `out_dir` as `frame_NNNN.exr` and `.png`, with a
+/// progress bar on stderr unless `quiet`.
+pub fn render_to_dir(
+    renderer: &mut Renderer,
+    frames: Range<u32>,
+    out_dir: &Path,
+    quiet: bool,
+) -> Result<RenderSummary> {
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create output directory {}", out_dir.display()))?;
+    let progress = progress_bar(frames.len() as u64, quiet);
+    let start = Instant::now();
+    let rays_before = renderer.backend().ray_counts().total();
+    for frame in frames.clone() {
+        progress.set_message(format!("frame {frame}"));
+        let film = renderer.render_frame(frame);
+        film::write_frame(&film, out_dir, frame)?;
+        progress.inc(1);
+    }
+    progress.finish_and_clear();
+    Ok(RenderSummary {
+        frames: frames.len() as u32,
+        elapsed: start.elapsed(),
+        rays: renderer.backend().ray_counts().total() - rays_before,
+        out_dir: out_dir.to_path_buf(),
+    })
+}
+
+fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
+    if quiet {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} frames, eta {eta} {msg}",
+        )
+        .expect("static progress template is valid"),
+    );
+    bar
+}

@@ -163,13 +163,25 @@ mod tests {
 
     #[test]
     fn streams_repeat_and_differ() {
-        let key = SampleKey { seed: 1, frame: Some(3), item: 42, sample: 7 };
-        let a: Vec<u32> = (0..8).scan(Rng::new(key), |r, _| Some(r.next_u32())).collect();
-        let b: Vec<u32> = (0..8).scan(Rng::new(key), |r, _| Some(r.next_u32())).collect();
+        let key = SampleKey {
+            seed: 1,
+            frame: Some(3),
+            item: 42,
+            sample: 7,
+        };
+        let a: Vec<u32> = (0..8)
+            .scan(Rng::new(key), |r, _| Some(r.next_u32()))
+            .collect();
+        let b: Vec<u32> = (0..8)
+            .scan(Rng::new(key), |r, _| Some(r.next_u32()))
+            .collect();
         assert_eq!(a, b);
         for other in [
             SampleKey { seed: 2, ..key },
-            SampleKey { frame: Some(4), ..key },
+            SampleKey {
+                frame: Some(4),
+                ..key
+            },
             SampleKey { frame: None, ..key },
             SampleKey { item: 43, ..key },
             SampleKey { sample: 8, ..key },
@@ -180,7 +192,12 @@ mod tests {
 
     #[test]
     fn uniform_floats_have_the_right_mean() {
-        let mut rng = Rng::new(SampleKey { seed: 9, frame: None, item: 0, sample: 0 });
+        let mut rng = Rng::new(SampleKey {
+            seed: 9,
+            frame: None,
+            item: 0,
+            sample: 0,
+        });
         let n = 200_000;
         let mean = (0..n).map(|_| rng.next_f32() as f64).sum::<f64>() / n as f64;
         assert!((mean - 0.5).abs() < 0.003, "mean {mean}");
@@ -188,9 +205,16 @@ mod tests {
 
     #[test]
     fn frame_is_orthonormal() {
-        for n in [Vec3::Z, -Vec3::Z, Vec3::X, Vec3::new(0.3, -0.5, 0.8).normalize()] {
+        for n in [
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::X,
+            Vec3::new(0.3, -0.5, 0.8).normalize(),
+        ] {
             let f = Frame::new(n);
-            assert!(f.t.dot(f.b).abs() < 1e-5 && f.t.dot(n).abs() < 1e-5 && f.b.dot(n).abs() < 1e-5);
+            assert!(
+                f.t.dot(f.b).abs() < 1e-5 && f.t.dot(n).abs() < 1e-5 && f.b.dot(n).abs() < 1e-5
+            );
             assert!((f.t.cross(f.b) - n).length() < 1e-4, "right-handed for {n}");
             let v = Vec3::new(0.2, 0.3, 0.9);
             assert!((f.to_local(f.to_world(v)) - v).length() < 1e-5);

@@ -45,7 +45,11 @@ impl Channel {
         if self.times.windows(2).any(|w| w[1] < w[0]) {
             return Err("animation key times are not increasing".into());
         }
-        let per_key = if self.interpolation == Interpolation::CubicSpline { 3 } else { 1 };
+        let per_key = if self.interpolation == Interpolation::CubicSpline {
+            3
+        } else {
+            1
+        };
         if self.values.len() != self.times.len() * per_key {
             return Err(format!(
                 "animation channel has {} values for {} keys (expected {})",

@@ -3,5 +3,8 @@ use super::{Scene, SceneError};
 use std::path::Path;
 
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
-    Err(SceneError::invalid(path.display().to_string(), "glTF loading is not implemented yet"))
+    Err(SceneError::invalid(
+        path.display().to_string(),
+        "glTF loading is not implemented yet",
+    ))
 }

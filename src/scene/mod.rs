@@ -360,14 +360,20 @@ impl Scene {
         for i in 0..self.nodes.len() {
             self.resolve_world(i, t, &mut world);
         }
-        world.into_iter().map(|m| m.unwrap_or(Mat4::IDENTITY)).collect()
+        world
+            .into_iter()
+            .map(|m| m.unwrap_or(Mat4::IDENTITY))
+            .collect()
     }
 
     fn resolve_world(&self, node: usize, t: f32, world: &mut [Option<Mat4>]) -> Mat4 {
         if let Some(m) = world[node] {
             return m;
         }
-        let local = self.animation.local_trs(node, self.nodes[node].rest, t).to_mat4();
+        let local = self
+            .animation
+            .local_trs(node, self.nodes[node].rest, t)
+            .to_mat4();
         let m = match self.nodes[node].parent {
             // Loaders guarantee the hierarchy is a forest (no cycles).
             Some(parent) => self.resolve_world(parent, t, world) * local,
@@ -422,9 +428,15 @@ impl Scene {
         };
         for object in self.object_order() {
             if !self.object_is_dynamic(object) {
-                snap.static_count = snap.triangles.len() + self.objects[object].mesh.triangles.len();
+                snap.static_count =
+                    snap.triangles.len() + self.objects[object].mesh.triangles.len();
             }
-            append_object(&mut snap, object as u32, &self.objects[object].mesh, &world[self.objects[object].node]);
+            append_object(
+                &mut snap,
+                object as u32,
+                &self.objects[object].mesh,
+                &world[self.objects[object].node],
+            );
         }
         snap
     }
