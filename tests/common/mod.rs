@@ -1,0 +1,84 @@
+//! Small scenes built in code for closed-form and brute-force tests.
+#![allow(dead_code)]
+
+use glam::{Quat, Vec3};
+use radcache::scene::{
+    Animation, CameraDef, Channel, Material, Mesh, Node, Object, PunctualLight, Scene, Trs,
+};
+
+/// Appends the quad `origin + s·u + t·v` (s, t ∈ [0,1]); its front face
+/// (counter-clockwise) looks along `u × v`.
+pub fn push_quad(mesh: &mut Mesh, origin: Vec3, u: Vec3, v: Vec3, material: u32) {
+    let base = mesh.positions.len() as u32;
+    let n = u.cross(v).normalize();
+    for p in [origin, origin + u, origin + u + v, origin + v] {
+        mesh.positions.push(p);
+        mesh.normals.push(n);
+    }
+    mesh.triangles.push([base, base + 1, base + 2]);
+    mesh.triangles.push([base, base + 2, base + 3]);
+    mesh.materials.extend([material, material]);
+}
+
+/// An axis-aligned box whose front faces look inward (a closed room).
+pub fn inward_box(min: Vec3, max: Vec3, material: u32) -> Mesh {
+    let mut m = Mesh::default();
+    let d = max - min;
+    let (x, y, z) = (Vec3::X * d.x, Vec3::Y * d.y, Vec3::Z * d.z);
+    push_quad(&mut m, min, z, x, material); // floor, faces +y
+    push_quad(&mut m, min + y, x, z, material); // ceiling, faces -y
+    push_quad(&mut m, min, x, y, material); // back, faces +z
+    push_quad(&mut m, min + z, y, x, material); // front, faces -z
+    push_quad(&mut m, min, y, z, material); // left, faces +x
+    push_quad(&mut m, min + x, z, y, material); // right, faces -x
+    m
+}
+
+/// One object per mesh, each on its own root node; `channels` animate them
+/// (their `node` field is the object index). The camera sits at `eye`
+/// looking along `look` (no roll).
+pub fn scene(
+    meshes: Vec<Mesh>,
+    materials: Vec<Material>,
+    channels: Vec<Channel>,
+    eye: Vec3,
+    look: Vec3,
+    yfov: f32,
+    lights: Vec<(Vec3, Vec3)>,
+) -> Scene {
+    let mut nodes = Vec::new();
+    let mut objects = Vec::new();
+    for (i, mesh) in meshes.into_iter().enumerate() {
+        nodes.push(Node { name: format!("object{i}"), parent: None, rest: Trs::default() });
+        objects.push(Object { name: format!("object{i}"), node: i, mesh });
+    }
+    let camera_node = nodes.len();
+    nodes.push(Node {
+        name: "camera".into(),
+        parent: None,
+        rest: Trs {
+            translation: eye,
+            rotation: Quat::from_rotation_arc(-Vec3::Z, look.normalize()),
+            scale: Vec3::ONE,
+        },
+    });
+    let mut punctual = Vec::new();
+    for (i, (position, intensity)) in lights.into_iter().enumerate() {
+        nodes.push(Node {
+            name: format!("light{i}"),
+            parent: None,
+            rest: Trs { translation: position, ..Trs::default() },
+        });
+        punctual.push(PunctualLight { name: format!("light{i}"), node: nodes.len() - 1, intensity, spot: None });
+    }
+    Scene {
+        name: "test".into(),
+        nodes,
+        objects,
+        materials,
+        lights: punctual,
+        camera: CameraDef { node: camera_node, yfov },
+        animation: Animation { channels },
+        frame_count: 2,
+    }
+}
