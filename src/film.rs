@@ -1,8 +1,24 @@
 //! Frames as linear RGB f32 images, and their files: `frame_NNNN.exr` (linear
-//! radiance, RGB f32) and `frame_NNNN.png` (tone-mapped sRGB preview).
+//! radiance, RGB f32) and `frame_NNNN.png` (tone-mapped sRGB preview), as
+//! DESIGN.md "Command line" specifies.
+//!
+//! - EXR: scanline, ZIP compression (16 lines per block, OpenEXR's `ZIP`),
+//!   channels `R`, `G`, `B` as 32-bit float, no alpha — the same layout as the
+//!   Mitsuba references in `shared/reference/`, so `compare` reads both alike.
+//!   Reading accepts f16 or f32 (or u32) channels and converts them to f32.
+//! - PNG: exposure 1, a tone curve on luminance that is the identity up to
+//!   [`TONE_KNEE`] and rolls highlights off smoothly towards 1 (see
+//!   [`tone_curve`]), then the sRGB OETF, 8 bits per channel.
+//!
+//! Every file is written atomically: encoded in memory, written to a temporary
+//! file in the destination folder, then renamed over the destination, so a
+//! crash never leaves a half-written frame behind.
 
 use glam::Vec3;
+use std::fs;
+use std::io::{self, Cursor, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// A linear-radiance RGB image, row-major from the top-left pixel.
 #[derive(Clone, Debug, PartialEq)]
@@ -37,30 +53,481 @@ pub fn frame_path(dir: &Path, frame: u32, ext: &str) -> PathBuf {
     dir.join(format!("frame_{frame:04}.{ext}"))
 }
 
-/// Writes `frame_NNNN.exr` and `frame_NNNN.png` (temporary: replaced by the
-/// full film I/O module).
-pub fn write_frame(film: &Film, dir: &Path, frame: u32) -> anyhow::Result<()> {
-    use exr::prelude::*;
-    let path = frame_path(dir, frame, "exr");
-    let (w, h) = (film.width as usize, film.height as usize);
-    write_rgb_file(&path, w, h, |x, y| {
-        let p = film.pixels[y * w + x];
-        (p.x, p.y, p.z)
-    })?;
-    let mut png = image::RgbImage::new(film.width, film.height);
-    for (i, px) in png.pixels_mut().enumerate() {
-        let p = film.pixels[i];
-        let enc = |v: f32| {
-            let v = v.clamp(0.0, 1.0);
-            let s = if v <= 0.0031308 {
-                12.92 * v
-            } else {
-                1.055 * v.powf(1.0 / 2.4) - 0.055
-            };
-            (s * 255.0 + 0.5) as u8
-        };
-        *px = image::Rgb([enc(p.x), enc(p.y), enc(p.z)]);
+/// Errors reading or writing frame files; every message names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum FilmError {
+    #[error("{}: file not found", path.display())]
+    NotFound { path: PathBuf },
+    #[error("{}: {source}", path.display())]
+    Io { path: PathBuf, source: io::Error },
+    #[error("{}: not an OpenEXR file (no EXR magic number)", path.display())]
+    NotExr { path: PathBuf },
+    #[error("{}: no R, G, B channels in the first layer (found: {found})", path.display())]
+    MissingChannels { path: PathBuf, found: String },
+    #[error("{}: invalid or unsupported EXR: {message}", path.display())]
+    Exr { path: PathBuf, message: String },
+    #[error("{}: cannot encode PNG: {message}", path.display())]
+    Png { path: PathBuf, message: String },
+}
+
+impl FilmError {
+    fn io(path: &Path, source: io::Error) -> Self {
+        if source.kind() == io::ErrorKind::NotFound {
+            FilmError::NotFound {
+                path: path.to_owned(),
+            }
+        } else {
+            FilmError::Io {
+                path: path.to_owned(),
+                source,
+            }
+        }
     }
-    png.save(frame_path(dir, frame, "png"))?;
-    Ok(())
+
+    fn exr(path: &Path, error: exr::error::Error) -> Self {
+        match error {
+            exr::error::Error::Io(source) => FilmError::io(path, source),
+            other => FilmError::Exr {
+                path: path.to_owned(),
+                message: other.to_string(),
+            },
+        }
+    }
+}
+
+// ---------------------------------------------------------------- EXR
+
+/// The four bytes every OpenEXR file starts with.
+const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
+
+/// Writes `film` as a scanline, ZIP-compressed RGB f32 EXR (atomically).
+pub fn write_exr(film: &Film, path: &Path) -> Result<(), FilmError> {
+    let bytes = encode_exr(film).map_err(|e| FilmError::exr(path, e))?;
+    write_atomically(path, &bytes)
+}
+
+fn encode_exr(film: &Film) -> Result<Vec<u8>, exr::error::Error> {
+    use exr::prelude::*;
+    let width = film.width as usize;
+    let channels = SpecificChannels::rgb(|pos: Vec2<usize>| {
+        let p = film.pixels[pos.y() * width + pos.x()];
+        (p.x, p.y, p.z)
+    });
+    // ZIP16 is OpenEXR's `ZIP` (16 scanlines per block); ZIP1 would be `ZIPS`.
+    let encoding = Encoding {
+        compression: Compression::ZIP16,
+        blocks: Blocks::ScanLines,
+        line_order: LineOrder::Increasing,
+    };
+    let size = (width, film.height as usize);
+    let layer = Layer::new(size, LayerAttributes::default(), encoding, channels);
+    let mut buffer = Cursor::new(Vec::new());
+    Image::from_layer(layer).write().to_buffered(&mut buffer)?;
+    Ok(buffer.into_inner())
+}
+
+/// Reads the R, G, B channels of the first layer of an EXR as f32.
+pub fn read_exr(path: &Path) -> Result<Film, FilmError> {
+    let bytes = fs::read(path).map_err(|e| FilmError::io(path, e))?;
+    if !bytes.starts_with(&EXR_MAGIC) {
+        return Err(FilmError::NotExr {
+            path: path.to_owned(),
+        });
+    }
+    check_rgb_channels(path, &bytes)?;
+    decode_rgb(&bytes).map_err(|e| FilmError::exr(path, e))
+}
+
+/// Checks the header first so that a file without colour channels gets a
+/// clear error listing what it has, rather than exr's generic "no layer
+/// matched your requirements".
+fn check_rgb_channels(path: &Path, bytes: &[u8]) -> Result<(), FilmError> {
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
+        .map_err(|e| FilmError::exr(path, e))?;
+    let names: Vec<String> = meta
+        .headers
+        .first()
+        .map(|h| h.channels.list.iter().map(|c| c.name.to_string()).collect())
+        .unwrap_or_default();
+    let has = |n: &str| names.iter().any(|c| c == n);
+    if has("R") && has("G") && has("B") {
+        Ok(())
+    } else {
+        Err(FilmError::MissingChannels {
+            path: path.to_owned(),
+            found: names.join(", "),
+        })
+    }
+}
+
+fn decode_rgb(bytes: &[u8]) -> Result<Film, exr::error::Error> {
+    use exr::prelude::*;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .specific_channels()
+        .required("R")
+        .required("G")
+        .required("B")
+        .collect_pixels(
+            |size: Vec2<usize>, _| Film::new(size.width() as u32, size.height() as u32),
+            // f16 and u32 samples are converted to the requested f32 by exr.
+            |film: &mut Film, pos: Vec2<usize>, (r, g, b): (f32, f32, f32)| {
+                let width = film.width as usize;
+                film.pixels[pos.y() * width + pos.x()] = Vec3::new(r, g, b);
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes))?;
+    Ok(image.layer_data.channel_data.pixels)
+}
+
+// ---------------------------------------------------------------- PNG
+
+/// Luminance below this is shown linearly (exposure 1); above, highlights
+/// roll off. Chosen so mid-tones (the references' mean is ≈ 0.56) are
+/// untouched while the radiance-30 light does not clip to a flat block of
+/// colour-shifted white before it has to.
+pub const TONE_KNEE: f32 = 0.8;
+
+/// The tone curve on luminance: identity up to [`TONE_KNEE`], then an
+/// exponential shoulder `k + (1−k)(1 − e^{−(L−k)/(1−k)})` that is continuous
+/// with slope 1 at the knee and approaches 1 as L → ∞. Chosen over a plain
+/// clamp so bright walls keep their gradation, and over a global Reinhard so
+/// that values ≤ 0.8 stay linear.
+pub fn tone_curve(luminance: f32) -> f32 {
+    let k = TONE_KNEE;
+    if luminance <= k {
+        luminance
+    } else {
+        k + (1.0 - k) * (1.0 - (-(luminance - k) / (1.0 - k)).exp())
+    }
+}
+
+/// The sRGB OETF (IEC 61966-2-1): linear [0, 1] → encoded [0, 1].
+pub fn srgb_oetf(linear: f32) -> f32 {
+    if linear <= 0.003_130_8 {
+        12.92 * linear
+    } else {
+        1.055 * linear.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// A linear value in [0, 1] → 8-bit sRGB, rounded to nearest. Non-finite or
+/// out-of-range input is clamped (NaN shows as black).
+pub fn encode_srgb8(linear: f32) -> u8 {
+    let v = if linear.is_nan() {
+        0.0
+    } else {
+        linear.clamp(0.0, 1.0)
+    };
+    (srgb_oetf(v) * 255.0 + 0.5) as u8
+}
+
+/// Rec. 709 luminance of linear RGB.
+fn luminance(c: Vec3) -> f32 {
+    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
+}
+
+/// One pixel: tone-map by scaling RGB with `tone_curve(L) / L` (keeps hue),
+/// then clamp each channel — a saturated colour above 1 may still clip.
+/// Non-finite pixels skip the curve so that ∞ shows white and NaN black.
+fn tonemap_pixel(c: Vec3) -> [u8; 3] {
+    let l = luminance(c);
+    let scale = if l.is_finite() && l > TONE_KNEE {
+        tone_curve(l) / l
+    } else {
+        1.0
+    };
+    let c = c * scale;
+    [encode_srgb8(c.x), encode_srgb8(c.y), encode_srgb8(c.z)]
+}
+
+/// The sRGB 8-bit preview of a linear film (exposure 1, [`tone_curve`]).
+pub fn tonemap_srgb(film: &Film) -> image::RgbImage {
+    let bytes: Vec<u8> = film.pixels.iter().flat_map(|&c| tonemap_pixel(c)).collect();
+    image::RgbImage::from_raw(film.width, film.height, bytes)
+        .expect("film has width × height pixels")
+}
+
+/// Writes the tone-mapped sRGB preview as an 8-bit RGB PNG (atomically).
+pub fn write_png(film: &Film, path: &Path) -> Result<(), FilmError> {
+    let mut buffer = Cursor::new(Vec::new());
+    tonemap_srgb(film)
+        .write_to(&mut buffer, image::ImageFormat::Png)
+        .map_err(|e| FilmError::Png {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+    write_atomically(path, &buffer.into_inner())
+}
+
+// ---------------------------------------------------------------- frames
+
+/// Writes `DIR/frame_NNNN.png` then `DIR/frame_NNNN.exr`, creating `dir` if
+/// needed. The EXR goes last so that its presence means the frame is complete
+/// (a resume can test for the EXR alone).
+pub fn write_frame(film: &Film, dir: &Path, frame: u32) -> Result<(), FilmError> {
+    fs::create_dir_all(dir).map_err(|e| FilmError::io(dir, e))?;
+    write_png(film, &frame_path(dir, frame, "png"))?;
+    write_exr(film, &frame_path(dir, frame, "exr"))
+}
+
+/// Distinguishes temporary files of concurrent writers in one process.
+static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes `bytes` to a temporary file beside `path`, syncs it, and renames it
+/// over `path`: rename within a folder is atomic, so readers see either the
+/// old file or the whole new one, never a partial one.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FilmError> {
+    let temp = temp_path(path);
+    let result = fs::File::create(&temp)
+        .and_then(|mut f| f.write_all(bytes).and_then(|()| f.sync_all()))
+        .and_then(|()| fs::rename(&temp, path));
+    result.map_err(|e| {
+        let _ = fs::remove_file(&temp);
+        FilmError::io(path, e)
+    })
+}
+
+/// `.NAME.tmp-PID-N` in the same folder as `path` (same file system, so the
+/// rename cannot fail with a cross-device error).
+fn temp_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy())
+        .unwrap_or_default();
+    let n = TEMP_COUNTER.fetch_add(1, Ordering::Relaxed);
+    path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::mix64;
+
+    fn reference(rel: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data/reference")
+            .join(rel)
+    }
+
+    /// Values spread over many magnitudes, incl. subnormal, tiny, huge, 0.
+    fn random_film(width: u32, height: u32, seed: u64) -> Film {
+        let mut film = Film::new(width, height);
+        for (i, p) in film.pixels.iter_mut().enumerate() {
+            let h = mix64(seed ^ i as u64);
+            let c = |k: u32| {
+                let mantissa = ((h >> (k * 16)) & 0xffff) as f32 / 65536.0;
+                let exponent = ((h >> (k * 7 + 40)) % 80) as i32 - 40;
+                mantissa * 2f32.powi(exponent)
+            };
+            *p = Vec3::new(c(0), c(1), c(2));
+        }
+        film.pixels[0] = Vec3::new(0.0, f32::MIN_POSITIVE / 8.0, 1.0e30);
+        film.pixels[1] = Vec3::new(f32::MAX, 1.0e-30, 30.0);
+        film
+    }
+
+    #[test]
+    fn exr_round_trip_is_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.exr");
+        let film = random_film(37, 21, 7);
+        write_exr(&film, &path).unwrap();
+        let back = read_exr(&path).unwrap();
+        assert_eq!((back.width, back.height), (37, 21));
+        for (a, b) in film.pixels.iter().zip(&back.pixels) {
+            assert_eq!(
+                a.to_array().map(f32::to_bits),
+                b.to_array().map(f32::to_bits)
+            );
+        }
+    }
+
+    #[test]
+    fn exr_is_scanline_zip_rgb_f32() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.exr");
+        write_exr(&Film::new(4, 3), &path).unwrap();
+        let meta = exr::meta::MetaData::read_from_file(&path, false).unwrap();
+        let header = &meta.headers[0];
+        assert_eq!(header.compression, exr::compression::Compression::ZIP16);
+        assert_eq!(header.blocks, exr::meta::BlockDescription::ScanLines);
+        let names: Vec<String> = header
+            .channels
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        assert_eq!(names, ["B", "G", "R"]); // EXR stores channels sorted by name
+        assert!(header
+            .channels
+            .list
+            .iter()
+            .all(|c| c.sample_type == exr::meta::attribute::SampleType::F32));
+    }
+
+    #[test]
+    fn reads_f16_channels() {
+        use exr::prelude::*;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("half.exr");
+        let channels = SpecificChannels::rgb(|p: Vec2<usize>| {
+            (
+                f16::from_f32(p.x() as f32),
+                f16::from_f32(0.5),
+                f16::from_f32(1024.0),
+            )
+        });
+        Image::from_channels((3, 2), channels)
+            .write()
+            .to_file(&path)
+            .unwrap();
+        let film = read_exr(&path).unwrap();
+        assert_eq!(film.get(2, 1), Vec3::new(2.0, 0.5, 1024.0));
+    }
+
+    #[test]
+    fn reads_shared_reference() {
+        let film = read_exr(&reference("cube_in_box/frame_0000.exr")).unwrap();
+        assert_eq!((film.width, film.height), (128, 128));
+        // SOURCE.md "Noise": mean radiance 0.5641.
+        assert!((film.mean() - 0.5641).abs() < 5e-4, "mean {}", film.mean());
+        let spheres = read_exr(&reference("spheres/frame_0000.exr")).unwrap();
+        assert!(
+            (spheres.mean() - 0.5460).abs() < 5e-4,
+            "mean {}",
+            spheres.mean()
+        );
+    }
+
+    #[test]
+    fn reference_sees_the_light_exactly() {
+        // SOURCE.md: a pixel seeing the light head-on holds exactly (30, 27, 22.5).
+        let film = read_exr(&reference("cube_in_box/frame_0000.exr")).unwrap();
+        let brightest = film
+            .pixels
+            .iter()
+            .copied()
+            .max_by(|a, b| luminance(*a).total_cmp(&luminance(*b)))
+            .unwrap();
+        assert_eq!(brightest, Vec3::new(30.0, 27.0, 22.5));
+    }
+
+    #[test]
+    fn read_errors_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("missing.exr");
+        let err = read_exr(&missing).unwrap_err();
+        assert!(matches!(err, FilmError::NotFound { .. }), "{err}");
+        assert!(err.to_string().contains("missing.exr"), "{err}");
+
+        let text = dir.path().join("text.exr");
+        fs::write(&text, "not an image").unwrap();
+        let err = read_exr(&text).unwrap_err();
+        assert!(matches!(err, FilmError::NotExr { .. }), "{err}");
+        assert!(err.to_string().contains("text.exr"), "{err}");
+
+        let truncated = dir.path().join("truncated.exr");
+        let whole = fs::read(reference("cube_in_box/frame_0000.exr")).unwrap();
+        fs::write(&truncated, &whole[..whole.len() / 2]).unwrap();
+        let err = read_exr(&truncated).unwrap_err();
+        assert!(err.to_string().contains("truncated.exr"), "{err}");
+    }
+
+    #[test]
+    fn missing_rgb_is_a_clear_error() {
+        use exr::prelude::*;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("luma.exr");
+        let channels = SpecificChannels::build()
+            .with_channel("Y")
+            .with_pixel_fn(|_p: Vec2<usize>| (0.5_f32,));
+        Image::from_channels((2, 2), channels)
+            .write()
+            .to_file(&path)
+            .unwrap();
+        let err = read_exr(&path).unwrap_err();
+        assert!(matches!(err, FilmError::MissingChannels { .. }), "{err}");
+        let message = err.to_string();
+        assert!(
+            message.contains("luma.exr") && message.contains("Y"),
+            "{message}"
+        );
+    }
+
+    #[test]
+    fn srgb_oetf_endpoints_and_boundary() {
+        assert_eq!(encode_srgb8(0.0), 0);
+        assert_eq!(encode_srgb8(1.0), 255);
+        assert_eq!(encode_srgb8(-1.0), 0);
+        assert_eq!(encode_srgb8(f32::INFINITY), 255);
+        assert_eq!(encode_srgb8(f32::NAN), 0);
+        // Both branches meet at 0.0031308 → 0.04045 (continuity of the OETF).
+        let below = srgb_oetf(0.003_130_8);
+        let above = srgb_oetf(f32::from_bits(0.003_130_8_f32.to_bits() + 1));
+        assert!((below - 0.040_45).abs() < 1e-5, "{below}");
+        assert!((above - below).abs() < 1e-5, "{above} vs {below}");
+        assert_eq!(encode_srgb8(0.003_130_8), 10); // 0.04045·255 = 10.3
+        assert!((srgb_oetf(0.5) - 0.735_357).abs() < 1e-5);
+    }
+
+    #[test]
+    fn tone_curve_is_linear_then_rolls_off() {
+        assert_eq!(tone_curve(0.5), 0.5);
+        assert_eq!(tone_curve(TONE_KNEE), TONE_KNEE);
+        let just_above = tone_curve(TONE_KNEE + 1e-3);
+        assert!((just_above - (TONE_KNEE + 1e-3)).abs() < 1e-5); // slope 1 at the knee
+        assert!(tone_curve(2.0) < 1.0 && tone_curve(2.0) > tone_curve(1.0));
+        assert!(tone_curve(30.0) <= 1.0 && tone_curve(30.0) > 0.999);
+        // Mid grey 0.5 passes through unchanged: sRGB 188.
+        assert_eq!(tonemap_pixel(Vec3::splat(0.5)), [188; 3]);
+        // The warm light keeps its hue: its luminance maps to ≈ 1, red clips.
+        let light = tonemap_pixel(Vec3::new(30.0, 27.0, 22.5));
+        assert!(
+            light[0] == 255 && light[1] >= 250 && light[2] < light[1],
+            "{light:?}"
+        );
+        let odd = tonemap_pixel(Vec3::new(f32::INFINITY, f32::NAN, 0.5));
+        assert_eq!(odd, [255, 0, 188]);
+    }
+
+    #[test]
+    fn png_has_the_right_size() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.png");
+        let film = random_film(19, 11, 3);
+        write_png(&film, &path).unwrap();
+        let decoded = image::open(&path).unwrap().to_rgb8();
+        assert_eq!(decoded.dimensions(), (19, 11));
+        assert_eq!(decoded, tonemap_srgb(&film));
+    }
+
+    #[test]
+    fn write_frame_writes_both_and_no_temporaries() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("a/b");
+        let film = random_film(8, 4, 11);
+        write_frame(&film, &out, 7).unwrap();
+        write_frame(&film, &out, 7).unwrap(); // overwriting is fine
+        assert_eq!(read_exr(&frame_path(&out, 7, "exr")).unwrap(), film);
+        assert!(frame_path(&out, 7, "png").is_file());
+        let mut names: Vec<String> = fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["frame_0007.exr", "frame_0007.png"]);
+    }
+
+    #[test]
+    fn write_error_names_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let blocker = dir.path().join("file");
+        fs::write(&blocker, "").unwrap();
+        let err = write_frame(&Film::new(2, 2), &blocker.join("sub"), 0).unwrap_err();
+        assert!(err.to_string().contains("file"), "{err}");
+    }
 }

@@ -1,15 +1,579 @@
-//! Image metrics (placeholder until the metrics module lands).
-use std::path::Path;
+//! Image metrics: RMSE, relative RMSE, block bias and flicker, and
+//! [`compare_dirs`] behind `radcache compare` (DESIGN.md "Measuring" and
+//! "Command line").
+//!
+//! All figures are over linear radiance and all three channels: a pixel
+//! contributes three values. "Mean radiance" is [`Film::mean`], the mean over
+//! pixels and channels. Sums are accumulated in f64 so that a 4K sequence does
+//! not lose the small differences being measured.
+//!
+//! The per-image functions take two films of the same size and panic
+//! otherwise; [`compare_dirs`] checks sizes first and reports the files.
 
-#[derive(serde::Serialize)]
-pub struct CompareReport {}
+use crate::film::{read_exr, Film, FilmError};
+use glam::Vec3;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
-impl CompareReport {
-    pub fn to_text(&self) -> String {
-        String::new()
+/// Side of the square pixel blocks of [`block_bias`] (DESIGN.md "Measuring":
+/// "the bias on 16×16-pixel block means").
+pub const BLOCK: u32 = 16;
+
+/// Errors of [`compare_dirs`]; each names the folder or files involved.
+#[derive(Debug, thiserror::Error)]
+pub enum MetricsError {
+    #[error("cannot read folder {}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("no frame_NNNN.exr files in reference folder {}", dir.display())]
+    NoFrames { dir: PathBuf },
+    #[error("{} is missing (the reference has {})", path.display(), reference.display())]
+    MissingFrame { path: PathBuf, reference: PathBuf },
+    #[error(
+        "sizes differ: {} is {}×{} but {} is {}×{}",
+        a.display(), a_size.0, a_size.1, b.display(), b_size.0, b_size.1
+    )]
+    SizeMismatch {
+        a: PathBuf,
+        a_size: (u32, u32),
+        b: PathBuf,
+        b_size: (u32, u32),
+    },
+    #[error(transparent)]
+    Film(#[from] FilmError),
+}
+
+// ---------------------------------------------------------------- per image
+
+fn assert_same_size(test: &Film, reference: &Film) {
+    assert_eq!(
+        (test.width, test.height),
+        (reference.width, reference.height),
+        "metrics need images of the same size"
+    );
+}
+
+fn sum_sq(v: Vec3) -> f64 {
+    let d = v.as_dvec3();
+    d.dot(d)
+}
+
+/// Mean over pixels and channels of (I − R)².
+pub fn mse(test: &Film, reference: &Film) -> f64 {
+    assert_same_size(test, reference);
+    let sum: f64 = test
+        .pixels
+        .iter()
+        .zip(&reference.pixels)
+        .map(|(i, r)| sum_sq(*i - *r))
+        .sum();
+    sum / (3 * test.pixels.len()).max(1) as f64
+}
+
+/// RMSE (DESIGN.md "Measuring", accuracy): √(mean over pixels and channels of
+/// (I − R)²).
+pub fn rmse(test: &Film, reference: &Film) -> f64 {
+    mse(test, reference).sqrt()
+}
+
+/// Relative RMSE: [`rmse`] ÷ mean(R), so scenes of different brightness
+/// compare. Infinite or NaN for an all-black reference.
+pub fn rel_rmse(test: &Film, reference: &Film) -> f64 {
+    rmse(test, reference) / reference.mean()
+}
+
+/// Per-channel means of the `block`×`block` tiles, row-major. Tiles on the
+/// right and bottom edges may be partial; each is averaged over its own
+/// pixel count.
+fn block_means(film: &Film, block: u32) -> Vec<[f64; 3]> {
+    let block = block.max(1);
+    let (bw, bh) = (film.width.div_ceil(block), film.height.div_ceil(block));
+    let mut sums = vec![([0.0_f64; 3], 0_u32); (bw * bh) as usize];
+    for y in 0..film.height {
+        for x in 0..film.width {
+            let (sum, count) = &mut sums[((y / block) * bw + x / block) as usize];
+            let p = film.get(x, y).as_dvec3();
+            for (s, v) in sum.iter_mut().zip(p.to_array()) {
+                *s += v;
+            }
+            *count += 1;
+        }
+    }
+    sums.into_iter()
+        .map(|(s, n)| s.map(|v| v / f64::from(n)))
+        .collect()
+}
+
+/// Mean over blocks and channels of (mean_block(I) − mean_block(R))²; every
+/// block counts once, whatever its pixel count.
+pub fn block_mse(test: &Film, reference: &Film, block: u32) -> f64 {
+    assert_same_size(test, reference);
+    let (bi, br) = (block_means(test, block), block_means(reference, block));
+    let sum: f64 = bi
+        .iter()
+        .zip(&br)
+        .flat_map(|(i, r)| i.iter().zip(r).map(|(a, b)| (a - b) * (a - b)))
+        .sum();
+    sum / (3 * bi.len()).max(1) as f64
+}
+
+/// Block bias (DESIGN.md "Measuring"): the RMS over `block`×`block` tiles and
+/// channels of (mean_block(I) − mean_block(R)), ÷ mean(R). Zero-mean noise
+/// averages out inside a tile, so this shows bias that the all-pixel RMSE,
+/// dominated by the edge pixels of a directly seen light, hides.
+pub fn block_bias(test: &Film, reference: &Film, block: u32) -> f64 {
+    block_mse(test, reference, block).sqrt() / reference.mean()
+}
+
+/// Sum over pixels and channels of ((I₁ − I₀) − (R₁ − R₀))², and the count of
+/// values summed.
+fn flicker_sum(i0: &Film, i1: &Film, r0: &Film, r1: &Film) -> (f64, usize) {
+    for f in [i1, r0, r1] {
+        assert_same_size(i0, f);
+    }
+    let sum = (0..i0.pixels.len())
+        .map(|k| sum_sq((i1.pixels[k] - i0.pixels[k]) - (r1.pixels[k] - r0.pixels[k])))
+        .sum();
+    (sum, 3 * i0.pixels.len())
+}
+
+/// Flicker (DESIGN.md "Measuring", temporal stability): the RMS over pixels,
+/// channels and consecutive frame pairs of (I(t+1) − I(t)) − (R(t+1) − R(t)),
+/// ÷ the reference's mean radiance over all its frames. Subtracting the
+/// reference's own change leaves only the method's frame-to-frame noise and
+/// lag. `test[k]` and `reference[k]` are frame k of consecutive frames;
+/// `None` with fewer than two frames.
+pub fn flicker(test: &[Film], reference: &[Film]) -> Option<f64> {
+    assert_eq!(
+        test.len(),
+        reference.len(),
+        "flicker needs as many test as reference frames"
+    );
+    if reference.len() < 2 {
+        return None;
+    }
+    let (mut sum, mut count) = (0.0, 0);
+    for k in 0..reference.len() - 1 {
+        let (s, n) = flicker_sum(&test[k], &test[k + 1], &reference[k], &reference[k + 1]);
+        sum += s;
+        count += n;
+    }
+    Some((sum / count as f64).sqrt() / sequence_mean(reference))
+}
+
+/// Mean over every pixel and channel of every frame.
+fn sequence_mean(frames: &[Film]) -> f64 {
+    let sum: f64 = frames
+        .iter()
+        .map(|f| f.mean() * f.pixels.len() as f64)
+        .sum();
+    sum / frames.iter().map(|f| f.pixels.len()).sum::<usize>().max(1) as f64
+}
+
+// ---------------------------------------------------------------- folders
+
+/// The figures for one frame.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FrameReport {
+    pub frame: u32,
+    pub rmse: f64,
+    pub rel_rmse: f64,
+    pub block_bias: f64,
+}
+
+/// The result of comparing a test folder with a reference folder. Serialises
+/// to `{"frames":N,"rmse":…,"rel_rmse":…,"block_bias":…,"flicker":…,
+/// "per_frame":[…]}`; `flicker` is `null` without consecutive frames.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CompareReport {
+    pub frames: usize,
+    /// √(mean over frames of the per-frame MSE).
+    pub rmse: f64,
+    /// `rmse` ÷ the reference's mean radiance over all frames.
+    pub rel_rmse: f64,
+    /// √(mean over frames of the per-frame block MSE) ÷ the same mean.
+    pub block_bias: f64,
+    pub flicker: Option<f64>,
+    pub per_frame: Vec<FrameReport>,
+}
+
+/// `frame_NNNN.exr` files of `dir` as (frame number, path), sorted by number.
+/// Other files (`frame_NNNN.png`, `seed1_frame_0000.exr`, …) are ignored.
+pub fn list_frames(dir: &Path) -> Result<Vec<(u32, PathBuf)>, MetricsError> {
+    let io_err = |source| MetricsError::Io {
+        path: dir.to_owned(),
+        source,
+    };
+    let mut frames = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(io_err)? {
+        let entry = entry.map_err(io_err)?;
+        if let Some(n) = entry.file_name().to_str().and_then(frame_number) {
+            frames.push((n, entry.path()));
+        }
+    }
+    frames.sort();
+    Ok(frames)
+}
+
+/// `frame_0012.exr` → 12.
+fn frame_number(name: &str) -> Option<u32> {
+    let digits = name.strip_prefix("frame_")?.strip_suffix(".exr")?;
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    digits.parse().ok()
+}
+
+fn size(f: &Film) -> (u32, u32) {
+    (f.width, f.height)
+}
+
+fn check_size(a: &Path, fa: &Film, b: &Path, fb: &Film) -> Result<(), MetricsError> {
+    if size(fa) == size(fb) {
+        return Ok(());
+    }
+    Err(MetricsError::SizeMismatch {
+        a: a.to_owned(),
+        a_size: size(fa),
+        b: b.to_owned(),
+        b_size: size(fb),
+    })
+}
+
+/// One frame read from both folders.
+struct FramePair {
+    number: u32,
+    ref_path: PathBuf,
+    test: Film,
+    reference: Film,
+}
+
+fn read_pair(number: u32, ref_path: PathBuf, test_dir: &Path) -> Result<FramePair, MetricsError> {
+    let test_path = test_dir.join(ref_path.file_name().expect("listed files have names"));
+    if !test_path.is_file() {
+        return Err(MetricsError::MissingFrame {
+            path: test_path,
+            reference: ref_path,
+        });
+    }
+    let reference = read_exr(&ref_path)?;
+    let test = read_exr(&test_path)?;
+    check_size(&test_path, &test, &ref_path, &reference)?;
+    Ok(FramePair {
+        number,
+        ref_path,
+        test,
+        reference,
+    })
+}
+
+/// Running sums over the sequence; frames are read one at a time so a long
+/// high-resolution sequence never sits in memory whole.
+#[derive(Default)]
+struct Totals {
+    mse: f64,
+    block_mse: f64,
+    ref_sum: f64,
+    ref_values: usize,
+    flicker_sum: f64,
+    flicker_values: usize,
+    per_frame: Vec<FrameReport>,
+}
+
+impl Totals {
+    fn add_frame(&mut self, f: &FramePair) {
+        let (mse, block_mse) = (
+            mse(&f.test, &f.reference),
+            block_mse(&f.test, &f.reference, BLOCK),
+        );
+        let mean = f.reference.mean();
+        self.mse += mse;
+        self.block_mse += block_mse;
+        self.ref_sum += mean * (3 * f.reference.pixels.len()) as f64;
+        self.ref_values += 3 * f.reference.pixels.len();
+        self.per_frame.push(FrameReport {
+            frame: f.number,
+            rmse: mse.sqrt(),
+            rel_rmse: mse.sqrt() / mean,
+            block_bias: block_mse.sqrt() / mean,
+        });
+    }
+
+    /// Counts the pair only when the frame numbers are consecutive: the
+    /// definition is about I(t+1) − I(t), not about any two listed frames.
+    fn add_pair(&mut self, prev: &FramePair, next: &FramePair) -> Result<(), MetricsError> {
+        if prev.number.checked_add(1) != Some(next.number) {
+            return Ok(());
+        }
+        check_size(
+            &prev.ref_path,
+            &prev.reference,
+            &next.ref_path,
+            &next.reference,
+        )?;
+        let (s, n) = flicker_sum(&prev.test, &next.test, &prev.reference, &next.reference);
+        self.flicker_sum += s;
+        self.flicker_values += n;
+        Ok(())
+    }
+
+    fn report(self) -> CompareReport {
+        let frames = self.per_frame.len();
+        let mean = self.ref_sum / self.ref_values.max(1) as f64;
+        let rmse = (self.mse / frames as f64).sqrt();
+        let block = (self.block_mse / frames as f64).sqrt();
+        let flicker = (self.flicker_values > 0)
+            .then(|| (self.flicker_sum / self.flicker_values as f64).sqrt() / mean);
+        CompareReport {
+            frames,
+            rmse,
+            rel_rmse: rmse / mean,
+            block_bias: block / mean,
+            flicker,
+            per_frame: self.per_frame,
+        }
     }
 }
 
-pub fn compare_dirs(_reference: &Path, _test: &Path) -> anyhow::Result<CompareReport> {
-    anyhow::bail!("not implemented")
+/// Compares every `frame_NNNN.exr` of `reference_dir` with the file of the
+/// same name in `test_dir` (`radcache compare REF_DIR TEST_DIR`). Frames only
+/// in `test_dir` are ignored; a reference frame missing from `test_dir`, or
+/// of another size, is an error. Flicker uses the pairs whose numbers differ
+/// by one.
+pub fn compare_dirs(reference_dir: &Path, test_dir: &Path) -> Result<CompareReport, MetricsError> {
+    let frames = list_frames(reference_dir)?;
+    if frames.is_empty() {
+        return Err(MetricsError::NoFrames {
+            dir: reference_dir.to_owned(),
+        });
+    }
+    let mut totals = Totals::default();
+    let mut prev: Option<FramePair> = None;
+    for (number, ref_path) in frames {
+        let pair = read_pair(number, ref_path, test_dir)?;
+        totals.add_frame(&pair);
+        if let Some(prev) = &prev {
+            totals.add_pair(prev, &pair)?;
+        }
+        prev = Some(pair);
+    }
+    Ok(totals.report())
+}
+
+impl CompareReport {
+    /// A table for people: one line per frame, then the overall line with
+    /// the flicker (`-` when there are no consecutive frames).
+    pub fn to_text(&self) -> String {
+        let mut out = format!(
+            "{:>6} {:>12} {:>12} {:>12} {:>12}\n",
+            "frame", "rmse", "rel_rmse", "block_bias", "flicker"
+        );
+        for f in &self.per_frame {
+            let _ = writeln!(
+                out,
+                "{:>6} {:>12.6} {:>12.6} {:>12.6} {:>12}",
+                format!("{:04}", f.frame),
+                f.rmse,
+                f.rel_rmse,
+                f.block_bias,
+                ""
+            );
+        }
+        let flicker = self.flicker.map_or("-".to_string(), |v| format!("{v:.6}"));
+        let _ = writeln!(
+            out,
+            "{:>6} {:>12.6} {:>12.6} {:>12.6} {:>12}  ({} frames)",
+            "all", self.rmse, self.rel_rmse, self.block_bias, flicker, self.frames
+        );
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn constant(w: u32, h: u32, v: f32) -> Film {
+        Film {
+            width: w,
+            height: h,
+            pixels: vec![Vec3::splat(v); (w * h) as usize],
+        }
+    }
+
+    /// A smooth, non-constant image so that tests don't pass by symmetry.
+    fn ramp(w: u32, h: u32) -> Film {
+        let mut f = Film::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                f.pixels[(y * w + x) as usize] =
+                    Vec3::new(0.2 + x as f32 / w as f32, 0.5, 0.1 + y as f32 / h as f32);
+            }
+        }
+        f
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() <= 1e-5 * b.abs().max(1.0)
+    }
+
+    #[test]
+    fn rmse_of_identical_images_is_zero() {
+        let f = ramp(40, 30);
+        assert_eq!(rmse(&f, &f), 0.0);
+        assert_eq!(block_bias(&f, &f, BLOCK), 0.0);
+    }
+
+    #[test]
+    fn rmse_of_constant_offset_is_the_offset() {
+        let r = ramp(40, 30);
+        let mut t = r.clone();
+        t.pixels.iter_mut().for_each(|p| *p += Vec3::splat(0.25));
+        assert!(close(rmse(&t, &r), 0.25), "{}", rmse(&t, &r));
+        // A constant offset is all bias: the block bias sees it in full.
+        assert!(close(block_bias(&t, &r, BLOCK) * r.mean(), 0.25));
+        // One channel only: the mean over three channels is c²/3.
+        let mut t1 = r.clone();
+        t1.pixels.iter_mut().for_each(|p| p.x += 0.3);
+        assert!(close(rmse(&t1, &r), 0.3 / 3f64.sqrt()));
+    }
+
+    #[test]
+    fn rel_rmse_divides_by_reference_mean() {
+        let r = constant(8, 8, 2.0);
+        let t = constant(8, 8, 2.5);
+        assert!(close(rel_rmse(&t, &r), 0.25));
+        // Scaling both images leaves the relative figure unchanged.
+        let (r10, t10) = (constant(8, 8, 20.0), constant(8, 8, 25.0));
+        assert!(close(rel_rmse(&t10, &r10), rel_rmse(&t, &r)));
+        assert!(close(rmse(&t10, &r10), 10.0 * rmse(&t, &r)));
+    }
+
+    #[test]
+    fn block_bias_ignores_zero_mean_noise_in_blocks() {
+        // 40×24: partial blocks on the right (8 px) and bottom (8 px) edges,
+        // all of even size, so a checkerboard averages to 0 in every block.
+        let r = ramp(40, 24);
+        let e = 0.05_f32;
+        let mut t = r.clone();
+        for y in 0..24 {
+            for x in 0..40 {
+                let s = if (x + y) % 2 == 0 { e } else { -e };
+                t.pixels[(y * 40 + x) as usize] += Vec3::splat(s);
+            }
+        }
+        assert!(close(rmse(&t, &r), f64::from(e)));
+        assert!(
+            block_bias(&t, &r, BLOCK) < 1e-6,
+            "{}",
+            block_bias(&t, &r, BLOCK)
+        );
+    }
+
+    #[test]
+    fn block_bias_weights_partial_blocks_as_blocks() {
+        // 17×16: one full block and a 1×16 column. Offset only the column:
+        // its block mean moves by c, the full block's by 0 → RMS c/√2.
+        let r = constant(17, 16, 1.0);
+        let mut t = r.clone();
+        for y in 0..16 {
+            t.pixels[(y * 17 + 16) as usize] += Vec3::splat(0.4);
+        }
+        assert!(close(block_bias(&t, &r, BLOCK), 0.4 / 2f64.sqrt()));
+    }
+
+    #[test]
+    fn flicker_ignores_constant_bias() {
+        let refs: Vec<Film> = (0..4)
+            .map(|k| constant(10, 10, 1.0 + k as f32 * 0.1))
+            .collect();
+        let tests: Vec<Film> = refs
+            .iter()
+            .map(|f| {
+                let mut t = f.clone();
+                t.pixels
+                    .iter_mut()
+                    .for_each(|p| *p += Vec3::new(0.5, -0.25, 0.125));
+                t
+            })
+            .collect();
+        assert!(flicker(&tests, &refs).unwrap() < 1e-7);
+    }
+
+    #[test]
+    fn flicker_of_alternating_error() {
+        // I(t) = R(t) + e·(−1)^t: every pair differs by ±2e → flicker 2e/mean(R).
+        let e = 0.125_f32;
+        let refs: Vec<Film> = (0..5)
+            .map(|k| constant(6, 4, 1.0 + k as f32 * 0.25))
+            .collect();
+        let tests: Vec<Film> = refs
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let s = if k % 2 == 0 { e } else { -e };
+                let mut t = f.clone();
+                t.pixels.iter_mut().for_each(|p| *p += Vec3::splat(s));
+                t
+            })
+            .collect();
+        let mean = (1.0 + 1.25 + 1.5 + 1.75 + 2.0) / 5.0;
+        let got = flicker(&tests, &refs).unwrap();
+        assert!(close(got, 2.0 * f64::from(e) / mean), "{got}");
+    }
+
+    #[test]
+    fn flicker_needs_two_frames() {
+        let f = ramp(4, 4);
+        assert_eq!(
+            flicker(std::slice::from_ref(&f), std::slice::from_ref(&f)),
+            None
+        );
+    }
+
+    #[test]
+    fn frame_numbers() {
+        assert_eq!(frame_number("frame_0012.exr"), Some(12));
+        assert_eq!(frame_number("frame_12345.exr"), Some(12345));
+        assert_eq!(frame_number("frame_0012.png"), None);
+        assert_eq!(frame_number("seed1_frame_0000.exr"), None);
+        assert_eq!(frame_number("frame_.exr"), None);
+        assert_eq!(frame_number("frame_-1.exr"), None);
+    }
+
+    #[test]
+    fn text_table_has_a_line_per_frame_and_overall() {
+        let report = CompareReport {
+            frames: 2,
+            rmse: 0.5,
+            rel_rmse: 0.25,
+            block_bias: 0.125,
+            flicker: None,
+            per_frame: vec![
+                FrameReport {
+                    frame: 3,
+                    rmse: 0.5,
+                    rel_rmse: 0.25,
+                    block_bias: 0.125,
+                },
+                FrameReport {
+                    frame: 4,
+                    rmse: 0.5,
+                    rel_rmse: 0.25,
+                    block_bias: 0.125,
+                },
+            ],
+        };
+        let text = report.to_text();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 4, "{text}");
+        assert!(lines[1].trim_start().starts_with("0003"), "{text}");
+        assert!(
+            lines[3].trim_start().starts_with("all") && lines[3].contains('-'),
+            "{text}"
+        );
+    }
 }

@@ -1,0 +1,207 @@
+//! `compare_dirs` on folders of frames: the reference copies in
+//! `tests/data/reference/` (see its SOURCE.md) and small synthetic sequences.
+
+use glam::Vec3;
+use radcache::film::{frame_path, write_exr, Film};
+use radcache::metrics::{compare_dirs, MetricsError};
+use std::fs;
+use std::path::{Path, PathBuf};
+
+fn data(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/reference")
+        .join(rel)
+}
+
+fn constant(w: u32, h: u32, v: f32) -> Film {
+    Film {
+        width: w,
+        height: h,
+        pixels: vec![Vec3::splat(v); (w * h) as usize],
+    }
+}
+
+fn offset(f: &Film, c: f32) -> Film {
+    let mut t = f.clone();
+    t.pixels.iter_mut().for_each(|p| *p += Vec3::splat(c));
+    t
+}
+
+/// Writes `frames` as `dir/frame_NNNN.exr`.
+fn write_seq(dir: &Path, frames: &[(u32, Film)]) {
+    fs::create_dir_all(dir).unwrap();
+    for (n, f) in frames {
+        write_exr(f, &frame_path(dir, *n, "exr")).unwrap();
+    }
+}
+
+#[test]
+fn seed0_against_seed1_matches_source_md() {
+    // SOURCE.md "Noise": RMSE(seed0 − seed1) = 0.0189 for cube_in_box.
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b) = (tmp.path().join("seed0"), tmp.path().join("seed1"));
+    fs::create_dir_all(&a).unwrap();
+    fs::create_dir_all(&b).unwrap();
+    fs::copy(data("cube_in_box/frame_0000.exr"), a.join("frame_0000.exr")).unwrap();
+    fs::copy(
+        data("cube_in_box/seed1_frame_0000.exr"),
+        b.join("frame_0000.exr"),
+    )
+    .unwrap();
+    let report = compare_dirs(&a, &b).unwrap();
+    assert_eq!(report.frames, 1);
+    assert!(
+        (report.rmse / 0.0189 - 1.0).abs() < 0.05,
+        "rmse {}",
+        report.rmse
+    );
+    // Relative: 0.034 in SOURCE.md.
+    assert!(
+        (report.rel_rmse / 0.034 - 1.0).abs() < 0.05,
+        "rel {}",
+        report.rel_rmse
+    );
+    // Two noisy images with the same expectation: little block bias.
+    assert!(
+        report.block_bias < 0.2 * report.rel_rmse,
+        "block {}",
+        report.block_bias
+    );
+    assert_eq!(report.flicker, None);
+}
+
+#[test]
+fn reference_folder_against_itself() {
+    // Frames 0, 12, 23: seed1_frame_0000.exr is not a frame; no consecutive pair.
+    let dir = data("cube_in_box");
+    let report = compare_dirs(&dir, &dir).unwrap();
+    assert_eq!(report.frames, 3);
+    let numbers: Vec<u32> = report.per_frame.iter().map(|f| f.frame).collect();
+    assert_eq!(numbers, [0, 12, 23]);
+    assert_eq!(
+        (report.rmse, report.rel_rmse, report.block_bias),
+        (0.0, 0.0, 0.0)
+    );
+    assert_eq!(report.flicker, None);
+}
+
+#[test]
+fn json_has_the_specified_keys() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let refs: Vec<(u32, Film)> = (0..3).map(|k| (k, constant(20, 18, 1.0))).collect();
+    let tests: Vec<(u32, Film)> = refs.iter().map(|(k, f)| (*k, offset(f, 0.5))).collect();
+    write_seq(&r, &refs);
+    write_seq(&t, &tests);
+    let report = compare_dirs(&r, &t).unwrap();
+    let json = serde_json::to_value(&report).unwrap();
+    let keys: Vec<&str> = json
+        .as_object()
+        .unwrap()
+        .keys()
+        .map(String::as_str)
+        .collect();
+    let mut want = [
+        "frames",
+        "rmse",
+        "rel_rmse",
+        "block_bias",
+        "flicker",
+        "per_frame",
+    ];
+    let mut got = keys.clone();
+    got.sort();
+    want.sort();
+    assert_eq!(got, want);
+    assert_eq!(json["frames"], 3);
+    assert!((json["rmse"].as_f64().unwrap() - 0.5).abs() < 1e-6);
+    assert!((json["rel_rmse"].as_f64().unwrap() - 0.5).abs() < 1e-6);
+    assert_eq!(json["flicker"].as_f64().unwrap(), 0.0); // constant bias: no flicker
+    let first = json["per_frame"][0].as_object().unwrap();
+    let mut frame_keys: Vec<&str> = first.keys().map(String::as_str).collect();
+    frame_keys.sort();
+    assert_eq!(frame_keys, ["block_bias", "frame", "rel_rmse", "rmse"]);
+    // The text table: header, three frames, overall.
+    assert_eq!(report.to_text().lines().count(), 5);
+}
+
+#[test]
+fn flicker_uses_only_consecutive_frames() {
+    // Frames 0, 1, 3 with I = R + e·(−1)^n. Pair (0,1) differs by 2e; the
+    // (1,3) gap would add a zero difference and lower the RMS to √2·e.
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let e = 0.125;
+    let refs: Vec<(u32, Film)> = [0, 1, 3]
+        .iter()
+        .map(|&k| (k, constant(8, 8, 1.0)))
+        .collect();
+    let tests: Vec<(u32, Film)> = refs
+        .iter()
+        .map(|(k, f)| (*k, offset(f, if k % 2 == 0 { e } else { -e })))
+        .collect();
+    write_seq(&r, &refs);
+    write_seq(&t, &tests);
+    let flicker = compare_dirs(&r, &t).unwrap().flicker.unwrap();
+    assert!((flicker - 2.0 * f64::from(e)).abs() < 1e-9, "{flicker}");
+}
+
+#[test]
+fn extra_test_frames_are_ignored() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    write_seq(&r, &[(0, constant(4, 4, 1.0))]);
+    write_seq(&t, &[(0, constant(4, 4, 1.0)), (1, constant(4, 4, 9.0))]);
+    let report = compare_dirs(&r, &t).unwrap();
+    assert_eq!((report.frames, report.rmse), (1, 0.0));
+}
+
+#[test]
+fn missing_frame_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    write_seq(&r, &[(0, constant(4, 4, 1.0)), (1, constant(4, 4, 1.0))]);
+    write_seq(&t, &[(0, constant(4, 4, 1.0))]);
+    let err = compare_dirs(&r, &t).unwrap_err();
+    assert!(matches!(err, MetricsError::MissingFrame { .. }), "{err}");
+    assert!(
+        err.to_string()
+            .contains(&*t.join("frame_0001.exr").to_string_lossy()),
+        "{err}"
+    );
+}
+
+#[test]
+fn size_mismatch_names_both_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    write_seq(&r, &[(0, constant(4, 4, 1.0))]);
+    write_seq(&t, &[(0, constant(5, 4, 1.0))]);
+    let err = compare_dirs(&r, &t).unwrap_err();
+    assert!(matches!(err, MetricsError::SizeMismatch { .. }), "{err}");
+    let message = err.to_string();
+    for needle in ["ref/frame_0000.exr", "test/frame_0000.exr", "4×4", "5×4"] {
+        assert!(message.contains(needle), "{needle} not in {message}");
+    }
+}
+
+#[test]
+fn empty_or_absent_reference_folder_is_an_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let err = compare_dirs(tmp.path(), tmp.path()).unwrap_err();
+    assert!(matches!(err, MetricsError::NoFrames { .. }), "{err}");
+    let absent = tmp.path().join("nope");
+    let err = compare_dirs(&absent, tmp.path()).unwrap_err();
+    assert!(err.to_string().contains("nope"), "{err}");
+}
+
+#[test]
+fn unreadable_test_frame_names_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    write_seq(&r, &[(0, constant(4, 4, 1.0))]);
+    fs::create_dir_all(&t).unwrap();
+    fs::write(t.join("frame_0000.exr"), "garbage").unwrap();
+    let err = compare_dirs(&r, &t).unwrap_err();
+    assert!(err.to_string().contains("test/frame_0000.exr"), "{err}");
+}
