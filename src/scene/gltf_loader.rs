@@ -1,10 +1,918 @@
-//! glTF 2.0 loader (placeholder until the loader lands).
-use super::{Scene, SceneError};
-use std::path::Path;
+//! glTF 2.0 loader (`.gltf` and `.glb`) producing a [`Scene`].
+//!
+//! What is read (DESIGN.md, "Scenes"): the default scene's node hierarchy with
+//! rest TRS, every mesh node as one object (its triangle primitives merged),
+//! metallic-roughness materials with `KHR_materials_emissive_strength`,
+//! `KHR_lights_punctual` point and spot lights, the first perspective camera
+//! and all TRS animation channels. Textures, skins and morph targets are
+//! ignored.
+//!
+//! Bad input must give an error naming the file and the problem, never a
+//! panic. The `gltf` crate's own accessor readers can panic on malformed
+//! files (reads past a buffer end, a zero count, a stride smaller than an
+//! element), so accessors are decoded here with bounds-checked code, and the
+//! whole parse additionally runs under `catch_unwind` as a last line of
+//! defence.
 
+use super::animation::{Animation, Channel, Interpolation, Property};
+use super::{
+    CameraDef, Material, Mesh, Node, Object, PunctualLight, Scene, SceneError, Spot, Trs,
+    DEFAULT_FPS,
+};
+use glam::{Mat4, Quat, Vec3, Vec4};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::{Mode, Semantic};
+use std::cell::Cell;
+use std::collections::HashMap;
+use std::panic::{self, AssertUnwindSafe};
+use std::path::Path;
+use std::sync::Once;
+
+/// Internal results carry only the problem; [`load`] prefixes the file path.
+type Res<T> = Result<T, String>;
+
+/// Accessors without a buffer view are all zeros and cost no file bytes, so
+/// their `count` is the only thing bounding the allocation: cap it.
+const MAX_VIEWLESS_BYTES: usize = 1 << 28;
+
+/// Albedo of the material given to primitives that have none.
+const DEFAULT_ALBEDO: f32 = 0.8;
+
+/// Loads a glTF 2.0 scene from `path`. Every error names the file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
-    Err(SceneError::invalid(
-        path.display().to_string(),
-        "glTF loading is not implemented yet",
-    ))
+    let source = path.display().to_string();
+    let fail = |message: String| SceneError::invalid(source.clone(), message);
+    check_extension(path).map_err(fail)?;
+    let bytes = read_file(path).map_err(fail)?;
+    quietly_catch_panics(|| load_bytes(path, &bytes)).map_err(fail)
+}
+
+fn check_extension(path: &Path) -> Res<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("gltf") | Some("glb") => Ok(()),
+        Some(other) => Err(format!(
+            "unsupported file extension '.{other}' (expected .gltf or .glb)"
+        )),
+        None => Err("unsupported file: no extension (expected .gltf or .glb)".into()),
+    }
+}
+
+fn read_file(path: &Path) -> Res<Vec<u8>> {
+    std::fs::read(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => "file not found".to_string(),
+        _ => format!("cannot read file: {e}"),
+    })
+}
+
+thread_local! {
+    /// Set while this thread parses a file, so the panic hook stays silent.
+    static QUIET: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Runs `f`, turning a panic into an error. The default hook would print a
+/// confusing "thread panicked" message before our clean error, so a hook that
+/// stays silent on threads inside this function (and defers to the previous
+/// hook everywhere else) is installed once.
+fn quietly_catch_panics<T>(f: impl FnOnce() -> Res<T>) -> Res<T> {
+    static INSTALL: Once = Once::new();
+    INSTALL.call_once(|| {
+        let previous = panic::take_hook();
+        panic::set_hook(Box::new(move |info| {
+            if !QUIET.try_with(Cell::get).unwrap_or(false) {
+                previous(info);
+            }
+        }));
+    });
+    let was_quiet = QUIET.with(|q| q.replace(true));
+    let result = panic::catch_unwind(AssertUnwindSafe(f));
+    QUIET.with(|q| q.set(was_quiet));
+    result.unwrap_or_else(|payload| {
+        let what = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown error".into());
+        Err(format!("malformed glTF: the parser failed ({what})"))
+    })
+}
+
+fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
+    check_glb_length(bytes)?;
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(parse_error)?;
+    let root = document.into_json();
+    check_unvalidated_references(&root)?;
+    let document = gltf::Document::from_json(root).map_err(parse_error)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let buffers = Buffers {
+        data: load_buffers(&document, base, blob)?,
+    };
+    let scene_def = document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+        .ok_or("the file has no scene")?;
+    let hierarchy = Hierarchy::collect(&document, &scene_def)?;
+    let gnodes: Vec<gltf::Node> = hierarchy
+        .order
+        .iter()
+        .map(|&g| node_at(&document, g))
+        .collect();
+
+    let nodes = build_nodes(&gnodes, &hierarchy)?;
+    let mut materials = build_materials(&document)?;
+    let objects = build_objects(&gnodes, &buffers, &mut materials)?;
+    let lights = build_lights(&gnodes)?;
+    let camera = find_camera(&gnodes)?;
+    let animation = build_animation(&document, &buffers, &hierarchy)?;
+    check_renderable(&objects, &materials, &lights)?;
+
+    Ok(Scene {
+        name: path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into()),
+        frame_count: frame_count(animation.duration()),
+        nodes,
+        objects,
+        materials,
+        lights,
+        camera,
+        animation,
+    })
+}
+
+/// Frames covering `t = 0..=duration` at the default rate; the small
+/// tolerance keeps a duration of exactly N/24 s (stored as f32) at N+1 frames.
+fn frame_count(duration: f32) -> u32 {
+    if duration > 0.0 {
+        ((duration as f64 * DEFAULT_FPS as f64 - 1e-3)
+            .ceil()
+            .max(0.0) as u32)
+            .saturating_add(1)
+    } else {
+        1
+    }
+}
+
+/// The GLB header states the file length; a mismatch is the clearest sign of
+/// a truncated download, clearer than the chunk error the parser reports.
+fn check_glb_length(bytes: &[u8]) -> Res<()> {
+    if !bytes.starts_with(b"glTF") {
+        return Ok(());
+    }
+    let Some(len) = bytes.get(8..12) else {
+        return Err(format!(
+            "truncated GLB: only {} bytes, shorter than the 12-byte header",
+            bytes.len()
+        ));
+    };
+    let declared = u32::from_le_bytes([len[0], len[1], len[2], len[3]]) as usize;
+    if bytes.len() < declared {
+        return Err(format!(
+            "truncated GLB: the header declares {declared} bytes but the file has {}",
+            bytes.len()
+        ));
+    }
+    Ok(())
+}
+
+/// References that `gltf`'s validation indexes without checking (POSITION
+/// accessors, which its own validation hook reads) or does not check at all
+/// (animation targets); either would panic later.
+fn check_unvalidated_references(root: &gltf::json::Root) -> Res<()> {
+    let accessors = root.accessors.len();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            if let Some(bad) = prim.attributes.values().find(|a| a.value() >= accessors) {
+                return Err(format!(
+                    "mesh {m}, primitive {p}: attribute accessor {} is out of range ({accessors} accessors)",
+                    bad.value()
+                ));
+            }
+        }
+    }
+    for (a, anim) in root.animations.iter().enumerate() {
+        for (c, ch) in anim.channels.iter().enumerate() {
+            let node = ch.target.node.value();
+            if node >= root.nodes.len() {
+                return Err(format!(
+                    "animation {a}, channel {c}: target node {node} is out of range ({} nodes)",
+                    root.nodes.len()
+                ));
+            }
+            if let gltf::json::validation::Checked::Invalid = ch.target.path {
+                return Err(format!("animation {a}, channel {c}: unknown target path"));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn parse_error(e: gltf::Error) -> String {
+    match e {
+        gltf::Error::Binary(e) => format!("truncated or corrupt GLB: {e}"),
+        gltf::Error::Deserialize(e) => format!("not a valid glTF file: {e}"),
+        gltf::Error::Validation(errors) => {
+            let list: Vec<String> = errors
+                .iter()
+                .take(5)
+                .map(|(path, err)| format!("{}: {err}", path.as_str()))
+                .collect();
+            format!("invalid glTF: {}", list.join("; "))
+        }
+        other => format!("cannot parse glTF: {other}"),
+    }
+}
+
+/// Buffer contents, indexed like the document's buffers.
+fn load_buffers(
+    document: &gltf::Document,
+    base: &Path,
+    mut blob: Option<Vec<u8>>,
+) -> Res<Vec<Vec<u8>>> {
+    let mut out = Vec::new();
+    for buffer in document.buffers() {
+        let i = buffer.index();
+        let source = buffer.source();
+        if let gltf::buffer::Source::Uri(uri) = source {
+            // Check relative files first: the crate's I/O error does not say
+            // which file is missing.
+            if !uri.contains(':') && !uri.contains('%') {
+                let file = base.join(uri);
+                if !file.is_file() {
+                    return Err(format!(
+                        "missing buffer file '{}' (buffer {i})",
+                        file.display()
+                    ));
+                }
+            }
+        }
+        let data = gltf::buffer::Data::from_source_and_blob(source, Some(base), &mut blob)
+            .map_err(|e| match e {
+                gltf::Error::MissingBlob => {
+                    format!("buffer {i} refers to the GLB binary chunk, which is missing (truncated GLB?)")
+                }
+                e => format!("cannot load buffer {i}: {e}"),
+            })?;
+        if data.len() < buffer.length() {
+            return Err(format!(
+                "buffer {i} is truncated: it declares {} bytes but has {}",
+                buffer.length(),
+                data.len()
+            ));
+        }
+        out.push(data.0);
+    }
+    Ok(out)
+}
+
+/// Bounds-checked accessor decoding (see the module comment for why the
+/// crate's readers are not used).
+struct Buffers {
+    data: Vec<Vec<u8>>,
+}
+
+impl Buffers {
+    fn view_bytes(&self, view: &gltf::buffer::View) -> Res<&[u8]> {
+        let buffer = self
+            .data
+            .get(view.buffer().index())
+            .ok_or_else(|| format!("buffer view {} names a missing buffer", view.index()))?;
+        view.offset()
+            .checked_add(view.length())
+            .and_then(|end| buffer.get(view.offset()..end))
+            .ok_or_else(|| {
+                format!(
+                    "buffer view {} is out of range of buffer {} ({} bytes)",
+                    view.index(),
+                    view.buffer().index(),
+                    buffer.len()
+                )
+            })
+    }
+
+    /// The accessor's elements packed tightly (`count × element size`
+    /// bytes), with sparse substitutions applied.
+    fn elements(&self, acc: &gltf::Accessor, what: &str) -> Res<Vec<u8>> {
+        let i = acc.index();
+        let out_of_range = || format!("accessor {i} ({what}) is out of range of its buffer view");
+        let count = acc.count();
+        let elem = acc.data_type().size() * acc.dimensions().multiplicity();
+        if count == 0 {
+            return Err(format!("accessor {i} ({what}) is empty"));
+        }
+        let total = count.checked_mul(elem).ok_or_else(out_of_range)?;
+        let mut out = match acc.view() {
+            Some(view) => {
+                let bytes = self.view_bytes(&view)?;
+                let stride = view.stride().unwrap_or(elem);
+                if stride < elem {
+                    return Err(format!(
+                        "accessor {i} ({what}): byte stride {stride} is smaller than an element ({elem} bytes)"
+                    ));
+                }
+                let last = stride
+                    .checked_mul(count - 1)
+                    .and_then(|x| x.checked_add(acc.offset()))
+                    .ok_or_else(out_of_range)?;
+                if last.checked_add(elem).is_none_or(|end| end > bytes.len()) {
+                    return Err(out_of_range());
+                }
+                let mut out = Vec::with_capacity(total);
+                for k in 0..count {
+                    let start = acc.offset() + k * stride;
+                    out.extend_from_slice(&bytes[start..start + elem]);
+                }
+                out
+            }
+            None if total <= MAX_VIEWLESS_BYTES => vec![0; total],
+            None => return Err(format!("accessor {i} ({what}) is too large")),
+        };
+        if let Some(sparse) = acc.sparse() {
+            self.apply_sparse(&sparse, &mut out, count, elem)
+                .map_err(|e| format!("accessor {i} ({what}): sparse {e}"))?;
+        }
+        Ok(out)
+    }
+
+    fn apply_sparse(
+        &self,
+        sparse: &gltf::accessor::sparse::Sparse,
+        out: &mut [u8],
+        count: usize,
+        elem: usize,
+    ) -> Res<()> {
+        let n = sparse.count();
+        let (indices, values) = (sparse.indices(), sparse.values());
+        let index_size = indices.index_type().size();
+        let slice = |bytes: &'_ [u8], offset: usize, len: Option<usize>| -> Res<Vec<u8>> {
+            len.and_then(|len| bytes.get(offset..offset.checked_add(len)?))
+                .map(<[u8]>::to_vec)
+                .ok_or_else(|| "data is out of range of its buffer view".to_string())
+        };
+        let index_bytes = slice(
+            self.view_bytes(&indices.view())?,
+            indices.offset(),
+            n.checked_mul(index_size),
+        )?;
+        let value_bytes = slice(
+            self.view_bytes(&values.view())?,
+            values.offset(),
+            n.checked_mul(elem),
+        )?;
+        for (k, raw) in index_bytes.chunks_exact(index_size).enumerate() {
+            let target = read_uint(raw) as usize;
+            if target >= count {
+                return Err(format!("index {target} is out of range ({count} elements)"));
+            }
+            out[target * elem..(target + 1) * elem]
+                .copy_from_slice(&value_bytes[k * elem..(k + 1) * elem]);
+        }
+        Ok(())
+    }
+
+    /// Float values of an accessor of the given type, flattened; integer
+    /// components are converted (normalised ones to [0,1] or [−1,1]).
+    fn floats(&self, acc: &gltf::Accessor, dims: Dimensions, what: &str) -> Res<Vec<f32>> {
+        if acc.dimensions() != dims {
+            return Err(format!(
+                "accessor {} ({what}) has type {:?}, expected {dims:?}",
+                acc.index(),
+                acc.dimensions()
+            ));
+        }
+        let ty = acc.data_type();
+        let bytes = self.elements(acc, what)?;
+        Ok(bytes
+            .chunks_exact(ty.size())
+            .map(|c| component(c, ty, acc.normalized()))
+            .collect())
+    }
+
+    fn vec3s(&self, acc: &gltf::Accessor, what: &str) -> Res<Vec<Vec3>> {
+        let flat = self.floats(acc, Dimensions::Vec3, what)?;
+        Ok(flat.chunks_exact(3).map(Vec3::from_slice).collect())
+    }
+
+    fn indices(&self, acc: &gltf::Accessor, what: &str) -> Res<Vec<u32>> {
+        let ty = acc.data_type();
+        if acc.dimensions() != Dimensions::Scalar
+            || !matches!(ty, DataType::U8 | DataType::U16 | DataType::U32)
+        {
+            return Err(format!(
+                "accessor {} ({what}) must be unsigned integer scalars for indices",
+                acc.index()
+            ));
+        }
+        let bytes = self.elements(acc, what)?;
+        Ok(bytes.chunks_exact(ty.size()).map(read_uint).collect())
+    }
+}
+
+/// Little-endian unsigned integer of 1, 2 or 4 bytes.
+fn read_uint(raw: &[u8]) -> u32 {
+    raw.iter().rev().fold(0u32, |acc, &b| (acc << 8) | b as u32)
+}
+
+/// One component as f32 (glTF §3.11 normalisation for integer types).
+fn component(raw: &[u8], ty: DataType, normalized: bool) -> f32 {
+    let (value, scale) = match ty {
+        DataType::F32 => return f32::from_le_bytes([raw[0], raw[1], raw[2], raw[3]]),
+        DataType::I8 => (raw[0] as i8 as f32, 127.0),
+        DataType::U8 => (raw[0] as f32, 255.0),
+        DataType::I16 => (i16::from_le_bytes([raw[0], raw[1]]) as f32, 32767.0),
+        DataType::U16 => (u16::from_le_bytes([raw[0], raw[1]]) as f32, 65535.0),
+        DataType::U32 => (read_uint(raw) as f32, 1.0),
+    };
+    if normalized {
+        (value / scale).max(-1.0)
+    } else {
+        value
+    }
+}
+
+fn node_at<'a>(document: &'a gltf::Document, index: usize) -> gltf::Node<'a> {
+    // Indices come from the document's own node list, so this is in range.
+    document
+        .nodes()
+        .nth(index)
+        .expect("node index from the document")
+}
+
+fn node_name(node: &gltf::Node) -> String {
+    node.name()
+        .map(str::to_string)
+        .unwrap_or_else(|| format!("node{}", node.index()))
+}
+
+/// The nodes reachable from the scene's roots, in document order, with
+/// their parents; proven to be a forest.
+struct Hierarchy {
+    /// glTF node index of each of our nodes.
+    order: Vec<usize>,
+    /// Our node index of each reachable glTF node.
+    ours: HashMap<usize, usize>,
+    /// glTF parent of each reachable glTF node.
+    parent_of: HashMap<usize, Option<usize>>,
+}
+
+impl Hierarchy {
+    fn collect(document: &gltf::Document, scene: &gltf::Scene) -> Res<Hierarchy> {
+        let mut parent_of: HashMap<usize, Option<usize>> = HashMap::new();
+        let mut stack: Vec<(usize, Option<usize>)> =
+            scene.nodes().map(|n| (n.index(), None)).collect();
+        while let Some((g, parent)) = stack.pop() {
+            // A node reached twice has two parents or lies on a cycle; the
+            // world-transform recursion relies on neither happening.
+            if parent_of.insert(g, parent).is_some() {
+                let name = node_name(&node_at(document, g));
+                return Err(format!(
+                    "node hierarchy is not a tree: node '{name}' is reached twice (a cycle or two parents)"
+                ));
+            }
+            stack.extend(
+                node_at(document, g)
+                    .children()
+                    .map(|c| (c.index(), Some(g))),
+            );
+        }
+        let mut order: Vec<usize> = parent_of.keys().copied().collect();
+        order.sort_unstable();
+        let ours = order.iter().enumerate().map(|(i, &g)| (g, i)).collect();
+        Ok(Hierarchy {
+            order,
+            ours,
+            parent_of,
+        })
+    }
+}
+
+fn build_nodes(gnodes: &[gltf::Node], hierarchy: &Hierarchy) -> Res<Vec<Node>> {
+    gnodes
+        .iter()
+        .map(|n| {
+            let parent = hierarchy.parent_of[&n.index()].map(|p| hierarchy.ours[&p]);
+            let rest = rest_trs(n).map_err(|e| format!("node '{}': {e}", node_name(n)))?;
+            Ok(Node {
+                name: node_name(n),
+                parent,
+                rest,
+            })
+        })
+        .collect()
+}
+
+fn all_finite(values: &[f32]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+fn rest_trs(node: &gltf::Node) -> Res<Trs> {
+    const NON_FINITE: &str = "NaN or infinite value in its transform";
+    match node.transform() {
+        gltf::scene::Transform::Matrix { matrix } => {
+            if !all_finite(matrix.as_flattened()) {
+                return Err(NON_FINITE.into());
+            }
+            let (scale, rotation, translation) =
+                Mat4::from_cols_array_2d(&matrix).to_scale_rotation_translation();
+            // A singular matrix decomposes into NaN rotations.
+            if !(scale.is_finite() && rotation.is_finite() && translation.is_finite()) {
+                return Err("transform matrix cannot be decomposed into TRS (singular?)".into());
+            }
+            Ok(Trs {
+                translation,
+                rotation: rotation.normalize(),
+                scale,
+            })
+        }
+        gltf::scene::Transform::Decomposed {
+            translation,
+            rotation,
+            scale,
+        } => {
+            if !(all_finite(&translation) && all_finite(&rotation) && all_finite(&scale)) {
+                return Err(NON_FINITE.into());
+            }
+            let rotation = Quat::from_array(rotation);
+            if rotation.length() < 1e-6 {
+                return Err("zero rotation quaternion".into());
+            }
+            Ok(Trs {
+                translation: Vec3::from(translation),
+                rotation: rotation.normalize(),
+                scale: Vec3::from(scale),
+            })
+        }
+    }
+}
+
+fn build_materials(document: &gltf::Document) -> Res<Vec<Material>> {
+    document.materials().map(|m| convert_material(&m)).collect()
+}
+
+fn convert_material(m: &gltf::Material) -> Res<Material> {
+    let name = m
+        .name()
+        .map(str::to_string)
+        .unwrap_or_else(|| format!("material{}", m.index().unwrap_or(0)));
+    let pbr = m.pbr_metallic_roughness();
+    let [r, g, b, _] = pbr.base_color_factor();
+    let strength = m.emissive_strength().unwrap_or(1.0);
+    let emission = Vec3::from(m.emissive_factor()) * strength;
+    let factors = [r, g, b, pbr.metallic_factor(), pbr.roughness_factor()];
+    if !all_finite(&factors) || !emission.is_finite() {
+        return Err(format!("material '{name}' has a NaN or infinite factor"));
+    }
+    // Out-of-range factors would make surfaces gain energy; glTF forbids them.
+    let unit = |x: f32| x.clamp(0.0, 1.0);
+    let mut material = Material::from_metallic_roughness(
+        &name,
+        Vec3::new(r, g, b).clamp(Vec3::ZERO, Vec3::ONE),
+        unit(pbr.metallic_factor()),
+        unit(pbr.roughness_factor()),
+    );
+    material.emission = emission.max(Vec3::ZERO);
+    material.double_sided = m.double_sided();
+    Ok(material)
+}
+
+fn build_objects(
+    gnodes: &[gltf::Node],
+    buffers: &Buffers,
+    materials: &mut Vec<Material>,
+) -> Res<Vec<Object>> {
+    let mut default_material = None;
+    let mut objects = Vec::new();
+    for (node, gnode) in gnodes.iter().enumerate() {
+        let Some(mesh) = gnode.mesh() else { continue };
+        let name = node_name(gnode);
+        let mesh = build_mesh(&mesh, buffers, materials, &mut default_material)
+            .map_err(|e| format!("mesh of node '{name}': {e}"))?;
+        objects.push(Object { name, node, mesh });
+    }
+    Ok(objects)
+}
+
+/// Merges the triangle primitives of `mesh`; primitives without a material
+/// get a shared default white diffuse appended to `materials` on first use.
+fn build_mesh(
+    mesh: &gltf::Mesh,
+    buffers: &Buffers,
+    materials: &mut Vec<Material>,
+    default_material: &mut Option<u32>,
+) -> Res<Mesh> {
+    let mut out = Mesh::default();
+    for prim in mesh.primitives() {
+        if !matches!(
+            prim.mode(),
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            continue; // points and lines carry no surface
+        }
+        let what = format!("primitive {}", prim.index());
+        let material = match prim.material().index() {
+            Some(m) => m as u32,
+            None => *default_material.get_or_insert_with(|| {
+                materials.push(Material::diffuse("default", Vec3::splat(DEFAULT_ALBEDO)));
+                (materials.len() - 1) as u32
+            }),
+        };
+        let (positions, normals, triangles) =
+            read_primitive(&prim, buffers).map_err(|e| format!("{what}: {e}"))?;
+        let base = out.positions.len() as u32;
+        out.positions.extend(positions);
+        out.normals.extend(normals);
+        out.materials
+            .extend(std::iter::repeat_n(material, triangles.len()));
+        out.triangles
+            .extend(triangles.iter().map(|t| t.map(|i| i + base)));
+    }
+    Ok(out)
+}
+
+type PrimitiveData = (Vec<Vec3>, Vec<Vec3>, Vec<[u32; 3]>);
+
+fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveData> {
+    let pos_acc = prim
+        .get(&Semantic::Positions)
+        .ok_or("no POSITION attribute")?;
+    let positions = buffers.vec3s(&pos_acc, "POSITION")?;
+    if positions.iter().any(|p| !p.is_finite()) {
+        return Err("NaN or infinite vertex position".into());
+    }
+    let n = positions.len();
+    let indices = match prim.indices() {
+        Some(acc) => buffers.indices(&acc, "indices")?,
+        None => (0..n as u32).collect(),
+    };
+    if let Some(&bad) = indices.iter().find(|&&i| i as usize >= n) {
+        return Err(format!(
+            "vertex index {bad} is out of range (the primitive has {n} vertices)"
+        ));
+    }
+    let triangles = triangulate(prim.mode(), &indices);
+    let given = match prim.get(&Semantic::Normals) {
+        Some(acc) => Some(buffers.vec3s(&acc, "NORMAL")?),
+        None => None,
+    };
+    // Unusable normals (missing, wrong count, NaN) are recomputed rather
+    // than rejected: they only affect shading.
+    let normals = match given {
+        Some(normals) if normals.len() == n && normals.iter().all(|v| v.is_finite()) => {
+            normals.into_iter().map(Vec3::normalize_or_zero).collect()
+        }
+        _ => vertex_normals(&positions, &triangles),
+    };
+    Ok((positions, normals, triangles))
+}
+
+/// Triangle list from glTF index order (spec §3.7.2.1 for strips and fans).
+fn triangulate(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+    let n = idx.len();
+    match mode {
+        Mode::TriangleStrip => (0..n.saturating_sub(2))
+            .map(|i| {
+                let odd = i % 2;
+                [idx[i], idx[i + 1 + odd], idx[i + 2 - odd]]
+            })
+            .collect(),
+        Mode::TriangleFan => (1..n.saturating_sub(1))
+            .map(|i| [idx[i], idx[i + 1], idx[0]])
+            .collect(),
+        _ => idx.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect(),
+    }
+}
+
+/// Area-weighted vertex normals (each face adds its unnormalised normal,
+/// whose length is twice its area).
+pub(crate) fn vertex_normals(positions: &[Vec3], triangles: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut normals = vec![Vec3::ZERO; positions.len()];
+    for t in triangles {
+        let [a, b, c] = t.map(|i| positions[i as usize]);
+        let face = (b - a).cross(c - a);
+        for &i in t {
+            normals[i as usize] += face;
+        }
+    }
+    normals.into_iter().map(Vec3::normalize_or_zero).collect()
+}
+
+fn build_lights(gnodes: &[gltf::Node]) -> Res<Vec<PunctualLight>> {
+    use gltf::khr_lights_punctual::Kind;
+    let mut lights = Vec::new();
+    for (node, gnode) in gnodes.iter().enumerate() {
+        let Some(light) = gnode.light() else { continue };
+        let name = light
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| node_name(gnode));
+        let intensity = Vec3::from(light.color()) * light.intensity();
+        if !intensity.is_finite() || intensity.min_element() < 0.0 {
+            return Err(format!(
+                "light '{name}' has a NaN, infinite or negative intensity"
+            ));
+        }
+        let spot = match light.kind() {
+            Kind::Directional => {
+                eprintln!("warning: directional light '{name}' is not supported and is skipped");
+                continue;
+            }
+            Kind::Point => None,
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                if !(all_finite(&[inner_cone_angle, outer_cone_angle]) && outer_cone_angle > 0.0) {
+                    return Err(format!("spot light '{name}' has invalid cone angles"));
+                }
+                Some(Spot {
+                    inner_cone: inner_cone_angle.clamp(0.0, outer_cone_angle),
+                    outer_cone: outer_cone_angle,
+                })
+            }
+        };
+        lights.push(PunctualLight {
+            name,
+            node,
+            intensity,
+            spot,
+        });
+    }
+    Ok(lights)
+}
+
+/// The first scene node (document order) with a perspective camera.
+fn find_camera(gnodes: &[gltf::Node]) -> Res<CameraDef> {
+    let mut saw_orthographic = false;
+    for (node, gnode) in gnodes.iter().enumerate() {
+        let Some(camera) = gnode.camera() else {
+            continue;
+        };
+        match camera.projection() {
+            gltf::camera::Projection::Perspective(p) => {
+                let yfov = p.yfov();
+                if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
+                    return Err(format!(
+                        "camera of node '{}' has yfov {yfov} out of range (0, π)",
+                        node_name(gnode)
+                    ));
+                }
+                return Ok(CameraDef { node, yfov });
+            }
+            gltf::camera::Projection::Orthographic(_) => saw_orthographic = true,
+        }
+    }
+    Err(if saw_orthographic {
+        "no perspective camera (orthographic cameras are not supported)".into()
+    } else {
+        "no camera in the scene".into()
+    })
+}
+
+/// All channels of all animations, merged (they all play from t = 0).
+/// Channels on nodes outside the scene and morph-target weights are dropped.
+fn build_animation(
+    document: &gltf::Document,
+    buffers: &Buffers,
+    hierarchy: &Hierarchy,
+) -> Res<Animation> {
+    let mut channels = Vec::new();
+    for anim in document.animations() {
+        let anim_name = anim
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("animation{}", anim.index()));
+        for ch in anim.channels() {
+            let target = ch.target();
+            let Some(&node) = hierarchy.ours.get(&target.node().index()) else {
+                continue;
+            };
+            let property = match target.property() {
+                gltf::animation::Property::Translation => Property::Translation,
+                gltf::animation::Property::Rotation => Property::Rotation,
+                gltf::animation::Property::Scale => Property::Scale,
+                gltf::animation::Property::MorphTargetWeights => continue,
+            };
+            let channel = read_channel(&ch, node, property, buffers).map_err(|e| {
+                format!(
+                    "animation '{anim_name}', channel {} (node '{}'): {e}",
+                    ch.index(),
+                    node_name(&target.node())
+                )
+            })?;
+            channels.push(channel);
+        }
+    }
+    Ok(Animation { channels })
+}
+
+fn read_channel(
+    ch: &gltf::animation::Channel,
+    node: usize,
+    property: Property,
+    buffers: &Buffers,
+) -> Res<Channel> {
+    let sampler = ch.sampler();
+    let interpolation = match sampler.interpolation() {
+        gltf::animation::Interpolation::Linear => Interpolation::Linear,
+        gltf::animation::Interpolation::Step => Interpolation::Step,
+        gltf::animation::Interpolation::CubicSpline => Interpolation::CubicSpline,
+    };
+    let times = buffers.floats(&sampler.input(), Dimensions::Scalar, "key times")?;
+    let values: Vec<Vec4> = if property == Property::Rotation {
+        let flat = buffers.floats(&sampler.output(), Dimensions::Vec4, "key values")?;
+        flat.chunks_exact(4).map(Vec4::from_slice).collect()
+    } else {
+        let flat = buffers.floats(&sampler.output(), Dimensions::Vec3, "key values")?;
+        flat.chunks_exact(3)
+            .map(|v| Vec3::from_slice(v).extend(0.0))
+            .collect()
+    };
+    let channel = Channel {
+        node,
+        property,
+        interpolation,
+        times,
+        values,
+    };
+    channel.validate()?;
+    Ok(channel)
+}
+
+/// A renderable scene has triangles and something that emits light.
+fn check_renderable(
+    objects: &[Object],
+    materials: &[Material],
+    lights: &[PunctualLight],
+) -> Res<()> {
+    if objects.iter().all(|o| o.mesh.triangles.is_empty()) {
+        return Err("the scene has no triangles (no mesh with triangle primitives)".into());
+    }
+    let is_emissive = |m: &u32| {
+        materials
+            .get(*m as usize)
+            .is_some_and(Material::is_emissive)
+    };
+    let emissive = objects
+        .iter()
+        .any(|o| o.mesh.materials.iter().any(is_emissive));
+    if !emissive && lights.is_empty() {
+        return Err(
+            "no light source: no triangle has an emissive material and there are no punctual lights"
+                .into(),
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn panics_become_errors() {
+        let result: Res<()> = quietly_catch_panics(|| panic!("index out of bounds"));
+        let message = result.unwrap_err();
+        assert!(message.contains("malformed glTF"), "{message}");
+        assert!(message.contains("index out of bounds"), "{message}");
+        // The thread is usable and no longer quiet afterwards.
+        assert!(!QUIET.with(Cell::get));
+        assert_eq!(quietly_catch_panics(|| Ok(7)), Ok(7));
+    }
+
+    #[test]
+    fn strips_and_fans_triangulate() {
+        let idx = [0, 1, 2, 3, 4];
+        assert_eq!(
+            triangulate(Mode::TriangleStrip, &idx),
+            [[0, 1, 2], [1, 3, 2], [2, 3, 4]]
+        );
+        assert_eq!(
+            triangulate(Mode::TriangleFan, &idx),
+            [[1, 2, 0], [2, 3, 0], [3, 4, 0]]
+        );
+        assert_eq!(triangulate(Mode::Triangles, &idx), [[0, 1, 2]]);
+        assert!(triangulate(Mode::TriangleStrip, &idx[..2]).is_empty());
+    }
+
+    #[test]
+    fn normalised_components() {
+        assert_eq!(component(&[255], DataType::U8, true), 1.0);
+        assert_eq!(component(&[0x80], DataType::I8, true), -1.0);
+        assert_eq!(component(&[0xff, 0x7f], DataType::I16, true), 1.0);
+        assert_eq!(component(&[7, 0], DataType::U16, false), 7.0);
+        assert_eq!(read_uint(&[1, 2, 0, 0]), 0x0201);
+    }
+
+    #[test]
+    fn frame_counts() {
+        assert_eq!(frame_count(0.0), 1);
+        assert_eq!(frame_count(1.0), 25);
+        assert_eq!(frame_count(100.0 / 24.0), 101);
+        assert_eq!(frame_count(1.01), 26);
+    }
 }

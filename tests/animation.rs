@@ -1,0 +1,357 @@
+//! Animation sampling (glTF semantics) and the node hierarchy: keys are hit
+//! exactly, interpolation matches formulas computed here independently,
+//! values clamp outside the key range, children follow animated parents and
+//! `Scene::object_motion` maps a point on an object from one time to another.
+
+use glam::{Mat4, Quat, Vec3, Vec4};
+use radcache::scene::animation::{linear_rotation, linear_translation};
+use radcache::scene::{
+    Animation, CameraDef, Channel, Interpolation, Material, Mesh, Node, Object, Property, Scene,
+    Trs,
+};
+use std::f32::consts::{FRAC_PI_2, FRAC_PI_4};
+
+const EPS: f32 = 1e-5;
+
+fn close4(a: Vec4, b: Vec4) -> bool {
+    (a - b).abs().max_element() <= EPS
+}
+
+fn close3(a: Vec3, b: Vec3) -> bool {
+    (a - b).abs().max_element() <= EPS
+}
+
+fn same_rotation(a: Quat, b: Quat) -> bool {
+    a.dot(b).abs() >= 1.0 - 1e-5
+}
+
+const TIMES: [f32; 3] = [0.0, 1.0, 3.0];
+
+fn keys() -> Vec<Vec4> {
+    vec![
+        Vec4::new(0.0, 1.0, 2.0, 0.0),
+        Vec4::new(4.0, -1.0, 2.5, 0.0),
+        Vec4::new(-2.0, 3.0, 0.0, 0.0),
+    ]
+}
+
+fn channel(interpolation: Interpolation, values: Vec<Vec4>) -> Channel {
+    Channel {
+        node: 0,
+        property: Property::Translation,
+        interpolation,
+        times: TIMES.to_vec(),
+        values,
+    }
+}
+
+/// Cubic spline values: (in-tangent, value, out-tangent) per key.
+fn cubic(tangents: &[(Vec4, Vec4)]) -> Vec<Vec4> {
+    keys()
+        .into_iter()
+        .zip(tangents)
+        .flat_map(|(v, &(a, b))| [a, v, b])
+        .collect()
+}
+
+fn some_tangents() -> Vec<(Vec4, Vec4)> {
+    vec![
+        (
+            Vec4::new(1.0, 0.0, 0.0, 0.0),
+            Vec4::new(2.0, -1.0, 0.5, 0.0),
+        ),
+        (
+            Vec4::new(-3.0, 1.0, 0.0, 0.0),
+            Vec4::new(0.5, 4.0, -2.0, 0.0),
+        ),
+        (Vec4::new(0.0, 0.0, 1.0, 0.0), Vec4::new(1.0, 1.0, 1.0, 0.0)),
+    ]
+}
+
+fn all_channels() -> Vec<Channel> {
+    vec![
+        channel(Interpolation::Linear, keys()),
+        channel(Interpolation::Step, keys()),
+        channel(Interpolation::CubicSpline, cubic(&some_tangents())),
+    ]
+}
+
+#[test]
+fn channels_validate() {
+    for c in all_channels() {
+        c.validate().unwrap();
+    }
+    // Cubic splines need three values per key.
+    assert!(channel(Interpolation::CubicSpline, keys())
+        .validate()
+        .is_err());
+}
+
+#[test]
+fn keys_are_hit_exactly() {
+    for c in all_channels() {
+        for (k, &t) in TIMES.iter().enumerate() {
+            assert!(
+                close4(c.sample(t), keys()[k]),
+                "{:?} at key {k}",
+                c.interpolation
+            );
+        }
+    }
+}
+
+#[test]
+fn values_clamp_outside_the_keys() {
+    for c in all_channels() {
+        assert!(close4(c.sample(-5.0), keys()[0]), "{:?}", c.interpolation);
+        assert!(close4(c.sample(3.5), keys()[2]), "{:?}", c.interpolation);
+        assert!(close4(c.sample(1e6), keys()[2]), "{:?}", c.interpolation);
+    }
+}
+
+#[test]
+fn linear_midpoint_is_the_average() {
+    let c = channel(Interpolation::Linear, keys());
+    let k = keys();
+    assert!(close4(c.sample(0.5), (k[0] + k[1]) * 0.5));
+    assert!(close4(c.sample(2.0), (k[1] + k[2]) * 0.5));
+    // A quarter of the way through the second (2 s long) segment.
+    assert!(close4(c.sample(1.5), k[1] * 0.75 + k[2] * 0.25));
+}
+
+#[test]
+fn step_holds_the_previous_key() {
+    let c = channel(Interpolation::Step, keys());
+    let k = keys();
+    assert!(close4(c.sample(0.999), k[0]));
+    assert!(close4(c.sample(1.0), k[1]));
+    assert!(close4(c.sample(2.9), k[1]));
+}
+
+#[test]
+fn slerp_midpoint_is_the_half_angle() {
+    let c = linear_rotation(
+        0,
+        &[
+            (0.0, Quat::IDENTITY),
+            (2.0, Quat::from_rotation_y(FRAC_PI_2)),
+        ],
+    );
+    let mid = Quat::from_vec4(c.sample(1.0));
+    assert!(
+        same_rotation(mid, Quat::from_rotation_y(FRAC_PI_4)),
+        "{mid}"
+    );
+    assert!((mid.length() - 1.0).abs() < EPS);
+    // Slerp, not a normalised lerp: at a quarter the angle is a quarter.
+    let quarter = Quat::from_vec4(c.sample(0.5));
+    assert!(
+        same_rotation(quarter, Quat::from_rotation_y(FRAC_PI_2 / 4.0)),
+        "{quarter}"
+    );
+}
+
+#[test]
+fn cubic_with_zero_tangents_midpoint_is_the_average() {
+    let zero = vec![(Vec4::ZERO, Vec4::ZERO); 3];
+    let c = channel(Interpolation::CubicSpline, cubic(&zero));
+    let k = keys();
+    assert!(close4(c.sample(0.5), (k[0] + k[1]) * 0.5));
+    assert!(close4(c.sample(2.0), (k[1] + k[2]) * 0.5));
+}
+
+/// The same Hermite segment evaluated as a cubic Bézier with de Casteljau:
+/// control points v0, v0 + dt·b0/3, v1 − dt·a1/3, v1.
+fn bezier(v0: Vec4, b0: Vec4, a1: Vec4, v1: Vec4, dt: f32, s: f32) -> Vec4 {
+    let p = [v0, v0 + b0 * (dt / 3.0), v1 - a1 * (dt / 3.0), v1];
+    let q: Vec<Vec4> = p.windows(2).map(|w| w[0].lerp(w[1], s)).collect();
+    let r: Vec<Vec4> = q.windows(2).map(|w| w[0].lerp(w[1], s)).collect();
+    r[0].lerp(r[1], s)
+}
+
+#[test]
+fn cubic_with_tangents_matches_hermite() {
+    let tangents = some_tangents();
+    let c = channel(Interpolation::CubicSpline, cubic(&tangents));
+    let k = keys();
+    for (seg, (t0, t1)) in [(0usize, (0.0f32, 1.0f32)), (1, (1.0, 3.0))] {
+        for s in [0.1f32, 0.25, 0.5, 0.8] {
+            let t = t0 + s * (t1 - t0);
+            let expected = bezier(
+                k[seg],
+                tangents[seg].1,
+                tangents[seg + 1].0,
+                k[seg + 1],
+                t1 - t0,
+                s,
+            );
+            let got = c.sample(t);
+            assert!(
+                (got - expected).abs().max_element() < 1e-4,
+                "t={t}: {got} vs {expected}"
+            );
+        }
+    }
+    // The tangents matter: a zero-tangent spline differs off the keys.
+    let flat = channel(
+        Interpolation::CubicSpline,
+        cubic(&[(Vec4::ZERO, Vec4::ZERO); 3]),
+    );
+    assert!(!close4(c.sample(0.5), flat.sample(0.5)));
+}
+
+#[test]
+fn local_trs_overrides_only_animated_properties() {
+    let rest = Trs {
+        translation: Vec3::new(9.0, 9.0, 9.0),
+        rotation: Quat::from_rotation_x(0.3),
+        scale: Vec3::splat(2.0),
+    };
+    let animation = Animation {
+        channels: vec![linear_translation(0, &[(0.0, Vec3::ZERO), (1.0, Vec3::X)])],
+    };
+    let trs = animation.local_trs(0, rest, 0.5);
+    assert!(close3(trs.translation, Vec3::new(0.5, 0.0, 0.0)));
+    assert_eq!(trs.rotation, rest.rotation);
+    assert_eq!(trs.scale, rest.scale);
+    // Another node is untouched.
+    assert_eq!(animation.local_trs(1, rest, 0.5), rest);
+    assert!((animation.duration() - 1.0).abs() < EPS);
+}
+
+// -------------------------------------------------------------- hierarchy
+
+fn triangle_mesh() -> Mesh {
+    Mesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+        normals: vec![Vec3::Z; 3],
+        triangles: vec![[0, 1, 2]],
+        materials: vec![0],
+    }
+}
+
+/// Nodes: 0 = animated parent, 1 = its (unanimated) child with an object,
+/// 2 = a static object, 3 = camera.
+fn hierarchy_scene() -> Scene {
+    let child_rest = Trs {
+        translation: Vec3::new(0.0, 1.0, 0.0),
+        rotation: Quat::from_rotation_z(0.5),
+        scale: Vec3::splat(0.5),
+    };
+    let parent = Node {
+        name: "parent".into(),
+        parent: None,
+        rest: Trs::default(),
+    };
+    let child = Node {
+        name: "child".into(),
+        parent: Some(0),
+        rest: child_rest,
+    };
+    let fixed = Node {
+        name: "fixed".into(),
+        parent: None,
+        rest: Trs::default(),
+    };
+    let cam = Node {
+        name: "cam".into(),
+        parent: None,
+        rest: Trs {
+            translation: Vec3::new(0.0, 0.0, 5.0),
+            ..Trs::default()
+        },
+    };
+    Scene {
+        name: "hierarchy".into(),
+        nodes: vec![parent, child, fixed, cam],
+        objects: vec![
+            Object {
+                name: "fixed".into(),
+                node: 2,
+                mesh: triangle_mesh(),
+            },
+            Object {
+                name: "child".into(),
+                node: 1,
+                mesh: triangle_mesh(),
+            },
+        ],
+        materials: vec![Material::emitter("glow", Vec3::ONE)],
+        lights: vec![],
+        camera: CameraDef { node: 3, yfov: 0.8 },
+        animation: Animation {
+            channels: vec![
+                linear_translation(0, &[(0.0, Vec3::ZERO), (2.0, Vec3::new(2.0, 0.0, -1.0))]),
+                linear_rotation(
+                    0,
+                    &[
+                        (0.0, Quat::IDENTITY),
+                        (2.0, Quat::from_rotation_y(FRAC_PI_2)),
+                    ],
+                ),
+            ],
+        },
+        frame_count: 49,
+    }
+}
+
+fn close_mat(a: Mat4, b: Mat4) -> bool {
+    a.abs_diff_eq(b, 1e-5)
+}
+
+#[test]
+fn child_follows_animated_parent() {
+    let scene = hierarchy_scene();
+    assert!(
+        scene.node_is_dynamic(1),
+        "a child of an animated node moves"
+    );
+    assert!(!scene.node_is_dynamic(2));
+    assert!(scene.object_is_dynamic(1));
+    assert!(!scene.object_is_dynamic(0));
+    for t in [0.0, 0.7, 1.0, 2.0] {
+        let world = scene.node_world_transforms(t);
+        let parent = Mat4::from_rotation_translation(
+            Quat::from_rotation_y(FRAC_PI_4 * t),
+            Vec3::new(t, 0.0, -0.5 * t),
+        );
+        let child = parent * scene.nodes[1].rest.to_mat4();
+        assert!(close_mat(world[0], parent), "t={t}");
+        assert!(close_mat(world[1], child), "t={t}");
+        assert!(close_mat(world[2], Mat4::IDENTITY));
+    }
+    let w0 = scene.node_world_transforms(0.0)[1];
+    let w1 = scene.node_world_transforms(1.0)[1];
+    assert!(!close_mat(w0, w1), "the child moved");
+}
+
+#[test]
+fn snapshot_orders_static_first() {
+    let scene = hierarchy_scene();
+    let snap = scene.snapshot(1.0);
+    assert_eq!(snap.static_count, 1);
+    assert_eq!(snap.tri_object, [0, 1]);
+    assert!(close3(snap.camera.position, Vec3::new(0.0, 0.0, 5.0)));
+}
+
+#[test]
+fn object_motion_maps_points_between_times() {
+    let scene = hierarchy_scene();
+    let (t0, t1) = (0.3, 1.6);
+    let (a, b) = (scene.snapshot(t0), scene.snapshot(t1));
+    // Triangle 1 belongs to the dynamic child object.
+    let motion = scene.object_motion(1, t0, t1);
+    for k in 0..3 {
+        let moved = motion.transform_point3(a.triangles[1].p[k]);
+        assert!(
+            close3(moved, b.triangles[1].p[k]),
+            "{moved} vs {}",
+            b.triangles[1].p[k]
+        );
+    }
+    // An interior point (barycentric) maps the same way.
+    let moved = motion.transform_point3(a.triangles[1].point(0.2, 0.3));
+    assert!(close3(moved, b.triangles[1].point(0.2, 0.3)));
+    // The static object does not move.
+    assert!(close_mat(scene.object_motion(0, t0, t1), Mat4::IDENTITY));
+}

@@ -1,0 +1,801 @@
+//! glTF loader tests: the two committed scenes load with the facts their
+//! files state, and broken files give an error naming the file and the
+//! problem instead of a panic.
+
+use glam::{Quat, Vec3};
+use radcache::scene::Scene;
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/scenes")
+        .join(name)
+}
+
+fn close(a: Vec3, b: Vec3, eps: f32) -> bool {
+    (a - b).abs().max_element() <= eps
+}
+
+fn object(scene: &Scene, name: &str) -> usize {
+    scene
+        .objects
+        .iter()
+        .position(|o| o.name == name)
+        .unwrap_or_else(|| panic!("no object {name}"))
+}
+
+fn material<'a>(scene: &'a Scene, name: &str) -> &'a radcache::scene::Material {
+    scene
+        .materials
+        .iter()
+        .find(|m| m.name == name)
+        .unwrap_or_else(|| panic!("no material {name}"))
+}
+
+// ---------------------------------------------------------------- good files
+
+#[test]
+fn cube_in_box_structure() {
+    let scene = Scene::load(&data("cube_in_box.glb")).unwrap();
+    assert_eq!(scene.name, "cube_in_box");
+    assert_eq!(scene.nodes.len(), 4);
+    let names: Vec<&str> = scene.nodes.iter().map(|n| n.name.as_str()).collect();
+    assert_eq!(names, ["room", "light", "camera", "cube"]);
+    assert!(scene.nodes.iter().all(|n| n.parent.is_none()));
+    assert_eq!(scene.objects.len(), 3);
+    assert!(scene.lights.is_empty());
+    // Keys span 0..=100/24 s: frames 0..=100 at 24 fps.
+    assert_eq!(scene.frame_count, 101);
+    // Room: 24 + 6 + 6 indices; light: 6; cube: 36.
+    let tris: Vec<usize> = scene
+        .objects
+        .iter()
+        .map(|o| o.mesh.triangles.len())
+        .collect();
+    assert_eq!(tris, [12, 2, 12]);
+    // The room's three primitives keep their own materials.
+    let room = &scene.objects[object(&scene, "room")].mesh;
+    let room_mats: Vec<&str> = room
+        .materials
+        .iter()
+        .map(|&m| scene.materials[m as usize].name.as_str())
+        .collect();
+    assert_eq!(room_mats.iter().filter(|&&m| m == "white").count(), 8);
+    assert_eq!(room_mats.iter().filter(|&&m| m == "red").count(), 2);
+    assert_eq!(room_mats.iter().filter(|&&m| m == "green").count(), 2);
+    assert_eq!(room.normals.len(), room.positions.len());
+}
+
+#[test]
+fn cube_in_box_camera_and_materials() {
+    let scene = Scene::load(&data("cube_in_box.glb")).unwrap();
+    assert_eq!(scene.nodes[scene.camera.node].name, "camera");
+    assert!((scene.camera.yfov - 0.8727).abs() < 1e-4);
+    let snap = scene.snapshot(0.0);
+    assert!(close(snap.camera.position, Vec3::new(0.0, 1.0, 2.9), 1e-6));
+
+    let light = material(&scene, "light");
+    assert!(close(light.emission, Vec3::new(30.0, 27.0, 22.5), 1e-4));
+    assert!(!light.double_sided);
+    let white = material(&scene, "white");
+    assert_eq!(white.emission, Vec3::ZERO);
+    assert!(close(white.diffuse, Vec3::new(0.725, 0.71, 0.68), 1e-6));
+    assert!(!white.is_glossy());
+}
+
+#[test]
+fn cube_in_box_dynamic_and_static() {
+    let scene = Scene::load(&data("cube_in_box.glb")).unwrap();
+    assert!(scene.object_is_dynamic(object(&scene, "cube")));
+    assert!(!scene.object_is_dynamic(object(&scene, "room")));
+    assert!(!scene.object_is_dynamic(object(&scene, "light")));
+    let snap = scene.snapshot(1.0);
+    assert_eq!(snap.triangles.len(), 26);
+    assert_eq!(snap.static_count, 14);
+}
+
+/// The cube's animation keys, read with the `gltf` crate's own readers (not
+/// our loader): (times, translations, rotations).
+type Keys = (Vec<f32>, Vec<[f32; 3]>, Vec<[f32; 4]>);
+
+fn cube_keys() -> Keys {
+    use gltf::animation::util::ReadOutputs;
+    let (doc, buffers, _) = gltf::import(data("cube_in_box.glb")).unwrap();
+    let (mut times, mut translations, mut rotations) = (vec![], vec![], vec![]);
+    for channel in doc
+        .animations()
+        .flat_map(|a| a.channels().collect::<Vec<_>>())
+    {
+        assert_eq!(channel.target().node().name(), Some("cube"));
+        let reader = channel.reader(|b| Some(&buffers[b.index()]));
+        times = reader.read_inputs().unwrap().collect();
+        match reader.read_outputs().unwrap() {
+            ReadOutputs::Translations(t) => translations = t.collect(),
+            ReadOutputs::Rotations(r) => rotations = r.into_f32().collect(),
+            _ => panic!("unexpected channel"),
+        }
+    }
+    (times, translations, rotations)
+}
+
+#[test]
+fn cube_in_box_snapshot_matches_keys() {
+    let scene = Scene::load(&data("cube_in_box.glb")).unwrap();
+    let cube = object(&scene, "cube");
+    let (times, translations, rotations) = cube_keys();
+    assert_eq!(times.len(), 101);
+    for k in [0, 1, 37, 64, 100] {
+        let snap = scene.snapshot(times[k]);
+        let (_, r, t) = snap.object_to_world[cube].to_scale_rotation_translation();
+        assert!(
+            close(t, Vec3::from(translations[k]), 1e-5),
+            "key {k}: {t} vs {:?}",
+            translations[k]
+        );
+        let key = Quat::from_array(rotations[k]).normalize();
+        assert!(r.dot(key).abs() > 1.0 - 1e-5, "key {k}: {r} vs {key}");
+    }
+    // The cube does move over the animation.
+    assert!(!close(
+        Vec3::from(translations[0]),
+        Vec3::from(translations[50]),
+        1e-3
+    ));
+}
+
+#[test]
+fn spheres_materials_and_motion() {
+    let scene = Scene::load(&data("spheres.glb")).unwrap();
+    assert_eq!(scene.nodes.len(), 19);
+    assert_eq!(scene.objects.len(), 18);
+    assert_eq!(scene.frame_count, 101);
+
+    // roughness 0.1 → α = 0.01 → n = 2/α² − 2 = 19998.
+    let glossy = material(&scene, "sphere2_glossy");
+    assert!(glossy.is_glossy());
+    assert!(
+        (glossy.exponent - 19998.0).abs() < 5.0,
+        "{}",
+        glossy.exponent
+    );
+    assert!(close(glossy.specular, Vec3::splat(0.04), 1e-6));
+    assert!(close(glossy.diffuse, Vec3::splat(0.85 * 0.96), 1e-5));
+
+    let metal = material(&scene, "sphere5_glossy_metal");
+    assert!(close(metal.specular, Vec3::new(0.7, 0.3, 0.8), 1e-6));
+    assert_eq!(metal.diffuse, Vec3::ZERO);
+    assert!((metal.exponent - 19998.0).abs() < 5.0);
+
+    assert!(!material(&scene, "sphere0").is_glossy());
+    let glossy_count = scene.materials.iter().filter(|m| m.is_glossy()).count();
+    assert_eq!(glossy_count, 5); // spheres 2, 5, 8, 11 and 14
+
+    for i in 0..16 {
+        let s = object(&scene, &format!("sphere{i}"));
+        assert!(scene.object_is_dynamic(s));
+        assert_eq!(scene.objects[s].mesh.triangles.len(), 320);
+    }
+    assert!(!scene.object_is_dynamic(object(&scene, "room")));
+    // Node scale is part of the rest transform: sphere0 has radius ≈ 0.121.
+    let s0 = &scene.nodes[scene.objects[object(&scene, "sphere0")].node];
+    assert!((s0.rest.scale.x - 0.121_254_77).abs() < 1e-6);
+}
+
+// ------------------------------------------------------- a small valid file
+
+/// One emissive triangle (external buffer `<stem>.bin`) and a camera.
+fn tri_json(bin_name: &str) -> Value {
+    json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1]}],
+        "nodes": [
+            {"name": "tri", "mesh": 0},
+            {"name": "cam", "camera": 0, "translation": [0.0, 0.0, 3.0]}
+        ],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.01}}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [{"name": "glow", "emissiveFactor": [1.0, 1.0, 1.0]}],
+        "buffers": [{"uri": bin_name, "byteLength": 48}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 12}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"}
+        ]
+    })
+}
+
+fn tri_bin(positions: [[f32; 3]; 3], indices: [u32; 3]) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    for v in positions.iter().flatten() {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    for i in indices {
+        bytes.extend_from_slice(&i.to_le_bytes());
+    }
+    bytes
+}
+
+const TRI: [[f32; 3]; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+
+/// Writes `<name>.gltf` (and, if given, its `<name>.bin`) into `dir`.
+fn write_case(
+    dir: &Path,
+    name: &str,
+    edit: impl FnOnce(&mut Value),
+    bin: Option<Vec<u8>>,
+) -> PathBuf {
+    let mut doc = tri_json(&format!("{name}.bin"));
+    edit(&mut doc);
+    let path = dir.join(format!("{name}.gltf"));
+    std::fs::write(&path, serde_json::to_vec_pretty(&doc).unwrap()).unwrap();
+    if let Some(bin) = bin {
+        std::fs::write(dir.join(format!("{name}.bin")), bin).unwrap();
+    }
+    path
+}
+
+fn good_bin() -> Option<Vec<u8>> {
+    Some(tri_bin(TRI, [0, 1, 2]))
+}
+
+/// Loading must fail (not panic) with the file name and `phrase` in the message.
+fn assert_error(path: &Path, phrase: &str) {
+    let err = match Scene::load(path) {
+        Ok(_) => panic!("{} loaded but should fail with '{phrase}'", path.display()),
+        Err(e) => e.to_string(),
+    };
+    let file = path.file_name().unwrap().to_str().unwrap();
+    assert!(err.contains(file), "error does not name {file}: {err}");
+    assert!(err.contains(phrase), "error lacks '{phrase}': {err}");
+}
+
+#[test]
+fn small_valid_gltf_loads() {
+    // The base of the broken cases must itself be fine, so that each broken
+    // case fails for its own edit.
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(dir.path(), "ok", |_| {}, good_bin());
+    let scene = Scene::load(&path).unwrap();
+    assert_eq!(scene.objects.len(), 1);
+    assert_eq!(scene.frame_count, 1);
+    let mesh = &scene.objects[0].mesh;
+    assert_eq!(mesh.triangles, [[0, 1, 2]]);
+    // No NORMAL attribute: computed from the counter-clockwise face (+Z).
+    assert!(mesh.normals.iter().all(|&n| close(n, Vec3::Z, 1e-6)));
+    assert!(close(scene.materials[0].emission, Vec3::ONE, 0.0));
+    assert!((scene.camera.yfov - 0.8).abs() < 1e-6);
+}
+
+#[test]
+fn data_uri_buffer_and_extras_load() {
+    use base64_like::encode;
+    let dir = tempfile::tempdir().unwrap();
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        encode(&tri_bin(TRI, [0, 1, 2]))
+    );
+    let path =
+        write_case(
+            dir.path(),
+            "embedded",
+            |d| {
+                d["buffers"][0]["uri"] = json!(uri);
+                // A primitive without material gets the default white diffuse,
+                // a point light keeps the scene lit, a matrix node is decomposed.
+                d["meshes"][0]["primitives"][0]
+                    .as_object_mut()
+                    .unwrap()
+                    .remove("material");
+                d["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+                d["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+                    {"type": "spot", "color": [1.0, 0.5, 0.25], "intensity": 4.0,
+                     "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}},
+                    {"type": "directional", "intensity": 1.0}
+                ]}});
+                d["nodes"][0]["matrix"] = json!([
+                    2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 1.0, 2.0, 3.0, 1.0
+                ]);
+                d["nodes"].as_array_mut().unwrap().push(
+                    json!({"name": "lamp", "extensions": {"KHR_lights_punctual": {"light": 0}}}),
+                );
+                d["nodes"].as_array_mut().unwrap().push(
+                    json!({"name": "sun", "extensions": {"KHR_lights_punctual": {"light": 1}}}),
+                );
+                d["scenes"][0]["nodes"] = json!([0, 1, 2, 3]);
+            },
+            None,
+        );
+    let scene = Scene::load(&path).unwrap();
+    let default = &scene.materials[scene.objects[0].mesh.materials[0] as usize];
+    assert!(close(default.diffuse, Vec3::splat(0.8), 1e-6));
+    assert_eq!(scene.lights.len(), 1, "the directional light is skipped");
+    let lamp = &scene.lights[0];
+    assert_eq!(scene.nodes[lamp.node].name, "lamp");
+    assert!(close(lamp.intensity, Vec3::new(4.0, 2.0, 1.0), 1e-6));
+    let spot = lamp.spot.unwrap();
+    assert!((spot.inner_cone - 0.2).abs() < 1e-6 && (spot.outer_cone - 0.5).abs() < 1e-6);
+    let rest = scene.nodes[0].rest;
+    assert!(close(rest.translation, Vec3::new(1.0, 2.0, 3.0), 1e-6));
+    assert!(close(rest.scale, Vec3::splat(2.0), 1e-6));
+}
+
+/// Minimal base64 encoder so the test needs no extra dependency.
+mod base64_like {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+
+    pub fn encode(bytes: &[u8]) -> String {
+        let mut out = String::new();
+        for chunk in bytes.chunks(3) {
+            let b = [
+                chunk[0],
+                *chunk.get(1).unwrap_or(&0),
+                *chunk.get(2).unwrap_or(&0),
+            ];
+            let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
+            for i in 0..4 {
+                if i <= chunk.len() {
+                    out.push(ALPHABET[(n >> (18 - 6 * i) & 63) as usize] as char);
+                } else {
+                    out.push('=');
+                }
+            }
+        }
+        out
+    }
+}
+
+#[test]
+fn animated_gltf_channels() {
+    // A STEP translation and a CUBICSPLINE scale channel from binary data.
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = tri_bin(TRI, [0, 1, 2]);
+    let times = [0.0f32, 0.5, 1.0];
+    let steps = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]];
+    let cubic: Vec<[f32; 3]> = (0..3)
+        .flat_map(|k| [[0.0; 3], [1.0 + k as f32; 3], [0.0; 3]])
+        .collect();
+    for v in times
+        .iter()
+        .chain(steps.iter().flatten())
+        .chain(cubic.iter().flatten())
+    {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let len = bin.len();
+    let path = write_case(
+        dir.path(),
+        "anim",
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(len);
+            let views = d["bufferViews"].as_array_mut().unwrap();
+            views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 12}));
+            views.push(json!({"buffer": 0, "byteOffset": 60, "byteLength": 36}));
+            views.push(json!({"buffer": 0, "byteOffset": 96, "byteLength": 108}));
+            let acc = d["accessors"].as_array_mut().unwrap();
+            acc.push(json!({"bufferView": 2, "componentType": 5126, "count": 3, "type": "SCALAR", "min": [0.0], "max": [1.0]}));
+            acc.push(json!({"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3"}));
+            acc.push(json!({"bufferView": 4, "componentType": 5126, "count": 9, "type": "VEC3"}));
+            d["animations"] = json!([{
+                "channels": [
+                    {"sampler": 0, "target": {"node": 0, "path": "translation"}},
+                    {"sampler": 1, "target": {"node": 0, "path": "scale"}}
+                ],
+                "samplers": [
+                    {"input": 2, "output": 3, "interpolation": "STEP"},
+                    {"input": 2, "output": 4, "interpolation": "CUBICSPLINE"}
+                ]
+            }]);
+        },
+        Some(bin),
+    );
+    let scene = Scene::load(&path).unwrap();
+    assert_eq!(scene.animation.channels.len(), 2);
+    // 1 s at 24 fps: frames 0..=24.
+    assert_eq!(scene.frame_count, 25);
+    let trs = |t: f32| scene.animation.local_trs(0, scene.nodes[0].rest, t);
+    assert!(close(trs(0.49).translation, Vec3::ZERO, 0.0));
+    assert!(close(trs(0.5).translation, Vec3::X, 0.0));
+    assert!(close(trs(0.5).scale, Vec3::splat(2.0), 1e-6));
+    // Zero tangents: the midpoint of a segment is the average of its keys.
+    assert!(close(trs(0.75).scale, Vec3::splat(2.5), 1e-6));
+    assert!(scene.object_is_dynamic(0));
+}
+
+#[test]
+fn sparse_positions_apply() {
+    // A sparse accessor replaces vertex 2 of the dense POSITION data.
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = tri_bin(TRI, [0, 1, 2]);
+    bin.extend_from_slice(&2u32.to_le_bytes());
+    for v in [0.0f32, 2.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let len = bin.len();
+    let path = write_case(
+        dir.path(),
+        "sparse",
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(len);
+            let views = d["bufferViews"].as_array_mut().unwrap();
+            views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 4}));
+            views.push(json!({"buffer": 0, "byteOffset": 52, "byteLength": 12}));
+            d["accessors"][0]["sparse"] = json!({"count": 1,
+                "indices": {"bufferView": 2, "componentType": 5125},
+                "values": {"bufferView": 3}});
+        },
+        Some(bin),
+    );
+    let scene = Scene::load(&path).unwrap();
+    let p = &scene.objects[0].mesh.positions;
+    assert_eq!(p[..2], [Vec3::ZERO, Vec3::X]);
+    assert_eq!(p[2], Vec3::new(0.0, 2.0, 0.0));
+}
+
+// ------------------------------------------------------------- bad inputs
+
+#[test]
+fn nonexistent_file() {
+    let dir = tempfile::tempdir().unwrap();
+    assert_error(&dir.path().join("nothing_here.glb"), "file not found");
+}
+
+#[test]
+fn unknown_extension() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("mesh.obj");
+    std::fs::write(&path, "v 0 0 0\n").unwrap();
+    assert_error(&path, "unsupported file extension '.obj'");
+}
+
+#[test]
+fn truncated_glb() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = std::fs::read(data("cube_in_box.glb")).unwrap();
+    for (name, len) in [
+        ("half.glb", bytes.len() / 2),
+        ("header.glb", 10),
+        ("tail.glb", bytes.len() - 4),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, &bytes[..len]).unwrap();
+        assert_error(&path, "truncated");
+    }
+}
+
+#[test]
+fn garbage_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    // Deterministic pseudo-random bytes (xorshift).
+    let mut x = 0x1234_5678_9abc_def0u64;
+    let bytes: Vec<u8> = (0..4096)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x as u8
+        })
+        .collect();
+    for name in ["garbage.glb", "garbage.gltf"] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        assert_error(&path, "not a valid glTF");
+    }
+    // A GLB header followed by garbage chunks.
+    let mut glb = b"glTF".to_vec();
+    glb.extend_from_slice(&2u32.to_le_bytes());
+    glb.extend_from_slice(&(bytes.len() as u32 + 12).to_le_bytes());
+    glb.extend_from_slice(&bytes);
+    let path = dir.path().join("garbage_chunks.glb");
+    std::fs::write(&path, &glb).unwrap();
+    assert_error(&path, "corrupt GLB");
+}
+
+#[test]
+fn missing_buffer_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(dir.path(), "nobuffer", |_| {}, None);
+    assert_error(&path, "missing buffer file");
+    assert_error(&path, "nobuffer.bin");
+}
+
+#[test]
+fn short_buffer_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(dir.path(), "shortbuf", |_| {}, Some(vec![0; 20]));
+    assert_error(&path, "buffer 0 is truncated");
+}
+
+#[test]
+fn index_out_of_range() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "badindex",
+        |_| {},
+        Some(tri_bin(TRI, [0, 1, 7])),
+    );
+    assert_error(&path, "vertex index 7 is out of range");
+}
+
+#[test]
+fn accessor_past_buffer_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "longacc",
+        |d| d["accessors"][0]["count"] = json!(1000),
+        good_bin(),
+    );
+    assert_error(&path, "out of range of its buffer view");
+    let path = write_case(
+        dir.path(),
+        "longview",
+        |d| d["bufferViews"][0]["byteLength"] = json!(4000),
+        good_bin(),
+    );
+    assert_error(&path, "out of range of buffer 0");
+    let path = write_case(
+        dir.path(),
+        "stride",
+        |d| d["bufferViews"][0]["byteStride"] = json!(4),
+        good_bin(),
+    );
+    // glTF validation rejects strides below 4 only; 4 < 12 is ours to catch.
+    assert_error(&path, "stride");
+}
+
+#[test]
+fn infinite_transform() {
+    let dir = tempfile::tempdir().unwrap();
+    // 1e39 overflows f32 to infinity (JSON cannot hold NaN literally).
+    let path = write_case(
+        dir.path(),
+        "inftrs",
+        |d| d["nodes"][0]["translation"] = json!([1e39, 0.0, 0.0]),
+        good_bin(),
+    );
+    assert_error(&path, "NaN or infinite value in its transform");
+    let path = write_case(
+        dir.path(),
+        "infmatrix",
+        |d| {
+            d["nodes"][0]["matrix"] = json!([
+                1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -1e39, 0.0, 1.0
+            ])
+        },
+        good_bin(),
+    );
+    assert_error(&path, "NaN or infinite value in its transform");
+}
+
+#[test]
+fn nan_vertex_position() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut tri = TRI;
+    tri[1][2] = f32::NAN;
+    let path = write_case(
+        dir.path(),
+        "nanvertex",
+        |_| {},
+        Some(tri_bin(tri, [0, 1, 2])),
+    );
+    assert_error(&path, "NaN or infinite vertex position");
+}
+
+#[test]
+fn empty_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "empty",
+        |d| {
+            d["scenes"][0]["nodes"] = json!([1]);
+        },
+        good_bin(),
+    );
+    assert_error(&path, "no triangles");
+    // Only line primitives: still nothing to render.
+    let path = write_case(
+        dir.path(),
+        "lines",
+        |d| d["meshes"][0]["primitives"][0]["mode"] = json!(1),
+        good_bin(),
+    );
+    assert_error(&path, "no triangles");
+}
+
+#[test]
+fn no_emitter_no_light() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "dark",
+        |d| d["materials"][0]["emissiveFactor"] = json!([0.0, 0.0, 0.0]),
+        good_bin(),
+    );
+    assert_error(&path, "no light source");
+}
+
+#[test]
+fn no_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "nocam",
+        |d| d["scenes"][0]["nodes"] = json!([0]),
+        good_bin(),
+    );
+    assert_error(&path, "no camera");
+}
+
+#[test]
+fn hierarchy_cycle() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "cycle",
+        |d| {
+            d["nodes"][0]["children"] = json!([2]);
+            d["nodes"]
+                .as_array_mut()
+                .unwrap()
+                .push(json!({"name": "loop", "children": [0]}));
+        },
+        good_bin(),
+    );
+    assert_error(&path, "not a tree");
+}
+
+#[test]
+fn bad_animation_keys() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = tri_bin(TRI, [0, 1, 2]);
+    for v in [1.0f32, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    for v in [0.0f32; 6] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let len = bin.len();
+    let path = write_case(
+        dir.path(),
+        "backwards",
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(len);
+            let views = d["bufferViews"].as_array_mut().unwrap();
+            views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 8}));
+            views.push(json!({"buffer": 0, "byteOffset": 56, "byteLength": 24}));
+            let acc = d["accessors"].as_array_mut().unwrap();
+            acc.push(json!({"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0.0], "max": [1.0]}));
+            acc.push(json!({"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"}));
+            d["animations"] = json!([{"name": "oops",
+                "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}],
+                "samplers": [{"input": 2, "output": 3}]}]);
+        },
+        Some(bin),
+    );
+    assert_error(&path, "not increasing");
+    assert_error(&path, "animation 'oops'");
+}
+
+#[test]
+fn dangling_reference_is_invalid() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "dangling",
+        |d| d["nodes"][0]["mesh"] = json!(9),
+        good_bin(),
+    );
+    assert_error(&path, "invalid glTF");
+}
+
+#[test]
+fn mutated_glb_never_panics() {
+    // Overwrite bytes all over a valid GLB (JSON and binary chunk alike):
+    // whatever the damage, loading returns instead of panicking.
+    let dir = tempfile::tempdir().unwrap();
+    let original = std::fs::read(data("cube_in_box.glb")).unwrap();
+    let path = dir.path().join("mutant.glb");
+    let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
+    for _ in 0..300 {
+        let mut bytes = original.clone();
+        for _ in 0..1 + next() % 4 {
+            let at = (next() % bytes.len() as u64) as usize;
+            bytes[at] = [b'9', b'-', b'0', b'"', 0xff, 0x00][(next() % 6) as usize];
+        }
+        std::fs::write(&path, &bytes).unwrap();
+        match Scene::load(&path) {
+            // What loads must also evaluate without panicking.
+            Ok(scene) => drop(scene.snapshot(1.0)),
+            Err(e) => {
+                assert!(e.to_string().contains("mutant.glb"), "{e}");
+                // The panic net must not be what caught it: our checks come first.
+                assert!(!e.to_string().contains("parser failed"), "{e}");
+            }
+        }
+    }
+}
+
+fn xorshift(mut x: u64) -> impl FnMut() -> u64 {
+    move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    }
+}
+
+/// JSON pointers of every number in `v`.
+fn number_pointers(v: &Value, at: String, out: &mut Vec<String>) {
+    match v {
+        Value::Number(_) => out.push(at),
+        Value::Array(items) => {
+            for (i, item) in items.iter().enumerate() {
+                number_pointers(item, format!("{at}/{i}"), out);
+            }
+        }
+        Value::Object(map) => {
+            for (k, item) in map {
+                number_pointers(item, format!("{at}/{k}"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+#[test]
+fn mutated_numbers_never_panic() {
+    // Replace numbers of the cube-in-box JSON (counts, offsets, strides,
+    // indices, factors) with hostile values; the binary chunk is kept as an
+    // external buffer file. Loading must return, never panic.
+    let dir = tempfile::tempdir().unwrap();
+    let (doc, buffers, _) = gltf::import(data("cube_in_box.glb")).unwrap();
+    let mut json = serde_json::to_value(doc.into_json()).unwrap();
+    json["buffers"][0]["uri"] = json!("mutant.bin");
+    std::fs::write(dir.path().join("mutant.bin"), &buffers[0].0).unwrap();
+    let path = dir.path().join("mutant.gltf");
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+    Scene::load(&path).expect("the unmutated conversion loads");
+
+    let mut pointers = Vec::new();
+    number_pointers(&json, String::new(), &mut pointers);
+    let hostile = [
+        json!(0),
+        json!(1),
+        json!(3),
+        json!(-1),
+        json!(4095),
+        json!(1u64 << 40),
+        json!(-2.5),
+        json!(1e39),
+    ];
+    let mut next = xorshift(0x2545_f491_4f6c_dd1d);
+    for _ in 0..400 {
+        let mut mutant = json.clone();
+        let mut changed = vec![];
+        for _ in 0..1 + next() % 3 {
+            let at = &pointers[(next() % pointers.len() as u64) as usize];
+            let val = hostile[(next() % hostile.len() as u64) as usize].clone();
+            changed.push(format!("{at}={val}"));
+            *mutant.pointer_mut(at).unwrap() = val;
+        }
+        std::fs::write(&path, serde_json::to_vec(&mutant).unwrap()).unwrap();
+        match Scene::load(&path) {
+            Ok(scene) => drop(scene.snapshot(1.0)),
+            Err(e) => {
+                assert!(e.to_string().contains("mutant.gltf"), "{e}");
+                assert!(
+                    !e.to_string().contains("parser failed"),
+                    "{e} after {changed:?}"
+                );
+            }
+        }
+    }
+}
