@@ -13,9 +13,16 @@ use radcache::scene::{Material, Mesh};
 fn renderer(scene: radcache::scene::Scene, spp: u32, size: u32) -> Renderer {
     Renderer::new(
         scene,
-        Box::new(PathTracer::new(PathSettings { spp, ..PathSettings::default() })),
+        Box::new(PathTracer::new(PathSettings {
+            spp,
+            ..PathSettings::default()
+        })),
         Box::new(CpuBackend::new()),
-        FrameSettings { width: size, height: size, ..FrameSettings::default() },
+        FrameSettings {
+            width: size,
+            height: size,
+            ..FrameSettings::default()
+        },
     )
 }
 
@@ -31,7 +38,15 @@ fn furnace_radiance_is_le_over_one_minus_albedo() {
             ..Material::diffuse("furnace", Vec3::splat(albedo))
         };
         let room = inward_box(Vec3::splat(-1.0), Vec3::splat(1.0), 0);
-        let s = scene(vec![room], vec![material], vec![], Vec3::ZERO, -Vec3::Z, 1.2, vec![]);
+        let s = scene(
+            vec![room],
+            vec![material],
+            vec![],
+            Vec3::ZERO,
+            -Vec3::Z,
+            1.2,
+            vec![],
+        );
         let film = renderer(s, 64, 16).render_frame(0);
         let expected = le / (1.0 - albedo);
         let mean = film.mean() as f32;
@@ -42,7 +57,10 @@ fn furnace_radiance_is_le_over_one_minus_albedo() {
         // Per pixel, 64 paths of geometric length leave ~11 % noise at
         // ρ = 0.8; a structural error (dark edges, leaks) shows up far beyond.
         for p in &film.pixels {
-            assert!((p.x - expected).abs() / expected < 0.5, "pixel {p} far from {expected}");
+            assert!(
+                (p.x - expected).abs() / expected < 0.5,
+                "pixel {p} far from {expected}"
+            );
         }
     }
 }
@@ -57,7 +75,13 @@ fn point_light_over_plane_matches_inverse_square_law() {
     let intensity = 5.0;
     let light = Vec3::new(0.3, 1.0, -0.2);
     let mut plane = Mesh::default();
-    push_quad(&mut plane, Vec3::new(-10.0, 0.0, -10.0), Vec3::Z * 20.0, Vec3::X * 20.0, 0);
+    push_quad(
+        &mut plane,
+        Vec3::new(-10.0, 0.0, -10.0),
+        Vec3::Z * 20.0,
+        Vec3::X * 20.0,
+        0,
+    );
     let eye = Vec3::new(0.0, 3.0, 0.0);
     let yfov = 1.0;
     let s = scene(
@@ -109,8 +133,22 @@ fn frames_are_deterministic_and_keyed_by_frame_and_seed() {
         let material = Material::diffuse("w", Vec3::splat(0.5));
         let light = Material::emitter("l", Vec3::splat(10.0));
         let mut room = inward_box(Vec3::splat(-1.0), Vec3::splat(1.0), 0);
-        push_quad(&mut room, Vec3::new(-0.2, 0.99, -0.2), Vec3::X * 0.4, Vec3::Z * 0.4, 1);
-        let s = scene(vec![room], vec![material, light], vec![], Vec3::ZERO, -Vec3::Z, 1.0, vec![]);
+        push_quad(
+            &mut room,
+            Vec3::new(-0.2, 0.99, -0.2),
+            Vec3::X * 0.4,
+            Vec3::Z * 0.4,
+            1,
+        );
+        let s = scene(
+            vec![room],
+            vec![material, light],
+            vec![],
+            Vec3::ZERO,
+            -Vec3::Z,
+            1.0,
+            vec![],
+        );
         let mut r = renderer(s, 4, 12);
         r.settings.seed = seed;
         r
@@ -121,8 +159,16 @@ fn frames_are_deterministic_and_keyed_by_frame_and_seed() {
     assert_eq!(a.render_frame(1), first, "re-rendering a frame changed it");
     assert_eq!(make(0).render_frame(1), first, "a fresh renderer disagrees");
     assert_ne!(make(1).render_frame(1), first, "the seed is ignored");
-    assert_ne!(make(0).render_frame(2), first, "the frame is not part of the key");
+    assert_ne!(
+        make(0).render_frame(2),
+        first,
+        "the frame is not part of the key"
+    );
     let mut same = make(0);
     same.settings.same_pattern = true;
-    assert_eq!(same.render_frame(2), same.render_frame(1), "--same-pattern must repeat the sequence");
+    assert_eq!(
+        same.render_frame(2),
+        same.render_frame(1),
+        "--same-pattern must repeat the sequence"
+    );
 }

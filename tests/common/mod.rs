@@ -49,8 +49,16 @@ pub fn scene(
     let mut nodes = Vec::new();
     let mut objects = Vec::new();
     for (i, mesh) in meshes.into_iter().enumerate() {
-        nodes.push(Node { name: format!("object{i}"), parent: None, rest: Trs::default() });
-        objects.push(Object { name: format!("object{i}"), node: i, mesh });
+        nodes.push(Node {
+            name: format!("object{i}"),
+            parent: None,
+            rest: Trs::default(),
+        });
+        objects.push(Object {
+            name: format!("object{i}"),
+            node: i,
+            mesh,
+        });
     }
     let camera_node = nodes.len();
     nodes.push(Node {
@@ -67,9 +75,17 @@ pub fn scene(
         nodes.push(Node {
             name: format!("light{i}"),
             parent: None,
-            rest: Trs { translation: position, ..Trs::default() },
+            rest: Trs {
+                translation: position,
+                ..Trs::default()
+            },
         });
-        punctual.push(PunctualLight { name: format!("light{i}"), node: nodes.len() - 1, intensity, spot: None });
+        punctual.push(PunctualLight {
+            name: format!("light{i}"),
+            node: nodes.len() - 1,
+            intensity,
+            spot: None,
+        });
     }
     Scene {
         name: "test".into(),
@@ -77,7 +93,10 @@ pub fn scene(
         objects,
         materials,
         lights: punctual,
-        camera: CameraDef { node: camera_node, yfov },
+        camera: CameraDef {
+            node: camera_node,
+            yfov,
+        },
         animation: Animation { channels },
         frame_count: 2,
     }
