@@ -2,6 +2,7 @@
 //! its arguments, calls the library and maps errors to a message and a
 //! non-zero exit status; no input makes it panic.
 
+use crate::integrator::PathLength;
 use crate::method::path::PathSettings;
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
@@ -176,8 +177,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
     let method = match args.method {
         MethodName::Path => MethodSettings::Path(PathSettings {
             spp: args.spp,
-            max_depth: args.max_depth,
-            ..PathSettings::default()
+            length: PathLength {
+                max_depth: args.max_depth,
+                ..PathLength::default()
+            },
         }),
     };
     let backend = render::make_backend(match args.backend {

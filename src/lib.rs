@@ -13,6 +13,7 @@
 //! | [`material`]| BSDFs: Lambertian and energy-conserving modified Phong         |
 //! | [`light`]   | light sampling: emissive triangles by power, point and spot   |
 //! | [`method`]  | rendering methods behind one trait (`path`, later `ic`, `trc`) |
+//! | [`integrator`] | path tracing of ray batches, shared by all methods        |
 //! | [`film`]    | RGB f32 images, EXR and PNG input/output                        |
 //! | [`metrics`] | RMSE, relative RMSE, block bias and flicker; `compare`         |
 //! | [`render`]  | the frame loop: animation → geometry → method → files         |
@@ -22,6 +23,7 @@ pub mod accel;
 pub mod backend;
 pub mod cli;
 pub mod film;
+pub mod integrator;
 pub mod light;
 pub mod material;
 pub mod method;

@@ -1,0 +1,268 @@
+//! Radiance along batches of rays by path tracing: the light-transport engine
+//! shared by every method (camera paths of `path`, hemisphere gathering of
+//! cache records, glossy continuations).
+//!
+//! Unidirectional path tracing (Kajiya 1986) with next-event estimation at
+//! every vertex, combined with BSDF sampling by multiple importance sampling
+//! with the power heuristic (Veach 1997, §9.2), and Russian roulette on the
+//! path throughput. It is written as a wavefront so that it only talks to the
+//! batched [`RayBackend`](crate::backend::RayBackend): all paths of a batch
+//! advance one bounce at a time — trace all extension rays, shade, trace all
+//! shadow rays.
+
+use crate::backend::{Hit, Ray};
+use crate::light::emitting_cosine;
+use crate::material::Bsdf;
+use crate::method::FrameContext;
+use crate::sampling::{power_heuristic, Rng};
+use crate::scene::Triangle;
+use glam::Vec3;
+
+/// Path-length control shared by every caller.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathLength {
+    /// Hard bounce limit (`None`: unbounded, terminated by Russian roulette
+    /// only, as the reference renders are).
+    pub max_depth: Option<u32>,
+    /// Russian roulette starts after this many bounces (pbrt-v4 starts after
+    /// 1; a later start costs time, not accuracy).
+    pub rr_start: u32,
+}
+
+impl Default for PathLength {
+    fn default() -> Self {
+        PathLength {
+            max_depth: None,
+            rr_start: 3,
+        }
+    }
+}
+
+/// How the emission of the first surface a query's ray hits is counted.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FirstHitEmission {
+    /// Fully (camera rays).
+    Include,
+    /// Not at all: the caller accounts for direct light separately (the
+    /// hemisphere gathering of indirect-light records).
+    Exclude,
+    /// MIS-weighted against next-event estimation at the ray's origin, for a
+    /// ray drawn by BSDF sampling with this solid-angle pdf.
+    Mis { bsdf_pdf: f32 },
+}
+
+/// One radiance estimate to compute: the radiance arriving at `ray.origin`
+/// from direction `ray.dir`, times `weight`.
+#[derive(Clone, Debug)]
+pub struct RadianceQuery {
+    pub ray: Ray,
+    pub rng: Rng,
+    pub weight: Vec3,
+    pub first_hit: FirstHitEmission,
+}
+
+/// The estimate of a query and the first hit of its ray.
+#[derive(Clone, Copy, Debug)]
+pub struct RadianceResult {
+    pub radiance: Vec3,
+    pub hit: Hit,
+}
+
+/// Relative offset of secondary ray origins along the geometric normal,
+/// scaled by the magnitude of the hit point, against self-intersection.
+pub const RAY_OFFSET: f32 = 1e-4;
+
+/// Origin for a ray leaving surface point `p` (geometric normal `ng`)
+/// towards `w`: pushed off the surface on the side `w` goes to.
+#[inline]
+pub fn offset_origin(p: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
+    let offset = RAY_OFFSET * (1.0 + p.abs().max_element());
+    if ng.dot(w) >= 0.0 {
+        p + ng * offset
+    } else {
+        p - ng * offset
+    }
+}
+
+/// State of one path between bounces.
+struct PathState {
+    query: usize,
+    rng: Rng,
+    throughput: Vec3,
+    radiance: Vec3,
+    bounces: u32,
+    emission: FirstHitEmission,
+}
+
+/// A shadow ray waiting to be traced and what it adds if unoccluded.
+struct ShadowQuery {
+    path: usize,
+    contribution: Vec3,
+}
+
+/// Computes every query of the batch on the calling thread (the backend may
+/// parallelise each ray batch). Results are in query order and depend only
+/// on the queries, so they are reproducible.
+pub fn trace_radiance(
+    ctx: &FrameContext,
+    length: PathLength,
+    queries: Vec<RadianceQuery>,
+) -> Vec<RadianceResult> {
+    let mut results = vec![
+        RadianceResult {
+            radiance: Vec3::ZERO,
+            hit: Hit::MISS,
+        };
+        queries.len()
+    ];
+    let mut rays = Vec::with_capacity(queries.len());
+    let mut paths = Vec::with_capacity(queries.len());
+    for (i, q) in queries.into_iter().enumerate() {
+        rays.push(q.ray);
+        paths.push(PathState {
+            query: i,
+            rng: q.rng,
+            throughput: q.weight,
+            radiance: Vec3::ZERO,
+            bounces: 0,
+            emission: q.first_hit,
+        });
+    }
+    let mut hits = Vec::new();
+    let mut continuations = Vec::new();
+    let mut shadow_rays = Vec::new();
+    let mut shadow_queries = Vec::new();
+    let mut occluded = Vec::new();
+    while !paths.is_empty() {
+        hits.clear();
+        hits.resize(rays.len(), Hit::MISS);
+        ctx.backend.closest_hit(&rays, &mut hits);
+        shadow_rays.clear();
+        shadow_queries.clear();
+        continuations.clear();
+        for (i, path) in paths.iter_mut().enumerate() {
+            if path.bounces == 0 {
+                results[path.query].hit = hits[i];
+            }
+            let mut shadow = |ray: Ray, contribution: Vec3| {
+                shadow_rays.push(ray);
+                shadow_queries.push(ShadowQuery {
+                    path: i,
+                    contribution,
+                });
+            };
+            continuations.push(shade(ctx, length, path, &rays[i], &hits[i], &mut shadow));
+        }
+        occluded.clear();
+        occluded.resize(shadow_rays.len(), false);
+        ctx.backend.any_hit(&shadow_rays, &mut occluded);
+        for (q, &blocked) in shadow_queries.iter().zip(&occluded) {
+            if !blocked {
+                paths[q.path].radiance += q.contribution;
+            }
+        }
+        // Compact: continuing paths and their rays stay, the others are done.
+        rays.clear();
+        let mut alive = Vec::with_capacity(paths.len());
+        for (path, next) in paths.drain(..).zip(continuations.drain(..)) {
+            match next {
+                Some(ray) => {
+                    rays.push(ray);
+                    alive.push(path);
+                }
+                None => results[path.query].radiance = path.radiance,
+            }
+        }
+        paths = alive;
+    }
+    results
+}
+
+/// Emission seen along `ray` at `hit` on `tri`, weighted as `mode` says.
+fn emission_weight(
+    ctx: &FrameContext,
+    mode: FirstHitEmission,
+    tri: &Triangle,
+    triangle: u32,
+    ray: &Ray,
+    p: Vec3,
+) -> f32 {
+    match mode {
+        FirstHitEmission::Include => 1.0,
+        FirstHitEmission::Exclude => 0.0,
+        FirstHitEmission::Mis { bsdf_pdf } => {
+            let light_pdf = ctx.lights.pdf_triangle(tri, triangle, ray.origin(), p);
+            power_heuristic(bsdf_pdf, light_pdf)
+        }
+    }
+}
+
+/// Shades the hit of `path`: adds emission, queues a light sample through
+/// `shadow` and draws the continuation. Returns the next ray, or `None` when
+/// the path ends.
+fn shade(
+    ctx: &FrameContext,
+    length: PathLength,
+    path: &mut PathState,
+    ray: &Ray,
+    hit: &Hit,
+    shadow: &mut impl FnMut(Ray, Vec3),
+) -> Option<Ray> {
+    if !hit.is_hit() {
+        return None; // Closed scenes: nothing beyond (black background).
+    }
+    let snapshot = ctx.snapshot;
+    let tri = &snapshot.triangles[hit.triangle as usize];
+    let material = &ctx.scene.materials[snapshot.tri_material[hit.triangle as usize] as usize];
+    let wo = -ray.dir().normalize();
+    let p = ray.at(hit.t);
+
+    if material.is_emissive() && emitting_cosine(tri, material.double_sided, wo).is_some() {
+        let weight = emission_weight(ctx, path.emission, tri, hit.triangle, ray, p);
+        path.radiance += path.throughput * material.emission * weight;
+    }
+    if length.max_depth.is_some_and(|max| path.bounces >= max) {
+        return None;
+    }
+    let bsdf = Bsdf::new(material, tri.shading_normal(hit.u, hit.v), wo);
+    if bsdf.is_black() {
+        return None;
+    }
+    let ng = tri.geometric_normal();
+
+    // Next-event estimation, MIS-weighted against BSDF sampling.
+    let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
+    if let Some(ls) = ctx.lights.sample(snapshot, &ctx.scene.materials, p, pick, u) {
+        let f = bsdf.eval(wo, ls.wi);
+        let cos = bsdf.normal().dot(ls.wi);
+        if cos > 0.0 && f.max_element() > 0.0 {
+            let weight = if ls.is_delta {
+                1.0
+            } else {
+                power_heuristic(ls.pdf, bsdf.pdf(wo, ls.wi))
+            };
+            let contribution = path.throughput * f * ls.radiance * (cos * weight / ls.pdf);
+            shadow(
+                Ray::segment(offset_origin(p, ng, ls.wi), ls.position),
+                contribution,
+            );
+        }
+    }
+
+    // Continue by BSDF sampling.
+    let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
+    let s = bsdf.sample(wo, pick, u)?;
+    let cos = bsdf.normal().dot(s.wi);
+    path.throughput *= s.f * (cos / s.pdf);
+    path.emission = FirstHitEmission::Mis { bsdf_pdf: s.pdf };
+    path.bounces += 1;
+    if path.bounces > length.rr_start {
+        // Survive with probability q = min(max βᵢ, 0.95), reweight by 1/q.
+        let q = path.throughput.max_element().min(0.95);
+        if path.rng.next_f32() >= q {
+            return None;
+        }
+        path.throughput /= q;
+    }
+    Some(Ray::new(offset_origin(p, ng, s.wi), s.wi, 0.0, f32::INFINITY))
+}
