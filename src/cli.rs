@@ -2,7 +2,9 @@
 //! its arguments, calls the library and maps errors to a message and a
 //! non-zero exit status; no input makes it panic.
 
+use crate::cache::gather::Strata;
 use crate::integrator::PathLength;
+use crate::method::ic::IcSettings;
 use crate::method::path::PathSettings;
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
@@ -36,6 +38,8 @@ pub enum Command {
 pub enum MethodName {
     /// Unbiased path tracer (NEE + MIS + Russian roulette): the accuracy yardstick.
     Path,
+    /// Per-frame irradiance caching (Ward 1988, Ward & Heckbert 1992): a new cache every frame.
+    Ic,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -60,9 +64,9 @@ pub struct RenderArgs {
     /// Image size WxH.
     #[arg(long, default_value = "256x256", value_parser = parse_size)]
     pub size: (u32, u32),
-    /// Samples per pixel (path).
-    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
-    pub spp: u32,
+    /// Samples per pixel [default: 16 for path, 4 for ic (direct light and anti-aliasing)].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub spp: Option<u32>,
     /// Frames per second: frame f is rendered at t = f / fps.
     #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, value_parser = parse_fps)]
     pub fps: f32,
@@ -81,9 +85,31 @@ pub struct RenderArgs {
     /// Hard limit on path length in bounces (default: unbounded, Russian roulette).
     #[arg(long)]
     pub max_depth: Option<u32>,
+    #[command(flatten)]
+    pub ic: IcArgs,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
+}
+
+/// Settings of `--method ic`.
+#[derive(Args, Debug)]
+pub struct IcArgs {
+    /// Accuracy a: records are used where their weight w ≥ 1/a (Ward 1988 recommends 0.1–0.3).
+    #[arg(long, default_value_t = 0.2, value_parser = parse_accuracy)]
+    pub ic_accuracy: f32,
+    /// Hemisphere cells per record, MxN (θ × φ; Ward & Heckbert 1992 use N ≈ πM).
+    #[arg(long, default_value = "16x48", value_parser = parse_strata)]
+    pub ic_strata: Strata,
+    /// Smallest record spacing in pixels (screen-space clamp of the record radius).
+    #[arg(long, default_value_t = 2.0, value_parser = parse_positive)]
+    pub ic_min_spacing: f32,
+    /// Largest record influence radius in pixels.
+    #[arg(long, default_value_t = 64.0, value_parser = parse_positive)]
+    pub ic_max_spacing: f32,
+    /// Interpolate without the translation and rotation gradients.
+    #[arg(long)]
+    pub ic_no_gradients: bool,
 }
 
 #[derive(Args, Debug)]
@@ -140,6 +166,32 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
+fn parse_accuracy(s: &str) -> Result<f32, String> {
+    let a: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !(a > 0.0 && a <= 2.0) {
+        return Err(format!("accuracy must be in (0, 2], got {s}"));
+    }
+    Ok(a)
+}
+
+fn parse_positive(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !(v.is_finite() && v > 0.0) {
+        return Err(format!("expected a positive number, got {s}"));
+    }
+    Ok(v)
+}
+
+fn parse_strata(s: &str) -> Result<Strata, String> {
+    let (m, n) = parse_size(s).map_err(|_| format!("'{s}' is not MxN, e.g. 16x48"))?;
+    if m * n > 65_536 {
+        return Err(format!(
+            "{m}x{n} cells per record is too many (at most 65536)"
+        ));
+    }
+    Ok(Strata { theta: m, phi: n })
+}
+
 fn parse_fps(s: &str) -> Result<f32, String> {
     let fps: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
     if !fps.is_finite() || fps <= 0.0 {
@@ -174,15 +226,26 @@ fn run_render(args: RenderArgs) -> Result<()> {
         (None, None) => SceneSource::Builtin("cube-in-box".into()),
     };
     let scene = source.load()?;
+    let length = PathLength {
+        max_depth: args.max_depth,
+        ..PathLength::default()
+    };
     let method = match args.method {
         MethodName::Path => MethodSettings::Path(PathSettings {
-            spp: args.spp,
-            length: PathLength {
-                max_depth: args.max_depth,
-                ..PathLength::default()
-            },
+            spp: args.spp.unwrap_or(PathSettings::default().spp),
+            length,
+        }),
+        MethodName::Ic => MethodSettings::Ic(IcSettings {
+            accuracy: args.ic.ic_accuracy,
+            strata: args.ic.ic_strata,
+            spp: args.spp.unwrap_or(IcSettings::default().spp),
+            min_spacing_px: args.ic.ic_min_spacing,
+            max_spacing_px: args.ic.ic_max_spacing,
+            gradients: !args.ic.ic_no_gradients,
+            length,
         }),
     };
+    let spp = method.spp();
     let backend = render::make_backend(match args.backend {
         BackendArg::Auto => BackendChoice::Auto,
         BackendArg::Cpu => BackendChoice::Cpu,
@@ -201,15 +264,15 @@ fn run_render(args: RenderArgs) -> Result<()> {
             "rendering {source} frames {}..{} at {w}x{h}, method {}, {} spp, backend {}",
             args.frames.start,
             args.frames.end,
-            method_label(&method),
-            args.spp,
+            method.name(),
+            spp,
             backend.name()
         );
     }
     let mut renderer = Renderer::new(scene, method.instantiate(), backend, settings);
     let summary = render::render_to_dir(&mut renderer, args.frames.clone(), &args.out, args.quiet)?;
     let secs = summary.elapsed.as_secs_f64();
-    let samples = u64::from(w) * u64::from(h) * u64::from(args.spp) * u64::from(summary.frames);
+    let samples = u64::from(w) * u64::from(h) * u64::from(spp) * u64::from(summary.frames);
     println!(
         "rendered {} frames in {:.2} s ({:.3} s/frame, {:.2} Mrays/s, {:.2} M samples/s) → {}/frame_{:04}..{:04}.{{exr,png}}",
         summary.frames,
@@ -221,13 +284,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
         args.frames.start,
         args.frames.end - 1,
     );
-    Ok(())
-}
-
-fn method_label(m: &MethodSettings) -> &'static str {
-    match m {
-        MethodSettings::Path(_) => "path",
+    if let Some(report) = summary.cache_report() {
+        println!("{report}");
     }
+    Ok(())
 }
 
 fn run_compare(args: CompareArgs) -> Result<()> {

@@ -232,7 +232,10 @@ fn shade(
 
     // Next-event estimation, MIS-weighted against BSDF sampling.
     let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
-    if let Some(ls) = ctx.lights.sample(snapshot, &ctx.scene.materials, p, pick, u) {
+    if let Some(ls) = ctx
+        .lights
+        .sample(snapshot, &ctx.scene.materials, p, pick, u)
+    {
         let f = bsdf.eval(wo, ls.wi);
         let cos = bsdf.normal().dot(ls.wi);
         if cos > 0.0 && f.max_element() > 0.0 {
@@ -264,5 +267,10 @@ fn shade(
         }
         path.throughput /= q;
     }
-    Some(Ray::new(offset_origin(p, ng, s.wi), s.wi, 0.0, f32::INFINITY))
+    Some(Ray::new(
+        offset_origin(p, ng, s.wi),
+        s.wi,
+        0.0,
+        f32::INFINITY,
+    ))
 }

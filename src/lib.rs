@@ -9,6 +9,7 @@
 //! | [`scene`]   | scene description, glTF loading, built-in scenes, animation   |
 //! | [`accel`]   | BVHs over the triangles of one frame (obvhs)                   |
 //! | [`backend`] | the batched ray interface and its CPU implementation          |
+//! | [`cache`]   | irradiance records, gathering, gradients, interpolation      |
 //! | [`sampling`]| deterministic random numbers keyed by (seed, frame, pixel, sample) |
 //! | [`material`]| BSDFs: Lambertian and energy-conserving modified Phong         |
 //! | [`light`]   | light sampling: emissive triangles by power, point and spot   |
@@ -21,6 +22,7 @@
 
 pub mod accel;
 pub mod backend;
+pub mod cache;
 pub mod cli;
 pub mod film;
 pub mod integrator;

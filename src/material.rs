@@ -89,12 +89,7 @@ impl Bsdf {
         if n.dot(wi) <= 0.0 || n.dot(wo) <= 0.0 {
             return Vec3::ZERO;
         }
-        let mut f = self.kd * FRAC_1_PI;
-        if self.specular_pick > 0.0 {
-            // Lafortune & Willems 1994, Eq. for the energy-conserving lobe.
-            f += self.ks * ((self.exponent + 2.0) * 0.5 * FRAC_1_PI * self.lobe(wo, wi));
-        }
-        f
+        self.kd * FRAC_1_PI + self.eval_specular(wo, wi)
     }
 
     /// Solid-angle density with which [`Bsdf::sample`] picks `wi`.
@@ -104,12 +99,49 @@ impl Bsdf {
             return 0.0;
         }
         let diffuse = cos_i * FRAC_1_PI;
-        let specular = if self.specular_pick > 0.0 {
-            (self.exponent + 1.0) * 0.5 * FRAC_1_PI * self.lobe(wo, wi)
-        } else {
-            0.0
-        };
-        (1.0 - self.specular_pick) * diffuse + self.specular_pick * specular
+        (1.0 - self.specular_pick) * diffuse + self.specular_pick * self.pdf_specular(wo, wi)
+    }
+
+    /// Diffuse albedo `kd`: the part of the BSDF the irradiance caches serve.
+    pub fn diffuse_albedo(&self) -> Vec3 {
+        self.kd
+    }
+
+    /// Whether the BSDF has a Phong lobe (glossy part).
+    pub fn has_specular(&self) -> bool {
+        self.specular_pick > 0.0
+    }
+
+    /// The Phong lobe alone: `ks·(n+2)/(2π)·cosⁿα`, zero below the surface.
+    pub fn eval_specular(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        let n = self.frame.n;
+        if n.dot(wi) <= 0.0 || n.dot(wo) <= 0.0 || !self.has_specular() {
+            return Vec3::ZERO;
+        }
+        self.ks * ((self.exponent + 2.0) * 0.5 * FRAC_1_PI * self.lobe(wo, wi))
+    }
+
+    /// Density of [`Bsdf::sample_specular`]: `(n+1)/(2π)·cosⁿα` above the surface.
+    pub fn pdf_specular(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if self.frame.n.dot(wi) <= 0.0 || self.frame.n.dot(wo) <= 0.0 {
+            return 0.0;
+        }
+        (self.exponent + 1.0) * 0.5 * FRAC_1_PI * self.lobe(wo, wi)
+    }
+
+    /// Draws `wi` from the Phong lobe only (for estimating the glossy part
+    /// separately from the cached diffuse part).
+    pub fn sample_specular(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
+        if !self.has_specular() || self.frame.n.dot(wo) <= 0.0 {
+            return None;
+        }
+        let wi = Frame::new(self.reflect(wo)).to_world(cosine_power_lobe(u, self.exponent));
+        let pdf = self.pdf_specular(wo, wi);
+        (pdf > 0.0).then(|| BsdfSample {
+            wi,
+            f: self.eval_specular(wo, wi),
+            pdf,
+        })
     }
 
     /// Draws `wi` ∝ the mixture of the cosine lobe and the `cosⁿα` lobe.

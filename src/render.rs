@@ -7,8 +7,9 @@ use crate::backend::cpu::CpuBackend;
 use crate::backend::RayBackend;
 use crate::film::{self, Film};
 use crate::light::LightSampler;
+use crate::method::ic::{IcSettings, IrradianceCaching};
 use crate::method::path::{PathSettings, PathTracer};
-use crate::method::{FrameContext, Method};
+use crate::method::{FrameContext, FrameStats, Method};
 use crate::scene::{Scene, SceneError};
 use anyhow::{bail, Context, Result};
 use std::ops::Range;
@@ -44,12 +45,30 @@ impl std::fmt::Display for SceneSource {
 #[derive(Clone, Debug, PartialEq)]
 pub enum MethodSettings {
     Path(PathSettings),
+    Ic(IcSettings),
 }
 
 impl MethodSettings {
+    /// The method's command-line name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            MethodSettings::Path(_) => "path",
+            MethodSettings::Ic(_) => "ic",
+        }
+    }
+
+    /// Pixel samples per frame.
+    pub fn spp(&self) -> u32 {
+        match self {
+            MethodSettings::Path(s) => s.spp,
+            MethodSettings::Ic(s) => s.spp,
+        }
+    }
+
     pub fn instantiate(&self) -> Box<dyn Method> {
         match self {
             MethodSettings::Path(s) => Box::new(PathTracer::new(s.clone())),
+            MethodSettings::Ic(s) => Box::new(IrradianceCaching::new(s.clone())),
         }
     }
 }
@@ -104,6 +123,8 @@ pub struct Renderer {
     pub settings: FrameSettings,
     method: Box<dyn Method>,
     backend: Box<dyn RayBackend>,
+    last_frame: Option<u32>,
+    last_frame_rays: u64,
 }
 
 impl Renderer {
@@ -118,6 +139,8 @@ impl Renderer {
             settings,
             method,
             backend,
+            last_frame: None,
+            last_frame_rays: 0,
         }
     }
 
@@ -129,8 +152,34 @@ impl Renderer {
         self.method.name()
     }
 
+    /// Statistics of the last rendered frame, rays included.
+    pub fn last_frame_stats(&self) -> FrameStats {
+        let mut stats = self.method.last_frame_stats();
+        stats.frame = self.last_frame.unwrap_or(0);
+        stats.rays = self.last_frame_rays;
+        stats
+    }
+
     /// Renders frame `frame` (time `frame / fps`).
     pub fn render_frame(&mut self, frame: u32) -> Film {
+        let rays_before = self.backend.ray_counts().total();
+        let film = self.render_frame_uncounted(frame);
+        self.last_frame_rays = self.backend.ray_counts().total() - rays_before;
+        self.last_frame = Some(frame);
+        film
+    }
+
+    fn render_frame_uncounted(&mut self, frame: u32) -> Film {
+        let mut method = std::mem::replace(&mut self.method, Box::new(NoMethod));
+        let film = self.with_frame_context(frame, |ctx| method.render_frame(ctx));
+        self.method = method;
+        film
+    }
+
+    /// Evaluates frame `frame` (geometry, lights, backend) and runs `f` on
+    /// its context: what a method sees. Tests use it to probe a method's
+    /// stages directly.
+    pub fn with_frame_context<R>(&mut self, frame: u32, f: impl FnOnce(&FrameContext) -> R) -> R {
         let t = frame as f32 / self.settings.fps;
         let snapshot = self.scene.snapshot(t);
         self.backend.set_geometry(&snapshot);
@@ -146,7 +195,20 @@ impl Renderer {
             seed: self.settings.seed,
             same_pattern: self.settings.same_pattern,
         };
-        self.method.render_frame(&ctx)
+        f(&ctx)
+    }
+}
+
+/// Placeholder while the real method is borrowed out of the renderer.
+struct NoMethod;
+
+impl Method for NoMethod {
+    fn name(&self) -> &'static str {
+        "none"
+    }
+
+    fn render_frame(&mut self, ctx: &FrameContext) -> Film {
+        Film::new(ctx.width, ctx.height)
     }
 }
 
@@ -154,12 +216,43 @@ impl Renderer {
 #[derive(Clone, Debug)]
 pub struct RenderSummary {
     pub frames: u32,
+    /// Statistics of every rendered frame, in order.
+    pub frame_stats: Vec<FrameStats>,
     pub elapsed: Duration,
     pub rays: u64,
     pub out_dir: PathBuf,
 }
 
 impl RenderSummary {
+    /// Totals over frames, for caching methods: records created, lookups,
+    /// mean records per lookup, fallbacks and seconds per phase.
+    pub fn cache_report(&self) -> Option<String> {
+        let created: u64 = self.frame_stats.iter().map(|s| s.records_created).sum();
+        let lookups: u64 = self.frame_stats.iter().map(|s| s.lookups).sum();
+        if lookups == 0 {
+            return None;
+        }
+        let used: u64 = self.frame_stats.iter().map(|s| s.lookup_records).sum();
+        let fallbacks: u64 = self.frame_stats.iter().map(|s| s.fallback_lookups).sum();
+        let mut phases: Vec<(String, f64)> = Vec::new();
+        for (name, secs) in self.frame_stats.iter().flat_map(|s| s.phase_seconds.iter()) {
+            match phases.iter_mut().find(|p| &p.0 == name) {
+                Some(p) => p.1 += secs,
+                None => phases.push((name.clone(), *secs)),
+            }
+        }
+        let phases: Vec<String> = phases
+            .iter()
+            .map(|(n, s)| format!("{n} {s:.2} s"))
+            .collect();
+        Some(format!(
+            "records created {created} ({:.0}/frame), lookups {lookups}, {:.1} records/lookup, {fallbacks} path-traced fallbacks; {}",
+            created as f64 / self.frames.max(1) as f64,
+            used as f64 / lookups as f64,
+            phases.join(", ")
+        ))
+    }
+
     pub fn rays_per_second(&self) -> f64 {
         self.rays as f64 / self.elapsed.as_secs_f64().max(1e-9)
     }
@@ -178,15 +271,18 @@ pub fn render_to_dir(
     let progress = progress_bar(frames.len() as u64, quiet);
     let start = Instant::now();
     let rays_before = renderer.backend().ray_counts().total();
+    let mut frame_stats = Vec::with_capacity(frames.len());
     for frame in frames.clone() {
         progress.set_message(format!("frame {frame}"));
         let film = renderer.render_frame(frame);
         film::write_frame(&film, out_dir, frame)?;
+        frame_stats.push(renderer.last_frame_stats());
         progress.inc(1);
     }
     progress.finish_and_clear();
     Ok(RenderSummary {
         frames: frames.len() as u32,
+        frame_stats,
         elapsed: start.elapsed(),
         rays: renderer.backend().ray_counts().total() - rays_before,
         out_dir: out_dir.to_path_buf(),

@@ -77,6 +77,13 @@ impl Rng {
         xorshifted.rotate_right(rot)
     }
 
+    /// An independent stream seeded from this one (for a sub-path that must
+    /// not share numbers with its parent).
+    pub fn split(&mut self) -> Rng {
+        let seed = (u64::from(self.next_u32()) << 32) | u64::from(self.next_u32());
+        Rng::from_seed(mix64(seed), mix64(seed ^ 0x5851_f42d_4c95_7f2d))
+    }
+
     /// Uniform in [0, 1): 24 random mantissa bits, never exactly 1.
     #[inline]
     pub fn next_f32(&mut self) -> f32 {

@@ -3,6 +3,7 @@
 //! the scene only through a [`FrameContext`] and trace rays only through the
 //! batched [`RayBackend`] interface.
 
+pub mod ic;
 pub mod path;
 
 use crate::backend::RayBackend;
@@ -42,6 +43,36 @@ impl FrameContext<'_> {
     }
 }
 
+/// What a method did in one frame (the store and server persist and serve
+/// these; `render` prints a summary).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FrameStats {
+    pub frame: u32,
+    /// Records in the cache at the end of the frame.
+    pub records_alive: u64,
+    pub records_created: u64,
+    /// Records from earlier frames used again (temporal methods).
+    pub records_reused: u64,
+    pub records_replaced: u64,
+    pub records_dropped: u64,
+    /// Cache lookups (shading points that needed cached irradiance).
+    pub lookups: u64,
+    /// Sum over lookups of the records interpolated (mean = this / lookups).
+    pub lookup_records: u64,
+    /// Lookups no record covered, computed by path tracing instead.
+    pub fallback_lookups: u64,
+    /// Rays traced in the frame (filled in by the renderer).
+    pub rays: u64,
+    /// Wall time of each phase, in seconds.
+    pub phase_seconds: Vec<(String, f64)>,
+}
+
+impl FrameStats {
+    pub fn mean_records_per_lookup(&self) -> f64 {
+        self.lookup_records as f64 / self.lookups.max(1) as f64
+    }
+}
+
 /// A rendering method. Methods may keep state from frame to frame (the
 /// temporal caches do), so frames are rendered in order through `&mut self`.
 pub trait Method: Send {
@@ -50,4 +81,10 @@ pub trait Method: Send {
 
     /// Renders one frame into a linear-radiance image.
     fn render_frame(&mut self, ctx: &FrameContext) -> Film;
+
+    /// Statistics of the last rendered frame (methods without a cache
+    /// report only their phases).
+    fn last_frame_stats(&self) -> FrameStats {
+        FrameStats::default()
+    }
 }

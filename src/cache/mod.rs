@@ -1,0 +1,117 @@
+//! Record caches shared by the caching methods (`ic` now; `trc` and `tcg`
+//! reuse the same records, weights and interpolation): irradiance records
+//! with gradients ([`record`]), hemisphere gathering ([`gather`]), a spatial
+//! index over their spheres of influence ([`octree`]) and the weighted
+//! interpolation of TRC paper Eq. 1–4 ([`IrradianceCache::interpolate`]).
+
+pub mod gather;
+pub mod octree;
+pub mod record;
+
+use glam::Vec3;
+use octree::SphereOctree;
+pub use record::{IrradianceRecord, RecordId};
+
+/// Records of one cache with their spatial index.
+pub struct IrradianceCache {
+    /// User accuracy `a`: a record is used where `w ≥ 1/a` (Ward 1988).
+    pub accuracy: f32,
+    records: Vec<IrradianceRecord>,
+    index: SphereOctree,
+}
+
+/// An interpolated irradiance and how many records made it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Interpolated {
+    pub irradiance: Vec3,
+    pub records: u32,
+}
+
+impl IrradianceCache {
+    /// An empty cache for a scene within `[min, max]`.
+    pub fn new(min: Vec3, max: Vec3, accuracy: f32) -> Self {
+        IrradianceCache {
+            accuracy,
+            records: Vec::new(),
+            index: SphereOctree::new(min, max),
+        }
+    }
+
+    pub fn records(&self) -> &[IrradianceRecord] {
+        &self.records
+    }
+
+    pub fn len(&self) -> usize {
+        self.records.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.records.is_empty()
+    }
+
+    /// Calls `visit(record, weight)` for every record usable at `p` with
+    /// normal `n`: `w_K(p) ≥ 1/a` (TRC Eq. 3) and not in front of `p`.
+    pub fn for_each_usable(&self, p: Vec3, n: Vec3, mut visit: impl FnMut(&IrradianceRecord, f32)) {
+        let threshold = 1.0 / self.accuracy;
+        self.index.query(p, |i| {
+            let record = &self.records[i as usize];
+            let w = record.weight(p, n);
+            if w >= threshold && !record.is_in_front_of(p, n) {
+                visit(record, w);
+            }
+        });
+    }
+
+    /// Whether some record can be used at `p`.
+    pub fn covers(&self, p: Vec3, n: Vec3) -> bool {
+        let mut covered = false;
+        self.for_each_usable(p, n, |_, _| covered = true);
+        covered
+    }
+
+    /// TRC Eq. 1 with Eq. 4: `E(p) = Σ w_K E_K(p) / Σ w_K` over usable
+    /// records; `None` where no record is usable.
+    pub fn interpolate(&self, p: Vec3, n: Vec3, use_gradients: bool) -> Option<Interpolated> {
+        let (mut sum, mut weights, mut count) = (Vec3::ZERO, 0.0f32, 0u32);
+        self.for_each_usable(p, n, |record, w| {
+            // A record exactly at p has infinite weight: it alone decides.
+            let w = w.min(1e6);
+            sum += record.extrapolate(p, n, use_gradients) * w;
+            weights += w;
+            count += 1;
+        });
+        (count > 0).then(|| Interpolated {
+            irradiance: sum / weights,
+            records: count,
+        })
+    }
+
+    /// Adds a record, with neighbour clamping (Křivánek et al. 2006,
+    /// "Making radiance and irradiance caching practical", §4): radii of
+    /// neighbouring records may not differ by more than their distance,
+    /// `R_k ≤ R_j + ‖p_k − p_j‖` both ways, which keeps a small record from
+    /// sitting inside a huge one that ignores the geometry it saw.
+    pub fn insert(&mut self, mut record: IrradianceRecord) {
+        let mut neighbours = Vec::new();
+        self.index.query(record.position, |i| neighbours.push(i));
+        for &j in &neighbours {
+            let other = &self.records[j as usize];
+            let d = (other.position - record.position).length();
+            record.radius = record.radius.min(other.radius + d);
+        }
+        for &j in &neighbours {
+            let other = &mut self.records[j as usize];
+            let d = (other.position - record.position).length();
+            let clamped = other.radius.min(record.radius + d);
+            if clamped < other.radius {
+                other.radius = clamped;
+                let (p, r) = (other.position, other.influence_radius(self.accuracy));
+                self.index.shrink(j, p, r);
+            }
+        }
+        let id = self.records.len() as u32;
+        self.index
+            .insert(id, record.position, record.influence_radius(self.accuracy));
+        self.records.push(record);
+    }
+}

@@ -1,0 +1,171 @@
+//! A loose octree over spheres of influence, for finding every record whose
+//! sphere contains a query point (Ward et al. 1988 store records in an
+//! octree for the same purpose).
+//!
+//! A sphere is stored in the deepest node whose cell contains its centre and
+//! whose half-size is at least its radius; the sphere then lies inside the
+//! node's *loose* bounds (the cell grown by its half-size on every side). A
+//! query visits only nodes whose loose bounds contain the point.
+
+use glam::Vec3;
+
+/// Depth limit: cells 2⁻¹⁶ of the root are far below any record radius.
+const MAX_DEPTH: u32 = 16;
+
+struct Node {
+    center: Vec3,
+    half: f32,
+    /// `(item, centre, radius)` of the spheres stored here.
+    items: Vec<(u32, Vec3, f32)>,
+    children: Option<Box<[Node; 8]>>,
+}
+
+impl Node {
+    fn new(center: Vec3, half: f32) -> Self {
+        Node {
+            center,
+            half,
+            items: Vec::new(),
+            children: None,
+        }
+    }
+
+    fn split(&mut self) {
+        let h = self.half * 0.5;
+        let c = self.center;
+        self.children = Some(Box::new(std::array::from_fn(|i| {
+            let offset = Vec3::new(
+                if i & 1 != 0 { h } else { -h },
+                if i & 2 != 0 { h } else { -h },
+                if i & 4 != 0 { h } else { -h },
+            );
+            Node::new(c + offset, h)
+        })));
+    }
+
+    fn loosely_contains(&self, p: Vec3) -> bool {
+        ((p - self.center).abs().max_element()) <= 2.0 * self.half
+    }
+}
+
+/// Spheres (id, centre, radius) indexed for point queries.
+pub struct SphereOctree {
+    root: Node,
+    len: usize,
+}
+
+impl SphereOctree {
+    /// An empty tree covering the box `[min, max]` (points outside still
+    /// work, they are kept at the root).
+    pub fn new(min: Vec3, max: Vec3) -> Self {
+        let center = 0.5 * (min + max);
+        let half = (0.5 * (max - min)).max_element().max(1e-3) * 1.01;
+        SphereOctree {
+            root: Node::new(center, half),
+            len: 0,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    pub fn insert(&mut self, id: u32, center: Vec3, radius: f32) {
+        self.len += 1;
+        let mut node = &mut self.root;
+        let mut depth = 0;
+        let inside_root = (center - node.center).abs().max_element() <= node.half;
+        while inside_root && depth < MAX_DEPTH && node.half * 0.5 >= radius {
+            if node.children.is_none() {
+                node.split();
+            }
+            let i = child_for(node.center, center);
+            node = &mut node.children.as_mut().expect("split above")[i];
+            depth += 1;
+        }
+        node.items.push((id, center, radius));
+    }
+
+    /// Calls `visit(id)` for every sphere that contains `p`.
+    pub fn query(&self, p: Vec3, mut visit: impl FnMut(u32)) {
+        let mut stack: Vec<&Node> = vec![&self.root];
+        while let Some(node) = stack.pop() {
+            for &(id, c, r) in &node.items {
+                if (p - c).length_squared() <= r * r {
+                    visit(id);
+                }
+            }
+            if let Some(children) = &node.children {
+                stack.extend(children.iter().filter(|c| c.loosely_contains(p)));
+            }
+        }
+    }
+
+    /// Shrinks the stored radius of `id` (the sphere stays where it is
+    /// stored: a smaller sphere still fits its node's loose bounds).
+    pub fn shrink(&mut self, id: u32, center: Vec3, radius: f32) {
+        let mut stack: Vec<&mut Node> = vec![&mut self.root];
+        while let Some(node) = stack.pop() {
+            if let Some(item) = node.items.iter_mut().find(|it| it.0 == id) {
+                item.2 = item.2.min(radius);
+                return;
+            }
+            if let Some(children) = node.children.as_deref_mut() {
+                let i = child_for(node.center, center);
+                stack.push(&mut children[i]);
+            }
+        }
+    }
+}
+
+/// Index of the child cell of a node centred at `node_center` holding `p`.
+fn child_for(node_center: Vec3, p: Vec3) -> usize {
+    (usize::from(p.x >= node_center.x))
+        | (usize::from(p.y >= node_center.y) << 1)
+        | (usize::from(p.z >= node_center.z) << 2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::{Rng, SampleKey};
+
+    #[test]
+    fn query_finds_exactly_the_containing_spheres() {
+        let mut rng = Rng::new(SampleKey {
+            seed: 1,
+            frame: None,
+            item: 0,
+            sample: 0,
+        });
+        let mut tree = SphereOctree::new(Vec3::splat(-1.0), Vec3::splat(1.0));
+        let mut spheres = Vec::new();
+        for id in 0..2000u32 {
+            let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.4 - 1.2;
+            let r = 0.002 + 0.3 * rng.next_f32().powi(3);
+            tree.insert(id, c, r);
+            spheres.push((c, r));
+        }
+        for (id, &(c, r)) in spheres.iter().enumerate().step_by(7) {
+            tree.shrink(id as u32, c, r * 0.5);
+            spheres[id].1 = r * 0.5;
+        }
+        for _ in 0..2000 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.6 - 1.3;
+            let mut found = Vec::new();
+            tree.query(p, |id| found.push(id));
+            found.sort_unstable();
+            let brute: Vec<u32> = spheres
+                .iter()
+                .enumerate()
+                .filter(|(_, (c, r))| (p - *c).length_squared() <= r * r)
+                .map(|(i, _)| i as u32)
+                .collect();
+            assert_eq!(found, brute, "at {p}");
+        }
+    }
+}

@@ -1,0 +1,530 @@
+//! `ic`: per-frame irradiance caching (Ward, Rubinstein & Clear 1988; Ward
+//! & Heckbert 1992), as summarised in §3 of the TRC paper
+//! (`temporal-radiance-caching-tvcg2007`), in the two-stage form of
+//! Algorithm 1 of the EAS paper: a cache-filling stage creates records
+//! where none is usable, then a rendering stage interpolates them. A new
+//! cache is built every frame — the "per-frame computation" every temporal
+//! method is compared with.
+//!
+//! Per pixel sample the outgoing radiance is split as
+//! `L = Le + L_direct + kd/π·E_indirect + L_glossy`:
+//! - direct light by next-event estimation (one light sample per pixel
+//!   sample; the glossy lobe's part MIS-weighted against lobe sampling),
+//! - indirect diffuse from the cache: `E_indirect` interpolated with
+//!   gradients (TRC Eq. 1–4), records used where `w ≥ 1/a`,
+//! - the glossy lobe by path tracing from a lobe sample (until radiance
+//!   records for glossy surfaces land).
+
+use super::path::camera_query;
+use super::{FrameContext, FrameStats, Method};
+use crate::backend::{Hit, Ray};
+use crate::cache::gather::{
+    gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint, Strata,
+};
+use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
+use crate::film::Film;
+use crate::integrator::{
+    offset_origin, trace_radiance, FirstHitEmission, PathLength, RadianceQuery,
+};
+use crate::light::emitting_cosine;
+use crate::material::{luminance, Bsdf};
+use crate::sampling::{cosine_hemisphere, power_heuristic, Rng, SampleKey};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::f32::consts::FRAC_1_PI;
+use std::time::Instant;
+
+/// Settings of `ic`, with their sources.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IcSettings {
+    /// Accuracy `a` (Ward 1988): records are used where `w ≥ 1/a`. Ward
+    /// recommends 0.1–0.3; 0.2 is our default.
+    pub accuracy: f32,
+    /// Hemisphere cells per record (`M × N`).
+    pub strata: Strata,
+    /// Pixel samples (direct light, glossy lobe and anti-aliasing).
+    pub spp: u32,
+    /// Smallest distance between records, in pixels: `a·R ≥ min·footprint`
+    /// (Tabellion & Lamorlette 2004 clamp R in screen space so corners do
+    /// not fill with records).
+    pub min_spacing_px: f32,
+    /// Largest influence radius, in pixels (keeps records in open space from
+    /// covering half the image).
+    pub max_spacing_px: f32,
+    /// Interpolate with translation and rotation gradients (Eq. 4).
+    pub gradients: bool,
+    pub length: PathLength,
+}
+
+impl Default for IcSettings {
+    fn default() -> Self {
+        IcSettings {
+            accuracy: 0.2,
+            strata: Strata::default(),
+            spp: 4,
+            min_spacing_px: 2.0,
+            max_spacing_px: 64.0,
+            gradients: true,
+            length: PathLength::default(),
+        }
+    }
+}
+
+/// Tags the random streams of record gathering apart from pixel sampling.
+const RECORD_STREAM: u64 = 1 << 62;
+
+pub struct IrradianceCaching {
+    pub settings: IcSettings,
+    stats: FrameStats,
+}
+
+impl IrradianceCaching {
+    pub fn new(settings: IcSettings) -> Self {
+        IrradianceCaching {
+            settings,
+            stats: FrameStats::default(),
+        }
+    }
+}
+
+/// The first surface seen through a pixel centre, where a record may go.
+#[derive(Clone, Copy)]
+struct Candidate {
+    pixel: u32,
+    point: GatherPoint,
+    object: u32,
+    /// World size of one pixel at this depth.
+    footprint: f32,
+}
+
+impl Method for IrradianceCaching {
+    fn name(&self) -> &'static str {
+        "ic"
+    }
+
+    fn render_frame(&mut self, ctx: &FrameContext) -> Film {
+        let mut stats = FrameStats {
+            frame: ctx.frame,
+            ..FrameStats::default()
+        };
+        let start = Instant::now();
+        let cache = self.build_cache(ctx);
+        stats
+            .phase_seconds
+            .push(("fill".into(), start.elapsed().as_secs_f64()));
+        let start = Instant::now();
+        let film = render_pass(ctx, &cache, &self.settings, &mut stats);
+        stats
+            .phase_seconds
+            .push(("render".into(), start.elapsed().as_secs_f64()));
+        stats.records_created = cache.len() as u64;
+        stats.records_alive = cache.len() as u64;
+        self.stats = stats;
+        film
+    }
+
+    fn last_frame_stats(&self) -> FrameStats {
+        self.stats.clone()
+    }
+}
+
+fn scene_bounds(ctx: &FrameContext) -> (Vec3, Vec3) {
+    let mut min = Vec3::splat(f32::INFINITY);
+    let mut max = Vec3::splat(f32::NEG_INFINITY);
+    for tri in &ctx.snapshot.triangles {
+        for p in tri.p {
+            min = min.min(p);
+            max = max.max(p);
+        }
+    }
+    if min.x > max.x {
+        (Vec3::splat(-1.0), Vec3::ONE)
+    } else {
+        (min, max)
+    }
+}
+
+impl IrradianceCaching {
+    /// A new cache for this frame, filled by [`Self::fill`].
+    pub fn build_cache(&self, ctx: &FrameContext) -> IrradianceCache {
+        let (min, max) = scene_bounds(ctx);
+        let mut cache = IrradianceCache::new(min, max, self.settings.accuracy);
+        self.fill(ctx, &mut cache);
+        cache
+    }
+
+    /// Cache-filling stage (EAS Algorithm 1, lines 1–17): pixel centres are
+    /// visited coarse to fine (every 2ᴸ-th pixel, then the pixels between),
+    /// so that the first records are spread over the image rather than
+    /// clustered along the first scanlines; a record is created wherever no
+    /// existing record is usable.
+    pub fn fill(&self, ctx: &FrameContext, cache: &mut IrradianceCache) {
+        let candidates = primary_candidates(ctx);
+        let (w, h) = (ctx.width as usize, ctx.height as usize);
+        let mut step = 1usize;
+        while step * 8 < w.max(h) {
+            step *= 2;
+        }
+        let mut visited = vec![false; w * h];
+        while step >= 1 {
+            // Four interleaved sub-batches per level: candidates of one batch
+            // are 2·step pixels apart, so few of them cover each other.
+            for (ox, oy) in [(0, 0), (1, 1), (1, 0), (0, 1)] {
+                let mut batch = Vec::new();
+                for y in (oy * step..h).step_by(2 * step) {
+                    for x in (ox * step..w).step_by(2 * step) {
+                        let i = y * w + x;
+                        if !visited[i] {
+                            visited[i] = true;
+                            if let Some(c) = candidates[i] {
+                                batch.push(c);
+                            }
+                        }
+                    }
+                }
+                self.create_records(ctx, cache, batch);
+            }
+            step /= 2;
+        }
+    }
+
+    /// Gathers records (in parallel) for the candidates no record covers,
+    /// then inserts them in pixel order, skipping any that an earlier one of
+    /// the batch already covers.
+    fn create_records(
+        &self,
+        ctx: &FrameContext,
+        cache: &mut IrradianceCache,
+        batch: Vec<Candidate>,
+    ) {
+        let needed: Vec<Candidate> = batch
+            .into_par_iter()
+            .filter(|c| !cache.covers(c.point.position, c.point.normal))
+            .collect();
+        let per_task = (ctx.backend.preferred_batch() / self.settings.strata.count()).max(1);
+        let records: Vec<IrradianceRecord> = needed
+            .par_chunks(per_task)
+            .flat_map_iter(|chunk| self.gather_chunk(ctx, chunk))
+            .collect();
+        for record in records {
+            if !cache.covers(record.position, record.normal) {
+                cache.insert(record);
+            }
+        }
+    }
+
+    /// Computes the records of `chunk` with one batch of radiance queries.
+    fn gather_chunk(&self, ctx: &FrameContext, chunk: &[Candidate]) -> Vec<IrradianceRecord> {
+        let strata = self.settings.strata;
+        let mut queries = Vec::with_capacity(chunk.len() * strata.count());
+        for c in chunk {
+            let key = SampleKey {
+                seed: ctx.seed,
+                frame: (!ctx.same_pattern).then_some(ctx.frame),
+                item: RECORD_STREAM | u64::from(c.pixel),
+                sample: 0,
+            };
+            queries.extend(gather_queries(&c.point, strata, key));
+        }
+        let results = trace_radiance(ctx, self.settings.length, queries.clone());
+        chunk
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let range = i * strata.count()..(i + 1) * strata.count();
+                let samples = samples_from_results(&queries[range.clone()], &results[range]);
+                let g = irradiance_and_gradients(&samples, c.point.normal, strata);
+                IrradianceRecord {
+                    id: RecordId::from(c.pixel),
+                    position: c.point.position,
+                    normal: c.point.normal,
+                    irradiance: g.irradiance,
+                    grad_translation: g.grad_translation,
+                    grad_rotation: g.grad_rotation,
+                    radius: self.clamp_radius(
+                        g.harmonic_distance,
+                        g.irradiance,
+                        &g.grad_translation,
+                        c.footprint,
+                    ),
+                    created_frame: ctx.frame,
+                    object: c.object,
+                }
+            })
+            .collect()
+    }
+
+    /// `R` from the harmonic mean distance, limited by the translation
+    /// gradient (`R ≤ E/‖∇p E‖`: the gradient alone would change E by 100 %
+    /// over R) and clamped to the pixel-spacing limits (influence `a·R`).
+    fn clamp_radius(&self, harmonic: f32, e: Vec3, grad: &[Vec3; 3], footprint: f32) -> f32 {
+        let a = self.settings.accuracy;
+        let grad_lum = grad[0] * 0.2126 + grad[1] * 0.7152 + grad[2] * 0.0722;
+        let mut r = harmonic;
+        let g = grad_lum.length();
+        if g > 0.0 {
+            r = r.min(luminance(e) / g);
+        }
+        let r_min = self.settings.min_spacing_px * footprint / a;
+        let r_max = self.settings.max_spacing_px * footprint / a;
+        r.clamp(r_min, r_max.max(r_min))
+    }
+}
+
+/// The surface point seen through each pixel centre that wants a record
+/// (a surface with a diffuse part), or `None`.
+fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
+    let camera = &ctx.snapshot.camera;
+    let n_pixels = (ctx.width * ctx.height) as usize;
+    let rays: Vec<Ray> = (0..n_pixels as u32)
+        .map(|pixel| {
+            let (x, y) = (pixel % ctx.width, pixel / ctx.width);
+            let sx = (x as f32 + 0.5) / ctx.width as f32;
+            let sy = (y as f32 + 0.5) / ctx.height as f32;
+            Ray::new(
+                camera.position,
+                camera.direction(sx, sy, ctx.aspect()),
+                0.0,
+                f32::INFINITY,
+            )
+        })
+        .collect();
+    let mut hits = vec![Hit::MISS; rays.len()];
+    ctx.backend.closest_hit(&rays, &mut hits);
+    let pixel_angle = 2.0 * (0.5 * camera.yfov).tan() / ctx.height as f32;
+    rays.iter()
+        .zip(&hits)
+        .enumerate()
+        .map(|(pixel, (ray, hit))| {
+            let surface = Surface::at(ctx, ray, hit)?;
+            (surface.bsdf.diffuse_albedo().max_element() > 0.0).then(|| Candidate {
+                pixel: pixel as u32,
+                point: surface.gather_point(),
+                object: hit.object,
+                footprint: hit.t * ray.dir().length() * pixel_angle,
+            })
+        })
+        .collect()
+}
+
+/// A shaded hit: position, normals and BSDF.
+struct Surface<'a> {
+    p: Vec3,
+    ng: Vec3,
+    wo: Vec3,
+    bsdf: Bsdf,
+    material: &'a crate::scene::Material,
+    triangle: &'a crate::scene::Triangle,
+}
+
+impl<'a> Surface<'a> {
+    fn at(ctx: &'a FrameContext, ray: &Ray, hit: &Hit) -> Option<Self> {
+        if !hit.is_hit() {
+            return None;
+        }
+        let snapshot = ctx.snapshot;
+        let triangle = &snapshot.triangles[hit.triangle as usize];
+        let material = &ctx.scene.materials[snapshot.tri_material[hit.triangle as usize] as usize];
+        let wo = -ray.dir().normalize();
+        Some(Surface {
+            p: ray.at(hit.t),
+            ng: triangle.geometric_normal(),
+            wo,
+            bsdf: Bsdf::new(material, triangle.shading_normal(hit.u, hit.v), wo),
+            material,
+            triangle,
+        })
+    }
+
+    fn gather_point(&self) -> GatherPoint {
+        GatherPoint {
+            position: self.p,
+            normal: self.bsdf.normal(),
+            geometric_normal: self.ng,
+        }
+    }
+}
+
+/// Rendering stage (EAS Algorithm 1, lines 18–24), tile by tile.
+fn render_pass(
+    ctx: &FrameContext,
+    cache: &IrradianceCache,
+    settings: &IcSettings,
+    stats: &mut FrameStats,
+) -> Film {
+    let mut film = Film::new(ctx.width, ctx.height);
+    let spp = settings.spp.max(1);
+    let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1);
+    let tile_stats: Vec<FrameStats> = film
+        .pixels
+        .par_chunks_mut(pixels_per_tile)
+        .enumerate()
+        .map(|(tile, out)| {
+            let first = (tile * pixels_per_tile) as u32;
+            render_tile(ctx, cache, settings, first, out)
+        })
+        .collect();
+    for t in tile_stats {
+        stats.lookups += t.lookups;
+        stats.lookup_records += t.lookup_records;
+        stats.fallback_lookups += t.fallback_lookups;
+    }
+    film
+}
+
+/// A path-traced part of a pixel sample (glossy lobe, or diffuse indirect
+/// where no record is usable) and the sample it belongs to.
+struct Deferred {
+    sample: usize,
+    query: RadianceQuery,
+}
+
+fn render_tile(
+    ctx: &FrameContext,
+    cache: &IrradianceCache,
+    settings: &IcSettings,
+    first: u32,
+    out: &mut [Vec3],
+) -> FrameStats {
+    let spp = settings.spp.max(1);
+    let mut stats = FrameStats::default();
+    let mut rays = Vec::with_capacity(out.len() * spp as usize);
+    let mut rngs = Vec::with_capacity(rays.capacity());
+    for pixel in first..first + out.len() as u32 {
+        for sample in 0..spp {
+            let (ray, rng) = camera_query(ctx, pixel, sample);
+            rays.push(ray);
+            rngs.push(rng);
+        }
+    }
+    let mut hits = vec![Hit::MISS; rays.len()];
+    ctx.backend.closest_hit(&rays, &mut hits);
+
+    let mut radiance = vec![Vec3::ZERO; rays.len()];
+    let mut shadow_rays = Vec::new();
+    let mut shadow_targets = Vec::new();
+    let mut deferred = Vec::new();
+    for (i, (ray, hit)) in rays.iter().zip(&hits).enumerate() {
+        let Some(surface) = Surface::at(ctx, ray, hit) else {
+            continue;
+        };
+        let rng = &mut rngs[i];
+        if surface.material.is_emissive()
+            && emitting_cosine(surface.triangle, surface.material.double_sided, surface.wo)
+                .is_some()
+        {
+            radiance[i] += surface.material.emission;
+        }
+        if surface.bsdf.is_black() {
+            continue;
+        }
+        if let Some((shadow, contribution)) = direct_light(ctx, &surface, rng) {
+            shadow_rays.push(shadow);
+            shadow_targets.push((i, contribution));
+        }
+        let kd = surface.bsdf.diffuse_albedo();
+        if kd.max_element() > 0.0 {
+            stats.lookups += 1;
+            let n = surface.bsdf.normal();
+            match cache.interpolate(surface.p, n, settings.gradients) {
+                Some(e) => {
+                    radiance[i] += kd * FRAC_1_PI * e.irradiance;
+                    stats.lookup_records += u64::from(e.records);
+                }
+                None => {
+                    stats.fallback_lookups += 1;
+                    deferred.push(Deferred {
+                        sample: i,
+                        query: diffuse_indirect_query(&surface, rng),
+                    });
+                }
+            }
+        }
+        if let Some(query) = glossy_query(&surface, rng) {
+            deferred.push(Deferred { sample: i, query });
+        }
+    }
+    let mut occluded = vec![false; shadow_rays.len()];
+    ctx.backend.any_hit(&shadow_rays, &mut occluded);
+    for ((i, c), blocked) in shadow_targets.into_iter().zip(occluded) {
+        if !blocked {
+            radiance[i] += c;
+        }
+    }
+    let (targets, queries): (Vec<usize>, Vec<RadianceQuery>) =
+        deferred.into_iter().map(|d| (d.sample, d.query)).unzip();
+    for (i, r) in targets
+        .into_iter()
+        .zip(trace_radiance(ctx, settings.length, queries))
+    {
+        radiance[i] += r.radiance;
+    }
+    let inv = 1.0 / spp as f32;
+    for (pixel, samples) in out.iter_mut().zip(radiance.chunks(spp as usize)) {
+        *pixel = samples.iter().copied().sum::<Vec3>() * inv;
+    }
+    stats
+}
+
+/// One light sample for the whole BSDF: the diffuse lobe unweighted (its
+/// emission hits are never counted elsewhere: the cache excludes them), the
+/// glossy lobe MIS-weighted against [`glossy_query`]'s lobe sampling.
+fn direct_light(ctx: &FrameContext, s: &Surface, rng: &mut Rng) -> Option<(Ray, Vec3)> {
+    let (pick, u) = (rng.next_f32(), rng.next_2d());
+    let ls = ctx
+        .lights
+        .sample(ctx.snapshot, &ctx.scene.materials, s.p, pick, u)?;
+    let cos = s.bsdf.normal().dot(ls.wi);
+    if cos <= 0.0 || s.wo.dot(s.bsdf.normal()) <= 0.0 {
+        return None;
+    }
+    let diffuse = s.bsdf.diffuse_albedo() * FRAC_1_PI;
+    let specular = s.bsdf.eval_specular(s.wo, ls.wi);
+    let w = if ls.is_delta || !s.bsdf.has_specular() {
+        1.0
+    } else {
+        power_heuristic(ls.pdf, s.bsdf.pdf_specular(s.wo, ls.wi))
+    };
+    let f = diffuse + specular * w;
+    if f.max_element() <= 0.0 {
+        return None;
+    }
+    let shadow = Ray::segment(offset_origin(s.p, s.ng, ls.wi), ls.position);
+    Some((shadow, f * ls.radiance * (cos / ls.pdf)))
+}
+
+/// The glossy lobe's indirect and MIS-weighted direct light, by sampling
+/// the lobe and path tracing on.
+fn glossy_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> {
+    if !s.bsdf.has_specular() {
+        return None;
+    }
+    let sample = s.bsdf.sample_specular(s.wo, rng.next_2d())?;
+    let cos = s.bsdf.normal().dot(sample.wi);
+    Some(RadianceQuery {
+        ray: Ray::new(
+            offset_origin(s.p, s.ng, sample.wi),
+            sample.wi,
+            0.0,
+            f32::INFINITY,
+        ),
+        rng: rng.split(),
+        weight: sample.f * (cos / sample.pdf),
+        first_hit: FirstHitEmission::Mis {
+            bsdf_pdf: sample.pdf,
+        },
+    })
+}
+
+/// Indirect diffuse light by path tracing, where no record is usable:
+/// cosine sampling makes the weight `kd` (`kd/π · L · cosθ / (cosθ/π)`).
+fn diffuse_indirect_query(s: &Surface, rng: &mut Rng) -> RadianceQuery {
+    let frame = s.bsdf.frame;
+    let wi = frame.to_world(cosine_hemisphere(rng.next_2d()));
+    RadianceQuery {
+        ray: Ray::new(offset_origin(s.p, s.ng, wi), wi, 0.0, f32::INFINITY),
+        rng: rng.split(),
+        weight: s.bsdf.diffuse_albedo(),
+        first_hit: FirstHitEmission::Exclude,
+    }
+}

@@ -1,0 +1,269 @@
+//! Per-frame irradiance caching against independent answers: the indirect
+//! irradiance of a floor under a ceiling lit by a point light (computed by
+//! quadrature), the effect of gradients, the path tracer, determinism.
+
+mod common;
+
+use common::{push_quad, scene};
+use glam::Vec3;
+use radcache::backend::cpu::CpuBackend;
+use radcache::cache::gather::Strata;
+use radcache::cache::IrradianceCache;
+use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::method::path::{PathSettings, PathTracer};
+use radcache::metrics::{block_bias, rel_rmse, BLOCK};
+use radcache::render::{FrameSettings, Renderer};
+use radcache::scene::{Material, Mesh, Scene};
+use std::f32::consts::PI;
+
+const CEILING_Y: f32 = 2.0;
+const CEILING_ALBEDO: f32 = 0.8;
+const INTENSITY: f32 = 20.0;
+const HALF: f32 = 5.0;
+
+/// A floor (albedo ~0, so nothing bounces back) under a 10 m × 10 m
+/// ceiling facing down, lit by a point light at `light`; the camera looks
+/// down at the floor from just under the ceiling.
+fn floor_and_ceiling(light: Vec3) -> Scene {
+    let mut floor = Mesh::default();
+    push_quad(
+        &mut floor,
+        Vec3::new(-HALF, 0.0, -HALF),
+        Vec3::Z * 2.0 * HALF,
+        Vec3::X * 2.0 * HALF,
+        0,
+    );
+    let mut ceiling = Mesh::default();
+    push_quad(
+        &mut ceiling,
+        Vec3::new(-HALF, CEILING_Y, -HALF),
+        Vec3::X * 2.0 * HALF,
+        Vec3::Z * 2.0 * HALF,
+        1,
+    );
+    scene(
+        vec![floor, ceiling],
+        vec![
+            Material::diffuse("floor", Vec3::splat(1e-4)),
+            Material::diffuse("ceiling", Vec3::splat(CEILING_ALBEDO)),
+        ],
+        vec![],
+        Vec3::new(0.0, 1.95, 0.0),
+        -Vec3::Y,
+        1.0,
+        vec![(light, Vec3::splat(INTENSITY))],
+    )
+}
+
+/// Indirect irradiance at floor point `p`: the ceiling's radiance
+/// `L(x) = ρ/π · I·cosθ_x/d²` (lit by the point light only) integrated
+/// over the ceiling, `E(p) = ∫ L(x) cosθ_p cosθ_x / r² dA`, by the midpoint
+/// rule on a 600×600 grid.
+fn floor_irradiance(p: Vec3, light: Vec3) -> f32 {
+    let n = 600;
+    let cell = 2.0 * HALF / n as f32;
+    let mut e = 0.0f64;
+    for i in 0..n {
+        for j in 0..n {
+            let x = Vec3::new(
+                -HALF + (i as f32 + 0.5) * cell,
+                CEILING_Y,
+                -HALF + (j as f32 + 0.5) * cell,
+            );
+            let to_light = light - x;
+            let d2 = to_light.length_squared();
+            let radiance = CEILING_ALBEDO / PI * INTENSITY * (-to_light.y / d2.sqrt()) / d2;
+            let r2 = (x - p).length_squared();
+            let cos = CEILING_Y / r2.sqrt();
+            e += (radiance * cos * cos / r2) as f64;
+        }
+    }
+    (e * (cell * cell) as f64) as f32
+}
+
+fn ic_cache(light: Vec3, settings: IcSettings, size: u32) -> (IrradianceCache, Renderer) {
+    let ic = IrradianceCaching::new(settings);
+    let mut renderer = Renderer::new(
+        floor_and_ceiling(light),
+        Box::new(IrradianceCaching::new(IcSettings::default())),
+        Box::new(CpuBackend::new()),
+        FrameSettings {
+            width: size,
+            height: size,
+            ..FrameSettings::default()
+        },
+    );
+    let cache = renderer.with_frame_context(0, |ctx| ic.build_cache(ctx));
+    (cache, renderer)
+}
+
+/// Floor points seen by the camera (it sees |x|, |z| < 1.05 at y = 0).
+fn floor_points(n: usize) -> Vec<Vec3> {
+    (0..n)
+        .flat_map(|i| (0..n).map(move |j| (i, j)))
+        .map(|(i, j)| {
+            let s = |k: usize| -0.9 + 1.8 * (k as f32 + 0.37) / n as f32;
+            Vec3::new(s(i), 0.0, s(j))
+        })
+        .collect()
+}
+
+/// With accuracy a = 0.1 (Ward's weight bounds the estimated relative error
+/// by about a, so the default 0.2 allows more than the 2 % asked here).
+#[test]
+fn cached_irradiance_matches_quadrature_between_records() {
+    // 32×96 cells: the per-record Monte Carlo noise stays well under 1 %,
+    // so what is left is the interpolation error under test.
+    let light = Vec3::new(0.2, 0.6, -0.1);
+    let settings = IcSettings {
+        accuracy: 0.1,
+        strata: Strata { theta: 32, phi: 96 },
+        ..IcSettings::default()
+    };
+    let (cache, _) = ic_cache(light, settings, 32);
+    assert!(
+        cache.len() >= 4,
+        "expected several records, got {}",
+        cache.len()
+    );
+    let mut worst = 0.0f32;
+    for p in floor_points(12) {
+        let e = cache
+            .interpolate(p, Vec3::Y, true)
+            .unwrap_or_else(|| panic!("no record covers {p}"))
+            .irradiance;
+        let expected = floor_irradiance(p, light);
+        let err = (e.x - expected).abs() / expected;
+        worst = worst.max(err);
+        assert!(
+            err < 0.02,
+            "at {p}: cached {} vs quadrature {expected} ({:.1} %)",
+            e.x,
+            err * 100.0
+        );
+    }
+    eprintln!(
+        "{} records, worst error {:.2} %",
+        cache.len(),
+        worst * 100.0
+    );
+}
+
+#[test]
+fn gradients_reduce_interpolation_error() {
+    // The ceiling's bright spot lies beside the view: across the floor in
+    // view the indirect irradiance climbs steeply towards +x; a coarse
+    // accuracy makes records extrapolate far.
+    let light = Vec3::new(2.0, 1.5, 0.0);
+    let settings = IcSettings {
+        accuracy: 0.5,
+        strata: Strata { theta: 32, phi: 96 },
+        ..IcSettings::default()
+    };
+    let (cache, _) = ic_cache(light, settings, 32);
+    let (mut with, mut without, mut n) = (0.0f64, 0.0f64, 0);
+    for p in floor_points(16) {
+        let expected = floor_irradiance(p, light);
+        let (Some(g), Some(c)) = (
+            cache.interpolate(p, Vec3::Y, true),
+            cache.interpolate(p, Vec3::Y, false),
+        ) else {
+            continue;
+        };
+        with += ((g.irradiance.x - expected) / expected).abs() as f64;
+        without += ((c.irradiance.x - expected) / expected).abs() as f64;
+        n += 1;
+    }
+    assert!(n > 100, "too few covered points: {n}");
+    let (with, without) = (with / n as f64, without / n as f64);
+    eprintln!("mean relative error: with gradients {with:.4}, without {without:.4}");
+    assert!(
+        with < 0.75 * without,
+        "gradients did not help: {with} vs {without}"
+    );
+}
+
+fn cube_in_box(method: Box<dyn radcache::method::Method>, size: u32) -> Renderer {
+    Renderer::new(
+        Scene::builtin("cube-in-box").unwrap(),
+        method,
+        Box::new(CpuBackend::new()),
+        FrameSettings {
+            width: size,
+            height: size,
+            ..FrameSettings::default()
+        },
+    )
+}
+
+/// `ic` against a converged `path` render of the same scene: relative RMSE
+/// and block bias within bounds. At 48×48 the reference (1024 spp) has about
+/// 3 % relative noise per pixel and `ic` at 64 spp about 8 % from direct
+/// light and the light's edge pixels, so an unbiased `ic` lands near 0.1;
+/// the bound 0.2 leaves room for interpolation error but not for a missing
+/// or doubled bounce (≈ 30 % of the light here). The bias on 16×16 block
+/// means must stay under 5 % (the bound).
+#[test]
+fn ic_agrees_with_path_tracer() {
+    let size = 48;
+    let reference = cube_in_box(
+        Box::new(PathTracer::new(PathSettings {
+            spp: 1024,
+            ..PathSettings::default()
+        })),
+        size,
+    )
+    .render_frame(3);
+    let settings = IcSettings {
+        spp: 64,
+        ..IcSettings::default()
+    };
+    let image = cube_in_box(Box::new(IrradianceCaching::new(settings)), size).render_frame(3);
+    let e = rel_rmse(&image, &reference);
+    let bias = block_bias(&image, &reference, BLOCK);
+    eprintln!("ic vs path: rel_rmse {e:.4}, block bias {bias:.4}");
+    assert!(e < 0.2, "rel_rmse {e}");
+    assert!(bias < 0.05, "block bias {bias}");
+}
+
+#[test]
+fn ic_frames_are_deterministic() {
+    let settings = IcSettings {
+        spp: 2,
+        ..IcSettings::default()
+    };
+    let a = cube_in_box(Box::new(IrradianceCaching::new(settings.clone())), 24).render_frame(5);
+    let mut r = cube_in_box(Box::new(IrradianceCaching::new(settings)), 24);
+    let _ = r.render_frame(4);
+    assert_eq!(r.render_frame(5), a);
+}
+
+/// Each record's translation gradient (Ward & Heckbert 1992, as re-derived
+/// in `cache::gather`) against central differences of the quadrature.
+#[test]
+fn translation_gradients_match_finite_differences() {
+    let light = Vec3::new(0.1, 1.3, 0.0);
+    let settings = IcSettings {
+        strata: Strata { theta: 32, phi: 96 },
+        ..IcSettings::default()
+    };
+    let (cache, _) = ic_cache(light, settings, 32);
+    let h = 0.02;
+    for r in cache.records() {
+        let p = r.position;
+        let fd = |axis: Vec3| {
+            (floor_irradiance(p + axis * h, light) - floor_irradiance(p - axis * h, light))
+                / (2.0 * h)
+        };
+        let (gx, gz) = (fd(Vec3::X), fd(Vec3::Z));
+        let g = r.grad_translation[0];
+        // 5 % of the slope, or 1 % of E per metre where the slope is flat.
+        let tol = 0.05 * gx.hypot(gz) + 0.01 * r.irradiance.x;
+        assert!(
+            (g.x - gx).hypot(g.z - gz) < tol,
+            "record at {p}: gradient ({}, {}) vs finite differences ({gx}, {gz})",
+            g.x,
+            g.z
+        );
+    }
+}
