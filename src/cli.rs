@@ -2,6 +2,7 @@
 //! its arguments, calls the library and maps errors to a message and a
 //! non-zero exit status; no input makes it panic.
 
+use crate::bench;
 use crate::cache::gather::Strata;
 use crate::integrator::PathLength;
 use crate::method::ic::IcSettings;
@@ -31,6 +32,8 @@ pub enum Command {
     Render(RenderArgs),
     /// Compare two directories of frame_NNNN.exr: RMSE, relative RMSE, block bias, flicker.
     Compare(CompareArgs),
+    /// Run methods over scenes against a converged path reference; write bench.csv and charts.
+    Bench(BenchArgs),
 }
 
 /// Rendering methods available in this build.
@@ -121,6 +124,46 @@ pub struct CompareArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Comma-separated built-in scene names and/or .gltf/.glb files.
+    #[arg(long, default_value = "cube-in-box", value_delimiter = ',', value_parser = parse_bench_scene)]
+    pub scenes: Vec<SceneSource>,
+    /// Methods, each NAME or NAME:KEY=V1,V2,… sweeping one setting (one run per value),
+    /// e.g. `--methods path:spp=4,16,64 ic:accuracy=0.1,0.2`.
+    #[arg(long, num_args = 1.., default_value = "path:spp=4,16,64", value_parser = parse_bench_method)]
+    pub methods: Vec<bench::MethodSweep>,
+    /// Half-open frame range START..END.
+    #[arg(long, default_value = "0..4", value_parser = parse_frames)]
+    pub frames: Range<u32>,
+    /// Image size WxH.
+    #[arg(long, default_value = "64x64", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Samples per pixel of the converged path reference.
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub reference_spp: u32,
+    /// Frames per second: frame f is rendered at t = f / fps.
+    #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, value_parser = parse_fps)]
+    pub fps: f32,
+    /// Random seed of the runs and the reference.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output directory: bench.csv, charts, reference/ and runs/.
+    #[arg(long, default_value = "bench-out")]
+    pub out: PathBuf,
+    /// No progress bars or messages (the table is still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+fn parse_bench_scene(s: &str) -> Result<SceneSource, String> {
+    bench::parse_scene(s).map_err(|e| e.to_string())
+}
+
+fn parse_bench_method(s: &str) -> Result<bench::MethodSweep, String> {
+    bench::MethodSweep::parse(s).map_err(|e| e.to_string())
 }
 
 /// Largest image side accepted; beyond it a typo is likelier than intent.
@@ -216,7 +259,38 @@ pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Render(args) => run_render(args),
         Command::Compare(args) => run_compare(args),
+        Command::Bench(args) => run_bench(args),
     }
+}
+
+fn run_bench(args: BenchArgs) -> Result<()> {
+    let opts = bench::BenchOptions {
+        scenes: args.scenes,
+        methods: args.methods,
+        frames: args.frames,
+        width: args.size.0,
+        height: args.size.1,
+        fps: args.fps,
+        reference_spp: args.reference_spp,
+        seed: args.seed,
+        out: args.out,
+        quiet: args.quiet,
+    };
+    let report = bench::run(&opts)?;
+    print!("{}", bench::to_table(&report.rows));
+    let equal = bench::equal_error_table(&report.rows);
+    if !equal.is_empty() {
+        println!("\nequal error (path time interpolated along its sweep, log-log):");
+        print!("{}", bench::equal_error_text(&equal));
+    }
+    if !report.peak_mem_per_run {
+        println!("(peak memory is the process peak so far, not per run)");
+    }
+    println!("\nwrote {}", report.csv.display());
+    for chart in &report.charts {
+        println!("wrote {}", chart.display());
+    }
+    Ok(())
 }
 
 fn run_render(args: RenderArgs) -> Result<()> {

@@ -18,10 +18,12 @@
 //! | [`film`]    | RGB f32 images, EXR and PNG input/output                        |
 //! | [`metrics`] | RMSE, relative RMSE, block bias and flicker; `compare`         |
 //! | [`render`]  | the frame loop: animation → geometry → method → files         |
+//! | [`bench`]   | `radcache bench`: methods against a reference, CSV and charts |
 //! | [`cli`]     | the `radcache` command line                                    |
 
 pub mod accel;
 pub mod backend;
+pub mod bench;
 pub mod cache;
 pub mod cli;
 pub mod film;

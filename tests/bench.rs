@@ -1,0 +1,185 @@
+//! `radcache bench`: CSV layout, equal-error interpolation, method errors and
+//! a tiny end-to-end run.
+
+use radcache::bench::{
+    self, equal_error_table, interpolate_time_at_error, method_settings, to_csv, BenchOptions,
+    BenchRow, MethodError, MethodSweep, CSV_HEADER,
+};
+use radcache::render::SceneSource;
+
+fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
+    BenchRow {
+        scene: "s".into(),
+        method: method.into(),
+        settings: settings.into(),
+        frames: 2,
+        seconds,
+        rays: 100,
+        records: 0,
+        peak_mem_mb: Some(12.5),
+        rel_rmse,
+        block_bias: 0.01,
+        flicker: None,
+    }
+}
+
+#[test]
+fn csv_has_header_and_one_line_per_run() {
+    let rows = vec![
+        row("path", "spp=1", 0.5, 0.4),
+        row("path", "spp=4", 2.0, 0.2),
+    ];
+    let csv = to_csv(&rows);
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(
+        lines[0],
+        "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,block_bias,flicker"
+    );
+    assert_eq!(lines[0], CSV_HEADER);
+    assert_eq!(lines.len(), 3, "{csv}");
+    for l in &lines[1..] {
+        assert_eq!(l.split(',').count(), 11, "{l}");
+    }
+    assert!(lines[1].starts_with("s,path,spp=1,2,"), "{}", lines[1]);
+    // A missing flicker is an empty last field.
+    assert!(lines[1].ends_with(','), "{}", lines[1]);
+}
+
+#[test]
+fn csv_quotes_fields_with_commas() {
+    let mut r = row("path", "spp=1", 0.5, 0.4);
+    r.scene = "a,b".into();
+    let csv = to_csv(&[r]);
+    assert!(
+        csv.lines().nth(1).unwrap().starts_with("\"a,b\",path"),
+        "{csv}"
+    );
+}
+
+#[test]
+fn interpolation_is_exact_on_a_power_law() {
+    // Monte Carlo: error ∝ time^-1/2. Sample the law at three times; any
+    // error between them maps back to the time of the law.
+    let law = |t: f64| 0.8 * t.powf(-0.5);
+    let pts: Vec<(f64, f64)> = [0.25, 1.0, 16.0].iter().map(|&t| (t, law(t))).collect();
+    for t in [0.25, 0.3, 0.5, 1.0, 2.0, 7.5, 16.0] {
+        let got = interpolate_time_at_error(&pts, law(t)).unwrap();
+        assert!((got - t).abs() < 1e-9 * t, "t={t}: {got}");
+    }
+    // Order of the points does not matter.
+    let mut rev = pts.clone();
+    rev.reverse();
+    assert!((interpolate_time_at_error(&rev, law(3.0)).unwrap() - 3.0).abs() < 1e-9);
+    // Outside the sweep: no extrapolation.
+    assert_eq!(interpolate_time_at_error(&pts, law(0.1)), None);
+    assert_eq!(interpolate_time_at_error(&pts, law(20.0)), None);
+    assert_eq!(interpolate_time_at_error(&[], 0.1), None);
+    assert_eq!(interpolate_time_at_error(&pts, 0.0), None);
+    assert_eq!(interpolate_time_at_error(&pts, f64::NAN), None);
+}
+
+#[test]
+fn equal_error_ratio_for_non_path_runs() {
+    // path: error 0.8·t^-½. "other" reaches 0.2 (path's error at t = 16) in 2 s.
+    let rows = vec![
+        row("path", "spp=1", 1.0, 0.8),
+        row("path", "spp=64", 64.0, 0.1),
+        row("other", "a=0.2", 2.0, 0.2),
+        row("other", "a=0.01", 2.0, 0.01),
+    ];
+    let table = equal_error_table(&rows);
+    assert_eq!(table.len(), 2);
+    assert!((table[0].path_seconds.unwrap() - 16.0).abs() < 1e-9);
+    assert!((table[0].speedup().unwrap() - 8.0).abs() < 1e-9);
+    assert_eq!(table[1].path_seconds, None);
+    assert!(bench::equal_error_text(&table).contains("does not bracket"));
+}
+
+#[test]
+fn unknown_method_and_key_are_clear_errors() {
+    let e = method_settings("nope", None).unwrap_err();
+    assert!(matches!(e, MethodError::UnknownMethod { .. }));
+    assert!(
+        e.to_string().contains("nope") && e.to_string().contains("path"),
+        "{e}"
+    );
+    let e = method_settings("path", Some(("colour", "red"))).unwrap_err();
+    assert!(matches!(e, MethodError::UnknownKey { .. }));
+    assert!(
+        e.to_string().contains("colour") && e.to_string().contains("spp"),
+        "{e}"
+    );
+    let e = method_settings("path", Some(("spp", "0"))).unwrap_err();
+    assert!(matches!(e, MethodError::BadValue { .. }), "{e}");
+    assert!(MethodSweep::parse("nope:x=1").is_err());
+    assert!(MethodSweep::parse("path:colour=1,2").is_err());
+}
+
+#[test]
+fn tiny_end_to_end_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        scenes: vec![SceneSource::Builtin("cube-in-box".into())],
+        methods: vec![MethodSweep::parse("path:spp=1,4").unwrap()],
+        frames: 0..2,
+        width: 16,
+        height: 16,
+        reference_spp: 64,
+        out: dir.path().to_path_buf(),
+        quiet: true,
+        ..BenchOptions::default()
+    };
+    let report = bench::run(&opts).unwrap();
+    let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines[0], CSV_HEADER);
+    assert_eq!(lines.len(), 3, "{csv}");
+    for chart in [
+        "cube-in-box_error_vs_time.svg",
+        "cube-in-box_flicker_vs_time.svg",
+    ] {
+        let svg = std::fs::read_to_string(dir.path().join(chart)).unwrap();
+        assert!(svg.contains("<svg") && svg.contains("path"), "{chart}");
+    }
+    let (one, four) = (&report.rows[0], &report.rows[1]);
+    assert_eq!(
+        (one.settings.as_str(), four.settings.as_str()),
+        ("spp=1", "spp=4")
+    );
+    assert!(
+        four.rel_rmse < one.rel_rmse,
+        "4 spp {} vs 1 spp {}",
+        four.rel_rmse,
+        one.rel_rmse
+    );
+    assert!(four.rays > one.rays && one.rays > 0);
+    assert!(one.flicker.is_some() && one.seconds > 0.0);
+    assert!(dir
+        .path()
+        .join("runs/cube-in-box/path-spp=4/frame_0001.exr")
+        .is_file());
+
+    // A second run reuses the reference (same reference.json, same files).
+    let json = dir.path().join("reference/cube-in-box/reference.json");
+    let stamp = std::fs::metadata(dir.path().join("reference/cube-in-box/frame_0000.exr"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert!(json.is_file());
+    let again = bench::run(&opts).unwrap();
+    let stamp2 = std::fs::metadata(dir.path().join("reference/cube-in-box/frame_0000.exr"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    assert_eq!(stamp, stamp2, "the reference was rendered again");
+    assert_eq!(again.rows[0].rel_rmse, one.rel_rmse, "deterministic runs");
+
+    // Another reference sample count renders a new reference.
+    let other = BenchOptions {
+        reference_spp: 32,
+        ..opts.clone()
+    };
+    bench::run(&other).unwrap();
+    let info = std::fs::read_to_string(&json).unwrap();
+    assert!(info.contains("\"spp\": 32"), "{info}");
+}
