@@ -37,9 +37,13 @@ fn to_obvhs(tri: &crate::scene::Triangle) -> ObTriangle {
 }
 
 fn to_obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
+    // `+ 0.0` turns −0.0 components into +0.0. obvhs 0.4 takes the slab
+    // order from `direction < 0.0` (false for −0.0) but the inverse from
+    // `signum` (−1 for −0.0): with a −0.0 component the two disagree and the
+    // ray misses every box, e.g. `-n` for an axis-aligned normal `n`.
     obvhs::ray::Ray::new(
         Vec3A::from_array(ray.origin),
-        Vec3A::from_array(ray.dir),
+        Vec3A::from_array(ray.dir) + Vec3A::ZERO,
         ray.tmin,
         ray.tmax,
     )
