@@ -150,9 +150,9 @@ mod tests {
             tree.insert(id, c, r);
             spheres.push((c, r));
         }
-        for (id, &(c, r)) in spheres.iter().enumerate().step_by(7) {
-            tree.shrink(id as u32, c, r * 0.5);
-            spheres[id].1 = r * 0.5;
+        for (id, (c, r)) in spheres.iter_mut().enumerate().step_by(7) {
+            *r *= 0.5;
+            tree.shrink(id as u32, *c, *r);
         }
         for _ in 0..2000 {
             let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.6 - 1.3;
