@@ -9,6 +9,7 @@ use crate::method::ic::IcSettings;
 use crate::method::path::PathSettings;
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
+use crate::store::{self, Store};
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::ops::Range;
@@ -34,6 +35,27 @@ pub enum Command {
     Compare(CompareArgs),
     /// Run methods over scenes against a converged path reference; write bench.csv and charts.
     Bench(BenchArgs),
+    /// Show what a store holds: jobs, frames done, records, bytes per tree, lifespans.
+    Inspect(InspectArgs),
+}
+
+/// Default store directory (DESIGN.md "The store"), used when `--job` is
+/// given without `--db`, and by `inspect`.
+pub const DEFAULT_DB: &str = "radcache.db";
+
+#[derive(Args, Debug)]
+pub struct InspectArgs {
+    /// Only this job (default: every job).
+    pub job: Option<String>,
+    /// Store directory.
+    #[arg(long, default_value = DEFAULT_DB)]
+    pub db: PathBuf,
+    /// Per-frame details of this frame only (default: every frame when a JOB is given).
+    #[arg(long)]
+    pub frame: Option<u32>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Rendering methods available in this build.
@@ -90,6 +112,16 @@ pub struct RenderArgs {
     pub max_depth: Option<u32>,
     #[command(flatten)]
     pub ic: IcArgs,
+    /// Record the render as job NAME in the store and resume it if it was interrupted
+    /// (frames already finished are skipped). The store is --db, default ./radcache.db.
+    #[arg(long, value_name = "NAME", value_parser = parse_job_name)]
+    pub job: Option<String>,
+    /// Store directory for --job [default: ./radcache.db]. Only used with --job.
+    #[arg(long, value_name = "PATH", requires = "job")]
+    pub db: Option<PathBuf>,
+    /// With --job: start the job over when its scene or settings changed (else an error).
+    #[arg(long, requires = "job")]
+    pub force: bool,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -235,6 +267,15 @@ fn parse_strata(s: &str) -> Result<Strata, String> {
     Ok(Strata { theta: m, phi: n })
 }
 
+fn parse_job_name(s: &str) -> Result<String, String> {
+    if s.is_empty() || s.len() > 200 || s.chars().any(|c| c.is_control()) {
+        return Err(format!(
+            "job name {s:?} must be 1 to 200 characters without control characters"
+        ));
+    }
+    Ok(s.to_string())
+}
+
 fn parse_fps(s: &str) -> Result<f32, String> {
     let fps: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
     if !fps.is_finite() || fps <= 0.0 {
@@ -260,6 +301,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Render(args) => run_render(args),
         Command::Compare(args) => run_compare(args),
         Command::Bench(args) => run_bench(args),
+        Command::Inspect(args) => run_inspect(args),
     }
 }
 
@@ -343,8 +385,38 @@ fn run_render(args: RenderArgs) -> Result<()> {
             backend.name()
         );
     }
+    let store_and_job = match &args.job {
+        Some(name) => {
+            let db = args.db.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_DB));
+            let store = Store::open(&db)?;
+            let spec = render::job_spec(name, &source, &method, &settings, args.frames.clone())?;
+            let job = store.begin_job(&spec, args.force)?;
+            Some((store, job))
+        }
+        None => None,
+    };
     let mut renderer = Renderer::new(scene, method.instantiate(), backend, settings);
-    let summary = render::render_to_dir(&mut renderer, args.frames.clone(), &args.out, args.quiet)?;
+    let mut store_job = store_and_job.as_ref().map(|(store, job)| render::StoreJob {
+        store,
+        job: job.clone(),
+    });
+    let summary = render::render_job_to_dir(
+        &mut renderer,
+        args.frames.clone(),
+        &args.out,
+        args.quiet,
+        store_job.as_mut(),
+    )?;
+    if let Some(j) = &store_job {
+        println!(
+            "job {:?} in {}: {} frames resumed from the store, {} rendered, {} done in all",
+            j.job.name,
+            j.store.path().display(),
+            summary.resumed,
+            summary.frames,
+            j.job.frames_done
+        );
+    }
     let secs = summary.elapsed.as_secs_f64();
     let samples = u64::from(w) * u64::from(h) * u64::from(spp) * u64::from(summary.frames);
     println!(
@@ -360,6 +432,20 @@ fn run_render(args: RenderArgs) -> Result<()> {
     );
     if let Some(report) = summary.cache_report() {
         println!("{report}");
+    }
+    Ok(())
+}
+
+fn run_inspect(args: InspectArgs) -> Result<()> {
+    let store = Store::open_existing(&args.db)?;
+    let report = store::inspect::report(&store, args.job.as_deref(), args.frame)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print!(
+            "{}",
+            store::inspect::to_text(&report, args.job.is_some() || args.frame.is_some())
+        );
     }
     Ok(())
 }

@@ -106,7 +106,8 @@ pub fn write_exr(film: &Film, path: &Path) -> Result<(), FilmError> {
     write_atomically(path, &bytes)
 }
 
-fn encode_exr(film: &Film) -> Result<Vec<u8>, exr::error::Error> {
+/// The EXR file of `film` in memory (what [`write_exr`] writes; the store keeps these bytes).
+pub fn encode_exr(film: &Film) -> Result<Vec<u8>, exr::error::Error> {
     use exr::prelude::*;
     let width = film.width as usize;
     let channels = SpecificChannels::rgb(|pos: Vec2<usize>| {

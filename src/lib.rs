@@ -20,6 +20,7 @@
 //! | [`render`]  | the frame loop: animation → geometry → method → files         |
 //! | [`bench`]   | `radcache bench`: methods against a reference, CSV and charts |
 //! | [`cli`]     | the `radcache` command line                                    |
+//! | [`store`]   | the persistent space-time store (sled + rkyv + zstd), jobs, resume |
 
 pub mod accel;
 pub mod backend;
@@ -35,3 +36,4 @@ pub mod metrics;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod store;

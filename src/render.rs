@@ -9,8 +9,9 @@ use crate::film::{self, Film};
 use crate::light::LightSampler;
 use crate::method::ic::{IcSettings, IrradianceCaching};
 use crate::method::path::{PathSettings, PathTracer};
-use crate::method::{FrameContext, FrameStats, Method};
+use crate::method::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::scene::{Scene, SceneError};
+use crate::store::{self, schema::JobValue, FrameCommit, JobSpec, RecordCommit, Store};
 use anyhow::{bail, Context, Result};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -160,6 +161,17 @@ impl Renderer {
         stats
     }
 
+    /// Asks the method to keep each frame's records with their samples
+    /// (for the store); see [`Method::keep_frame_records`].
+    pub fn keep_frame_records(&mut self, keep: bool) {
+        self.method.keep_frame_records(keep);
+    }
+
+    /// The records the method created or changed in the last frame, if kept.
+    pub fn take_frame_records(&mut self) -> Option<FrameRecords> {
+        self.method.take_frame_records()
+    }
+
     /// Renders frame `frame` (time `frame / fps`).
     pub fn render_frame(&mut self, frame: u32) -> Film {
         let rays_before = self.backend.ray_counts().total();
@@ -215,7 +227,10 @@ impl Method for NoMethod {
 /// What a finished render reports.
 #[derive(Clone, Debug)]
 pub struct RenderSummary {
+    /// Frames rendered by this run (resumed frames not counted).
     pub frames: u32,
+    /// Frames a store job had already finished, skipped by this run.
+    pub resumed: u32,
     /// Statistics of every rendered frame, in order.
     pub frame_stats: Vec<FrameStats>,
     pub elapsed: Duration,
@@ -266,27 +281,172 @@ pub fn render_to_dir(
     out_dir: &Path,
     quiet: bool,
 ) -> Result<RenderSummary> {
+    render_job_to_dir(renderer, frames, out_dir, quiet, None)
+}
+
+/// A store job a render checkpoints to (`render --db PATH --job NAME`).
+pub struct StoreJob<'a> {
+    pub store: &'a Store,
+    pub job: JobValue,
+}
+
+/// What a scene source is, as a job records it: its text and content hash
+/// (FNV-1a 64 of the file bytes, or of `builtin:NAME`).
+pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
+    let hash = match source {
+        SceneSource::Builtin(_) => store::content_hash(source.to_string().as_bytes()),
+        SceneSource::File(path) => store::content_hash(
+            &std::fs::read(path)
+                .with_context(|| format!("cannot read scene {}", path.display()))?,
+        ),
+    };
+    Ok((source.to_string(), hash))
+}
+
+/// The job description of a render: compared with the stored job so that a
+/// resume never mixes frames of different scenes or settings.
+pub fn job_spec(
+    name: &str,
+    source: &SceneSource,
+    method: &MethodSettings,
+    settings: &FrameSettings,
+    frames: Range<u32>,
+) -> Result<JobSpec> {
+    let (scene, scene_hash) = scene_identity(source)?;
+    Ok(JobSpec {
+        name: name.to_string(),
+        scene,
+        scene_hash,
+        method: method.name().to_string(),
+        // `{:?}` of the settings is canonical: Rust prints floats in their
+        // shortest round-trip form.
+        settings: format!("{method:?}"),
+        width: settings.width,
+        height: settings.height,
+        spp: method.spp(),
+        fps: settings.fps,
+        seed: settings.seed,
+        same_pattern: settings.same_pattern,
+        frame_start: frames.start,
+        frame_end: frames.end,
+    })
+}
+
+/// [`render_to_dir`] with an optional store job: frames the job already
+/// finished are skipped (shown as done; their files are restored from the
+/// store if missing in `out_dir`), and after each new frame one atomic
+/// store batch writes the frame, its records with samples, its stats and
+/// the job's progress, then flushes. Only then is the frame acknowledged
+/// and written to `out_dir`.
+pub fn render_job_to_dir(
+    renderer: &mut Renderer,
+    frames: Range<u32>,
+    out_dir: &Path,
+    quiet: bool,
+    mut job: Option<&mut StoreJob>,
+) -> Result<RenderSummary> {
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create output directory {}", out_dir.display()))?;
+    let mut done = std::collections::BTreeSet::new();
+    if let Some(j) = job.as_deref() {
+        for frame in j.store.frames_done(j.job.id)? {
+            if frames.contains(&frame) {
+                done.insert(frame);
+            }
+        }
+        for &frame in &done {
+            restore_frame_files(j, frame, out_dir)?;
+        }
+    }
+    renderer.keep_frame_records(job.is_some());
+    let dynamic: Vec<bool> = (0..renderer.scene.objects.len())
+        .map(|o| renderer.scene.object_is_dynamic(o))
+        .collect();
     let progress = progress_bar(frames.len() as u64, quiet);
+    progress.set_position(done.len() as u64);
+    progress.reset_eta();
     let start = Instant::now();
     let rays_before = renderer.backend().ray_counts().total();
-    let mut frame_stats = Vec::with_capacity(frames.len());
+    let mut frame_stats = Vec::with_capacity(frames.len() - done.len());
     for frame in frames.clone() {
+        if done.contains(&frame) {
+            continue;
+        }
         progress.set_message(format!("frame {frame}"));
         let film = renderer.render_frame(frame);
+        let stats = renderer.last_frame_stats();
+        let kept = renderer.take_frame_records();
+        if let Some(j) = job.as_deref_mut() {
+            let exr = film::encode_exr(&film)
+                .map_err(|e| anyhow::anyhow!("cannot encode frame {frame} as EXR: {e}"))?;
+            let records = kept
+                .map(|k| {
+                    k.records
+                        .iter()
+                        .zip(k.samples.iter().map(Some).chain(std::iter::repeat(None)))
+                        .map(|(r, s)| {
+                            let empty = Default::default();
+                            RecordCommit::from_record(
+                                r,
+                                s.unwrap_or(&empty),
+                                k.strata,
+                                frame,
+                                |o| dynamic.get(o as usize).copied().unwrap_or(false),
+                            )
+                        })
+                        .collect()
+                })
+                .unwrap_or_default();
+            let commit = FrameCommit {
+                frame,
+                width: film.width,
+                height: film.height,
+                exr: &exr,
+                records,
+                stats: &stats,
+            };
+            j.store.commit_frame(&mut j.job, commit)?;
+        }
         film::write_frame(&film, out_dir, frame)?;
-        frame_stats.push(renderer.last_frame_stats());
+        frame_stats.push(stats);
         progress.inc(1);
     }
     progress.finish_and_clear();
     Ok(RenderSummary {
-        frames: frames.len() as u32,
+        frames: frame_stats.len() as u32,
+        resumed: done.len() as u32,
         frame_stats,
         elapsed: start.elapsed(),
         rays: renderer.backend().ray_counts().total() - rays_before,
         out_dir: out_dir.to_path_buf(),
     })
+}
+
+/// Writes a finished frame's files from the store if `out_dir` lacks its
+/// EXR (a crash between the store's flush and the file write, or another
+/// `--out`).
+fn restore_frame_files(job: &StoreJob, frame: u32, out_dir: &Path) -> Result<()> {
+    let exr_path = film::frame_path(out_dir, frame, "exr");
+    if exr_path.exists() {
+        return Ok(());
+    }
+    let Some(bytes) = job.store.frame_exr(job.job.id, frame)? else {
+        return Ok(());
+    };
+    // PNG first, EXR last (renamed into place): as `film::write_frame`, the
+    // EXR's presence means the frame's files are complete.
+    let temp = out_dir.join(format!(
+        ".frame_{frame:04}.exr.restore-{}",
+        std::process::id()
+    ));
+    std::fs::write(&temp, &bytes)
+        .and_then(|()| std::fs::File::open(&temp)?.sync_all())
+        .with_context(|| format!("cannot write {}", temp.display()))?;
+    let film = film::read_exr(&temp)?;
+    film::write_png(&film, &film::frame_path(out_dir, frame, "png"))?;
+    std::fs::rename(&temp, &exr_path)
+        .with_context(|| format!("cannot write {}", exr_path.display()))?;
+    Ok(())
 }
 
 fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {

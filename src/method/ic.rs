@@ -16,10 +16,11 @@
 //!   records for glossy surfaces land).
 
 use super::path::camera_query;
-use super::{FrameContext, FrameStats, Method};
+use super::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
-    gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint, Strata,
+    gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint, HemisphereSamples,
+    Strata,
 };
 use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
@@ -76,6 +77,11 @@ const RECORD_STREAM: u64 = 1 << 62;
 pub struct IrradianceCaching {
     pub settings: IcSettings,
     stats: FrameStats,
+    /// Store hook ([`Method::keep_frame_records`]): samples of the records
+    /// gathered this frame, and the last frame's records with them.
+    keep_records: bool,
+    gathered_samples: std::sync::Mutex<Vec<(RecordId, HemisphereSamples)>>,
+    kept: Option<FrameRecords>,
 }
 
 impl IrradianceCaching {
@@ -83,6 +89,9 @@ impl IrradianceCaching {
         IrradianceCaching {
             settings,
             stats: FrameStats::default(),
+            keep_records: false,
+            gathered_samples: Default::default(),
+            kept: None,
         }
     }
 }
@@ -109,6 +118,7 @@ impl Method for IrradianceCaching {
         };
         let start = Instant::now();
         let cache = self.build_cache(ctx);
+        self.keep_records_of(&cache);
         stats
             .phase_seconds
             .push(("fill".into(), start.elapsed().as_secs_f64()));
@@ -125,6 +135,42 @@ impl Method for IrradianceCaching {
 
     fn last_frame_stats(&self) -> FrameStats {
         self.stats.clone()
+    }
+
+    fn keep_frame_records(&mut self, keep: bool) {
+        self.keep_records = keep;
+    }
+
+    fn take_frame_records(&mut self) -> Option<FrameRecords> {
+        self.kept.take()
+    }
+}
+
+impl IrradianceCaching {
+    /// Store hook: remembers the records of this frame's cache with the
+    /// samples gathered for them (samples of records that were gathered but
+    /// not inserted are dropped).
+    fn keep_records_of(&mut self, cache: &IrradianceCache) {
+        let gathered = std::mem::take(
+            self.gathered_samples
+                .get_mut()
+                .unwrap_or_else(|e| e.into_inner()),
+        );
+        if !self.keep_records {
+            return;
+        }
+        let mut by_id: std::collections::HashMap<RecordId, HemisphereSamples> =
+            gathered.into_iter().collect();
+        let records = cache.records().to_vec();
+        let samples = records
+            .iter()
+            .map(|r| by_id.remove(&r.id).unwrap_or_default())
+            .collect();
+        self.kept = Some(FrameRecords {
+            records,
+            samples,
+            strata: self.settings.strata,
+        });
     }
 }
 
@@ -234,6 +280,13 @@ impl IrradianceCaching {
                 let range = i * strata.count()..(i + 1) * strata.count();
                 let samples = samples_from_results(&queries[range.clone()], &results[range]);
                 let g = irradiance_and_gradients(&samples, c.point.normal, strata);
+                if self.keep_records {
+                    let mut kept = self
+                        .gathered_samples
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner());
+                    kept.push((RecordId::from(c.pixel), samples));
+                }
                 IrradianceRecord {
                     id: RecordId::from(c.pixel),
                     position: c.point.position,

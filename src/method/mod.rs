@@ -87,4 +87,27 @@ pub trait Method: Send {
     fn last_frame_stats(&self) -> FrameStats {
         FrameStats::default()
     }
+
+    /// Asks the method to keep the records (with their hemisphere samples)
+    /// it creates or changes in each frame, for [`Method::take_frame_records`]
+    /// (the store persists them). Off unless asked, so that no samples are
+    /// held in memory otherwise. Methods without records ignore it.
+    fn keep_frame_records(&mut self, _keep: bool) {}
+
+    /// The records created or changed in the last frame, if kept (one
+    /// frame's worth: taking them frees them).
+    fn take_frame_records(&mut self) -> Option<FrameRecords> {
+        None
+    }
+}
+
+/// Records a method created or changed in one frame, with their
+/// incoming-radiance samples (`samples[i]` belongs to `records[i]`; empty
+/// when the method has none for it).
+#[derive(Clone, Debug, Default)]
+pub struct FrameRecords {
+    pub records: Vec<crate::cache::IrradianceRecord>,
+    pub samples: Vec<crate::cache::gather::HemisphereSamples>,
+    /// Strata of the samples (`M × N`, cell `j·N + k` at index `j·N + k`).
+    pub strata: crate::cache::gather::Strata,
 }

@@ -1,0 +1,291 @@
+//! `radcache inspect`: what a store holds — jobs, frames done, records per
+//! frame, bytes per tree, compression ratios, record lifespans.
+
+use super::{schema::JobValue, Store, StoreError, TREES};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct InspectReport {
+    pub path: String,
+    pub schema_version: u32,
+    /// Bytes of the database files (sled's `size_on_disk`).
+    pub size_on_disk: u64,
+    /// Key and value bytes per tree (logical: before sled's own overhead).
+    pub trees: Vec<TreeReport>,
+    /// `size_on_disk` / Σ (key + value bytes): sled's space amplification.
+    pub space_amplification: f64,
+    pub jobs: Vec<JobReport>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct TreeReport {
+    pub name: String,
+    pub keys: u64,
+    pub key_bytes: u64,
+    pub value_bytes: u64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct JobReport {
+    pub name: String,
+    pub id: u64,
+    pub scene: String,
+    pub scene_hash: String,
+    pub method: String,
+    pub settings: String,
+    pub size: String,
+    pub spp: u32,
+    pub fps: f32,
+    pub seed: u64,
+    /// Frame range of the last render, `START..END`.
+    pub frames: String,
+    pub frames_done: u32,
+    pub last_frame: Option<u32>,
+    pub records: u64,
+    pub samples: u64,
+    /// Stored (zstd) and raw bytes of the record samples.
+    pub samples_stored_bytes: u64,
+    pub samples_raw_bytes: u64,
+    /// Stored (zstd) and raw bytes of the frame EXR files.
+    pub exr_stored_bytes: u64,
+    pub exr_raw_bytes: u64,
+    /// Record value bytes (rkyv) in `records`.
+    pub record_value_bytes: u64,
+    /// Lifespan in frames → number of records.
+    pub lifespan_histogram: BTreeMap<u32, u64>,
+    /// Per-frame details (all frames, or the one asked for).
+    pub frame_details: Vec<FrameReport>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameReport {
+    pub frame: u32,
+    /// Record versions written in this frame.
+    pub records_written: u64,
+    /// Records alive at the end of the frame (from the frame's stats).
+    pub records_alive: u64,
+    pub samples: u64,
+    pub exr_bytes: u64,
+    pub rays: u64,
+}
+
+/// Builds the report: every job, or only `job`; per-frame rows for
+/// `frame` only when given.
+pub fn report(
+    store: &Store,
+    job: Option<&str>,
+    frame: Option<u32>,
+) -> Result<InspectReport, StoreError> {
+    let mut trees = Vec::new();
+    for name in TREES {
+        let tree = store.tree(name).expect("known tree");
+        let mut t = TreeReport {
+            name: name.to_string(),
+            keys: 0,
+            key_bytes: 0,
+            value_bytes: 0,
+        };
+        for item in tree.iter() {
+            let (k, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
+            t.keys += 1;
+            t.key_bytes += k.len() as u64;
+            t.value_bytes += v.len() as u64;
+        }
+        trees.push(t);
+    }
+    let logical: u64 = trees.iter().map(|t| t.key_bytes + t.value_bytes).sum();
+    let size_on_disk = store.size_on_disk()?;
+    let jobs: Vec<JobValue> = match job {
+        Some(name) => vec![store.job(name)?.ok_or_else(|| StoreError::Job {
+            path: store.path().to_owned(),
+            job: name.to_string(),
+            detail: "no such job in this store".into(),
+        })?],
+        None => store.jobs()?,
+    };
+    let mut reports = Vec::new();
+    for j in &jobs {
+        reports.push(job_report(store, j, frame)?);
+    }
+    Ok(InspectReport {
+        path: store.path().display().to_string(),
+        schema_version: store.schema_version()?,
+        size_on_disk,
+        trees,
+        space_amplification: size_on_disk as f64 / logical.max(1) as f64,
+        jobs: reports,
+    })
+}
+
+fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobReport, StoreError> {
+    let mut r = JobReport {
+        name: j.name.clone(),
+        id: j.id,
+        scene: j.scene.clone(),
+        scene_hash: j.scene_hash.clone(),
+        method: j.method.clone(),
+        settings: j.settings.clone(),
+        size: format!("{}x{}", j.width, j.height),
+        spp: j.spp,
+        fps: j.fps,
+        seed: j.seed,
+        frames: format!("{}..{}", j.frame_start, j.frame_end),
+        frames_done: j.frames_done,
+        last_frame: j.last_frame,
+        records: 0,
+        samples: 0,
+        samples_stored_bytes: 0,
+        samples_raw_bytes: 0,
+        exr_stored_bytes: 0,
+        exr_raw_bytes: 0,
+        record_value_bytes: 0,
+        lifespan_histogram: BTreeMap::new(),
+        frame_details: Vec::new(),
+    };
+    let mut per_frame: BTreeMap<u32, FrameReport> = BTreeMap::new();
+    for frame in store.frames_done(j.id)? {
+        let v = store.frame(j.id, frame)?.expect("listed frame exists");
+        r.exr_stored_bytes += v.exr_zstd.len() as u64;
+        r.exr_raw_bytes += v.exr_len;
+        let stats = store.frame_stats(j.id, frame)?.unwrap_or_default();
+        per_frame.insert(
+            frame,
+            FrameReport {
+                frame,
+                records_written: 0,
+                records_alive: stats.records_alive,
+                samples: 0,
+                exr_bytes: v.exr_zstd.len() as u64,
+                rays: stats.rays,
+            },
+        );
+    }
+    // Records and samples: one streaming pass over the job's keys.
+    let prefix = super::keys::job_prefix(j.id);
+    for item in store.records.scan_prefix(prefix) {
+        let (_, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
+        r.record_value_bytes += v.len() as u64;
+    }
+    let mut lifespans = BTreeMap::new();
+    store.for_each_record(j.id, |frame, rec| {
+        r.records += 1;
+        *lifespans
+            .entry(rec.last_frame.saturating_sub(rec.created_frame) + 1)
+            .or_insert(0) += 1;
+        if let Some(f) = per_frame.get_mut(&frame) {
+            f.records_written += 1;
+        }
+    })?;
+    r.lifespan_histogram = lifespans;
+    for item in store.samples.scan_prefix(prefix) {
+        let (k, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
+        let s: super::schema::SamplesValue = store.decode("samples", &k, &v)?;
+        r.samples += u64::from(s.count);
+        r.samples_stored_bytes += s.packed_zstd.len() as u64;
+        r.samples_raw_bytes += u64::from(s.count) * super::PackedSample::BYTES as u64;
+        if let Some((_, frame, _)) = super::keys::parse_record(&k) {
+            if let Some(f) = per_frame.get_mut(&frame) {
+                f.samples += u64::from(s.count);
+            }
+        }
+    }
+    r.frame_details = match only {
+        Some(f) => per_frame.remove(&f).into_iter().collect(),
+        None => per_frame.into_values().collect(),
+    };
+    Ok(r)
+}
+
+fn ratio(raw: u64, stored: u64) -> String {
+    if stored == 0 {
+        "-".into()
+    } else {
+        format!("{:.2}", raw as f64 / stored as f64)
+    }
+}
+
+/// The report as text. Per-frame rows only when `frames` (a job or a frame
+/// was asked for).
+pub fn to_text(r: &InspectReport, frames: bool) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "store {} (schema {}): {} bytes on disk, space amplification {:.2}",
+        r.path, r.schema_version, r.size_on_disk, r.space_amplification
+    );
+    let _ = writeln!(
+        s,
+        "{:<8} {:>10} {:>12} {:>14}",
+        "tree", "keys", "key bytes", "value bytes"
+    );
+    for t in &r.trees {
+        let _ = writeln!(
+            s,
+            "{:<8} {:>10} {:>12} {:>14}",
+            t.name, t.keys, t.key_bytes, t.value_bytes
+        );
+    }
+    for j in &r.jobs {
+        let _ = writeln!(
+            s,
+            "\njob {:?} (id {}): {} [{}], {} {} spp {}, fps {}, seed {}, frames {} — {} done, last {}",
+            j.name,
+            j.id,
+            j.scene,
+            j.scene_hash,
+            j.method,
+            j.size,
+            j.spp,
+            j.fps,
+            j.seed,
+            j.frames,
+            j.frames_done,
+            j.last_frame.map_or("-".into(), |f| f.to_string()),
+        );
+        let _ = writeln!(s, "  settings: {}", j.settings);
+        let _ = writeln!(
+            s,
+            "  records {} ({} B of rkyv values), samples {}: {} B stored / {} B raw (ratio {})",
+            j.records,
+            j.record_value_bytes,
+            j.samples,
+            j.samples_stored_bytes,
+            j.samples_raw_bytes,
+            ratio(j.samples_raw_bytes, j.samples_stored_bytes)
+        );
+        let _ = writeln!(
+            s,
+            "  frames: {} B stored / {} B EXR (ratio {})",
+            j.exr_stored_bytes,
+            j.exr_raw_bytes,
+            ratio(j.exr_raw_bytes, j.exr_stored_bytes)
+        );
+        let hist: Vec<String> = j
+            .lifespan_histogram
+            .iter()
+            .map(|(l, n)| format!("{l}: {n}"))
+            .collect();
+        let _ = writeln!(
+            s,
+            "  record lifespan (frames: records): {}",
+            hist.join(", ")
+        );
+        if frames {
+            let _ = writeln!(
+                s,
+                "  {:>6} {:>8} {:>8} {:>9} {:>9} {:>10}",
+                "frame", "written", "alive", "samples", "exr B", "rays"
+            );
+            for f in &j.frame_details {
+                let _ = writeln!(
+                    s,
+                    "  {:>6} {:>8} {:>8} {:>9} {:>9} {:>10}",
+                    f.frame, f.records_written, f.records_alive, f.samples, f.exr_bytes, f.rays
+                );
+            }
+        }
+    }
+    s
+}

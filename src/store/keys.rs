@@ -1,0 +1,103 @@
+//! Every key the store writes, and nothing else: no other module builds or
+//! parses raw keys (STYLE.md). Integers are big-endian so that sled's
+//! lexicographic order is numeric order and prefix scans walk space-time
+//! in order. The layout is documented in `migrations/0001_initial.md`.
+//!
+//! | tree      | key                                   | bytes |
+//! |-----------|---------------------------------------|-------|
+//! | `meta`    | ASCII name (`schema_version`, …)      | var   |
+//! | `jobs`    | job name, UTF-8                       | var   |
+//! | `frames`  | job id u64 · frame u32                | 12    |
+//! | `stats`   | job id u64 · frame u32                | 12    |
+//! | `records` | job id u64 · frame u32 · record id u64 | 20   |
+//! | `samples` | job id u64 · frame u32 · record id u64 | 20   |
+//! | `movies`  | (reserved, empty in schema 1)         |       |
+//!
+//! In `records`/`samples`, `frame` is the frame in which this version of
+//! the record was written (its creation frame for `ic`), so a `job · frame`
+//! prefix scan gives one frame's record changes.
+
+use std::ops::Range;
+
+/// `meta` key of the schema version (value: u32 big-endian, 4 bytes).
+pub const META_SCHEMA_VERSION: &[u8] = b"schema_version";
+/// `meta` key of the crate version that created the store (UTF-8).
+pub const META_CREATED_BY: &[u8] = b"created_by";
+
+pub fn job(name: &str) -> Vec<u8> {
+    name.as_bytes().to_vec()
+}
+
+/// `job · frame` (frames, stats).
+pub fn frame(job: u64, frame: u32) -> [u8; 12] {
+    let mut k = [0u8; 12];
+    k[..8].copy_from_slice(&job.to_be_bytes());
+    k[8..].copy_from_slice(&frame.to_be_bytes());
+    k
+}
+
+/// `job · frame · record id` (records, samples).
+pub fn record(job: u64, frame: u32, id: u64) -> [u8; 20] {
+    let mut k = [0u8; 20];
+    k[..12].copy_from_slice(&self::frame(job, frame));
+    k[12..].copy_from_slice(&id.to_be_bytes());
+    k
+}
+
+/// Prefix of every key of one job in `frames`, `stats`, `records`, `samples`.
+pub fn job_prefix(job: u64) -> [u8; 8] {
+    job.to_be_bytes()
+}
+
+/// Key range of frames `frames` of `job` (frames, stats).
+pub fn frame_range(job: u64, frames: Range<u32>) -> Range<[u8; 12]> {
+    frame(job, frames.start)..frame(job, frames.end)
+}
+
+/// Decodes a `job · frame` key.
+pub fn parse_frame(key: &[u8]) -> Option<(u64, u32)> {
+    let k: [u8; 12] = key.try_into().ok()?;
+    Some((
+        u64::from_be_bytes(k[..8].try_into().ok()?),
+        u32::from_be_bytes(k[8..].try_into().ok()?),
+    ))
+}
+
+/// Decodes a `job · frame · record id` key.
+pub fn parse_record(key: &[u8]) -> Option<(u64, u32, u64)> {
+    let k: [u8; 20] = key.try_into().ok()?;
+    let (job, frame) = parse_frame(&k[..12])?;
+    Some((job, frame, u64::from_be_bytes(k[12..].try_into().ok()?)))
+}
+
+/// A key as text for error messages: UTF-8 names as they are, binary keys
+/// decoded, anything else in hex.
+pub fn describe(key: &[u8]) -> String {
+    if let Some((job, frame, id)) = parse_record(key) {
+        return format!("job {job} frame {frame} record {id}");
+    }
+    if let Some((job, frame)) = parse_frame(key) {
+        return format!("job {job} frame {frame}");
+    }
+    match std::str::from_utf8(key) {
+        Ok(s) if s.chars().all(|c| !c.is_control()) => format!("{s:?}"),
+        _ => key.iter().map(|b| format!("{b:02x}")).collect(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_sort_in_space_time_order_and_round_trip() {
+        assert!(frame(1, 255) < frame(1, 256));
+        assert!(frame(1, u32::MAX) < frame(2, 0));
+        assert!(record(1, 2, u64::MAX) < record(1, 3, 0));
+        assert_eq!(parse_frame(&frame(7, 9)), Some((7, 9)));
+        assert_eq!(parse_record(&record(7, 9, 11)), Some((7, 9, 11)));
+        assert!(frame(3, 5).starts_with(&job_prefix(3)));
+        assert_eq!(describe(&frame(3, 5)), "job 3 frame 5");
+        assert_eq!(describe(b"schema_version"), "\"schema_version\"");
+    }
+}

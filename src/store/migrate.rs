@@ -1,0 +1,91 @@
+//! Schema versions and the migration runner. The store carries its version
+//! in `meta` (`schema_version`, u32 big-endian). Opening a store:
+//! - with no version and no data: a new store, stamped [`CURRENT_VERSION`];
+//! - with an older version: each [`Migration`] from that version on runs in
+//!   order, and the version is bumped and flushed after each step (a step
+//!   must therefore be idempotent: a crash mid-step re-runs it);
+//! - with a newer version: [`StoreError::NewerSchema`], nothing touched.
+//!
+//! One `migrations/NNNN_*.md` per version documents its layout.
+
+use super::{keys, StoreError};
+use std::path::Path;
+
+/// The schema this build reads and writes.
+pub const CURRENT_VERSION: u32 = 1;
+
+/// One upgrade step, `from` → `from + 1`.
+#[derive(Clone, Copy)]
+pub struct Migration {
+    pub from: u32,
+    pub name: &'static str,
+    pub run: fn(&sled::Db) -> Result<(), String>,
+}
+
+/// The real migrations, in order. Version 1 is the initial layout
+/// (`migrations/0001_initial.md`), so there is none yet.
+pub const MIGRATIONS: &[Migration] = &[];
+
+/// The schema version stored in `meta`, if any.
+pub fn read_version(path: &Path, meta: &sled::Tree) -> Result<Option<u32>, StoreError> {
+    let Some(v) = meta
+        .get(keys::META_SCHEMA_VERSION)
+        .map_err(|e| StoreError::sled(path, e))?
+    else {
+        return Ok(None);
+    };
+    let bytes: [u8; 4] = v.as_ref().try_into().map_err(|_| StoreError::Corrupt {
+        path: path.to_owned(),
+        tree: "meta",
+        key: keys::describe(keys::META_SCHEMA_VERSION),
+        detail: format!("expected 4 bytes, found {}", v.len()),
+    })?;
+    Ok(Some(u32::from_be_bytes(bytes)))
+}
+
+pub fn write_version(path: &Path, meta: &sled::Tree, version: u32) -> Result<(), StoreError> {
+    meta.insert(keys::META_SCHEMA_VERSION, &version.to_be_bytes())
+        .map_err(|e| StoreError::sled(path, e))?;
+    Ok(())
+}
+
+/// Brings a store at `found` up to `target` with `steps`; returns the
+/// version reached. Fails without touching anything if `found > target`
+/// or a step is missing.
+pub fn migrate(
+    path: &Path,
+    db: &sled::Db,
+    meta: &sled::Tree,
+    found: u32,
+    target: u32,
+    steps: &[Migration],
+) -> Result<u32, StoreError> {
+    if found > target {
+        return Err(StoreError::NewerSchema {
+            path: path.to_owned(),
+            found,
+            supported: target,
+        });
+    }
+    // Check the whole chain before running any step.
+    for v in found..target {
+        if !steps.iter().any(|m| m.from == v) {
+            return Err(StoreError::Migration {
+                path: path.to_owned(),
+                from: v,
+                detail: format!("no migration from schema {v} to {}", v + 1),
+            });
+        }
+    }
+    for v in found..target {
+        let step = steps.iter().find(|m| m.from == v).expect("checked above");
+        (step.run)(db).map_err(|detail| StoreError::Migration {
+            path: path.to_owned(),
+            from: v,
+            detail: format!("{}: {detail}", step.name),
+        })?;
+        write_version(path, meta, v + 1)?;
+        db.flush().map_err(|e| StoreError::sled(path, e))?;
+    }
+    Ok(target)
+}

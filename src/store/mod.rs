@@ -1,0 +1,761 @@
+//! The persistent space-time store (DESIGN.md "The store"): a sled 0.34
+//! database directory with one tree per kind — `meta`, `records`,
+//! `samples`, `movies`, `frames`, `jobs`, `stats`.
+//!
+//! - Keys: big-endian, built only by [`keys`] (layout there and in
+//!   `migrations/0001_initial.md`).
+//! - Values: rkyv archives ([`schema`]), validated on every read; a value
+//!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
+//! - Bulk arrays (frame EXR bytes, record samples) are zstd-compressed;
+//!   samples are the 8-byte RGBE records of [`rgbe::PackedSample`].
+//! - A job checkpoints each frame with [`Store::commit_frame`]: one sled
+//!   transaction over `frames`, `records`, `samples`, `stats` and `jobs`,
+//!   then `flush`; the frame counts as acknowledged only after that returns.
+//! - The schema version lives in `meta`; see [`migrate`].
+
+pub mod inspect;
+pub mod keys;
+pub mod migrate;
+pub mod rgbe;
+pub mod schema;
+
+use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};
+use rkyv::bytecheck::CheckBytes;
+use rkyv::rancor;
+use rkyv::ser::allocator::ArenaHandle;
+use rkyv::util::AlignedVec;
+use schema::{FrameValue, JobValue, RecordValue, SamplesValue, StatsValue};
+use sled::transaction::{ConflictableTransactionError, TransactionError};
+use sled::Transactional;
+use std::path::{Path, PathBuf};
+
+pub use rgbe::PackedSample;
+
+/// The trees of schema 1, in the order `inspect` lists them.
+pub const TREES: [&str; 7] = [
+    "meta", "jobs", "frames", "stats", "records", "samples", "movies",
+];
+
+/// zstd level for bulk arrays (STACK.md: level 3 ≈ 140 MB/s in).
+const ZSTD_LEVEL: i32 = 3;
+
+/// Store errors; every message names the store path and the problem.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("store {}: no store here (create one with `radcache render --db PATH --job NAME`)", path.display())]
+    Missing { path: PathBuf },
+    #[error("store {}: locked by another process (is a render or inspect still running?): {detail}", path.display())]
+    Locked { path: PathBuf, detail: String },
+    #[error("store {}: not a radcache store: {detail}", path.display())]
+    NotAStore { path: PathBuf, detail: String },
+    #[error("store {}: schema version {found} is newer than this radcache supports (version {supported}); use a newer radcache", path.display())]
+    NewerSchema {
+        path: PathBuf,
+        found: u32,
+        supported: u32,
+    },
+    #[error("store {}: corrupt value in tree `{tree}` at key {key}: {detail}", path.display())]
+    Corrupt {
+        path: PathBuf,
+        tree: &'static str,
+        key: String,
+        detail: String,
+    },
+    #[error("store {}: migration from schema {from} failed: {detail}", path.display())]
+    Migration {
+        path: PathBuf,
+        from: u32,
+        detail: String,
+    },
+    #[error("store {}: job {job:?}: {detail}", path.display())]
+    Job {
+        path: PathBuf,
+        job: String,
+        detail: String,
+    },
+    #[error("store {}: {source}", path.display())]
+    Sled { path: PathBuf, source: sled::Error },
+}
+
+impl StoreError {
+    fn sled(path: &Path, source: sled::Error) -> Self {
+        StoreError::Sled {
+            path: path.to_owned(),
+            source,
+        }
+    }
+}
+
+/// An open store. Only one process (and one `Store` per process) can hold
+/// a store directory at a time: sled locks it.
+pub struct Store {
+    path: PathBuf,
+    db: sled::Db,
+    meta: sled::Tree,
+    jobs: sled::Tree,
+    frames: sled::Tree,
+    stats: sled::Tree,
+    records: sled::Tree,
+    samples: sled::Tree,
+    movies: sled::Tree,
+}
+
+/// What a job renders: compared with the stored job on every `render`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JobSpec {
+    pub name: String,
+    pub scene: String,
+    pub scene_hash: String,
+    pub method: String,
+    pub settings: String,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub fps: f32,
+    pub seed: u64,
+    pub same_pattern: bool,
+    pub frame_start: u32,
+    pub frame_end: u32,
+}
+
+/// One record of a frame with its samples, ready to store.
+pub struct RecordCommit {
+    pub record: RecordValue,
+    /// The record's samples in cell order (may be empty).
+    pub samples: Vec<PackedSample>,
+}
+
+/// Everything one frame writes.
+pub struct FrameCommit<'a> {
+    pub frame: u32,
+    pub width: u32,
+    pub height: u32,
+    /// The frame's EXR file bytes.
+    pub exr: &'a [u8],
+    pub records: Vec<RecordCommit>,
+    pub stats: &'a crate::method::FrameStats,
+}
+
+/// FNV-1a 64 of `bytes`, in hex: the scene content hash of a job (stable
+/// across builds and platforms, unlike `std`'s hasher).
+pub fn content_hash(bytes: &[u8]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+fn now_unix() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs())
+        .unwrap_or(0)
+}
+
+/// An rkyv archive of `value`.
+fn encode<T>(value: &T) -> Vec<u8>
+where
+    T: for<'a> rkyv::Serialize<HighSerializer<AlignedVec, ArenaHandle<'a>, rancor::Error>>,
+{
+    rkyv::to_bytes::<rancor::Error>(value)
+        .expect("serialising plain data to memory cannot fail")
+        .into_vec()
+}
+
+impl Store {
+    /// Opens the store at `path`, creating it if the directory does not
+    /// exist (or is empty). Runs pending migrations.
+    pub fn open(path: &Path) -> Result<Store, StoreError> {
+        Self::open_with(path, true, migrate::CURRENT_VERSION, migrate::MIGRATIONS)
+    }
+
+    /// Opens an existing store; [`StoreError::Missing`] if there is none.
+    pub fn open_existing(path: &Path) -> Result<Store, StoreError> {
+        Self::open_with(path, false, migrate::CURRENT_VERSION, migrate::MIGRATIONS)
+    }
+
+    /// [`Self::open`] with an explicit target version and migration list
+    /// (tests exercise the runner with synthetic steps).
+    pub fn open_with(
+        path: &Path,
+        create: bool,
+        target: u32,
+        steps: &[migrate::Migration],
+    ) -> Result<Store, StoreError> {
+        let existing = check_directory(path, create)?;
+        let db = open_sled(path)?;
+        let tree = |name: &str| db.open_tree(name).map_err(|e| StoreError::sled(path, e));
+        let store = Store {
+            path: path.to_owned(),
+            meta: tree("meta")?,
+            jobs: tree("jobs")?,
+            frames: tree("frames")?,
+            stats: tree("stats")?,
+            records: tree("records")?,
+            samples: tree("samples")?,
+            movies: tree("movies")?,
+            db,
+        };
+        match migrate::read_version(path, &store.meta)? {
+            Some(found) => {
+                migrate::migrate(path, &store.db, &store.meta, found, target, steps)?;
+            }
+            None => {
+                let empty = TREES
+                    .iter()
+                    .all(|t| store.tree(t).map(|tree| tree.is_empty()).unwrap_or(false));
+                if existing && !empty {
+                    return Err(StoreError::NotAStore {
+                        path: path.to_owned(),
+                        detail: "sled database without a schema version in `meta`".into(),
+                    });
+                }
+                migrate::write_version(path, &store.meta, target)?;
+                store
+                    .meta
+                    .insert(
+                        keys::META_CREATED_BY,
+                        concat!("radcache ", env!("CARGO_PKG_VERSION")).as_bytes(),
+                    )
+                    .map_err(|e| StoreError::sled(path, e))?;
+                store.flush()?;
+            }
+        }
+        Ok(store)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn schema_version(&self) -> Result<u32, StoreError> {
+        Ok(migrate::read_version(&self.path, &self.meta)?.unwrap_or(0))
+    }
+
+    /// A tree by name (one of [`TREES`]).
+    pub fn tree(&self, name: &str) -> Option<&sled::Tree> {
+        Some(match name {
+            "meta" => &self.meta,
+            "jobs" => &self.jobs,
+            "frames" => &self.frames,
+            "stats" => &self.stats,
+            "records" => &self.records,
+            "samples" => &self.samples,
+            "movies" => &self.movies,
+            _ => return None,
+        })
+    }
+
+    /// Bytes of the database directory's files.
+    pub fn size_on_disk(&self) -> Result<u64, StoreError> {
+        self.db
+            .size_on_disk()
+            .map_err(|e| StoreError::sled(&self.path, e))
+    }
+
+    pub fn flush(&self) -> Result<(), StoreError> {
+        self.db
+            .flush()
+            .map(|_| ())
+            .map_err(|e| StoreError::sled(&self.path, e))
+    }
+
+    fn decode<T>(&self, tree: &'static str, key: &[u8], bytes: &[u8]) -> Result<T, StoreError>
+    where
+        T: rkyv::Archive,
+        T::Archived: for<'a> CheckBytes<HighValidator<'a, rancor::Error>>
+            + rkyv::Deserialize<T, HighDeserializer<rancor::Error>>,
+    {
+        // sled values carry no alignment guarantee; rkyv needs 16.
+        let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+        aligned.extend_from_slice(bytes);
+        rkyv::from_bytes::<T, rancor::Error>(&aligned).map_err(|e| self.corrupt(tree, key, e))
+    }
+
+    fn corrupt(&self, tree: &'static str, key: &[u8], detail: impl ToString) -> StoreError {
+        StoreError::Corrupt {
+            path: self.path.clone(),
+            tree,
+            key: keys::describe(key),
+            detail: detail.to_string(),
+        }
+    }
+
+    fn get<T>(&self, tree: &'static str, key: &[u8]) -> Result<Option<T>, StoreError>
+    where
+        T: rkyv::Archive,
+        T::Archived: for<'a> CheckBytes<HighValidator<'a, rancor::Error>>
+            + rkyv::Deserialize<T, HighDeserializer<rancor::Error>>,
+    {
+        let t = self.tree(tree).expect("known tree");
+        match t.get(key).map_err(|e| StoreError::sled(&self.path, e))? {
+            Some(v) => self.decode(tree, key, &v).map(Some),
+            None => Ok(None),
+        }
+    }
+
+    // ------------------------------------------------------------ jobs
+
+    pub fn job(&self, name: &str) -> Result<Option<JobValue>, StoreError> {
+        self.get("jobs", &keys::job(name))
+    }
+
+    pub fn jobs(&self) -> Result<Vec<JobValue>, StoreError> {
+        let mut out = Vec::new();
+        for item in self.jobs.iter() {
+            let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
+            out.push(self.decode("jobs", &k, &v)?);
+        }
+        Ok(out)
+    }
+
+    /// Starts or resumes job `spec.name`. A job of that name with another
+    /// scene or other settings is refused unless `force`, which starts it
+    /// over under a new id (the old id's data is then deleted).
+    pub fn begin_job(&self, spec: &JobSpec, force: bool) -> Result<JobValue, StoreError> {
+        let key = keys::job(&spec.name);
+        let now = now_unix();
+        if let Some(mut job) = self.job(&spec.name)? {
+            let diffs = job_differences(&job, spec);
+            if diffs.is_empty() {
+                job.frame_start = spec.frame_start;
+                job.frame_end = spec.frame_end;
+                job.updated_unix = now;
+                self.jobs
+                    .insert(&key, encode(&job))
+                    .map_err(|e| StoreError::sled(&self.path, e))?;
+                self.flush()?;
+                return Ok(job);
+            }
+            if !force {
+                return Err(StoreError::Job {
+                    path: self.path.clone(),
+                    job: spec.name.clone(),
+                    detail: format!(
+                        "exists with a different {}; use another --job name, or --force to start it over",
+                        diffs.join(", ")
+                    ),
+                });
+            }
+            let fresh = self.new_job_value(spec, now)?;
+            // The name now points at a fresh id: atomic by construction.
+            self.jobs
+                .insert(&key, encode(&fresh))
+                .map_err(|e| StoreError::sled(&self.path, e))?;
+            self.flush()?;
+            self.delete_job_data(job.id)?;
+            return Ok(fresh);
+        }
+        let fresh = self.new_job_value(spec, now)?;
+        self.jobs
+            .insert(&key, encode(&fresh))
+            .map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()?;
+        Ok(fresh)
+    }
+
+    fn new_job_value(&self, spec: &JobSpec, now: u64) -> Result<JobValue, StoreError> {
+        // Ids are unique over the store's life (sled persists the counter
+        // and skips ahead after a crash), so a restarted job never sees
+        // keys of its former self.
+        let id = self
+            .db
+            .generate_id()
+            .map_err(|e| StoreError::sled(&self.path, e))?
+            + 1;
+        Ok(JobValue {
+            id,
+            name: spec.name.clone(),
+            scene: spec.scene.clone(),
+            scene_hash: spec.scene_hash.clone(),
+            method: spec.method.clone(),
+            settings: spec.settings.clone(),
+            width: spec.width,
+            height: spec.height,
+            spp: spec.spp,
+            fps: spec.fps,
+            seed: spec.seed,
+            same_pattern: spec.same_pattern,
+            frame_start: spec.frame_start,
+            frame_end: spec.frame_end,
+            frames_done: 0,
+            last_frame: None,
+            created_unix: now,
+            updated_unix: now,
+        })
+    }
+
+    /// Deletes every key of job id `job` in the per-job trees.
+    fn delete_job_data(&self, job: u64) -> Result<(), StoreError> {
+        let prefix = keys::job_prefix(job);
+        for tree in [&self.frames, &self.stats, &self.records, &self.samples] {
+            for key in tree.scan_prefix(prefix).keys() {
+                let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
+                tree.remove(key)
+                    .map_err(|e| StoreError::sled(&self.path, e))?;
+            }
+        }
+        self.flush()
+    }
+
+    // ------------------------------------------------------------ frames
+
+    pub fn frame_done(&self, job: u64, frame: u32) -> Result<bool, StoreError> {
+        self.frames
+            .contains_key(keys::frame(job, frame))
+            .map_err(|e| StoreError::sled(&self.path, e))
+    }
+
+    /// Frames of `job` that are stored, in order.
+    pub fn frames_done(&self, job: u64) -> Result<Vec<u32>, StoreError> {
+        let mut out = Vec::new();
+        for key in self.frames.scan_prefix(keys::job_prefix(job)).keys() {
+            let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
+            let (_, frame) = keys::parse_frame(&key)
+                .ok_or_else(|| self.corrupt("frames", &key, "malformed key"))?;
+            out.push(frame);
+        }
+        Ok(out)
+    }
+
+    /// Writes one finished frame of `job` — image, records with samples,
+    /// stats and progress — in one atomic transaction, then flushes. Only
+    /// when this returns `Ok` is the frame acknowledged; `job` is updated
+    /// to the stored progress.
+    pub fn commit_frame(&self, job: &mut JobValue, c: FrameCommit) -> Result<(), StoreError> {
+        let frame_key = keys::frame(job.id, c.frame);
+        let already = self.frame_done(job.id, c.frame)?;
+        let frame_value = FrameValue {
+            width: c.width,
+            height: c.height,
+            exr_len: c.exr.len() as u64,
+            exr_zstd: compress(c.exr),
+        };
+        let mut record_rows = Vec::with_capacity(c.records.len());
+        let mut sample_rows = Vec::with_capacity(c.records.len());
+        let mut samples_raw = 0u64;
+        for rc in &c.records {
+            let key = keys::record(job.id, c.frame, rc.record.id);
+            record_rows.push((key, encode(&rc.record)));
+            if !rc.samples.is_empty() {
+                let raw = to_planar(&rc.samples);
+                samples_raw += raw.len() as u64;
+                let value = SamplesValue {
+                    count: rc.samples.len() as u32,
+                    packed_zstd: compress(&raw),
+                };
+                sample_rows.push((key, encode(&value)));
+            }
+        }
+        let stats = StatsValue::from_stats(c.stats, samples_raw);
+        let mut progressed = job.clone();
+        if !already {
+            progressed.frames_done += 1;
+        }
+        progressed.last_frame = Some(c.frame);
+        progressed.updated_unix = now_unix();
+        let frame_bytes = encode(&frame_value);
+        let stats_bytes = encode(&stats);
+        let job_bytes = encode(&progressed);
+        let job_key = keys::job(&job.name);
+        let result: Result<(), TransactionError<()>> = (
+            &self.frames,
+            &self.records,
+            &self.samples,
+            &self.stats,
+            &self.jobs,
+        )
+            .transaction(|(frames, records, samples, stats, jobs)| {
+                for (k, v) in &record_rows {
+                    records.insert(&k[..], &v[..])?;
+                }
+                for (k, v) in &sample_rows {
+                    samples.insert(&k[..], &v[..])?;
+                }
+                stats.insert(&frame_key[..], &stats_bytes[..])?;
+                frames.insert(&frame_key[..], &frame_bytes[..])?;
+                jobs.insert(&job_key[..], &job_bytes[..])?;
+                Ok::<(), ConflictableTransactionError<()>>(())
+            });
+        result.map_err(|e| match e {
+            TransactionError::Storage(s) => StoreError::sled(&self.path, s),
+            TransactionError::Abort(()) => unreachable!("the transaction never aborts"),
+        })?;
+        self.flush()?;
+        *job = progressed;
+        Ok(())
+    }
+
+    pub fn frame(&self, job: u64, frame: u32) -> Result<Option<FrameValue>, StoreError> {
+        self.get("frames", &keys::frame(job, frame))
+    }
+
+    /// The EXR bytes of a stored frame.
+    pub fn frame_exr(&self, job: u64, frame: u32) -> Result<Option<Vec<u8>>, StoreError> {
+        let key = keys::frame(job, frame);
+        let Some(v) = self.frame(job, frame)? else {
+            return Ok(None);
+        };
+        let exr = decompress(&v.exr_zstd, v.exr_len as usize)
+            .map_err(|d| self.corrupt("frames", &key, d))?;
+        Ok(Some(exr))
+    }
+
+    pub fn frame_stats(&self, job: u64, frame: u32) -> Result<Option<StatsValue>, StoreError> {
+        self.get("stats", &keys::frame(job, frame))
+    }
+
+    /// Records written in `frame` of `job`, in id order.
+    pub fn frame_records(&self, job: u64, frame: u32) -> Result<Vec<RecordValue>, StoreError> {
+        let mut out = Vec::new();
+        for item in self.records.scan_prefix(keys::frame(job, frame)) {
+            let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
+            out.push(self.decode("records", &k, &v)?);
+        }
+        Ok(out)
+    }
+
+    /// Every record version of `job`, in (frame, id) order, through `f`
+    /// (streams: nothing is collected).
+    pub fn for_each_record(
+        &self,
+        job: u64,
+        mut f: impl FnMut(u32, RecordValue),
+    ) -> Result<(), StoreError> {
+        for item in self.records.scan_prefix(keys::job_prefix(job)) {
+            let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
+            let (_, frame, _) = keys::parse_record(&k)
+                .ok_or_else(|| self.corrupt("records", &k, "malformed key"))?;
+            f(frame, self.decode("records", &k, &v)?);
+        }
+        Ok(())
+    }
+
+    /// The samples of record `id` written in `frame` of `job`.
+    pub fn record_samples(
+        &self,
+        job: u64,
+        frame: u32,
+        id: u64,
+    ) -> Result<Vec<PackedSample>, StoreError> {
+        let key = keys::record(job, frame, id);
+        let Some(v) = self.get::<SamplesValue>("samples", &key)? else {
+            return Ok(Vec::new());
+        };
+        let raw = decompress(&v.packed_zstd, v.count as usize * PackedSample::BYTES)
+            .map_err(|d| self.corrupt("samples", &key, d))?;
+        Ok(from_planar(&raw, v.count as usize))
+    }
+
+    /// Writes a raw value (tests use it to corrupt a store on purpose).
+    #[doc(hidden)]
+    pub fn raw_insert(&self, tree: &str, key: &[u8], value: &[u8]) -> Result<(), StoreError> {
+        let t = self.tree(tree).expect("known tree");
+        t.insert(key, value)
+            .map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()
+    }
+}
+
+/// Byte planes of the 8-byte samples: byte 0 of every sample, then byte 1,
+/// … (exponents, distance high bytes and flags then sit together, which
+/// zstd compresses far better than interleaved samples).
+fn to_planar(samples: &[PackedSample]) -> Vec<u8> {
+    let n = samples.len();
+    let mut out = vec![0u8; n * PackedSample::BYTES];
+    for (i, s) in samples.iter().enumerate() {
+        for (b, byte) in s.to_bytes().into_iter().enumerate() {
+            out[b * n + i] = byte;
+        }
+    }
+    out
+}
+
+fn from_planar(raw: &[u8], n: usize) -> Vec<PackedSample> {
+    (0..n)
+        .map(|i| PackedSample::from_bytes(std::array::from_fn(|b| raw[b * n + i])))
+        .collect()
+}
+
+fn compress(bytes: &[u8]) -> Vec<u8> {
+    zstd::bulk::compress(bytes, ZSTD_LEVEL).expect("zstd compression to memory cannot fail")
+}
+
+/// Decompresses exactly `len` bytes.
+fn decompress(bytes: &[u8], len: usize) -> Result<Vec<u8>, String> {
+    let out = zstd::bulk::decompress(bytes, len).map_err(|e| format!("zstd: {e}"))?;
+    if out.len() != len {
+        return Err(format!(
+            "zstd: expected {len} bytes, decompressed {}",
+            out.len()
+        ));
+    }
+    Ok(out)
+}
+
+/// Fields of `spec` that differ from the stored job (frame range and
+/// progress aside).
+fn job_differences(job: &JobValue, spec: &JobSpec) -> Vec<String> {
+    let mut d = Vec::new();
+    let mut check = |name: &str, stored: String, given: String| {
+        if stored != given {
+            d.push(format!("{name} (stored {stored}, given {given})"));
+        }
+    };
+    check("scene", job.scene.clone(), spec.scene.clone());
+    check(
+        "scene hash",
+        job.scene_hash.clone(),
+        spec.scene_hash.clone(),
+    );
+    check("method", job.method.clone(), spec.method.clone());
+    check(
+        "method settings",
+        job.settings.clone(),
+        spec.settings.clone(),
+    );
+    check(
+        "size",
+        format!("{}x{}", job.width, job.height),
+        format!("{}x{}", spec.width, spec.height),
+    );
+    check("spp", job.spp.to_string(), spec.spp.to_string());
+    check("fps", job.fps.to_string(), spec.fps.to_string());
+    check("seed", job.seed.to_string(), spec.seed.to_string());
+    check(
+        "same-pattern",
+        job.same_pattern.to_string(),
+        spec.same_pattern.to_string(),
+    );
+    d
+}
+
+/// Checks the directory before sled touches it. Returns whether a store
+/// already existed. A directory that has files but not sled's `conf` and
+/// `db` is refused, so that sled never "repairs" something that is not its
+/// own.
+fn check_directory(path: &Path, create: bool) -> Result<bool, StoreError> {
+    let not_a_store = |detail: String| StoreError::NotAStore {
+        path: path.to_owned(),
+        detail,
+    };
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            if create {
+                Ok(false)
+            } else {
+                Err(StoreError::Missing {
+                    path: path.to_owned(),
+                })
+            }
+        }
+        Err(e) => Err(not_a_store(e.to_string())),
+        Ok(m) if !m.is_dir() => Err(not_a_store("not a directory".into())),
+        Ok(_) => {
+            let entries: Vec<String> = std::fs::read_dir(path)
+                .map_err(|e| not_a_store(e.to_string()))?
+                .filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
+            if entries.is_empty() {
+                return if create {
+                    Ok(false)
+                } else {
+                    Err(StoreError::Missing {
+                        path: path.to_owned(),
+                    })
+                };
+            }
+            for needed in ["conf", "db"] {
+                if !entries.iter().any(|e| e == needed) {
+                    return Err(not_a_store(format!(
+                        "no `{needed}` file (found: {})",
+                        entries.join(", ")
+                    )));
+                }
+            }
+            let db_len = std::fs::metadata(path.join("db"))
+                .map(|m| m.len())
+                .unwrap_or(0);
+            if db_len == 0 {
+                return Err(not_a_store("empty `db` file (truncated store?)".into()));
+            }
+            Ok(true)
+        }
+    }
+}
+
+/// `sled::open`, with its errors (and any panic on a damaged directory)
+/// turned into [`StoreError`]s.
+fn open_sled(path: &Path) -> Result<sled::Db, StoreError> {
+    let config = sled::Config::new().path(path);
+    let opened = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| config.open()));
+    match opened {
+        Ok(Ok(db)) => Ok(db),
+        Ok(Err(sled::Error::Io(e))) if e.to_string().contains("could not acquire lock") => {
+            Err(StoreError::Locked {
+                path: path.to_owned(),
+                detail: e.to_string(),
+            })
+        }
+        Ok(Err(sled::Error::Corruption { .. })) | Ok(Err(sled::Error::Unsupported(_))) => {
+            Err(StoreError::NotAStore {
+                path: path.to_owned(),
+                detail: "sled reports a corrupt or unsupported database".into(),
+            })
+        }
+        Ok(Err(e)) => Err(StoreError::sled(path, e)),
+        Err(_) => Err(StoreError::NotAStore {
+            path: path.to_owned(),
+            detail: "sled could not read the database (damaged files)".into(),
+        }),
+    }
+}
+
+impl RecordCommit {
+    /// A record created or changed in `frame`, with its samples packed
+    /// (age 0: they were all shot this frame). `dynamic(object)` tells
+    /// whether an object is animated (the sample's hit-dynamic flag).
+    pub fn from_record(
+        record: &crate::cache::IrradianceRecord,
+        samples: &crate::cache::gather::HemisphereSamples,
+        strata: crate::cache::gather::Strata,
+        frame: u32,
+        dynamic: impl Fn(u32) -> bool,
+    ) -> Self {
+        let v = |v: glam::Vec3| v.to_array();
+        let packed: Vec<PackedSample> = (0..samples.radiance.len())
+            .map(|i| {
+                let object = samples.object.get(i).copied().unwrap_or(u32::MAX);
+                let hit_dynamic = object != u32::MAX && dynamic(object);
+                PackedSample::pack(
+                    samples.radiance[i],
+                    samples.distance[i],
+                    object,
+                    hit_dynamic,
+                    0,
+                )
+            })
+            .collect();
+        let has = !packed.is_empty();
+        RecordCommit {
+            record: RecordValue {
+                id: record.id,
+                created_frame: record.created_frame,
+                last_frame: frame,
+                position: v(record.position),
+                normal: v(record.normal),
+                irradiance: v(record.irradiance),
+                grad_translation: record.grad_translation.map(v),
+                grad_rotation: record.grad_rotation.map(v),
+                radius: record.radius,
+                object: record.object,
+                strata_theta: if has { strata.theta } else { 0 },
+                strata_phi: if has { strata.phi } else { 0 },
+            },
+            samples: packed,
+        }
+    }
+}

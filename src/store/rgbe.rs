@@ -1,0 +1,219 @@
+//! Ward's shared-exponent RGBE packing of radiance (Ward, "Real pixels",
+//! Graphics Gems II, 1991; the `Li` field of the 8-byte radiance sample of
+//! the 2004 temporally coherent final gathering paper, §3.1), and that
+//! 8-byte sample itself: [`PackedSample`].
+//!
+//! RGBE: the largest channel `v = m·2^e` (`m ∈ [0.5, 1)`) fixes the
+//! exponent byte `e + 128`; each channel `c` keeps the 8-bit mantissa
+//! `⌊c·2^(8−e)⌋`. Decoding returns the middle of the mantissa step,
+//! `(b + 0.5)·2^(e−8)` (as Radiance does), so every channel is within
+//! `max(r, g, b)/256` of its value. Zero, negative and NaN channels
+//! encode as 0; a largest channel below `1e-32` is black (`[0, 0, 0, 0]`);
+//! a largest channel of `2^127` or more (or +∞) saturates.
+
+use glam::Vec3;
+use half::f16;
+
+/// Packs linear radiance into 4 bytes `[r, g, b, e]`.
+pub fn encode(c: Vec3) -> [u8; 4] {
+    let clean = |x: f32| if x > 0.0 { x } else { 0.0 }; // NaN and negatives → 0
+    let (r, g, b) = (clean(c.x), clean(c.y), clean(c.z));
+    let v = r.max(g).max(b);
+    if v < 1e-32 {
+        return [0; 4];
+    }
+    if v >= 2f32.powi(127) {
+        return [255; 4];
+    }
+    // v is a normal float here: its biased exponent gives frexp's e.
+    let e = ((v.to_bits() >> 23) & 0xff) as i32 - 126; // v ∈ [2^(e−1), 2^e)
+    let scale = exp2i(8 - e);
+    let byte = |x: f32| (x * scale).floor().min(255.0) as u8;
+    [byte(r), byte(g), byte(b), (e + 128) as u8]
+}
+
+/// Unpacks 4 RGBE bytes into linear radiance.
+pub fn decode(rgbe: [u8; 4]) -> Vec3 {
+    let [r, g, b, e] = rgbe;
+    if e == 0 {
+        return Vec3::ZERO;
+    }
+    let f = 2f64.powi(i32::from(e) - 136);
+    let ch = |x: u8| ((f64::from(x) + 0.5) * f) as f32;
+    Vec3::new(ch(r), ch(g), ch(b))
+}
+
+/// `2^k` exactly, for `k ∈ [−126, 127]`.
+fn exp2i(k: i32) -> f32 {
+    f32::from_bits(((k + 127) as u32) << 23)
+}
+
+/// Bits of [`PackedSample::flags`].
+pub mod flags {
+    /// Bits 0–3: age of the sample in frames since it was computed,
+    /// saturating at 15 (the 2004 paper's `2^age` replacement weight).
+    pub const AGE_MASK: u16 = 0x000f;
+    /// Bit 4: the sample's ray hit an animated object.
+    pub const HIT_DYNAMIC: u16 = 1 << 4;
+    /// Bit 5: the ray left the scene (distance is +∞, no object).
+    pub const MISS: u16 = 1 << 5;
+    /// Bits 6–15: the low 10 bits of the hit object's index (0 on a miss).
+    /// Enough to tell objects apart in scenes of up to 1024 objects; beyond
+    /// that ids alias (the flag is a hint, the geometry is authoritative).
+    pub const OBJECT_SHIFT: u16 = 6;
+    pub const OBJECT_BITS: u16 = 10;
+    pub const MAX_AGE: u16 = AGE_MASK;
+}
+
+/// One incoming-radiance sample of a record in 8 bytes (2004 paper §3.1):
+/// RGBE radiance, half-float hit distance, 16 flag bits (see [`flags`]).
+/// The sample's direction is not stored: it is cell `j·N + k` of the
+/// record's `M × N` strata (index in the sample array), so its cell is
+/// known from the index and its exact jittered direction can be
+/// regenerated from the record's deterministic sample key.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PackedSample {
+    pub rgbe: [u8; 4],
+    /// `f16` bits of the distance to the first hit (+∞ on a miss).
+    pub distance: u16,
+    pub flags: u16,
+}
+
+impl PackedSample {
+    pub const BYTES: usize = 8;
+
+    /// Packs one sample. `object` is `u32::MAX` on a miss.
+    pub fn pack(radiance: Vec3, distance: f32, object: u32, hit_dynamic: bool, age: u32) -> Self {
+        let miss = object == u32::MAX || !distance.is_finite();
+        let mut f = (age.min(u32::from(flags::MAX_AGE))) as u16;
+        if miss {
+            f |= flags::MISS;
+        } else {
+            if hit_dynamic {
+                f |= flags::HIT_DYNAMIC;
+            }
+            let obj = (object & ((1 << flags::OBJECT_BITS) - 1)) as u16;
+            f |= obj << flags::OBJECT_SHIFT;
+        }
+        let d = if miss { f32::INFINITY } else { distance };
+        PackedSample {
+            rgbe: encode(radiance),
+            distance: f16::from_f32(d).to_bits(),
+            flags: f,
+        }
+    }
+
+    pub fn radiance(&self) -> Vec3 {
+        decode(self.rgbe)
+    }
+
+    pub fn distance(&self) -> f32 {
+        f16::from_bits(self.distance).to_f32()
+    }
+
+    pub fn age(&self) -> u32 {
+        u32::from(self.flags & flags::AGE_MASK)
+    }
+
+    pub fn is_miss(&self) -> bool {
+        self.flags & flags::MISS != 0
+    }
+
+    pub fn hit_dynamic(&self) -> bool {
+        self.flags & flags::HIT_DYNAMIC != 0
+    }
+
+    /// Low 10 bits of the hit object's index, `None` on a miss.
+    pub fn object_bits(&self) -> Option<u32> {
+        (!self.is_miss()).then_some(u32::from(self.flags >> flags::OBJECT_SHIFT))
+    }
+
+    /// Little-endian: `r g b e`, distance (2), flags (2).
+    pub fn to_bytes(&self) -> [u8; 8] {
+        let d = self.distance.to_le_bytes();
+        let f = self.flags.to_le_bytes();
+        let [r, g, b, e] = self.rgbe;
+        [r, g, b, e, d[0], d[1], f[0], f[1]]
+    }
+
+    pub fn from_bytes(b: [u8; 8]) -> Self {
+        PackedSample {
+            rgbe: [b[0], b[1], b[2], b[3]],
+            distance: u16::from_le_bytes([b[4], b[5]]),
+            flags: u16::from_le_bytes([b[6], b[7]]),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small deterministic generator (no test depends on `rand`).
+    fn lcg(state: &mut u64) -> f32 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*state >> 40) as f32) / (1u64 << 24) as f32
+    }
+
+    #[test]
+    fn rgbe_round_trip_error_is_within_max_channel_over_256() {
+        let mut s = 7u64;
+        for i in 0..200_000 {
+            let scale = 10f32.powf(lcg(&mut s) * 24.0 - 12.0);
+            let c = Vec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * scale;
+            // Some samples with one channel exactly zero or tiny.
+            let c = if i % 7 == 0 {
+                Vec3::new(c.x, 0.0, c.z * 1e-4)
+            } else {
+                c
+            };
+            let d = decode(encode(c));
+            let bound = c.max_element() / 256.0 * (1.0 + 1e-5);
+            let err = (d - c).abs().max_element();
+            assert!(err <= bound, "{c:?} → {d:?}: error {err} > {bound}");
+        }
+    }
+
+    #[test]
+    fn rgbe_special_values() {
+        assert_eq!(encode(Vec3::ZERO), [0; 4]);
+        assert_eq!(decode([0; 4]), Vec3::ZERO);
+        assert_eq!(encode(Vec3::new(f32::NAN, -1.0, 0.0)), [0; 4]);
+        assert_eq!(encode(Vec3::splat(f32::INFINITY)), [255; 4]);
+        // Powers of two sit on a mantissa step boundary.
+        let one = decode(encode(Vec3::ONE));
+        assert!((one - Vec3::ONE).abs().max_element() <= 1.0 / 256.0);
+        // Exponent range extremes do not overflow.
+        let tiny = Vec3::splat(2e-32);
+        assert!((decode(encode(tiny)) - tiny).abs().max_element() <= tiny.x / 256.0 * 1.0001);
+        let huge = Vec3::splat(1e38);
+        assert!((decode(encode(huge)) - huge).abs().max_element() <= huge.x / 256.0 * 1.0001);
+    }
+
+    #[test]
+    fn packed_sample_round_trip() {
+        let p = PackedSample::pack(Vec3::new(0.5, 0.25, 2.0), 3.1416, 1234, true, 3);
+        assert_eq!(PackedSample::from_bytes(p.to_bytes()), p);
+        assert_eq!(p.age(), 3);
+        assert!(p.hit_dynamic());
+        assert!(!p.is_miss());
+        assert_eq!(p.object_bits(), Some(1234 & 0x3ff));
+        assert!((p.distance() - 3.1416).abs() < 3.1416 / 1024.0);
+        assert!(
+            (p.radiance() - Vec3::new(0.5, 0.25, 2.0))
+                .abs()
+                .max_element()
+                <= 2.0 / 256.0
+        );
+
+        let miss = PackedSample::pack(Vec3::ONE, f32::INFINITY, u32::MAX, true, 99);
+        assert!(miss.is_miss());
+        assert!(!miss.hit_dynamic());
+        assert_eq!(miss.object_bits(), None);
+        assert_eq!(miss.distance(), f32::INFINITY);
+        assert_eq!(miss.age(), 15);
+        assert_eq!(std::mem::size_of::<PackedSample>(), PackedSample::BYTES);
+    }
+}

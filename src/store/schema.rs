@@ -1,0 +1,114 @@
+//! Value schemas of store schema version 1 (`migrations/0001_initial.md`).
+//! Every value is an rkyv 0.8 archive, validated (bytecheck) when read.
+//! Bulk arrays (EXR bytes, samples) are zstd-compressed inside the archive.
+//! Changing any of these types is a schema change: bump
+//! [`super::migrate::CURRENT_VERSION`], add a migration and a
+//! `migrations/NNNN_*.md`.
+
+use rkyv::{Archive, Deserialize, Serialize};
+
+/// `jobs` value: what a job renders and how far it got.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct JobValue {
+    /// Prefix of the job's keys in the other trees.
+    pub id: u64,
+    pub name: String,
+    /// `builtin:NAME` or the scene file path as given.
+    pub scene: String,
+    /// FNV-1a 64 of the scene file bytes, or of `builtin:NAME`, in hex.
+    pub scene_hash: String,
+    pub method: String,
+    /// Canonical text of the method settings (`{:?}` of `MethodSettings`).
+    pub settings: String,
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub fps: f32,
+    pub seed: u64,
+    pub same_pattern: bool,
+    /// Frame range of the last `render` of this job (half-open).
+    pub frame_start: u32,
+    pub frame_end: u32,
+    /// Progress: frames acknowledged so far (each one has a `frames` entry).
+    pub frames_done: u32,
+    /// Last acknowledged frame, if any.
+    pub last_frame: Option<u32>,
+    pub created_unix: u64,
+    pub updated_unix: u64,
+}
+
+/// `frames` value: one finished frame.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct FrameValue {
+    pub width: u32,
+    pub height: u32,
+    /// Length of the EXR file before zstd.
+    pub exr_len: u64,
+    /// The frame's EXR file (as written to `--out`), zstd-compressed.
+    pub exr_zstd: Vec<u8>,
+}
+
+/// `records` value: one version of an irradiance record.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RecordValue {
+    pub id: u64,
+    pub created_frame: u32,
+    /// Last frame the record was alive in (inclusive); lifespan is
+    /// `last_frame − created_frame + 1` (1 for `ic`).
+    pub last_frame: u32,
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    pub irradiance: [f32; 3],
+    pub grad_translation: [[f32; 3]; 3],
+    pub grad_rotation: [[f32; 3]; 3],
+    pub radius: f32,
+    pub object: u32,
+    /// Strata `M × N` of the record's samples (0 × 0 when it has none).
+    pub strata_theta: u32,
+    pub strata_phi: u32,
+}
+
+/// `samples` value: a record's incoming-radiance samples, `count` 8-byte
+/// [`super::rgbe::PackedSample`]s in cell order, zstd-compressed.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct SamplesValue {
+    pub count: u32,
+    pub packed_zstd: Vec<u8>,
+}
+
+/// `stats` value: [`crate::method::FrameStats`] of one frame.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
+pub struct StatsValue {
+    pub frame: u32,
+    pub records_alive: u64,
+    pub records_created: u64,
+    pub records_reused: u64,
+    pub records_replaced: u64,
+    pub records_dropped: u64,
+    pub lookups: u64,
+    pub lookup_records: u64,
+    pub fallback_lookups: u64,
+    pub rays: u64,
+    pub phase_seconds: Vec<(String, f64)>,
+    /// Uncompressed bytes of the frame's samples (for compression ratios).
+    pub samples_raw_bytes: u64,
+}
+
+impl StatsValue {
+    pub fn from_stats(s: &crate::method::FrameStats, samples_raw_bytes: u64) -> Self {
+        StatsValue {
+            frame: s.frame,
+            records_alive: s.records_alive,
+            records_created: s.records_created,
+            records_reused: s.records_reused,
+            records_replaced: s.records_replaced,
+            records_dropped: s.records_dropped,
+            lookups: s.lookups,
+            lookup_records: s.lookup_records,
+            fallback_lookups: s.fallback_lookups,
+            rays: s.rays,
+            phase_seconds: s.phase_seconds.clone(),
+            samples_raw_bytes,
+        }
+    }
+}
