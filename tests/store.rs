@@ -1,0 +1,506 @@
+//! The persistent store: round trips, bad input (corrupt value, newer
+//! schema, locked, damaged directory), migrations, jobs and resume.
+
+use glam::Vec3;
+use radcache::cache::gather::{HemisphereSamples, Strata};
+use radcache::cache::IrradianceRecord;
+use radcache::film;
+use radcache::method::ic::IcSettings;
+use radcache::method::path::PathSettings;
+use radcache::method::FrameStats;
+use radcache::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob};
+use radcache::store::migrate::{self, Migration};
+use radcache::store::{keys, FrameCommit, JobSpec, PackedSample, RecordCommit, Store, StoreError};
+use std::path::Path;
+
+fn spec(name: &str) -> JobSpec {
+    JobSpec {
+        name: name.into(),
+        scene: "builtin:cube-in-box".into(),
+        scene_hash: "0123456789abcdef".into(),
+        method: "ic".into(),
+        settings: "Ic(..)".into(),
+        width: 16,
+        height: 16,
+        spp: 4,
+        fps: 24.0,
+        seed: 0,
+        same_pattern: false,
+        frame_start: 0,
+        frame_end: 10,
+    }
+}
+
+fn record(id: u64, frame: u32) -> IrradianceRecord {
+    let f = id as f32;
+    IrradianceRecord {
+        id,
+        position: Vec3::new(f, 1.0, -2.0),
+        normal: Vec3::Y,
+        irradiance: Vec3::new(0.5, 0.25, f),
+        grad_translation: [Vec3::X, Vec3::Y, Vec3::Z],
+        grad_rotation: [Vec3::Z, Vec3::X, Vec3::Y * f],
+        radius: 0.75,
+        created_frame: frame,
+        object: 3,
+    }
+}
+
+fn samples(n: usize, seed: u32) -> HemisphereSamples {
+    let mut s = HemisphereSamples::default();
+    for i in 0..n {
+        let x = (i as f32 + seed as f32) * 0.37;
+        s.direction.push(Vec3::Y);
+        s.radiance
+            .push(Vec3::new(x.sin().abs(), x.cos().abs() * 3.0, 0.01 * x));
+        if i % 5 == 0 {
+            s.distance.push(f32::INFINITY);
+            s.object.push(u32::MAX);
+        } else {
+            s.distance.push(1.0 + x);
+            s.object.push(i as u32 % 4);
+        }
+    }
+    s
+}
+
+fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
+    let mut job = store.begin_job(&spec(name), false).unwrap();
+    let strata = Strata { theta: 4, phi: 12 };
+    for frame in frames {
+        let records = (0..3u64)
+            .map(|id| {
+                RecordCommit::from_record(
+                    &record(id, frame),
+                    &samples(48, frame * 10 + id as u32),
+                    strata,
+                    frame,
+                    |o| o == 1,
+                )
+            })
+            .collect();
+        let exr = vec![frame as u8; 1000 + frame as usize];
+        let stats = FrameStats {
+            frame,
+            records_created: 3,
+            records_alive: 3,
+            ..FrameStats::default()
+        };
+        store
+            .commit_frame(
+                &mut job,
+                FrameCommit {
+                    frame,
+                    width: 16,
+                    height: 16,
+                    exr: &exr,
+                    records,
+                    stats: &stats,
+                },
+            )
+            .unwrap();
+    }
+}
+
+#[test]
+fn store_round_trips_frames_records_samples_and_progress() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    {
+        let store = Store::open(&path).unwrap();
+        assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
+        commit_frames(&store, "j", 0..4);
+    }
+    let store = Store::open_existing(&path).unwrap();
+    let job = store.job("j").unwrap().unwrap();
+    assert_eq!(job.frames_done, 4);
+    assert_eq!(job.last_frame, Some(3));
+    assert_eq!(store.frames_done(job.id).unwrap(), vec![0, 1, 2, 3]);
+    for frame in 0..4u32 {
+        let exr = store.frame_exr(job.id, frame).unwrap().unwrap();
+        assert_eq!(exr, vec![frame as u8; 1000 + frame as usize]);
+        let recs = store.frame_records(job.id, frame).unwrap();
+        assert_eq!(recs.len(), 3);
+        for r in &recs {
+            let want = record(r.id, frame);
+            assert_eq!(r.position, want.position.to_array());
+            assert_eq!(r.grad_rotation[2], want.grad_rotation[2].to_array());
+            assert_eq!((r.created_frame, r.last_frame), (frame, frame));
+            assert_eq!((r.strata_theta, r.strata_phi), (4, 12));
+            let got = store.record_samples(job.id, frame, r.id).unwrap();
+            let src = samples(48, frame * 10 + r.id as u32);
+            assert_eq!(got.len(), 48);
+            for (i, s) in got.iter().enumerate() {
+                let want = PackedSample::pack(
+                    src.radiance[i],
+                    src.distance[i],
+                    src.object[i],
+                    src.object[i] == 1,
+                    0,
+                );
+                assert_eq!(*s, want);
+                let err = (s.radiance() - src.radiance[i]).abs().max_element();
+                assert!(err <= src.radiance[i].max_element() / 256.0 * 1.0001);
+            }
+        }
+        assert_eq!(
+            store
+                .frame_stats(job.id, frame)
+                .unwrap()
+                .unwrap()
+                .records_created,
+            3
+        );
+    }
+    let report = radcache::store::inspect::report(&store, Some("j"), None).unwrap();
+    assert_eq!(report.jobs[0].records, 12);
+    assert_eq!(report.jobs[0].samples, 12 * 48);
+    assert_eq!(report.jobs[0].lifespan_histogram.get(&1), Some(&12));
+}
+
+fn err_text(r: Result<impl Sized, StoreError>) -> String {
+    match r {
+        Ok(_) => panic!("expected an error"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn corrupt_value_is_an_error_naming_tree_and_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let store = Store::open(&path).unwrap();
+    commit_frames(&store, "j", 0..2);
+    let id = store.job("j").unwrap().unwrap().id;
+    for garbage in [&b"garbage"[..], &[0xff; 64][..], &[][..]] {
+        store
+            .raw_insert("records", &keys::record(id, 1, 2), garbage)
+            .unwrap();
+        let msg = err_text(store.frame_records(id, 1));
+        assert!(msg.contains("tree `records`"), "{msg}");
+        assert!(msg.contains(&format!("job {id} frame 1 record 2")), "{msg}");
+        assert!(msg.contains(&path.display().to_string()), "{msg}");
+        store
+            .raw_insert("samples", &keys::record(id, 1, 2), garbage)
+            .unwrap();
+        let msg = err_text(store.record_samples(id, 1, 2));
+        assert!(msg.contains("tree `samples`"), "{msg}");
+    }
+    store
+        .raw_insert("frames", &keys::frame(id, 0), b"xx")
+        .unwrap();
+    let msg = err_text(store.frame_exr(id, 0));
+    assert!(
+        msg.contains("tree `frames`") && msg.contains(&format!("job {id} frame 0")),
+        "{msg}"
+    );
+    store
+        .raw_insert("jobs", &keys::job("j"), b"not a job")
+        .unwrap();
+    let msg = err_text(store.job("j"));
+    assert!(
+        msg.contains("tree `jobs`") && msg.contains("\"j\""),
+        "{msg}"
+    );
+    // Undamaged values still read.
+    assert_eq!(store.frame_records(id, 0).unwrap().len(), 3);
+}
+
+#[test]
+fn newer_schema_is_refused_and_left_as_it_was() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    {
+        let store = Store::open(&path).unwrap();
+        commit_frames(&store, "j", 0..1);
+        store
+            .raw_insert("meta", keys::META_SCHEMA_VERSION, &99u32.to_be_bytes())
+            .unwrap();
+    }
+    for _ in 0..2 {
+        let msg = err_text(Store::open(&path));
+        assert!(msg.contains("schema version 99 is newer"), "{msg}");
+        assert!(
+            msg.contains(&format!("version {}", migrate::CURRENT_VERSION)),
+            "{msg}"
+        );
+    }
+}
+
+fn add_marker(db: &sled::Db) -> Result<(), String> {
+    db.open_tree("meta")
+        .and_then(|t| t.insert(b"synthetic_step", &b"done"[..]))
+        .map(|_| ())
+        .map_err(|e| e.to_string())
+}
+
+#[test]
+fn older_schema_is_migrated_in_order() {
+    // A synthetic version 2 on top of the real version 1: the runner
+    // upgrades a version-1 store built by the fixture above.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    {
+        let store = Store::open(&path).unwrap();
+        commit_frames(&store, "j", 0..2);
+    }
+    let steps = [Migration {
+        from: 1,
+        name: "synthetic",
+        run: add_marker,
+    }];
+    // Without the step for 1 → 2 nothing runs.
+    let msg = err_text(Store::open_with(&path, false, 2, &[]));
+    assert!(msg.contains("no migration from schema 1 to 2"), "{msg}");
+    {
+        let store = Store::open_with(&path, false, 2, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 2);
+        assert!(store
+            .tree("meta")
+            .unwrap()
+            .contains_key(b"synthetic_step")
+            .unwrap());
+        assert_eq!(
+            store
+                .frames_done(store.job("j").unwrap().unwrap().id)
+                .unwrap(),
+            vec![0, 1]
+        );
+    }
+    // This build (version 1) now refuses the upgraded store.
+    let msg = err_text(Store::open(&path));
+    assert!(msg.contains("schema version 2 is newer"), "{msg}");
+}
+
+#[test]
+fn locked_store_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let store = Store::open(&path).unwrap();
+    commit_frames(&store, "j", 0..1);
+    let msg = err_text(Store::open(&path));
+    assert!(msg.contains("locked"), "{msg}");
+    // A second process (the CLI) too.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["inspect", "--db"])
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("locked"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    drop(store);
+    assert!(Store::open(&path).is_ok());
+}
+
+fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.is_file())
+        .map(|p| (p.display().to_string(), std::fs::read(&p).unwrap()))
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn damaged_or_foreign_directories_are_refused_untouched() {
+    let dir = tempfile::tempdir().unwrap();
+    // Missing.
+    let msg = err_text(Store::open_existing(&dir.path().join("nope")));
+    assert!(msg.contains("no store here"), "{msg}");
+    // A file, not a directory.
+    let file = dir.path().join("file");
+    std::fs::write(&file, b"hello").unwrap();
+    assert!(err_text(Store::open(&file)).contains("not a directory"));
+    assert_eq!(std::fs::read(&file).unwrap(), b"hello");
+    // A directory of something else.
+    let foreign = dir.path().join("foreign");
+    std::fs::create_dir(&foreign).unwrap();
+    std::fs::write(foreign.join("notes.txt"), b"mine").unwrap();
+    let msg = err_text(Store::open(&foreign));
+    assert!(msg.contains("not a radcache store"), "{msg}");
+    assert_eq!(snapshot(&foreign).len(), 1);
+    // A store whose `db` file was truncated to nothing.
+    let truncated = dir.path().join("truncated");
+    {
+        let store = Store::open(&truncated).unwrap();
+        commit_frames(&store, "j", 0..2);
+    }
+    std::fs::write(truncated.join("db"), b"").unwrap();
+    let before = snapshot(&truncated);
+    let msg = err_text(Store::open(&truncated));
+    assert!(
+        msg.contains("not a radcache store") && msg.contains("truncated"),
+        "{msg}"
+    );
+    assert_eq!(snapshot(&truncated), before);
+    // A store whose files were overwritten with garbage: an error (or, if
+    // sled finds nothing it can read, an empty store) — never a panic.
+    let garbage = dir.path().join("garbage");
+    {
+        let store = Store::open(&garbage).unwrap();
+        commit_frames(&store, "j", 0..2);
+    }
+    for name in ["conf", "db"] {
+        let len = std::fs::metadata(garbage.join(name)).unwrap().len() as usize;
+        std::fs::write(garbage.join(name), vec![0xa5u8; len]).unwrap();
+    }
+    let before = snapshot(&garbage);
+    let result = std::panic::catch_unwind(|| Store::open(&garbage).map(|_| ()));
+    let result = result.expect("opening a garbage store must not panic");
+    let msg = err_text(result);
+    assert!(msg.contains(&garbage.display().to_string()), "{msg}");
+    assert_eq!(
+        snapshot(&garbage),
+        before,
+        "a refused store is left as it was"
+    );
+}
+
+#[test]
+fn job_with_other_settings_is_refused_unless_forced() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let store = Store::open(&path).unwrap();
+    commit_frames(&store, "j", 0..3);
+    let old = store.job("j").unwrap().unwrap();
+    let mut other = spec("j");
+    other.scene_hash = "ffffffffffffffff".into();
+    other.seed = 7;
+    let msg = err_text(store.begin_job(&other, false));
+    assert!(
+        msg.contains("scene hash") && msg.contains("seed") && msg.contains("--force"),
+        "{msg}"
+    );
+    // Same settings, other frame range: a resume.
+    let mut longer = spec("j");
+    longer.frame_end = 20;
+    assert_eq!(store.begin_job(&longer, false).unwrap().id, old.id);
+    let fresh = store.begin_job(&other, true).unwrap();
+    assert_ne!(fresh.id, old.id);
+    assert_eq!(fresh.frames_done, 0);
+    assert!(store.frames_done(old.id).unwrap().is_empty());
+    assert!(store.frame_records(old.id, 0).unwrap().is_empty());
+}
+
+fn renderer(method: &MethodSettings) -> Renderer {
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let settings = FrameSettings {
+        width: 16,
+        height: 16,
+        ..FrameSettings::default()
+    };
+    Renderer::new(
+        source.load().unwrap(),
+        method.instantiate(),
+        render::make_backend(render::BackendChoice::Cpu).unwrap(),
+        settings,
+    )
+}
+
+fn exr_files(dir: &Path, frames: std::ops::Range<u32>) -> Vec<Vec<u8>> {
+    frames
+        .map(|f| std::fs::read(film::frame_path(dir, f, "exr")).unwrap())
+        .collect()
+}
+
+fn resume_matches_uninterrupted(method: MethodSettings) {
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
+    render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
+    let path = dir.path().join("db");
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let fs = renderer(&method).settings.clone();
+    let job_spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
+    let store = Store::open(&path).unwrap();
+    // "Interrupted" after frames 0..2 (and a frame 4 from another range).
+    for part in [0..2, 4..5, 0..6] {
+        let job = store.begin_job(&job_spec, false).unwrap();
+        let mut sj = StoreJob { store: &store, job };
+        let summary = render::render_job_to_dir(
+            &mut renderer(&method),
+            part.clone(),
+            &resumed,
+            true,
+            Some(&mut sj),
+        )
+        .unwrap();
+        if part == (0..6) {
+            assert_eq!((summary.resumed, summary.frames), (3, 3));
+        }
+    }
+    assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
+    let job = store.job("j").unwrap().unwrap();
+    assert_eq!(job.frames_done, 6);
+    for f in 0..6 {
+        assert_eq!(
+            store.frame_exr(job.id, f).unwrap().unwrap(),
+            std::fs::read(film::frame_path(&plain, f, "exr")).unwrap()
+        );
+    }
+    // Files deleted from --out come back from the store on the next run.
+    std::fs::remove_file(film::frame_path(&resumed, 2, "exr")).unwrap();
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&job_spec, false).unwrap(),
+    };
+    let s = render::render_job_to_dir(&mut renderer(&method), 0..6, &resumed, true, Some(&mut sj))
+        .unwrap();
+    assert_eq!((s.resumed, s.frames), (6, 0));
+    assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
+}
+
+#[test]
+fn resumed_path_render_is_bit_identical_to_uninterrupted() {
+    resume_matches_uninterrupted(MethodSettings::Path(PathSettings {
+        spp: 2,
+        ..PathSettings::default()
+    }));
+}
+
+#[test]
+fn resumed_ic_render_is_bit_identical_and_stores_records_with_samples() {
+    let settings = IcSettings {
+        strata: Strata { theta: 4, phi: 12 },
+        spp: 1,
+        ..IcSettings::default()
+    };
+    resume_matches_uninterrupted(MethodSettings::Ic(settings.clone()));
+    // The records of a frame with their 48 samples each.
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let method = MethodSettings::Ic(settings);
+    let mut r = renderer(&method);
+    let spec = render::job_spec(
+        "j",
+        &SceneSource::Builtin("cube-in-box".into()),
+        &method,
+        &r.settings,
+        0..1,
+    )
+    .unwrap();
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    let s = render::render_job_to_dir(&mut r, 0..1, &dir.path().join("out"), true, Some(&mut sj))
+        .unwrap();
+    let recs = store.frame_records(sj.job.id, 0).unwrap();
+    assert_eq!(recs.len() as u64, s.frame_stats[0].records_created);
+    assert!(!recs.is_empty());
+    for rec in &recs {
+        let samples = store.record_samples(sj.job.id, 0, rec.id).unwrap();
+        assert_eq!(samples.len(), 48);
+        // Irradiance from the stored samples ≈ the record's (RGBE error only).
+        let e: Vec3 =
+            samples.iter().map(|s| s.radiance()).sum::<Vec3>() * (std::f32::consts::PI / 48.0);
+        let want = Vec3::from(rec.irradiance);
+        assert!(
+            (e - want).abs().max_element() <= want.max_element() * 0.01 + 1e-6,
+            "{e} vs {want}"
+        );
+    }
+}

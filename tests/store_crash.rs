@@ -1,0 +1,142 @@
+//! Crash test (issue 4): a child `radcache render --db … --job …` is killed
+//! with SIGKILL at random moments, again and again; after each kill the
+//! store reopens, no acknowledged frame is lost, no partial frame is
+//! visible, and the finished frames equal an uninterrupted run byte for
+//! byte.
+
+use radcache::film;
+use radcache::store::Store;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const FRAMES: u32 = 200;
+
+fn radcache(args: &[&str], dir: &Path) -> Command {
+    radcache_frames(args, dir, FRAMES)
+}
+
+fn radcache_frames(args: &[&str], dir: &Path, frames: u32) -> Command {
+    let range = format!("0..{frames}");
+    let mut c = Command::new(env!("CARGO_BIN_EXE_radcache"));
+    c.args(args)
+        .args(["--size", "16x16", "--spp", "1", "--frames", &range, "-q"])
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null());
+    c
+}
+
+fn lcg(state: &mut u64) -> f64 {
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
+    (*state >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Checks the store after a kill; returns the frames it holds.
+fn check_store(dir: &Path, reference: &[Vec<u8>], acknowledged_before: usize) -> usize {
+    let store = Store::open(&dir.join("db")).expect("the store reopens after SIGKILL");
+    let Some(job) = store.job("crash").unwrap() else {
+        return 0; // killed before the job was recorded
+    };
+    let done = store.frames_done(job.id).unwrap();
+    assert_eq!(
+        job.frames_done as usize,
+        done.len(),
+        "progress matches the frames"
+    );
+    assert!(
+        done.len() >= acknowledged_before,
+        "an acknowledged frame was lost"
+    );
+    for &f in &done {
+        // Whole frames only, equal to the uninterrupted run.
+        let exr = store.frame_exr(job.id, f).unwrap().unwrap();
+        assert_eq!(exr, reference[f as usize], "frame {f} differs");
+        assert!(
+            store.frame_stats(job.id, f).unwrap().is_some(),
+            "frame {f} without stats"
+        );
+    }
+    // Every frame acknowledged to --out is in the store.
+    for f in 0..FRAMES {
+        if film::frame_path(&dir.join("out"), f, "exr").exists() {
+            assert!(
+                done.contains(&f),
+                "frame {f} written to --out but not in the store"
+            );
+        }
+    }
+    done.len()
+}
+
+#[test]
+fn sigkilled_renders_resume_without_losing_or_tearing_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let status = radcache(&["render", "--out", "ref"], dir).status().unwrap();
+    assert!(status.success());
+    let reference: Vec<Vec<u8>> = (0..FRAMES)
+        .map(|f| std::fs::read(film::frame_path(&dir.join("ref"), f, "exr")).unwrap())
+        .collect();
+    // Start-up time and time per frame with the store, to place the kills
+    // between start-up and a few frames in (so that most land mid-frame or
+    // mid-batch, and the job does not finish before 20 kills).
+    let job = ["render", "--db", "db", "--job", "crash", "--out", "out"];
+    let timing_dir = tempfile::tempdir().unwrap();
+    let t0 = Instant::now();
+    let status = radcache_frames(&job, timing_dir.path(), 1).status();
+    assert!(status.unwrap().success());
+    let startup = t0.elapsed().as_secs_f64();
+    let t0 = Instant::now();
+    let status = radcache_frames(&job, timing_dir.path(), 41).status();
+    assert!(status.unwrap().success());
+    let per_frame = (t0.elapsed().as_secs_f64() - startup).max(0.0) / 40.0;
+    let window = startup * 1.5 + 6.0 * per_frame;
+
+    let mut rng = 0x5eed_u64;
+    let mut kills = 0;
+    let mut progressed = 0;
+    let mut acknowledged = 0;
+    let mut attempts = 0;
+    while kills < 25 {
+        attempts += 1;
+        assert!(attempts < 200, "too many attempts");
+        let mut child = radcache(&job, dir).spawn().unwrap();
+        let delay = lcg(&mut rng) * window;
+        std::thread::sleep(Duration::from_secs_f64(delay));
+        if child.try_wait().unwrap().is_some() {
+            break; // finished before the kill
+        }
+        child.kill().unwrap(); // SIGKILL
+        child.wait().unwrap();
+        kills += 1;
+        let now = check_store(dir, &reference, acknowledged);
+        if now > acknowledged {
+            progressed += 1;
+        }
+        acknowledged = now;
+        if acknowledged == FRAMES as usize {
+            break;
+        }
+    }
+    // Finish the job; everything equals the uninterrupted run.
+    assert!(radcache(&job, dir).status().unwrap().success());
+    assert_eq!(check_store(dir, &reference, acknowledged), FRAMES as usize);
+    for f in 0..FRAMES {
+        let out = std::fs::read(film::frame_path(&dir.join("out"), f, "exr")).unwrap();
+        assert_eq!(out, reference[f as usize], "--out frame {f} differs");
+    }
+    eprintln!(
+        "{kills} kills, {progressed} after new frames; start-up {startup:.3} s, {per_frame:.4} s/frame"
+    );
+    assert!(
+        progressed >= 5,
+        "only {progressed} kills landed after frames were written"
+    );
+    assert!(
+        kills >= 20,
+        "only {kills} kills landed (the render finished too fast)"
+    );
+}
