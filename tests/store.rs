@@ -504,3 +504,64 @@ fn resumed_ic_render_is_bit_identical_and_stores_records_with_samples() {
         );
     }
 }
+
+/// Throughput of record writes and reads (records with 768 samples each,
+/// committed 400 per frame as `ic` does at 64×64). Ignored by default; run
+/// `cargo test --release --test store store_throughput -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn store_throughput() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let mut job = store.begin_job(&spec("t"), false).unwrap();
+    let strata = Strata { theta: 16, phi: 48 };
+    let (frames, per_frame) = (20u32, 400u64);
+    let hemis: Vec<HemisphereSamples> = (0..8).map(|i| samples(768, i)).collect();
+    let exr = vec![0u8; 64 * 1024];
+    let stats = FrameStats::default();
+    let t0 = std::time::Instant::now();
+    for frame in 0..frames {
+        let records = (0..per_frame)
+            .map(|id| {
+                RecordCommit::from_record(
+                    &record(id, frame),
+                    &hemis[(id % 8) as usize],
+                    strata,
+                    frame,
+                    |_| false,
+                )
+            })
+            .collect();
+        let c = FrameCommit {
+            frame,
+            width: 64,
+            height: 64,
+            exr: &exr,
+            records,
+            stats: &stats,
+        };
+        store.commit_frame(&mut job, c).unwrap();
+    }
+    let write = t0.elapsed().as_secs_f64();
+    let t0 = std::time::Instant::now();
+    let mut n = 0u64;
+    let mut s = 0u64;
+    for frame in 0..frames {
+        for r in store.frame_records(job.id, frame).unwrap() {
+            n += 1;
+            s += store.record_samples(job.id, frame, r.id).unwrap().len() as u64;
+        }
+    }
+    let read = t0.elapsed().as_secs_f64();
+    let total = u64::from(frames) * per_frame;
+    assert_eq!(n, total);
+    eprintln!(
+        "{total} records × 768 samples: write {:.0} records/s ({:.1} M samples/s, commit+flush per frame), read {:.0} records/s ({:.1} M samples/s); {} B on disk = {:.2} B/sample",
+        total as f64 / write,
+        (total * 768) as f64 / write / 1e6,
+        n as f64 / read,
+        s as f64 / read / 1e6,
+        store.size_on_disk().unwrap(),
+        store.size_on_disk().unwrap() as f64 / (total * 768) as f64
+    );
+}

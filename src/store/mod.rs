@@ -36,6 +36,11 @@ pub const TREES: [&str; 7] = [
     "meta", "jobs", "frames", "stats", "records", "samples", "movies",
 ];
 
+/// sled's page cache. Its default (1 GiB) made a render's memory grow
+/// with the size of the store; the renderer reads little back, so a small
+/// cache keeps peak memory independent of the number of frames.
+const CACHE_BYTES: u64 = 16 * 1024 * 1024;
+
 /// zstd level for bulk arrays (STACK.md: level 3 ≈ 140 MB/s in).
 const ZSTD_LEVEL: i32 = 3;
 
@@ -690,7 +695,9 @@ fn check_directory(path: &Path, create: bool) -> Result<bool, StoreError> {
 /// `sled::open`, with its errors (and any panic on a damaged directory)
 /// turned into [`StoreError`]s.
 fn open_sled(path: &Path) -> Result<sled::Db, StoreError> {
-    let config = sled::Config::new().path(path);
+    let config = sled::Config::new()
+        .path(path)
+        .cache_capacity(CACHE_BYTES);
     let opened = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| config.open()));
     match opened {
         Ok(Ok(db)) => Ok(db),

@@ -194,13 +194,13 @@ mod tests {
 
     #[test]
     fn packed_sample_round_trip() {
-        let p = PackedSample::pack(Vec3::new(0.5, 0.25, 2.0), 3.1416, 1234, true, 3);
+        let p = PackedSample::pack(Vec3::new(0.5, 0.25, 2.0), 5.4321, 1234, true, 3);
         assert_eq!(PackedSample::from_bytes(p.to_bytes()), p);
         assert_eq!(p.age(), 3);
         assert!(p.hit_dynamic());
         assert!(!p.is_miss());
         assert_eq!(p.object_bits(), Some(1234 & 0x3ff));
-        assert!((p.distance() - 3.1416).abs() < 3.1416 / 1024.0);
+        assert!((p.distance() - 5.4321).abs() < 5.4321 / 1024.0);
         assert!(
             (p.radiance() - Vec3::new(0.5, 0.25, 2.0))
                 .abs()
