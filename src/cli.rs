@@ -317,6 +317,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
             max_spacing_px: args.ic.ic_max_spacing,
             gradients: !args.ic.ic_no_gradients,
             length,
+            ..IcSettings::default()
         }),
     };
     let spp = method.spp();

@@ -27,6 +27,10 @@ pub struct PathLength {
     /// Russian roulette starts after this many bounces (pbrt-v4 starts after
     /// 1; a later start costs time, not accuracy).
     pub rr_start: u32,
+    /// Scales the survival probability of Russian roulette
+    /// (`q = min(s·max βᵢ, 0.95)`). Below 1 it trades variance of the
+    /// deeper bounces for time; the estimate stays unbiased.
+    pub survival: f32,
 }
 
 impl Default for PathLength {
@@ -34,6 +38,7 @@ impl Default for PathLength {
         PathLength {
             max_depth: None,
             rr_start: 3,
+            survival: 1.0,
         }
     }
 }
@@ -260,8 +265,8 @@ fn shade(
     path.emission = FirstHitEmission::Mis { bsdf_pdf: s.pdf };
     path.bounces += 1;
     if path.bounces > length.rr_start {
-        // Survive with probability q = min(max βᵢ, 0.95), reweight by 1/q.
-        let q = path.throughput.max_element().min(0.95);
+        // Survive with probability q = min(s·max βᵢ, 0.95), reweight by 1/q.
+        let q = (length.survival * path.throughput.max_element()).min(0.95);
         if path.rng.next_f32() >= q {
             return None;
         }
