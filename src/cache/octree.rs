@@ -92,15 +92,25 @@ impl SphereOctree {
 
     /// Calls `visit(id)` for every sphere that contains `p`.
     pub fn query(&self, p: Vec3, mut visit: impl FnMut(u32)) {
-        let mut stack: Vec<&Node> = vec![&self.root];
-        while let Some(node) = stack.pop() {
+        // A fixed stack: at most 8 children are pushed per level (this runs
+        // once per shading point, so it must not allocate).
+        let mut stack: [Option<&Node>; 8 * MAX_DEPTH as usize + 1] =
+            [None; 8 * MAX_DEPTH as usize + 1];
+        stack[0] = Some(&self.root);
+        let mut len = 1;
+        while len > 0 {
+            len -= 1;
+            let node = stack[len].take().expect("entries below len are set");
             for &(id, c, r) in &node.items {
                 if (p - c).length_squared() <= r * r {
                     visit(id);
                 }
             }
             if let Some(children) = &node.children {
-                stack.extend(children.iter().filter(|c| c.loosely_contains(p)));
+                for child in children.iter().filter(|c| c.loosely_contains(p)) {
+                    stack[len] = Some(child);
+                    len += 1;
+                }
             }
         }
     }

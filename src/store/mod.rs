@@ -695,9 +695,7 @@ fn check_directory(path: &Path, create: bool) -> Result<bool, StoreError> {
 /// `sled::open`, with its errors (and any panic on a damaged directory)
 /// turned into [`StoreError`]s.
 fn open_sled(path: &Path) -> Result<sled::Db, StoreError> {
-    let config = sled::Config::new()
-        .path(path)
-        .cache_capacity(CACHE_BYTES);
+    let config = sled::Config::new().path(path).cache_capacity(CACHE_BYTES);
     let opened = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| config.open()));
     match opened {
         Ok(Ok(db)) => Ok(db),
