@@ -692,9 +692,27 @@ fn check_directory(path: &Path, create: bool) -> Result<bool, StoreError> {
     }
 }
 
+/// How long to retry a lock held by someone else: sled releases its lock
+/// from background threads shortly after a `Db` is dropped, so a store
+/// closed a moment ago (by this process or one that just exited) can still
+/// look locked.
+const LOCK_WAIT: std::time::Duration = std::time::Duration::from_millis(1500);
+
 /// `sled::open`, with its errors (and any panic on a damaged directory)
 /// turned into [`StoreError`]s.
 fn open_sled(path: &Path) -> Result<sled::Db, StoreError> {
+    let start = std::time::Instant::now();
+    loop {
+        match open_sled_once(path) {
+            Err(StoreError::Locked { .. }) if start.elapsed() < LOCK_WAIT => {
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            other => return other,
+        }
+    }
+}
+
+fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
     let config = sled::Config::new().path(path).cache_capacity(CACHE_BYTES);
     let opened = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| config.open()));
     match opened {
