@@ -21,7 +21,9 @@ const SPP: u32 = 64;
 const REFERENCE_SPP: f64 = 4096.0;
 
 fn data(path: &str) -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(path)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(path)
 }
 
 fn reference_noise(scene: &str) -> f64 {
@@ -37,18 +39,33 @@ fn check_scene(scene_file: &str, scene: &str, frames: &[u32], max_block_bias: f6
     let loaded = Scene::load(&data(&format!("scenes/{scene_file}"))).unwrap();
     let mut renderer = Renderer::new(
         loaded,
-        Box::new(PathTracer::new(PathSettings { spp: SPP, ..PathSettings::default() })),
+        Box::new(PathTracer::new(PathSettings {
+            spp: SPP,
+            ..PathSettings::default()
+        })),
         Box::new(CpuBackend::new()),
-        FrameSettings { width: 128, height: 128, same_pattern: true, ..FrameSettings::default() },
+        FrameSettings {
+            width: 128,
+            height: 128,
+            same_pattern: true,
+            ..FrameSettings::default()
+        },
     );
     for &frame in frames {
-        let reference = read_exr(&data(&format!("reference/{scene}/frame_{frame:04}.exr"))).unwrap();
+        let reference =
+            read_exr(&data(&format!("reference/{scene}/frame_{frame:04}.exr"))).unwrap();
         let image = renderer.render_frame(frame);
         let e = rmse(&image, &reference);
         let bias = block_bias(&image, &reference, BLOCK);
         eprintln!("{scene} frame {frame}: rmse {e:.4} (noise-only ≈ {expected_rmse:.4}), block bias {bias:.4}");
-        assert!(e < 1.25 * expected_rmse, "{scene} frame {frame}: rmse {e} vs noise-only {expected_rmse}");
-        assert!(bias < max_block_bias, "{scene} frame {frame}: block bias {bias} ≥ {max_block_bias}");
+        assert!(
+            e < 1.25 * expected_rmse,
+            "{scene} frame {frame}: rmse {e} vs noise-only {expected_rmse}"
+        );
+        assert!(
+            bias < max_block_bias,
+            "{scene} frame {frame}: block bias {bias} ≥ {max_block_bias}"
+        );
     }
 }
 
