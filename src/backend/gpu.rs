@@ -252,7 +252,7 @@ fn rank(t: wgpu::DeviceType) -> u8 {
     }
 }
 
-/// `min(a, b)` over u64 without overflow surprises in `usize` conversions.
+/// A byte or element count as `usize`, saturating on 32-bit targets.
 fn usize_of(x: u64) -> usize {
     usize::try_from(x).unwrap_or(usize::MAX)
 }
@@ -467,7 +467,7 @@ impl GpuBackend {
             if count * 48 > self.max_binding {
                 return Err(GpuError::Geometry(format!(
                     "{count} {what} ({} MiB) exceed the device's storage binding size of {} MiB",
-                    count * 48 >> 20,
+                    (count * 48) >> 20,
                     self.max_binding >> 20
                 )));
             }
