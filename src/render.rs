@@ -4,6 +4,7 @@
 //! it); [`render_to_dir`] adds files, a progress bar and a summary for the CLI.
 
 use crate::backend::cpu::CpuBackend;
+use crate::backend::gpu::{AdapterPolicy, GpuBackend, GpuError};
 use crate::backend::RayBackend;
 use crate::film::{self, Film};
 use crate::light::LightSampler;
@@ -83,14 +84,32 @@ pub enum BackendChoice {
     Gpu,
 }
 
-/// Picks the backend. There is no GPU backend in this build yet, so `auto`
-/// is the CPU and `gpu` is an error rather than a silent fallback.
+/// Picks the backend:
+/// - `auto`: a real GPU adapter (device type other than `Cpu`) when one
+///   exists, else the CPU backend. A GPU that is found but cannot be used
+///   (no device, shaders rejected) falls back to the CPU with a warning on
+///   stderr;
+/// - `cpu`: the CPU backend;
+/// - `gpu`: any adapter, the software one (lavapipe) included; none is an
+///   error, never a panic.
+///
+/// `WGPU_BACKEND` (e.g. `vulkan`) restricts the wgpu backends searched.
+/// The caller prints `backend.name()`, which names the adapter picked.
 pub fn make_backend(choice: BackendChoice) -> Result<Box<dyn RayBackend>> {
     match choice {
-        BackendChoice::Auto | BackendChoice::Cpu => Ok(Box::new(CpuBackend::new())),
-        BackendChoice::Gpu => {
-            bail!("--backend gpu: this build has no GPU ray backend yet; use --backend cpu or auto")
-        }
+        BackendChoice::Cpu => Ok(Box::new(CpuBackend::new())),
+        BackendChoice::Auto => match GpuBackend::new(AdapterPolicy::HardwareOnly) {
+            Ok(gpu) => Ok(Box::new(gpu)),
+            Err(GpuError::NoAdapter) => Ok(Box::new(CpuBackend::new())),
+            Err(e) => {
+                eprintln!("warning: {e}; using the CPU backend");
+                Ok(Box::new(CpuBackend::new()))
+            }
+        },
+        BackendChoice::Gpu => match GpuBackend::new(AdapterPolicy::AllowSoftware) {
+            Ok(gpu) => Ok(Box::new(gpu)),
+            Err(e) => bail!("--backend gpu: {e}"),
+        },
     }
 }
 
