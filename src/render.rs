@@ -9,6 +9,7 @@ use crate::film::{self, Film};
 use crate::light::LightSampler;
 use crate::method::ic::{IcSettings, IrradianceCaching};
 use crate::method::path::{PathSettings, PathTracer};
+use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::{FrameContext, FrameStats, Method};
 use crate::scene::{Scene, SceneError};
 use anyhow::{bail, Context, Result};
@@ -46,6 +47,7 @@ impl std::fmt::Display for SceneSource {
 pub enum MethodSettings {
     Path(PathSettings),
     Ic(IcSettings),
+    Trc(TrcSettings),
 }
 
 impl MethodSettings {
@@ -54,6 +56,7 @@ impl MethodSettings {
         match self {
             MethodSettings::Path(_) => "path",
             MethodSettings::Ic(_) => "ic",
+            MethodSettings::Trc(_) => "trc",
         }
     }
 
@@ -62,6 +65,7 @@ impl MethodSettings {
         match self {
             MethodSettings::Path(s) => s.spp,
             MethodSettings::Ic(s) => s.spp,
+            MethodSettings::Trc(s) => s.ic.spp,
         }
     }
 
@@ -69,6 +73,7 @@ impl MethodSettings {
         match self {
             MethodSettings::Path(s) => Box::new(PathTracer::new(s.clone())),
             MethodSettings::Ic(s) => Box::new(IrradianceCaching::new(s.clone())),
+            MethodSettings::Trc(s) => Box::new(TemporalRadianceCaching::new(s.clone())),
         }
     }
 }
@@ -190,6 +195,7 @@ impl Renderer {
             lights: &lights,
             backend: self.backend.as_ref(),
             frame,
+            fps: self.settings.fps,
             width: self.settings.width,
             height: self.settings.height,
             seed: self.settings.seed,
