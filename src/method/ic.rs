@@ -19,8 +19,8 @@ use super::path::camera_query;
 use super::{FrameContext, FrameStats, Method};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
-    gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint,
-    HemisphereSamples, Strata,
+    gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint, HemisphereSamples,
+    Strata,
 };
 use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
@@ -280,7 +280,12 @@ impl IrradianceCaching {
     }
 
     /// Computes the records of `chunk` with one batch of radiance queries.
-    fn gather_chunk(&self, ctx: &FrameContext, chunk: &[Candidate], key_frame: u32) -> Vec<Gathered> {
+    fn gather_chunk(
+        &self,
+        ctx: &FrameContext,
+        chunk: &[Candidate],
+        key_frame: u32,
+    ) -> Vec<Gathered> {
         let strata = self.settings.strata;
         let mut queries = Vec::with_capacity(chunk.len() * strata.count());
         for c in chunk {
@@ -298,7 +303,8 @@ impl IrradianceCaching {
             .enumerate()
             .map(|(i, c)| {
                 let range = i * strata.count()..(i + 1) * strata.count();
-                let samples = samples_from_results(&queries[range.clone()], &results[range.clone()]);
+                let samples =
+                    samples_from_results(&queries[range.clone()], &results[range.clone()]);
                 let g = irradiance_and_gradients(&samples, c.point.normal, strata);
                 let record = IrradianceRecord {
                     id: RecordId::from(c.pixel),

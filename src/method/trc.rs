@@ -21,17 +21,17 @@
 //! Everything spatial — candidates, gathering, weights, gradients,
 //! neighbour clamping, direct light, glossy lobes — is `ic`'s code.
 
-use super::ic::{primary_candidates, render_pass, scene_bounds, Candidate, Gathered, IcSettings};
 use super::ic::IrradianceCaching;
+use super::ic::{primary_candidates, render_pass, scene_bounds, Candidate, Gathered, IcSettings};
 use super::{FrameContext, FrameStats, Method};
 use crate::backend::Hit;
 use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance, HemisphereSamples};
 use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
-use crate::scene::Snapshot;
 use crate::sampling::Frame;
+use crate::scene::Snapshot;
 use glam::{Mat4, Vec3};
-use std::f32::consts::TAU;
+use std::f32::consts::{PI, TAU};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
@@ -477,8 +477,10 @@ fn reproject(
     let s = &g.samples;
     let origin = g.record.position;
     let frame = Frame::new(g.record.normal);
-    // (depth, radiance) per cell.
-    let mut cells: Vec<Option<(f32, Vec3)>> = vec![None; m * n];
+    // (depth, radiance, object) per cell.
+    let mut cells: Vec<Option<(f32, Vec3, u32)>> = vec![None; m * n];
+    let mut own = s.radiance.clone();
+    #[allow(clippy::needless_range_loop)] // i indexes five parallel arrays
     for i in 0..s.radiance.len() {
         let (dir, dist, object) = (s.direction[i].normalize(), s.distance[i], s.object[i]);
         let mut radiance = s.radiance[i];
@@ -498,8 +500,21 @@ fn reproject(
                 if !(local.z > 0.0 && depth > 0.0) {
                     continue; // moved below the record's horizon
                 }
-                let j = (((1.0 - local.z * local.z) * m as f32) as usize).min(m - 1);
-                let phi = local.y.atan2(local.x).rem_euclid(TAU);
+                // The sample's displacement in (sin²θ, φ) is applied to the
+                // centre of its cell: samples of one rigidly moving surface
+                // then move together, where their jittered positions would
+                // collide and leave holes inside the surface.
+                let before = frame.to_local(dir);
+                let (j0, k0) = (i / n, i % n);
+                let du = before.z * before.z - local.z * local.z;
+                let dphi =
+                    (local.y.atan2(local.x) - before.y.atan2(before.x) + PI).rem_euclid(TAU) - PI;
+                let u = (j0 as f32 + 0.5) / m as f32 + du;
+                if u >= 1.0 {
+                    continue; // below the horizon
+                }
+                let phi = ((k0 as f32 + 0.5) / n as f32 * TAU + dphi).rem_euclid(TAU);
+                let j = ((u.max(0.0) * m as f32) as usize).min(m - 1);
                 let k = ((phi / TAU * n as f32) as usize).min(n - 1);
                 (j * n + k, depth, Some((mat, moved)))
             }
@@ -508,8 +523,18 @@ fn reproject(
         if let (Some((l0, l1)), Some(hit)) = (&next.lights, g.hits.get(i).filter(|h| h.is_hit())) {
             radiance *= light_ratio(snapshot, hit, dir, hit_point, moved, l0, l1);
         }
-        if cells[cell].is_none_or(|(d, _)| depth < d) {
-            cells[cell] = Some((depth, radiance));
+        own[i] = radiance;
+        if cells[cell].is_none_or(|(d, _, _)| depth < d) {
+            cells[cell] = Some((depth, radiance, object));
+        }
+    }
+    // A cell that still sees the object its own sample saw keeps its own
+    // sample: our cells hold one path-traced sample each, and passing
+    // samples between cells of one surface would only reshuffle Monte
+    // Carlo noise (the paper's rasterized hemispheres have none).
+    for (i, cell) in cells.iter_mut().enumerate() {
+        if let Some(c) = cell.as_mut().filter(|c| c.2 == s.object[i]) {
+            c.1 = own[i];
         }
     }
     // Hole filling from the farthest neighbour (Fig. 6d).
@@ -520,7 +545,7 @@ fn reproject(
                 if before[j * n + k].is_some() {
                     continue;
                 }
-                let mut best: Option<(f32, Vec3)> = None;
+                let mut best: Option<(f32, Vec3, u32)> = None;
                 for dj in [-1i64, 0, 1] {
                     let jj = j as i64 + dj;
                     if jj < 0 || jj >= m as i64 {
@@ -544,8 +569,14 @@ fn reproject(
     }
     HemisphereSamples {
         direction: s.direction.clone(),
-        radiance: cells.iter().map(|c| c.map_or(Vec3::ZERO, |c| c.1)).collect(),
-        distance: cells.iter().map(|c| c.map_or(f32::INFINITY, |c| c.0)).collect(),
+        radiance: cells
+            .iter()
+            .map(|c| c.map_or(Vec3::ZERO, |c| c.1))
+            .collect(),
+        distance: cells
+            .iter()
+            .map(|c| c.map_or(f32::INFINITY, |c| c.0))
+            .collect(),
         object: s.object.clone(),
     }
 }
