@@ -349,11 +349,15 @@ pub struct BenchOptions {
 
 impl Default for BenchOptions {
     /// The small default run: `cube-in-box`, frames 0..4 at 64×64, `path`
-    /// at 4, 16 and 64 spp against a 1024-spp reference.
+    /// at 4, 16, 64 and 256 spp and `ic` at 16 and 64 spp against a
+    /// 1024-spp reference.
     fn default() -> Self {
         BenchOptions {
             scenes: vec![SceneSource::Builtin("cube-in-box".into())],
-            methods: vec![MethodSweep::parse("path:spp=4,16,64").expect("valid default")],
+            methods: vec![
+                MethodSweep::parse("path:spp=4,16,64,256").expect("valid default"),
+                MethodSweep::parse("ic:spp=16,64").expect("valid default"),
+            ],
             frames: 0..4,
             width: 64,
             height: 64,

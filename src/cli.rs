@@ -70,7 +70,7 @@ pub struct RenderArgs {
     /// Image size WxH.
     #[arg(long, default_value = "256x256", value_parser = parse_size)]
     pub size: (u32, u32),
-    /// Samples per pixel [default: 16 for path, 4 for ic (direct light and anti-aliasing)].
+    /// Samples per pixel [default: 16; for ic the samples of direct light and anti-aliasing].
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     pub spp: Option<u32>,
     /// Frames per second: frame f is rendered at t = f / fps.
@@ -167,7 +167,7 @@ pub struct BenchArgs {
     pub scenes: Vec<SceneSource>,
     /// Methods, each NAME or NAME:KEY=V1,V2,… sweeping one setting (one run per value),
     /// e.g. `--methods path:spp=4,16,64 ic:accuracy=0.1,0.2`.
-    #[arg(long, num_args = 1.., default_value = "path:spp=4,16,64", value_parser = parse_bench_method)]
+    #[arg(long, num_args = 1.., default_values = ["path:spp=4,16,64,256", "ic:spp=16,64"], value_parser = parse_bench_method)]
     pub methods: Vec<bench::MethodSweep>,
     /// Half-open frame range START..END.
     #[arg(long, default_value = "0..4", value_parser = parse_frames)]

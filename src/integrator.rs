@@ -16,7 +16,7 @@ use crate::material::Bsdf;
 use crate::method::FrameContext;
 use crate::sampling::{power_heuristic, Rng};
 use crate::scene::Triangle;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// Path-length control shared by every caller.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -61,6 +61,9 @@ pub enum FirstHitEmission {
 #[derive(Clone, Debug)]
 pub struct RadianceQuery {
     pub ray: Ray,
+    /// Position sample for the light sample at the first hit (stratified by
+    /// the caller); `None` draws it from `rng`.
+    pub first_light: Option<Vec2>,
     pub rng: Rng,
     pub weight: Vec3,
     pub first_hit: FirstHitEmission,
@@ -92,6 +95,7 @@ pub fn offset_origin(p: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
 /// State of one path between bounces.
 struct PathState {
     query: usize,
+    first_light: Option<Vec2>,
     rng: Rng,
     throughput: Vec3,
     radiance: Vec3,
@@ -126,6 +130,7 @@ pub fn trace_radiance(
         rays.push(q.ray);
         paths.push(PathState {
             query: i,
+            first_light: q.first_light,
             rng: q.rng,
             throughput: q.weight,
             radiance: Vec3::ZERO,
@@ -237,6 +242,7 @@ fn shade(
 
     // Next-event estimation, MIS-weighted against BSDF sampling.
     let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
+    let u = path.first_light.take().unwrap_or(u);
     if let Some(ls) = ctx
         .lights
         .sample(snapshot, &ctx.scene.materials, p, pick, u)

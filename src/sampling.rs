@@ -96,6 +96,27 @@ impl Rng {
     }
 }
 
+/// Stratifies a 2D sample over the `spp` samples of a pixel: sample `i` of
+/// the first `n²` (`n = ⌊√spp⌋`) falls in its own cell of an `n × n` grid,
+/// at `u` within the cell; later samples are plain `u`. Averaged over the
+/// pixel's samples the estimate stays unbiased, and its variance falls
+/// faster than with independent samples. `transposed` walks the grid in
+/// the other order, so that two stratified dimensions of one sample (pixel
+/// position, light position) are not paired cell for cell.
+pub fn stratified_2d(sample: u32, spp: u32, u: Vec2, transposed: bool) -> Vec2 {
+    let n = (spp as f32).sqrt() as u32;
+    if sample >= n * n {
+        return u;
+    }
+    let (a, b) = ((sample % n) as f32, (sample / n) as f32);
+    let cell = if transposed {
+        Vec2::new(b, a)
+    } else {
+        Vec2::new(a, b)
+    };
+    (cell + u) / n as f32
+}
+
 /// An orthonormal basis around a unit normal (Duff et al. 2017, branchless).
 #[derive(Clone, Copy, Debug)]
 pub struct Frame {

@@ -47,15 +47,17 @@ fn furnace_radiance_is_le_over_one_minus_albedo() {
             1.2,
             vec![],
         );
-        let film = renderer(s, 64, 16).render_frame(0);
+        let film = renderer(s, 256, 32).render_frame(0);
         let expected = le / (1.0 - albedo);
         let mean = film.mean() as f32;
         assert!(
             (mean - expected).abs() / expected < 0.01,
             "ρ={albedo} Le={le}: mean radiance {mean}, expected {expected}"
         );
-        // Per pixel, 64 paths of geometric length leave ~11 % noise at
-        // ρ = 0.8; a structural error (dark edges, leaks) shows up far beyond.
+        // 262k paths put the standard error of the mean near 0.2 % at
+        // ρ = 0.8 (paths have geometric length), so 1 % is a 5σ bound. Per
+        // pixel, 256 paths leave ~6 % noise; a structural error (dark
+        // edges, leaks) shows up far beyond the 50 % bound.
         for p in &film.pixels {
             assert!(
                 (p.x - expected).abs() / expected < 0.5,

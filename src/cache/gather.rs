@@ -85,6 +85,7 @@ pub fn gather_queries(point: &GatherPoint, strata: Strata, key: SampleKey) -> Ve
             let origin = offset_origin(point.position, point.geometric_normal, dir);
             queries.push(RadianceQuery {
                 ray: Ray::new(origin, dir, 0.0, f32::INFINITY),
+                first_light: None,
                 rng,
                 weight: Vec3::ONE,
                 first_hit: FirstHitEmission::Exclude,

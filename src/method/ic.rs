@@ -15,7 +15,7 @@
 //! - the glossy lobe by path tracing from a lobe sample (until radiance
 //!   records for glossy surfaces land).
 
-use super::path::camera_query;
+use super::path::{camera_query, first_light_sample};
 use super::{FrameContext, FrameStats, Method};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
@@ -69,7 +69,7 @@ impl Default for IcSettings {
         IcSettings {
             accuracy: 0.2,
             strata: Strata::default(),
-            spp: 4,
+            spp: 16,
             min_spacing_px: 2.0,
             max_spacing_px: 64.0,
             gradients: true,
@@ -473,10 +473,12 @@ fn render_tile(
     let mut stats = FrameStats::default();
     let mut rays = Vec::with_capacity(out.len() * spp as usize);
     let mut rngs = Vec::with_capacity(rays.capacity());
+    let mut light_samples = Vec::with_capacity(rays.capacity());
     for pixel in first..first + out.len() as u32 {
         for sample in 0..spp {
-            let (ray, rng) = camera_query(ctx, pixel, sample);
+            let (ray, mut rng) = camera_query(ctx, pixel, sample, spp);
             rays.push(ray);
+            light_samples.push(first_light_sample(&mut rng, sample, spp));
             rngs.push(rng);
         }
     }
@@ -501,7 +503,7 @@ fn render_tile(
         if surface.bsdf.is_black() {
             continue;
         }
-        if let Some((shadow, contribution)) = direct_light(ctx, &surface, rng) {
+        if let Some((shadow, contribution)) = direct_light(ctx, &surface, rng, light_samples[i]) {
             shadow_rays.push(shadow);
             shadow_targets.push((i, contribution));
         }
@@ -554,11 +556,16 @@ fn render_tile(
     stats
 }
 
-/// One light sample for the whole BSDF: the diffuse lobe unweighted (its
+/// One light sample (position `u`, stratified over the pixel) for the whole BSDF: the diffuse lobe unweighted (its
 /// emission hits are never counted elsewhere: the cache excludes them), the
 /// glossy lobe MIS-weighted against [`glossy_query`]'s lobe sampling.
-fn direct_light(ctx: &FrameContext, s: &Surface, rng: &mut Rng) -> Option<(Ray, Vec3)> {
-    let (pick, u) = (rng.next_f32(), rng.next_2d());
+fn direct_light(
+    ctx: &FrameContext,
+    s: &Surface,
+    rng: &mut Rng,
+    u: glam::Vec2,
+) -> Option<(Ray, Vec3)> {
+    let pick = rng.next_f32();
     let ls = ctx
         .lights
         .sample(ctx.snapshot, &ctx.scene.materials, s.p, pick, u)?;
@@ -596,6 +603,7 @@ fn glossy_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> {
             0.0,
             f32::INFINITY,
         ),
+        first_light: None,
         rng: rng.split(),
         weight: sample.f * (cos / sample.pdf),
         first_hit: FirstHitEmission::Mis {
@@ -611,6 +619,7 @@ fn diffuse_indirect_query(s: &Surface, rng: &mut Rng) -> RadianceQuery {
     let wi = frame.to_world(cosine_hemisphere(rng.next_2d()));
     RadianceQuery {
         ray: Ray::new(offset_origin(s.p, s.ng, wi), wi, 0.0, f32::INFINITY),
+        first_light: None,
         rng: rng.split(),
         weight: s.bsdf.diffuse_albedo(),
         first_hit: FirstHitEmission::Exclude,

@@ -7,7 +7,7 @@ use super::{FrameContext, Method};
 use crate::backend::Ray;
 use crate::film::Film;
 use crate::integrator::{trace_radiance, FirstHitEmission, PathLength, RadianceQuery};
-use crate::sampling::Rng;
+use crate::sampling::{stratified_2d, Rng};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -38,17 +38,29 @@ impl PathTracer {
     }
 }
 
-/// The primary ray of pixel sample `sample` of `pixel`, jittered uniformly
-/// over the pixel, and the sample's random stream positioned after the jitter.
-pub fn camera_query(ctx: &FrameContext, pixel: u32, sample: u32) -> (Ray, Rng) {
+/// The primary ray of pixel sample `sample` (of `spp`) of `pixel`, and the
+/// sample's random stream positioned after the jitter. The pixel is
+/// box-filtered: positions are uniform over its square, stratified over the
+/// pixel's samples ([`stratified_2d`]) — unbiased, and the noise of edges
+/// inside the pixel (the rim of a directly seen light) falls faster than
+/// with independent jitter.
+pub fn camera_query(ctx: &FrameContext, pixel: u32, sample: u32, spp: u32) -> (Ray, Rng) {
     let mut rng = Rng::new(ctx.pixel_key(pixel, sample));
-    let jitter = rng.next_2d();
+    let jitter = stratified_2d(sample, spp, rng.next_2d(), false);
     let (x, y) = (pixel % ctx.width, pixel / ctx.width);
     let sx = (x as f32 + jitter.x) / ctx.width as f32;
     let sy = (y as f32 + jitter.y) / ctx.height as f32;
     let camera = &ctx.snapshot.camera;
     let dir = camera.direction(sx, sy, ctx.aspect());
     (Ray::new(camera.position, dir, 0.0, f32::INFINITY), rng)
+}
+
+/// The light-sample position used at the first surface a pixel sample
+/// hits, stratified over the pixel's samples like the pixel position (in
+/// transposed order): soft shadows and area-light shading are the largest
+/// noise left once edges are stratified.
+pub fn first_light_sample(rng: &mut Rng, sample: u32, spp: u32) -> glam::Vec2 {
+    stratified_2d(sample, spp, rng.next_2d(), true)
 }
 
 impl Method for PathTracer {
@@ -69,9 +81,10 @@ impl Method for PathTracer {
                 let queries = (0..out.len() as u32)
                     .flat_map(|i| (0..spp).map(move |s| (first + i, s)))
                     .map(|(pixel, sample)| {
-                        let (ray, rng) = camera_query(ctx, pixel, sample);
+                        let (ray, mut rng) = camera_query(ctx, pixel, sample, spp);
                         RadianceQuery {
                             ray,
+                            first_light: Some(first_light_sample(&mut rng, sample, spp)),
                             rng,
                             weight: Vec3::ONE,
                             first_hit: FirstHitEmission::Include,

@@ -1,0 +1,80 @@
+//! The `radcache` binary end to end: a tiny render writes its frames, and
+//! bad input of every kind ends in a clear message and a non-zero status,
+//! never a panic.
+
+use std::process::Command;
+
+fn radcache(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(args)
+        .output()
+        .expect("the binary runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn tiny_render_writes_exr_and_png_per_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    for method in ["path", "ic"] {
+        let (code, stdout, stderr) = radcache(&[
+            "render", "--method", method, "--frames", "2..4", "--size", "12x10", "--spp", "2",
+            "--out", out, "-q",
+        ]);
+        assert_eq!(code, 0, "{method}: {stderr}");
+        assert!(stdout.contains("rendered 2 frames"), "{stdout}");
+        for f in [2, 3] {
+            for ext in ["exr", "png"] {
+                let path = dir.path().join(format!("frame_{f:04}.{ext}"));
+                assert!(path.is_file(), "{method}: missing {}", path.display());
+            }
+        }
+        let film = radcache::film::read_exr(&dir.path().join("frame_0003.exr")).unwrap();
+        assert_eq!((film.width, film.height), (12, 10));
+        assert!(film.mean() > 0.0, "{method}: black frame");
+    }
+}
+
+#[test]
+fn bad_input_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let garbage = dir.path().join("broken.glb");
+    std::fs::write(&garbage, b"glTF\x02\x00\x00\x00garbage").unwrap();
+    let garbage = garbage.to_str().unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        (&["render", "missing.glb"], "missing.glb"),
+        (&["render", garbage], "broken.glb"),
+        (&["render", "--builtin", "nope"], "unknown built-in scene"),
+        (&["render", "--size", "0x4"], "out of range"),
+        (&["render", "--size", "abc"], "not an image size"),
+        (&["render", "--frames", "5..2"], "empty"),
+        (&["render", "--fps", "nan"], "fps"),
+        (
+            &["render", "--method", "ic", "--ic-accuracy", "0"],
+            "accuracy",
+        ),
+        (
+            &["render", "--method", "ic", "--ic-strata", "1000x1000"],
+            "too many",
+        ),
+        (&["render", "--method", "teleport"], "invalid value"),
+        (
+            &["compare", "/nonexistent/ref", "/nonexistent/test"],
+            "does not exist",
+        ),
+        (&["bench", "--methods", "path:warp=9"], "warp"),
+    ];
+    for (args, expected) in cases {
+        let (code, _, stderr) = radcache(args);
+        assert_ne!(code, 0, "{args:?} succeeded");
+        assert!(!stderr.contains("panicked"), "{args:?} panicked: {stderr}");
+        assert!(
+            stderr.contains(expected),
+            "{args:?}: expected '{expected}' in: {stderr}"
+        );
+    }
+}
