@@ -10,6 +10,7 @@ use crate::film::{self, Film};
 use crate::light::LightSampler;
 use crate::method::ic::{IcSettings, IrradianceCaching};
 use crate::method::path::{PathSettings, PathTracer};
+use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::{FrameContext, FrameStats, Method};
 use crate::scene::{Scene, SceneError};
 use anyhow::{bail, Context, Result};
@@ -47,6 +48,7 @@ impl std::fmt::Display for SceneSource {
 pub enum MethodSettings {
     Path(PathSettings),
     Ic(IcSettings),
+    Trc(TrcSettings),
 }
 
 impl MethodSettings {
@@ -55,6 +57,7 @@ impl MethodSettings {
         match self {
             MethodSettings::Path(_) => "path",
             MethodSettings::Ic(_) => "ic",
+            MethodSettings::Trc(_) => "trc",
         }
     }
 
@@ -63,6 +66,7 @@ impl MethodSettings {
         match self {
             MethodSettings::Path(s) => s.spp,
             MethodSettings::Ic(s) => s.spp,
+            MethodSettings::Trc(s) => s.ic.spp,
         }
     }
 
@@ -70,6 +74,7 @@ impl MethodSettings {
         match self {
             MethodSettings::Path(s) => Box::new(PathTracer::new(s.clone())),
             MethodSettings::Ic(s) => Box::new(IrradianceCaching::new(s.clone())),
+            MethodSettings::Trc(s) => Box::new(TemporalRadianceCaching::new(s.clone())),
         }
     }
 }
@@ -209,6 +214,7 @@ impl Renderer {
             lights: &lights,
             backend: self.backend.as_ref(),
             frame,
+            fps: self.settings.fps,
             width: self.settings.width,
             height: self.settings.height,
             seed: self.settings.seed,
