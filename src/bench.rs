@@ -21,6 +21,7 @@
 use crate::cache::gather::Strata;
 use crate::method::ic::IcSettings;
 use crate::method::path::PathSettings;
+use crate::method::trc::{TemporalGradients, TrcSettings};
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
 use anyhow::{bail, Context, Result};
@@ -56,6 +57,17 @@ pub const METHODS: &[MethodInfo] = &[
             ("min_spacing", "2"),
             ("max_spacing", "64"),
             ("gradients", "1"),
+        ],
+    },
+    MethodInfo {
+        name: "trc",
+        keys: &[
+            ("at", "0.05"),
+            ("max_life", "20"),
+            ("gradients", "extrapolated"),
+            ("reprojection", "1"),
+            ("spp", "4"),
+            ("accuracy", "0.2"),
         ],
     },
 ];
@@ -179,6 +191,34 @@ pub fn method_settings(
                 }
             }
             Ok(MethodSettings::Ic(s))
+        }
+        "trc" => {
+            let mut s = TrcSettings::default();
+            if let Some((key, v)) = setting {
+                match key {
+                    "at" => s.temporal_accuracy = value(method, key, v, 1e-6..1e6)?,
+                    "max_life" => s.max_life = value(method, key, v, 1..100_001)?,
+                    "gradients" => {
+                        s.gradients = match v.trim() {
+                            "none" => TemporalGradients::None,
+                            "extrapolated" => TemporalGradients::Extrapolated,
+                            _ => {
+                                return Err(MethodError::BadValue {
+                                    method: method.into(),
+                                    key: key.into(),
+                                    value: v.into(),
+                                    problem: "expected none or extrapolated".into(),
+                                })
+                            }
+                        }
+                    }
+                    "reprojection" => s.reprojection = value::<u8>(method, key, v, 0..2)? == 1,
+                    "spp" => s.ic.spp = value(method, key, v, 1..1_000_001)?,
+                    "accuracy" => s.ic.accuracy = value(method, key, v, 0.001..2.001)?,
+                    _ => return Err(unknown_key(key)),
+                }
+            }
+            Ok(MethodSettings::Trc(s))
         }
         _ => Err(MethodError::UnknownMethod {
             name: method.into(),
@@ -886,7 +926,9 @@ fn render_frames(
         let start = Instant::now();
         let film = renderer.render_frame(frame);
         render_time += start.elapsed();
-        records += renderer.last_frame_stats().records_created;
+        let stats = renderer.last_frame_stats();
+        // Records computed: new ones and replacements at the same point (trc).
+        records += stats.records_created + stats.records_replaced;
         crate::film::write_frame(&film, dir, frame)?;
         bar.inc(1);
     }

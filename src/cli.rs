@@ -7,6 +7,7 @@ use crate::cache::gather::Strata;
 use crate::integrator::PathLength;
 use crate::method::ic::IcSettings;
 use crate::method::path::PathSettings;
+use crate::method::trc::{TemporalGradients, TrcSettings};
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
 use crate::store::{self, Store};
@@ -65,6 +66,8 @@ pub enum MethodName {
     Path,
     /// Per-frame irradiance caching (Ward 1988, Ward & Heckbert 1992): a new cache every frame.
     Ic,
+    /// Temporal radiance caching (Gautron et al., TVCG 2007): ic records that live across frames.
+    Trc,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -112,6 +115,8 @@ pub struct RenderArgs {
     pub max_depth: Option<u32>,
     #[command(flatten)]
     pub ic: IcArgs,
+    #[command(flatten)]
+    pub trc: TrcArgs,
     /// Record the render as job NAME in the store and resume it if it was interrupted
     /// (frames already finished are skipped). The store is --db, default ./radcache.db.
     #[arg(long, value_name = "NAME", value_parser = parse_job_name)]
@@ -145,6 +150,35 @@ pub struct IcArgs {
     /// Interpolate without the translation and rotation gradients.
     #[arg(long)]
     pub ic_no_gradients: bool,
+}
+
+/// Settings of `--method trc` (its spatial settings are the `--ic-*` ones).
+#[derive(Args, Debug)]
+pub struct TrcArgs {
+    /// Temporal accuracy a_t: a record is used while w_t = 1/(|τ−1|(t−t0)) ≥ 1/a_t (TRC Eq. 9–10; the paper uses 0.05).
+    #[arg(long, default_value_t = 0.05, value_parser = parse_positive)]
+    pub trc_at: f32,
+    /// δt_max: longest life of a record in frames, t − t0 < δt_max (TRC Eq. 11; the paper uses 20).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub trc_max_life: u32,
+    /// Temporal gradients (TRC §4.5): none, or extrapolated from the estimate of E(t0+1) (Eq. 15–17).
+    #[arg(long, value_enum, default_value = "extrapolated")]
+    pub trc_gradients: TrcGradientsArg,
+    /// Estimate E(t0+1) by reprojecting the record's hemisphere samples (TRC §4.7); off: E constant.
+    #[arg(long, value_enum, default_value = "on")]
+    pub trc_reprojection: OnOff,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TrcGradientsArg {
+    None,
+    Extrapolated,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum OnOff {
+    On,
+    Off,
 }
 
 #[derive(Args, Debug)]
@@ -346,20 +380,31 @@ fn run_render(args: RenderArgs) -> Result<()> {
         max_depth: args.max_depth,
         ..PathLength::default()
     };
+    let ic_settings = IcSettings {
+        accuracy: args.ic.ic_accuracy,
+        strata: args.ic.ic_strata,
+        spp: args.spp.unwrap_or(IcSettings::default().spp),
+        min_spacing_px: args.ic.ic_min_spacing,
+        max_spacing_px: args.ic.ic_max_spacing,
+        gradients: !args.ic.ic_no_gradients,
+        length,
+        ..IcSettings::default()
+    };
     let method = match args.method {
         MethodName::Path => MethodSettings::Path(PathSettings {
             spp: args.spp.unwrap_or(PathSettings::default().spp),
             length,
         }),
-        MethodName::Ic => MethodSettings::Ic(IcSettings {
-            accuracy: args.ic.ic_accuracy,
-            strata: args.ic.ic_strata,
-            spp: args.spp.unwrap_or(IcSettings::default().spp),
-            min_spacing_px: args.ic.ic_min_spacing,
-            max_spacing_px: args.ic.ic_max_spacing,
-            gradients: !args.ic.ic_no_gradients,
-            length,
-            ..IcSettings::default()
+        MethodName::Ic => MethodSettings::Ic(ic_settings),
+        MethodName::Trc => MethodSettings::Trc(TrcSettings {
+            ic: ic_settings,
+            temporal_accuracy: args.trc.trc_at,
+            max_life: args.trc.trc_max_life,
+            gradients: match args.trc.trc_gradients {
+                TrcGradientsArg::None => TemporalGradients::None,
+                TrcGradientsArg::Extrapolated => TemporalGradients::Extrapolated,
+            },
+            reprojection: args.trc.trc_reprojection == OnOff::On,
         }),
     };
     let spp = method.spp();

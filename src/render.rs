@@ -4,11 +4,13 @@
 //! it); [`render_to_dir`] adds files, a progress bar and a summary for the CLI.
 
 use crate::backend::cpu::CpuBackend;
+use crate::backend::gpu::{AdapterPolicy, GpuBackend, GpuError};
 use crate::backend::RayBackend;
 use crate::film::{self, Film};
 use crate::light::LightSampler;
 use crate::method::ic::{IcSettings, IrradianceCaching};
 use crate::method::path::{PathSettings, PathTracer};
+use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::scene::{Scene, SceneError};
 use crate::store::{self, schema::JobValue, FrameCommit, JobSpec, RecordCommit, Store};
@@ -47,6 +49,7 @@ impl std::fmt::Display for SceneSource {
 pub enum MethodSettings {
     Path(PathSettings),
     Ic(IcSettings),
+    Trc(TrcSettings),
 }
 
 impl MethodSettings {
@@ -55,6 +58,7 @@ impl MethodSettings {
         match self {
             MethodSettings::Path(_) => "path",
             MethodSettings::Ic(_) => "ic",
+            MethodSettings::Trc(_) => "trc",
         }
     }
 
@@ -63,6 +67,7 @@ impl MethodSettings {
         match self {
             MethodSettings::Path(s) => s.spp,
             MethodSettings::Ic(s) => s.spp,
+            MethodSettings::Trc(s) => s.ic.spp,
         }
     }
 
@@ -70,6 +75,7 @@ impl MethodSettings {
         match self {
             MethodSettings::Path(s) => Box::new(PathTracer::new(s.clone())),
             MethodSettings::Ic(s) => Box::new(IrradianceCaching::new(s.clone())),
+            MethodSettings::Trc(s) => Box::new(TemporalRadianceCaching::new(s.clone())),
         }
     }
 }
@@ -84,14 +90,32 @@ pub enum BackendChoice {
     Gpu,
 }
 
-/// Picks the backend. There is no GPU backend in this build yet, so `auto`
-/// is the CPU and `gpu` is an error rather than a silent fallback.
+/// Picks the backend:
+/// - `auto`: a real GPU adapter (device type other than `Cpu`) when one
+///   exists, else the CPU backend. A GPU that is found but cannot be used
+///   (no device, shaders rejected) falls back to the CPU with a warning on
+///   stderr;
+/// - `cpu`: the CPU backend;
+/// - `gpu`: any adapter, the software one (lavapipe) included; none is an
+///   error, never a panic.
+///
+/// `WGPU_BACKEND` (e.g. `vulkan`) restricts the wgpu backends searched.
+/// The caller prints `backend.name()`, which names the adapter picked.
 pub fn make_backend(choice: BackendChoice) -> Result<Box<dyn RayBackend>> {
     match choice {
-        BackendChoice::Auto | BackendChoice::Cpu => Ok(Box::new(CpuBackend::new())),
-        BackendChoice::Gpu => {
-            bail!("--backend gpu: this build has no GPU ray backend yet; use --backend cpu or auto")
-        }
+        BackendChoice::Cpu => Ok(Box::new(CpuBackend::new())),
+        BackendChoice::Auto => match GpuBackend::new(AdapterPolicy::HardwareOnly) {
+            Ok(gpu) => Ok(Box::new(gpu)),
+            Err(GpuError::NoAdapter) => Ok(Box::new(CpuBackend::new())),
+            Err(e) => {
+                eprintln!("warning: {e}; using the CPU backend");
+                Ok(Box::new(CpuBackend::new()))
+            }
+        },
+        BackendChoice::Gpu => match GpuBackend::new(AdapterPolicy::AllowSoftware) {
+            Ok(gpu) => Ok(Box::new(gpu)),
+            Err(e) => bail!("--backend gpu: {e}"),
+        },
     }
 }
 
@@ -202,6 +226,7 @@ impl Renderer {
             lights: &lights,
             backend: self.backend.as_ref(),
             frame,
+            fps: self.settings.fps,
             width: self.settings.width,
             height: self.settings.height,
             seed: self.settings.seed,
@@ -284,6 +309,11 @@ pub fn render_to_dir(
     render_job_to_dir(renderer, frames, out_dir, quiet, None)
 }
 
+/// Methods that keep no state across frames: a resume skips their
+/// finished frames. Any other method replays them (see
+/// [`render_job_to_dir`]).
+const STATELESS_METHODS: [&str; 2] = ["path", "ic"];
+
 /// A store job a render checkpoints to (`render --db PATH --job NAME`).
 pub struct StoreJob<'a> {
     pub store: &'a Store,
@@ -354,6 +384,12 @@ pub fn render_job_to_dir(
                 done.insert(frame);
             }
         }
+        if !STATELESS_METHODS.contains(&renderer.method_name()) {
+            // A stateful method's frame depends on the frames before it in
+            // this range: only the finished prefix of the range counts.
+            let prefix = frames.clone().take_while(|f| done.contains(f)).count() as u32;
+            done.retain(|&f| f < frames.start + prefix);
+        }
         for &frame in &done {
             restore_frame_files(j, frame, out_dir)?;
         }
@@ -368,8 +404,19 @@ pub fn render_job_to_dir(
     let start = Instant::now();
     let rays_before = renderer.backend().ray_counts().total();
     let mut frame_stats = Vec::with_capacity(frames.len() - done.len());
+    // Methods whose cache carries over from frame to frame cannot start
+    // mid-range until the store holds their cache state: they replay the
+    // finished frames (rendered again in order, not written) so that the
+    // resumed frames equal an uninterrupted run.
+    let replay = !STATELESS_METHODS.contains(&renderer.method_name());
     for frame in frames.clone() {
         if done.contains(&frame) {
+            // (`done` is the range's finished prefix here.)
+            if replay && done.len() < frames.len() {
+                progress.set_message(format!("frame {frame} (replay)"));
+                renderer.render_frame(frame);
+                let _ = renderer.take_frame_records();
+            }
             continue;
         }
         progress.set_message(format!("frame {frame}"));

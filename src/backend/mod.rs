@@ -6,6 +6,7 @@
 //! and read them back as they are.
 
 pub mod cpu;
+pub mod gpu;
 
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};

@@ -52,12 +52,22 @@ impl IrradianceCache {
     /// Calls `visit(record, weight)` for every record usable at `p` with
     /// normal `n`: `w_K(p) ≥ 1/a` (TRC Eq. 3) and not in front of `p`.
     pub fn for_each_usable(&self, p: Vec3, n: Vec3, mut visit: impl FnMut(&IrradianceRecord, f32)) {
+        self.for_each_usable_indexed(p, n, |_, record, w| visit(record, w));
+    }
+
+    /// [`Self::for_each_usable`] with each record's index in [`Self::records`].
+    pub fn for_each_usable_indexed(
+        &self,
+        p: Vec3,
+        n: Vec3,
+        mut visit: impl FnMut(usize, &IrradianceRecord, f32),
+    ) {
         let threshold = 1.0 / self.accuracy;
         self.index.query(p, |i| {
             let record = &self.records[i as usize];
             let w = record.weight(p, n);
             if w >= threshold && !record.is_in_front_of(p, n) {
-                visit(record, w);
+                visit(i as usize, record, w);
             }
         });
     }
@@ -72,8 +82,21 @@ impl IrradianceCache {
     /// TRC Eq. 1 with Eq. 4: `E(p) = Σ w_K E_K(p) / Σ w_K` over usable
     /// records; `None` where no record is usable.
     pub fn interpolate(&self, p: Vec3, n: Vec3, use_gradients: bool) -> Option<Interpolated> {
+        self.interpolate_marking(p, n, use_gradients, |_| ())
+    }
+
+    /// [`Self::interpolate`], calling `mark(index)` for every record used
+    /// (`trc` keeps the records that contributed to a frame).
+    pub fn interpolate_marking(
+        &self,
+        p: Vec3,
+        n: Vec3,
+        use_gradients: bool,
+        mut mark: impl FnMut(usize),
+    ) -> Option<Interpolated> {
         let (mut sum, mut weights, mut count) = (Vec3::ZERO, 0.0f32, 0u32);
-        self.for_each_usable(p, n, |record, w| {
+        self.for_each_usable_indexed(p, n, |i, record, w| {
+            mark(i);
             // A record exactly at p has infinite weight: it alone decides.
             let w = w.min(1e6);
             sum += record.extrapolate(p, n, use_gradients) * w;
@@ -91,6 +114,15 @@ impl IrradianceCache {
     /// neighbouring records may not differ by more than their distance,
     /// `R_k ≤ R_j + ‖p_k − p_j‖` both ways, which keeps a small record from
     /// sitting inside a huge one that ignores the geometry it saw.
+    /// Adds a record without neighbour clamping: for records that were
+    /// clamped when first inserted and come back in a later frame (`trc`).
+    pub fn insert_as_is(&mut self, record: IrradianceRecord) {
+        let id = self.records.len() as u32;
+        self.index
+            .insert(id, record.position, record.influence_radius(self.accuracy));
+        self.records.push(record);
+    }
+
     pub fn insert(&mut self, mut record: IrradianceRecord) {
         let mut neighbours = Vec::new();
         self.index.query(record.position, |i| neighbours.push(i));

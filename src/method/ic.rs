@@ -33,6 +33,7 @@ use crate::sampling::{cosine_hemisphere, power_heuristic, Rng, SampleKey};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Settings of `ic`, with their sources.
@@ -107,14 +108,26 @@ impl IrradianceCaching {
     }
 }
 
-/// The first surface seen through a pixel centre, where a record may go.
-#[derive(Clone, Copy)]
-struct Candidate {
-    pixel: u32,
-    point: GatherPoint,
-    object: u32,
+/// The first surface seen through a pixel centre, where a record may go
+/// (`trc` also makes them for records it replaces at the same point).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Candidate {
+    pub(crate) pixel: u32,
+    /// Random stream of the gather (the pixel for new records).
+    pub(crate) stream: u64,
+    pub(crate) point: GatherPoint,
+    pub(crate) object: u32,
     /// World size of one pixel at this depth.
-    footprint: f32,
+    pub(crate) footprint: f32,
+}
+
+/// A record just gathered, with the hemisphere samples and first hits it
+/// was computed from (`trc` reprojects them, TRC §4.7).
+pub(crate) struct Gathered {
+    pub(crate) candidate: Candidate,
+    pub(crate) record: IrradianceRecord,
+    pub(crate) samples: HemisphereSamples,
+    pub(crate) hits: Vec<Hit>,
 }
 
 impl Method for IrradianceCaching {
@@ -134,7 +147,7 @@ impl Method for IrradianceCaching {
             .phase_seconds
             .push(("fill".into(), start.elapsed().as_secs_f64()));
         let start = Instant::now();
-        let film = render_pass(ctx, &cache, &self.settings, &mut stats);
+        let film = render_pass(ctx, &cache, &self.settings, None, &mut stats);
         stats
             .phase_seconds
             .push(("render".into(), start.elapsed().as_secs_f64()));
@@ -185,7 +198,7 @@ impl IrradianceCaching {
     }
 }
 
-fn scene_bounds(ctx: &FrameContext) -> (Vec3, Vec3) {
+pub(crate) fn scene_bounds(ctx: &FrameContext) -> (Vec3, Vec3) {
     let mut min = Vec3::splat(f32::INFINITY);
     let mut max = Vec3::splat(f32::NEG_INFINITY);
     for tri in &ctx.snapshot.triangles {
@@ -217,6 +230,27 @@ impl IrradianceCaching {
     /// existing record is usable.
     pub fn fill(&self, ctx: &FrameContext, cache: &mut IrradianceCache) {
         let candidates = primary_candidates(ctx);
+        self.fill_from(ctx, cache, &candidates, |_| (), &mut Vec::new());
+    }
+
+    /// Renders this frame with a given cache (what [`Method::render_frame`]
+    /// does after [`Self::build_cache`]); tests compare `trc` with it.
+    pub fn render_with_cache(&self, ctx: &FrameContext, cache: &IrradianceCache) -> Film {
+        render_pass(ctx, cache, &self.settings, None, &mut FrameStats::default())
+    }
+
+    /// The fill stage over given candidates (one per pixel). Every record
+    /// it inserts is first passed to `annotate` (in parallel, right after
+    /// its gather) and the result pushed to `inserted`, in insertion order:
+    /// `trc` estimates each new record's E(t0+1) there.
+    pub(crate) fn fill_from<X: Send>(
+        &self,
+        ctx: &FrameContext,
+        cache: &mut IrradianceCache,
+        candidates: &[Option<Candidate>],
+        annotate: impl Fn(&Gathered) -> X + Sync,
+        inserted: &mut Vec<X>,
+    ) {
         let (w, h) = (ctx.width as usize, ctx.height as usize);
         let mut step = 1usize;
         while step * 8 < w.max(h) {
@@ -239,7 +273,7 @@ impl IrradianceCaching {
                         }
                     }
                 }
-                self.create_records(ctx, cache, batch);
+                self.create_records(ctx, cache, batch, &annotate, inserted);
             }
             step /= 2;
         }
@@ -248,37 +282,62 @@ impl IrradianceCaching {
     /// Gathers records (in parallel) for the candidates no record covers,
     /// then inserts them in pixel order, skipping any that an earlier one of
     /// the batch already covers.
-    fn create_records(
+    fn create_records<X: Send>(
         &self,
         ctx: &FrameContext,
         cache: &mut IrradianceCache,
         batch: Vec<Candidate>,
+        annotate: &(impl Fn(&Gathered) -> X + Sync),
+        inserted: &mut Vec<X>,
     ) {
         let needed: Vec<Candidate> = batch
             .into_par_iter()
             .filter(|c| !cache.covers(c.point.position, c.point.normal))
             .collect();
-        let per_task = (ctx.backend.preferred_batch() / self.settings.strata.count()).max(1);
-        let records: Vec<IrradianceRecord> = needed
-            .par_chunks(per_task)
-            .flat_map_iter(|chunk| self.gather_chunk(ctx, chunk))
+        let records: Vec<(IrradianceRecord, X)> = self
+            .gather_parallel(ctx, &needed, ctx.frame)
+            .map(|g| {
+                let x = annotate(&g);
+                (g.record, x)
+            })
             .collect();
-        for record in records {
+        for (record, x) in records {
             if !cache.covers(record.position, record.normal) {
                 cache.insert(record);
+                inserted.push(x);
             }
         }
     }
 
+    /// Gathers records at `candidates` in parallel, in candidate order.
+    /// `key_frame` picks the random streams (the frame being rendered; a
+    /// test re-gathers with the streams of an earlier frame).
+    pub(crate) fn gather_parallel<'a>(
+        &'a self,
+        ctx: &'a FrameContext,
+        candidates: &'a [Candidate],
+        key_frame: u32,
+    ) -> impl ParallelIterator<Item = Gathered> + 'a {
+        let per_task = (ctx.backend.preferred_batch() / self.settings.strata.count()).max(1);
+        candidates
+            .par_chunks(per_task)
+            .flat_map_iter(move |chunk| self.gather_chunk(ctx, chunk, key_frame))
+    }
+
     /// Computes the records of `chunk` with one batch of radiance queries.
-    fn gather_chunk(&self, ctx: &FrameContext, chunk: &[Candidate]) -> Vec<IrradianceRecord> {
+    fn gather_chunk(
+        &self,
+        ctx: &FrameContext,
+        chunk: &[Candidate],
+        key_frame: u32,
+    ) -> Vec<Gathered> {
         let strata = self.settings.strata;
         let mut queries = Vec::with_capacity(chunk.len() * strata.count());
         for c in chunk {
             let key = SampleKey {
                 seed: ctx.seed,
-                frame: (!ctx.same_pattern).then_some(ctx.frame),
-                item: RECORD_STREAM | u64::from(c.pixel),
+                frame: (!ctx.same_pattern).then_some(key_frame),
+                item: RECORD_STREAM | c.stream,
                 sample: 0,
             };
             queries.extend(gather_queries(&c.point, strata, key));
@@ -289,16 +348,17 @@ impl IrradianceCaching {
             .enumerate()
             .map(|(i, c)| {
                 let range = i * strata.count()..(i + 1) * strata.count();
-                let samples = samples_from_results(&queries[range.clone()], &results[range]);
+                let samples =
+                    samples_from_results(&queries[range.clone()], &results[range.clone()]);
                 let g = irradiance_and_gradients(&samples, c.point.normal, strata);
                 if self.keep_records {
                     let mut kept = self
                         .gathered_samples
                         .lock()
                         .unwrap_or_else(|e| e.into_inner());
-                    kept.push((RecordId::from(c.pixel), samples));
+                    kept.push((RecordId::from(c.pixel), samples.clone()));
                 }
-                IrradianceRecord {
+                let record = IrradianceRecord {
                     id: RecordId::from(c.pixel),
                     position: c.point.position,
                     normal: c.point.normal,
@@ -313,6 +373,12 @@ impl IrradianceCaching {
                     ),
                     created_frame: ctx.frame,
                     object: c.object,
+                };
+                Gathered {
+                    candidate: *c,
+                    record,
+                    samples,
+                    hits: results[range].iter().map(|r| r.hit).collect(),
                 }
             })
             .collect()
@@ -337,7 +403,7 @@ impl IrradianceCaching {
 
 /// The surface point seen through each pixel centre that wants a record
 /// (a surface with a diffuse part), or `None`.
-fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
+pub(crate) fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
     let camera = &ctx.snapshot.camera;
     let n_pixels = (ctx.width * ctx.height) as usize;
     let rays: Vec<Ray> = (0..n_pixels as u32)
@@ -363,6 +429,7 @@ fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
             let surface = Surface::at(ctx, ray, hit)?;
             (surface.bsdf.diffuse_albedo().max_element() > 0.0).then(|| Candidate {
                 pixel: pixel as u32,
+                stream: pixel as u64,
                 point: surface.gather_point(),
                 object: hit.object,
                 footprint: hit.t * ray.dir().length() * pixel_angle,
@@ -409,11 +476,14 @@ impl<'a> Surface<'a> {
     }
 }
 
-/// Rendering stage (EAS Algorithm 1, lines 18–24), tile by tile.
-fn render_pass(
+/// Rendering stage (EAS Algorithm 1, lines 18–24), tile by tile. With
+/// `used` (one flag per cache record), every record that contributes to a
+/// pixel sample is flagged (`trc`'s replace-or-drop rule).
+pub(crate) fn render_pass(
     ctx: &FrameContext,
     cache: &IrradianceCache,
     settings: &IcSettings,
+    used: Option<&[AtomicBool]>,
     stats: &mut FrameStats,
 ) -> Film {
     let mut film = Film::new(ctx.width, ctx.height);
@@ -425,7 +495,7 @@ fn render_pass(
         .enumerate()
         .map(|(tile, out)| {
             let first = (tile * pixels_per_tile) as u32;
-            render_tile(ctx, cache, settings, first, out)
+            render_tile(ctx, cache, settings, used, first, out)
         })
         .collect();
     for t in tile_stats {
@@ -447,6 +517,7 @@ fn render_tile(
     ctx: &FrameContext,
     cache: &IrradianceCache,
     settings: &IcSettings,
+    used: Option<&[AtomicBool]>,
     first: u32,
     out: &mut [Vec3],
 ) -> FrameStats {
@@ -492,7 +563,12 @@ fn render_tile(
         if kd.max_element() > 0.0 {
             stats.lookups += 1;
             let n = surface.bsdf.normal();
-            match cache.interpolate(surface.p, n, settings.gradients) {
+            let mark = |i: usize| {
+                if let Some(used) = used {
+                    used[i].store(true, Ordering::Relaxed);
+                }
+            };
+            match cache.interpolate_marking(surface.p, n, settings.gradients, mark) {
                 Some(e) => {
                     radiance[i] += kd * FRAC_1_PI * e.irradiance;
                     stats.lookup_records += u64::from(e.records);

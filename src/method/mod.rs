@@ -5,6 +5,7 @@
 
 pub mod ic;
 pub mod path;
+pub mod trc;
 
 use crate::backend::RayBackend;
 use crate::film::Film;
@@ -19,6 +20,9 @@ pub struct FrameContext<'a> {
     pub lights: &'a LightSampler,
     pub backend: &'a dyn RayBackend,
     pub frame: u32,
+    /// Frames per second: frame `f` is at time `f / fps` (temporal methods
+    /// look one frame ahead).
+    pub fps: f32,
     pub width: u32,
     pub height: u32,
     pub seed: u64,
@@ -36,6 +40,11 @@ impl FrameContext<'_> {
             item: u64::from(pixel),
             sample,
         }
+    }
+
+    /// Animation time of frame `frame`.
+    pub fn time_of(&self, frame: u32) -> f32 {
+        frame as f32 / self.fps
     }
 
     pub fn aspect(&self) -> f32 {

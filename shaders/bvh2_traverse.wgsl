@@ -1,0 +1,322 @@
+// BVH2 traversal shared by the ray stages of the GPU backend
+// (`src/backend/gpu.rs`). Not a pipeline by itself: the Rust side prepends
+// this file to `closest_hit.wgsl` and `any_hit.wgsl` (WGSL has no includes).
+//
+// It mirrors, step for step, what the CPU backend does (`src/accel.rs` and
+// obvhs 0.4 `Bvh2::ray_traverse_dynamic`) so that both find the same hits:
+// the same ray-box slab test on `safe_inverse(dir)`, the nearer child first,
+// the same Möller–Trumbore formulation, the same strict `t < tmax` rules,
+// the static BVH before the dynamic one with one shrinking `tmax`.
+
+/// Work items per workgroup. Must match `WORKGROUP_SIZE` in
+/// `src/backend/gpu.rs`. 64 fills a warp/wavefront twice over on real GPUs
+/// and is well under lavapipe's 1024 invocations per workgroup.
+const WORKGROUP_SIZE: u32 = 64u;
+
+/// Entries of the per-ray traversal stack. Must match `STACK_SIZE` in
+/// `src/backend/gpu.rs`, which refuses BVHs deeper than this (a BVH2 of
+/// depth d needs at most d entries). obvhs's PLOC builds of millions of
+/// triangles stay well under it.
+const STACK_SIZE: u32 = 64u;
+
+/// "No node / no triangle": the root of an empty BVH, the id of a miss.
+const NONE: u32 = 0xffffffffu;
+
+/// `f32::EPSILON` (2⁻²³): obvhs `safe_inverse` treats direction components
+/// at most this small as ±EPSILON, so that 1/dir stays finite.
+const F32_EPSILON: f32 = 1.1920929e-7;
+
+/// Relative widening of every ray-box interval: 2γ₃ (γₙ = nε/(1−nε),
+/// ε = 2⁻²⁴; pbrt-v4 §6.8.2). The CPU's compressed wide BVH rounds its boxes
+/// outward; our exact BVH2 boxes are flat for axis-aligned walls, where a
+/// rounding error in the slab test could otherwise cull a triangle the CPU
+/// hits. Widening only ever visits more nodes, it never changes a hit.
+const BOX_SLACK: f32 = 3.58e-7;
+
+/// Parameters of one dispatch (one chunk of rays).
+/// Field order must match `GpuParams` in `src/backend/gpu.rs`.
+struct Params {
+    /// Rays in this chunk.
+    ray_count: u32,
+    /// Work items per row of the 2D dispatch (workgroups in x × WORKGROUP_SIZE).
+    row_width: u32,
+    /// Root node of the static BVH, or NONE when there are no static triangles.
+    static_root: u32,
+    /// Root node of the dynamic BVH, or NONE.
+    dynamic_root: u32,
+}
+
+/// A ray as the methods build it. Field order must match `Ray` in
+/// `src/backend/mod.rs` (32 bytes: vec3 + f32 pack into 16).
+struct Ray {
+    origin: vec3<f32>,
+    tmin: f32,
+    dir: vec3<f32>,
+    tmax: f32,
+}
+
+/// obvhs `Bvh2Node` with vec4-sized fields (48 bytes). Field order must
+/// match `GpuNode` in `src/backend/gpu.rs`. Inner node: `prim_count == 0`,
+/// children at `first_index` and `first_index + 1`. Leaf: triangles
+/// `first_index .. first_index + prim_count` of `triangles`.
+struct Node {
+    aabb_min: vec3<f32>,
+    _pad0: u32,
+    aabb_max: vec3<f32>,
+    _pad1: u32,
+    prim_count: u32,
+    first_index: u32,
+    _pad2: u32,
+    _pad3: u32,
+}
+
+/// A triangle in BVH leaf order with the ids the hit reports (48 bytes).
+/// Field order must match `GpuTriangle` in `src/backend/gpu.rs`.
+struct Triangle {
+    v0: vec3<f32>,
+    /// Snapshot triangle id.
+    id: u32,
+    v1: vec3<f32>,
+    /// Object id.
+    object: u32,
+    v2: vec3<f32>,
+    _pad: u32,
+}
+
+/// Closest hit. Field order must match `Hit` in `src/backend/mod.rs`
+/// (20 bytes, array stride 20).
+struct Hit {
+    t: f32,
+    triangle: u32,
+    object: u32,
+    u: f32,
+    v: f32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> rays: array<Ray>;
+@group(0) @binding(2) var<storage, read> nodes: array<Node>;
+@group(0) @binding(3) var<storage, read> triangles: array<Triangle>;
+// Binding 4 (the results) is declared by each stage.
+
+/// A ray prepared for traversal, as obvhs `Ray::new` prepares it.
+struct TraceRay {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    inv_dir: vec3<f32>,
+    tmin: f32,
+}
+
+/// obvhs `safe_inverse`: 1/x, or ±1/EPSILON (sign of x, −0 counts as
+/// negative like Rust's `signum`) when |x| ≤ EPSILON.
+fn safe_inverse(x: f32) -> f32 {
+    if abs(x) <= F32_EPSILON {
+        let negative = (bitcast<u32>(x) & 0x80000000u) != 0u;
+        return select(1.0, -1.0, negative) / F32_EPSILON;
+    }
+    return 1.0 / x;
+}
+
+fn trace_ray(ray: Ray) -> TraceRay {
+    let inv = vec3<f32>(safe_inverse(ray.dir.x), safe_inverse(ray.dir.y), safe_inverse(ray.dir.z));
+    return TraceRay(ray.origin, ray.dir, inv, ray.tmin);
+}
+
+/// +∞, written to `Hit::t` on a miss (`Hit::MISS`).
+fn infinity() -> f32 {
+    return bitcast<f32>(0x7f800000u);
+}
+
+/// obvhs `Aabb::intersect_ray`: entry distance of the ray into the box, or
+/// +∞ when it misses (the interval is widened by BOX_SLACK).
+fn intersect_box(node: Node, ray: TraceRay) -> f32 {
+    let t1 = (node.aabb_min - ray.origin) * ray.inv_dir;
+    let t2 = (node.aabb_max - ray.origin) * ray.inv_dir;
+    let lo = min(t1, t2);
+    let hi = max(t1, t2);
+    var t_near = max(max(lo.x, lo.y), lo.z);
+    var t_far = min(min(hi.x, hi.y), hi.z);
+    t_near = t_near - abs(t_near) * BOX_SLACK;
+    t_far = t_far + abs(t_far) * BOX_SLACK;
+    if t_far >= t_near && t_far >= 0.0 {
+        return t_near;
+    }
+    return infinity();
+}
+
+/// Möller–Trumbore in the formulation of `intersect_triangle` in
+/// `src/accel.rs`: returns (t, u, v) with the hit at
+/// `v0·(1−u−v) + v1·u + v2·v`, or t = +∞ when the ray misses the triangle or
+/// t falls outside [tmin, tmax]. Rays in the triangle's plane never hit.
+fn intersect_triangle(tri: Triangle, ray: TraceRay, tmax: f32) -> vec3<f32> {
+    let miss = vec3<f32>(infinity(), 0.0, 0.0);
+    let e1 = tri.v0 - tri.v1;
+    let e2 = tri.v2 - tri.v0;
+    let n = cross(e1, e2);
+    let c = tri.v0 - ray.origin;
+    let r = cross(ray.dir, c);
+    let det = dot(n, ray.dir);
+    if det == 0.0 {
+        return miss;
+    }
+    let inv_det = 1.0 / det;
+    let u = dot(r, e2) * inv_det;
+    let v = dot(r, e1) * inv_det;
+    if u < 0.0 || v < 0.0 || u + v > 1.0 {
+        return miss;
+    }
+    let t = dot(n, c) * inv_det;
+    if t >= ray.tmin && t <= tmax {
+        return vec3<f32>(t, u, v);
+    }
+    return miss;
+}
+
+/// Nearest hit in the leaf closer than `best.t` (strictly, as the CPU).
+fn closest_in_leaf(node: Node, ray: TraceRay, best: ptr<function, Hit>) {
+    for (var i = node.first_index; i < node.first_index + node.prim_count; i++) {
+        let tri = triangles[i];
+        let h = intersect_triangle(tri, ray, (*best).t);
+        if h.x < (*best).t {
+            *best = Hit(h.x, tri.id, tri.object, h.y, h.z);
+        }
+    }
+}
+
+/// Closest hit in the BVH rooted at `root` closer than `best.t`; updates
+/// `best`. obvhs `Bvh2::ray_traverse_dynamic` with `ray_traverse`'s leaf test.
+fn traverse_closest(root: u32, ray: TraceRay, best: ptr<function, Hit>) {
+    if root == NONE {
+        return;
+    }
+    let root_node = nodes[root];
+    if !(intersect_box(root_node, ray) < (*best).t) {
+        return;
+    }
+    if root_node.prim_count > 0u {
+        closest_in_leaf(root_node, ray, best);
+        return;
+    }
+    var stack: array<u32, STACK_SIZE>;
+    var sp = 0u;
+    var current = root_node.first_index;
+    loop {
+        var near = nodes[current];
+        var far = nodes[current + 1u];
+        var t_near = intersect_box(near, ray);
+        var t_far = intersect_box(far, ray);
+        if t_near > t_far {
+            let n = near;
+            near = far;
+            far = n;
+            let t = t_near;
+            t_near = t_far;
+            t_far = t;
+        }
+        var go_near = t_near < (*best).t;
+        if go_near && near.prim_count > 0u {
+            closest_in_leaf(near, ray, best);
+            go_near = false;
+        }
+        var go_far = t_far < (*best).t;
+        if go_far && far.prim_count > 0u {
+            closest_in_leaf(far, ray, best);
+            go_far = false;
+        }
+        if go_near && go_far {
+            current = near.first_index;
+            stack[sp] = far.first_index;
+            sp += 1u;
+        } else if go_near {
+            current = near.first_index;
+        } else if go_far {
+            current = far.first_index;
+        } else {
+            if sp == 0u {
+                break;
+            }
+            sp -= 1u;
+            current = stack[sp];
+        }
+    }
+}
+
+/// Whether the leaf has a triangle hit in [tmin, tmax).
+fn any_in_leaf(node: Node, ray: TraceRay, tmax: f32) -> bool {
+    for (var i = node.first_index; i < node.first_index + node.prim_count; i++) {
+        let h = intersect_triangle(triangles[i], ray, tmax);
+        if h.x < tmax {
+            return true;
+        }
+    }
+    return false;
+}
+
+/// Whether anything in the BVH rooted at `root` hits the ray in
+/// [tmin, tmax). obvhs `Bvh2::ray_traverse_miss`, negated.
+fn traverse_any(root: u32, ray: TraceRay, tmax: f32) -> bool {
+    if root == NONE {
+        return false;
+    }
+    let root_node = nodes[root];
+    if !(intersect_box(root_node, ray) < tmax) {
+        return false;
+    }
+    if root_node.prim_count > 0u {
+        return any_in_leaf(root_node, ray, tmax);
+    }
+    var stack: array<u32, STACK_SIZE>;
+    var sp = 0u;
+    var current = root_node.first_index;
+    loop {
+        var near = nodes[current];
+        var far = nodes[current + 1u];
+        var t_near = intersect_box(near, ray);
+        var t_far = intersect_box(far, ray);
+        if t_near > t_far {
+            let n = near;
+            near = far;
+            far = n;
+            let t = t_near;
+            t_near = t_far;
+            t_far = t;
+        }
+        var go_near = t_near < tmax;
+        if go_near && near.prim_count > 0u {
+            if any_in_leaf(near, ray, tmax) {
+                return true;
+            }
+            go_near = false;
+        }
+        var go_far = t_far < tmax;
+        if go_far && far.prim_count > 0u {
+            if any_in_leaf(far, ray, tmax) {
+                return true;
+            }
+            go_far = false;
+        }
+        if go_near && go_far {
+            current = near.first_index;
+            stack[sp] = far.first_index;
+            sp += 1u;
+        } else if go_near {
+            current = near.first_index;
+        } else if go_far {
+            current = far.first_index;
+        } else {
+            if sp == 0u {
+                return false;
+            }
+            sp -= 1u;
+            current = stack[sp];
+        }
+    }
+    return false;
+}
+
+/// Index of the ray this work item traces in a 2D dispatch, or NONE past
+/// the end of the chunk.
+fn ray_index(id: vec3<u32>) -> u32 {
+    let i = id.y * params.row_width + id.x;
+    return select(NONE, i, i < params.ray_count);
+}

@@ -1,0 +1,23 @@
+// Stage "closest hit": for each ray of the chunk, the nearest triangle in
+// [tmin, tmax) over the static then the dynamic BVH, or a miss.
+// Prepended with `bvh2_traverse.wgsl` by `src/backend/gpu.rs`.
+
+@group(0) @binding(4) var<storage, read_write> hits: array<Hit>;
+
+@compute @workgroup_size(WORKGROUP_SIZE)
+fn closest_hit(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = ray_index(id);
+    if i == NONE {
+        return;
+    }
+    let ray = rays[i];
+    let r = trace_ray(ray);
+    // `best.t` is the shrinking tmax shared by both BVHs, as on the CPU.
+    var best = Hit(ray.tmax, NONE, NONE, 0.0, 0.0);
+    traverse_closest(params.static_root, r, &best);
+    traverse_closest(params.dynamic_root, r, &best);
+    if best.triangle == NONE {
+        best = Hit(infinity(), NONE, NONE, 0.0, 0.0);
+    }
+    hits[i] = best;
+}

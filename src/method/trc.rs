@@ -1,0 +1,605 @@
+//! `trc`: temporal radiance caching (Gautron, Bouatouch & Pattanaik,
+//! "Temporal Radiance Caching", IEEE TVCG 2007 —
+//! `papers/temporal-radiance-caching-tvcg2007.md`, §4–5), built on the
+//! per-frame irradiance cache of [`super::ic`].
+//!
+//! Records live across frames (TRC Algorithm 1). When a record K is gathered
+//! at frame t0, its incoming light at t0+1 is estimated by reprojecting its
+//! hemisphere samples (§4.7, [`reproject`]); the ratio `τ = E(t0+1)/E(t0)`
+//! sets how many frames K may be used (Eq. 9–11) and the difference gives
+//! its extrapolated temporal gradients (Eq. 15–17), applied at lookup by
+//! Eq. 14. Each frame:
+//! 1. *age records*: a record still valid is reused; one that is no longer
+//!    valid but contributed to the previous frame is replaced by a new
+//!    record gathered at the same point (§4.4, "p_l = p_K"); one that
+//!    contributed to no pixel is dropped (§5, "Replacement/deletion
+//!    method": no trail of records behind moving objects);
+//! 2. *fill*: `ic`'s fill stage adds records where none is usable;
+//! 3. *render*: `ic`'s render pass, flagging every record a pixel sample
+//!    used (our stand-in for the paper's occlusion query).
+//!
+//! Everything spatial — candidates, gathering, weights, gradients,
+//! neighbour clamping, direct light, glossy lobes — is `ic`'s code.
+
+use super::ic::IrradianceCaching;
+use super::ic::{primary_candidates, render_pass, scene_bounds, Candidate, Gathered, IcSettings};
+use super::{FrameContext, FrameStats, Method};
+use crate::backend::Hit;
+use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance, HemisphereSamples};
+use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
+use crate::film::Film;
+use crate::sampling::Frame;
+use crate::scene::Snapshot;
+use glam::{Mat4, Vec3};
+use std::f32::consts::{PI, TAU};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// Temporal gradients (TRC §4.5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum TemporalGradients {
+    /// A record's value is constant over its life (Fig. 4c).
+    None,
+    /// Extrapolated from the estimate of E(t0+1), Eq. 15–17 (Fig. 4d).
+    #[default]
+    Extrapolated,
+}
+
+/// Settings of `trc`, with their sources.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrcSettings {
+    /// Everything spatial: accuracy `a`, strata, spp, spacing, spatial
+    /// gradients, path lengths (see [`IcSettings`]).
+    pub ic: IcSettings,
+    /// Temporal accuracy `a^t` (Eq. 10): K is used at t while
+    /// `w_t(t) ≥ 1/a^t`. The paper's examples use 0.05 (§6).
+    pub temporal_accuracy: f32,
+    /// `δt_max` (Eq. 11): K is used at t only while `t − t0 < δt_max`. The
+    /// paper's examples use 20 frames (§6); 1 gives per-frame computation.
+    pub max_life: u32,
+    pub gradients: TemporalGradients,
+    /// Estimate E(t0+1) by reprojection (§4.7); off: E(t0+1) = E(t0), the
+    /// "no reprojection" column of Table 1 (then every record lives
+    /// `δt_max` frames).
+    pub reprojection: bool,
+}
+
+impl Default for TrcSettings {
+    fn default() -> Self {
+        TrcSettings {
+            ic: IcSettings::default(),
+            temporal_accuracy: 0.05,
+            max_life: 20,
+            gradients: TemporalGradients::default(),
+            reprojection: true,
+        }
+    }
+}
+
+/// A record with its life (TRC §4.4–4.5).
+#[derive(Clone, Debug)]
+pub struct TemporalRecord {
+    /// The record as gathered at `t0 = record.created_frame` (its radius as
+    /// clamped by the latest cache it was in).
+    pub record: IrradianceRecord,
+    /// Where it was gathered (kept for replacement at the same point).
+    pub(crate) candidate: Candidate,
+    /// Estimate of `E(t0+1)` (§4.7).
+    pub next_irradiance: Vec3,
+    /// Worst channel of `|τ − 1|`, `τ = E(t0+1)/E(t0)` (Eq. 7, 9).
+    pub change: f32,
+    /// Last frame K may contribute to (Eq. 10 and 11).
+    pub last_valid: u32,
+    /// Extrapolated temporal gradients ∇t_E, ∇t_∇r, ∇t_∇p (Eq. 15–17).
+    pub d_irradiance: Vec3,
+    pub d_grad_rotation: [Vec3; 3],
+    pub d_grad_translation: [Vec3; 3],
+    /// The record this one replaced at the same point, if any.
+    pub replaces: Option<RecordId>,
+    /// Whether a pixel sample used K in the last rendered frame.
+    pub used: bool,
+}
+
+impl TemporalRecord {
+    /// TRC Eq. 14: the record as it is used at frame `t` (temporal
+    /// gradients applied to E and to both spatial gradients).
+    fn at_frame(&self, t: u32, gradients: TemporalGradients) -> IrradianceRecord {
+        let mut r = self.record.clone();
+        if gradients == TemporalGradients::Extrapolated {
+            let dt = t.saturating_sub(r.created_frame) as f32;
+            r.irradiance = (r.irradiance + self.d_irradiance * dt).max(Vec3::ZERO);
+            for c in 0..3 {
+                r.grad_rotation[c] += self.d_grad_rotation[c] * dt;
+                r.grad_translation[c] += self.d_grad_translation[c] * dt;
+            }
+        }
+        r
+    }
+
+    /// TRC Eq. 9–11: `w_t(t) = 1/((τ−1)(t−t0)) ≥ 1/a^t` and `t − t0 < δt_max`.
+    pub fn is_valid_at(&self, t: u32) -> bool {
+        t >= self.record.created_frame && t <= self.last_valid
+    }
+}
+
+/// Random streams of replacement gathers, apart from the pixels' streams.
+const REPLACE_STREAM: u64 = 1 << 61;
+
+pub struct TemporalRadianceCaching {
+    pub settings: TrcSettings,
+    ic: IrradianceCaching,
+    records: Vec<TemporalRecord>,
+    last_frame: Option<u32>,
+    next_id: RecordId,
+    stats: FrameStats,
+}
+
+impl TemporalRadianceCaching {
+    pub fn new(settings: TrcSettings) -> Self {
+        TemporalRadianceCaching {
+            ic: IrradianceCaching::new(settings.ic.clone()),
+            settings,
+            records: Vec::new(),
+            last_frame: None,
+            next_id: 0,
+            stats: FrameStats::default(),
+        }
+    }
+
+    /// The records alive after the last frame, in cache order.
+    pub fn records(&self) -> &[TemporalRecord] {
+        &self.records
+    }
+
+    /// Gathers again, in the frame of `ctx`, at the points of `records`
+    /// with the random streams each was first gathered with: the actual
+    /// `E(t)` to compare with an estimate (TRC Table 1).
+    pub fn regather(&self, ctx: &FrameContext, records: &[TemporalRecord]) -> Vec<Vec3> {
+        use rayon::prelude::*;
+        records
+            .iter()
+            .map(|r| {
+                let c = [r.candidate];
+                let g: Vec<Gathered> = self
+                    .ic
+                    .gather_parallel(ctx, &c, r.record.created_frame)
+                    .collect();
+                g[0].record.irradiance
+            })
+            .collect()
+    }
+
+    /// TRC §4.4–4.7 for a record just gathered at `ctx.frame`: estimate
+    /// E(t0+1), derive τ, lifespan and temporal gradients.
+    fn temporal(&self, ctx: &FrameContext, next: &NextFrame, g: &Gathered) -> TemporalRecord {
+        let strata = self.settings.ic.strata;
+        let e0 = g.record.irradiance;
+        let next_gather = if self.settings.reprojection {
+            let samples = reproject(ctx.snapshot, next, g, strata.theta, strata.phi);
+            irradiance_and_gradients(&samples, g.record.normal, strata)
+        } else {
+            GatheredIrradiance {
+                irradiance: e0,
+                grad_translation: g.record.grad_translation,
+                grad_rotation: g.record.grad_rotation,
+                harmonic_distance: 0.0,
+            }
+        };
+        let e1 = next_gather.irradiance;
+        // Eq. 7: τ = E1/E0 per channel; the worst channel decides.
+        let change = (0..3)
+            .map(|c| {
+                let (a, b) = (e0[c], e1[c]);
+                if a > 0.0 {
+                    (b / a - 1.0).abs()
+                } else if b > 0.0 {
+                    f32::INFINITY
+                } else {
+                    0.0
+                }
+            })
+            .fold(0.0f32, f32::max);
+        // Eq. 9–10: 1/(|τ−1|(t−t0)) ≥ 1/a^t ⇔ t − t0 ≤ a^t/|τ−1|;
+        // Eq. 11: t − t0 < δt_max.
+        let max_age = self.settings.max_life.max(1) - 1;
+        let age = if change > 0.0 {
+            let a = (self.settings.temporal_accuracy / change).floor();
+            if a.is_finite() {
+                (a as u32).min(max_age)
+            } else {
+                max_age
+            }
+        } else {
+            max_age
+        };
+        let sub = |a: [Vec3; 3], b: [Vec3; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        TemporalRecord {
+            record: g.record.clone(),
+            candidate: g.candidate,
+            next_irradiance: e1,
+            change,
+            last_valid: ctx.frame + age,
+            // Eq. 15–17 (t1 − t0 = 1).
+            d_irradiance: e1 - e0,
+            d_grad_rotation: sub(next_gather.grad_rotation, g.record.grad_rotation),
+            d_grad_translation: sub(next_gather.grad_translation, g.record.grad_translation),
+            replaces: None,
+            used: false,
+        }
+    }
+}
+
+impl Method for TemporalRadianceCaching {
+    fn name(&self) -> &'static str {
+        "trc"
+    }
+
+    fn render_frame(&mut self, ctx: &FrameContext) -> Film {
+        let t = ctx.frame;
+        let gradients = self.settings.gradients;
+        let mut stats = FrameStats {
+            frame: t,
+            ..FrameStats::default()
+        };
+        let start = Instant::now();
+        let next = NextFrame::new(ctx);
+        let (min, max) = scene_bounds(ctx);
+        let mut cache = IrradianceCache::new(min, max, self.settings.ic.accuracy);
+
+        // Age records (TRC Algorithm 1 and §4.4, §5 replacement/deletion).
+        let follows = self.last_frame.is_some_and(|f| f + 1 == t);
+        let mut alive = Vec::with_capacity(self.records.len());
+        let mut replace = Vec::new();
+        for r in std::mem::take(&mut self.records) {
+            if r.is_valid_at(t) {
+                stats.records_reused += 1;
+                cache.insert_as_is(r.at_frame(t, gradients));
+                alive.push(r);
+            } else if follows && r.used {
+                replace.push(r);
+            } else {
+                stats.records_dropped += 1;
+            }
+        }
+        // Replacement at the same location (§4.4: p_l = p_K), inserted
+        // whether or not another record covers the point.
+        let candidates: Vec<Candidate> = replace
+            .iter()
+            .map(|r| Candidate {
+                stream: REPLACE_STREAM | r.record.id,
+                ..r.candidate
+            })
+            .collect();
+        let gathered: Vec<TemporalRecord> = {
+            use rayon::prelude::*;
+            self.ic
+                .gather_parallel(ctx, &candidates, t)
+                .map(|g| self.temporal(ctx, &next, &g))
+                .collect()
+        };
+        for (mut new, old) in gathered.into_iter().zip(&replace) {
+            new.replaces = Some(old.record.id);
+            cache.insert(new.at_frame(t, gradients));
+            alive.push(new);
+            stats.records_replaced += 1;
+        }
+        stats
+            .phase_seconds
+            .push(("age".into(), start.elapsed().as_secs_f64()));
+
+        // New records where nothing is usable (`ic`'s fill stage).
+        let start = Instant::now();
+        let pixels = primary_candidates(ctx);
+        let mut created = Vec::new();
+        self.ic.fill_from(
+            ctx,
+            &mut cache,
+            &pixels,
+            |g| self.temporal(ctx, &next, g),
+            &mut created,
+        );
+        stats.records_created = created.len() as u64;
+        alive.extend(created);
+        stats
+            .phase_seconds
+            .push(("fill".into(), start.elapsed().as_secs_f64()));
+
+        let start = Instant::now();
+        let used: Vec<AtomicBool> = (0..cache.len()).map(|_| AtomicBool::new(false)).collect();
+        let film = render_pass(ctx, &cache, &self.settings.ic, Some(&used), &mut stats);
+        stats
+            .phase_seconds
+            .push(("render".into(), start.elapsed().as_secs_f64()));
+
+        // Keep the records with the radii neighbour clamping gave them.
+        debug_assert_eq!(alive.len(), cache.len());
+        for ((r, in_cache), used) in alive.iter_mut().zip(cache.records()).zip(&used) {
+            r.record.radius = in_cache.radius;
+            r.used = used.load(Ordering::Relaxed);
+            if r.record.created_frame == t {
+                r.record.id = self.next_id;
+                self.next_id += 1;
+            }
+        }
+        stats.records_alive = alive.len() as u64;
+        self.records = alive;
+        self.last_frame = Some(t);
+        self.stats = stats;
+        film
+    }
+
+    fn last_frame_stats(&self) -> FrameStats {
+        self.stats.clone()
+    }
+}
+
+/// What changes from this frame to the next (TRC §5: "the transformation
+/// matrix … at time t+1 is known"; "such matrices are available for light
+/// sources as well").
+struct NextFrame {
+    /// Per object, its rigid motion from t to t+1 (`Scene::object_motion`,
+    /// from the two snapshots' transforms); `None` when it does not move.
+    motion: Vec<Option<Mat4>>,
+    /// The lights at t and t+1, when some light moves.
+    lights: Option<(Vec<Emitter>, Vec<Emitter>)>,
+}
+
+/// A light reduced to what the unshadowed direct-light ratio needs.
+#[derive(Clone, Copy, Debug)]
+enum Emitter {
+    /// An emissive triangle: centroid, unit normal, `L_e · area`.
+    Area {
+        center: Vec3,
+        normal: Vec3,
+        power: Vec3,
+        double_sided: bool,
+    },
+    /// A punctual light.
+    Point(crate::scene::PointLight),
+}
+
+impl NextFrame {
+    fn new(ctx: &FrameContext) -> Self {
+        let now = ctx.snapshot;
+        let later = ctx.scene.snapshot(ctx.time_of(ctx.frame + 1));
+        let motion = now
+            .object_to_world
+            .iter()
+            .zip(&later.object_to_world)
+            .map(|(w0, w1)| {
+                let m = *w1 * w0.inverse();
+                (!m.abs_diff_eq(Mat4::IDENTITY, 1e-7)).then_some(m)
+            })
+            .collect();
+        let (l0, l1) = (emitters(ctx, now), emitters(ctx, &later));
+        NextFrame {
+            motion,
+            lights: (!same_lights(&l0, &l1)).then_some((l0, l1)),
+        }
+    }
+}
+
+/// Whether two frames' lights are in the same places.
+fn same_lights(a: &[Emitter], b: &[Emitter]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|pair| match pair {
+            (
+                Emitter::Area {
+                    center: c0,
+                    normal: n0,
+                    power: p0,
+                    ..
+                },
+                Emitter::Area {
+                    center: c1,
+                    normal: n1,
+                    power: p1,
+                    ..
+                },
+            ) => c0 == c1 && n0 == n1 && p0 == p1,
+            (Emitter::Point(l0), Emitter::Point(l1)) => {
+                l0.position == l1.position
+                    && l0.direction == l1.direction
+                    && l0.intensity == l1.intensity
+            }
+            _ => false,
+        })
+}
+
+fn emitters(ctx: &FrameContext, snapshot: &Snapshot) -> Vec<Emitter> {
+    let mut out = Vec::new();
+    for (tri, &m) in snapshot.triangles.iter().zip(&snapshot.tri_material) {
+        let m = &ctx.scene.materials[m as usize];
+        if m.is_emissive() && tri.area() > 0.0 {
+            out.push(Emitter::Area {
+                center: (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0,
+                normal: tri.geometric_normal(),
+                power: m.emission * tri.area(),
+                double_sided: m.double_sided,
+            });
+        }
+    }
+    out.extend(snapshot.lights.iter().map(|l| Emitter::Point(*l)));
+    out
+}
+
+/// Unshadowed direct irradiance at `p` (normal `n`) from `lights`, each
+/// area light taken as a point at its triangles' centroids.
+fn direct_irradiance(lights: &[Emitter], p: Vec3, n: Vec3) -> Vec3 {
+    let mut e = Vec3::ZERO;
+    for l in lights {
+        match *l {
+            Emitter::Area {
+                center,
+                normal,
+                power,
+                double_sided,
+            } => {
+                let d = center - p;
+                let d2 = d.length_squared().max(1e-8);
+                let w = d / d2.sqrt();
+                let cos_l = -normal.dot(w);
+                let cos_l = if double_sided { cos_l.abs() } else { cos_l };
+                e += power * (cos_l.max(0.0) * n.dot(w).max(0.0) / d2);
+            }
+            Emitter::Point(light) => {
+                let d = light.position - p;
+                let d2 = d.length_squared().max(1e-8);
+                let w = d / d2.sqrt();
+                e += light.intensity_toward(-w) * (n.dot(w).max(0.0) / d2);
+            }
+        }
+    }
+    e
+}
+
+/// TRC §4.7 (Fig. 6): the record's hemisphere samples at t0 moved to
+/// t0+1. The record stays where it is (§4.4: record locations are fixed in
+/// world space, also on dynamic objects). Each sample's first hit moves
+/// with its object (static hits and misses stay), is projected back onto
+/// the record's stratified hemisphere (its cell `(j, k)` from
+/// `sin²θ` and `φ`, as in `cache::gather`), overlaps are resolved by a
+/// depth test (nearest wins), and empty cells are filled from the farthest
+/// neighbouring sample (the local background, Walter et al. 1999), pass
+/// after pass until none is left. Moving lights: each sample's radiance is
+/// scaled by the ratio of unshadowed direct irradiance at its hit point
+/// after and before ("accounting for the rotation and displacement of both
+/// objects and light sources"): shadowing is assumed unchanged and the hit's
+/// own indirect light assumed to scale with its direct light.
+fn reproject(
+    snapshot: &Snapshot,
+    next: &NextFrame,
+    g: &Gathered,
+    m: u32,
+    n: u32,
+) -> HemisphereSamples {
+    let (m, n) = (m as usize, n as usize);
+    let s = &g.samples;
+    let origin = g.record.position;
+    let frame = Frame::new(g.record.normal);
+    // (depth, radiance, object) per cell.
+    let mut cells: Vec<Option<(f32, Vec3, u32)>> = vec![None; m * n];
+    let mut own = s.radiance.clone();
+    #[allow(clippy::needless_range_loop)] // i indexes five parallel arrays
+    for i in 0..s.radiance.len() {
+        let (dir, dist, object) = (s.direction[i].normalize(), s.distance[i], s.object[i]);
+        let mut radiance = s.radiance[i];
+        let motion = next
+            .motion
+            .get(object as usize)
+            .copied()
+            .flatten()
+            .filter(|_| dist.is_finite());
+        let hit_point = origin + dir * dist;
+        let (cell, depth, moved) = match motion {
+            Some(mat) => {
+                let moved = mat.transform_point3(hit_point);
+                let d = moved - origin;
+                let depth = d.length();
+                let local = frame.to_local(d / depth.max(1e-12));
+                if !(local.z > 0.0 && depth > 0.0) {
+                    continue; // moved below the record's horizon
+                }
+                // The sample's displacement in (sin²θ, φ) is applied to the
+                // centre of its cell: samples of one rigidly moving surface
+                // then move together, where their jittered positions would
+                // collide and leave holes inside the surface.
+                let before = frame.to_local(dir);
+                let (j0, k0) = (i / n, i % n);
+                let du = before.z * before.z - local.z * local.z;
+                let dphi =
+                    (local.y.atan2(local.x) - before.y.atan2(before.x) + PI).rem_euclid(TAU) - PI;
+                let u = (j0 as f32 + 0.5) / m as f32 + du;
+                if u >= 1.0 {
+                    continue; // below the horizon
+                }
+                let phi = ((k0 as f32 + 0.5) / n as f32 * TAU + dphi).rem_euclid(TAU);
+                let j = ((u.max(0.0) * m as f32) as usize).min(m - 1);
+                let k = ((phi / TAU * n as f32) as usize).min(n - 1);
+                (j * n + k, depth, Some((mat, moved)))
+            }
+            None => (i, dist, None),
+        };
+        if let (Some((l0, l1)), Some(hit)) = (&next.lights, g.hits.get(i).filter(|h| h.is_hit())) {
+            radiance *= light_ratio(snapshot, hit, dir, hit_point, moved, l0, l1);
+        }
+        own[i] = radiance;
+        if cells[cell].is_none_or(|(d, _, _)| depth < d) {
+            cells[cell] = Some((depth, radiance, object));
+        }
+    }
+    // A cell that still sees the object its own sample saw keeps its own
+    // sample: our cells hold one path-traced sample each, and passing
+    // samples between cells of one surface would only reshuffle Monte
+    // Carlo noise (the paper's rasterized hemispheres have none).
+    for (i, cell) in cells.iter_mut().enumerate() {
+        if let Some(c) = cell.as_mut().filter(|c| c.2 == s.object[i]) {
+            c.1 = own[i];
+        }
+    }
+    // Hole filling from the farthest neighbour (Fig. 6d).
+    while cells.iter().any(Option::is_none) {
+        let before = cells.clone();
+        for j in 0..m {
+            for k in 0..n {
+                if before[j * n + k].is_some() {
+                    continue;
+                }
+                let mut best: Option<(f32, Vec3, u32)> = None;
+                for dj in [-1i64, 0, 1] {
+                    let jj = j as i64 + dj;
+                    if jj < 0 || jj >= m as i64 {
+                        continue;
+                    }
+                    for dk in [n - 1, 0, 1] {
+                        let kk = (k + dk) % n;
+                        if let Some(c) = before[jj as usize * n + kk] {
+                            if best.is_none_or(|b| c.0 > b.0) {
+                                best = Some(c);
+                            }
+                        }
+                    }
+                }
+                cells[j * n + k] = best;
+            }
+        }
+        if cells == before {
+            break; // nothing left above the horizon
+        }
+    }
+    HemisphereSamples {
+        direction: s.direction.clone(),
+        radiance: cells
+            .iter()
+            .map(|c| c.map_or(Vec3::ZERO, |c| c.1))
+            .collect(),
+        distance: cells
+            .iter()
+            .map(|c| c.map_or(f32::INFINITY, |c| c.0))
+            .collect(),
+        object: s.object.clone(),
+    }
+}
+
+/// Per channel `D(t0+1)/D(t0)` of the unshadowed direct irradiance at a
+/// sample's hit point (moved with its object), 1 where `D(t0)` is zero.
+fn light_ratio(
+    snapshot: &Snapshot,
+    hit: &Hit,
+    dir: Vec3,
+    p0: Vec3,
+    moved: Option<(Mat4, Vec3)>,
+    l0: &[Emitter],
+    l1: &[Emitter],
+) -> Vec3 {
+    let mut n0 = snapshot.triangles[hit.triangle as usize].geometric_normal();
+    if n0.dot(dir) > 0.0 {
+        n0 = -n0; // the side the record sees
+    }
+    let (p1, n1) = match moved {
+        Some((mat, p1)) => (p1, mat.transform_vector3(n0).normalize_or_zero()),
+        None => (p0, n0),
+    };
+    let (d0, d1) = (direct_irradiance(l0, p0, n0), direct_irradiance(l1, p1, n1));
+    Vec3::select(d0.cmpgt(Vec3::splat(1e-12)), d1 / d0, Vec3::ONE)
+}

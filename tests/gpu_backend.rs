@@ -1,0 +1,490 @@
+//! The GPU ray backend against the CPU one: the same hits on random triangle
+//! soups with moving objects and on every built-in scene, and the same
+//! path-traced frame.
+//!
+//! These tests need a wgpu adapter. Machines without a GPU use Mesa's
+//! software Vulkan driver (lavapipe), which `.ci/run` installs; without any
+//! adapter the tests FAIL (they do not skip), saying what to install.
+//!
+//! Parity rules (for the same rays, same geometry):
+//! - same hit/miss;
+//! - t within 1e-5 relative;
+//! - same triangle, except on an exact tie (two triangles at the same t,
+//!   |t_gpu − t_cpu| ≤ 1e-5·t, e.g. a shared edge) where the traversal
+//!   orders (BVH2 on the GPU, CWBVH on the CPU) may pick either; the object
+//!   may then differ too, and is otherwise equal;
+//! - barycentrics within 1e-4 when the triangle is the same;
+//! - any hit identical.
+
+mod common;
+
+use common::{inward_box, scene};
+use glam::{Quat, Vec3};
+use radcache::backend::cpu::CpuBackend;
+use radcache::backend::gpu::{AdapterPolicy, GpuBackend};
+use radcache::backend::{Hit, Ray, RayBackend};
+use radcache::method::path::{PathSettings, PathTracer};
+use radcache::render::{FrameSettings, Renderer};
+use radcache::sampling::Rng;
+use radcache::scene::animation::{linear_rotation, linear_translation};
+use radcache::scene::{builtin, Material, Mesh, Scene, Snapshot};
+
+/// Relative tolerance on t (and on ties).
+const T_REL: f32 = 1e-5;
+/// Absolute tolerance on barycentrics.
+const UV_ABS: f32 = 1e-4;
+/// The CPU's CWBVH traversal (obvhs 0.4 `CwBvhNode::intersect_ray`) culls
+/// every box the ray leaves before t = 1e-4 (its `EPSILON`), so the CPU
+/// misses some hits nearer than that, depending on how its wide nodes group
+/// the triangles. The GPU's BVH2 has no such cut and finds them. Only in
+/// that case may the GPU report a nearer hit (or an occlusion) the CPU lacks.
+const CPU_NEAR_CULL: f32 = 1e-4;
+/// At most this share of the rays may fall in that case.
+const MAX_NEAR_SHARE: f64 = 1e-3;
+
+fn gpu() -> GpuBackend {
+    match GpuBackend::new(AdapterPolicy::AllowSoftware) {
+        Ok(gpu) => gpu,
+        Err(e) => panic!(
+            "GPU backend unavailable: {e}. These tests need a wgpu adapter; on a machine \
+             without a GPU install Mesa's software Vulkan driver: \
+             apt-get install mesa-vulkan-drivers libvulkan1 (.ci/run does this)"
+        ),
+    }
+}
+
+fn rng(stream: u64) -> Rng {
+    Rng::from_seed(0x6770_755f_7465_7374, stream)
+}
+
+fn random_unit(rng: &mut Rng) -> Vec3 {
+    let z = 2.0 * rng.next_f32() - 1.0;
+    let phi = std::f32::consts::TAU * rng.next_f32();
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+fn random_in(rng: &mut Rng, min: Vec3, max: Vec3) -> Vec3 {
+    min + (max - min) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32())
+}
+
+fn bounds(snapshot: &Snapshot) -> (Vec3, Vec3) {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for t in &snapshot.triangles {
+        for p in t.p {
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    (lo, hi)
+}
+
+/// Ray sets of a snapshot: camera rays through random pixels, random
+/// incoherent rays inside the scene's bounds (infinite and finite), and
+/// secondary rays leaving the surfaces the camera rays hit, in random
+/// directions, with the path tracer's kind of offset; also shadow segments
+/// between hit points and random points.
+fn rays_for(snapshot: &Snapshot, cpu: &CpuBackend, n: usize, stream: u64) -> Vec<Ray> {
+    let mut rng = rng(stream);
+    let (lo, hi) = bounds(snapshot);
+    let pad = (hi - lo) * 0.05;
+    let cam = &snapshot.camera;
+    let mut rays = Vec::with_capacity(n);
+    let quarter = n / 4;
+    for _ in 0..quarter {
+        let (sx, sy) = (rng.next_f32(), rng.next_f32());
+        rays.push(Ray::new(
+            cam.position,
+            cam.direction(sx, sy, 1.5),
+            0.0,
+            f32::INFINITY,
+        ));
+    }
+    let camera_rays = rays.clone();
+    for i in 0..quarter {
+        let o = random_in(&mut rng, lo - pad, hi + pad);
+        let d = random_unit(&mut rng) * (0.5 + rng.next_f32());
+        let tmax = if i % 2 == 0 {
+            f32::INFINITY
+        } else {
+            rng.next_f32() * (hi - lo).length()
+        };
+        rays.push(Ray::new(o, d, 0.0, tmax));
+    }
+    let mut hits = vec![Hit::MISS; camera_rays.len()];
+    cpu.closest_hit(&camera_rays, &mut hits);
+    for (ray, hit) in camera_rays.iter().zip(&hits) {
+        if rays.len() >= n {
+            break;
+        }
+        if !hit.is_hit() {
+            continue;
+        }
+        let tri = &snapshot.triangles[hit.triangle as usize];
+        let p = tri.point(hit.u, hit.v);
+        let mut ng = tri.geometric_normal();
+        if ng.dot(ray.dir()) > 0.0 {
+            ng = -ng;
+        }
+        let origin = p + ng * 1e-4 * p.abs().max_element().max(1.0);
+        let mut d = random_unit(&mut rng);
+        if d.dot(ng) < 0.0 {
+            d = -d;
+        }
+        rays.push(Ray::new(origin, d, 0.0, f32::INFINITY));
+        if rays.len() < n {
+            // A shadow segment leaving on the same side, as a light sample's.
+            let mut e = random_unit(&mut rng);
+            if e.dot(ng) < 0.0 {
+                e = -e;
+            }
+            let to = origin + e * (hi - lo).length() * rng.next_f32();
+            rays.push(Ray::segment(origin, to));
+        }
+    }
+    while rays.len() < n {
+        let a = random_in(&mut rng, lo - pad, hi + pad);
+        let b = random_in(&mut rng, lo - pad, hi + pad);
+        rays.push(Ray::segment(a, b));
+    }
+    rays
+}
+
+#[derive(Debug, Default)]
+struct Parity {
+    rays: usize,
+    hits: usize,
+    /// Rays whose triangle differs on an exact tie.
+    ties: usize,
+    /// Rays whose t is not bit-identical (but within tolerance).
+    t_not_bitwise: usize,
+    /// Rays where the GPU found a hit nearer than `CPU_NEAR_CULL` that the
+    /// CPU's traversal culled (closest or any hit).
+    near_culled: usize,
+    max_t_rel: f32,
+    max_uv: f32,
+    occluded: usize,
+}
+
+/// Traces `rays` on both backends and checks the parity rules; `what`
+/// names the case in failure messages.
+fn check_parity(
+    what: &str,
+    cpu: &CpuBackend,
+    gpu: &GpuBackend,
+    snapshot: &Snapshot,
+    rays: &[Ray],
+) -> Parity {
+    let mut cpu_hits = vec![Hit::MISS; rays.len()];
+    let mut gpu_hits = vec![Hit::MISS; rays.len()];
+    cpu.closest_hit(rays, &mut cpu_hits);
+    gpu.try_closest_hit(rays, &mut gpu_hits)
+        .unwrap_or_else(|e| panic!("{what}: {e}"));
+    let mut p = Parity {
+        rays: rays.len(),
+        ..Parity::default()
+    };
+    let mut failures = Vec::new();
+    for (i, (c, g)) in cpu_hits.iter().zip(&gpu_hits).enumerate() {
+        if g.is_hit() && g.t < CPU_NEAR_CULL && (!c.is_hit() || g.t < c.t) {
+            p.near_culled += 1;
+            if p.near_culled <= 2 {
+                eprintln!("{what}: near ray {i} {:?} cpu {c:?} gpu {g:?}", rays[i]);
+            }
+            continue;
+        }
+        if c.is_hit() != g.is_hit() {
+            failures.push(format!("ray {i} {:?}: cpu {c:?}, gpu {g:?}", rays[i]));
+            continue;
+        }
+        if !c.is_hit() {
+            if g.t != f32::INFINITY || g.object != u32::MAX {
+                failures.push(format!("ray {i}: miss not MISS on the gpu: {g:?}"));
+            }
+            continue;
+        }
+        p.hits += 1;
+        let dt = (g.t - c.t).abs();
+        let rel = dt / c.t.abs().max(f32::MIN_POSITIVE);
+        p.max_t_rel = p.max_t_rel.max(rel);
+        if g.t.to_bits() != c.t.to_bits() {
+            p.t_not_bitwise += 1;
+        }
+        if dt > T_REL * c.t.abs() {
+            failures.push(format!(
+                "ray {i}: t cpu {} gpu {} ({c:?} / {g:?})",
+                c.t, g.t
+            ));
+            continue;
+        }
+        if c.triangle != g.triangle {
+            // A tie: the GPU's triangle must really be hit at the same t.
+            let tri = &snapshot.triangles[g.triangle as usize];
+            let q = tri.point(g.u, g.v);
+            let expected = rays[i].at(c.t);
+            let scale = expected.abs().max_element().max(1.0);
+            if (q - expected).length() > 1e-3 * scale {
+                failures.push(format!(
+                    "ray {i}: different triangles not at a tie: cpu {c:?}, gpu {g:?}"
+                ));
+            }
+            p.ties += 1;
+            continue;
+        }
+        if c.object != g.object {
+            failures.push(format!("ray {i}: object cpu {c:?} gpu {g:?}"));
+            continue;
+        }
+        let duv = (g.u - c.u).abs().max((g.v - c.v).abs());
+        p.max_uv = p.max_uv.max(duv);
+        if duv > UV_ABS {
+            failures.push(format!("ray {i}: barycentrics cpu {c:?} gpu {g:?}"));
+        }
+    }
+
+    let mut cpu_occ = vec![false; rays.len()];
+    let mut gpu_occ = vec![true; rays.len()];
+    cpu.any_hit(rays, &mut cpu_occ);
+    gpu.try_any_hit(rays, &mut gpu_occ)
+        .unwrap_or_else(|e| panic!("{what}: {e}"));
+    for (i, (c, g)) in cpu_occ.iter().zip(&gpu_occ).enumerate() {
+        if !c && *g && gpu_hits[i].is_hit() && gpu_hits[i].t < CPU_NEAR_CULL {
+            p.near_culled += 1;
+            continue;
+        }
+        if c != g {
+            failures.push(format!("ray {i} {:?}: any hit cpu {c} gpu {g}", rays[i]));
+        }
+    }
+    p.occluded = cpu_occ.iter().filter(|&&o| o).count();
+    if p.near_culled as f64 > MAX_NEAR_SHARE * rays.len() as f64 {
+        failures.push(format!(
+            "{} rays with a hit nearer than {CPU_NEAR_CULL} that only the GPU finds",
+            p.near_culled
+        ));
+    }
+    assert!(
+        failures.is_empty(),
+        "{what}: {} of {} rays differ; first ones:\n{}",
+        failures.len(),
+        rays.len(),
+        failures[..failures.len().min(10)].join("\n")
+    );
+    // Both results must mean something: most sets hit, some rays miss.
+    assert!(p.hits > 0, "{what}: no ray hit anything");
+    eprintln!("{what}: {p:?}");
+    p
+}
+
+/// A soup of `n` random triangles (sizes varying over two decades) in the
+/// box [lo, hi].
+fn soup(rng: &mut Rng, n: usize, lo: Vec3, hi: Vec3) -> Mesh {
+    let mut m = Mesh::default();
+    for _ in 0..n {
+        let c = random_in(rng, lo, hi);
+        let size = 0.02 * 10f32.powf(2.0 * rng.next_f32()) * (hi - lo).min_element() * 0.1;
+        let base = m.positions.len() as u32;
+        for _ in 0..3 {
+            m.positions.push(c + random_unit(rng) * size);
+            m.normals.push(Vec3::Z);
+        }
+        m.triangles.push([base, base + 1, base + 2]);
+        m.materials.push(0);
+    }
+    m
+}
+
+/// A room with a static soup, and moving soups (translated, rotated and
+/// both) inside it.
+fn soup_scene(seed: u64) -> Scene {
+    let mut r = rng(1000 + seed);
+    let room = inward_box(Vec3::splat(-4.0), Vec3::splat(4.0), 0);
+    let statics = soup(&mut r, 20_000, Vec3::splat(-3.0), Vec3::splat(3.0));
+    let movers: Vec<Mesh> = (0..3)
+        .map(|_| soup(&mut r, 2_000, Vec3::splat(-1.0), Vec3::splat(1.0)))
+        .collect();
+    let mut meshes = vec![room, statics];
+    meshes.extend(movers);
+    let channels = vec![
+        linear_translation(
+            2,
+            &[
+                (0.0, Vec3::new(-2.0, 0.0, 0.0)),
+                (1.0, Vec3::new(2.0, 1.0, 0.0)),
+            ],
+        ),
+        linear_rotation(
+            3,
+            &[
+                (0.0, Quat::IDENTITY),
+                (
+                    1.0,
+                    Quat::from_axis_angle(Vec3::new(1.0, 1.0, 0.0).normalize(), 2.0),
+                ),
+            ],
+        ),
+        linear_translation(
+            4,
+            &[
+                (0.0, Vec3::new(0.0, -2.0, 1.0)),
+                (1.0, Vec3::new(0.0, 2.0, -1.0)),
+            ],
+        ),
+        linear_rotation(
+            4,
+            &[(0.0, Quat::IDENTITY), (1.0, Quat::from_rotation_z(3.0))],
+        ),
+    ];
+    scene(
+        meshes,
+        vec![Material::diffuse("grey", Vec3::splat(0.5))],
+        channels,
+        Vec3::new(0.0, 0.0, 3.9),
+        -Vec3::Z,
+        1.0,
+        vec![],
+    )
+}
+
+#[test]
+fn gpu_matches_cpu_on_random_soups_with_moving_objects() {
+    let mut gpu = gpu();
+    eprintln!("adapter: {}", gpu.name());
+    for seed in 0..2u64 {
+        let s = soup_scene(seed);
+        let mut cpu = CpuBackend::new();
+        for (k, t) in [0.0f32, 0.37, 0.81].into_iter().enumerate() {
+            let snap = s.snapshot(t);
+            assert!(snap.dynamic_count() > 0 && snap.static_count > 0);
+            cpu.set_geometry(&snap);
+            gpu.set_geometry(&snap);
+            let rays = rays_for(&snap, &cpu, 40_000, seed * 10 + k as u64);
+            check_parity(&format!("soup {seed} t={t}"), &cpu, &gpu, &snap, &rays);
+        }
+    }
+    // The static part (same fingerprint across frames of a scene) is
+    // uploaded once per scene.
+    assert_eq!(gpu.timings().static_uploads, 2, "{:?}", gpu.timings());
+}
+
+#[test]
+fn gpu_matches_cpu_on_every_builtin_scene() {
+    let mut gpu = gpu();
+    let mut total = Parity::default();
+    for (n, name) in builtin::NAMES.iter().enumerate() {
+        let s = Scene::builtin(name).unwrap();
+        let mut cpu = CpuBackend::new();
+        let times = [
+            0.0,
+            (s.frame_count / 2) as f32 / radcache::scene::DEFAULT_FPS,
+        ];
+        for (k, t) in times.into_iter().enumerate() {
+            let snap = s.snapshot(t);
+            cpu.set_geometry(&snap);
+            gpu.set_geometry(&snap);
+            let rays = rays_for(&snap, &cpu, 30_000, 100 + (n * 2 + k) as u64);
+            let p = check_parity(&format!("{name} t={t}"), &cpu, &gpu, &snap, &rays);
+            total.rays += p.rays;
+            total.hits += p.hits;
+            total.ties += p.ties;
+            total.t_not_bitwise += p.t_not_bitwise;
+            total.near_culled += p.near_culled;
+            total.occluded += p.occluded;
+            total.max_t_rel = total.max_t_rel.max(p.max_t_rel);
+            total.max_uv = total.max_uv.max(p.max_uv);
+        }
+    }
+    eprintln!("all built-in scenes: {total:?}");
+}
+
+/// Large batches are cut into chunks; results must land at the right place.
+#[test]
+fn gpu_batches_larger_than_a_chunk_and_empty_batches() {
+    let mut gpu = gpu();
+    let s = soup_scene(7);
+    let snap = s.snapshot(0.5);
+    let mut cpu = CpuBackend::new();
+    cpu.set_geometry(&snap);
+    gpu.set_geometry(&snap);
+    gpu.try_closest_hit(&[], &mut []).unwrap();
+    let chunk = gpu.chunk_rays();
+    // More than one chunk where that is affordable (lavapipe: 4 Mi rays per
+    // chunk is too slow for a test); otherwise many small batches in a row,
+    // which exercise the same buffer reuse.
+    let n = if chunk <= 1 << 16 {
+        2 * chunk + 17
+    } else {
+        100_003
+    };
+    let rays = rays_for(&snap, &cpu, n, 999);
+    check_parity("large batch", &cpu, &gpu, &snap, &rays);
+    for part in rays.chunks(4_099).take(5) {
+        check_parity("small batch", &cpu, &gpu, &snap, part);
+    }
+    let counts = gpu.ray_counts();
+    assert_eq!(counts.closest, counts.any);
+    assert!(counts.closest >= n as u64);
+}
+
+/// A whole path-traced frame: with identical hits the path tracer takes the
+/// same decisions, so the frames agree; we require bit-identical pixels on
+/// all but a handful (a t differing in its last bit may move a hit point by
+/// an ulp) and a tight bound on all.
+#[test]
+fn gpu_path_traced_frame_equals_cpu_frame() {
+    for name in ["cube-in-box", "glossy-cornell"] {
+        let render = |backend: Box<dyn RayBackend>| {
+            let mut r = Renderer::new(
+                Scene::builtin(name).unwrap(),
+                Box::new(PathTracer::new(PathSettings {
+                    spp: 4,
+                    ..PathSettings::default()
+                })),
+                backend,
+                FrameSettings {
+                    width: 32,
+                    height: 32,
+                    ..FrameSettings::default()
+                },
+            );
+            let film = r.render_frame(3);
+            (film, r.backend().ray_counts())
+        };
+        let (cpu_film, cpu_counts) = render(Box::new(CpuBackend::new()));
+        let (gpu_film, gpu_counts) = render(Box::new(gpu()));
+        let mut differing = 0;
+        let mut max_rel = 0.0f32;
+        for (c, g) in cpu_film.pixels.iter().zip(&gpu_film.pixels) {
+            if c != g {
+                differing += 1;
+                let rel = (*c - *g).abs().max_element() / c.max_element().max(1e-3);
+                max_rel = max_rel.max(rel);
+            }
+        }
+        eprintln!(
+            "{name}: {differing} of {} pixels differ, max relative difference {max_rel:e}; \
+             rays cpu {cpu_counts:?} gpu {gpu_counts:?}",
+            cpu_film.pixels.len()
+        );
+        assert!(
+            differing <= cpu_film.pixels.len() / 100,
+            "{name}: {differing} pixels differ"
+        );
+        assert!(
+            max_rel < 1e-3 || differing <= 2,
+            "{name}: max relative difference {max_rel}"
+        );
+        let (cm, gm) = (cpu_film.mean(), gpu_film.mean());
+        assert!((cm - gm).abs() <= 1e-4 * cm, "{name}: mean {cm} vs {gm}");
+    }
+}
+
+#[test]
+fn gpu_backend_names_its_adapter() {
+    let gpu = gpu();
+    let name = gpu.name();
+    assert!(name.starts_with("gpu ("), "{name}");
+    assert!(name.contains(&gpu.adapter_info().name), "{name}");
+    assert!(gpu.preferred_batch() >= 1 << 20);
+}
