@@ -280,8 +280,7 @@ impl IrradianceCaching {
     }
 
     /// Gathers records (in parallel) for the candidates no record covers,
-    /// then inserts them in pixel order, skipping any that an earlier one of
-    /// the batch already covers.
+    /// then inserts them in pixel order.
     fn create_records<X: Send>(
         &self,
         ctx: &FrameContext,
@@ -301,11 +300,12 @@ impl IrradianceCaching {
                 (g.record, x)
             })
             .collect();
+        // A record of the batch may already be covered by an earlier one of
+        // the same batch (they were gathered in parallel); it is kept all the
+        // same: the work is done, and it only adds accuracy.
         for (record, x) in records {
-            if !cache.covers(record.position, record.normal) {
-                cache.insert(record);
-                inserted.push(x);
-            }
+            cache.insert(record);
+            inserted.push(x);
         }
     }
 
