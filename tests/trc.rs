@@ -165,6 +165,7 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
     let fps = 6.0;
     let mut r = renderer(Scene::builtin("cube-in-box").unwrap(), 24, fps, false);
     let mut errors = (Vec::new(), Vec::new());
+    let mut seeing = (Vec::new(), Vec::new());
     for t0 in [5u32, 20] {
         let mut trc = TemporalRadianceCaching::new(TrcSettings {
             ic: IcSettings {
@@ -187,12 +188,27 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
             };
             errors.0.push(rel(k.next_irradiance));
             errors.1.push(rel(k.record.irradiance));
+            if k.next_irradiance != k.record.irradiance {
+                seeing.0.push(rel(k.next_irradiance));
+                seeing.1.push(rel(k.record.irradiance));
+            }
         }
     }
     let stats = |v: &mut Vec<f32>| {
         v.sort_by(f32::total_cmp);
         (v.iter().sum::<f32>() / v.len() as f32, v[v.len() / 2])
     };
+    if !seeing.0.is_empty() {
+        let (a, b) = (stats(&mut seeing.0), stats(&mut seeing.1));
+        eprintln!(
+            "records that see the moving cube: {}: reprojection mean {:.2} % median {:.2} %, none mean {:.2} % median {:.2} %",
+            seeing.0.len(),
+            100.0 * a.0,
+            100.0 * a.1,
+            100.0 * b.0,
+            100.0 * b.1
+        );
+    }
     let (mean_r, median_r) = stats(&mut errors.0);
     let (mean_n, median_n) = stats(&mut errors.1);
     eprintln!(
@@ -205,9 +221,16 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
         100.0 * median_n
     );
     // The paper's gain (Table 1: mean 2.9 % vs 3.7 %) is NOT reproduced
-    // here: most of the error is the change of light on static surfaces,
-    // which neither estimate sees. This guards against reprojection making
-    // the estimate worse (before cell-centre displacement it did, by 10 %).
+    // here. Measured (see the module docs of `trc`): the 58 of 241 records
+    // whose samples see the moving cube change by ~1 % per frame (constant
+    // estimate: mean 1.09 %), the others by 3.5 % on average — shadows
+    // moving over what they see, or the record lying on the cube — which
+    // neither estimate sees. Against a converged E(t0+1) (32×96 strata)
+    // both estimates are at ~4.9 %: a record's own Monte Carlo noise
+    // (16×48 cells, one path each) exceeds its change from one frame to the
+    // next, where the paper's rasterized hemispheres have no noise. This
+    // guards against reprojection making the estimate worse (before
+    // cell-centre displacement it did, by 10 %).
     assert!(mean_r <= 1.05 * mean_n, "mean {mean_r} vs {mean_n}");
     assert!(
         median_r <= 1.05 * median_n,
