@@ -156,20 +156,6 @@ pub struct SceneBvh {
     dynamic_part: Option<TriangleBvh>,
 }
 
-/// FNV-1a over the bits of the static triangles' vertices: detects a change
-/// of static geometry (a new scene) without keeping a copy of it.
-fn fingerprint(snapshot: &Snapshot) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for tri in &snapshot.triangles[..snapshot.static_count] {
-        for p in tri.p {
-            for x in p.to_array() {
-                h = (h ^ u64::from(x.to_bits())).wrapping_mul(0x0100_0000_01b3);
-            }
-        }
-    }
-    h ^ snapshot.static_count as u64
-}
-
 impl SceneBvh {
     pub fn new() -> Self {
         Self::default()
@@ -178,7 +164,7 @@ impl SceneBvh {
     /// Makes the BVHs match `snapshot`.
     pub fn update(&mut self, snapshot: &Snapshot) -> BuildTimes {
         let mut times = BuildTimes::default();
-        let fp = fingerprint(snapshot);
+        let fp = snapshot.static_fingerprint();
         if self.static_fingerprint != Some(fp) {
             let start = Instant::now();
             self.static_part = TriangleBvh::build(snapshot, 0..snapshot.static_count);

@@ -184,16 +184,7 @@ fn gradients_reduce_interpolation_error() {
 }
 
 fn cube_in_box(method: Box<dyn radcache::method::Method>, size: u32) -> Renderer {
-    Renderer::new(
-        Scene::builtin("cube-in-box").unwrap(),
-        method,
-        Box::new(CpuBackend::new()),
-        FrameSettings {
-            width: size,
-            height: size,
-            ..FrameSettings::default()
-        },
-    )
+    common::cpu_renderer(Scene::builtin("cube-in-box").unwrap(), method, size)
 }
 
 /// `ic` against a converged `path` render of the same scene: relative RMSE

@@ -5,25 +5,16 @@ mod common;
 
 use common::{inward_box, push_quad, scene};
 use glam::Vec3;
-use radcache::backend::cpu::CpuBackend;
 use radcache::method::path::{PathSettings, PathTracer};
-use radcache::render::{FrameSettings, Renderer};
+use radcache::render::Renderer;
 use radcache::scene::{Material, Mesh};
 
 fn renderer(scene: radcache::scene::Scene, spp: u32, size: u32) -> Renderer {
-    Renderer::new(
-        scene,
-        Box::new(PathTracer::new(PathSettings {
-            spp,
-            ..PathSettings::default()
-        })),
-        Box::new(CpuBackend::new()),
-        FrameSettings {
-            width: size,
-            height: size,
-            ..FrameSettings::default()
-        },
-    )
+    let method = PathTracer::new(PathSettings {
+        spp,
+        ..PathSettings::default()
+    });
+    common::cpu_renderer(scene, Box::new(method), size)
 }
 
 /// Inside a closed box whose every surface has albedo ρ and emits Le, the

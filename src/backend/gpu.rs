@@ -440,7 +440,7 @@ impl GpuBackend {
     /// whose nodes or triangles exceed the device's storage binding size, or
     /// a BVH deeper than the shaders' stack.
     pub fn try_set_geometry(&mut self, snapshot: &Snapshot) -> Result<(), GpuError> {
-        let fp = fingerprint(snapshot);
+        let fp = snapshot.static_fingerprint();
         let build_start = Instant::now();
         let mut encoder = self
             .device
@@ -841,27 +841,6 @@ fn depth(bvh: &Bvh2) -> usize {
         }
     }
     max
-}
-
-/// FNV-1a over the bits of the static triangles' vertices and ids: detects
-/// a change of static geometry (a new scene) without keeping a copy of it.
-/// The same idea as the CPU's `src/accel.rs`; the object ids are included
-/// because the GPU buffers carry them.
-fn fingerprint(snapshot: &Snapshot) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |x: u32| h = (h ^ u64::from(x)).wrapping_mul(0x0100_0000_01b3);
-    for (tri, &object) in snapshot.triangles[..snapshot.static_count]
-        .iter()
-        .zip(&snapshot.tri_object)
-    {
-        for p in tri.p {
-            for x in p.to_array() {
-                eat(x.to_bits());
-            }
-        }
-        eat(object);
-    }
-    h ^ snapshot.static_count as u64
 }
 
 impl RayBackend for GpuBackend {

@@ -478,4 +478,24 @@ impl Snapshot {
     pub fn dynamic_count(&self) -> usize {
         self.triangles.len() - self.static_count
     }
+
+    /// FNV-1a over the static triangles' vertex bits and object ids: ray
+    /// backends rebuild (and re-upload) their static part only when this
+    /// changes (a new scene), without keeping a copy of the geometry.
+    pub fn static_fingerprint(&self) -> u64 {
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |x: u32| h = (h ^ u64::from(x)).wrapping_mul(0x0100_0000_01b3);
+        let statics = self.triangles[..self.static_count]
+            .iter()
+            .zip(&self.tri_object);
+        for (tri, &object) in statics {
+            for p in tri.p {
+                for x in p.to_array() {
+                    eat(x.to_bits());
+                }
+            }
+            eat(object);
+        }
+        h ^ self.static_count as u64
+    }
 }

@@ -101,3 +101,21 @@ pub fn scene(
         frame_count: 2,
     }
 }
+
+/// A CPU renderer of `scene` with `method` at `size × size`, default seed.
+pub fn cpu_renderer(
+    scene: Scene,
+    method: Box<dyn radcache::method::Method>,
+    size: u32,
+) -> radcache::render::Renderer {
+    radcache::render::Renderer::new(
+        scene,
+        method,
+        Box::new(radcache::backend::cpu::CpuBackend::new()),
+        radcache::render::FrameSettings {
+            width: size,
+            height: size,
+            ..radcache::render::FrameSettings::default()
+        },
+    )
+}
