@@ -202,12 +202,13 @@ pub fn method_settings(
                         s.gradients = match v.trim() {
                             "none" => TemporalGradients::None,
                             "extrapolated" => TemporalGradients::Extrapolated,
+                            "interpolated" => TemporalGradients::Interpolated,
                             _ => {
                                 return Err(MethodError::BadValue {
                                     method: method.into(),
                                     key: key.into(),
                                     value: v.into(),
-                                    problem: "expected none or extrapolated".into(),
+                                    problem: "expected none, extrapolated or interpolated".into(),
                                 })
                             }
                         }
@@ -921,6 +922,7 @@ fn render_frames(
     let rays_before = renderer.backend().ray_counts().total();
     let mut render_time = Duration::ZERO;
     let mut records = 0;
+    renderer.set_frame_end(Some(frames.end));
     for frame in frames {
         bar.set_message(format!("{what}, frame {frame}"));
         let start = Instant::now();

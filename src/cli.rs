@@ -161,7 +161,7 @@ pub struct TrcArgs {
     /// δt_max: longest life of a record in frames, t − t0 < δt_max (TRC Eq. 11; the paper uses 20).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub trc_max_life: u32,
-    /// Temporal gradients (TRC §4.5): none, or extrapolated from the estimate of E(t0+1) (Eq. 15–17).
+    /// Temporal gradients (TRC §4.5): none, extrapolated from the estimate of E(t0+1) (Eq. 15–17, one pass), or interpolated towards the record's replacement (Eq. 18–20, two passes: frames come out up to δt_max frames of first pass late).
     #[arg(long, value_enum, default_value = "extrapolated")]
     pub trc_gradients: TrcGradientsArg,
     /// Estimate E(t0+1) by reprojecting the record's hemisphere samples (TRC §4.7); off: E constant.
@@ -173,6 +173,7 @@ pub struct TrcArgs {
 pub enum TrcGradientsArg {
     None,
     Extrapolated,
+    Interpolated,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -403,6 +404,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
             gradients: match args.trc.trc_gradients {
                 TrcGradientsArg::None => TemporalGradients::None,
                 TrcGradientsArg::Extrapolated => TemporalGradients::Extrapolated,
+                TrcGradientsArg::Interpolated => TemporalGradients::Interpolated,
             },
             reprojection: args.trc.trc_reprojection == OnOff::On,
         }),
@@ -477,6 +479,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
         args.frames.end - 1,
     );
     if let Some(report) = summary.cache_report() {
+        println!("{report}");
+    }
+    if let Some(report) = summary.lifespan_report() {
         println!("{report}");
     }
     Ok(())

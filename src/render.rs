@@ -150,6 +150,9 @@ pub struct Renderer {
     backend: Box<dyn RayBackend>,
     last_frame: Option<u32>,
     last_frame_rays: u64,
+    /// The frame after the last one to render (two-pass methods look
+    /// ahead no further); `None`: the scene's last frame.
+    frame_end: Option<u32>,
 }
 
 impl Renderer {
@@ -166,6 +169,7 @@ impl Renderer {
             backend,
             last_frame: None,
             last_frame_rays: 0,
+            frame_end: None,
         }
     }
 
@@ -196,7 +200,17 @@ impl Renderer {
         self.method.take_frame_records()
     }
 
-    /// Renders frame `frame` (time `frame / fps`).
+    /// Tells the renderer that no frame at or after `end` will be
+    /// rendered: a two-pass method (`trc` with interpolated gradients)
+    /// looks no further ahead. Without it, it may look ahead to the
+    /// scene's last frame.
+    pub fn set_frame_end(&mut self, end: Option<u32>) {
+        self.frame_end = end;
+    }
+
+    /// Renders frame `frame` (time `frame / fps`). A two-pass method first
+    /// gets the frames it asks for through its first pass (the rays they
+    /// trace count in this frame).
     pub fn render_frame(&mut self, frame: u32) -> Film {
         let rays_before = self.backend.ray_counts().total();
         let film = self.render_frame_uncounted(frame);
@@ -207,6 +221,13 @@ impl Renderer {
 
     fn render_frame_uncounted(&mut self, frame: u32) -> Film {
         let mut method = std::mem::replace(&mut self.method, Box::new(NoMethod));
+        let end = self
+            .frame_end
+            .unwrap_or(self.scene.frame_count)
+            .max(frame + 1);
+        while let Some(f) = method.next_frame_to_prepare(frame, end) {
+            self.with_frame_context(f, |ctx| method.prepare_frame(ctx));
+        }
         let film = self.with_frame_context(frame, |ctx| method.render_frame(ctx));
         self.method = method;
         film
@@ -291,6 +312,44 @@ impl RenderSummary {
             used as f64 / lookups as f64,
             phases.join(", ")
         ))
+    }
+
+    /// For temporal methods (records with lifespans): records reused,
+    /// replaced and dropped, the mean lifespan of the records computed, and
+    /// their lifespan histogram, one line per lifespan in frames.
+    pub fn lifespan_report(&self) -> Option<String> {
+        let mut histogram: Vec<u64> = Vec::new();
+        for s in &self.frame_stats {
+            if histogram.len() < s.lifespan_histogram.len() {
+                histogram.resize(s.lifespan_histogram.len(), 0);
+            }
+            for (h, n) in histogram.iter_mut().zip(&s.lifespan_histogram) {
+                *h += n;
+            }
+        }
+        let computed: u64 = histogram.iter().sum();
+        if computed == 0 {
+            return None;
+        }
+        let sum = |f: fn(&FrameStats) -> u64| self.frame_stats.iter().map(f).sum::<u64>();
+        let total: u64 = histogram
+            .iter()
+            .enumerate()
+            .map(|(life, n)| life as u64 * n)
+            .sum();
+        let widest = histogram.iter().copied().max().unwrap_or(1).max(1);
+        let mut out = format!(
+            "records reused {} times, replaced {}, dropped {}; mean lifespan {:.2} frames over {computed} records computed\nlifespan histogram (frames: records):",
+            sum(|s| s.records_reused),
+            sum(|s| s.records_replaced),
+            sum(|s| s.records_dropped),
+            total as f64 / computed as f64,
+        );
+        for (life, &n) in histogram.iter().enumerate().filter(|(_, n)| **n > 0) {
+            let bar = "#".repeat(((n * 40).div_ceil(widest)) as usize);
+            out.push_str(&format!("\n  {life:>4}: {n:>8} {bar}"));
+        }
+        Some(out)
     }
 
     pub fn rays_per_second(&self) -> f64 {
@@ -404,6 +463,7 @@ pub fn render_job_to_dir(
     let start = Instant::now();
     let rays_before = renderer.backend().ray_counts().total();
     let mut frame_stats = Vec::with_capacity(frames.len() - done.len());
+    renderer.set_frame_end(Some(frames.end));
     // Methods whose cache carries over from frame to frame cannot start
     // mid-range until the store holds their cache state: they replay the
     // finished frames (rendered again in order, not written) so that the

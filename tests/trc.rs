@@ -11,11 +11,18 @@ use radcache::cache::gather::Strata;
 use radcache::film::Film;
 use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
-use radcache::method::trc::{TemporalRadianceCaching, TrcSettings};
+use radcache::method::trc::{TemporalGradients, TemporalRadianceCaching, TrcSettings};
 use radcache::method::Method;
 use radcache::metrics::flicker;
 use radcache::render::{FrameSettings, Renderer};
 use radcache::scene::{Channel, Interpolation, Material, Mesh, Property, Scene};
+
+/// Every temporal gradient mode (TRC §4.5).
+const GRADIENT_MODES: [TemporalGradients; 3] = [
+    TemporalGradients::None,
+    TemporalGradients::Extrapolated,
+    TemporalGradients::Interpolated,
+];
 
 fn renderer(scene: Scene, size: u32, fps: f32, same_pattern: bool) -> Renderer {
     Renderer::new(
@@ -158,6 +165,7 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
     let fps = 6.0;
     let mut r = renderer(Scene::builtin("cube-in-box").unwrap(), 24, fps, false);
     let mut errors = (Vec::new(), Vec::new());
+    let mut seeing = (Vec::new(), Vec::new());
     for t0 in [5u32, 20] {
         let mut trc = TemporalRadianceCaching::new(TrcSettings {
             ic: IcSettings {
@@ -180,12 +188,27 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
             };
             errors.0.push(rel(k.next_irradiance));
             errors.1.push(rel(k.record.irradiance));
+            if k.next_irradiance != k.record.irradiance {
+                seeing.0.push(rel(k.next_irradiance));
+                seeing.1.push(rel(k.record.irradiance));
+            }
         }
     }
     let stats = |v: &mut Vec<f32>| {
         v.sort_by(f32::total_cmp);
         (v.iter().sum::<f32>() / v.len() as f32, v[v.len() / 2])
     };
+    if !seeing.0.is_empty() {
+        let (a, b) = (stats(&mut seeing.0), stats(&mut seeing.1));
+        eprintln!(
+            "records that see the moving cube: {}: reprojection mean {:.2} % median {:.2} %, none mean {:.2} % median {:.2} %",
+            seeing.0.len(),
+            100.0 * a.0,
+            100.0 * a.1,
+            100.0 * b.0,
+            100.0 * b.1
+        );
+    }
     let (mean_r, median_r) = stats(&mut errors.0);
     let (mean_n, median_n) = stats(&mut errors.1);
     eprintln!(
@@ -198,9 +221,16 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
         100.0 * median_n
     );
     // The paper's gain (Table 1: mean 2.9 % vs 3.7 %) is NOT reproduced
-    // here: most of the error is the change of light on static surfaces,
-    // which neither estimate sees. This guards against reprojection making
-    // the estimate worse (before cell-centre displacement it did, by 10 %).
+    // here. Measured (see the module docs of `trc`): the 58 of 241 records
+    // whose samples see the moving cube change by ~1 % per frame (constant
+    // estimate: mean 1.09 %), the others by 3.5 % on average — shadows
+    // moving over what they see, or the record lying on the cube — which
+    // neither estimate sees. Against a converged E(t0+1) (32×96 strata)
+    // both estimates are at ~4.9 %: a record's own Monte Carlo noise
+    // (16×48 cells, one path each) exceeds its change from one frame to the
+    // next, where the paper's rasterized hemispheres have no noise. This
+    // guards against reprojection making the estimate worse (before
+    // cell-centre displacement it did, by 10 %).
     assert!(mean_r <= 1.05 * mean_n, "mean {mean_r} vs {mean_n}");
     assert!(
         median_r <= 1.05 * median_n,
@@ -293,4 +323,218 @@ fn trc_computes_fewer_records_and_flickers_less_than_ic() {
         "{trc_records} vs {ic_records}"
     );
     assert!(trc_flicker < ic_flicker, "{trc_flicker} vs {ic_flicker}");
+}
+
+/// An axis-aligned box whose front faces look outward (a solid block).
+fn outward_box(min: Vec3, max: Vec3, material: u32) -> Mesh {
+    let mut m = Mesh::default();
+    let d = max - min;
+    let (x, y, z) = (Vec3::X * d.x, Vec3::Y * d.y, Vec3::Z * d.z);
+    push_quad(&mut m, min, x, z, material); // bottom, faces -y
+    push_quad(&mut m, min + y, z, x, material); // top, faces +y
+    push_quad(&mut m, min, y, x, material); // back, faces -z
+    push_quad(&mut m, min + z, x, y, material); // front, faces +z
+    push_quad(&mut m, min, z, y, material); // left, faces -x
+    push_quad(&mut m, min + x, y, z, material); // right, faces +x
+    m
+}
+
+/// The lit room with a bright red block in its back left corner that
+/// jumps out of the room (20 m down, under the floor) at frame `k`: a STEP
+/// translation key. Before `k` the block bleeds red onto the back and left
+/// walls and the floor and shadows their indirect light.
+fn jumping_block_room(k: u32, fps: f32) -> Scene {
+    let mut s = lit_room(None, fps);
+    s.materials
+        .push(Material::diffuse("red", Vec3::new(0.9, 0.1, 0.1)));
+    let block = outward_box(Vec3::new(-0.95, 0.0, -0.95), Vec3::new(-0.2, 1.0, -0.2), 2);
+    s.objects.push(radcache::scene::Object {
+        name: "block".into(),
+        node: s.nodes.len(),
+        mesh: block,
+    });
+    s.nodes.push(radcache::scene::Node {
+        name: "block".into(),
+        parent: None,
+        rest: radcache::scene::Trs::default(),
+    });
+    s.animation.channels.push(Channel {
+        node: s.nodes.len() - 1,
+        property: Property::Translation,
+        interpolation: Interpolation::Step,
+        times: vec![0.0, (k as f32 - 0.5) / fps],
+        values: vec![Vec4::ZERO, Vec4::new(0.0, -20.0, 0.0, 0.0)],
+    });
+    s
+}
+
+/// The bias of `test` over the lower left quarter of the image (where the
+/// block stood): the difference of the region's mean radiance from the
+/// reference's, relative to the reference's, worst colour channel. A ghost
+/// is a bias (the block's red light, its missing shadow); the noise of
+/// records gathered with other random streams mostly averages out over the
+/// region.
+fn region_error(test: &Film, reference: &Film) -> f64 {
+    let (w, h) = (reference.width as usize, reference.height as usize);
+    let (mut a, mut b) = (Vec3::ZERO, Vec3::ZERO);
+    for y in h / 2..h {
+        for x in 0..w / 2 {
+            a += test.pixels[y * w + x];
+            b += reference.pixels[y * w + x];
+        }
+    }
+    f64::from(((a - b).abs() / b.max(Vec3::splat(1e-6))).max_element())
+}
+
+/// Ghosts (issue 5, "Stability where it fails"): a red block jumps out of
+/// the room at frame k. Records created before k saw it and, as nothing
+/// moved in their next frame (τ = 1), keep its red indirect light after it
+/// left: a ghost near its old place. Each lives less than δt_max frames
+/// (Eq. 11) and is then replaced by a fresh gather, so from frame
+/// k + δt_max − 1 on every record was gathered after the jump.
+///
+/// The reference is `ic` with the same spatial settings at the same
+/// frames, both with `--same-pattern` sampling: a fresh cache every frame
+/// has no temporal error, and with the same accuracy, strata and pixel
+/// samples it has the same spatial interpolation error and direct light, so
+/// `trc − ic` isolates the temporal error (a path-traced reference would
+/// add `ic`'s spatial bias, of the order of the ghost at this tiny size).
+/// Checked for every temporal gradient mode.
+#[test]
+fn jumping_object_leaves_no_ghost_after_max_life() {
+    let (k, max_life, size, fps) = (2u32, 6u32, 16u32, 24.0);
+    let frames = 0..k + max_life + 2;
+    let ic_settings = IcSettings {
+        spp: 2,
+        strata: Strata { theta: 16, phi: 48 },
+        ..small_ic()
+    };
+    let mut reference = renderer(jumping_block_room(k, fps), size, fps, true);
+    let mut ic = IrradianceCaching::new(ic_settings.clone());
+    let ic_frames: Vec<Film> = frames
+        .clone()
+        .map(|f| reference.with_frame_context(f, |ctx| ic.render_frame(ctx)))
+        .collect();
+    // The ghost of the one-pass modes at frame k: the records of frame 0
+    // (τ = 1: frame 1 looks like frame 0) live through frame
+    // δt_max − 1 = k + 3 with the block's light. Interpolated gradients
+    // fade it towards the replacements from frame k on.
+    let mut ghost = None;
+    for gradients in GRADIENT_MODES {
+        let trc = TemporalRadianceCaching::new(TrcSettings {
+            ic: ic_settings.clone(),
+            max_life,
+            gradients,
+            ..TrcSettings::default()
+        });
+        let mut r = Renderer::new(
+            jumping_block_room(k, fps),
+            Box::new(trc),
+            Box::new(CpuBackend::new()),
+            FrameSettings {
+                width: size,
+                height: size,
+                fps,
+                same_pattern: true,
+                ..FrameSettings::default()
+            },
+        );
+        r.set_frame_end(Some(frames.end));
+        let errors: Vec<f64> = frames
+            .clone()
+            .map(|f| region_error(&r.render_frame(f), &ic_frames[f as usize]))
+            .collect();
+        eprintln!("{gradients:?}: bias near the block's old place per frame: {errors:.4?}");
+        let at_k = errors[k as usize];
+        let ghost = *ghost.get_or_insert(at_k);
+        assert!(
+            at_k > 0.03,
+            "{gradients:?}: no ghost at frame k ({at_k}): the test proves nothing"
+        );
+        // What is left once every record is younger than the jump is the
+        // difference between two record sets (other points, other random
+        // streams): 15–18 % of the ghost here.
+        for (f, e) in errors.iter().enumerate().skip((k + max_life) as usize) {
+            assert!(
+                *e < 0.3 * ghost,
+                "{gradients:?}: ghost left at frame {f}: {e} (at k: {ghost})"
+            );
+        }
+    }
+}
+
+/// TRC §4.5, Fig. 4c–e: temporal gradients smooth the jump of accuracy when
+/// a record is replaced, extrapolated ones in one pass, interpolated ones
+/// (Eq. 18–20, two passes) towards the replacement's value. Cube-in-box at
+/// 16×16 over 16 frames with δt_max = 5 (the paper's Spheres setting, so
+/// that records are replaced within the sequence), flicker against a
+/// same-pattern `path` reference. All three modes share the same records
+/// (same aging, replacement and fill), so only the gradients differ.
+#[test]
+fn temporal_gradients_flicker_order() {
+    let (size, frames) = (16, 0..16u32);
+    let cube = || Scene::builtin("cube-in-box").unwrap();
+    let mut reference = renderer(cube(), size, 24.0, true);
+    let mut path = PathTracer::new(PathSettings {
+        spp: 256,
+        ..PathSettings::default()
+    });
+    let reference: Vec<Film> = frames
+        .clone()
+        .map(|f| reference.with_frame_context(f, |ctx| path.render_frame(ctx)))
+        .collect();
+    let mut results = Vec::new();
+    for gradients in GRADIENT_MODES {
+        let trc = TemporalRadianceCaching::new(TrcSettings {
+            ic: IcSettings {
+                spp: 4,
+                strata: Strata { theta: 8, phi: 24 },
+                ..IcSettings::default()
+            },
+            max_life: 5,
+            gradients,
+            ..TrcSettings::default()
+        });
+        let mut r = Renderer::new(
+            cube(),
+            Box::new(trc),
+            Box::new(CpuBackend::new()),
+            FrameSettings {
+                width: size,
+                height: size,
+                same_pattern: true,
+                ..FrameSettings::default()
+            },
+        );
+        r.set_frame_end(Some(frames.end));
+        let mut computed = 0;
+        let films: Vec<Film> = frames
+            .clone()
+            .map(|f| {
+                let film = r.render_frame(f);
+                let s = r.last_frame_stats();
+                computed += s.records_created + s.records_replaced;
+                film
+            })
+            .collect();
+        let flicker = flicker(&films, &reference).unwrap();
+        let error = films
+            .iter()
+            .zip(&reference)
+            .map(|(f, r)| radcache::metrics::rel_rmse(f, r))
+            .sum::<f64>()
+            / films.len() as f64;
+        eprintln!(
+            "{gradients:?}: flicker {flicker:.4}, rel. RMSE {error:.4}, records computed {computed}"
+        );
+        results.push((flicker, computed));
+    }
+    let (none, extrapolated, interpolated) = (results[0], results[1], results[2]);
+    assert_eq!(none.1, extrapolated.1, "same records in every mode");
+    assert_eq!(none.1, interpolated.1, "same records in every mode");
+    // Measured: none 0.0240, extrapolated 0.0237, interpolated 0.0196 — the
+    // paper's order; extrapolation gains little here (most records live
+    // δt_max frames with τ ≈ 1, so their extrapolated change is small).
+    assert!(extrapolated.0 <= none.0, "{results:?}");
+    assert!(interpolated.0 <= 0.9 * extrapolated.0, "{results:?}");
 }

@@ -506,6 +506,43 @@ pub(crate) fn render_pass(
     film
 }
 
+/// Flags every record that [`render_pass`] would use for some pixel sample
+/// of this frame, without rendering: the same camera samples, the same
+/// shading points and the same usability test (`w ≥ 1/a`, which depends on
+/// the records' positions, normals and radii, not on their values). `trc`'s
+/// first pass with interpolated gradients (TRC §4.5, two passes) decides
+/// replace-or-drop from it before the frame is rendered.
+pub(crate) fn mark_used(
+    ctx: &FrameContext,
+    cache: &IrradianceCache,
+    settings: &IcSettings,
+    used: &[AtomicBool],
+) {
+    let spp = settings.spp.max(1);
+    let n_pixels = ctx.width * ctx.height;
+    let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1) as u32;
+    let tiles: Vec<u32> = (0..n_pixels).step_by(pixels_per_tile as usize).collect();
+    tiles.into_par_iter().for_each(|first| {
+        let last = (first + pixels_per_tile).min(n_pixels);
+        let rays: Vec<Ray> = (first..last)
+            .flat_map(|pixel| (0..spp).map(move |sample| camera_query(ctx, pixel, sample, spp).0))
+            .collect();
+        let mut hits = vec![Hit::MISS; rays.len()];
+        ctx.backend.closest_hit(&rays, &mut hits);
+        for (ray, hit) in rays.iter().zip(&hits) {
+            let Some(surface) = Surface::at(ctx, ray, hit) else {
+                continue;
+            };
+            if surface.bsdf.is_black() || surface.bsdf.diffuse_albedo().max_element() <= 0.0 {
+                continue;
+            }
+            cache.for_each_usable_indexed(surface.p, surface.bsdf.normal(), |i, _, _| {
+                used[i].store(true, Ordering::Relaxed)
+            });
+        }
+    });
+}
+
 /// A path-traced part of a pixel sample (glossy lobe, or diffuse indirect
 /// where no record is usable) and the sample it belongs to.
 struct Deferred {

@@ -70,6 +70,12 @@ pub struct FrameStats {
     pub lookup_records: u64,
     /// Lookups no record covered, computed by path tracing instead.
     pub fallback_lookups: u64,
+    /// Mean lifespan, in frames, of the records computed in the frame (new
+    /// and replacements; temporal methods: TRC Eq. 10–11, at most δt_max).
+    pub mean_lifespan: f64,
+    /// Records computed in the frame by lifespan: `[n]` records may be used
+    /// in `n` frames (temporal methods; empty for the others).
+    pub lifespan_histogram: Vec<u64>,
     /// Rays traced in the frame (filled in by the renderer).
     pub rays: u64,
     /// Wall time of each phase, in seconds.
@@ -90,6 +96,20 @@ pub trait Method: Send {
 
     /// Renders one frame into a linear-radiance image.
     fn render_frame(&mut self, ctx: &FrameContext) -> Film;
+
+    /// Two-pass methods (`trc` with interpolated temporal gradients) run a
+    /// first pass over frames ahead of the one they render. Before
+    /// rendering `frame`, the renderer calls [`Method::prepare_frame`] on
+    /// each frame this returns, as long as it returns one; `end` is the
+    /// frame after the last one the renderer will render. One-pass
+    /// methods return `None`.
+    fn next_frame_to_prepare(&self, _frame: u32, _end: u32) -> Option<u32> {
+        None
+    }
+
+    /// The first pass over frame `ctx.frame` (see
+    /// [`Method::next_frame_to_prepare`]).
+    fn prepare_frame(&mut self, _ctx: &FrameContext) {}
 
     /// Statistics of the last rendered frame (methods without a cache
     /// report only their phases).
