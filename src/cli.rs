@@ -38,6 +38,30 @@ pub enum Command {
     Bench(BenchArgs),
     /// Show what a store holds: jobs, frames done, records, bytes per tree, lifespans.
     Inspect(InspectArgs),
+    /// Serve the HTTP API and dashboard; render queued jobs in the background.
+    Serve(ServeArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ServeArgs {
+    /// Store directory.
+    #[arg(long, default_value = DEFAULT_DB)]
+    pub db: PathBuf,
+    /// Address to listen on (non-loopback needs --token).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub addr: std::net::SocketAddr,
+    /// Directory of scene files jobs may name (relative paths only).
+    #[arg(long)]
+    pub scenes: Option<PathBuf>,
+    /// Token every request must carry (Authorization: Bearer TOKEN or ?token=).
+    #[arg(long, env = "RADCACHE_TOKEN")]
+    pub token: Option<String>,
+    /// Ray backend.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendArg,
+    /// Directory of each job's frame files (DIR/<job id>/) [default: DB.frames].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 /// Default store directory (DESIGN.md "The store"), used when `--job` is
@@ -337,6 +361,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Compare(args) => run_compare(args),
         Command::Bench(args) => run_bench(args),
         Command::Inspect(args) => run_inspect(args),
+        Command::Serve(args) => run_serve(args),
     }
 }
 
@@ -485,6 +510,30 @@ fn run_render(args: RenderArgs) -> Result<()> {
         println!("{report}");
     }
     Ok(())
+}
+
+fn run_serve(args: ServeArgs) -> Result<()> {
+    let out = args.out.unwrap_or_else(|| {
+        let mut p = args.db.clone().into_os_string();
+        p.push(".frames");
+        PathBuf::from(p)
+    });
+    crate::server::serve(crate::server::ServeOptions {
+        db: args.db,
+        addr: args.addr,
+        scenes: args.scenes,
+        token: args.token,
+        backend: backend_choice(args.backend),
+        out,
+    })
+}
+
+fn backend_choice(b: BackendArg) -> BackendChoice {
+    match b {
+        BackendArg::Auto => BackendChoice::Auto,
+        BackendArg::Cpu => BackendChoice::Cpu,
+        BackendArg::Gpu => BackendChoice::Gpu,
+    }
 }
 
 fn run_inspect(args: InspectArgs) -> Result<()> {

@@ -139,6 +139,18 @@ pub fn read_exr(path: &Path) -> Result<Film, FilmError> {
     decode_rgb(&bytes).map_err(|e| FilmError::exr(path, e))
 }
 
+/// Decodes EXR file bytes (as [`encode_exr`] writes and the store keeps).
+pub fn decode_exr(bytes: &[u8]) -> Result<Film, exr::error::Error> {
+    decode_rgb(bytes)
+}
+
+/// The tone-mapped sRGB preview of `film` as PNG file bytes.
+pub fn encode_png(film: &Film) -> Result<Vec<u8>, image::ImageError> {
+    let mut buffer = Cursor::new(Vec::new());
+    tonemap_srgb(film).write_to(&mut buffer, image::ImageFormat::Png)?;
+    Ok(buffer.into_inner())
+}
+
 /// Checks the header first so that a file without colour channels gets a
 /// clear error listing what it has, rather than exr's generic "no layer
 /// matched your requirements".

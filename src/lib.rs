@@ -36,4 +36,5 @@ pub mod metrics;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod server;
 pub mod store;

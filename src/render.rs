@@ -432,7 +432,22 @@ pub fn render_job_to_dir(
     frames: Range<u32>,
     out_dir: &Path,
     quiet: bool,
+    job: Option<&mut StoreJob>,
+) -> Result<RenderSummary> {
+    render_job_to_dir_with(renderer, frames, out_dir, quiet, job, &mut |_| true)
+}
+
+/// [`render_job_to_dir`] calling `after_frame(frame)` once each new frame is
+/// acknowledged and written; returning `false` stops the render there (the
+/// server's cancel and shutdown). A stopped render is resumed like a crashed
+/// one.
+pub fn render_job_to_dir_with(
+    renderer: &mut Renderer,
+    frames: Range<u32>,
+    out_dir: &Path,
+    quiet: bool,
     mut job: Option<&mut StoreJob>,
+    after_frame: &mut dyn FnMut(u32) -> bool,
 ) -> Result<RenderSummary> {
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create output directory {}", out_dir.display()))?;
@@ -517,6 +532,9 @@ pub fn render_job_to_dir(
         film::write_frame(&film, out_dir, frame)?;
         frame_stats.push(stats);
         progress.inc(1);
+        if !after_frame(frame) {
+            break;
+        }
     }
     progress.finish_and_clear();
     Ok(RenderSummary {

@@ -1,0 +1,125 @@
+//! Frames (PNG, EXR), per-frame statistics and `/metrics`, all read from
+//! the store.
+
+use super::{ApiError, AppState, JobState};
+use crate::film;
+use axum::extract::{Path, State};
+use axum::http::header;
+use axum::response::IntoResponse;
+use axum::Json;
+use serde_json::{json, Value};
+use std::fmt::Write;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+/// The store id of job `id` (it has one once its first frame started).
+fn store_id(state: &AppState, id: &str) -> Result<Option<u64>, ApiError> {
+    state.job(id)?;
+    Ok(state
+        .store
+        .job(id)
+        .map_err(ApiError::internal)?
+        .map(|j| j.id))
+}
+
+pub async fn frame(
+    State(state): State<Arc<AppState>>,
+    Path((id, file)): Path<(String, String)>,
+) -> Result<impl IntoResponse, ApiError> {
+    let (n, ext) = file
+        .split_once('.')
+        .and_then(|(n, ext)| Some((n.parse::<u32>().ok()?, ext)))
+        .filter(|(_, ext)| *ext == "png" || *ext == "exr")
+        .ok_or_else(|| {
+            ApiError::not_found(format!("no frame file {file:?}; use N.png or N.exr"))
+        })?;
+    let missing = || ApiError::not_found(format!("job {id} has no frame {n} (yet)"));
+    let sid = store_id(&state, &id)?.ok_or_else(missing)?;
+    let exr = state
+        .store
+        .frame_exr(sid, n)
+        .map_err(ApiError::internal)?
+        .ok_or_else(missing)?;
+    if ext == "exr" {
+        return Ok(([(header::CONTENT_TYPE, "image/x-exr")], exr));
+    }
+    let png = tokio::task::spawn_blocking(move || {
+        let film = film::decode_exr(&exr).map_err(ApiError::internal)?;
+        film::encode_png(&film).map_err(ApiError::internal)
+    })
+    .await
+    .map_err(ApiError::internal)??;
+    Ok(([(header::CONTENT_TYPE, "image/png")], png))
+}
+
+pub async fn stats(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Json<Value>, ApiError> {
+    let Some(sid) = store_id(&state, &id)? else {
+        return Ok(Json(json!({ "id": id, "frames": [] })));
+    };
+    let mut frames = Vec::new();
+    for frame in state.store.frames_done(sid).map_err(ApiError::internal)? {
+        if let Some(s) = state
+            .store
+            .frame_stats(sid, frame)
+            .map_err(ApiError::internal)?
+        {
+            let phases: serde_json::Map<String, Value> = s
+                .phase_seconds
+                .iter()
+                .map(|(k, v)| (k.clone(), json!(v)))
+                .collect();
+            frames.push(json!({
+                "frame": s.frame,
+                "records_alive": s.records_alive,
+                "records_created": s.records_created,
+                "records_reused": s.records_reused,
+                "records_replaced": s.records_replaced,
+                "records_dropped": s.records_dropped,
+                "lookups": s.lookups,
+                "rays": s.rays,
+                "phase_seconds": phases,
+                "seconds": s.phase_seconds.iter().map(|p| p.1).sum::<f64>(),
+            }));
+        }
+    }
+    Ok(Json(json!({ "id": id, "frames": frames })))
+}
+
+/// Prometheus text format.
+pub async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
+    let mut out = String::new();
+    let counts = {
+        let jobs = state.jobs.lock().expect("job table lock");
+        [
+            JobState::Queued,
+            JobState::Running,
+            JobState::Done,
+            JobState::Failed,
+            JobState::Cancelled,
+        ]
+        .map(|s| (s, jobs.values().filter(|j| j.state == s).count()))
+    };
+    out.push_str("# HELP radcache_jobs Jobs by state.\n# TYPE radcache_jobs gauge\n");
+    for (s, n) in counts {
+        let _ = writeln!(out, "radcache_jobs{{state=\"{}\"}} {n}", s.as_str());
+    }
+    let _ = writeln!(
+        out,
+        "# HELP radcache_frames_rendered_total Frames rendered by this server.\n# TYPE radcache_frames_rendered_total counter\nradcache_frames_rendered_total {}",
+        state.frames_rendered.load(Ordering::Relaxed)
+    );
+    let _ = writeln!(
+        out,
+        "# HELP radcache_render_seconds_total Seconds spent rendering frames.\n# TYPE radcache_render_seconds_total counter\nradcache_render_seconds_total {}",
+        state.render_micros.load(Ordering::Relaxed) as f64 / 1e6
+    );
+    let bytes = state.store.size_on_disk().unwrap_or(0);
+    let _ = writeln!(
+        out,
+        "# HELP radcache_store_bytes Bytes of the store on disk.\n# TYPE radcache_store_bytes gauge\nradcache_store_bytes {bytes}"
+    );
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out)
+}

@@ -1,0 +1,102 @@
+//! `/api/jobs`: create, list, show, cancel, resume.
+
+use super::{ApiError, AppState, Job, JobRequest, JobState};
+use axum::body::Bytes;
+use axum::extract::{Path, State};
+use axum::http::StatusCode;
+use axum::Json;
+use serde_json::{json, Value};
+use std::sync::Arc;
+
+pub fn job_json(job: &Job) -> Value {
+    json!({
+        "id": job.id,
+        "state": job.state.as_str(),
+        "frames_done": job.frames_done,
+        "frames_total": job.request.frames_total(),
+        "scene": job.request.scene.to_string(),
+        "method": job.request.method.name(),
+        "frames": format!("{}..{}", job.request.frames.start, job.request.frames.end),
+        "size": format!("{}x{}", job.request.settings.width, job.request.settings.height),
+        "spp": job.request.method.spp(),
+        "error": job.error,
+    })
+}
+
+pub async fn create(
+    State(state): State<Arc<AppState>>,
+    body: Bytes,
+) -> Result<(StatusCode, Json<Value>), ApiError> {
+    let request = JobRequest::parse(&body, state.options.scenes.as_deref())?;
+    let id = {
+        let mut jobs = state.jobs.lock().expect("job table lock");
+        let n = jobs.keys().next_back().map_or(1, |n| n + 1);
+        let id = format!("job-{n}");
+        jobs.insert(
+            n,
+            Job {
+                id: id.clone(),
+                request,
+                state: JobState::Queued,
+                frames_done: 0,
+                error: None,
+                cancel: false,
+            },
+        );
+        id
+    };
+    state.wake.notify_one();
+    Ok((StatusCode::CREATED, Json(json!({ "id": id }))))
+}
+
+pub async fn list(State(state): State<Arc<AppState>>) -> Json<Value> {
+    let jobs = state.jobs.lock().expect("job table lock");
+    Json(Value::Array(jobs.values().map(job_json).collect()))
+}
+
+pub async fn show(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Json<Value>, ApiError> {
+    Ok(Json(job_json(&state.job(&id)?)))
+}
+
+pub async fn cancel(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Json<Value>, ApiError> {
+    let job = state.job(&id)?;
+    match job.state {
+        JobState::Queued => state.update(&id, |j| j.state = JobState::Cancelled),
+        JobState::Running => state.update(&id, |j| j.cancel = true),
+        s => {
+            return Err(ApiError::conflict(format!(
+                "job {id} is {}; only queued or running jobs can be cancelled",
+                s.as_str()
+            )))
+        }
+    }
+    Ok(Json(job_json(&state.job(&id)?)))
+}
+
+pub async fn resume(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Json<Value>, ApiError> {
+    let job = state.job(&id)?;
+    match job.state {
+        JobState::Cancelled | JobState::Failed => state.update(&id, |j| {
+            j.state = JobState::Queued;
+            j.cancel = false;
+            j.error = None;
+        }),
+        s => {
+            return Err(ApiError::conflict(format!(
+                "job {id} is {}; only cancelled or failed jobs can be resumed",
+                s.as_str()
+            )))
+        }
+    }
+    state.wake.notify_one();
+    Ok(Json(job_json(&state.job(&id)?)))
+}

@@ -1,0 +1,180 @@
+//! A job request (`POST /api/jobs` body) checked and turned into the
+//! library's render settings: the same types `radcache render` builds.
+
+use super::ApiError;
+use crate::method::ic::IcSettings;
+use crate::method::path::PathSettings;
+use crate::method::trc::TrcSettings;
+use crate::render::{FrameSettings, MethodSettings, SceneSource};
+use crate::store::schema::JobValue;
+use serde::Deserialize;
+use std::ops::Range;
+use std::path::{Component, Path};
+
+/// Most frames one job may render.
+pub const MAX_FRAMES: u32 = 10_000;
+/// Largest image side.
+pub const MAX_SIDE: u32 = 4096;
+/// Most samples per pixel.
+pub const MAX_SPP: u32 = 65_536;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Body {
+    scene: String,
+    method: String,
+    frames: String,
+    size: String,
+    spp: Option<u32>,
+    seed: Option<u64>,
+}
+
+/// What a job renders.
+#[derive(Clone, Debug)]
+pub struct JobRequest {
+    pub scene: SceneSource,
+    pub method: MethodSettings,
+    pub settings: FrameSettings,
+    pub frames: Range<u32>,
+}
+
+impl JobRequest {
+    /// Parses and checks a request body; scene files must lie under `scenes`.
+    pub fn parse(body: &[u8], scenes: Option<&Path>) -> Result<JobRequest, ApiError> {
+        let b: Body = serde_json::from_slice(body)
+            .map_err(|e| ApiError::bad_request(format!("malformed job request: {e}")))?;
+        let scene = parse_scene(&b.scene, scenes)?;
+        let frames = parse_frames(&b.frames)?;
+        let (width, height) = parse_size(&b.size)?;
+        if let Some(spp) = b.spp {
+            if spp == 0 || spp > MAX_SPP {
+                return Err(ApiError::bad_request(format!(
+                    "spp {spp} is out of range (1..={MAX_SPP})"
+                )));
+            }
+        }
+        let method = method_settings(&b.method, b.spp)
+            .ok_or_else(|| ApiError::bad_request(format!("unknown method {:?}", b.method)))?;
+        let settings = FrameSettings {
+            width,
+            height,
+            seed: b.seed.unwrap_or(0),
+            ..FrameSettings::default()
+        };
+        Ok(JobRequest {
+            scene,
+            method,
+            settings,
+            frames,
+        })
+    }
+
+    /// The request of a job found in the store (a restart resumes it).
+    pub fn from_stored(job: &JobValue) -> Option<JobRequest> {
+        let scene = match job.scene.strip_prefix("builtin:") {
+            Some(name) => SceneSource::Builtin(name.to_string()),
+            None => SceneSource::File(job.scene.clone().into()),
+        };
+        Some(JobRequest {
+            scene,
+            method: method_settings(&job.method, Some(job.spp))?,
+            settings: FrameSettings {
+                width: job.width,
+                height: job.height,
+                fps: job.fps,
+                seed: job.seed,
+                same_pattern: job.same_pattern,
+            },
+            frames: job.frame_start..job.frame_end,
+        })
+    }
+
+    pub fn frames_total(&self) -> u32 {
+        self.frames.end - self.frames.start
+    }
+}
+
+/// A method by name with its paper defaults (as `radcache render`).
+fn method_settings(name: &str, spp: Option<u32>) -> Option<MethodSettings> {
+    let ic = IcSettings {
+        spp: spp.unwrap_or(IcSettings::default().spp),
+        ..IcSettings::default()
+    };
+    Some(match name {
+        "path" => MethodSettings::Path(PathSettings {
+            spp: spp.unwrap_or(PathSettings::default().spp),
+            ..PathSettings::default()
+        }),
+        "ic" => MethodSettings::Ic(ic),
+        "trc" => MethodSettings::Trc(TrcSettings {
+            ic,
+            ..TrcSettings::default()
+        }),
+        _ => return None,
+    })
+}
+
+/// `builtin:NAME`, or a relative path inside the scenes directory (no `..`,
+/// no absolute path).
+fn parse_scene(s: &str, scenes: Option<&Path>) -> Result<SceneSource, ApiError> {
+    if let Some(name) = s.strip_prefix("builtin:") {
+        crate::scene::Scene::builtin(name)
+            .map_err(|e| ApiError::bad_request(format!("scene {s:?}: {e}")))?;
+        return Ok(SceneSource::Builtin(name.to_string()));
+    }
+    let rel = Path::new(s);
+    if s.is_empty() || !rel.components().all(|c| matches!(c, Component::Normal(_))) {
+        return Err(ApiError::bad_request(format!(
+            "scene path {s:?} must be relative to the scenes directory, without '..'"
+        )));
+    }
+    let dir = scenes.ok_or_else(|| {
+        ApiError::bad_request("this server has no --scenes directory; use builtin:NAME".into())
+    })?;
+    let path = dir.join(rel);
+    // Symbolic links must not lead out of the directory either.
+    let real = path
+        .canonicalize()
+        .map_err(|_| ApiError::bad_request(format!("no scene {s:?} in the scenes directory")))?;
+    let root = dir
+        .canonicalize()
+        .map_err(|e| ApiError::internal(format!("scenes directory: {e}")))?;
+    if !real.starts_with(&root) || !real.is_file() {
+        return Err(ApiError::bad_request(format!(
+            "scene {s:?} is not a file in the scenes directory"
+        )));
+    }
+    Ok(SceneSource::File(real))
+}
+
+fn parse_frames(s: &str) -> Result<Range<u32>, ApiError> {
+    let bad = || ApiError::bad_request(format!("frames {s:?}: expected START..END, e.g. 0..24"));
+    let (a, b) = s.split_once("..").ok_or_else(bad)?;
+    let start: u32 = a.trim().parse().map_err(|_| bad())?;
+    let end: u32 = b.trim().parse().map_err(|_| bad())?;
+    if end <= start {
+        return Err(ApiError::bad_request(format!(
+            "frame range {s:?} is empty (END is exclusive)"
+        )));
+    }
+    if end - start > MAX_FRAMES {
+        return Err(ApiError::bad_request(format!(
+            "frame range {s:?} has {} frames; at most {MAX_FRAMES}",
+            end - start
+        )));
+    }
+    Ok(start..end)
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), ApiError> {
+    let bad = || ApiError::bad_request(format!("size {s:?}: expected WxH, e.g. 128x128"));
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let w: u32 = w.trim().parse().map_err(|_| bad())?;
+    let h: u32 = h.trim().parse().map_err(|_| bad())?;
+    if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
+        return Err(ApiError::bad_request(format!(
+            "size {w}x{h} is out of range (1..={MAX_SIDE} per side)"
+        )));
+    }
+    Ok((w, h))
+}

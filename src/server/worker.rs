@@ -1,0 +1,149 @@
+//! The background worker: one queued job at a time, rendered in
+//! `spawn_blocking` through [`render::render_job_to_dir_with`], the same
+//! store job and resume logic as `radcache render --db --job`.
+
+use super::{parse_job_id, AppState, Job, JobRequest, JobState};
+use crate::render::{self, Renderer, StoreJob};
+use anyhow::Result;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Fills the job table from the store's `job-N` jobs: finished ones are
+/// done, unfinished ones (interrupted by a stop or a crash) are queued again.
+pub fn load_jobs(state: &AppState) -> Result<()> {
+    let mut jobs = state.jobs.lock().expect("job table lock");
+    for stored in state.store.jobs()? {
+        let (Some(n), Some(request)) =
+            (parse_job_id(&stored.name), JobRequest::from_stored(&stored))
+        else {
+            continue;
+        };
+        let done = frames_done(state, stored.id, &request);
+        let finished = done == request.frames_total();
+        jobs.insert(
+            n,
+            Job {
+                id: stored.name.clone(),
+                request,
+                state: if finished {
+                    JobState::Done
+                } else {
+                    JobState::Queued
+                },
+                frames_done: done,
+                error: None,
+                cancel: false,
+            },
+        );
+    }
+    Ok(())
+}
+
+fn frames_done(state: &AppState, store_id: u64, request: &JobRequest) -> u32 {
+    state
+        .store
+        .frames_done(store_id)
+        .map(|f| f.iter().filter(|f| request.frames.contains(f)).count() as u32)
+        .unwrap_or(0)
+}
+
+/// Runs queued jobs until shutdown.
+pub async fn run(state: Arc<AppState>) {
+    loop {
+        if state.shutdown.load(Ordering::SeqCst) {
+            return;
+        }
+        let next = {
+            let mut jobs = state.jobs.lock().expect("job table lock");
+            jobs.values_mut()
+                .find(|j| j.state == JobState::Queued)
+                .map(|j| {
+                    j.state = JobState::Running;
+                    j.id.clone()
+                })
+        };
+        let Some(id) = next else {
+            state.wake.notified().await;
+            continue;
+        };
+        let s = state.clone();
+        let job_id = id.clone();
+        let result = tokio::task::spawn_blocking(move || render_job(&s, &job_id)).await;
+        let result = match result {
+            Ok(r) => r,
+            Err(e) => Err(anyhow::anyhow!("render panicked: {e}")),
+        };
+        let stopping = state.shutdown.load(Ordering::SeqCst);
+        state.update(&id, |j| match result {
+            Err(e) => {
+                j.state = JobState::Failed;
+                j.error = Some(format!("{e:#}"));
+            }
+            Ok(()) if j.frames_done == j.request.frames_total() => j.state = JobState::Done,
+            Ok(()) if j.cancel => {
+                j.state = JobState::Cancelled;
+                j.cancel = false;
+            }
+            // Stopped by shutdown: resumed on the next start.
+            Ok(()) if stopping => j.state = JobState::Queued,
+            Ok(()) => j.state = JobState::Queued,
+        });
+    }
+}
+
+/// Renders job `id` until it is finished, cancelled or the server stops.
+fn render_job(state: &AppState, id: &str) -> Result<()> {
+    let request = state
+        .job(id)
+        .map_err(|e| anyhow::anyhow!("{}", e.detail))?
+        .request;
+    let scene = request.scene.load()?;
+    let backend = render::make_backend(state.options.backend)?;
+    let spec = render::job_spec(
+        id,
+        &request.scene,
+        &request.method,
+        &request.settings,
+        request.frames.clone(),
+    )?;
+    let stored = state.store.begin_job(&spec, false)?;
+    let store_id = stored.id;
+    state.update(id, |j| {
+        j.frames_done = frames_done(state, store_id, &request)
+    });
+    let mut renderer = Renderer::new(
+        scene,
+        request.method.instantiate(),
+        backend,
+        request.settings.clone(),
+    );
+    let mut job = StoreJob {
+        store: &state.store,
+        job: stored,
+    };
+    let out = state.options.out.join(id);
+    let mut last = Instant::now();
+    let mut after_frame = |_frame: u32| {
+        let micros = last.elapsed().as_micros() as u64;
+        last = Instant::now();
+        state.frames_rendered.fetch_add(1, Ordering::Relaxed);
+        state.render_micros.fetch_add(micros, Ordering::Relaxed);
+        let done = frames_done(state, store_id, &request);
+        let mut go_on = !state.shutdown.load(Ordering::SeqCst);
+        state.update(id, |j| {
+            j.frames_done = done;
+            go_on &= !j.cancel;
+        });
+        go_on
+    };
+    render::render_job_to_dir_with(
+        &mut renderer,
+        request.frames.clone(),
+        &out,
+        true,
+        Some(&mut job),
+        &mut after_frame,
+    )?;
+    Ok(())
+}
