@@ -14,6 +14,7 @@
 //! file in the destination folder, then renamed over the destination, so a
 //! crash never leaves a half-written frame behind.
 
+use crate::material::luminance;
 use glam::Vec3;
 use std::fs;
 use std::io::{self, Cursor, Write};
@@ -236,11 +237,6 @@ pub fn encode_srgb8(linear: f32) -> u8 {
         linear.clamp(0.0, 1.0)
     };
     (srgb_oetf(v) * 255.0 + 0.5) as u8
-}
-
-/// Rec. 709 luminance of linear RGB.
-fn luminance(c: Vec3) -> f32 {
-    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
 
 /// One pixel: tone-map by scaling RGB with `tone_curve(L) / L` (keeps hue),

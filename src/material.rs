@@ -16,8 +16,11 @@ use std::f32::consts::FRAC_1_PI;
 
 /// Luminance weights (Rec. 709), used to split sampling between lobes.
 pub fn luminance(c: Vec3) -> f32 {
-    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
+    c.dot(LUMINANCE)
 }
+
+/// Rec. 709 luminance weights of (r, g, b).
+pub const LUMINANCE: Vec3 = Vec3::new(0.2126, 0.7152, 0.0722);
 
 /// The BSDF of one material at one shading point, in a local frame whose +Z
 /// is the shading normal on the side of the outgoing direction.

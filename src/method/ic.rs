@@ -28,7 +28,7 @@ use crate::integrator::{
     offset_origin, trace_radiance, FirstHitEmission, PathLength, RadianceQuery,
 };
 use crate::light::emitting_cosine;
-use crate::material::{luminance, Bsdf};
+use crate::material::{luminance, Bsdf, LUMINANCE};
 use crate::sampling::{cosine_hemisphere, power_heuristic, Rng, SampleKey};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -389,7 +389,7 @@ impl IrradianceCaching {
     /// over R) and clamped to the pixel-spacing limits (influence `a·R`).
     fn clamp_radius(&self, harmonic: f32, e: Vec3, grad: &[Vec3; 3], footprint: f32) -> f32 {
         let a = self.settings.accuracy;
-        let grad_lum = grad[0] * 0.2126 + grad[1] * 0.7152 + grad[2] * 0.0722;
+        let grad_lum = grad[0] * LUMINANCE.x + grad[1] * LUMINANCE.y + grad[2] * LUMINANCE.z;
         let mut r = harmonic;
         let g = grad_lum.length();
         if g > 0.0 {
