@@ -7,6 +7,7 @@ use radcache::cache::IrradianceRecord;
 use radcache::film;
 use radcache::method::ic::IcSettings;
 use radcache::method::path::PathSettings;
+use radcache::method::trc::{TemporalGradients, TrcSettings};
 use radcache::method::FrameStats;
 use radcache::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob};
 use radcache::store::migrate::{self, Migration};
@@ -96,6 +97,7 @@ fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
                     exr: &exr,
                     records,
                     stats: &stats,
+                    state: None,
                 },
             )
             .unwrap();
@@ -539,6 +541,7 @@ fn store_throughput() {
             exr: &exr,
             records,
             stats: &stats,
+            state: None,
         };
         store.commit_frame(&mut job, c).unwrap();
     }
@@ -567,11 +570,128 @@ fn store_throughput() {
 }
 
 #[test]
-fn resumed_trc_render_replays_and_is_bit_identical() {
-    // `trc` carries its cache across frames: a resume replays the finished
-    // frames (until the store persists the cache state).
-    let mut trc = radcache::method::trc::TrcSettings::default();
+fn resumed_trc_render_is_bit_identical() {
+    // Also across other ranges of the same job: a range whose stored state
+    // belongs to another chain starts over.
+    let mut trc = TrcSettings::default();
     trc.ic.strata = Strata { theta: 4, phi: 12 };
     trc.ic.spp = 1;
     resume_matches_uninterrupted(MethodSettings::Trc(trc));
+}
+
+/// A `trc` render stopped after frame 5 of 0..10 — with records created
+/// before frame 5 that are still valid after it (mid-window), and records
+/// whose life ends at frame 5 (replaced or dropped on resume, as their
+/// stored `used` flags say) — resumes from the stored state: only frames
+/// 6..9 are rendered (and, with interpolated gradients, only their first
+/// passes run), with exactly their rays, and the frames equal an
+/// uninterrupted run byte for byte. A corrupt state record is a clear
+/// error naming tree and key.
+fn trc_resumes_from_stored_state(gradients: TemporalGradients) {
+    let mut trc = TrcSettings::default();
+    trc.ic.strata = Strata { theta: 4, phi: 12 };
+    trc.ic.spp = 1;
+    trc.max_life = 6;
+    trc.temporal_accuracy = 0.02;
+    trc.gradients = gradients;
+    let method = MethodSettings::Trc(trc);
+    // 4 fps: the cube moves enough per frame for records of many lifespans.
+    let renderer = |m: &MethodSettings| {
+        let mut r = renderer(m);
+        r.settings.fps = 4.0;
+        r
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
+    let mut r = renderer(&method);
+    let uninterrupted = render::render_to_dir(&mut r, 0..10, &plain, true).unwrap();
+    assert_eq!(r.method_calls().rendered, 10);
+
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let spec = render::job_spec("j", &source, &method, &r.settings, 0..10).unwrap();
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    let mut first = renderer(&method);
+    let s = render::render_job_to_dir_with(
+        &mut first,
+        0..10,
+        &resumed,
+        true,
+        Some(&mut sj),
+        &mut |f| f < 5,
+    )
+    .unwrap();
+    assert_eq!(s.frames, 6);
+    let id = sj.job.id;
+
+    // The stored state is the one after frame 5, and it is mid-window.
+    let state = store.load_state(id).unwrap().unwrap();
+    assert_eq!(state.frame, 5);
+    let alive: std::collections::HashSet<u64> = state.records.iter().map(|r| r.0).collect();
+    let (mut spanning, mut ending) = (0, 0);
+    store
+        .for_each_record(id, |_, rec| {
+            if alive.contains(&rec.id) && rec.created_frame < 5 {
+                spanning += u32::from(rec.last_frame > 5);
+                ending += u32::from(rec.last_frame == 5);
+            }
+        })
+        .unwrap();
+    assert!(spanning > 0, "no record spans the resume point");
+    assert!(ending > 0, "no record ends at the resume point");
+
+    // A corrupt state record: a clear error naming tree and key.
+    let (bad_id, _) = state.records[0];
+    let key = keys::state_record(id, bad_id);
+    let good = store.tree("state").unwrap().get(key).unwrap().unwrap();
+    store.raw_insert("state", &key, b"garbage").unwrap();
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    let msg =
+        render::render_job_to_dir(&mut renderer(&method), 0..10, &resumed, true, Some(&mut sj))
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+    assert!(
+        msg.contains("tree `state`") && msg.contains(&format!("job {id} record {bad_id}")),
+        "{msg}"
+    );
+    store.raw_insert("state", &key, &good).unwrap();
+
+    // The resume renders frames 6..9 only.
+    let mut second = renderer(&method);
+    let s = render::render_job_to_dir(&mut second, 0..10, &resumed, true, Some(&mut sj)).unwrap();
+    assert_eq!((s.resumed, s.frames), (6, 4));
+    let calls = second.method_calls();
+    assert_eq!(calls.rendered, 4, "no finished frame rendered again");
+    if gradients == TemporalGradients::Interpolated {
+        assert_eq!(calls.prepared, 4, "first passes of frames 6..9 only");
+    } else {
+        assert_eq!(calls.prepared, 0);
+        let rays: u64 = uninterrupted.frame_stats[6..].iter().map(|f| f.rays).sum();
+        assert_eq!(s.rays, rays, "exactly the rays of frames 6..9");
+    }
+    assert_eq!(exr_files(&plain, 0..10), exr_files(&resumed, 0..10));
+    // The state stays the working set: records alive after the last frame.
+    let state = store.load_state(id).unwrap().unwrap();
+    assert_eq!(state.frame, 9);
+    assert_eq!(
+        state.records.len() as u64,
+        uninterrupted.frame_stats[9].records_alive
+    );
+}
+
+#[test]
+fn trc_resumes_mid_window_from_stored_state_without_replay() {
+    trc_resumes_from_stored_state(TemporalGradients::Extrapolated);
+}
+
+#[test]
+fn trc_interpolated_resumes_from_stored_first_pass_without_replay() {
+    trc_resumes_from_stored_state(TemporalGradients::Interpolated);
 }

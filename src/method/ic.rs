@@ -194,6 +194,7 @@ impl IrradianceCaching {
             records,
             samples,
             strata: self.settings.strata,
+            ..FrameRecords::default()
         });
     }
 }

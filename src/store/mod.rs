@@ -9,8 +9,13 @@
 //! - Bulk arrays (frame EXR bytes, record samples) are zstd-compressed;
 //!   samples are the 8-byte RGBE records of [`rgbe::PackedSample`].
 //! - A job checkpoints each frame with [`Store::commit_frame`]: one sled
-//!   transaction over `frames`, `records`, `samples`, `stats` and `jobs`,
-//!   then `flush`; the frame counts as acknowledged only after that returns.
+//!   transaction over `frames`, `records`, `samples`, `stats`, `state` and
+//!   `jobs`, then `flush`; the frame counts as acknowledged only after that
+//!   returns.
+//! - `state` holds the cache a stateful method (`trc`) carries to the next
+//!   frame, as of the job's last frame: each frame writes only its changes
+//!   (records put and removed, and the head), and a resume loads it
+//!   ([`Store::load_state`]) instead of rendering the finished frames again.
 //! - The schema version lives in `meta`; see [`migrate`].
 
 pub mod inspect;
@@ -24,16 +29,18 @@ use rkyv::bytecheck::CheckBytes;
 use rkyv::rancor;
 use rkyv::ser::allocator::ArenaHandle;
 use rkyv::util::AlignedVec;
-use schema::{FrameValue, JobValue, RecordValue, SamplesValue, StatsValue};
+use schema::{
+    FrameValue, JobValue, RecordValue, SamplesValue, StateHeadValue, StateRecordValue, StatsValue,
+};
 use sled::transaction::{ConflictableTransactionError, TransactionError};
 use sled::Transactional;
 use std::path::{Path, PathBuf};
 
 pub use rgbe::PackedSample;
 
-/// The trees of schema 1, in the order `inspect` lists them.
-pub const TREES: [&str; 7] = [
-    "meta", "jobs", "frames", "stats", "records", "samples", "movies",
+/// The trees, in the order `inspect` lists them.
+pub const TREES: [&str; 8] = [
+    "meta", "jobs", "frames", "stats", "records", "samples", "state", "movies",
 ];
 
 /// sled's page cache. Its default (1 GiB) made a render's memory grow
@@ -102,6 +109,7 @@ pub struct Store {
     stats: sled::Tree,
     records: sled::Tree,
     samples: sled::Tree,
+    state: sled::Tree,
     movies: sled::Tree,
 }
 
@@ -139,6 +147,16 @@ pub struct FrameCommit<'a> {
     pub exr: &'a [u8],
     pub records: Vec<RecordCommit>,
     pub stats: &'a crate::method::FrameStats,
+    /// The frame's changes of a stateful method's carried state.
+    pub state: Option<StateCommit<'a>>,
+}
+
+/// A stateful method's state changes of one frame, with the chain they
+/// belong to (see [`StateHeadValue`]).
+pub struct StateCommit<'a> {
+    pub chain_start: u32,
+    pub chain_end: Option<u32>,
+    pub changes: &'a crate::method::StateChanges,
 }
 
 /// FNV-1a 64 of `bytes`, in hex: the scene content hash of a job (stable
@@ -200,6 +218,7 @@ impl Store {
             stats: tree("stats")?,
             records: tree("records")?,
             samples: tree("samples")?,
+            state: tree("state")?,
             movies: tree("movies")?,
             db,
         };
@@ -248,6 +267,7 @@ impl Store {
             "stats" => &self.stats,
             "records" => &self.records,
             "samples" => &self.samples,
+            "state" => &self.state,
             "movies" => &self.movies,
             _ => return None,
         })
@@ -395,7 +415,13 @@ impl Store {
     /// Deletes every key of job id `job` in the per-job trees.
     fn delete_job_data(&self, job: u64) -> Result<(), StoreError> {
         let prefix = keys::job_prefix(job);
-        for tree in [&self.frames, &self.stats, &self.records, &self.samples] {
+        for tree in [
+            &self.frames,
+            &self.stats,
+            &self.records,
+            &self.samples,
+            &self.state,
+        ] {
             for key in tree.scan_prefix(prefix).keys() {
                 let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
                 tree.remove(key)
@@ -432,6 +458,14 @@ impl Store {
     pub fn commit_frame(&self, job: &mut JobValue, c: FrameCommit) -> Result<(), StoreError> {
         let frame_key = keys::frame(job.id, c.frame);
         let already = self.frame_done(job.id, c.frame)?;
+        // A frame written again (by another chain of a stateful method)
+        // replaces the record versions of its former self.
+        let mut stale = Vec::new();
+        if already {
+            for key in self.records.scan_prefix(frame_key).keys() {
+                stale.push(key.map_err(|e| StoreError::sled(&self.path, e))?);
+            }
+        }
         let frame_value = FrameValue {
             width: c.width,
             height: c.height,
@@ -455,6 +489,32 @@ impl Store {
             }
         }
         let stats = StatsValue::from_stats(c.stats, samples_raw);
+        let mut state_rows = Vec::new();
+        let mut state_removed = Vec::new();
+        let mut state_head = None;
+        if let Some(sc) = &c.state {
+            for (id, data) in &sc.changes.put {
+                let value = StateRecordValue {
+                    frame: c.frame,
+                    data: data.clone(),
+                };
+                state_rows.push((keys::state_record(job.id, *id), encode(&value)));
+            }
+            state_removed.extend(
+                sc.changes
+                    .removed
+                    .iter()
+                    .map(|&id| keys::state_record(job.id, id)),
+            );
+            let head = StateHeadValue {
+                frame: c.frame,
+                chain_start: sc.chain_start,
+                chain_end: sc.chain_end,
+                global: sc.changes.global.clone(),
+            };
+            state_head = Some(encode(&head));
+        }
+        let state_head_key = keys::state_head(job.id);
         let mut progressed = job.clone();
         if !already {
             progressed.frames_done += 1;
@@ -470,9 +530,23 @@ impl Store {
             &self.records,
             &self.samples,
             &self.stats,
+            &self.state,
             &self.jobs,
         )
-            .transaction(|(frames, records, samples, stats, jobs)| {
+            .transaction(|(frames, records, samples, stats, state, jobs)| {
+                for k in &stale {
+                    records.remove(&k[..])?;
+                    samples.remove(&k[..])?;
+                }
+                for k in &state_removed {
+                    state.remove(&k[..])?;
+                }
+                for (k, v) in &state_rows {
+                    state.insert(&k[..], &v[..])?;
+                }
+                if let Some(head) = &state_head {
+                    state.insert(&state_head_key[..], &head[..])?;
+                }
                 for (k, v) in &record_rows {
                     records.insert(&k[..], &v[..])?;
                 }
@@ -552,6 +626,65 @@ impl Store {
         let raw = decompress(&v.packed_zstd, v.count as usize * PackedSample::BYTES)
             .map_err(|d| self.corrupt("samples", &key, d))?;
         Ok(from_planar(&raw, v.count as usize))
+    }
+
+    // ------------------------------------------------------------ state
+
+    /// The head of job `job`'s carried method state, if any.
+    pub fn state_head(&self, job: u64) -> Result<Option<StateHeadValue>, StoreError> {
+        self.get("state", &keys::state_head(job))
+    }
+
+    /// Job `job`'s carried method state (as of [`Self::state_head`]'s
+    /// frame): the head's method-wide bytes and every state record, in id
+    /// order.
+    pub fn load_state(&self, job: u64) -> Result<Option<crate::method::MethodState>, StoreError> {
+        let Some(head) = self.state_head(job)? else {
+            return Ok(None);
+        };
+        let mut records = Vec::new();
+        for item in self.state.scan_prefix(keys::job_prefix(job)) {
+            let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
+            if k.len() == 8 {
+                continue; // the head
+            }
+            let (_, id) = keys::parse_state_record(&k)
+                .ok_or_else(|| self.corrupt("state", &k, "malformed key"))?;
+            let value: StateRecordValue = self.decode("state", &k, &v)?;
+            records.push((id, value.data));
+        }
+        Ok(Some(crate::method::MethodState {
+            frame: head.frame,
+            global: head.global,
+            records,
+        }))
+    }
+
+    /// Forgets job `job`'s carried method state (a render that starts its
+    /// chain over). The head goes first, so that a crash halfway leaves no
+    /// head over partial records.
+    pub fn clear_state(&self, job: u64) -> Result<(), StoreError> {
+        self.state
+            .remove(keys::state_head(job))
+            .map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()?;
+        for key in self.state.scan_prefix(keys::job_prefix(job)).keys() {
+            let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
+            self.state
+                .remove(key)
+                .map_err(|e| StoreError::sled(&self.path, e))?;
+        }
+        self.flush()
+    }
+
+    /// The error for a state [`crate::method::Method::restore_state`]
+    /// refused: a corrupt value in `state`, naming its key.
+    pub fn state_error(&self, job: u64, e: crate::method::StateError) -> StoreError {
+        let key = match e.record {
+            Some(id) => keys::state_record(job, id).to_vec(),
+            None => keys::state_head(job).to_vec(),
+        };
+        self.corrupt("state", &key, e.detail)
     }
 
     /// Writes a raw value (tests use it to corrupt a store on purpose).

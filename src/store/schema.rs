@@ -112,3 +112,28 @@ impl StatsValue {
         }
     }
 }
+
+/// `state` value under `job id`: the head of a job's carried method state
+/// (written with every frame of a stateful method, in the frame's batch).
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct StateHeadValue {
+    /// The state is the one after this frame.
+    pub frame: u32,
+    /// The frame the method started from (its state depends on it).
+    pub chain_start: u32,
+    /// The end of the range rendered, for methods that look ahead (their
+    /// frames depend on it); `None` for the others.
+    pub chain_end: Option<u32>,
+    /// The method-wide state (method-defined bytes).
+    pub global: Vec<u8>,
+}
+
+/// `state` value under `job id · record id`: one record of a job's carried
+/// method state.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct StateRecordValue {
+    /// The frame that wrote this version.
+    pub frame: u32,
+    /// The record's state (method-defined bytes).
+    pub data: Vec<u8>,
+}
