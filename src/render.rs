@@ -46,8 +46,9 @@ impl std::fmt::Display for SceneSource {
     }
 }
 
-/// Which rendering method, with its settings.
-#[derive(Clone, Debug, PartialEq)]
+/// Which rendering method, with its settings. Its serde JSON is a job's
+/// settings identity in the store.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub enum MethodSettings {
     Path(PathSettings),
     Ic(IcSettings),
@@ -418,17 +419,90 @@ pub struct StoreJob<'a> {
     pub job: JobValue,
 }
 
-/// What a scene source is, as a job records it: its text and content hash
-/// (FNV-1a 64 of the file bytes, or of `builtin:NAME`).
+/// What a scene source is, as a job records it: its text and content hash.
+/// A built-in scene hashes as `builtin:NAME`; a file as the FNV-1a 64 of its
+/// bytes, followed by `+` and the hash of the external files it references
+/// (the `uri`s of glTF `buffers` and `images` other than `data:` URIs, in
+/// file order, each with its URI) when it references any, so that editing a
+/// `.bin` or a texture next to a `.gltf` changes the hash too.
 pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
     let hash = match source {
         SceneSource::Builtin(_) => store::content_hash(source.to_string().as_bytes()),
-        SceneSource::File(path) => store::content_hash(
-            &std::fs::read(path)
-                .with_context(|| format!("cannot read scene {}", path.display()))?,
-        ),
+        SceneSource::File(path) => {
+            let bytes = std::fs::read(path)
+                .with_context(|| format!("cannot read scene {}", path.display()))?;
+            let main = store::content_hash(&bytes);
+            let uris = external_uris(&bytes);
+            if uris.is_empty() {
+                main
+            } else {
+                let dir = path.parent().unwrap_or(Path::new("."));
+                let mut all = Vec::new();
+                for uri in uris {
+                    let file = dir.join(percent_decode(&uri));
+                    let content = std::fs::read(&file).with_context(|| {
+                        format!(
+                            "cannot read {} (referenced by scene {})",
+                            file.display(),
+                            path.display()
+                        )
+                    })?;
+                    all.extend_from_slice(uri.as_bytes());
+                    all.push(0);
+                    all.extend_from_slice(&(content.len() as u64).to_le_bytes());
+                    all.extend_from_slice(&content);
+                }
+                format!("{main}+{}", store::content_hash(&all))
+            }
+        }
     };
     Ok((source.to_string(), hash))
+}
+
+/// The external file URIs of a glTF (`.gltf` JSON, or the JSON chunk of a
+/// `.glb`): `buffers[].uri` then `images[].uri`, `data:` URIs left out.
+/// Anything unreadable gives none (the scene loader reports it).
+fn external_uris(bytes: &[u8]) -> Vec<String> {
+    let json: &[u8] = if bytes.starts_with(b"glTF") && bytes.len() >= 20 {
+        let len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
+        bytes.get(20..20 + len).unwrap_or(&[])
+    } else {
+        bytes
+    };
+    let Ok(doc) = serde_json::from_slice::<serde_json::Value>(json) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for list in ["buffers", "images"] {
+        for item in doc[list].as_array().into_iter().flatten() {
+            if let Some(uri) = item["uri"].as_str() {
+                if !uri.starts_with("data:") {
+                    out.push(uri.to_string());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// `%XX` escapes of a URI decoded (glTF URIs are RFC 3986).
+fn percent_decode(uri: &str) -> String {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' && i + 2 < b.len() {
+            let hex = std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or("");
+            if let Ok(v) = u8::from_str_radix(hex, 16) {
+                out.push(v);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// The job description of a render: compared with the stored job so that a
@@ -446,9 +520,8 @@ pub fn job_spec(
         scene,
         scene_hash,
         method: method.name().to_string(),
-        // `{:?}` of the settings is canonical: Rust prints floats in their
-        // shortest round-trip form.
-        settings: format!("{method:?}"),
+        settings: serde_json::to_string(method)
+            .context("cannot write the method settings as JSON")?,
         width: settings.width,
         height: settings.height,
         spp: method.spp(),

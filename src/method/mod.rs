@@ -54,7 +54,19 @@ impl FrameContext<'_> {
 
 /// What a method did in one frame (the store and server persist and serve
 /// these; `render` prints a summary).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+/// Stored whole in the store's `stats` tree (rkyv): a field added here is
+/// stored with no other change (a schema change all the same: see
+/// `store::schema`).
+#[derive(
+    Clone,
+    Debug,
+    Default,
+    PartialEq,
+    serde::Serialize,
+    rkyv::Archive,
+    rkyv::Serialize,
+    rkyv::Deserialize,
+)]
 pub struct FrameStats {
     pub frame: u32,
     /// Records in the cache at the end of the frame.

@@ -65,7 +65,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Temporal gradients (TRC §4.5).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
 pub enum TemporalGradients {
     /// A record's value is constant over its life (Fig. 4c).
     None,
@@ -94,7 +94,7 @@ pub struct Successor {
 }
 
 /// Settings of `trc`, with their sources.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct TrcSettings {
     /// Everything spatial: accuracy `a`, strata, spp, spacing, spatial
     /// gradients, path lengths (see [`IcSettings`]).

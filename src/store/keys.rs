@@ -1,7 +1,8 @@
 //! Every key the store writes, and nothing else: no other module builds or
 //! parses raw keys (STYLE.md). Integers are big-endian so that sled's
 //! lexicographic order is numeric order and prefix scans walk space-time
-//! in order. The layout is documented in `migrations/0001_initial.md`.
+//! in order. The layout is documented in `migrations/0001_initial.md` and
+//! `migrations/0002_state_and_identity.md` (schema 2, this one).
 //!
 //! | tree      | key                                   | bytes |
 //! |-----------|---------------------------------------|-------|
@@ -9,15 +10,16 @@
 //! | `jobs`    | job name, UTF-8                       | var   |
 //! | `frames`  | job id u64 · frame u32                | 12    |
 //! | `stats`   | job id u64 · frame u32                | 12    |
-//! | `records` | job id u64 · frame u32 · record id u64 | 20   |
-//! | `samples` | job id u64 · frame u32 · record id u64 | 20   |
+//! | `records` | job id u64 · frame u32                | 12    |
+//! | `samples` | job id u64 · frame u32                | 12    |
 //! | `state`   | job id u64 (the head)                 | 8     |
 //! | `state`   | job id u64 · record id u64            | 16    |
 //! | `movies`  | (reserved, empty)                     |       |
 //!
-//! In `records`/`samples`, `frame` is the frame in which this version of
-//! the record was written (its creation frame for `ic`), so a `job · frame`
-//! prefix scan gives one frame's record changes. `state` holds the carried
+//! `records`/`samples` hold one value per frame: the record versions
+//! written in that frame (creation frame), in id order; schema 1 had one
+//! key per record (`job · frame · record id`, [`record`], still read by
+//! the migration). `state` holds the carried
 //! state of a stateful method (`trc`) after the job's last frame: its head
 //! under the job id, then its records in id order.
 
@@ -40,7 +42,7 @@ pub fn frame(job: u64, frame: u32) -> [u8; 12] {
     k
 }
 
-/// `job · frame · record id` (records, samples).
+/// `job · frame · record id` (schema-1 `records`, `samples`).
 pub fn record(job: u64, frame: u32, id: u64) -> [u8; 20] {
     let mut k = [0u8; 20];
     k[..12].copy_from_slice(&self::frame(job, frame));
@@ -131,8 +133,8 @@ mod tests {
         assert_eq!(describe(&frame(3, 5)), "job 3 frame 5");
         assert_eq!(describe(b"schema_version"), "\"schema_version\"");
         assert_eq!(parse_state_record(&state_record(7, 11)), Some((7, 11)));
-        assert!(state_head(7) < state_record(7, 0));
-        assert!(state_record(7, u64::MAX) < state_head(8));
+        assert!(state_head(7)[..] < state_record(7, 0)[..]);
+        assert!(state_record(7, u64::MAX)[..] < state_head(8)[..]);
         assert_eq!(describe(&state_record(3, 5)), "job 3 record 5");
         assert_eq!(describe(&state_head(3)), "job 3");
     }

@@ -3,7 +3,7 @@
 //! `samples`, `movies`, `frames`, `jobs`, `stats`.
 //!
 //! - Keys: big-endian, built only by [`keys`] (layout there and in
-//!   `migrations/0001_initial.md`).
+//!   `migrations/0001_initial.md`, `migrations/0002_state_and_identity.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
 //! - Bulk arrays (frame EXR bytes, record samples) are zstd-compressed;
@@ -23,6 +23,7 @@ pub mod keys;
 pub mod migrate;
 pub mod rgbe;
 pub mod schema;
+pub mod v1;
 
 use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};
 use rkyv::bytecheck::CheckBytes;
@@ -30,13 +31,15 @@ use rkyv::rancor;
 use rkyv::ser::allocator::ArenaHandle;
 use rkyv::util::AlignedVec;
 use schema::{
-    FrameValue, JobValue, RecordValue, SamplesValue, StateHeadValue, StateRecordValue, StatsValue,
+    FrameRecordsValue, FrameSamplesValue, FrameValue, JobValue, RecordValue, SamplesValue,
+    StateHeadValue, StateRecordValue, StatsValue,
 };
 use sled::transaction::{ConflictableTransactionError, TransactionError};
 use sled::Transactional;
 use std::path::{Path, PathBuf};
 
 pub use rgbe::PackedSample;
+pub use schema::JobSpec;
 
 /// The trees, in the order `inspect` lists them.
 pub const TREES: [&str; 8] = [
@@ -113,24 +116,6 @@ pub struct Store {
     movies: sled::Tree,
 }
 
-/// What a job renders: compared with the stored job on every `render`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct JobSpec {
-    pub name: String,
-    pub scene: String,
-    pub scene_hash: String,
-    pub method: String,
-    pub settings: String,
-    pub width: u32,
-    pub height: u32,
-    pub spp: u32,
-    pub fps: f32,
-    pub seed: u64,
-    pub same_pattern: bool,
-    pub frame_start: u32,
-    pub frame_end: u32,
-}
-
 /// One record of a frame with its samples, ready to store.
 pub struct RecordCommit {
     pub record: RecordValue,
@@ -175,6 +160,19 @@ fn now_unix() -> u64 {
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs())
         .unwrap_or(0)
+}
+
+/// Reads an rkyv archive (validated) of a `T`.
+pub(crate) fn decode_value<T>(bytes: &[u8]) -> Result<T, String>
+where
+    T: rkyv::Archive,
+    T::Archived: for<'a> CheckBytes<HighValidator<'a, rancor::Error>>
+        + rkyv::Deserialize<T, HighDeserializer<rancor::Error>>,
+{
+    // sled values carry no alignment guarantee; rkyv needs 16.
+    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+    aligned.extend_from_slice(bytes);
+    rkyv::from_bytes::<T, rancor::Error>(&aligned).map_err(|e| e.to_string())
 }
 
 /// An rkyv archive of `value`.
@@ -293,10 +291,7 @@ impl Store {
         T::Archived: for<'a> CheckBytes<HighValidator<'a, rancor::Error>>
             + rkyv::Deserialize<T, HighDeserializer<rancor::Error>>,
     {
-        // sled values carry no alignment guarantee; rkyv needs 16.
-        let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
-        aligned.extend_from_slice(bytes);
-        rkyv::from_bytes::<T, rancor::Error>(&aligned).map_err(|e| self.corrupt(tree, key, e))
+        decode_value(bytes).map_err(|e| self.corrupt(tree, key, e))
     }
 
     fn corrupt(&self, tree: &'static str, key: &[u8], detail: impl ToString) -> StoreError {
@@ -343,10 +338,11 @@ impl Store {
         let key = keys::job(&spec.name);
         let now = now_unix();
         if let Some(mut job) = self.job(&spec.name)? {
-            let diffs = job_differences(&job, spec);
+            let diffs = job_differences(&job.spec, spec);
             if diffs.is_empty() {
-                job.frame_start = spec.frame_start;
-                job.frame_end = spec.frame_end;
+                // Same job: the new range, and the spec as this build
+                // writes it (a schema-1 job's settings and hash upgraded).
+                job.spec = spec.clone();
                 job.updated_unix = now;
                 self.jobs
                     .insert(&key, encode(&job))
@@ -392,19 +388,7 @@ impl Store {
             + 1;
         Ok(JobValue {
             id,
-            name: spec.name.clone(),
-            scene: spec.scene.clone(),
-            scene_hash: spec.scene_hash.clone(),
-            method: spec.method.clone(),
-            settings: spec.settings.clone(),
-            width: spec.width,
-            height: spec.height,
-            spp: spec.spp,
-            fps: spec.fps,
-            seed: spec.seed,
-            same_pattern: spec.same_pattern,
-            frame_start: spec.frame_start,
-            frame_end: spec.frame_end,
+            spec: spec.clone(),
             frames_done: 0,
             last_frame: None,
             created_unix: now,
@@ -458,36 +442,33 @@ impl Store {
     pub fn commit_frame(&self, job: &mut JobValue, c: FrameCommit) -> Result<(), StoreError> {
         let frame_key = keys::frame(job.id, c.frame);
         let already = self.frame_done(job.id, c.frame)?;
-        // A frame written again (by another chain of a stateful method)
-        // replaces the record versions of its former self.
-        let mut stale = Vec::new();
-        if already {
-            for key in self.records.scan_prefix(frame_key).keys() {
-                stale.push(key.map_err(|e| StoreError::sled(&self.path, e))?);
-            }
-        }
         let frame_value = FrameValue {
             width: c.width,
             height: c.height,
             exr_len: c.exr.len() as u64,
             exr_zstd: compress(c.exr),
         };
-        let mut record_rows = Vec::with_capacity(c.records.len());
-        let mut sample_rows = Vec::with_capacity(c.records.len());
+        // One `records` and one `samples` value for the frame (replacing
+        // those of a frame written again), records in id order.
+        let mut records = FrameRecordsValue::default();
+        let mut samples = FrameSamplesValue::default();
         let mut samples_raw = 0u64;
-        for rc in &c.records {
-            let key = keys::record(job.id, c.frame, rc.record.id);
-            record_rows.push((key, encode(&rc.record)));
+        let mut commits: Vec<&RecordCommit> = c.records.iter().collect();
+        commits.sort_by_key(|rc| rc.record.id);
+        for rc in commits {
+            records.records.push(rc.record.clone());
             if !rc.samples.is_empty() {
                 let raw = to_planar(&rc.samples);
                 samples_raw += raw.len() as u64;
-                let value = SamplesValue {
+                samples.records.push(SamplesValue {
+                    id: rc.record.id,
                     count: rc.samples.len() as u32,
                     packed_zstd: compress(&raw),
-                };
-                sample_rows.push((key, encode(&value)));
+                });
             }
         }
+        let records_bytes = (!records.records.is_empty()).then(|| encode(&records));
+        let samples_bytes = (!samples.records.is_empty()).then(|| encode(&samples));
         let stats = StatsValue::from_stats(c.stats, samples_raw);
         let mut state_rows = Vec::new();
         let mut state_removed = Vec::new();
@@ -534,10 +515,6 @@ impl Store {
             &self.jobs,
         )
             .transaction(|(frames, records, samples, stats, state, jobs)| {
-                for k in &stale {
-                    records.remove(&k[..])?;
-                    samples.remove(&k[..])?;
-                }
                 for k in &state_removed {
                     state.remove(&k[..])?;
                 }
@@ -547,12 +524,14 @@ impl Store {
                 if let Some(head) = &state_head {
                     state.insert(&state_head_key[..], &head[..])?;
                 }
-                for (k, v) in &record_rows {
-                    records.insert(&k[..], &v[..])?;
-                }
-                for (k, v) in &sample_rows {
-                    samples.insert(&k[..], &v[..])?;
-                }
+                match &records_bytes {
+                    Some(v) => records.insert(&frame_key[..], &v[..])?,
+                    None => records.remove(&frame_key[..])?,
+                };
+                match &samples_bytes {
+                    Some(v) => samples.insert(&frame_key[..], &v[..])?,
+                    None => samples.remove(&frame_key[..])?,
+                };
                 stats.insert(&frame_key[..], &stats_bytes[..])?;
                 frames.insert(&frame_key[..], &frame_bytes[..])?;
                 jobs.insert(&job_key[..], &job_bytes[..])?;
@@ -588,12 +567,10 @@ impl Store {
 
     /// Records written in `frame` of `job`, in id order.
     pub fn frame_records(&self, job: u64, frame: u32) -> Result<Vec<RecordValue>, StoreError> {
-        let mut out = Vec::new();
-        for item in self.records.scan_prefix(keys::frame(job, frame)) {
-            let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
-            out.push(self.decode("records", &k, &v)?);
-        }
-        Ok(out)
+        Ok(self
+            .get::<FrameRecordsValue>("records", &keys::frame(job, frame))?
+            .map(|v| v.records)
+            .unwrap_or_default())
     }
 
     /// Every record version of `job`, in (frame, id) order, through `f`
@@ -605,9 +582,12 @@ impl Store {
     ) -> Result<(), StoreError> {
         for item in self.records.scan_prefix(keys::job_prefix(job)) {
             let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
-            let (_, frame, _) = keys::parse_record(&k)
+            let (_, frame) = keys::parse_frame(&k)
                 .ok_or_else(|| self.corrupt("records", &k, "malformed key"))?;
-            f(frame, self.decode("records", &k, &v)?);
+            let value: FrameRecordsValue = self.decode("records", &k, &v)?;
+            for r in value.records {
+                f(frame, r);
+            }
         }
         Ok(())
     }
@@ -619,12 +599,16 @@ impl Store {
         frame: u32,
         id: u64,
     ) -> Result<Vec<PackedSample>, StoreError> {
-        let key = keys::record(job, frame, id);
-        let Some(v) = self.get::<SamplesValue>("samples", &key)? else {
+        let key = keys::frame(job, frame);
+        let Some(all) = self.get::<FrameSamplesValue>("samples", &key)? else {
             return Ok(Vec::new());
         };
+        let Ok(i) = all.records.binary_search_by_key(&id, |s| s.id) else {
+            return Ok(Vec::new());
+        };
+        let v = &all.records[i];
         let raw = decompress(&v.packed_zstd, v.count as usize * PackedSample::BYTES)
-            .map_err(|d| self.corrupt("samples", &key, d))?;
+            .map_err(|d| self.corrupt("samples", &key, format!("record {id}: {d}")))?;
         Ok(from_planar(&raw, v.count as usize))
     }
 
@@ -733,41 +717,107 @@ fn decompress(bytes: &[u8], len: usize) -> Result<Vec<u8>, String> {
     Ok(out)
 }
 
-/// Fields of `spec` that differ from the stored job (frame range and
-/// progress aside).
-fn job_differences(job: &JobValue, spec: &JobSpec) -> Vec<String> {
+/// Fields of `spec` that differ from the stored job's (name and frame range
+/// aside). Every field is named, so a field added to [`JobSpec`] does not
+/// compile until it is compared here.
+fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
+    let JobSpec {
+        name: _,
+        scene,
+        scene_hash,
+        method,
+        settings,
+        width,
+        height,
+        spp,
+        fps,
+        seed,
+        same_pattern,
+        frame_start: _,
+        frame_end: _,
+    } = spec;
     let mut d = Vec::new();
-    let mut check = |name: &str, stored: String, given: String| {
-        if stored != given {
+    let mut check = |name: &str, same: bool, stored: String, given: String| {
+        if !same {
             d.push(format!("{name} (stored {stored}, given {given})"));
         }
     };
-    check("scene", job.scene.clone(), spec.scene.clone());
+    check(
+        "scene",
+        &stored.scene == scene,
+        stored.scene.clone(),
+        scene.clone(),
+    );
     check(
         "scene hash",
-        job.scene_hash.clone(),
-        spec.scene_hash.clone(),
+        same_scene_hash(&stored.scene_hash, scene_hash),
+        stored.scene_hash.clone(),
+        scene_hash.clone(),
     );
-    check("method", job.method.clone(), spec.method.clone());
+    check(
+        "method",
+        &stored.method == method,
+        stored.method.clone(),
+        method.clone(),
+    );
     check(
         "method settings",
-        job.settings.clone(),
-        spec.settings.clone(),
+        same_settings(&stored.settings, settings),
+        stored.settings.clone(),
+        settings.clone(),
     );
     check(
         "size",
-        format!("{}x{}", job.width, job.height),
-        format!("{}x{}", spec.width, spec.height),
+        (stored.width, stored.height) == (*width, *height),
+        format!("{}x{}", stored.width, stored.height),
+        format!("{width}x{height}"),
     );
-    check("spp", job.spp.to_string(), spec.spp.to_string());
-    check("fps", job.fps.to_string(), spec.fps.to_string());
-    check("seed", job.seed.to_string(), spec.seed.to_string());
+    check(
+        "spp",
+        stored.spp == *spp,
+        stored.spp.to_string(),
+        spp.to_string(),
+    );
+    check(
+        "fps",
+        stored.fps.to_bits() == fps.to_bits(),
+        stored.fps.to_string(),
+        fps.to_string(),
+    );
+    check(
+        "seed",
+        stored.seed == *seed,
+        stored.seed.to_string(),
+        seed.to_string(),
+    );
     check(
         "same-pattern",
-        job.same_pattern.to_string(),
-        spec.same_pattern.to_string(),
+        stored.same_pattern == *same_pattern,
+        stored.same_pattern.to_string(),
+        same_pattern.to_string(),
     );
     d
+}
+
+/// Settings are serde JSON: equal as JSON values (text that is not JSON,
+/// as in tests, compares as text).
+fn same_settings(stored: &str, given: &str) -> bool {
+    match (
+        serde_json::from_str::<serde_json::Value>(stored),
+        serde_json::from_str::<serde_json::Value>(given),
+    ) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => stored == given,
+    }
+}
+
+/// Scene hashes are equal, or the stored one is a schema-1 hash (suffix
+/// [`v1::LEGACY_HASH_SUFFIX`], external files not hashed) of the same file.
+fn same_scene_hash(stored: &str, given: &str) -> bool {
+    stored == given
+        || stored
+            .strip_suffix(v1::LEGACY_HASH_SUFFIX)
+            .is_some_and(|main| given.split('+').next() == Some(main))
 }
 
 /// Checks the directory before sled touches it. Returns whether a store
