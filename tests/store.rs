@@ -178,14 +178,14 @@ fn corrupt_value_is_an_error_naming_tree_and_key() {
     let id = store.job("j").unwrap().unwrap().id;
     for garbage in [&b"garbage"[..], &[0xff; 64][..], &[][..]] {
         store
-            .raw_insert("records", &keys::frame(id, 1), garbage)
+            .raw_insert("records", &keys::record(id, 1, 2), garbage)
             .unwrap();
         let msg = err_text(store.frame_records(id, 1));
         assert!(msg.contains("tree `records`"), "{msg}");
-        assert!(msg.contains(&format!("job {id} frame 1")), "{msg}");
+        assert!(msg.contains(&format!("job {id} frame 1 record 2")), "{msg}");
         assert!(msg.contains(&path.display().to_string()), "{msg}");
         store
-            .raw_insert("samples", &keys::frame(id, 1), garbage)
+            .raw_insert("samples", &keys::record(id, 1, 2), garbage)
             .unwrap();
         let msg = err_text(store.record_samples(id, 1, 2));
         assert!(msg.contains("tree `samples`"), "{msg}");
@@ -793,7 +793,7 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
     assert_eq!(store.frame_exr(7, 1).unwrap().unwrap(), exrs[1]);
     let stats = store.frame_stats(7, 0).unwrap().unwrap();
     assert!(stats.records_created > 0);
-    // Records and samples repacked per frame, all still there.
+    // Records and samples, all still there.
     let recs: usize = (0..2)
         .map(|f| store.frame_records(7, f).unwrap().len())
         .sum();

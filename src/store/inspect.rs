@@ -181,15 +181,13 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
     r.lifespan_histogram = lifespans;
     for item in store.samples.scan_prefix(prefix) {
         let (k, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
-        let all: super::schema::FrameSamplesValue = store.decode("samples", &k, &v)?;
-        for s in &all.records {
-            r.samples += u64::from(s.count);
-            r.samples_stored_bytes += s.packed_zstd.len() as u64;
-            r.samples_raw_bytes += u64::from(s.count) * super::PackedSample::BYTES as u64;
-            if let Some((_, frame)) = super::keys::parse_frame(&k) {
-                if let Some(f) = per_frame.get_mut(&frame) {
-                    f.samples += u64::from(s.count);
-                }
+        let s: super::schema::SamplesValue = store.decode("samples", &k, &v)?;
+        r.samples += u64::from(s.count);
+        r.samples_stored_bytes += s.packed_zstd.len() as u64;
+        r.samples_raw_bytes += u64::from(s.count) * super::PackedSample::BYTES as u64;
+        if let Some((_, frame, _)) = super::keys::parse_record(&k) {
+            if let Some(f) = per_frame.get_mut(&frame) {
+                f.samples += u64::from(s.count);
             }
         }
     }

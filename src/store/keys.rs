@@ -10,16 +10,15 @@
 //! | `jobs`    | job name, UTF-8                       | var   |
 //! | `frames`  | job id u64 · frame u32                | 12    |
 //! | `stats`   | job id u64 · frame u32                | 12    |
-//! | `records` | job id u64 · frame u32                | 12    |
-//! | `samples` | job id u64 · frame u32                | 12    |
+//! | `records` | job id u64 · frame u32 · record id u64 | 20   |
+//! | `samples` | job id u64 · frame u32 · record id u64 | 20   |
 //! | `state`   | job id u64 (the head)                 | 8     |
 //! | `state`   | job id u64 · record id u64            | 16    |
 //! | `movies`  | (reserved, empty)                     |       |
 //!
-//! `records`/`samples` hold one value per frame: the record versions
-//! written in that frame (creation frame), in id order; schema 1 had one
-//! key per record (`job · frame · record id`, [`record`], still read by
-//! the migration). `state` holds the carried
+//! In `records`/`samples`, `frame` is the frame in which this version of
+//! the record was written (its creation frame for `ic`), so a `job · frame`
+//! prefix scan gives one frame's record changes. `state` holds the carried
 //! state of a stateful method (`trc`) after the job's last frame: its head
 //! under the job id, then its records in id order.
 
@@ -42,7 +41,7 @@ pub fn frame(job: u64, frame: u32) -> [u8; 12] {
     k
 }
 
-/// `job · frame · record id` (schema-1 `records`, `samples`).
+/// `job · frame · record id` (records, samples).
 pub fn record(job: u64, frame: u32, id: u64) -> [u8; 20] {
     let mut k = [0u8; 20];
     k[..12].copy_from_slice(&self::frame(job, frame));

@@ -31,8 +31,7 @@ use rkyv::rancor;
 use rkyv::ser::allocator::ArenaHandle;
 use rkyv::util::AlignedVec;
 use schema::{
-    FrameRecordsValue, FrameSamplesValue, FrameValue, JobValue, RecordValue, SamplesValue,
-    StateHeadValue, StateRecordValue, StatsValue,
+    FrameValue, JobValue, RecordValue, SamplesValue, StateHeadValue, StateRecordValue, StatsValue,
 };
 use sled::transaction::{ConflictableTransactionError, TransactionError};
 use sled::Transactional;
@@ -442,33 +441,36 @@ impl Store {
     pub fn commit_frame(&self, job: &mut JobValue, c: FrameCommit) -> Result<(), StoreError> {
         let frame_key = keys::frame(job.id, c.frame);
         let already = self.frame_done(job.id, c.frame)?;
+        // A frame written again (by another chain of a stateful method)
+        // replaces the record versions of its former self.
+        let mut stale = Vec::new();
+        if already {
+            for key in self.records.scan_prefix(frame_key).keys() {
+                stale.push(key.map_err(|e| StoreError::sled(&self.path, e))?);
+            }
+        }
         let frame_value = FrameValue {
             width: c.width,
             height: c.height,
             exr_len: c.exr.len() as u64,
             exr_zstd: compress(c.exr),
         };
-        // One `records` and one `samples` value for the frame (replacing
-        // those of a frame written again), records in id order.
-        let mut records = FrameRecordsValue::default();
-        let mut samples = FrameSamplesValue::default();
+        let mut record_rows = Vec::with_capacity(c.records.len());
+        let mut sample_rows = Vec::with_capacity(c.records.len());
         let mut samples_raw = 0u64;
-        let mut commits: Vec<&RecordCommit> = c.records.iter().collect();
-        commits.sort_by_key(|rc| rc.record.id);
-        for rc in commits {
-            records.records.push(rc.record.clone());
+        for rc in &c.records {
+            let key = keys::record(job.id, c.frame, rc.record.id);
+            record_rows.push((key, encode(&rc.record)));
             if !rc.samples.is_empty() {
                 let raw = to_planar(&rc.samples);
                 samples_raw += raw.len() as u64;
-                samples.records.push(SamplesValue {
-                    id: rc.record.id,
+                let value = SamplesValue {
                     count: rc.samples.len() as u32,
                     packed_zstd: compress(&raw),
-                });
+                };
+                sample_rows.push((key, encode(&value)));
             }
         }
-        let records_bytes = (!records.records.is_empty()).then(|| encode(&records));
-        let samples_bytes = (!samples.records.is_empty()).then(|| encode(&samples));
         let stats = StatsValue::from_stats(c.stats, samples_raw);
         let mut state_rows = Vec::new();
         let mut state_removed = Vec::new();
@@ -515,6 +517,10 @@ impl Store {
             &self.jobs,
         )
             .transaction(|(frames, records, samples, stats, state, jobs)| {
+                for k in &stale {
+                    records.remove(&k[..])?;
+                    samples.remove(&k[..])?;
+                }
                 for k in &state_removed {
                     state.remove(&k[..])?;
                 }
@@ -524,14 +530,12 @@ impl Store {
                 if let Some(head) = &state_head {
                     state.insert(&state_head_key[..], &head[..])?;
                 }
-                match &records_bytes {
-                    Some(v) => records.insert(&frame_key[..], &v[..])?,
-                    None => records.remove(&frame_key[..])?,
-                };
-                match &samples_bytes {
-                    Some(v) => samples.insert(&frame_key[..], &v[..])?,
-                    None => samples.remove(&frame_key[..])?,
-                };
+                for (k, v) in &record_rows {
+                    records.insert(&k[..], &v[..])?;
+                }
+                for (k, v) in &sample_rows {
+                    samples.insert(&k[..], &v[..])?;
+                }
                 stats.insert(&frame_key[..], &stats_bytes[..])?;
                 frames.insert(&frame_key[..], &frame_bytes[..])?;
                 jobs.insert(&job_key[..], &job_bytes[..])?;
@@ -567,10 +571,12 @@ impl Store {
 
     /// Records written in `frame` of `job`, in id order.
     pub fn frame_records(&self, job: u64, frame: u32) -> Result<Vec<RecordValue>, StoreError> {
-        Ok(self
-            .get::<FrameRecordsValue>("records", &keys::frame(job, frame))?
-            .map(|v| v.records)
-            .unwrap_or_default())
+        let mut out = Vec::new();
+        for item in self.records.scan_prefix(keys::frame(job, frame)) {
+            let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
+            out.push(self.decode("records", &k, &v)?);
+        }
+        Ok(out)
     }
 
     /// Every record version of `job`, in (frame, id) order, through `f`
@@ -582,12 +588,9 @@ impl Store {
     ) -> Result<(), StoreError> {
         for item in self.records.scan_prefix(keys::job_prefix(job)) {
             let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
-            let (_, frame) = keys::parse_frame(&k)
+            let (_, frame, _) = keys::parse_record(&k)
                 .ok_or_else(|| self.corrupt("records", &k, "malformed key"))?;
-            let value: FrameRecordsValue = self.decode("records", &k, &v)?;
-            for r in value.records {
-                f(frame, r);
-            }
+            f(frame, self.decode("records", &k, &v)?);
         }
         Ok(())
     }
@@ -599,16 +602,12 @@ impl Store {
         frame: u32,
         id: u64,
     ) -> Result<Vec<PackedSample>, StoreError> {
-        let key = keys::frame(job, frame);
-        let Some(all) = self.get::<FrameSamplesValue>("samples", &key)? else {
+        let key = keys::record(job, frame, id);
+        let Some(v) = self.get::<SamplesValue>("samples", &key)? else {
             return Ok(Vec::new());
         };
-        let Ok(i) = all.records.binary_search_by_key(&id, |s| s.id) else {
-            return Ok(Vec::new());
-        };
-        let v = &all.records[i];
         let raw = decompress(&v.packed_zstd, v.count as usize * PackedSample::BYTES)
-            .map_err(|d| self.corrupt("samples", &key, format!("record {id}: {d}")))?;
+            .map_err(|d| self.corrupt("samples", &key, d))?;
         Ok(from_planar(&raw, v.count as usize))
     }
 

@@ -73,7 +73,8 @@ pub struct FrameValue {
     pub exr_zstd: Vec<u8>,
 }
 
-/// One version of an irradiance record (an entry of [`FrameRecordsValue`]).
+/// `records` value under `job · frame · record id`: one version of an
+/// irradiance record (written in its creation frame).
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct RecordValue {
     pub id: u64,
@@ -93,32 +94,13 @@ pub struct RecordValue {
     pub strata_phi: u32,
 }
 
-/// `records` value under `job · frame`: the record versions written in the
-/// frame, in id order. One value per frame, not per record: sled 0.34
-/// keeps in memory a page-table entry per tree node it ever wrote (a leaf
-/// holds at most 16 keys), so per-record keys made a render's memory grow
-/// with its number of frames.
-#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
-pub struct FrameRecordsValue {
-    pub records: Vec<RecordValue>,
-}
-
-/// A record's incoming-radiance samples: `count` 8-byte
-/// [`super::rgbe::PackedSample`]s in cell order, as byte planes,
-/// zstd-compressed on their own (an entry of [`FrameSamplesValue`]).
+/// `samples` value under `job · frame · record id`: a record's
+/// incoming-radiance samples, `count` 8-byte [`super::rgbe::PackedSample`]s
+/// in cell order, zstd-compressed.
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct SamplesValue {
-    /// The record's id.
-    pub id: u64,
     pub count: u32,
     pub packed_zstd: Vec<u8>,
-}
-
-/// `samples` value under `job · frame`: the samples of the frame's records
-/// that have any, in id order.
-#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
-pub struct FrameSamplesValue {
-    pub records: Vec<SamplesValue>,
 }
 
 /// `stats` value: the [`crate::method::FrameStats`] of one frame, whole.

@@ -1,8 +1,8 @@
 //! Schema 1 (`migrations/0001_initial.md`): the value types that schema 2
-//! changed, kept to read a version-1 store in the 0001 → 0002 migration,
+//! changed (`frames`, `records` and `samples` values are the same), kept to read a version-1 store in the 0001 → 0002 migration,
 //! and a writer of version-1 stores for the test that opens one.
 
-use super::schema::{self, FrameRecordsValue, FrameSamplesValue, FrameValue, RecordValue};
+use super::schema::{self, FrameValue, SamplesValue};
 use super::{compress, encode, keys, to_planar, RecordCommit};
 use crate::method::FrameStats;
 use rkyv::{Archive, Deserialize, Serialize};
@@ -31,13 +31,6 @@ pub struct JobValue {
     pub last_frame: Option<u32>,
     pub created_unix: u64,
     pub updated_unix: u64,
-}
-
-/// Schema-1 `samples` value, under `job · frame · record id`.
-#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
-pub struct SamplesValue {
-    pub count: u32,
-    pub packed_zstd: Vec<u8>,
 }
 
 /// Schema-1 `stats` value (no lifespans).
@@ -145,16 +138,13 @@ impl StatsValue {
 }
 
 /// Migration 0001 → 0002 (`migrations/0002_state_and_identity.md`):
-/// repacks `records` and `samples` one frame at a time (each frame in one
-/// transaction; frames already repacked are skipped, so a crash midway is
-/// finished by the next open), then rewrites every `jobs` and `stats` value
-/// in the schema-2 layout, creates the `state` tree and stamps version 2 in
-/// one transaction.
+/// rewrites every `jobs` and `stats` value in the schema-2 layout, creates
+/// the `state` tree and stamps version 2, in one transaction: a crash
+/// leaves either schema 1 untouched or schema 2 complete.
 pub fn migrate_to_v2(db: &sled::Db) -> Result<(), String> {
     let tree = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
     let (meta, jobs, stats) = (tree("meta")?, tree("jobs")?, tree("stats")?);
     tree("state")?;
-    repack_frames(&tree("records")?, &tree("samples")?)?;
     let mut job_rows = Vec::new();
     for item in jobs.iter() {
         let (k, v) = item.map_err(|e| e.to_string())?;
@@ -183,71 +173,6 @@ pub fn migrate_to_v2(db: &sled::Db) -> Result<(), String> {
             Ok::<(), ConflictableTransactionError<()>>(())
         })
         .map_err(|e| format!("{e:?}"))?;
-    Ok(())
-}
-
-/// Schema 1 kept one `records` and one `samples` row per record
-/// (`job · frame · record id`, 20 bytes); schema 2 one per frame
-/// (`job · frame`, 12 bytes).
-fn repack_frames(records: &sled::Tree, samples: &sled::Tree) -> Result<(), String> {
-    use sled::transaction::ConflictableTransactionError;
-    use sled::Transactional;
-    let mut frames = std::collections::BTreeSet::new();
-    for tree in [records, samples] {
-        for key in tree.iter().keys() {
-            let key = key.map_err(|e| e.to_string())?;
-            if let Some((job, frame, _)) = keys::parse_record(&key) {
-                frames.insert((job, frame));
-            }
-        }
-    }
-    for (job, frame) in frames {
-        let prefix = keys::frame(job, frame);
-        let mut old_keys = Vec::new();
-        let mut recs = FrameRecordsValue::default();
-        for item in records.scan_prefix(prefix) {
-            let (k, v) = item.map_err(|e| e.to_string())?;
-            if k.len() != 20 {
-                continue;
-            }
-            let r: RecordValue = super::decode_value(&v)
-                .map_err(|e| format!("tree `records` key {}: {e}", keys::describe(&k)))?;
-            recs.records.push(r);
-            old_keys.push(k);
-        }
-        let mut samps = FrameSamplesValue::default();
-        for item in samples.scan_prefix(prefix) {
-            let (k, v) = item.map_err(|e| e.to_string())?;
-            let Some((_, _, id)) = keys::parse_record(&k) else {
-                continue;
-            };
-            let s: SamplesValue = super::decode_value(&v)
-                .map_err(|e| format!("tree `samples` key {}: {e}", keys::describe(&k)))?;
-            samps.records.push(schema::SamplesValue {
-                id,
-                count: s.count,
-                packed_zstd: s.packed_zstd,
-            });
-            old_keys.push(k);
-        }
-        let recs = (!recs.records.is_empty()).then(|| encode(&recs));
-        let samps = (!samps.records.is_empty()).then(|| encode(&samps));
-        (records, samples)
-            .transaction(|(r, s)| {
-                for k in &old_keys {
-                    r.remove(&k[..])?;
-                    s.remove(&k[..])?;
-                }
-                if let Some(v) = &recs {
-                    r.insert(&prefix[..], &v[..])?;
-                }
-                if let Some(v) = &samps {
-                    s.insert(&prefix[..], &v[..])?;
-                }
-                Ok::<(), ConflictableTransactionError<()>>(())
-            })
-            .map_err(|e| format!("{e:?}"))?;
-    }
     Ok(())
 }
 
