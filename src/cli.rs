@@ -380,10 +380,18 @@ fn run_bench(args: BenchArgs) -> Result<()> {
     };
     let report = bench::run(&opts)?;
     print!("{}", bench::to_table(&report.rows));
-    let equal = bench::equal_error_table(&report.rows);
-    if !equal.is_empty() {
-        println!("\nequal error (path time interpolated along its sweep, log-log):");
-        print!("{}", bench::equal_error_text(&equal));
+    for (measure, what) in [
+        (bench::ErrorMeasure::AllPixels, "all pixels"),
+        (
+            bench::ErrorMeasure::Surfaces,
+            "without the pixels at directly seen lights",
+        ),
+    ] {
+        let equal = bench::equal_error_table(&report.rows, measure);
+        if !equal.is_empty() {
+            println!("\nequal error, {what} (path time interpolated along its sweep, log-log):");
+            print!("{}", bench::equal_error_text(&equal));
+        }
     }
     if !report.peak_mem_per_run {
         println!("(peak memory is the process peak so far, not per run)");
