@@ -17,8 +17,9 @@
 //! directly, or border one), so every run also gets `rel_rmse_surfaces`, the
 //! error of the lit surfaces without the rim of a directly seen light, whose
 //! anti-aliasing noise is the same for every method and dominates an
-//! all-pixel RMSE at low sample counts; `DIR/<scene>_surface_error_vs_time.svg`
-//! charts it.
+//! all-pixel RMSE at low sample counts, and likewise `flicker_surfaces`;
+//! `DIR/<scene>_surface_error_vs_time.svg` and
+//! `DIR/<scene>_surface_flicker_vs_time.svg` chart them.
 //!
 //! # Adding a method
 //! A method becomes benchable by one row in [`METHODS`] (its name, the keys
@@ -447,11 +448,14 @@ pub struct BenchRow {
     pub block_bias: f64,
     /// `None` with a single frame.
     pub flicker: Option<f64>,
+    /// Flicker without the pixels at directly seen lights
+    /// ([`metrics::CompareReport::flicker_surfaces`]).
+    pub flicker_surfaces: Option<f64>,
 }
 
 /// `bench.csv`'s header line.
 pub const CSV_HEADER: &str =
-    "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker";
+    "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -472,7 +476,7 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{:.4},{},{},{},{:.6},{},{:.6},{}",
+            "{},{},{},{},{:.4},{},{},{},{:.6},{},{:.6},{},{}",
             csv_field(&r.scene),
             csv_field(&r.method),
             csv_field(&r.settings),
@@ -485,6 +489,7 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
             opt(r.rel_rmse_surfaces, 6),
             r.block_bias,
             opt(r.flicker, 6),
+            opt(r.flicker_surfaces, 6),
         );
     }
     out
@@ -502,11 +507,12 @@ pub fn to_table(rows: &[BenchRow]) -> String {
         "records",
         "peak MB",
         "rel_rmse",
-        "surfaces",
+        "rmse surf",
         "block_bias",
         "flicker",
+        "flicker surf",
     ];
-    let cells: Vec<[String; 12]> = rows
+    let cells: Vec<[String; 13]> = rows
         .iter()
         .map(|r| {
             [
@@ -523,6 +529,7 @@ pub fn to_table(rows: &[BenchRow]) -> String {
                     .map_or("-".into(), |v| format!("{v:.5}")),
                 format!("{:.5}", r.block_bias),
                 r.flicker.map_or("-".into(), |v| format!("{v:.5}")),
+                r.flicker_surfaces.map_or("-".into(), |v| format!("{v:.5}")),
             ]
         })
         .collect();
@@ -868,6 +875,7 @@ fn bench_scene(
                 rel_rmse_surfaces: cmp.rel_rmse_surfaces,
                 block_bias: cmp.block_bias,
                 flicker: cmp.flicker,
+                flicker_surfaces: cmp.flicker_surfaces,
             });
         }
     }
@@ -1157,11 +1165,12 @@ fn point_label(r: &BenchRow) -> String {
         .map_or(String::new(), |(_, v)| v.to_string())
 }
 
-/// Writes the three charts of one scene; returns their paths.
+/// Writes the four charts of one scene; returns their paths.
 pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<PathBuf>> {
     let error = out.join(format!("{scene}_error_vs_time.svg"));
     let surfaces = out.join(format!("{scene}_surface_error_vs_time.svg"));
     let flicker = out.join(format!("{scene}_flicker_vs_time.svg"));
+    let surface_flicker = out.join(format!("{scene}_surface_flicker_vs_time.svg"));
     plot(
         &error,
         &format!("{scene}: error against time"),
@@ -1183,7 +1192,14 @@ pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<Path
         rows,
         |r| r.flicker,
     )?;
-    Ok(vec![error, surfaces, flicker])
+    plot(
+        &surface_flicker,
+        &format!("{scene}: flicker of lit surfaces against time"),
+        "flicker without the pixels at seen lights",
+        rows,
+        |r| r.flicker_surfaces,
+    )?;
+    Ok(vec![error, surfaces, flicker, surface_flicker])
 }
 
 fn plot(

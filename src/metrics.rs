@@ -98,6 +98,9 @@ struct MaskedSums {
     sq_err: f64,
     ref_sum: f64,
     values: usize,
+    /// [`flicker_sum`] over the pixels kept in both frames of each pair.
+    flicker_sq: f64,
+    flicker_values: usize,
 }
 
 impl MaskedSums {
@@ -122,13 +125,21 @@ impl MaskedSums {
         self.sq_err += other.sq_err;
         self.ref_sum += other.ref_sum;
         self.values += other.values;
+        self.flicker_sq += other.flicker_sq;
+        self.flicker_values += other.flicker_values;
+    }
+
+    fn ref_mean(&self) -> f64 {
+        self.ref_sum / self.values as f64
+    }
+
+    fn flicker(&self) -> Option<f64> {
+        (self.values > 0 && self.flicker_values > 0)
+            .then(|| (self.flicker_sq / self.flicker_values as f64).sqrt() / self.ref_mean())
     }
 
     fn rel_rmse(&self) -> Option<f64> {
-        (self.values > 0).then(|| {
-            let n = self.values as f64;
-            (self.sq_err / n).sqrt() / (self.ref_sum / n)
-        })
+        (self.values > 0).then(|| (self.sq_err / self.values as f64).sqrt() / self.ref_mean())
     }
 }
 
@@ -178,13 +189,26 @@ pub fn block_bias(test: &Film, reference: &Film, block: u32) -> f64 {
 /// Sum over pixels and channels of ((I₁ − I₀) − (R₁ − R₀))², and the count of
 /// values summed.
 fn flicker_sum(i0: &Film, i1: &Film, r0: &Film, r1: &Film) -> (f64, usize) {
+    flicker_sum_over(i0, i1, r0, r1, |_| true)
+}
+
+/// [`flicker_sum`] over the pixels `k` where `keep(k)`.
+fn flicker_sum_over(
+    i0: &Film,
+    i1: &Film,
+    r0: &Film,
+    r1: &Film,
+    keep: impl Fn(usize) -> bool,
+) -> (f64, usize) {
     for f in [i1, r0, r1] {
         assert_same_size(i0, f);
     }
-    let sum = (0..i0.pixels.len())
-        .map(|k| sum_sq((i1.pixels[k] - i0.pixels[k]) - (r1.pixels[k] - r0.pixels[k])))
-        .sum();
-    (sum, 3 * i0.pixels.len())
+    let (mut sum, mut values) = (0.0, 0);
+    for k in (0..i0.pixels.len()).filter(|&k| keep(k)) {
+        sum += sum_sq((i1.pixels[k] - i0.pixels[k]) - (r1.pixels[k] - r0.pixels[k]));
+        values += 3;
+    }
+    (sum, values)
 }
 
 /// Flicker (DESIGN.md "Measuring", temporal stability): the RMS over pixels,
@@ -233,8 +257,9 @@ pub struct FrameReport {
 
 /// The result of comparing a test folder with a reference folder. Serialises
 /// to `{"frames":N,"rmse":…,"rel_rmse":…,"block_bias":…,"flicker":…,
-/// "rel_rmse_surfaces":…,"per_frame":[…]}`; `flicker` is `null` without
-/// consecutive frames, `rel_rmse_surfaces` without light masks.
+/// "rel_rmse_surfaces":…,"flicker_surfaces":…,"per_frame":[…]}`; `flicker`
+/// is `null` without consecutive frames, the `_surfaces` figures without
+/// light masks.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CompareReport {
     pub frames: usize,
@@ -249,6 +274,10 @@ pub struct CompareReport {
     /// has a light mask ([`light_mask_path`]).
     pub rel_rmse_surfaces: Option<f64>,
     pub flicker: Option<f64>,
+    /// [`Self::flicker`] over the pixels that see no light in either frame
+    /// of a pair, ÷ the reference's mean over the pixels that see none;
+    /// `None` without light masks or consecutive frames.
+    pub flicker_surfaces: Option<f64>,
     pub per_frame: Vec<FrameReport>,
 }
 
@@ -439,6 +468,18 @@ impl Totals {
         let (s, n) = flicker_sum(&prev.test, &next.test, &prev.reference, &next.reference);
         self.flicker_sum += s;
         self.flicker_values += n;
+        if let (Some(sums), Some(a), Some(b)) = (&mut self.surfaces, &prev.surfaces, &next.surfaces)
+        {
+            let (s, n) = flicker_sum_over(
+                &prev.test,
+                &next.test,
+                &prev.reference,
+                &next.reference,
+                |k| a[k] && b[k],
+            );
+            sums.flicker_sq += s;
+            sums.flicker_values += n;
+        }
         Ok(())
     }
 
@@ -456,6 +497,7 @@ impl Totals {
             block_bias: block / mean,
             rel_rmse_surfaces: self.surfaces.and_then(|s| s.rel_rmse()),
             flicker,
+            flicker_surfaces: self.surfaces.and_then(|s| s.flicker()),
             per_frame: self.per_frame,
         }
     }
@@ -512,9 +554,12 @@ impl CompareReport {
             "all", self.rmse, self.rel_rmse, self.block_bias, flicker, self.frames
         );
         if let Some(s) = self.rel_rmse_surfaces {
+            let flicker = self
+                .flicker_surfaces
+                .map_or("-".to_string(), |v| format!("{v:.6}"));
             let _ = writeln!(
                 out,
-                "rel_rmse without the pixels at directly seen lights: {s:.6}"
+                "without the pixels at directly seen lights: rel_rmse {s:.6}, flicker {flicker}"
             );
         }
         out
@@ -682,6 +727,7 @@ mod tests {
             block_bias: 0.125,
             rel_rmse_surfaces: None,
             flicker: None,
+            flicker_surfaces: None,
             per_frame: vec![
                 FrameReport {
                     frame: 3,

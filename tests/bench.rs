@@ -21,6 +21,7 @@ fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
         rel_rmse_surfaces: Some(rel_rmse / 2.0),
         block_bias: 0.01,
         flicker: None,
+        flicker_surfaces: None,
     }
 }
 
@@ -34,12 +35,12 @@ fn csv_has_header_and_one_line_per_run() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(
         lines[0],
-        "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker"
+        "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces"
     );
     assert_eq!(lines[0], CSV_HEADER);
     assert_eq!(lines.len(), 3, "{csv}");
     for l in &lines[1..] {
-        assert_eq!(l.split(',').count(), 12, "{l}");
+        assert_eq!(l.split(',').count(), 13, "{l}");
     }
     assert!(lines[1].starts_with("s,path,spp=1,2,"), "{}", lines[1]);
     // A missing flicker is an empty last field.
@@ -153,6 +154,7 @@ fn tiny_end_to_end_run() {
         "cube-in-box_error_vs_time.svg",
         "cube-in-box_surface_error_vs_time.svg",
         "cube-in-box_flicker_vs_time.svg",
+        "cube-in-box_surface_flicker_vs_time.svg",
     ] {
         let svg = std::fs::read_to_string(dir.path().join(chart)).unwrap();
         assert!(svg.contains("<svg") && svg.contains("path"), "{chart}");
@@ -189,6 +191,7 @@ fn tiny_end_to_end_run() {
         four.rel_rmse_surfaces.unwrap(),
     );
     assert!(s4 < s1, "surface error 4 spp {s4} vs 1 spp {s1}");
+    assert!(one.flicker_surfaces.is_some_and(|f| f > 0.0));
     assert!(one.flicker.is_some() && one.seconds > 0.0);
     assert!(dir
         .path()

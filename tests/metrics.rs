@@ -108,6 +108,7 @@ fn json_has_the_specified_keys() {
         "block_bias",
         "rel_rmse_surfaces",
         "flicker",
+        "flicker_surfaces",
         "per_frame",
     ];
     let mut got = keys.clone();
@@ -233,11 +234,17 @@ fn light_masks_leave_their_pixels_out_of_the_surface_error() {
     assert!((surfaces - 0.1).abs() < 1e-6, "{surfaces}");
     assert!(report.rel_rmse > 5.0 * surfaces, "{}", report.rel_rmse);
     assert_eq!(report.rel_rmse, no_masks.rel_rmse);
+    // Same error in both frames: no flicker anywhere.
+    assert!(report.flicker_surfaces.unwrap() < 1e-7);
     assert!(report.to_text().contains("directly seen lights"));
 
     // One frame without its mask: no surface figure rather than a partial one.
     fs::remove_file(light_mask_path(&r, 1)).unwrap();
-    assert_eq!(compare_dirs(&r, &t).unwrap().rel_rmse_surfaces, None);
+    let partial = compare_dirs(&r, &t).unwrap();
+    assert_eq!(
+        (partial.rel_rmse_surfaces, partial.flicker_surfaces),
+        (None, None)
+    );
 
     // A mask of the wrong size is an error naming the file.
     write_light_mask(&light_mask_path(&r, 1), 2, 8, &[false; 16]).unwrap();
