@@ -355,6 +355,11 @@ pub struct BenchOptions {
     pub reference_spp: u32,
     pub seed: u64,
     pub out: PathBuf,
+    /// Render the runs, not only the reference, with the same random
+    /// sequence in every frame: pixel noise then stays put from frame to
+    /// frame, so flicker shows what the method itself changes between
+    /// frames (records appearing and moving), not its per-frame noise.
+    pub same_pattern: bool,
     /// No progress bars or messages on stderr.
     pub quiet: bool,
 }
@@ -377,6 +382,7 @@ impl Default for BenchOptions {
             reference_spp: 1024,
             seed: 0,
             out: PathBuf::from("bench-out"),
+            same_pattern: false,
             quiet: false,
         }
     }
@@ -850,7 +856,7 @@ fn bench_scene(
                 scene,
                 settings.instantiate(),
                 backend,
-                frame_settings(opts, false),
+                frame_settings(opts, opts.same_pattern),
             );
             if per_run {
                 reset_peak_memory();

@@ -244,6 +244,11 @@ pub struct BenchArgs {
     /// Output directory: bench.csv, charts, reference/ and runs/.
     #[arg(long, default_value = "bench-out")]
     pub out: PathBuf,
+    /// Render the runs too with the same random sequence in every frame
+    /// (the reference always is): flicker then shows what a method changes
+    /// between frames rather than its per-frame pixel noise.
+    #[arg(long)]
+    pub same_pattern: bool,
     /// No progress bars or messages (the table is still printed).
     #[arg(long, short)]
     pub quiet: bool,
@@ -376,6 +381,7 @@ fn run_bench(args: BenchArgs) -> Result<()> {
         reference_spp: args.reference_spp,
         seed: args.seed,
         out: args.out,
+        same_pattern: args.same_pattern,
         quiet: args.quiet,
     };
     let report = bench::run(&opts)?;

@@ -222,3 +222,33 @@ fn tiny_end_to_end_run() {
     let info = std::fs::read_to_string(&json).unwrap();
     assert!(info.contains("\"spp\": 32"), "{info}");
 }
+
+#[test]
+fn same_pattern_runs_flicker_less() {
+    // With the same random sequence in every frame a run's pixel noise is
+    // correlated from frame to frame, so its frame differences (hence
+    // flicker) shrink; its error against the reference does not vanish.
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        scenes: vec![SceneSource::Builtin("cube-in-box".into())],
+        methods: vec![MethodSweep::parse("path:spp=2").unwrap()],
+        frames: 0..3,
+        width: 16,
+        height: 16,
+        reference_spp: 32,
+        out: dir.path().to_path_buf(),
+        quiet: true,
+        ..BenchOptions::default()
+    };
+    let fresh = bench::run(&opts).unwrap().rows[0].clone();
+    let same = bench::run(&BenchOptions {
+        same_pattern: true,
+        ..opts
+    })
+    .unwrap()
+    .rows[0]
+        .clone();
+    let (f, s) = (fresh.flicker.unwrap(), same.flicker.unwrap());
+    assert!(s < 0.8 * f, "same pattern {s} vs fresh {f}");
+    assert!(same.rel_rmse > 0.0);
+}
