@@ -699,6 +699,12 @@ fn trc_resumes_from_stored_state(gradients: TemporalGradients) {
         state.records.len() as u64,
         uninterrupted.frame_stats[9].records_alive
     );
+    let report = radcache::store::inspect::report(&store, Some("j"), None).unwrap();
+    let st = report.jobs[0].state.as_ref().unwrap();
+    assert_eq!((st.frame, st.chain_start), (9, 0));
+    assert_eq!(st.records, state.records.len() as u64);
+    let text = radcache::store::inspect::to_text(&report, false);
+    assert!(text.contains("carried state after frame 9"), "{text}");
 }
 
 #[test]
