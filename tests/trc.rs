@@ -269,6 +269,19 @@ fn switched_off_light_leaves_no_indirect_after_max_life() {
 
 /// Over 16 frames of cube-in-box, `trc` computes far fewer records than
 /// `ic` and flickers less against a same-pattern `path` reference.
+/// The flicker yardstick: `path` at 256 spp with the same random sequence
+/// in every frame (DESIGN.md "Measuring").
+fn converged_sequence(scene: Scene, size: u32, frames: std::ops::Range<u32>) -> Vec<Film> {
+    let mut r = renderer(scene, size, 24.0, true);
+    let mut path = PathTracer::new(PathSettings {
+        spp: 256,
+        ..PathSettings::default()
+    });
+    frames
+        .map(|f| r.with_frame_context(f, |ctx| path.render_frame(ctx)))
+        .collect()
+}
+
 #[test]
 fn trc_computes_fewer_records_and_flickers_less_than_ic() {
     let (size, frames) = (16, 0..16u32);
@@ -278,15 +291,7 @@ fn trc_computes_fewer_records_and_flickers_less_than_ic() {
         strata: Strata { theta: 8, phi: 24 },
         ..IcSettings::default()
     };
-    let mut reference = renderer(cube(), size, 24.0, true);
-    let mut path = PathTracer::new(PathSettings {
-        spp: 256,
-        ..PathSettings::default()
-    });
-    let reference: Vec<Film> = frames
-        .clone()
-        .map(|f| reference.with_frame_context(f, |ctx| path.render_frame(ctx)))
-        .collect();
+    let reference = converged_sequence(cube(), size, frames.clone());
 
     let mut r = renderer(cube(), size, 24.0, false);
     let mut ic = IrradianceCaching::new(ic_settings.clone());
@@ -474,15 +479,7 @@ fn jumping_object_leaves_no_ghost_after_max_life() {
 fn temporal_gradients_flicker_order() {
     let (size, frames) = (16, 0..16u32);
     let cube = || Scene::builtin("cube-in-box").unwrap();
-    let mut reference = renderer(cube(), size, 24.0, true);
-    let mut path = PathTracer::new(PathSettings {
-        spp: 256,
-        ..PathSettings::default()
-    });
-    let reference: Vec<Film> = frames
-        .clone()
-        .map(|f| reference.with_frame_context(f, |ctx| path.render_frame(ctx)))
-        .collect();
+    let reference = converged_sequence(cube(), size, frames.clone());
     let mut results = Vec::new();
     for gradients in GRADIENT_MODES {
         let trc = TemporalRadianceCaching::new(TrcSettings {
