@@ -41,7 +41,13 @@ fn start(db: &std::path::Path, scenes: &std::path::Path) -> Server {
 
 /// One HTTP/1.1 request; returns (status, body).
 fn http(server: &Server, method: &str, path: &str, body: &str) -> (u16, Vec<u8>) {
-    let mut s = TcpStream::connect(&server.addr).unwrap();
+    let (status, _, body) = http_full(&server.addr, method, path, body);
+    (status, body)
+}
+
+/// One HTTP/1.1 request read to the end; returns (status, head, body).
+fn http_full(addr: &str, method: &str, path: &str, body: &str) -> (u16, String, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
     write!(
         s,
@@ -61,7 +67,7 @@ fn http(server: &Server, method: &str, path: &str, body: &str) -> (u16, Vec<u8>)
     {
         body = dechunk(&body);
     }
-    (status, body)
+    (status, head, body)
 }
 
 fn dechunk(mut b: &[u8]) -> Vec<u8> {
@@ -265,4 +271,152 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
     let job = wait_done(&server, &id);
     assert_eq!(job["frames_done"], 2);
     check("POST", &format!("/api/jobs/{id}/cancel"), "", 409);
+}
+
+fn create_job(server: &Server, body: &str) -> String {
+    let (status, resp) = http(server, "POST", "/api/jobs", body);
+    assert_eq!(status, 201, "{}", String::from_utf8_lossy(&resp));
+    json(&resp)["id"].as_str().unwrap().to_string()
+}
+
+/// The parts of a `multipart/x-mixed-replace` body: (X-Frame, bytes).
+fn multipart_parts(head: &str, body: &[u8]) -> Vec<(u32, Vec<u8>)> {
+    let ct = head
+        .lines()
+        .find_map(|l| {
+            l.to_ascii_lowercase()
+                .strip_prefix("content-type: ")
+                .map(str::to_string)
+        })
+        .expect("content-type");
+    assert!(ct.starts_with("multipart/x-mixed-replace"), "{ct}");
+    let boundary = format!("--{}", ct.split("boundary=").nth(1).unwrap().trim());
+    let mut parts = Vec::new();
+    let mut rest = body;
+    loop {
+        assert!(
+            rest.starts_with(boundary.as_bytes()),
+            "part does not start with the boundary"
+        );
+        rest = &rest[boundary.len()..];
+        if rest.starts_with(b"--") {
+            return parts;
+        }
+        let end = rest.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+        let headers = String::from_utf8_lossy(&rest[..end]).to_ascii_lowercase();
+        let field = |name: &str| -> String {
+            headers
+                .lines()
+                .find_map(|l| l.strip_prefix(name).map(|v| v.trim().to_string()))
+                .unwrap_or_else(|| panic!("no {name} in {headers}"))
+        };
+        assert_eq!(field("content-type:"), "image/png");
+        let len: usize = field("content-length:").parse().unwrap();
+        let frame: u32 = field("x-frame:").parse().unwrap();
+        let data = &rest[end + 4..end + 4 + len];
+        parts.push((frame, data.to_vec()));
+        rest = &rest[end + 4 + len..];
+        assert!(rest.starts_with(b"\r\n"));
+        rest = &rest[2..];
+    }
+}
+
+/// Server-sent events: (event, data) pairs.
+fn sse_events(body: &[u8]) -> Vec<(String, serde_json::Value)> {
+    let text = String::from_utf8(body.to_vec()).unwrap();
+    text.split("\n\n")
+        .filter_map(|block| {
+            let mut event = None;
+            let mut data = String::new();
+            for line in block.lines() {
+                if let Some(e) = line.strip_prefix("event:") {
+                    event = Some(e.trim().to_string());
+                } else if let Some(d) = line.strip_prefix("data:") {
+                    data.push_str(d.trim_start());
+                }
+            }
+            Some((event?, json(data.as_bytes())))
+        })
+        .collect()
+}
+
+#[test]
+fn stream_and_events_deliver_every_frame_in_order_to_two_clients() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    let server = start(&dir.path().join("db"), &scenes);
+    // A slower job first, so that the followed job is still queued when
+    // its clients connect: they then see every frame live.
+    create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"48x48","spp":32}"#,
+    );
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"trc","frames":"0..4","size":"16x16","spp":1}"#,
+    );
+    let clients: Vec<_> = (0..2)
+        .map(|_| {
+            let addr = server.addr.clone();
+            let path = format!("/api/jobs/{id}/stream");
+            std::thread::spawn(move || http_full(&addr, "GET", &path, ""))
+        })
+        .collect();
+    let events = {
+        let addr = server.addr.clone();
+        let path = format!("/api/jobs/{id}/events");
+        std::thread::spawn(move || http_full(&addr, "GET", &path, ""))
+    };
+    for client in clients {
+        let (status, head, body) = client.join().unwrap();
+        assert_eq!(status, 200, "{head}");
+        let parts = multipart_parts(&head, &body);
+        let frames: Vec<u32> = parts.iter().map(|p| p.0).collect();
+        assert_eq!(frames, [0, 1, 2, 3]);
+        for (frame, png) in parts {
+            let (status, want) = http(
+                &server,
+                "GET",
+                &format!("/api/jobs/{id}/frames/{frame}.png"),
+                "",
+            );
+            assert_eq!(status, 200);
+            assert!(png == want, "frame {frame}: streamed PNG differs");
+            let img = image::load_from_memory(&png).unwrap();
+            assert_eq!((img.width(), img.height()), (16, 16));
+        }
+    }
+    let (status, head, body) = events.join().unwrap();
+    assert_eq!(status, 200);
+    assert!(
+        head.to_ascii_lowercase().contains("text/event-stream"),
+        "{head}"
+    );
+    let events = sse_events(&body);
+    let frames: Vec<u64> = events
+        .iter()
+        .filter(|e| e.0 == "frame")
+        .map(|e| e.1["frame"].as_u64().unwrap())
+        .collect();
+    assert_eq!(frames, [0, 1, 2, 3]);
+    assert!(events
+        .iter()
+        .any(|e| e.0 == "progress" && e.1["frames_done"] == 4));
+    let states: Vec<&str> = events
+        .iter()
+        .filter(|e| e.0 == "state")
+        .map(|e| e.1["state"].as_str().unwrap())
+        .collect();
+    assert!(states.len() >= 2, "{states:?}");
+    assert_eq!(states.last(), Some(&"done"));
+
+    // A finished job streams all its frames at once, then ends.
+    let (status, head, body) =
+        http_full(&server.addr, "GET", &format!("/api/jobs/{id}/stream"), "");
+    assert_eq!(status, 200);
+    let frames: Vec<u32> = multipart_parts(&head, &body).iter().map(|p| p.0).collect();
+    assert_eq!(frames, [0, 1, 2, 3]);
+    let (status, _) = http(&server, "GET", "/api/jobs/job-99/stream", "");
+    assert_eq!(status, 404);
 }

@@ -20,6 +20,8 @@ pub fn job_json(job: &Job) -> Value {
         "size": format!("{}x{}", job.request.settings.width, job.request.settings.height),
         "spp": job.request.method.spp(),
         "error": job.error,
+        "seconds_per_frame": (job.run_frames > 0).then(|| job.run_seconds / job.run_frames as f64),
+        "eta_seconds": job.eta_seconds(),
     })
 }
 
@@ -32,17 +34,7 @@ pub async fn create(
         let mut jobs = state.jobs.lock().expect("job table lock");
         let n = jobs.keys().next_back().map_or(1, |n| n + 1);
         let id = format!("job-{n}");
-        jobs.insert(
-            n,
-            Job {
-                id: id.clone(),
-                request,
-                state: JobState::Queued,
-                frames_done: 0,
-                error: None,
-                cancel: false,
-            },
-        );
+        jobs.insert(n, Job::new(id.clone(), request, JobState::Queued, 0));
         id
     };
     state.wake.notify_one();
