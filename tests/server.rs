@@ -420,3 +420,106 @@ fn stream_and_events_deliver_every_frame_in_order_to_two_clients() {
     let (status, _) = http(&server, "GET", "/api/jobs/job-99/stream", "");
     assert_eq!(status, 404);
 }
+
+#[test]
+fn records_match_the_store_and_inspect() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    let db = dir.path().join("db");
+    let server = start(&db, &scenes);
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"ic","frames":"0..2","size":"16x16","spp":1}"#,
+    );
+    wait_done(&server, &id);
+    let get = |q: &str| {
+        let (status, body) = http(&server, "GET", &format!("/api/jobs/{id}/records?{q}"), "");
+        (status, json(&body))
+    };
+    let (status, all) = get("frame=1");
+    assert_eq!(status, 200, "{all}");
+    let records = all["records"].as_array().unwrap();
+    assert!(!records.is_empty());
+    assert_eq!(all["count"].as_u64().unwrap() as usize, records.len());
+    for r in records {
+        assert_eq!(r["created"], 1, "{r}");
+        assert_eq!(r["lifespan"], 1, "ic records live one frame: {r}");
+        let s = r["screen"].as_array().expect("a record in view projects");
+        let (x, y) = (s[0].as_f64().unwrap(), s[1].as_f64().unwrap());
+        assert!(
+            (-0.5..=16.5).contains(&x) && (-0.5..=16.5).contains(&y),
+            "{r}"
+        );
+    }
+    // A box around the lower half (in y) of the records.
+    let ys: Vec<f64> = records
+        .iter()
+        .map(|r| r["position"][1].as_f64().unwrap())
+        .collect();
+    let mid = (ys.iter().cloned().fold(f64::INFINITY, f64::min)
+        + ys.iter().cloned().fold(f64::NEG_INFINITY, f64::max))
+        / 2.0;
+    let (status, half) = get(&format!("frame=1&bbox=-1000,-1000,-1000,1000,{mid},1000"));
+    assert_eq!(status, 200, "{half}");
+    let want = ys.iter().filter(|&&y| y as f32 <= mid as f32).count();
+    assert_eq!(half["count"].as_u64().unwrap() as usize, want);
+    assert!(want > 0 && want < records.len());
+    let (status, limited) = get("frame=1&limit=3");
+    assert_eq!(status, 200);
+    assert_eq!(limited["records"].as_array().unwrap().len(), 3);
+    assert_eq!(limited["truncated"], true);
+    for bad in [
+        "frame=1&bbox=1,2,3",
+        "frame=1&bbox=a,b,c,d,e,f",
+        "frame=1&bbox=1,1,1,0,0,0",
+        "frame=1&bbox=NaN,0,0,1,1,1",
+        "frame=1&bbox=0,0,0,inf,1,1",
+        "frame=x",
+        "bbox=0,0,0,1,1,1",
+        "frame=1&limit=0",
+    ] {
+        let (status, err) = get(bad);
+        assert_eq!(status, 400, "{bad}: {err}");
+        assert!(err["detail"].is_string());
+    }
+    assert_eq!(get("frame=7").0, 404);
+    let (status, _) = http(&server, "GET", "/api/jobs/job-42/records?frame=0", "");
+    assert_eq!(status, 404);
+    let frame0 = get("frame=0").1["count"].as_u64().unwrap();
+
+    // The same job as the store and `inspect` see it (the server holds the
+    // store's lock: stop it first).
+    drop(server);
+    let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["inspect", &id, "--json", "--db"])
+        .arg(&db)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = json(&out.stdout);
+    let frames = report["jobs"][0]["frame_details"].as_array().unwrap();
+    for (f, n) in [(0, frame0), (1, records.len() as u64)] {
+        assert_eq!(frames[f]["records_written"], n, "frame {f}");
+        assert_eq!(frames[f]["records_alive"], n, "frame {f}");
+    }
+    let store = radcache::store::Store::open_existing(&db).unwrap();
+    let sid = store.job(&id).unwrap().unwrap().id;
+    let stored = store.frame_records(sid, 1).unwrap();
+    assert_eq!(stored.len(), records.len());
+    for (s, r) in stored.iter().zip(records) {
+        assert_eq!(r["id"], s.id);
+        let p: Vec<f32> = r["position"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap() as f32)
+            .collect();
+        assert_eq!(p, s.position);
+        assert_eq!(r["radius"].as_f64().unwrap() as f32, s.radius);
+    }
+}

@@ -7,6 +7,7 @@
 mod error;
 mod frames;
 mod jobs;
+mod records;
 mod request;
 mod stream;
 mod worker;
@@ -167,6 +168,8 @@ pub struct AppState {
     /// change of the job: followers wake on changes, never poll.
     pub watchers: Mutex<HashMap<u64, watch::Sender<u64>>>,
     pub pngs: Mutex<PngCache>,
+    /// The scene of the last `/records` query (its camera projects records).
+    pub scene_cache: Mutex<Option<(String, Arc<crate::scene::Scene>)>>,
 }
 
 impl AppState {
@@ -280,6 +283,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/jobs/{id}/stats", get(frames::stats))
         .route("/api/jobs/{id}/stream", get(stream::frames))
         .route("/api/jobs/{id}/events", get(stream::events))
+        .route("/api/jobs/{id}/records", get(records::records))
         .route("/metrics", get(frames::metrics))
         .fallback(|| async { ApiError::not_found("no such route".into()) })
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
@@ -336,6 +340,7 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         render_micros: AtomicU64::new(0),
         watchers: Mutex::new(HashMap::new()),
         pngs: Mutex::new(PngCache::default()),
+        scene_cache: Mutex::new(None),
     });
     worker::load_jobs(&state)?;
     let runtime = tokio::runtime::Runtime::new().context("cannot start the tokio runtime")?;
