@@ -523,3 +523,69 @@ fn records_match_the_store_and_inspect() {
         assert_eq!(r["radius"].as_f64().unwrap() as f32, s.radius);
     }
 }
+
+/// (method, path) of every `.route(…)` in the router's source.
+fn router_routes() -> Vec<(String, String)> {
+    let src =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/src/server/mod.rs")).unwrap();
+    let mut routes = Vec::new();
+    for line in src
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with(".route(\""))
+    {
+        let rest = &line[".route(\"".len()..];
+        let (path, handlers) = rest.split_once('"').unwrap();
+        for method in ["get", "post", "put", "delete", "patch"] {
+            if handlers.contains(&format!(" {method}("))
+                || handlers.contains(&format!(".{method}("))
+            {
+                routes.push((method.to_string(), path.to_string()));
+            }
+        }
+    }
+    routes
+}
+
+#[test]
+fn openapi_documents_every_route() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    let server = start(&dir.path().join("db"), &scenes);
+    let (status, body) = http(&server, "GET", "/api/openapi.json", "");
+    assert_eq!(status, 200);
+    let doc = json(&body);
+    assert!(doc["openapi"].as_str().unwrap().starts_with("3."));
+    let routes = router_routes();
+    assert!(routes.len() >= 15, "{routes:?}");
+    for (method, path) in &routes {
+        assert!(
+            doc["paths"][path][method].is_object(),
+            "{} {path} is not in web/openapi.json",
+            method.to_uppercase()
+        );
+    }
+    let paths = doc["paths"].as_object().unwrap();
+    for (path, ops) in paths {
+        for method in ops.as_object().unwrap().keys() {
+            assert!(
+                routes.contains(&(method.clone(), path.clone())),
+                "web/openapi.json documents {method} {path}, which the router lacks"
+            );
+            // Every documented route reaches a handler (not the fallback).
+            let concrete = path.replace("{id}", "job-1").replace("{file}", "x");
+            let (_, body) = http(&server, &method.to_uppercase(), &concrete, "");
+            assert!(
+                !String::from_utf8_lossy(&body).contains("no such route"),
+                "{method} {concrete} hits the fallback"
+            );
+        }
+    }
+    // Every `$ref` resolves.
+    let text = String::from_utf8(body).unwrap();
+    for r in text.split("\"$ref\": \"#/").skip(1) {
+        let pointer = format!("/{}", r.split('"').next().unwrap());
+        assert!(doc.pointer(&pointer).is_some(), "unresolved $ref {pointer}");
+    }
+}

@@ -10,7 +10,10 @@ mod jobs;
 mod records;
 mod request;
 mod stream;
+mod web;
 mod worker;
+
+pub use web::OPENAPI;
 
 pub use error::ApiError;
 pub use request::{JobRequest, MAX_FRAMES};
@@ -274,7 +277,11 @@ pub fn parse_job_id(id: &str) -> Option<u64> {
 /// The API router over `state`.
 pub fn router(state: Arc<AppState>) -> Router {
     Router::new()
-        .route("/", get(index))
+        .route("/", get(web::index))
+        .route("/web/{file}", get(web::file))
+        .route("/web/charts/{file}", get(web::chart))
+        .route("/api/charts", get(web::charts))
+        .route("/api/openapi.json", get(web::openapi))
         .route("/api/jobs", post(jobs::create).get(jobs::list))
         .route("/api/jobs/{id}", get(jobs::show))
         .route("/api/jobs/{id}/cancel", post(jobs::cancel))
@@ -289,10 +296,6 @@ pub fn router(state: Arc<AppState>) -> Router {
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
         .layer(middleware::from_fn_with_state(state.clone(), check_token))
         .with_state(state)
-}
-
-async fn index() -> impl IntoResponse {
-    axum::response::Html(include_str!("../../web/index.html"))
 }
 
 /// With a token configured, every request must carry it as
