@@ -524,6 +524,89 @@ fn records_match_the_store_and_inspect() {
     }
 }
 
+fn job_state(server: &Server, id: &str) -> serde_json::Value {
+    let (status, body) = http(server, "GET", &format!("/api/jobs/{id}"), "");
+    assert_eq!(status, 200);
+    json(&body)
+}
+
+#[test]
+fn killed_server_resumes_its_job_and_frames_equal_an_uninterrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    let db = dir.path().join("db");
+    let frames = 24;
+    let request = format!(
+        r#"{{"scene":"builtin:cube-in-box","method":"trc","frames":"0..{frames}","size":"24x24","spp":2}}"#
+    );
+    let mut server = start(&db, &scenes);
+    let id = create_job(&server, &request);
+    // Queued behind it, then cancelled: must stay cancelled after the restart.
+    let cancelled = create_job(&server, &request);
+    let (status, body) = http(
+        &server,
+        "POST",
+        &format!("/api/jobs/{cancelled}/cancel"),
+        "",
+    );
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(json(&body)["state"], "cancelled");
+    let start_time = Instant::now();
+    let done_at_kill = loop {
+        let done = job_state(&server, &id)["frames_done"].as_u64().unwrap();
+        if done >= 2 {
+            break done;
+        }
+        assert!(start_time.elapsed() < Duration::from_secs(120));
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    // SIGKILL: no chance to finish the frame or flush anything.
+    server.child.kill().unwrap();
+    server.child.wait().unwrap();
+    assert!(done_at_kill < frames, "the job finished before the kill");
+
+    let server = start(&db, &scenes);
+    assert_eq!(job_state(&server, &cancelled)["state"], "cancelled");
+    let job = wait_done(&server, &id);
+    assert_eq!(job["frames_done"], frames);
+    assert_eq!(job_state(&server, &cancelled)["state"], "cancelled");
+
+    // The same job rendered in one go by the CLI.
+    let out = dir.path().join("cli");
+    let ok = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["render", "--builtin", "cube-in-box", "--method", "trc"])
+        .args(["--frames", &format!("0..{frames}"), "--size", "24x24"])
+        .args(["--spp", "2", "--backend", "cpu", "-q", "--out"])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    for f in 0..frames {
+        let (status, exr) = http(
+            &server,
+            "GET",
+            &format!("/api/jobs/{id}/frames/{f}.exr"),
+            "",
+        );
+        assert_eq!(status, 200);
+        let cli = std::fs::read(out.join(format!("frame_{f:04}.exr"))).unwrap();
+        assert!(
+            exr == cli,
+            "frame {f}: resumed job differs from an uninterrupted run"
+        );
+    }
+    // The cancelled job resumes on request.
+    let (status, _) = http(
+        &server,
+        "POST",
+        &format!("/api/jobs/{cancelled}/resume"),
+        "",
+    );
+    assert_eq!(status, 200);
+    assert_eq!(wait_done(&server, &cancelled)["frames_done"], frames);
+}
+
 /// (method, path) of every `.route(…)` in the router's source.
 fn router_routes() -> Vec<(String, String)> {
     let src =

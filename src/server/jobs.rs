@@ -34,6 +34,19 @@ pub async fn create(
         let mut jobs = state.jobs.lock().expect("job table lock");
         let n = jobs.keys().next_back().map_or(1, |n| n + 1);
         let id = format!("job-{n}");
+        // Into the store at once, so that a restart finds it queued.
+        let spec = crate::render::job_spec(
+            &id,
+            &request.scene,
+            &request.method,
+            &request.settings,
+            request.frames.clone(),
+        )
+        .map_err(ApiError::internal)?;
+        state
+            .store
+            .begin_job(&spec, false)
+            .map_err(ApiError::internal)?;
         jobs.insert(n, Job::new(id.clone(), request, JobState::Queued, 0));
         id
     };
@@ -58,6 +71,13 @@ pub async fn cancel(
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
     let job = state.job(&id)?;
+    if matches!(job.state, JobState::Queued | JobState::Running) {
+        // Durable first: a restart keeps the job cancelled.
+        state
+            .store
+            .set_job_cancelled(&id, true)
+            .map_err(ApiError::internal)?;
+    }
     match job.state {
         JobState::Queued => state.update(&id, |j| j.state = JobState::Cancelled),
         JobState::Running => state.update(&id, |j| j.cancel = true),
@@ -76,6 +96,12 @@ pub async fn resume(
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
     let job = state.job(&id)?;
+    if matches!(job.state, JobState::Cancelled | JobState::Failed) {
+        state
+            .store
+            .set_job_cancelled(&id, false)
+            .map_err(ApiError::internal)?;
+    }
     match job.state {
         JobState::Cancelled | JobState::Failed => state.update(&id, |j| {
             j.state = JobState::Queued;

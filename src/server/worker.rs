@@ -10,7 +10,8 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// Fills the job table from the store's `job-N` jobs: finished ones are
-/// done, unfinished ones (interrupted by a stop or a crash) are queued again.
+/// done, cancelled ones stay cancelled, other unfinished ones (interrupted
+/// by a stop or a crash) are queued again.
 pub fn load_jobs(state: &AppState) -> Result<()> {
     let mut jobs = state.jobs.lock().expect("job table lock");
     for stored in state.store.jobs()? {
@@ -23,6 +24,8 @@ pub fn load_jobs(state: &AppState) -> Result<()> {
         let finished = done == request.frames_total();
         let job_state = if finished {
             JobState::Done
+        } else if state.store.job_cancelled(&stored.name)? {
+            JobState::Cancelled
         } else {
             JobState::Queued
         };
