@@ -13,7 +13,8 @@ fn any_hit(@builtin(global_invocation_id) id: vec3<u32>) {
     let ray = rays[i];
     let r = trace_ray(ray);
     // Dynamic parts are usually small: test them first (as the CPU does).
-    let hit = traverse_any(params.dynamic_root, r, ray.tmax)
-        || traverse_any(params.static_root, r, ray.tmax);
+    var best = Hit(ray.tmax, NONE, NONE, 0.0, 0.0);
+    let hit = traverse(params.dynamic_root, r, &best, true)
+        || traverse(params.static_root, r, &best, true);
     occluded[i] = select(0u, 1u, hit);
 }

@@ -172,31 +172,43 @@ fn intersect_triangle(tri: Triangle, ray: TraceRay, tmax: f32) -> vec3<f32> {
     return miss;
 }
 
-/// Nearest hit in the leaf closer than `best.t` (strictly, as the CPU).
-fn closest_in_leaf(node: Node, ray: TraceRay, best: ptr<function, Hit>) {
+/// Triangles of the leaf hit closer than `best.t` (strictly, as the CPU):
+/// updates `best` with the nearest. With `any`, stops at the first one.
+/// Returns whether there was one.
+fn leaf_hits(node: Node, ray: TraceRay, best: ptr<function, Hit>, any: bool) -> bool {
+    var found = false;
     for (var i = node.first_index; i < node.first_index + node.prim_count; i++) {
         let tri = triangles[i];
         let h = intersect_triangle(tri, ray, (*best).t);
         if h.x < (*best).t {
             *best = Hit(h.x, tri.id, tri.object, h.y, h.z);
+            found = true;
+            if any {
+                return true;
+            }
         }
     }
+    return found;
 }
 
-/// Closest hit in the BVH rooted at `root` closer than `best.t`; updates
-/// `best`. obvhs `Bvh2::ray_traverse_dynamic` with `ray_traverse`'s leaf test.
-fn traverse_closest(root: u32, ray: TraceRay, best: ptr<function, Hit>) {
+/// Hits in the BVH rooted at `root` closer than `best.t`, shrinking
+/// `best` to the nearest: obvhs `Bvh2::ray_traverse_dynamic` with
+/// `ray_traverse`'s leaf test. With `any` it returns at the first hit
+/// (obvhs `Bvh2::ray_traverse_miss`, negated). Returns whether there was a
+/// hit. One loop for both queries: `any` is uniform across a dispatch, so
+/// its branches cost nothing in divergence.
+fn traverse(root: u32, ray: TraceRay, best: ptr<function, Hit>, any: bool) -> bool {
     if root == NONE {
-        return;
+        return false;
     }
     let root_node = nodes[root];
     if !(intersect_box(root_node, ray) < (*best).t) {
-        return;
+        return false;
     }
     if root_node.prim_count > 0u {
-        closest_in_leaf(root_node, ray, best);
-        return;
+        return leaf_hits(root_node, ray, best, any);
     }
+    var found = false;
     var stack: array<u32, STACK_SIZE>;
     var sp = 0u;
     var current = root_node.first_index;
@@ -215,12 +227,23 @@ fn traverse_closest(root: u32, ray: TraceRay, best: ptr<function, Hit>) {
         }
         var go_near = t_near < (*best).t;
         if go_near && near.prim_count > 0u {
-            closest_in_leaf(near, ray, best);
+            if leaf_hits(near, ray, best, any) {
+                found = true;
+                if any {
+                    return true;
+                }
+            }
             go_near = false;
         }
+        // After the near leaf: `best.t` may have shrunk.
         var go_far = t_far < (*best).t;
         if go_far && far.prim_count > 0u {
-            closest_in_leaf(far, ray, best);
+            if leaf_hits(far, ray, best, any) {
+                found = true;
+                if any {
+                    return true;
+                }
+            }
             go_far = false;
         }
         if go_near && go_far {
@@ -239,79 +262,7 @@ fn traverse_closest(root: u32, ray: TraceRay, best: ptr<function, Hit>) {
             current = stack[sp];
         }
     }
-}
-
-/// Whether the leaf has a triangle hit in [tmin, tmax).
-fn any_in_leaf(node: Node, ray: TraceRay, tmax: f32) -> bool {
-    for (var i = node.first_index; i < node.first_index + node.prim_count; i++) {
-        let h = intersect_triangle(triangles[i], ray, tmax);
-        if h.x < tmax {
-            return true;
-        }
-    }
-    return false;
-}
-
-/// Whether anything in the BVH rooted at `root` hits the ray in
-/// [tmin, tmax). obvhs `Bvh2::ray_traverse_miss`, negated.
-fn traverse_any(root: u32, ray: TraceRay, tmax: f32) -> bool {
-    if root == NONE {
-        return false;
-    }
-    let root_node = nodes[root];
-    if !(intersect_box(root_node, ray) < tmax) {
-        return false;
-    }
-    if root_node.prim_count > 0u {
-        return any_in_leaf(root_node, ray, tmax);
-    }
-    var stack: array<u32, STACK_SIZE>;
-    var sp = 0u;
-    var current = root_node.first_index;
-    loop {
-        var near = nodes[current];
-        var far = nodes[current + 1u];
-        var t_near = intersect_box(near, ray);
-        var t_far = intersect_box(far, ray);
-        if t_near > t_far {
-            let n = near;
-            near = far;
-            far = n;
-            let t = t_near;
-            t_near = t_far;
-            t_far = t;
-        }
-        var go_near = t_near < tmax;
-        if go_near && near.prim_count > 0u {
-            if any_in_leaf(near, ray, tmax) {
-                return true;
-            }
-            go_near = false;
-        }
-        var go_far = t_far < tmax;
-        if go_far && far.prim_count > 0u {
-            if any_in_leaf(far, ray, tmax) {
-                return true;
-            }
-            go_far = false;
-        }
-        if go_near && go_far {
-            current = near.first_index;
-            stack[sp] = far.first_index;
-            sp += 1u;
-        } else if go_near {
-            current = near.first_index;
-        } else if go_far {
-            current = far.first_index;
-        } else {
-            if sp == 0u {
-                return false;
-            }
-            sp -= 1u;
-            current = stack[sp];
-        }
-    }
-    return false;
+    return found;
 }
 
 /// Index of the ray this work item traces in a 2D dispatch, or NONE past

@@ -14,8 +14,8 @@ fn closest_hit(@builtin(global_invocation_id) id: vec3<u32>) {
     let r = trace_ray(ray);
     // `best.t` is the shrinking tmax shared by both BVHs, as on the CPU.
     var best = Hit(ray.tmax, NONE, NONE, 0.0, 0.0);
-    traverse_closest(params.static_root, r, &best);
-    traverse_closest(params.dynamic_root, r, &best);
+    traverse(params.static_root, r, &best, false);
+    traverse(params.dynamic_root, r, &best, false);
     if best.triangle == NONE {
         best = Hit(infinity(), NONE, NONE, 0.0, 0.0);
     }

@@ -12,16 +12,27 @@
 //! one line per method sweep, so the Pareto front shows) and
 //! `DIR/<scene>_flicker_vs_time.svg`.
 //!
+//! Beside each reference frame it writes the frame's light mask
+//! ([`metrics::light_mask_path`]: the pixels that see a light source
+//! directly, or border one), so every run also gets `rel_rmse_surfaces`, the
+//! error of the lit surfaces without the rim of a directly seen light, whose
+//! anti-aliasing noise is the same for every method and dominates an
+//! all-pixel RMSE at low sample counts, and likewise `flicker_surfaces`;
+//! `DIR/<scene>_surface_error_vs_time.svg` and
+//! `DIR/<scene>_surface_flicker_vs_time.svg` chart them.
+//!
 //! # Adding a method
 //! A method becomes benchable by one row in [`METHODS`] (its name, the keys
 //! it sweeps with an example value each) and one arm in [`method_settings`]
 //! turning `(key, value)` into its [`MethodSettings`]; a unit test checks
 //! that the two agree. Record counts come from the method's frame statistics.
 
+use crate::backend::{Hit, Ray};
 use crate::cache::gather::Strata;
 use crate::method::ic::IcSettings;
 use crate::method::path::PathSettings;
 use crate::method::trc::{TemporalGradients, TrcSettings};
+use crate::method::FrameContext;
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
 use anyhow::{bail, Context, Result};
@@ -344,6 +355,11 @@ pub struct BenchOptions {
     pub reference_spp: u32,
     pub seed: u64,
     pub out: PathBuf,
+    /// Render the runs, not only the reference, with the same random
+    /// sequence in every frame: pixel noise then stays put from frame to
+    /// frame, so flicker shows what the method itself changes between
+    /// frames (records appearing and moving), not its per-frame noise.
+    pub same_pattern: bool,
     /// No progress bars or messages on stderr.
     pub quiet: bool,
 }
@@ -366,6 +382,7 @@ impl Default for BenchOptions {
             reference_spp: 1024,
             seed: 0,
             out: PathBuf::from("bench-out"),
+            same_pattern: false,
             quiet: false,
         }
     }
@@ -431,14 +448,20 @@ pub struct BenchRow {
     /// platform tells it.
     pub peak_mem_mb: Option<f64>,
     pub rel_rmse: f64,
+    /// Relative RMSE without the pixels at directly seen lights
+    /// ([`metrics::CompareReport::rel_rmse_surfaces`]).
+    pub rel_rmse_surfaces: Option<f64>,
     pub block_bias: f64,
     /// `None` with a single frame.
     pub flicker: Option<f64>,
+    /// Flicker without the pixels at directly seen lights
+    /// ([`metrics::CompareReport::flicker_surfaces`]).
+    pub flicker_surfaces: Option<f64>,
 }
 
 /// `bench.csv`'s header line.
 pub const CSV_HEADER: &str =
-    "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,block_bias,flicker";
+    "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -459,7 +482,7 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{:.4},{},{},{},{:.6},{:.6},{}",
+            "{},{},{},{},{:.4},{},{},{},{:.6},{},{:.6},{},{}",
             csv_field(&r.scene),
             csv_field(&r.method),
             csv_field(&r.settings),
@@ -469,8 +492,10 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
             r.records,
             opt(r.peak_mem_mb, 1),
             r.rel_rmse,
+            opt(r.rel_rmse_surfaces, 6),
             r.block_bias,
             opt(r.flicker, 6),
+            opt(r.flicker_surfaces, 6),
         );
     }
     out
@@ -488,10 +513,12 @@ pub fn to_table(rows: &[BenchRow]) -> String {
         "records",
         "peak MB",
         "rel_rmse",
+        "rmse surf",
         "block_bias",
         "flicker",
+        "flicker surf",
     ];
-    let cells: Vec<[String; 11]> = rows
+    let cells: Vec<[String; 13]> = rows
         .iter()
         .map(|r| {
             [
@@ -504,8 +531,11 @@ pub fn to_table(rows: &[BenchRow]) -> String {
                 r.records.to_string(),
                 r.peak_mem_mb.map_or("-".into(), |v| format!("{v:.0}")),
                 format!("{:.5}", r.rel_rmse),
+                r.rel_rmse_surfaces
+                    .map_or("-".into(), |v| format!("{v:.5}")),
                 format!("{:.5}", r.block_bias),
                 r.flicker.map_or("-".into(), |v| format!("{v:.5}")),
+                r.flicker_surfaces.map_or("-".into(), |v| format!("{v:.5}")),
             ]
         })
         .collect();
@@ -567,14 +597,41 @@ pub fn interpolate_time_at_error(points: &[(f64, f64)], target: f64) -> Option<f
     })
 }
 
+/// Which error an equal-error comparison holds equal.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorMeasure {
+    /// Relative RMSE over all pixels ([`BenchRow::rel_rmse`]).
+    AllPixels,
+    /// Relative RMSE without the pixels at directly seen lights
+    /// ([`BenchRow::rel_rmse_surfaces`]).
+    Surfaces,
+}
+
+impl ErrorMeasure {
+    pub fn of(self, row: &BenchRow) -> Option<f64> {
+        match self {
+            ErrorMeasure::AllPixels => Some(row.rel_rmse),
+            ErrorMeasure::Surfaces => row.rel_rmse_surfaces,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            ErrorMeasure::AllPixels => "rel_rmse",
+            ErrorMeasure::Surfaces => "rel_rmse_surfaces",
+        }
+    }
+}
+
 /// For a run of another method: how long `path` takes to reach the same
-/// relative RMSE on the same scene, and the ratio (path time ÷ run time).
+/// error on the same scene, and the ratio (path time ÷ run time).
 #[derive(Clone, Debug, PartialEq)]
 pub struct EqualError {
     pub scene: String,
     pub method: String,
     pub settings: String,
-    pub rel_rmse: f64,
+    pub measure: ErrorMeasure,
+    pub error: f64,
     pub seconds: f64,
     /// `None` where the path sweep does not bracket the error.
     pub path_seconds: Option<f64>,
@@ -586,10 +643,11 @@ impl EqualError {
     }
 }
 
-/// [`EqualError`] for every run whose method is not `path`, against the
-/// `path` runs of its scene that vary only the sample count (`spp=…` or the
-/// defaults), or all its `path` runs when there are none such.
-pub fn equal_error_table(rows: &[BenchRow]) -> Vec<EqualError> {
+/// [`EqualError`] under `measure` for every run whose method is not `path`
+/// (and that has the measure), against the `path` runs of its scene that
+/// vary only the sample count (`spp=…` or the defaults), or all its `path`
+/// runs when there are none such.
+pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualError> {
     let path_curve = |scene: &str| -> Vec<(f64, f64)> {
         let runs: Vec<&BenchRow> = rows
             .iter()
@@ -601,20 +659,24 @@ pub fn equal_error_table(rows: &[BenchRow]) -> Vec<EqualError> {
             .filter(|p| p.settings.starts_with("spp=") || p.settings == "default")
             .collect();
         let chosen = if spp.is_empty() { runs } else { spp };
-        chosen.iter().map(|p| (p.seconds, p.rel_rmse)).collect()
+        chosen
+            .iter()
+            .filter_map(|p| Some((p.seconds, measure.of(p)?)))
+            .collect()
     };
     rows.iter()
         .filter(|r| r.method != "path")
-        .map(|r| {
-            let path = path_curve(&r.scene);
-            EqualError {
+        .filter_map(|r| {
+            let error = measure.of(r)?;
+            Some(EqualError {
                 scene: r.scene.clone(),
                 method: r.method.clone(),
                 settings: r.settings.clone(),
-                rel_rmse: r.rel_rmse,
+                measure,
+                error,
                 seconds: r.seconds,
-                path_seconds: interpolate_time_at_error(&path, r.rel_rmse),
-            }
+                path_seconds: interpolate_time_at_error(&path_curve(&r.scene), error),
+            })
         })
         .collect()
 }
@@ -623,16 +685,23 @@ pub fn equal_error_table(rows: &[BenchRow]) -> Vec<EqualError> {
 pub fn equal_error_text(table: &[EqualError]) -> String {
     let mut out = String::new();
     for e in table {
+        let what = format!(
+            "{} {} {}: {} {:.5} in {:.3} s",
+            e.scene,
+            e.method,
+            e.settings,
+            e.measure.name(),
+            e.error,
+            e.seconds
+        );
         let _ = match (e.path_seconds, e.speedup()) {
             (Some(p), Some(x)) => writeln!(
                 out,
-                "{} {} {}: rel_rmse {:.5} in {:.3} s; path needs {:.3} s for it → {:.2}× faster than path",
-                e.scene, e.method, e.settings, e.rel_rmse, e.seconds, p, x
+                "{what}; path needs {p:.3} s for it → {x:.2}× faster than path"
             ),
             _ => writeln!(
                 out,
-                "{} {} {}: rel_rmse {:.5} in {:.3} s; the path sweep does not bracket this error (widen it)",
-                e.scene, e.method, e.settings, e.rel_rmse, e.seconds
+                "{what}; the path sweep does not bracket this error (widen it)"
             ),
         };
     }
@@ -688,6 +757,10 @@ struct ReferenceInfo {
     fps: f32,
     method: String,
     same_pattern: bool,
+    /// The folder holds a light mask per frame (written since the surface
+    /// error exists; an older reference is rendered again).
+    #[serde(default)]
+    light_masks: bool,
 }
 
 fn fnv1a(bytes: &[u8]) -> u64 {
@@ -783,7 +856,7 @@ fn bench_scene(
                 scene,
                 settings.instantiate(),
                 backend,
-                frame_settings(opts, false),
+                frame_settings(opts, opts.same_pattern),
             );
             if per_run {
                 reset_peak_memory();
@@ -805,8 +878,10 @@ fn bench_scene(
                 records: stats.records,
                 peak_mem_mb,
                 rel_rmse: cmp.rel_rmse,
+                rel_rmse_surfaces: cmp.rel_rmse_surfaces,
                 block_bias: cmp.block_bias,
                 flicker: cmp.flicker,
+                flicker_surfaces: cmp.flicker_surfaces,
             });
         }
     }
@@ -827,6 +902,7 @@ fn ensure_reference(opts: &BenchOptions, source: &SceneSource, dir: &Path) -> Re
         fps: opts.fps,
         method: "path".into(),
         same_pattern: true,
+        light_masks: true,
     };
     let json = dir.join("reference.json");
     let have = std::fs::read_to_string(&json)
@@ -869,10 +945,70 @@ fn ensure_reference(opts: &BenchOptions, source: &SceneSource, dir: &Path) -> Re
     );
     let what = format!("reference {}", scene_label(source));
     render_frames(&mut renderer, opts.frames.clone(), dir, &what, opts.quiet)?;
+    for frame in opts.frames.clone() {
+        let mask = renderer.with_frame_context(frame, seen_lights);
+        metrics::write_light_mask(
+            &metrics::light_mask_path(dir, frame),
+            opts.width,
+            opts.height,
+            &mask,
+        )?;
+    }
     // Written last: its presence says the frames are complete.
     std::fs::write(&json, serde_json::to_string_pretty(&info)?)
         .with_context(|| format!("cannot write {}", json.display()))?;
     Ok(())
+}
+
+/// Which pixels of the frame see a light source directly or border a pixel
+/// that does (the light mask of [`metrics::light_mask_path`]): 8×8 primary
+/// rays per pixel on a regular grid over its square, then a one-pixel
+/// dilation, so that a rim pixel the grid misses is left out as well. An
+/// emissive triangle counts from either side: leaving out a few more pixels
+/// only narrows the surface error, it does not bias it.
+fn seen_lights(ctx: &FrameContext) -> Vec<bool> {
+    const GRID: u32 = 8;
+    let (w, h) = (ctx.width, ctx.height);
+    let camera = &ctx.snapshot.camera;
+    let emissive = |hit: &Hit| {
+        hit.is_hit() && {
+            let material = ctx.snapshot.tri_material[hit.triangle as usize];
+            ctx.scene.materials[material as usize].is_emissive()
+        }
+    };
+    let mut lit = vec![false; (w * h) as usize];
+    for y in 0..h {
+        let rays: Vec<Ray> = (0..w * GRID * GRID)
+            .map(|i| {
+                let (x, s) = (i / (GRID * GRID), i % (GRID * GRID));
+                let sx = (x as f32 + ((s % GRID) as f32 + 0.5) / GRID as f32) / w as f32;
+                let sy = (y as f32 + ((s / GRID) as f32 + 0.5) / GRID as f32) / h as f32;
+                let dir = camera.direction(sx, sy, ctx.aspect());
+                Ray::new(camera.position, dir, 0.0, f32::INFINITY)
+            })
+            .collect();
+        let mut hits = vec![Hit::MISS; rays.len()];
+        ctx.backend.closest_hit(&rays, &mut hits);
+        for (x, pixel_hits) in hits.chunks(GRID as usize * GRID as usize).enumerate() {
+            lit[(y * w) as usize + x] = pixel_hits.iter().any(emissive);
+        }
+    }
+    dilate(&lit, w, h)
+}
+
+/// `mask` grown by one pixel in the eight directions.
+fn dilate(mask: &[bool], w: u32, h: u32) -> Vec<bool> {
+    let at = |x: i64, y: i64| {
+        (0..w as i64).contains(&x)
+            && (0..h as i64).contains(&y)
+            && mask[(y * w as i64 + x) as usize]
+    };
+    (0..(w * h) as i64)
+        .map(|i| {
+            let (x, y) = (i % w as i64, i / w as i64);
+            (-1..=1).any(|dy| (-1..=1).any(|dx| at(x + dx, y + dy)))
+        })
+        .collect()
 }
 
 /// Creates `dir` and removes the `frame_NNNN.{exr,png}` files in it.
@@ -1035,10 +1171,12 @@ fn point_label(r: &BenchRow) -> String {
         .map_or(String::new(), |(_, v)| v.to_string())
 }
 
-/// Writes the two charts of one scene; returns their paths.
+/// Writes the four charts of one scene; returns their paths.
 pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<PathBuf>> {
     let error = out.join(format!("{scene}_error_vs_time.svg"));
+    let surfaces = out.join(format!("{scene}_surface_error_vs_time.svg"));
     let flicker = out.join(format!("{scene}_flicker_vs_time.svg"));
+    let surface_flicker = out.join(format!("{scene}_surface_flicker_vs_time.svg"));
     plot(
         &error,
         &format!("{scene}: error against time"),
@@ -1047,13 +1185,27 @@ pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<Path
         |r| Some(r.rel_rmse),
     )?;
     plot(
+        &surfaces,
+        &format!("{scene}: error of lit surfaces against time"),
+        "relative RMSE without the pixels at seen lights",
+        rows,
+        |r| r.rel_rmse_surfaces,
+    )?;
+    plot(
         &flicker,
         &format!("{scene}: flicker against time"),
         "flicker (RMS of frame-difference error / mean radiance)",
         rows,
         |r| r.flicker,
     )?;
-    Ok(vec![error, flicker])
+    plot(
+        &surface_flicker,
+        &format!("{scene}: flicker of lit surfaces against time"),
+        "flicker without the pixels at seen lights",
+        rows,
+        |r| r.flicker_surfaces,
+    )?;
+    Ok(vec![error, surfaces, flicker, surface_flicker])
 }
 
 fn plot(
@@ -1155,7 +1307,7 @@ fn plot(
             .map_err(|e| draw_err(&e))?;
     } else {
         root.draw(&Text::new(
-            "no data (flicker needs at least two frames)",
+            "no data (flicker needs two frames; the surface error, light masks)",
             (260, 290),
             ("sans-serif", 16),
         ))

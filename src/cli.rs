@@ -244,6 +244,11 @@ pub struct BenchArgs {
     /// Output directory: bench.csv, charts, reference/ and runs/.
     #[arg(long, default_value = "bench-out")]
     pub out: PathBuf,
+    /// Render the runs too with the same random sequence in every frame
+    /// (the reference always is): flicker then shows what a method changes
+    /// between frames rather than its per-frame pixel noise.
+    #[arg(long)]
+    pub same_pattern: bool,
     /// No progress bars or messages (the table is still printed).
     #[arg(long, short)]
     pub quiet: bool,
@@ -376,14 +381,23 @@ fn run_bench(args: BenchArgs) -> Result<()> {
         reference_spp: args.reference_spp,
         seed: args.seed,
         out: args.out,
+        same_pattern: args.same_pattern,
         quiet: args.quiet,
     };
     let report = bench::run(&opts)?;
     print!("{}", bench::to_table(&report.rows));
-    let equal = bench::equal_error_table(&report.rows);
-    if !equal.is_empty() {
-        println!("\nequal error (path time interpolated along its sweep, log-log):");
-        print!("{}", bench::equal_error_text(&equal));
+    for (measure, what) in [
+        (bench::ErrorMeasure::AllPixels, "all pixels"),
+        (
+            bench::ErrorMeasure::Surfaces,
+            "without the pixels at directly seen lights",
+        ),
+    ] {
+        let equal = bench::equal_error_table(&report.rows, measure);
+        if !equal.is_empty() {
+            println!("\nequal error, {what} (path time interpolated along its sweep, log-log):");
+            print!("{}", bench::equal_error_text(&equal));
+        }
     }
     if !report.peak_mem_per_run {
         println!("(peak memory is the process peak so far, not per run)");

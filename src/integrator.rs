@@ -14,9 +14,9 @@ use crate::backend::{Hit, Ray};
 use crate::light::emitting_cosine;
 use crate::material::Bsdf;
 use crate::method::FrameContext;
-use crate::sampling::{power_heuristic, Rng};
+use crate::sampling::{power_heuristic, LightChoice, Rng};
 use crate::scene::Triangle;
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 
 /// Path-length control shared by every caller.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -61,9 +61,9 @@ pub enum FirstHitEmission {
 #[derive(Clone, Debug)]
 pub struct RadianceQuery {
     pub ray: Ray,
-    /// Position sample for the light sample at the first hit (stratified by
-    /// the caller); `None` draws it from `rng`.
-    pub first_light: Option<Vec2>,
+    /// The light sample at the first hit (stratified by the caller); `None`
+    /// draws it from `rng`.
+    pub first_light: Option<LightChoice>,
     pub rng: Rng,
     pub weight: Vec3,
     pub first_hit: FirstHitEmission,
@@ -95,7 +95,7 @@ pub fn offset_origin(p: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
 /// State of one path between bounces.
 struct PathState {
     query: usize,
-    first_light: Option<Vec2>,
+    first_light: Option<LightChoice>,
     rng: Rng,
     throughput: Vec3,
     radiance: Vec3,
@@ -242,7 +242,7 @@ fn shade(
 
     // Next-event estimation, MIS-weighted against BSDF sampling.
     let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
-    let u = path.first_light.take().unwrap_or(u);
+    let LightChoice { pick, u } = path.first_light.take().unwrap_or(LightChoice { pick, u });
     if let Some(ls) = ctx
         .lights
         .sample(snapshot, &ctx.scene.materials, p, pick, u)

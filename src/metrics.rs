@@ -42,6 +42,12 @@ pub enum MetricsError {
         b: PathBuf,
         b_size: (u32, u32),
     },
+    #[error("{}: not a light mask of {}×{} pixels: {detail}", path.display(), size.0, size.1)]
+    Mask {
+        path: PathBuf,
+        size: (u32, u32),
+        detail: String,
+    },
     #[error(transparent)]
     Film(#[from] FilmError),
 }
@@ -83,6 +89,58 @@ pub fn rmse(test: &Film, reference: &Film) -> f64 {
 /// compare. Infinite or NaN for an all-black reference.
 pub fn rel_rmse(test: &Film, reference: &Film) -> f64 {
     rmse(test, reference) / reference.mean()
+}
+
+/// Sums over the kept pixels (`keep[pixel]`) of one or more frames: their
+/// relative RMSE is the RMSE over them ÷ the reference's mean over them.
+#[derive(Clone, Copy, Debug, Default)]
+struct MaskedSums {
+    sq_err: f64,
+    ref_sum: f64,
+    values: usize,
+    /// [`flicker_sum`] over the pixels kept in both frames of each pair.
+    flicker_sq: f64,
+    flicker_values: usize,
+}
+
+impl MaskedSums {
+    fn of(test: &Film, reference: &Film, keep: &[bool]) -> Self {
+        assert_same_size(test, reference);
+        assert_eq!(
+            keep.len(),
+            reference.pixels.len(),
+            "a mask of the image's size"
+        );
+        let mut sums = MaskedSums::default();
+        for k in (0..keep.len()).filter(|&k| keep[k]) {
+            let r = reference.pixels[k].as_dvec3();
+            sums.sq_err += sum_sq(test.pixels[k] - reference.pixels[k]);
+            sums.ref_sum += r.x + r.y + r.z;
+            sums.values += 3;
+        }
+        sums
+    }
+
+    fn add(&mut self, other: MaskedSums) {
+        self.sq_err += other.sq_err;
+        self.ref_sum += other.ref_sum;
+        self.values += other.values;
+        self.flicker_sq += other.flicker_sq;
+        self.flicker_values += other.flicker_values;
+    }
+
+    fn ref_mean(&self) -> f64 {
+        self.ref_sum / self.values as f64
+    }
+
+    fn flicker(&self) -> Option<f64> {
+        (self.values > 0 && self.flicker_values > 0)
+            .then(|| (self.flicker_sq / self.flicker_values as f64).sqrt() / self.ref_mean())
+    }
+
+    fn rel_rmse(&self) -> Option<f64> {
+        (self.values > 0).then(|| (self.sq_err / self.values as f64).sqrt() / self.ref_mean())
+    }
 }
 
 /// Per-channel means of the `block`×`block` tiles, row-major. Tiles on the
@@ -131,13 +189,26 @@ pub fn block_bias(test: &Film, reference: &Film, block: u32) -> f64 {
 /// Sum over pixels and channels of ((I₁ − I₀) − (R₁ − R₀))², and the count of
 /// values summed.
 fn flicker_sum(i0: &Film, i1: &Film, r0: &Film, r1: &Film) -> (f64, usize) {
+    flicker_sum_over(i0, i1, r0, r1, |_| true)
+}
+
+/// [`flicker_sum`] over the pixels `k` where `keep(k)`.
+fn flicker_sum_over(
+    i0: &Film,
+    i1: &Film,
+    r0: &Film,
+    r1: &Film,
+    keep: impl Fn(usize) -> bool,
+) -> (f64, usize) {
     for f in [i1, r0, r1] {
         assert_same_size(i0, f);
     }
-    let sum = (0..i0.pixels.len())
-        .map(|k| sum_sq((i1.pixels[k] - i0.pixels[k]) - (r1.pixels[k] - r0.pixels[k])))
-        .sum();
-    (sum, 3 * i0.pixels.len())
+    let (mut sum, mut values) = (0.0, 0);
+    for k in (0..i0.pixels.len()).filter(|&k| keep(k)) {
+        sum += sum_sq((i1.pixels[k] - i0.pixels[k]) - (r1.pixels[k] - r0.pixels[k]));
+        values += 3;
+    }
+    (sum, values)
 }
 
 /// Flicker (DESIGN.md "Measuring", temporal stability): the RMS over pixels,
@@ -186,7 +257,9 @@ pub struct FrameReport {
 
 /// The result of comparing a test folder with a reference folder. Serialises
 /// to `{"frames":N,"rmse":…,"rel_rmse":…,"block_bias":…,"flicker":…,
-/// "per_frame":[…]}`; `flicker` is `null` without consecutive frames.
+/// "rel_rmse_surfaces":…,"flicker_surfaces":…,"per_frame":[…]}`; `flicker`
+/// is `null` without consecutive frames, the `_surfaces` figures without
+/// light masks.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CompareReport {
     pub frames: usize,
@@ -196,7 +269,15 @@ pub struct CompareReport {
     pub rel_rmse: f64,
     /// √(mean over frames of the per-frame block MSE) ÷ the same mean.
     pub block_bias: f64,
+    /// Relative RMSE over the pixels that see no light source directly (nor
+    /// border one), all frames together; `None` unless every reference frame
+    /// has a light mask ([`light_mask_path`]).
+    pub rel_rmse_surfaces: Option<f64>,
     pub flicker: Option<f64>,
+    /// [`Self::flicker`] over the pixels that see no light in either frame
+    /// of a pair, ÷ the reference's mean over the pixels that see none;
+    /// `None` without light masks or consecutive frames.
+    pub flicker_surfaces: Option<f64>,
     pub per_frame: Vec<FrameReport>,
 }
 
@@ -216,6 +297,58 @@ pub fn list_frames(dir: &Path) -> Result<Vec<(u32, PathBuf)>, MetricsError> {
     }
     frames.sort();
     Ok(frames)
+}
+
+/// The light mask of frame `frame` in a reference folder:
+/// `seen_lights_NNNN.png`, white where a pixel sees a light source directly
+/// or borders one that does. [`compare_dirs`] leaves those pixels out of
+/// [`CompareReport::rel_rmse_surfaces`]: the handful of pixels on the rim of
+/// a directly seen light carry most of an all-pixel RMSE at low sample
+/// counts (DESIGN.md "Measuring"), and that anti-aliasing noise is the same
+/// for every method, so it hides how well a method computes the lighting of
+/// surfaces.
+pub fn light_mask_path(dir: &Path, frame: u32) -> PathBuf {
+    dir.join(format!("seen_lights_{frame:04}.png"))
+}
+
+/// Writes a light mask (row-major, `width`×`height`) as an 8-bit grey PNG.
+pub fn write_light_mask(
+    path: &Path,
+    width: u32,
+    height: u32,
+    mask: &[bool],
+) -> Result<(), MetricsError> {
+    let size = (width, height);
+    let bad = |detail: String| MetricsError::Mask {
+        path: path.to_owned(),
+        size,
+        detail,
+    };
+    let pixels = mask.iter().map(|&m| if m { 255 } else { 0 }).collect();
+    let image = image::GrayImage::from_raw(width, height, pixels)
+        .ok_or_else(|| bad(format!("{} values given", mask.len())))?;
+    image.save(path).map_err(|e| bad(e.to_string()))
+}
+
+/// Reads the light mask at `path` for an image of `size`; `Ok(None)` when
+/// there is no such file.
+pub fn read_light_mask(path: &Path, size: (u32, u32)) -> Result<Option<Vec<bool>>, MetricsError> {
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let bad = |detail: String| MetricsError::Mask {
+        path: path.to_owned(),
+        size,
+        detail,
+    };
+    let image = image::open(path)
+        .map_err(|e| bad(e.to_string()))?
+        .to_luma8();
+    if image.dimensions() != size {
+        let (w, h) = image.dimensions();
+        return Err(bad(format!("it is {w}×{h}")));
+    }
+    Ok(Some(image.pixels().map(|p| p.0[0] >= 128).collect()))
 }
 
 /// `frame_0012.exr` → 12.
@@ -249,6 +382,8 @@ struct FramePair {
     ref_path: PathBuf,
     test: Film,
     reference: Film,
+    /// Pixels to keep for the surface error (`None`: no light mask).
+    surfaces: Option<Vec<bool>>,
 }
 
 fn read_pair(number: u32, ref_path: PathBuf, test_dir: &Path) -> Result<FramePair, MetricsError> {
@@ -262,11 +397,15 @@ fn read_pair(number: u32, ref_path: PathBuf, test_dir: &Path) -> Result<FramePai
     let reference = read_exr(&ref_path)?;
     let test = read_exr(&test_path)?;
     check_size(&test_path, &test, &ref_path, &reference)?;
+    let dir = ref_path.parent().unwrap_or(Path::new("."));
+    let lights = read_light_mask(&light_mask_path(dir, number), size(&reference))?;
+    let surfaces = lights.map(|m| m.into_iter().map(|light| !light).collect());
     Ok(FramePair {
         number,
         ref_path,
         test,
         reference,
+        surfaces,
     })
 }
 
@@ -280,6 +419,9 @@ struct Totals {
     ref_values: usize,
     flicker_sum: f64,
     flicker_values: usize,
+    /// Sums over the pixels that see no light; `None` once a frame has no
+    /// light mask.
+    surfaces: Option<MaskedSums>,
     per_frame: Vec<FrameReport>,
 }
 
@@ -290,6 +432,15 @@ impl Totals {
             block_mse(&f.test, &f.reference, BLOCK),
         );
         let mean = f.reference.mean();
+        let first = self.per_frame.is_empty();
+        self.surfaces = match (&f.surfaces, self.surfaces) {
+            (Some(keep), Some(mut sums)) => {
+                sums.add(MaskedSums::of(&f.test, &f.reference, keep));
+                Some(sums)
+            }
+            (Some(keep), None) if first => Some(MaskedSums::of(&f.test, &f.reference, keep)),
+            _ => None,
+        };
         self.mse += mse;
         self.block_mse += block_mse;
         self.ref_sum += mean * (3 * f.reference.pixels.len()) as f64;
@@ -317,6 +468,18 @@ impl Totals {
         let (s, n) = flicker_sum(&prev.test, &next.test, &prev.reference, &next.reference);
         self.flicker_sum += s;
         self.flicker_values += n;
+        if let (Some(sums), Some(a), Some(b)) = (&mut self.surfaces, &prev.surfaces, &next.surfaces)
+        {
+            let (s, n) = flicker_sum_over(
+                &prev.test,
+                &next.test,
+                &prev.reference,
+                &next.reference,
+                |k| a[k] && b[k],
+            );
+            sums.flicker_sq += s;
+            sums.flicker_values += n;
+        }
         Ok(())
     }
 
@@ -332,7 +495,9 @@ impl Totals {
             rmse,
             rel_rmse: rmse / mean,
             block_bias: block / mean,
+            rel_rmse_surfaces: self.surfaces.and_then(|s| s.rel_rmse()),
             flicker,
+            flicker_surfaces: self.surfaces.and_then(|s| s.flicker()),
             per_frame: self.per_frame,
         }
     }
@@ -388,6 +553,15 @@ impl CompareReport {
             "{:>6} {:>12.6} {:>12.6} {:>12.6} {:>12}  ({} frames)",
             "all", self.rmse, self.rel_rmse, self.block_bias, flicker, self.frames
         );
+        if let Some(s) = self.rel_rmse_surfaces {
+            let flicker = self
+                .flicker_surfaces
+                .map_or("-".to_string(), |v| format!("{v:.6}"));
+            let _ = writeln!(
+                out,
+                "without the pixels at directly seen lights: rel_rmse {s:.6}, flicker {flicker}"
+            );
+        }
         out
     }
 }
@@ -551,7 +725,9 @@ mod tests {
             rmse: 0.5,
             rel_rmse: 0.25,
             block_bias: 0.125,
+            rel_rmse_surfaces: None,
             flicker: None,
+            flicker_surfaces: None,
             per_frame: vec![
                 FrameReport {
                     frame: 3,

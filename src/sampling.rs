@@ -96,25 +96,86 @@ impl Rng {
     }
 }
 
+/// Largest f32 below 1: stratified values are clamped to it so that
+/// `(k + u)/n` never rounds up to 1.
+const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
 /// Stratifies a 2D sample over the `spp` samples of a pixel: sample `i` of
 /// the first `n²` (`n = ⌊√spp⌋`) falls in its own cell of an `n × n` grid,
 /// at `u` within the cell; later samples are plain `u`. Averaged over the
 /// pixel's samples the estimate stays unbiased, and its variance falls
-/// faster than with independent samples. `transposed` walks the grid in
-/// the other order, so that two stratified dimensions of one sample (pixel
-/// position, light position) are not paired cell for cell.
-pub fn stratified_2d(sample: u32, spp: u32, u: Vec2, transposed: bool) -> Vec2 {
+/// faster than with independent samples.
+///
+/// With `scramble`, sample `i` takes cell `permute(i, n², scramble)`
+/// instead of cell `i`. Two stratified dimensions of one sample (pixel
+/// position, light position) must be paired by a random permutation, drawn
+/// anew per pixel, and not by a fixed one: only then is every pairing of
+/// their cells equally likely, which keeps the pixel's estimate unbiased
+/// where the two interact (a shadow edge inside the pixel). This is the
+/// "padding" of independently stratified dimensions (PBRT 3rd ed., §7.3).
+pub fn stratified_2d(sample: u32, spp: u32, u: Vec2, scramble: Option<u32>) -> Vec2 {
     let n = (spp as f32).sqrt() as u32;
     if sample >= n * n {
         return u;
     }
-    let (a, b) = ((sample % n) as f32, (sample / n) as f32);
-    let cell = if transposed {
-        Vec2::new(b, a)
-    } else {
-        Vec2::new(a, b)
-    };
-    (cell + u) / n as f32
+    let cell = scramble.map_or(sample, |p| permute(sample, n * n, p));
+    let (a, b) = ((cell % n) as f32, (cell / n) as f32);
+    ((Vec2::new(a, b) + u) / n as f32).min(Vec2::splat(ONE_MINUS_EPSILON))
+}
+
+/// Stratifies a 1D sample over the `spp` samples of a pixel: sample `i`
+/// falls in stratum `permute(i, spp, scramble)` of `spp`, at `u` within it
+/// (see [`stratified_2d`] for why the strata are permuted per pixel).
+pub fn stratified_1d(sample: u32, spp: u32, u: f32, scramble: u32) -> f32 {
+    let spp = spp.max(1);
+    let stratum = permute(sample % spp, spp, scramble);
+    ((stratum as f32 + u) / spp as f32).min(ONE_MINUS_EPSILON)
+}
+
+/// Element `i` of a pseudo-random permutation of `0..len` chosen by `p`,
+/// in O(1) and without storing the permutation: Kensler, "Correlated
+/// Multi-Jittered Sampling" (Pixar Technical Memo 13-01, 2013), `permute`.
+/// A keyed bijection on the next power of two, cycle-walked until it lands
+/// below `len`.
+pub fn permute(mut i: u32, len: u32, p: u32) -> u32 {
+    debug_assert!(i < len, "permute: {i} is not below {len}");
+    let mut w = len.max(1) - 1;
+    w |= w >> 1;
+    w |= w >> 2;
+    w |= w >> 4;
+    w |= w >> 8;
+    w |= w >> 16;
+    loop {
+        i ^= p;
+        i = i.wrapping_mul(0xe170_893d);
+        i ^= p >> 16;
+        i ^= (i & w) >> 4;
+        i ^= p >> 8;
+        i = i.wrapping_mul(0x0929_eb3f);
+        i ^= p >> 23;
+        i ^= (i & w) >> 1;
+        i = i.wrapping_mul(1 | (p >> 27));
+        i = i.wrapping_mul(0x6935_fa69);
+        i ^= (i & w) >> 11;
+        i = i.wrapping_mul(0x74dc_b303);
+        i ^= (i & w) >> 2;
+        i = i.wrapping_mul(0x9e50_1cc3);
+        i ^= (i & w) >> 2;
+        i = i.wrapping_mul(0xc860_a3df);
+        i &= w;
+        i ^= i >> 5;
+        if i < len {
+            return (i.wrapping_add(p)) % len;
+        }
+    }
+}
+
+/// The random numbers of one light sample: which light (`pick`) and where
+/// on it (`u`), as [`crate::light::LightSampler::sample`] takes them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightChoice {
+    pub pick: f32,
+    pub u: Vec2,
 }
 
 /// An orthonormal basis around a unit normal (Duff et al. 2017, branchless).
@@ -188,6 +249,45 @@ pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn permute_is_a_permutation_that_depends_on_its_key() {
+        for len in [1, 2, 3, 7, 16, 33, 64, 100, 1024] {
+            let mut orders = Vec::new();
+            for p in [0u32, 1, 0xdead_beef, 0x1234_5678] {
+                let order: Vec<u32> = (0..len).map(|i| permute(i, len, p)).collect();
+                let mut sorted = order.clone();
+                sorted.sort_unstable();
+                assert_eq!(sorted, (0..len).collect::<Vec<_>>(), "len {len} key {p}");
+                orders.push(order);
+            }
+            if len >= 7 {
+                orders.dedup();
+                assert!(orders.len() > 1, "every key gave the same order of {len}");
+            }
+        }
+    }
+
+    #[test]
+    fn stratified_samples_fill_every_stratum_once() {
+        for spp in [1, 4, 16, 17, 64] {
+            let mut seen_1d = vec![0; spp as usize];
+            let n = (spp as f32).sqrt() as u32;
+            let mut seen_2d = vec![0; (n * n) as usize];
+            for s in 0..spp {
+                let x = stratified_1d(s, spp, 0.5, 0xabc);
+                seen_1d[(x * spp as f32) as usize] += 1;
+                assert!(stratified_1d(s, spp, ONE_MINUS_EPSILON, 0xabc) < 1.0);
+                let v = stratified_2d(s, spp, Vec2::splat(0.5), Some(0x51));
+                if s < n * n {
+                    let cell = (v.y * n as f32) as u32 * n + (v.x * n as f32) as u32;
+                    seen_2d[cell as usize] += 1;
+                }
+            }
+            assert!(seen_1d.iter().all(|&c| c == 1), "spp {spp}: {seen_1d:?}");
+            assert!(seen_2d.iter().all(|&c| c == 1), "spp {spp}: {seen_2d:?}");
+        }
+    }
 
     #[test]
     fn streams_repeat_and_differ() {

@@ -3,7 +3,7 @@
 
 use radcache::bench::{
     self, equal_error_table, interpolate_time_at_error, method_settings, to_csv, BenchOptions,
-    BenchRow, MethodError, MethodSweep, CSV_HEADER,
+    BenchRow, ErrorMeasure, MethodError, MethodSweep, CSV_HEADER,
 };
 use radcache::render::SceneSource;
 
@@ -18,8 +18,10 @@ fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
         records: 0,
         peak_mem_mb: Some(12.5),
         rel_rmse,
+        rel_rmse_surfaces: Some(rel_rmse / 2.0),
         block_bias: 0.01,
         flicker: None,
+        flicker_surfaces: None,
     }
 }
 
@@ -33,12 +35,12 @@ fn csv_has_header_and_one_line_per_run() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(
         lines[0],
-        "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,block_bias,flicker"
+        "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces"
     );
     assert_eq!(lines[0], CSV_HEADER);
     assert_eq!(lines.len(), 3, "{csv}");
     for l in &lines[1..] {
-        assert_eq!(l.split(',').count(), 11, "{l}");
+        assert_eq!(l.split(',').count(), 13, "{l}");
     }
     assert!(lines[1].starts_with("s,path,spp=1,2,"), "{}", lines[1]);
     // A missing flicker is an empty last field.
@@ -87,12 +89,26 @@ fn equal_error_ratio_for_non_path_runs() {
         row("other", "a=0.2", 2.0, 0.2),
         row("other", "a=0.01", 2.0, 0.01),
     ];
-    let table = equal_error_table(&rows);
+    let table = equal_error_table(&rows, ErrorMeasure::AllPixels);
     assert_eq!(table.len(), 2);
     assert!((table[0].path_seconds.unwrap() - 16.0).abs() < 1e-9);
     assert!((table[0].speedup().unwrap() - 8.0).abs() < 1e-9);
     assert_eq!(table[1].path_seconds, None);
     assert!(bench::equal_error_text(&table).contains("does not bracket"));
+
+    // The surface error (half the all-pixel one in `row`) follows the same
+    // path curve, halved: "other" at 0.1 is path's surface error at t = 16.
+    let surfaces = equal_error_table(&rows, ErrorMeasure::Surfaces);
+    assert!((surfaces[0].error - 0.1).abs() < 1e-12);
+    assert!((surfaces[0].speedup().unwrap() - 8.0).abs() < 1e-9);
+    assert!(bench::equal_error_text(&surfaces).contains("rel_rmse_surfaces"));
+    // A run without light masks has no surface row.
+    let mut unmasked = rows.clone();
+    unmasked[2].rel_rmse_surfaces = None;
+    assert_eq!(
+        equal_error_table(&unmasked, ErrorMeasure::Surfaces).len(),
+        1
+    );
 }
 
 #[test]
@@ -136,7 +152,9 @@ fn tiny_end_to_end_run() {
     assert_eq!(lines.len(), 3, "{csv}");
     for chart in [
         "cube-in-box_error_vs_time.svg",
+        "cube-in-box_surface_error_vs_time.svg",
         "cube-in-box_flicker_vs_time.svg",
+        "cube-in-box_surface_flicker_vs_time.svg",
     ] {
         let svg = std::fs::read_to_string(dir.path().join(chart)).unwrap();
         assert!(svg.contains("<svg") && svg.contains("path"), "{chart}");
@@ -153,6 +171,27 @@ fn tiny_end_to_end_run() {
         one.rel_rmse
     );
     assert!(four.rays > one.rays && one.rays > 0);
+    // The reference folder has a light mask per frame: the ceiling light of
+    // cube-in-box is in view, so some pixels are left out, most are kept,
+    // and the surface error exists and falls with the sample count.
+    let mask = radcache::metrics::read_light_mask(
+        &radcache::metrics::light_mask_path(&dir.path().join("reference/cube-in-box"), 0),
+        (16, 16),
+    )
+    .unwrap()
+    .expect("a light mask beside the reference frame");
+    let lit = mask.iter().filter(|&&m| m).count();
+    assert!(
+        lit > 0 && lit < mask.len() / 2,
+        "{lit} of {} pixels",
+        mask.len()
+    );
+    let (s1, s4) = (
+        one.rel_rmse_surfaces.unwrap(),
+        four.rel_rmse_surfaces.unwrap(),
+    );
+    assert!(s4 < s1, "surface error 4 spp {s4} vs 1 spp {s1}");
+    assert!(one.flicker_surfaces.is_some_and(|f| f > 0.0));
     assert!(one.flicker.is_some() && one.seconds > 0.0);
     assert!(dir
         .path()
@@ -182,4 +221,34 @@ fn tiny_end_to_end_run() {
     bench::run(&other).unwrap();
     let info = std::fs::read_to_string(&json).unwrap();
     assert!(info.contains("\"spp\": 32"), "{info}");
+}
+
+#[test]
+fn same_pattern_runs_flicker_less() {
+    // With the same random sequence in every frame a run's pixel noise is
+    // correlated from frame to frame, so its frame differences (hence
+    // flicker) shrink; its error against the reference does not vanish.
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        scenes: vec![SceneSource::Builtin("cube-in-box".into())],
+        methods: vec![MethodSweep::parse("path:spp=2").unwrap()],
+        frames: 0..3,
+        width: 16,
+        height: 16,
+        reference_spp: 32,
+        out: dir.path().to_path_buf(),
+        quiet: true,
+        ..BenchOptions::default()
+    };
+    let fresh = bench::run(&opts).unwrap().rows[0].clone();
+    let same = bench::run(&BenchOptions {
+        same_pattern: true,
+        ..opts
+    })
+    .unwrap()
+    .rows[0]
+        .clone();
+    let (f, s) = (fresh.flicker.unwrap(), same.flicker.unwrap());
+    assert!(s < 0.8 * f, "same pattern {s} vs fresh {f}");
+    assert!(same.rel_rmse > 0.0);
 }

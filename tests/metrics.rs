@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 use radcache::film::{frame_path, write_exr, Film};
-use radcache::metrics::{compare_dirs, MetricsError};
+use radcache::metrics::{compare_dirs, light_mask_path, write_light_mask, MetricsError};
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -106,7 +106,9 @@ fn json_has_the_specified_keys() {
         "rmse",
         "rel_rmse",
         "block_bias",
+        "rel_rmse_surfaces",
         "flicker",
+        "flicker_surfaces",
         "per_frame",
     ];
     let mut got = keys.clone();
@@ -204,4 +206,49 @@ fn unreadable_test_frame_names_the_file() {
     fs::write(t.join("frame_0000.exr"), "garbage").unwrap();
     let err = compare_dirs(&r, &t).unwrap_err();
     assert!(err.to_string().contains("test/frame_0000.exr"), "{err}");
+}
+
+#[test]
+fn light_masks_leave_their_pixels_out_of_the_surface_error() {
+    // 4×4 frames, reference 1 everywhere but 30 in the first pixel (a light).
+    // The test is off by 10 at the light and by 0.1 elsewhere: the all-pixel
+    // RMSE is dominated by the light's pixel, the surface error is 0.1 / 1.
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let mut reference = constant(4, 4, 1.0);
+    reference.pixels[0] = Vec3::splat(30.0);
+    let mut test = offset(&reference, 0.1);
+    test.pixels[0] = Vec3::splat(40.0);
+    write_seq(&r, &[(0, reference.clone()), (1, reference.clone())]);
+    write_seq(&t, &[(0, test.clone()), (1, test.clone())]);
+    let no_masks = compare_dirs(&r, &t).unwrap();
+    assert_eq!(no_masks.rel_rmse_surfaces, None);
+
+    let mut lights = vec![false; 16];
+    lights[0] = true;
+    for frame in [0, 1] {
+        write_light_mask(&light_mask_path(&r, frame), 4, 4, &lights).unwrap();
+    }
+    let report = compare_dirs(&r, &t).unwrap();
+    let surfaces = report.rel_rmse_surfaces.unwrap();
+    assert!((surfaces - 0.1).abs() < 1e-6, "{surfaces}");
+    assert!(report.rel_rmse > 5.0 * surfaces, "{}", report.rel_rmse);
+    assert_eq!(report.rel_rmse, no_masks.rel_rmse);
+    // Same error in both frames: no flicker anywhere.
+    assert!(report.flicker_surfaces.unwrap() < 1e-7);
+    assert!(report.to_text().contains("directly seen lights"));
+
+    // One frame without its mask: no surface figure rather than a partial one.
+    fs::remove_file(light_mask_path(&r, 1)).unwrap();
+    let partial = compare_dirs(&r, &t).unwrap();
+    assert_eq!(
+        (partial.rel_rmse_surfaces, partial.flicker_surfaces),
+        (None, None)
+    );
+
+    // A mask of the wrong size is an error naming the file.
+    write_light_mask(&light_mask_path(&r, 1), 2, 8, &[false; 16]).unwrap();
+    let e = compare_dirs(&r, &t).unwrap_err();
+    assert!(matches!(e, MetricsError::Mask { .. }), "{e}");
+    assert!(e.to_string().contains("seen_lights_0001.png"), "{e}");
 }

@@ -109,11 +109,6 @@ impl IrradianceCache {
         })
     }
 
-    /// Adds a record, with neighbour clamping (Křivánek et al. 2006,
-    /// "Making radiance and irradiance caching practical", §4): radii of
-    /// neighbouring records may not differ by more than their distance,
-    /// `R_k ≤ R_j + ‖p_k − p_j‖` both ways, which keeps a small record from
-    /// sitting inside a huge one that ignores the geometry it saw.
     /// Adds a record without neighbour clamping: for records that were
     /// clamped when first inserted and come back in a later frame (`trc`).
     pub fn insert_as_is(&mut self, record: IrradianceRecord) {
@@ -123,6 +118,11 @@ impl IrradianceCache {
         self.records.push(record);
     }
 
+    /// Adds a record, with neighbour clamping (Křivánek et al. 2006,
+    /// "Making radiance and irradiance caching practical", §4): radii of
+    /// neighbouring records may not differ by more than their distance,
+    /// `R_k ≤ R_j + ‖p_k − p_j‖` both ways, which keeps a small record from
+    /// sitting inside a huge one that ignores the geometry it saw.
     pub fn insert(&mut self, mut record: IrradianceRecord) {
         let mut neighbours = Vec::new();
         self.index.query(record.position, |i| neighbours.push(i));

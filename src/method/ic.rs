@@ -29,7 +29,7 @@ use crate::integrator::{
 };
 use crate::light::emitting_cosine;
 use crate::material::{luminance, Bsdf, LUMINANCE};
-use crate::sampling::{cosine_hemisphere, power_heuristic, Rng, SampleKey};
+use crate::sampling::{cosine_hemisphere, power_heuristic, LightChoice, Rng, SampleKey};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -567,7 +567,7 @@ fn render_tile(
         for sample in 0..spp {
             let (ray, mut rng) = camera_query(ctx, pixel, sample, spp);
             rays.push(ray);
-            light_samples.push(first_light_sample(&mut rng, sample, spp));
+            light_samples.push(first_light_sample(ctx, pixel, &mut rng, sample, spp));
             rngs.push(rng);
         }
     }
@@ -592,7 +592,7 @@ fn render_tile(
         if surface.bsdf.is_black() {
             continue;
         }
-        if let Some((shadow, contribution)) = direct_light(ctx, &surface, rng, light_samples[i]) {
+        if let Some((shadow, contribution)) = direct_light(ctx, &surface, light_samples[i]) {
             shadow_rays.push(shadow);
             shadow_targets.push((i, contribution));
         }
@@ -645,19 +645,18 @@ fn render_tile(
     stats
 }
 
-/// One light sample (position `u`, stratified over the pixel) for the whole BSDF: the diffuse lobe unweighted (its
-/// emission hits are never counted elsewhere: the cache excludes them), the
-/// glossy lobe MIS-weighted against [`glossy_query`]'s lobe sampling.
-fn direct_light(
-    ctx: &FrameContext,
-    s: &Surface,
-    rng: &mut Rng,
-    u: glam::Vec2,
-) -> Option<(Ray, Vec3)> {
-    let pick = rng.next_f32();
-    let ls = ctx
-        .lights
-        .sample(ctx.snapshot, &ctx.scene.materials, s.p, pick, u)?;
+/// One light sample (`choice`, stratified over the pixel) for the whole
+/// BSDF: the diffuse lobe unweighted (its emission hits are never counted
+/// elsewhere: the cache excludes them), the glossy lobe MIS-weighted against
+/// [`glossy_query`]'s lobe sampling.
+fn direct_light(ctx: &FrameContext, s: &Surface, choice: LightChoice) -> Option<(Ray, Vec3)> {
+    let ls = ctx.lights.sample(
+        ctx.snapshot,
+        &ctx.scene.materials,
+        s.p,
+        choice.pick,
+        choice.u,
+    )?;
     let cos = s.bsdf.normal().dot(ls.wi);
     if cos <= 0.0 || s.wo.dot(s.bsdf.normal()) <= 0.0 {
         return None;

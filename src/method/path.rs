@@ -7,7 +7,7 @@ use super::{FrameContext, Method};
 use crate::backend::Ray;
 use crate::film::Film;
 use crate::integrator::{trace_radiance, FirstHitEmission, PathLength, RadianceQuery};
-use crate::sampling::{stratified_2d, Rng};
+use crate::sampling::{stratified_1d, stratified_2d, LightChoice, Rng};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -46,7 +46,7 @@ impl PathTracer {
 /// with independent jitter.
 pub fn camera_query(ctx: &FrameContext, pixel: u32, sample: u32, spp: u32) -> (Ray, Rng) {
     let mut rng = Rng::new(ctx.pixel_key(pixel, sample));
-    let jitter = stratified_2d(sample, spp, rng.next_2d(), false);
+    let jitter = stratified_2d(sample, spp, rng.next_2d(), None);
     let (x, y) = (pixel % ctx.width, pixel / ctx.width);
     let sx = (x as f32 + jitter.x) / ctx.width as f32;
     let sy = (y as f32 + jitter.y) / ctx.height as f32;
@@ -55,12 +55,34 @@ pub fn camera_query(ctx: &FrameContext, pixel: u32, sample: u32, spp: u32) -> (R
     (Ray::new(camera.position, dir, 0.0, f32::INFINITY), rng)
 }
 
-/// The light-sample position used at the first surface a pixel sample
-/// hits, stratified over the pixel's samples like the pixel position (in
-/// transposed order): soft shadows and area-light shading are the largest
-/// noise left once edges are stratified.
-pub fn first_light_sample(rng: &mut Rng, sample: u32, spp: u32) -> glam::Vec2 {
-    stratified_2d(sample, spp, rng.next_2d(), true)
+/// Sample numbers reserved for the per-pixel scrambles of the stratified
+/// light choice (no pixel has this many samples).
+const LIGHT_PICK_SCRAMBLE: u32 = u32::MAX;
+const LIGHT_POSITION_SCRAMBLE: u32 = u32::MAX - 1;
+
+/// The light sample used at the first surface a pixel sample hits: which
+/// light and where on it, both stratified over the pixel's samples like the
+/// pixel position, with strata paired by per-pixel random permutations
+/// ([`stratified_2d`]). Soft shadows, area-light shading and the choice
+/// among several lights are the largest noise left once edges are
+/// stratified.
+pub fn first_light_sample(
+    ctx: &FrameContext,
+    pixel: u32,
+    rng: &mut Rng,
+    sample: u32,
+    spp: u32,
+) -> LightChoice {
+    let scramble = |reserved| Rng::new(ctx.pixel_key(pixel, reserved)).next_u32();
+    LightChoice {
+        pick: stratified_1d(sample, spp, rng.next_f32(), scramble(LIGHT_PICK_SCRAMBLE)),
+        u: stratified_2d(
+            sample,
+            spp,
+            rng.next_2d(),
+            Some(scramble(LIGHT_POSITION_SCRAMBLE)),
+        ),
+    }
 }
 
 impl Method for PathTracer {
@@ -84,7 +106,9 @@ impl Method for PathTracer {
                         let (ray, mut rng) = camera_query(ctx, pixel, sample, spp);
                         RadianceQuery {
                             ray,
-                            first_light: Some(first_light_sample(&mut rng, sample, spp)),
+                            first_light: Some(first_light_sample(
+                                ctx, pixel, &mut rng, sample, spp,
+                            )),
                             rng,
                             weight: Vec3::ONE,
                             first_hit: FirstHitEmission::Include,
