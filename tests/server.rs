@@ -18,11 +18,16 @@ impl Drop for Server {
 }
 
 fn start(db: &std::path::Path, scenes: &std::path::Path) -> Server {
+    start_with(db, scenes, &[])
+}
+
+fn start_with(db: &std::path::Path, scenes: &std::path::Path, extra: &[&str]) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
         .args(["serve", "--addr", "127.0.0.1:0", "--backend", "cpu", "--db"])
         .arg(db)
         .arg("--scenes")
         .arg(scenes)
+        .args(extra)
         .env_remove("RADCACHE_TOKEN")
         .stdout(Stdio::piped())
         .spawn()
@@ -670,5 +675,66 @@ fn openapi_documents_every_route() {
     for r in text.split("\"$ref\": \"#/").skip(1) {
         let pointer = format!("/{}", r.split('"').next().unwrap());
         assert!(doc.pointer(&pointer).is_some(), "unresolved $ref {pointer}");
+    }
+}
+
+#[test]
+fn bench_charts_come_from_the_bench_directory_when_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    // Embedded charts by default.
+    let server = start(&dir.path().join("db"), &scenes);
+    let (status, body) = http(&server, "GET", "/api/charts", "");
+    assert_eq!(status, 200);
+    let charts = json(&body);
+    assert!(charts
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["name"] == "cube-in-box_error_vs_time.svg"));
+    let (status, svg) = http(
+        &server,
+        "GET",
+        "/web/charts/cube-in-box_error_vs_time.svg",
+        "",
+    );
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&svg).contains("<svg"));
+    drop(server);
+
+    let bench = dir.path().join("bench-out");
+    std::fs::create_dir(&bench).unwrap();
+    std::fs::write(bench.join("s_error_vs_time.svg"), "<svg id='mine'></svg>").unwrap();
+    std::fs::write(bench.join("bench.csv"), "scene,method\n").unwrap();
+    std::fs::write(bench.join("notes.txt"), "no").unwrap();
+    std::fs::write(dir.path().join("secret.svg"), "<svg id='secret'></svg>").unwrap();
+    let server = start_with(
+        &dir.path().join("db"),
+        &scenes,
+        &["--bench", bench.to_str().unwrap()],
+    );
+    let (status, body) = http(&server, "GET", "/api/charts", "");
+    assert_eq!(status, 200);
+    let names: Vec<String> = json(&body)
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(names, ["bench.csv", "s_error_vs_time.svg"]);
+    let (status, svg) = http(&server, "GET", "/web/charts/s_error_vs_time.svg", "");
+    assert_eq!(status, 200);
+    assert_eq!(svg, b"<svg id='mine'></svg>");
+    for bad in [
+        "notes.txt",
+        "..%2Fsecret.svg",
+        "%2E%2E%2Fsecret.svg",
+        "missing.svg",
+        ".hidden.svg",
+    ] {
+        let (status, body) = http(&server, "GET", &format!("/web/charts/{bad}"), "");
+        assert_eq!(status, 404, "{bad}: {}", String::from_utf8_lossy(&body));
+        assert!(!String::from_utf8_lossy(&body).contains("id='secret'"));
     }
 }

@@ -48,6 +48,9 @@ pub struct ServeOptions {
     pub backend: BackendChoice,
     /// Where each job's frame files are written (`DIR/<job id>/`).
     pub out: PathBuf,
+    /// A `radcache bench --out` directory whose charts the dashboard shows
+    /// instead of the ones embedded from `web/charts`.
+    pub bench: Option<PathBuf>,
 }
 
 /// A job's lifecycle state.

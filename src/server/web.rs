@@ -1,15 +1,16 @@
 //! The dashboard's files (`web/`), embedded in the binary so that
 //! `radcache serve` needs nothing beside it: `/` (index.html), `/web/{file}`
 //! (script, style sheet), `/web/charts/{file}` and `/api/charts` (the charts
-//! of the latest `radcache bench` run kept in `web/charts/`) and
-//! `/api/openapi.json`.
+//! of the latest `radcache bench` run kept in `web/charts/`, or those of a
+//! bench directory given with `--bench`) and `/api/openapi.json`.
 
-use super::ApiError;
-use axum::extract::Path;
+use super::{ApiError, AppState};
+use axum::extract::{Path, State};
 use axum::http::header;
-use axum::response::IntoResponse;
+use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde_json::{json, Value};
+use std::sync::Arc;
 
 /// The OpenAPI 3 document of every route (`web/openapi.json`).
 pub const OPENAPI: &str = include_str!("../../web/openapi.json");
@@ -74,19 +75,71 @@ pub async fn file(Path(file): Path<String>) -> Result<impl IntoResponse, ApiErro
     find(&FILES, &file)
 }
 
-pub async fn chart(Path(file): Path<String>) -> Result<impl IntoResponse, ApiError> {
-    find(&CHARTS, &file)
+/// A chart file name from a bench directory: a plain `*.svg` or `*.csv`
+/// name, nothing that could leave the directory.
+fn chart_mime(name: &str) -> Option<&'static str> {
+    if name.starts_with('.') || name.contains(['/', '\\']) {
+        return None;
+    }
+    if name.ends_with(".svg") {
+        Some("image/svg+xml")
+    } else if name.ends_with(".csv") {
+        Some("text/csv; charset=utf-8")
+    } else {
+        None
+    }
 }
 
-pub async fn charts() -> Json<Value> {
-    Json(Value::Array(
-        CHARTS
+pub async fn chart(
+    State(state): State<Arc<AppState>>,
+    Path(file): Path<String>,
+) -> Result<Response, ApiError> {
+    let Some(dir) = &state.options.bench else {
+        return Ok(find(&CHARTS, &file)?.into_response());
+    };
+    let missing = || ApiError::not_found(format!("no chart {file:?}"));
+    let mime = chart_mime(&file).ok_or_else(missing)?;
+    let path = dir.join(&file);
+    let body = tokio::task::spawn_blocking(move || std::fs::read(path))
+        .await
+        .map_err(ApiError::internal)?
+        .map_err(|_| missing())?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, mime),
+            (header::CACHE_CONTROL, "no-cache"),
+        ],
+        body,
+    )
+        .into_response())
+}
+
+/// The charts the dashboard shows: the bench directory's (`--bench`),
+/// sorted by name, or the embedded ones.
+pub async fn charts(State(state): State<Arc<AppState>>) -> Result<Json<Value>, ApiError> {
+    let entry = |name: &str, mime: &str| json!({ "name": name, "type": mime, "url": format!("/web/charts/{name}") });
+    let Some(dir) = &state.options.bench else {
+        return Ok(Json(Value::Array(
+            CHARTS
+                .iter()
+                .map(|(name, mime, _)| entry(name, mime))
+                .collect(),
+        )));
+    };
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .map_err(|e| ApiError::internal(format!("bench directory {}: {e}", dir.display())))?
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
+        .filter_map(|e| e.file_name().into_string().ok())
+        .filter(|n| chart_mime(n).is_some())
+        .collect();
+    names.sort();
+    Ok(Json(Value::Array(
+        names
             .iter()
-            .map(|(name, mime, _)| {
-                json!({ "name": name, "type": mime, "url": format!("/web/charts/{name}") })
-            })
+            .map(|n| entry(n, chart_mime(n).expect("filtered")))
             .collect(),
-    ))
+    )))
 }
 
 pub async fn openapi() -> impl IntoResponse {
