@@ -23,10 +23,11 @@ impl Drop for Server {
     }
 }
 
-fn start(db: &Path) -> Server {
+fn start(db: &Path, extra: &[&str]) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
         .args(["serve", "--addr", "127.0.0.1:0", "--backend", "cpu", "--db"])
         .arg(db)
+        .args(extra)
         .env_remove("RADCACHE_TOKEN")
         .stdout(Stdio::piped())
         .spawn()
@@ -109,13 +110,51 @@ fn console_lines(stderr: &str) -> Vec<&str> {
 
 #[test]
 fn dashboard_shows_frame_charts_and_overlay_without_console_errors() {
+    check_dashboard(None, true);
+}
+
+/// With --token, the page opened as /?token=… passes it on to every request.
+#[test]
+fn dashboard_works_behind_a_token() {
+    check_dashboard(Some("tok/en +1"), false);
+}
+
+/// Renders a tiny job and checks the dashboard for it in Chromium; keeps a
+/// screenshot when `screenshot`.
+fn check_dashboard(token: Option<&str>, screenshot: bool) {
     let chromium_path = chromium();
     let dir = tempfile::tempdir().unwrap();
-    let server = start(&dir.path().join("db"));
+    let extra: Vec<&str> = token.map(|t| vec!["--token", t]).unwrap_or_default();
+    let server = start(&dir.path().join("db"), &extra);
+    // `?token=…` on every request (percent-encoded).
+    let q = token
+        .map(|t| {
+            let enc: String = t
+                .bytes()
+                .map(|b| {
+                    if b.is_ascii_alphanumeric() {
+                        (b as char).to_string()
+                    } else {
+                        format!("%{b:02X}")
+                    }
+                })
+                .collect();
+            format!("token={enc}")
+        })
+        .unwrap_or_default();
+    let with_q = |path: &str| {
+        if q.is_empty() {
+            path.to_string()
+        } else if path.contains('?') {
+            format!("{path}&{q}")
+        } else {
+            format!("{path}?{q}")
+        }
+    };
     let (status, body) = http(
         &server.addr,
         "POST",
-        "/api/jobs",
+        &with_q("/api/jobs"),
         r#"{"scene":"builtin:cube-in-box","method":"ic","frames":"0..3","size":"16x16","spp":1}"#,
     );
     assert_eq!(status, 201, "{body}");
@@ -125,7 +164,7 @@ fn dashboard_shows_frame_charts_and_overlay_without_console_errors() {
         .to_string();
     let start = Instant::now();
     loop {
-        let (_, job) = http(&server.addr, "GET", &format!("/api/jobs/{id}"), "");
+        let (_, job) = http(&server.addr, "GET", &with_q(&format!("/api/jobs/{id}")), "");
         if job.contains("\"state\":\"done\"") {
             break;
         }
@@ -133,7 +172,7 @@ fn dashboard_shows_frame_charts_and_overlay_without_console_errors() {
         assert!(start.elapsed() < Duration::from_secs(120), "{job}");
         std::thread::sleep(Duration::from_millis(50));
     }
-    let url = format!("http://{}/?job={id}", server.addr);
+    let url = format!("http://{}{}", server.addr, with_q(&format!("/?job={id}")));
 
     let (dom, stderr) = run_chromium(&url, "--dump-dom", &dir.path().join("profile1"));
     let console = console_lines(&stderr);
@@ -150,8 +189,9 @@ fn dashboard_shows_frame_charts_and_overlay_without_console_errors() {
     );
     assert!(!has("data-errors="), "the page reported errors:\n{dom}");
     // The live frame: the stream, shown at the job's size.
+    let stream_src = with_q(&format!("/api/jobs/{id}/stream")).replace('&', "&amp;");
     assert!(
-        has(&format!("src=\"/api/jobs/{id}/stream\"")),
+        has(&format!("src=\"{stream_src}\"")),
         "no live stream image:\n{dom}"
     );
     assert!(
@@ -168,7 +208,7 @@ fn dashboard_shows_frame_charts_and_overlay_without_console_errors() {
     let (_, records) = http(
         &server.addr,
         "GET",
-        &format!("/api/jobs/{id}/records?frame=2"),
+        &with_q(&format!("/api/jobs/{id}/records?frame=2")),
         "",
     );
     let records: serde_json::Value = serde_json::from_str(&records).unwrap();
@@ -186,10 +226,11 @@ fn dashboard_shows_frame_charts_and_overlay_without_console_errors() {
     assert!(in_view > 0, "no records to show: {records}");
     assert_eq!(dots, in_view, "overlay dots vs records in view");
     // The bench chart.
-    assert!(
-        has("src=\"/web/charts/cube-in-box_error_vs_time.svg\""),
-        "{dom}"
-    );
+    let chart_src = with_q("/web/charts/cube-in-box_error_vs_time.svg").replace('&', "&amp;");
+    assert!(has(&format!("src=\"{chart_src}\"")), "{dom}");
+    if !screenshot {
+        return;
+    }
 
     let shots = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("browser");
     std::fs::create_dir_all(&shots).unwrap();

@@ -738,3 +738,84 @@ fn bench_charts_come_from_the_bench_directory_when_given() {
         assert!(!String::from_utf8_lossy(&body).contains("id='secret'"));
     }
 }
+
+/// A GET with extra header lines; returns (status, body).
+fn get_with(addr: &str, path: &str, headers: &str) -> (u16, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n{headers}\r\n"
+    )
+    .unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&raw[..split]).to_string();
+    let status: u16 = head.split(' ').nth(1).unwrap().parse().unwrap();
+    let mut body = raw[split + 4..].to_vec();
+    if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
+        body = dechunk(&body);
+    }
+    (status, body)
+}
+
+#[test]
+fn a_token_is_required_on_every_request_and_the_dashboard_carries_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    // A non-loopback address without a token is refused.
+    let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["serve", "--addr", "0.0.0.0:0", "--db"])
+        .arg(dir.path().join("db0"))
+        .env_remove("RADCACHE_TOKEN")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--token"));
+
+    let token = "s3cret/+ &x";
+    let encoded = "s3cret%2F%2B%20%26x";
+    let server = start_with(&dir.path().join("db"), &scenes, &["--token", token]);
+    let addr = server.addr.clone();
+    let (status, body) = get_with(&addr, "/api/jobs", "");
+    assert_eq!(status, 401);
+    assert!(json(&body)["detail"].is_string());
+    assert_eq!(
+        get_with(&addr, "/api/jobs", "Authorization: Bearer wrong\r\n").0,
+        401
+    );
+    assert_eq!(get_with(&addr, "/api/jobs?token=wrong", "").0, 401);
+    assert_eq!(get_with(&addr, "/", "").0, 401);
+    assert_eq!(get_with(&addr, "/web/app.js", "").0, 401);
+    let (status, _) = get_with(
+        &addr,
+        "/api/jobs",
+        &format!("Authorization: Bearer {token}\r\n"),
+    );
+    assert_eq!(status, 200);
+    assert_eq!(
+        get_with(&addr, &format!("/api/jobs?token={encoded}"), "").0,
+        200
+    );
+    let (status, html) = get_with(&addr, &format!("/?token={encoded}"), "");
+    assert_eq!(status, 200);
+    let html = String::from_utf8(html).unwrap();
+    assert!(
+        html.contains(&format!("/web/app.js?token={encoded}")),
+        "{html}"
+    );
+    assert!(
+        html.contains(&format!("/web/app.css?token={encoded}")),
+        "{html}"
+    );
+    assert_eq!(
+        get_with(&addr, &format!("/web/app.js?token={encoded}"), "").0,
+        200
+    );
+    assert_eq!(get_with(&addr, "/api/jobs?token=%zz", "").0, 401);
+}

@@ -22,8 +22,16 @@ function reportError(msg) {
 window.addEventListener('error', (e) => reportError(e.message));
 window.addEventListener('unhandledrejection', (e) => reportError(e.reason && e.reason.message || e.reason));
 
+// A server started with --token needs it on every request: the page was
+// opened as /?token=…, and every URL it requests carries it on.
+const TOKEN = new URLSearchParams(location.search).get('token');
+function withToken(path) {
+  if (!TOKEN) return path;
+  return `${path}${path.includes('?') ? '&' : '?'}token=${encodeURIComponent(TOKEN)}`;
+}
+
 async function api(path, options) {
-  const r = await fetch(path, options);
+  const r = await fetch(withToken(path), options);
   const text = await r.text();
   let body = null;
   try { body = text ? JSON.parse(text) : null; } catch (_) { body = null; }
@@ -112,7 +120,7 @@ async function selectJob(id) {
   if (view.events) view.events.close();
   Object.assign(view, { id, job: null, stats: new Map(), events: null, follow: true, overlayFrame: null, overlayWanted: null });
   $('follow').checked = true;
-  history.replaceState(null, '', `/?job=${encodeURIComponent(id)}`);
+  history.replaceState(null, '', withToken(`/?job=${encodeURIComponent(id)}`));
   for (const tr of $('jobs').tBodies[0].rows) tr.classList.toggle('selected', tr.dataset.id === id);
   $('job-panel').hidden = false;
   $('overlay').replaceChildren();
@@ -141,7 +149,7 @@ function lastFrame() {
 }
 
 function follow(id) {
-  const es = new EventSource(`/api/jobs/${id}/events`);
+  const es = new EventSource(withToken(`/api/jobs/${id}/events`));
   view.events = es;
   es.addEventListener('progress', (e) => {
     if (view.id !== id) return;
@@ -175,14 +183,14 @@ function follow(id) {
 function showLive() {
   const img = $('live');
   if (view.follow) {
-    img.src = `/api/jobs/${view.id}/stream`;
+    img.src = withToken(`/api/jobs/${view.id}/stream`);
     const last = lastFrame();
     $('frame-label').textContent = last == null ? 'waiting for the first frame' : `frame ${last}`;
   }
 }
 
 function showFrame(frame) {
-  $('live').src = `/api/jobs/${view.id}/frames/${frame}.png`;
+  $('live').src = withToken(`/api/jobs/${view.id}/frames/${frame}.png`);
   $('frame-label').textContent = `frame ${frame}`;
   requestOverlay(frame);
 }
@@ -323,9 +331,9 @@ async function loadBench() {
   const box = $('bench');
   box.replaceChildren();
   for (const c of charts) {
-    if (c.type === 'image/svg+xml') box.append(el('img', { src: c.url, alt: c.name, title: c.name }));
+    if (c.type === 'image/svg+xml') box.append(el('img', { src: withToken(c.url), alt: c.name, title: c.name }));
     else {
-      const a = el('a', { href: c.url }, c.name);
+      const a = el('a', { href: withToken(c.url) }, c.name);
       box.append(a);
     }
   }

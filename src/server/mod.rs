@@ -313,8 +313,9 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
         let query = req
             .uri()
             .query()
-            .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")));
-        if bearer != Some(token.as_str()) && query != Some(token.as_str()) {
+            .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")))
+            .and_then(percent_decode);
+        if bearer != Some(token.as_str()) && query.as_deref() != Some(token.as_str()) {
             return ApiError::new(
                 axum::http::StatusCode::UNAUTHORIZED,
                 "unauthorized",
@@ -324,6 +325,37 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
         }
     }
     next.run(req).await
+}
+
+/// `s` with every byte outside RFC 3986's unreserved set as `%XX`.
+pub fn percent_encode(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for b in s.bytes() {
+        if b.is_ascii_alphanumeric() || b"-._~".contains(&b) {
+            out.push(b as char);
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
+}
+
+/// Decodes `%XX` escapes (and `+` as a space, as forms send it); `None`
+/// for a malformed escape or bytes that are not UTF-8.
+pub fn percent_decode(s: &str) -> Option<String> {
+    let mut out = Vec::with_capacity(s.len());
+    let mut bytes = s.bytes();
+    while let Some(b) = bytes.next() {
+        match b {
+            b'%' => {
+                let hex = [bytes.next()?, bytes.next()?];
+                out.push(u8::from_str_radix(std::str::from_utf8(&hex).ok()?, 16).ok()?);
+            }
+            b'+' => out.push(b' '),
+            b => out.push(b),
+        }
+    }
+    String::from_utf8(out).ok()
 }
 
 /// Runs the server until Ctrl-C or SIGTERM; the job being rendered stops

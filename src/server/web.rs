@@ -47,10 +47,22 @@ const CHARTS: [(&str, &str, &str); 3] = [
     ),
 ];
 
-pub async fn index() -> impl IntoResponse {
+/// The page. With a token, the request that got here carried it (the
+/// middleware checked it), and the page's own script and style sheet links
+/// carry it on (`/?token=…`; the script adds it to every API request).
+pub async fn index(State(state): State<Arc<AppState>>) -> impl IntoResponse {
+    let html = include_str!("../../web/index.html");
+    let html = match &state.options.token {
+        None => html.to_string(),
+        Some(token) => {
+            let q = format!("?token={}", super::percent_encode(token));
+            html.replace("/web/app.js", &format!("/web/app.js{q}"))
+                .replace("/web/app.css", &format!("/web/app.css{q}"))
+        }
+    };
     (
         [(header::CACHE_CONTROL, "no-cache")],
-        axum::response::Html(include_str!("../../web/index.html")),
+        axum::response::Html(html),
     )
 }
 
