@@ -272,7 +272,7 @@ function drawCharts() {
   const series = (name, colour, f) => ({ name, colour, points: rows.map((r) => [r.frame, f(r)]) });
   lineChart($('chart-records'), [
     series('alive', '#1565c0', (r) => r.records_alive),
-    series('created', '#2e7d32', (r) => r.records_created),
+    { ...series('created', '#2e7d32', (r) => r.records_created), dash: '5 3' },
     series('reused', '#f9a825', (r) => r.records_reused),
     series('dropped', '#c62828', (r) => r.records_dropped),
   ], (v) => String(Math.round(v)));
@@ -314,6 +314,8 @@ function lineChart(svg, series, fmt) {
     if (s.points.length === 0) continue;
     const d = s.points.map((p, i) => `${i ? 'L' : 'M'}${sx(p[0]).toFixed(1)},${sy(p[1]).toFixed(1)}`).join('');
     const path = svgEl('path', { class: 'series', d, stroke: s.colour, 'data-series': s.name });
+    // Dashed where it may lie on another series (ic creates every record alive).
+    if (s.dash) path.setAttribute('stroke-dasharray', s.dash);
     if (s.points.length === 1) path.setAttribute('stroke-linecap', 'round');
     if (s.points.length === 1) path.setAttribute('stroke-width', '5');
     svg.append(path);
