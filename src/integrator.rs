@@ -19,7 +19,7 @@ use crate::scene::Triangle;
 use glam::Vec3;
 
 /// Path-length control shared by every caller.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct PathLength {
     /// Hard bounce limit (`None`: unbounded, terminated by Russian roulette
     /// only, as the reference renders are).

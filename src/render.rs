@@ -13,7 +13,9 @@ use crate::method::path::{PathSettings, PathTracer};
 use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::scene::{Scene, SceneError};
-use crate::store::{self, schema::JobValue, FrameCommit, JobSpec, RecordCommit, Store};
+use crate::store::{
+    self, schema::JobValue, FrameCommit, JobSpec, RecordCommit, StateCommit, Store,
+};
 use anyhow::{bail, Context, Result};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -44,8 +46,9 @@ impl std::fmt::Display for SceneSource {
     }
 }
 
-/// Which rendering method, with its settings.
-#[derive(Clone, Debug, PartialEq)]
+/// Which rendering method, with its settings. Its serde JSON is a job's
+/// settings identity in the store.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub enum MethodSettings {
     Path(PathSettings),
     Ic(IcSettings),
@@ -150,6 +153,7 @@ pub struct Renderer {
     backend: Box<dyn RayBackend>,
     last_frame: Option<u32>,
     last_frame_rays: u64,
+    counts: MethodCalls,
     /// The frame after the last one to render (two-pass methods look
     /// ahead no further); `None`: the scene's last frame.
     frame_end: Option<u32>,
@@ -169,6 +173,7 @@ impl Renderer {
             backend,
             last_frame: None,
             last_frame_rays: 0,
+            counts: MethodCalls::default(),
             frame_end: None,
         }
     }
@@ -179,6 +184,35 @@ impl Renderer {
 
     pub fn method_name(&self) -> &'static str {
         self.method.name()
+    }
+
+    /// How often this renderer ran its method's passes (tests check that a
+    /// resume renders no finished frame again).
+    pub fn method_calls(&self) -> MethodCalls {
+        self.counts
+    }
+
+    /// Whether the method carries state from frame to frame
+    /// ([`Method::carries_state`]).
+    pub fn carries_state(&self) -> bool {
+        self.method.carries_state()
+    }
+
+    /// Whether the method's frames depend on the end of the rendered range
+    /// ([`Method::looks_ahead`]).
+    pub fn looks_ahead(&self) -> bool {
+        self.method.looks_ahead()
+    }
+
+    /// Continues the method from a stored state ([`Method::restore_state`]).
+    pub fn restore_state(
+        &mut self,
+        state: crate::method::MethodState,
+    ) -> Result<(), crate::method::StateError> {
+        let frame = state.frame;
+        self.method.restore_state(state)?;
+        self.last_frame = Some(frame);
+        Ok(())
     }
 
     /// Statistics of the last rendered frame, rays included.
@@ -227,8 +261,10 @@ impl Renderer {
             .max(frame + 1);
         while let Some(f) = method.next_frame_to_prepare(frame, end) {
             self.with_frame_context(f, |ctx| method.prepare_frame(ctx));
+            self.counts.prepared += 1;
         }
         let film = self.with_frame_context(frame, |ctx| method.render_frame(ctx));
+        self.counts.rendered += 1;
         self.method = method;
         film
     }
@@ -255,6 +291,15 @@ impl Renderer {
         };
         f(&ctx)
     }
+}
+
+/// Calls of a method's passes by one [`Renderer`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MethodCalls {
+    /// [`Method::render_frame`] calls.
+    pub rendered: u32,
+    /// [`Method::prepare_frame`] calls (first passes of two-pass methods).
+    pub prepared: u32,
 }
 
 /// Placeholder while the real method is borrowed out of the renderer.
@@ -368,28 +413,96 @@ pub fn render_to_dir(
     render_job_to_dir(renderer, frames, out_dir, quiet, None)
 }
 
-/// Methods that keep no state across frames: a resume skips their
-/// finished frames. Any other method replays them (see
-/// [`render_job_to_dir`]).
-const STATELESS_METHODS: [&str; 2] = ["path", "ic"];
-
 /// A store job a render checkpoints to (`render --db PATH --job NAME`).
 pub struct StoreJob<'a> {
     pub store: &'a Store,
     pub job: JobValue,
 }
 
-/// What a scene source is, as a job records it: its text and content hash
-/// (FNV-1a 64 of the file bytes, or of `builtin:NAME`).
+/// What a scene source is, as a job records it: its text and content hash.
+/// A built-in scene hashes as `builtin:NAME`; a file as the FNV-1a 64 of its
+/// bytes, followed by `+` and the hash of the external files it references
+/// (the `uri`s of glTF `buffers` and `images` other than `data:` URIs, in
+/// file order, each with its URI) when it references any, so that editing a
+/// `.bin` or a texture next to a `.gltf` changes the hash too.
 pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
     let hash = match source {
         SceneSource::Builtin(_) => store::content_hash(source.to_string().as_bytes()),
-        SceneSource::File(path) => store::content_hash(
-            &std::fs::read(path)
-                .with_context(|| format!("cannot read scene {}", path.display()))?,
-        ),
+        SceneSource::File(path) => {
+            let bytes = std::fs::read(path)
+                .with_context(|| format!("cannot read scene {}", path.display()))?;
+            let main = store::content_hash(&bytes);
+            let uris = external_uris(&bytes);
+            if uris.is_empty() {
+                main
+            } else {
+                let dir = path.parent().unwrap_or(Path::new("."));
+                let mut all = Vec::new();
+                for uri in uris {
+                    let file = dir.join(percent_decode(&uri));
+                    let content = std::fs::read(&file).with_context(|| {
+                        format!(
+                            "cannot read {} (referenced by scene {})",
+                            file.display(),
+                            path.display()
+                        )
+                    })?;
+                    all.extend_from_slice(uri.as_bytes());
+                    all.push(0);
+                    all.extend_from_slice(&(content.len() as u64).to_le_bytes());
+                    all.extend_from_slice(&content);
+                }
+                format!("{main}+{}", store::content_hash(&all))
+            }
+        }
     };
     Ok((source.to_string(), hash))
+}
+
+/// The external file URIs of a glTF (`.gltf` JSON, or the JSON chunk of a
+/// `.glb`): `buffers[].uri` then `images[].uri`, `data:` URIs left out.
+/// Anything unreadable gives none (the scene loader reports it).
+fn external_uris(bytes: &[u8]) -> Vec<String> {
+    let json: &[u8] = if bytes.starts_with(b"glTF") && bytes.len() >= 20 {
+        let len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
+        bytes.get(20..20 + len).unwrap_or(&[])
+    } else {
+        bytes
+    };
+    let Ok(doc) = serde_json::from_slice::<serde_json::Value>(json) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for list in ["buffers", "images"] {
+        for item in doc[list].as_array().into_iter().flatten() {
+            if let Some(uri) = item["uri"].as_str() {
+                if !uri.starts_with("data:") {
+                    out.push(uri.to_string());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// `%XX` escapes of a URI decoded (glTF URIs are RFC 3986).
+fn percent_decode(uri: &str) -> String {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' && i + 2 < b.len() {
+            let hex = std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or("");
+            if let Ok(v) = u8::from_str_radix(hex, 16) {
+                out.push(v);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// The job description of a render: compared with the stored job so that a
@@ -407,9 +520,8 @@ pub fn job_spec(
         scene,
         scene_hash,
         method: method.name().to_string(),
-        // `{:?}` of the settings is canonical: Rust prints floats in their
-        // shortest round-trip form.
-        settings: format!("{method:?}"),
+        settings: serde_json::to_string(method)
+            .context("cannot write the method settings as JSON")?,
         width: settings.width,
         height: settings.height,
         spp: method.spp(),
@@ -424,9 +536,19 @@ pub fn job_spec(
 /// [`render_to_dir`] with an optional store job: frames the job already
 /// finished are skipped (shown as done; their files are restored from the
 /// store if missing in `out_dir`), and after each new frame one atomic
-/// store batch writes the frame, its records with samples, its stats and
-/// the job's progress, then flushes. Only then is the frame acknowledged
-/// and written to `out_dir`.
+/// store batch writes the frame, its records with samples, its stats, the
+/// changes of a stateful method's carried state and the job's progress,
+/// then flushes. Only then is the frame acknowledged and written to
+/// `out_dir`.
+///
+/// A method that carries state ([`Method::carries_state`], `trc`) makes
+/// each frame depend on the frames before it in the range: a resume
+/// continues after the finished prefix of the range from the stored state
+/// of its last frame, when that state belongs to the same chain (started
+/// at the same first frame, and for methods that look ahead with the same
+/// range end). Otherwise the range starts over from its first frame (its
+/// frames are rendered and written again). A range whose frames are all
+/// done renders nothing.
 pub fn render_job_to_dir(
     renderer: &mut Renderer,
     frames: Range<u32>,
@@ -458,11 +580,20 @@ pub fn render_job_to_dir_with(
                 done.insert(frame);
             }
         }
-        if !STATELESS_METHODS.contains(&renderer.method_name()) {
-            // A stateful method's frame depends on the frames before it in
-            // this range: only the finished prefix of the range counts.
+        if renderer.carries_state() {
             let prefix = frames.clone().take_while(|f| done.contains(f)).count() as u32;
-            done.retain(|&f| f < frames.start + prefix);
+            if prefix as usize == frames.len() {
+                // Every frame done: nothing to render, no state needed.
+            } else if let Some(state) = resumable_state(j, &frames, prefix, renderer.looks_ahead())?
+            {
+                renderer
+                    .restore_state(state)
+                    .map_err(|e| j.store.state_error(j.job.id, e))?;
+                done.retain(|&f| f < frames.start + prefix);
+            } else {
+                j.store.clear_state(j.job.id)?;
+                done.clear();
+            }
         }
         for &frame in &done {
             restore_frame_files(j, frame, out_dir)?;
@@ -479,19 +610,9 @@ pub fn render_job_to_dir_with(
     let rays_before = renderer.backend().ray_counts().total();
     let mut frame_stats = Vec::with_capacity(frames.len() - done.len());
     renderer.set_frame_end(Some(frames.end));
-    // Methods whose cache carries over from frame to frame cannot start
-    // mid-range until the store holds their cache state: they replay the
-    // finished frames (rendered again in order, not written) so that the
-    // resumed frames equal an uninterrupted run.
-    let replay = !STATELESS_METHODS.contains(&renderer.method_name());
+    let chain_end = renderer.looks_ahead().then_some(frames.end);
     for frame in frames.clone() {
         if done.contains(&frame) {
-            // (`done` is the range's finished prefix here.)
-            if replay && done.len() < frames.len() {
-                progress.set_message(format!("frame {frame} (replay)"));
-                renderer.render_frame(frame);
-                let _ = renderer.take_frame_records();
-            }
             continue;
         }
         progress.set_message(format!("frame {frame}"));
@@ -501,24 +622,32 @@ pub fn render_job_to_dir_with(
         if let Some(j) = job.as_deref_mut() {
             let exr = film::encode_exr(&film)
                 .map_err(|e| anyhow::anyhow!("cannot encode frame {frame} as EXR: {e}"))?;
+            let kept = kept.unwrap_or_default();
             let records = kept
-                .map(|k| {
-                    k.records
-                        .iter()
-                        .zip(k.samples.iter().map(Some).chain(std::iter::repeat(None)))
-                        .map(|(r, s)| {
-                            let empty = Default::default();
-                            RecordCommit::from_record(
-                                r,
-                                s.unwrap_or(&empty),
-                                k.strata,
-                                frame,
-                                |o| dynamic.get(o as usize).copied().unwrap_or(false),
-                            )
-                        })
-                        .collect()
+                .records
+                .iter()
+                .enumerate()
+                .map(|(i, r)| {
+                    let empty = Default::default();
+                    let mut c = RecordCommit::from_record(
+                        r,
+                        kept.samples.get(i).unwrap_or(&empty),
+                        kept.strata,
+                        frame,
+                        |o| dynamic.get(o as usize).copied().unwrap_or(false),
+                    );
+                    if let Some(&last) = kept.last_frames.get(i) {
+                        c.record.last_frame = last;
+                    }
+                    c
                 })
-                .unwrap_or_default();
+                .collect();
+            if renderer.carries_state() && kept.state.is_none() {
+                bail!(
+                    "method {} carries state but reported no state changes for frame {frame}",
+                    renderer.method_name()
+                );
+            }
             let commit = FrameCommit {
                 frame,
                 width: film.width,
@@ -526,6 +655,11 @@ pub fn render_job_to_dir_with(
                 exr: &exr,
                 records,
                 stats: &stats,
+                state: kept.state.as_ref().map(|changes| StateCommit {
+                    chain_start: frames.start,
+                    chain_end,
+                    changes,
+                }),
             };
             j.store.commit_frame(&mut j.job, commit)?;
         }
@@ -545,6 +679,30 @@ pub fn render_job_to_dir_with(
         rays: renderer.backend().ray_counts().total() - rays_before,
         out_dir: out_dir.to_path_buf(),
     })
+}
+
+/// The stored state to continue a stateful method after the finished
+/// `prefix` of `frames`, if the job holds the state of exactly that frame of
+/// the same chain.
+fn resumable_state(
+    job: &StoreJob,
+    frames: &Range<u32>,
+    prefix: u32,
+    looks_ahead: bool,
+) -> Result<Option<crate::method::MethodState>> {
+    if prefix == 0 {
+        return Ok(None);
+    }
+    let Some(head) = job.store.state_head(job.job.id)? else {
+        return Ok(None);
+    };
+    let same_chain = head.chain_start == frames.start
+        && head.chain_end == looks_ahead.then_some(frames.end)
+        && head.frame == frames.start + prefix - 1;
+    if !same_chain {
+        return Ok(None);
+    }
+    Ok(job.store.load_state(job.job.id)?)
 }
 
 /// Writes a finished frame's files from the store if `out_dir` lacks its

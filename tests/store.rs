@@ -7,10 +7,13 @@ use radcache::cache::IrradianceRecord;
 use radcache::film;
 use radcache::method::ic::IcSettings;
 use radcache::method::path::PathSettings;
+use radcache::method::trc::{TemporalGradients, TrcSettings};
 use radcache::method::FrameStats;
 use radcache::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob};
 use radcache::store::migrate::{self, Migration};
-use radcache::store::{keys, FrameCommit, JobSpec, PackedSample, RecordCommit, Store, StoreError};
+use radcache::store::{
+    keys, v1, FrameCommit, JobSpec, PackedSample, RecordCommit, Store, StoreError,
+};
 use std::path::Path;
 
 fn spec(name: &str) -> JobSpec {
@@ -96,6 +99,7 @@ fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
                     exr: &exr,
                     records,
                     stats: &stats,
+                    state: None,
                 },
             )
             .unwrap();
@@ -227,49 +231,62 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
+/// A synthetic step 2 → 3: checks that it runs after the real 1 → 2
+/// (the stored version is 2 and the jobs are in the schema-2 layout).
 fn add_marker(db: &sled::Db) -> Result<(), String> {
-    db.open_tree("meta")
-        .and_then(|t| t.insert(b"synthetic_step", &b"done"[..]))
+    let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
+    let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
+    if version.as_ref() != 2u32.to_be_bytes() {
+        return Err(format!("ran at version {version:?}"));
+    }
+    meta.insert(b"synthetic_step", &b"done"[..])
         .map(|_| ())
         .map_err(|e| e.to_string())
 }
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A synthetic version 2 on top of the real version 1: the runner
-    // upgrades a version-1 store built by the fixture above.
+    // A version-1 store (fixture) brought to a synthetic version 3: the
+    // real 1 → 2, then 2 → 3, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
+    let method = MethodSettings::Path(PathSettings {
+        spp: 1,
+        ..PathSettings::default()
+    });
+    v1_fixture(&path, &method);
+    let steps = [
+        migrate::MIGRATIONS[0],
+        Migration {
+            from: 2,
+            name: "synthetic",
+            run: add_marker,
+        },
+    ];
+    // Without the step for 2 → 3 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 3, &steps[..1]));
+    assert!(msg.contains("no migration from schema 2 to 3"), "{msg}");
+    assert_eq!(
+        Store::open_with(&path, false, 1, &[])
+            .unwrap()
+            .schema_version()
+            .unwrap(),
+        1
+    );
     {
-        let store = Store::open(&path).unwrap();
-        commit_frames(&store, "j", 0..2);
-    }
-    let steps = [Migration {
-        from: 1,
-        name: "synthetic",
-        run: add_marker,
-    }];
-    // Without the step for 1 → 2 nothing runs.
-    let msg = err_text(Store::open_with(&path, false, 2, &[]));
-    assert!(msg.contains("no migration from schema 1 to 2"), "{msg}");
-    {
-        let store = Store::open_with(&path, false, 2, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 2);
+        let store = Store::open_with(&path, false, 3, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 3);
         assert!(store
             .tree("meta")
             .unwrap()
             .contains_key(b"synthetic_step")
             .unwrap());
-        assert_eq!(
-            store
-                .frames_done(store.job("j").unwrap().unwrap().id)
-                .unwrap(),
-            vec![0, 1]
-        );
+        assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
+        assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 1) now refuses the upgraded store.
+    // This build (version 2) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 2 is newer"), "{msg}");
+    assert!(msg.contains("schema version 3 is newer"), "{msg}");
 }
 
 #[test]
@@ -539,6 +556,7 @@ fn store_throughput() {
             exr: &exr,
             records,
             stats: &stats,
+            state: None,
         };
         store.commit_frame(&mut job, c).unwrap();
     }
@@ -567,11 +585,349 @@ fn store_throughput() {
 }
 
 #[test]
-fn resumed_trc_render_replays_and_is_bit_identical() {
-    // `trc` carries its cache across frames: a resume replays the finished
-    // frames (until the store persists the cache state).
-    let mut trc = radcache::method::trc::TrcSettings::default();
+fn resumed_trc_render_is_bit_identical() {
+    // Also across other ranges of the same job: a range whose stored state
+    // belongs to another chain starts over.
+    let mut trc = TrcSettings::default();
     trc.ic.strata = Strata { theta: 4, phi: 12 };
     trc.ic.spp = 1;
     resume_matches_uninterrupted(MethodSettings::Trc(trc));
+}
+
+/// A `trc` render stopped after frame 5 of 0..10 — with records created
+/// before frame 5 that are still valid after it (mid-window), and records
+/// whose life ends at frame 5 (replaced or dropped on resume, as their
+/// stored `used` flags say) — resumes from the stored state: only frames
+/// 6..9 are rendered (and, with interpolated gradients, only their first
+/// passes run), with exactly their rays, and the frames equal an
+/// uninterrupted run byte for byte. A corrupt state record is a clear
+/// error naming tree and key.
+fn trc_resumes_from_stored_state(gradients: TemporalGradients) {
+    let mut trc = TrcSettings::default();
+    trc.ic.strata = Strata { theta: 4, phi: 12 };
+    trc.ic.spp = 1;
+    trc.max_life = 6;
+    trc.temporal_accuracy = 0.02;
+    trc.gradients = gradients;
+    let method = MethodSettings::Trc(trc);
+    // 4 fps: the cube moves enough per frame for records of many lifespans.
+    let renderer = |m: &MethodSettings| {
+        let mut r = renderer(m);
+        r.settings.fps = 4.0;
+        r
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
+    let mut r = renderer(&method);
+    let uninterrupted = render::render_to_dir(&mut r, 0..10, &plain, true).unwrap();
+    assert_eq!(r.method_calls().rendered, 10);
+
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let spec = render::job_spec("j", &source, &method, &r.settings, 0..10).unwrap();
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    let mut first = renderer(&method);
+    let s = render::render_job_to_dir_with(
+        &mut first,
+        0..10,
+        &resumed,
+        true,
+        Some(&mut sj),
+        &mut |f| f < 5,
+    )
+    .unwrap();
+    assert_eq!(s.frames, 6);
+    let id = sj.job.id;
+
+    // The stored state is the one after frame 5, and it is mid-window.
+    let state = store.load_state(id).unwrap().unwrap();
+    assert_eq!(state.frame, 5);
+    let alive: std::collections::HashSet<u64> = state.records.iter().map(|r| r.0).collect();
+    let (mut spanning, mut ending) = (0, 0);
+    store
+        .for_each_record(id, |_, rec| {
+            if alive.contains(&rec.id) && rec.created_frame < 5 {
+                spanning += u32::from(rec.last_frame > 5);
+                ending += u32::from(rec.last_frame == 5);
+            }
+        })
+        .unwrap();
+    assert!(spanning > 0, "no record spans the resume point");
+    assert!(ending > 0, "no record ends at the resume point");
+
+    // A corrupt state record: a clear error naming tree and key.
+    let (bad_id, _) = state.records[0];
+    let key = keys::state_record(id, bad_id);
+    let good = store.tree("state").unwrap().get(key).unwrap().unwrap();
+    store.raw_insert("state", &key, b"garbage").unwrap();
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    let msg =
+        render::render_job_to_dir(&mut renderer(&method), 0..10, &resumed, true, Some(&mut sj))
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+    assert!(
+        msg.contains("tree `state`") && msg.contains(&format!("job {id} record {bad_id}")),
+        "{msg}"
+    );
+    store.raw_insert("state", &key, &good).unwrap();
+
+    // The resume renders frames 6..9 only.
+    let mut second = renderer(&method);
+    let s = render::render_job_to_dir(&mut second, 0..10, &resumed, true, Some(&mut sj)).unwrap();
+    assert_eq!((s.resumed, s.frames), (6, 4));
+    let calls = second.method_calls();
+    assert_eq!(calls.rendered, 4, "no finished frame rendered again");
+    if gradients == TemporalGradients::Interpolated {
+        assert_eq!(calls.prepared, 4, "first passes of frames 6..9 only");
+    } else {
+        assert_eq!(calls.prepared, 0);
+        let rays: u64 = uninterrupted.frame_stats[6..].iter().map(|f| f.rays).sum();
+        assert_eq!(s.rays, rays, "exactly the rays of frames 6..9");
+    }
+    assert_eq!(exr_files(&plain, 0..10), exr_files(&resumed, 0..10));
+    // The state stays the working set: records alive after the last frame.
+    let state = store.load_state(id).unwrap().unwrap();
+    assert_eq!(state.frame, 9);
+    assert_eq!(
+        state.records.len() as u64,
+        uninterrupted.frame_stats[9].records_alive
+    );
+    let report = radcache::store::inspect::report(&store, Some("j"), None).unwrap();
+    let st = report.jobs[0].state.as_ref().unwrap();
+    assert_eq!((st.frame, st.chain_start), (9, 0));
+    assert_eq!(st.records, state.records.len() as u64);
+    let text = radcache::store::inspect::to_text(&report, false);
+    assert!(text.contains("carried state after frame 9"), "{text}");
+}
+
+#[test]
+fn trc_resumes_mid_window_from_stored_state_without_replay() {
+    trc_resumes_from_stored_state(TemporalGradients::Extrapolated);
+}
+
+#[test]
+fn trc_interpolated_resumes_from_stored_first_pass_without_replay() {
+    trc_resumes_from_stored_state(TemporalGradients::Interpolated);
+}
+
+/// A version-1 store built by the schema-1 writer (`store::v1::Writer`):
+/// an `ic` job of cube-in-box 16×16 that finished frames 0..2 of 0..4,
+/// with the frames, statistics, records and samples the renderer made.
+fn v1_fixture(path: &Path, method: &MethodSettings) -> (JobSpec, Vec<Vec<u8>>, usize) {
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let mut r = renderer(method);
+    let spec = render::job_spec("old", &source, method, &r.settings, 0..4).unwrap();
+    let writer = v1::Writer::create(path).unwrap();
+    let job = v1::JobValue {
+        id: 7,
+        name: spec.name.clone(),
+        scene: spec.scene.clone(),
+        scene_hash: spec.scene_hash.clone(),
+        method: spec.method.clone(),
+        // Schema 1 compared `{:?}` text.
+        settings: format!("{method:?}"),
+        width: spec.width,
+        height: spec.height,
+        spp: spec.spp,
+        fps: spec.fps,
+        seed: spec.seed,
+        same_pattern: spec.same_pattern,
+        frame_start: 0,
+        frame_end: 4,
+        frames_done: 2,
+        last_frame: Some(1),
+        created_unix: 1,
+        updated_unix: 2,
+    };
+    writer.put_job(&job).unwrap();
+    r.keep_frame_records(true);
+    let mut exrs = Vec::new();
+    let mut rows = 0;
+    for frame in 0..2 {
+        let film = r.render_frame(frame);
+        let stats = r.last_frame_stats();
+        let kept = r.take_frame_records().unwrap_or_default();
+        let records: Vec<RecordCommit> = kept
+            .records
+            .iter()
+            .zip(&kept.samples)
+            .map(|(rec, s)| RecordCommit::from_record(rec, s, kept.strata, frame, |_| false))
+            .collect();
+        let exr = film::encode_exr(&film).unwrap();
+        let raw = records.iter().map(|r| r.samples.len() as u64 * 8).sum();
+        writer
+            .put_frame(
+                7,
+                frame,
+                (16, 16),
+                &exr,
+                &v1::StatsValue::from_stats(&stats, raw),
+                &records,
+            )
+            .unwrap();
+        exrs.push(exr);
+        rows += records.len();
+    }
+    (spec, exrs, rows)
+}
+
+#[test]
+fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
+    let method = MethodSettings::Ic(IcSettings {
+        strata: Strata { theta: 4, phi: 12 },
+        spp: 1,
+        ..IcSettings::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let (spec, exrs, v1_records) = v1_fixture(&path, &method);
+    assert!(v1_records > 0);
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.schema_version().unwrap(), 2);
+    let job = store.job("old").unwrap().unwrap();
+    assert_eq!((job.id, job.frames_done, job.last_frame), (7, 2, Some(1)));
+    // Settings `{:?}` → the JSON this build writes for them.
+    let as_json = |s: &str| serde_json::from_str::<serde_json::Value>(s).unwrap();
+    assert_eq!(as_json(&job.settings), as_json(&spec.settings));
+    assert_eq!(store.frame_exr(7, 1).unwrap().unwrap(), exrs[1]);
+    let stats = store.frame_stats(7, 0).unwrap().unwrap();
+    assert!(stats.records_created > 0);
+    // Records and samples, all still there.
+    let recs: usize = (0..2)
+        .map(|f| store.frame_records(7, f).unwrap().len())
+        .sum();
+    assert_eq!(recs, v1_records);
+    let first = &store.frame_records(7, 0).unwrap()[0];
+    assert_eq!(store.record_samples(7, 0, first.id).unwrap().len(), 48);
+    let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
+    assert_eq!(report.schema_version, 2);
+    assert_eq!(report.jobs[0].records as usize, v1_records);
+    assert_eq!(report.jobs[0].samples as usize, v1_records * 48);
+    assert_eq!(report.jobs[0].frames_done, 2);
+
+    // The job resumes: frames 2..3 only, equal to an uninterrupted run.
+    let out = dir.path().join("out");
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    assert_eq!(sj.job.id, 7);
+    let s =
+        render::render_job_to_dir(&mut renderer(&method), 0..4, &out, true, Some(&mut sj)).unwrap();
+    assert_eq!((s.resumed, s.frames), (2, 2));
+    let plain = dir.path().join("plain");
+    render::render_to_dir(&mut renderer(&method), 0..4, &plain, true).unwrap();
+    assert_eq!(exr_files(&plain, 0..4), exr_files(&out, 0..4));
+    // Its stored settings are now the JSON text.
+    assert_eq!(store.job("old").unwrap().unwrap().settings, spec.settings);
+    drop(sj);
+    drop(store);
+    // Opening it again runs nothing; an older build would refuse it.
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.schema_version().unwrap(), 2);
+    drop(store);
+    let msg = err_text(Store::open_with(&path, false, 1, migrate::MIGRATIONS));
+    assert!(
+        msg.contains("schema version 2 is newer") && msg.contains("version 1"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn settings_debug_text_reads_as_serde_json() {
+    use radcache::method::trc::TrcSettings;
+    for m in [
+        MethodSettings::Path(PathSettings::default()),
+        MethodSettings::Ic(IcSettings::default()),
+        MethodSettings::Trc(TrcSettings::default()),
+        MethodSettings::Trc(TrcSettings {
+            temporal_accuracy: 1e-7,
+            gradients: TemporalGradients::Interpolated,
+            ..TrcSettings::default()
+        }),
+    ] {
+        // As stored: JSON text (floats in their shortest f32 form), read back.
+        let json: serde_json::Value =
+            serde_json::from_str(&serde_json::to_string(&m).unwrap()).unwrap();
+        assert_eq!(v1::debug_to_json(&format!("{m:?}")).unwrap(), json, "{m:?}");
+    }
+}
+
+#[test]
+fn scene_hash_covers_external_buffers_and_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let gltf = dir.path().join("a.gltf");
+    std::fs::write(
+        &gltf,
+        r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"a%20b.bin","byteLength":4},{"uri":"data:application/octet-stream;base64,AAAA","byteLength":3}],"images":[{"uri":"tex.png"}]}"#,
+    )
+    .unwrap();
+    std::fs::write(dir.path().join("a b.bin"), [1u8, 2, 3, 4]).unwrap();
+    std::fs::write(dir.path().join("tex.png"), b"png").unwrap();
+    let source = SceneSource::File(gltf.clone());
+    let (_, h1) = render::scene_identity(&source).unwrap();
+    let (main, ext) = h1.split_once('+').expect("external files hashed");
+    assert_eq!(
+        main,
+        radcache::store::content_hash(&std::fs::read(&gltf).unwrap())
+    );
+    std::fs::write(dir.path().join("a b.bin"), [1u8, 2, 3, 5]).unwrap();
+    let (_, h2) = render::scene_identity(&source).unwrap();
+    assert_ne!(h1, h2, "a changed .bin changes the hash");
+    assert!(h2.starts_with(main) && !h2.ends_with(ext));
+    std::fs::write(dir.path().join("tex.png"), b"PNG").unwrap();
+    let (_, h3) = render::scene_identity(&source).unwrap();
+    assert_ne!(h2, h3, "a changed image changes the hash");
+    // A missing external file is a clear error.
+    std::fs::remove_file(dir.path().join("tex.png")).unwrap();
+    let msg = render::scene_identity(&source).unwrap_err().to_string();
+    assert!(msg.contains("tex.png") && msg.contains("a.gltf"), "{msg}");
+
+    // A schema-1 job of this file (hash of the .gltf alone, marked `+v1`
+    // by the migration) resumes with the full hash, which it then keeps.
+    std::fs::write(dir.path().join("tex.png"), b"PNG").unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let mut old = spec("g");
+    old.scene_hash = format!("{main}{}", v1::LEGACY_HASH_SUFFIX);
+    store.begin_job(&old, false).unwrap();
+    let mut now = spec("g");
+    now.scene_hash = h3.clone();
+    assert_eq!(store.begin_job(&now, false).unwrap().scene_hash, h3);
+    now.scene_hash = format!("{}+{ext}", "0".repeat(16));
+    let msg = err_text(store.begin_job(&now, false));
+    assert!(msg.contains("scene hash"), "{msg}");
+}
+
+#[test]
+fn settings_are_compared_as_json_values() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let method = MethodSettings::Ic(IcSettings::default());
+    let fs = FrameSettings::default();
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let spec = render::job_spec("s", &source, &method, &fs, 0..2).unwrap();
+    let value: serde_json::Value = serde_json::from_str(&spec.settings).unwrap();
+    assert_eq!(value["Ic"]["strata"]["theta"], 16);
+    store.begin_job(&spec, false).unwrap();
+    // The same value, other formatting: the same job.
+    let mut same = spec.clone();
+    same.settings = serde_json::to_string_pretty(&value).unwrap();
+    store.begin_job(&same, false).unwrap();
+    let other = MethodSettings::Ic(IcSettings {
+        accuracy: 0.3,
+        ..IcSettings::default()
+    });
+    let other = render::job_spec("s", &source, &other, &fs, 0..2).unwrap();
+    let msg = err_text(store.begin_job(&other, false));
+    assert!(
+        msg.contains("method settings") && msg.contains("0.3"),
+        "{msg}"
+    );
 }

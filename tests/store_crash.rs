@@ -2,7 +2,8 @@
 //! with SIGKILL at random moments, again and again; after each kill the
 //! store reopens, no acknowledged frame is lost, no partial frame is
 //! visible, and the finished frames equal an uninterrupted run byte for
-//! byte.
+//! byte. Once with `path`, once with `trc`, whose cache state is
+//! checkpointed with every frame and restored on resume.
 
 use radcache::film;
 use radcache::store::Store;
@@ -11,10 +12,6 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 const FRAMES: u32 = 200;
-
-fn radcache(args: &[&str], dir: &Path) -> Command {
-    radcache_frames(args, dir, FRAMES)
-}
 
 fn radcache_frames(args: &[&str], dir: &Path, frames: u32) -> Command {
     let range = format!("0..{frames}");
@@ -36,6 +33,7 @@ fn lcg(state: &mut u64) -> f64 {
 
 /// Checks the store after a kill; returns the frames it holds.
 fn check_store(dir: &Path, reference: &[Vec<u8>], acknowledged_before: usize) -> usize {
+    let frames = reference.len() as u32;
     let store = Store::open(&dir.join("db")).expect("the store reopens after SIGKILL");
     let Some(job) = store.job("crash").unwrap() else {
         return 0; // killed before the job was recorded
@@ -59,8 +57,19 @@ fn check_store(dir: &Path, reference: &[Vec<u8>], acknowledged_before: usize) ->
             "frame {f} without stats"
         );
     }
+    // A stateful method's stored state is that of the last frame: the
+    // frames are the range's prefix, and the head names its last one.
+    if let Some(head) = store.state_head(job.id).unwrap() {
+        assert_eq!(done, (0..done.len() as u32).collect::<Vec<_>>());
+        assert_eq!(
+            Some(head.frame),
+            done.last().copied(),
+            "state not of the last frame"
+        );
+        assert!(store.load_state(job.id).unwrap().is_some());
+    }
     // Every frame acknowledged to --out is in the store.
-    for f in 0..FRAMES {
+    for f in 0..frames {
         if film::frame_path(&dir.join("out"), f, "exr").exists() {
             assert!(
                 done.contains(&f),
@@ -73,11 +82,35 @@ fn check_store(dir: &Path, reference: &[Vec<u8>], acknowledged_before: usize) ->
 
 #[test]
 fn sigkilled_renders_resume_without_losing_or_tearing_frames() {
+    crash_and_resume(&[], FRAMES, 20);
+}
+
+#[test]
+fn sigkilled_trc_renders_resume_from_stored_state() {
+    crash_and_resume(&["--method", "trc", "--trc-max-life", "6"], 120, 12);
+}
+
+/// The kills are timed from measured start-up and frame times: one crash
+/// test at a time, so that the other does not skew them.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Kills `radcache render ARGS --frames 0..FRAMES` at random moments at
+/// least `min_kills` times, checking the store after each kill.
+fn crash_and_resume(method: &[&str], frames: u32, min_kills: u32) {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let radcache = |args: &[&str], dir: &Path| {
+        let all: Vec<&str> = args.iter().chain(method).copied().collect();
+        radcache_frames(&all, dir, frames)
+    };
+    let radcache_frames = |args: &[&str], dir: &Path, n: u32| {
+        let all: Vec<&str> = args.iter().chain(method).copied().collect();
+        radcache_frames(&all, dir, n)
+    };
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let status = radcache(&["render", "--out", "ref"], dir).status().unwrap();
     assert!(status.success());
-    let reference: Vec<Vec<u8>> = (0..FRAMES)
+    let reference: Vec<Vec<u8>> = (0..frames)
         .map(|f| std::fs::read(film::frame_path(&dir.join("ref"), f, "exr")).unwrap())
         .collect();
     // Start-up time and time per frame with the store, to place the kills
@@ -100,7 +133,7 @@ fn sigkilled_renders_resume_without_losing_or_tearing_frames() {
     let mut progressed = 0;
     let mut acknowledged = 0;
     let mut attempts = 0;
-    while kills < 25 {
+    while kills < min_kills + 5 {
         attempts += 1;
         assert!(attempts < 200, "too many attempts");
         let mut child = radcache(&job, dir).spawn().unwrap();
@@ -117,14 +150,14 @@ fn sigkilled_renders_resume_without_losing_or_tearing_frames() {
             progressed += 1;
         }
         acknowledged = now;
-        if acknowledged == FRAMES as usize {
+        if acknowledged == frames as usize {
             break;
         }
     }
     // Finish the job; everything equals the uninterrupted run.
     assert!(radcache(&job, dir).status().unwrap().success());
-    assert_eq!(check_store(dir, &reference, acknowledged), FRAMES as usize);
-    for f in 0..FRAMES {
+    assert_eq!(check_store(dir, &reference, acknowledged), frames as usize);
+    for f in 0..frames {
         let out = std::fs::read(film::frame_path(&dir.join("out"), f, "exr")).unwrap();
         assert_eq!(out, reference[f as usize], "--out frame {f} differs");
     }
@@ -136,7 +169,7 @@ fn sigkilled_renders_resume_without_losing_or_tearing_frames() {
         "only {progressed} kills landed after frames were written"
     );
     assert!(
-        kills >= 20,
+        kills >= min_kills,
         "only {kills} kills landed (the render finished too fast)"
     );
 }

@@ -37,7 +37,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Settings of `ic`, with their sources.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct IcSettings {
     /// Accuracy `a` (Ward 1988): records are used where `w ≥ 1/a`. Ward
     /// recommends 0.1–0.3; 0.2 is our default.
@@ -194,6 +194,7 @@ impl IrradianceCaching {
             records,
             samples,
             strata: self.settings.strata,
+            ..FrameRecords::default()
         });
     }
 }

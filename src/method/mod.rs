@@ -54,7 +54,19 @@ impl FrameContext<'_> {
 
 /// What a method did in one frame (the store and server persist and serve
 /// these; `render` prints a summary).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+/// Stored whole in the store's `stats` tree (rkyv): a field added here is
+/// stored with no other change (a schema change all the same: see
+/// `store::schema`).
+#[derive(
+    Clone,
+    Debug,
+    Default,
+    PartialEq,
+    serde::Serialize,
+    rkyv::Archive,
+    rkyv::Serialize,
+    rkyv::Deserialize,
+)]
 pub struct FrameStats {
     pub frame: u32,
     /// Records in the cache at the end of the frame.
@@ -128,15 +140,84 @@ pub trait Method: Send {
     fn take_frame_records(&mut self) -> Option<FrameRecords> {
         None
     }
+
+    /// Whether a frame depends on the frames rendered before it (the
+    /// method carries a cache from frame to frame). Such a method reports
+    /// its state changes in [`FrameRecords::state`] and a resume restores
+    /// them with [`Method::restore_state`]; the others simply skip their
+    /// finished frames.
+    fn carries_state(&self) -> bool {
+        false
+    }
+
+    /// Whether a frame depends on the end of the rendered range (a
+    /// two-pass method looks ahead no further than it): then a resume must
+    /// also keep the range's end.
+    fn looks_ahead(&self) -> bool {
+        false
+    }
+
+    /// Continues from `state`, the state after frame `state.frame` as
+    /// the method reported it frame by frame: the next frame rendered is
+    /// `state.frame + 1`, exactly as if the frames before had just been
+    /// rendered by this instance.
+    fn restore_state(&mut self, _state: MethodState) -> Result<(), StateError> {
+        Err(StateError {
+            record: None,
+            detail: format!("method {} keeps no state across frames", self.name()),
+        })
+    }
 }
 
 /// Records a method created or changed in one frame, with their
 /// incoming-radiance samples (`samples[i]` belongs to `records[i]`; empty
-/// when the method has none for it).
+/// when the method has none for it), and for methods that carry a cache
+/// from frame to frame the changes of that cache.
 #[derive(Clone, Debug, Default)]
 pub struct FrameRecords {
     pub records: Vec<crate::cache::IrradianceRecord>,
     pub samples: Vec<crate::cache::gather::HemisphereSamples>,
     /// Strata of the samples (`M × N`, cell `j·N + k` at index `j·N + k`).
     pub strata: crate::cache::gather::Strata,
+    /// `last_frames[i]`: the last frame `records[i]` may be used in
+    /// (temporal methods; empty: each record lives one frame).
+    pub last_frames: Vec<u32>,
+    /// The changes of the state carried to the next frame
+    /// ([`Method::carries_state`]); `None` for the other methods.
+    pub state: Option<StateChanges>,
+}
+
+/// How a method's carried state changed in one frame: what the store
+/// writes, in the frame's atomic batch, so that a render can resume after
+/// that frame without rendering the frames before it again. The bytes are
+/// the method's own (it validates them in [`Method::restore_state`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StateChanges {
+    /// Method-wide state after the frame (e.g. the next record id),
+    /// replacing the previous one.
+    pub global: Vec<u8>,
+    /// Records that entered the state or whose state changed in the frame,
+    /// by id, with their whole state.
+    pub put: Vec<(crate::cache::RecordId, Vec<u8>)>,
+    /// Records that left the state in the frame (dropped, replaced).
+    pub removed: Vec<crate::cache::RecordId>,
+}
+
+/// A method's whole carried state after frame `frame`: the last
+/// [`StateChanges::global`] and the records put and not removed since, in
+/// id order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MethodState {
+    pub frame: u32,
+    pub global: Vec<u8>,
+    pub records: Vec<(crate::cache::RecordId, Vec<u8>)>,
+}
+
+/// A state [`Method::restore_state`] cannot continue from.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{detail}")]
+pub struct StateError {
+    /// The record whose state is bad (`None`: the method-wide state).
+    pub record: Option<crate::cache::RecordId>,
+    pub detail: String,
 }

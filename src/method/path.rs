@@ -12,7 +12,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 /// Settings of the path tracer.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct PathSettings {
     /// Samples per pixel.
     pub spp: u32,

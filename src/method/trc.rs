@@ -49,7 +49,9 @@ use super::ic::IrradianceCaching;
 use super::ic::{
     mark_used, primary_candidates, render_pass, scene_bounds, Candidate, Gathered, IcSettings,
 };
-use super::{FrameContext, FrameStats, Method};
+use super::{
+    FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges, StateError,
+};
 use crate::backend::Hit;
 use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance, HemisphereSamples};
 use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
@@ -63,7 +65,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Temporal gradients (TRC §4.5).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
 pub enum TemporalGradients {
     /// A record's value is constant over its life (Fig. 4c).
     None,
@@ -92,7 +94,7 @@ pub struct Successor {
 }
 
 /// Settings of `trc`, with their sources.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct TrcSettings {
     /// Everything spatial: accuracy `a`, strata, spp, spacing, spatial
     /// gradients, path lengths (see [`IcSettings`]).
@@ -217,6 +219,9 @@ struct PendingFrame {
     /// The frame after the last one any of these records is valid in:
     /// their replacements are known once the first pass has reached it.
     horizon: u32,
+    /// Store hook: the first pass's new records and state changes of this
+    /// frame, handed out when the frame is rendered.
+    kept: Option<FrameRecords>,
 }
 
 /// `trc`. With extrapolated or no temporal gradients, one pass: each frame
@@ -243,6 +248,14 @@ pub struct TemporalRadianceCaching {
     /// Interpolated gradients: replacements found by the first pass, by
     /// the id of the record they replace, while that record may be used.
     successors: HashMap<RecordId, Successor>,
+    /// Store hook ([`Method::keep_frame_records`]): keep each frame's new
+    /// records with their samples and the frame's state changes.
+    keep: bool,
+    /// The kept records and changes of the last frame rendered.
+    kept: Option<FrameRecords>,
+    /// Records forgotten by a first pass that went back (interpolated
+    /// gradients), to report as removed with the next state changes.
+    forgotten: Vec<RecordId>,
 }
 
 impl TemporalRadianceCaching {
@@ -256,6 +269,9 @@ impl TemporalRadianceCaching {
             stats: FrameStats::default(),
             pending: VecDeque::new(),
             successors: HashMap::new(),
+            keep: false,
+            kept: None,
+            forgotten: Vec::new(),
         }
     }
 
@@ -345,10 +361,7 @@ impl TemporalRadianceCaching {
 
     /// Aging and fill of frame `ctx.frame` (TRC Algorithm 1): the frame's
     /// cache and its records in cache order (new ones not numbered yet).
-    fn age_and_fill(
-        &mut self,
-        ctx: &FrameContext,
-    ) -> (IrradianceCache, Vec<TemporalRecord>, FrameStats) {
+    fn age_and_fill(&mut self, ctx: &FrameContext) -> (IrradianceCache, Aged) {
         let t = ctx.frame;
         let gradients = self.settings.gradients;
         let mut stats = FrameStats {
@@ -364,12 +377,19 @@ impl TemporalRadianceCaching {
         let follows = self.last_frame.is_some_and(|f| f + 1 == t);
         let mut alive = Vec::with_capacity(self.records.len());
         let mut replace = Vec::new();
+        let keep = self.keep;
+        let mut removed = std::mem::take(&mut self.forgotten);
         for r in std::mem::take(&mut self.records) {
             if r.is_valid_at(t) {
                 stats.records_reused += 1;
                 cache.insert_as_is(r.at_frame(t, gradients, None));
                 alive.push(r);
-            } else if follows && r.used {
+                continue;
+            }
+            if keep {
+                removed.push(r.record.id);
+            }
+            if follows && r.used {
                 replace.push(r);
             } else {
                 stats.records_dropped += 1;
@@ -384,17 +404,19 @@ impl TemporalRadianceCaching {
                 ..r.candidate
             })
             .collect();
-        let gathered: Vec<TemporalRecord> = {
+        let gathered: Vec<(TemporalRecord, Option<HemisphereSamples>)> = {
             use rayon::prelude::*;
             self.ic
                 .gather_parallel(ctx, &candidates, t)
-                .map(|g| self.temporal(ctx, &next, &g))
+                .map(|g| (self.temporal(ctx, &next, &g), keep.then_some(g.samples)))
                 .collect()
         };
-        for (mut new, old) in gathered.into_iter().zip(&replace) {
+        let mut samples = Vec::new();
+        for ((mut new, s), old) in gathered.into_iter().zip(&replace) {
             new.replaces = Some(old.record.id);
             cache.insert(new.at_frame(t, gradients, None));
             alive.push(new);
+            samples.extend(s);
             stats.records_replaced += 1;
         }
         stats
@@ -409,37 +431,75 @@ impl TemporalRadianceCaching {
             ctx,
             &mut cache,
             &pixels,
-            |g| self.temporal(ctx, &next, g),
+            |g| {
+                (
+                    self.temporal(ctx, &next, g),
+                    keep.then(|| g.samples.clone()),
+                )
+            },
             &mut created,
         );
         stats.records_created = created.len() as u64;
-        alive.extend(created);
+        for (r, s) in created {
+            alive.push(r);
+            samples.extend(s);
+        }
         stats
             .phase_seconds
             .push(("fill".into(), start.elapsed().as_secs_f64()));
-        (cache, alive, stats)
+        let aged = Aged {
+            alive,
+            stats,
+            removed,
+            samples,
+        };
+        (cache, aged)
     }
 
     /// Ends frame `t`'s aging: radii as neighbour clamping left them, the
     /// `used` flags, ids for the new records, lifespan statistics, and (for
     /// interpolated gradients) the successors of the records replaced.
-    fn finish(
-        &mut self,
-        t: u32,
-        mut alive: Vec<TemporalRecord>,
-        cache: &IrradianceCache,
-        used: &[AtomicBool],
-        mut stats: FrameStats,
-    ) {
+    fn finish(&mut self, t: u32, aged: Aged, cache: &IrradianceCache, used: &[AtomicBool]) {
+        let Aged {
+            mut alive,
+            mut stats,
+            removed,
+            samples,
+        } = aged;
         debug_assert_eq!(alive.len(), cache.len());
         let longest = self.settings.max_life.max(1) as usize;
         let mut lifespans = vec![0u64; longest + 1];
+        // Store hook: the frame's new records and its state changes.
+        let mut kept = self.keep.then(|| FrameRecords {
+            strata: self.settings.ic.strata,
+            samples,
+            state: Some(StateChanges {
+                removed,
+                ..StateChanges::default()
+            }),
+            ..FrameRecords::default()
+        });
         for ((r, in_cache), used) in alive.iter_mut().zip(cache.records()).zip(used) {
+            let used = used.load(Ordering::Relaxed);
+            let changed = r.record.radius.to_bits() != in_cache.radius.to_bits() || r.used != used;
             r.record.radius = in_cache.radius;
-            r.used = used.load(Ordering::Relaxed);
-            if r.record.created_frame == t {
+            r.used = used;
+            let new = r.record.created_frame == t;
+            if new {
                 r.record.id = self.next_id;
                 self.next_id += 1;
+            }
+            if let Some(k) = kept.as_mut() {
+                if new {
+                    k.records.push(r.record.clone());
+                    k.last_frames.push(r.last_valid);
+                }
+                if new || changed {
+                    let put = &mut k.state.as_mut().expect("set above").put;
+                    put.push((r.record.id, state::encode_record(r)));
+                }
+            }
+            if new {
                 lifespans[(r.lifespan() as usize).min(longest)] += 1;
                 if let (TemporalGradients::Interpolated, Some(old)) =
                     (self.settings.gradients, r.replaces)
@@ -470,6 +530,10 @@ impl TemporalRadianceCaching {
         };
         stats.lifespan_histogram = lifespans;
         stats.records_alive = alive.len() as u64;
+        if let Some(k) = kept.as_mut() {
+            k.state.as_mut().expect("set above").global = state::encode_global(self.next_id);
+        }
+        self.kept = kept;
         self.records = alive;
         self.last_frame = Some(t);
         self.stats = stats;
@@ -486,6 +550,7 @@ impl TemporalRadianceCaching {
             self.prepare_frame(ctx);
         }
         let p = self.pending.pop_front().expect("frame prepared just now");
+        self.kept = p.kept;
         let mut stats = p.stats;
         let start = Instant::now();
         let (min, max) = scene_bounds(ctx);
@@ -514,14 +579,14 @@ impl Method for TemporalRadianceCaching {
         if self.settings.gradients == TemporalGradients::Interpolated {
             return self.render_pending(ctx);
         }
-        let (cache, alive, mut stats) = self.age_and_fill(ctx);
+        let (cache, mut aged) = self.age_and_fill(ctx);
         let start = Instant::now();
         let used: Vec<AtomicBool> = (0..cache.len()).map(|_| AtomicBool::new(false)).collect();
-        let film = render_pass(ctx, &cache, &self.settings.ic, Some(&used), &mut stats);
-        stats
+        let film = render_pass(ctx, &cache, &self.settings.ic, Some(&used), &mut aged.stats);
+        aged.stats
             .phase_seconds
             .push(("render".into(), start.elapsed().as_secs_f64()));
-        self.finish(ctx.frame, alive, &cache, &used, stats);
+        self.finish(ctx.frame, aged, &cache, &used);
         film
     }
 
@@ -545,19 +610,23 @@ impl Method for TemporalRadianceCaching {
         let t = ctx.frame;
         if self.last_frame.is_some_and(|f| f >= t) {
             // Going back: start over from this frame.
+            if self.keep {
+                self.forgotten
+                    .extend(self.records.iter().map(|r| r.record.id));
+            }
             self.records.clear();
             self.pending.clear();
             self.successors.clear();
             self.last_frame = None;
         }
-        let (cache, alive, mut stats) = self.age_and_fill(ctx);
+        let (cache, mut aged) = self.age_and_fill(ctx);
         let start = Instant::now();
         let used: Vec<AtomicBool> = (0..cache.len()).map(|_| AtomicBool::new(false)).collect();
         mark_used(ctx, &cache, &self.settings.ic, &used);
-        stats
+        aged.stats
             .phase_seconds
             .push(("usage".into(), start.elapsed().as_secs_f64()));
-        self.finish(t, alive, &cache, &used, stats);
+        self.finish(t, aged, &cache, &used);
         let horizon = self
             .records
             .iter()
@@ -569,11 +638,235 @@ impl Method for TemporalRadianceCaching {
             records: self.records.clone(),
             stats: self.stats.clone(),
             horizon,
+            kept: self.kept.take(),
         });
     }
 
     fn last_frame_stats(&self) -> FrameStats {
         self.stats.clone()
+    }
+
+    fn keep_frame_records(&mut self, keep: bool) {
+        self.keep = keep;
+    }
+
+    fn take_frame_records(&mut self) -> Option<FrameRecords> {
+        self.kept.take()
+    }
+
+    fn carries_state(&self) -> bool {
+        true
+    }
+
+    fn looks_ahead(&self) -> bool {
+        self.settings.gradients == TemporalGradients::Interpolated
+    }
+
+    /// Continues after frame `state.frame` from the records alive then (in
+    /// id order, which is cache order: survivors keep their order and new
+    /// records get increasing ids) and the next record id. With
+    /// interpolated gradients the state is the first pass's at that frame:
+    /// the first pass goes on from there (its lookahead beyond the frame
+    /// was not acknowledged and is redone), and no successor found before
+    /// is needed again (a record replaced at `t_l ≤ frame` was last used at
+    /// `t_l − 1 < frame + 1`).
+    fn restore_state(&mut self, s: MethodState) -> Result<(), StateError> {
+        let next_id = state::decode_global(&s.global).map_err(|detail| StateError {
+            record: None,
+            detail,
+        })?;
+        let mut records = Vec::with_capacity(s.records.len());
+        for (id, bytes) in &s.records {
+            let bad = |detail: String| StateError {
+                record: Some(*id),
+                detail,
+            };
+            let r = state::decode_record(bytes).map_err(bad)?;
+            if r.record.id != *id || r.record.id >= next_id {
+                return Err(bad(format!(
+                    "record state holds id {} (next id {next_id})",
+                    r.record.id
+                )));
+            }
+            if records
+                .last()
+                .is_some_and(|p: &TemporalRecord| p.record.id >= r.record.id)
+            {
+                return Err(bad("records out of id order".into()));
+            }
+            records.push(r);
+        }
+        self.records = records;
+        self.next_id = next_id;
+        self.last_frame = Some(s.frame);
+        self.stats = FrameStats::default();
+        self.pending.clear();
+        self.successors.clear();
+        self.forgotten.clear();
+        self.kept = None;
+        Ok(())
+    }
+}
+
+/// A frame through aging and fill, before its lookups.
+struct Aged {
+    /// The frame's records in cache order (new ones not numbered yet).
+    alive: Vec<TemporalRecord>,
+    stats: FrameStats,
+    /// Store hook: ids of the records dropped or replaced.
+    removed: Vec<RecordId>,
+    /// Store hook: samples of the new records, in their order in `alive`.
+    samples: Vec<HemisphereSamples>,
+}
+
+/// `trc`'s carried state as bytes for the store ([`StateChanges`]): rkyv
+/// archives, validated when read back. The layout is part of the store
+/// schema (`migrations/`): changing it needs a migration.
+mod state {
+    use super::TemporalRecord;
+    use crate::cache::gather::GatherPoint;
+    use crate::cache::IrradianceRecord;
+    use crate::method::ic::Candidate;
+    use glam::Vec3;
+    use rkyv::rancor;
+    use rkyv::util::AlignedVec;
+
+    /// Everything of a [`TemporalRecord`], in plain arrays.
+    #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+    pub(super) struct RecordState {
+        id: u64,
+        created_frame: u32,
+        object: u32,
+        position: [f32; 3],
+        normal: [f32; 3],
+        irradiance: [f32; 3],
+        grad_translation: [[f32; 3]; 3],
+        grad_rotation: [[f32; 3]; 3],
+        /// As clamped by the latest cache the record was in.
+        radius: f32,
+        pixel: u32,
+        stream: u64,
+        point_position: [f32; 3],
+        point_normal: [f32; 3],
+        point_geometric_normal: [f32; 3],
+        footprint: f32,
+        next_irradiance: [f32; 3],
+        change: f32,
+        last_valid: u32,
+        d_irradiance: [f32; 3],
+        d_grad_rotation: [[f32; 3]; 3],
+        d_grad_translation: [[f32; 3]; 3],
+        replaces: Option<u64>,
+        used: bool,
+    }
+
+    /// The method-wide state.
+    #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+    pub(super) struct GlobalState {
+        next_id: u64,
+    }
+
+    fn a(v: Vec3) -> [f32; 3] {
+        v.to_array()
+    }
+
+    fn a3(v: [Vec3; 3]) -> [[f32; 3]; 3] {
+        v.map(|v| v.to_array())
+    }
+
+    fn v3(a: [[f32; 3]; 3]) -> [Vec3; 3] {
+        a.map(Vec3::from)
+    }
+
+    pub(super) fn encode_record(r: &TemporalRecord) -> Vec<u8> {
+        let c = &r.candidate;
+        let s = RecordState {
+            id: r.record.id,
+            created_frame: r.record.created_frame,
+            object: r.record.object,
+            position: a(r.record.position),
+            normal: a(r.record.normal),
+            irradiance: a(r.record.irradiance),
+            grad_translation: a3(r.record.grad_translation),
+            grad_rotation: a3(r.record.grad_rotation),
+            radius: r.record.radius,
+            pixel: c.pixel,
+            stream: c.stream,
+            point_position: a(c.point.position),
+            point_normal: a(c.point.normal),
+            point_geometric_normal: a(c.point.geometric_normal),
+            footprint: c.footprint,
+            next_irradiance: a(r.next_irradiance),
+            change: r.change,
+            last_valid: r.last_valid,
+            d_irradiance: a(r.d_irradiance),
+            d_grad_rotation: a3(r.d_grad_rotation),
+            d_grad_translation: a3(r.d_grad_translation),
+            replaces: r.replaces,
+            used: r.used,
+        };
+        rkyv::to_bytes::<rancor::Error>(&s)
+            .expect("serialising plain data to memory cannot fail")
+            .into_vec()
+    }
+
+    pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
+        let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+        aligned.extend_from_slice(bytes);
+        let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
+            .map_err(|e| format!("trc record state: {e}"))?;
+        if s.last_valid < s.created_frame {
+            return Err(format!(
+                "trc record state: last valid frame {} before its creation {}",
+                s.last_valid, s.created_frame
+            ));
+        }
+        Ok(TemporalRecord {
+            record: IrradianceRecord {
+                id: s.id,
+                position: s.position.into(),
+                normal: s.normal.into(),
+                irradiance: s.irradiance.into(),
+                grad_translation: v3(s.grad_translation),
+                grad_rotation: v3(s.grad_rotation),
+                radius: s.radius,
+                created_frame: s.created_frame,
+                object: s.object,
+            },
+            candidate: Candidate {
+                pixel: s.pixel,
+                stream: s.stream,
+                point: GatherPoint {
+                    position: s.point_position.into(),
+                    normal: s.point_normal.into(),
+                    geometric_normal: s.point_geometric_normal.into(),
+                },
+                object: s.object,
+                footprint: s.footprint,
+            },
+            next_irradiance: s.next_irradiance.into(),
+            change: s.change,
+            last_valid: s.last_valid,
+            d_irradiance: s.d_irradiance.into(),
+            d_grad_rotation: v3(s.d_grad_rotation),
+            d_grad_translation: v3(s.d_grad_translation),
+            replaces: s.replaces,
+            used: s.used,
+        })
+    }
+
+    pub(super) fn encode_global(next_id: u64) -> Vec<u8> {
+        rkyv::to_bytes::<rancor::Error>(&GlobalState { next_id })
+            .expect("serialising plain data to memory cannot fail")
+            .into_vec()
+    }
+
+    pub(super) fn decode_global(bytes: &[u8]) -> Result<u64, String> {
+        let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+        aligned.extend_from_slice(bytes);
+        rkyv::from_bytes::<GlobalState, rancor::Error>(&aligned)
+            .map(|g| g.next_id)
+            .map_err(|e| format!("trc state: {e}"))
     }
 }
 

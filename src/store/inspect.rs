@@ -57,6 +57,22 @@ pub struct JobReport {
     pub lifespan_histogram: BTreeMap<u32, u64>,
     /// Per-frame details (all frames, or the one asked for).
     pub frame_details: Vec<FrameReport>,
+    /// The carried state of a stateful method (`trc`) a resume would
+    /// continue from, if any.
+    pub state: Option<StateReport>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct StateReport {
+    /// The state is the one after this frame.
+    pub frame: u32,
+    /// First frame of the range it belongs to (and its end, for methods
+    /// that look ahead).
+    pub chain_start: u32,
+    pub chain_end: Option<u32>,
+    /// Records in the state, and their value bytes.
+    pub records: u64,
+    pub value_bytes: u64,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -143,7 +159,25 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
         record_value_bytes: 0,
         lifespan_histogram: BTreeMap::new(),
         frame_details: Vec::new(),
+        state: None,
     };
+    if let Some(head) = store.state_head(j.id)? {
+        let mut state = StateReport {
+            frame: head.frame,
+            chain_start: head.chain_start,
+            chain_end: head.chain_end,
+            records: 0,
+            value_bytes: 0,
+        };
+        for item in store.state.scan_prefix(super::keys::job_prefix(j.id)) {
+            let (k, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
+            if k.len() != 8 {
+                state.records += 1;
+                state.value_bytes += v.len() as u64;
+            }
+        }
+        r.state = Some(state);
+    }
     let mut per_frame: BTreeMap<u32, FrameReport> = BTreeMap::new();
     for frame in store.frames_done(j.id)? {
         let v = store.frame(j.id, frame)?.expect("listed frame exists");
@@ -255,6 +289,17 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
             j.samples_raw_bytes,
             ratio(j.samples_raw_bytes, j.samples_stored_bytes)
         );
+        if let Some(st) = &j.state {
+            let _ = writeln!(
+                s,
+                "  carried state after frame {} (range from frame {}{}): {} records, {} B",
+                st.frame,
+                st.chain_start,
+                st.chain_end.map_or(String::new(), |e| format!(" to {e}")),
+                st.records,
+                st.value_bytes
+            );
+        }
         let _ = writeln!(
             s,
             "  frames: {} B stored / {} B EXR (ratio {})",

@@ -1,7 +1,8 @@
 //! Every key the store writes, and nothing else: no other module builds or
 //! parses raw keys (STYLE.md). Integers are big-endian so that sled's
 //! lexicographic order is numeric order and prefix scans walk space-time
-//! in order. The layout is documented in `migrations/0001_initial.md`.
+//! in order. The layout is documented in `migrations/0001_initial.md` and
+//! `migrations/0002_state_and_identity.md` (schema 2, this one).
 //!
 //! | tree      | key                                   | bytes |
 //! |-----------|---------------------------------------|-------|
@@ -11,11 +12,15 @@
 //! | `stats`   | job id u64 · frame u32                | 12    |
 //! | `records` | job id u64 · frame u32 · record id u64 | 20   |
 //! | `samples` | job id u64 · frame u32 · record id u64 | 20   |
-//! | `movies`  | (reserved, empty in schema 1)         |       |
+//! | `state`   | job id u64 (the head)                 | 8     |
+//! | `state`   | job id u64 · record id u64            | 16    |
+//! | `movies`  | (reserved, empty)                     |       |
 //!
 //! In `records`/`samples`, `frame` is the frame in which this version of
 //! the record was written (its creation frame for `ic`), so a `job · frame`
-//! prefix scan gives one frame's record changes.
+//! prefix scan gives one frame's record changes. `state` holds the carried
+//! state of a stateful method (`trc`) after the job's last frame: its head
+//! under the job id, then its records in id order.
 
 use std::ops::Range;
 
@@ -55,6 +60,29 @@ pub fn job_prefix(job: u64) -> [u8; 8] {
     job.to_be_bytes()
 }
 
+/// `state` key of a job's state head (= [`job_prefix`]: it sorts before the
+/// job's state records).
+pub fn state_head(job: u64) -> [u8; 8] {
+    job_prefix(job)
+}
+
+/// `job · record id` (`state` records).
+pub fn state_record(job: u64, id: u64) -> [u8; 16] {
+    let mut k = [0u8; 16];
+    k[..8].copy_from_slice(&job.to_be_bytes());
+    k[8..].copy_from_slice(&id.to_be_bytes());
+    k
+}
+
+/// Decodes a `job · record id` key.
+pub fn parse_state_record(key: &[u8]) -> Option<(u64, u64)> {
+    let k: [u8; 16] = key.try_into().ok()?;
+    Some((
+        u64::from_be_bytes(k[..8].try_into().ok()?),
+        u64::from_be_bytes(k[8..].try_into().ok()?),
+    ))
+}
+
 /// Key range of frames `frames` of `job` (frames, stats).
 pub fn frame_range(job: u64, frames: Range<u32>) -> Range<[u8; 12]> {
     frame(job, frames.start)..frame(job, frames.end)
@@ -85,8 +113,12 @@ pub fn describe(key: &[u8]) -> String {
     if let Some((job, frame)) = parse_frame(key) {
         return format!("job {job} frame {frame}");
     }
+    if let Some((job, id)) = parse_state_record(key) {
+        return format!("job {job} record {id}");
+    }
     match std::str::from_utf8(key) {
         Ok(s) if s.chars().all(|c| !c.is_control()) => format!("{s:?}"),
+        _ if key.len() == 8 => format!("job {}", u64::from_be_bytes(key.try_into().unwrap())),
         _ => key.iter().map(|b| format!("{b:02x}")).collect(),
     }
 }
@@ -105,5 +137,10 @@ mod tests {
         assert!(frame(3, 5).starts_with(&job_prefix(3)));
         assert_eq!(describe(&frame(3, 5)), "job 3 frame 5");
         assert_eq!(describe(b"schema_version"), "\"schema_version\"");
+        assert_eq!(parse_state_record(&state_record(7, 11)), Some((7, 11)));
+        assert!(state_head(7)[..] < state_record(7, 0)[..]);
+        assert!(state_record(7, u64::MAX)[..] < state_head(8)[..]);
+        assert_eq!(describe(&state_record(3, 5)), "job 3 record 5");
+        assert_eq!(describe(&state_head(3)), "job 3");
     }
 }

@@ -12,7 +12,7 @@ use super::{keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 1;
+pub const CURRENT_VERSION: u32 = 2;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -22,9 +22,13 @@ pub struct Migration {
     pub run: fn(&sled::Db) -> Result<(), String>,
 }
 
-/// The real migrations, in order. Version 1 is the initial layout
-/// (`migrations/0001_initial.md`), so there is none yet.
-pub const MIGRATIONS: &[Migration] = &[];
+/// The real migrations, in order: version 1 is the initial layout
+/// (`migrations/0001_initial.md`).
+pub const MIGRATIONS: &[Migration] = &[Migration {
+    from: 1,
+    name: "0002_state_and_identity",
+    run: super::v1::migrate_to_v2,
+}];
 
 /// The schema version stored in `meta`, if any.
 pub fn read_version(path: &Path, meta: &sled::Tree) -> Result<Option<u32>, StoreError> {

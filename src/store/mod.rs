@@ -3,14 +3,19 @@
 //! `samples`, `movies`, `frames`, `jobs`, `stats`.
 //!
 //! - Keys: big-endian, built only by [`keys`] (layout there and in
-//!   `migrations/0001_initial.md`).
+//!   `migrations/0001_initial.md`, `migrations/0002_state_and_identity.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
 //! - Bulk arrays (frame EXR bytes, record samples) are zstd-compressed;
 //!   samples are the 8-byte RGBE records of [`rgbe::PackedSample`].
 //! - A job checkpoints each frame with [`Store::commit_frame`]: one sled
-//!   transaction over `frames`, `records`, `samples`, `stats` and `jobs`,
-//!   then `flush`; the frame counts as acknowledged only after that returns.
+//!   transaction over `frames`, `records`, `samples`, `stats`, `state` and
+//!   `jobs`, then `flush`; the frame counts as acknowledged only after that
+//!   returns.
+//! - `state` holds the cache a stateful method (`trc`) carries to the next
+//!   frame, as of the job's last frame: each frame writes only its changes
+//!   (records put and removed, and the head), and a resume loads it
+//!   ([`Store::load_state`]) instead of rendering the finished frames again.
 //! - The schema version lives in `meta`; see [`migrate`].
 
 pub mod inspect;
@@ -18,22 +23,26 @@ pub mod keys;
 pub mod migrate;
 pub mod rgbe;
 pub mod schema;
+pub mod v1;
 
 use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};
 use rkyv::bytecheck::CheckBytes;
 use rkyv::rancor;
 use rkyv::ser::allocator::ArenaHandle;
 use rkyv::util::AlignedVec;
-use schema::{FrameValue, JobValue, RecordValue, SamplesValue, StatsValue};
+use schema::{
+    FrameValue, JobValue, RecordValue, SamplesValue, StateHeadValue, StateRecordValue, StatsValue,
+};
 use sled::transaction::{ConflictableTransactionError, TransactionError};
 use sled::Transactional;
 use std::path::{Path, PathBuf};
 
 pub use rgbe::PackedSample;
+pub use schema::JobSpec;
 
-/// The trees of schema 1, in the order `inspect` lists them.
-pub const TREES: [&str; 7] = [
-    "meta", "jobs", "frames", "stats", "records", "samples", "movies",
+/// The trees, in the order `inspect` lists them.
+pub const TREES: [&str; 8] = [
+    "meta", "jobs", "frames", "stats", "records", "samples", "state", "movies",
 ];
 
 /// sled's page cache. Its default (1 GiB) made a render's memory grow
@@ -102,25 +111,8 @@ pub struct Store {
     stats: sled::Tree,
     records: sled::Tree,
     samples: sled::Tree,
+    state: sled::Tree,
     movies: sled::Tree,
-}
-
-/// What a job renders: compared with the stored job on every `render`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct JobSpec {
-    pub name: String,
-    pub scene: String,
-    pub scene_hash: String,
-    pub method: String,
-    pub settings: String,
-    pub width: u32,
-    pub height: u32,
-    pub spp: u32,
-    pub fps: f32,
-    pub seed: u64,
-    pub same_pattern: bool,
-    pub frame_start: u32,
-    pub frame_end: u32,
 }
 
 /// One record of a frame with its samples, ready to store.
@@ -139,6 +131,16 @@ pub struct FrameCommit<'a> {
     pub exr: &'a [u8],
     pub records: Vec<RecordCommit>,
     pub stats: &'a crate::method::FrameStats,
+    /// The frame's changes of a stateful method's carried state.
+    pub state: Option<StateCommit<'a>>,
+}
+
+/// A stateful method's state changes of one frame, with the chain they
+/// belong to (see [`StateHeadValue`]).
+pub struct StateCommit<'a> {
+    pub chain_start: u32,
+    pub chain_end: Option<u32>,
+    pub changes: &'a crate::method::StateChanges,
 }
 
 /// FNV-1a 64 of `bytes`, in hex: the scene content hash of a job (stable
@@ -157,6 +159,19 @@ fn now_unix() -> u64 {
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_secs())
         .unwrap_or(0)
+}
+
+/// Reads an rkyv archive (validated) of a `T`.
+pub(crate) fn decode_value<T>(bytes: &[u8]) -> Result<T, String>
+where
+    T: rkyv::Archive,
+    T::Archived: for<'a> CheckBytes<HighValidator<'a, rancor::Error>>
+        + rkyv::Deserialize<T, HighDeserializer<rancor::Error>>,
+{
+    // sled values carry no alignment guarantee; rkyv needs 16.
+    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+    aligned.extend_from_slice(bytes);
+    rkyv::from_bytes::<T, rancor::Error>(&aligned).map_err(|e| e.to_string())
 }
 
 /// An rkyv archive of `value`.
@@ -200,6 +215,7 @@ impl Store {
             stats: tree("stats")?,
             records: tree("records")?,
             samples: tree("samples")?,
+            state: tree("state")?,
             movies: tree("movies")?,
             db,
         };
@@ -248,6 +264,7 @@ impl Store {
             "stats" => &self.stats,
             "records" => &self.records,
             "samples" => &self.samples,
+            "state" => &self.state,
             "movies" => &self.movies,
             _ => return None,
         })
@@ -273,10 +290,7 @@ impl Store {
         T::Archived: for<'a> CheckBytes<HighValidator<'a, rancor::Error>>
             + rkyv::Deserialize<T, HighDeserializer<rancor::Error>>,
     {
-        // sled values carry no alignment guarantee; rkyv needs 16.
-        let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
-        aligned.extend_from_slice(bytes);
-        rkyv::from_bytes::<T, rancor::Error>(&aligned).map_err(|e| self.corrupt(tree, key, e))
+        decode_value(bytes).map_err(|e| self.corrupt(tree, key, e))
     }
 
     fn corrupt(&self, tree: &'static str, key: &[u8], detail: impl ToString) -> StoreError {
@@ -343,10 +357,11 @@ impl Store {
         let key = keys::job(&spec.name);
         let now = now_unix();
         if let Some(mut job) = self.job(&spec.name)? {
-            let diffs = job_differences(&job, spec);
+            let diffs = job_differences(&job.spec, spec);
             if diffs.is_empty() {
-                job.frame_start = spec.frame_start;
-                job.frame_end = spec.frame_end;
+                // Same job: the new range, and the spec as this build
+                // writes it (a schema-1 job's settings and hash upgraded).
+                job.spec = spec.clone();
                 job.updated_unix = now;
                 self.jobs
                     .insert(&key, encode(&job))
@@ -392,19 +407,7 @@ impl Store {
             + 1;
         Ok(JobValue {
             id,
-            name: spec.name.clone(),
-            scene: spec.scene.clone(),
-            scene_hash: spec.scene_hash.clone(),
-            method: spec.method.clone(),
-            settings: spec.settings.clone(),
-            width: spec.width,
-            height: spec.height,
-            spp: spec.spp,
-            fps: spec.fps,
-            seed: spec.seed,
-            same_pattern: spec.same_pattern,
-            frame_start: spec.frame_start,
-            frame_end: spec.frame_end,
+            spec: spec.clone(),
             frames_done: 0,
             last_frame: None,
             created_unix: now,
@@ -415,7 +418,13 @@ impl Store {
     /// Deletes every key of job id `job` in the per-job trees.
     fn delete_job_data(&self, job: u64) -> Result<(), StoreError> {
         let prefix = keys::job_prefix(job);
-        for tree in [&self.frames, &self.stats, &self.records, &self.samples] {
+        for tree in [
+            &self.frames,
+            &self.stats,
+            &self.records,
+            &self.samples,
+            &self.state,
+        ] {
             for key in tree.scan_prefix(prefix).keys() {
                 let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
                 tree.remove(key)
@@ -452,6 +461,14 @@ impl Store {
     pub fn commit_frame(&self, job: &mut JobValue, c: FrameCommit) -> Result<(), StoreError> {
         let frame_key = keys::frame(job.id, c.frame);
         let already = self.frame_done(job.id, c.frame)?;
+        // A frame written again (by another chain of a stateful method)
+        // replaces the record versions of its former self.
+        let mut stale = Vec::new();
+        if already {
+            for key in self.records.scan_prefix(frame_key).keys() {
+                stale.push(key.map_err(|e| StoreError::sled(&self.path, e))?);
+            }
+        }
         let frame_value = FrameValue {
             width: c.width,
             height: c.height,
@@ -475,6 +492,32 @@ impl Store {
             }
         }
         let stats = StatsValue::from_stats(c.stats, samples_raw);
+        let mut state_rows = Vec::new();
+        let mut state_removed = Vec::new();
+        let mut state_head = None;
+        if let Some(sc) = &c.state {
+            for (id, data) in &sc.changes.put {
+                let value = StateRecordValue {
+                    frame: c.frame,
+                    data: data.clone(),
+                };
+                state_rows.push((keys::state_record(job.id, *id), encode(&value)));
+            }
+            state_removed.extend(
+                sc.changes
+                    .removed
+                    .iter()
+                    .map(|&id| keys::state_record(job.id, id)),
+            );
+            let head = StateHeadValue {
+                frame: c.frame,
+                chain_start: sc.chain_start,
+                chain_end: sc.chain_end,
+                global: sc.changes.global.clone(),
+            };
+            state_head = Some(encode(&head));
+        }
+        let state_head_key = keys::state_head(job.id);
         let mut progressed = job.clone();
         if !already {
             progressed.frames_done += 1;
@@ -490,9 +533,23 @@ impl Store {
             &self.records,
             &self.samples,
             &self.stats,
+            &self.state,
             &self.jobs,
         )
-            .transaction(|(frames, records, samples, stats, jobs)| {
+            .transaction(|(frames, records, samples, stats, state, jobs)| {
+                for k in &stale {
+                    records.remove(&k[..])?;
+                    samples.remove(&k[..])?;
+                }
+                for k in &state_removed {
+                    state.remove(&k[..])?;
+                }
+                for (k, v) in &state_rows {
+                    state.insert(&k[..], &v[..])?;
+                }
+                if let Some(head) = &state_head {
+                    state.insert(&state_head_key[..], &head[..])?;
+                }
                 for (k, v) in &record_rows {
                     records.insert(&k[..], &v[..])?;
                 }
@@ -574,6 +631,65 @@ impl Store {
         Ok(from_planar(&raw, v.count as usize))
     }
 
+    // ------------------------------------------------------------ state
+
+    /// The head of job `job`'s carried method state, if any.
+    pub fn state_head(&self, job: u64) -> Result<Option<StateHeadValue>, StoreError> {
+        self.get("state", &keys::state_head(job))
+    }
+
+    /// Job `job`'s carried method state (as of [`Self::state_head`]'s
+    /// frame): the head's method-wide bytes and every state record, in id
+    /// order.
+    pub fn load_state(&self, job: u64) -> Result<Option<crate::method::MethodState>, StoreError> {
+        let Some(head) = self.state_head(job)? else {
+            return Ok(None);
+        };
+        let mut records = Vec::new();
+        for item in self.state.scan_prefix(keys::job_prefix(job)) {
+            let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
+            if k.len() == 8 {
+                continue; // the head
+            }
+            let (_, id) = keys::parse_state_record(&k)
+                .ok_or_else(|| self.corrupt("state", &k, "malformed key"))?;
+            let value: StateRecordValue = self.decode("state", &k, &v)?;
+            records.push((id, value.data));
+        }
+        Ok(Some(crate::method::MethodState {
+            frame: head.frame,
+            global: head.global,
+            records,
+        }))
+    }
+
+    /// Forgets job `job`'s carried method state (a render that starts its
+    /// chain over). The head goes first, so that a crash halfway leaves no
+    /// head over partial records.
+    pub fn clear_state(&self, job: u64) -> Result<(), StoreError> {
+        self.state
+            .remove(keys::state_head(job))
+            .map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()?;
+        for key in self.state.scan_prefix(keys::job_prefix(job)).keys() {
+            let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
+            self.state
+                .remove(key)
+                .map_err(|e| StoreError::sled(&self.path, e))?;
+        }
+        self.flush()
+    }
+
+    /// The error for a state [`crate::method::Method::restore_state`]
+    /// refused: a corrupt value in `state`, naming its key.
+    pub fn state_error(&self, job: u64, e: crate::method::StateError) -> StoreError {
+        let key = match e.record {
+            Some(id) => keys::state_record(job, id).to_vec(),
+            None => keys::state_head(job).to_vec(),
+        };
+        self.corrupt("state", &key, e.detail)
+    }
+
     /// Writes a raw value (tests use it to corrupt a store on purpose).
     #[doc(hidden)]
     pub fn raw_insert(&self, tree: &str, key: &[u8], value: &[u8]) -> Result<(), StoreError> {
@@ -620,41 +736,107 @@ fn decompress(bytes: &[u8], len: usize) -> Result<Vec<u8>, String> {
     Ok(out)
 }
 
-/// Fields of `spec` that differ from the stored job (frame range and
-/// progress aside).
-fn job_differences(job: &JobValue, spec: &JobSpec) -> Vec<String> {
+/// Fields of `spec` that differ from the stored job's (name and frame range
+/// aside). Every field is named, so a field added to [`JobSpec`] does not
+/// compile until it is compared here.
+fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
+    let JobSpec {
+        name: _,
+        scene,
+        scene_hash,
+        method,
+        settings,
+        width,
+        height,
+        spp,
+        fps,
+        seed,
+        same_pattern,
+        frame_start: _,
+        frame_end: _,
+    } = spec;
     let mut d = Vec::new();
-    let mut check = |name: &str, stored: String, given: String| {
-        if stored != given {
+    let mut check = |name: &str, same: bool, stored: String, given: String| {
+        if !same {
             d.push(format!("{name} (stored {stored}, given {given})"));
         }
     };
-    check("scene", job.scene.clone(), spec.scene.clone());
+    check(
+        "scene",
+        &stored.scene == scene,
+        stored.scene.clone(),
+        scene.clone(),
+    );
     check(
         "scene hash",
-        job.scene_hash.clone(),
-        spec.scene_hash.clone(),
+        same_scene_hash(&stored.scene_hash, scene_hash),
+        stored.scene_hash.clone(),
+        scene_hash.clone(),
     );
-    check("method", job.method.clone(), spec.method.clone());
+    check(
+        "method",
+        &stored.method == method,
+        stored.method.clone(),
+        method.clone(),
+    );
     check(
         "method settings",
-        job.settings.clone(),
-        spec.settings.clone(),
+        same_settings(&stored.settings, settings),
+        stored.settings.clone(),
+        settings.clone(),
     );
     check(
         "size",
-        format!("{}x{}", job.width, job.height),
-        format!("{}x{}", spec.width, spec.height),
+        (stored.width, stored.height) == (*width, *height),
+        format!("{}x{}", stored.width, stored.height),
+        format!("{width}x{height}"),
     );
-    check("spp", job.spp.to_string(), spec.spp.to_string());
-    check("fps", job.fps.to_string(), spec.fps.to_string());
-    check("seed", job.seed.to_string(), spec.seed.to_string());
+    check(
+        "spp",
+        stored.spp == *spp,
+        stored.spp.to_string(),
+        spp.to_string(),
+    );
+    check(
+        "fps",
+        stored.fps.to_bits() == fps.to_bits(),
+        stored.fps.to_string(),
+        fps.to_string(),
+    );
+    check(
+        "seed",
+        stored.seed == *seed,
+        stored.seed.to_string(),
+        seed.to_string(),
+    );
     check(
         "same-pattern",
-        job.same_pattern.to_string(),
-        spec.same_pattern.to_string(),
+        stored.same_pattern == *same_pattern,
+        stored.same_pattern.to_string(),
+        same_pattern.to_string(),
     );
     d
+}
+
+/// Settings are serde JSON: equal as JSON values (text that is not JSON,
+/// as in tests, compares as text).
+fn same_settings(stored: &str, given: &str) -> bool {
+    match (
+        serde_json::from_str::<serde_json::Value>(stored),
+        serde_json::from_str::<serde_json::Value>(given),
+    ) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => stored == given,
+    }
+}
+
+/// Scene hashes are equal, or the stored one is a schema-1 hash (suffix
+/// [`v1::LEGACY_HASH_SUFFIX`], external files not hashed) of the same file.
+fn same_scene_hash(stored: &str, given: &str) -> bool {
+    stored == given
+        || stored
+            .strip_suffix(v1::LEGACY_HASH_SUFFIX)
+            .is_some_and(|main| given.split('+').next() == Some(main))
 }
 
 /// Checks the directory before sled touches it. Returns whether a store

@@ -1,24 +1,33 @@
-//! Value schemas of store schema version 1 (`migrations/0001_initial.md`).
+//! Value schemas of store schema version 2 (`migrations/0002_state_and_identity.md`;
+//! version 1 in `migrations/0001_initial.md`, its types in [`super::v1`]).
 //! Every value is an rkyv 0.8 archive, validated (bytecheck) when read.
 //! Bulk arrays (EXR bytes, samples) are zstd-compressed inside the archive.
 //! Changing any of these types is a schema change: bump
 //! [`super::migrate::CURRENT_VERSION`], add a migration and a
 //! `migrations/NNNN_*.md`.
+//!
+//! A job's description ([`JobSpec`]) and a frame's statistics
+//! ([`crate::method::FrameStats`]) are stored as they are, embedded in
+//! [`JobValue`] and [`StatsValue`]: a field added to either is stored (and,
+//! for the job, compared on resume) without another list to update.
 
 use rkyv::{Archive, Deserialize, Serialize};
 
-/// `jobs` value: what a job renders and how far it got.
+/// What a job renders: compared with the stored job on every `render`
+/// ([`super::Store::begin_job`]), embedded in its [`JobValue`].
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
-pub struct JobValue {
-    /// Prefix of the job's keys in the other trees.
-    pub id: u64,
+pub struct JobSpec {
     pub name: String,
     /// `builtin:NAME` or the scene file path as given.
     pub scene: String,
-    /// FNV-1a 64 of the scene file bytes, or of `builtin:NAME`, in hex.
+    /// FNV-1a 64 of the scene file bytes (then `+` and the hash of the
+    /// external buffers and images it references, if any), or of
+    /// `builtin:NAME`, in hex. Schema-1 jobs of scene files carry
+    /// `HASH+v1` (their external files were not hashed).
     pub scene_hash: String,
     pub method: String,
-    /// Canonical text of the method settings (`{:?}` of `MethodSettings`).
+    /// The method settings as serde JSON (`MethodSettings`); compared as
+    /// JSON values, so formatting never matters.
     pub settings: String,
     pub width: u32,
     pub height: u32,
@@ -29,12 +38,28 @@ pub struct JobValue {
     /// Frame range of the last `render` of this job (half-open).
     pub frame_start: u32,
     pub frame_end: u32,
+}
+
+/// `jobs` value: what a job renders and how far it got.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct JobValue {
+    /// Prefix of the job's keys in the other trees.
+    pub id: u64,
+    pub spec: JobSpec,
     /// Progress: frames acknowledged so far (each one has a `frames` entry).
     pub frames_done: u32,
     /// Last acknowledged frame, if any.
     pub last_frame: Option<u32>,
     pub created_unix: u64,
     pub updated_unix: u64,
+}
+
+/// A job reads as its spec (`job.scene`, `job.width`, …).
+impl std::ops::Deref for JobValue {
+    type Target = JobSpec;
+    fn deref(&self) -> &JobSpec {
+        &self.spec
+    }
 }
 
 /// `frames` value: one finished frame.
@@ -48,12 +73,13 @@ pub struct FrameValue {
     pub exr_zstd: Vec<u8>,
 }
 
-/// `records` value: one version of an irradiance record.
+/// `records` value under `job · frame · record id`: one version of an
+/// irradiance record (written in its creation frame).
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct RecordValue {
     pub id: u64,
     pub created_frame: u32,
-    /// Last frame the record was alive in (inclusive); lifespan is
+    /// Last frame the record may be used in (inclusive); lifespan is
     /// `last_frame − created_frame + 1` (1 for `ic`).
     pub last_frame: u32,
     pub position: [f32; 3],
@@ -68,28 +94,19 @@ pub struct RecordValue {
     pub strata_phi: u32,
 }
 
-/// `samples` value: a record's incoming-radiance samples, `count` 8-byte
-/// [`super::rgbe::PackedSample`]s in cell order, zstd-compressed.
+/// `samples` value under `job · frame · record id`: a record's
+/// incoming-radiance samples, `count` 8-byte [`super::rgbe::PackedSample`]s
+/// in cell order, zstd-compressed.
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct SamplesValue {
     pub count: u32,
     pub packed_zstd: Vec<u8>,
 }
 
-/// `stats` value: [`crate::method::FrameStats`] of one frame.
+/// `stats` value: the [`crate::method::FrameStats`] of one frame, whole.
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
 pub struct StatsValue {
-    pub frame: u32,
-    pub records_alive: u64,
-    pub records_created: u64,
-    pub records_reused: u64,
-    pub records_replaced: u64,
-    pub records_dropped: u64,
-    pub lookups: u64,
-    pub lookup_records: u64,
-    pub fallback_lookups: u64,
-    pub rays: u64,
-    pub phase_seconds: Vec<(String, f64)>,
+    pub stats: crate::method::FrameStats,
     /// Uncompressed bytes of the frame's samples (for compression ratios).
     pub samples_raw_bytes: u64,
 }
@@ -97,18 +114,40 @@ pub struct StatsValue {
 impl StatsValue {
     pub fn from_stats(s: &crate::method::FrameStats, samples_raw_bytes: u64) -> Self {
         StatsValue {
-            frame: s.frame,
-            records_alive: s.records_alive,
-            records_created: s.records_created,
-            records_reused: s.records_reused,
-            records_replaced: s.records_replaced,
-            records_dropped: s.records_dropped,
-            lookups: s.lookups,
-            lookup_records: s.lookup_records,
-            fallback_lookups: s.fallback_lookups,
-            rays: s.rays,
-            phase_seconds: s.phase_seconds.clone(),
+            stats: s.clone(),
             samples_raw_bytes,
         }
     }
+}
+
+/// Stats read as the frame's [`crate::method::FrameStats`].
+impl std::ops::Deref for StatsValue {
+    type Target = crate::method::FrameStats;
+    fn deref(&self) -> &crate::method::FrameStats {
+        &self.stats
+    }
+}
+/// `state` value under `job id`: the head of a job's carried method state
+/// (written with every frame of a stateful method, in the frame's batch).
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct StateHeadValue {
+    /// The state is the one after this frame.
+    pub frame: u32,
+    /// The frame the method started from (its state depends on it).
+    pub chain_start: u32,
+    /// The end of the range rendered, for methods that look ahead (their
+    /// frames depend on it); `None` for the others.
+    pub chain_end: Option<u32>,
+    /// The method-wide state (method-defined bytes).
+    pub global: Vec<u8>,
+}
+
+/// `state` value under `job id · record id`: one record of a job's carried
+/// method state.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct StateRecordValue {
+    /// The frame that wrote this version.
+    pub frame: u32,
+    /// The record's state (method-defined bytes).
+    pub data: Vec<u8>,
 }
