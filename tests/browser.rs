@@ -1,7 +1,6 @@
 //! The dashboard in headless Chromium (Debian package `chromium`, which
-//! `.ci/run` installs): a server on a loopback port renders a tiny `ic`
-//! job (`ic` stores its records; `trc` does not yet), then Chromium loads
-//! the dashboard for it. The test fails, never
+//! `.ci/run` installs): a server on a loopback port renders a tiny `trc`
+//! job, then Chromium loads the dashboard for it. The test fails, never
 //! skips, without Chromium (set `CHROMIUM` to use another binary). The
 //! screenshot is kept at `target/tmp/browser/dashboard.png`.
 
@@ -155,7 +154,7 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
         &server.addr,
         "POST",
         &with_q("/api/jobs"),
-        r#"{"scene":"builtin:cube-in-box","method":"ic","frames":"0..3","size":"16x16","spp":1}"#,
+        r#"{"scene":"builtin:cube-in-box","method":"trc","frames":"0..3","size":"16x16","spp":1}"#,
     );
     assert_eq!(status, 201, "{body}");
     let id = serde_json::from_str::<serde_json::Value>(&body).unwrap()["id"]

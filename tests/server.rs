@@ -493,6 +493,38 @@ fn records_match_the_store_and_inspect() {
     assert_eq!(status, 404);
     let frame0 = get("frame=0").1["count"].as_u64().unwrap();
 
+    // A trc job: records live across frames.
+    let trc_frames = 6u32;
+    let trc = create_job(
+        &server,
+        &format!(
+            r#"{{"scene":"builtin:cube-in-box","method":"trc","frames":"0..{trc_frames}","size":"16x16","spp":1}}"#
+        ),
+    );
+    wait_done(&server, &trc);
+    let mut trc_counts = Vec::new();
+    for f in 0..trc_frames {
+        let (status, r) = http(
+            &server,
+            "GET",
+            &format!("/api/jobs/{trc}/records?frame={f}"),
+            "",
+        );
+        assert_eq!(status, 200);
+        let r = json(&r);
+        for rec in r["records"].as_array().unwrap() {
+            let (c, l) = (
+                rec["created"].as_u64().unwrap(),
+                rec["last_frame"].as_u64().unwrap(),
+            );
+            assert!(c <= f as u64 && f as u64 <= l, "{rec}");
+            assert_eq!(rec["reused"].as_u64().unwrap(), f as u64 - c);
+        }
+        trc_counts.push(r["count"].as_u64().unwrap());
+    }
+    assert!(trc_counts[0] > 0);
+    let trc_sid = |store: &radcache::store::Store| store.job(&trc).unwrap().unwrap().id;
+
     // The same job as the store and `inspect` see it (the server holds the
     // store's lock: stop it first).
     drop(server);
@@ -513,6 +545,14 @@ fn records_match_the_store_and_inspect() {
         assert_eq!(frames[f]["records_alive"], n, "frame {f}");
     }
     let store = radcache::store::Store::open_existing(&db).unwrap();
+    // trc: the records alive at each frame are as many as its statistics say.
+    for f in 0..trc_frames {
+        let stats = store.frame_stats(trc_sid(&store), f).unwrap().unwrap();
+        assert_eq!(
+            trc_counts[f as usize], stats.records_alive,
+            "trc frame {f}: records alive vs stats"
+        );
+    }
     let sid = store.job(&id).unwrap().unwrap().id;
     let stored = store.frame_records(sid, 1).unwrap();
     assert_eq!(stored.len(), records.len());
