@@ -646,7 +646,7 @@ impl EqualError {
 /// [`EqualError`] under `measure` for every run whose method is not `path`
 /// (and that has the measure), against the `path` runs of its scene that
 /// vary only the sample count (`spp=…` or the defaults), or all its `path`
-/// runs when there are none such.
+/// runs when there are none such. Scenes without `path` runs have no rows.
 pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualError> {
     let path_curve = |scene: &str| -> Vec<(f64, f64)> {
         let runs: Vec<&BenchRow> = rows
@@ -668,6 +668,10 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
         .filter(|r| r.method != "path")
         .filter_map(|r| {
             let error = measure.of(r)?;
+            let path = path_curve(&r.scene);
+            if path.is_empty() {
+                return None; // Nothing to compare with on this scene.
+            }
             Some(EqualError {
                 scene: r.scene.clone(),
                 method: r.method.clone(),
@@ -675,7 +679,7 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
                 measure,
                 error,
                 seconds: r.seconds,
-                path_seconds: interpolate_time_at_error(&path_curve(&r.scene), error),
+                path_seconds: interpolate_time_at_error(&path, error),
             })
         })
         .collect()

@@ -109,6 +109,10 @@ fn equal_error_ratio_for_non_path_runs() {
         equal_error_table(&unmasked, ErrorMeasure::Surfaces).len(),
         1
     );
+    // A scene without path runs has nothing to compare with.
+    let mut elsewhere = rows[2].clone();
+    elsewhere.scene = "other scene".into();
+    assert!(equal_error_table(&[elsewhere], ErrorMeasure::AllPixels).is_empty());
 }
 
 #[test]
