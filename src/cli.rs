@@ -62,6 +62,10 @@ pub struct ServeArgs {
     /// Directory of each job's frame files (DIR/<job id>/) [default: DB.frames].
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// A `radcache bench --out DIR` directory whose charts (*.svg, *.csv)
+    /// the dashboard shows [default: the charts kept in web/charts].
+    #[arg(long)]
+    pub bench: Option<PathBuf>,
 }
 
 /// Default store directory (DESIGN.md "The store"), used when `--job` is
@@ -539,6 +543,7 @@ fn run_serve(args: ServeArgs) -> Result<()> {
         token: args.token,
         backend: backend_choice(args.backend),
         out,
+        bench: args.bench,
     })
 }
 

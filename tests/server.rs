@@ -18,11 +18,16 @@ impl Drop for Server {
 }
 
 fn start(db: &std::path::Path, scenes: &std::path::Path) -> Server {
+    start_with(db, scenes, &[])
+}
+
+fn start_with(db: &std::path::Path, scenes: &std::path::Path, extra: &[&str]) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
         .args(["serve", "--addr", "127.0.0.1:0", "--backend", "cpu", "--db"])
         .arg(db)
         .arg("--scenes")
         .arg(scenes)
+        .args(extra)
         .env_remove("RADCACHE_TOKEN")
         .stdout(Stdio::piped())
         .spawn()
@@ -41,7 +46,13 @@ fn start(db: &std::path::Path, scenes: &std::path::Path) -> Server {
 
 /// One HTTP/1.1 request; returns (status, body).
 fn http(server: &Server, method: &str, path: &str, body: &str) -> (u16, Vec<u8>) {
-    let mut s = TcpStream::connect(&server.addr).unwrap();
+    let (status, _, body) = http_full(&server.addr, method, path, body);
+    (status, body)
+}
+
+/// One HTTP/1.1 request read to the end; returns (status, head, body).
+fn http_full(addr: &str, method: &str, path: &str, body: &str) -> (u16, String, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
     write!(
         s,
@@ -61,7 +72,7 @@ fn http(server: &Server, method: &str, path: &str, body: &str) -> (u16, Vec<u8>)
     {
         body = dechunk(&body);
     }
-    (status, body)
+    (status, head, body)
 }
 
 fn dechunk(mut b: &[u8]) -> Vec<u8> {
@@ -265,4 +276,586 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
     let job = wait_done(&server, &id);
     assert_eq!(job["frames_done"], 2);
     check("POST", &format!("/api/jobs/{id}/cancel"), "", 409);
+}
+
+fn create_job(server: &Server, body: &str) -> String {
+    let (status, resp) = http(server, "POST", "/api/jobs", body);
+    assert_eq!(status, 201, "{}", String::from_utf8_lossy(&resp));
+    json(&resp)["id"].as_str().unwrap().to_string()
+}
+
+/// The parts of a `multipart/x-mixed-replace` body: (X-Frame, bytes).
+fn multipart_parts(head: &str, body: &[u8]) -> Vec<(u32, Vec<u8>)> {
+    let ct = head
+        .lines()
+        .find_map(|l| {
+            l.to_ascii_lowercase()
+                .strip_prefix("content-type: ")
+                .map(str::to_string)
+        })
+        .expect("content-type");
+    assert!(ct.starts_with("multipart/x-mixed-replace"), "{ct}");
+    let boundary = format!("--{}", ct.split("boundary=").nth(1).unwrap().trim());
+    let mut parts = Vec::new();
+    let mut rest = body;
+    loop {
+        assert!(
+            rest.starts_with(boundary.as_bytes()),
+            "part does not start with the boundary"
+        );
+        rest = &rest[boundary.len()..];
+        if rest.starts_with(b"--") {
+            return parts;
+        }
+        let end = rest.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+        let headers = String::from_utf8_lossy(&rest[..end]).to_ascii_lowercase();
+        let field = |name: &str| -> String {
+            headers
+                .lines()
+                .find_map(|l| l.strip_prefix(name).map(|v| v.trim().to_string()))
+                .unwrap_or_else(|| panic!("no {name} in {headers}"))
+        };
+        assert_eq!(field("content-type:"), "image/png");
+        let len: usize = field("content-length:").parse().unwrap();
+        let frame: u32 = field("x-frame:").parse().unwrap();
+        let data = &rest[end + 4..end + 4 + len];
+        parts.push((frame, data.to_vec()));
+        rest = &rest[end + 4 + len..];
+        assert!(rest.starts_with(b"\r\n"));
+        rest = &rest[2..];
+    }
+}
+
+/// Server-sent events: (event, data) pairs.
+fn sse_events(body: &[u8]) -> Vec<(String, serde_json::Value)> {
+    let text = String::from_utf8(body.to_vec()).unwrap();
+    text.split("\n\n")
+        .filter_map(|block| {
+            let mut event = None;
+            let mut data = String::new();
+            for line in block.lines() {
+                if let Some(e) = line.strip_prefix("event:") {
+                    event = Some(e.trim().to_string());
+                } else if let Some(d) = line.strip_prefix("data:") {
+                    data.push_str(d.trim_start());
+                }
+            }
+            Some((event?, json(data.as_bytes())))
+        })
+        .collect()
+}
+
+#[test]
+fn stream_and_events_deliver_every_frame_in_order_to_two_clients() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    let server = start(&dir.path().join("db"), &scenes);
+    // A slower job first, so that the followed job is still queued when
+    // its clients connect: they then see every frame live.
+    create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"48x48","spp":32}"#,
+    );
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"trc","frames":"0..4","size":"16x16","spp":1}"#,
+    );
+    let clients: Vec<_> = (0..2)
+        .map(|_| {
+            let addr = server.addr.clone();
+            let path = format!("/api/jobs/{id}/stream");
+            std::thread::spawn(move || http_full(&addr, "GET", &path, ""))
+        })
+        .collect();
+    let events = {
+        let addr = server.addr.clone();
+        let path = format!("/api/jobs/{id}/events");
+        std::thread::spawn(move || http_full(&addr, "GET", &path, ""))
+    };
+    for client in clients {
+        let (status, head, body) = client.join().unwrap();
+        assert_eq!(status, 200, "{head}");
+        let parts = multipart_parts(&head, &body);
+        let frames: Vec<u32> = parts.iter().map(|p| p.0).collect();
+        assert_eq!(frames, [0, 1, 2, 3]);
+        for (frame, png) in parts {
+            let (status, want) = http(
+                &server,
+                "GET",
+                &format!("/api/jobs/{id}/frames/{frame}.png"),
+                "",
+            );
+            assert_eq!(status, 200);
+            assert!(png == want, "frame {frame}: streamed PNG differs");
+            let img = image::load_from_memory(&png).unwrap();
+            assert_eq!((img.width(), img.height()), (16, 16));
+        }
+    }
+    let (status, head, body) = events.join().unwrap();
+    assert_eq!(status, 200);
+    assert!(
+        head.to_ascii_lowercase().contains("text/event-stream"),
+        "{head}"
+    );
+    let events = sse_events(&body);
+    let frames: Vec<u64> = events
+        .iter()
+        .filter(|e| e.0 == "frame")
+        .map(|e| e.1["frame"].as_u64().unwrap())
+        .collect();
+    assert_eq!(frames, [0, 1, 2, 3]);
+    assert!(events
+        .iter()
+        .any(|e| e.0 == "progress" && e.1["frames_done"] == 4));
+    let states: Vec<&str> = events
+        .iter()
+        .filter(|e| e.0 == "state")
+        .map(|e| e.1["state"].as_str().unwrap())
+        .collect();
+    assert!(states.len() >= 2, "{states:?}");
+    assert_eq!(states.last(), Some(&"done"));
+
+    // A finished job streams all its frames at once, then ends.
+    let (status, head, body) =
+        http_full(&server.addr, "GET", &format!("/api/jobs/{id}/stream"), "");
+    assert_eq!(status, 200);
+    let frames: Vec<u32> = multipart_parts(&head, &body).iter().map(|p| p.0).collect();
+    assert_eq!(frames, [0, 1, 2, 3]);
+    let (status, _) = http(&server, "GET", "/api/jobs/job-99/stream", "");
+    assert_eq!(status, 404);
+}
+
+#[test]
+fn records_match_the_store_and_inspect() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    let db = dir.path().join("db");
+    let server = start(&db, &scenes);
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"ic","frames":"0..2","size":"16x16","spp":1}"#,
+    );
+    wait_done(&server, &id);
+    let get = |q: &str| {
+        let (status, body) = http(&server, "GET", &format!("/api/jobs/{id}/records?{q}"), "");
+        (status, json(&body))
+    };
+    let (status, all) = get("frame=1");
+    assert_eq!(status, 200, "{all}");
+    let records = all["records"].as_array().unwrap();
+    assert!(!records.is_empty());
+    assert_eq!(all["count"].as_u64().unwrap() as usize, records.len());
+    for r in records {
+        assert_eq!(r["created"], 1, "{r}");
+        assert_eq!(r["lifespan"], 1, "ic records live one frame: {r}");
+        let s = r["screen"].as_array().expect("a record in view projects");
+        let (x, y) = (s[0].as_f64().unwrap(), s[1].as_f64().unwrap());
+        assert!(
+            (-0.5..=16.5).contains(&x) && (-0.5..=16.5).contains(&y),
+            "{r}"
+        );
+    }
+    // A box around the lower half (in y) of the records.
+    let ys: Vec<f64> = records
+        .iter()
+        .map(|r| r["position"][1].as_f64().unwrap())
+        .collect();
+    let mid = (ys.iter().cloned().fold(f64::INFINITY, f64::min)
+        + ys.iter().cloned().fold(f64::NEG_INFINITY, f64::max))
+        / 2.0;
+    let (status, half) = get(&format!("frame=1&bbox=-1000,-1000,-1000,1000,{mid},1000"));
+    assert_eq!(status, 200, "{half}");
+    let want = ys.iter().filter(|&&y| y as f32 <= mid as f32).count();
+    assert_eq!(half["count"].as_u64().unwrap() as usize, want);
+    assert!(want > 0 && want < records.len());
+    let (status, limited) = get("frame=1&limit=3");
+    assert_eq!(status, 200);
+    assert_eq!(limited["records"].as_array().unwrap().len(), 3);
+    assert_eq!(limited["truncated"], true);
+    for bad in [
+        "frame=1&bbox=1,2,3",
+        "frame=1&bbox=a,b,c,d,e,f",
+        "frame=1&bbox=1,1,1,0,0,0",
+        "frame=1&bbox=NaN,0,0,1,1,1",
+        "frame=1&bbox=0,0,0,inf,1,1",
+        "frame=x",
+        "bbox=0,0,0,1,1,1",
+        "frame=1&limit=0",
+    ] {
+        let (status, err) = get(bad);
+        assert_eq!(status, 400, "{bad}: {err}");
+        assert!(err["detail"].is_string());
+    }
+    assert_eq!(get("frame=7").0, 404);
+    let (status, _) = http(&server, "GET", "/api/jobs/job-42/records?frame=0", "");
+    assert_eq!(status, 404);
+    let frame0 = get("frame=0").1["count"].as_u64().unwrap();
+
+    // A trc job: records live across frames.
+    let trc_frames = 6u32;
+    let trc = create_job(
+        &server,
+        &format!(
+            r#"{{"scene":"builtin:cube-in-box","method":"trc","frames":"0..{trc_frames}","size":"16x16","spp":1}}"#
+        ),
+    );
+    wait_done(&server, &trc);
+    let mut trc_counts = Vec::new();
+    for f in 0..trc_frames {
+        let (status, r) = http(
+            &server,
+            "GET",
+            &format!("/api/jobs/{trc}/records?frame={f}"),
+            "",
+        );
+        assert_eq!(status, 200);
+        let r = json(&r);
+        for rec in r["records"].as_array().unwrap() {
+            let (c, l) = (
+                rec["created"].as_u64().unwrap(),
+                rec["last_frame"].as_u64().unwrap(),
+            );
+            assert!(c <= f as u64 && f as u64 <= l, "{rec}");
+            assert_eq!(rec["reused"].as_u64().unwrap(), f as u64 - c);
+        }
+        trc_counts.push(r["count"].as_u64().unwrap());
+    }
+    assert!(trc_counts[0] > 0);
+    let trc_sid = |store: &radcache::store::Store| store.job(&trc).unwrap().unwrap().id;
+
+    // The same job as the store and `inspect` see it (the server holds the
+    // store's lock: stop it first).
+    drop(server);
+    let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["inspect", &id, "--json", "--db"])
+        .arg(&db)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report = json(&out.stdout);
+    let frames = report["jobs"][0]["frame_details"].as_array().unwrap();
+    for (f, n) in [(0, frame0), (1, records.len() as u64)] {
+        assert_eq!(frames[f]["records_written"], n, "frame {f}");
+        assert_eq!(frames[f]["records_alive"], n, "frame {f}");
+    }
+    let store = radcache::store::Store::open_existing(&db).unwrap();
+    // trc: the records alive at each frame are as many as its statistics say.
+    for f in 0..trc_frames {
+        let stats = store.frame_stats(trc_sid(&store), f).unwrap().unwrap();
+        assert_eq!(
+            trc_counts[f as usize], stats.records_alive,
+            "trc frame {f}: records alive vs stats"
+        );
+    }
+    let sid = store.job(&id).unwrap().unwrap().id;
+    let stored = store.frame_records(sid, 1).unwrap();
+    assert_eq!(stored.len(), records.len());
+    for (s, r) in stored.iter().zip(records) {
+        assert_eq!(r["id"], s.id);
+        let p: Vec<f32> = r["position"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap() as f32)
+            .collect();
+        assert_eq!(p, s.position);
+        assert_eq!(r["radius"].as_f64().unwrap() as f32, s.radius);
+    }
+}
+
+fn job_state(server: &Server, id: &str) -> serde_json::Value {
+    let (status, body) = http(server, "GET", &format!("/api/jobs/{id}"), "");
+    assert_eq!(status, 200);
+    json(&body)
+}
+
+#[test]
+fn killed_server_resumes_its_job_and_frames_equal_an_uninterrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    let db = dir.path().join("db");
+    let frames = 24;
+    let request = format!(
+        r#"{{"scene":"builtin:cube-in-box","method":"trc","frames":"0..{frames}","size":"24x24","spp":2}}"#
+    );
+    let mut server = start(&db, &scenes);
+    let id = create_job(&server, &request);
+    // Queued behind it, then cancelled: must stay cancelled after the restart.
+    let cancelled = create_job(&server, &request);
+    let (status, body) = http(
+        &server,
+        "POST",
+        &format!("/api/jobs/{cancelled}/cancel"),
+        "",
+    );
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(json(&body)["state"], "cancelled");
+    let start_time = Instant::now();
+    let done_at_kill = loop {
+        let done = job_state(&server, &id)["frames_done"].as_u64().unwrap();
+        if done >= 2 {
+            break done;
+        }
+        assert!(start_time.elapsed() < Duration::from_secs(120));
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    // SIGKILL: no chance to finish the frame or flush anything.
+    server.child.kill().unwrap();
+    server.child.wait().unwrap();
+    assert!(done_at_kill < frames, "the job finished before the kill");
+
+    let server = start(&db, &scenes);
+    assert_eq!(job_state(&server, &cancelled)["state"], "cancelled");
+    let job = wait_done(&server, &id);
+    assert_eq!(job["frames_done"], frames);
+    assert_eq!(job_state(&server, &cancelled)["state"], "cancelled");
+
+    // The same job rendered in one go by the CLI.
+    let out = dir.path().join("cli");
+    let ok = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["render", "--builtin", "cube-in-box", "--method", "trc"])
+        .args(["--frames", &format!("0..{frames}"), "--size", "24x24"])
+        .args(["--spp", "2", "--backend", "cpu", "-q", "--out"])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    for f in 0..frames {
+        let (status, exr) = http(
+            &server,
+            "GET",
+            &format!("/api/jobs/{id}/frames/{f}.exr"),
+            "",
+        );
+        assert_eq!(status, 200);
+        let cli = std::fs::read(out.join(format!("frame_{f:04}.exr"))).unwrap();
+        assert!(
+            exr == cli,
+            "frame {f}: resumed job differs from an uninterrupted run"
+        );
+    }
+    // The cancelled job resumes on request.
+    let (status, _) = http(
+        &server,
+        "POST",
+        &format!("/api/jobs/{cancelled}/resume"),
+        "",
+    );
+    assert_eq!(status, 200);
+    assert_eq!(wait_done(&server, &cancelled)["frames_done"], frames);
+}
+
+/// (method, path) of every `.route(…)` in the router's source.
+fn router_routes() -> Vec<(String, String)> {
+    let src =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/src/server/mod.rs")).unwrap();
+    let mut routes = Vec::new();
+    for line in src
+        .lines()
+        .map(str::trim)
+        .filter(|l| l.starts_with(".route(\""))
+    {
+        let rest = &line[".route(\"".len()..];
+        let (path, handlers) = rest.split_once('"').unwrap();
+        for method in ["get", "post", "put", "delete", "patch"] {
+            if handlers.contains(&format!(" {method}("))
+                || handlers.contains(&format!(".{method}("))
+            {
+                routes.push((method.to_string(), path.to_string()));
+            }
+        }
+    }
+    routes
+}
+
+#[test]
+fn openapi_documents_every_route() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    let server = start(&dir.path().join("db"), &scenes);
+    let (status, body) = http(&server, "GET", "/api/openapi.json", "");
+    assert_eq!(status, 200);
+    let doc = json(&body);
+    assert!(doc["openapi"].as_str().unwrap().starts_with("3."));
+    let routes = router_routes();
+    assert!(routes.len() >= 15, "{routes:?}");
+    for (method, path) in &routes {
+        assert!(
+            doc["paths"][path][method].is_object(),
+            "{} {path} is not in web/openapi.json",
+            method.to_uppercase()
+        );
+    }
+    let paths = doc["paths"].as_object().unwrap();
+    for (path, ops) in paths {
+        for method in ops.as_object().unwrap().keys() {
+            assert!(
+                routes.contains(&(method.clone(), path.clone())),
+                "web/openapi.json documents {method} {path}, which the router lacks"
+            );
+            // Every documented route reaches a handler (not the fallback).
+            let concrete = path.replace("{id}", "job-1").replace("{file}", "x");
+            let (_, body) = http(&server, &method.to_uppercase(), &concrete, "");
+            assert!(
+                !String::from_utf8_lossy(&body).contains("no such route"),
+                "{method} {concrete} hits the fallback"
+            );
+        }
+    }
+    // Every `$ref` resolves.
+    let text = String::from_utf8(body).unwrap();
+    for r in text.split("\"$ref\": \"#/").skip(1) {
+        let pointer = format!("/{}", r.split('"').next().unwrap());
+        assert!(doc.pointer(&pointer).is_some(), "unresolved $ref {pointer}");
+    }
+}
+
+#[test]
+fn bench_charts_come_from_the_bench_directory_when_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    // Embedded charts by default.
+    let server = start(&dir.path().join("db"), &scenes);
+    let (status, body) = http(&server, "GET", "/api/charts", "");
+    assert_eq!(status, 200);
+    let charts = json(&body);
+    assert!(charts
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|c| c["name"] == "cube-in-box_error_vs_time.svg"));
+    let (status, svg) = http(
+        &server,
+        "GET",
+        "/web/charts/cube-in-box_error_vs_time.svg",
+        "",
+    );
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&svg).contains("<svg"));
+    drop(server);
+
+    let bench = dir.path().join("bench-out");
+    std::fs::create_dir(&bench).unwrap();
+    std::fs::write(bench.join("s_error_vs_time.svg"), "<svg id='mine'></svg>").unwrap();
+    std::fs::write(bench.join("bench.csv"), "scene,method\n").unwrap();
+    std::fs::write(bench.join("notes.txt"), "no").unwrap();
+    std::fs::write(dir.path().join("secret.svg"), "<svg id='secret'></svg>").unwrap();
+    let server = start_with(
+        &dir.path().join("db"),
+        &scenes,
+        &["--bench", bench.to_str().unwrap()],
+    );
+    let (status, body) = http(&server, "GET", "/api/charts", "");
+    assert_eq!(status, 200);
+    let names: Vec<String> = json(&body)
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(names, ["bench.csv", "s_error_vs_time.svg"]);
+    let (status, svg) = http(&server, "GET", "/web/charts/s_error_vs_time.svg", "");
+    assert_eq!(status, 200);
+    assert_eq!(svg, b"<svg id='mine'></svg>");
+    for bad in [
+        "notes.txt",
+        "..%2Fsecret.svg",
+        "%2E%2E%2Fsecret.svg",
+        "missing.svg",
+        ".hidden.svg",
+    ] {
+        let (status, body) = http(&server, "GET", &format!("/web/charts/{bad}"), "");
+        assert_eq!(status, 404, "{bad}: {}", String::from_utf8_lossy(&body));
+        assert!(!String::from_utf8_lossy(&body).contains("id='secret'"));
+    }
+}
+
+/// A GET with extra header lines; returns (status, body).
+fn get_with(addr: &str, path: &str, headers: &str) -> (u16, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    write!(
+        s,
+        "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n{headers}\r\n"
+    )
+    .unwrap();
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).unwrap();
+    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&raw[..split]).to_string();
+    let status: u16 = head.split(' ').nth(1).unwrap().parse().unwrap();
+    let mut body = raw[split + 4..].to_vec();
+    if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
+        body = dechunk(&body);
+    }
+    (status, body)
+}
+
+#[test]
+fn a_token_is_required_on_every_request_and_the_dashboard_carries_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    // A non-loopback address without a token is refused.
+    let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["serve", "--addr", "0.0.0.0:0", "--db"])
+        .arg(dir.path().join("db0"))
+        .env_remove("RADCACHE_TOKEN")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--token"));
+
+    let token = "s3cret/+ &x";
+    let encoded = "s3cret%2F%2B%20%26x";
+    let server = start_with(&dir.path().join("db"), &scenes, &["--token", token]);
+    let addr = server.addr.clone();
+    let (status, body) = get_with(&addr, "/api/jobs", "");
+    assert_eq!(status, 401);
+    assert!(json(&body)["detail"].is_string());
+    assert_eq!(
+        get_with(&addr, "/api/jobs", "Authorization: Bearer wrong\r\n").0,
+        401
+    );
+    assert_eq!(get_with(&addr, "/api/jobs?token=wrong", "").0, 401);
+    assert_eq!(get_with(&addr, "/", "").0, 401);
+    assert_eq!(get_with(&addr, "/web/app.js", "").0, 401);
+    let (status, _) = get_with(
+        &addr,
+        "/api/jobs",
+        &format!("Authorization: Bearer {token}\r\n"),
+    );
+    assert_eq!(status, 200);
+    assert_eq!(
+        get_with(&addr, &format!("/api/jobs?token={encoded}"), "").0,
+        200
+    );
+    let (status, html) = get_with(&addr, &format!("/?token={encoded}"), "");
+    assert_eq!(status, 200);
+    let html = String::from_utf8(html).unwrap();
+    assert!(
+        html.contains(&format!("/web/app.js?token={encoded}")),
+        "{html}"
+    );
+    assert!(
+        html.contains(&format!("/web/app.css?token={encoded}")),
+        "{html}"
+    );
+    assert_eq!(
+        get_with(&addr, &format!("/web/app.js?token={encoded}"), "").0,
+        200
+    );
+    assert_eq!(get_with(&addr, "/api/jobs?token=%zz", "").0, 401);
 }

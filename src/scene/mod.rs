@@ -306,6 +306,21 @@ impl Camera {
         let y = (1.0 - 2.0 * sy) * tan_half;
         (self.basis * Vec3::new(x, y, -1.0)).normalize()
     }
+
+    /// The film point (sx, sy) ∈ [0,1]² (as [`Camera::direction`] takes it,
+    /// (0,0) at the top-left corner) that world point `p` projects to, or
+    /// `None` when `p` is not in front of the camera. Points outside the
+    /// view give coordinates outside [0,1].
+    pub fn project(&self, p: Vec3, aspect: f32) -> Option<(f32, f32)> {
+        let local = self.basis.transpose() * (p - self.position);
+        if local.z >= -1e-6 {
+            return None;
+        }
+        let tan_half = (0.5 * self.yfov).tan();
+        let x = local.x / -local.z / (tan_half * aspect);
+        let y = local.y / -local.z / tan_half;
+        Some((0.5 * (x + 1.0), 0.5 * (1.0 - y)))
+    }
 }
 
 /// The scene evaluated at one time `t`: world-space triangles (static objects
@@ -352,6 +367,12 @@ impl Scene {
 
     pub fn object_is_dynamic(&self, object: usize) -> bool {
         self.node_is_dynamic(self.objects[object].node)
+    }
+
+    /// The camera at time `t` (as [`Scene::snapshot`] evaluates it).
+    pub fn camera_at(&self, t: f32) -> Camera {
+        let world = self.node_world_transforms(t);
+        camera_at(&world[self.camera.node], self.camera.yfov)
     }
 
     /// World transforms of all nodes at time `t`.
@@ -497,5 +518,24 @@ impl Snapshot {
             eat(object);
         }
         h ^ self.static_count as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn project_inverts_direction() {
+        let scene = Scene::builtin("cube-in-box").unwrap();
+        let camera = scene.camera_at(0.5);
+        let aspect = 1.5;
+        for (sx, sy) in [(0.5, 0.5), (0.1, 0.9), (0.8, 0.2)] {
+            let p = camera.position + 3.0 * camera.direction(sx, sy, aspect);
+            let (x, y) = camera.project(p, aspect).unwrap();
+            assert!((x - sx).abs() < 1e-4 && (y - sy).abs() < 1e-4, "{x} {y}");
+        }
+        let behind = camera.position - camera.direction(0.5, 0.5, aspect);
+        assert_eq!(camera.project(behind, aspect), None);
     }
 }

@@ -2,7 +2,7 @@
 //! the store.
 
 use super::{ApiError, AppState, JobState};
-use crate::film;
+use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::header;
 use axum::response::IntoResponse;
@@ -11,16 +11,6 @@ use serde_json::{json, Value};
 use std::fmt::Write;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
-
-/// The store id of job `id` (it has one once its first frame started).
-fn store_id(state: &AppState, id: &str) -> Result<Option<u64>, ApiError> {
-    state.job(id)?;
-    Ok(state
-        .store
-        .job(id)
-        .map_err(ApiError::internal)?
-        .map(|j| j.id))
-}
 
 pub async fn frame(
     State(state): State<Arc<AppState>>,
@@ -34,21 +24,16 @@ pub async fn frame(
             ApiError::not_found(format!("no frame file {file:?}; use N.png or N.exr"))
         })?;
     let missing = || ApiError::not_found(format!("job {id} has no frame {n} (yet)"));
-    let sid = store_id(&state, &id)?.ok_or_else(missing)?;
-    let exr = state
-        .store
-        .frame_exr(sid, n)
-        .map_err(ApiError::internal)?
-        .ok_or_else(missing)?;
+    let sid = state.store_id(&id)?.ok_or_else(missing)?;
     if ext == "exr" {
-        return Ok(([(header::CONTENT_TYPE, "image/x-exr")], exr));
+        let exr = state
+            .store
+            .frame_exr(sid, n)
+            .map_err(ApiError::internal)?
+            .ok_or_else(missing)?;
+        return Ok(([(header::CONTENT_TYPE, "image/x-exr")], Bytes::from(exr)));
     }
-    let png = tokio::task::spawn_blocking(move || {
-        let film = film::decode_exr(&exr).map_err(ApiError::internal)?;
-        film::encode_png(&film).map_err(ApiError::internal)
-    })
-    .await
-    .map_err(ApiError::internal)??;
+    let png = state.frame_png(sid, n).await?.ok_or_else(missing)?;
     Ok(([(header::CONTENT_TYPE, "image/png")], png))
 }
 
@@ -56,36 +41,51 @@ pub async fn stats(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
-    let Some(sid) = store_id(&state, &id)? else {
+    let Some(sid) = state.store_id(&id)? else {
         return Ok(Json(json!({ "id": id, "frames": [] })));
     };
     let mut frames = Vec::new();
     for frame in state.store.frames_done(sid).map_err(ApiError::internal)? {
-        if let Some(s) = state
-            .store
-            .frame_stats(sid, frame)
-            .map_err(ApiError::internal)?
-        {
-            let phases: serde_json::Map<String, Value> = s
-                .phase_seconds
-                .iter()
-                .map(|(k, v)| (k.clone(), json!(v)))
-                .collect();
-            frames.push(json!({
-                "frame": s.frame,
-                "records_alive": s.records_alive,
-                "records_created": s.records_created,
-                "records_reused": s.records_reused,
-                "records_replaced": s.records_replaced,
-                "records_dropped": s.records_dropped,
-                "lookups": s.lookups,
-                "rays": s.rays,
-                "phase_seconds": phases,
-                "seconds": s.phase_seconds.iter().map(|p| p.1).sum::<f64>(),
-            }));
+        if let Some(row) = frame_stats_json(&state, sid, frame)? {
+            frames.push(row);
         }
     }
     Ok(Json(json!({ "id": id, "frames": frames })))
+}
+
+/// One frame's statistics row (`/stats`, and the `frame` event).
+pub fn frame_stats_json(state: &AppState, sid: u64, frame: u32) -> Result<Option<Value>, ApiError> {
+    let Some(s) = state
+        .store
+        .frame_stats(sid, frame)
+        .map_err(ApiError::internal)?
+    else {
+        return Ok(None);
+    };
+    let exr_bytes = state
+        .store
+        .frame(sid, frame)
+        .map_err(ApiError::internal)?
+        .map_or(0, |f| f.exr_zstd.len() as u64);
+    let phases: serde_json::Map<String, Value> = s
+        .phase_seconds
+        .iter()
+        .map(|(k, v)| (k.clone(), json!(v)))
+        .collect();
+    Ok(Some(json!({
+        "frame": s.frame,
+        "records_alive": s.records_alive,
+        "records_created": s.records_created,
+        "records_reused": s.records_reused,
+        "records_replaced": s.records_replaced,
+        "records_dropped": s.records_dropped,
+        "lookups": s.lookups,
+        "rays": s.rays,
+        "phase_seconds": phases,
+        "seconds": s.phase_seconds.iter().map(|p| p.1).sum::<f64>(),
+        "exr_bytes": exr_bytes,
+        "samples_raw_bytes": s.samples_raw_bytes,
+    })))
 }
 
 /// Prometheus text format.

@@ -20,6 +20,8 @@ pub fn job_json(job: &Job) -> Value {
         "size": format!("{}x{}", job.request.settings.width, job.request.settings.height),
         "spp": job.request.method.spp(),
         "error": job.error,
+        "seconds_per_frame": (job.run_frames > 0).then(|| job.run_seconds / job.run_frames as f64),
+        "eta_seconds": job.eta_seconds(),
     })
 }
 
@@ -32,17 +34,20 @@ pub async fn create(
         let mut jobs = state.jobs.lock().expect("job table lock");
         let n = jobs.keys().next_back().map_or(1, |n| n + 1);
         let id = format!("job-{n}");
-        jobs.insert(
-            n,
-            Job {
-                id: id.clone(),
-                request,
-                state: JobState::Queued,
-                frames_done: 0,
-                error: None,
-                cancel: false,
-            },
-        );
+        // Into the store at once, so that a restart finds it queued.
+        let spec = crate::render::job_spec(
+            &id,
+            &request.scene,
+            &request.method,
+            &request.settings,
+            request.frames.clone(),
+        )
+        .map_err(ApiError::internal)?;
+        state
+            .store
+            .begin_job(&spec, false)
+            .map_err(ApiError::internal)?;
+        jobs.insert(n, Job::new(id.clone(), request, JobState::Queued, 0));
         id
     };
     state.wake.notify_one();
@@ -66,6 +71,13 @@ pub async fn cancel(
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
     let job = state.job(&id)?;
+    if matches!(job.state, JobState::Queued | JobState::Running) {
+        // Durable first: a restart keeps the job cancelled.
+        state
+            .store
+            .set_job_cancelled(&id, true)
+            .map_err(ApiError::internal)?;
+    }
     match job.state {
         JobState::Queued => state.update(&id, |j| j.state = JobState::Cancelled),
         JobState::Running => state.update(&id, |j| j.cancel = true),
@@ -84,6 +96,12 @@ pub async fn resume(
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
     let job = state.job(&id)?;
+    if matches!(job.state, JobState::Cancelled | JobState::Failed) {
+        state
+            .store
+            .set_job_cancelled(&id, false)
+            .map_err(ApiError::internal)?;
+    }
     match job.state {
         JobState::Cancelled | JobState::Failed => state.update(&id, |j| {
             j.state = JobState::Queued;

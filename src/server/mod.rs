@@ -7,8 +7,13 @@
 mod error;
 mod frames;
 mod jobs;
+mod records;
 mod request;
+mod stream;
+mod web;
 mod worker;
+
+pub use web::OPENAPI;
 
 pub use error::ApiError;
 pub use request::{JobRequest, MAX_FRAMES};
@@ -16,17 +21,18 @@ pub use request::{JobRequest, MAX_FRAMES};
 use crate::render::BackendChoice;
 use crate::store::Store;
 use anyhow::{bail, Context, Result};
+use axum::body::Bytes;
 use axum::extract::{DefaultBodyLimit, Request, State};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::Router;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
-use tokio::sync::Notify;
+use tokio::sync::{watch, Notify};
 
 /// Largest accepted request body (a job request is a few hundred bytes).
 pub const MAX_BODY_BYTES: usize = 16 * 1024;
@@ -42,6 +48,9 @@ pub struct ServeOptions {
     pub backend: BackendChoice,
     /// Where each job's frame files are written (`DIR/<job id>/`).
     pub out: PathBuf,
+    /// A `radcache bench --out` directory whose charts the dashboard shows
+    /// instead of the ones embedded from `web/charts`.
+    pub bench: Option<PathBuf>,
 }
 
 /// A job's lifecycle state.
@@ -55,6 +64,14 @@ pub enum JobState {
 }
 
 impl JobState {
+    /// Done, failed or cancelled: nothing changes until a resume.
+    pub fn is_final(self) -> bool {
+        matches!(
+            self,
+            JobState::Done | JobState::Failed | JobState::Cancelled
+        )
+    }
+
     pub fn as_str(self) -> &'static str {
         match self {
             JobState::Queued => "queued",
@@ -77,6 +94,68 @@ pub struct Job {
     pub error: Option<String>,
     /// Set by `cancel`; the worker stops after the current frame.
     pub cancel: bool,
+    /// Frames rendered and seconds spent by the current run (the ETA).
+    pub run_frames: u32,
+    pub run_seconds: f64,
+}
+
+impl Job {
+    pub fn new(id: String, request: JobRequest, state: JobState, frames_done: u32) -> Job {
+        Job {
+            id,
+            request,
+            state,
+            frames_done,
+            error: None,
+            cancel: false,
+            run_frames: 0,
+            run_seconds: 0.0,
+        }
+    }
+
+    /// Seconds left at the current run's mean time per frame.
+    pub fn eta_seconds(&self) -> Option<f64> {
+        (self.state == JobState::Running && self.run_frames > 0).then(|| {
+            let left = self.request.frames_total().saturating_sub(self.frames_done);
+            left as f64 * self.run_seconds / self.run_frames as f64
+        })
+    }
+}
+
+/// Most bytes of PNG encodings [`AppState`] keeps (the stream and
+/// `frames/N.png` encode a frame once, not once per client).
+const PNG_CACHE_BYTES: usize = 64 * 1024 * 1024;
+
+/// Recently encoded frame PNGs by (store job id, frame), oldest evicted
+/// first.
+#[derive(Default)]
+pub struct PngCache {
+    map: HashMap<(u64, u32), Bytes>,
+    order: VecDeque<(u64, u32)>,
+    bytes: usize,
+}
+
+impl PngCache {
+    pub fn get(&self, key: (u64, u32)) -> Option<Bytes> {
+        self.map.get(&key).cloned()
+    }
+
+    pub fn insert(&mut self, key: (u64, u32), png: Bytes) {
+        if png.len() > PNG_CACHE_BYTES || self.map.contains_key(&key) {
+            return;
+        }
+        self.bytes += png.len();
+        self.map.insert(key, png);
+        self.order.push_back(key);
+        while self.bytes > PNG_CACHE_BYTES {
+            let Some(old) = self.order.pop_front() else {
+                break;
+            };
+            if let Some(b) = self.map.remove(&old) {
+                self.bytes -= b.len();
+            }
+        }
+    }
 }
 
 /// The one shared state of the server.
@@ -91,6 +170,12 @@ pub struct AppState {
     pub shutdown: AtomicBool,
     pub frames_rendered: AtomicU64,
     pub render_micros: AtomicU64,
+    /// One watch channel per followed job (stream, events), bumped on every
+    /// change of the job: followers wake on changes, never poll.
+    pub watchers: Mutex<HashMap<u64, watch::Sender<u64>>>,
+    pub pngs: Mutex<PngCache>,
+    /// The scene of the last `/records` query (its camera projects records).
+    pub scene_cache: Mutex<Option<(String, Arc<crate::scene::Scene>)>>,
 }
 
 impl AppState {
@@ -104,12 +189,86 @@ impl AppState {
             .ok_or_else(|| ApiError::not_found(format!("no job {id:?}")))
     }
 
+    /// Changes job `id` and wakes its followers.
     pub fn update(&self, id: &str, f: impl FnOnce(&mut Job)) {
         if let Some(n) = parse_job_id(id) {
             if let Some(job) = self.jobs.lock().expect("job table lock").get_mut(&n) {
                 f(job);
             }
+            self.notify(n);
         }
+    }
+
+    fn notify(&self, n: u64) {
+        if let Some(tx) = self.watchers.lock().expect("watchers lock").get(&n) {
+            tx.send_modify(|g| *g += 1);
+        }
+    }
+
+    /// Wakes every follower (shutdown: they end their streams).
+    pub fn notify_all(&self) {
+        for tx in self.watchers.lock().expect("watchers lock").values() {
+            tx.send_modify(|g| *g += 1);
+        }
+    }
+
+    /// A receiver that changes whenever job `id` does (subscribe before
+    /// reading the job, so that no change is missed).
+    pub fn subscribe(&self, id: &str) -> Result<watch::Receiver<u64>, ApiError> {
+        self.job(id)?;
+        let n = parse_job_id(id).expect("an existing job has a valid id");
+        Ok(self
+            .watchers
+            .lock()
+            .expect("watchers lock")
+            .entry(n)
+            .or_insert_with(|| watch::channel(0).0)
+            .subscribe())
+    }
+
+    /// The store id of job `id` (it has one once its render started).
+    pub fn store_id(&self, id: &str) -> Result<Option<u64>, ApiError> {
+        self.job(id)?;
+        Ok(self
+            .store
+            .job(id)
+            .map_err(ApiError::internal)?
+            .map(|j| j.id))
+    }
+
+    /// Frame `frame` of store job `sid` as PNG (tone-mapped), encoded once
+    /// and cached; `None` if the frame is not stored.
+    pub async fn frame_png(
+        self: &Arc<Self>,
+        sid: u64,
+        frame: u32,
+    ) -> Result<Option<Bytes>, ApiError> {
+        let cached = self.pngs.lock().expect("png cache lock").get((sid, frame));
+        if cached.is_some() {
+            return Ok(cached);
+        }
+        let state = self.clone();
+        let png = tokio::task::spawn_blocking(move || -> Result<Option<Bytes>, ApiError> {
+            let Some(exr) = state
+                .store
+                .frame_exr(sid, frame)
+                .map_err(ApiError::internal)?
+            else {
+                return Ok(None);
+            };
+            let film = crate::film::decode_exr(&exr).map_err(ApiError::internal)?;
+            let png = crate::film::encode_png(&film).map_err(ApiError::internal)?;
+            Ok(Some(Bytes::from(png)))
+        })
+        .await
+        .map_err(ApiError::internal)??;
+        if let Some(png) = &png {
+            self.pngs
+                .lock()
+                .expect("png cache lock")
+                .insert((sid, frame), png.clone());
+        }
+        Ok(png)
     }
 }
 
@@ -121,22 +280,25 @@ pub fn parse_job_id(id: &str) -> Option<u64> {
 /// The API router over `state`.
 pub fn router(state: Arc<AppState>) -> Router {
     Router::new()
-        .route("/", get(index))
+        .route("/", get(web::index))
+        .route("/web/{file}", get(web::file))
+        .route("/web/charts/{file}", get(web::chart))
+        .route("/api/charts", get(web::charts))
+        .route("/api/openapi.json", get(web::openapi))
         .route("/api/jobs", post(jobs::create).get(jobs::list))
         .route("/api/jobs/{id}", get(jobs::show))
         .route("/api/jobs/{id}/cancel", post(jobs::cancel))
         .route("/api/jobs/{id}/resume", post(jobs::resume))
         .route("/api/jobs/{id}/frames/{file}", get(frames::frame))
         .route("/api/jobs/{id}/stats", get(frames::stats))
+        .route("/api/jobs/{id}/stream", get(stream::frames))
+        .route("/api/jobs/{id}/events", get(stream::events))
+        .route("/api/jobs/{id}/records", get(records::records))
         .route("/metrics", get(frames::metrics))
         .fallback(|| async { ApiError::not_found("no such route".into()) })
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
         .layer(middleware::from_fn_with_state(state.clone(), check_token))
         .with_state(state)
-}
-
-async fn index() -> impl IntoResponse {
-    axum::response::Html(include_str!("../../web/index.html"))
 }
 
 /// With a token configured, every request must carry it as
@@ -151,8 +313,9 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
         let query = req
             .uri()
             .query()
-            .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")));
-        if bearer != Some(token.as_str()) && query != Some(token.as_str()) {
+            .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")))
+            .and_then(percent_decode);
+        if bearer != Some(token.as_str()) && query.as_deref() != Some(token.as_str()) {
             return ApiError::new(
                 axum::http::StatusCode::UNAUTHORIZED,
                 "unauthorized",
@@ -162,6 +325,37 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
         }
     }
     next.run(req).await
+}
+
+/// `s` with every byte outside RFC 3986's unreserved set as `%XX`.
+pub fn percent_encode(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for b in s.bytes() {
+        if b.is_ascii_alphanumeric() || b"-._~".contains(&b) {
+            out.push(b as char);
+        } else {
+            out.push_str(&format!("%{b:02X}"));
+        }
+    }
+    out
+}
+
+/// Decodes `%XX` escapes (and `+` as a space, as forms send it); `None`
+/// for a malformed escape or bytes that are not UTF-8.
+pub fn percent_decode(s: &str) -> Option<String> {
+    let mut out = Vec::with_capacity(s.len());
+    let mut bytes = s.bytes();
+    while let Some(b) = bytes.next() {
+        match b {
+            b'%' => {
+                let hex = [bytes.next()?, bytes.next()?];
+                out.push(u8::from_str_radix(std::str::from_utf8(&hex).ok()?, 16).ok()?);
+            }
+            b'+' => out.push(b' '),
+            b => out.push(b),
+        }
+    }
+    String::from_utf8(out).ok()
 }
 
 /// Runs the server until Ctrl-C or SIGTERM; the job being rendered stops
@@ -182,6 +376,9 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         shutdown: AtomicBool::new(false),
         frames_rendered: AtomicU64::new(0),
         render_micros: AtomicU64::new(0),
+        watchers: Mutex::new(HashMap::new()),
+        pngs: Mutex::new(PngCache::default()),
+        scene_cache: Mutex::new(None),
     });
     worker::load_jobs(&state)?;
     let runtime = tokio::runtime::Runtime::new().context("cannot start the tokio runtime")?;
@@ -201,6 +398,7 @@ pub fn serve(options: ServeOptions) -> Result<()> {
                 shutdown_signal().await;
                 stopping.shutdown.store(true, Ordering::SeqCst);
                 stopping.wake.notify_one();
+                stopping.notify_all();
             })
             .await
             .context("server error")?;

@@ -10,7 +10,8 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// Fills the job table from the store's `job-N` jobs: finished ones are
-/// done, unfinished ones (interrupted by a stop or a crash) are queued again.
+/// done, cancelled ones stay cancelled, other unfinished ones (interrupted
+/// by a stop or a crash) are queued again.
 pub fn load_jobs(state: &AppState) -> Result<()> {
     let mut jobs = state.jobs.lock().expect("job table lock");
     for stored in state.store.jobs()? {
@@ -21,21 +22,14 @@ pub fn load_jobs(state: &AppState) -> Result<()> {
         };
         let done = frames_done(state, stored.id, &request);
         let finished = done == request.frames_total();
-        jobs.insert(
-            n,
-            Job {
-                id: stored.name.clone(),
-                request,
-                state: if finished {
-                    JobState::Done
-                } else {
-                    JobState::Queued
-                },
-                frames_done: done,
-                error: None,
-                cancel: false,
-            },
-        );
+        let job_state = if finished {
+            JobState::Done
+        } else if state.store.job_cancelled(&stored.name)? {
+            JobState::Cancelled
+        } else {
+            JobState::Queued
+        };
+        jobs.insert(n, Job::new(stored.name.clone(), request, job_state, done));
     }
     Ok(())
 }
@@ -60,9 +54,14 @@ pub async fn run(state: Arc<AppState>) {
                 .find(|j| j.state == JobState::Queued)
                 .map(|j| {
                     j.state = JobState::Running;
+                    j.run_frames = 0;
+                    j.run_seconds = 0.0;
                     j.id.clone()
                 })
         };
+        if let Some(id) = &next {
+            state.update(id, |_| {});
+        }
         let Some(id) = next else {
             state.wake.notified().await;
             continue;
@@ -133,6 +132,8 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
         let mut go_on = !state.shutdown.load(Ordering::SeqCst);
         state.update(id, |j| {
             j.frames_done = done;
+            j.run_frames += 1;
+            j.run_seconds += micros as f64 / 1e6;
             go_on &= !j.cancel;
         });
         go_on

@@ -29,6 +29,12 @@ pub const META_SCHEMA_VERSION: &[u8] = b"schema_version";
 /// `meta` key of the crate version that created the store (UTF-8).
 pub const META_CREATED_BY: &[u8] = b"created_by";
 
+/// `meta` key marking job `name` as cancelled by `radcache serve` (value
+/// empty): a restarted server keeps it cancelled instead of resuming it.
+pub fn meta_cancelled(name: &str) -> Vec<u8> {
+    [b"cancelled:".as_slice(), name.as_bytes()].concat()
+}
+
 pub fn job(name: &str) -> Vec<u8> {
     name.as_bytes().to_vec()
 }

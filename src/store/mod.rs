@@ -330,6 +330,26 @@ impl Store {
         Ok(out)
     }
 
+    /// Marks job `name` cancelled (or not) for `radcache serve`, durably
+    /// (a `meta` key; no schema change).
+    pub fn set_job_cancelled(&self, name: &str, cancelled: bool) -> Result<(), StoreError> {
+        let key = keys::meta_cancelled(name);
+        let r = if cancelled {
+            self.meta.insert(key, &[] as &[u8]).map(|_| ())
+        } else {
+            self.meta.remove(key).map(|_| ())
+        };
+        r.map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()
+    }
+
+    /// Whether job `name` is marked cancelled ([`Self::set_job_cancelled`]).
+    pub fn job_cancelled(&self, name: &str) -> Result<bool, StoreError> {
+        self.meta
+            .contains_key(keys::meta_cancelled(name))
+            .map_err(|e| StoreError::sled(&self.path, e))
+    }
+
     /// Starts or resumes job `spec.name`. A job of that name with another
     /// scene or other settings is refused unless `force`, which starts it
     /// over under a new id (the old id's data is then deleted).

@@ -1,0 +1,165 @@
+//! `GET /api/jobs/{id}/records?frame=N&bbox=x0,y0,z0,x1,y1,z1[&limit=L]`:
+//! the records alive at frame N inside a world-space box, read from the
+//! store, each with its projected pixel position (`screen`) under the
+//! scene's camera at that frame (the dashboard's overlay).
+//!
+//! A record's versions are keyed by the frame that wrote them
+//! (`store::keys`); the record at frame N is its latest version written at
+//! or before N, and it is alive there when `created_frame ≤ N ≤ last_frame`
+//! (`store::schema::RecordValue`).
+
+use super::{ApiError, AppState};
+use crate::scene::Scene;
+use crate::store::schema::RecordValue;
+use axum::extract::rejection::QueryRejection;
+use axum::extract::{Path, Query, State};
+use axum::Json;
+use serde_json::{json, Value};
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+
+/// Records returned when no `limit` is given, and the most a `limit` may ask.
+pub const DEFAULT_LIMIT: usize = 20_000;
+pub const MAX_LIMIT: usize = 200_000;
+
+/// An axis-aligned box, min and max corners.
+type Bbox = ([f32; 3], [f32; 3]);
+
+fn parse_bbox(s: &str) -> Result<Bbox, ApiError> {
+    let bad = |why: &str| {
+        ApiError::bad_request(format!(
+            "bbox {s:?}: {why}; expected x0,y0,z0,x1,y1,z1 (six finite numbers, x0 ≤ x1, y0 ≤ y1, z0 ≤ z1)"
+        ))
+    };
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad("not a number"))?;
+    if v.len() != 6 {
+        return Err(bad("not six numbers"));
+    }
+    if v.iter().any(|x| !x.is_finite()) {
+        return Err(bad("not finite"));
+    }
+    let (min, max) = ([v[0], v[1], v[2]], [v[3], v[4], v[5]]);
+    if (0..3).any(|i| min[i] > max[i]) {
+        return Err(bad("min corner above max corner"));
+    }
+    Ok((min, max))
+}
+
+fn inside(p: &[f32; 3], (min, max): &Bbox) -> bool {
+    (0..3).all(|i| p[i] >= min[i] && p[i] <= max[i])
+}
+
+/// The job's scene, loaded once per scene source (the last one asked).
+fn scene(
+    state: &AppState,
+    key: &str,
+    source: &crate::render::SceneSource,
+) -> Result<Arc<Scene>, ApiError> {
+    let mut cache = state.scene_cache.lock().expect("scene cache lock");
+    if let Some((k, s)) = cache.as_ref() {
+        if k == key {
+            return Ok(s.clone());
+        }
+    }
+    let scene = Arc::new(source.load().map_err(ApiError::internal)?);
+    *cache = Some((key.to_string(), scene.clone()));
+    Ok(scene)
+}
+
+pub async fn records(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    query: Result<Query<HashMap<String, String>>, QueryRejection>,
+) -> Result<Json<Value>, ApiError> {
+    let Query(q) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let frame: u32 = q
+        .get("frame")
+        .ok_or_else(|| ApiError::bad_request("missing frame=N".into()))?
+        .parse()
+        .map_err(|_| {
+            ApiError::bad_request(format!("frame {:?} is not a frame number", q["frame"]))
+        })?;
+    let bbox = q.get("bbox").map(|b| parse_bbox(b)).transpose()?;
+    let limit = match q.get("limit") {
+        None => DEFAULT_LIMIT,
+        Some(l) => l
+            .parse::<usize>()
+            .ok()
+            .filter(|l| (1..=MAX_LIMIT).contains(l))
+            .ok_or_else(|| {
+                ApiError::bad_request(format!("limit {l:?}: expected 1..={MAX_LIMIT}"))
+            })?,
+    };
+    let job = state.job(&id)?;
+    let missing = || ApiError::not_found(format!("job {id} has no frame {frame} (yet)"));
+    let sid = state.store_id(&id)?.ok_or_else(missing)?;
+    if !state
+        .store
+        .frame_done(sid, frame)
+        .map_err(ApiError::internal)?
+    {
+        return Err(missing());
+    }
+    let s = state.clone();
+    tokio::task::spawn_blocking(move || {
+        // Latest version of each record written at or before `frame`.
+        let mut latest: BTreeMap<u64, RecordValue> = BTreeMap::new();
+        s.store
+            .for_each_record(sid, |written, r| {
+                if written <= frame {
+                    latest.insert(r.id, r);
+                }
+            })
+            .map_err(ApiError::internal)?;
+        let scene = scene(&s, &job.request.scene.to_string(), &job.request.scene)?;
+        let settings = &job.request.settings;
+        let camera = scene.camera_at(frame as f32 / settings.fps);
+        let (w, h) = (settings.width as f32, settings.height as f32);
+        let mut out = Vec::new();
+        let mut count = 0usize;
+        for r in latest.values() {
+            if !(r.created_frame <= frame && frame <= r.last_frame) {
+                continue;
+            }
+            if bbox.as_ref().is_some_and(|b| !inside(&r.position, b)) {
+                continue;
+            }
+            count += 1;
+            if out.len() >= limit {
+                continue;
+            }
+            let screen = camera
+                .project(glam::Vec3::from_array(r.position), w / h)
+                .map(|(sx, sy)| [sx * w, sy * h]);
+            out.push(json!({
+                "id": r.id,
+                "position": r.position,
+                "normal": r.normal,
+                "radius": r.radius,
+                "irradiance": r.irradiance,
+                "created": r.created_frame,
+                "last_frame": r.last_frame,
+                "lifespan": r.last_frame - r.created_frame + 1,
+                "reused": frame - r.created_frame,
+                "object": r.object,
+                "screen": screen,
+            }));
+        }
+        Ok(Json(json!({
+            "id": id,
+            "frame": frame,
+            "bbox": bbox.map(|(a, b)| [a[0], a[1], a[2], b[0], b[1], b[2]]),
+            "width": settings.width,
+            "height": settings.height,
+            "count": count,
+            "truncated": count > out.len(),
+            "records": out,
+        })))
+    })
+    .await
+    .map_err(ApiError::internal)?
+}

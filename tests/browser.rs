@@ -1,0 +1,256 @@
+//! The dashboard in headless Chromium (Debian package `chromium`, which
+//! `.ci/run` installs): a server on a loopback port renders a tiny `trc`
+//! job, then Chromium loads the dashboard for it. The test fails, never
+//! skips, without Chromium (set `CHROMIUM` to use another binary). The
+//! screenshot is kept at `target/tmp/browser/dashboard.png`.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+struct Server {
+    child: Child,
+    addr: String,
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn start(db: &Path, extra: &[&str]) -> Server {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["serve", "--addr", "127.0.0.1:0", "--backend", "cpu", "--db"])
+        .arg(db)
+        .args(extra)
+        .env_remove("RADCACHE_TOKEN")
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("start radcache serve");
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line
+        .trim()
+        .strip_prefix("listening on http://")
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .to_string();
+    Server { child, addr }
+}
+
+fn http(addr: &str, method: &str, path: &str, body: &str) -> (u16, String) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    write!(
+        s,
+        "{method} {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    )
+    .unwrap();
+    let mut raw = String::new();
+    s.read_to_string(&mut raw).unwrap();
+    let (head, body) = raw.split_once("\r\n\r\n").unwrap();
+    (
+        head.split(' ').nth(1).unwrap().parse().unwrap(),
+        body.to_string(),
+    )
+}
+
+fn chromium() -> PathBuf {
+    let path = std::env::var_os("CHROMIUM")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from("/usr/bin/chromium"));
+    assert!(
+        path.exists(),
+        "{} not found: install Chromium (Debian: apt-get install chromium; .ci/run does) or set CHROMIUM",
+        path.display()
+    );
+    path
+}
+
+/// Runs headless Chromium on `url` with `action` (`--dump-dom` or
+/// `--screenshot=…`); returns (stdout, stderr).
+fn run_chromium(url: &str, action: &str, profile: &Path) -> (String, String) {
+    let out = Command::new(chromium())
+        .args([
+            "--headless=new",
+            "--disable-gpu",
+            "--no-sandbox",
+            "--no-first-run",
+            "--disable-extensions",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--window-size=1300,1500",
+            "--virtual-time-budget=15000",
+            "--enable-logging=stderr",
+            "--v=0",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(action)
+        .arg(url)
+        .output()
+        .expect("run chromium");
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "chromium failed: {stderr}");
+    (stdout, stderr)
+}
+
+/// Console messages Chromium logged (`…:CONSOLE(…)] "message", source: …`).
+fn console_lines(stderr: &str) -> Vec<&str> {
+    stderr.lines().filter(|l| l.contains("CONSOLE")).collect()
+}
+
+#[test]
+fn dashboard_shows_frame_charts_and_overlay_without_console_errors() {
+    check_dashboard(None, true);
+}
+
+/// With --token, the page opened as /?token=… passes it on to every request.
+#[test]
+fn dashboard_works_behind_a_token() {
+    check_dashboard(Some("tok/en +1"), false);
+}
+
+/// Renders a tiny job and checks the dashboard for it in Chromium; keeps a
+/// screenshot when `screenshot`.
+fn check_dashboard(token: Option<&str>, screenshot: bool) {
+    let chromium_path = chromium();
+    let dir = tempfile::tempdir().unwrap();
+    let extra: Vec<&str> = token.map(|t| vec!["--token", t]).unwrap_or_default();
+    let server = start(&dir.path().join("db"), &extra);
+    // `?token=…` on every request (percent-encoded).
+    let q = token
+        .map(|t| {
+            let enc: String = t
+                .bytes()
+                .map(|b| {
+                    if b.is_ascii_alphanumeric() {
+                        (b as char).to_string()
+                    } else {
+                        format!("%{b:02X}")
+                    }
+                })
+                .collect();
+            format!("token={enc}")
+        })
+        .unwrap_or_default();
+    let with_q = |path: &str| {
+        if q.is_empty() {
+            path.to_string()
+        } else if path.contains('?') {
+            format!("{path}&{q}")
+        } else {
+            format!("{path}?{q}")
+        }
+    };
+    let (status, body) = http(
+        &server.addr,
+        "POST",
+        &with_q("/api/jobs"),
+        r#"{"scene":"builtin:cube-in-box","method":"trc","frames":"0..3","size":"16x16","spp":1}"#,
+    );
+    assert_eq!(status, 201, "{body}");
+    let id = serde_json::from_str::<serde_json::Value>(&body).unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let start = Instant::now();
+    loop {
+        let (_, job) = http(&server.addr, "GET", &with_q(&format!("/api/jobs/{id}")), "");
+        if job.contains("\"state\":\"done\"") {
+            break;
+        }
+        assert!(!job.contains("failed"), "{job}");
+        assert!(start.elapsed() < Duration::from_secs(120), "{job}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let url = format!("http://{}{}", server.addr, with_q(&format!("/?job={id}")));
+
+    let (dom, stderr) = run_chromium(&url, "--dump-dom", &dir.path().join("profile1"));
+    let console = console_lines(&stderr);
+    assert!(
+        console.is_empty(),
+        "console messages (chromium {}):\n{}",
+        chromium_path.display(),
+        console.join("\n")
+    );
+    let has = |needle: &str| dom.contains(needle);
+    assert!(
+        has("data-ready=\"1\""),
+        "the page did not finish loading:\n{dom}"
+    );
+    assert!(!has("data-errors="), "the page reported errors:\n{dom}");
+    // The live frame: the stream, shown at the job's size.
+    let stream_src = with_q(&format!("/api/jobs/{id}/stream")).replace('&', "&amp;");
+    assert!(
+        has(&format!("src=\"{stream_src}\"")),
+        "no live stream image:\n{dom}"
+    );
+    assert!(
+        has("data-loaded=\"16x16\""),
+        "the live frame did not load:\n{dom}"
+    );
+    // Progress from the events.
+    assert!(has("3/3 frames"), "{dom}");
+    // Charts: the paths the script drew (4 record series, time, 2 byte series).
+    let paths = dom.matches("class=\"series\"").count();
+    assert!(paths >= 7, "{paths} chart paths:\n{dom}");
+    // The record overlay: one dot per record alive in the last frame.
+    let dots = dom.matches("class=\"record\"").count();
+    let (_, records) = http(
+        &server.addr,
+        "GET",
+        &with_q(&format!("/api/jobs/{id}/records?frame=2")),
+        "",
+    );
+    let records: serde_json::Value = serde_json::from_str(&records).unwrap();
+    let in_view = records["records"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| {
+            r["screen"].as_array().is_some_and(|s| {
+                let (x, y) = (s[0].as_f64().unwrap(), s[1].as_f64().unwrap());
+                (0.0..=16.0).contains(&x) && (0.0..=16.0).contains(&y)
+            })
+        })
+        .count();
+    assert!(in_view > 0, "no records to show: {records}");
+    assert_eq!(dots, in_view, "overlay dots vs records in view");
+    // The bench chart.
+    let chart_src = with_q("/web/charts/cube-in-box_error_vs_time.svg").replace('&', "&amp;");
+    assert!(has(&format!("src=\"{chart_src}\"")), "{dom}");
+    if !screenshot {
+        return;
+    }
+
+    let shots = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("browser");
+    std::fs::create_dir_all(&shots).unwrap();
+    let shot = shots.join("dashboard.png");
+    let _ = std::fs::remove_file(&shot);
+    let (_, stderr) = run_chromium(
+        &url,
+        &format!("--screenshot={}", shot.display()),
+        &dir.path().join("profile2"),
+    );
+    let console = console_lines(&stderr);
+    assert!(
+        console.is_empty(),
+        "console messages:\n{}",
+        console.join("\n")
+    );
+    let png = image::open(&shot).expect("screenshot written");
+    assert!(
+        png.width() >= 1000,
+        "screenshot {}x{}",
+        png.width(),
+        png.height()
+    );
+}

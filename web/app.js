@@ -1,0 +1,401 @@
+// radcache dashboard: plain JS, no build step, nothing loaded from outside
+// the server. Talks to the API described at /api/openapi.json:
+// the live frame is an <img> on /api/jobs/ID/stream (multipart), progress and
+// per-frame statistics come from /api/jobs/ID/events (SSE), the record
+// overlay from /api/jobs/ID/records (pixel positions computed by the server).
+'use strict';
+
+const $ = (id) => document.getElementById(id);
+const SVG = 'http://www.w3.org/2000/svg';
+
+// Errors are shown on the page (and counted in body[data-errors]) so that
+// the browser test sees them in the DOM as well as in the console.
+const errors = [];
+function reportError(msg) {
+  errors.push(String(msg));
+  const pre = $('errors');
+  pre.textContent = errors.join('\n');
+  pre.hidden = false;
+  document.body.dataset.errors = String(errors.length);
+  console.error(String(msg));
+}
+window.addEventListener('error', (e) => reportError(e.message));
+window.addEventListener('unhandledrejection', (e) => reportError(e.reason && e.reason.message || e.reason));
+
+// A server started with --token needs it on every request: the page was
+// opened as /?token=…, and every URL it requests carries it on.
+const TOKEN = new URLSearchParams(location.search).get('token');
+function withToken(path) {
+  if (!TOKEN) return path;
+  return `${path}${path.includes('?') ? '&' : '?'}token=${encodeURIComponent(TOKEN)}`;
+}
+
+async function api(path, options) {
+  const r = await fetch(withToken(path), options);
+  const text = await r.text();
+  let body = null;
+  try { body = text ? JSON.parse(text) : null; } catch (_) { body = null; }
+  if (!r.ok) throw new Error((body && body.detail) || `${r.status} ${r.statusText}`);
+  return body;
+}
+
+function el(tag, attrs, text) {
+  const e = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs || {})) e.setAttribute(k, v);
+  if (text !== undefined) e.textContent = text;
+  return e;
+}
+
+function svgEl(tag, attrs, text) {
+  const e = document.createElementNS(SVG, tag);
+  for (const [k, v] of Object.entries(attrs || {})) e.setAttribute(k, v);
+  if (text !== undefined) e.textContent = text;
+  return e;
+}
+
+function fmtSeconds(s) {
+  if (s == null || !isFinite(s)) return '';
+  if (s < 60) return `${s.toFixed(1)} s`;
+  const m = Math.floor(s / 60);
+  return `${m} min ${Math.round(s - 60 * m)} s`;
+}
+
+function fmtBytes(b) {
+  if (b >= 1 << 20) return `${(b / (1 << 20)).toFixed(1)} MiB`;
+  if (b >= 1 << 10) return `${(b / (1 << 10)).toFixed(1)} KiB`;
+  return `${Math.round(b)} B`;
+}
+
+// ---------------------------------------------------------------- jobs
+
+const view = {
+  id: null,        // selected job id
+  job: null,       // its last known state (GET /api/jobs/ID)
+  stats: new Map(),// frame -> statistics row
+  events: null,    // EventSource
+  follow: true,    // show the live stream and the newest frame's records
+  overlayFrame: null,
+  overlayBusy: false,
+  overlayWanted: null,
+};
+
+async function refreshJobs() {
+  const jobs = await api('/api/jobs');
+  const body = $('jobs').tBodies[0];
+  body.replaceChildren();
+  for (const j of jobs) {
+    const tr = el('tr', { class: 'job', 'data-id': j.id });
+    if (j.id === view.id) tr.classList.add('selected');
+    tr.append(el('td', {}, j.id), el('td', {}, j.scene), el('td', {}, j.method), el('td', {}, j.size),
+      el('td', { class: j.state === 'failed' ? 'error' : '' }, j.state));
+    const td = el('td');
+    const p = el('progress', { max: String(j.frames_total), value: String(j.frames_done) });
+    td.append(p, ` ${j.frames_done}/${j.frames_total}`);
+    tr.append(td);
+    tr.addEventListener('click', () => selectJob(j.id).catch(reportError));
+    body.append(tr);
+  }
+  return jobs;
+}
+
+function frameRange(job) {
+  const [a, b] = job.frames.split('..').map(Number);
+  return [a, b];
+}
+
+function showProgress(job) {
+  view.job = job;
+  $('job-title').textContent = `${job.id}: ${job.scene}, ${job.method}, ${job.size}, ${job.spp} spp, frames ${job.frames} — ${job.state}`;
+  $('progress').max = job.frames_total;
+  $('progress').value = job.frames_done;
+  $('progress-text').textContent = `${job.frames_done}/${job.frames_total} frames`;
+  $('eta').textContent = job.state === 'running' && job.eta_seconds != null
+    ? `ETA ${fmtSeconds(job.eta_seconds)} (${fmtSeconds(job.seconds_per_frame)}/frame)` : job.state;
+  $('cancel').disabled = !(job.state === 'queued' || job.state === 'running');
+  $('resume').disabled = !(job.state === 'cancelled' || job.state === 'failed');
+  if (job.error) $('eta').textContent += ` — ${job.error}`;
+}
+
+async function selectJob(id) {
+  if (view.events) view.events.close();
+  Object.assign(view, { id, job: null, stats: new Map(), events: null, follow: true, overlayFrame: null, overlayWanted: null });
+  $('follow').checked = true;
+  history.replaceState(null, '', withToken(`/?job=${encodeURIComponent(id)}`));
+  for (const tr of $('jobs').tBodies[0].rows) tr.classList.toggle('selected', tr.dataset.id === id);
+  $('job-panel').hidden = false;
+  $('overlay').replaceChildren();
+  $('record-details').textContent = 'click a record for its details';
+  const job = await api(`/api/jobs/${id}`);
+  showProgress(job);
+  const [start, end] = frameRange(job);
+  $('frame-slider').min = start;
+  $('frame-slider').max = Math.max(start, end - 1);
+  const stats = await api(`/api/jobs/${id}/stats`);
+  for (const row of stats.frames) view.stats.set(row.frame, row);
+  drawCharts();
+  showLive();
+  const last = lastFrame();
+  if (last != null) {
+    $('frame-slider').value = last;
+    await loadOverlay(last);
+  }
+  follow(id);
+}
+
+function lastFrame() {
+  let last = null;
+  for (const f of view.stats.keys()) if (last == null || f > last) last = f;
+  return last;
+}
+
+function follow(id) {
+  const es = new EventSource(withToken(`/api/jobs/${id}/events`));
+  view.events = es;
+  es.addEventListener('progress', (e) => {
+    if (view.id !== id) return;
+    showProgress(JSON.parse(e.data));
+  });
+  es.addEventListener('frame', (e) => {
+    if (view.id !== id) return;
+    const row = JSON.parse(e.data);
+    const fresh = !view.stats.has(row.frame);
+    view.stats.set(row.frame, row);
+    if (fresh) scheduleCharts();
+    if (view.follow) {
+      $('frame-slider').value = row.frame;
+      $('frame-label').textContent = `frame ${row.frame}`;
+      requestOverlay(row.frame);
+    }
+  });
+  es.addEventListener('state', (e) => {
+    const s = JSON.parse(e.data);
+    if (s.final) {
+      es.close();
+      if (view.events === es) view.events = null;
+    }
+    refreshJobs().catch(reportError);
+  });
+  // The server closes the stream after the final state; anything else is a
+  // lost connection, which EventSource retries by itself.
+  es.addEventListener('error', () => {});
+}
+
+function showLive() {
+  const img = $('live');
+  if (view.follow) {
+    img.src = withToken(`/api/jobs/${view.id}/stream`);
+    const last = lastFrame();
+    $('frame-label').textContent = last == null ? 'waiting for the first frame' : `frame ${last}`;
+  }
+}
+
+function showFrame(frame) {
+  $('live').src = withToken(`/api/jobs/${view.id}/frames/${frame}.png`);
+  $('frame-label').textContent = `frame ${frame}`;
+  requestOverlay(frame);
+}
+
+// ---------------------------------------------------------------- overlay
+
+// At most one records request in flight; the newest wanted frame wins.
+function requestOverlay(frame) {
+  view.overlayWanted = frame;
+  if (!view.overlayBusy) loadOverlay(frame).catch(reportError);
+}
+
+// Fig. 11 of the TRC paper: red = short lifespan, green = long.
+function lifespanColour(t) {
+  return `hsl(${Math.round(120 * Math.min(1, Math.max(0, t)))}, 90%, 45%)`;
+}
+
+async function loadOverlay(frame) {
+  view.overlayBusy = true;
+  view.overlayWanted = null;
+  const id = view.id;
+  try {
+    const r = await api(`/api/jobs/${id}/records?frame=${frame}&limit=20000`);
+    if (view.id !== id) return;
+    drawOverlay(r);
+  } finally {
+    view.overlayBusy = false;
+  }
+  if (view.overlayWanted != null && view.overlayWanted !== frame) {
+    await loadOverlay(view.overlayWanted);
+  }
+}
+
+function drawOverlay(r) {
+  const svg = $('overlay');
+  view.overlayFrame = r.frame;
+  svg.setAttribute('viewBox', `0 0 ${r.width} ${r.height}`);
+  svg.replaceChildren();
+  $('frame-wrap').style.aspectRatio = `${r.width} / ${r.height}`;
+  svg.style.display = $('show-overlay').checked ? '' : 'none';
+  let maxLife = 1;
+  for (const rec of r.records) maxLife = Math.max(maxLife, rec.lifespan);
+  const logMax = Math.log(Math.max(2, maxLife));
+  const radius = Math.max(r.width, r.height) / 90;
+  for (const rec of r.records) {
+    if (!rec.screen) continue;
+    const [x, y] = rec.screen;
+    if (x < 0 || y < 0 || x > r.width || y > r.height) continue;
+    const c = svgEl('circle', {
+      cx: x.toFixed(3), cy: y.toFixed(3), r: radius.toFixed(3),
+      fill: lifespanColour(Math.log(rec.lifespan) / logMax),
+      'data-id': String(rec.id), class: 'record',
+    });
+    c.append(svgEl('title', {}, `record ${rec.id}: lifespan ${rec.lifespan}, created at frame ${rec.created}`));
+    c.addEventListener('click', (e) => {
+      e.stopPropagation();
+      for (const p of svg.querySelectorAll('circle.picked')) p.classList.remove('picked');
+      c.classList.add('picked');
+      $('record-details').textContent = JSON.stringify({ frame: r.frame, ...rec }, null, 1);
+    });
+    svg.append(c);
+  }
+  $('legend-range').textContent = `(1–${maxLife} frames)`;
+  $('overlay-info').textContent = `frame ${r.frame}: ${r.count} records alive` +
+    (r.truncated ? ` (showing ${r.records.length})` : '');
+}
+
+// ---------------------------------------------------------------- charts
+
+let chartsScheduled = false;
+function scheduleCharts() {
+  if (chartsScheduled) return;
+  chartsScheduled = true;
+  requestAnimationFrame(() => { chartsScheduled = false; drawCharts(); });
+}
+
+function drawCharts() {
+  const rows = [...view.stats.values()].sort((a, b) => a.frame - b.frame);
+  const series = (name, colour, f) => ({ name, colour, points: rows.map((r) => [r.frame, f(r)]) });
+  lineChart($('chart-records'), [
+    series('alive', '#1565c0', (r) => r.records_alive),
+    { ...series('created', '#2e7d32', (r) => r.records_created), dash: '5 3' },
+    series('reused', '#f9a825', (r) => r.records_reused),
+    series('dropped', '#c62828', (r) => r.records_dropped),
+  ], (v) => String(Math.round(v)));
+  lineChart($('chart-time'), [series('seconds', '#6a1b9a', (r) => r.seconds)], (v) => `${v.toPrecision(2)} s`);
+  lineChart($('chart-bytes'), [
+    series('frame EXR (stored)', '#00838f', (r) => r.exr_bytes || 0),
+    series('record samples (raw)', '#ef6c00', (r) => r.samples_raw_bytes || 0),
+  ], fmtBytes);
+}
+
+// A line chart drawn by hand into an <svg>: axes, min/max labels, one path
+// per series, a legend.
+function lineChart(svg, series, fmt) {
+  const W = 480, H = 170, L = 56, R = 8, T = 22, B = 22;
+  svg.setAttribute('viewBox', `0 0 ${W} ${H}`);
+  svg.replaceChildren();
+  const pts = series.flatMap((s) => s.points);
+  if (pts.length === 0) {
+    svg.append(svgEl('text', { x: W / 2, y: H / 2, 'text-anchor': 'middle' }, 'no frames yet'));
+    return;
+  }
+  let x0 = Math.min(...pts.map((p) => p[0])), x1 = Math.max(...pts.map((p) => p[0]));
+  let y1 = Math.max(...pts.map((p) => p[1]));
+  const y0 = 0;
+  if (x1 === x0) { x0 -= 0.5; x1 += 0.5; }
+  if (!(y1 > y0)) y1 = y0 + 1;
+  const sx = (x) => L + (W - L - R) * (x - x0) / (x1 - x0);
+  const sy = (y) => H - B - (H - T - B) * (y - y0) / (y1 - y0);
+  svg.append(
+    svgEl('line', { class: 'axis', x1: L, y1: H - B, x2: W - R, y2: H - B }),
+    svgEl('line', { class: 'axis', x1: L, y1: T, x2: L, y2: H - B }),
+    svgEl('text', { x: L - 4, y: T + 4, 'text-anchor': 'end' }, fmt(y1)),
+    svgEl('text', { x: L - 4, y: H - B, 'text-anchor': 'end' }, fmt(y0)),
+    svgEl('text', { x: L, y: H - 6, 'text-anchor': 'middle' }, String(Math.ceil(x0))),
+    svgEl('text', { x: W - R, y: H - 6, 'text-anchor': 'end' }, `frame ${Math.floor(x1)}`),
+  );
+  let lx = L + 4;
+  for (const s of series) {
+    if (s.points.length === 0) continue;
+    const d = s.points.map((p, i) => `${i ? 'L' : 'M'}${sx(p[0]).toFixed(1)},${sy(p[1]).toFixed(1)}`).join('');
+    const path = svgEl('path', { class: 'series', d, stroke: s.colour, 'data-series': s.name });
+    // Dashed where it may lie on another series (ic creates every record alive).
+    if (s.dash) path.setAttribute('stroke-dasharray', s.dash);
+    if (s.points.length === 1) path.setAttribute('stroke-linecap', 'round');
+    if (s.points.length === 1) path.setAttribute('stroke-width', '5');
+    svg.append(path);
+    const label = svgEl('text', { x: lx, y: 12, fill: s.colour }, s.name);
+    label.style.fill = s.colour;
+    svg.append(label);
+    lx += 9 + 6 * s.name.length;
+  }
+}
+
+// ---------------------------------------------------------------- bench
+
+async function loadBench() {
+  const charts = await api('/api/charts');
+  const box = $('bench');
+  box.replaceChildren();
+  for (const c of charts) {
+    if (c.type === 'image/svg+xml') box.append(el('img', { src: withToken(c.url), alt: c.name, title: c.name }));
+    else {
+      const a = el('a', { href: withToken(c.url) }, c.name);
+      box.append(a);
+    }
+  }
+}
+
+// ---------------------------------------------------------------- wiring
+
+$('new-job').addEventListener('submit', async (e) => {
+  e.preventDefault();
+  $('form-error').textContent = '';
+  const body = Object.fromEntries(new FormData(e.target));
+  if (body.spp === '') delete body.spp; else body.spp = Number(body.spp);
+  try {
+    const r = await api('/api/jobs', { method: 'POST', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(body) });
+    await refreshJobs();
+    await selectJob(r.id);
+  } catch (err) {
+    // A refused request is the user's to fix, not a page error.
+    $('form-error').textContent = err.message;
+  }
+});
+
+$('frame-slider').addEventListener('input', (e) => {
+  view.follow = false;
+  $('follow').checked = false;
+  showFrame(Number(e.target.value));
+});
+
+$('follow').addEventListener('change', (e) => {
+  view.follow = e.target.checked;
+  if (view.follow) {
+    showLive();
+    const last = lastFrame();
+    if (last != null) { $('frame-slider').value = last; requestOverlay(last); }
+  }
+});
+
+// Marks the frame shown (the browser test checks it): set on every image
+// (each part of the stream, each single frame).
+$('live').addEventListener('load', (e) => {
+  e.target.dataset.loaded = `${e.target.naturalWidth}x${e.target.naturalHeight}`;
+});
+
+$('show-overlay').addEventListener('change', (e) => {
+  $('overlay').style.display = e.target.checked ? '' : 'none';
+});
+
+$('cancel').addEventListener('click', () =>
+  api(`/api/jobs/${view.id}/cancel`, { method: 'POST' }).then(showProgress).then(refreshJobs).catch(reportError));
+$('resume').addEventListener('click', () =>
+  api(`/api/jobs/${view.id}/resume`, { method: 'POST' }).then(() => selectJob(view.id)).then(refreshJobs).catch(reportError));
+
+async function main() {
+  const jobs = await refreshJobs();
+  const wanted = new URLSearchParams(location.search).get('job');
+  const pick = jobs.find((j) => j.id === wanted) || jobs[jobs.length - 1];
+  await Promise.all([loadBench(), pick ? selectJob(pick.id) : null]);
+  document.body.dataset.ready = '1';
+  // The job list changes when jobs are created elsewhere; refresh it now and then.
+  setInterval(() => refreshJobs().catch(reportError), 5000);
+}
+
+main().catch(reportError);
