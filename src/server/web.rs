@@ -29,16 +29,26 @@ const FILES: [(&str, &str, &str); 2] = [
 ];
 
 /// The bench charts in `web/charts/` (README "Benchmarking").
-const CHARTS: [(&str, &str, &str); 3] = [
+const CHARTS: [(&str, &str, &str); 5] = [
     (
         "cube-in-box_error_vs_time.svg",
         "image/svg+xml",
         include_str!("../../web/charts/cube-in-box_error_vs_time.svg"),
     ),
     (
+        "cube-in-box_surface_error_vs_time.svg",
+        "image/svg+xml",
+        include_str!("../../web/charts/cube-in-box_surface_error_vs_time.svg"),
+    ),
+    (
         "cube-in-box_flicker_vs_time.svg",
         "image/svg+xml",
         include_str!("../../web/charts/cube-in-box_flicker_vs_time.svg"),
+    ),
+    (
+        "cube-in-box_surface_flicker_vs_time.svg",
+        "image/svg+xml",
+        include_str!("../../web/charts/cube-in-box_surface_flicker_vs_time.svg"),
     ),
     (
         "cube-in-box_bench.csv",
