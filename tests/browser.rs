@@ -4,61 +4,26 @@
 //! skips, without Chromium (set `CHROMIUM` to use another binary). The
 //! screenshot is kept at `target/tmp/browser/dashboard.png`.
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
+mod serve_client;
+
+use serve_client::{request, start_server, Server};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
-struct Server {
-    child: Child,
-    addr: String,
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 fn start(db: &Path, extra: &[&str]) -> Server {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
-        .args(["serve", "--addr", "127.0.0.1:0", "--backend", "cpu", "--db"])
-        .arg(db)
-        .args(extra)
-        .env_remove("RADCACHE_TOKEN")
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("start radcache serve");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line
-        .trim()
-        .strip_prefix("listening on http://")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_string();
-    Server { child, addr }
+    let mut args: Vec<&std::ffi::OsStr> = ["--backend", "cpu", "--db"]
+        .iter()
+        .map(|a| a.as_ref())
+        .collect();
+    args.push(db.as_os_str());
+    args.extend(extra.iter().map(std::ffi::OsStr::new));
+    start_server(&args)
 }
 
 fn http(addr: &str, method: &str, path: &str, body: &str) -> (u16, String) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
-    write!(
-        s,
-        "{method} {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\nContent-Length: {}\r\n\r\n{body}",
-        body.len()
-    )
-    .unwrap();
-    let mut raw = String::new();
-    s.read_to_string(&mut raw).unwrap();
-    let (head, body) = raw.split_once("\r\n\r\n").unwrap();
-    (
-        head.split(' ').nth(1).unwrap().parse().unwrap(),
-        body.to_string(),
-    )
+    let (status, _, body) = request(addr, method, path, "", body);
+    (status, String::from_utf8_lossy(&body).into_owned())
 }
 
 fn chromium() -> PathBuf {

@@ -1,47 +1,23 @@
 //! `radcache serve` against a real server on a loopback port.
 
-use std::io::{BufRead, BufReader, Read, Write};
-use std::net::TcpStream;
-use std::process::{Child, Command, Stdio};
+mod serve_client;
+
+use serve_client::{request, start_server, Server};
+use std::process::Command;
 use std::time::{Duration, Instant};
-
-struct Server {
-    child: Child,
-    addr: String,
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
 
 fn start(db: &std::path::Path, scenes: &std::path::Path) -> Server {
     start_with(db, scenes, &[])
 }
 
 fn start_with(db: &std::path::Path, scenes: &std::path::Path, extra: &[&str]) -> Server {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
-        .args(["serve", "--addr", "127.0.0.1:0", "--backend", "cpu", "--db"])
-        .arg(db)
-        .arg("--scenes")
-        .arg(scenes)
-        .args(extra)
-        .env_remove("RADCACHE_TOKEN")
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("start radcache serve");
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line
-        .trim()
-        .strip_prefix("listening on http://")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_string();
-    Server { child, addr }
+    let mut args: Vec<&std::ffi::OsStr> = ["--backend", "cpu", "--db"]
+        .iter()
+        .map(|a| a.as_ref())
+        .collect();
+    args.extend([db.as_os_str(), "--scenes".as_ref(), scenes.as_os_str()]);
+    args.extend(extra.iter().map(std::ffi::OsStr::new));
+    start_server(&args)
 }
 
 /// One HTTP/1.1 request; returns (status, body).
@@ -50,42 +26,16 @@ fn http(server: &Server, method: &str, path: &str, body: &str) -> (u16, Vec<u8>)
     (status, body)
 }
 
-/// One HTTP/1.1 request read to the end; returns (status, head, body).
+/// One HTTP/1.1 request with a JSON body, read to the end; returns
+/// (status, head, body).
 fn http_full(addr: &str, method: &str, path: &str, body: &str) -> (u16, String, Vec<u8>) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
-    write!(
-        s,
-        "{method} {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
-        body.len()
+    request(
+        addr,
+        method,
+        path,
+        "Content-Type: application/json\r\n",
+        body,
     )
-    .unwrap();
-    let mut raw = Vec::new();
-    s.read_to_end(&mut raw).unwrap();
-    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
-    let head = String::from_utf8_lossy(&raw[..split]).to_string();
-    let status: u16 = head.split(' ').nth(1).unwrap().parse().unwrap();
-    let mut body = raw[split + 4..].to_vec();
-    if head
-        .to_ascii_lowercase()
-        .contains("transfer-encoding: chunked")
-    {
-        body = dechunk(&body);
-    }
-    (status, head, body)
-}
-
-fn dechunk(mut b: &[u8]) -> Vec<u8> {
-    let mut out = Vec::new();
-    loop {
-        let nl = b.windows(2).position(|w| w == b"\r\n").unwrap();
-        let len = usize::from_str_radix(std::str::from_utf8(&b[..nl]).unwrap().trim(), 16).unwrap();
-        if len == 0 {
-            return out;
-        }
-        out.extend_from_slice(&b[nl + 2..nl + 2 + len]);
-        b = &b[nl + 4 + len..];
-    }
 }
 
 fn json(body: &[u8]) -> serde_json::Value {
@@ -781,25 +731,7 @@ fn bench_charts_come_from_the_bench_directory_when_given() {
 
 /// A GET with extra header lines; returns (status, body).
 fn get_with(addr: &str, path: &str, headers: &str) -> (u16, Vec<u8>) {
-    let mut s = TcpStream::connect(addr).unwrap();
-    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
-    write!(
-        s,
-        "GET {path} HTTP/1.1\r\nHost: x\r\nConnection: close\r\n{headers}\r\n"
-    )
-    .unwrap();
-    let mut raw = Vec::new();
-    s.read_to_end(&mut raw).unwrap();
-    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
-    let head = String::from_utf8_lossy(&raw[..split]).to_string();
-    let status: u16 = head.split(' ').nth(1).unwrap().parse().unwrap();
-    let mut body = raw[split + 4..].to_vec();
-    if head
-        .to_ascii_lowercase()
-        .contains("transfer-encoding: chunked")
-    {
-        body = dechunk(&body);
-    }
+    let (status, _, body) = request(addr, "GET", path, headers, "");
     (status, body)
 }
 
