@@ -6,6 +6,15 @@ use serve_client::{request, start_server, Server};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+/// A temporary folder for a test's store, with an empty `scenes/` folder
+/// in it for `--scenes`.
+fn workspace() -> (tempfile::TempDir, std::path::PathBuf) {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = dir.path().join("scenes");
+    std::fs::create_dir(&scenes).unwrap();
+    (dir, scenes)
+}
+
 fn start(db: &std::path::Path, scenes: &std::path::Path) -> Server {
     start_with(db, scenes, &[])
 }
@@ -64,9 +73,7 @@ fn wait_done(server: &Server, id: &str) -> serde_json::Value {
 
 #[test]
 fn job_renders_and_frames_match_the_cli() {
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir(&scenes).unwrap();
+    let (dir, scenes) = workspace();
     let server = start(&dir.path().join("db"), &scenes);
     let (status, body) = http(
         &server,
@@ -157,9 +164,7 @@ fn job_renders_and_frames_match_the_cli() {
 
 #[test]
 fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir(&scenes).unwrap();
+    let (dir, scenes) = workspace();
     std::fs::write(dir.path().join("secret.gltf"), "{}").unwrap();
     let server = start(&dir.path().join("db"), &scenes);
     let check = |method: &str, path: &str, body: &str, want: u16| {
@@ -297,9 +302,7 @@ fn sse_events(body: &[u8]) -> Vec<(String, serde_json::Value)> {
 
 #[test]
 fn stream_and_events_deliver_every_frame_in_order_to_two_clients() {
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir(&scenes).unwrap();
+    let (dir, scenes) = workspace();
     let server = start(&dir.path().join("db"), &scenes);
     // A slower job first, so that the followed job is still queued when
     // its clients connect: they then see every frame live.
@@ -378,9 +381,7 @@ fn stream_and_events_deliver_every_frame_in_order_to_two_clients() {
 
 #[test]
 fn records_match_the_store_and_inspect() {
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir(&scenes).unwrap();
+    let (dir, scenes) = workspace();
     let db = dir.path().join("db");
     let server = start(&db, &scenes);
     let id = create_job(
@@ -527,9 +528,7 @@ fn job_state(server: &Server, id: &str) -> serde_json::Value {
 
 #[test]
 fn killed_server_resumes_its_job_and_frames_equal_an_uninterrupted_run() {
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir(&scenes).unwrap();
+    let (dir, scenes) = workspace();
     let db = dir.path().join("db");
     let frames = 24;
     let request = format!(
@@ -627,9 +626,7 @@ fn router_routes() -> Vec<(String, String)> {
 
 #[test]
 fn openapi_documents_every_route() {
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir(&scenes).unwrap();
+    let (dir, scenes) = workspace();
     let server = start(&dir.path().join("db"), &scenes);
     let (status, body) = http(&server, "GET", "/api/openapi.json", "");
     assert_eq!(status, 200);
@@ -670,9 +667,7 @@ fn openapi_documents_every_route() {
 
 #[test]
 fn bench_charts_come_from_the_bench_directory_when_given() {
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir(&scenes).unwrap();
+    let (dir, scenes) = workspace();
     // Embedded charts by default.
     let server = start(&dir.path().join("db"), &scenes);
     let (status, body) = http(&server, "GET", "/api/charts", "");
@@ -737,9 +732,7 @@ fn get_with(addr: &str, path: &str, headers: &str) -> (u16, Vec<u8>) {
 
 #[test]
 fn a_token_is_required_on_every_request_and_the_dashboard_carries_it() {
-    let dir = tempfile::tempdir().unwrap();
-    let scenes = dir.path().join("scenes");
-    std::fs::create_dir(&scenes).unwrap();
+    let (dir, scenes) = workspace();
     // A non-loopback address without a token is refused.
     let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
         .args(["serve", "--addr", "0.0.0.0:0", "--db"])
