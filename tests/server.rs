@@ -47,6 +47,34 @@ fn http_full(addr: &str, method: &str, path: &str, body: &str) -> (u16, String, 
     )
 }
 
+/// `radcache render --builtin cube-in-box ARGS… --backend cpu -q --out OUT`
+/// in one go: the frames a server job must equal.
+fn render_with_cli(method: &[&str], size: &[&str], out: &std::path::Path) {
+    let ok = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["render", "--builtin", "cube-in-box"])
+        .args(method)
+        .args(size)
+        .args(["--backend", "cpu", "-q", "--out"])
+        .arg(out)
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
+/// Frames `0..frames` of job `id`, as EXR from the server, equal the CLI's
+/// byte for byte.
+fn assert_frames_equal_cli(server: &Server, id: &str, frames: u64, out: &std::path::Path) {
+    for f in 0..frames {
+        let (status, exr) = http(server, "GET", &format!("/api/jobs/{id}/frames/{f}.exr"), "");
+        assert_eq!(status, 200);
+        let cli = std::fs::read(out.join(format!("frame_{f:04}.exr"))).unwrap();
+        assert!(
+            exr == cli,
+            "frame {f}: the server's EXR differs from the CLI's"
+        );
+    }
+}
+
 fn json(body: &[u8]) -> serde_json::Value {
     serde_json::from_slice(body)
         .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(body)))
@@ -97,41 +125,12 @@ fn job_renders_and_frames_match_the_cli() {
     assert_eq!((img.width(), img.height()), (16, 16));
 
     let out = dir.path().join("cli");
-    let ok = Command::new(env!("CARGO_BIN_EXE_radcache"))
-        .args([
-            "render",
-            "--builtin",
-            "cube-in-box",
-            "--method",
-            "path",
-            "--frames",
-            "0..2",
-        ])
-        .args([
-            "--size",
-            "16x16",
-            "--spp",
-            "1",
-            "--backend",
-            "cpu",
-            "-q",
-            "--out",
-        ])
-        .arg(&out)
-        .status()
-        .unwrap();
-    assert!(ok.success());
-    for f in 0..2 {
-        let (status, exr) = http(
-            &server,
-            "GET",
-            &format!("/api/jobs/{id}/frames/{f}.exr"),
-            "",
-        );
-        assert_eq!(status, 200);
-        let cli = std::fs::read(out.join(format!("frame_{f:04}.exr"))).unwrap();
-        assert!(exr == cli, "frame {f}: server EXR differs from the CLI's");
-    }
+    render_with_cli(
+        &["--method", "path", "--frames", "0..2"],
+        &["--size", "16x16", "--spp", "1"],
+        &out,
+    );
+    assert_frames_equal_cli(&server, &id, 2, &out);
 
     let (status, stats) = http(&server, "GET", &format!("/api/jobs/{id}/stats"), "");
     assert_eq!(status, 200);
@@ -568,28 +567,13 @@ fn killed_server_resumes_its_job_and_frames_equal_an_uninterrupted_run() {
 
     // The same job rendered in one go by the CLI.
     let out = dir.path().join("cli");
-    let ok = Command::new(env!("CARGO_BIN_EXE_radcache"))
-        .args(["render", "--builtin", "cube-in-box", "--method", "trc"])
-        .args(["--frames", &format!("0..{frames}"), "--size", "24x24"])
-        .args(["--spp", "2", "--backend", "cpu", "-q", "--out"])
-        .arg(&out)
-        .status()
-        .unwrap();
-    assert!(ok.success());
-    for f in 0..frames {
-        let (status, exr) = http(
-            &server,
-            "GET",
-            &format!("/api/jobs/{id}/frames/{f}.exr"),
-            "",
-        );
-        assert_eq!(status, 200);
-        let cli = std::fs::read(out.join(format!("frame_{f:04}.exr"))).unwrap();
-        assert!(
-            exr == cli,
-            "frame {f}: resumed job differs from an uninterrupted run"
-        );
-    }
+    let range = format!("0..{frames}");
+    render_with_cli(
+        &["--method", "trc", "--frames", &range],
+        &["--size", "24x24", "--spp", "2"],
+        &out,
+    );
+    assert_frames_equal_cli(&server, &id, frames, &out);
     // The cancelled job resumes on request.
     let (status, _) = http(
         &server,
