@@ -575,6 +575,17 @@ fn dynamic_hits_follow_the_objects() {
     assert!(backend.last_build().static_build.is_some());
 }
 
+impl Stats {
+    /// Fails with the first few mismatches against the brute force.
+    fn assert_no_failures(&self) {
+        assert!(
+            self.failures.is_empty(),
+            "{:?}",
+            &self.failures[..self.failures.len().min(5)]
+        );
+    }
+}
+
 fn check_all_against_brute(scene: &Scene, times: &[f32], rays_per_time: usize) -> Stats {
     let mut backend = CpuBackend::new();
     let mut rng = Rng::from_seed(5, 5);
@@ -624,11 +635,7 @@ fn empty_dynamic_part() {
     let snap = scene.snapshot(0.0);
     assert_eq!(snap.dynamic_count(), 0);
     let stats = check_all_against_brute(&scene, &[0.0, 0.5], 2000);
-    assert!(
-        stats.failures.is_empty(),
-        "{:?}",
-        &stats.failures[..stats.failures.len().min(5)]
-    );
+    stats.assert_no_failures();
     assert!(stats.hits > 0);
 }
 
@@ -646,11 +653,7 @@ fn empty_static_part() {
     assert_eq!(snap.static_count, 0);
     assert_eq!(snap.dynamic_count(), snap.triangles.len());
     let stats = check_all_against_brute(&scene, &[0.0, 0.5, 1.0], 2000);
-    assert!(
-        stats.failures.is_empty(),
-        "{:?}",
-        &stats.failures[..stats.failures.len().min(5)]
-    );
+    stats.assert_no_failures();
     assert!(stats.hits > 0);
 }
 
@@ -733,10 +736,6 @@ fn axis_aligned_rays_with_signed_zeros() {
     for ((ray, hit), &o) in rays.iter().zip(&hits).zip(&occ) {
         check_ray(&snap, ray, hit, o, &mut stats);
     }
-    assert!(
-        stats.failures.is_empty(),
-        "{:?}",
-        &stats.failures[..stats.failures.len().min(5)]
-    );
+    stats.assert_no_failures();
     assert_eq!(stats.edge_excused, 0);
 }
