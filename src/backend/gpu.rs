@@ -40,6 +40,7 @@
 //! happened; it is never silently swallowed. [`GpuBackend::try_set_geometry`]
 //! reports the size problems as errors for callers that want to handle them.
 
+use super::gpu_cache::{CacheSplat, GpuLookup};
 use super::{Hit, Ray, RayBackend, RayCounts};
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
@@ -200,7 +201,7 @@ struct GeometryBuffers {
 }
 
 /// Errors reported by wgpu outside an error scope, or the device being lost.
-type ErrorSlot = Arc<Mutex<Option<String>>>;
+pub(super) type ErrorSlot = Arc<Mutex<Option<String>>>;
 
 pub struct GpuBackend {
     device: wgpu::Device,
@@ -218,6 +219,8 @@ pub struct GpuBackend {
     closest: AtomicU64,
     any: AtomicU64,
     timings: Mutex<GpuTimings>,
+    /// The render pass's cache interpolation on this device.
+    splat: CacheSplat,
 }
 
 /// The adapters wgpu sees (backends from `WGPU_BACKEND` when set, else
@@ -364,6 +367,7 @@ impl GpuBackend {
             dynamic_root: NONE,
         };
         let rays = RayBuffers::new(&device, 1);
+        let splat = CacheSplat::new(&device, &queue, adapter_name.clone(), errors.clone())?;
         let backend = GpuBackend {
             device,
             queue,
@@ -380,6 +384,7 @@ impl GpuBackend {
             closest: AtomicU64::new(0),
             any: AtomicU64::new(0),
             timings: Mutex::default(),
+            splat,
         };
         // One empty-scene dispatch of each kind: shader compilation and the
         // readback path fail here, not in the middle of a render.
@@ -396,6 +401,15 @@ impl GpuBackend {
             return Err(setup(
                 "test dispatch returned a hit in an empty scene".into(),
             ));
+        }
+        // And one splat over an empty cache: no record is usable anywhere.
+        let empty = backend
+            .splat
+            .prepare(&[], 0.2, true)
+            .and_then(|c| backend.splat.interpolate(&c, &[GpuLookup::default()], None))
+            .map_err(|e| setup(format!("test splat failed: {e}")))?;
+        if empty.first().is_none_or(|s| s.count != 0) {
+            return Err(setup("test splat found a record in an empty cache".into()));
         }
         backend.reset_timings();
         backend.closest.store(0, Ordering::Relaxed);
@@ -723,7 +737,10 @@ fn storage_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer
     })
 }
 
-fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+pub(super) fn layout_entry(
+    binding: u32,
+    ty: wgpu::BufferBindingType,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -736,11 +753,11 @@ fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLay
     }
 }
 
-fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+pub(super) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     layout_entry(binding, wgpu::BufferBindingType::Storage { read_only })
 }
 
-fn bind(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+pub(super) fn bind(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry {
         binding,
         resource: buffer.as_entire_binding(),
@@ -879,5 +896,9 @@ impl RayBackend for GpuBackend {
 
     fn preferred_batch(&self) -> usize {
         PREFERRED_BATCH
+    }
+
+    fn cache_splat(&self) -> Option<&CacheSplat> {
+        Some(&self.splat)
     }
 }
