@@ -329,7 +329,10 @@ fn pixel_differences(a: &Film, b: &Film) -> Vec<f32> {
     d
 }
 
-fn methods() -> Vec<(&'static str, fn() -> Box<dyn Method>)> {
+/// A fresh instance of a method, for each backend.
+type NewMethod = fn() -> Box<dyn Method>;
+
+fn methods() -> Vec<(&'static str, NewMethod)> {
     vec![
         ("ic", || Box::new(IrradianceCaching::new(small_ic()))),
         ("trc extrapolated", || {
