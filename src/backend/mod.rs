@@ -114,4 +114,14 @@ pub trait RayBackend: Send + Sync {
 
     /// Batch size that keeps this backend busy.
     fn preferred_batch(&self) -> usize;
+
+    /// Why this backend stopped working, if it did (a GPU device lost, out
+    /// of memory, a scene too large for it). The tracing methods cannot
+    /// return errors — they run deep inside rayon tasks — so a backend that
+    /// fails records the first error here and answers every later ray with
+    /// a miss; whoever drives a frame checks this afterwards and discards
+    /// the frame (the renderer does, see `Renderer::try_render_frame`).
+    fn failure(&self) -> Option<String> {
+        None
+    }
 }
