@@ -665,8 +665,8 @@ pub fn render_job_to_dir_with(
             progress.abandon();
             match job {
                 Some(_) => anyhow::anyhow!(
-                    "{e}\nevery frame before it is saved in the store: run the same command \
-                     again to resume (with --backend cpu if the GPU keeps failing)"
+                    "{e}\nevery frame before it is saved in the store: running the job \
+                     again resumes there (with --backend cpu if the GPU keeps failing)"
                 ),
                 None => anyhow::anyhow!("{e}"),
             }
