@@ -47,7 +47,7 @@
 //! frames; they only grow. Records and grid are uploaded once per render
 //! pass ([`CacheSplat::prepare`]); lookups per render tile.
 
-use super::gpu::{bind, layout_entry, storage_entry, ErrorSlot, GpuError};
+use super::gpu::{bind, layout_entry, storage_entry, ErrorSlot, FailureSlot, GpuError};
 use crate::cache::{Interpolated, IrradianceRecord};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -475,16 +475,20 @@ pub struct CacheSplat {
     max_binding: u64,
     max_groups_per_dim: u32,
     errors: ErrorSlot,
+    /// The GPU backend's failure, which [`Self::fail`] sets.
+    failed: FailureSlot,
 }
 
 impl CacheSplat {
     /// Compiles the shader on the backend's device (`adapter` names it in
-    /// errors; `errors` is the backend's slot for uncaptured errors).
+    /// errors; `errors` is the backend's slot for uncaptured errors, `failed`
+    /// its [`super::RayBackend::failure`]).
     pub(super) fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         adapter: String,
         errors: ErrorSlot,
+        failed: FailureSlot,
     ) -> Result<Self, GpuError> {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -568,7 +572,24 @@ impl CacheSplat {
                 .min(limits.max_buffer_size),
             max_groups_per_dim: limits.max_compute_workgroups_per_dimension.max(1),
             errors,
+            failed,
         })
+    }
+
+    /// Fails the GPU backend with `error` (the first error is kept): a
+    /// caller that cannot return it (a render tile) reports it here, and
+    /// the renderer discards the frame as for a ray error.
+    pub fn fail(&self, error: &GpuError) {
+        let mut failed = self.failed.lock().unwrap_or_else(|e| e.into_inner());
+        failed.get_or_insert_with(|| error.to_string());
+    }
+
+    /// Whether the GPU backend has failed (then the splat is not used).
+    pub fn has_failed(&self) -> bool {
+        self.failed
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .is_some()
     }
 
     fn error(&self, message: String) -> GpuError {
