@@ -27,7 +27,7 @@
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
 use radcache::backend::gpu::{AdapterPolicy, GpuBackend};
-use radcache::backend::gpu_cache::GpuLookup;
+use radcache::backend::gpu_cache::{GpuLookup, SplatTimings};
 use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
 use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::camera_query;
@@ -157,12 +157,14 @@ fn main() {
         let gpu_points: Vec<GpuLookup> =
             points.iter().map(|&(p, n)| GpuLookup::new(p, n)).collect();
         let (mut prepare, mut lookup) = (Duration::MAX, Duration::MAX);
+        let mut parts = SplatTimings::default();
         for _ in 0..RUNS {
             let start = Instant::now();
             let prepared = splat
                 .prepare(cache.records(), cache.accuracy, settings.gradients)
                 .expect("prepare");
             let p = start.elapsed();
+            splat.reset_timings();
             let start = Instant::now();
             let sums = splat
                 .interpolate(&prepared, &gpu_points, None)
@@ -170,10 +172,7 @@ fn main() {
             std::hint::black_box(sums);
             let l = start.elapsed();
             if p + l < prepare.saturating_add(lookup) {
-                (prepare, lookup) = (p, l);
-            }
-            if RUNS == 1 {
-                break;
+                (prepare, lookup, parts) = (p, l, splat.timings());
             }
         }
         let grid = splat
@@ -187,6 +186,14 @@ fn main() {
             ms(prepare),
             ms(lookup),
             ms(prepare + lookup)
+        );
+        println!(
+            "\nsplat lookups: upload {} ms, dispatch (GPU work, submit to done) {} ms, \
+             readback {} ms, {} dispatch(es)",
+            ms(parts.upload),
+            ms(parts.dispatch),
+            ms(parts.readback),
+            parts.dispatches
         );
     }
 

@@ -145,12 +145,15 @@ fn splat_records(@builtin(global_invocation_id) id: vec3<u32>) {
         let end = cell_start[cell + 1u];
         for (var j = cell_start[cell]; j < end; j = j + 1u) {
             let k = cell_records[j];
-            let r = records[k];
-            // The octree's test: p inside the sphere of influence.
-            let d = p - r.position;
-            if dot(d, d) > r.influence * r.influence {
+            // The octree's test: p inside the sphere of influence. Only the
+            // record's first 16 bytes are read for it; most binned records
+            // fail it.
+            let d = p - records[k].position;
+            let influence = records[k].influence;
+            if dot(d, d) > influence * influence {
                 continue;
             }
+            let r = records[k];
             // Eq. 2: w = 1/(‖p − p_K‖/R_K + √(1 − n·n_K)); ∞ at p_K itself.
             let denom = length(d) / r.radius + sqrt(max(1.0 - dot(n, r.normal), 0.0));
             var w = WEIGHT_CAP;

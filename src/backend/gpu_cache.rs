@@ -53,6 +53,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 /// Work items per workgroup. Must match `WORKGROUP_SIZE` in
 /// `shaders/cache_splat.wgsl`.
@@ -399,6 +400,21 @@ impl PreparedCache {
     }
 }
 
+/// Time spent by the splat, summed since creation or the last
+/// [`CacheSplat::reset_timings`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SplatTimings {
+    /// Binning the records and uploading records and grid.
+    pub prepare: Duration,
+    /// Writing lookups and parameters.
+    pub upload: Duration,
+    /// Submit to completion of the dispatch and the copy to staging.
+    pub dispatch: Duration,
+    /// Mapping the staging buffer and copying the sums out.
+    pub readback: Duration,
+    pub dispatches: u64,
+}
+
 /// Buffers of the pass, reused across dispatches; they only grow.
 struct SplatBuffers {
     /// `PreparedCache::generation` of the records and grid uploaded.
@@ -477,6 +493,7 @@ pub struct CacheSplat {
     errors: ErrorSlot,
     /// The GPU backend's failure, which [`Self::fail`] sets.
     failed: FailureSlot,
+    timings: Mutex<SplatTimings>,
 }
 
 impl CacheSplat {
@@ -573,7 +590,20 @@ impl CacheSplat {
             max_groups_per_dim: limits.max_compute_workgroups_per_dimension.max(1),
             errors,
             failed,
+            timings: Mutex::default(),
         })
+    }
+
+    pub fn timings(&self) -> SplatTimings {
+        *self.timings.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    pub fn reset_timings(&self) {
+        *self.timings.lock().unwrap_or_else(|e| e.into_inner()) = SplatTimings::default();
+    }
+
+    fn add_timings(&self, f: impl FnOnce(&mut SplatTimings)) {
+        f(&mut self.timings.lock().unwrap_or_else(|e| e.into_inner()));
     }
 
     /// Fails the GPU backend with `error` (the first error is kept): a
@@ -614,6 +644,7 @@ impl CacheSplat {
         accuracy: f32,
         gradients: bool,
     ) -> Result<PreparedCache, GpuError> {
+        let start = Instant::now();
         let prepared = PreparedCache {
             grid: SplatGrid::new(records, accuracy),
             gradients,
@@ -635,6 +666,8 @@ impl CacheSplat {
         }
         let mut buffers = self.buffers.lock().unwrap_or_else(|e| e.into_inner());
         self.upload(&mut buffers, &prepared);
+        let elapsed = start.elapsed();
+        self.add_timings(|t| t.prepare += elapsed);
         Ok(prepared)
     }
 
@@ -699,6 +732,7 @@ impl CacheSplat {
         used: Option<&[AtomicBool]>,
         out: &mut Vec<GpuSplat>,
     ) -> Result<(), GpuError> {
+        let start = Instant::now();
         let n = lookups.len() as u64;
         let grid = &prepared.grid;
         let splat_bytes = n * SPLAT_BYTES;
@@ -737,6 +771,8 @@ impl CacheSplat {
             .write_buffer(&buffers.params, 0, bytemuck::bytes_of(&params));
         self.queue
             .write_buffer(&buffers.lookups.buffer, 0, bytemuck::cast_slice(lookups));
+        let upload = start.elapsed();
+        let start = Instant::now();
 
         let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("splat records"),
@@ -789,6 +825,8 @@ impl CacheSplat {
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| self.error(format!("waiting for the GPU failed: {e}")))?;
+        let dispatch = start.elapsed();
+        let start = Instant::now();
         match rx.recv() {
             Ok(Ok(())) => {}
             Ok(Err(e)) => return Err(self.error(format!("cannot map the splat sums: {e}"))),
@@ -809,6 +847,13 @@ impl CacheSplat {
             }
         }
         staging.unmap();
+        let readback = start.elapsed();
+        self.add_timings(|t| {
+            t.upload += upload;
+            t.dispatch += dispatch;
+            t.readback += readback;
+            t.dispatches += 1;
+        });
         Ok(())
     }
 }
