@@ -78,6 +78,9 @@ impl RayBackend for RaysOnly {
     fn preferred_batch(&self) -> usize {
         self.0.preferred_batch()
     }
+    fn failure(&self) -> Option<String> {
+        self.0.failure()
+    }
 }
 
 /// The frame's lookups: the shading point and normal of each pixel sample

@@ -26,7 +26,7 @@
 
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
-use radcache::backend::gpu::{AdapterPolicy, GpuBackend};
+use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuError};
 use radcache::backend::gpu_cache::{CacheSplat, GpuLookup};
 use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
 use radcache::cache::gather::Strata;
@@ -261,6 +261,29 @@ fn gpu_interpolation_of_empty_and_interleaved_caches() {
         .is_empty());
 }
 
+/// A splat error (reported by a render tile, which cannot return it) fails
+/// the GPU backend as a ray error does, so the renderer discards the frame.
+#[test]
+fn a_splat_error_fails_the_gpu_backend() {
+    let gpu = gpu();
+    assert!(gpu.failure().is_none() && !splat(&gpu).has_failed());
+    splat(&gpu).fail(&GpuError::Geometry("test".into()));
+    splat(&gpu).fail(&GpuError::NoAdapter);
+    assert_eq!(gpu.failure().as_deref(), Some("GPU ray backend: test"));
+    assert!(splat(&gpu).has_failed());
+    let mut r = Renderer::new(
+        Scene::builtin("cube-in-box").unwrap(),
+        Box::new(IrradianceCaching::new(small_ic())),
+        Box::new(gpu),
+        FrameSettings {
+            width: 8,
+            height: 8,
+            ..FrameSettings::default()
+        },
+    );
+    assert!(r.try_render_frame(0).is_err());
+}
+
 /// The GPU backend with its cache splat hidden: GPU rays, CPU
 /// interpolation (what `--backend gpu` did before the splat).
 struct RaysOnly(GpuBackend);
@@ -283,6 +306,9 @@ impl RayBackend for RaysOnly {
     }
     fn preferred_batch(&self) -> usize {
         self.0.preferred_batch()
+    }
+    fn failure(&self) -> Option<String> {
+        self.0.failure()
     }
 }
 
@@ -383,7 +409,12 @@ fn frames_with_gpu_interpolation_equal_cpu_interpolation_on_the_same_rays() {
 /// the GPU finds (`tests/gpu_backend.rs`, README `--backend`), so such a
 /// record's irradiance differs by tens of percent whichever way the cache
 /// is interpolated (cube-in-box frame 0: 134 records on the CPU, 137 on the
-/// GPU, half of them identical), and so do the pixels it covers. Hence:
+/// GPU, half of them identical), and so do the pixels it covers. (With
+/// `ic`'s default strata at 64×64 it is worse: a GPU-gathered record on the
+/// floor–wall edge gets translation gradients near 1e6 from hits at t ≈ 0
+/// and the frame mean doubles, whichever way the cache is interpolated —
+/// a gathering problem this test does not cover; see README `--backend`.)
+/// Hence:
 /// at least [`SAME_PIXEL_SHARE`] of the pixels within
 /// [`PIXEL_REL_SAME_RAYS`], and the frame means within [`MEAN_REL_BACKENDS`].
 #[test]
