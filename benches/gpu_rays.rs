@@ -1,6 +1,6 @@
-//! Rays per second, CPU (2 threads) against the GPU backend, on the same
-//! 100k-triangle scene and the same 1M incoherent rays; plus the GPU's
-//! upload and readback times.
+//! Rays per second, CPU (2 threads) against the GPU backend with each BVH
+//! layout (BVH2, CWBVH), on the same 100k-triangle scene and the same 1M
+//! incoherent rays; plus the GPU's upload and readback times.
 //!
 //! ```text
 //! cargo bench --bench gpu_rays            # all adapters wgpu finds, lavapipe included
@@ -10,7 +10,7 @@
 
 use glam::{Quat, Vec3};
 use radcache::backend::cpu::CpuBackend;
-use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuTimings};
+use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuLayout, GpuTimings};
 use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::sampling::Rng;
 use radcache::scene::{Animation, CameraDef, Material, Mesh, Node, Object, Scene, Snapshot, Trs};
@@ -173,35 +173,67 @@ fn main() {
         mrays(n, cpu_any)
     );
 
-    let mut gpu = match GpuBackend::new(AdapterPolicy::AllowSoftware) {
-        Ok(gpu) => gpu,
-        Err(e) => {
-            println!("\nGPU: {e}");
-            return;
-        }
+    let cpu = CpuRun {
+        closest: cpu_closest,
+        any: cpu_any,
+        hits: cpu_hits,
     };
+    let mut notes = Vec::new();
+    for layout in GpuLayout::ALL {
+        match gpu_row(layout, &snapshot, &rays, &cpu) {
+            Ok(note) => notes.push(note),
+            Err(e) => {
+                println!("\nGPU: {e}");
+                return;
+            }
+        }
+    }
+    for note in notes {
+        println!("\n{note}");
+    }
+}
+
+/// The CPU's times and hits, which the GPU rows are compared with.
+struct CpuRun {
+    closest: Duration,
+    any: Duration,
+    hits: Vec<Hit>,
+}
+
+/// Measures the GPU backend with `layout` on `rays`, prints its table row
+/// and returns the notes printed under the table.
+fn gpu_row(
+    layout: GpuLayout,
+    snapshot: &Snapshot,
+    rays: &[Ray],
+    cpu: &CpuRun,
+) -> Result<String, radcache::backend::gpu::GpuError> {
+    let n = rays.len();
+    let mut hits = vec![Hit::MISS; n];
+    let mut occluded = vec![false; n];
+    let mut gpu = GpuBackend::with_layout(AdapterPolicy::AllowSoftware, layout)?;
     let start = Instant::now();
-    gpu.set_geometry(&snapshot);
+    gpu.set_geometry(snapshot);
     let setup = start.elapsed();
     let geometry = gpu.timings();
     gpu.reset_timings();
     // One warm-up batch (pipeline caches, buffer growth), not measured.
-    gpu.closest_hit(&rays, &mut hits);
-    gpu.any_hit(&rays, &mut occluded);
+    gpu.closest_hit(rays, &mut hits);
+    gpu.any_hit(rays, &mut occluded);
     gpu.reset_timings();
     let (gpu_closest, closest_t) = best(|| {
         gpu.reset_timings();
-        gpu.closest_hit(&rays, &mut hits);
+        gpu.closest_hit(rays, &mut hits);
         gpu.timings()
     });
     let (gpu_any, any_t) = best(|| {
         gpu.reset_timings();
-        gpu.any_hit(&rays, &mut occluded);
+        gpu.any_hit(rays, &mut occluded);
         gpu.timings()
     });
     let same = hits
         .iter()
-        .zip(&cpu_hits)
+        .zip(&cpu.hits)
         .filter(|(g, c)| g.triangle == c.triangle && g.t == c.t)
         .count();
     let breakdown = |t: &GpuTimings| {
@@ -214,33 +246,37 @@ fn main() {
         )
     };
     println!(
-        "| {} | {:.2} | {:.2} | {:.1}× / {:.1}× the CPU |",
+        "| {}, {} | {:.2} | {:.2} | {:.2}× / {:.2}× the CPU's rate |",
         gpu.name(),
+        layout.name(),
         mrays(n, gpu_closest),
         mrays(n, gpu_any),
-        cpu_closest.as_secs_f64() / gpu_closest.as_secs_f64(),
-        cpu_any.as_secs_f64() / gpu_any.as_secs_f64(),
+        cpu.closest.as_secs_f64() / gpu_closest.as_secs_f64(),
+        cpu.any.as_secs_f64() / gpu_any.as_secs_f64(),
     );
-    println!();
-    println!("GPU closest hit, best run: {}", breakdown(&closest_t));
-    println!("GPU any hit, best run:     {}", breakdown(&any_t));
-    println!(
-        "GPU geometry: BVH2 build {:.1} ms, static upload {:.1} ms ({} MiB nodes + triangles), set_geometry total {:.1} ms",
-        ms(geometry.bvh_build),
-        ms(geometry.static_upload),
-        (snapshot.triangles.len() * 48 * 3) >> 20,
-        ms(setup)
-    );
-    println!(
-        "GPU readback: {:.1} MiB of hits in {:.1} ms = {:.0} MiB/s",
-        (n * std::mem::size_of::<Hit>()) as f64 / (1 << 20) as f64,
-        ms(closest_t.readback),
-        (n * std::mem::size_of::<Hit>()) as f64
-            / (1 << 20) as f64
-            / closest_t.readback.as_secs_f64().max(1e-9)
-    );
-    println!(
-        "closest hits identical to the CPU (triangle and t): {same} of {n} ({:.4} %)",
-        100.0 * same as f64 / n as f64
-    );
+    let name = layout.name();
+    Ok([
+        format!("GPU {name} closest hit, best run: {}", breakdown(&closest_t)),
+        format!("GPU {name} any hit, best run:     {}", breakdown(&any_t)),
+        format!(
+            "GPU {name} geometry: build {:.1} ms, static upload {:.1} ms ({} MiB of triangles, plus nodes), set_geometry total {:.1} ms",
+            ms(geometry.bvh_build),
+            ms(geometry.static_upload),
+            (snapshot.triangles.len() * 48) >> 20,
+            ms(setup)
+        ),
+        format!(
+            "GPU {name} readback: {:.1} MiB of hits in {:.1} ms = {:.0} MiB/s",
+            (n * std::mem::size_of::<Hit>()) as f64 / (1 << 20) as f64,
+            ms(closest_t.readback),
+            (n * std::mem::size_of::<Hit>()) as f64
+                / (1 << 20) as f64
+                / closest_t.readback.as_secs_f64().max(1e-9)
+        ),
+        format!(
+            "GPU {name} closest hits identical to the CPU (triangle and t): {same} of {n} ({:.4} %)",
+            100.0 * same as f64 / n as f64
+        ),
+    ]
+    .join("\n"))
 }

@@ -1,6 +1,7 @@
 // Stage "any hit": for each ray of the chunk, 1 when any triangle of the
 // dynamic or the static BVH intersects it in [tmin, tmax), else 0.
-// Prepended with `bvh2_traverse.wgsl` by `src/backend/gpu.rs`.
+// Prepended with `ray_common.wgsl` and a traversal (`bvh2_traverse.wgsl`
+// or `cwbvh_traverse.wgsl`) by `src/backend/gpu.rs`.
 
 @group(0) @binding(4) var<storage, read_write> occluded: array<u32>;
 

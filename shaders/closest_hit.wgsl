@@ -1,6 +1,7 @@
 // Stage "closest hit": for each ray of the chunk, the nearest triangle in
 // [tmin, tmax) over the static then the dynamic BVH, or a miss.
-// Prepended with `bvh2_traverse.wgsl` by `src/backend/gpu.rs`.
+// Prepended with `ray_common.wgsl` and a traversal (`bvh2_traverse.wgsl`
+// or `cwbvh_traverse.wgsl`) by `src/backend/gpu.rs`.
 
 @group(0) @binding(4) var<storage, read_write> hits: array<Hit>;
 

@@ -15,13 +15,17 @@
 //!   may then differ too, and is otherwise equal;
 //! - barycentrics within 1e-4 when the triangle is the same;
 //! - any hit identical.
+//!
+//! Every parity test runs for both GPU layouts ([`GpuLayout`]). The GPU's
+//! CWBVH is the CPU's very tree traversed in the CPU's order, so on lavapipe
+//! it is held to bit-identical hits ([`cwbvh_is_exact`]).
 
 mod common;
 
 use common::{inward_box, scene};
 use glam::{Quat, Vec3};
 use radcache::backend::cpu::CpuBackend;
-use radcache::backend::gpu::{AdapterPolicy, GpuBackend};
+use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuLayout};
 use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::render::{FrameSettings, Renderer};
@@ -43,7 +47,11 @@ const CPU_NEAR_CULL: f32 = 1e-4;
 const MAX_NEAR_SHARE: f64 = 1e-3;
 
 fn gpu() -> GpuBackend {
-    match GpuBackend::new(AdapterPolicy::AllowSoftware) {
+    gpu_with(GpuLayout::default())
+}
+
+fn gpu_with(layout: GpuLayout) -> GpuBackend {
+    match GpuBackend::with_layout(AdapterPolicy::AllowSoftware, layout) {
         Ok(gpu) => gpu,
         Err(e) => panic!(
             "GPU backend unavailable: {e}. These tests need a wgpu adapter; on a machine \
@@ -347,10 +355,22 @@ fn soup_scene(seed: u64) -> Scene {
     )
 }
 
-#[test]
-fn gpu_matches_cpu_on_random_soups_with_moving_objects() {
-    let mut gpu = gpu();
-    eprintln!("adapter: {}", gpu.name());
+/// With the CWBVH layout the GPU walks the CPU's tree in the CPU's order
+/// with the CPU's arithmetic, so on lavapipe (which, like the CPU, does not
+/// fuse multiply-adds) every hit is bit-identical: same triangle, same t,
+/// same barycentrics, the same near cut. A real GPU may contract `a·b + c`
+/// into an FMA, move a t by an ulp and so resolve an exact tie the other
+/// way: there only the general rules of [`check_parity`] apply.
+fn cwbvh_is_exact(gpu: &GpuBackend, what: &str, p: &Parity) {
+    if gpu.bvh_layout() == GpuLayout::Cwbvh && gpu.is_software() {
+        let exact = (p.ties, p.near_culled, p.t_not_bitwise, p.max_uv);
+        assert_eq!(exact, (0, 0, 0, 0.0), "{what}: {p:?}");
+    }
+}
+
+fn random_soups_with_moving_objects(layout: GpuLayout) {
+    let mut gpu = gpu_with(layout);
+    eprintln!("adapter: {}, {layout:?}", gpu.name());
     for seed in 0..2u64 {
         let s = soup_scene(seed);
         let mut cpu = CpuBackend::new();
@@ -360,7 +380,9 @@ fn gpu_matches_cpu_on_random_soups_with_moving_objects() {
             cpu.set_geometry(&snap);
             gpu.set_geometry(&snap);
             let rays = rays_for(&snap, &cpu, 40_000, seed * 10 + k as u64);
-            check_parity(&format!("soup {seed} t={t}"), &cpu, &gpu, &snap, &rays);
+            let what = format!("{layout:?} soup {seed} t={t}");
+            let p = check_parity(&what, &cpu, &gpu, &snap, &rays);
+            cwbvh_is_exact(&gpu, &what, &p);
         }
     }
     // The static part (same fingerprint across frames of a scene) is
@@ -369,8 +391,17 @@ fn gpu_matches_cpu_on_random_soups_with_moving_objects() {
 }
 
 #[test]
-fn gpu_matches_cpu_on_every_builtin_scene() {
-    let mut gpu = gpu();
+fn gpu_matches_cpu_on_random_soups_with_moving_objects() {
+    random_soups_with_moving_objects(GpuLayout::Bvh2);
+}
+
+#[test]
+fn gpu_cwbvh_matches_cpu_on_random_soups_with_moving_objects() {
+    random_soups_with_moving_objects(GpuLayout::Cwbvh);
+}
+
+fn every_builtin_scene(layout: GpuLayout) {
+    let mut gpu = gpu_with(layout);
     let mut total = Parity::default();
     for (n, name) in builtin::NAMES.iter().enumerate() {
         let s = Scene::builtin(name).unwrap();
@@ -384,7 +415,9 @@ fn gpu_matches_cpu_on_every_builtin_scene() {
             cpu.set_geometry(&snap);
             gpu.set_geometry(&snap);
             let rays = rays_for(&snap, &cpu, 30_000, 100 + (n * 2 + k) as u64);
-            let p = check_parity(&format!("{name} t={t}"), &cpu, &gpu, &snap, &rays);
+            let what = format!("{layout:?} {name} t={t}");
+            let p = check_parity(&what, &cpu, &gpu, &snap, &rays);
+            cwbvh_is_exact(&gpu, &what, &p);
             total.rays += p.rays;
             total.hits += p.hits;
             total.ties += p.ties;
@@ -395,13 +428,29 @@ fn gpu_matches_cpu_on_every_builtin_scene() {
             total.max_uv = total.max_uv.max(p.max_uv);
         }
     }
-    eprintln!("all built-in scenes: {total:?}");
+    eprintln!("{layout:?}, all built-in scenes: {total:?}");
+}
+
+#[test]
+fn gpu_matches_cpu_on_every_builtin_scene() {
+    every_builtin_scene(GpuLayout::Bvh2);
+}
+
+#[test]
+fn gpu_cwbvh_matches_cpu_on_every_builtin_scene() {
+    every_builtin_scene(GpuLayout::Cwbvh);
 }
 
 /// Large batches are cut into chunks; results must land at the right place.
 #[test]
 fn gpu_batches_larger_than_a_chunk_and_empty_batches() {
-    let mut gpu = gpu();
+    for layout in GpuLayout::ALL {
+        batches_larger_than_a_chunk_and_empty_batches(layout);
+    }
+}
+
+fn batches_larger_than_a_chunk_and_empty_batches(layout: GpuLayout) {
+    let mut gpu = gpu_with(layout);
     let s = soup_scene(7);
     let snap = s.snapshot(0.5);
     let mut cpu = CpuBackend::new();

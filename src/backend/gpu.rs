@@ -1,13 +1,13 @@
 //! The GPU ray backend: wgpu compute shaders (`shaders/*.wgsl`) traverse
-//! obvhs BVH2s of the frame's triangles, closest hit and any hit over
-//! batches of rays. It returns the same hits as the CPU backend
+//! obvhs BVHs of the frame's triangles (BVH2 or CWBVH, [`GpuLayout`]),
+//! closest hit and any hit over batches of rays. It returns the same hits as the CPU backend
 //! (`tests/gpu_backend.rs` checks it on random scenes and on every built-in
 //! scene).
 //!
 //! Split as bevy_solari splits its passes:
-//! - **extract**: [`GpuBackend::set_geometry`] builds a BVH2 per part (static
-//!   triangles `0..static_count`, dynamic ones after) with
-//!   `build_bvh2_from_tris` and lays triangles out in leaf order
+//! - **extract**: [`GpuBackend::set_geometry`] builds a BVH per part (static
+//!   triangles `0..static_count`, dynamic ones after) in the backend's
+//!   layout (`src/backend/gpu_bvh.rs`) and lays triangles out in leaf order
 //!   ([`GpuTriangle`], with their snapshot triangle and object ids);
 //! - **prepare**: both parts live in one node buffer and one triangle buffer,
 //!   static part first. The static part is uploaded once and again only when
@@ -15,7 +15,8 @@
 //!   dynamic tail. Ray, result and staging buffers are reused across
 //!   dispatches and only ever grow;
 //! - **passes**: "closest hit" (`shaders/closest_hit.wgsl`) and "any hit"
-//!   (`shaders/any_hit.wgsl`), both on `shaders/bvh2_traverse.wgsl`. A batch
+//!   (`shaders/any_hit.wgsl`), both on `shaders/ray_common.wgsl` and the
+//!   layout's traversal (`bvh2_traverse.wgsl` or `cwbvh_traverse.wgsl`). A batch
 //!   is cut in chunks of at most [`GpuBackend::chunk_rays`] rays (the storage
 //!   binding limit: 128 MiB on lavapipe), each dispatched as a 2D grid (at
 //!   most 65535 workgroups per dimension), its results copied to a staging
@@ -27,10 +28,15 @@
 //! also exactly what the CPU backend does (`src/accel.rs`), which keeps the
 //! tie-breaking between static and dynamic hits identical.
 //!
-//! BVH2 rather than CWBVH: obvhs ships no GPU traversal, the BVH2 one is a
-//! short stack loop that mirrors obvhs's CPU loop exactly, and STACK.md
-//! measured it matching the CPU bit for bit. A CWBVH traversal on the GPU is
-//! left for the measurement issue 6 asks for.
+//! Two layouts, chosen at construction ([`GpuBackend::with_layout`], or
+//! `RADCACHE_GPU_BVH=bvh2|cwbvh` for [`GpuBackend::new`]): BVH2, a short
+//! stack loop over 48-byte nodes, and CWBVH (Ylitie et al. 2017), the CPU
+//! backend's own tree, 80-byte nodes with 8 quantised child boxes each,
+//! traversed in the CPU's exact order. obvhs ships no GPU traversal; both
+//! are ours and both return the CPU's hits. BVH2 stays the default because
+//! that is what the measurement says (README, `--backend`:
+//! `cargo bench --bench gpu_rays`); it was taken on lavapipe only, which
+//! runs the shaders on the CPU, so on a real GPU the answer may differ.
 //!
 //! Errors: everything that can fail for lack of a device — no adapter, no
 //! device, a shader the driver rejects — fails in [`GpuBackend::new`] with an
@@ -43,14 +49,12 @@
 //! silently swallowed, and it never panics. The `try_` methods return the
 //! errors directly for callers that want to handle them.
 
+use super::gpu_bvh::Part;
+pub use super::gpu_bvh::{GpuLayout, GpuNode, CWBVH_STACK_SIZE, STACK_SIZE};
 use super::gpu_cache::{CacheSplat, GpuLookup};
 use super::{Hit, Ray, RayBackend, RayCounts};
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
-use obvhs::bvh2::builder::build_bvh2_from_tris;
-use obvhs::bvh2::Bvh2;
-use obvhs::triangle::Triangle as ObTriangle;
-use obvhs::BvhBuildParams;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -58,10 +62,6 @@ use std::time::{Duration, Instant};
 /// Work items per workgroup. Must match `WORKGROUP_SIZE` in
 /// `shaders/bvh2_traverse.wgsl`.
 pub const WORKGROUP_SIZE: u32 = 64;
-
-/// Entries of the per-ray traversal stack. Must match `STACK_SIZE` in
-/// `shaders/bvh2_traverse.wgsl`; deeper BVHs are refused.
-pub const STACK_SIZE: usize = 64;
 
 /// Rays per dispatch at most, before the device's binding limit is applied:
 /// 4 Mi rays (128 MiB of rays) keep a large GPU busy while bounding the
@@ -72,10 +72,6 @@ pub const MAX_CHUNK_RAYS: usize = 1 << 22;
 /// map, wait) of a fraction of a millisecond, small beside 1 Mi rays.
 pub const PREFERRED_BATCH: usize = 1 << 20;
 
-/// Triangles above which the BVH2 is built with obvhs's medium preset
-/// (better trees for the big static part), as `src/accel.rs` does.
-const MEDIUM_BUILD_ABOVE: usize = 10_000;
-
 /// "No node / no triangle" (`NONE` in the shaders).
 const NONE: u32 = u32::MAX;
 
@@ -85,25 +81,8 @@ const HIT_BYTES: u64 = std::mem::size_of::<Hit>() as u64;
 const FLAG_BYTES: u64 = 4;
 /// Bytes of one ray.
 const RAY_BYTES: u64 = std::mem::size_of::<Ray>() as u64;
-
-/// A BVH2 node as the shaders read it: obvhs `Bvh2Node` with its bounds as
-/// vec4-sized fields. Field order must match `Node` in
-/// `shaders/bvh2_traverse.wgsl`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
-#[repr(C)]
-pub struct GpuNode {
-    pub aabb_min: [f32; 3],
-    pub _pad0: u32,
-    pub aabb_max: [f32; 3],
-    pub _pad1: u32,
-    /// 0 for an inner node, else the number of triangles of the leaf.
-    pub prim_count: u32,
-    /// Inner node: index of the first child (the second follows it). Leaf:
-    /// index of its first triangle in the triangle buffer.
-    pub first_index: u32,
-    pub _pad2: u32,
-    pub _pad3: u32,
-}
+/// Bytes of one triangle.
+const TRIANGLE_BYTES: u64 = std::mem::size_of::<GpuTriangle>() as u64;
 
 /// A triangle in BVH leaf order with the ids a hit reports. Field order must
 /// match `Triangle` in `shaders/bvh2_traverse.wgsl`.
@@ -132,11 +111,9 @@ struct GpuParams {
     dynamic_root: u32,
 }
 
-const _: () = assert!(std::mem::size_of::<GpuNode>() == 48);
 const _: () = assert!(std::mem::size_of::<GpuTriangle>() == 48);
 const _: () = assert!(std::mem::size_of::<Ray>() == 32);
 const _: () = assert!(std::mem::size_of::<Hit>() == 20);
-const _: () = assert!(std::mem::size_of::<obvhs::bvh2::node::Bvh2Node>() == 48);
 
 /// Which adapters [`GpuBackend::new`] may pick.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -162,7 +139,7 @@ pub enum GpuError {
 /// [`GpuBackend::reset_timings`].
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GpuTimings {
-    /// BVH2 builds (static and dynamic).
+    /// BVH builds (static and dynamic).
     pub bvh_build: Duration,
     /// Static geometry uploads (nodes + triangles) and how many there were.
     pub static_upload: Duration,
@@ -214,6 +191,8 @@ pub struct GpuBackend {
     queue: wgpu::Queue,
     info: wgpu::AdapterInfo,
     layout: wgpu::BindGroupLayout,
+    /// The BVH layout the shaders traverse.
+    bvh: GpuLayout,
     closest_pipeline: wgpu::ComputePipeline,
     any_pipeline: wgpu::ComputePipeline,
     geometry: GeometryBuffers,
@@ -270,10 +249,16 @@ fn usize_of(x: u64) -> usize {
 }
 
 impl GpuBackend {
-    /// Picks an adapter by `policy`, opens a device with the adapter's own
-    /// limits, compiles the shaders and runs one tiny dispatch, so that a
-    /// backend that is returned can trace.
+    /// [`Self::with_layout`] with the layout `RADCACHE_GPU_BVH` names
+    /// (BVH2 when unset).
     pub fn new(policy: AdapterPolicy) -> Result<Self, GpuError> {
+        Self::with_layout(policy, GpuLayout::from_env()?)
+    }
+
+    /// Picks an adapter by `policy`, opens a device with the adapter's own
+    /// limits, compiles the shaders for BVH layout `bvh` and runs one tiny
+    /// dispatch, so that a backend that is returned can trace.
+    pub fn with_layout(policy: AdapterPolicy, bvh: GpuLayout) -> Result<Self, GpuError> {
         let instance = instance();
         let mut candidates: Vec<wgpu::Adapter> =
             pollster::block_on(instance.enumerate_adapters(backends()))
@@ -334,8 +319,9 @@ impl GpuBackend {
         });
         let pipeline = |name: &str, stage: &str| {
             let source = format!(
-                "{}\n{}",
-                include_str!("../../shaders/bvh2_traverse.wgsl"),
+                "{}\n{}\n{}",
+                include_str!("../../shaders/ray_common.wgsl"),
+                bvh.traversal_source(),
                 stage
             );
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -365,8 +351,8 @@ impl GpuBackend {
             .min(limits.max_buffer_size);
         let chunk_rays = MAX_CHUNK_RAYS.min(usize_of(max_binding / RAY_BYTES)).max(1);
         let geometry = GeometryBuffers {
-            nodes: storage_buffer(&device, "nodes", 48),
-            triangles: storage_buffer(&device, "triangles", 48),
+            nodes: storage_buffer(&device, "nodes", bvh.node_bytes()),
+            triangles: storage_buffer(&device, "triangles", TRIANGLE_BYTES),
             node_capacity: 1,
             triangle_capacity: 1,
             static_nodes: 0,
@@ -389,6 +375,7 @@ impl GpuBackend {
             queue,
             info,
             layout,
+            bvh,
             closest_pipeline,
             any_pipeline,
             geometry,
@@ -444,6 +431,11 @@ impl GpuBackend {
         self.info.device_type == wgpu::DeviceType::Cpu
     }
 
+    /// The BVH layout the shaders traverse.
+    pub fn bvh_layout(&self) -> GpuLayout {
+        self.bvh
+    }
+
     /// Rays per dispatch at most.
     pub fn chunk_rays(&self) -> usize {
         self.chunk_rays
@@ -490,25 +482,30 @@ impl GpuBackend {
             });
 
         let static_part = if self.geometry.static_fingerprint != Some(fp) {
-            Some(Part::build(snapshot, 0..snapshot.static_count)?)
+            Some(Part::build(self.bvh, snapshot, 0..snapshot.static_count)?)
         } else {
             None
         };
-        let dynamic_part = Part::build(snapshot, snapshot.static_count..snapshot.triangles.len())?;
+        let dynamic_range = snapshot.static_count..snapshot.triangles.len();
+        let dynamic_part = Part::build(self.bvh, snapshot, dynamic_range)?;
         let bvh_build = build_start.elapsed();
 
         let g = &mut self.geometry;
         let (static_nodes, static_triangles) = match &static_part {
-            Some(p) => (p.nodes.len() as u64, p.triangles.len() as u64),
+            Some(p) => (p.node_count() as u64, p.triangles.len() as u64),
             None => (g.static_nodes, g.static_triangles),
         };
-        let nodes_needed = (static_nodes + dynamic_part.nodes.len() as u64).max(1);
+        let nodes_needed = (static_nodes + dynamic_part.node_count() as u64).max(1);
         let triangles_needed = (static_triangles + dynamic_part.triangles.len() as u64).max(1);
-        for (what, count) in [("BVH nodes", nodes_needed), ("triangles", triangles_needed)] {
-            if count * 48 > self.max_binding {
+        let node_bytes = self.bvh.node_bytes();
+        for (what, count, size) in [
+            ("BVH nodes", nodes_needed, node_bytes),
+            ("triangles", triangles_needed, TRIANGLE_BYTES),
+        ] {
+            if count * size > self.max_binding {
                 return Err(GpuError::Geometry(format!(
                     "{count} {what} ({} MiB) exceed the device's storage binding size of {} MiB",
-                    (count * 48) >> 20,
+                    (count * size) >> 20,
                     self.max_binding >> 20
                 )));
             }
@@ -516,25 +513,31 @@ impl GpuBackend {
         // Grow (never shrink) the buffers; a kept static part is copied over
         // on the GPU, not uploaded again.
         let keep_static = static_part.is_none();
-        let grow = |needed: u64, capacity: u64| {
+        let grow = |needed: u64, capacity: u64, size: u64| {
             if needed > capacity {
-                Some((needed + needed / 4).min(self.max_binding / 48).max(needed))
+                Some(
+                    (needed + needed / 4)
+                        .min(self.max_binding / size)
+                        .max(needed),
+                )
             } else {
                 None
             }
         };
-        if let Some(cap) = grow(nodes_needed, g.node_capacity) {
-            let buffer = storage_buffer(&self.device, "nodes", cap * 48);
+        if let Some(cap) = grow(nodes_needed, g.node_capacity, node_bytes) {
+            let buffer = storage_buffer(&self.device, "nodes", cap * node_bytes);
             if keep_static && static_nodes > 0 {
-                encoder.copy_buffer_to_buffer(&g.nodes, 0, &buffer, 0, static_nodes * 48);
+                let bytes = static_nodes * node_bytes;
+                encoder.copy_buffer_to_buffer(&g.nodes, 0, &buffer, 0, bytes);
             }
             g.nodes = buffer;
             g.node_capacity = cap;
         }
-        if let Some(cap) = grow(triangles_needed, g.triangle_capacity) {
-            let buffer = storage_buffer(&self.device, "triangles", cap * 48);
+        if let Some(cap) = grow(triangles_needed, g.triangle_capacity, TRIANGLE_BYTES) {
+            let buffer = storage_buffer(&self.device, "triangles", cap * TRIANGLE_BYTES);
             if keep_static && static_triangles > 0 {
-                encoder.copy_buffer_to_buffer(&g.triangles, 0, &buffer, 0, static_triangles * 48);
+                let bytes = static_triangles * TRIANGLE_BYTES;
+                encoder.copy_buffer_to_buffer(&g.triangles, 0, &buffer, 0, bytes);
             }
             g.triangles = buffer;
             g.triangle_capacity = cap;
@@ -543,28 +546,24 @@ impl GpuBackend {
         let mut static_upload = None;
         if let Some(part) = static_part {
             let start = Instant::now();
-            self.queue
-                .write_buffer(&g.nodes, 0, bytemuck::cast_slice(&part.nodes));
+            self.queue.write_buffer(&g.nodes, 0, part.node_bytes());
             self.queue
                 .write_buffer(&g.triangles, 0, bytemuck::cast_slice(&part.triangles));
             g.static_nodes = static_nodes;
             g.static_triangles = static_triangles;
-            g.static_root = if part.nodes.is_empty() { NONE } else { 0 };
+            g.static_root = if part.node_count() == 0 { NONE } else { 0 };
             g.static_fingerprint = Some(fp);
             static_upload = Some(start.elapsed());
         }
         let start = Instant::now();
         let mut dynamic = dynamic_part;
         dynamic.offset(static_nodes as u32, static_triangles as u32);
-        if !dynamic.nodes.is_empty() {
-            self.queue.write_buffer(
-                &g.nodes,
-                static_nodes * 48,
-                bytemuck::cast_slice(&dynamic.nodes),
-            );
+        if dynamic.node_count() > 0 {
+            self.queue
+                .write_buffer(&g.nodes, static_nodes * node_bytes, dynamic.node_bytes());
             self.queue.write_buffer(
                 &g.triangles,
-                static_triangles * 48,
+                static_triangles * TRIANGLE_BYTES,
                 bytemuck::cast_slice(&dynamic.triangles),
             );
             g.dynamic_root = static_nodes as u32;
@@ -789,102 +788,6 @@ pub(super) fn bind(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<
         binding,
         resource: buffer.as_entire_binding(),
     }
-}
-
-/// One part (static or dynamic) of the geometry, ready for upload.
-struct Part {
-    nodes: Vec<GpuNode>,
-    triangles: Vec<GpuTriangle>,
-}
-
-impl Part {
-    /// BVH2 over snapshot triangles `range`, triangles in leaf order.
-    fn build(snapshot: &Snapshot, range: std::ops::Range<usize>) -> Result<Self, GpuError> {
-        if range.is_empty() {
-            return Ok(Part {
-                nodes: Vec::new(),
-                triangles: Vec::new(),
-            });
-        }
-        let source: Vec<ObTriangle> = snapshot.triangles[range.clone()]
-            .iter()
-            .map(|t| ObTriangle {
-                v0: t.p[0].into(),
-                v1: t.p[1].into(),
-                v2: t.p[2].into(),
-            })
-            .collect();
-        let params = if range.len() > MEDIUM_BUILD_ABOVE {
-            BvhBuildParams::medium_build()
-        } else {
-            BvhBuildParams::fast_build()
-        };
-        let bvh = build_bvh2_from_tris(&source, params, &mut Duration::default());
-        let depth = depth(&bvh);
-        if depth > STACK_SIZE {
-            return Err(GpuError::Geometry(format!(
-                "BVH depth {depth} exceeds the traversal stack of {STACK_SIZE} entries"
-            )));
-        }
-        let nodes = bvh
-            .nodes
-            .iter()
-            .map(|n| GpuNode {
-                aabb_min: n.aabb.min.to_array(),
-                aabb_max: n.aabb.max.to_array(),
-                prim_count: n.prim_count,
-                first_index: n.first_index,
-                ..GpuNode::default()
-            })
-            .collect();
-        // Leaves index `primitive_indices`; laying triangles out in that
-        // order lets them index the triangle buffer directly.
-        let triangles = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| {
-                let id = range.start + i as usize;
-                let t = &snapshot.triangles[id];
-                GpuTriangle {
-                    v0: t.p[0].to_array(),
-                    id: id as u32,
-                    v1: t.p[1].to_array(),
-                    object: snapshot.tri_object[id],
-                    v2: t.p[2].to_array(),
-                    _pad: 0,
-                }
-            })
-            .collect();
-        Ok(Part { nodes, triangles })
-    }
-
-    /// Moves the part behind `nodes` nodes and `triangles` triangles in the
-    /// shared buffers.
-    fn offset(&mut self, nodes: u32, triangles: u32) {
-        for n in &mut self.nodes {
-            n.first_index += if n.prim_count == 0 { nodes } else { triangles };
-        }
-    }
-}
-
-/// Depth of a BVH2 (a lone root leaf has depth 1): the traversal stack
-/// holds at most depth − 1 entries.
-fn depth(bvh: &Bvh2) -> usize {
-    if bvh.nodes.is_empty() {
-        return 0;
-    }
-    let mut max = 0;
-    let mut stack = vec![(0usize, 1usize)];
-    while let Some((i, d)) = stack.pop() {
-        max = max.max(d);
-        let n = &bvh.nodes[i];
-        if n.prim_count == 0 {
-            let c = n.first_index as usize;
-            stack.push((c, d + 1));
-            stack.push((c + 1, d + 1));
-        }
-    }
-    max
 }
 
 impl RayBackend for GpuBackend {

@@ -10,6 +10,7 @@
 
 pub mod cpu;
 pub mod gpu;
+pub mod gpu_bvh;
 pub mod gpu_cache;
 
 use crate::scene::Snapshot;

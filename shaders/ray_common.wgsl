@@ -1,0 +1,131 @@
+// What both BVH traversals of the GPU backend (`src/backend/gpu.rs`)
+// share: the dispatch parameters, rays, triangles, hits, their bindings and
+// the ray-triangle test. Not a pipeline by itself: the Rust side
+// concatenates this file, one traversal (`bvh2_traverse.wgsl` or
+// `cwbvh_traverse.wgsl`) and one stage (`closest_hit.wgsl`, `any_hit.wgsl`),
+// as WGSL has no includes. Each traversal declares binding 2 (its nodes),
+// `trace_ray` and `traverse(root, ray, best, any)`.
+//
+// The triangle test and the strict `t < tmax` rules are those of the CPU
+// backend (`src/accel.rs`), so that both find the same hits.
+
+/// Work items per workgroup. Must match `WORKGROUP_SIZE` in
+/// `src/backend/gpu.rs`. 64 fills a warp/wavefront twice over on real GPUs
+/// and is well under lavapipe's 1024 invocations per workgroup.
+const WORKGROUP_SIZE: u32 = 64u;
+
+/// "No node / no triangle": the root of an empty BVH, the id of a miss.
+const NONE: u32 = 0xffffffffu;
+
+/// `f32::EPSILON` (2⁻²³): obvhs `safe_inverse` treats direction components
+/// at most this small as ±EPSILON, so that 1/dir stays finite.
+const F32_EPSILON: f32 = 1.1920929e-7;
+
+/// Parameters of one dispatch (one chunk of rays).
+/// Field order must match `GpuParams` in `src/backend/gpu.rs`.
+struct Params {
+    /// Rays in this chunk.
+    ray_count: u32,
+    /// Work items per row of the 2D dispatch (workgroups in x × WORKGROUP_SIZE).
+    row_width: u32,
+    /// Root node of the static BVH, or NONE when there are no static triangles.
+    static_root: u32,
+    /// Root node of the dynamic BVH, or NONE.
+    dynamic_root: u32,
+}
+
+/// A ray as the methods build it. Field order must match `Ray` in
+/// `src/backend/mod.rs` (32 bytes: vec3 + f32 pack into 16).
+struct Ray {
+    origin: vec3<f32>,
+    tmin: f32,
+    dir: vec3<f32>,
+    tmax: f32,
+}
+
+/// A triangle in BVH leaf order with the ids the hit reports (48 bytes).
+/// Field order must match `GpuTriangle` in `src/backend/gpu.rs`.
+struct Triangle {
+    v0: vec3<f32>,
+    /// Snapshot triangle id.
+    id: u32,
+    v1: vec3<f32>,
+    /// Object id.
+    object: u32,
+    v2: vec3<f32>,
+    _pad: u32,
+}
+
+/// Closest hit. Field order must match `Hit` in `src/backend/mod.rs`
+/// (20 bytes, array stride 20).
+struct Hit {
+    t: f32,
+    triangle: u32,
+    object: u32,
+    u: f32,
+    v: f32,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> rays: array<Ray>;
+@group(0) @binding(3) var<storage, read> triangles: array<Triangle>;
+// Binding 2 (the nodes) is declared by each traversal, binding 4 (the
+// results) by each stage.
+
+/// A ray prepared for traversal, as obvhs `Ray::new` prepares it.
+struct TraceRay {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    inv_dir: vec3<f32>,
+    tmin: f32,
+}
+
+/// obvhs `safe_inverse`: 1/x, or ±1/EPSILON (sign of x, −0 counts as
+/// negative like Rust's `signum`) when |x| ≤ EPSILON.
+fn safe_inverse(x: f32) -> f32 {
+    if abs(x) <= F32_EPSILON {
+        let negative = (bitcast<u32>(x) & 0x80000000u) != 0u;
+        return select(1.0, -1.0, negative) / F32_EPSILON;
+    }
+    return 1.0 / x;
+}
+
+/// +∞, written to `Hit::t` on a miss (`Hit::MISS`).
+fn infinity() -> f32 {
+    return bitcast<f32>(0x7f800000u);
+}
+
+/// Möller–Trumbore in the formulation of `intersect_triangle` in
+/// `src/accel.rs`: returns (t, u, v) with the hit at
+/// `v0·(1−u−v) + v1·u + v2·v`, or t = +∞ when the ray misses the triangle or
+/// t falls outside [tmin, tmax]. Rays in the triangle's plane never hit.
+fn intersect_triangle(tri: Triangle, ray: TraceRay, tmax: f32) -> vec3<f32> {
+    let miss = vec3<f32>(infinity(), 0.0, 0.0);
+    let e1 = tri.v0 - tri.v1;
+    let e2 = tri.v2 - tri.v0;
+    let n = cross(e1, e2);
+    let c = tri.v0 - ray.origin;
+    let r = cross(ray.dir, c);
+    let det = dot(n, ray.dir);
+    if det == 0.0 {
+        return miss;
+    }
+    let inv_det = 1.0 / det;
+    let u = dot(r, e2) * inv_det;
+    let v = dot(r, e1) * inv_det;
+    if u < 0.0 || v < 0.0 || u + v > 1.0 {
+        return miss;
+    }
+    let t = dot(n, c) * inv_det;
+    if t >= ray.tmin && t <= tmax {
+        return vec3<f32>(t, u, v);
+    }
+    return miss;
+}
+
+/// Index of the ray this work item traces in a 2D dispatch, or NONE past
+/// the end of the chunk.
+fn ray_index(id: vec3<u32>) -> u32 {
+    let i = id.y * params.row_width + id.x;
+    return select(NONE, i, i < params.ray_count);
+}

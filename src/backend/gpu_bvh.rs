@@ -1,0 +1,282 @@
+//! The BVH layouts the GPU backend traverses, and building one part
+//! (static or dynamic) of the geometry in either for upload.
+//!
+//! - [`GpuLayout::Bvh2`]: obvhs's BVH2 (`build_bvh2_from_tris`), nodes
+//!   repacked as [`GpuNode`], traversed by `shaders/bvh2_traverse.wgsl`.
+//! - [`GpuLayout::Cwbvh`]: obvhs's compressed wide BVH8
+//!   (`build_cwbvh_from_tris`), the very tree the CPU backend traverses
+//!   (`src/accel.rs`), its 80-byte nodes uploaded as they are, traversed by
+//!   `shaders/cwbvh_traverse.wgsl`.
+//!
+//! Both lay triangles out in the BVH's `primitive_indices` order, so that
+//! leaves index the triangle buffer directly.
+
+use super::gpu::{GpuError, GpuTriangle};
+use crate::scene::Snapshot;
+use bytemuck::{Pod, Zeroable};
+use obvhs::bvh2::builder::build_bvh2_from_tris;
+use obvhs::bvh2::Bvh2;
+use obvhs::cwbvh::builder::build_cwbvh_from_tris;
+use obvhs::cwbvh::node::CwBvhNode;
+use obvhs::cwbvh::CwBvh;
+use obvhs::triangle::Triangle as ObTriangle;
+use obvhs::BvhBuildParams;
+use std::time::Duration;
+
+/// Entries of the BVH2 traversal stack. Must match `STACK_SIZE` in
+/// `shaders/bvh2_traverse.wgsl`; deeper BVHs are refused.
+pub const STACK_SIZE: usize = 64;
+
+/// Node groups the CWBVH traversal can keep pending. Must match
+/// `STACK_SIZE` in `shaders/cwbvh_traverse.wgsl`; deeper BVHs are refused.
+pub const CWBVH_STACK_SIZE: usize = 32;
+
+/// Triangles above which a part is built with obvhs's medium preset
+/// (better trees for the big static part), as `src/accel.rs` does.
+const MEDIUM_BUILD_ABOVE: usize = 10_000;
+
+/// Environment variable that picks the layout of [`GpuLayout::from_env`]:
+/// `bvh2` (default) or `cwbvh`.
+pub const LAYOUT_ENV: &str = "RADCACHE_GPU_BVH";
+
+/// Which BVH the GPU traverses. Chosen when the backend is created.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GpuLayout {
+    /// Binary BVH, 48-byte nodes, one box per node visit. The default:
+    /// see the measurement in `README.md` (`--backend`).
+    #[default]
+    Bvh2,
+    /// Compressed wide BVH8, 80-byte nodes, 8 quantised child boxes per
+    /// node visit; the CPU backend's tree.
+    Cwbvh,
+}
+
+impl GpuLayout {
+    pub const ALL: [GpuLayout; 2] = [GpuLayout::Bvh2, GpuLayout::Cwbvh];
+
+    /// The layout named by `RADCACHE_GPU_BVH` (unset or empty: the default).
+    pub fn from_env() -> Result<Self, GpuError> {
+        match std::env::var(LAYOUT_ENV).unwrap_or_default().as_str() {
+            "" | "bvh2" => Ok(GpuLayout::Bvh2),
+            "cwbvh" => Ok(GpuLayout::Cwbvh),
+            other => Err(GpuError::Geometry(format!(
+                "{LAYOUT_ENV}={other}: expected bvh2 or cwbvh"
+            ))),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            GpuLayout::Bvh2 => "BVH2",
+            GpuLayout::Cwbvh => "CWBVH",
+        }
+    }
+
+    /// Bytes of one node in the node buffer.
+    pub fn node_bytes(self) -> u64 {
+        match self {
+            GpuLayout::Bvh2 => std::mem::size_of::<GpuNode>() as u64,
+            GpuLayout::Cwbvh => std::mem::size_of::<CwBvhNode>() as u64,
+        }
+    }
+
+    /// The traversal shader, declaring the node binding, `trace_ray` and
+    /// `traverse`.
+    pub(super) fn traversal_source(self) -> &'static str {
+        match self {
+            GpuLayout::Bvh2 => include_str!("../../shaders/bvh2_traverse.wgsl"),
+            GpuLayout::Cwbvh => include_str!("../../shaders/cwbvh_traverse.wgsl"),
+        }
+    }
+}
+
+/// A BVH2 node as the shaders read it: obvhs `Bvh2Node` with its bounds as
+/// vec4-sized fields. Field order must match `Node` in
+/// `shaders/bvh2_traverse.wgsl`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct GpuNode {
+    pub aabb_min: [f32; 3],
+    pub _pad0: u32,
+    pub aabb_max: [f32; 3],
+    pub _pad1: u32,
+    /// 0 for an inner node, else the number of triangles of the leaf.
+    pub prim_count: u32,
+    /// Inner node: index of the first child (the second follows it). Leaf:
+    /// index of its first triangle in the triangle buffer.
+    pub first_index: u32,
+    pub _pad2: u32,
+    pub _pad3: u32,
+}
+
+const _: () = assert!(std::mem::size_of::<GpuNode>() == 48);
+const _: () = assert!(std::mem::size_of::<obvhs::bvh2::node::Bvh2Node>() == 48);
+// `Node` in `shaders/cwbvh_traverse.wgsl` reads it as 80 bytes, stride 80.
+const _: () = assert!(std::mem::size_of::<CwBvhNode>() == 80);
+
+/// The nodes of a part, in its layout's format.
+enum Nodes {
+    Bvh2(Vec<GpuNode>),
+    Cwbvh(Vec<CwBvhNode>),
+}
+
+/// One part (static or dynamic) of the geometry, ready for upload.
+pub(super) struct Part {
+    nodes: Nodes,
+    pub triangles: Vec<GpuTriangle>,
+}
+
+impl Part {
+    /// A BVH in `layout` over snapshot triangles `range`, triangles in leaf
+    /// order. Refuses a BVH deeper than its traversal's stack.
+    pub fn build(
+        layout: GpuLayout,
+        snapshot: &Snapshot,
+        range: std::ops::Range<usize>,
+    ) -> Result<Self, GpuError> {
+        let source: Vec<ObTriangle> = snapshot.triangles[range.clone()]
+            .iter()
+            .map(|t| ObTriangle {
+                v0: t.p[0].into(),
+                v1: t.p[1].into(),
+                v2: t.p[2].into(),
+            })
+            .collect();
+        let (nodes, order) = match layout {
+            _ if range.is_empty() => (Nodes::Bvh2(Vec::new()), Vec::new()),
+            GpuLayout::Bvh2 => bvh2_nodes(&source)?,
+            GpuLayout::Cwbvh => cwbvh_nodes(&source)?,
+        };
+        let triangles = order
+            .iter()
+            .map(|&i| {
+                let id = range.start + i as usize;
+                let t = &snapshot.triangles[id];
+                GpuTriangle {
+                    v0: t.p[0].to_array(),
+                    id: id as u32,
+                    v1: t.p[1].to_array(),
+                    object: snapshot.tri_object[id],
+                    v2: t.p[2].to_array(),
+                    _pad: 0,
+                }
+            })
+            .collect();
+        Ok(Part { nodes, triangles })
+    }
+
+    pub fn node_count(&self) -> usize {
+        match &self.nodes {
+            Nodes::Bvh2(n) => n.len(),
+            Nodes::Cwbvh(n) => n.len(),
+        }
+    }
+
+    pub fn node_bytes(&self) -> &[u8] {
+        match &self.nodes {
+            Nodes::Bvh2(n) => bytemuck::cast_slice(n),
+            Nodes::Cwbvh(n) => bytemuck::cast_slice(n),
+        }
+    }
+
+    /// Moves the part behind `nodes` nodes and `triangles` triangles in the
+    /// shared buffers.
+    pub fn offset(&mut self, nodes: u32, triangles: u32) {
+        match &mut self.nodes {
+            Nodes::Bvh2(all) => {
+                for n in all {
+                    n.first_index += if n.prim_count == 0 { nodes } else { triangles };
+                }
+            }
+            Nodes::Cwbvh(all) => {
+                for n in all {
+                    n.child_base_idx += nodes;
+                    n.primitive_base_idx += triangles;
+                }
+            }
+        }
+    }
+}
+
+fn build_params(triangles: usize) -> BvhBuildParams {
+    if triangles > MEDIUM_BUILD_ABOVE {
+        BvhBuildParams::medium_build()
+    } else {
+        BvhBuildParams::fast_build()
+    }
+}
+
+fn too_deep(depth: usize, stack: usize) -> Result<(), GpuError> {
+    if depth > stack {
+        return Err(GpuError::Geometry(format!(
+            "BVH depth {depth} exceeds the traversal stack of {stack} entries"
+        )));
+    }
+    Ok(())
+}
+
+/// BVH2 nodes and the triangle order of their leaves.
+fn bvh2_nodes(source: &[ObTriangle]) -> Result<(Nodes, Vec<u32>), GpuError> {
+    let bvh = build_bvh2_from_tris(source, build_params(source.len()), &mut Duration::default());
+    too_deep(bvh2_depth(&bvh), STACK_SIZE)?;
+    let nodes = bvh
+        .nodes
+        .iter()
+        .map(|n| GpuNode {
+            aabb_min: n.aabb.min.to_array(),
+            aabb_max: n.aabb.max.to_array(),
+            prim_count: n.prim_count,
+            first_index: n.first_index,
+            ..GpuNode::default()
+        })
+        .collect();
+    Ok((Nodes::Bvh2(nodes), bvh.primitive_indices))
+}
+
+/// CWBVH nodes (built exactly as `src/accel.rs` builds the CPU's) and the
+/// triangle order of their leaves.
+fn cwbvh_nodes(source: &[ObTriangle]) -> Result<(Nodes, Vec<u32>), GpuError> {
+    let bvh = build_cwbvh_from_tris(source, build_params(source.len()), &mut Duration::default());
+    too_deep(cwbvh_depth(&bvh), CWBVH_STACK_SIZE)?;
+    Ok((Nodes::Cwbvh(bvh.nodes), bvh.primitive_indices))
+}
+
+/// Depth of a BVH2 (a lone root leaf has depth 1): the traversal stack
+/// holds at most depth − 1 entries.
+fn bvh2_depth(bvh: &Bvh2) -> usize {
+    if bvh.nodes.is_empty() {
+        return 0;
+    }
+    let mut max = 0;
+    let mut stack = vec![(0usize, 1usize)];
+    while let Some((i, d)) = stack.pop() {
+        max = max.max(d);
+        let n = &bvh.nodes[i];
+        if n.prim_count == 0 {
+            let c = n.first_index as usize;
+            stack.push((c, d + 1));
+            stack.push((c + 1, d + 1));
+        }
+    }
+    max
+}
+
+/// Depth in nodes of a CWBVH (a lone root has depth 1): the traversal
+/// keeps at most one pending group per level above the current node.
+fn cwbvh_depth(bvh: &CwBvh) -> usize {
+    if bvh.nodes.is_empty() {
+        return 0;
+    }
+    let mut max = 0;
+    let mut stack = vec![(0usize, 1usize)];
+    while let Some((i, d)) = stack.pop() {
+        max = max.max(d);
+        let n = &bvh.nodes[i];
+        for slot in 0..8 {
+            if !n.is_leaf(slot) {
+                stack.push((n.child_node_index(slot) as usize, d + 1));
+            }
+        }
+    }
+    max
+}
