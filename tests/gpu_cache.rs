@@ -26,7 +26,7 @@
 
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
-use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuError};
+use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuError, GpuLayout};
 use radcache::backend::gpu_cache::{CacheSplat, GpuLookup};
 use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
 use radcache::cache::gather::Strata;
@@ -475,4 +475,32 @@ fn edge_records_gathered_on_the_gpu_keep_the_frame_mean() {
         (cm - gm).abs() <= MEAN_REL_BACKENDS * cm,
         "mean {cm} (cpu) vs {gm} (gpu)"
     );
+}
+
+/// The same with the GPU traversing the CPU's own tree (CWBVH): its rays
+/// return the CPU's hits bit for bit on lavapipe (`tests/gpu_backend.rs`),
+/// edge records included, so every pixel agrees as closely as with the same
+/// rays. (A real GPU may fuse multiply-adds and move a t by an ulp; there
+/// only the looser rules above hold.)
+#[test]
+fn gpu_cwbvh_backend_frames_equal_cpu_backend_frames() {
+    let cwbvh = || {
+        GpuBackend::with_layout(AdapterPolicy::AllowSoftware, GpuLayout::Cwbvh)
+            .expect("a wgpu adapter (see gpu())")
+    };
+    if !cwbvh().is_software() {
+        return;
+    }
+    for (name, method) in methods() {
+        let cpu = render("cube-in-box", method(), Box::new(CpuBackend::new()), 3);
+        let gpu = render("cube-in-box", method(), Box::new(cwbvh()), 3);
+        for (f, (c, g)) in cpu.iter().zip(&gpu).enumerate() {
+            let worst = *pixel_differences(c, g).last().unwrap();
+            eprintln!("{name} frame {f}, CWBVH: worst pixel {worst:e}");
+            assert!(
+                worst <= PIXEL_REL_SAME_RAYS,
+                "{name} frame {f}: pixel off by {worst}"
+            );
+        }
+    }
 }
