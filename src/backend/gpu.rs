@@ -1,8 +1,8 @@
 //! The GPU ray backend: wgpu compute shaders (`shaders/*.wgsl`) traverse
-//! obvhs BVHs of the frame's triangles (BVH2 or CWBVH, [`GpuLayout`]),
-//! closest hit and any hit over batches of rays. It returns the same hits as the CPU backend
-//! (`tests/gpu_backend.rs` checks it on random scenes and on every built-in
-//! scene).
+//! obvhs BVHs of the frame's triangles (CWBVH or BVH2, [`GpuLayout`]),
+//! closest hit and any hit over batches of rays. It returns the same hits
+//! as the CPU backend (`tests/gpu_backend.rs` checks it on random scenes
+//! and on every built-in scene).
 //!
 //! Split as bevy_solari splits its passes:
 //! - **extract**: [`GpuBackend::set_geometry`] builds a BVH per part (static
@@ -16,8 +16,8 @@
 //!   dispatches and only ever grow;
 //! - **passes**: "closest hit" (`shaders/closest_hit.wgsl`) and "any hit"
 //!   (`shaders/any_hit.wgsl`), both on `shaders/ray_common.wgsl` and the
-//!   layout's traversal (`bvh2_traverse.wgsl` or `cwbvh_traverse.wgsl`). A batch
-//!   is cut in chunks of at most [`GpuBackend::chunk_rays`] rays (the storage
+//!   layout's traversal (`cwbvh_traverse.wgsl` or `bvh2_traverse.wgsl`). A
+//!   batch is cut in chunks of at most [`GpuBackend::chunk_rays`] rays (the storage
 //!   binding limit: 128 MiB on lavapipe), each dispatched as a 2D grid (at
 //!   most 65535 workgroups per dimension), its results copied to a staging
 //!   buffer, mapped and read back.
@@ -61,7 +61,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// Work items per workgroup. Must match `WORKGROUP_SIZE` in
-/// `shaders/bvh2_traverse.wgsl`.
+/// `shaders/ray_common.wgsl`.
 pub const WORKGROUP_SIZE: u32 = 64;
 
 /// Rays per dispatch at most, before the device's binding limit is applied:
@@ -86,7 +86,7 @@ const RAY_BYTES: u64 = std::mem::size_of::<Ray>() as u64;
 const TRIANGLE_BYTES: u64 = std::mem::size_of::<GpuTriangle>() as u64;
 
 /// A triangle in BVH leaf order with the ids a hit reports. Field order must
-/// match `Triangle` in `shaders/bvh2_traverse.wgsl`.
+/// match `Triangle` in `shaders/ray_common.wgsl`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct GpuTriangle {
@@ -101,7 +101,7 @@ pub struct GpuTriangle {
 }
 
 /// Parameters of one dispatch. Field order must match `Params` in
-/// `shaders/bvh2_traverse.wgsl`.
+/// `shaders/ray_common.wgsl`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 struct GpuParams {

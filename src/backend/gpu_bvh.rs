@@ -145,8 +145,11 @@ impl Part {
                 v2: t.p[2].into(),
             })
             .collect();
+        // obvhs builds nothing useful from no triangles: an empty part has
+        // no nodes (its root is NONE in the shaders).
         let (nodes, order) = match layout {
-            _ if range.is_empty() => (Nodes::Bvh2(Vec::new()), Vec::new()),
+            GpuLayout::Bvh2 if range.is_empty() => (Nodes::Bvh2(Vec::new()), Vec::new()),
+            GpuLayout::Cwbvh if range.is_empty() => (Nodes::Cwbvh(Vec::new()), Vec::new()),
             GpuLayout::Bvh2 => bvh2_nodes(&source)?,
             GpuLayout::Cwbvh => cwbvh_nodes(&source)?,
         };
