@@ -1,0 +1,180 @@
+//! Schema 2 (`migrations/0002_state_and_identity.md`; schema 1 had the
+//! same `records` and `samples` values): the value types that schema 3
+//! changed, kept to read a version-2 store in the 0002 → 0003 migration
+//! (`migrations/0003_sample_log.md`), which moves every record's samples
+//! out of the `samples` tree into the sample log.
+
+use super::samples::{SampleLog, FILE_NAME as LOG_FILE};
+use super::{encode, keys, schema};
+use rkyv::{Archive, Deserialize, Serialize};
+use std::ops::Bound;
+use std::path::Path;
+
+/// Schema-1 and -2 `records` value (no sample location: the samples were
+/// in the `samples` tree under the same key).
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RecordValue {
+    pub id: u64,
+    pub created_frame: u32,
+    pub last_frame: u32,
+    pub position: [f32; 3],
+    pub normal: [f32; 3],
+    pub irradiance: [f32; 3],
+    pub grad_translation: [[f32; 3]; 3],
+    pub grad_rotation: [[f32; 3]; 3],
+    pub radius: f32,
+    pub object: u32,
+    pub strata_theta: u32,
+    pub strata_phi: u32,
+}
+
+/// Schema-1 and -2 `samples` value under `job · frame · record id`: the
+/// record's `count` samples, the bytes of a
+/// [`super::samples::SampleBlock`].
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct SamplesValue {
+    pub count: u32,
+    pub packed_zstd: Vec<u8>,
+}
+
+impl RecordValue {
+    /// The schema-2 form of a record (its sample location dropped).
+    pub fn from_v3(r: &schema::RecordValue) -> Self {
+        RecordValue {
+            id: r.id,
+            created_frame: r.created_frame,
+            last_frame: r.last_frame,
+            position: r.position,
+            normal: r.normal,
+            irradiance: r.irradiance,
+            grad_translation: r.grad_translation,
+            grad_rotation: r.grad_rotation,
+            radius: r.radius,
+            object: r.object,
+            strata_theta: r.strata_theta,
+            strata_phi: r.strata_phi,
+        }
+    }
+
+    /// The schema-3 record, its samples at `(count, offset, len)`.
+    fn to_v3(&self, count: u32, offset: u64, len: u32) -> schema::RecordValue {
+        schema::RecordValue {
+            id: self.id,
+            created_frame: self.created_frame,
+            last_frame: self.last_frame,
+            position: self.position,
+            normal: self.normal,
+            irradiance: self.irradiance,
+            grad_translation: self.grad_translation,
+            grad_rotation: self.grad_rotation,
+            radius: self.radius,
+            object: self.object,
+            strata_theta: self.strata_theta,
+            strata_phi: self.strata_phi,
+            samples_count: count,
+            samples_offset: offset,
+            samples_len: len,
+        }
+    }
+}
+
+/// Records converted per transaction of the migration.
+const BATCH: usize = 1024;
+
+/// Migration 0002 → 0003 (`migrations/0003_sample_log.md`): in batches
+/// of [`BATCH`] records in key order, appends each record's samples to
+/// `samples.log` (synced), then in one transaction over `records`,
+/// `samples` and `meta` rewrites the records with their sample location,
+/// removes their `samples` values and records the log's committed length
+/// and the last key converted (`meta.migrate_0003_through`); at the end
+/// drops the `samples` tree. A crash mid-step resumes after the last
+/// batch committed (the log's uncommitted tail is cut off first).
+pub fn migrate_to_v3(db: &sled::Db, dir: &Path) -> Result<(), String> {
+    let tree = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
+    let (meta, records, samples) = (tree("meta")?, tree("records")?, tree("samples")?);
+    let committed = read_meta_u64(&meta, keys::META_SAMPLES_LOG_LEN)?;
+    let mut log = SampleLog::open(dir, committed).map_err(|e| format!("{LOG_FILE}: {e}"))?;
+    let mut through = meta
+        .get(keys::META_MIGRATE_0003_THROUGH)
+        .map_err(|e| e.to_string())?
+        .map(|v| v.to_vec());
+    loop {
+        let start = match &through {
+            Some(k) => Bound::Excluded(k.clone()),
+            None => Bound::Unbounded,
+        };
+        let mut rows = Vec::with_capacity(BATCH);
+        for item in records
+            .range::<Vec<u8>, _>((start, Bound::Unbounded))
+            .take(BATCH)
+        {
+            let (k, v) = item.map_err(|e| e.to_string())?;
+            let at = |e: String| format!("tree `records` key {}: {e}", keys::describe(&k));
+            let old: RecordValue = super::decode_value(&v).map_err(at)?;
+            let (count, offset, len) = match samples.get(&k).map_err(|e| e.to_string())? {
+                Some(sv) => {
+                    let s: SamplesValue = super::decode_value(&sv)
+                        .map_err(|e| format!("tree `samples` key {}: {e}", keys::describe(&k)))?;
+                    if s.count == 0 {
+                        (0, 0, 0)
+                    } else {
+                        let offset = log
+                            .append(&s.packed_zstd)
+                            .map_err(|e| format!("{LOG_FILE}: {e}"))?;
+                        (s.count, offset, s.packed_zstd.len() as u32)
+                    }
+                }
+                None => (0, 0, 0),
+            };
+            rows.push((k, encode(&old.to_v3(count, offset, len))));
+        }
+        let Some((last, _)) = rows.last() else {
+            break;
+        };
+        let last = last.to_vec();
+        log.sync().map_err(|e| format!("{LOG_FILE}: {e}"))?;
+        let end = log.end();
+        use sled::transaction::ConflictableTransactionError;
+        use sled::Transactional;
+        (&meta, &records, &samples)
+            .transaction(|(meta, records, samples)| {
+                for (k, v) in &rows {
+                    records.insert(k, &v[..])?;
+                    samples.remove(k)?;
+                }
+                meta.insert(keys::META_SAMPLES_LOG_LEN, &end.to_be_bytes())?;
+                meta.insert(keys::META_MIGRATE_0003_THROUGH, &last[..])?;
+                Ok::<(), ConflictableTransactionError<()>>(())
+            })
+            .map_err(|e| format!("{e:?}"))?;
+        db.flush().map_err(|e| e.to_string())?;
+        log.commit();
+        through = Some(last);
+    }
+    if committed.is_none() && through.is_none() {
+        // No records at all: the log exists, empty; say so in `meta`.
+        meta.insert(keys::META_SAMPLES_LOG_LEN, &log.end().to_be_bytes())
+            .map_err(|e| e.to_string())?;
+    }
+    // Samples without a record (none are written so) go with the tree.
+    drop(samples);
+    db.drop_tree("samples").map_err(|e| e.to_string())?;
+    db.flush().map_err(|e| e.to_string())?;
+    Ok(())
+}
+
+pub(crate) fn read_meta_u64(meta: &sled::Tree, key: &[u8]) -> Result<Option<u64>, String> {
+    match meta.get(key).map_err(|e| e.to_string())? {
+        None => Ok(None),
+        Some(v) => {
+            let b: [u8; 8] = v.as_ref().try_into().map_err(|_| {
+                format!(
+                    "tree `meta` key {}: expected 8 bytes, found {}",
+                    keys::describe(key),
+                    v.len()
+                )
+            })?;
+            Ok(Some(u64::from_be_bytes(b)))
+        }
+    }
+}
