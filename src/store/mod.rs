@@ -56,9 +56,12 @@ pub const TREES: [&str; 7] = [
 ];
 
 /// sled's page cache. Its default (1 GiB) made a render's memory grow
-/// with the size of the store; the renderer reads little back, so a small
-/// cache keeps peak memory independent of the number of frames.
-const CACHE_BYTES: u64 = 16 * 1024 * 1024;
+/// with the size of the store; the renderer reads little back. Since the
+/// samples moved to the sample log, sled holds only small values, and a
+/// 16 MiB cache took hundreds of frames to fill: a 16×16 `ic` render
+/// peaked at 22 MB for 100 frames and 32 MB for 400 with it, 21 and 24 MB
+/// with 2 MiB (README, "Peak memory").
+const CACHE_BYTES: u64 = 2 * 1024 * 1024;
 
 /// Store errors; every message names the store path and the problem.
 #[derive(Debug, thiserror::Error)]

@@ -253,7 +253,7 @@ impl SampleLog {
 
     /// The `len` bytes at `offset`, which must lie in the committed part.
     pub fn read(&self, offset: u64, len: u32) -> Result<Vec<u8>, String> {
-        let stop = offset.checked_add(u64::from(len)).unwrap_or(u64::MAX);
+        let stop = offset.saturating_add(u64::from(len));
         if offset < MAGIC.len() as u64 || stop > self.committed {
             return Err(format!(
                 "bytes {offset}..{stop} lie outside its committed {} bytes",
