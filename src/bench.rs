@@ -1066,7 +1066,9 @@ fn render_frames(
     for frame in frames {
         bar.set_message(format!("{what}, frame {frame}"));
         let start = Instant::now();
-        let film = renderer.render_frame(frame);
+        let film = renderer
+            .try_render_frame(frame)
+            .map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
         render_time += start.elapsed();
         let stats = renderer.last_frame_stats();
         // Records computed: new ones and replacements at the same point (trc).

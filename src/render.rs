@@ -244,13 +244,37 @@ impl Renderer {
 
     /// Renders frame `frame` (time `frame / fps`). A two-pass method first
     /// gets the frames it asks for through its first pass (the rays they
-    /// trace count in this frame).
+    /// trace count in this frame). Panics if the backend fails (tests);
+    /// `render`, `bench` and `serve` use [`Self::try_render_frame`].
     pub fn render_frame(&mut self, frame: u32) -> Film {
+        self.try_render_frame(frame)
+            .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`Self::render_frame`], or the error that stopped the backend
+    /// ([`RayBackend::failure`]). The frame is then discarded, and so is
+    /// every later one: the method's carried state may hold the failed
+    /// frame's garbage, so only a fresh renderer (a resume from the store)
+    /// goes on.
+    pub fn try_render_frame(&mut self, frame: u32) -> Result<Film, BackendFailed> {
+        let failed = |r: &Self| {
+            r.backend.failure().map(|message| BackendFailed {
+                frame,
+                backend: r.backend.name(),
+                message,
+            })
+        };
+        if let Some(e) = failed(self) {
+            return Err(e);
+        }
         let rays_before = self.backend.ray_counts().total();
         let film = self.render_frame_uncounted(frame);
+        if let Some(e) = failed(self) {
+            return Err(e);
+        }
         self.last_frame_rays = self.backend.ray_counts().total() - rays_before;
         self.last_frame = Some(frame);
-        film
+        Ok(film)
     }
 
     fn render_frame_uncounted(&mut self, frame: u32) -> Film {
@@ -292,6 +316,27 @@ impl Renderer {
         f(&ctx)
     }
 }
+
+/// The ray backend stopped working while a frame was rendered.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BackendFailed {
+    pub frame: u32,
+    /// [`RayBackend::name`].
+    pub backend: String,
+    pub message: String,
+}
+
+impl std::fmt::Display for BackendFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "frame {}: the {} backend failed: {}",
+            self.frame, self.backend, self.message
+        )
+    }
+}
+
+impl std::error::Error for BackendFailed {}
 
 /// Calls of a method's passes by one [`Renderer`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -613,7 +658,16 @@ pub fn render_job_to_dir_with(
             continue;
         }
         progress.set_message(format!("frame {frame}"));
-        let film = renderer.render_frame(frame);
+        let film = renderer.try_render_frame(frame).map_err(|e| {
+            progress.abandon();
+            match job {
+                Some(_) => anyhow::anyhow!(
+                    "{e}\nevery frame before it is saved in the store: running the job \
+                     again resumes there (with --backend cpu if the GPU keeps failing)"
+                ),
+                None => anyhow::anyhow!("{e}"),
+            }
+        })?;
         let stats = renderer.last_frame_stats();
         let kept = renderer.take_frame_records();
         if let Some(j) = job.as_deref_mut() {

@@ -488,3 +488,68 @@ fn gpu_backend_names_its_adapter() {
     assert!(name.contains(&gpu.adapter_info().name), "{name}");
     assert!(gpu.preferred_batch() >= 1 << 20);
 }
+
+/// Triangles at exponentially growing distances (each 1.5 times as far as
+/// the one before): the BVH builder peels them off one by one, so the tree
+/// is about as deep as there are triangles (200 gave depth 99).
+fn exponential_row(n: usize) -> Mesh {
+    let mut m = Mesh::default();
+    for i in 0..n {
+        let x = 1.5f32.powi(i as i32);
+        let base = m.positions.len() as u32;
+        for p in [
+            Vec3::new(x, 0.0, 0.0),
+            Vec3::new(x, 1.0, 0.0),
+            Vec3::new(x, 0.0, 1.0),
+        ] {
+            m.positions.push(p);
+            m.normals.push(Vec3::X);
+        }
+        m.triangles.push([base, base + 1, base + 2]);
+        m.materials.push(0);
+    }
+    m
+}
+
+#[test]
+fn a_scene_the_gpu_cannot_take_fails_the_backend_instead_of_panicking() {
+    let s = scene(
+        vec![exponential_row(200)],
+        vec![Material::diffuse("grey", Vec3::splat(0.5))],
+        vec![],
+        Vec3::new(-1.0, 0.3, 0.3),
+        Vec3::X,
+        1.0,
+        vec![],
+    );
+    let snapshot = s.snapshot(0.0);
+    let mut gpu = gpu();
+    let expected = gpu
+        .try_set_geometry(&snapshot)
+        .expect_err("a BVH deeper than the traversal stack is refused")
+        .to_string();
+    assert!(expected.contains("depth"), "{expected}");
+    assert_eq!(
+        gpu.failure(),
+        None,
+        "try_ methods leave the backend working"
+    );
+
+    RayBackend::set_geometry(&mut gpu, &snapshot);
+    let failure = gpu.failure().expect("set_geometry failed the backend");
+    assert_eq!(failure, expected);
+    let rays = [Ray::new(
+        Vec3::new(-1.0, 0.3, 0.3),
+        Vec3::X,
+        0.0,
+        f32::INFINITY,
+    )];
+    let (mut hits, mut occluded) = ([Hit::MISS], [true]);
+    gpu.closest_hit(&rays, &mut hits);
+    gpu.any_hit(&rays, &mut occluded);
+    assert!(
+        !hits[0].is_hit() && !occluded[0],
+        "a failed backend reports misses"
+    );
+    assert_eq!(gpu.failure(), Some(expected), "the first error is kept");
+}

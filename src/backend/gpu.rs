@@ -36,10 +36,14 @@
 //! device, a shader the driver rejects — fails in [`GpuBackend::new`] with an
 //! error. The [`RayBackend`] methods return nothing, so a failure after
 //! construction (the device lost, a buffer that cannot be mapped, a scene too
-//! large for the device's binding limits) panics with a message saying what
-//! happened; it is never silently swallowed. [`GpuBackend::try_set_geometry`]
-//! reports the size problems as errors for callers that want to handle them.
+//! large for the device's binding limits) is kept as the backend's
+//! [`RayBackend::failure`]: from then on every ray misses, and the renderer,
+//! which checks it after each frame, discards the frame and stops with the
+//! message (a resumable job keeps every frame finished before). It is never
+//! silently swallowed, and it never panics. The `try_` methods return the
+//! errors directly for callers that want to handle them.
 
+use super::gpu_cache::{CacheSplat, GpuLookup};
 use super::{Hit, Ray, RayBackend, RayCounts};
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
@@ -200,7 +204,10 @@ struct GeometryBuffers {
 }
 
 /// Errors reported by wgpu outside an error scope, or the device being lost.
-type ErrorSlot = Arc<Mutex<Option<String>>>;
+pub(super) type ErrorSlot = Arc<Mutex<Option<String>>>;
+
+/// The first error that failed the backend ([`RayBackend::failure`]).
+pub(super) type FailureSlot = Arc<Mutex<Option<String>>>;
 
 pub struct GpuBackend {
     device: wgpu::Device,
@@ -215,9 +222,14 @@ pub struct GpuBackend {
     max_binding: u64,
     max_groups_per_dim: u32,
     errors: ErrorSlot,
+    /// The first error of a [`RayBackend`] call ([`RayBackend::failure`]),
+    /// shared with the cache splat, whose errors fail the backend too.
+    failed: FailureSlot,
     closest: AtomicU64,
     any: AtomicU64,
     timings: Mutex<GpuTimings>,
+    /// The render pass's cache interpolation on this device.
+    splat: CacheSplat,
 }
 
 /// The adapters wgpu sees (backends from `WGPU_BACKEND` when set, else
@@ -364,6 +376,14 @@ impl GpuBackend {
             dynamic_root: NONE,
         };
         let rays = RayBuffers::new(&device, 1);
+        let failed = FailureSlot::default();
+        let splat = CacheSplat::new(
+            &device,
+            &queue,
+            adapter_name.clone(),
+            errors.clone(),
+            failed.clone(),
+        )?;
         let backend = GpuBackend {
             device,
             queue,
@@ -377,9 +397,11 @@ impl GpuBackend {
             max_binding,
             max_groups_per_dim: limits.max_compute_workgroups_per_dimension.max(1),
             errors,
+            failed,
             closest: AtomicU64::new(0),
             any: AtomicU64::new(0),
             timings: Mutex::default(),
+            splat,
         };
         // One empty-scene dispatch of each kind: shader compilation and the
         // readback path fail here, not in the middle of a render.
@@ -396,6 +418,15 @@ impl GpuBackend {
             return Err(setup(
                 "test dispatch returned a hit in an empty scene".into(),
             ));
+        }
+        // And one splat over an empty cache: no record is usable anywhere.
+        let empty = backend
+            .splat
+            .prepare(&[], 0.2, true)
+            .and_then(|c| backend.splat.interpolate(&c, &[GpuLookup::default()], None))
+            .map_err(|e| setup(format!("test splat failed: {e}")))?;
+        if empty.first().is_none_or(|s| s.count != 0) {
+            return Err(setup("test splat found a record in an empty cache".into()));
         }
         backend.reset_timings();
         backend.closest.store(0, Ordering::Relaxed);
@@ -428,6 +459,16 @@ impl GpuBackend {
 
     fn add_timings(&self, f: impl FnOnce(&mut GpuTimings)) {
         f(&mut self.timings.lock().unwrap_or_else(|e| e.into_inner()));
+    }
+
+    /// Keeps the first error of `result` as [`RayBackend::failure`];
+    /// whether the backend has failed (now or before).
+    fn fail_on(&self, result: Result<(), GpuError>) -> bool {
+        let mut failed = self.failed.lock().unwrap_or_else(|e| e.into_inner());
+        if let Err(e) = result {
+            failed.get_or_insert_with(|| e.to_string());
+        }
+        failed.is_some()
     }
 
     /// The first error wgpu reported outside a scope, if any (device lost,
@@ -723,7 +764,10 @@ fn storage_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer
     })
 }
 
-fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+pub(super) fn layout_entry(
+    binding: u32,
+    ty: wgpu::BufferBindingType,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
@@ -736,11 +780,11 @@ fn layout_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLay
     }
 }
 
-fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+pub(super) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     layout_entry(binding, wgpu::BufferBindingType::Storage { read_only })
 }
 
-fn bind(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+pub(super) fn bind(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry {
         binding,
         resource: buffer.as_entire_binding(),
@@ -848,26 +892,43 @@ impl RayBackend for GpuBackend {
         format!("gpu ({}, {:?})", self.info.name, self.info.backend)
     }
 
-    /// Panics with the reason when the scene does not fit the device (see
+    /// A scene that does not fit the device fails the backend (see
     /// [`GpuBackend::try_set_geometry`]).
     fn set_geometry(&mut self, snapshot: &Snapshot) {
-        if let Err(e) = self.try_set_geometry(snapshot) {
-            panic!("{e}");
+        if self.failure().is_none() {
+            let result = self.try_set_geometry(snapshot);
+            self.fail_on(result);
         }
     }
 
-    /// Panics with the reason when the device fails (lost, out of memory).
+    /// A device failure (lost, out of memory) fails the backend: every ray
+    /// misses from then on.
     fn closest_hit(&self, rays: &[Ray], hits: &mut [Hit]) {
-        if let Err(e) = self.try_closest_hit(rays, hits) {
-            panic!("{e}");
+        let result = match self.failure() {
+            None => self.try_closest_hit(rays, hits),
+            Some(_) => Ok(()),
+        };
+        if self.fail_on(result) {
+            hits.fill(Hit::MISS);
         }
     }
 
-    /// Panics with the reason when the device fails (lost, out of memory).
+    /// As [`Self::closest_hit`]: nothing is occluded once the backend failed.
     fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
-        if let Err(e) = self.try_any_hit(rays, occluded) {
-            panic!("{e}");
+        let result = match self.failure() {
+            None => self.try_any_hit(rays, occluded),
+            Some(_) => Ok(()),
+        };
+        if self.fail_on(result) {
+            occluded.fill(false);
         }
+    }
+
+    fn failure(&self) -> Option<String> {
+        self.failed
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     fn ray_counts(&self) -> RayCounts {
@@ -879,5 +940,9 @@ impl RayBackend for GpuBackend {
 
     fn preferred_batch(&self) -> usize {
         PREFERRED_BATCH
+    }
+
+    fn cache_splat(&self) -> Option<&CacheSplat> {
+        Some(&self.splat)
     }
 }

@@ -1,12 +1,16 @@
 //! The batched ray interface. Methods trace rays only through
 //! [`RayBackend`]; the CPU backend ([`cpu::CpuBackend`]) works everywhere and
-//! a GPU backend can replace it without any method changing.
+//! a GPU backend can replace it without any method changing. A backend with
+//! a device also offers the render pass's cache interpolation there
+//! ([`RayBackend::cache_splat`], [`gpu_cache`]); the caching methods use it
+//! through `method::lookups`, which falls back to the CPU.
 //!
 //! `Ray` and `Hit` are `#[repr(C)]` plain data so that a GPU backend can upload
 //! and read them back as they are.
 
 pub mod cpu;
 pub mod gpu;
+pub mod gpu_cache;
 
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
@@ -114,4 +118,23 @@ pub trait RayBackend: Send + Sync {
 
     /// Batch size that keeps this backend busy.
     fn preferred_batch(&self) -> usize;
+
+    /// Why this backend stopped working, if it did (a GPU device lost, out
+    /// of memory, a scene too large for it). The tracing methods cannot
+    /// return errors — they run deep inside rayon tasks — so a backend that
+    /// fails records the first error here and answers every later ray with
+    /// a miss; whoever drives a frame checks this afterwards and discards
+    /// the frame (the renderer does, see `Renderer::try_render_frame`).
+    fn failure(&self) -> Option<String> {
+        None
+    }
+
+    /// The render pass's cache interpolation on this backend's device
+    /// (TRC §5 radiance cache splatting), for backends that have one: the
+    /// GPU backend. `ic` and `trc` interpolate on the CPU otherwise. An
+    /// error of the splat fails the backend like a ray error
+    /// ([`gpu_cache::CacheSplat::fail`]).
+    fn cache_splat(&self) -> Option<&gpu_cache::CacheSplat> {
+        None
+    }
 }

@@ -4,8 +4,12 @@
 //!
 //! A sphere is stored in the deepest node whose cell contains its centre and
 //! whose half-size is at least its radius; the sphere then lies inside the
-//! node's *loose* bounds (the cell grown by its half-size on every side). A
-//! query visits only nodes whose loose bounds contain the point.
+//! node's *loose* bounds (the cell grown by its half-size on every side).
+//! Each node also keeps the exact box around every sphere of its subtree,
+//! which is much tighter than the loose cell where records lie on surfaces
+//! (a wall's records fill a thin slab, not the cube around it): a query
+//! descends only into children whose box contains the point. This test
+//! runs once per shading point and dominates the render pass's lookups.
 
 use glam::Vec3;
 
@@ -17,6 +21,10 @@ struct Node {
     half: f32,
     /// `(item, centre, radius)` of the spheres stored here.
     items: Vec<(u32, Vec3, f32)>,
+    /// Box around every sphere stored in this node or below (empty:
+    /// `min > max`). Shrinking a sphere leaves it conservative.
+    bounds_min: Vec3,
+    bounds_max: Vec3,
     children: Option<Box<[Node; 8]>>,
 }
 
@@ -26,8 +34,19 @@ impl Node {
             center,
             half,
             items: Vec::new(),
+            bounds_min: Vec3::INFINITY,
+            bounds_max: Vec3::NEG_INFINITY,
             children: None,
         }
+    }
+
+    fn grow_bounds(&mut self, center: Vec3, radius: f32) {
+        self.bounds_min = self.bounds_min.min(center - radius);
+        self.bounds_max = self.bounds_max.max(center + radius);
+    }
+
+    fn bounds_contain(&self, p: Vec3) -> bool {
+        p.cmpge(self.bounds_min).all() && p.cmple(self.bounds_max).all()
     }
 
     fn split(&mut self) {
@@ -41,10 +60,6 @@ impl Node {
             );
             Node::new(c + offset, h)
         })));
-    }
-
-    fn loosely_contains(&self, p: Vec3) -> bool {
-        ((p - self.center).abs().max_element()) <= 2.0 * self.half
     }
 }
 
@@ -79,12 +94,14 @@ impl SphereOctree {
         let mut node = &mut self.root;
         let mut depth = 0;
         let inside_root = (center - node.center).abs().max_element() <= node.half;
+        node.grow_bounds(center, radius);
         while inside_root && depth < MAX_DEPTH && node.half * 0.5 >= radius {
             if node.children.is_none() {
                 node.split();
             }
             let i = child_for(node.center, center);
             node = &mut node.children.as_mut().expect("split above")[i];
+            node.grow_bounds(center, radius);
             depth += 1;
         }
         node.items.push((id, center, radius));
@@ -107,7 +124,7 @@ impl SphereOctree {
                 }
             }
             if let Some(children) = &node.children {
-                for child in children.iter().filter(|c| c.loosely_contains(p)) {
+                for child in children.iter().filter(|c| c.bounds_contain(p)) {
                     stack[len] = Some(child);
                     len += 1;
                 }

@@ -11,10 +11,13 @@
 //! - direct light by next-event estimation (one light sample per pixel
 //!   sample; the glossy lobe's part MIS-weighted against lobe sampling),
 //! - indirect diffuse from the cache: `E_indirect` interpolated with
-//!   gradients (TRC Eq. 1–4), records used where `w ≥ 1/a`,
+//!   gradients (TRC Eq. 1–4), records used where `w ≥ 1/a` — on the CPU,
+//!   or on the GPU by radiance cache splatting (TRC §5,
+//!   `backend::gpu_cache`) when the ray backend is the GPU one,
 //! - the glossy lobe by path tracing from a lobe sample (until radiance
 //!   records for glossy surfaces land).
 
+use super::lookups::{Interpolation, Lookup};
 use super::path::{camera_query, first_light_sample};
 use super::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::backend::{Hit, Ray};
@@ -34,7 +37,7 @@ use crate::store::SampleBlock;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 /// Settings of `ic`, with their sources.
@@ -499,7 +502,8 @@ impl<'a> Surface<'a> {
 
 /// Rendering stage (EAS Algorithm 1, lines 18–24), tile by tile. With
 /// `used` (one flag per cache record), every record that contributes to a
-/// pixel sample is flagged (`trc`'s replace-or-drop rule).
+/// pixel sample is flagged (`trc`'s replace-or-drop rule). The cache is
+/// interpolated on the GPU when the backend has one ([`Interpolation`]).
 pub(crate) fn render_pass(
     ctx: &FrameContext,
     cache: &IrradianceCache,
@@ -508,6 +512,7 @@ pub(crate) fn render_pass(
     stats: &mut FrameStats,
 ) -> Film {
     let mut film = Film::new(ctx.width, ctx.height);
+    let interpolation = Interpolation::new(ctx, cache, settings.gradients);
     let spp = settings.spp.max(1);
     let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1);
     let tile_stats: Vec<FrameStats> = film
@@ -516,7 +521,7 @@ pub(crate) fn render_pass(
         .enumerate()
         .map(|(tile, out)| {
             let first = (tile * pixels_per_tile) as u32;
-            render_tile(ctx, cache, settings, used, first, out)
+            render_tile(ctx, &interpolation, settings, used, first, out)
         })
         .collect();
     for t in tile_stats {
@@ -539,6 +544,7 @@ pub(crate) fn mark_used(
     settings: &IcSettings,
     used: &[AtomicBool],
 ) {
+    let interpolation = Interpolation::new(ctx, cache, settings.gradients);
     let spp = settings.spp.max(1);
     let n_pixels = ctx.width * ctx.height;
     let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1) as u32;
@@ -550,17 +556,14 @@ pub(crate) fn mark_used(
             .collect();
         let mut hits = vec![Hit::MISS; rays.len()];
         ctx.backend.closest_hit(&rays, &mut hits);
-        for (ray, hit) in rays.iter().zip(&hits) {
-            let Some(surface) = Surface::at(ctx, ray, hit) else {
-                continue;
-            };
-            if surface.bsdf.is_black() || surface.bsdf.diffuse_albedo().max_element() <= 0.0 {
-                continue;
-            }
-            cache.for_each_usable_indexed(surface.p, surface.bsdf.normal(), |i, _, _| {
-                used[i].store(true, Ordering::Relaxed)
-            });
-        }
+        let lookups: Vec<Lookup> = rays
+            .iter()
+            .zip(&hits)
+            .filter_map(|(ray, hit)| Surface::at(ctx, ray, hit))
+            .filter(|s| !s.bsdf.is_black() && s.bsdf.diffuse_albedo().max_element() > 0.0)
+            .map(|s| (s.p, s.bsdf.normal()))
+            .collect();
+        interpolation.mark_used(&lookups, used);
     });
 }
 
@@ -571,9 +574,14 @@ struct Deferred {
     query: RadianceQuery,
 }
 
+/// One tile of pixels in three steps: primary hits, emission and direct
+/// light, collecting the cache lookups of the tile (a G-buffer of shading
+/// points); the lookups interpolated all at once (on the GPU when there is
+/// one); then per sample the cached indirect light or, where no record is
+/// usable, a path-traced fallback, and the glossy lobe.
 fn render_tile(
     ctx: &FrameContext,
-    cache: &IrradianceCache,
+    interpolation: &Interpolation,
     settings: &IcSettings,
     used: Option<&[AtomicBool]>,
     first: u32,
@@ -594,16 +602,22 @@ fn render_tile(
     }
     let mut hits = vec![Hit::MISS; rays.len()];
     ctx.backend.closest_hit(&rays, &mut hits);
+    let surfaces: Vec<Option<Surface>> = rays
+        .iter()
+        .zip(&hits)
+        .map(|(ray, hit)| Surface::at(ctx, ray, hit))
+        .collect();
 
     let mut radiance = vec![Vec3::ZERO; rays.len()];
     let mut shadow_rays = Vec::new();
     let mut shadow_targets = Vec::new();
-    let mut deferred = Vec::new();
-    for (i, (ray, hit)) in rays.iter().zip(&hits).enumerate() {
-        let Some(surface) = Surface::at(ctx, ray, hit) else {
+    // The samples that look the cache up, in sample order, and their points.
+    let mut lookup_samples = Vec::new();
+    let mut lookups: Vec<Lookup> = Vec::new();
+    for (i, surface) in surfaces.iter().enumerate() {
+        let Some(surface) = surface else {
             continue;
         };
-        let rng = &mut rngs[i];
         if surface.material.is_emissive()
             && emitting_cosine(surface.triangle, surface.material.double_sided, surface.wo)
                 .is_some()
@@ -613,34 +627,46 @@ fn render_tile(
         if surface.bsdf.is_black() {
             continue;
         }
-        if let Some((shadow, contribution)) = direct_light(ctx, &surface, light_samples[i]) {
+        if let Some((shadow, contribution)) = direct_light(ctx, surface, light_samples[i]) {
             shadow_rays.push(shadow);
             shadow_targets.push((i, contribution));
         }
-        let kd = surface.bsdf.diffuse_albedo();
-        if kd.max_element() > 0.0 {
-            stats.lookups += 1;
-            let n = surface.bsdf.normal();
-            let mark = |i: usize| {
-                if let Some(used) = used {
-                    used[i].store(true, Ordering::Relaxed);
-                }
-            };
-            match cache.interpolate_marking(surface.p, n, settings.gradients, mark) {
+        if surface.bsdf.diffuse_albedo().max_element() > 0.0 {
+            lookup_samples.push(i);
+            lookups.push((surface.p, surface.bsdf.normal()));
+        }
+    }
+    stats.lookups = lookups.len() as u64;
+    let interpolated = interpolation.interpolate(&lookups, used);
+
+    // Per sample, in the order the CPU-only pass took them: the fallback
+    // query (if any) draws from the sample's stream before the glossy one.
+    let mut deferred = Vec::new();
+    let mut cached = lookup_samples.into_iter().zip(interpolated).peekable();
+    for (i, surface) in surfaces.iter().enumerate() {
+        let Some(surface) = surface else {
+            continue;
+        };
+        if surface.bsdf.is_black() {
+            continue;
+        }
+        let rng = &mut rngs[i];
+        if let Some((_, e)) = cached.next_if(|(j, _)| *j == i) {
+            match e {
                 Some(e) => {
-                    radiance[i] += kd * FRAC_1_PI * e.irradiance;
+                    radiance[i] += surface.bsdf.diffuse_albedo() * FRAC_1_PI * e.irradiance;
                     stats.lookup_records += u64::from(e.records);
                 }
                 None => {
                     stats.fallback_lookups += 1;
                     deferred.push(Deferred {
                         sample: i,
-                        query: diffuse_indirect_query(&surface, rng),
+                        query: diffuse_indirect_query(surface, rng),
                     });
                 }
             }
         }
-        if let Some(query) = glossy_query(&surface, rng) {
+        if let Some(query) = glossy_query(surface, rng) {
             deferred.push(Deferred { sample: i, query });
         }
     }

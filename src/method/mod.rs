@@ -4,6 +4,7 @@
 //! batched [`RayBackend`] interface.
 
 pub mod ic;
+mod lookups;
 pub mod path;
 pub mod trc;
 

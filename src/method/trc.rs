@@ -16,7 +16,9 @@
 //!    method": no trail of records behind moving objects);
 //! 2. *fill*: `ic`'s fill stage adds records where none is usable;
 //! 3. *render*: `ic`'s render pass, flagging every record a pixel sample
-//!    used (our stand-in for the paper's occlusion query).
+//!    used (our stand-in for the paper's occlusion query; with the GPU
+//!    backend the render pass splats the records on the GPU as in §5 and
+//!    returns these flags from there, `backend::gpu_cache`).
 //!
 //! Everything spatial — candidates, gathering, weights, gradients,
 //! neighbour clamping, direct light, glossy lobes — is `ic`'s code.

@@ -1,0 +1,128 @@
+//! The render pass's cache lookups, a tile at a time: TRC Eq. 1–4 at every
+//! pixel sample's shading point, on the CPU through the cache's octree, or
+//! on the GPU by radiance cache splatting (TRC §5,
+//! [`crate::backend::gpu_cache`]) when the ray backend has a device. Both
+//! give the same usable records and the same irradiance up to f32
+//! summation order; `ic` and `trc` do not know which one runs.
+//!
+//! A GPU error cannot be returned from a render tile: it fails the backend
+//! ([`CacheSplat::fail`], as a ray error does) and the lookups are
+//! answered on the CPU, so the results stay right while the renderer, which
+//! checks the backend after the frame, discards it.
+
+use super::FrameContext;
+use crate::backend::gpu_cache::{CacheSplat, GpuLookup, PreparedCache};
+use crate::cache::{Interpolated, IrradianceCache};
+use glam::Vec3;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// A shading point and its unit normal.
+pub(crate) type Lookup = (Vec3, Vec3);
+
+/// How one render pass interpolates its cache.
+pub(crate) enum Interpolation<'a> {
+    /// [`IrradianceCache::interpolate_marking`], lookup by lookup.
+    Cpu {
+        cache: &'a IrradianceCache,
+        gradients: bool,
+    },
+    /// The records binned and uploaded once for the pass; each tile's
+    /// lookups splatted in one dispatch (`cache` answers them if the GPU
+    /// fails).
+    Gpu {
+        splat: &'a CacheSplat,
+        prepared: PreparedCache,
+        cache: &'a IrradianceCache,
+        gradients: bool,
+    },
+}
+
+impl<'a> Interpolation<'a> {
+    /// The GPU splat when the frame's backend has one (and has not
+    /// failed), else the CPU.
+    pub(crate) fn new(ctx: &'a FrameContext, cache: &'a IrradianceCache, gradients: bool) -> Self {
+        let cpu = Interpolation::Cpu { cache, gradients };
+        let Some(splat) = ctx.backend.cache_splat().filter(|s| !s.has_failed()) else {
+            return cpu;
+        };
+        match splat.prepare(cache.records(), cache.accuracy, gradients) {
+            Ok(prepared) => Interpolation::Gpu {
+                splat,
+                prepared,
+                cache,
+                gradients,
+            },
+            Err(e) => {
+                splat.fail(&e);
+                cpu
+            }
+        }
+    }
+
+    /// The interpolated irradiance at each lookup (`None` where no record
+    /// is usable), in order. With `used`, every record used is flagged.
+    pub(crate) fn interpolate(
+        &self,
+        lookups: &[Lookup],
+        used: Option<&[AtomicBool]>,
+    ) -> Vec<Option<Interpolated>> {
+        match self {
+            Interpolation::Cpu { cache, gradients } => {
+                interpolate_on_cpu(cache, *gradients, lookups, used)
+            }
+            Interpolation::Gpu {
+                splat,
+                prepared,
+                cache,
+                gradients,
+            } => {
+                let points: Vec<GpuLookup> =
+                    lookups.iter().map(|&(p, n)| GpuLookup::new(p, n)).collect();
+                match splat.interpolate(prepared, &points, used) {
+                    Ok(sums) => sums.iter().map(|s| s.interpolated()).collect(),
+                    Err(e) => {
+                        splat.fail(&e);
+                        interpolate_on_cpu(cache, *gradients, lookups, used)
+                    }
+                }
+            }
+        }
+    }
+
+    /// Flags every record usable at some lookup, without interpolating
+    /// (the CPU skips the extrapolation; the GPU pass is the same one).
+    pub(crate) fn mark_used(&self, lookups: &[Lookup], used: &[AtomicBool]) {
+        match self {
+            Interpolation::Cpu { cache, .. } => mark_on_cpu(cache, lookups, used),
+            Interpolation::Gpu { .. } => {
+                self.interpolate(lookups, Some(used));
+            }
+        }
+    }
+}
+
+/// [`IrradianceCache::interpolate_marking`] at each lookup.
+fn interpolate_on_cpu(
+    cache: &IrradianceCache,
+    gradients: bool,
+    lookups: &[Lookup],
+    used: Option<&[AtomicBool]>,
+) -> Vec<Option<Interpolated>> {
+    lookups
+        .iter()
+        .map(|&(p, n)| {
+            cache.interpolate_marking(p, n, gradients, |i| {
+                if let Some(used) = used {
+                    used[i].store(true, Ordering::Relaxed);
+                }
+            })
+        })
+        .collect()
+}
+
+/// Flags the records usable at each lookup (no extrapolation needed).
+fn mark_on_cpu(cache: &IrradianceCache, lookups: &[Lookup], used: &[AtomicBool]) {
+    for &(p, n) in lookups {
+        cache.for_each_usable_indexed(p, n, |i, _, _| used[i].store(true, Ordering::Relaxed));
+    }
+}
