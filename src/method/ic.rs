@@ -22,8 +22,8 @@ use super::path::{camera_query, first_light_sample};
 use super::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
-    gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint, HemisphereSamples,
-    Strata,
+    gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint,
+    GatheredIrradiance, HemisphereSamples, Strata,
 };
 use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
@@ -382,19 +382,15 @@ impl IrradianceCaching {
                         .unwrap_or_else(|e| e.into_inner());
                     kept.push((RecordId::from(c.pixel), block));
                 }
+                let (radius, grad_translation) = self.limit_radius(&g, c.footprint);
                 let record = IrradianceRecord {
                     id: RecordId::from(c.pixel),
                     position: c.point.position,
                     normal: c.point.normal,
                     irradiance: g.irradiance,
-                    grad_translation: g.grad_translation,
+                    grad_translation,
                     grad_rotation: g.grad_rotation,
-                    radius: self.clamp_radius(
-                        g.harmonic_distance,
-                        g.irradiance,
-                        &g.grad_translation,
-                        c.footprint,
-                    ),
+                    radius,
                     created_frame: ctx.frame,
                     object: c.object,
                 };
@@ -410,18 +406,29 @@ impl IrradianceCaching {
 
     /// `R` from the harmonic mean distance, limited by the translation
     /// gradient (`R ≤ E/‖∇p E‖`: the gradient alone would change E by 100 %
-    /// over R) and clamped to the pixel-spacing limits (influence `a·R`).
-    fn clamp_radius(&self, harmonic: f32, e: Vec3, grad: &[Vec3; 3], footprint: f32) -> f32 {
+    /// over R) and clamped to the pixel-spacing limits (influence `a·R`);
+    /// and the translation gradient to interpolate with.
+    ///
+    /// Where the lower spacing limit raises `R` above the gradient limit,
+    /// the gradient is scaled down to `‖∇p E‖ = E/R`, so that extrapolating
+    /// over the record's influence (`a·R`) changes E by at most `a`. The
+    /// case is a record at a concave edge: a gather ray that hits the other
+    /// face at t ≈ 0 enters Ward & Heckbert's `1/min(r)` terms and makes
+    /// the gradient arbitrarily large (1e6 against ~20 for its neighbours
+    /// was seen), which the radius limit alone cannot bound once `R` is
+    /// clamped up. (Křivánek et al. 2006 limit `R` by the gradient; this is
+    /// the same bound applied the other way round.)
+    fn limit_radius(&self, g: &GatheredIrradiance, footprint: f32) -> (f32, [Vec3; 3]) {
         let a = self.settings.accuracy;
-        let grad_lum = grad[0] * LUMINANCE.x + grad[1] * LUMINANCE.y + grad[2] * LUMINANCE.z;
-        let mut r = harmonic;
-        let g = grad_lum.length();
-        if g > 0.0 {
-            r = r.min(luminance(e) / g);
+        let slope = luminance_gradient(&g.grad_translation).length();
+        let mut r = g.harmonic_distance;
+        if slope > 0.0 {
+            r = r.min(luminance(g.irradiance) / slope);
         }
         let r_min = self.settings.min_spacing_px * footprint / a;
         let r_max = self.settings.max_spacing_px * footprint / a;
-        r.clamp(r_min, r_max.max(r_min))
+        let r = r.clamp(r_min, r_max.max(r_min));
+        (r, limit_gradient(g.grad_translation, g.irradiance, r))
     }
 }
 
@@ -460,6 +467,21 @@ pub(crate) fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
             })
         })
         .collect()
+}
+
+/// The luminance of a per-channel gradient.
+fn luminance_gradient(grad: &[Vec3; 3]) -> Vec3 {
+    grad[0] * LUMINANCE.x + grad[1] * LUMINANCE.y + grad[2] * LUMINANCE.z
+}
+
+/// A translation gradient scaled down, if need be, so that it changes the
+/// luminance of `e` by at most 100 % over `r` (see
+/// [`IrradianceCaching::limit_radius`]; `trc` bounds its estimate of the
+/// next frame's gradient with the same `r`).
+pub(crate) fn limit_gradient(grad: [Vec3; 3], e: Vec3, r: f32) -> [Vec3; 3] {
+    let (slope, e) = (luminance_gradient(&grad).length(), luminance(e));
+    let scale = if slope * r > e { e / (slope * r) } else { 1.0 };
+    grad.map(|c| c * scale)
 }
 
 /// A shaded hit: position, normals and BSDF.
@@ -758,5 +780,88 @@ fn diffuse_indirect_query(s: &Surface, rng: &mut Rng) -> RadianceQuery {
         rng: rng.split(),
         weight: s.bsdf.diffuse_albedo(),
         first_hit: FirstHitEmission::Exclude,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cache::gather::Strata;
+
+    /// A hemisphere lit from one side, gathered next to a wall: one cell's
+    /// ray hits the wall at t ≈ 0, which makes Ward & Heckbert's gradient
+    /// huge. Limited with the record's radius, extrapolating over the
+    /// record's influence (`a·R`) changes the luminance by at most `a`.
+    #[test]
+    fn a_hit_at_t_near_zero_cannot_blow_up_the_translation_gradient() {
+        let strata = Strata { theta: 4, phi: 12 };
+        let normal = Vec3::Z;
+        let frame = crate::sampling::Frame::new(normal);
+        let mut samples = HemisphereSamples::default();
+        for j in 0..strata.theta {
+            for k in 0..strata.phi {
+                let phi = std::f32::consts::TAU * (k as f32 + 0.5) / strata.phi as f32;
+                let s = ((j as f32 + 0.5) / strata.theta as f32).sqrt();
+                let dir = frame.to_world(Vec3::new(
+                    s * phi.cos(),
+                    s * phi.sin(),
+                    (1.0 - s * s).sqrt(),
+                ));
+                samples.direction.push(dir);
+                // The wall next to the record, at t ≈ 0 and brighter.
+                let wall = (j, k) == (3, 3);
+                let l = if wall {
+                    4.0
+                } else if dir.x > 0.0 {
+                    2.0
+                } else {
+                    0.5
+                };
+                samples.radiance.push(Vec3::splat(l));
+                samples.distance.push(if wall { 1e-7 } else { 1.0 });
+                samples.object.push(0);
+            }
+        }
+        let g = irradiance_and_gradients(&samples, normal, strata);
+        let e = luminance(g.irradiance);
+        let raw = luminance_gradient(&g.grad_translation).length();
+        let r = 0.05;
+        assert!(
+            raw * r > 100.0 * e,
+            "the t ≈ 0 hit makes the raw gradient huge: {raw}"
+        );
+
+        let limited = limit_gradient(g.grad_translation, g.irradiance, r);
+        let slope = luminance_gradient(&limited).length();
+        assert!(
+            (slope * r - e).abs() <= 1e-4 * e,
+            "|∇E|·R = {} against E = {e}",
+            slope * r
+        );
+        // A gradient within the limit is kept as it is.
+        let small = limit_gradient(limited.map(|c| c * 0.5), g.irradiance, r);
+        assert_eq!(small, limited.map(|c| c * 0.5));
+
+        let a = IcSettings::default().accuracy;
+        let record = IrradianceRecord {
+            id: 0,
+            position: Vec3::ZERO,
+            normal,
+            irradiance: g.irradiance,
+            grad_translation: limited,
+            grad_rotation: [Vec3::ZERO; 3],
+            radius: r,
+            created_frame: 0,
+            object: 0,
+        };
+        for k in 0..16 {
+            let angle = std::f32::consts::TAU * k as f32 / 16.0;
+            let p = Vec3::new(angle.cos(), angle.sin(), 0.0) * a * r;
+            let change = (luminance(record.extrapolate(p, normal, true)) - e).abs();
+            assert!(
+                change <= a * e * 1.0001,
+                "E changed by {change} of {e} at {p}"
+            );
+        }
     }
 }

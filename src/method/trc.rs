@@ -49,8 +49,8 @@
 
 use super::ic::IrradianceCaching;
 use super::ic::{
-    dynamic_objects, mark_used, primary_candidates, render_pass, scene_bounds, Candidate, Gathered,
-    IcSettings,
+    dynamic_objects, limit_gradient, mark_used, primary_candidates, render_pass, scene_bounds,
+    Candidate, Gathered, IcSettings,
 };
 use super::{
     FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges, StateError,
@@ -357,7 +357,10 @@ impl TemporalRadianceCaching {
             // Eq. 15–17 (t1 − t0 = 1).
             d_irradiance: e1 - e0,
             d_grad_rotation: sub(next_gather.grad_rotation, g.record.grad_rotation),
-            d_grad_translation: sub(next_gather.grad_translation, g.record.grad_translation),
+            d_grad_translation: sub(
+                limit_gradient(next_gather.grad_translation, e1, g.record.radius),
+                g.record.grad_translation,
+            ),
             replaces: None,
             used: false,
         }
