@@ -1083,3 +1083,56 @@ fn sample_log_shorter_than_referenced_is_a_clear_error() {
         "{msg}"
     );
 }
+
+#[test]
+fn interrupted_0002_to_0003_migration_resumes_where_it_stopped() {
+    let method = MethodSettings::Ic(IcSettings {
+        strata: Strata { theta: 4, phi: 12 },
+        spp: 1,
+        ..IcSettings::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let (_, _, written) = v1_fixture(&path, &method);
+    assert!(written.len() > 10);
+    drop(Store::open_with(&path, false, 2, migrate::MIGRATIONS).unwrap());
+    // A crash after two batches of 5 records, and in the middle of the
+    // third one's log append (bytes no record references yet).
+    let committed = {
+        let db = open_raw(&path);
+        radcache::store::v2::migrate_to_v3_batches(&db, &path, 5, Some(2)).unwrap();
+        db.flush().unwrap();
+        let meta = db.open_tree("meta").unwrap();
+        let len = meta.get(keys::META_SAMPLES_LOG_LEN).unwrap().unwrap();
+        assert_eq!(
+            meta.get(keys::META_SCHEMA_VERSION)
+                .unwrap()
+                .unwrap()
+                .as_ref(),
+            2u32.to_be_bytes(),
+            "still schema 2"
+        );
+        assert_eq!(db.open_tree("samples").unwrap().len(), written.len() - 10);
+        u64::from_be_bytes(len.as_ref().try_into().unwrap())
+    };
+    {
+        use std::io::Write;
+        let mut f = std::fs::OpenOptions::new()
+            .append(true)
+            .open(path.join("samples.log"))
+            .unwrap();
+        f.write_all(&[0x55; 777]).unwrap();
+    }
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.schema_version().unwrap(), 3);
+    for (frame, id, samples) in &written {
+        assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);
+    }
+    // The torn bytes were cut off: blocks follow each other with no gap.
+    let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
+    assert_eq!(
+        report.jobs[0].samples_stored_bytes,
+        store.sample_log_bytes() - 8
+    );
+    assert!(store.sample_log_bytes() > committed);
+}

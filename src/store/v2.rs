@@ -90,6 +90,19 @@ const BATCH: usize = 1024;
 /// drops the `samples` tree. A crash mid-step resumes after the last
 /// batch committed (the log's uncommitted tail is cut off first).
 pub fn migrate_to_v3(db: &sled::Db, dir: &Path) -> Result<(), String> {
+    migrate_to_v3_batches(db, dir, BATCH, None)
+}
+
+/// [`migrate_to_v3`] in batches of `batch` records, stopping after
+/// `max_batches` of them if given (what a crash after that batch leaves:
+/// tests resume from it).
+#[doc(hidden)]
+pub fn migrate_to_v3_batches(
+    db: &sled::Db,
+    dir: &Path,
+    batch: usize,
+    max_batches: Option<usize>,
+) -> Result<(), String> {
     let tree = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
     let (meta, records, samples) = (tree("meta")?, tree("records")?, tree("samples")?);
     let committed = read_meta_u64(&meta, keys::META_SAMPLES_LOG_LEN)?;
@@ -98,15 +111,15 @@ pub fn migrate_to_v3(db: &sled::Db, dir: &Path) -> Result<(), String> {
         .get(keys::META_MIGRATE_0003_THROUGH)
         .map_err(|e| e.to_string())?
         .map(|v| v.to_vec());
-    loop {
+    for _ in 0..max_batches.unwrap_or(usize::MAX) {
         let start = match &through {
             Some(k) => Bound::Excluded(k.clone()),
             None => Bound::Unbounded,
         };
-        let mut rows = Vec::with_capacity(BATCH);
+        let mut rows = Vec::with_capacity(batch);
         for item in records
             .range::<Vec<u8>, _>((start, Bound::Unbounded))
-            .take(BATCH)
+            .take(batch)
         {
             let (k, v) = item.map_err(|e| e.to_string())?;
             let at = |e: String| format!("tree `records` key {}: {e}", keys::describe(&k));
@@ -150,6 +163,9 @@ pub fn migrate_to_v3(db: &sled::Db, dir: &Path) -> Result<(), String> {
         db.flush().map_err(|e| e.to_string())?;
         log.commit();
         through = Some(last);
+    }
+    if max_batches.is_some() {
+        return Ok(());
     }
     if committed.is_none() && through.is_none() {
         // No records at all: the log exists, empty; say so in `meta`.
