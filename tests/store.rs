@@ -993,7 +993,11 @@ fn version_2_store_moves_its_samples_into_the_sample_log() {
     );
     let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
     assert_eq!(report.jobs[0].samples as usize, written.len() * 48);
-    assert_eq!(report.jobs[0].samples_stored_bytes, log_bytes - 8);
+    // The log holds the samples and the frames' EXR files, nothing else.
+    assert_eq!(
+        report.jobs[0].samples_stored_bytes + report.jobs[0].exr_stored_bytes,
+        log_bytes - 8
+    );
     assert!(report.trees.iter().all(|t| t.name != "samples"));
     drop(store);
     // The `samples` tree is gone; running the step again changes nothing.
@@ -1131,7 +1135,7 @@ fn interrupted_0002_to_0003_migration_resumes_where_it_stopped() {
     // The torn bytes were cut off: blocks follow each other with no gap.
     let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
     assert_eq!(
-        report.jobs[0].samples_stored_bytes,
+        report.jobs[0].samples_stored_bytes + report.jobs[0].exr_stored_bytes,
         store.sample_log_bytes() - 8
     );
     assert!(store.sample_log_bytes() > committed);

@@ -186,7 +186,7 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
     let mut per_frame: BTreeMap<u32, FrameReport> = BTreeMap::new();
     for frame in store.frames_done(j.id)? {
         let v = store.frame(j.id, frame)?.expect("listed frame exists");
-        r.exr_stored_bytes += v.exr_zstd.len() as u64;
+        r.exr_stored_bytes += u64::from(v.exr_stored_len);
         r.exr_raw_bytes += v.exr_len;
         let stats = store.frame_stats(j.id, frame)?.unwrap_or_default();
         per_frame.insert(
@@ -196,7 +196,7 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
                 records_written: 0,
                 records_alive: stats.records_alive,
                 samples: 0,
-                exr_bytes: v.exr_zstd.len() as u64,
+                exr_bytes: u64::from(v.exr_stored_len),
                 rays: stats.rays,
             },
         );

@@ -38,6 +38,8 @@ pub const META_SAMPLES_LOG_LEN: &[u8] = b"samples_log_len";
 /// key it converted (left in place after it; see
 /// `migrations/0003_sample_log.md`).
 pub const META_MIGRATE_0003_THROUGH: &[u8] = b"migrate_0003_through";
+/// The same for its second part, over `frames`.
+pub const META_MIGRATE_0003_FRAMES_THROUGH: &[u8] = b"migrate_0003_frames_through";
 
 /// `meta` key marking job `name` as cancelled by `radcache serve` (value
 /// empty): a restarted server keeps it cancelled instead of resuming it.

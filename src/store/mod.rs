@@ -540,12 +540,15 @@ impl Store {
                 stale.push(key.map_err(|e| StoreError::sled(&self.path, e))?);
             }
         }
+        let exr_zstd = compress(c.exr);
         let frame_value = FrameValue {
             width: c.width,
             height: c.height,
             exr_len: c.exr.len() as u64,
-            exr_zstd: compress(c.exr),
+            exr_offset: log.append(&exr_zstd).map_err(|e| self.log_error(e))?,
+            exr_stored_len: exr_zstd.len() as u32,
         };
+        drop(exr_zstd);
         let mut record_rows = Vec::with_capacity(c.records.len());
         let mut samples_raw = 0u64;
         for rc in c.records {
@@ -654,8 +657,18 @@ impl Store {
         let Some(v) = self.frame(job, frame)? else {
             return Ok(None);
         };
-        let exr = decompress(&v.exr_zstd, v.exr_len as usize)
-            .map_err(|d| self.corrupt("frames", &key, d))?;
+        let in_log = |d: String| {
+            self.log_error(format!(
+                "EXR of {} at offset {}: {d}",
+                keys::describe(&key),
+                v.exr_offset
+            ))
+        };
+        let stored = self
+            .lock_log()
+            .read(v.exr_offset, v.exr_stored_len)
+            .map_err(in_log)?;
+        let exr = decompress(&stored, v.exr_len as usize).map_err(in_log)?;
         Ok(Some(exr))
     }
 

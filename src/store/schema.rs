@@ -3,8 +3,9 @@
 //! `migrations/0001_initial.md`; the types schema 3 changed are kept in
 //! [`super::v2`], those schema 2 changed in [`super::v1`]).
 //! Every value is an rkyv 0.8 archive, validated (bytecheck) when read.
-//! Frame EXR bytes are zstd-compressed inside the archive; record samples
-//! live in the sample log ([`super::samples`]), the record says where.
+//! Bulk values live in the sample log ([`super::samples`]), zstd-compressed:
+//! record samples (the record says where) and frame EXR files (the frame
+//! says where).
 //! Changing any of these types is a schema change: bump
 //! [`super::migrate::CURRENT_VERSION`], add a migration and a
 //! `migrations/NNNN_*.md`.
@@ -65,15 +66,18 @@ impl std::ops::Deref for JobValue {
     }
 }
 
-/// `frames` value: one finished frame.
+/// `frames` value: one finished frame. Its EXR file (as written to
+/// `--out`), zstd-compressed, lies in the sample log (a bulk value kept
+/// out of sled, like the samples).
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct FrameValue {
     pub width: u32,
     pub height: u32,
     /// Length of the EXR file before zstd.
     pub exr_len: u64,
-    /// The frame's EXR file (as written to `--out`), zstd-compressed.
-    pub exr_zstd: Vec<u8>,
+    /// Where the compressed EXR lies in `samples.log`, and its length.
+    pub exr_offset: u64,
+    pub exr_stored_len: u32,
 }
 
 /// `records` value under `job · frame · record id`: one version of an

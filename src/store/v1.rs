@@ -4,8 +4,8 @@
 //! version-1 store in the 0001 → 0002 migration, and a writer of version-1
 //! stores for the test that opens one.
 
-use super::schema::{self, FrameValue};
-use super::v2::{self, SamplesValue};
+use super::schema;
+use super::v2::{self, FrameValue, SamplesValue};
 use super::{compress, encode, keys, RecordCommit};
 use crate::method::FrameStats;
 use rkyv::{Archive, Deserialize, Serialize};

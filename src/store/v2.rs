@@ -28,6 +28,15 @@ pub struct RecordValue {
     pub strata_phi: u32,
 }
 
+/// Schema-1 and -2 `frames` value: the EXR file inside it.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct FrameValue {
+    pub width: u32,
+    pub height: u32,
+    pub exr_len: u64,
+    pub exr_zstd: Vec<u8>,
+}
+
 /// Schema-1 and -2 `samples` value under `job · frame · record id`: the
 /// record's `count` samples, the bytes of a
 /// [`super::samples::SampleBlock`].
@@ -93,7 +102,7 @@ pub fn migrate_to_v3(db: &sled::Db, dir: &Path) -> Result<(), String> {
     migrate_to_v3_batches(db, dir, BATCH, None)
 }
 
-/// [`migrate_to_v3`] in batches of `batch` records, stopping after
+/// [`migrate_to_v3`] in batches of `batch` values, stopping after
 /// `max_batches` of them if given (what a crash after that batch leaves:
 /// tests resume from it).
 #[doc(hidden)]
@@ -104,71 +113,71 @@ pub fn migrate_to_v3_batches(
     max_batches: Option<usize>,
 ) -> Result<(), String> {
     let tree = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
-    let (meta, records, samples) = (tree("meta")?, tree("records")?, tree("samples")?);
+    let (meta, records, frames, samples) = (
+        tree("meta")?,
+        tree("records")?,
+        tree("frames")?,
+        tree("samples")?,
+    );
     let committed = read_meta_u64(&meta, keys::META_SAMPLES_LOG_LEN)?;
     let mut log = SampleLog::open(dir, committed).map_err(|e| format!("{LOG_FILE}: {e}"))?;
-    let mut through = meta
-        .get(keys::META_MIGRATE_0003_THROUGH)
-        .map_err(|e| e.to_string())?
-        .map(|v| v.to_vec());
-    for _ in 0..max_batches.unwrap_or(usize::MAX) {
-        let start = match &through {
-            Some(k) => Bound::Excluded(k.clone()),
-            None => Bound::Unbounded,
-        };
-        let mut rows = Vec::with_capacity(batch);
-        for item in records
-            .range::<Vec<u8>, _>((start, Bound::Unbounded))
-            .take(batch)
-        {
-            let (k, v) = item.map_err(|e| e.to_string())?;
-            let at = |e: String| format!("tree `records` key {}: {e}", keys::describe(&k));
-            let old: RecordValue = super::decode_value(&v).map_err(at)?;
-            let (count, offset, len) = match samples.get(&k).map_err(|e| e.to_string())? {
+    let mut budget = max_batches.unwrap_or(usize::MAX);
+    let log_err = |e: std::io::Error| format!("{LOG_FILE}: {e}");
+    // Records: their samples into the log, their `samples` values removed.
+    let records_done = convert_tree(
+        db,
+        (&meta, &records, &samples),
+        keys::META_MIGRATE_0003_THROUGH,
+        &mut log,
+        batch,
+        &mut budget,
+        |k, v, log| {
+            let old: RecordValue = super::decode_value(v)
+                .map_err(|e| format!("tree `records` key {}: {e}", keys::describe(k)))?;
+            let (count, offset, len) = match samples.get(k).map_err(|e| e.to_string())? {
                 Some(sv) => {
                     let s: SamplesValue = super::decode_value(&sv)
-                        .map_err(|e| format!("tree `samples` key {}: {e}", keys::describe(&k)))?;
+                        .map_err(|e| format!("tree `samples` key {}: {e}", keys::describe(k)))?;
                     if s.count == 0 {
                         (0, 0, 0)
                     } else {
-                        let offset = log
-                            .append(&s.packed_zstd)
-                            .map_err(|e| format!("{LOG_FILE}: {e}"))?;
+                        let offset = log.append(&s.packed_zstd).map_err(log_err)?;
                         (s.count, offset, s.packed_zstd.len() as u32)
                     }
                 }
                 None => (0, 0, 0),
             };
-            rows.push((k, encode(&old.to_v3(count, offset, len))));
-        }
-        let Some((last, _)) = rows.last() else {
-            break;
-        };
-        let last = last.to_vec();
-        log.sync().map_err(|e| format!("{LOG_FILE}: {e}"))?;
-        let end = log.end();
-        use sled::transaction::ConflictableTransactionError;
-        use sled::Transactional;
-        (&meta, &records, &samples)
-            .transaction(|(meta, records, samples)| {
-                for (k, v) in &rows {
-                    records.insert(k, &v[..])?;
-                    samples.remove(k)?;
-                }
-                meta.insert(keys::META_SAMPLES_LOG_LEN, &end.to_be_bytes())?;
-                meta.insert(keys::META_MIGRATE_0003_THROUGH, &last[..])?;
-                Ok::<(), ConflictableTransactionError<()>>(())
-            })
-            .map_err(|e| format!("{e:?}"))?;
-        db.flush().map_err(|e| e.to_string())?;
-        log.commit();
-        through = Some(last);
+            Ok((encode(&old.to_v3(count, offset, len)), true))
+        },
+    )?;
+    // Frames: their EXR files into the log.
+    let frames_done = records_done
+        && convert_tree(
+            db,
+            (&meta, &frames, &samples),
+            keys::META_MIGRATE_0003_FRAMES_THROUGH,
+            &mut log,
+            batch,
+            &mut budget,
+            |k, v, log| {
+                let old: FrameValue = super::decode_value(v)
+                    .map_err(|e| format!("tree `frames` key {}: {e}", keys::describe(k)))?;
+                let offset = log.append(&old.exr_zstd).map_err(log_err)?;
+                let new = schema::FrameValue {
+                    width: old.width,
+                    height: old.height,
+                    exr_len: old.exr_len,
+                    exr_offset: offset,
+                    exr_stored_len: old.exr_zstd.len() as u32,
+                };
+                Ok((encode(&new), false))
+            },
+        )?;
+    if !frames_done {
+        return Ok(()); // stopped after `max_batches`
     }
-    if max_batches.is_some() {
-        return Ok(());
-    }
-    if committed.is_none() && through.is_none() {
-        // No records at all: the log exists, empty; say so in `meta`.
+    if read_meta_u64(&meta, keys::META_SAMPLES_LOG_LEN)?.is_none() {
+        // Nothing at all to move: the log exists, empty; say so in `meta`.
         meta.insert(keys::META_SAMPLES_LOG_LEN, &log.end().to_be_bytes())
             .map_err(|e| e.to_string())?;
     }
@@ -177,6 +186,71 @@ pub fn migrate_to_v3_batches(
     db.drop_tree("samples").map_err(|e| e.to_string())?;
     db.flush().map_err(|e| e.to_string())?;
     Ok(())
+}
+
+/// Converts `tree`'s values after the key in `meta[marker]`, in batches:
+/// `convert(key, value, log)` gives the new value (having appended its bulk
+/// to the log) and whether to remove the key's `samples` value. Each batch:
+/// log synced, then one transaction (values, removals, the log's length,
+/// the marker), then a flush. Returns whether the tree is done (`false`:
+/// `budget` batches ran out first).
+fn convert_tree(
+    db: &sled::Db,
+    (meta, tree, samples): (&sled::Tree, &sled::Tree, &sled::Tree),
+    marker: &[u8],
+    log: &mut SampleLog,
+    batch: usize,
+    budget: &mut usize,
+    convert: impl Fn(&[u8], &[u8], &mut SampleLog) -> Result<(Vec<u8>, bool), String>,
+) -> Result<bool, String> {
+    let mut through = meta
+        .get(marker)
+        .map_err(|e| e.to_string())?
+        .map(|v| v.to_vec());
+    loop {
+        let start = match &through {
+            Some(k) => Bound::Excluded(k.clone()),
+            None => Bound::Unbounded,
+        };
+        let mut rows = Vec::with_capacity(batch);
+        for item in tree
+            .range::<Vec<u8>, _>((start, Bound::Unbounded))
+            .take(batch)
+        {
+            let (k, v) = item.map_err(|e| e.to_string())?;
+            let (value, remove_samples) = convert(&k, &v, log)?;
+            rows.push((k, value, remove_samples));
+        }
+        let Some((last, _, _)) = rows.last() else {
+            return Ok(true);
+        };
+        if *budget == 0 {
+            log.rollback().map_err(|e| format!("{LOG_FILE}: {e}"))?;
+            return Ok(false);
+        }
+        *budget -= 1;
+        let last = last.to_vec();
+        log.sync().map_err(|e| format!("{LOG_FILE}: {e}"))?;
+        let end = log.end();
+        use sled::transaction::ConflictableTransactionError;
+        use sled::Transactional;
+        (meta, tree, samples)
+            .transaction(|(meta, tree, samples)| {
+                for (k, v, remove_samples) in &rows {
+                    tree.insert(k, &v[..])?;
+                    if *remove_samples {
+                        samples.remove(k)?;
+                    }
+                }
+                meta.insert(keys::META_SAMPLES_LOG_LEN, &end.to_be_bytes())?;
+                meta.insert(marker, &last[..])?;
+                Ok::<(), ConflictableTransactionError<()>>(())
+            })
+            .map_err(|e| format!("{e:?}"))?;
+        db.flush().map_err(|e| e.to_string())?;
+        log.commit();
+        through = Some(last);
+    }
 }
 
 pub(crate) fn read_meta_u64(meta: &sled::Tree, key: &[u8]) -> Result<Option<u64>, String> {
