@@ -9,13 +9,13 @@
 //!   `migrations/0003_sample_log.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
-//! - Bulk arrays are zstd-compressed: frame EXR bytes in `frames`, record
-//!   samples (the 8-byte RGBE records of [`rgbe::PackedSample`]) one block
-//!   per record in the sample log, whose location the record's value holds.
-//!   The bulk of the data thus stays out of sled, whose memory grows with
-//!   the number of keys it has written.
+//! - Bulk values are zstd-compressed and live in the sample log, whose
+//!   location the sled value holds: a frame's EXR file (`frames`), a
+//!   record's samples (`records`; the 8-byte RGBE records of
+//!   [`rgbe::PackedSample`], one block per record). They thus stay out of
+//!   sled, whose memory grows with the bytes and keys it has written.
 //! - A job checkpoints each frame with [`Store::commit_frame`]: the frame's
-//!   sample blocks are appended to the log and synced, then one sled
+//!   EXR and sample blocks are appended to the log and synced, then one sled
 //!   transaction over `frames`, `records`, `stats`, `state`, `jobs` and
 //!   `meta` (the log's committed length), then `flush`; the frame counts as
 //!   acknowledged only after that returns. A log tail beyond the committed

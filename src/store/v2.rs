@@ -2,7 +2,8 @@
 //! same `records` and `samples` values): the value types that schema 3
 //! changed, kept to read a version-2 store in the 0002 → 0003 migration
 //! (`migrations/0003_sample_log.md`), which moves every record's samples
-//! out of the `samples` tree into the sample log.
+//! out of the `samples` tree, and every frame's EXR file out of its
+//! `frames` value, into the sample log.
 
 use super::samples::{SampleLog, FILE_NAME as LOG_FILE};
 use super::{encode, keys, schema};
@@ -87,7 +88,7 @@ impl RecordValue {
     }
 }
 
-/// Records converted per transaction of the migration.
+/// Values converted per transaction of the migration.
 const BATCH: usize = 1024;
 
 /// Migration 0002 → 0003 (`migrations/0003_sample_log.md`): in batches
@@ -95,9 +96,10 @@ const BATCH: usize = 1024;
 /// `samples.log` (synced), then in one transaction over `records`,
 /// `samples` and `meta` rewrites the records with their sample location,
 /// removes their `samples` values and records the log's committed length
-/// and the last key converted (`meta.migrate_0003_through`); at the end
-/// drops the `samples` tree. A crash mid-step resumes after the last
-/// batch committed (the log's uncommitted tail is cut off first).
+/// and the last key converted (`meta.migrate_0003_through`); then the same
+/// for `frames`, their EXR files (`meta.migrate_0003_frames_through`); at
+/// the end drops the `samples` tree. A crash mid-step resumes after the
+/// last batch committed (the log's uncommitted tail is cut off first).
 pub fn migrate_to_v3(db: &sled::Db, dir: &Path) -> Result<(), String> {
     migrate_to_v3_batches(db, dir, BATCH, None)
 }
