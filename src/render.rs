@@ -645,9 +645,6 @@ pub fn render_job_to_dir_with(
         }
     }
     renderer.keep_frame_records(job.is_some());
-    let dynamic: Vec<bool> = (0..renderer.scene.objects.len())
-        .map(|o| renderer.scene.object_is_dynamic(o))
-        .collect();
     let progress = progress_bar(frames.len() as u64, quiet);
     progress.set_position(done.len() as u64);
     progress.reset_eta();
@@ -676,20 +673,15 @@ pub fn render_job_to_dir_with(
         if let Some(j) = job.as_deref_mut() {
             let exr = film::encode_exr(&film)
                 .map_err(|e| anyhow::anyhow!("cannot encode frame {frame} as EXR: {e}"))?;
-            let kept = kept.unwrap_or_default();
+            let mut kept = kept.unwrap_or_default();
+            let mut samples = std::mem::take(&mut kept.samples).into_iter();
             let records = kept
                 .records
                 .iter()
                 .enumerate()
                 .map(|(i, r)| {
-                    let empty = Default::default();
-                    let mut c = RecordCommit::from_record(
-                        r,
-                        kept.samples.get(i).unwrap_or(&empty),
-                        kept.strata,
-                        frame,
-                        |o| dynamic.get(o as usize).copied().unwrap_or(false),
-                    );
+                    let block = samples.next().unwrap_or_default();
+                    let mut c = RecordCommit::from_record(r, block, kept.strata, frame);
                     if let Some(&last) = kept.last_frames.get(i) {
                         c.record.last_frame = last;
                     }

@@ -12,7 +12,7 @@ use radcache::method::FrameStats;
 use radcache::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob};
 use radcache::store::migrate::{self, Migration};
 use radcache::store::{
-    keys, v1, FrameCommit, JobSpec, PackedSample, RecordCommit, Store, StoreError,
+    keys, v1, FrameCommit, JobSpec, PackedSample, RecordCommit, SampleBlock, Store, StoreError,
 };
 use std::path::Path;
 
@@ -75,10 +75,10 @@ fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
             .map(|id| {
                 RecordCommit::from_record(
                     &record(id, frame),
-                    &samples(48, frame * 10 + id as u32),
+                    // Object 1 is the dynamic one.
+                    SampleBlock::pack(&samples(48, frame * 10 + id as u32), &[false, true]),
                     strata,
                     frame,
-                    |o| o == 1,
                 )
             })
             .collect();
@@ -184,11 +184,8 @@ fn corrupt_value_is_an_error_naming_tree_and_key() {
         assert!(msg.contains("tree `records`"), "{msg}");
         assert!(msg.contains(&format!("job {id} frame 1 record 2")), "{msg}");
         assert!(msg.contains(&path.display().to_string()), "{msg}");
-        store
-            .raw_insert("samples", &keys::record(id, 1, 2), garbage)
-            .unwrap();
         let msg = err_text(store.record_samples(id, 1, 2));
-        assert!(msg.contains("tree `samples`"), "{msg}");
+        assert!(msg.contains("tree `records`"), "{msg}");
     }
     store
         .raw_insert("frames", &keys::frame(id, 0), b"xx")
@@ -231,12 +228,12 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
-/// A synthetic step 2 → 3: checks that it runs after the real 1 → 2
-/// (the stored version is 2 and the jobs are in the schema-2 layout).
-fn add_marker(db: &sled::Db) -> Result<(), String> {
+/// A synthetic step 3 → 4: checks that it runs after the real 1 → 2 and
+/// 2 → 3 (the stored version is 3 and the jobs are in the schema-3 layout).
+fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 2u32.to_be_bytes() {
+    if version.as_ref() != 3u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -246,8 +243,8 @@ fn add_marker(db: &sled::Db) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 3: the
-    // real 1 → 2, then 2 → 3, in order.
+    // A version-1 store (fixture) brought to a synthetic version 4: the
+    // real 1 → 2 and 2 → 3, then 3 → 4, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -257,15 +254,16 @@ fn older_schema_is_migrated_in_order() {
     v1_fixture(&path, &method);
     let steps = [
         migrate::MIGRATIONS[0],
+        migrate::MIGRATIONS[1],
         Migration {
-            from: 2,
+            from: 3,
             name: "synthetic",
             run: add_marker,
         },
     ];
-    // Without the step for 2 → 3 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 3, &steps[..1]));
-    assert!(msg.contains("no migration from schema 2 to 3"), "{msg}");
+    // Without the step for 3 → 4 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 4, &steps[..2]));
+    assert!(msg.contains("no migration from schema 3 to 4"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -274,8 +272,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 3, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 3);
+        let store = Store::open_with(&path, false, 4, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 4);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -284,9 +282,9 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 2) now refuses the upgraded store.
+    // This build (version 3) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 3 is newer"), "{msg}");
+    assert!(msg.contains("schema version 4 is newer"), "{msg}");
 }
 
 #[test]
@@ -534,6 +532,7 @@ fn store_throughput() {
     let strata = Strata { theta: 16, phi: 48 };
     let (frames, per_frame) = (20u32, 400u64);
     let hemis: Vec<HemisphereSamples> = (0..8).map(|i| samples(768, i)).collect();
+    // Packing (as the method does when it gathers) is timed with the writes.
     let exr = vec![0u8; 64 * 1024];
     let stats = FrameStats::default();
     let t0 = std::time::Instant::now();
@@ -542,10 +541,9 @@ fn store_throughput() {
             .map(|id| {
                 RecordCommit::from_record(
                     &record(id, frame),
-                    &hemis[(id % 8) as usize],
+                    SampleBlock::pack(&hemis[(id % 8) as usize], &[]),
                     strata,
                     frame,
-                    |_| false,
                 )
             })
             .collect();
@@ -573,14 +571,16 @@ fn store_throughput() {
     let read = t0.elapsed().as_secs_f64();
     let total = u64::from(frames) * per_frame;
     assert_eq!(n, total);
+    let sled_bytes = store.size_on_disk().unwrap();
+    let log_bytes = store.sample_log_bytes();
+    let disk = sled_bytes + log_bytes;
     eprintln!(
-        "{total} records × 768 samples: write {:.0} records/s ({:.1} M samples/s, commit+flush per frame), read {:.0} records/s ({:.1} M samples/s); {} B on disk = {:.2} B/sample",
+        "{total} records × 768 samples: write {:.0} records/s ({:.1} M samples/s, pack + commit + flush per frame), read {:.0} records/s ({:.1} M samples/s); {disk} B on disk ({sled_bytes} sled + {log_bytes} sample log) = {:.2} B/sample",
         total as f64 / write,
         (total * 768) as f64 / write / 1e6,
         n as f64 / read,
         s as f64 / read / 1e6,
-        store.size_on_disk().unwrap(),
-        store.size_on_disk().unwrap() as f64 / (total * 768) as f64
+        disk as f64 / (total * 768) as f64
     );
 }
 
@@ -720,7 +720,13 @@ fn trc_interpolated_resumes_from_stored_first_pass_without_replay() {
 /// A version-1 store built by the schema-1 writer (`store::v1::Writer`):
 /// an `ic` job of cube-in-box 16×16 that finished frames 0..2 of 0..4,
 /// with the frames, statistics, records and samples the renderer made.
-fn v1_fixture(path: &Path, method: &MethodSettings) -> (JobSpec, Vec<Vec<u8>>, usize) {
+/// Returns the job, the EXR bytes and every record's samples as written:
+/// `(frame, record id, samples)`.
+#[allow(clippy::type_complexity)]
+fn v1_fixture(
+    path: &Path,
+    method: &MethodSettings,
+) -> (JobSpec, Vec<Vec<u8>>, Vec<(u32, u64, Vec<PackedSample>)>) {
     let source = SceneSource::Builtin("cube-in-box".into());
     let mut r = renderer(method);
     let spec = render::job_spec("old", &source, method, &r.settings, 0..4).unwrap();
@@ -749,7 +755,7 @@ fn v1_fixture(path: &Path, method: &MethodSettings) -> (JobSpec, Vec<Vec<u8>>, u
     writer.put_job(&job).unwrap();
     r.keep_frame_records(true);
     let mut exrs = Vec::new();
-    let mut rows = 0;
+    let mut rows = Vec::new();
     for frame in 0..2 {
         let film = r.render_frame(frame);
         let stats = r.last_frame_stats();
@@ -758,10 +764,10 @@ fn v1_fixture(path: &Path, method: &MethodSettings) -> (JobSpec, Vec<Vec<u8>>, u
             .records
             .iter()
             .zip(&kept.samples)
-            .map(|(rec, s)| RecordCommit::from_record(rec, s, kept.strata, frame, |_| false))
+            .map(|(rec, s)| RecordCommit::from_record(rec, s.clone(), kept.strata, frame))
             .collect();
         let exr = film::encode_exr(&film).unwrap();
-        let raw = records.iter().map(|r| r.samples.len() as u64 * 8).sum();
+        let raw = records.iter().map(|r| r.samples.raw_bytes()).sum();
         writer
             .put_frame(
                 7,
@@ -773,7 +779,11 @@ fn v1_fixture(path: &Path, method: &MethodSettings) -> (JobSpec, Vec<Vec<u8>>, u
             )
             .unwrap();
         exrs.push(exr);
-        rows += records.len();
+        rows.extend(
+            records
+                .iter()
+                .map(|r| (frame, r.record.id, r.samples.unpack().unwrap())),
+        );
     }
     (spec, exrs, rows)
 }
@@ -787,10 +797,11 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
     });
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
-    let (spec, exrs, v1_records) = v1_fixture(&path, &method);
+    let (spec, exrs, v1_samples) = v1_fixture(&path, &method);
+    let v1_records = v1_samples.len();
     assert!(v1_records > 0);
     let store = Store::open(&path).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 2);
+    assert_eq!(store.schema_version().unwrap(), 3);
     let job = store.job("old").unwrap().unwrap();
     assert_eq!((job.id, job.frames_done, job.last_frame), (7, 2, Some(1)));
     // Settings `{:?}` → the JSON this build writes for them.
@@ -804,10 +815,13 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
         .map(|f| store.frame_records(7, f).unwrap().len())
         .sum();
     assert_eq!(recs, v1_records);
-    let first = &store.frame_records(7, 0).unwrap()[0];
-    assert_eq!(store.record_samples(7, 0, first.id).unwrap().len(), 48);
+    // Every record's samples, moved to the sample log, read back as written.
+    for (frame, id, samples) in &v1_samples {
+        assert_eq!(samples.len(), 48);
+        assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);
+    }
     let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
-    assert_eq!(report.schema_version, 2);
+    assert_eq!(report.schema_version, 3);
     assert_eq!(report.jobs[0].records as usize, v1_records);
     assert_eq!(report.jobs[0].samples as usize, v1_records * 48);
     assert_eq!(report.jobs[0].frames_done, 2);
@@ -831,11 +845,11 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
     drop(store);
     // Opening it again runs nothing; an older build would refuse it.
     let store = Store::open(&path).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 2);
+    assert_eq!(store.schema_version().unwrap(), 3);
     drop(store);
-    let msg = err_text(Store::open_with(&path, false, 1, migrate::MIGRATIONS));
+    let msg = err_text(Store::open_with(&path, false, 2, migrate::MIGRATIONS));
     assert!(
-        msg.contains("schema version 2 is newer") && msg.contains("version 1"),
+        msg.contains("schema version 3 is newer") && msg.contains("version 2"),
         "{msg}"
     );
 }
@@ -930,4 +944,199 @@ fn settings_are_compared_as_json_values() {
         msg.contains("method settings") && msg.contains("0.3"),
         "{msg}"
     );
+}
+
+/// The sled database under a store, opened directly (retrying while the
+/// lock of a store just closed is released).
+fn open_raw(path: &Path) -> sled::Db {
+    for _ in 0..100 {
+        if let Ok(db) = sled::open(path) {
+            return db;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    sled::open(path).unwrap()
+}
+
+#[test]
+fn version_2_store_moves_its_samples_into_the_sample_log() {
+    // A schema-2 store: the schema-1 fixture brought to 2 by the real
+    // 1 → 2 step (samples still in the `samples` tree).
+    let method = MethodSettings::Ic(IcSettings {
+        strata: Strata { theta: 4, phi: 12 },
+        spp: 1,
+        ..IcSettings::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let (_, _, written) = v1_fixture(&path, &method);
+    {
+        let store = Store::open_with(&path, false, 2, migrate::MIGRATIONS).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 2);
+        assert_eq!(store.sample_log_bytes(), 8, "no samples in the log yet");
+    }
+    {
+        let db = open_raw(&path);
+        let samples = db.open_tree("samples").unwrap();
+        assert_eq!(samples.len(), written.len());
+    }
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.schema_version().unwrap(), 3);
+    for (frame, id, samples) in &written {
+        assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);
+    }
+    let log_bytes = store.sample_log_bytes();
+    assert!(log_bytes > 8 + written.len() as u64 * 48);
+    assert_eq!(
+        std::fs::metadata(path.join("samples.log")).unwrap().len(),
+        log_bytes
+    );
+    let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
+    assert_eq!(report.jobs[0].samples as usize, written.len() * 48);
+    // The log holds the samples and the frames' EXR files, nothing else.
+    assert_eq!(
+        report.jobs[0].samples_stored_bytes + report.jobs[0].exr_stored_bytes,
+        log_bytes - 8
+    );
+    assert!(report.trees.iter().all(|t| t.name != "samples"));
+    drop(store);
+    // The `samples` tree is gone; running the step again changes nothing.
+    {
+        let db = open_raw(&path);
+        assert!(!db.tree_names().iter().any(|n| n.as_ref() == b"samples"));
+        radcache::store::v2::migrate_to_v3(&db, &path).unwrap();
+        db.flush().unwrap();
+    }
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.sample_log_bytes(), log_bytes);
+    for (frame, id, samples) in &written {
+        assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);
+    }
+}
+
+#[test]
+fn torn_sample_log_tail_is_truncated_on_reopen() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let log = path.join("samples.log");
+    let committed = {
+        let store = Store::open(&path).unwrap();
+        commit_frames(&store, "j", 0..2);
+        store.sample_log_bytes()
+    };
+    assert_eq!(std::fs::metadata(&log).unwrap().len(), committed);
+    // A crash between a frame's log append and its sled transaction
+    // leaves bytes no record references.
+    {
+        use std::io::Write;
+        let mut f = std::fs::OpenOptions::new().append(true).open(&log).unwrap();
+        f.write_all(&[0xab; 1000]).unwrap();
+    }
+    {
+        let store = Store::open_existing(&path).unwrap();
+        assert_eq!(store.sample_log_bytes(), committed);
+        assert_eq!(std::fs::metadata(&log).unwrap().len(), committed);
+        // The job goes on: the next frame's samples follow the committed
+        // ones and every frame's samples read back.
+        commit_frames(&store, "j", 2..3);
+    }
+    let store = Store::open_existing(&path).unwrap();
+    let id = store.job("j").unwrap().unwrap().id;
+    for frame in 0..3 {
+        for r in store.frame_records(id, frame).unwrap() {
+            assert_eq!(store.record_samples(id, frame, r.id).unwrap().len(), 48);
+        }
+    }
+    assert!(store.sample_log_bytes() > committed);
+}
+
+#[test]
+fn sample_log_shorter_than_referenced_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let log = path.join("samples.log");
+    let committed = {
+        let store = Store::open(&path).unwrap();
+        commit_frames(&store, "j", 0..2);
+        store.sample_log_bytes()
+    };
+    let f = std::fs::OpenOptions::new().write(true).open(&log).unwrap();
+    f.set_len(committed - 100).unwrap();
+    drop(f);
+    for _ in 0..2 {
+        let msg = err_text(Store::open_existing(&path));
+        assert!(msg.contains(&log.display().to_string()), "{msg}");
+        assert!(
+            msg.contains("shorter than") && msg.contains(&committed.to_string()),
+            "{msg}"
+        );
+    }
+    // Left as it was.
+    assert_eq!(std::fs::metadata(&log).unwrap().len(), committed - 100);
+    std::fs::remove_file(&log).unwrap();
+    let msg = err_text(Store::open_existing(&path));
+    assert!(
+        msg.contains(&log.display().to_string()) && msg.contains("lost"),
+        "{msg}"
+    );
+    // Not a sample log at all.
+    std::fs::write(&log, vec![0u8; committed as usize]).unwrap();
+    let msg = err_text(Store::open_existing(&path));
+    assert!(
+        msg.contains("samples.log") && msg.contains("bad header"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn interrupted_0002_to_0003_migration_resumes_where_it_stopped() {
+    let method = MethodSettings::Ic(IcSettings {
+        strata: Strata { theta: 4, phi: 12 },
+        spp: 1,
+        ..IcSettings::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let (_, _, written) = v1_fixture(&path, &method);
+    assert!(written.len() > 10);
+    drop(Store::open_with(&path, false, 2, migrate::MIGRATIONS).unwrap());
+    // A crash after two batches of 5 records, and in the middle of the
+    // third one's log append (bytes no record references yet).
+    let committed = {
+        let db = open_raw(&path);
+        radcache::store::v2::migrate_to_v3_batches(&db, &path, 5, Some(2)).unwrap();
+        db.flush().unwrap();
+        let meta = db.open_tree("meta").unwrap();
+        let len = meta.get(keys::META_SAMPLES_LOG_LEN).unwrap().unwrap();
+        assert_eq!(
+            meta.get(keys::META_SCHEMA_VERSION)
+                .unwrap()
+                .unwrap()
+                .as_ref(),
+            2u32.to_be_bytes(),
+            "still schema 2"
+        );
+        assert_eq!(db.open_tree("samples").unwrap().len(), written.len() - 10);
+        u64::from_be_bytes(len.as_ref().try_into().unwrap())
+    };
+    {
+        use std::io::Write;
+        let mut f = std::fs::OpenOptions::new()
+            .append(true)
+            .open(path.join("samples.log"))
+            .unwrap();
+        f.write_all(&[0x55; 777]).unwrap();
+    }
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.schema_version().unwrap(), 3);
+    for (frame, id, samples) in &written {
+        assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);
+    }
+    // The torn bytes were cut off: blocks follow each other with no gap.
+    let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
+    assert_eq!(
+        report.jobs[0].samples_stored_bytes + report.jobs[0].exr_stored_bytes,
+        store.sample_log_bytes() - 8
+    );
+    assert!(store.sample_log_bytes() > committed);
 }

@@ -3,7 +3,8 @@
 //! store reopens, no acknowledged frame is lost, no partial frame is
 //! visible, and the finished frames equal an uninterrupted run byte for
 //! byte. Once with `path`, once with `trc`, whose cache state is
-//! checkpointed with every frame and restored on resume.
+//! checkpointed with every frame and restored on resume, and whose records'
+//! samples go to the sample log before each frame's batch.
 
 use radcache::film;
 use radcache::store::Store;
@@ -56,7 +57,20 @@ fn check_store(dir: &Path, reference: &[Vec<u8>], acknowledged_before: usize) ->
             store.frame_stats(job.id, f).unwrap().is_some(),
             "frame {f} without stats"
         );
+        // Every record's samples read back whole from the sample log.
+        for r in store.frame_records(job.id, f).unwrap() {
+            let samples = store.record_samples(job.id, f, r.id).unwrap();
+            assert_eq!(samples.len(), (r.strata_theta * r.strata_phi) as usize);
+        }
     }
+    // The sample log holds exactly what the store committed (a torn tail
+    // was cut off when the store was opened).
+    assert_eq!(
+        std::fs::metadata(dir.join("db").join("samples.log"))
+            .unwrap()
+            .len(),
+        store.sample_log_bytes()
+    );
     // A stateful method's stored state is that of the last frame: the
     // frames are the range's prefix, and the head names its last one.
     if let Some(head) = store.state_head(job.id).unwrap() {

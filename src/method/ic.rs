@@ -33,6 +33,7 @@ use crate::integrator::{
 use crate::light::emitting_cosine;
 use crate::material::{luminance, Bsdf, LUMINANCE};
 use crate::sampling::{cosine_hemisphere, power_heuristic, LightChoice, Rng, SampleKey};
+use crate::store::SampleBlock;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -95,7 +96,7 @@ pub struct IrradianceCaching {
     /// Store hook ([`Method::keep_frame_records`]): samples of the records
     /// gathered this frame, and the last frame's records with them.
     keep_records: bool,
-    gathered_samples: std::sync::Mutex<Vec<(RecordId, HemisphereSamples)>>,
+    gathered_samples: std::sync::Mutex<Vec<(RecordId, SampleBlock)>>,
     kept: Option<FrameRecords>,
 }
 
@@ -186,7 +187,7 @@ impl IrradianceCaching {
         if !self.keep_records {
             return;
         }
-        let mut by_id: std::collections::HashMap<RecordId, HemisphereSamples> =
+        let mut by_id: std::collections::HashMap<RecordId, SampleBlock> =
             gathered.into_iter().collect();
         let records = cache.records().to_vec();
         let samples = records
@@ -200,6 +201,14 @@ impl IrradianceCaching {
             ..FrameRecords::default()
         });
     }
+}
+
+/// `dynamic[object]`: whether the object is animated (the hit-dynamic flag
+/// of stored samples).
+pub(crate) fn dynamic_objects(ctx: &FrameContext) -> Vec<bool> {
+    (0..ctx.scene.objects.len())
+        .map(|o| ctx.scene.object_is_dynamic(o))
+        .collect()
 }
 
 pub(crate) fn scene_bounds(ctx: &FrameContext) -> (Vec3, Vec3) {
@@ -354,6 +363,7 @@ impl IrradianceCaching {
             queries.extend(gather_queries(&c.point, strata, key));
         }
         let results = trace_radiance(ctx, self.settings.gather_length, queries.clone());
+        let dynamic = self.keep_records.then(|| dynamic_objects(ctx));
         chunk
             .iter()
             .enumerate()
@@ -362,12 +372,15 @@ impl IrradianceCaching {
                 let samples =
                     samples_from_results(&queries[range.clone()], &results[range.clone()]);
                 let g = irradiance_and_gradients(&samples, c.point.normal, strata);
-                if self.keep_records {
+                if let Some(dynamic) = &dynamic {
+                    // Packed here, in the gather's thread: the store never
+                    // sees the 32-byte samples.
+                    let block = SampleBlock::pack(&samples, dynamic);
                     let mut kept = self
                         .gathered_samples
                         .lock()
                         .unwrap_or_else(|e| e.into_inner());
-                    kept.push((RecordId::from(c.pixel), samples.clone()));
+                    kept.push((RecordId::from(c.pixel), block));
                 }
                 let (radius, grad_translation) = self.limit_radius(&g, c.footprint);
                 let record = IrradianceRecord {

@@ -174,10 +174,14 @@ pub trait Method: Send {
 /// incoming-radiance samples (`samples[i]` belongs to `records[i]`; empty
 /// when the method has none for it), and for methods that carry a cache
 /// from frame to frame the changes of that cache.
+///
+/// The samples are in their stored form (8 bytes each, zstd-compressed:
+/// [`crate::store::SampleBlock`]), packed by the method as soon as a record
+/// is gathered, so that a frame never holds them at 32 bytes each.
 #[derive(Clone, Debug, Default)]
 pub struct FrameRecords {
     pub records: Vec<crate::cache::IrradianceRecord>,
-    pub samples: Vec<crate::cache::gather::HemisphereSamples>,
+    pub samples: Vec<crate::store::SampleBlock>,
     /// Strata of the samples (`M × N`, cell `j·N + k` at index `j·N + k`).
     pub strata: crate::cache::gather::Strata,
     /// `last_frames[i]`: the last frame `records[i]` may be used in

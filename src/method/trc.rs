@@ -49,8 +49,8 @@
 
 use super::ic::IrradianceCaching;
 use super::ic::{
-    limit_gradient, mark_used, primary_candidates, render_pass, scene_bounds, Candidate, Gathered,
-    IcSettings,
+    dynamic_objects, limit_gradient, mark_used, primary_candidates, render_pass, scene_bounds,
+    Candidate, Gathered, IcSettings,
 };
 use super::{
     FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges, StateError,
@@ -61,6 +61,7 @@ use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
 use crate::sampling::Frame;
 use crate::scene::Snapshot;
+use crate::store::SampleBlock;
 use glam::{Mat4, Vec3};
 use std::collections::{HashMap, VecDeque};
 use std::f32::consts::{PI, TAU};
@@ -410,11 +411,15 @@ impl TemporalRadianceCaching {
                 ..r.candidate
             })
             .collect();
-        let gathered: Vec<(TemporalRecord, Option<HemisphereSamples>)> = {
+        // Store hook: samples packed to their stored form as soon as they
+        // are gathered (reprojection used them at full precision first).
+        let dynamic = keep.then(|| dynamic_objects(ctx));
+        let pack = |g: &Gathered| dynamic.as_ref().map(|d| SampleBlock::pack(&g.samples, d));
+        let gathered: Vec<(TemporalRecord, Option<SampleBlock>)> = {
             use rayon::prelude::*;
             self.ic
                 .gather_parallel(ctx, &candidates, t)
-                .map(|g| (self.temporal(ctx, &next, &g), keep.then_some(g.samples)))
+                .map(|g| (self.temporal(ctx, &next, &g), pack(&g)))
                 .collect()
         };
         let mut samples = Vec::new();
@@ -437,12 +442,7 @@ impl TemporalRadianceCaching {
             ctx,
             &mut cache,
             &pixels,
-            |g| {
-                (
-                    self.temporal(ctx, &next, g),
-                    keep.then(|| g.samples.clone()),
-                )
-            },
+            |g| (self.temporal(ctx, &next, g), pack(g)),
             &mut created,
         );
         stats.records_created = created.len() as u64;
@@ -722,7 +722,7 @@ struct Aged {
     /// Store hook: ids of the records dropped or replaced.
     removed: Vec<RecordId>,
     /// Store hook: samples of the new records, in their order in `alive`.
-    samples: Vec<HemisphereSamples>,
+    samples: Vec<SampleBlock>,
 }
 
 /// `trc`'s carried state as bytes for the store ([`StateChanges`]): rkyv

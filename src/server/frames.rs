@@ -66,7 +66,7 @@ pub fn frame_stats_json(state: &AppState, sid: u64, frame: u32) -> Result<Option
         .store
         .frame(sid, frame)
         .map_err(ApiError::internal)?
-        .map_or(0, |f| f.exr_zstd.len() as u64);
+        .map_or(0, |f| u64::from(f.exr_stored_len));
     let phases: serde_json::Map<String, Value> = s
         .phase_seconds
         .iter()

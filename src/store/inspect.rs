@@ -1,5 +1,6 @@
 //! `radcache inspect`: what a store holds — jobs, frames done, records per
-//! frame, bytes per tree, compression ratios, record lifespans.
+//! frame, bytes per tree and of the sample log, compression ratios, record
+//! lifespans.
 
 use super::{schema::JobValue, Store, StoreError, TREES};
 use serde::Serialize;
@@ -12,6 +13,9 @@ pub struct InspectReport {
     pub schema_version: u32,
     /// Bytes of the database files (sled's `size_on_disk`).
     pub size_on_disk: u64,
+    /// Committed bytes of the sample log (`samples.log`; the record
+    /// samples, outside sled).
+    pub sample_log_bytes: u64,
     /// Key and value bytes per tree (logical: before sled's own overhead).
     pub trees: Vec<TreeReport>,
     /// `size_on_disk` / Σ (key + value bytes): sled's space amplification.
@@ -129,6 +133,7 @@ pub fn report(
         path: store.path().display().to_string(),
         schema_version: store.schema_version()?,
         size_on_disk,
+        sample_log_bytes: store.sample_log_bytes(),
         trees,
         space_amplification: size_on_disk as f64 / logical.max(1) as f64,
         jobs: reports,
@@ -181,7 +186,7 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
     let mut per_frame: BTreeMap<u32, FrameReport> = BTreeMap::new();
     for frame in store.frames_done(j.id)? {
         let v = store.frame(j.id, frame)?.expect("listed frame exists");
-        r.exr_stored_bytes += v.exr_zstd.len() as u64;
+        r.exr_stored_bytes += u64::from(v.exr_stored_len);
         r.exr_raw_bytes += v.exr_len;
         let stats = store.frame_stats(j.id, frame)?.unwrap_or_default();
         per_frame.insert(
@@ -191,7 +196,7 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
                 records_written: 0,
                 records_alive: stats.records_alive,
                 samples: 0,
-                exr_bytes: v.exr_zstd.len() as u64,
+                exr_bytes: u64::from(v.exr_stored_len),
                 rays: stats.rays,
             },
         );
@@ -208,23 +213,16 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
         *lifespans
             .entry(rec.last_frame.saturating_sub(rec.created_frame) + 1)
             .or_insert(0) += 1;
+        let samples = u64::from(rec.samples_count);
+        r.samples += samples;
+        r.samples_stored_bytes += u64::from(rec.samples_len);
+        r.samples_raw_bytes += samples * super::PackedSample::BYTES as u64;
         if let Some(f) = per_frame.get_mut(&frame) {
             f.records_written += 1;
+            f.samples += samples;
         }
     })?;
     r.lifespan_histogram = lifespans;
-    for item in store.samples.scan_prefix(prefix) {
-        let (k, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
-        let s: super::schema::SamplesValue = store.decode("samples", &k, &v)?;
-        r.samples += u64::from(s.count);
-        r.samples_stored_bytes += s.packed_zstd.len() as u64;
-        r.samples_raw_bytes += u64::from(s.count) * super::PackedSample::BYTES as u64;
-        if let Some((_, frame, _)) = super::keys::parse_record(&k) {
-            if let Some(f) = per_frame.get_mut(&frame) {
-                f.samples += u64::from(s.count);
-            }
-        }
-    }
     r.frame_details = match only {
         Some(f) => per_frame.remove(&f).into_iter().collect(),
         None => per_frame.into_values().collect(),
@@ -246,8 +244,8 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "store {} (schema {}): {} bytes on disk, space amplification {:.2}",
-        r.path, r.schema_version, r.size_on_disk, r.space_amplification
+        "store {} (schema {}): {} bytes on disk, space amplification {:.2}; sample log {} bytes",
+        r.path, r.schema_version, r.size_on_disk, r.space_amplification, r.sample_log_bytes
     );
     let _ = writeln!(
         s,

@@ -1,8 +1,9 @@
 //! Every key the store writes, and nothing else: no other module builds or
 //! parses raw keys (STYLE.md). Integers are big-endian so that sled's
 //! lexicographic order is numeric order and prefix scans walk space-time
-//! in order. The layout is documented in `migrations/0001_initial.md` and
-//! `migrations/0002_state_and_identity.md` (schema 2, this one).
+//! in order. The layout is documented in `migrations/0001_initial.md`,
+//! `migrations/0002_state_and_identity.md` and
+//! `migrations/0003_sample_log.md` (schema 3, this one).
 //!
 //! | tree      | key                                   | bytes |
 //! |-----------|---------------------------------------|-------|
@@ -11,12 +12,14 @@
 //! | `frames`  | job id u64 · frame u32                | 12    |
 //! | `stats`   | job id u64 · frame u32                | 12    |
 //! | `records` | job id u64 · frame u32 · record id u64 | 20   |
-//! | `samples` | job id u64 · frame u32 · record id u64 | 20   |
 //! | `state`   | job id u64 (the head)                 | 8     |
 //! | `state`   | job id u64 · record id u64            | 16    |
 //! | `movies`  | (reserved, empty)                     |       |
 //!
-//! In `records`/`samples`, `frame` is the frame in which this version of
+//! Schema 3 has no `samples` tree: a record's samples are in the sample
+//! log (`samples.log`), the `records` value says where.
+//!
+//! In `records`, `frame` is the frame in which this version of
 //! the record was written (its creation frame for `ic`), so a `job · frame`
 //! prefix scan gives one frame's record changes. `state` holds the carried
 //! state of a stateful method (`trc`) after the job's last frame: its head
@@ -28,6 +31,15 @@ use std::ops::Range;
 pub const META_SCHEMA_VERSION: &[u8] = b"schema_version";
 /// `meta` key of the crate version that created the store (UTF-8).
 pub const META_CREATED_BY: &[u8] = b"created_by";
+/// `meta` key of the sample log's committed length (u64 big-endian):
+/// records reference no byte beyond it (see `store::samples`).
+pub const META_SAMPLES_LOG_LEN: &[u8] = b"samples_log_len";
+/// `meta` key of the 0002 → 0003 migration's progress: the last `records`
+/// key it converted (left in place after it; see
+/// `migrations/0003_sample_log.md`).
+pub const META_MIGRATE_0003_THROUGH: &[u8] = b"migrate_0003_through";
+/// The same for its second part, over `frames`.
+pub const META_MIGRATE_0003_FRAMES_THROUGH: &[u8] = b"migrate_0003_frames_through";
 
 /// `meta` key marking job `name` as cancelled by `radcache serve` (value
 /// empty): a restarted server keeps it cancelled instead of resuming it.
@@ -47,7 +59,7 @@ pub fn frame(job: u64, frame: u32) -> [u8; 12] {
     k
 }
 
-/// `job · frame · record id` (records, samples).
+/// `job · frame · record id` (records; schema 2 also samples).
 pub fn record(job: u64, frame: u32, id: u64) -> [u8; 20] {
     let mut k = [0u8; 20];
     k[..12].copy_from_slice(&self::frame(job, frame));
@@ -55,7 +67,7 @@ pub fn record(job: u64, frame: u32, id: u64) -> [u8; 20] {
     k
 }
 
-/// Prefix of every key of one job in `frames`, `stats`, `records`, `samples`.
+/// Prefix of every key of one job in `frames`, `stats`, `records`.
 pub fn job_prefix(job: u64) -> [u8; 8] {
     job.to_be_bytes()
 }

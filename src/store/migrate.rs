@@ -12,23 +12,32 @@ use super::{keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 2;
+pub const CURRENT_VERSION: u32 = 3;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
 pub struct Migration {
     pub from: u32,
     pub name: &'static str,
-    pub run: fn(&sled::Db) -> Result<(), String>,
+    /// The step, given the database and the store directory (the sample
+    /// log lives there).
+    pub run: fn(&sled::Db, &Path) -> Result<(), String>,
 }
 
 /// The real migrations, in order: version 1 is the initial layout
 /// (`migrations/0001_initial.md`).
-pub const MIGRATIONS: &[Migration] = &[Migration {
-    from: 1,
-    name: "0002_state_and_identity",
-    run: super::v1::migrate_to_v2,
-}];
+pub const MIGRATIONS: &[Migration] = &[
+    Migration {
+        from: 1,
+        name: "0002_state_and_identity",
+        run: super::v1::migrate_to_v2,
+    },
+    Migration {
+        from: 2,
+        name: "0003_sample_log",
+        run: super::v2::migrate_to_v3,
+    },
+];
 
 /// The schema version stored in `meta`, if any.
 pub fn read_version(path: &Path, meta: &sled::Tree) -> Result<Option<u32>, StoreError> {
@@ -83,7 +92,7 @@ pub fn migrate(
     }
     for v in found..target {
         let step = steps.iter().find(|m| m.from == v).expect("checked above");
-        (step.run)(db).map_err(|detail| StoreError::Migration {
+        (step.run)(db, path).map_err(|detail| StoreError::Migration {
             path: path.to_owned(),
             from: v,
             detail: format!("{}: {detail}", step.name),

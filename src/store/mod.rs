@@ -1,17 +1,25 @@
 //! The persistent space-time store (DESIGN.md "The store"): a sled 0.34
 //! database directory with one tree per kind — `meta`, `records`,
-//! `samples`, `movies`, `frames`, `jobs`, `stats`.
+//! `movies`, `frames`, `jobs`, `stats`, `state` — and, beside it in the
+//! same directory, the append-only sample log `samples.log`
+//! ([`samples`]).
 //!
 //! - Keys: big-endian, built only by [`keys`] (layout there and in
-//!   `migrations/0001_initial.md`, `migrations/0002_state_and_identity.md`).
+//!   `migrations/0001_initial.md`, `migrations/0002_state_and_identity.md`,
+//!   `migrations/0003_sample_log.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
-//! - Bulk arrays (frame EXR bytes, record samples) are zstd-compressed;
-//!   samples are the 8-byte RGBE records of [`rgbe::PackedSample`].
-//! - A job checkpoints each frame with [`Store::commit_frame`]: one sled
-//!   transaction over `frames`, `records`, `samples`, `stats`, `state` and
-//!   `jobs`, then `flush`; the frame counts as acknowledged only after that
-//!   returns.
+//! - Bulk values are zstd-compressed and live in the sample log, whose
+//!   location the sled value holds: a frame's EXR file (`frames`), a
+//!   record's samples (`records`; the 8-byte RGBE records of
+//!   [`rgbe::PackedSample`], one block per record). They thus stay out of
+//!   sled, whose memory grows with the bytes and keys it has written.
+//! - A job checkpoints each frame with [`Store::commit_frame`]: the frame's
+//!   EXR and sample blocks are appended to the log and synced, then one sled
+//!   transaction over `frames`, `records`, `stats`, `state`, `jobs` and
+//!   `meta` (the log's committed length), then `flush`; the frame counts as
+//!   acknowledged only after that returns. A log tail beyond the committed
+//!   length (a crash in between) is cut off when the store is opened.
 //! - `state` holds the cache a stateful method (`trc`) carries to the next
 //!   frame, as of the job's last frame: each frame writes only its changes
 //!   (records put and removed, and the head), and a resume loads it
@@ -22,36 +30,38 @@ pub mod inspect;
 pub mod keys;
 pub mod migrate;
 pub mod rgbe;
+pub mod samples;
 pub mod schema;
 pub mod v1;
+pub mod v2;
 
 use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};
 use rkyv::bytecheck::CheckBytes;
 use rkyv::rancor;
 use rkyv::ser::allocator::ArenaHandle;
 use rkyv::util::AlignedVec;
-use schema::{
-    FrameValue, JobValue, RecordValue, SamplesValue, StateHeadValue, StateRecordValue, StatsValue,
-};
+use samples::{compress, decompress, SampleLog};
+use schema::{FrameValue, JobValue, RecordValue, StateHeadValue, StateRecordValue, StatsValue};
 use sled::transaction::{ConflictableTransactionError, TransactionError};
 use sled::Transactional;
 use std::path::{Path, PathBuf};
 
 pub use rgbe::PackedSample;
+pub use samples::SampleBlock;
 pub use schema::JobSpec;
 
 /// The trees, in the order `inspect` lists them.
-pub const TREES: [&str; 8] = [
-    "meta", "jobs", "frames", "stats", "records", "samples", "state", "movies",
+pub const TREES: [&str; 7] = [
+    "meta", "jobs", "frames", "stats", "records", "state", "movies",
 ];
 
 /// sled's page cache. Its default (1 GiB) made a render's memory grow
-/// with the size of the store; the renderer reads little back, so a small
-/// cache keeps peak memory independent of the number of frames.
-const CACHE_BYTES: u64 = 16 * 1024 * 1024;
-
-/// zstd level for bulk arrays (STACK.md: level 3 ≈ 140 MB/s in).
-const ZSTD_LEVEL: i32 = 3;
+/// with the size of the store; the renderer reads little back. Since the
+/// samples moved to the sample log, sled holds only small values, and a
+/// 16 MiB cache took hundreds of frames to fill: a 16×16 `ic` render
+/// peaked at 22 MB for 100 frames and 32 MB for 400 with it, 21 and 24 MB
+/// with 2 MiB (README, "Peak memory").
+const CACHE_BYTES: u64 = 2 * 1024 * 1024;
 
 /// Store errors; every message names the store path and the problem.
 #[derive(Debug, thiserror::Error)]
@@ -87,6 +97,12 @@ pub enum StoreError {
         job: String,
         detail: String,
     },
+    #[error("store {}: sample log {}: {detail}", path.display(), file.display())]
+    SampleLog {
+        path: PathBuf,
+        file: PathBuf,
+        detail: String,
+    },
     #[error("store {}: {source}", path.display())]
     Sled { path: PathBuf, source: sled::Error },
 }
@@ -110,16 +126,19 @@ pub struct Store {
     frames: sled::Tree,
     stats: sled::Tree,
     records: sled::Tree,
-    samples: sled::Tree,
     state: sled::Tree,
     movies: sled::Tree,
+    /// The sample log; locked over a whole [`Store::commit_frame`] (its
+    /// appends and the transaction that commits them).
+    log: std::sync::Mutex<SampleLog>,
 }
 
 /// One record of a frame with its samples, ready to store.
 pub struct RecordCommit {
     pub record: RecordValue,
-    /// The record's samples in cell order (may be empty).
-    pub samples: Vec<PackedSample>,
+    /// The record's samples in cell order, stored form (may be empty).
+    /// [`Store::commit_frame`] fills in the record's sample location.
+    pub samples: SampleBlock,
 }
 
 /// Everything one frame writes.
@@ -207,22 +226,38 @@ impl Store {
         let existing = check_directory(path, create)?;
         let db = open_sled(path)?;
         let tree = |name: &str| db.open_tree(name).map_err(|e| StoreError::sled(path, e));
+        let meta = tree("meta")?;
+        let version = match migrate::read_version(path, &meta)? {
+            Some(found) => Some(migrate::migrate(path, &db, &meta, found, target, steps)?),
+            None => None,
+        };
+        let log_error = |detail: String| StoreError::SampleLog {
+            path: path.to_owned(),
+            file: path.join(samples::FILE_NAME),
+            detail,
+        };
+        let committed = v2::read_meta_u64(&meta, keys::META_SAMPLES_LOG_LEN).map_err(|detail| {
+            StoreError::Corrupt {
+                path: path.to_owned(),
+                tree: "meta",
+                key: keys::describe(keys::META_SAMPLES_LOG_LEN),
+                detail,
+            }
+        })?;
         let store = Store {
             path: path.to_owned(),
-            meta: tree("meta")?,
+            meta,
             jobs: tree("jobs")?,
             frames: tree("frames")?,
             stats: tree("stats")?,
             records: tree("records")?,
-            samples: tree("samples")?,
             state: tree("state")?,
             movies: tree("movies")?,
+            log: std::sync::Mutex::new(SampleLog::open(path, committed).map_err(log_error)?),
             db,
         };
-        match migrate::read_version(path, &store.meta)? {
-            Some(found) => {
-                migrate::migrate(path, &store.db, &store.meta, found, target, steps)?;
-            }
+        match version {
+            Some(_) => {}
             None => {
                 let empty = TREES
                     .iter()
@@ -263,18 +298,36 @@ impl Store {
             "frames" => &self.frames,
             "stats" => &self.stats,
             "records" => &self.records,
-            "samples" => &self.samples,
             "state" => &self.state,
             "movies" => &self.movies,
             _ => return None,
         })
     }
 
-    /// Bytes of the database directory's files.
+    /// Bytes of the sled database's files (the sample log aside: see
+    /// [`Self::sample_log_bytes`]).
     pub fn size_on_disk(&self) -> Result<u64, StoreError> {
         self.db
             .size_on_disk()
             .map_err(|e| StoreError::sled(&self.path, e))
+    }
+
+    /// Committed bytes of the sample log (`samples.log`).
+    pub fn sample_log_bytes(&self) -> u64 {
+        self.lock_log().committed()
+    }
+
+    fn lock_log(&self) -> std::sync::MutexGuard<'_, SampleLog> {
+        // A panic while holding it leaves the log as consistent as a crash.
+        self.log.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn log_error(&self, detail: impl ToString) -> StoreError {
+        StoreError::SampleLog {
+            path: self.path.clone(),
+            file: self.path.join(samples::FILE_NAME),
+            detail: detail.to_string(),
+        }
     }
 
     pub fn flush(&self) -> Result<(), StoreError> {
@@ -418,13 +471,8 @@ impl Store {
     /// Deletes every key of job id `job` in the per-job trees.
     fn delete_job_data(&self, job: u64) -> Result<(), StoreError> {
         let prefix = keys::job_prefix(job);
-        for tree in [
-            &self.frames,
-            &self.stats,
-            &self.records,
-            &self.samples,
-            &self.state,
-        ] {
+        // Their samples stay in the log, unreferenced (it is append-only).
+        for tree in [&self.frames, &self.stats, &self.records, &self.state] {
             for key in tree.scan_prefix(prefix).keys() {
                 let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
                 tree.remove(key)
@@ -455,10 +503,33 @@ impl Store {
     }
 
     /// Writes one finished frame of `job` — image, records with samples,
-    /// stats and progress — in one atomic transaction, then flushes. Only
+    /// stats and progress: the records' sample blocks appended to the
+    /// sample log and synced, then everything else and the log's new
+    /// committed length in one atomic transaction, then a flush. Only
     /// when this returns `Ok` is the frame acknowledged; `job` is updated
     /// to the stored progress.
     pub fn commit_frame(&self, job: &mut JobValue, c: FrameCommit) -> Result<(), StoreError> {
+        let mut log = self.lock_log();
+        let result = self.commit_frame_locked(&mut log, job, c);
+        match &result {
+            // The transaction references the appends, flushed or not.
+            Ok(_) => log.commit(),
+            // No transaction references them: cut them off now (a crash
+            // before this is handled on the next open).
+            Err(_) => log.rollback().map_err(|e| self.log_error(e))?,
+        }
+        let progressed = result?;
+        self.flush()?;
+        *job = progressed;
+        Ok(())
+    }
+
+    fn commit_frame_locked(
+        &self,
+        log: &mut SampleLog,
+        job: &JobValue,
+        c: FrameCommit,
+    ) -> Result<JobValue, StoreError> {
         let frame_key = keys::frame(job.id, c.frame);
         let already = self.frame_done(job.id, c.frame)?;
         // A frame written again (by another chain of a stateful method)
@@ -469,28 +540,39 @@ impl Store {
                 stale.push(key.map_err(|e| StoreError::sled(&self.path, e))?);
             }
         }
+        let exr_zstd = compress(c.exr);
         let frame_value = FrameValue {
             width: c.width,
             height: c.height,
             exr_len: c.exr.len() as u64,
-            exr_zstd: compress(c.exr),
+            exr_offset: log.append(&exr_zstd).map_err(|e| self.log_error(e))?,
+            exr_stored_len: exr_zstd.len() as u32,
         };
+        drop(exr_zstd);
         let mut record_rows = Vec::with_capacity(c.records.len());
-        let mut sample_rows = Vec::with_capacity(c.records.len());
         let mut samples_raw = 0u64;
-        for rc in &c.records {
-            let key = keys::record(job.id, c.frame, rc.record.id);
-            record_rows.push((key, encode(&rc.record)));
-            if !rc.samples.is_empty() {
-                let raw = to_planar(&rc.samples);
-                samples_raw += raw.len() as u64;
-                let value = SamplesValue {
-                    count: rc.samples.len() as u32,
-                    packed_zstd: compress(&raw),
-                };
-                sample_rows.push((key, encode(&value)));
-            }
+        for rc in c.records {
+            let mut record = rc.record;
+            (
+                record.samples_count,
+                record.samples_offset,
+                record.samples_len,
+            ) = if rc.samples.is_empty() {
+                (0, 0, 0)
+            } else {
+                samples_raw += rc.samples.raw_bytes();
+                let offset = log
+                    .append(&rc.samples.zstd)
+                    .map_err(|e| self.log_error(e))?;
+                (rc.samples.count, offset, rc.samples.zstd.len() as u32)
+            };
+            let key = keys::record(job.id, c.frame, record.id);
+            record_rows.push((key, encode(&record)));
         }
+        if log.end() > log.committed() {
+            log.sync().map_err(|e| self.log_error(e))?;
+        }
+        let log_len = log.end().to_be_bytes();
         let stats = StatsValue::from_stats(c.stats, samples_raw);
         let mut state_rows = Vec::new();
         let mut state_removed = Vec::new();
@@ -531,15 +613,14 @@ impl Store {
         let result: Result<(), TransactionError<()>> = (
             &self.frames,
             &self.records,
-            &self.samples,
+            &self.meta,
             &self.stats,
             &self.state,
             &self.jobs,
         )
-            .transaction(|(frames, records, samples, stats, state, jobs)| {
+            .transaction(|(frames, records, meta, stats, state, jobs)| {
                 for k in &stale {
                     records.remove(&k[..])?;
-                    samples.remove(&k[..])?;
                 }
                 for k in &state_removed {
                     state.remove(&k[..])?;
@@ -553,9 +634,7 @@ impl Store {
                 for (k, v) in &record_rows {
                     records.insert(&k[..], &v[..])?;
                 }
-                for (k, v) in &sample_rows {
-                    samples.insert(&k[..], &v[..])?;
-                }
+                meta.insert(keys::META_SAMPLES_LOG_LEN, &log_len[..])?;
                 stats.insert(&frame_key[..], &stats_bytes[..])?;
                 frames.insert(&frame_key[..], &frame_bytes[..])?;
                 jobs.insert(&job_key[..], &job_bytes[..])?;
@@ -565,9 +644,7 @@ impl Store {
             TransactionError::Storage(s) => StoreError::sled(&self.path, s),
             TransactionError::Abort(()) => unreachable!("the transaction never aborts"),
         })?;
-        self.flush()?;
-        *job = progressed;
-        Ok(())
+        Ok(progressed)
     }
 
     pub fn frame(&self, job: u64, frame: u32) -> Result<Option<FrameValue>, StoreError> {
@@ -580,8 +657,18 @@ impl Store {
         let Some(v) = self.frame(job, frame)? else {
             return Ok(None);
         };
-        let exr = decompress(&v.exr_zstd, v.exr_len as usize)
-            .map_err(|d| self.corrupt("frames", &key, d))?;
+        let in_log = |d: String| {
+            self.log_error(format!(
+                "EXR of {} at offset {}: {d}",
+                keys::describe(&key),
+                v.exr_offset
+            ))
+        };
+        let stored = self
+            .lock_log()
+            .read(v.exr_offset, v.exr_stored_len)
+            .map_err(in_log)?;
+        let exr = decompress(&stored, v.exr_len as usize).map_err(in_log)?;
         Ok(Some(exr))
     }
 
@@ -615,7 +702,8 @@ impl Store {
         Ok(())
     }
 
-    /// The samples of record `id` written in `frame` of `job`.
+    /// The samples of record `id` written in `frame` of `job` (none if
+    /// there is no such record), read from the sample log.
     pub fn record_samples(
         &self,
         job: u64,
@@ -623,12 +711,29 @@ impl Store {
         id: u64,
     ) -> Result<Vec<PackedSample>, StoreError> {
         let key = keys::record(job, frame, id);
-        let Some(v) = self.get::<SamplesValue>("samples", &key)? else {
+        match self.get::<RecordValue>("records", &key)? {
+            Some(r) => self.samples_of(&r, &key),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    /// The samples of stored record `r` (under `key`), read from the log.
+    fn samples_of(&self, r: &RecordValue, key: &[u8]) -> Result<Vec<PackedSample>, StoreError> {
+        if r.samples_count == 0 {
             return Ok(Vec::new());
+        }
+        let in_log = |d: String| {
+            self.log_error(format!(
+                "samples of {} at offset {}: {d}",
+                keys::describe(key),
+                r.samples_offset
+            ))
         };
-        let raw = decompress(&v.packed_zstd, v.count as usize * PackedSample::BYTES)
-            .map_err(|d| self.corrupt("samples", &key, d))?;
-        Ok(from_planar(&raw, v.count as usize))
+        let bytes = self
+            .lock_log()
+            .read(r.samples_offset, r.samples_len)
+            .map_err(in_log)?;
+        SampleBlock::unpack_bytes(&bytes, r.samples_count).map_err(in_log)
     }
 
     // ------------------------------------------------------------ state
@@ -698,42 +803,6 @@ impl Store {
             .map_err(|e| StoreError::sled(&self.path, e))?;
         self.flush()
     }
-}
-
-/// Byte planes of the 8-byte samples: byte 0 of every sample, then byte 1,
-/// … (exponents, distance high bytes and flags then sit together, which
-/// zstd compresses far better than interleaved samples).
-fn to_planar(samples: &[PackedSample]) -> Vec<u8> {
-    let n = samples.len();
-    let mut out = vec![0u8; n * PackedSample::BYTES];
-    for (i, s) in samples.iter().enumerate() {
-        for (b, byte) in s.to_bytes().into_iter().enumerate() {
-            out[b * n + i] = byte;
-        }
-    }
-    out
-}
-
-fn from_planar(raw: &[u8], n: usize) -> Vec<PackedSample> {
-    (0..n)
-        .map(|i| PackedSample::from_bytes(std::array::from_fn(|b| raw[b * n + i])))
-        .collect()
-}
-
-fn compress(bytes: &[u8]) -> Vec<u8> {
-    zstd::bulk::compress(bytes, ZSTD_LEVEL).expect("zstd compression to memory cannot fail")
-}
-
-/// Decompresses exactly `len` bytes.
-fn decompress(bytes: &[u8], len: usize) -> Result<Vec<u8>, String> {
-    let out = zstd::bulk::decompress(bytes, len).map_err(|e| format!("zstd: {e}"))?;
-    if out.len() != len {
-        return Err(format!(
-            "zstd: expected {len} bytes, decompressed {}",
-            out.len()
-        ));
-    }
-    Ok(out)
 }
 
 /// Fields of `spec` that differ from the stored job's (name and frame range
@@ -940,31 +1009,16 @@ fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
 }
 
 impl RecordCommit {
-    /// A record created or changed in `frame`, with its samples packed
-    /// (age 0: they were all shot this frame). `dynamic(object)` tells
-    /// whether an object is animated (the sample's hit-dynamic flag).
+    /// A record created or changed in `frame`, with its samples in their
+    /// stored form.
     pub fn from_record(
         record: &crate::cache::IrradianceRecord,
-        samples: &crate::cache::gather::HemisphereSamples,
+        samples: SampleBlock,
         strata: crate::cache::gather::Strata,
         frame: u32,
-        dynamic: impl Fn(u32) -> bool,
     ) -> Self {
         let v = |v: glam::Vec3| v.to_array();
-        let packed: Vec<PackedSample> = (0..samples.radiance.len())
-            .map(|i| {
-                let object = samples.object.get(i).copied().unwrap_or(u32::MAX);
-                let hit_dynamic = object != u32::MAX && dynamic(object);
-                PackedSample::pack(
-                    samples.radiance[i],
-                    samples.distance[i],
-                    object,
-                    hit_dynamic,
-                    0,
-                )
-            })
-            .collect();
-        let has = !packed.is_empty();
+        let has = !samples.is_empty();
         RecordCommit {
             record: RecordValue {
                 id: record.id,
@@ -979,8 +1033,12 @@ impl RecordCommit {
                 object: record.object,
                 strata_theta: if has { strata.theta } else { 0 },
                 strata_phi: if has { strata.phi } else { 0 },
+                // Filled in by `Store::commit_frame`.
+                samples_count: 0,
+                samples_offset: 0,
+                samples_len: 0,
             },
-            samples: packed,
+            samples,
         }
     }
 }

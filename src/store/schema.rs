@@ -1,7 +1,11 @@
-//! Value schemas of store schema version 2 (`migrations/0002_state_and_identity.md`;
-//! version 1 in `migrations/0001_initial.md`, its types in [`super::v1`]).
+//! Value schemas of store schema version 3 (`migrations/0003_sample_log.md`,
+//! on top of `migrations/0002_state_and_identity.md` and
+//! `migrations/0001_initial.md`; the types schema 3 changed are kept in
+//! [`super::v2`], those schema 2 changed in [`super::v1`]).
 //! Every value is an rkyv 0.8 archive, validated (bytecheck) when read.
-//! Bulk arrays (EXR bytes, samples) are zstd-compressed inside the archive.
+//! Bulk values live in the sample log ([`super::samples`]), zstd-compressed:
+//! record samples (the record says where) and frame EXR files (the frame
+//! says where).
 //! Changing any of these types is a schema change: bump
 //! [`super::migrate::CURRENT_VERSION`], add a migration and a
 //! `migrations/NNNN_*.md`.
@@ -62,19 +66,23 @@ impl std::ops::Deref for JobValue {
     }
 }
 
-/// `frames` value: one finished frame.
+/// `frames` value: one finished frame. Its EXR file (as written to
+/// `--out`), zstd-compressed, lies in the sample log (a bulk value kept
+/// out of sled, like the samples).
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct FrameValue {
     pub width: u32,
     pub height: u32,
     /// Length of the EXR file before zstd.
     pub exr_len: u64,
-    /// The frame's EXR file (as written to `--out`), zstd-compressed.
-    pub exr_zstd: Vec<u8>,
+    /// Where the compressed EXR lies in `samples.log`, and its length.
+    pub exr_offset: u64,
+    pub exr_stored_len: u32,
 }
 
 /// `records` value under `job · frame · record id`: one version of an
-/// irradiance record (written in its creation frame).
+/// irradiance record (written in its creation frame), with where its
+/// samples lie in the sample log.
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct RecordValue {
     pub id: u64,
@@ -92,15 +100,12 @@ pub struct RecordValue {
     /// Strata `M × N` of the record's samples (0 × 0 when it has none).
     pub strata_theta: u32,
     pub strata_phi: u32,
-}
-
-/// `samples` value under `job · frame · record id`: a record's
-/// incoming-radiance samples, `count` 8-byte [`super::rgbe::PackedSample`]s
-/// in cell order, zstd-compressed.
-#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
-pub struct SamplesValue {
-    pub count: u32,
-    pub packed_zstd: Vec<u8>,
+    /// The record's samples: `samples_count` 8-byte samples, a
+    /// [`super::samples::SampleBlock`] of `samples_len` bytes at
+    /// `samples_offset` in `samples.log` (all 0 when it has none).
+    pub samples_count: u32,
+    pub samples_offset: u64,
+    pub samples_len: u32,
 }
 
 /// `stats` value: the [`crate::method::FrameStats`] of one frame, whole.

@@ -1,9 +1,12 @@
 //! Schema 1 (`migrations/0001_initial.md`): the value types that schema 2
-//! changed (`frames`, `records` and `samples` values are the same), kept to read a version-1 store in the 0001 → 0002 migration,
-//! and a writer of version-1 stores for the test that opens one.
+//! changed (`frames`, `records` and `samples` values are the same; the
+//! latter two, changed by schema 3, are in [`super::v2`]), kept to read a
+//! version-1 store in the 0001 → 0002 migration, and a writer of version-1
+//! stores for the test that opens one.
 
-use super::schema::{self, FrameValue, SamplesValue};
-use super::{compress, encode, keys, to_planar, RecordCommit};
+use super::schema;
+use super::v2::{self, FrameValue, SamplesValue};
+use super::{compress, encode, keys, RecordCommit};
 use crate::method::FrameStats;
 use rkyv::{Archive, Deserialize, Serialize};
 use std::path::Path;
@@ -141,7 +144,7 @@ impl StatsValue {
 /// rewrites every `jobs` and `stats` value in the schema-2 layout, creates
 /// the `state` tree and stamps version 2, in one transaction: a crash
 /// leaves either schema 1 untouched or schema 2 complete.
-pub fn migrate_to_v2(db: &sled::Db) -> Result<(), String> {
+pub fn migrate_to_v2(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let tree = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
     let (meta, jobs, stats) = (tree("meta")?, tree("jobs")?, tree("stats")?);
     tree("state")?;
@@ -217,11 +220,12 @@ impl Writer {
         self.insert("stats", &key, &encode(stats))?;
         for rc in records {
             let key = keys::record(job, frame, rc.record.id);
-            self.insert("records", &key, &encode(&rc.record))?;
+            let record = v2::RecordValue::from_v3(&rc.record);
+            self.insert("records", &key, &encode(&record))?;
             if !rc.samples.is_empty() {
                 let samples = SamplesValue {
-                    count: rc.samples.len() as u32,
-                    packed_zstd: compress(&to_planar(&rc.samples)),
+                    count: rc.samples.count,
+                    packed_zstd: rc.samples.zstd.clone(),
                 };
                 self.insert("samples", &key, &encode(&samples))?;
             }

@@ -1,0 +1,274 @@
+//! A record's hemisphere samples in their stored form ([`SampleBlock`]),
+//! and the append-only file that holds them beside the sled database
+//! ([`SampleLog`], `samples.log`; schema 3, `migrations/0003_sample_log.md`),
+//! with the frames' EXR files: every bulk value the store writes. sled
+//! 0.34 keeps in memory about the bytes of every large value written to
+//! it, whatever its cache size (README, "Peak memory"); out here they cost
+//! no memory.
+//!
+//! - A block is a record's `count` 8-byte [`PackedSample`]s in byte planes
+//!   (byte 0 of every sample, then byte 1, …), zstd-compressed. Methods
+//!   build it as soon as a record is gathered, so a frame never holds its
+//!   samples at 32 bytes each for the store.
+//! - The log is the file's 8-byte header [`MAGIC`] followed by blocks, back
+//!   to back; a record's value in `records` says where its block lies
+//!   (offset, length, count), a frame's value in `frames` where its
+//!   zstd-compressed EXR file lies. Nothing in the log is ever rewritten.
+//! - `meta.samples_log_len` (u64 big-endian) is the log's committed length,
+//!   written in each frame's sled transaction after the frame's EXR and
+//!   blocks were appended and synced. Bytes beyond it belong to a frame that was never
+//!   acknowledged (a crash between the append and the transaction): opening
+//!   the store truncates them. A log shorter than its committed length has
+//!   lost acknowledged data: opening the store fails, naming the file.
+
+use super::rgbe::PackedSample;
+use crate::cache::gather::HemisphereSamples;
+use std::fs::{File, OpenOptions};
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+/// The log's file name inside the store directory.
+pub const FILE_NAME: &str = "samples.log";
+
+/// First 8 bytes of a sample log (format version 1).
+pub const MAGIC: &[u8; 8] = b"RCSLOG1\n";
+
+/// zstd level for sample blocks (STACK.md: level 3 ≈ 140 MB/s in).
+const ZSTD_LEVEL: i32 = 3;
+
+/// A record's samples in cell order, stored form: `count` 8-byte samples in
+/// byte planes, zstd-compressed (empty when the record has none).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SampleBlock {
+    pub count: u32,
+    pub zstd: Vec<u8>,
+}
+
+impl SampleBlock {
+    /// Packs gathered samples (age 0: all shot this frame).
+    /// `dynamic[object]` tells whether an object is animated (the
+    /// sample's hit-dynamic flag). The direction is not kept: it is the
+    /// sample's strata cell (its index), jittered by the record's
+    /// deterministic sample key.
+    pub fn pack(samples: &HemisphereSamples, dynamic: &[bool]) -> Self {
+        let packed: Vec<PackedSample> = (0..samples.radiance.len())
+            .map(|i| {
+                let object = samples.object.get(i).copied().unwrap_or(u32::MAX);
+                let hit_dynamic =
+                    object != u32::MAX && dynamic.get(object as usize).copied().unwrap_or(false);
+                PackedSample::pack(
+                    samples.radiance[i],
+                    samples.distance[i],
+                    object,
+                    hit_dynamic,
+                    0,
+                )
+            })
+            .collect();
+        Self::from_packed(&packed)
+    }
+
+    /// The block of samples already packed.
+    pub fn from_packed(samples: &[PackedSample]) -> Self {
+        if samples.is_empty() {
+            return SampleBlock::default();
+        }
+        SampleBlock {
+            count: samples.len() as u32,
+            zstd: compress(&to_planar(samples)),
+        }
+    }
+
+    /// The samples back, in cell order.
+    pub fn unpack(&self) -> Result<Vec<PackedSample>, String> {
+        Self::unpack_bytes(&self.zstd, self.count)
+    }
+
+    /// Unpacks `count` samples from a block's compressed bytes.
+    pub fn unpack_bytes(zstd: &[u8], count: u32) -> Result<Vec<PackedSample>, String> {
+        if count == 0 {
+            return Ok(Vec::new());
+        }
+        let n = count as usize;
+        let raw = decompress(zstd, n * PackedSample::BYTES)?;
+        Ok(from_planar(&raw, n))
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// Bytes of the samples before compression.
+    pub fn raw_bytes(&self) -> u64 {
+        u64::from(self.count) * PackedSample::BYTES as u64
+    }
+}
+
+/// Byte planes of the 8-byte samples: byte 0 of every sample, then byte 1,
+/// … (exponents, distance high bytes and flags then sit together, which
+/// zstd compresses far better than interleaved samples).
+pub(crate) fn to_planar(samples: &[PackedSample]) -> Vec<u8> {
+    let n = samples.len();
+    let mut out = vec![0u8; n * PackedSample::BYTES];
+    for (i, s) in samples.iter().enumerate() {
+        for (b, byte) in s.to_bytes().into_iter().enumerate() {
+            out[b * n + i] = byte;
+        }
+    }
+    out
+}
+
+fn from_planar(raw: &[u8], n: usize) -> Vec<PackedSample> {
+    (0..n)
+        .map(|i| PackedSample::from_bytes(std::array::from_fn(|b| raw[b * n + i])))
+        .collect()
+}
+
+pub(crate) fn compress(bytes: &[u8]) -> Vec<u8> {
+    zstd::bulk::compress(bytes, ZSTD_LEVEL).expect("zstd compression to memory cannot fail")
+}
+
+/// Decompresses exactly `len` bytes.
+pub(crate) fn decompress(bytes: &[u8], len: usize) -> Result<Vec<u8>, String> {
+    let out = zstd::bulk::decompress(bytes, len).map_err(|e| format!("zstd: {e}"))?;
+    if out.len() != len {
+        return Err(format!(
+            "zstd: expected {len} bytes, decompressed {}",
+            out.len()
+        ));
+    }
+    Ok(out)
+}
+
+/// The open sample log of a store (see the module comment). Appends go to
+/// the end; [`SampleLog::commit`] makes them the committed length once the
+/// sled transaction that references them is done, [`SampleLog::rollback`]
+/// cuts them off when it failed.
+pub struct SampleLog {
+    path: PathBuf,
+    file: File,
+    /// Length the store's records may reference (`meta.samples_log_len`).
+    committed: u64,
+    /// Length including appends not committed yet.
+    end: u64,
+}
+
+impl SampleLog {
+    /// Opens (or creates) the log in store directory `dir`, whose `meta`
+    /// says `committed` bytes are referenced (`None`: nothing ever was).
+    /// A tail beyond `committed` is truncated; a file shorter than
+    /// `committed`, or without the header, is an error.
+    pub fn open(dir: &Path, committed: Option<u64>) -> Result<SampleLog, String> {
+        let path = dir.join(FILE_NAME);
+        let file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(committed.is_none())
+            .truncate(false)
+            .open(&path)
+            .map_err(|e| match committed {
+                Some(c) => format!(
+                    "cannot open it ({e}), but the store references {c} bytes of it (lost?)"
+                ),
+                None => format!("cannot open it: {e}"),
+            })?;
+        let actual = file.metadata().map_err(|e| e.to_string())?.len();
+        let mut log = SampleLog {
+            path,
+            file,
+            committed: 0,
+            end: 0,
+        };
+        match committed {
+            None => {
+                // Nothing committed: whatever is there was never
+                // acknowledged.
+                log.file.set_len(0).map_err(|e| e.to_string())?;
+                log.file
+                    .write_all_at(MAGIC, 0)
+                    .and_then(|()| log.file.sync_all())
+                    .map_err(|e| e.to_string())?;
+                log.committed = MAGIC.len() as u64;
+            }
+            Some(c) => {
+                if actual < c {
+                    return Err(format!(
+                        "it is {actual} bytes, shorter than the {c} bytes the store's records reference (truncated or replaced?)"
+                    ));
+                }
+                let mut head = [0u8; 8];
+                log.file
+                    .read_exact_at(&mut head, 0)
+                    .map_err(|e| format!("cannot read its header: {e}"))?;
+                if &head != MAGIC {
+                    return Err("not a radcache sample log (bad header)".into());
+                }
+                if actual > c {
+                    // The tail of a frame that was never acknowledged.
+                    log.file
+                        .set_len(c)
+                        .and_then(|()| log.file.sync_all())
+                        .map_err(|e| format!("cannot truncate its uncommitted tail: {e}"))?;
+                }
+                log.committed = c;
+            }
+        }
+        log.end = log.committed;
+        Ok(log)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The committed length.
+    pub fn committed(&self) -> u64 {
+        self.committed
+    }
+
+    /// The length including uncommitted appends.
+    pub fn end(&self) -> u64 {
+        self.end
+    }
+
+    /// Appends `bytes` (not yet synced nor committed); returns their offset.
+    pub fn append(&mut self, bytes: &[u8]) -> std::io::Result<u64> {
+        let offset = self.end;
+        self.file.write_all_at(bytes, offset)?;
+        self.end += bytes.len() as u64;
+        Ok(offset)
+    }
+
+    /// Makes the appends durable (before the transaction that references
+    /// them).
+    pub fn sync(&self) -> std::io::Result<()> {
+        self.file.sync_data()
+    }
+
+    /// The appends are referenced by a committed transaction.
+    pub fn commit(&mut self) {
+        self.committed = self.end;
+    }
+
+    /// Cuts off the uncommitted appends.
+    pub fn rollback(&mut self) -> std::io::Result<()> {
+        self.end = self.committed;
+        self.file.set_len(self.committed)
+    }
+
+    /// The `len` bytes at `offset`, which must lie in the committed part.
+    pub fn read(&self, offset: u64, len: u32) -> Result<Vec<u8>, String> {
+        let stop = offset.saturating_add(u64::from(len));
+        if offset < MAGIC.len() as u64 || stop > self.committed {
+            return Err(format!(
+                "bytes {offset}..{stop} lie outside its committed {} bytes",
+                self.committed
+            ));
+        }
+        let mut out = vec![0u8; len as usize];
+        self.file
+            .read_exact_at(&mut out, offset)
+            .map_err(|e| format!("cannot read bytes {offset}..{stop}: {e}"))?;
+        Ok(out)
+    }
+}
