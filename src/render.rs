@@ -103,6 +103,9 @@ pub enum BackendChoice {
 ///   error, never a panic.
 ///
 /// `WGPU_BACKEND` (e.g. `vulkan`) restricts the wgpu backends searched.
+/// `RADCACHE_GPU_BVH` (`cwbvh`, the default, or `bvh2`) picks the BVH
+/// layout the GPU traverses; an unknown value is an error like a missing
+/// adapter.
 /// The caller prints `backend.name()`, which names the adapter picked.
 pub fn make_backend(choice: BackendChoice) -> Result<Box<dyn RayBackend>> {
     match choice {

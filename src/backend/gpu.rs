@@ -134,6 +134,9 @@ pub enum GpuError {
     Setup { adapter: String, message: String },
     #[error("GPU ray backend: {0}")]
     Geometry(String),
+    /// A setting (`RADCACHE_GPU_BVH`) with a value the backend does not know.
+    #[error("GPU ray backend: {0}")]
+    Config(String),
 }
 
 /// Time spent by the GPU backend, summed since creation or the last

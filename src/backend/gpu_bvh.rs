@@ -58,11 +58,16 @@ impl GpuLayout {
     /// The layout named by `RADCACHE_GPU_BVH` (unset or empty: the default).
     /// A developer's switch for comparing the two; the CLI has no flag.
     pub fn from_env() -> Result<Self, GpuError> {
-        match std::env::var(LAYOUT_ENV).unwrap_or_default().as_str() {
+        Self::parse(&std::env::var(LAYOUT_ENV).unwrap_or_default())
+    }
+
+    /// `bvh2`, `cwbvh`, or empty for the default.
+    pub fn parse(name: &str) -> Result<Self, GpuError> {
+        match name {
             "" => Ok(GpuLayout::default()),
             "bvh2" => Ok(GpuLayout::Bvh2),
             "cwbvh" => Ok(GpuLayout::Cwbvh),
-            other => Err(GpuError::Geometry(format!(
+            other => Err(GpuError::Config(format!(
                 "{LAYOUT_ENV}={other}: expected bvh2 or cwbvh"
             ))),
         }
@@ -285,4 +290,24 @@ fn cwbvh_depth(bvh: &CwBvh) -> usize {
         }
     }
     max
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_names_parse_and_cwbvh_is_the_default() {
+        assert_eq!(GpuLayout::parse("").unwrap(), GpuLayout::Cwbvh);
+        assert_eq!(GpuLayout::parse("bvh2").unwrap(), GpuLayout::Bvh2);
+        assert_eq!(GpuLayout::parse("cwbvh").unwrap(), GpuLayout::Cwbvh);
+        let e = GpuLayout::parse("bvh4").unwrap_err().to_string();
+        assert!(e.contains("RADCACHE_GPU_BVH=bvh4"), "{e}");
+    }
+
+    #[test]
+    fn node_sizes_match_the_shaders() {
+        assert_eq!(GpuLayout::Bvh2.node_bytes(), 48);
+        assert_eq!(GpuLayout::Cwbvh.node_bytes(), 80);
+    }
 }
