@@ -973,14 +973,42 @@ const LOCK_WAIT: std::time::Duration = std::time::Duration::from_millis(1500);
 /// turned into [`StoreError`]s.
 fn open_sled(path: &Path) -> Result<sled::Db, StoreError> {
     let start = std::time::Instant::now();
+    let mut cleaned = false;
     loop {
         match open_sled_once(path) {
             Err(StoreError::Locked { .. }) if start.elapsed() < LOCK_WAIT => {
                 std::thread::sleep(std::time::Duration::from_millis(20));
             }
+            Err(StoreError::NotAStore { .. }) if !cleaned && remove_unfinished_snapshots(path) => {
+                cleaned = true;
+            }
             other => return other,
         }
     }
+}
+
+/// sled 0.34 writes a snapshot to `snap.N.generating` and then renames it
+/// to `snap.N`, but on open it reads the greatest `snap.*` file name,
+/// `.generating` included (sled issue #1527): a process killed while
+/// writing a snapshot — which sled also does while it opens a store after
+/// a crash — leaves a store sled calls corrupt. Such a file is never
+/// complete (the rename is what finishes it), and the snapshot only speeds
+/// up recovery, which sled can do from its log alone, so removing it
+/// recovers the store. Called only after sled refused the store, having
+/// taken its lock first: no other process is writing a snapshot. Returns
+/// whether it removed any.
+fn remove_unfinished_snapshots(path: &Path) -> bool {
+    let Ok(entries) = std::fs::read_dir(path) else {
+        return false;
+    };
+    let mut removed = false;
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with("snap.") && name.ends_with(".generating") {
+            removed |= std::fs::remove_file(entry.path()).is_ok();
+        }
+    }
+    removed
 }
 
 fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
