@@ -430,12 +430,10 @@ fn frames_with_gpu_interpolation_equal_cpu_interpolation_on_the_same_rays() {
 /// the GPU's BVH2 finds (`tests/gpu_backend.rs`, README `--backend`), so such a
 /// record's irradiance differs by tens of percent whichever way the cache
 /// is interpolated (cube-in-box frame 0: 134 records on the CPU, 137 on the
-/// GPU, half of them identical), and so do the pixels it covers. (With
-/// `ic`'s default strata at 64×64 it is worse: a GPU-gathered record on the
-/// floor–wall edge gets translation gradients near 1e6 from hits at t ≈ 0
-/// and the frame mean doubles, whichever way the cache is interpolated —
-/// a gathering problem this test does not cover; see README `--backend`.)
-/// Hence:
+/// GPU, half of them identical), and so do the pixels it covers. (At
+/// 64×64 with `ic`'s default strata such hits at t ≈ 0 used to blow up a
+/// record's translation gradient and double the frame mean; see
+/// [`edge_records_gathered_on_the_gpu_keep_the_frame_mean`].) Hence:
 /// at least [`SAME_PIXEL_SHARE`] of the pixels within
 /// [`PIXEL_REL_SAME_RAYS`], and the frame means within [`MEAN_REL_BACKENDS`].
 #[test]
