@@ -423,6 +423,20 @@ fn job_with_other_settings_is_refused_unless_forced() {
     assert!(store.frame_records(old.id, 0).unwrap().is_empty());
 }
 
+/// `ic` with few strata and one sample per pixel: fixtures and resumes
+/// that stay fast.
+fn small_ic() -> MethodSettings {
+    MethodSettings::Ic(small_ic_settings())
+}
+
+fn small_ic_settings() -> IcSettings {
+    IcSettings {
+        strata: Strata { theta: 4, phi: 12 },
+        spp: 1,
+        ..IcSettings::default()
+    }
+}
+
 fn renderer(method: &MethodSettings) -> Renderer {
     let source = SceneSource::Builtin("cube-in-box".into());
     let settings = FrameSettings {
@@ -500,11 +514,7 @@ fn resumed_path_render_is_bit_identical_to_uninterrupted() {
 
 #[test]
 fn resumed_ic_render_is_bit_identical_and_stores_records_with_samples() {
-    let settings = IcSettings {
-        strata: Strata { theta: 4, phi: 12 },
-        spp: 1,
-        ..IcSettings::default()
-    };
+    let settings = small_ic_settings();
     resume_matches_uninterrupted(MethodSettings::Ic(settings.clone()));
     // The records of a frame with their 48 samples each.
     let dir = tempfile::tempdir().unwrap();
@@ -812,11 +822,7 @@ fn v1_fixture(
 
 #[test]
 fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
-    let method = MethodSettings::Ic(IcSettings {
-        strata: Strata { theta: 4, phi: 12 },
-        spp: 1,
-        ..IcSettings::default()
-    });
+    let method = small_ic();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let (spec, exrs, v1_samples) = v1_fixture(&path, &method);
@@ -984,11 +990,7 @@ fn open_raw(path: &Path) -> sled::Db {
 fn version_2_store_moves_its_samples_into_the_sample_log() {
     // A schema-2 store: the schema-1 fixture brought to 2 by the real
     // 1 → 2 step (samples still in the `samples` tree).
-    let method = MethodSettings::Ic(IcSettings {
-        strata: Strata { theta: 4, phi: 12 },
-        spp: 1,
-        ..IcSettings::default()
-    });
+    let method = small_ic();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let (_, _, written) = v1_fixture(&path, &method);
@@ -1112,11 +1114,7 @@ fn sample_log_shorter_than_referenced_is_a_clear_error() {
 
 #[test]
 fn interrupted_0002_to_0003_migration_resumes_where_it_stopped() {
-    let method = MethodSettings::Ic(IcSettings {
-        strata: Strata { theta: 4, phi: 12 },
-        spp: 1,
-        ..IcSettings::default()
-    });
+    let method = small_ic();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let (_, _, written) = v1_fixture(&path, &method);

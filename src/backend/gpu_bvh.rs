@@ -255,39 +255,38 @@ fn cwbvh_nodes(source: &[ObTriangle]) -> Result<(Nodes, Vec<u32>), GpuError> {
 /// Depth of a BVH2 (a lone root leaf has depth 1): the traversal stack
 /// holds at most depth − 1 entries.
 fn bvh2_depth(bvh: &Bvh2) -> usize {
-    if bvh.nodes.is_empty() {
-        return 0;
-    }
-    let mut max = 0;
-    let mut stack = vec![(0usize, 1usize)];
-    while let Some((i, d)) = stack.pop() {
-        max = max.max(d);
+    tree_depth(bvh.nodes.len(), |i| {
         let n = &bvh.nodes[i];
-        if n.prim_count == 0 {
-            let c = n.first_index as usize;
-            stack.push((c, d + 1));
-            stack.push((c + 1, d + 1));
-        }
-    }
-    max
+        let c = n.first_index as usize;
+        (n.prim_count == 0)
+            .then_some([c, c + 1])
+            .into_iter()
+            .flatten()
+    })
 }
 
 /// Depth in nodes of a CWBVH (a lone root has depth 1): the traversal
 /// keeps at most one pending group per level above the current node.
 fn cwbvh_depth(bvh: &CwBvh) -> usize {
-    if bvh.nodes.is_empty() {
+    tree_depth(bvh.nodes.len(), |i| {
+        let n = &bvh.nodes[i];
+        (0..8)
+            .filter(|&slot| !n.is_leaf(slot))
+            .map(|slot| n.child_node_index(slot) as usize)
+    })
+}
+
+/// Depth in nodes of a tree of `len` nodes rooted at node 0, given each
+/// node's child nodes (0 for an empty tree).
+fn tree_depth<I: Iterator<Item = usize>>(len: usize, children: impl Fn(usize) -> I) -> usize {
+    if len == 0 {
         return 0;
     }
     let mut max = 0;
     let mut stack = vec![(0usize, 1usize)];
     while let Some((i, d)) = stack.pop() {
         max = max.max(d);
-        let n = &bvh.nodes[i];
-        for slot in 0..8 {
-            if !n.is_leaf(slot) {
-                stack.push((n.child_node_index(slot) as usize, d + 1));
-            }
-        }
+        stack.extend(children(i).map(|c| (c, d + 1)));
     }
     max
 }
