@@ -26,14 +26,14 @@
 
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
-use radcache::backend::gpu::{AdapterPolicy, GpuBackend};
+use radcache::backend::gpu::{AdapterPolicy, GpuBackend, RaysOnly};
 use radcache::backend::gpu_cache::{GpuLookup, SplatTimings};
-use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
+use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::camera_query;
 use radcache::method::FrameContext;
 use radcache::render::{FrameSettings, Renderer};
-use radcache::scene::{Scene, Snapshot};
+use radcache::scene::Scene;
 use std::time::{Duration, Instant};
 
 /// Repetitions; the best one is reported.
@@ -54,33 +54,6 @@ fn best(mut f: impl FnMut() -> Duration) -> Duration {
 
 fn ms(d: Duration) -> String {
     format!("{:.2}", d.as_secs_f64() * 1e3)
-}
-
-/// The GPU backend with its cache splat hidden: GPU rays, CPU interpolation.
-struct RaysOnly(GpuBackend);
-
-impl RayBackend for RaysOnly {
-    fn name(&self) -> String {
-        format!("{} rays, cpu interpolation", self.0.name())
-    }
-    fn set_geometry(&mut self, snapshot: &Snapshot) {
-        self.0.set_geometry(snapshot)
-    }
-    fn closest_hit(&self, rays: &[Ray], hits: &mut [Hit]) {
-        self.0.closest_hit(rays, hits)
-    }
-    fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
-        self.0.any_hit(rays, occluded)
-    }
-    fn ray_counts(&self) -> RayCounts {
-        self.0.ray_counts()
-    }
-    fn preferred_batch(&self) -> usize {
-        self.0.preferred_batch()
-    }
-    fn failure(&self) -> Option<String> {
-        self.0.failure()
-    }
 }
 
 /// The frame's lookups: the shading point and normal of each pixel sample

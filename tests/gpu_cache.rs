@@ -29,9 +29,9 @@
 
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
-use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuError, GpuLayout};
+use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuError, GpuLayout, RaysOnly};
 use radcache::backend::gpu_cache::{CacheSplat, GpuLookup};
-use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
+use radcache::backend::RayBackend;
 use radcache::cache::gather::Strata;
 use radcache::cache::{IrradianceCache, IrradianceRecord};
 use radcache::film::Film;
@@ -40,7 +40,7 @@ use radcache::method::trc::{TemporalGradients, TemporalRadianceCaching, TrcSetti
 use radcache::method::Method;
 use radcache::render::{FrameSettings, Renderer};
 use radcache::sampling::Rng;
-use radcache::scene::{Scene, Snapshot};
+use radcache::scene::Scene;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Relative tolerance on interpolated irradiance (a few hundred f32 ulps:
@@ -292,34 +292,6 @@ fn a_splat_error_fails_the_gpu_backend() {
         },
     );
     assert!(r.try_render_frame(0).is_err());
-}
-
-/// The GPU backend with its cache splat hidden: GPU rays, CPU
-/// interpolation (what `--backend gpu` did before the splat).
-struct RaysOnly(GpuBackend);
-
-impl RayBackend for RaysOnly {
-    fn name(&self) -> String {
-        format!("{} without cache splat", self.0.name())
-    }
-    fn set_geometry(&mut self, snapshot: &Snapshot) {
-        self.0.set_geometry(snapshot)
-    }
-    fn closest_hit(&self, rays: &[Ray], hits: &mut [Hit]) {
-        self.0.closest_hit(rays, hits)
-    }
-    fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
-        self.0.any_hit(rays, occluded)
-    }
-    fn ray_counts(&self) -> RayCounts {
-        self.0.ray_counts()
-    }
-    fn preferred_batch(&self) -> usize {
-        self.0.preferred_batch()
-    }
-    fn failure(&self) -> Option<String> {
-        self.0.failure()
-    }
 }
 
 fn small_ic() -> IcSettings {

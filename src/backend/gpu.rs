@@ -853,3 +853,32 @@ impl RayBackend for GpuBackend {
         Some(&self.splat)
     }
 }
+
+/// The GPU backend with its cache splat hidden: GPU rays, CPU cache
+/// interpolation (what `--backend gpu` did before the splat). Tests and
+/// `benches/cache_splat.rs` compare the two interpolations on the same rays.
+pub struct RaysOnly(pub GpuBackend);
+
+impl RayBackend for RaysOnly {
+    fn name(&self) -> String {
+        format!("{} rays, cpu interpolation", self.0.name())
+    }
+    fn set_geometry(&mut self, snapshot: &Snapshot) {
+        self.0.set_geometry(snapshot)
+    }
+    fn closest_hit(&self, rays: &[Ray], hits: &mut [Hit]) {
+        self.0.closest_hit(rays, hits)
+    }
+    fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
+        self.0.any_hit(rays, occluded)
+    }
+    fn ray_counts(&self) -> RayCounts {
+        self.0.ray_counts()
+    }
+    fn preferred_batch(&self) -> usize {
+        self.0.preferred_batch()
+    }
+    fn failure(&self) -> Option<String> {
+        self.0.failure()
+    }
+}
