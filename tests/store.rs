@@ -1038,16 +1038,20 @@ fn version_2_store_moves_its_samples_into_the_sample_log() {
     }
 }
 
+/// A closed store at `path` with frames 0..2 of job "j"; the bytes of its
+/// sample log.
+fn store_with_two_frames(path: &Path) -> u64 {
+    let store = Store::open(path).unwrap();
+    commit_frames(&store, "j", 0..2);
+    store.sample_log_bytes()
+}
+
 #[test]
 fn torn_sample_log_tail_is_truncated_on_reopen() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let log = path.join("samples.log");
-    let committed = {
-        let store = Store::open(&path).unwrap();
-        commit_frames(&store, "j", 0..2);
-        store.sample_log_bytes()
-    };
+    let committed = store_with_two_frames(&path);
     assert_eq!(std::fs::metadata(&log).unwrap().len(), committed);
     // A crash between a frame's log append and its sled transaction
     // leaves bytes no record references.
@@ -1079,11 +1083,7 @@ fn sample_log_shorter_than_referenced_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let log = path.join("samples.log");
-    let committed = {
-        let store = Store::open(&path).unwrap();
-        commit_frames(&store, "j", 0..2);
-        store.sample_log_bytes()
-    };
+    let committed = store_with_two_frames(&path);
     let f = std::fs::OpenOptions::new().write(true).open(&log).unwrap();
     f.set_len(committed - 100).unwrap();
     drop(f);
