@@ -200,11 +200,11 @@ fn corrupt_value_is_an_error_naming_tree_and_key() {
     let id = store.job("j").unwrap().unwrap().id;
     for garbage in [&b"garbage"[..], &[0xff; 64][..], &[][..]] {
         store
-            .raw_insert("records", &keys::record(id, 1, 2), garbage)
+            .raw_insert("records", &keys::frame(id, 1), garbage)
             .unwrap();
         let msg = err_text(store.frame_records(id, 1));
         assert!(msg.contains("tree `records`"), "{msg}");
-        assert!(msg.contains(&format!("job {id} frame 1 record 2")), "{msg}");
+        assert!(msg.contains(&format!("job {id} frame 1")), "{msg}");
         assert!(msg.contains(&path.display().to_string()), "{msg}");
         let msg = err_text(store.record_samples(id, 1, 2));
         assert!(msg.contains("tree `records`"), "{msg}");
@@ -250,12 +250,13 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
-/// A synthetic step 3 → 4: checks that it runs after the real 1 → 2 and
-/// 2 → 3 (the stored version is 3 and the jobs are in the schema-3 layout).
+/// A synthetic step 4 → 5: checks that it runs after the real 1 → 2,
+/// 2 → 3 and 3 → 4 (the stored version is 4 and the jobs are in the
+/// schema-4 layout).
 fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 3u32.to_be_bytes() {
+    if version.as_ref() != 4u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -265,8 +266,8 @@ fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 4: the
-    // real 1 → 2 and 2 → 3, then 3 → 4, in order.
+    // A version-1 store (fixture) brought to a synthetic version 5: the
+    // real 1 → 2, 2 → 3 and 3 → 4, then 4 → 5, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -277,15 +278,16 @@ fn older_schema_is_migrated_in_order() {
     let steps = [
         migrate::MIGRATIONS[0],
         migrate::MIGRATIONS[1],
+        migrate::MIGRATIONS[2],
         Migration {
-            from: 3,
+            from: 4,
             name: "synthetic",
             run: add_marker,
         },
     ];
-    // Without the step for 3 → 4 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 4, &steps[..2]));
-    assert!(msg.contains("no migration from schema 3 to 4"), "{msg}");
+    // Without the step for 4 → 5 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 5, &steps[..3]));
+    assert!(msg.contains("no migration from schema 4 to 5"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -294,8 +296,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 4, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 4);
+        let store = Store::open_with(&path, false, 5, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 5);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -304,9 +306,9 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 3) now refuses the upgraded store.
+    // This build (version 4) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 4 is newer"), "{msg}");
+    assert!(msg.contains("schema version 5 is newer"), "{msg}");
 }
 
 #[test]
@@ -597,7 +599,7 @@ fn store_throughput() {
     for frame in 0..frames {
         for r in store.frame_records(job.id, frame).unwrap() {
             n += 1;
-            s += store.record_samples(job.id, frame, r.id).unwrap().len() as u64;
+            s += store.samples_of_record(job.id, frame, &r).unwrap().len() as u64;
         }
     }
     let read = t0.elapsed().as_secs_f64();
@@ -829,7 +831,7 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
     let v1_records = v1_samples.len();
     assert!(v1_records > 0);
     let store = Store::open(&path).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 3);
+    assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
     let job = store.job("old").unwrap().unwrap();
     assert_eq!((job.id, job.frames_done, job.last_frame), (7, 2, Some(1)));
     // Settings `{:?}` → the JSON this build writes for them.
@@ -849,7 +851,7 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
         assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);
     }
     let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
-    assert_eq!(report.schema_version, 3);
+    assert_eq!(report.schema_version, migrate::CURRENT_VERSION);
     assert_eq!(report.jobs[0].records as usize, v1_records);
     assert_eq!(report.jobs[0].samples as usize, v1_records * 48);
     assert_eq!(report.jobs[0].frames_done, 2);
@@ -873,11 +875,11 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
     drop(store);
     // Opening it again runs nothing; an older build would refuse it.
     let store = Store::open(&path).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 3);
+    assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
     drop(store);
-    let msg = err_text(Store::open_with(&path, false, 2, migrate::MIGRATIONS));
+    let msg = err_text(Store::open_with(&path, false, 3, migrate::MIGRATIONS));
     assert!(
-        msg.contains("schema version 3 is newer") && msg.contains("version 2"),
+        msg.contains("schema version 4 is newer") && msg.contains("version 3"),
         "{msg}"
     );
 }
@@ -1005,7 +1007,7 @@ fn version_2_store_moves_its_samples_into_the_sample_log() {
         assert_eq!(samples.len(), written.len());
     }
     let store = Store::open(&path).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 3);
+    assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
     for (frame, id, samples) in &written {
         assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);
     }
@@ -1017,11 +1019,9 @@ fn version_2_store_moves_its_samples_into_the_sample_log() {
     );
     let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
     assert_eq!(report.jobs[0].samples as usize, written.len() * 48);
-    // The log holds the samples and the frames' EXR files, nothing else.
-    assert_eq!(
-        report.jobs[0].samples_stored_bytes + report.jobs[0].exr_stored_bytes,
-        log_bytes - 8
-    );
+    // The log holds the samples, the frames' EXR files and (schema 4)
+    // their record blocks, nothing else.
+    assert_eq!(log_parts(&report.jobs[0]), log_bytes - 8);
     assert!(report.trees.iter().all(|t| t.name != "samples"));
     drop(store);
     // The `samples` tree is gone; running the step again changes nothing.
@@ -1148,15 +1148,256 @@ fn interrupted_0002_to_0003_migration_resumes_where_it_stopped() {
         f.write_all(&[0x55; 777]).unwrap();
     }
     let store = Store::open(&path).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 3);
+    assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
     for (frame, id, samples) in &written {
         assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);
     }
     // The torn bytes were cut off: blocks follow each other with no gap.
     let report = radcache::store::inspect::report(&store, Some("old"), None).unwrap();
-    assert_eq!(
-        report.jobs[0].samples_stored_bytes + report.jobs[0].exr_stored_bytes,
-        store.sample_log_bytes() - 8
-    );
+    assert_eq!(log_parts(&report.jobs[0]), store.sample_log_bytes() - 8);
     assert!(store.sample_log_bytes() > committed);
+}
+
+/// The job's bytes in the sample log, by kind: record samples, frame EXR
+/// files and (schema 4) record blocks.
+fn log_parts(j: &radcache::store::inspect::JobReport) -> u64 {
+    j.samples_stored_bytes + j.exr_stored_bytes + j.record_block_bytes
+}
+
+#[test]
+fn corrupt_record_block_is_an_error_naming_the_log_and_the_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let log = path.join("samples.log");
+    let store = Store::open(&path).unwrap();
+    commit_frames(&store, "j", 0..3);
+    let id = store.job("j").unwrap().unwrap().id;
+    let at = |frame| store.frame_records_value(id, frame).unwrap().unwrap();
+    let (b0, b1) = (at(0), at(1));
+    assert_eq!((b1.count, b1.first_id, b1.last_id), (3, 0, 2));
+    let names_block = |msg: &str, frame: u32| {
+        msg.contains(&log.display().to_string()) && msg.contains(&format!("job {id} frame {frame}"))
+    };
+    // Frame 1's `records` value pointing at frame 0's (valid) block.
+    let original = store
+        .tree("records")
+        .unwrap()
+        .get(keys::frame(id, 1))
+        .unwrap()
+        .unwrap();
+    let frame0 = store
+        .tree("records")
+        .unwrap()
+        .get(keys::frame(id, 0))
+        .unwrap()
+        .unwrap();
+    store
+        .raw_insert("records", &keys::frame(id, 1), &frame0)
+        .unwrap();
+    let msg = err_text(store.frame_records(id, 1));
+    assert!(names_block(&msg, 1) && msg.contains("frame 0"), "{msg}");
+    store
+        .raw_insert("records", &keys::frame(id, 1), &original)
+        .unwrap();
+    assert_eq!(store.frame_records(id, 1).unwrap().len(), 3);
+    // Frame 1's block overwritten with garbage in the log.
+    {
+        use std::os::unix::fs::FileExt;
+        let f = std::fs::OpenOptions::new().write(true).open(&log).unwrap();
+        f.write_all_at(&vec![0x5a; b1.stored_len as usize], b1.offset)
+            .unwrap();
+    }
+    let msg = err_text(store.frame_records(id, 1));
+    assert!(names_block(&msg, 1), "{msg}");
+    let msg = err_text(store.record_samples(id, 1, 2));
+    assert!(names_block(&msg, 1), "{msg}");
+    let msg = err_text(store.for_each_record(id, |_, _| {}));
+    assert!(names_block(&msg, 1), "{msg}");
+    // The other frames still read.
+    assert_eq!(store.frame_records(id, 0).unwrap().len(), 3);
+    assert_eq!(store.frame_records(id, 2).unwrap().len(), 3);
+    assert_eq!(b0.count, 3);
+}
+
+/// The schema-3 records of the store at `path` (closed), as stored: (frame,
+/// value) in key order.
+fn raw_v3_records(path: &Path) -> Vec<(u32, radcache::store::schema::RecordValue)> {
+    let db = open_raw(path);
+    let records = db.open_tree("records").unwrap();
+    records
+        .iter()
+        .map(|item| {
+            let (k, v) = item.unwrap();
+            let (job, frame, id) = keys::parse_record(&k).expect("a schema-3 key");
+            assert_eq!(job, 7);
+            let mut aligned = rkyv::util::AlignedVec::<16>::new();
+            aligned.extend_from_slice(&v);
+            let r: radcache::store::schema::RecordValue =
+                rkyv::from_bytes::<_, rkyv::rancor::Error>(&aligned).unwrap();
+            assert_eq!(r.id, id);
+            (frame, r)
+        })
+        .collect()
+}
+
+/// The `frames` and `stats` trees of the store at `path` (closed), raw.
+fn raw_frames_and_stats(path: &Path) -> Vec<(Vec<u8>, Vec<u8>)> {
+    let db = open_raw(path);
+    ["frames", "stats"]
+        .iter()
+        .flat_map(|t| {
+            db.open_tree(t)
+                .unwrap()
+                .iter()
+                .map(|i| {
+                    let (k, v) = i.unwrap();
+                    (k.to_vec(), v.to_vec())
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// A schema-3 store at `path` (the schema-1 fixture brought to 3 by the
+/// real steps): its EXRs, samples, and records as stored.
+#[allow(clippy::type_complexity)]
+fn v3_fixture(
+    path: &Path,
+) -> (
+    Vec<Vec<u8>>,
+    Vec<(u32, u64, Vec<PackedSample>)>,
+    Vec<(u32, radcache::store::schema::RecordValue)>,
+) {
+    let (_, exrs, written) = v1_fixture(path, &small_ic());
+    {
+        let store = Store::open_with(path, false, 3, migrate::MIGRATIONS).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 3);
+    }
+    let records = raw_v3_records(path);
+    assert_eq!(records.len(), written.len());
+    assert!(records.iter().any(|(f, _)| *f == 0) && records.iter().any(|(f, _)| *f == 1));
+    (exrs, written, records)
+}
+
+/// Checks that the store at `path`, now schema 4, reads back the schema-3
+/// fixture's frames, records and samples exactly.
+fn check_v3_fixture_reads_back(
+    store: &Store,
+    exrs: &[Vec<u8>],
+    written: &[(u32, u64, Vec<PackedSample>)],
+    records: &[(u32, radcache::store::schema::RecordValue)],
+) {
+    assert_eq!(store.schema_version().unwrap(), 4);
+    for frame in 0..2u32 {
+        let want: Vec<_> = records
+            .iter()
+            .filter(|(f, _)| *f == frame)
+            .map(|(_, r)| r.clone())
+            .collect();
+        assert_eq!(store.frame_records(7, frame).unwrap(), want);
+        assert_eq!(
+            &store.frame_exr(7, frame).unwrap().unwrap(),
+            &exrs[frame as usize]
+        );
+    }
+    let mut all = Vec::new();
+    store.for_each_record(7, |f, r| all.push((f, r))).unwrap();
+    assert_eq!(all, records);
+    for (frame, id, samples) in written {
+        assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);
+    }
+    // One `records` key per frame; the log holds the samples, EXRs and
+    // record blocks, back to back.
+    let keys_now: Vec<_> = store
+        .tree("records")
+        .unwrap()
+        .iter()
+        .keys()
+        .map(|k| k.unwrap().to_vec())
+        .collect();
+    assert_eq!(
+        keys_now,
+        vec![keys::frame(7, 0).to_vec(), keys::frame(7, 1).to_vec()]
+    );
+    let report = radcache::store::inspect::report(store, Some("old"), None).unwrap();
+    assert_eq!(report.jobs[0].records as usize, records.len());
+    assert_eq!(report.jobs[0].samples as usize, written.len() * 48);
+    assert_eq!(log_parts(&report.jobs[0]), store.sample_log_bytes() - 8);
+    assert!(report.jobs[0].record_value_bytes > report.jobs[0].record_block_bytes);
+}
+
+#[test]
+fn version_3_store_moves_its_records_into_blocks_in_the_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let (exrs, written, records) = v3_fixture(&path);
+    let frames_before = raw_frames_and_stats(&path);
+    let log_before = std::fs::metadata(path.join("samples.log")).unwrap().len();
+    {
+        let store = Store::open(&path).unwrap();
+        check_v3_fixture_reads_back(&store, &exrs, &written, &records);
+        assert!(store.sample_log_bytes() > log_before);
+    }
+    // `frames` and `stats` untouched.
+    assert_eq!(raw_frames_and_stats(&path), frames_before);
+    // Running the step again changes nothing.
+    let log_len = {
+        let db = open_raw(&path);
+        radcache::store::v3::migrate_to_v4(&db, &path).unwrap();
+        db.flush().unwrap();
+        std::fs::metadata(path.join("samples.log")).unwrap().len()
+    };
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.sample_log_bytes(), log_len);
+    check_v3_fixture_reads_back(&store, &exrs, &written, &records);
+    drop(store);
+    // An older build refuses it.
+    let msg = err_text(Store::open_with(&path, false, 3, migrate::MIGRATIONS));
+    assert!(
+        msg.contains("schema version 4 is newer") && msg.contains("version 3"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn interrupted_0003_to_0004_migration_resumes_where_it_stopped() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let (exrs, written, records) = v3_fixture(&path);
+    let in_frame_1 = records.iter().filter(|(f, _)| *f == 1).count();
+    // A crash after the first batch (one frame), and in the middle of the
+    // next one's log append (bytes no key references yet).
+    {
+        let db = open_raw(&path);
+        radcache::store::v3::migrate_to_v4_batches(&db, &path, 1, Some(1)).unwrap();
+        db.flush().unwrap();
+        let meta = db.open_tree("meta").unwrap();
+        assert_eq!(
+            meta.get(keys::META_SCHEMA_VERSION)
+                .unwrap()
+                .unwrap()
+                .as_ref(),
+            3u32.to_be_bytes(),
+            "still schema 3"
+        );
+        let lens: Vec<usize> = db
+            .open_tree("records")
+            .unwrap()
+            .iter()
+            .keys()
+            .map(|k| k.unwrap().len())
+            .collect();
+        assert_eq!(lens.iter().filter(|&&l| l == 12).count(), 1);
+        assert_eq!(lens.iter().filter(|&&l| l == 20).count(), in_frame_1);
+    }
+    {
+        use std::io::Write;
+        let mut f = std::fs::OpenOptions::new()
+            .append(true)
+            .open(path.join("samples.log"))
+            .unwrap();
+        f.write_all(&[0x55; 777]).unwrap();
+    }
+    let store = Store::open(&path).unwrap();
+    check_v3_fixture_reads_back(&store, &exrs, &written, &records);
 }

@@ -55,8 +55,10 @@ pub struct JobReport {
     /// Stored (zstd) and raw bytes of the frame EXR files.
     pub exr_stored_bytes: u64,
     pub exr_raw_bytes: u64,
-    /// Record value bytes (rkyv) in `records`.
+    /// Bytes of the records' rkyv values (their frames' blocks before zstd).
     pub record_value_bytes: u64,
+    /// Bytes of the frames' record blocks in the sample log (zstd).
+    pub record_block_bytes: u64,
     /// Lifespan in frames → number of records.
     pub lifespan_histogram: BTreeMap<u32, u64>,
     /// Per-frame details (all frames, or the one asked for).
@@ -162,6 +164,7 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
         exr_stored_bytes: 0,
         exr_raw_bytes: 0,
         record_value_bytes: 0,
+        record_block_bytes: 0,
         lifespan_histogram: BTreeMap::new(),
         frame_details: Vec::new(),
         state: None,
@@ -201,11 +204,12 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
             },
         );
     }
-    // Records and samples: one streaming pass over the job's keys.
-    let prefix = super::keys::job_prefix(j.id);
-    for item in store.records.scan_prefix(prefix) {
-        let (_, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
-        r.record_value_bytes += v.len() as u64;
+    // Records and samples: one streaming pass over the job's frames.
+    for frame in store.frames_done(j.id)? {
+        if let Some(v) = store.frame_records_value(j.id, frame)? {
+            r.record_value_bytes += u64::from(v.raw_len);
+            r.record_block_bytes += u64::from(v.stored_len);
+        }
     }
     let mut lifespans = BTreeMap::new();
     store.for_each_record(j.id, |frame, rec| {
@@ -279,9 +283,10 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
         let _ = writeln!(s, "  settings: {}", j.settings);
         let _ = writeln!(
             s,
-            "  records {} ({} B of rkyv values), samples {}: {} B stored / {} B raw (ratio {})",
+            "  records {} ({} B of rkyv values, {} B stored in blocks), samples {}: {} B stored / {} B raw (ratio {})",
             j.records,
             j.record_value_bytes,
+            j.record_block_bytes,
             j.samples,
             j.samples_stored_bytes,
             j.samples_raw_bytes,

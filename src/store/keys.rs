@@ -2,8 +2,8 @@
 //! parses raw keys (STYLE.md). Integers are big-endian so that sled's
 //! lexicographic order is numeric order and prefix scans walk space-time
 //! in order. The layout is documented in `migrations/0001_initial.md`,
-//! `migrations/0002_state_and_identity.md` and
-//! `migrations/0003_sample_log.md` (schema 3, this one).
+//! `migrations/0002_state_and_identity.md`, `migrations/0003_sample_log.md`
+//! and `migrations/0004_record_blocks.md` (schema 4, this one).
 //!
 //! | tree      | key                                   | bytes |
 //! |-----------|---------------------------------------|-------|
@@ -11,17 +11,23 @@
 //! | `jobs`    | job name, UTF-8                       | var   |
 //! | `frames`  | job id u64 · frame u32                | 12    |
 //! | `stats`   | job id u64 · frame u32                | 12    |
-//! | `records` | job id u64 · frame u32 · record id u64 | 20   |
+//! | `records` | job id u64 · frame u32                | 12    |
 //! | `state`   | job id u64 (the head)                 | 8     |
 //! | `state`   | job id u64 · record id u64            | 16    |
 //! | `movies`  | (reserved, empty)                     |       |
 //!
-//! Schema 3 has no `samples` tree: a record's samples are in the sample
-//! log (`samples.log`), the `records` value says where.
+//! Since schema 3 there is no `samples` tree: a record's samples are in the
+//! sample log (`samples.log`), the record says where. Since schema 4 the
+//! records themselves are there too, one block per frame: `records` holds
+//! one small value per frame that wrote records, saying where its block
+//! lies (schema 3 had one key per record, `job · frame · record id`, built
+//! by [`record`], which now only names a record in messages and the
+//! 0003 → 0004 migration).
 //!
-//! In `records`, `frame` is the frame in which this version of
-//! the record was written (its creation frame for `ic`), so a `job · frame`
-//! prefix scan gives one frame's record changes. `state` holds the carried
+//! In `records`, `frame` is the frame in which these versions of the
+//! records were written (their creation frame for `ic`), so the frame's
+//! block holds one frame's record changes, and a `job` prefix scan walks
+//! them in frame order. `state` holds the carried
 //! state of a stateful method (`trc`) after the job's last frame: its head
 //! under the job id, then its records in id order.
 
@@ -40,6 +46,10 @@ pub const META_SAMPLES_LOG_LEN: &[u8] = b"samples_log_len";
 pub const META_MIGRATE_0003_THROUGH: &[u8] = b"migrate_0003_through";
 /// The same for its second part, over `frames`.
 pub const META_MIGRATE_0003_FRAMES_THROUGH: &[u8] = b"migrate_0003_frames_through";
+/// `meta` key of the 0003 → 0004 migration's progress: the last frame
+/// (`job · frame` key) whose records it moved into a block (see
+/// `migrations/0004_record_blocks.md`).
+pub const META_MIGRATE_0004_THROUGH: &[u8] = b"migrate_0004_through";
 
 /// `meta` key marking job `name` as cancelled by `radcache serve` (value
 /// empty): a restarted server keeps it cancelled instead of resuming it.
@@ -51,7 +61,7 @@ pub fn job(name: &str) -> Vec<u8> {
     name.as_bytes().to_vec()
 }
 
-/// `job · frame` (frames, stats).
+/// `job · frame` (frames, stats, records).
 pub fn frame(job: u64, frame: u32) -> [u8; 12] {
     let mut k = [0u8; 12];
     k[..8].copy_from_slice(&job.to_be_bytes());
@@ -59,7 +69,8 @@ pub fn frame(job: u64, frame: u32) -> [u8; 12] {
     k
 }
 
-/// `job · frame · record id` (records; schema 2 also samples).
+/// `job · frame · record id`: a record version in messages; the `records`
+/// key of schema 1–3 (schema 2 also `samples`).
 pub fn record(job: u64, frame: u32, id: u64) -> [u8; 20] {
     let mut k = [0u8; 20];
     k[..12].copy_from_slice(&self::frame(job, frame));
@@ -95,7 +106,7 @@ pub fn parse_state_record(key: &[u8]) -> Option<(u64, u64)> {
     ))
 }
 
-/// Key range of frames `frames` of `job` (frames, stats).
+/// Key range of frames `frames` of `job` (frames, stats, records).
 pub fn frame_range(job: u64, frames: Range<u32>) -> Range<[u8; 12]> {
     frame(job, frames.start)..frame(job, frames.end)
 }

@@ -12,7 +12,7 @@ use super::{keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 3;
+pub const CURRENT_VERSION: u32 = 4;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -36,6 +36,11 @@ pub const MIGRATIONS: &[Migration] = &[
         from: 2,
         name: "0003_sample_log",
         run: super::v2::migrate_to_v3,
+    },
+    Migration {
+        from: 3,
+        name: "0004_record_blocks",
+        run: super::v3::migrate_to_v4,
     },
 ];
 

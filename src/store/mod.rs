@@ -6,20 +6,23 @@
 //!
 //! - Keys: big-endian, built only by [`keys`] (layout there and in
 //!   `migrations/0001_initial.md`, `migrations/0002_state_and_identity.md`,
-//!   `migrations/0003_sample_log.md`).
+//!   `migrations/0003_sample_log.md`, `migrations/0004_record_blocks.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
 //! - Bulk values are zstd-compressed and live in the sample log, whose
 //!   location the sled value holds: a frame's EXR file (`frames`), a
-//!   record's samples (`records`; the 8-byte RGBE records of
-//!   [`rgbe::PackedSample`], one block per record). They thus stay out of
-//!   sled, whose memory grows with the bytes and keys it has written.
+//!   frame's records (`records`: one block of [`schema::RecordValue`]s per
+//!   frame), a record's samples (the record value; the 8-byte RGBE records
+//!   of [`rgbe::PackedSample`], one block per record). They thus stay out
+//!   of sled, whose memory grows with the bytes and keys it has written:
+//!   sled sees a few small values per frame, however many records it has.
 //! - A job checkpoints each frame with [`Store::commit_frame`]: the frame's
-//!   EXR and sample blocks are appended to the log and synced, then one sled
-//!   transaction over `frames`, `records`, `stats`, `state`, `jobs` and
-//!   `meta` (the log's committed length), then `flush`; the frame counts as
-//!   acknowledged only after that returns. A log tail beyond the committed
-//!   length (a crash in between) is cut off when the store is opened.
+//!   EXR, sample blocks and record block are appended to the log and
+//!   synced, then one sled transaction over `frames`, `records`, `stats`,
+//!   `state`, `jobs` and `meta` (the log's committed length), then `flush`;
+//!   the frame counts as acknowledged only after that returns. A log tail
+//!   beyond the committed length (a crash in between) is cut off when the
+//!   store is opened.
 //! - `state` holds the cache a stateful method (`trc`) carries to the next
 //!   frame, as of the job's last frame: each frame writes only its changes
 //!   (records put and removed, and the head), and a resume loads it
@@ -34,6 +37,7 @@ pub mod samples;
 pub mod schema;
 pub mod v1;
 pub mod v2;
+pub mod v3;
 
 use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};
 use rkyv::bytecheck::CheckBytes;
@@ -41,7 +45,10 @@ use rkyv::rancor;
 use rkyv::ser::allocator::ArenaHandle;
 use rkyv::util::AlignedVec;
 use samples::{compress, decompress, SampleLog};
-use schema::{FrameValue, JobValue, RecordValue, StateHeadValue, StateRecordValue, StatsValue};
+use schema::{
+    FrameRecordsValue, FrameValue, JobValue, RecordBlock, RecordValue, StateHeadValue,
+    StateRecordValue, StatsValue,
+};
 use sled::transaction::{ConflictableTransactionError, TransactionError};
 use sled::Transactional;
 use std::path::{Path, PathBuf};
@@ -62,6 +69,10 @@ pub const TREES: [&str; 7] = [
 /// peaked at 22 MB for 100 frames and 32 MB for 400 with it, 21 and 24 MB
 /// with 2 MiB (README, "Peak memory").
 const CACHE_BYTES: u64 = 2 * 1024 * 1024;
+
+/// The most records one frame's block may hold (a sanity bound on a
+/// `records` value read back: far above any frame's, ≈ 200 bytes each).
+const MAX_BLOCK_RECORDS: u32 = 1 << 24;
 
 /// Store errors; every message names the store path and the problem.
 #[derive(Debug, thiserror::Error)]
@@ -194,7 +205,7 @@ where
 }
 
 /// An rkyv archive of `value`.
-fn encode<T>(value: &T) -> Vec<u8>
+pub(crate) fn encode<T>(value: &T) -> Vec<u8>
 where
     T: for<'a> rkyv::Serialize<HighSerializer<AlignedVec, ArenaHandle<'a>, rancor::Error>>,
 {
@@ -531,15 +542,10 @@ impl Store {
         c: FrameCommit,
     ) -> Result<JobValue, StoreError> {
         let frame_key = keys::frame(job.id, c.frame);
-        let already = self.frame_done(job.id, c.frame)?;
         // A frame written again (by another chain of a stateful method)
-        // replaces the record versions of its former self.
-        let mut stale = Vec::new();
-        if already {
-            for key in self.records.scan_prefix(frame_key).keys() {
-                stale.push(key.map_err(|e| StoreError::sled(&self.path, e))?);
-            }
-        }
+        // replaces the record block of its former self (or, writing none,
+        // removes it).
+        let already = self.frame_done(job.id, c.frame)?;
         let exr_zstd = compress(c.exr);
         let frame_value = FrameValue {
             width: c.width,
@@ -549,7 +555,7 @@ impl Store {
             exr_stored_len: exr_zstd.len() as u32,
         };
         drop(exr_zstd);
-        let mut record_rows = Vec::with_capacity(c.records.len());
+        let mut records = Vec::with_capacity(c.records.len());
         let mut samples_raw = 0u64;
         for rc in c.records {
             let mut record = rc.record;
@@ -566,9 +572,36 @@ impl Store {
                     .map_err(|e| self.log_error(e))?;
                 (rc.samples.count, offset, rc.samples.zstd.len() as u32)
             };
-            let key = keys::record(job.id, c.frame, record.id);
-            record_rows.push((key, encode(&record)));
+            records.push(record);
         }
+        // The frame's records, in id order, as one block after their
+        // samples (it says where they lie).
+        // A record given twice keeps its last version, as a second insert
+        // under its key did in schema 3.
+        records.sort_by_key(|r| r.id);
+        records.reverse();
+        records.dedup_by_key(|r| r.id);
+        records.reverse();
+        let records_value = if records.is_empty() {
+            None
+        } else {
+            let block = RecordBlock {
+                job: job.id,
+                frame: c.frame,
+                records,
+            };
+            let raw = encode(&block);
+            let zstd = compress(&raw);
+            let value = FrameRecordsValue {
+                count: block.records.len() as u32,
+                first_id: block.records.first().map_or(0, |r| r.id),
+                last_id: block.records.last().map_or(0, |r| r.id),
+                offset: log.append(&zstd).map_err(|e| self.log_error(e))?,
+                stored_len: zstd.len() as u32,
+                raw_len: raw.len() as u32,
+            };
+            Some(encode(&value))
+        };
         if log.end() > log.committed() {
             log.sync().map_err(|e| self.log_error(e))?;
         }
@@ -619,9 +652,6 @@ impl Store {
             &self.jobs,
         )
             .transaction(|(frames, records, meta, stats, state, jobs)| {
-                for k in &stale {
-                    records.remove(&k[..])?;
-                }
                 for k in &state_removed {
                     state.remove(&k[..])?;
                 }
@@ -631,8 +661,14 @@ impl Store {
                 if let Some(head) = &state_head {
                     state.insert(&state_head_key[..], &head[..])?;
                 }
-                for (k, v) in &record_rows {
-                    records.insert(&k[..], &v[..])?;
+                match &records_value {
+                    Some(v) => {
+                        records.insert(&frame_key[..], &v[..])?;
+                    }
+                    None if already => {
+                        records.remove(&frame_key[..])?;
+                    }
+                    None => {}
                 }
                 meta.insert(keys::META_SAMPLES_LOG_LEN, &log_len[..])?;
                 stats.insert(&frame_key[..], &stats_bytes[..])?;
@@ -676,18 +712,116 @@ impl Store {
         self.get("stats", &keys::frame(job, frame))
     }
 
+    /// Where the records written in `frame` of `job` lie in the sample log
+    /// (`None`: the frame wrote none, or is not stored).
+    pub fn frame_records_value(
+        &self,
+        job: u64,
+        frame: u32,
+    ) -> Result<Option<FrameRecordsValue>, StoreError> {
+        self.get("records", &keys::frame(job, frame))
+    }
+
+    /// Checks that `records` value `v` (under `key`) can describe a block
+    /// in a log of `committed` bytes: rkyv accepts any bytes of the right
+    /// length for a struct of integers, so a damaged value is caught here,
+    /// as a corrupt `records` value, before anything is read or allocated
+    /// for it.
+    fn check_records_value(
+        &self,
+        key: &[u8],
+        v: &FrameRecordsValue,
+        committed: u64,
+    ) -> Result<(), StoreError> {
+        let end = v.offset.checked_add(u64::from(v.stored_len));
+        let max_raw = (v.count as usize)
+            .saturating_mul(std::mem::size_of::<rkyv::Archived<RecordValue>>())
+            .saturating_add(256);
+        let problem = if v.count == 0 || v.count > MAX_BLOCK_RECORDS {
+            Some(format!(
+                "{} records (1..={MAX_BLOCK_RECORDS} expected)",
+                v.count
+            ))
+        } else if v.first_id > v.last_id || v.last_id - v.first_id < u64::from(v.count - 1) {
+            Some(format!(
+                "{} records cannot have ids {}..={}",
+                v.count, v.first_id, v.last_id
+            ))
+        } else if v.raw_len as usize > max_raw {
+            Some(format!(
+                "{} bytes before zstd for {} records (at most {max_raw})",
+                v.raw_len, v.count
+            ))
+        } else if v.offset < samples::MAGIC.len() as u64 || end.is_none_or(|e| e > committed) {
+            Some(format!(
+                "its block, {} bytes at offset {}, lies outside the sample log's committed {} bytes",
+                v.stored_len,
+                v.offset,
+                committed
+            ))
+        } else {
+            None
+        };
+        match problem {
+            Some(problem) => Err(self.corrupt("records", key, problem)),
+            None => Ok(()),
+        }
+    }
+
+    /// The records of the block `v` (the `records` value under `key`),
+    /// read from the log and checked against `v`.
+    fn record_block(
+        &self,
+        key: &[u8],
+        v: &FrameRecordsValue,
+    ) -> Result<Vec<RecordValue>, StoreError> {
+        let in_log = |d: String| {
+            self.log_error(format!(
+                "records of {} at offset {}: {d}",
+                keys::describe(key),
+                v.offset
+            ))
+        };
+        let log = self.lock_log();
+        self.check_records_value(key, v, log.committed())?;
+        let stored = log.read(v.offset, v.stored_len).map_err(in_log)?;
+        drop(log);
+        let raw = decompress(&stored, v.raw_len as usize).map_err(in_log)?;
+        drop(stored);
+        let block: RecordBlock = decode_value(&raw).map_err(in_log)?;
+        let (job, frame) = keys::parse_frame(key).unwrap_or_default();
+        if (block.job, block.frame) != (job, frame) {
+            return Err(in_log(format!(
+                "the block is job {} frame {}'s",
+                block.job, block.frame
+            )));
+        }
+        let ids_ok = block.records.windows(2).all(|w| w[0].id < w[1].id)
+            && block.records.first().map_or(0, |r| r.id) == v.first_id
+            && block.records.last().map_or(0, |r| r.id) == v.last_id;
+        if block.records.len() != v.count as usize || !ids_ok {
+            return Err(in_log(format!(
+                "expected {} records, ids {}..={} increasing; found {}",
+                v.count,
+                v.first_id,
+                v.last_id,
+                block.records.len()
+            )));
+        }
+        Ok(block.records)
+    }
+
     /// Records written in `frame` of `job`, in id order.
     pub fn frame_records(&self, job: u64, frame: u32) -> Result<Vec<RecordValue>, StoreError> {
-        let mut out = Vec::new();
-        for item in self.records.scan_prefix(keys::frame(job, frame)) {
-            let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
-            out.push(self.decode("records", &k, &v)?);
+        let key = keys::frame(job, frame);
+        match self.get::<FrameRecordsValue>("records", &key)? {
+            Some(v) => self.record_block(&key, &v),
+            None => Ok(Vec::new()),
         }
-        Ok(out)
     }
 
     /// Every record version of `job`, in (frame, id) order, through `f`
-    /// (streams: nothing is collected).
+    /// (streams: one frame's block at a time).
     pub fn for_each_record(
         &self,
         job: u64,
@@ -695,29 +829,54 @@ impl Store {
     ) -> Result<(), StoreError> {
         for item in self.records.scan_prefix(keys::job_prefix(job)) {
             let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
-            let (_, frame, _) = keys::parse_record(&k)
+            let (_, frame) = keys::parse_frame(&k)
                 .ok_or_else(|| self.corrupt("records", &k, "malformed key"))?;
-            f(frame, self.decode("records", &k, &v)?);
+            let value: FrameRecordsValue = self.decode("records", &k, &v)?;
+            for r in self.record_block(&k, &value)? {
+                f(frame, r);
+            }
         }
         Ok(())
     }
 
     /// The samples of record `id` written in `frame` of `job` (none if
-    /// there is no such record), read from the sample log.
+    /// there is no such record), read from the sample log: the frame's
+    /// record block, then the record's sample block.
     pub fn record_samples(
         &self,
         job: u64,
         frame: u32,
         id: u64,
     ) -> Result<Vec<PackedSample>, StoreError> {
-        let key = keys::record(job, frame, id);
-        match self.get::<RecordValue>("records", &key)? {
-            Some(r) => self.samples_of(&r, &key),
-            None => Ok(Vec::new()),
+        let key = keys::frame(job, frame);
+        let Some(v) = self.get::<FrameRecordsValue>("records", &key)? else {
+            return Ok(Vec::new());
+        };
+        self.check_records_value(&key, &v, self.sample_log_bytes())?;
+        if !(v.first_id..=v.last_id).contains(&id) {
+            return Ok(Vec::new());
+        }
+        let records = self.record_block(&key, &v)?;
+        match records.binary_search_by_key(&id, |r| r.id) {
+            Ok(i) => self.samples_of(&records[i], &keys::record(job, frame, id)),
+            Err(_) => Ok(Vec::new()),
         }
     }
 
-    /// The samples of stored record `r` (under `key`), read from the log.
+    /// The samples of record `r`, read from `frame`'s records of `job`
+    /// ([`Self::frame_records`], [`Self::for_each_record`]): what
+    /// [`Self::record_samples`] gives for its id, without reading the
+    /// frame's record block again.
+    pub fn samples_of_record(
+        &self,
+        job: u64,
+        frame: u32,
+        r: &RecordValue,
+    ) -> Result<Vec<PackedSample>, StoreError> {
+        self.samples_of(r, &keys::record(job, frame, r.id))
+    }
+
+    /// The samples of stored record `r` (`key` names it), read from the log.
     fn samples_of(&self, r: &RecordValue, key: &[u8]) -> Result<Vec<PackedSample>, StoreError> {
         if r.samples_count == 0 {
             return Ok(Vec::new());

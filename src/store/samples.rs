@@ -1,22 +1,24 @@
 //! A record's hemisphere samples in their stored form ([`SampleBlock`]),
 //! and the append-only file that holds them beside the sled database
 //! ([`SampleLog`], `samples.log`; schema 3, `migrations/0003_sample_log.md`),
-//! with the frames' EXR files: every bulk value the store writes. sled
-//! 0.34 keeps in memory about the bytes of every large value written to
-//! it, whatever its cache size (README, "Peak memory"); out here they cost
-//! no memory.
+//! with the frames' EXR files and (schema 4,
+//! `migrations/0004_record_blocks.md`) each frame's records as one block:
+//! every bulk value the store writes. sled 0.34's memory grows with what is
+//! written to it, whatever its cache size (README, "Peak memory"); out here
+//! they cost no memory.
 //!
 //! - A block is a record's `count` 8-byte [`PackedSample`]s in byte planes
 //!   (byte 0 of every sample, then byte 1, …), zstd-compressed. Methods
 //!   build it as soon as a record is gathered, so a frame never holds its
 //!   samples at 32 bytes each for the store.
 //! - The log is the file's 8-byte header [`MAGIC`] followed by blocks, back
-//!   to back; a record's value in `records` says where its block lies
-//!   (offset, length, count), a frame's value in `frames` where its
-//!   zstd-compressed EXR file lies. Nothing in the log is ever rewritten.
+//!   to back; a record says where its samples' block lies (offset, length,
+//!   count), a frame's value in `frames` where its zstd-compressed EXR file
+//!   lies, its value in `records` where its block of records lies. Nothing
+//!   in the log is ever rewritten.
 //! - `meta.samples_log_len` (u64 big-endian) is the log's committed length,
 //!   written in each frame's sled transaction after the frame's EXR and
-//!   blocks were appended and synced. Bytes beyond it belong to a frame that was never
+//!   blocks (samples, then records) were appended and synced. Bytes beyond it belong to a frame that was never
 //!   acknowledged (a crash between the append and the transaction): opening
 //!   the store truncates them. A log shorter than its committed length has
 //!   lost acknowledged data: opening the store fails, naming the file.

@@ -1,11 +1,14 @@
-//! Value schemas of store schema version 3 (`migrations/0003_sample_log.md`,
-//! on top of `migrations/0002_state_and_identity.md` and
-//! `migrations/0001_initial.md`; the types schema 3 changed are kept in
-//! [`super::v2`], those schema 2 changed in [`super::v1`]).
+//! Value schemas of store schema version 4
+//! (`migrations/0004_record_blocks.md`, on top of
+//! `migrations/0003_sample_log.md`, `migrations/0002_state_and_identity.md`
+//! and `migrations/0001_initial.md`; the types schema 3 changed are kept in
+//! [`super::v2`], those schema 2 changed in [`super::v1`]; schema 4 changed
+//! where [`RecordValue`]s are kept, not the type).
 //! Every value is an rkyv 0.8 archive, validated (bytecheck) when read.
 //! Bulk values live in the sample log ([`super::samples`]), zstd-compressed:
-//! record samples (the record says where) and frame EXR files (the frame
-//! says where).
+//! frame EXR files (the frame says where), each frame's records as one
+//! [`RecordBlock`] (its [`FrameRecordsValue`] says where) and each record's
+//! samples (the record says where).
 //! Changing any of these types is a schema change: bump
 //! [`super::migrate::CURRENT_VERSION`], add a migration and a
 //! `migrations/NNNN_*.md`.
@@ -80,9 +83,10 @@ pub struct FrameValue {
     pub exr_stored_len: u32,
 }
 
-/// `records` value under `job · frame · record id`: one version of an
-/// irradiance record (written in its creation frame), with where its
-/// samples lie in the sample log.
+/// One version of an irradiance record (written in its creation frame),
+/// with where its samples lie in the sample log: an element of a frame's
+/// [`RecordBlock`] (schema 3: the `records` value under
+/// `job · frame · record id`).
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
 pub struct RecordValue {
     pub id: u64,
@@ -106,6 +110,32 @@ pub struct RecordValue {
     pub samples_count: u32,
     pub samples_offset: u64,
     pub samples_len: u32,
+}
+
+/// `records` value under `job · frame`: where the records written in that
+/// frame lie in the sample log, as one [`RecordBlock`] (no key when the
+/// frame wrote none).
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct FrameRecordsValue {
+    /// Records in the block.
+    pub count: u32,
+    /// The smallest and largest record id in the block (0 when empty).
+    pub first_id: u64,
+    pub last_id: u64,
+    /// Where the zstd-compressed block lies in `samples.log`, its length
+    /// there, and the length of its rkyv archive before zstd.
+    pub offset: u64,
+    pub stored_len: u32,
+    pub raw_len: u32,
+}
+
+/// A frame's records in the sample log (rkyv archive, zstd-compressed):
+/// every record version written in `frame` of job id `job`, in id order.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RecordBlock {
+    pub job: u64,
+    pub frame: u32,
+    pub records: Vec<RecordValue>,
 }
 
 /// `stats` value: the [`crate::method::FrameStats`] of one frame, whole.
