@@ -91,6 +91,20 @@ impl Default for IcSettings {
 /// Tags the random streams of record gathering apart from pixel sampling.
 const RECORD_STREAM: u64 = 1 << 62;
 
+/// The random streams of a record first gathered at `pixel`'s candidate in
+/// this frame: frame and pixel (the pixel alone with `--same-pattern`).
+/// They are the record's own from then on: a record gathered again at the
+/// same point (`trc`'s replacement, TRC §4.4) shoots the same hemisphere
+/// directions with the same path streams, as temporally coherent final
+/// gathering does (Tawara et al. 2004, §3: the same sample rays every
+/// frame), so that where nothing changed the new value equals the old one
+/// and a replacement shows only the change, not fresh Monte Carlo noise.
+fn first_stream(ctx: &FrameContext, pixel: u32) -> u64 {
+    // Frames below 2^29 keep clear of the stream tags (bits 61–62).
+    let frame = if ctx.same_pattern { 0 } else { ctx.frame + 1 };
+    (u64::from(frame) << 32) | u64::from(pixel)
+}
+
 pub struct IrradianceCaching {
     pub settings: IcSettings,
     stats: FrameStats,
@@ -118,7 +132,9 @@ impl IrradianceCaching {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Candidate {
     pub(crate) pixel: u32,
-    /// Random stream of the gather (the pixel for new records).
+    /// The random streams of the record's gather ([`first_stream`]): set
+    /// where a record is first gathered and kept by the records `trc`
+    /// gathers again at the same point.
     pub(crate) stream: u64,
     pub(crate) point: GatherPoint,
     pub(crate) object: u32,
@@ -308,7 +324,7 @@ impl IrradianceCaching {
             .filter(|c| !cache.covers(c.point.position, c.point.normal))
             .collect();
         let records: Vec<(IrradianceRecord, X)> = self
-            .gather_parallel(ctx, &needed, ctx.frame)
+            .gather_parallel(ctx, &needed)
             .map(|g| {
                 let x = annotate(&g);
                 (g.record, x)
@@ -323,14 +339,12 @@ impl IrradianceCaching {
         }
     }
 
-    /// Gathers records at `candidates` in parallel, in candidate order.
-    /// `key_frame` picks the random streams (the frame being rendered; a
-    /// test re-gathers with the streams of an earlier frame).
+    /// Gathers records at `candidates` in parallel, in candidate order, each
+    /// with its own random streams (`Candidate::stream`).
     pub(crate) fn gather_parallel<'a>(
         &'a self,
         ctx: &'a FrameContext,
         candidates: &'a [Candidate],
-        key_frame: u32,
     ) -> impl ParallelIterator<Item = Gathered> + 'a {
         // About one backend batch of gather rays per task, but no more
         // candidates per task than spreads the work over every thread: `trc`
@@ -342,22 +356,18 @@ impl IrradianceCaching {
         let per_task = per_batch.min(per_thread).max(1);
         candidates
             .par_chunks(per_task)
-            .flat_map_iter(move |chunk| self.gather_chunk(ctx, chunk, key_frame))
+            .flat_map_iter(move |chunk| self.gather_chunk(ctx, chunk))
     }
 
     /// Computes the records of `chunk` with one batch of radiance queries.
-    fn gather_chunk(
-        &self,
-        ctx: &FrameContext,
-        chunk: &[Candidate],
-        key_frame: u32,
-    ) -> Vec<Gathered> {
+    fn gather_chunk(&self, ctx: &FrameContext, chunk: &[Candidate]) -> Vec<Gathered> {
         let strata = self.settings.strata;
         let mut queries = Vec::with_capacity(chunk.len() * strata.count());
         for c in chunk {
             let key = SampleKey {
                 seed: ctx.seed,
-                frame: (!ctx.same_pattern).then_some(key_frame),
+                // The frame is in the stream (`first_stream`).
+                frame: None,
                 item: RECORD_STREAM | c.stream,
                 sample: 0,
             };
@@ -461,7 +471,7 @@ pub(crate) fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
             let surface = Surface::at(ctx, ray, hit)?;
             (surface.bsdf.diffuse_albedo().max_element() > 0.0).then(|| Candidate {
                 pixel: pixel as u32,
-                stream: pixel as u64,
+                stream: first_stream(ctx, pixel as u32),
                 point: surface.gather_point(),
                 object: hit.object,
                 footprint: hit.t * ray.dir().length() * pixel_angle,
