@@ -144,16 +144,31 @@ fn static_scene_records_live_max_life_and_frames_match_ic() {
         }
         assert!(trc.records().iter().all(|k| k.last_valid == max_life - 1));
     }
+    let before: std::collections::HashMap<u64, Vec3> = trc
+        .records()
+        .iter()
+        .map(|k| (k.record.id, k.record.irradiance))
+        .collect();
     let _ = render_trc(&mut r, &mut trc, max_life);
     let stats = trc.last_frame_stats();
     assert_eq!(stats.records_reused, 0);
     assert_eq!(stats.records_replaced + stats.records_dropped, n);
     assert!(stats.records_replaced > 0);
-    assert!(trc
+    let replacements: Vec<_> = trc
         .records()
         .iter()
         .filter(|k| k.replaces.is_some())
+        .collect();
+    assert!(replacements
+        .iter()
         .all(|k| k.record.created_frame == max_life));
+    // A replacement gathers with the random streams of the record it
+    // replaces (`ic::first_stream`): nothing changed, so neither does its
+    // value, though the frames' pixel streams differ (`same_pattern` off).
+    for k in replacements {
+        let old = before[&k.replaces.unwrap()];
+        assert_eq!(k.record.irradiance, old, "record {}", k.record.id);
+    }
 }
 
 /// TRC Table 1 on cube-in-box: the error of the E(t0+1) estimate against
@@ -529,9 +544,13 @@ fn temporal_gradients_flicker_order() {
     let (none, extrapolated, interpolated) = (results[0], results[1], results[2]);
     assert_eq!(none.1, extrapolated.1, "same records in every mode");
     assert_eq!(none.1, interpolated.1, "same records in every mode");
-    // Measured: none 0.0240, extrapolated 0.0237, interpolated 0.0196 — the
-    // paper's order; extrapolation gains little here (most records live
-    // δt_max frames with τ ≈ 1, so their extrapolated change is small).
+    // Measured: none 0.01114, extrapolated 0.01112, interpolated 0.01090 —
+    // the paper's order, with small steps: most records live δt_max frames
+    // with τ ≈ 1, so their extrapolated change is small, and a replacement
+    // gathers with its predecessor's random streams (`ic::first_stream`),
+    // so where nothing changed it does not jump and there is little left
+    // for interpolation to smooth. (With fresh streams for replacements:
+    // 0.0168, 0.0168, 0.0136.)
     assert!(extrapolated.0 <= none.0, "{results:?}");
-    assert!(interpolated.0 <= 0.9 * extrapolated.0, "{results:?}");
+    assert!(interpolated.0 < extrapolated.0, "{results:?}");
 }

@@ -11,7 +11,8 @@
 //! - direct light by next-event estimation (one light sample per pixel
 //!   sample; the glossy lobe's part MIS-weighted against lobe sampling),
 //! - indirect diffuse from the cache: `E_indirect` interpolated with
-//!   gradients (TRC Eq. 1–4), records used where `w ≥ 1/a` — on the CPU,
+//!   gradients (TRC Eq. 1–4), records used where `w ≥ 1/a`, looked up
+//!   once per pixel and triangle for the pixel's samples on it — on the CPU,
 //!   or on the GPU by radiance cache splatting (TRC §5,
 //!   `backend::gpu_cache`) when the ray backend is the GPU one,
 //! - the glossy lobe by path tracing from a lobe sample (until radiance
@@ -90,6 +91,20 @@ impl Default for IcSettings {
 /// Tags the random streams of record gathering apart from pixel sampling.
 const RECORD_STREAM: u64 = 1 << 62;
 
+/// The random streams of a record first gathered at `pixel`'s candidate in
+/// this frame: frame and pixel (the pixel alone with `--same-pattern`).
+/// They are the record's own from then on: a record gathered again at the
+/// same point (`trc`'s replacement, TRC §4.4) shoots the same hemisphere
+/// directions with the same path streams, as temporally coherent final
+/// gathering does (Tawara et al. 2004, §3: the same sample rays every
+/// frame), so that where nothing changed the new value equals the old one
+/// and a replacement shows only the change, not fresh Monte Carlo noise.
+fn first_stream(ctx: &FrameContext, pixel: u32) -> u64 {
+    // Frames below 2^29 keep clear of the stream tags (bits 61–62).
+    let frame = if ctx.same_pattern { 0 } else { ctx.frame + 1 };
+    (u64::from(frame) << 32) | u64::from(pixel)
+}
+
 pub struct IrradianceCaching {
     pub settings: IcSettings,
     stats: FrameStats,
@@ -117,7 +132,9 @@ impl IrradianceCaching {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Candidate {
     pub(crate) pixel: u32,
-    /// Random stream of the gather (the pixel for new records).
+    /// The random streams of the record's gather ([`first_stream`]): set
+    /// where a record is first gathered and kept by the records `trc`
+    /// gathers again at the same point.
     pub(crate) stream: u64,
     pub(crate) point: GatherPoint,
     pub(crate) object: u32,
@@ -307,7 +324,7 @@ impl IrradianceCaching {
             .filter(|c| !cache.covers(c.point.position, c.point.normal))
             .collect();
         let records: Vec<(IrradianceRecord, X)> = self
-            .gather_parallel(ctx, &needed, ctx.frame)
+            .gather_parallel(ctx, &needed)
             .map(|g| {
                 let x = annotate(&g);
                 (g.record, x)
@@ -322,14 +339,12 @@ impl IrradianceCaching {
         }
     }
 
-    /// Gathers records at `candidates` in parallel, in candidate order.
-    /// `key_frame` picks the random streams (the frame being rendered; a
-    /// test re-gathers with the streams of an earlier frame).
+    /// Gathers records at `candidates` in parallel, in candidate order, each
+    /// with its own random streams (`Candidate::stream`).
     pub(crate) fn gather_parallel<'a>(
         &'a self,
         ctx: &'a FrameContext,
         candidates: &'a [Candidate],
-        key_frame: u32,
     ) -> impl ParallelIterator<Item = Gathered> + 'a {
         // About one backend batch of gather rays per task, but no more
         // candidates per task than spreads the work over every thread: `trc`
@@ -341,22 +356,18 @@ impl IrradianceCaching {
         let per_task = per_batch.min(per_thread).max(1);
         candidates
             .par_chunks(per_task)
-            .flat_map_iter(move |chunk| self.gather_chunk(ctx, chunk, key_frame))
+            .flat_map_iter(move |chunk| self.gather_chunk(ctx, chunk))
     }
 
     /// Computes the records of `chunk` with one batch of radiance queries.
-    fn gather_chunk(
-        &self,
-        ctx: &FrameContext,
-        chunk: &[Candidate],
-        key_frame: u32,
-    ) -> Vec<Gathered> {
+    fn gather_chunk(&self, ctx: &FrameContext, chunk: &[Candidate]) -> Vec<Gathered> {
         let strata = self.settings.strata;
         let mut queries = Vec::with_capacity(chunk.len() * strata.count());
         for c in chunk {
             let key = SampleKey {
                 seed: ctx.seed,
-                frame: (!ctx.same_pattern).then_some(key_frame),
+                // The frame is in the stream (`first_stream`).
+                frame: None,
                 item: RECORD_STREAM | c.stream,
                 sample: 0,
             };
@@ -460,7 +471,7 @@ pub(crate) fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
             let surface = Surface::at(ctx, ray, hit)?;
             (surface.bsdf.diffuse_albedo().max_element() > 0.0).then(|| Candidate {
                 pixel: pixel as u32,
-                stream: pixel as u64,
+                stream: first_stream(ctx, pixel as u32),
                 point: surface.gather_point(),
                 object: hit.object,
                 footprint: hit.t * ray.dir().length() * pixel_angle,
@@ -578,13 +589,12 @@ pub(crate) fn mark_used(
             .collect();
         let mut hits = vec![Hit::MISS; rays.len()];
         ctx.backend.closest_hit(&rays, &mut hits);
-        let lookups: Vec<Lookup> = rays
+        let surfaces: Vec<Option<Surface>> = rays
             .iter()
             .zip(&hits)
-            .filter_map(|(ray, hit)| Surface::at(ctx, ray, hit))
-            .filter(|s| !s.bsdf.is_black() && s.bsdf.diffuse_albedo().max_element() > 0.0)
-            .map(|s| (s.p, s.bsdf.normal()))
+            .map(|(ray, hit)| Surface::at(ctx, ray, hit))
             .collect();
+        let (lookups, _) = pixel_lookups(&surfaces, &hits, spp as usize);
         interpolation.mark_used(&lookups, used);
     });
 }
@@ -594,6 +604,76 @@ pub(crate) fn mark_used(
 struct Deferred {
     sample: usize,
     query: RadianceQuery,
+}
+
+/// The render pass's cache lookups: one per pixel and triangle hit, at the
+/// mean shading point and normal of the pixel's samples on that triangle,
+/// rather than one per pixel sample; and, per sample, its lookup (`None`
+/// for samples that do not look the cache up).
+///
+/// Why: the interpolated irradiance (TRC Eq. 1–4) varies smoothly over a
+/// pixel's footprint, and the mean of a linear function over the samples is
+/// its value at their mean point, so sharing the lookup loses only the
+/// curvature of `E` within one pixel, far below the cache's own
+/// interpolation error. The lookups, about a quarter of the render pass at
+/// 16 samples per pixel, fall to about one per pixel. Each sample keeps its
+/// own visibility, emission, direct light and glossy lobe: the shading rate
+/// of the cache is decoupled from the visibility sampling, as in MSAA.
+/// Samples on different triangles never share (an edge, a corner).
+fn pixel_lookups(
+    surfaces: &[Option<Surface>],
+    hits: &[Hit],
+    spp: usize,
+) -> (Vec<Lookup>, Vec<Option<u32>>) {
+    let shading_points: Vec<Option<(u32, Lookup)>> = surfaces
+        .iter()
+        .zip(hits)
+        .map(|(surface, hit)| {
+            let s = surface.as_ref()?;
+            let diffuse = !s.bsdf.is_black() && s.bsdf.diffuse_albedo().max_element() > 0.0;
+            diffuse.then(|| (hit.triangle, (s.p, s.bsdf.normal())))
+        })
+        .collect();
+    share_lookups(&shading_points, spp)
+}
+
+/// [`pixel_lookups`] over each sample's triangle and shading point (`None`:
+/// no lookup), `spp` consecutive samples a pixel.
+fn share_lookups(samples: &[Option<(u32, Lookup)>], spp: usize) -> (Vec<Lookup>, Vec<Option<u32>>) {
+    let mut lookups: Vec<Lookup> = Vec::with_capacity(samples.len() / spp + 1);
+    let mut counts: Vec<f32> = Vec::with_capacity(lookups.capacity());
+    let mut of_sample = vec![None; samples.len()];
+    // The current pixel's (triangle, lookup) pairs: a pixel hits few.
+    let mut pixel: Vec<(u32, u32)> = Vec::with_capacity(4);
+    for (start, chunk) in samples.chunks(spp).enumerate() {
+        pixel.clear();
+        for (j, sample) in chunk.iter().enumerate() {
+            let Some((triangle, (point, normal))) = *sample else {
+                continue;
+            };
+            let i = start * spp + j;
+            let k = match pixel.iter().find(|(t, _)| *t == triangle) {
+                Some(&(_, k)) => k,
+                None => {
+                    let k = lookups.len() as u32;
+                    lookups.push((Vec3::ZERO, Vec3::ZERO));
+                    counts.push(0.0);
+                    pixel.push((triangle, k));
+                    k
+                }
+            };
+            let (p, n) = &mut lookups[k as usize];
+            *p += point;
+            *n += normal;
+            counts[k as usize] += 1.0;
+            of_sample[i] = Some(k);
+        }
+    }
+    for ((p, n), count) in lookups.iter_mut().zip(counts) {
+        *p /= count;
+        *n = n.normalize();
+    }
+    (lookups, of_sample)
 }
 
 /// One tile of pixels in three steps: primary hits, emission and direct
@@ -633,9 +713,6 @@ fn render_tile(
     let mut radiance = vec![Vec3::ZERO; rays.len()];
     let mut shadow_rays = Vec::new();
     let mut shadow_targets = Vec::new();
-    // The samples that look the cache up, in sample order, and their points.
-    let mut lookup_samples = Vec::new();
-    let mut lookups: Vec<Lookup> = Vec::new();
     for (i, surface) in surfaces.iter().enumerate() {
         let Some(surface) = surface else {
             continue;
@@ -653,18 +730,19 @@ fn render_tile(
             shadow_rays.push(shadow);
             shadow_targets.push((i, contribution));
         }
-        if surface.bsdf.diffuse_albedo().max_element() > 0.0 {
-            lookup_samples.push(i);
-            lookups.push((surface.p, surface.bsdf.normal()));
-        }
     }
+    let (lookups, lookup_of_sample) = pixel_lookups(&surfaces, &hits, spp as usize);
     stats.lookups = lookups.len() as u64;
     let interpolated = interpolation.interpolate(&lookups, used);
+    stats.lookup_records = interpolated
+        .iter()
+        .flatten()
+        .map(|e| u64::from(e.records))
+        .sum();
 
     // Per sample, in the order the CPU-only pass took them: the fallback
     // query (if any) draws from the sample's stream before the glossy one.
     let mut deferred = Vec::new();
-    let mut cached = lookup_samples.into_iter().zip(interpolated).peekable();
     for (i, surface) in surfaces.iter().enumerate() {
         let Some(surface) = surface else {
             continue;
@@ -673,11 +751,10 @@ fn render_tile(
             continue;
         }
         let rng = &mut rngs[i];
-        if let Some((_, e)) = cached.next_if(|(j, _)| *j == i) {
-            match e {
+        if let Some(lookup) = lookup_of_sample[i] {
+            match &interpolated[lookup as usize] {
                 Some(e) => {
                     radiance[i] += surface.bsdf.diffuse_albedo() * FRAC_1_PI * e.irradiance;
-                    stats.lookup_records += u64::from(e.records);
                 }
                 None => {
                     stats.fallback_lookups += 1;
@@ -787,6 +864,48 @@ fn diffuse_indirect_query(s: &Surface, rng: &mut Rng) -> RadianceQuery {
 mod tests {
     use super::*;
     use crate::cache::gather::Strata;
+
+    /// Two pixels of four samples: the first pixel's samples on triangles 7
+    /// and 9 (and one that looks nothing up), the second's all on 7 again.
+    /// One lookup per pixel and triangle, at the mean point and the
+    /// normalised mean normal; a triangle seen by two pixels is looked up
+    /// in each.
+    #[test]
+    fn pixel_samples_share_one_lookup_per_triangle() {
+        let n = Vec3::Z;
+        let tilted = Vec3::new(0.6, 0.0, 0.8);
+        let samples = [
+            Some((7, (Vec3::new(0.0, 0.0, 0.0), n))),
+            Some((9, (Vec3::new(5.0, 0.0, 0.0), tilted))),
+            None,
+            Some((7, (Vec3::new(2.0, 4.0, 0.0), n))),
+            Some((7, (Vec3::new(1.0, 1.0, 0.0), n))),
+            Some((7, (Vec3::new(3.0, 1.0, 0.0), Vec3::new(0.0, 0.6, 0.8)))),
+            Some((7, (Vec3::new(1.0, 3.0, 0.0), Vec3::new(0.0, -0.6, 0.8)))),
+            Some((7, (Vec3::new(3.0, 3.0, 0.0), n))),
+        ];
+        let (lookups, of_sample) = share_lookups(&samples, 4);
+        assert_eq!(
+            of_sample,
+            [
+                Some(0),
+                Some(1),
+                None,
+                Some(0),
+                Some(2),
+                Some(2),
+                Some(2),
+                Some(2)
+            ]
+        );
+        assert_eq!(lookups.len(), 3);
+        assert!((lookups[0].0 - Vec3::new(1.0, 2.0, 0.0)).length() < 1e-6);
+        assert!((lookups[0].1 - n).length() < 1e-6);
+        assert!((lookups[1].0 - Vec3::new(5.0, 0.0, 0.0)).length() < 1e-6);
+        assert!((lookups[1].1 - tilted).length() < 1e-6);
+        assert!((lookups[2].0 - Vec3::new(2.0, 2.0, 0.0)).length() < 1e-6);
+        assert!((lookups[2].1 - n).length() < 1e-6);
+    }
 
     /// A hemisphere lit from one side, gathered next to a wall: one cell's
     /// ray hits the wall at t ≈ 0, which makes Ward & Heckbert's gradient

@@ -210,9 +210,6 @@ impl TemporalRecord {
     }
 }
 
-/// Random streams of replacement gathers, apart from the pixels' streams.
-const REPLACE_STREAM: u64 = 1 << 61;
-
 /// A frame through the first pass (interpolated gradients), waiting to be
 /// rendered.
 struct PendingFrame {
@@ -295,10 +292,7 @@ impl TemporalRadianceCaching {
             .iter()
             .map(|r| {
                 let c = [r.candidate];
-                let g: Vec<Gathered> = self
-                    .ic
-                    .gather_parallel(ctx, &c, r.record.created_frame)
-                    .collect();
+                let g: Vec<Gathered> = self.ic.gather_parallel(ctx, &c).collect();
                 g[0].record.irradiance
             })
             .collect()
@@ -403,14 +397,9 @@ impl TemporalRadianceCaching {
             }
         }
         // Replacement at the same location (§4.4: p_l = p_K), inserted
-        // whether or not another record covers the point.
-        let candidates: Vec<Candidate> = replace
-            .iter()
-            .map(|r| Candidate {
-                stream: REPLACE_STREAM | r.record.id,
-                ..r.candidate
-            })
-            .collect();
+        // whether or not another record covers the point, gathered with
+        // K's random streams (`ic::first_stream`).
+        let candidates: Vec<Candidate> = replace.iter().map(|r| r.candidate).collect();
         // Store hook: samples packed to their stored form as soon as they
         // are gathered (reprojection used them at full precision first).
         let dynamic = keep.then(|| dynamic_objects(ctx));
@@ -418,7 +407,7 @@ impl TemporalRadianceCaching {
         let gathered: Vec<(TemporalRecord, Option<SampleBlock>)> = {
             use rayon::prelude::*;
             self.ic
-                .gather_parallel(ctx, &candidates, t)
+                .gather_parallel(ctx, &candidates)
                 .map(|g| (self.temporal(ctx, &next, &g), pack(&g)))
                 .collect()
         };
