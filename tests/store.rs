@@ -1401,3 +1401,52 @@ fn interrupted_0003_to_0004_migration_resumes_where_it_stopped() {
     let store = Store::open(&path).unwrap();
     check_v3_fixture_reads_back(&store, &exrs, &written, &records);
 }
+
+#[test]
+fn a_frame_written_again_replaces_its_record_block() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let mut job = store.begin_job(&spec("j"), false).unwrap();
+    let strata = Strata { theta: 4, phi: 12 };
+    let commit = |job: &mut radcache::store::schema::JobValue, records: Vec<RecordCommit>| {
+        let stats = FrameStats::default();
+        store
+            .commit_frame(
+                job,
+                FrameCommit {
+                    frame: 0,
+                    width: 16,
+                    height: 16,
+                    exr: b"exr",
+                    records,
+                    stats: &stats,
+                    state: None,
+                },
+            )
+            .unwrap();
+    };
+    let rc = |id: u64, seed: u32| {
+        let mut r = record(id, 0);
+        r.irradiance = Vec3::splat(seed as f32);
+        RecordCommit::from_record(&r, SampleBlock::pack(&samples(48, seed), &[]), strata, 0)
+    };
+    // Out of order, and record 5 twice: its last version is kept.
+    commit(&mut job, vec![rc(5, 1), rc(3, 2), rc(5, 3)]);
+    let recs = store.frame_records(job.id, 0).unwrap();
+    assert_eq!(recs.iter().map(|r| r.id).collect::<Vec<_>>(), vec![3, 5]);
+    assert_eq!(recs[1].irradiance, [3.0; 3]);
+    let want = SampleBlock::pack(&samples(48, 3), &[]).unpack().unwrap();
+    assert_eq!(store.record_samples(job.id, 0, 5).unwrap(), want);
+    assert_eq!(store.samples_of_record(job.id, 0, &recs[1]).unwrap(), want);
+    assert!(store.record_samples(job.id, 0, 4).unwrap().is_empty());
+    // Written again: the new block replaces the old one …
+    commit(&mut job, vec![rc(7, 4)]);
+    let recs = store.frame_records(job.id, 0).unwrap();
+    assert_eq!(recs.iter().map(|r| r.id).collect::<Vec<_>>(), vec![7]);
+    // … and a version with no records leaves none.
+    commit(&mut job, Vec::new());
+    assert!(store.frame_records(job.id, 0).unwrap().is_empty());
+    assert!(store.frame_records_value(job.id, 0).unwrap().is_none());
+    assert_eq!(store.frames_done(job.id).unwrap(), vec![0]);
+    assert_eq!(store.job("j").unwrap().unwrap().frames_done, 1);
+}
