@@ -833,6 +833,7 @@ fn frame_settings(opts: &BenchOptions, same_pattern: bool) -> FrameSettings {
         fps: opts.fps,
         seed: opts.seed,
         same_pattern,
+        ..FrameSettings::default()
     }
 }
 

@@ -464,6 +464,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         fps: args.fps,
         seed: args.seed,
         same_pattern: args.same_pattern,
+        ..FrameSettings::default()
     };
     let (w, h) = args.size;
     if !args.quiet {

@@ -19,7 +19,7 @@
 //!   records for glossy surfaces land).
 
 use super::lookups::{Interpolation, Lookup};
-use super::path::{camera_query, first_light_sample};
+use super::pixels::{self, camera_query, first_light_sample, PixelSample};
 use super::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
@@ -583,18 +583,10 @@ pub(crate) fn mark_used(
     let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1) as u32;
     let tiles: Vec<u32> = (0..n_pixels).step_by(pixels_per_tile as usize).collect();
     tiles.into_par_iter().for_each(|first| {
-        let last = (first + pixels_per_tile).min(n_pixels);
-        let rays: Vec<Ray> = (first..last)
-            .flat_map(|pixel| (0..spp).map(move |sample| camera_query(ctx, pixel, sample, spp).0))
-            .collect();
-        let mut hits = vec![Hit::MISS; rays.len()];
-        ctx.backend.closest_hit(&rays, &mut hits);
-        let surfaces: Vec<Option<Surface>> = rays
-            .iter()
-            .zip(&hits)
-            .map(|(ray, hit)| Surface::at(ctx, ray, hit))
-            .collect();
-        let (lookups, _) = pixel_lookups(&surfaces, &hits, spp as usize);
+        let count = pixels_per_tile.min(n_pixels - first);
+        let primary = PrimarySamples::trace(ctx, first, count, spp);
+        let surfaces = primary.surfaces(ctx);
+        let (lookups, _) = pixel_lookups(&surfaces, &primary.hits, &primary.samples);
         interpolation.mark_used(&lookups, used);
     });
 }
@@ -604,6 +596,52 @@ pub(crate) fn mark_used(
 struct Deferred {
     sample: usize,
     query: RadianceQuery,
+}
+
+/// A tile's pixel samples (`spp` a pixel, then the extra ones of pixels on
+/// the edge of a seen light: [`pixels`]) with their camera rays, random
+/// streams (positioned after the jitter) and first hits.
+struct PrimarySamples {
+    samples: Vec<PixelSample>,
+    rays: Vec<Ray>,
+    rngs: Vec<Rng>,
+    hits: Vec<Hit>,
+}
+
+impl PrimarySamples {
+    fn trace(ctx: &FrameContext, first: u32, count: u32, spp: u32) -> Self {
+        let mut primary = PrimarySamples {
+            samples: Vec::new(),
+            rays: Vec::new(),
+            rngs: Vec::new(),
+            hits: Vec::new(),
+        };
+        primary.add(ctx, pixels::tile_samples(first, count, spp));
+        let extra = pixels::edge_samples(ctx, &primary.samples, &primary.rays, &primary.hits, spp);
+        primary.add(ctx, extra);
+        primary
+    }
+
+    fn add(&mut self, ctx: &FrameContext, samples: Vec<PixelSample>) {
+        let start = self.rays.len();
+        for s in &samples {
+            let (ray, rng) = camera_query(ctx, s);
+            self.rays.push(ray);
+            self.rngs.push(rng);
+        }
+        self.hits.resize(self.rays.len(), Hit::MISS);
+        ctx.backend
+            .closest_hit(&self.rays[start..], &mut self.hits[start..]);
+        self.samples.extend(samples);
+    }
+
+    fn surfaces<'a>(&self, ctx: &'a FrameContext) -> Vec<Option<Surface<'a>>> {
+        self.rays
+            .iter()
+            .zip(&self.hits)
+            .map(|(ray, hit)| Surface::at(ctx, ray, hit))
+            .collect()
+    }
 }
 
 /// The render pass's cache lookups: one per pixel and triangle hit, at the
@@ -623,7 +661,7 @@ struct Deferred {
 fn pixel_lookups(
     surfaces: &[Option<Surface>],
     hits: &[Hit],
-    spp: usize,
+    samples: &[PixelSample],
 ) -> (Vec<Lookup>, Vec<Option<u32>>) {
     let shading_points: Vec<Option<(u32, Lookup)>> = surfaces
         .iter()
@@ -634,40 +672,44 @@ fn pixel_lookups(
             diffuse.then(|| (hit.triangle, (s.p, s.bsdf.normal())))
         })
         .collect();
-    share_lookups(&shading_points, spp)
+    let pixel_of: Vec<u32> = samples.iter().map(|s| s.pixel).collect();
+    share_lookups(&shading_points, &pixel_of)
 }
 
 /// [`pixel_lookups`] over each sample's triangle and shading point (`None`:
-/// no lookup), `spp` consecutive samples a pixel.
-fn share_lookups(samples: &[Option<(u32, Lookup)>], spp: usize) -> (Vec<Lookup>, Vec<Option<u32>>) {
-    let mut lookups: Vec<Lookup> = Vec::with_capacity(samples.len() / spp + 1);
-    let mut counts: Vec<f32> = Vec::with_capacity(lookups.capacity());
+/// no lookup) and pixel; a pixel's samples are consecutive (a run of equal
+/// pixels shares lookups).
+fn share_lookups(
+    samples: &[Option<(u32, Lookup)>],
+    pixel_of: &[u32],
+) -> (Vec<Lookup>, Vec<Option<u32>>) {
+    let mut lookups: Vec<Lookup> = Vec::new();
+    let mut counts: Vec<f32> = Vec::new();
     let mut of_sample = vec![None; samples.len()];
     // The current pixel's (triangle, lookup) pairs: a pixel hits few.
     let mut pixel: Vec<(u32, u32)> = Vec::with_capacity(4);
-    for (start, chunk) in samples.chunks(spp).enumerate() {
-        pixel.clear();
-        for (j, sample) in chunk.iter().enumerate() {
-            let Some((triangle, (point, normal))) = *sample else {
-                continue;
-            };
-            let i = start * spp + j;
-            let k = match pixel.iter().find(|(t, _)| *t == triangle) {
-                Some(&(_, k)) => k,
-                None => {
-                    let k = lookups.len() as u32;
-                    lookups.push((Vec3::ZERO, Vec3::ZERO));
-                    counts.push(0.0);
-                    pixel.push((triangle, k));
-                    k
-                }
-            };
-            let (p, n) = &mut lookups[k as usize];
-            *p += point;
-            *n += normal;
-            counts[k as usize] += 1.0;
-            of_sample[i] = Some(k);
+    for (i, sample) in samples.iter().enumerate() {
+        if i == 0 || pixel_of[i] != pixel_of[i - 1] {
+            pixel.clear();
         }
+        let Some((triangle, (point, normal))) = *sample else {
+            continue;
+        };
+        let k = match pixel.iter().find(|(t, _)| *t == triangle) {
+            Some(&(_, k)) => k,
+            None => {
+                let k = lookups.len() as u32;
+                lookups.push((Vec3::ZERO, Vec3::ZERO));
+                counts.push(0.0);
+                pixel.push((triangle, k));
+                k
+            }
+        };
+        let (p, n) = &mut lookups[k as usize];
+        *p += point;
+        *n += normal;
+        counts[k as usize] += 1.0;
+        of_sample[i] = Some(k);
     }
     for ((p, n), count) in lookups.iter_mut().zip(counts) {
         *p /= count;
@@ -691,19 +733,17 @@ fn render_tile(
 ) -> FrameStats {
     let spp = settings.spp.max(1);
     let mut stats = FrameStats::default();
-    let mut rays = Vec::with_capacity(out.len() * spp as usize);
-    let mut rngs = Vec::with_capacity(rays.capacity());
-    let mut light_samples = Vec::with_capacity(rays.capacity());
-    for pixel in first..first + out.len() as u32 {
-        for sample in 0..spp {
-            let (ray, mut rng) = camera_query(ctx, pixel, sample, spp);
-            rays.push(ray);
-            light_samples.push(first_light_sample(ctx, pixel, &mut rng, sample, spp));
-            rngs.push(rng);
-        }
-    }
-    let mut hits = vec![Hit::MISS; rays.len()];
-    ctx.backend.closest_hit(&rays, &mut hits);
+    let PrimarySamples {
+        samples,
+        rays,
+        mut rngs,
+        hits,
+    } = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
+    let light_samples: Vec<LightChoice> = samples
+        .iter()
+        .zip(&mut rngs)
+        .map(|(s, rng)| first_light_sample(ctx, s, rng))
+        .collect();
     let surfaces: Vec<Option<Surface>> = rays
         .iter()
         .zip(&hits)
@@ -731,7 +771,7 @@ fn render_tile(
             shadow_targets.push((i, contribution));
         }
     }
-    let (lookups, lookup_of_sample) = pixel_lookups(&surfaces, &hits, spp as usize);
+    let (lookups, lookup_of_sample) = pixel_lookups(&surfaces, &hits, &samples);
     stats.lookups = lookups.len() as u64;
     let interpolated = interpolation.interpolate(&lookups, used);
     stats.lookup_records = interpolated
@@ -784,10 +824,7 @@ fn render_tile(
     {
         radiance[i] += r.radiance;
     }
-    let inv = 1.0 / spp as f32;
-    for (pixel, samples) in out.iter_mut().zip(radiance.chunks(spp as usize)) {
-        *pixel = samples.iter().copied().sum::<Vec3>() * inv;
-    }
+    pixels::resolve(&samples, &radiance, first, out);
     stats
 }
 
@@ -884,7 +921,7 @@ mod tests {
             Some((7, (Vec3::new(1.0, 3.0, 0.0), Vec3::new(0.0, -0.6, 0.8)))),
             Some((7, (Vec3::new(3.0, 3.0, 0.0), n))),
         ];
-        let (lookups, of_sample) = share_lookups(&samples, 4);
+        let (lookups, of_sample) = share_lookups(&samples, &[0, 0, 0, 0, 1, 1, 1, 1]);
         assert_eq!(
             of_sample,
             [

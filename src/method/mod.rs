@@ -6,6 +6,7 @@
 pub mod ic;
 mod lookups;
 pub mod path;
+pub mod pixels;
 pub mod trc;
 
 use crate::backend::RayBackend;
@@ -30,6 +31,9 @@ pub struct FrameContext<'a> {
     /// Use the same random sequence in every frame (reference renders for
     /// the flicker figure, DESIGN.md "Measuring").
     pub same_pattern: bool,
+    /// Extra samples of a pixel on the edge of a seen light, in units of
+    /// the method's `spp` ([`pixels`]).
+    pub emitter_edge_factor: u32,
 }
 
 impl FrameContext<'_> {

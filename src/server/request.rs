@@ -84,6 +84,7 @@ impl JobRequest {
                 fps: job.fps,
                 seed: job.seed,
                 same_pattern: job.same_pattern,
+                ..FrameSettings::default()
             },
             frames: job.frame_start..job.frame_end,
         })
