@@ -1,7 +1,8 @@
 //! `path`: the unbiased reference path tracer, the accuracy yardstick of
 //! every other method. Camera rays through jittered pixel positions (each
-//! pixel box-filtered over its own square, as the reference renders are) are
-//! handed to the shared path-tracing engine in [`crate::integrator`].
+//! pixel box-filtered over its own square, as the reference renders are;
+//! more samples at the edge of a seen light: [`super::pixels`]) are handed
+//! to the shared path-tracing engine in [`crate::integrator`].
 
 use super::pixels::{self, camera_query, first_light_sample, PixelSample};
 use super::{FrameContext, Method};
