@@ -6,6 +6,7 @@
 
 use super::pixels::{self, camera_query, first_light_sample, PixelSample};
 use super::{FrameContext, Method};
+use crate::backend::{Hit, Ray};
 use crate::film::Film;
 use crate::integrator::{trace_radiance, FirstHitEmission, PathLength, RadianceQuery};
 use glam::Vec3;
@@ -39,13 +40,14 @@ impl PathTracer {
 }
 
 impl PathTracer {
-    /// Full paths from the camera for `samples`, in order.
+    /// Full paths from the camera for `samples`, in order, and their camera
+    /// rays.
     fn trace(
         &self,
         ctx: &FrameContext,
         samples: &[PixelSample],
-    ) -> Vec<crate::integrator::RadianceResult> {
-        let queries = samples
+    ) -> (Vec<Ray>, Vec<crate::integrator::RadianceResult>) {
+        let queries: Vec<RadianceQuery> = samples
             .iter()
             .map(|s| {
                 let (ray, mut rng) = camera_query(ctx, s);
@@ -58,7 +60,8 @@ impl PathTracer {
                 }
             })
             .collect();
-        trace_radiance(ctx, self.settings.length, queries)
+        let rays = queries.iter().map(|q| q.ray).collect();
+        (rays, trace_radiance(ctx, self.settings.length, queries))
     }
 }
 
@@ -78,15 +81,11 @@ impl Method for PathTracer {
             .for_each(|(tile, out)| {
                 let first = (tile * pixels_per_tile) as u32;
                 let mut samples = pixels::tile_samples(first, out.len() as u32, spp);
-                let mut results = self.trace(ctx, &samples);
+                let (rays, mut results) = self.trace(ctx, &samples);
                 // The first hits decide which pixels are on a light's edge.
-                let (rays, hits): (Vec<_>, Vec<_>) = samples
-                    .iter()
-                    .zip(&results)
-                    .map(|(s, r)| (camera_query(ctx, s).0, r.hit))
-                    .unzip();
+                let hits: Vec<Hit> = results.iter().map(|r| r.hit).collect();
                 let extra = pixels::edge_samples(ctx, &samples, &rays, &hits, spp);
-                results.extend(self.trace(ctx, &extra));
+                results.extend(self.trace(ctx, &extra).1);
                 samples.extend(extra);
                 let radiance: Vec<Vec3> = results.iter().map(|r| r.radiance).collect();
                 pixels::resolve(&samples, &radiance, first, out);

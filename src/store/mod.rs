@@ -184,6 +184,24 @@ pub fn content_hash(bytes: &[u8]) -> String {
     format!("{h:016x}")
 }
 
+/// Appends a frame's records to the sample log as one zstd block (schema
+/// 4) and returns the frame's `records` value, which says where it is.
+fn append_record_block(
+    log: &mut SampleLog,
+    block: &RecordBlock,
+) -> std::io::Result<FrameRecordsValue> {
+    let raw = encode(block);
+    let zstd = compress(&raw);
+    Ok(FrameRecordsValue {
+        count: block.records.len() as u32,
+        first_id: block.records.first().map_or(0, |r| r.id),
+        last_id: block.records.last().map_or(0, |r| r.id),
+        offset: log.append(&zstd)?,
+        stored_len: zstd.len() as u32,
+        raw_len: raw.len() as u32,
+    })
+}
+
 fn now_unix() -> u64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
@@ -590,16 +608,7 @@ impl Store {
                 frame: c.frame,
                 records,
             };
-            let raw = encode(&block);
-            let zstd = compress(&raw);
-            let value = FrameRecordsValue {
-                count: block.records.len() as u32,
-                first_id: block.records.first().map_or(0, |r| r.id),
-                last_id: block.records.last().map_or(0, |r| r.id),
-                offset: log.append(&zstd).map_err(|e| self.log_error(e))?,
-                stored_len: zstd.len() as u32,
-                raw_len: raw.len() as u32,
-            };
+            let value = append_record_block(log, &block).map_err(|e| self.log_error(e))?;
             Some(encode(&value))
         };
         if log.end() > log.committed() {

@@ -6,10 +6,10 @@
 //! small `records` key per frame. This module holds the 0003 → 0004
 //! migration step.
 
-use super::samples::{compress, SampleLog, FILE_NAME as LOG_FILE};
-use super::schema::{FrameRecordsValue, RecordBlock, RecordValue};
+use super::samples::{SampleLog, FILE_NAME as LOG_FILE};
+use super::schema::{RecordBlock, RecordValue};
 use super::v2::read_meta_u64;
-use super::{encode, keys};
+use super::{append_record_block, encode, keys};
 use sled::transaction::ConflictableTransactionError;
 use sled::{IVec, Transactional};
 use std::ops::Bound;
@@ -76,16 +76,7 @@ pub fn migrate_to_v4_batches(
                 frame: f.frame,
                 records: f.rows.iter().map(|(_, r)| r.clone()).collect(),
             };
-            let raw = encode(&block);
-            let zstd = compress(&raw);
-            let value = FrameRecordsValue {
-                count: block.records.len() as u32,
-                first_id: block.records.first().map_or(0, |r| r.id),
-                last_id: block.records.last().map_or(0, |r| r.id),
-                offset: log.append(&zstd).map_err(log_err)?,
-                stored_len: zstd.len() as u32,
-                raw_len: raw.len() as u32,
-            };
+            let value = append_record_block(&mut log, &block).map_err(log_err)?;
             values.push(encode(&value));
         }
         log.sync().map_err(log_err)?;
