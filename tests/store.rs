@@ -877,7 +877,13 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
     let store = Store::open(&path).unwrap();
     assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
     drop(store);
-    let msg = err_text(Store::open_with(&path, false, 3, migrate::MIGRATIONS));
+    assert_a_schema_3_build_refuses(&path);
+}
+
+/// A build that reads schema 3 at most refuses the (schema 4) store at
+/// `path` with a clear message.
+fn assert_a_schema_3_build_refuses(path: &Path) {
+    let msg = err_text(Store::open_with(path, false, 3, migrate::MIGRATIONS));
     assert!(
         msg.contains("schema version 4 is newer") && msg.contains("version 3"),
         "{msg}"
@@ -1352,11 +1358,7 @@ fn version_3_store_moves_its_records_into_blocks_in_the_log() {
     check_v3_fixture_reads_back(&store, &exrs, &written, &records);
     drop(store);
     // An older build refuses it.
-    let msg = err_text(Store::open_with(&path, false, 3, migrate::MIGRATIONS));
-    assert!(
-        msg.contains("schema version 4 is newer") && msg.contains("version 3"),
-        "{msg}"
-    );
+    assert_a_schema_3_build_refuses(&path);
 }
 
 #[test]
