@@ -9,7 +9,7 @@ use glam::{Vec3, Vec4};
 use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
 use radcache::film::Film;
-use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::method::ic::{FallbackStreams, IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::method::trc::{TemporalGradients, TemporalRadianceCaching, TrcSettings};
 use radcache::method::Method;
@@ -116,7 +116,9 @@ fn static_scene_records_live_max_life_and_frames_match_ic() {
     for f in 0..max_life {
         let frame = render_trc(&mut r, &mut trc, f);
         let stats = trc.last_frame_stats();
-        let expected = r.with_frame_context(f, |ctx| ic.render_with_cache(ctx, &cache0));
+        let expected = r.with_frame_context(f, |ctx| {
+            ic.render_with_cache(ctx, &cache0, FallbackStreams::Coherent)
+        });
         let scale = expected
             .pixels
             .iter()
