@@ -295,13 +295,20 @@ pub struct Camera {
     /// Columns: right (+X), up (+Y), backward (+Z) in world space, orthonormal.
     pub basis: Mat3,
     pub yfov: f32,
+    /// `tan(yfov/2)`, computed once: every camera ray needs it.
+    tan_half_fov: f32,
 }
 
 impl Camera {
+    /// `tan(yfov/2)`: half the film's height at distance 1.
+    pub fn tan_half_fov(&self) -> f32 {
+        self.tan_half_fov
+    }
+
     /// Direction of the ray through film point (sx, sy) ∈ [0,1]², (0,0) at the
     /// top-left corner, for an image of the given aspect ratio (width/height).
     pub fn direction(&self, sx: f32, sy: f32, aspect: f32) -> Vec3 {
-        let tan_half = (0.5 * self.yfov).tan();
+        let tan_half = self.tan_half_fov;
         let x = (2.0 * sx - 1.0) * tan_half * aspect;
         let y = (1.0 - 2.0 * sy) * tan_half;
         (self.basis * Vec3::new(x, y, -1.0)).normalize()
@@ -316,7 +323,7 @@ impl Camera {
         if local.z >= -1e-6 {
             return None;
         }
-        let tan_half = (0.5 * self.yfov).tan();
+        let tan_half = self.tan_half_fov;
         let x = local.x / -local.z / (tan_half * aspect);
         let y = local.y / -local.z / tan_half;
         Some((0.5 * (x + 1.0), 0.5 * (1.0 - y)))
@@ -469,6 +476,7 @@ fn camera_at(m: &Mat4, yfov: f32) -> Camera {
         position: translation,
         basis: Mat3::from_quat(rotation.normalize()),
         yfov,
+        tan_half_fov: (0.5 * yfov).tan(),
     }
 }
 
