@@ -17,6 +17,7 @@ use crate::method::FrameContext;
 use crate::sampling::{power_heuristic, LightChoice, Rng};
 use crate::scene::Triangle;
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// Path-length control shared by every caller.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -108,6 +109,29 @@ struct ShadowQuery {
     path: usize,
     contribution: Vec3,
 }
+
+/// [`trace_radiance`] split over the thread pool, [`QUERIES_PER_TASK`]
+/// queries a task: the same results, since each query carries its own
+/// random stream. For batches a single task would otherwise shade alone
+/// while the other threads wait — `trc` gathers a handful of records a
+/// frame, and one record is 768 queries.
+pub fn trace_radiance_parallel(
+    ctx: &FrameContext,
+    length: PathLength,
+    queries: Vec<RadianceQuery>,
+) -> Vec<RadianceResult> {
+    if queries.len() <= QUERIES_PER_TASK {
+        return trace_radiance(ctx, length, queries);
+    }
+    queries
+        .par_chunks(QUERIES_PER_TASK)
+        .flat_map_iter(|chunk| trace_radiance(ctx, length, chunk.to_vec()))
+        .collect()
+}
+
+/// Queries per task of [`trace_radiance_parallel`]: enough that a task's
+/// ray batches still amortise the backend's per-batch cost.
+const QUERIES_PER_TASK: usize = 256;
 
 /// Computes every query of the batch on the calling thread (the backend may
 /// parallelise each ray batch). Results are in query order and depend only

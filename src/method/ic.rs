@@ -29,7 +29,8 @@ use crate::cache::gather::{
 use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
 use crate::integrator::{
-    offset_origin, trace_radiance, FirstHitEmission, PathLength, RadianceQuery,
+    offset_origin, trace_radiance, trace_radiance_parallel, FirstHitEmission, PathLength,
+    RadianceQuery,
 };
 use crate::light::emitting_cosine;
 use crate::material::{luminance, Bsdf, LUMINANCE};
@@ -387,7 +388,7 @@ impl IrradianceCaching {
             };
             queries.extend(gather_queries(&c.point, strata, key));
         }
-        let results = trace_radiance(ctx, self.settings.gather_length, queries.clone());
+        let results = trace_radiance_parallel(ctx, self.settings.gather_length, queries.clone());
         let dynamic = self.keep_records.then(|| dynamic_objects(ctx));
         chunk
             .iter()
@@ -477,7 +478,7 @@ pub(crate) fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
         .collect();
     let mut hits = vec![Hit::MISS; rays.len()];
     ctx.backend.closest_hit(&rays, &mut hits);
-    let pixel_angle = 2.0 * (0.5 * camera.yfov).tan() / ctx.height as f32;
+    let pixel_angle = 2.0 * camera.tan_half_fov() / ctx.height as f32;
     rays.iter()
         .zip(&hits)
         .enumerate()
