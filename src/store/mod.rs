@@ -33,6 +33,7 @@
 //!   log without them.
 //! - The schema version lives in `meta`; see [`migrate`].
 
+pub mod compact;
 pub mod inspect;
 pub mod keys;
 pub mod migrate;
