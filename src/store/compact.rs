@@ -443,7 +443,7 @@ pub fn to_text(r: &CompactReport) -> String {
     }
     format!(
         "store {}: sample log {} → {}: {} → {} bytes\n\
-         dropped {} unreferenced bytes in {} ranges; kept {} bytes: {} frame EXRs, {} record blocks, {} sample blocks\n",
+         dropped {} unreferenced bytes in {} range(s); kept {} bytes: {} frame EXRs, {} record blocks, {} sample blocks\n",
         r.path.display(),
         name(&r.old_file),
         name(&r.new_file),
