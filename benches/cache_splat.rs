@@ -29,7 +29,7 @@ use radcache::backend::cpu::CpuBackend;
 use radcache::backend::gpu::{AdapterPolicy, GpuBackend, RaysOnly};
 use radcache::backend::gpu_cache::{GpuLookup, SplatTimings};
 use radcache::backend::{Hit, Ray, RayBackend};
-use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::method::ic::{FallbackStreams, IcSettings, IrradianceCaching};
 use radcache::method::pixels::{camera_query, PixelSample};
 use radcache::method::FrameContext;
 use radcache::render::{FrameSettings, Renderer};
@@ -181,7 +181,7 @@ fn main() {
         best(|| {
             r.with_frame_context(FRAME, |ctx| {
                 let start = Instant::now();
-                std::hint::black_box(ic.render_with_cache(ctx, &cache));
+                std::hint::black_box(ic.render_with_cache(ctx, &cache, FallbackStreams::PerFrame));
                 start.elapsed()
             })
         })

@@ -535,6 +535,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
         args.frames.start,
         args.frames.end - 1,
     );
+    if let Some(report) = summary.frame_time_report() {
+        println!("{report}");
+    }
     if let Some(report) = summary.cache_report() {
         println!("{report}");
     }

@@ -412,6 +412,31 @@ impl RenderSummary {
         ))
     }
 
+    /// The method's time per frame (the sum of its phases, file writing
+    /// excluded): median and slowest, so that uneven frames show — `trc`
+    /// regathers every record of a frame's cohort together, `δt_max`
+    /// frames after it was made.
+    pub fn frame_time_report(&self) -> Option<String> {
+        let mut times: Vec<(f64, u32)> = self
+            .frame_stats
+            .iter()
+            .map(|s| (s.phase_seconds.iter().map(|(_, t)| t).sum(), s.frame))
+            .collect();
+        if times.len() < 2 {
+            return None;
+        }
+        let (slowest, frame) =
+            times
+                .iter()
+                .copied()
+                .fold((f64::NEG_INFINITY, 0), |a, b| if b.0 > a.0 { b } else { a });
+        times.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let median = times[times.len() / 2].0;
+        (slowest > 0.0).then(|| {
+            format!("time per frame: median {median:.3} s, slowest {slowest:.3} s (frame {frame})")
+        })
+    }
+
     /// For temporal methods (records with lifespans): records reused,
     /// replaced and dropped, the mean lifespan of the records computed, and
     /// their lifespan histogram, one line per lifespan in frames.
@@ -798,4 +823,40 @@ fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
         .expect("static progress template is valid"),
     );
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn summary(phase_times: &[f64]) -> RenderSummary {
+        RenderSummary {
+            frames: phase_times.len() as u32,
+            resumed: 0,
+            frame_stats: phase_times
+                .iter()
+                .enumerate()
+                .map(|(f, &t)| FrameStats {
+                    frame: 10 + f as u32,
+                    phase_seconds: vec![("fill".into(), t / 4.0), ("render".into(), 0.75 * t)],
+                    ..FrameStats::default()
+                })
+                .collect(),
+            elapsed: Duration::from_secs(1),
+            rays: 0,
+            out_dir: PathBuf::from("out"),
+        }
+    }
+
+    #[test]
+    fn frame_time_report_names_the_median_and_the_slowest_frame() {
+        let report = summary(&[0.02, 0.03, 0.2, 0.01, 0.04]).frame_time_report();
+        assert_eq!(
+            report.as_deref(),
+            Some("time per frame: median 0.030 s, slowest 0.200 s (frame 12)")
+        );
+        // One frame, or methods that time no phases (`path`): nothing to say.
+        assert_eq!(summary(&[0.5]).frame_time_report(), None);
+        assert_eq!(summary(&[0.0, 0.0]).frame_time_report(), None);
+    }
 }

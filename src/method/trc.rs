@@ -50,7 +50,7 @@
 use super::ic::IrradianceCaching;
 use super::ic::{
     dynamic_objects, limit_gradient, mark_used, primary_candidates, render_pass, scene_bounds,
-    Candidate, Gathered, IcSettings,
+    Candidate, FallbackStreams, Gathered, IcSettings,
 };
 use super::{
     FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges, StateError,
@@ -554,7 +554,14 @@ impl TemporalRadianceCaching {
             let successor = self.successors.get(&r.record.id);
             cache.insert_as_is(r.at_frame(t, TemporalGradients::Interpolated, successor));
         }
-        let film = render_pass(ctx, &cache, &self.settings.ic, None, &mut stats);
+        let film = render_pass(
+            ctx,
+            &cache,
+            &self.settings.ic,
+            FallbackStreams::Coherent,
+            None,
+            &mut stats,
+        );
         stats
             .phase_seconds
             .push(("render".into(), start.elapsed().as_secs_f64()));
@@ -577,7 +584,14 @@ impl Method for TemporalRadianceCaching {
         let (cache, mut aged) = self.age_and_fill(ctx);
         let start = Instant::now();
         let used: Vec<AtomicBool> = (0..cache.len()).map(|_| AtomicBool::new(false)).collect();
-        let film = render_pass(ctx, &cache, &self.settings.ic, Some(&used), &mut aged.stats);
+        let film = render_pass(
+            ctx,
+            &cache,
+            &self.settings.ic,
+            FallbackStreams::Coherent,
+            Some(&used),
+            &mut aged.stats,
+        );
         aged.stats
             .phase_seconds
             .push(("render".into(), start.elapsed().as_secs_f64()));
