@@ -40,6 +40,18 @@ pub enum Command {
     Inspect(InspectArgs),
     /// Serve the HTTP API and dashboard; render queued jobs in the background.
     Serve(ServeArgs),
+    /// Rewrite a store's sample log without the bytes nothing references any more (jobs restarted with --force, frames written again).
+    Compact(CompactArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct CompactArgs {
+    /// Store directory.
+    #[arg(long, default_value = DEFAULT_DB)]
+    pub db: PathBuf,
+    /// No progress bar (the summary is still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
 #[derive(Args, Debug)]
@@ -371,6 +383,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Bench(args) => run_bench(args),
         Command::Inspect(args) => run_inspect(args),
         Command::Serve(args) => run_serve(args),
+        Command::Compact(args) => run_compact(args),
     }
 }
 
@@ -570,6 +583,15 @@ fn run_inspect(args: InspectArgs) -> Result<()> {
             store::inspect::to_text(&report, args.job.is_some() || args.frame.is_some())
         );
     }
+    Ok(())
+}
+
+fn run_compact(args: CompactArgs) -> Result<()> {
+    let mut store = Store::open_existing(&args.db)?;
+    let bar = store::compact::progress_bar(args.quiet);
+    let report = store::compact::compact(&mut store, &bar)?;
+    bar.finish_and_clear();
+    print!("{}", store::compact::to_text(&report));
     Ok(())
 }
 

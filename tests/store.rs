@@ -250,13 +250,13 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
-/// A synthetic step 4 → 5: checks that it runs after the real 1 → 2,
-/// 2 → 3 and 3 → 4 (the stored version is 4 and the jobs are in the
-/// schema-4 layout).
+/// A synthetic step 5 → 6: checks that it runs after the real 1 → 2,
+/// 2 → 3, 3 → 4 and 4 → 5 (the stored version is 5 and the jobs are in
+/// the schema-5 layout).
 fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 4u32.to_be_bytes() {
+    if version.as_ref() != 5u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -266,8 +266,8 @@ fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 5: the
-    // real 1 → 2, 2 → 3 and 3 → 4, then 4 → 5, in order.
+    // A version-1 store (fixture) brought to a synthetic version 6: the
+    // real 1 → 2, 2 → 3, 3 → 4 and 4 → 5, then 5 → 6, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -279,15 +279,16 @@ fn older_schema_is_migrated_in_order() {
         migrate::MIGRATIONS[0],
         migrate::MIGRATIONS[1],
         migrate::MIGRATIONS[2],
+        migrate::MIGRATIONS[3],
         Migration {
-            from: 4,
+            from: 5,
             name: "synthetic",
             run: add_marker,
         },
     ];
-    // Without the step for 4 → 5 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 5, &steps[..3]));
-    assert!(msg.contains("no migration from schema 4 to 5"), "{msg}");
+    // Without the step for 5 → 6 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 6, &steps[..4]));
+    assert!(msg.contains("no migration from schema 5 to 6"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -296,8 +297,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 5, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 5);
+        let store = Store::open_with(&path, false, 6, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 6);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -306,9 +307,9 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 4) now refuses the upgraded store.
+    // This build (version 5) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 5 is newer"), "{msg}");
+    assert!(msg.contains("schema version 6 is newer"), "{msg}");
 }
 
 #[test]
@@ -877,15 +878,21 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
     let store = Store::open(&path).unwrap();
     assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
     drop(store);
-    assert_a_schema_3_build_refuses(&path);
+    assert_an_older_build_refuses(&path, 3);
 }
 
-/// A build that reads schema 3 at most refuses the (schema 4) store at
-/// `path` with a clear message.
-fn assert_a_schema_3_build_refuses(path: &Path) {
-    let msg = err_text(Store::open_with(path, false, 3, migrate::MIGRATIONS));
+/// A build that reads schema `supported` at most refuses the store at
+/// `path` (of this build's schema) with a clear message.
+fn assert_an_older_build_refuses(path: &Path, supported: u32) {
+    let msg = err_text(Store::open_with(
+        path,
+        false,
+        supported,
+        migrate::MIGRATIONS,
+    ));
+    let newer = format!("schema version {} is newer", migrate::CURRENT_VERSION);
     assert!(
-        msg.contains("schema version 4 is newer") && msg.contains("version 3"),
+        msg.contains(&newer) && msg.contains(&format!("version {supported}")),
         "{msg}"
     );
 }
@@ -1285,15 +1292,15 @@ fn v3_fixture(
     (exrs, written, records)
 }
 
-/// Checks that the store at `path`, now schema 4, reads back the schema-3
-/// fixture's frames, records and samples exactly.
+/// Checks that the store at `path`, now of this build's schema, reads back
+/// the schema-3 fixture's frames, records and samples exactly.
 fn check_v3_fixture_reads_back(
     store: &Store,
     exrs: &[Vec<u8>],
     written: &[(u32, u64, Vec<PackedSample>)],
     records: &[(u32, radcache::store::schema::RecordValue)],
 ) {
-    assert_eq!(store.schema_version().unwrap(), 4);
+    assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
     for frame in 0..2u32 {
         let want: Vec<_> = records
             .iter()
@@ -1358,7 +1365,7 @@ fn version_3_store_moves_its_records_into_blocks_in_the_log() {
     check_v3_fixture_reads_back(&store, &exrs, &written, &records);
     drop(store);
     // An older build refuses it.
-    assert_a_schema_3_build_refuses(&path);
+    assert_an_older_build_refuses(&path, 3);
 }
 
 #[test]
@@ -1451,4 +1458,138 @@ fn a_frame_written_again_replaces_its_record_block() {
     assert!(store.frame_records_value(job.id, 0).unwrap().is_none());
     assert_eq!(store.frames_done(job.id).unwrap(), vec![0]);
     assert_eq!(store.job("j").unwrap().unwrap().frames_done, 1);
+}
+
+/// A schema-4 store at `path` (written by this build's writer at schema
+/// 4: the layout is the same): frames 0..2 of job "j", closed.
+fn v4_fixture(path: &Path) {
+    let store = Store::open_with(path, true, 4, migrate::MIGRATIONS).unwrap();
+    assert_eq!(store.schema_version().unwrap(), 4);
+    commit_frames(&store, "j", 0..2);
+}
+
+/// The store's frames, records and samples of job "j", as read back.
+#[allow(clippy::type_complexity)]
+fn job_j_content(
+    store: &Store,
+) -> Vec<(
+    Vec<u8>,
+    Vec<radcache::store::schema::RecordValue>,
+    Vec<Vec<PackedSample>>,
+)> {
+    let job = store.job("j").unwrap().unwrap();
+    (0..2)
+        .map(|f| {
+            let records = store.frame_records(job.id, f).unwrap();
+            let samples = records
+                .iter()
+                .map(|r| store.record_samples(job.id, f, r.id).unwrap())
+                .collect();
+            (
+                store.frame_exr(job.id, f).unwrap().unwrap(),
+                records,
+                samples,
+            )
+        })
+        .collect()
+}
+
+fn meta_generation(path: &Path) -> Option<Vec<u8>> {
+    let db = open_raw(path);
+    let meta = db.open_tree("meta").unwrap();
+    let g = meta.get(keys::META_SAMPLES_LOG_GENERATION).unwrap();
+    g.map(|v| v.to_vec())
+}
+
+#[test]
+fn version_4_store_gets_a_log_generation_and_a_schema_4_build_refuses_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    v4_fixture(&path);
+    let before = job_j_content(&Store::open_with(&path, false, 4, migrate::MIGRATIONS).unwrap());
+    assert_eq!(meta_generation(&path), None);
+    {
+        let store = Store::open(&path).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 5);
+        assert_eq!(job_j_content(&store), before);
+        assert_eq!(store.sample_log_file(), path.join("samples.log"));
+    }
+    assert_eq!(meta_generation(&path), Some(0u64.to_be_bytes().to_vec()));
+    // An older build refuses it (its log may have moved by now).
+    assert_an_older_build_refuses(&path, 4);
+}
+
+#[test]
+fn interrupted_0004_to_0005_migration_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    v4_fixture(&path);
+    let before = job_j_content(&Store::open_with(&path, false, 4, migrate::MIGRATIONS).unwrap());
+    // A crash after the step, before the version bump: still schema 4.
+    {
+        let db = open_raw(&path);
+        radcache::store::v4::migrate_to_v5(&db, &path).unwrap();
+        db.flush().unwrap();
+    }
+    assert_eq!(
+        Store::open_with(&path, false, 4, migrate::MIGRATIONS)
+            .unwrap()
+            .schema_version()
+            .unwrap(),
+        4
+    );
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.schema_version().unwrap(), 5);
+    assert_eq!(job_j_content(&store), before);
+    drop(store);
+    assert_eq!(meta_generation(&path), Some(0u64.to_be_bytes().to_vec()));
+}
+
+#[test]
+fn leftover_logs_are_removed_on_open_and_a_missing_current_log_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    store_with_two_frames(&path);
+    // A compaction's leftover (a new log that never switched), and files
+    // that are no log.
+    for name in [
+        "samples.1.log",
+        "samples.7.log",
+        "samples.x.log",
+        "samples.log.bak",
+    ] {
+        std::fs::write(path.join(name), b"RCSLOG1\njunk").unwrap();
+    }
+    let store = Store::open(&path).unwrap();
+    assert_eq!(
+        store
+            .frames_done(store.job("j").unwrap().unwrap().id)
+            .unwrap(),
+        vec![0, 1]
+    );
+    for (name, kept) in [
+        ("samples.log", true),
+        ("samples.1.log", false),
+        ("samples.7.log", false),
+        ("samples.x.log", true),
+        ("samples.log.bak", true),
+    ] {
+        assert_eq!(path.join(name).exists(), kept, "{name}");
+    }
+    // `meta` naming a log that is not there: an error naming it; nothing
+    // removed.
+    store
+        .raw_insert(
+            "meta",
+            keys::META_SAMPLES_LOG_GENERATION,
+            &3u64.to_be_bytes(),
+        )
+        .unwrap();
+    drop(store);
+    let msg = err_text(Store::open(&path));
+    assert!(
+        msg.contains("samples.3.log") && msg.contains("lost?"),
+        "{msg}"
+    );
+    assert!(path.join("samples.log").exists());
 }

@@ -13,9 +13,15 @@ pub struct InspectReport {
     pub schema_version: u32,
     /// Bytes of the database files (sled's `size_on_disk`).
     pub size_on_disk: u64,
-    /// Committed bytes of the sample log (`samples.log`; the record
-    /// samples, outside sled).
+    /// The sample log's file name (`samples.log`, or `samples.N.log`
+    /// after a compaction) and its committed bytes (the bulk values,
+    /// outside sled).
+    pub sample_log_file: String,
     pub sample_log_bytes: u64,
+    /// Of those, the bytes some value references and those none does any
+    /// more (what `radcache compact` reclaims).
+    pub sample_log_referenced_bytes: u64,
+    pub sample_log_unreferenced_bytes: u64,
     /// Key and value bytes per tree (logical: before sled's own overhead).
     pub trees: Vec<TreeReport>,
     /// `size_on_disk` / Σ (key + value bytes): sled's space amplification.
@@ -131,11 +137,19 @@ pub fn report(
     for j in &jobs {
         reports.push(job_report(store, j, frame)?);
     }
+    let usage = super::compact::log_usage(store)?;
+    let log_file = store.sample_log_file();
     Ok(InspectReport {
         path: store.path().display().to_string(),
         schema_version: store.schema_version()?,
         size_on_disk,
-        sample_log_bytes: store.sample_log_bytes(),
+        sample_log_file: log_file
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default(),
+        sample_log_bytes: usage.committed,
+        sample_log_referenced_bytes: usage.referenced,
+        sample_log_unreferenced_bytes: usage.unreferenced,
         trees,
         space_amplification: size_on_disk as f64 / logical.max(1) as f64,
         jobs: reports,
@@ -250,6 +264,18 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
         s,
         "store {} (schema {}): {} bytes on disk, space amplification {:.2}; sample log {} bytes",
         r.path, r.schema_version, r.size_on_disk, r.space_amplification, r.sample_log_bytes
+    );
+    let _ = writeln!(
+        s,
+        "sample log {}: {} bytes referenced, {} unreferenced{}",
+        r.sample_log_file,
+        r.sample_log_referenced_bytes,
+        r.sample_log_unreferenced_bytes,
+        if r.sample_log_unreferenced_bytes > 0 {
+            " (`radcache compact` reclaims them)"
+        } else {
+            ""
+        }
     );
     let _ = writeln!(
         s,

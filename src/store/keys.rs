@@ -2,8 +2,10 @@
 //! parses raw keys (STYLE.md). Integers are big-endian so that sled's
 //! lexicographic order is numeric order and prefix scans walk space-time
 //! in order. The layout is documented in `migrations/0001_initial.md`,
-//! `migrations/0002_state_and_identity.md`, `migrations/0003_sample_log.md`
-//! and `migrations/0004_record_blocks.md` (schema 4, this one).
+//! `migrations/0002_state_and_identity.md`, `migrations/0003_sample_log.md`,
+//! `migrations/0004_record_blocks.md` and
+//! `migrations/0005_log_generations.md` (schema 5, this one: no key
+//! changed but `meta.samples_log_generation`).
 //!
 //! | tree      | key                                   | bytes |
 //! |-----------|---------------------------------------|-------|
@@ -40,6 +42,11 @@ pub const META_CREATED_BY: &[u8] = b"created_by";
 /// `meta` key of the sample log's committed length (u64 big-endian):
 /// records reference no byte beyond it (see `store::samples`).
 pub const META_SAMPLES_LOG_LEN: &[u8] = b"samples_log_len";
+/// `meta` key of the sample log's generation (u64 big-endian; schema 5,
+/// `migrations/0005_log_generations.md`): the log is the file
+/// `store::samples::file_name(generation)`; each compaction writes the
+/// next one. Absent: 0 (`samples.log`).
+pub const META_SAMPLES_LOG_GENERATION: &[u8] = b"samples_log_generation";
 /// `meta` key of the 0002 → 0003 migration's progress: the last `records`
 /// key it converted (left in place after it; see
 /// `migrations/0003_sample_log.md`).

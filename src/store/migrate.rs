@@ -12,7 +12,7 @@ use super::{keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 4;
+pub const CURRENT_VERSION: u32 = 5;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -41,6 +41,11 @@ pub const MIGRATIONS: &[Migration] = &[
         from: 3,
         name: "0004_record_blocks",
         run: super::v3::migrate_to_v4,
+    },
+    Migration {
+        from: 4,
+        name: "0005_log_generations",
+        run: super::v4::migrate_to_v5,
     },
 ];
 

@@ -1,12 +1,13 @@
 //! The persistent space-time store (DESIGN.md "The store"): a sled 0.34
 //! database directory with one tree per kind — `meta`, `records`,
 //! `movies`, `frames`, `jobs`, `stats`, `state` — and, beside it in the
-//! same directory, the append-only sample log `samples.log`
-//! ([`samples`]).
+//! same directory, the append-only sample log `samples.log` (after a
+//! [`compact`]ion, `samples.N.log`: `meta` names it) ([`samples`]).
 //!
 //! - Keys: big-endian, built only by [`keys`] (layout there and in
 //!   `migrations/0001_initial.md`, `migrations/0002_state_and_identity.md`,
-//!   `migrations/0003_sample_log.md`, `migrations/0004_record_blocks.md`).
+//!   `migrations/0003_sample_log.md`, `migrations/0004_record_blocks.md`,
+//!   `migrations/0005_log_generations.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
 //! - Bulk values are zstd-compressed and live in the sample log, whose
@@ -27,8 +28,12 @@
 //!   frame, as of the job's last frame: each frame writes only its changes
 //!   (records put and removed, and the head), and a resume loads it
 //!   ([`Store::load_state`]) instead of rendering the finished frames again.
+//! - Bytes of the log no value references any more (a job restarted with
+//!   `--force`, a frame written again) stay until [`compact`] rewrites the
+//!   log without them.
 //! - The schema version lives in `meta`; see [`migrate`].
 
+pub mod compact;
 pub mod inspect;
 pub mod keys;
 pub mod migrate;
@@ -38,6 +43,7 @@ pub mod schema;
 pub mod v1;
 pub mod v2;
 pub mod v3;
+pub mod v4;
 
 use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};
 use rkyv::bytecheck::CheckBytes;
@@ -139,6 +145,9 @@ pub struct Store {
     records: sled::Tree,
     state: sled::Tree,
     movies: sled::Tree,
+    /// The sample log's generation (`meta.samples_log_generation`): its
+    /// file is [`samples::file_name`] of it.
+    log_generation: u64,
     /// The sample log; locked over a whole [`Store::commit_frame`] (its
     /// appends and the transaction that commits them).
     log: std::sync::Mutex<SampleLog>,
@@ -260,19 +269,25 @@ impl Store {
             Some(found) => Some(migrate::migrate(path, &db, &meta, found, target, steps)?),
             None => None,
         };
-        let log_error = |detail: String| StoreError::SampleLog {
-            path: path.to_owned(),
-            file: path.join(samples::FILE_NAME),
-            detail,
-        };
-        let committed = v2::read_meta_u64(&meta, keys::META_SAMPLES_LOG_LEN).map_err(|detail| {
-            StoreError::Corrupt {
+        let meta_u64 = |key: &[u8]| {
+            v2::read_meta_u64(&meta, key).map_err(|detail| StoreError::Corrupt {
                 path: path.to_owned(),
                 tree: "meta",
-                key: keys::describe(keys::META_SAMPLES_LOG_LEN),
+                key: keys::describe(key),
                 detail,
-            }
-        })?;
+            })
+        };
+        let committed = meta_u64(keys::META_SAMPLES_LOG_LEN)?;
+        let log_generation = meta_u64(keys::META_SAMPLES_LOG_GENERATION)?.unwrap_or(0);
+        let log_error = |detail: String| StoreError::SampleLog {
+            path: path.to_owned(),
+            file: path.join(samples::file_name(log_generation)),
+            detail,
+        };
+        let log = SampleLog::open(path, log_generation, committed).map_err(log_error)?;
+        // Only now that the current log opened: the leftovers of a
+        // compaction killed before or after its switch.
+        samples::remove_stale_logs(path, log_generation).map_err(log_error)?;
         let store = Store {
             path: path.to_owned(),
             meta,
@@ -282,7 +297,8 @@ impl Store {
             records: tree("records")?,
             state: tree("state")?,
             movies: tree("movies")?,
-            log: std::sync::Mutex::new(SampleLog::open(path, committed).map_err(log_error)?),
+            log_generation,
+            log: std::sync::Mutex::new(log),
             db,
         };
         match version {
@@ -341,7 +357,13 @@ impl Store {
             .map_err(|e| StoreError::sled(&self.path, e))
     }
 
-    /// Committed bytes of the sample log (`samples.log`).
+    /// The sample log's file (`samples.log`, or `samples.N.log` after a
+    /// compaction).
+    pub fn sample_log_file(&self) -> PathBuf {
+        self.path.join(samples::file_name(self.log_generation))
+    }
+
+    /// Committed bytes of the sample log ([`Self::sample_log_file`]).
     pub fn sample_log_bytes(&self) -> u64 {
         self.lock_log().committed()
     }
@@ -354,7 +376,7 @@ impl Store {
     fn log_error(&self, detail: impl ToString) -> StoreError {
         StoreError::SampleLog {
             path: self.path.clone(),
-            file: self.path.join(samples::FILE_NAME),
+            file: self.sample_log_file(),
             detail: detail.to_string(),
         }
     }
@@ -500,7 +522,8 @@ impl Store {
     /// Deletes every key of job id `job` in the per-job trees.
     fn delete_job_data(&self, job: u64) -> Result<(), StoreError> {
         let prefix = keys::job_prefix(job);
-        // Their samples stay in the log, unreferenced (it is append-only).
+        // Their bytes stay in the log, unreferenced (it is append-only),
+        // until `radcache compact` ([`compact`]).
         for tree in [&self.frames, &self.stats, &self.records, &self.state] {
             for key in tree.scan_prefix(prefix).keys() {
                 let key = key.map_err(|e| StoreError::sled(&self.path, e))?;

@@ -22,6 +22,13 @@
 //!   acknowledged (a crash between the append and the transaction): opening
 //!   the store truncates them. A log shorter than its committed length has
 //!   lost acknowledged data: opening the store fails, naming the file.
+//! - Schema 5 (`migrations/0005_log_generations.md`): `radcache compact`
+//!   ([`super::compact`]) rewrites the log without its unreferenced bytes
+//!   into a new file, so the log has a generation: `meta.samples_log_generation`
+//!   (u64 big-endian; absent: 0) names the file, [`file_name`]. Any other
+//!   log file in the directory is a compaction's leftover (the new file of
+//!   one that never switched, or the old file of one that did) and is
+//!   removed when the store is opened ([`remove_stale_logs`]).
 
 use super::rgbe::PackedSample;
 use crate::cache::gather::HemisphereSamples;
@@ -29,8 +36,59 @@ use std::fs::{File, OpenOptions};
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
-/// The log's file name inside the store directory.
+/// The log's file name inside the store directory before any compaction
+/// (generation 0; schemas 3 and 4 know only it).
 pub const FILE_NAME: &str = "samples.log";
+
+/// The file name of log generation `generation`: [`FILE_NAME`] for 0,
+/// `samples.N.log` for the log the Nth compaction wrote.
+pub fn file_name(generation: u64) -> String {
+    match generation {
+        0 => FILE_NAME.to_string(),
+        n => format!("samples.{n}.log"),
+    }
+}
+
+/// The generation of a log file name (the inverse of [`file_name`]), or
+/// `None` if `name` names no log.
+pub fn parse_file_name(name: &str) -> Option<u64> {
+    if name == FILE_NAME {
+        return Some(0);
+    }
+    let digits = name.strip_prefix("samples.")?.strip_suffix(".log")?;
+    let n: u64 = digits.parse().ok()?;
+    // Exactly what `file_name` writes: no `samples.0.log`, `samples.01.log`.
+    (n > 0 && file_name(n) == name).then_some(n)
+}
+
+/// Removes every log file in store directory `dir` but generation
+/// `current`'s (a compaction's leftovers: see the module comment), then
+/// syncs the directory; returns the files removed. Call only with the
+/// store's lock held and its current log opened.
+pub fn remove_stale_logs(dir: &Path, current: u64) -> Result<Vec<PathBuf>, String> {
+    let entries = std::fs::read_dir(dir).map_err(|e| format!("cannot list the directory: {e}"))?;
+    let mut removed = Vec::new();
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if parse_file_name(&name).is_some_and(|g| g != current) {
+            std::fs::remove_file(entry.path())
+                .map_err(|e| format!("cannot remove leftover log {name}: {e}"))?;
+            removed.push(entry.path());
+        }
+    }
+    if !removed.is_empty() {
+        sync_dir(dir)?;
+    }
+    Ok(removed)
+}
+
+/// Makes the directory's entries (a file created, renamed or removed)
+/// durable.
+pub fn sync_dir(dir: &Path) -> Result<(), String> {
+    File::open(dir)
+        .and_then(|d| d.sync_all())
+        .map_err(|e| format!("cannot sync directory {}: {e}", dir.display()))
+}
 
 /// First 8 bytes of a sample log (format version 1).
 pub const MAGIC: &[u8; 8] = b"RCSLOG1\n";
@@ -156,12 +214,13 @@ pub struct SampleLog {
 }
 
 impl SampleLog {
-    /// Opens (or creates) the log in store directory `dir`, whose `meta`
-    /// says `committed` bytes are referenced (`None`: nothing ever was).
-    /// A tail beyond `committed` is truncated; a file shorter than
-    /// `committed`, or without the header, is an error.
-    pub fn open(dir: &Path, committed: Option<u64>) -> Result<SampleLog, String> {
-        let path = dir.join(FILE_NAME);
+    /// Opens (or creates) the log of generation `generation` ([`file_name`])
+    /// in store directory `dir`, whose `meta` says `committed` bytes are
+    /// referenced (`None`: nothing ever was: the file is created, or
+    /// emptied). A tail beyond `committed` is truncated; a file shorter
+    /// than `committed`, or without the header, is an error.
+    pub fn open(dir: &Path, generation: u64, committed: Option<u64>) -> Result<SampleLog, String> {
+        let path = dir.join(file_name(generation));
         let file = OpenOptions::new()
             .read(true)
             .write(true)
@@ -272,5 +331,31 @@ impl SampleLog {
             .read_exact_at(&mut out, offset)
             .map_err(|e| format!("cannot read bytes {offset}..{stop}: {e}"))?;
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_file_names_round_trip_and_nothing_else_parses() {
+        for g in [0, 1, 2, 10, u64::MAX] {
+            assert_eq!(parse_file_name(&file_name(g)), Some(g));
+        }
+        assert_eq!(file_name(0), "samples.log");
+        assert_eq!(file_name(3), "samples.3.log");
+        for other in [
+            "samples.0.log",
+            "samples.03.log",
+            "samples.x.log",
+            "samples..log",
+            "samples.log.bak",
+            "samples.-1.log",
+            "samples.+1.log",
+            "db",
+        ] {
+            assert_eq!(parse_file_name(other), None, "{other}");
+        }
     }
 }

@@ -1,9 +1,11 @@
-//! Value schemas of store schema version 4
-//! (`migrations/0004_record_blocks.md`, on top of
-//! `migrations/0003_sample_log.md`, `migrations/0002_state_and_identity.md`
-//! and `migrations/0001_initial.md`; the types schema 3 changed are kept in
-//! [`super::v2`], those schema 2 changed in [`super::v1`]; schema 4 changed
-//! where [`RecordValue`]s are kept, not the type).
+//! Value schemas of store schema version 5
+//! (`migrations/0005_log_generations.md`, on top of
+//! `migrations/0004_record_blocks.md`, `migrations/0003_sample_log.md`,
+//! `migrations/0002_state_and_identity.md` and `migrations/0001_initial.md`;
+//! the types schema 3 changed are kept in [`super::v2`], those schema 2
+//! changed in [`super::v1`]; schema 4 changed where [`RecordValue`]s are
+//! kept, not the type; schema 5 changed no type, only which file the
+//! offsets below point into: the log `meta.samples_log_generation` names).
 //! Every value is an rkyv 0.8 archive, validated (bytecheck) when read.
 //! Bulk values live in the sample log ([`super::samples`]), zstd-compressed:
 //! frame EXR files (the frame says where), each frame's records as one
@@ -78,7 +80,7 @@ pub struct FrameValue {
     pub height: u32,
     /// Length of the EXR file before zstd.
     pub exr_len: u64,
-    /// Where the compressed EXR lies in `samples.log`, and its length.
+    /// Where the compressed EXR lies in the sample log, and its length.
     pub exr_offset: u64,
     pub exr_stored_len: u32,
 }

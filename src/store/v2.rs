@@ -122,7 +122,8 @@ pub fn migrate_to_v3_batches(
         tree("samples")?,
     );
     let committed = read_meta_u64(&meta, keys::META_SAMPLES_LOG_LEN)?;
-    let mut log = SampleLog::open(dir, committed).map_err(|e| format!("{LOG_FILE}: {e}"))?;
+    // Generation 0: logs of other generations came with schema 5.
+    let mut log = SampleLog::open(dir, 0, committed).map_err(|e| format!("{LOG_FILE}: {e}"))?;
     let mut budget = max_batches.unwrap_or(usize::MAX);
     let log_err = |e: std::io::Error| format!("{LOG_FILE}: {e}");
     // Records: their samples into the log, their `samples` values removed.

@@ -53,7 +53,8 @@ pub fn migrate_to_v4_batches(
     let tree = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
     let (meta, records) = (tree("meta")?, tree("records")?);
     let committed = read_meta_u64(&meta, keys::META_SAMPLES_LOG_LEN)?;
-    let mut log = SampleLog::open(dir, committed).map_err(|e| format!("{LOG_FILE}: {e}"))?;
+    // Generation 0: logs of other generations came with schema 5.
+    let mut log = SampleLog::open(dir, 0, committed).map_err(|e| format!("{LOG_FILE}: {e}"))?;
     let log_err = |e: std::io::Error| format!("{LOG_FILE}: {e}");
     let mut through = meta
         .get(keys::META_MIGRATE_0004_THROUGH)
