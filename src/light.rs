@@ -12,8 +12,9 @@ use std::f32::consts::PI;
 /// Where the light of a sample comes from.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Source {
-    /// Emissive triangle (snapshot triangle id).
-    Triangle(u32),
+    /// Emissive triangle: snapshot triangle id, and its area and unit
+    /// normal (computed once per snapshot, not for every sample).
+    Triangle { id: u32, area: f32, normal: Vec3 },
     /// Punctual light (index into `Snapshot::lights`).
     Point(usize),
 }
@@ -60,7 +61,11 @@ impl LightSampler {
         for (i, tri) in snapshot.triangles.iter().enumerate() {
             let m = &materials[snapshot.tri_material[i] as usize];
             if m.is_emissive() && tri.area() > 0.0 {
-                sources.push(Source::Triangle(i as u32));
+                sources.push(Source::Triangle {
+                    id: i as u32,
+                    area: tri.area(),
+                    normal: tri.geometric_normal(),
+                });
                 power.push(triangle_power(tri, m.emission, m.double_sided));
             }
         }
@@ -85,8 +90,8 @@ impl LightSampler {
         }
         let mut triangle_pick = vec![0.0; snapshot.triangles.len()];
         for (k, source) in sources.iter().enumerate() {
-            if let Source::Triangle(t) = source {
-                triangle_pick[*t as usize] = power[k] / total;
+            if let Source::Triangle { id, .. } = source {
+                triangle_pick[*id as usize] = power[k] / total;
             }
         }
         LightSampler {
@@ -124,8 +129,8 @@ impl LightSampler {
             .min(self.cdf.len() - 1);
         let pick_pdf = self.pick_probability(k);
         match self.sources[k] {
-            Source::Triangle(t) => {
-                let tri = &snapshot.triangles[t as usize];
+            Source::Triangle { id, area, normal } => {
+                let tri = &snapshot.triangles[id as usize];
                 let (bu, bv) = uniform_triangle(u);
                 let position = tri.point(bu, bv);
                 let to_light = position - p;
@@ -135,10 +140,10 @@ impl LightSampler {
                 }
                 let distance = d2.sqrt();
                 let wi = to_light / distance;
-                let m = &materials[snapshot.tri_material[t as usize] as usize];
-                let cos_light = emitting_cosine(tri, m.double_sided, -wi)?;
+                let m = &materials[snapshot.tri_material[id as usize] as usize];
+                let cos_light = emitting_side_cosine(normal, m.double_sided, -wi)?;
                 // Area pdf 1/A converted to solid angle: d²/(A·cosθ_l).
-                let pdf = pick_pdf * d2 / (tri.area() * cos_light);
+                let pdf = pick_pdf * d2 / (area * cos_light);
                 Some(LightSample {
                     position,
                     wi,
@@ -199,7 +204,12 @@ impl LightSampler {
 /// leaving the light), or `None` if that side does not emit. Front faces are
 /// counter-clockwise (glTF); `double_sided` emitters emit from both sides.
 pub fn emitting_cosine(tri: &Triangle, double_sided: bool, w: Vec3) -> Option<f32> {
-    let cos = tri.geometric_normal().dot(w);
+    emitting_side_cosine(tri.geometric_normal(), double_sided, w)
+}
+
+/// [`emitting_cosine`] for an emitter of unit geometric normal `normal`.
+fn emitting_side_cosine(normal: Vec3, double_sided: bool, w: Vec3) -> Option<f32> {
+    let cos = normal.dot(w);
     if cos > 0.0 {
         Some(cos)
     } else if double_sided && cos < 0.0 {

@@ -19,7 +19,7 @@
 //!   records for glossy surfaces land).
 
 use super::lookups::{Interpolation, Lookup};
-use super::pixels::{self, camera_query, first_light_sample, PixelSample};
+use super::pixels::{self, camera_query, FirstLightSampler, PixelSample};
 use super::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
@@ -754,10 +754,11 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
         mut rngs,
         hits,
     } = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
+    let mut lights = FirstLightSampler::default();
     let light_samples: Vec<LightChoice> = samples
         .iter()
         .zip(&mut rngs)
-        .map(|(s, rng)| first_light_sample(ctx, s, rng))
+        .map(|(s, rng)| lights.sample(ctx, s, rng))
         .collect();
     let surfaces: Vec<Option<Surface>> = rays
         .iter()

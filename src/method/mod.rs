@@ -85,7 +85,8 @@ pub struct FrameStats {
     pub lookups: u64,
     /// Sum over lookups of the records interpolated (mean = this / lookups).
     pub lookup_records: u64,
-    /// Lookups no record covered, computed by path tracing instead.
+    /// Pixel samples whose lookup no record covered, their indirect light
+    /// path-traced instead (the name predates per-pixel lookups).
     pub fallback_lookups: u64,
     /// Mean lifespan, in frames, of the records computed in the frame (new
     /// and replacements; temporal methods: TRC Eq. 10–11, at most δt_max).

@@ -4,7 +4,7 @@
 //! more samples at the edge of a seen light: [`super::pixels`]) are handed
 //! to the shared path-tracing engine in [`crate::integrator`].
 
-use super::pixels::{self, camera_query, first_light_sample, PixelSample};
+use super::pixels::{self, camera_query, FirstLightSampler, PixelSample};
 use super::{FrameContext, Method};
 use crate::backend::{Hit, Ray};
 use crate::film::Film;
@@ -47,13 +47,14 @@ impl PathTracer {
         ctx: &FrameContext,
         samples: &[PixelSample],
     ) -> (Vec<Ray>, Vec<crate::integrator::RadianceResult>) {
+        let mut lights = FirstLightSampler::default();
         let queries: Vec<RadianceQuery> = samples
             .iter()
             .map(|s| {
                 let (ray, mut rng) = camera_query(ctx, s);
                 RadianceQuery {
                     ray,
-                    first_light: Some(first_light_sample(ctx, s, &mut rng)),
+                    first_light: Some(lights.sample(ctx, s, &mut rng)),
                     rng,
                     weight: Vec3::ONE,
                     first_hit: FirstHitEmission::Include,

@@ -141,27 +141,54 @@ pub fn camera_query(ctx: &FrameContext, s: &PixelSample) -> (Ray, Rng) {
 const LIGHT_PICK_SCRAMBLE: u32 = u32::MAX;
 const LIGHT_POSITION_SCRAMBLE: u32 = u32::MAX - 1;
 
-/// The light sample used at the first surface a pixel sample hits: which
-/// light and where on it, both stratified over the samples of the sample's
-/// set like the pixel position, with strata paired by per-pixel random
-/// permutations ([`stratified_2d`]). Soft shadows, area-light shading and
-/// the choice among several lights are the largest noise left once edges
-/// are stratified.
-pub fn first_light_sample(ctx: &FrameContext, s: &PixelSample, rng: &mut Rng) -> LightChoice {
-    let scramble = |reserved| Rng::new(ctx.pixel_key(s.pixel, reserved)).next_u32();
-    LightChoice {
-        pick: stratified_1d(
-            s.stratum,
-            s.strata,
-            rng.next_f32(),
-            scramble(LIGHT_PICK_SCRAMBLE),
-        ),
-        u: stratified_2d(
-            s.stratum,
-            s.strata,
-            rng.next_2d(),
-            Some(scramble(LIGHT_POSITION_SCRAMBLE)),
-        ),
+/// The random permutations, one per pixel, that pair the strata of its
+/// samples' first light samples with their pixel strata
+/// ([`FirstLightSampler::sample`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct LightScrambles {
+    pick: u32,
+    position: u32,
+}
+
+impl LightScrambles {
+    fn of(ctx: &FrameContext, pixel: u32) -> Self {
+        let scramble = |reserved| Rng::new(ctx.pixel_key(pixel, reserved)).next_u32();
+        LightScrambles {
+            pick: scramble(LIGHT_PICK_SCRAMBLE),
+            position: scramble(LIGHT_POSITION_SCRAMBLE),
+        }
+    }
+}
+
+/// Draws the first light samples of a run of pixel samples, hashing each
+/// pixel's scrambles once for the run of its samples rather than once per
+/// sample (two keyed generators a sample were about a tenth of the render
+/// pass outside ray traversal).
+#[derive(Default)]
+pub struct FirstLightSampler {
+    last: Option<(u32, LightScrambles)>,
+}
+
+impl FirstLightSampler {
+    /// The light sample used at the first surface sample `s` hits: which
+    /// light and where on it, both stratified over the samples of the
+    /// sample's set like the pixel position, with strata paired by
+    /// per-pixel random permutations ([`stratified_2d`]). Soft shadows,
+    /// area-light shading and the choice among several lights are the
+    /// largest noise left once edges are stratified.
+    pub fn sample(&mut self, ctx: &FrameContext, s: &PixelSample, rng: &mut Rng) -> LightChoice {
+        let scrambles = match self.last {
+            Some((pixel, scrambles)) if pixel == s.pixel => scrambles,
+            _ => {
+                let scrambles = LightScrambles::of(ctx, s.pixel);
+                self.last = Some((s.pixel, scrambles));
+                scrambles
+            }
+        };
+        LightChoice {
+            pick: stratified_1d(s.stratum, s.strata, rng.next_f32(), scrambles.pick),
+            u: stratified_2d(s.stratum, s.strata, rng.next_2d(), Some(scrambles.position)),
+        }
     }
 }
 
