@@ -102,6 +102,11 @@ impl Bsdf {
             return 0.0;
         }
         let diffuse = cos_i * FRAC_1_PI;
+        if !self.has_specular() {
+            // No `cosⁿα` to evaluate (a `powf`, a twentieth of a diffuse
+            // path tracer's time when it was evaluated and multiplied by 0).
+            return diffuse;
+        }
         (1.0 - self.specular_pick) * diffuse + self.specular_pick * self.pdf_specular(wo, wi)
     }
 
