@@ -1152,14 +1152,7 @@ fn interrupted_0002_to_0003_migration_resumes_where_it_stopped() {
         assert_eq!(db.open_tree("samples").unwrap().len(), written.len() - 10);
         u64::from_be_bytes(len.as_ref().try_into().unwrap())
     };
-    {
-        use std::io::Write;
-        let mut f = std::fs::OpenOptions::new()
-            .append(true)
-            .open(path.join("samples.log"))
-            .unwrap();
-        f.write_all(&[0x55; 777]).unwrap();
-    }
+    append_torn_bytes_to_the_log(&path);
     let store = Store::open(&path).unwrap();
     assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
     for (frame, id, samples) in &written {
@@ -1399,14 +1392,7 @@ fn interrupted_0003_to_0004_migration_resumes_where_it_stopped() {
         assert_eq!(lens.iter().filter(|&&l| l == 12).count(), 1);
         assert_eq!(lens.iter().filter(|&&l| l == 20).count(), in_frame_1);
     }
-    {
-        use std::io::Write;
-        let mut f = std::fs::OpenOptions::new()
-            .append(true)
-            .open(path.join("samples.log"))
-            .unwrap();
-        f.write_all(&[0x55; 777]).unwrap();
-    }
+    append_torn_bytes_to_the_log(&path);
     let store = Store::open(&path).unwrap();
     check_v3_fixture_reads_back(&store, &exrs, &written, &records);
 }
@@ -1592,4 +1578,15 @@ fn leftover_logs_are_removed_on_open_and_a_missing_current_log_is_an_error() {
         "{msg}"
     );
     assert!(path.join("samples.log").exists());
+}
+
+/// What a crash after an append, before its commit, leaves: 777 bytes past
+/// the committed end of `samples.log`, which opening the store must cut off.
+fn append_torn_bytes_to_the_log(store_dir: &std::path::Path) {
+    use std::io::Write;
+    let mut f = std::fs::OpenOptions::new()
+        .append(true)
+        .open(store_dir.join("samples.log"))
+        .unwrap();
+    f.write_all(&[0x55; 777]).unwrap();
 }
