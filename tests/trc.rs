@@ -11,7 +11,9 @@ use radcache::cache::gather::Strata;
 use radcache::film::Film;
 use radcache::method::ic::{FallbackStreams, IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
-use radcache::method::trc::{TemporalGradients, TemporalRadianceCaching, TrcSettings};
+use radcache::method::trc::{
+    TemporalGradients, TemporalRadianceCaching, TemporalRecord, TrcSettings,
+};
 use radcache::method::Method;
 use radcache::metrics::flicker;
 use radcache::render::{FrameSettings, Renderer};
@@ -89,6 +91,24 @@ fn lit_room(off_at: Option<u32>, fps: f32) -> Scene {
 
 fn render_trc(r: &mut Renderer, trc: &mut TemporalRadianceCaching, frame: u32) -> Film {
     r.with_frame_context(frame, |ctx| trc.render_frame(ctx))
+}
+
+/// The records of a default `trc` (1 spp) that rendered frame `t0` alone,
+/// and their irradiance gathered again at `t0 + 1` with their own random
+/// streams (unchanged samples cancel): the actual `E(t0+1)` their
+/// estimates are measured against.
+fn records_and_their_next_frame(r: &mut Renderer, t0: u32) -> (Vec<TemporalRecord>, Vec<Vec3>) {
+    let mut trc = TemporalRadianceCaching::new(TrcSettings {
+        ic: IcSettings {
+            spp: 1,
+            ..IcSettings::default()
+        },
+        ..TrcSettings::default()
+    });
+    let _ = render_trc(r, &mut trc, t0);
+    let records = trc.records().to_vec();
+    let next = r.with_frame_context(t0 + 1, |ctx| trc.regather(ctx, &records));
+    (records, next)
 }
 
 /// Static scene: τ = 1 exactly (nothing moves, so no sample is
@@ -184,16 +204,7 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
     let mut errors = (Vec::new(), Vec::new());
     let mut seeing = (Vec::new(), Vec::new());
     for t0 in [5u32, 20] {
-        let mut trc = TemporalRadianceCaching::new(TrcSettings {
-            ic: IcSettings {
-                spp: 1,
-                ..IcSettings::default()
-            },
-            ..TrcSettings::default()
-        });
-        let _ = render_trc(&mut r, &mut trc, t0);
-        let records = trc.records().to_vec();
-        let actual = r.with_frame_context(t0 + 1, |ctx| trc.regather(ctx, &records));
+        let (records, actual) = records_and_their_next_frame(&mut r, t0);
         // Relative to the frame's mean record irradiance: records in the
         // dark (under the cube) would divide by almost nothing.
         let mean: f32 =
@@ -620,16 +631,7 @@ fn spheres_records_change_per_frame() {
     let half = TrcSettings::default().temporal_accuracy / 2.0;
     let (mut records_seen, mut estimated, mut actual) = (0, 0, 0);
     for t0 in [5u32, 20] {
-        let mut trc = TemporalRadianceCaching::new(TrcSettings {
-            ic: IcSettings {
-                spp: 1,
-                ..IcSettings::default()
-            },
-            ..TrcSettings::default()
-        });
-        let _ = render_trc(&mut r, &mut trc, t0);
-        let records = trc.records().to_vec();
-        let next = r.with_frame_context(t0 + 1, |ctx| trc.regather(ctx, &records));
+        let (records, next) = records_and_their_next_frame(&mut r, t0);
         for (k, e1) in records.iter().zip(next) {
             let e0 = k.record.irradiance;
             let change = (0..3)
