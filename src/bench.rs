@@ -765,11 +765,11 @@ struct ReferenceInfo {
     /// error exists; an older reference is rendered again).
     #[serde(default)]
     light_masks: bool,
-    /// Extra samples of pixels on a seen light's edge, in units of `spp`
-    /// (`method::pixels`; 0 in references made before it existed, which
-    /// are rendered again).
+    /// Coverage-only camera rays of pixels on a seen light's edge, in units
+    /// of `spp` (`method::pixels`; 0 in references made before the edge
+    /// pixels were post-stratified, which are rendered again).
     #[serde(default)]
-    emitter_edge_factor: u32,
+    edge_coverage_factor: u32,
 }
 
 fn fnv1a(bytes: &[u8]) -> u64 {
@@ -913,7 +913,7 @@ fn ensure_reference(opts: &BenchOptions, source: &SceneSource, dir: &Path) -> Re
         method: "path".into(),
         same_pattern: true,
         light_masks: true,
-        emitter_edge_factor: frame_settings(opts, true).emitter_edge_factor,
+        edge_coverage_factor: frame_settings(opts, true).edge_coverage_factor,
     };
     let json = dir.join("reference.json");
     let have = std::fs::read_to_string(&json)

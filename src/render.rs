@@ -134,9 +134,9 @@ pub struct FrameSettings {
     pub seed: u64,
     /// Same random sequence in every frame (`--same-pattern`).
     pub same_pattern: bool,
-    /// Extra samples of a pixel on the edge of a directly seen light, in
-    /// units of the method's samples per pixel (`method::pixels`).
-    pub emitter_edge_factor: u32,
+    /// Coverage-only camera rays of a pixel on the edge of a directly seen
+    /// light, in units of the method's samples per pixel (`method::pixels`).
+    pub edge_coverage_factor: u32,
 }
 
 impl Default for FrameSettings {
@@ -147,7 +147,7 @@ impl Default for FrameSettings {
             fps: crate::scene::DEFAULT_FPS,
             seed: 0,
             same_pattern: false,
-            emitter_edge_factor: crate::method::pixels::DEFAULT_EMITTER_EDGE_FACTOR,
+            edge_coverage_factor: crate::method::pixels::DEFAULT_EDGE_COVERAGE_FACTOR,
         }
     }
 }
@@ -319,7 +319,7 @@ impl Renderer {
             height: self.settings.height,
             seed: self.settings.seed,
             same_pattern: self.settings.same_pattern,
-            emitter_edge_factor: self.settings.emitter_edge_factor,
+            edge_coverage_factor: self.settings.edge_coverage_factor,
         };
         f(&ctx)
     }

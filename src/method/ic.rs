@@ -19,7 +19,7 @@
 //!   records for glossy surfaces land).
 
 use super::lookups::{Interpolation, Lookup};
-use super::pixels::{self, camera_query, FirstLightSampler, PixelSample};
+use super::pixels::{self, camera_query, EmitterEdges, FirstLightSampler, PixelSample};
 use super::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
@@ -623,6 +623,7 @@ struct Deferred {
 /// A tile's pixel samples (`spp` a pixel, then the extra ones of pixels on
 /// the edge of a seen light: [`pixels`]) with their camera rays, random
 /// streams (positioned after the jitter) and first hits.
+#[derive(Default)]
 struct PrimarySamples {
     samples: Vec<PixelSample>,
     rays: Vec<Ray>,
@@ -631,22 +632,17 @@ struct PrimarySamples {
 }
 
 impl PrimarySamples {
+    /// The `spp` samples of the `count` pixels from `first`.
     fn trace(ctx: &FrameContext, first: u32, count: u32, spp: u32) -> Self {
-        let mut primary = PrimarySamples {
-            samples: Vec::new(),
-            rays: Vec::new(),
-            rngs: Vec::new(),
-            hits: Vec::new(),
-        };
-        primary.add(ctx, pixels::tile_samples(first, count, spp));
-        let extra = pixels::edge_samples(ctx, &primary.samples, &primary.rays, &primary.hits, spp);
-        primary.add(ctx, extra);
+        let mut primary = PrimarySamples::default();
+        primary.add(ctx, &pixels::tile_samples(first, count, spp));
         primary
     }
 
-    fn add(&mut self, ctx: &FrameContext, samples: Vec<PixelSample>) {
+    /// Appends `samples`, tracing their camera rays.
+    fn add(&mut self, ctx: &FrameContext, samples: &[PixelSample]) {
         let start = self.rays.len();
-        for s in &samples {
+        for s in samples {
             let (ray, rng) = camera_query(ctx, s);
             self.rays.push(ray);
             self.rngs.push(rng);
@@ -654,7 +650,7 @@ impl PrimarySamples {
         self.hits.resize(self.rays.len(), Hit::MISS);
         ctx.backend
             .closest_hit(&self.rays[start..], &mut self.hits[start..]);
-        self.samples.extend(samples);
+        self.samples.extend_from_slice(samples);
     }
 
     fn surfaces<'a>(&self, ctx: &'a FrameContext) -> Vec<Option<Surface<'a>>> {
@@ -748,12 +744,16 @@ fn share_lookups(
 fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]) -> FrameStats {
     let spp = pass.settings.spp.max(1);
     let mut stats = FrameStats::default();
+    let mut primary = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
+    // The first hits decide which pixels are on a light's edge.
+    let edges = EmitterEdges::find(ctx, &primary.samples, &primary.rays, &primary.hits, spp);
+    primary.add(ctx, edges.extra_samples());
     let PrimarySamples {
         samples,
         rays,
         mut rngs,
         hits,
-    } = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
+    } = primary;
     let mut lights = FirstLightSampler::default();
     let light_samples: Vec<LightChoice> = samples
         .iter()
@@ -844,7 +844,7 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
     {
         radiance[i] += r.radiance;
     }
-    pixels::resolve(&samples, &radiance, first, out);
+    edges.resolve(&samples, &radiance, first, out);
     stats
 }
 

@@ -31,9 +31,9 @@ pub struct FrameContext<'a> {
     /// Use the same random sequence in every frame (reference renders for
     /// the flicker figure, DESIGN.md "Measuring").
     pub same_pattern: bool,
-    /// Extra samples of a pixel on the edge of a seen light, in units of
-    /// the method's `spp` ([`pixels`]).
-    pub emitter_edge_factor: u32,
+    /// Coverage-only camera rays of a pixel on the edge of a seen light, in
+    /// units of the method's `spp` ([`pixels`]).
+    pub edge_coverage_factor: u32,
 }
 
 impl FrameContext<'_> {
