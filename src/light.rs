@@ -105,6 +105,14 @@ impl LightSampler {
         self.sources.is_empty()
     }
 
+    /// The snapshot ids of the emitting triangles.
+    pub fn emitting_triangles(&self) -> impl Iterator<Item = usize> + '_ {
+        self.sources.iter().filter_map(|s| match s {
+            Source::Triangle { id, .. } => Some(*id as usize),
+            Source::Point(_) => None,
+        })
+    }
+
     fn pick_probability(&self, k: usize) -> f32 {
         self.cdf[k] - if k == 0 { 0.0 } else { self.cdf[k - 1] }
     }

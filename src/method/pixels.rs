@@ -145,7 +145,7 @@ impl EmitterEdges {
         let (Some(first), Some(last)) = (base.first(), base.last()) else {
             return edges;
         };
-        if extra == 0 {
+        if extra == 0 || !emitter_may_show(ctx) {
             return edges;
         }
         let corners = CornerRays::trace(ctx, first.pixel, last.pixel);
@@ -231,6 +231,15 @@ impl EmitterEdges {
             out[i] = c * a / na.max(1) as f32 + (1.0 - c) * b / nb.max(1) as f32;
         }
     }
+}
+
+/// Whether some emitting triangle may show on the film: without one, no
+/// pixel is an edge pixel, and the corner rays are not traced.
+fn emitter_may_show(ctx: &FrameContext) -> bool {
+    let camera = &ctx.snapshot.camera;
+    ctx.lights
+        .emitting_triangles()
+        .any(|t| camera.may_see(&ctx.snapshot.triangles[t], ctx.aspect()))
 }
 
 /// Coverage sample `j` of the `extra` an edge pixel takes after its `spp`.

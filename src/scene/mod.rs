@@ -328,6 +328,25 @@ impl Camera {
         let y = local.y / -local.z / tan_half;
         Some((0.5 * (x + 1.0), 0.5 * (1.0 - y)))
     }
+
+    /// Whether some of `tri` may show on the film: false only when all
+    /// three corners lie outside one plane of the view frustum (behind the
+    /// camera, or beyond one side of the film), so it errs towards true.
+    pub fn may_see(&self, tri: &Triangle, aspect: f32) -> bool {
+        let (tx, ty) = (self.tan_half_fov * aspect, self.tan_half_fov);
+        let local = tri.p.map(|p| self.basis.transpose() * (p - self.position));
+        // Inside the frustum every one of these is ≤ 0 (camera looks down −z).
+        let planes: [fn(Vec3, f32, f32) -> f32; 5] = [
+            |l, _, _| l.z,
+            |l, tx, _| l.x + l.z * tx,
+            |l, tx, _| -l.x + l.z * tx,
+            |l, _, ty| l.y + l.z * ty,
+            |l, _, ty| -l.y + l.z * ty,
+        ];
+        !planes
+            .iter()
+            .any(|outside| local.iter().all(|&l| outside(l, tx, ty) > 0.0))
+    }
 }
 
 /// The scene evaluated at one time `t`: world-space triangles (static objects
@@ -545,5 +564,39 @@ mod tests {
         }
         let behind = camera.position - camera.direction(0.5, 0.5, aspect);
         assert_eq!(camera.project(behind, aspect), None);
+    }
+
+    /// A small triangle around the camera ray through film point `(sx, sy)`
+    /// (outside [0,1]² is off the film), `d` along it (negative: behind).
+    fn triangle_at(camera: &Camera, sx: f32, sy: f32, d: f32, aspect: f32) -> Triangle {
+        let c = camera.position + d * camera.direction(sx, sy, aspect);
+        let (r, u) = (camera.basis.x_axis * 0.01, camera.basis.y_axis * 0.01);
+        Triangle {
+            p: [c - r, c + r, c + u],
+            n: [camera.basis.z_axis; 3],
+        }
+    }
+
+    #[test]
+    fn may_see_rejects_only_triangles_outside_one_frustum_plane() {
+        let camera = Scene::builtin("cube-in-box").unwrap().camera_at(0.0);
+        let aspect = 1.5;
+        let at = |sx, sy, d| triangle_at(&camera, sx, sy, d, aspect);
+        assert!(camera.may_see(&at(0.5, 0.5, 2.0), aspect));
+        assert!(
+            camera.may_see(&at(0.0, 1.0, 2.0), aspect),
+            "on a film corner"
+        );
+        assert!(!camera.may_see(&at(0.5, 0.5, -2.0), aspect), "behind");
+        for (sx, sy) in [(-0.2, 0.5), (1.2, 0.5), (0.5, -0.2), (0.5, 1.2)] {
+            assert!(
+                !camera.may_see(&at(sx, sy, 2.0), aspect),
+                "off the film at {sx}, {sy}"
+            );
+        }
+        // Corners on both sides of the camera's plane: kept (conservative).
+        let mut straddling = at(0.5, 0.5, 2.0);
+        straddling.p[0] = camera.position - 2.0 * camera.direction(0.5, 0.5, aspect);
+        assert!(camera.may_see(&straddling, aspect));
     }
 }
