@@ -606,7 +606,7 @@ pub(crate) fn mark_used(
     let tiles: Vec<u32> = (0..n_pixels).step_by(pixels_per_tile as usize).collect();
     tiles.into_par_iter().for_each(|first| {
         let count = pixels_per_tile.min(n_pixels - first);
-        let primary = PrimarySamples::trace(ctx, first, count, spp);
+        let (primary, _) = PrimarySamples::trace(ctx, first, count, spp);
         let surfaces = primary.surfaces(ctx);
         let (lookups, _) = pixel_lookups(&surfaces, &primary.hits, &primary.samples);
         interpolation.mark_used(&lookups, used);
@@ -632,11 +632,15 @@ struct PrimarySamples {
 }
 
 impl PrimarySamples {
-    /// The `spp` samples of the `count` pixels from `first`.
-    fn trace(ctx: &FrameContext, first: u32, count: u32, spp: u32) -> Self {
+    /// The `spp` samples of the `count` pixels from `first`, then the extra
+    /// ones of the edge pixels among them, which the returned edges resolve.
+    fn trace(ctx: &FrameContext, first: u32, count: u32, spp: u32) -> (Self, EmitterEdges) {
         let mut primary = PrimarySamples::default();
         primary.add(ctx, &pixels::tile_samples(first, count, spp));
-        primary
+        // The first hits decide which pixels are on a light's edge.
+        let edges = EmitterEdges::find(ctx, &primary.samples, &primary.rays, &primary.hits, spp);
+        primary.add(ctx, edges.extra_samples());
+        (primary, edges)
     }
 
     /// Appends `samples`, tracing their camera rays.
@@ -744,10 +748,7 @@ fn share_lookups(
 fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]) -> FrameStats {
     let spp = pass.settings.spp.max(1);
     let mut stats = FrameStats::default();
-    let mut primary = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
-    // The first hits decide which pixels are on a light's edge.
-    let edges = EmitterEdges::find(ctx, &primary.samples, &primary.rays, &primary.hits, spp);
-    primary.add(ctx, edges.extra_samples());
+    let (primary, edges) = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
     let PrimarySamples {
         samples,
         rays,
@@ -1004,6 +1005,52 @@ mod tests {
         assert!((lookups[1].1 - tilted).length() < 1e-6);
         assert!((lookups[2].0 - Vec3::new(2.0, 2.0, 0.0)).length() < 1e-6);
         assert!((lookups[2].1 - n).length() < 1e-6);
+    }
+
+    /// `trc`'s first pass flags the records the render pass will use: on a
+    /// scene whose light is in view (so edge pixels add shaded samples), at
+    /// a size where some records are used by few pixels, the flags of
+    /// [`mark_used`] equal those the render pass sets.
+    #[test]
+    fn mark_used_flags_exactly_the_records_the_render_pass_uses() {
+        let mut renderer = crate::render::Renderer::new(
+            crate::scene::Scene::builtin("cube-in-box").unwrap(),
+            Box::new(crate::method::path::PathTracer::new(Default::default())),
+            Box::new(crate::backend::cpu::CpuBackend::new()),
+            crate::render::FrameSettings {
+                width: 20,
+                height: 20,
+                ..Default::default()
+            },
+        );
+        let ic = IrradianceCaching::new(IcSettings {
+            spp: 4,
+            strata: Strata { theta: 4, phi: 12 },
+            ..IcSettings::default()
+        });
+        let (marked, rendered) = renderer.with_frame_context(2, |ctx| {
+            let cache = ic.build_cache(ctx);
+            let flags = || -> Vec<AtomicBool> {
+                (0..cache.len()).map(|_| AtomicBool::new(false)).collect()
+            };
+            let (marked, rendered) = (flags(), flags());
+            mark_used(ctx, &cache, &ic.settings, &marked);
+            let mut stats = FrameStats::default();
+            render_pass(
+                ctx,
+                &cache,
+                &ic.settings,
+                FallbackStreams::PerFrame,
+                Some(&rendered),
+                &mut stats,
+            );
+            let read = |f: Vec<AtomicBool>| -> Vec<bool> {
+                f.into_iter().map(AtomicBool::into_inner).collect()
+            };
+            (read(marked), read(rendered))
+        });
+        assert!(rendered.iter().any(|&u| u));
+        assert_eq!(marked, rendered);
     }
 
     /// A hemisphere lit from one side, gathered next to a wall: one cell's

@@ -2,8 +2,9 @@
 //!
 //! Every pixel takes `spp` samples, box-filtered over its square and
 //! stratified among themselves. A pixel on the edge of a directly seen light
-//! (some of its samples see an emitter's emitting side, others do not) is
-//! then post-stratified by what its camera rays see first: it traces
+//! (some of its samples see an emitter's emitting side, others do not, or
+//! the rays through its corners disagree with all of them) is then
+//! post-stratified by what its camera rays see first: it traces
 //! `edge_coverage_factor · spp` more camera rays, stratified among
 //! themselves and never shaded, that only measure how much of the pixel sees
 //! an emitter, and its value is that fraction of the mean of its shaded
@@ -161,29 +162,34 @@ impl EmitterEdges {
             })
             .collect();
         let coverage = coverage_rays(ctx, &candidates, spp, extra);
-        for (&(pixel, seen), sees) in candidates.iter().zip(coverage.chunks(extra as usize)) {
-            let edge = EdgeCoverage {
-                pixel,
-                seen: seen + sees.iter().filter(|&&s| s).count() as u32,
-                rays: spp + extra,
-            };
-            if edge.seen == 0 || edge.seen == edge.rays {
-                continue;
-            }
-            // A part no base sample fell in gets one shaded sample: the
-            // first coverage ray in it.
-            for part in [true, false] {
-                let shaded = if part { seen > 0 } else { seen < spp };
-                if shaded {
-                    continue;
-                }
-                let j = sees.iter().position(|&s| s == part).unwrap_or(0) as u32;
-                edges.extra.push(coverage_sample(pixel, spp, extra, j));
-                edges.sees.push(part);
-            }
-            edges.pixels.push(edge);
+        for (&(pixel, seen), rays) in candidates.iter().zip(coverage.chunks(extra as usize)) {
+            edges.add_candidate(pixel, seen, rays, spp);
         }
         edges
+    }
+
+    /// Adds candidate `pixel`, `seen` of whose `spp` base samples see an
+    /// emitter, if its coverage rays (`rays`: whether each sees one) show
+    /// it is an edge pixel. A part of the pixel that no base sample fell in
+    /// gets one shaded sample: the first coverage ray in it.
+    fn add_candidate(&mut self, pixel: u32, seen: u32, rays: &[bool], spp: u32) {
+        let extra = rays.len() as u32;
+        let edge = EdgeCoverage {
+            pixel,
+            seen: seen + rays.iter().filter(|&&s| s).count() as u32,
+            rays: spp + extra,
+        };
+        if edge.seen == 0 || edge.seen == edge.rays {
+            return;
+        }
+        for (part, shaded) in [(true, seen > 0), (false, seen < spp)] {
+            if let (false, Some(j)) = (shaded, rays.iter().position(|&s| s == part)) {
+                self.extra
+                    .push(coverage_sample(pixel, spp, extra, j as u32));
+                self.sees.push(part);
+            }
+        }
+        self.pixels.push(edge);
     }
 
     /// The samples to shade besides the base ones, in this order after
@@ -195,9 +201,8 @@ impl EmitterEdges {
 
     /// Each pixel's value from its samples' radiance (`samples`: the base
     /// samples given to [`Self::find`], then [`Self::extra_samples`]):
-    /// `out[p − first]` for the
-    /// pixels `p` of `samples`, summed in sample order (bit-exact
-    /// repeatability). An edge pixel is `c·A + (1 − c)·B`, `c` the share of
+    /// `out[p − first]` for the pixels `p` of `samples`, summed in sample
+    /// order (bit-exact repeatability). An edge pixel is `c·A + (1 − c)·B`, `c` the share of
     /// its camera rays that see an emitter, `A` and `B` the means of its
     /// samples that do and do not; every other pixel is the mean of its
     /// samples.
