@@ -142,7 +142,7 @@ impl EmitterEdges {
                 .collect(),
             ..EmitterEdges::default()
         };
-        let extra = ctx.edge_coverage_factor * spp;
+        let extra = ctx.edge_coverage_factor.saturating_mul(spp);
         let (Some(first), Some(last)) = (base.first(), base.last()) else {
             return edges;
         };
