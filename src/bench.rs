@@ -16,8 +16,9 @@
 //! ([`metrics::light_mask_path`]: the pixels that see a light source
 //! directly, or border one), so every run also gets `rel_rmse_surfaces`, the
 //! error of the lit surfaces without the rim of a directly seen light, whose
-//! anti-aliasing noise is the same for every method and dominates an
-//! all-pixel RMSE at low sample counts, and likewise `flicker_surfaces`;
+//! anti-aliasing noise is the same for every method and can weigh heavily
+//! in an all-pixel RMSE at low sample counts, and likewise
+//! `flicker_surfaces`;
 //! `DIR/<scene>_surface_error_vs_time.svg` and
 //! `DIR/<scene>_surface_flicker_vs_time.svg` chart them.
 //!

@@ -303,10 +303,11 @@ pub fn list_frames(dir: &Path) -> Result<Vec<(u32, PathBuf)>, MetricsError> {
 /// `seen_lights_NNNN.png`, white where a pixel sees a light source directly
 /// or borders one that does. [`compare_dirs`] leaves those pixels out of
 /// [`CompareReport::rel_rmse_surfaces`]: the handful of pixels on the rim of
-/// a directly seen light carry most of an all-pixel RMSE at low sample
-/// counts (DESIGN.md "Measuring"), and that anti-aliasing noise is the same
-/// for every method, so it hides how well a method computes the lighting of
-/// surfaces.
+/// a directly seen light can carry much of an all-pixel RMSE at low sample
+/// counts (DESIGN.md "Measuring"; `method::pixels` post-stratifies them by
+/// their coverage to keep that down), and that anti-aliasing noise is the
+/// same for every method, so it hides how well a method computes the
+/// lighting of surfaces.
 pub fn light_mask_path(dir: &Path, frame: u32) -> PathBuf {
     dir.join(format!("seen_lights_{frame:04}.png"))
 }

@@ -1008,9 +1008,10 @@ mod tests {
     }
 
     /// `trc`'s first pass flags the records the render pass will use: on a
-    /// scene whose light is in view (so edge pixels add shaded samples), at
-    /// a size where some records are used by few pixels, the flags of
-    /// [`mark_used`] equal those the render pass sets.
+    /// scene whose light is in view (so edge pixels add shaded samples), the
+    /// flags of [`mark_used`] equal those the render pass sets. (Here no
+    /// record is used by an edge pixel's extra sample alone, so this guards
+    /// the invariant rather than reproducing that case.)
     #[test]
     fn mark_used_flags_exactly_the_records_the_render_pass_uses() {
         let mut renderer = crate::render::Renderer::new(
