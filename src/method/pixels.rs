@@ -161,31 +161,33 @@ impl EmitterEdges {
                 (!uniform || !corners_agree).then_some((pixel, seen))
             })
             .collect();
-        let coverage = coverage_rays(ctx, &candidates, spp, extra);
-        for (&(pixel, seen), rays) in candidates.iter().zip(coverage.chunks(extra as usize)) {
-            edges.add_candidate(pixel, seen, rays, spp);
+        let coverage = coverage_counts(ctx, &candidates, spp, extra);
+        for (&(pixel, seen), count) in candidates.iter().zip(coverage) {
+            edges.add_candidate(pixel, seen, count, spp, extra);
         }
         edges
     }
 
     /// Adds candidate `pixel`, `seen` of whose `spp` base samples see an
-    /// emitter, if its coverage rays (`rays`: whether each sees one) show
-    /// it is an edge pixel. A part of the pixel that no base sample fell in
-    /// gets one shaded sample: the first coverage ray in it.
-    fn add_candidate(&mut self, pixel: u32, seen: u32, rays: &[bool], spp: u32) {
-        let extra = rays.len() as u32;
+    /// emitter, if what its `extra` coverage rays saw (`count`) shows it is
+    /// an edge pixel. A part of the pixel that no base sample fell in gets
+    /// one shaded sample: the first coverage ray in it.
+    fn add_candidate(&mut self, pixel: u32, seen: u32, count: CoverageCount, spp: u32, extra: u32) {
         let edge = EdgeCoverage {
             pixel,
-            seen: seen + rays.iter().filter(|&&s| s).count() as u32,
+            seen: seen + count.seen,
             rays: spp + extra,
         };
         if edge.seen == 0 || edge.seen == edge.rays {
             return;
         }
-        for (part, shaded) in [(true, seen > 0), (false, seen < spp)] {
-            if let (false, Some(j)) = (shaded, rays.iter().position(|&s| s == part)) {
-                self.extra
-                    .push(coverage_sample(pixel, spp, extra, j as u32));
+        let parts = [
+            (true, seen > 0, count.first_seeing),
+            (false, seen < spp, count.first_other),
+        ];
+        for (part, shaded, first) in parts {
+            if let (false, Some(j)) = (shaded, first) {
+                self.extra.push(coverage_sample(pixel, spp, extra, j));
                 self.sees.push(part);
             }
         }
@@ -257,21 +259,65 @@ fn coverage_sample(pixel: u32, spp: u32, extra: u32, j: u32) -> PixelSample {
     }
 }
 
-/// Whether each of the `extra` coverage rays of each candidate pixel sees an
-/// emitter first, candidate by candidate.
-fn coverage_rays(ctx: &FrameContext, candidates: &[(u32, u32)], spp: u32, extra: u32) -> Vec<bool> {
-    let rays: Vec<Ray> = candidates
-        .iter()
-        .flat_map(|&(pixel, _)| {
-            (0..extra).map(move |j| camera_query(ctx, &coverage_sample(pixel, spp, extra, j)).0)
-        })
-        .collect();
-    let mut hits = vec![Hit::MISS; rays.len()];
-    ctx.backend.closest_hit(&rays, &mut hits);
-    rays.iter()
-        .zip(&hits)
-        .map(|(ray, hit)| sees_emitter(ctx, ray, hit))
-        .collect()
+/// What a candidate pixel's coverage rays saw: how many see an emitter
+/// first, and the first ray (its index among them) that does and that does
+/// not.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct CoverageCount {
+    seen: u32,
+    first_seeing: Option<u32>,
+    first_other: Option<u32>,
+}
+
+impl CoverageCount {
+    fn add(&mut self, j: u32, sees: bool) {
+        let first = if sees {
+            self.seen += 1;
+            &mut self.first_seeing
+        } else {
+            &mut self.first_other
+        };
+        first.get_or_insert(j);
+    }
+}
+
+/// Coverage rays traced at a time: memory stays bounded whatever `spp` is
+/// (one edge pixel at the largest `--spp` takes 64 million).
+const COVERAGE_BATCH: usize = 1 << 16;
+
+/// What the `extra` coverage rays of each candidate pixel saw, candidate by
+/// candidate, traced in batches of at most [`COVERAGE_BATCH`].
+fn coverage_counts(
+    ctx: &FrameContext,
+    candidates: &[(u32, u32)],
+    spp: u32,
+    extra: u32,
+) -> Vec<CoverageCount> {
+    let mut counts = vec![CoverageCount::default(); candidates.len()];
+    let mut rays = Vec::new();
+    let mut owners = Vec::new();
+    let mut hits = Vec::new();
+    let mut flush = |rays: &mut Vec<Ray>, owners: &mut Vec<(usize, u32)>| {
+        hits.clear();
+        hits.resize(rays.len(), Hit::MISS);
+        ctx.backend.closest_hit(rays, &mut hits);
+        for ((ray, hit), &(c, j)) in rays.iter().zip(&hits).zip(owners.iter()) {
+            counts[c].add(j, sees_emitter(ctx, ray, hit));
+        }
+        rays.clear();
+        owners.clear();
+    };
+    for (c, &(pixel, _)) in candidates.iter().enumerate() {
+        for j in 0..extra {
+            rays.push(camera_query(ctx, &coverage_sample(pixel, spp, extra, j)).0);
+            owners.push((c, j));
+            if rays.len() == COVERAGE_BATCH {
+                flush(&mut rays, &mut owners);
+            }
+        }
+    }
+    flush(&mut rays, &mut owners);
+    counts
 }
 
 /// Whether the camera ray through each pixel corner of some rows sees an
@@ -406,6 +452,20 @@ mod tests {
         let mut out = [Vec3::ONE * 9.0; 2];
         edges.resolve(&samples, &radiance, 5, &mut out);
         assert_eq!(out, [Vec3::splat(1.5), Vec3::splat(4.0)]);
+    }
+
+    #[test]
+    fn a_coverage_count_keeps_the_first_ray_of_each_part() {
+        let mut count = CoverageCount::default();
+        for (j, sees) in [false, false, true, false, true].into_iter().enumerate() {
+            count.add(j as u32, sees);
+        }
+        let expected = CoverageCount {
+            seen: 2,
+            first_seeing: Some(2),
+            first_other: Some(0),
+        };
+        assert_eq!(count, expected);
     }
 
     /// An edge pixel whose coverage rays say a quarter of it sees the
