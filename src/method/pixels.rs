@@ -124,8 +124,9 @@ impl EmitterEdges {
     /// A pixel is a candidate when its samples disagree on seeing an
     /// emitter, or agree but one of its corners' rays says otherwise: a
     /// light's edge that clips a few percent of a pixel is easily missed by
-    /// all of its `spp` samples, and at 30× the brightness of the
-    /// surfaces a few percent of a missed light is a large error. A
+    /// all of its `spp` samples, and a light is often many times brighter
+    /// than the surfaces (30× on cube-in-box), so a few percent of it
+    /// missed is a large error. A
     /// candidate whose coverage rays all agree with its samples is no edge.
     pub fn find(
         ctx: &FrameContext,
@@ -171,7 +172,9 @@ impl EmitterEdges {
     /// Adds candidate `pixel`, `seen` of whose `spp` base samples see an
     /// emitter, if what its `extra` coverage rays saw (`count`) shows it is
     /// an edge pixel. A part of the pixel that no base sample fell in gets
-    /// one shaded sample: the first coverage ray in it.
+    /// one shaded sample: a coverage ray in it, drawn uniformly among them
+    /// (its shading is then a uniform sample of the part, as the mean of a
+    /// part's base samples is).
     fn add_candidate(&mut self, pixel: u32, seen: u32, count: CoverageCount, spp: u32, extra: u32) {
         let edge = EdgeCoverage {
             pixel,
@@ -182,8 +185,8 @@ impl EmitterEdges {
             return;
         }
         let parts = [
-            (true, seen > 0, count.first_seeing),
-            (false, seen < spp, count.first_other),
+            (true, seen > 0, count.pick_seeing),
+            (false, seen < spp, count.pick_other),
         ];
         for (part, shaded, first) in parts {
             if let (false, Some(j)) = (shaded, first) {
@@ -204,10 +207,10 @@ impl EmitterEdges {
     /// Each pixel's value from its samples' radiance (`samples`: the base
     /// samples given to [`Self::find`], then [`Self::extra_samples`]):
     /// `out[p − first]` for the pixels `p` of `samples`, summed in sample
-    /// order (bit-exact repeatability). An edge pixel is `c·A + (1 − c)·B`, `c` the share of
-    /// its camera rays that see an emitter, `A` and `B` the means of its
-    /// samples that do and do not; every other pixel is the mean of its
-    /// samples.
+    /// order (bit-exact repeatability). An edge pixel is `c·A + (1 − c)·B`,
+    /// `c` the share of its camera rays that see an emitter, `A` and `B` the
+    /// means of its samples that do and do not; every other pixel is the
+    /// mean of its samples.
     pub fn resolve(
         &self,
         samples: &[PixelSample],
@@ -260,24 +263,31 @@ fn coverage_sample(pixel: u32, spp: u32, extra: u32, j: u32) -> PixelSample {
 }
 
 /// What a candidate pixel's coverage rays saw: how many see an emitter
-/// first, and the first ray (its index among them) that does and that does
-/// not.
+/// first, and in each part (seeing one, not seeing one) one of its rays
+/// (its index among them) drawn uniformly, by reservoir sampling.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct CoverageCount {
     seen: u32,
-    first_seeing: Option<u32>,
-    first_other: Option<u32>,
+    other: u32,
+    pick_seeing: Option<u32>,
+    pick_other: Option<u32>,
 }
 
 impl CoverageCount {
-    fn add(&mut self, j: u32, sees: bool) {
-        let first = if sees {
-            self.seen += 1;
-            &mut self.first_seeing
+    /// Counts ray `j`, which `sees` an emitter or not; `u` ∈ [0, 1) is its
+    /// own random number. The `k`-th ray of a part replaces the part's pick
+    /// with probability 1/k, so each of the part's rays ends up picked
+    /// with the same probability.
+    fn add(&mut self, j: u32, sees: bool, u: f32) {
+        let (n, pick) = if sees {
+            (&mut self.seen, &mut self.pick_seeing)
         } else {
-            &mut self.first_other
+            (&mut self.other, &mut self.pick_other)
         };
-        first.get_or_insert(j);
+        *n += 1;
+        if u * (*n as f32) < 1.0 {
+            *pick = Some(j);
+        }
     }
 }
 
@@ -297,20 +307,21 @@ fn coverage_counts(
     let mut rays = Vec::new();
     let mut owners = Vec::new();
     let mut hits = Vec::new();
-    let mut flush = |rays: &mut Vec<Ray>, owners: &mut Vec<(usize, u32)>| {
+    let mut flush = |rays: &mut Vec<Ray>, owners: &mut Vec<(usize, u32, f32)>| {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
         ctx.backend.closest_hit(rays, &mut hits);
-        for ((ray, hit), &(c, j)) in rays.iter().zip(&hits).zip(owners.iter()) {
-            counts[c].add(j, sees_emitter(ctx, ray, hit));
+        for ((ray, hit), &(c, j, u)) in rays.iter().zip(&hits).zip(owners.iter()) {
+            counts[c].add(j, sees_emitter(ctx, ray, hit), u);
         }
         rays.clear();
         owners.clear();
     };
     for (c, &(pixel, _)) in candidates.iter().enumerate() {
         for j in 0..extra {
-            rays.push(camera_query(ctx, &coverage_sample(pixel, spp, extra, j)).0);
-            owners.push((c, j));
+            let (ray, mut rng) = camera_query(ctx, &coverage_sample(pixel, spp, extra, j));
+            rays.push(ray);
+            owners.push((c, j, rng.next_f32()));
             if rays.len() == COVERAGE_BATCH {
                 flush(&mut rays, &mut owners);
             }
@@ -454,18 +465,28 @@ mod tests {
         assert_eq!(out, [Vec3::splat(1.5), Vec3::splat(4.0)]);
     }
 
+    /// Reservoir sampling: over many draws each ray of a part is picked
+    /// about equally often, and the counts are exact.
     #[test]
-    fn a_coverage_count_keeps_the_first_ray_of_each_part() {
-        let mut count = CoverageCount::default();
-        for (j, sees) in [false, false, true, false, true].into_iter().enumerate() {
-            count.add(j as u32, sees);
+    fn a_coverage_count_picks_each_ray_of_a_part_uniformly() {
+        let sees = [false, true, true, false, true, true];
+        let mut picked = [0u32; 6];
+        let mut rng = Rng::from_seed(7, 11);
+        let draws = 30_000;
+        for _ in 0..draws {
+            let mut count = CoverageCount::default();
+            for (j, &s) in sees.iter().enumerate() {
+                count.add(j as u32, s, rng.next_f32());
+            }
+            assert_eq!((count.seen, count.other), (4, 2));
+            picked[count.pick_seeing.unwrap() as usize] += 1;
+            picked[count.pick_other.unwrap() as usize] += 1;
         }
-        let expected = CoverageCount {
-            seen: 2,
-            first_seeing: Some(2),
-            first_other: Some(0),
-        };
-        assert_eq!(count, expected);
+        for (j, &n) in picked.iter().enumerate() {
+            let expected = if sees[j] { draws / 4 } else { draws / 2 };
+            // Binomial standard deviation is under 90 draws; 5σ.
+            assert!(n.abs_diff(expected) < 450, "ray {j}: {n} of {draws}");
+        }
     }
 
     /// An edge pixel whose coverage rays say a quarter of it sees the
