@@ -29,8 +29,9 @@
 
 use super::FrameContext;
 use crate::backend::{Hit, Ray};
-use crate::light::emitting_cosine;
+use crate::light::{emitting_cosine, LightSampler};
 use crate::sampling::{stratified_1d, stratified_2d, LightChoice, Rng};
+use crate::scene::Snapshot;
 use glam::Vec3;
 
 /// Coverage-only camera rays an emitter-edge pixel takes, in units of
@@ -147,7 +148,7 @@ impl EmitterEdges {
         let (Some(first), Some(last)) = (base.first(), base.last()) else {
             return edges;
         };
-        if extra == 0 || !emitter_may_show(ctx) {
+        if extra == 0 || !ctx.emitter_in_view {
             return edges;
         }
         let corners = CornerRays::trace(ctx, first.pixel, last.pixel);
@@ -243,13 +244,15 @@ impl EmitterEdges {
     }
 }
 
-/// Whether some emitting triangle may show on the film: without one, no
-/// pixel is an edge pixel, and the corner rays are not traced.
-fn emitter_may_show(ctx: &FrameContext) -> bool {
-    let camera = &ctx.snapshot.camera;
-    ctx.lights
+/// Whether some emitting triangle of `snapshot` may show on a film of
+/// aspect ratio `aspect` ([`FrameContext::emitter_in_view`], computed once a
+/// frame): without one no pixel is an edge pixel, and the corner rays are
+/// not traced.
+pub fn emitter_may_show(snapshot: &Snapshot, lights: &LightSampler, aspect: f32) -> bool {
+    let camera = &snapshot.camera;
+    lights
         .emitting_triangles()
-        .any(|t| camera.may_see(&ctx.snapshot.triangles[t], ctx.aspect()))
+        .any(|t| camera.may_see(&snapshot.triangles[t], aspect))
 }
 
 /// Coverage sample `j` of the `extra` an edge pixel takes after its `spp`.
