@@ -308,8 +308,7 @@ impl Renderer {
         let snapshot = self.scene.snapshot(t);
         self.backend.set_geometry(&snapshot);
         let lights = LightSampler::new(&snapshot, &self.scene.materials);
-        let aspect = self.settings.width as f32 / self.settings.height as f32;
-        let ctx = FrameContext {
+        let mut ctx = FrameContext {
             scene: &self.scene,
             snapshot: &snapshot,
             lights: &lights,
@@ -321,8 +320,10 @@ impl Renderer {
             seed: self.settings.seed,
             same_pattern: self.settings.same_pattern,
             edge_coverage_factor: self.settings.edge_coverage_factor,
-            emitter_in_view: crate::method::pixels::emitter_may_show(&snapshot, &lights, aspect),
+            emitter_in_view: false,
         };
+        ctx.emitter_in_view =
+            crate::method::pixels::emitter_may_show(&snapshot, &lights, ctx.aspect());
         f(&ctx)
     }
 }

@@ -101,18 +101,21 @@ pub struct EmitterEdges {
     sees: Vec<bool>,
     /// The edge pixels, in pixel order.
     pixels: Vec<EdgeCoverage>,
+    /// Camera rays each edge pixel took: its base samples and its coverage
+    /// rays.
+    edge_rays: u32,
     /// Samples to shade besides the base ones: one for each part of an edge
     /// pixel that only its coverage rays saw.
     extra: Vec<PixelSample>,
 }
 
-/// Of a pixel's camera rays (its base samples and its coverage rays), how
-/// many see an emitter's emitting side first.
+/// Of an edge pixel's camera rays (its base samples and its coverage rays,
+/// [`EmitterEdges::edge_rays`] in all), how many see an emitter's emitting
+/// side first.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct EdgeCoverage {
     pixel: u32,
     seen: u32,
-    rays: u32,
 }
 
 impl EmitterEdges {
@@ -136,15 +139,21 @@ impl EmitterEdges {
         hits: &[Hit],
         spp: u32,
     ) -> Self {
-        let mut edges = EmitterEdges {
-            sees: rays
-                .iter()
+        let extra = ctx.edge_coverage_factor.saturating_mul(spp);
+        // No sample can see an emitter that is out of view.
+        let sees = if ctx.emitter_in_view {
+            rays.iter()
                 .zip(hits)
                 .map(|(ray, hit)| sees_emitter(ctx, ray, hit))
-                .collect(),
+                .collect()
+        } else {
+            vec![false; rays.len()]
+        };
+        let mut edges = EmitterEdges {
+            sees,
+            edge_rays: spp.saturating_add(extra),
             ..EmitterEdges::default()
         };
-        let extra = ctx.edge_coverage_factor.saturating_mul(spp);
         let (Some(first), Some(last)) = (base.first(), base.last()) else {
             return edges;
         };
@@ -180,9 +189,8 @@ impl EmitterEdges {
         let edge = EdgeCoverage {
             pixel,
             seen: seen + count.seen,
-            rays: spp + extra,
         };
-        if edge.seen == 0 || edge.seen == edge.rays {
+        if edge.seen == 0 || edge.seen == self.edge_rays {
             return;
         }
         let parts = [
@@ -237,8 +245,9 @@ impl EmitterEdges {
         for edge in &self.pixels {
             let i = (edge.pixel - first) as usize;
             let ((a, na), (b, nb)) = (seeing[i], other[i]);
-            // `find` gave each part some coverage saw at least one sample.
-            let c = edge.seen as f32 / edge.rays as f32;
+            // `find` gave a shaded sample to every part some ray saw; a part
+            // no ray saw has weight 0 (`c` is 0 or 1).
+            let c = edge.seen as f32 / self.edge_rays as f32;
             out[i] = c * a / na.max(1) as f32 + (1.0 - c) * b / nb.max(1) as f32;
         }
     }
@@ -500,11 +509,8 @@ mod tests {
         let samples = [sample(7, 0), sample(7, 1), sample(7, 2), sample(8, 0)];
         let edges = EmitterEdges {
             sees: vec![true, true, false, false],
-            pixels: vec![EdgeCoverage {
-                pixel: 7,
-                seen: 25,
-                rays: 100,
-            }],
+            pixels: vec![EdgeCoverage { pixel: 7, seen: 25 }],
+            edge_rays: 100,
             ..EmitterEdges::default()
         };
         let radiance = [10.0, 14.0, 2.0, 3.0].map(Vec3::splat);
