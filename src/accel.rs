@@ -73,6 +73,13 @@ pub fn intersect_triangle(tri: &ObTriangle, ray: &obvhs::ray::Ray) -> Option<(f3
     (t >= ray.tmin && t <= ray.tmax).then_some((t, u, v))
 }
 
+/// Where `ray` hits `tri` (`t`), computed as the BVHs compute it, so that
+/// a hit found here and the one [`SceneBvh::closest_hit`] finds on the same
+/// triangle have the same `t` to the bit.
+pub fn ray_hits_triangle(tri: &crate::scene::Triangle, ray: &Ray) -> Option<f32> {
+    intersect_triangle(&to_obvhs(tri), &to_obvhs_ray(ray)).map(|(t, _, _)| t)
+}
+
 impl TriangleBvh {
     /// Builds a BVH over snapshot triangles `range`; `None` when empty.
     pub fn build(snapshot: &Snapshot, range: std::ops::Range<usize>) -> Option<Self> {

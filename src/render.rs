@@ -320,10 +320,10 @@ impl Renderer {
             seed: self.settings.seed,
             same_pattern: self.settings.same_pattern,
             edge_coverage_factor: self.settings.edge_coverage_factor,
-            emitter_in_view: false,
+            emitters_in_view: Vec::new(),
         };
-        ctx.emitter_in_view =
-            crate::method::pixels::emitter_may_show(&snapshot, &lights, ctx.aspect());
+        ctx.emitters_in_view =
+            crate::method::pixels::emitters_in_view(&snapshot, &lights, ctx.aspect());
         f(&ctx)
     }
 }

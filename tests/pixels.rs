@@ -7,13 +7,15 @@ mod common;
 
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
+use radcache::backend::{Hit, Ray};
 use radcache::cache::gather::Strata;
 use radcache::film::Film;
 use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
-use radcache::method::pixels::DEFAULT_EDGE_COVERAGE_FACTOR;
+use radcache::method::pixels::{sees_emitter, sees_emitter_first, DEFAULT_EDGE_COVERAGE_FACTOR};
 use radcache::method::Method;
 use radcache::render::{FrameSettings, Renderer};
+use radcache::sampling::{cosine_hemisphere, Rng};
 use radcache::scene::{Material, Mesh, Scene};
 
 const SIZE: u32 = 24;
@@ -165,4 +167,119 @@ fn a_light_edge_pixel_is_its_radiance_times_its_covered_share() {
     eprintln!("RMS error {} → {}, worst {worst}", rms(&off), rms(&on));
     assert!(worst < 0.03, "worst pixel off by {worst}");
     assert!(rms(&on) < rms(&off) / 4.0, "{} → {}", rms(&off), rms(&on));
+}
+
+/// A room with a one-sided light quad under its ceiling (split into
+/// `light_cells × light_cells` quads), a cube between the camera and part
+/// of it, and a second light quad facing away from the camera (its back
+/// side is all the camera sees of it).
+fn lit_room(light_cells: u32) -> Scene {
+    let room = common::inward_box(Vec3::splat(-1.0), Vec3::splat(1.0), 0);
+    let mut cube = Mesh::default();
+    let (x, y, z) = (Vec3::X * 0.5, Vec3::Y * 0.5, Vec3::Z * 0.5);
+    let o = Vec3::new(-0.3, 0.3, -0.5);
+    common::push_quad(&mut cube, o, x, y, 0);
+    common::push_quad(&mut cube, o + z, y, x, 0);
+    common::push_quad(&mut cube, o, y, z, 0);
+    common::push_quad(&mut cube, o + x, z, y, 0);
+    common::push_quad(&mut cube, o, z, x, 0);
+    common::push_quad(&mut cube, o + y, x, z, 0);
+    let mut lights = Mesh::default();
+    let cell = 1.0 / light_cells as f32;
+    for i in 0..light_cells {
+        for j in 0..light_cells {
+            let corner = Vec3::new(-0.5 + i as f32 * cell, 0.99, -0.5 + j as f32 * cell);
+            // u × v = −y: the emitting side faces down into the room.
+            common::push_quad(&mut lights, corner, Vec3::X * cell, Vec3::Z * cell, 1);
+        }
+    }
+    // Faces −z, away from the camera at z = 0.9 looking along −z.
+    common::push_quad(
+        &mut lights,
+        Vec3::new(0.4, -0.6, -0.8),
+        Vec3::Y * 0.3,
+        Vec3::X * 0.3,
+        1,
+    );
+    common::scene(
+        vec![room, cube, lights],
+        vec![
+            Material::diffuse("wall", Vec3::splat(0.5)),
+            Material::emitter("light", Vec3::splat(5.0)),
+        ],
+        vec![],
+        Vec3::new(0.0, 0.0, 0.9),
+        Vec3::new(0.0, 0.4, -1.0),
+        1.2,
+        vec![],
+    )
+}
+
+/// `sees_emitter_first` (the nearest emitter along the ray, then an
+/// any-hit query short of it) answers what a closest-hit query and
+/// `sees_emitter` answer, ray for ray, with few emitters in view and with
+/// many (more than it tests one by one: closest hits): over a fine grid of camera
+/// rays and random rays from inside the room, of which many see a light,
+/// many see the occluding cube or the light's back side, and many see walls.
+#[test]
+fn the_first_hit_emitter_test_agrees_with_closest_hits() {
+    for cells in [2, 4] {
+        let mut r = common::cpu_renderer(lit_room(cells), path(1), 16);
+        r.with_frame_context(0, |ctx| {
+            // 2×2 cells: all 10 emitting triangles in view, tested one by
+            // one (the test is for camera rays, but with every emitter in
+            // view it holds for any ray); 4×4: more than the 16 up to which
+            // that is done.
+            let emitters = ctx.emitters_in_view.len();
+            if cells == 2 {
+                assert_eq!(emitters, 10);
+            } else {
+                assert!(emitters > 16, "{emitters} in view");
+            }
+            let camera = &ctx.snapshot.camera;
+            let n = 200;
+            let mut rays: Vec<Ray> = (0..n * n)
+                .map(|i| {
+                    let (sx, sy) = ((i % n) as f32 / n as f32, (i / n) as f32 / n as f32);
+                    let dir = camera.direction(sx + 0.37 / n as f32, sy + 0.61 / n as f32, 1.0);
+                    Ray::new(camera.position, dir, 0.0, f32::INFINITY)
+                })
+                .collect();
+            let mut rng = Rng::from_seed(7, 11);
+            rays.extend((0..20_000).map(|_| {
+                let origin = rng.next_2d().extend(rng.next_f32()) * 1.8 - 0.9;
+                // A random direction: a cosine lobe about ±z or ±x.
+                let lobe = cosine_hemisphere(rng.next_2d());
+                let dir = match rng.next_u32() % 4 {
+                    0 => lobe,
+                    1 => -lobe,
+                    2 => Vec3::new(lobe.z, lobe.y, lobe.x),
+                    _ => -Vec3::new(lobe.z, lobe.y, lobe.x),
+                };
+                Ray::new(origin, dir, 1e-4, f32::INFINITY)
+            }));
+            let fast = sees_emitter_first(ctx, &rays);
+            let mut hits = vec![Hit::MISS; rays.len()];
+            ctx.backend.closest_hit(&rays, &mut hits);
+            let mut agree = 0;
+            let mut seeing = 0;
+            for ((ray, hit), &fast) in rays.iter().zip(&hits).zip(&fast) {
+                let slow = sees_emitter(ctx, ray, hit);
+                agree += usize::from(fast == slow);
+                seeing += usize::from(slow);
+            }
+            assert_eq!(agree, rays.len(), "{cells}×{cells} light cells");
+            // Non-trivial: both answers are common.
+            assert!(
+                seeing > rays.len() / 50,
+                "{seeing} of {} see a light",
+                rays.len()
+            );
+            assert!(
+                seeing < rays.len() / 2,
+                "{seeing} of {} see a light",
+                rays.len()
+            );
+        });
+    }
 }

@@ -34,9 +34,9 @@ pub struct FrameContext<'a> {
     /// Coverage-only camera rays of a pixel on the edge of a seen light, in
     /// units of the method's `spp` ([`pixels`]).
     pub edge_coverage_factor: u32,
-    /// Some emitting triangle may show on the film this frame
-    /// ([`pixels::emitter_may_show`]).
-    pub emitter_in_view: bool,
+    /// The emitting triangles that may show on the film this frame
+    /// ([`pixels::emitters_in_view`]).
+    pub emitters_in_view: Vec<u32>,
 }
 
 impl FrameContext<'_> {

@@ -13,7 +13,8 @@
 //! Why: the rim of a seen light is a few pixels many times brighter than
 //! their neighbours, and with `spp` samples their coverage noise is most of
 //! an all-pixel error (DESIGN.md "Measuring") whatever the method does about
-//! lighting. Coverage is one closest-hit ray a sample, where a shaded sample
+//! lighting. Coverage is one ray a sample (and often no BVH query at all,
+//! [`sees_emitter_first`]), where a shaded sample
 //! also costs a shadow ray, a cache lookup or a path, so the rim gets the
 //! coverage of many samples at the shading cost of `spp`: visibility sampled
 //! more densely than shading, as MSAA does (and decoupled sampling,
@@ -28,6 +29,7 @@
 //! plain mean of its `spp` samples, bit for bit what it is without the rule.
 
 use super::FrameContext;
+use crate::accel::ray_hits_triangle;
 use crate::backend::{Hit, Ray};
 use crate::light::{emitting_cosine, LightSampler};
 use crate::sampling::{stratified_1d, stratified_2d, LightChoice, Rng};
@@ -77,10 +79,13 @@ pub fn tile_samples(first: u32, count: u32, spp: u32) -> Vec<PixelSample> {
 
 /// Whether a camera ray's first hit is the emitting side of a light.
 pub fn sees_emitter(ctx: &FrameContext, ray: &Ray, hit: &Hit) -> bool {
-    if !hit.is_hit() {
-        return false;
-    }
-    let t = hit.triangle as usize;
+    hit.is_hit() && emits_towards(ctx, hit.triangle, ray)
+}
+
+/// Whether triangle `triangle` is an emitter whose emitting side `ray`
+/// meets.
+fn emits_towards(ctx: &FrameContext, triangle: u32, ray: &Ray) -> bool {
+    let t = triangle as usize;
     let material = &ctx.scene.materials[ctx.snapshot.tri_material[t] as usize];
     material.is_emissive()
         && emitting_cosine(
@@ -89,6 +94,71 @@ pub fn sees_emitter(ctx: &FrameContext, ray: &Ray, hit: &Hit) -> bool {
             -ray.dir().normalize(),
         )
         .is_some()
+}
+
+/// Emitters in view up to which [`sees_emitter_first`] tests each one
+/// along a ray before it asks the scene's BVH; with more it traces plain
+/// closest-hit rays.
+const EMITTERS_TESTED_ONE_BY_ONE: usize = 16;
+
+/// For each camera ray (from the camera through the film: only
+/// [`FrameContext::emitters_in_view`] are looked at), whether its first hit
+/// is an emitter's emitting side ([`sees_emitter`] of its closest hit), for
+/// rays that need nothing else from their hit (the coverage and corner
+/// rays).
+///
+/// With few emitters in view it first finds the nearest of them along the
+/// ray. A ray that meets none, or the back of the nearest, sees none,
+/// whatever else it hits: no BVH query at all. One that meets an emitting
+/// side sees it unless something nearer is in the way: an any-hit query
+/// stopped just short of the emitter, cheaper than a closest-hit one. On a
+/// light's rim about half of the coverage rays miss it, and the coverage
+/// rays are the render pass's largest ray count after the primary and
+/// shadow rays. The answer is [`sees_emitter`]'s but for exact ties: a
+/// surface at exactly the emitter's distance along the ray (coplanar with
+/// it) hides it from the closest-hit query or not by traversal order, and
+/// never here.
+pub fn sees_emitter_first(ctx: &FrameContext, rays: &[Ray]) -> Vec<bool> {
+    let emitters = &ctx.emitters_in_view;
+    if emitters.is_empty() {
+        return vec![false; rays.len()];
+    }
+    if emitters.len() > EMITTERS_TESTED_ONE_BY_ONE {
+        let mut hits = vec![Hit::MISS; rays.len()];
+        ctx.backend.closest_hit(rays, &mut hits);
+        return rays
+            .iter()
+            .zip(&hits)
+            .map(|(ray, hit)| sees_emitter(ctx, ray, hit))
+            .collect();
+    }
+    // The rays that meet an emitting side first among the emitters, cut
+    // just short of it, and which ray each is.
+    let mut unless_occluded = Vec::new();
+    let mut of_ray = Vec::new();
+    for (i, ray) in rays.iter().enumerate() {
+        let nearest = emitters
+            .iter()
+            .filter_map(|&e| {
+                let t = ray_hits_triangle(&ctx.snapshot.triangles[e as usize], ray)?;
+                Some((t, e))
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some((t, _)) = nearest.filter(|&(_, e)| emits_towards(ctx, e, ray)) {
+            unless_occluded.push(Ray {
+                tmax: just_below(t),
+                ..*ray
+            });
+            of_ray.push(i);
+        }
+    }
+    let mut occluded = vec![false; unless_occluded.len()];
+    ctx.backend.any_hit(&unless_occluded, &mut occluded);
+    let mut sees = vec![false; rays.len()];
+    for (&i, &occluded) in of_ray.iter().zip(&occluded) {
+        sees[i] = !occluded;
+    }
+    sees
 }
 
 /// A tile's pixels on the edge of a seen light and how much of each sees
@@ -141,7 +211,7 @@ impl EmitterEdges {
     ) -> Self {
         let extra = ctx.edge_coverage_factor.saturating_mul(spp);
         // No sample can see an emitter that is out of view.
-        let sees = if ctx.emitter_in_view {
+        let sees = if !ctx.emitters_in_view.is_empty() {
             rays.iter()
                 .zip(hits)
                 .map(|(ray, hit)| sees_emitter(ctx, ray, hit))
@@ -157,7 +227,7 @@ impl EmitterEdges {
         let (Some(first), Some(last)) = (base.first(), base.last()) else {
             return edges;
         };
-        if extra == 0 || !ctx.emitter_in_view {
+        if extra == 0 || ctx.emitters_in_view.is_empty() {
             return edges;
         }
         let corners = CornerRays::trace(ctx, first.pixel, last.pixel);
@@ -253,15 +323,28 @@ impl EmitterEdges {
     }
 }
 
-/// Whether some emitting triangle of `snapshot` may show on a film of
-/// aspect ratio `aspect` ([`FrameContext::emitter_in_view`], computed once a
+/// The largest `f32` below a positive finite `t` (`f32::next_down`, which
+/// needs a newer Rust than the crate's minimum); `t` itself when it is 0
+/// (a camera on an emitter).
+fn just_below(t: f32) -> f32 {
+    if t > 0.0 {
+        f32::from_bits(t.to_bits() - 1)
+    } else {
+        t
+    }
+}
+
+/// The emitting triangles of `snapshot` that may show on a film of aspect
+/// ratio `aspect` ([`FrameContext::emitters_in_view`], computed once a
 /// frame): without one no pixel is an edge pixel, and the corner rays are
 /// not traced.
-pub fn emitter_may_show(snapshot: &Snapshot, lights: &LightSampler, aspect: f32) -> bool {
+pub fn emitters_in_view(snapshot: &Snapshot, lights: &LightSampler, aspect: f32) -> Vec<u32> {
     let camera = &snapshot.camera;
     lights
         .emitting_triangles()
-        .any(|t| camera.may_see(&snapshot.triangles[t], aspect))
+        .filter(|&t| camera.may_see(&snapshot.triangles[t], aspect))
+        .map(|t| t as u32)
+        .collect()
 }
 
 /// Coverage sample `j` of the `extra` an edge pixel takes after its `spp`.
@@ -318,13 +401,10 @@ fn coverage_counts(
     let mut counts = vec![CoverageCount::default(); candidates.len()];
     let mut rays = Vec::new();
     let mut owners = Vec::new();
-    let mut hits = Vec::new();
     let mut flush = |rays: &mut Vec<Ray>, owners: &mut Vec<(usize, u32, f32)>| {
-        hits.clear();
-        hits.resize(rays.len(), Hit::MISS);
-        ctx.backend.closest_hit(rays, &mut hits);
-        for ((ray, hit), &(c, j, u)) in rays.iter().zip(&hits).zip(owners.iter()) {
-            counts[c].add(j, sees_emitter(ctx, ray, hit), u);
+        let sees = sees_emitter_first(ctx, rays);
+        for (&sees, &(c, j, u)) in sees.iter().zip(owners.iter()) {
+            counts[c].add(j, sees, u);
         }
         rays.clear();
         owners.clear();
@@ -364,13 +444,7 @@ impl CornerRays {
                 Ray::new(camera.position, dir, 0.0, f32::INFINITY)
             })
             .collect();
-        let mut hits = vec![Hit::MISS; rays.len()];
-        ctx.backend.closest_hit(&rays, &mut hits);
-        let sees = rays
-            .iter()
-            .zip(&hits)
-            .map(|(ray, hit)| sees_emitter(ctx, ray, hit))
-            .collect();
+        let sees = sees_emitter_first(ctx, &rays);
         CornerRays { y0, sees }
     }
 
