@@ -30,7 +30,7 @@ use radcache::backend::gpu::{AdapterPolicy, GpuBackend, RaysOnly};
 use radcache::backend::gpu_cache::{GpuLookup, SplatTimings};
 use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::method::ic::{FallbackStreams, IcSettings, IrradianceCaching};
-use radcache::method::pixels::{camera_query, PixelSample};
+use radcache::method::pixels::{CameraSampler, PixelSample};
 use radcache::method::FrameContext;
 use radcache::render::{FrameSettings, Renderer};
 use radcache::scene::Scene;
@@ -59,10 +59,10 @@ fn ms(d: Duration) -> String {
 /// The frame's lookups: the shading point and normal of each pixel sample
 /// that hits a surface with a diffuse part (normal facing the camera).
 fn lookups(ctx: &FrameContext, spp: u32) -> Vec<(Vec3, Vec3)> {
+    let mut camera = CameraSampler::default();
     let rays: Vec<Ray> = (0..ctx.width * ctx.height)
-        .flat_map(|pixel| {
-            (0..spp).map(move |s| camera_query(ctx, &PixelSample::base(pixel, s, spp)).0)
-        })
+        .flat_map(|pixel| (0..spp).map(move |s| PixelSample::base(pixel, s, spp)))
+        .map(|s| camera.query(ctx, &s).0)
         .collect();
     let mut hits = vec![Hit::MISS; rays.len()];
     ctx.backend.closest_hit(&rays, &mut hits);

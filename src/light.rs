@@ -4,7 +4,7 @@
 //! by area); point and spot lights are delta lights.
 
 use crate::material::luminance;
-use crate::sampling::uniform_triangle;
+use crate::sampling::{uniform_triangle, LightChoice, ONE_MINUS_EPSILON};
 use crate::scene::{Snapshot, Triangle};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -117,6 +117,41 @@ impl LightSampler {
         self.cdf[k] - if k == 0 { 0.0 } else { self.cdf[k - 1] }
     }
 
+    /// One 2D sample split into a light choice: `u.x` picks the source by
+    /// where it falls in the pick distribution, and is then rescaled to
+    /// `[0, 1)` within that source's interval to place the point with
+    /// `u.y` (PBRT's `SampleDiscrete` remapping). Why: the stratification
+    /// of `u` over a pixel's samples then carries over to each light. A
+    /// quad light's two triangles each get half of the strata, as a grid;
+    /// drawn apart, the pick and the point paired each triangle with a
+    /// random half of the position strata, and the samples on one
+    /// triangle were hardly stratified at all.
+    pub fn choose(&self, u: Vec2) -> LightChoice {
+        let Some(k) = self.source_at(u.x) else {
+            return LightChoice { pick: u.x, u };
+        };
+        let below = if k == 0 { 0.0 } else { self.cdf[k - 1] };
+        let width = self.pick_probability(k);
+        let x = if width > 0.0 {
+            ((u.x - below) / width).clamp(0.0, ONE_MINUS_EPSILON)
+        } else {
+            0.0
+        };
+        LightChoice {
+            pick: u.x,
+            u: Vec2::new(x, u.y),
+        }
+    }
+
+    /// The source that pick value `pick` ∈ [0, 1) selects.
+    fn source_at(&self, pick: f32) -> Option<usize> {
+        (!self.cdf.is_empty()).then(|| {
+            self.cdf
+                .partition_point(|&c| c <= pick)
+                .min(self.cdf.len() - 1)
+        })
+    }
+
     /// Samples a light point for shading point `p`. `None` when there are no
     /// lights or the sampled point cannot send light towards `p` (back side
     /// of a one-sided emitter, outside a spot cone, degenerate geometry).
@@ -128,13 +163,7 @@ impl LightSampler {
         pick: f32,
         u: Vec2,
     ) -> Option<LightSample> {
-        if self.sources.is_empty() {
-            return None;
-        }
-        let k = self
-            .cdf
-            .partition_point(|&c| c <= pick)
-            .min(self.cdf.len() - 1);
+        let k = self.source_at(pick)?;
         let pick_pdf = self.pick_probability(k);
         match self.sources[k] {
             Source::Triangle { id, area, normal } => {
@@ -224,5 +253,53 @@ fn emitting_side_cosine(normal: Vec3, double_sided: bool, w: Vec3) -> Option<f32
         Some(-cos)
     } else {
         None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    /// `choose` sends each source the share of the unit square its pick
+    /// probability says, and spreads the rescaled coordinate of the points
+    /// it sends a source evenly over [0, 1): a stratified set of `u` stays
+    /// stratified on every light.
+    #[test]
+    fn a_choice_keeps_the_stratification_of_its_sample_on_each_light() {
+        let scene = Scene::builtin("chairs-room").unwrap();
+        let snapshot = scene.snapshot(0.0);
+        let lights = LightSampler::new(&snapshot, &scene.materials);
+        assert!(lights.sources.len() >= 2, "needs several lights");
+        let n = 256;
+        let mut xs: Vec<Vec<f32>> = vec![Vec::new(); lights.sources.len()];
+        for i in 0..n {
+            // One u per column of the square: x = (i + ½)/n.
+            let u = Vec2::new((i as f32 + 0.5) / n as f32, 0.3);
+            let choice = lights.choose(u);
+            assert_eq!(choice.u.y, u.y);
+            assert!((0.0..1.0).contains(&choice.u.x), "{choice:?}");
+            let k = lights.source_at(choice.pick).unwrap();
+            xs[k].push(choice.u.x);
+        }
+        for (k, x) in xs.iter_mut().enumerate() {
+            let p = lights.pick_probability(k);
+            let expected = p * n as f32;
+            assert!(
+                (x.len() as f32 - expected).abs() <= 1.0,
+                "source {k}: {} of {n}, expected {expected}",
+                x.len()
+            );
+            // Evenly spread: consecutive values 1/len apart, up to rounding.
+            x.sort_by(f32::total_cmp);
+            for pair in x.windows(2) {
+                let gap = pair[1] - pair[0];
+                let step = 1.0 / (p * n as f32);
+                assert!(
+                    (gap - step).abs() < 1e-3,
+                    "source {k}: gap {gap}, step {step}"
+                );
+            }
+        }
     }
 }

@@ -98,13 +98,27 @@ impl Rng {
 
 /// Largest f32 below 1: stratified values are clamped to it so that
 /// `(k + u)/n` never rounds up to 1.
-const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 
-/// Stratifies a 2D sample over the `spp` samples of a pixel: sample `i` of
-/// the first `n²` (`n = ⌊√spp⌋`) falls in its own cell of an `n × n` grid,
-/// at `u` within the cell; later samples are plain `u`. Averaged over the
-/// pixel's samples the estimate stays unbiased, and its variance falls
-/// faster than with independent samples.
+/// The layout of one stratified set of `spp` 2D samples (the positions of
+/// a pixel's samples, or their light samples): sample `i` of the first
+/// `n²` (`n = ⌊√spp⌋`) falls in its own cell of an `n × n` grid, and within
+/// the cell in its own column and row of an `n × n` sub-grid, so that the
+/// set is also stratified into `n²` strata along each axis (multi-jittered
+/// sampling: Chiu, Shirley and Wang, "Multi-Jittered Sampling", Graphics
+/// Gems IV, 1994); later samples are plain `u`. `u` places a sample within
+/// its sub-cell. Averaged over the set the estimate stays unbiased, and its
+/// variance falls faster than with independent samples. Why the sub-grid:
+/// with plain jittered cells a vertical or horizontal edge across a pixel
+/// (a room's corner, the side of an object, a shadow's edge) is measured by
+/// `n` strata along the axis it varies in; multi-jittered, by `n²`.
+///
+/// The cells of row `r` take sub-column `σ(r)`, the cells of column `c`
+/// sub-row `ρ(c)`, `σ` and `ρ` random permutations keyed by `shuffle`
+/// (Kensler's correlated layout: "Correlated Multi-Jittered Sampling",
+/// Pixar Technical Memo 13-01, 2013, `cmj`). Drawn anew per set, they make
+/// each sample uniform over its cell: the estimate stays unbiased. They are
+/// tabulated once per set rather than evaluated per sample.
 ///
 /// With `scramble`, sample `i` takes cell `permute(i, n², scramble)`
 /// instead of cell `i`. Two stratified dimensions of one sample (pixel
@@ -113,19 +127,48 @@ const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 /// their cells equally likely, which keeps the pixel's estimate unbiased
 /// where the two interact (a shadow edge inside the pixel). This is the
 /// "padding" of independently stratified dimensions (PBRT 3rd ed., §7.3).
-pub fn stratified_2d(sample: u32, spp: u32, u: Vec2, scramble: Option<u32>) -> Vec2 {
-    let n = (spp as f32).sqrt() as u32;
-    if sample >= n * n {
-        return u;
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Stratified2d {
+    n: u32,
+    scramble: Option<u32>,
+    /// `σ`: the sub-column of the cells of each row.
+    sub_columns: Vec<u32>,
+    /// `ρ`: the sub-row of the cells of each column.
+    sub_rows: Vec<u32>,
+}
+
+impl Stratified2d {
+    pub fn new(spp: u32, scramble: Option<u32>, shuffle: u32) -> Self {
+        let n = (spp as f32).sqrt() as u32;
+        // Kensler's multipliers for the two shuffles of one key.
+        let permutation = |key: u32| (0..n).map(|i| permute(i, n, key)).collect();
+        Stratified2d {
+            n,
+            scramble,
+            sub_columns: permutation(shuffle.wrapping_mul(0x63d8_3595)),
+            sub_rows: permutation(shuffle.wrapping_mul(0xa511_e9b3)),
+        }
     }
-    let cell = scramble.map_or(sample, |p| permute(sample, n * n, p));
-    let (a, b) = ((cell % n) as f32, (cell / n) as f32);
-    ((Vec2::new(a, b) + u) / n as f32).min(Vec2::splat(ONE_MINUS_EPSILON))
+
+    /// Sample `i` of the set, placed by `u` ∈ [0, 1)² within its sub-cell.
+    pub fn sample(&self, i: u32, u: Vec2) -> Vec2 {
+        let n = self.n;
+        if i >= n * n {
+            return u;
+        }
+        let cell = self.scramble.map_or(i, |p| permute(i, n * n, p));
+        let (column, row) = (cell % n, cell / n);
+        let sub_column = self.sub_columns[row as usize];
+        let sub_row = self.sub_rows[column as usize];
+        let x = (column as f32 + (sub_column as f32 + u.x) / n as f32) / n as f32;
+        let y = (row as f32 + (sub_row as f32 + u.y) / n as f32) / n as f32;
+        Vec2::new(x, y).min(Vec2::splat(ONE_MINUS_EPSILON))
+    }
 }
 
 /// Stratifies a 1D sample over the `spp` samples of a pixel: sample `i`
 /// falls in stratum `permute(i, spp, scramble)` of `spp`, at `u` within it
-/// (see [`stratified_2d`] for why the strata are permuted per pixel).
+/// (see [`Stratified2d`] for why the strata are permuted per pixel).
 pub fn stratified_1d(sample: u32, spp: u32, u: f32, scramble: u32) -> f32 {
     let spp = spp.max(1);
     let stratum = permute(sample % spp, spp, scramble);
@@ -227,14 +270,16 @@ pub fn cosine_power_lobe(u: Vec2, n: f32) -> Vec3 {
     Vec3::new(sin_theta * phi.cos(), sin_theta * phi.sin(), cos_theta)
 }
 
-/// Uniform point on a triangle as barycentrics (u, v) (Heitz 2019 would be
-/// more uniform in the unit square; the square-root map is standard).
+/// Uniform point on a triangle as barycentrics (u, v), by the square-root
+/// map. Heitz's low-distortion map (2019) spreads one triangle's samples
+/// more evenly, but on cube-in-box's quad light, whose two triangles share
+/// a stratified set ([`crate::light::LightSampler::choose`]), it gave 8 %
+/// more direct-light noise than this map (64×64, 16 spp, 8 seeds).
 #[inline]
 pub fn uniform_triangle(u: Vec2) -> (f32, f32) {
     let su = u.x.sqrt();
     (1.0 - su, u.y * su)
 }
-
 /// Power heuristic with β = 2 (Veach 1997, Eq. 9.13).
 #[inline]
 pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
@@ -272,20 +317,62 @@ mod tests {
     fn stratified_samples_fill_every_stratum_once() {
         for spp in [1, 4, 16, 17, 64] {
             let mut seen_1d = vec![0; spp as usize];
-            let n = (spp as f32).sqrt() as u32;
-            let mut seen_2d = vec![0; (n * n) as usize];
             for s in 0..spp {
                 let x = stratified_1d(s, spp, 0.5, 0xabc);
                 seen_1d[(x * spp as f32) as usize] += 1;
                 assert!(stratified_1d(s, spp, ONE_MINUS_EPSILON, 0xabc) < 1.0);
-                let v = stratified_2d(s, spp, Vec2::splat(0.5), Some(0x51));
-                if s < n * n {
-                    let cell = (v.y * n as f32) as u32 * n + (v.x * n as f32) as u32;
-                    seen_2d[cell as usize] += 1;
-                }
             }
             assert!(seen_1d.iter().all(|&c| c == 1), "spp {spp}: {seen_1d:?}");
-            assert!(seen_2d.iter().all(|&c| c == 1), "spp {spp}: {seen_2d:?}");
+        }
+    }
+
+    /// Every cell of the grid once, and along each axis every one of the
+    /// `n²` strata once: the multi-jittered property, for any keys.
+    #[test]
+    fn multi_jittered_sets_fill_every_cell_and_every_axis_stratum_once() {
+        for (spp, scramble, shuffle) in [
+            (1, None, 0),
+            (4, Some(0x51), 7),
+            (16, None, 0xdead_beef),
+            (17, Some(3), 1),
+            (64, Some(0x1234), 0x9876),
+            (1024, None, 42),
+        ] {
+            let n = (spp as f32).sqrt() as u32;
+            let layout = Stratified2d::new(spp, scramble, shuffle);
+            let mut cells = vec![0; (n * n) as usize];
+            let mut columns = vec![0; (n * n) as usize];
+            let mut rows = vec![0; (n * n) as usize];
+            for s in 0..n * n {
+                let top = layout.sample(s, Vec2::splat(ONE_MINUS_EPSILON));
+                assert!(top.x < 1.0 && top.y < 1.0);
+                // Anywhere in the sub-cell (up to rounding at its far side).
+                for u in [Vec2::ZERO, Vec2::splat(0.999)] {
+                    let v = layout.sample(s, u);
+                    let (x, y) = ((v.x * n as f32) as u32, (v.y * n as f32) as u32);
+                    assert_eq!(
+                        ((v.x * (n * n) as f32) as u32, (v.y * (n * n) as f32) as u32),
+                        (
+                            (layout.sample(s, Vec2::splat(0.5)).x * (n * n) as f32) as u32,
+                            (layout.sample(s, Vec2::splat(0.5)).y * (n * n) as f32) as u32
+                        ),
+                        "u moves sample {s} out of its sub-cell"
+                    );
+                    if u == Vec2::ZERO {
+                        cells[(y * n + x) as usize] += 1;
+                        columns[(v.x * (n * n) as f32) as usize] += 1;
+                        rows[(v.y * (n * n) as f32) as usize] += 1;
+                    }
+                }
+            }
+            for (name, counts) in [("cells", &cells), ("columns", &columns), ("rows", &rows)] {
+                assert!(
+                    counts.iter().all(|&c| c == 1),
+                    "spp {spp} {name}: {counts:?}"
+                );
+            }
+            let past = layout.sample(n * n, Vec2::new(0.3, 0.7));
+            assert_eq!(past, Vec2::new(0.3, 0.7), "samples past n² are plain");
         }
     }
 

@@ -19,7 +19,7 @@
 //!   records for glossy surfaces land).
 
 use super::lookups::{Interpolation, Lookup};
-use super::pixels::{self, camera_query, EmitterEdges, FirstLightSampler, PixelSample};
+use super::pixels::{self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample};
 use super::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
@@ -646,8 +646,9 @@ impl PrimarySamples {
     /// Appends `samples`, tracing their camera rays.
     fn add(&mut self, ctx: &FrameContext, samples: &[PixelSample]) {
         let start = self.rays.len();
+        let mut camera = CameraSampler::default();
         for s in samples {
-            let (ray, rng) = camera_query(ctx, s);
+            let (ray, rng) = camera.query(ctx, s);
             self.rays.push(ray);
             self.rngs.push(rng);
         }

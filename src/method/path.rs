@@ -4,7 +4,7 @@
 //! more samples at the edge of a seen light: [`super::pixels`]) are handed
 //! to the shared path-tracing engine in [`crate::integrator`].
 
-use super::pixels::{self, camera_query, EmitterEdges, FirstLightSampler, PixelSample};
+use super::pixels::{self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample};
 use super::{FrameContext, Method};
 use crate::backend::{Hit, Ray};
 use crate::film::Film;
@@ -47,11 +47,12 @@ impl PathTracer {
         ctx: &FrameContext,
         samples: &[PixelSample],
     ) -> (Vec<Ray>, Vec<crate::integrator::RadianceResult>) {
+        let mut camera = CameraSampler::default();
         let mut lights = FirstLightSampler::default();
         let queries: Vec<RadianceQuery> = samples
             .iter()
             .map(|s| {
-                let (ray, mut rng) = camera_query(ctx, s);
+                let (ray, mut rng) = camera.query(ctx, s);
                 RadianceQuery {
                     ray,
                     first_light: Some(lights.sample(ctx, s, &mut rng)),

@@ -32,7 +32,7 @@ use super::FrameContext;
 use crate::accel::ray_hits_triangle;
 use crate::backend::{Hit, Ray};
 use crate::light::{emitting_cosine, LightSampler};
-use crate::sampling::{stratified_1d, stratified_2d, LightChoice, Rng};
+use crate::sampling::{LightChoice, Rng, Stratified2d};
 use crate::scene::Snapshot;
 use glam::Vec3;
 
@@ -399,6 +399,7 @@ fn coverage_counts(
     extra: u32,
 ) -> Vec<CoverageCount> {
     let mut counts = vec![CoverageCount::default(); candidates.len()];
+    let mut camera = CameraSampler::default();
     let mut rays = Vec::new();
     let mut owners = Vec::new();
     let mut flush = |rays: &mut Vec<Ray>, owners: &mut Vec<(usize, u32, f32)>| {
@@ -411,7 +412,7 @@ fn coverage_counts(
     };
     for (c, &(pixel, _)) in candidates.iter().enumerate() {
         for j in 0..extra {
-            let (ray, mut rng) = camera_query(ctx, &coverage_sample(pixel, spp, extra, j));
+            let (ray, mut rng) = camera.query(ctx, &coverage_sample(pixel, spp, extra, j));
             rays.push(ray);
             owners.push((c, j, rng.next_f32()));
             if rays.len() == COVERAGE_BATCH {
@@ -458,75 +459,82 @@ impl CornerRays {
     }
 }
 
-/// The primary ray of sample `s` and the sample's random stream positioned
-/// after the jitter. The pixel is box-filtered: positions are uniform over
-/// its square, stratified over the samples of its set ([`stratified_2d`]) —
-/// unbiased, and the noise of edges inside the pixel falls faster than with
-/// independent jitter.
-pub fn camera_query(ctx: &FrameContext, s: &PixelSample) -> (Ray, Rng) {
-    let mut rng = Rng::new(ctx.pixel_key(s.pixel, s.key));
-    let jitter = stratified_2d(s.stratum, s.strata, rng.next_2d(), None);
-    let (x, y) = (s.pixel % ctx.width, s.pixel / ctx.width);
-    let sx = (x as f32 + jitter.x) / ctx.width as f32;
-    let sy = (y as f32 + jitter.y) / ctx.height as f32;
-    let camera = &ctx.snapshot.camera;
-    let dir = camera.direction(sx, sy, ctx.aspect());
-    (Ray::new(camera.position, dir, 0.0, f32::INFINITY), rng)
+/// The layout of the last set of samples (a pixel's base samples, or its
+/// coverage rays) a sampler placed, rebuilt when the set changes: a run of
+/// one set's samples builds it once.
+#[derive(Default)]
+struct LayoutCache {
+    /// `(pixel, strata)` of the set, and its layout.
+    last: Option<((u32, u32), Stratified2d)>,
 }
 
-/// Sample numbers reserved for the per-pixel scrambles of the stratified
-/// light choice (no pixel has this many samples).
-const LIGHT_PICK_SCRAMBLE: u32 = u32::MAX;
-const LIGHT_POSITION_SCRAMBLE: u32 = u32::MAX - 1;
-
-/// The random permutations, one per pixel, that pair the strata of its
-/// samples' first light samples with their pixel strata
-/// ([`FirstLightSampler::sample`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct LightScrambles {
-    pick: u32,
-    position: u32,
-}
-
-impl LightScrambles {
-    fn of(ctx: &FrameContext, pixel: u32) -> Self {
-        let scramble = |reserved| Rng::new(ctx.pixel_key(pixel, reserved)).next_u32();
-        LightScrambles {
-            pick: scramble(LIGHT_PICK_SCRAMBLE),
-            position: scramble(LIGHT_POSITION_SCRAMBLE),
+impl LayoutCache {
+    fn of(&mut self, s: &PixelSample, make: impl FnOnce() -> Stratified2d) -> &Stratified2d {
+        let key = (s.pixel, s.strata);
+        if self.last.as_ref().is_some_and(|(k, _)| *k != key) {
+            self.last = None;
         }
+        &self.last.get_or_insert_with(|| (key, make())).1
     }
 }
 
-/// Draws the first light samples of a run of pixel samples, hashing each
-/// pixel's scrambles once for the run of its samples rather than once per
-/// sample: two keyed generators a sample, where one a pixel will do (the
-/// render pass of `trc` at 64×64 took 9 % less time without them).
+/// Sample numbers reserved for the per-pixel keys of the stratified pixel
+/// positions and light choices (no pixel has this many samples).
+const PIXEL_PATTERN: u32 = u32::MAX;
+const LIGHT_PATTERN: u32 = u32::MAX - 1;
+
+/// Places the camera rays of pixel samples.
+#[derive(Default)]
+pub struct CameraSampler {
+    layouts: LayoutCache,
+}
+
+impl CameraSampler {
+    /// The primary ray of sample `s` and the sample's random stream
+    /// positioned after the jitter. The pixel is box-filtered: positions
+    /// are uniform over its square, multi-jittered over the samples of
+    /// their set ([`Stratified2d`]) — unbiased, and the noise of edges
+    /// inside the pixel falls faster than with independent jitter.
+    pub fn query(&mut self, ctx: &FrameContext, s: &PixelSample) -> (Ray, Rng) {
+        let layout = self.layouts.of(s, || {
+            let shuffle = Rng::new(ctx.pixel_key(s.pixel, PIXEL_PATTERN)).next_u32();
+            Stratified2d::new(s.strata, None, shuffle)
+        });
+        let mut rng = Rng::new(ctx.pixel_key(s.pixel, s.key));
+        let jitter = layout.sample(s.stratum, rng.next_2d());
+        let (x, y) = (s.pixel % ctx.width, s.pixel / ctx.width);
+        let sx = (x as f32 + jitter.x) / ctx.width as f32;
+        let sy = (y as f32 + jitter.y) / ctx.height as f32;
+        let camera = &ctx.snapshot.camera;
+        let dir = camera.direction(sx, sy, ctx.aspect());
+        (Ray::new(camera.position, dir, 0.0, f32::INFINITY), rng)
+    }
+}
+
+/// Draws the first light samples of pixel samples, building the layout of
+/// each set once for the run of its samples rather than once per sample
+/// (the render pass of `trc` at 64×64 took 9 % less time once the keyed
+/// generators of the layout were no longer drawn per sample).
 #[derive(Default)]
 pub struct FirstLightSampler {
-    last: Option<(u32, LightScrambles)>,
+    layouts: LayoutCache,
 }
 
 impl FirstLightSampler {
-    /// The light sample used at the first surface sample `s` hits: which
-    /// light and where on it, both stratified over the samples of the
-    /// sample's set like the pixel position, with strata paired by
-    /// per-pixel random permutations ([`stratified_2d`]). Soft shadows,
-    /// area-light shading and the choice among several lights are the
-    /// largest noise left once edges are stratified.
+    /// The light sample used at the first surface sample `s` hits: one 2D
+    /// sample stratified over the samples of the sample's set like the
+    /// pixel position, with strata paired by a per-pixel random permutation
+    /// ([`Stratified2d`]), that picks the light and the point on it
+    /// ([`crate::light::LightSampler::choose`]). Soft shadows, area-light
+    /// shading and the choice among several lights are the largest noise
+    /// left once edges are stratified.
     pub fn sample(&mut self, ctx: &FrameContext, s: &PixelSample, rng: &mut Rng) -> LightChoice {
-        let scrambles = match self.last {
-            Some((pixel, scrambles)) if pixel == s.pixel => scrambles,
-            _ => {
-                let scrambles = LightScrambles::of(ctx, s.pixel);
-                self.last = Some((s.pixel, scrambles));
-                scrambles
-            }
-        };
-        LightChoice {
-            pick: stratified_1d(s.stratum, s.strata, rng.next_f32(), scrambles.pick),
-            u: stratified_2d(s.stratum, s.strata, rng.next_2d(), Some(scrambles.position)),
-        }
+        let layout = self.layouts.of(s, || {
+            let mut keys = Rng::new(ctx.pixel_key(s.pixel, LIGHT_PATTERN));
+            let scramble = keys.next_u32();
+            Stratified2d::new(s.strata, Some(scramble), keys.next_u32())
+        });
+        ctx.lights.choose(layout.sample(s.stratum, rng.next_2d()))
     }
 }
 
