@@ -101,17 +101,18 @@ impl Rng {
 pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 
 /// The layout of one stratified set of `spp` 2D samples (the positions of
-/// a pixel's samples, or their light samples): sample `i` of the first
-/// `n²` (`n = ⌊√spp⌋`) falls in its own cell of an `n × n` grid, and within
-/// the cell in its own column and row of an `n × n` sub-grid, so that the
-/// set is also stratified into `n²` strata along each axis (multi-jittered
-/// sampling: Chiu, Shirley and Wang, "Multi-Jittered Sampling", Graphics
-/// Gems IV, 1994); later samples are plain `u`. `u` places a sample within
-/// its sub-cell. Averaged over the set the estimate stays unbiased, and its
-/// variance falls faster than with independent samples. Why the sub-grid:
-/// with plain jittered cells a vertical or horizontal edge across a pixel
-/// (a room's corner, the side of an object, a shadow's edge) is measured by
-/// `n` strata along the axis it varies in; multi-jittered, by `n²`.
+/// a pixel's samples, or their light samples): sample `i` falls in its own
+/// cell of a `columns × rows` grid (`columns · rows = spp`, as square as
+/// `spp`'s divisors allow: 4 × 4 for 16, 4 × 2 for 8, 17 × 1 for 17), and
+/// within the cell in its own column and row of a `rows × columns`
+/// sub-grid, so that the set is also stratified into `spp` strata along
+/// each axis (multi-jittered sampling: Chiu, Shirley and Wang,
+/// "Multi-Jittered Sampling", Graphics Gems IV, 1994). `u` places a sample
+/// within its sub-cell. Averaged over the set the estimate stays unbiased,
+/// and its variance falls faster than with independent samples. Why the
+/// sub-grid: with plain jittered cells a vertical or horizontal edge
+/// across a pixel (a room's corner, the side of an object, a shadow's edge)
+/// is measured by `columns` or `rows` strata; multi-jittered, by `spp`.
 ///
 /// The cells of row `r` take sub-column `σ(r)`, the cells of column `c`
 /// sub-row `ρ(c)`, `σ` and `ρ` random permutations keyed by `shuffle`
@@ -120,7 +121,7 @@ pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 /// each sample uniform over its cell: the estimate stays unbiased. They are
 /// tabulated once per set rather than evaluated per sample.
 ///
-/// With `scramble`, sample `i` takes cell `permute(i, n², scramble)`
+/// With `scramble`, sample `i` takes cell `permute(i, spp, scramble)`
 /// instead of cell `i`. Two stratified dimensions of one sample (pixel
 /// position, light position) must be paired by a random permutation, drawn
 /// anew per pixel, and not by a fixed one: only then is every pairing of
@@ -129,50 +130,48 @@ pub const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 /// "padding" of independently stratified dimensions (PBRT 3rd ed., §7.3).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Stratified2d {
-    n: u32,
+    columns: u32,
+    rows: u32,
     scramble: Option<u32>,
-    /// `σ`: the sub-column of the cells of each row.
+    /// `σ`: the sub-column (of `rows`) of the cells of each row.
     sub_columns: Vec<u32>,
-    /// `ρ`: the sub-row of the cells of each column.
+    /// `ρ`: the sub-row (of `columns`) of the cells of each column.
     sub_rows: Vec<u32>,
 }
 
 impl Stratified2d {
     pub fn new(spp: u32, scramble: Option<u32>, shuffle: u32) -> Self {
-        let n = (spp as f32).sqrt() as u32;
+        let spp = spp.max(1);
+        // The largest divisor of `spp` not above its square root.
+        let root = (spp as f64).sqrt() as u32;
+        let rows = (1..=root).rev().find(|d| spp % d == 0).unwrap_or(1);
+        let columns = spp / rows;
         // Kensler's multipliers for the two shuffles of one key.
-        let permutation = |key: u32| (0..n).map(|i| permute(i, n, key)).collect();
+        let permutation = |len: u32, key: u32| (0..len).map(|i| permute(i, len, key)).collect();
         Stratified2d {
-            n,
+            columns,
+            rows,
             scramble,
-            sub_columns: permutation(shuffle.wrapping_mul(0x63d8_3595)),
-            sub_rows: permutation(shuffle.wrapping_mul(0xa511_e9b3)),
+            sub_columns: permutation(rows, shuffle.wrapping_mul(0x63d8_3595)),
+            sub_rows: permutation(columns, shuffle.wrapping_mul(0xa511_e9b3)),
         }
     }
 
-    /// Sample `i` of the set, placed by `u` ∈ [0, 1)² within its sub-cell.
+    /// Sample `i` of the set, placed by `u` ∈ [0, 1)² within its sub-cell
+    /// (`u` itself for `i` past the set).
     pub fn sample(&self, i: u32, u: Vec2) -> Vec2 {
-        let n = self.n;
-        if i >= n * n {
+        let (columns, rows) = (self.columns, self.rows);
+        if i >= columns * rows {
             return u;
         }
-        let cell = self.scramble.map_or(i, |p| permute(i, n * n, p));
-        let (column, row) = (cell % n, cell / n);
+        let cell = self.scramble.map_or(i, |p| permute(i, columns * rows, p));
+        let (column, row) = (cell % columns, cell / columns);
         let sub_column = self.sub_columns[row as usize];
         let sub_row = self.sub_rows[column as usize];
-        let x = (column as f32 + (sub_column as f32 + u.x) / n as f32) / n as f32;
-        let y = (row as f32 + (sub_row as f32 + u.y) / n as f32) / n as f32;
+        let x = (column as f32 + (sub_column as f32 + u.x) / rows as f32) / columns as f32;
+        let y = (row as f32 + (sub_row as f32 + u.y) / columns as f32) / rows as f32;
         Vec2::new(x, y).min(Vec2::splat(ONE_MINUS_EPSILON))
     }
-}
-
-/// Stratifies a 1D sample over the `spp` samples of a pixel: sample `i`
-/// falls in stratum `permute(i, spp, scramble)` of `spp`, at `u` within it
-/// (see [`Stratified2d`] for why the strata are permuted per pixel).
-pub fn stratified_1d(sample: u32, spp: u32, u: f32, scramble: u32) -> f32 {
-    let spp = spp.max(1);
-    let stratum = permute(sample % spp, spp, scramble);
-    ((stratum as f32 + u) / spp as f32).min(ONE_MINUS_EPSILON)
 }
 
 /// Element `i` of a pseudo-random permutation of `0..len` chosen by `p`,
@@ -313,66 +312,52 @@ mod tests {
         }
     }
 
-    #[test]
-    fn stratified_samples_fill_every_stratum_once() {
-        for spp in [1, 4, 16, 17, 64] {
-            let mut seen_1d = vec![0; spp as usize];
-            for s in 0..spp {
-                let x = stratified_1d(s, spp, 0.5, 0xabc);
-                seen_1d[(x * spp as f32) as usize] += 1;
-                assert!(stratified_1d(s, spp, ONE_MINUS_EPSILON, 0xabc) < 1.0);
-            }
-            assert!(seen_1d.iter().all(|&c| c == 1), "spp {spp}: {seen_1d:?}");
-        }
-    }
-
     /// Every cell of the grid once, and along each axis every one of the
-    /// `n²` strata once: the multi-jittered property, for any keys.
+    /// `spp` strata once: the multi-jittered property, for square and
+    /// other sample counts and any keys.
     #[test]
     fn multi_jittered_sets_fill_every_cell_and_every_axis_stratum_once() {
-        for (spp, scramble, shuffle) in [
-            (1, None, 0),
-            (4, Some(0x51), 7),
-            (16, None, 0xdead_beef),
-            (17, Some(3), 1),
-            (64, Some(0x1234), 0x9876),
-            (1024, None, 42),
+        for (spp, scramble, shuffle, grid) in [
+            (1, None, 0, (1, 1)),
+            (4, Some(0x51), 7, (2, 2)),
+            (8, None, 3, (4, 2)),
+            (16, None, 0xdead_beef, (4, 4)),
+            (17, Some(3), 1, (17, 1)),
+            (64, Some(0x1234), 0x9876, (8, 8)),
+            (512, Some(9), 5, (32, 16)),
+            (1024, None, 42, (32, 32)),
         ] {
-            let n = (spp as f32).sqrt() as u32;
             let layout = Stratified2d::new(spp, scramble, shuffle);
-            let mut cells = vec![0; (n * n) as usize];
-            let mut columns = vec![0; (n * n) as usize];
-            let mut rows = vec![0; (n * n) as usize];
-            for s in 0..n * n {
+            assert_eq!((layout.columns, layout.rows), grid, "spp {spp}");
+            let (columns, rows) = grid;
+            let strata = |v: f32| (v * spp as f32) as usize;
+            let mut cells = vec![0; spp as usize];
+            let mut xs = vec![0; spp as usize];
+            let mut ys = vec![0; spp as usize];
+            for s in 0..spp {
                 let top = layout.sample(s, Vec2::splat(ONE_MINUS_EPSILON));
                 assert!(top.x < 1.0 && top.y < 1.0);
-                // Anywhere in the sub-cell (up to rounding at its far side).
-                for u in [Vec2::ZERO, Vec2::splat(0.999)] {
-                    let v = layout.sample(s, u);
-                    let (x, y) = ((v.x * n as f32) as u32, (v.y * n as f32) as u32);
-                    assert_eq!(
-                        ((v.x * (n * n) as f32) as u32, (v.y * (n * n) as f32) as u32),
-                        (
-                            (layout.sample(s, Vec2::splat(0.5)).x * (n * n) as f32) as u32,
-                            (layout.sample(s, Vec2::splat(0.5)).y * (n * n) as f32) as u32
-                        ),
-                        "u moves sample {s} out of its sub-cell"
-                    );
-                    if u == Vec2::ZERO {
-                        cells[(y * n + x) as usize] += 1;
-                        columns[(v.x * (n * n) as f32) as usize] += 1;
-                        rows[(v.y * (n * n) as f32) as usize] += 1;
-                    }
-                }
+                let v = layout.sample(s, Vec2::ZERO);
+                // Anywhere in its sub-cell (up to rounding at the far side).
+                let far = layout.sample(s, Vec2::splat(0.999));
+                assert_eq!(
+                    (strata(v.x), strata(v.y)),
+                    (strata(far.x), strata(far.y)),
+                    "spp {spp}: u moves sample {s} out of its sub-cell"
+                );
+                let (x, y) = ((v.x * columns as f32) as u32, (v.y * rows as f32) as u32);
+                cells[(y * columns + x) as usize] += 1;
+                xs[strata(v.x)] += 1;
+                ys[strata(v.y)] += 1;
             }
-            for (name, counts) in [("cells", &cells), ("columns", &columns), ("rows", &rows)] {
+            for (name, counts) in [("cells", &cells), ("columns", &xs), ("rows", &ys)] {
                 assert!(
                     counts.iter().all(|&c| c == 1),
                     "spp {spp} {name}: {counts:?}"
                 );
             }
-            let past = layout.sample(n * n, Vec2::new(0.3, 0.7));
-            assert_eq!(past, Vec2::new(0.3, 0.7), "samples past n² are plain");
+            let past = layout.sample(spp, Vec2::new(0.3, 0.7));
+            assert_eq!(past, Vec2::new(0.3, 0.7), "samples past the set are plain");
         }
     }
 
