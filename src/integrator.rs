@@ -267,10 +267,7 @@ fn shade(
     // Next-event estimation, MIS-weighted against BSDF sampling.
     let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
     let LightChoice { pick, u } = path.first_light.take().unwrap_or(LightChoice { pick, u });
-    if let Some(ls) = ctx
-        .lights
-        .sample(snapshot, &ctx.scene.materials, p, pick, u)
-    {
+    if let Some(ls) = ctx.lights.sample(snapshot, p, pick, u) {
         let f = bsdf.eval(wo, ls.wi);
         let cos = bsdf.normal().dot(ls.wi);
         if cos > 0.0 && f.max_element() > 0.0 {

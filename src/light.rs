@@ -12,9 +12,16 @@ use std::f32::consts::PI;
 /// Where the light of a sample comes from.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Source {
-    /// Emissive triangle: snapshot triangle id, and its area and unit
-    /// normal (computed once per snapshot, not for every sample).
-    Triangle { id: u32, area: f32, normal: Vec3 },
+    /// Emissive triangle: snapshot triangle id, and its area, unit normal,
+    /// radiance and sidedness (looked up once per snapshot, not for every
+    /// sample).
+    Triangle {
+        id: u32,
+        area: f32,
+        normal: Vec3,
+        radiance: Vec3,
+        double_sided: bool,
+    },
     /// Punctual light (index into `Snapshot::lights`).
     Point(usize),
 }
@@ -65,6 +72,8 @@ impl LightSampler {
                     id: i as u32,
                     area: tri.area(),
                     normal: tri.geometric_normal(),
+                    radiance: m.emission,
+                    double_sided: m.double_sided,
                 });
                 power.push(triangle_power(tri, m.emission, m.double_sided));
             }
@@ -155,18 +164,17 @@ impl LightSampler {
     /// Samples a light point for shading point `p`. `None` when there are no
     /// lights or the sampled point cannot send light towards `p` (back side
     /// of a one-sided emitter, outside a spot cone, degenerate geometry).
-    pub fn sample(
-        &self,
-        snapshot: &Snapshot,
-        materials: &[crate::scene::Material],
-        p: Vec3,
-        pick: f32,
-        u: Vec2,
-    ) -> Option<LightSample> {
+    pub fn sample(&self, snapshot: &Snapshot, p: Vec3, pick: f32, u: Vec2) -> Option<LightSample> {
         let k = self.source_at(pick)?;
         let pick_pdf = self.pick_probability(k);
         match self.sources[k] {
-            Source::Triangle { id, area, normal } => {
+            Source::Triangle {
+                id,
+                area,
+                normal,
+                radiance,
+                double_sided,
+            } => {
                 let tri = &snapshot.triangles[id as usize];
                 let (bu, bv) = uniform_triangle(u);
                 let position = tri.point(bu, bv);
@@ -177,15 +185,14 @@ impl LightSampler {
                 }
                 let distance = d2.sqrt();
                 let wi = to_light / distance;
-                let m = &materials[snapshot.tri_material[id as usize] as usize];
-                let cos_light = emitting_side_cosine(normal, m.double_sided, -wi)?;
+                let cos_light = emitting_side_cosine(normal, double_sided, -wi)?;
                 // Area pdf 1/A converted to solid angle: d²/(A·cosθ_l).
                 let pdf = pick_pdf * d2 / (area * cos_light);
                 Some(LightSample {
                     position,
                     wi,
                     distance,
-                    radiance: m.emission,
+                    radiance,
                     pdf,
                     is_delta: false,
                 })

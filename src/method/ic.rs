@@ -855,13 +855,9 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
 /// elsewhere: the cache excludes them), the glossy lobe MIS-weighted against
 /// [`glossy_query`]'s lobe sampling.
 fn direct_light(ctx: &FrameContext, s: &Surface, choice: LightChoice) -> Option<(Ray, Vec3)> {
-    let ls = ctx.lights.sample(
-        ctx.snapshot,
-        &ctx.scene.materials,
-        s.p,
-        choice.pick,
-        choice.u,
-    )?;
+    let ls = ctx
+        .lights
+        .sample(ctx.snapshot, s.p, choice.pick, choice.u)?;
     let cos = s.bsdf.normal().dot(ls.wi);
     if cos <= 0.0 || s.wo.dot(s.bsdf.normal()) <= 0.0 {
         return None;
