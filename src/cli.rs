@@ -71,7 +71,7 @@ pub struct ServeArgs {
     /// Ray backend.
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
-    /// Directory of each job's frame files (DIR/<job id>/) [default: DB.frames].
+    /// Directory of each job's frame files (DIR/JOB_ID/) [default: DB.frames].
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// A `radcache bench --out DIR` directory whose charts (*.svg, *.csv)

@@ -110,7 +110,7 @@ struct ShadowQuery {
     contribution: Vec3,
 }
 
-/// [`trace_radiance`] split over the thread pool, [`QUERIES_PER_TASK`]
+/// [`trace_radiance`] split over the thread pool, `QUERIES_PER_TASK`
 /// queries a task: the same results, since each query carries its own
 /// random stream. For batches a single task would otherwise shade alone
 /// while the other threads wait — `trc` gathers a handful of records a

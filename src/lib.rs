@@ -13,12 +13,12 @@
 //! | [`sampling`]| deterministic random numbers keyed by (seed, frame, pixel, sample) |
 //! | [`material`]| BSDFs: Lambertian and energy-conserving modified Phong         |
 //! | [`light`]   | light sampling: emissive triangles by power, point and spot   |
-//! | [`method`]  | rendering methods behind one trait (`path`, later `ic`, `trc`) |
+//! | [`method`]  | rendering methods behind one trait (`path`, `ic`, `trc`)   |
 //! | [`integrator`] | path tracing of ray batches, shared by all methods        |
 //! | [`film`]    | RGB f32 images, EXR and PNG input/output                        |
 //! | [`metrics`] | RMSE, relative RMSE, block bias and flicker; `compare`         |
 //! | [`render`]  | the frame loop: animation → geometry → method → files         |
-//! | [`bench`]   | `radcache bench`: methods against a reference, CSV and charts |
+//! | [`bench`](mod@bench) | `radcache bench`: methods against a reference, CSV and charts |
 //! | [`cli`]     | the `radcache` command line                                    |
 //! | [`store`]   | the persistent space-time store (sled + rkyv + zstd), jobs, resume |
 

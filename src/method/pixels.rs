@@ -1,11 +1,12 @@
 //! Which samples a pixel takes: the camera pass every method shares.
 //!
 //! Every pixel takes `spp` samples, box-filtered over its square and
-//! stratified among themselves. A pixel on the edge of a directly seen light
+//! multi-jittered among themselves ([`Stratified2d`]). A pixel on the edge
+//! of a directly seen light
 //! (some of its samples see an emitter's emitting side, others do not, or
 //! the rays through its corners disagree with all of them) is then
 //! post-stratified by what its camera rays see first: it traces
-//! `edge_coverage_factor · spp` more camera rays, stratified among
+//! `edge_coverage_factor · spp` more camera rays, multi-jittered among
 //! themselves and never shaded, that only measure how much of the pixel sees
 //! an emitter, and its value is that fraction of the mean of its shaded
 //! samples that see one plus the rest of the mean of those that do not.
@@ -44,8 +45,11 @@ use glam::Vec3;
 /// its noise is about 65^-3/4 ≈ 1/23 of what `spp` samples give. Measured
 /// on cube-in-box at 128×128, 16 spp, 8 frames, against a 1024-spp
 /// reference (`radcache render` then `radcache compare`), `ic`'s all-pixel
-/// relative RMSE was 0.0259 with 32, 0.0193 with 64 and 0.0185 with 128;
-/// at 64×64 the coverage rays cost `trc`'s render pass about a fifth more.
+/// relative RMSE with multi-jittered sets (8781aae) was 0.0187 with 16,
+/// 0.0171 with 32 and 0.0168 with 64 (with jittered cells, at d5dbb91:
+/// 0.0259 with 32, 0.0193 with 64, 0.0185 with 128); at 64×64 the coverage
+/// rays cost `trc`'s render pass about a fifth more (before 935e7a0 made
+/// them cheaper).
 pub const DEFAULT_EDGE_COVERAGE_FACTOR: u32 = 64;
 
 /// One sample of one pixel: its random streams are keyed by `key`, its

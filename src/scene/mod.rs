@@ -305,7 +305,7 @@ impl Camera {
         self.tan_half_fov
     }
 
-    /// Direction of the ray through film point (sx, sy) ∈ [0,1]², (0,0) at the
+    /// Direction of the ray through film point (sx, sy) ∈ \[0, 1\]², (0,0) at the
     /// top-left corner, for an image of the given aspect ratio (width/height).
     pub fn direction(&self, sx: f32, sy: f32, aspect: f32) -> Vec3 {
         let tan_half = self.tan_half_fov;
@@ -314,10 +314,10 @@ impl Camera {
         (self.basis * Vec3::new(x, y, -1.0)).normalize()
     }
 
-    /// The film point (sx, sy) ∈ [0,1]² (as [`Camera::direction`] takes it,
+    /// The film point (sx, sy) ∈ \[0, 1\]² (as [`Camera::direction`] takes it,
     /// (0,0) at the top-left corner) that world point `p` projects to, or
     /// `None` when `p` is not in front of the camera. Points outside the
-    /// view give coordinates outside [0,1].
+    /// view give coordinates outside \[0, 1\].
     pub fn project(&self, p: Vec3, aspect: f32) -> Option<(f32, f32)> {
         let local = self.basis.transpose() * (p - self.position);
         if local.z >= -1e-6 {

@@ -11,7 +11,7 @@
 //!   `exr_stored_len`);
 //! - `records`: a frame's record block ([`FrameRecordsValue`] `offset`,
 //!   `stored_len`), and through it, in the block, each record's samples
-//!   ([`RecordValue`] `samples_offset`, `samples_len`);
+//!   (`RecordValue` `samples_offset`, `samples_len`);
 //! - `meta.samples_log_len`: the committed length.
 //!
 //! Nothing else does: `state` holds a stateful method's own bytes (for

@@ -92,7 +92,7 @@ impl RecordValue {
 const BATCH: usize = 1024;
 
 /// Migration 0002 → 0003 (`migrations/0003_sample_log.md`): in batches
-/// of [`BATCH`] records in key order, appends each record's samples to
+/// of `BATCH` records in key order, appends each record's samples to
 /// `samples.log` (synced), then in one transaction over `records`,
 /// `samples` and `meta` rewrites the records with their sample location,
 /// removes their `samples` values and records the log's committed length

@@ -1,6 +1,6 @@
 //! Schema 3 (`migrations/0003_sample_log.md`): one `records` key per
 //! record (`job · frame · record id`, 20 bytes), its
-//! [`schema::RecordValue`] as the value. Schema 4
+//! `schema::RecordValue` as the value. Schema 4
 //! (`migrations/0004_record_blocks.md`) keeps the same record values but
 //! moves them, one zstd block per frame, into the sample log, leaving one
 //! small `records` key per frame. This module holds the 0003 → 0004
@@ -28,10 +28,10 @@ struct OldFrame {
 }
 
 /// Migration 0003 → 0004 (`migrations/0004_record_blocks.md`): in batches
-/// of whole frames (about [`BATCH`] records), in key order, appends each
+/// of whole frames (about `BATCH` records), in key order, appends each
 /// frame's records as one block to `samples.log` (synced), then in one
 /// transaction over `records` and `meta` removes the frame's per-record
-/// keys, writes its one `job · frame` key ([`FrameRecordsValue`]), and
+/// keys, writes its one `job · frame` key (`FrameRecordsValue`), and
 /// records the log's committed length and the last frame converted
 /// (`meta.migrate_0004_through`); then flushes. A crash mid-step resumes
 /// after the last batch committed (the log's uncommitted tail is cut off
