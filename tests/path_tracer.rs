@@ -1,5 +1,6 @@
-//! The reference path tracer against closed forms: the furnace test and a
-//! point light over a diffuse plane; and its determinism.
+//! The reference path tracer against closed forms: the furnace test, a
+//! point light over a diffuse plane and two rectangular lights over one;
+//! and its determinism.
 
 mod common;
 
@@ -114,6 +115,105 @@ fn point_light_over_plane_matches_inverse_square_law() {
             (got.x - expected).abs() / expected < 0.01,
             "pixel ({x},{y}): {} vs closed form {expected}",
             got.x
+        );
+    }
+}
+
+/// The form factor from a point on a plane to the rectangle `[x0, x1] ×
+/// [z0, z1]` of a parallel plane at height `h` above it (coordinates
+/// relative to the point): the corner formula (a point under one corner
+/// of an `X·h × Y·h` rectangle) combined by inclusion and exclusion.
+fn rectangle_form_factor(x0: f64, x1: f64, z0: f64, z1: f64, h: f64) -> f64 {
+    let corner = |x: f64, z: f64| {
+        let (a, b) = (x.abs() / h, z.abs() / h);
+        let (ra, rb) = ((1.0 + a * a).sqrt(), (1.0 + b * b).sqrt());
+        let f =
+            (a / ra * (b / ra).atan() + b / rb * (a / rb).atan()) / (2.0 * std::f64::consts::PI);
+        x.signum() * z.signum() * f
+    };
+    corner(x1, z1) - corner(x0, z1) - corner(x1, z0) + corner(x0, z0)
+}
+
+/// Two rectangular area lights of different power (each two emissive
+/// triangles) facing a diffuse plane: the radiance leaving the plane is
+/// `ρ · Σ Lᵢ · Fᵢ`, `Fᵢ` the form factor from the point to light `i` in
+/// closed form. Checks next-event estimation through the light choice
+/// (which light, then where on it, from one stratified sample) against an
+/// independent answer, off the lights' axes so both lights matter. The
+/// dimmer light gets about a seventh of the samples (its share of the
+/// power), so it takes many samples for the noise to fall well below 1 %
+/// (at 65,536 a pixel it was within 0.3 %).
+#[test]
+fn two_rectangular_lights_over_plane_match_the_form_factor() {
+    let (albedo, h) = (0.6, 1.0);
+    // (x0, x1, z0, z1, radiance) of each light at height h, facing down.
+    let lights = [(-0.5, 0.5, -0.3, 0.3, 2.0), (0.7, 1.5, -1.0, 0.2, 7.0)];
+    let mut plane = Mesh::default();
+    push_quad(
+        &mut plane,
+        Vec3::new(-10.0, 0.0, -10.0),
+        Vec3::Z * 20.0,
+        Vec3::X * 20.0,
+        0,
+    );
+    let mut emitters = Mesh::default();
+    for (i, &(x0, x1, z0, z1, _)) in lights.iter().enumerate() {
+        // X × Z = −Y: the emitting side faces the plane.
+        push_quad(
+            &mut emitters,
+            Vec3::new(x0, h, z0),
+            Vec3::X * (x1 - x0),
+            Vec3::Z * (z1 - z0),
+            1 + i as u32,
+        );
+    }
+    let eye = Vec3::new(0.2, 0.5, 0.1);
+    let yfov = 0.4;
+    let s = scene(
+        vec![plane, emitters],
+        vec![
+            Material::diffuse("plane", Vec3::splat(albedo)),
+            Material::emitter("light a", Vec3::splat(lights[0].4)),
+            Material::emitter("light b", Vec3::splat(lights[1].4)),
+        ],
+        vec![],
+        eye,
+        -Vec3::Y,
+        yfov,
+        vec![],
+    );
+    let size = 8;
+    let mut r = renderer(s, 65536, size);
+    let film = r.render_frame(0);
+    let camera = r.scene.snapshot(0.0).camera;
+    let radiance_at = |sx: f32, sy: f32| {
+        let d = camera.direction(sx, sy, 1.0);
+        let p = eye + d * (-eye.y / d.y);
+        let (px, pz) = (f64::from(p.x), f64::from(p.z));
+        lights
+            .iter()
+            .map(|&(x0, x1, z0, z1, l)| {
+                let [x0, x1, z0, z1, l, h] = [x0, x1, z0, z1, l, h].map(f64::from);
+                let f = rectangle_form_factor(x0 - px, x1 - px, z0 - pz, z1 - pz, h);
+                f64::from(albedo) * l * f
+            })
+            .sum::<f64>()
+    };
+    for (x, y) in [(0u32, 0u32), (3, 4), (7, 2), (5, 7)] {
+        let sub = 16;
+        let mut expected = 0.0;
+        for i in 0..sub {
+            for j in 0..sub {
+                let sx = (x as f32 + (i as f32 + 0.5) / sub as f32) / size as f32;
+                let sy = (y as f32 + (j as f32 + 0.5) / sub as f32) / size as f32;
+                expected += radiance_at(sx, sy);
+            }
+        }
+        expected /= f64::from(sub * sub);
+        let got = f64::from(film.get(x, y).x);
+        assert!(
+            (got - expected).abs() / expected < 0.01,
+            "pixel ({x},{y}): {got} vs closed form {expected}"
         );
     }
 }
