@@ -29,6 +29,7 @@ use radcache::backend::cpu::CpuBackend;
 use radcache::backend::gpu::{AdapterPolicy, GpuBackend, RaysOnly};
 use radcache::backend::gpu_cache::{GpuLookup, SplatTimings};
 use radcache::backend::{Hit, Ray, RayBackend};
+use radcache::cache::LookupPoint;
 use radcache::method::ic::{FallbackStreams, IcSettings, IrradianceCaching};
 use radcache::method::pixels::{CameraSampler, PixelSample};
 use radcache::method::FrameContext;
@@ -124,7 +125,10 @@ fn main() {
         let start = Instant::now();
         let covered = points
             .iter()
-            .filter(|&&(p, n)| cache.interpolate(p, n, settings.gradients).is_some())
+            .filter(|&&(p, n)| {
+                let at = LookupPoint::open(p, n);
+                cache.interpolate(&at, settings.gradients).is_some()
+            })
             .count();
         std::hint::black_box(covered);
         start.elapsed()
@@ -132,8 +136,10 @@ fn main() {
     println!("| cpu, octree, 1 thread | – | {} | {} |", ms(cpu), ms(cpu));
     if let Some(g) = gpu("interpolation") {
         let splat = g.cache_splat().expect("the GPU backend splats");
-        let gpu_points: Vec<GpuLookup> =
-            points.iter().map(|&(p, n)| GpuLookup::new(p, n)).collect();
+        let gpu_points: Vec<GpuLookup> = points
+            .iter()
+            .map(|&(p, n)| GpuLookup::new(&LookupPoint::open(p, n)))
+            .collect();
         let (mut prepare, mut lookup) = (Duration::MAX, Duration::MAX);
         let mut parts = SplatTimings::default();
         for _ in 0..RUNS {

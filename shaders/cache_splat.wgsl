@@ -73,9 +73,10 @@ struct Record {
 /// `GpuLookup` in `src/backend/gpu_cache.rs`.
 struct Lookup {
     position: vec3<f32>,
-    _pad0: f32,
+    /// R_p, the point's own harmonic distance estimate (`LookupPoint::radius`).
+    radius: f32,
     normal: vec3<f32>,
-    _pad1: f32,
+    _pad: f32,
 }
 
 /// The sums of one lookup (32 bytes). Field order must match `GpuSplat` in
@@ -139,6 +140,7 @@ fn splat_records(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let p = lookups[i].position;
     let n = lookups[i].normal;
+    let r_p = lookups[i].radius;
     var out = Splat(vec3<f32>(0.0), 0.0, 0u, 0u, 0u, 0u);
     let cell = cell_of(p);
     if cell != NONE {
@@ -154,8 +156,10 @@ fn splat_records(@builtin(global_invocation_id) id: vec3<u32>) {
                 continue;
             }
             let r = records[k];
-            // Eq. 2: w = 1/(‖p − p_K‖/R_K + √(1 − n·n_K)); ∞ at p_K itself.
-            let denom = length(d) / r.radius + sqrt(max(1.0 - dot(n, r.normal), 0.0));
+            // Eq. 2: w = 1/(‖p − p_K‖/R_K + √(1 − n·n_K)); ∞ at p_K itself;
+            // R_K no larger than p's own R_p (`IrradianceRecord::weight`).
+            let reach = min(r.radius, r_p);
+            let denom = length(d) / reach + sqrt(max(1.0 - dot(n, r.normal), 0.0));
             var w = WEIGHT_CAP;
             if denom > 0.0 {
                 w = 1.0 / denom;

@@ -33,7 +33,7 @@ use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuError, GpuLayout, Ray
 use radcache::backend::gpu_cache::{CacheSplat, GpuLookup};
 use radcache::backend::RayBackend;
 use radcache::cache::gather::Strata;
-use radcache::cache::{IrradianceCache, IrradianceRecord};
+use radcache::cache::{IrradianceCache, IrradianceRecord, LookupPoint};
 use radcache::film::Film;
 use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::trc::{TemporalGradients, TemporalRadianceCaching, TrcSettings};
@@ -128,25 +128,40 @@ fn surface_point(rng: &mut Rng) -> (Vec3, Vec3) {
 }
 
 /// Lookups: surface points, records' own points (w = ∞: the 1e6 cap) and
-/// a few points in open space (no record).
-fn random_lookups(rng: &mut Rng, cache: &IrradianceCache, n: usize) -> Vec<(Vec3, Vec3)> {
+/// a few points in open space (no record); a third of them open, the
+/// others with a clearance within the records' radii (which it then
+/// replaces in the weight of some).
+fn random_lookups(rng: &mut Rng, cache: &IrradianceCache, n: usize) -> Vec<LookupPoint> {
     let records = cache.records();
     (0..n)
-        .map(|i| match i % 10 {
-            0 => {
-                let r = &records[rng.next_u32() as usize % records.len()];
-                (r.position, r.normal)
-            }
-            1 => (v3(rng) * 4.0, normal_near(rng, Vec3::Z, 1.0)),
-            _ => surface_point(rng),
+        .map(|i| {
+            let (p, n) = random_point(rng, records, i);
+            let clearance = match i % 3 {
+                0 => LookupPoint::OPEN,
+                _ => 0.1 + 3.0 * rng.next_f32(),
+            };
+            LookupPoint::new(p, n, clearance)
         })
         .collect()
 }
 
+/// Lookup `i`'s point and normal for [`random_lookups`].
+fn random_point(rng: &mut Rng, records: &[IrradianceRecord], i: usize) -> (Vec3, Vec3) {
+    match i % 10 {
+        0 => {
+            let r = &records[rng.next_u32() as usize % records.len()];
+            (r.position, r.normal)
+        }
+        1 => (v3(rng) * 4.0, normal_near(rng, Vec3::Z, 1.0)),
+        _ => surface_point(rng),
+    }
+}
+
 /// Whether some record sits within rounding of one of the usability tests
-/// at `(p, n)`: then CPU and GPU may disagree on it.
-fn ambiguous(cache: &IrradianceCache, p: Vec3, n: Vec3) -> bool {
+/// at `at`: then CPU and GPU may disagree on it.
+fn ambiguous(cache: &IrradianceCache, at: &LookupPoint) -> bool {
     let a = cache.accuracy;
+    let (p, n) = (at.position, at.normal);
     cache.records().iter().any(|r| {
         let influence = r.influence_radius(a);
         let d2 = (p - r.position).length_squared();
@@ -154,7 +169,7 @@ fn ambiguous(cache: &IrradianceCache, p: Vec3, n: Vec3) -> bool {
             return false;
         }
         let near = |x: f32| x.abs() < AMBIGUOUS;
-        let w = r.weight(p, n);
+        let w = r.weight(at);
         let front = (p - r.position).dot(0.5 * (n + r.normal)) / r.radius + 0.01;
         near(d2 / (influence * influence) - 1.0)
             || (w.is_finite() && near(w * a - 1.0))
@@ -176,17 +191,15 @@ fn gpu_interpolation_equals_cpu_at_random_lookups() {
     for (records, accuracy) in [(300, 0.2), (2000, 0.3), (40, 0.1)] {
         let cache = random_cache(&mut rng, records, accuracy);
         let all = random_lookups(&mut rng, &cache, 20_000);
-        let (lookups, unclear): (Vec<_>, Vec<_>) = all
-            .iter()
-            .copied()
-            .partition(|&(p, n)| !ambiguous(&cache, p, n));
+        let (lookups, unclear): (Vec<_>, Vec<_>) =
+            all.iter().copied().partition(|at| !ambiguous(&cache, at));
         assert!(
             (unclear.len() as f64) <= MAX_AMBIGUOUS_SHARE * all.len() as f64,
             "{} of {} lookups near a boundary",
             unclear.len(),
             all.len()
         );
-        let points: Vec<GpuLookup> = lookups.iter().map(|&(p, n)| GpuLookup::new(p, n)).collect();
+        let points: Vec<GpuLookup> = lookups.iter().map(GpuLookup::new).collect();
         for gradients in [true, false] {
             let prepared = splat(&gpu)
                 .prepare(cache.records(), cache.accuracy, gradients)
@@ -199,8 +212,9 @@ fn gpu_interpolation_equals_cpu_at_random_lookups() {
             assert_eq!(splats.len(), lookups.len());
             let mut cpu_used = vec![false; cache.len()];
             let (mut covered, mut total_records) = (0, 0u64);
-            for (&(p, n), s) in lookups.iter().zip(&splats) {
-                let cpu = cache.interpolate_marking(p, n, gradients, |k| cpu_used[k] = true);
+            for (at, s) in lookups.iter().zip(&splats) {
+                let (p, n) = (at.position, at.normal);
+                let cpu = cache.interpolate_marking(at, gradients, |k| cpu_used[k] = true);
                 let gpu = s.interpolated();
                 match (cpu, gpu) {
                     (None, None) => {}
@@ -251,17 +265,22 @@ fn gpu_interpolation_of_empty_and_interleaved_caches() {
     let empty = splat(&gpu).prepare(&[], 0.2, true).unwrap();
     let a = random_cache(&mut rng, 200, 0.2);
     let b = random_cache(&mut rng, 500, 0.2);
-    let lookups: Vec<(Vec3, Vec3)> = random_lookups(&mut rng, &a, 2000)
+    let lookups: Vec<LookupPoint> = random_lookups(&mut rng, &a, 2000)
         .into_iter()
-        .filter(|&(p, n)| !ambiguous(&a, p, n))
+        .filter(|at| !ambiguous(&a, at))
         .collect();
-    let points: Vec<GpuLookup> = lookups.iter().map(|&(p, n)| GpuLookup::new(p, n)).collect();
+    let points: Vec<GpuLookup> = lookups.iter().map(GpuLookup::new).collect();
     let prepared_a = splat(&gpu).prepare(a.records(), a.accuracy, true).unwrap();
     let _prepared_b = splat(&gpu).prepare(b.records(), b.accuracy, true).unwrap();
     let splats = splat(&gpu).interpolate(&prepared_a, &points, None).unwrap();
-    for (&(p, n), s) in lookups.iter().zip(&splats) {
-        let cpu = a.interpolate(p, n, true).map(|e| e.records);
-        assert_eq!(cpu, s.interpolated().map(|e| e.records), "at {p}");
+    for (at, s) in lookups.iter().zip(&splats) {
+        let cpu = a.interpolate(at, true).map(|e| e.records);
+        assert_eq!(
+            cpu,
+            s.interpolated().map(|e| e.records),
+            "at {}",
+            at.position
+        );
     }
     let none = splat(&gpu).interpolate(&empty, &points, None).unwrap();
     assert!(none.iter().all(|s| s.count == 0));

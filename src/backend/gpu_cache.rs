@@ -48,7 +48,7 @@
 //! pass ([`CacheSplat::prepare`]); lookups per render tile.
 
 use super::gpu::{bind, layout_entry, storage_entry, ErrorSlot, FailureSlot, GpuError};
-use crate::cache::{Interpolated, IrradianceRecord};
+use crate::cache::{Interpolated, IrradianceRecord, LookupPoint};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -105,17 +105,19 @@ pub struct GpuRecord {
 #[repr(C)]
 pub struct GpuLookup {
     pub position: [f32; 3],
-    pub _pad0: f32,
+    /// [`LookupPoint::radius`].
+    pub radius: f32,
     pub normal: [f32; 3],
-    pub _pad1: f32,
+    pub _pad: f32,
 }
 
 impl GpuLookup {
-    pub fn new(position: Vec3, normal: Vec3) -> Self {
+    pub fn new(at: &LookupPoint) -> Self {
         GpuLookup {
-            position: position.to_array(),
-            normal: normal.to_array(),
-            ..GpuLookup::default()
+            position: at.position.to_array(),
+            radius: at.radius(),
+            normal: at.normal.to_array(),
+            _pad: 0.0,
         }
     }
 }

@@ -10,7 +10,7 @@ pub mod record;
 
 use glam::Vec3;
 use octree::SphereOctree;
-pub use record::{IrradianceRecord, RecordId};
+pub use record::{IrradianceRecord, LookupPoint, RecordId};
 
 /// Records of one cache with their spatial index.
 pub struct IrradianceCache {
@@ -49,57 +49,55 @@ impl IrradianceCache {
         self.records.is_empty()
     }
 
-    /// Calls `visit(record, weight)` for every record usable at `p` with
-    /// normal `n`: `w_K(p) ≥ 1/a` (TRC Eq. 3) and not in front of `p`.
-    pub fn for_each_usable(&self, p: Vec3, n: Vec3, mut visit: impl FnMut(&IrradianceRecord, f32)) {
-        self.for_each_usable_indexed(p, n, |_, record, w| visit(record, w));
+    /// Calls `visit(record, weight)` for every record usable at `at`:
+    /// `w_K(p) ≥ 1/a` (TRC Eq. 3) and not in front of `p`.
+    pub fn for_each_usable(&self, at: &LookupPoint, mut visit: impl FnMut(&IrradianceRecord, f32)) {
+        self.for_each_usable_indexed(at, |_, record, w| visit(record, w));
     }
 
     /// [`Self::for_each_usable`] with each record's index in [`Self::records`].
     pub fn for_each_usable_indexed(
         &self,
-        p: Vec3,
-        n: Vec3,
+        at: &LookupPoint,
         mut visit: impl FnMut(usize, &IrradianceRecord, f32),
     ) {
         let threshold = 1.0 / self.accuracy;
-        self.index.query(p, |i| {
+        self.index.query(at.position, |i| {
             let record = &self.records[i as usize];
-            let w = record.weight(p, n);
-            if w >= threshold && !record.is_in_front_of(p, n) {
+            let w = record.weight(at);
+            if w >= threshold && !record.is_in_front_of(at) {
                 visit(i as usize, record, w);
             }
         });
     }
 
-    /// Whether some record can be used at `p`.
-    pub fn covers(&self, p: Vec3, n: Vec3) -> bool {
+    /// Whether some record can be used at `at`.
+    pub fn covers(&self, at: &LookupPoint) -> bool {
         let mut covered = false;
-        self.for_each_usable(p, n, |_, _| covered = true);
+        self.for_each_usable(at, |_, _| covered = true);
         covered
     }
 
     /// TRC Eq. 1 with Eq. 4: `E(p) = Σ w_K E_K(p) / Σ w_K` over usable
     /// records; `None` where no record is usable.
-    pub fn interpolate(&self, p: Vec3, n: Vec3, use_gradients: bool) -> Option<Interpolated> {
-        self.interpolate_marking(p, n, use_gradients, |_| ())
+    pub fn interpolate(&self, at: &LookupPoint, use_gradients: bool) -> Option<Interpolated> {
+        self.interpolate_marking(at, use_gradients, |_| ())
     }
 
     /// [`Self::interpolate`], calling `mark(index)` for every record used
     /// (`trc` keeps the records that contributed to a frame).
     pub fn interpolate_marking(
         &self,
-        p: Vec3,
-        n: Vec3,
+        at: &LookupPoint,
         use_gradients: bool,
         mut mark: impl FnMut(usize),
     ) -> Option<Interpolated> {
         let (mut sum, mut weights, mut count) = (Vec3::ZERO, 0.0f32, 0u32);
-        self.for_each_usable_indexed(p, n, |i, record, w| {
+        self.for_each_usable_indexed(at, |i, record, w| {
             mark(i);
             // A record exactly at p has infinite weight: it alone decides.
             let w = w.min(1e6);
-            sum += record.extrapolate(p, n, use_gradients) * w;
+            sum += record.extrapolate(at.position, at.normal, use_gradients) * w;
             weights += w;
             count += 1;
         });

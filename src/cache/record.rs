@@ -9,6 +9,48 @@ use glam::Vec3;
 /// methods). Assigned in creation order, so deterministic.
 pub type RecordId = u64;
 
+/// A point where the cache is looked up: a surface point, its unit
+/// shading normal, and its clearance: the distance to the nearest surface
+/// straight along the normal ([`LookupPoint::OPEN`] where nothing is
+/// there or it was not measured). See [`IrradianceRecord::weight`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LookupPoint {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub clearance: f32,
+}
+
+impl LookupPoint {
+    /// The clearance of a point with nothing above it: finite (and finite
+    /// times [`Self::radius`]'s 3/2), so that it crosses to the GPU
+    /// unchanged (WGSL may assume no infinities).
+    pub const OPEN: f32 = 1e30;
+
+    pub fn new(position: Vec3, normal: Vec3, clearance: f32) -> Self {
+        LookupPoint {
+            position,
+            normal,
+            clearance,
+        }
+    }
+
+    /// A point whose clearance is not measured: Ward's weight unchanged.
+    pub fn open(position: Vec3, normal: Vec3) -> Self {
+        LookupPoint::new(position, normal, Self::OPEN)
+    }
+
+    /// The harmonic mean distance `R` a record gathered here would have
+    /// if the surface at the clearance `h` were a plane parallel to this
+    /// one: over the cosine-weighted hemisphere the mean of `1/r =
+    /// cosθ/h` is `2/(3h)`, so `R = 3h/2`. One ray cannot see more; the
+    /// factor keeps the bound consistent with the `R` of the records
+    /// ([`crate::cache::gather`]), so a record gathered at this very point
+    /// under such a plane is not cut down by it.
+    pub fn radius(&self) -> f32 {
+        1.5 * self.clearance
+    }
+}
+
 /// One cached irradiance sample of the indirect light on a surface.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IrradianceRecord {
@@ -49,10 +91,21 @@ impl IrradianceRecord {
         (self.irradiance + delta).max(Vec3::ZERO)
     }
 
-    /// TRC Eq. 2: `w_K(p) = 1 / (‖p − p_K‖/R_K + √(1 − n·n_K))`.
-    pub fn weight(&self, p: Vec3, n: Vec3) -> f32 {
-        let d = (p - self.position).length() / self.radius;
-        let c = (1.0 - n.dot(self.normal)).max(0.0).sqrt();
+    /// TRC Eq. 2, `w_K(p) = 1 / (‖p − p_K‖/R_K + √(1 − n·n_K))`, with
+    /// `R_K` no larger than the lookup point's own estimate `R_p`
+    /// ([`LookupPoint::radius`]): `‖p − p_K‖ / min(R_K, R_p)`.
+    ///
+    /// Why (a departure from Ward): his error model, the split sphere,
+    /// bounds the change of irradiance between two points by their
+    /// distance over the distance to the surfaces around them, and `R_K`
+    /// measures that only around `p_K`. A point with a surface close above
+    /// it (the ceiling above a light hung 2 cm under it, the floor under a
+    /// low shelf) sees an environment `K` never saw, however near `p_K`
+    /// is. `R_p` comes from one ray along p's normal and is huge wherever p
+    /// is open, so it leaves the weight alone there.
+    pub fn weight(&self, at: &LookupPoint) -> f32 {
+        let d = (at.position - self.position).length() / self.radius.min(at.radius());
+        let c = (1.0 - at.normal.dot(self.normal)).max(0.0).sqrt();
         let denom = d + c;
         if denom > 0.0 {
             1.0 / denom
@@ -65,9 +118,9 @@ impl IrradianceRecord {
     /// tangent plane at p, averaged over both normals), so it sees a
     /// different environment and must not be used. The tolerance is relative
     /// to the record's radius so that the test is scale-invariant.
-    pub fn is_in_front_of(&self, p: Vec3, n: Vec3) -> bool {
+    pub fn is_in_front_of(&self, at: &LookupPoint) -> bool {
         const FRONT_TOLERANCE: f32 = 0.01;
-        let d = (p - self.position).dot(0.5 * (n + self.normal));
+        let d = (at.position - self.position).dot(0.5 * (at.normal + self.normal));
         d < -FRONT_TOLERANCE * self.radius
     }
 

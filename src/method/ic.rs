@@ -11,14 +11,16 @@
 //! - direct light by next-event estimation (one light sample per pixel
 //!   sample; the glossy lobe's part MIS-weighted against lobe sampling),
 //! - indirect diffuse from the cache: `E_indirect` interpolated with
-//!   gradients (TRC Eq. 1–4), records used where `w ≥ 1/a`, looked up
+//!   gradients (TRC Eq. 1–4), records used where `w ≥ 1/a` (with `R_K`
+//!   no larger than an estimate from the lookup point's clearance, a departure from Ward
+//!   explained at `IrradianceRecord::weight`), looked up
 //!   once per pixel and triangle for the pixel's samples on it — on the CPU,
 //!   or on the GPU by radiance cache splatting (TRC §5,
 //!   `backend::gpu_cache`) when the ray backend is the GPU one,
 //! - the glossy lobe by path tracing from a lobe sample (until radiance
 //!   records for glossy surfaces land).
 
-use super::lookups::{Interpolation, Lookup};
+use super::lookups::{measure_clearance, Interpolation, Lookup};
 use super::pixels::{self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample};
 use super::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::backend::{Hit, Ray};
@@ -334,9 +336,16 @@ impl IrradianceCaching {
         annotate: &(impl Fn(&Gathered) -> X + Sync),
         inserted: &mut Vec<X>,
     ) {
+        let points: Vec<(Vec3, Vec3)> = batch
+            .iter()
+            .map(|c| (c.point.position, c.point.normal))
+            .collect();
+        let at = measure_clearance(ctx, &points);
         let needed: Vec<Candidate> = batch
             .into_par_iter()
-            .filter(|c| !cache.covers(c.point.position, c.point.normal))
+            .zip(at)
+            .filter(|(_, at)| !cache.covers(at))
+            .map(|(c, _)| c)
             .collect();
         let records: Vec<(IrradianceRecord, X)> = self
             .gather_parallel(ctx, &needed)
@@ -608,7 +617,7 @@ pub(crate) fn mark_used(
         let count = pixels_per_tile.min(n_pixels - first);
         let (primary, _) = PrimarySamples::trace(ctx, first, count, spp);
         let surfaces = primary.surfaces(ctx);
-        let (lookups, _) = pixel_lookups(&surfaces, &primary.hits, &primary.samples);
+        let (lookups, _) = pixel_lookups(ctx, &surfaces, &primary.hits, &primary.samples);
         interpolation.mark_used(&lookups, used);
     });
 }
@@ -680,13 +689,15 @@ impl PrimarySamples {
 /// 16 samples per pixel, fall to about one per pixel. Each sample keeps its
 /// own visibility, emission, direct light and glossy lobe: the shading rate
 /// of the cache is decoupled from the visibility sampling, as in MSAA.
-/// Samples on different triangles never share (an edge, a corner).
+/// Samples on different triangles never share (an edge, a corner), nor do
+/// samples spread wider than their lookup's clearance ([`split_narrow`]).
 fn pixel_lookups(
+    ctx: &FrameContext,
     surfaces: &[Option<Surface>],
     hits: &[Hit],
     samples: &[PixelSample],
 ) -> (Vec<Lookup>, Vec<Option<u32>>) {
-    let shading_points: Vec<Option<(u32, Lookup)>> = surfaces
+    let shading_points: Vec<Option<(u32, ShadingPoint)>> = surfaces
         .iter()
         .zip(hits)
         .map(|(surface, hit)| {
@@ -696,17 +707,79 @@ fn pixel_lookups(
         })
         .collect();
     let pixel_of: Vec<u32> = samples.iter().map(|s| s.pixel).collect();
-    share_lookups(&shading_points, &pixel_of)
+    let (points, of_sample) = share_lookups(&shading_points, &pixel_of);
+    let shared = measure_clearance(ctx, &points);
+    split_narrow(ctx, shared, of_sample, &shading_points)
 }
+
+/// Gives each sample of a shared lookup its own lookup (and clearance)
+/// where the samples lie farther from the shared point than its
+/// clearance: there `E` is not smooth over the pixel, and the clearance
+/// of one point does not speak for the others. The case is a pixel that
+/// sees, at a grazing angle, both the ceiling above a light hung just
+/// under it (dark) and the open ceiling beyond the light's edge: one
+/// lookup at their mean point shades the whole pixel with one or the
+/// other. Such pixels are few (one ray per sample of theirs is traced
+/// again); the others keep their index order.
+fn split_narrow(
+    ctx: &FrameContext,
+    shared: Vec<Lookup>,
+    mut of_sample: Vec<Option<u32>>,
+    points: &[Option<(u32, ShadingPoint)>],
+) -> (Vec<Lookup>, Vec<Option<u32>>) {
+    let point_of = |i: usize| {
+        points[i]
+            .expect("a sample with a lookup has a shading point")
+            .1
+    };
+    let mut spread = vec![0.0f32; shared.len()];
+    for (i, k) in of_sample.iter().enumerate() {
+        if let Some(k) = *k {
+            let d = (point_of(i).0 - shared[k as usize].position).length();
+            spread[k as usize] = spread[k as usize].max(d);
+        }
+    }
+    let narrow: Vec<bool> = shared
+        .iter()
+        .zip(&spread)
+        .map(|(at, &s)| at.clearance < s)
+        .collect();
+    if !narrow.contains(&true) {
+        return (shared, of_sample);
+    }
+    // The shared lookups kept, in order, then one per sample of the others.
+    let mut index = vec![None; shared.len()];
+    let mut lookups = Vec::with_capacity(shared.len());
+    for (k, at) in shared.iter().enumerate() {
+        if !narrow[k] {
+            index[k] = Some(lookups.len() as u32);
+            lookups.push(*at);
+        }
+    }
+    let mut own = Vec::new();
+    for (i, k) in of_sample.iter_mut().enumerate() {
+        if let Some(shared_k) = *k {
+            *k = index[shared_k as usize].or_else(|| {
+                own.push(point_of(i));
+                Some((lookups.len() + own.len() - 1) as u32)
+            });
+        }
+    }
+    lookups.extend(measure_clearance(ctx, &own));
+    (lookups, of_sample)
+}
+
+/// A shading point and its unit normal.
+type ShadingPoint = (Vec3, Vec3);
 
 /// [`pixel_lookups`] over each sample's triangle and shading point (`None`:
 /// no lookup) and pixel; a pixel's samples are consecutive (a run of equal
 /// pixels shares lookups).
 fn share_lookups(
-    samples: &[Option<(u32, Lookup)>],
+    samples: &[Option<(u32, ShadingPoint)>],
     pixel_of: &[u32],
-) -> (Vec<Lookup>, Vec<Option<u32>>) {
-    let mut lookups: Vec<Lookup> = Vec::new();
+) -> (Vec<ShadingPoint>, Vec<Option<u32>>) {
+    let mut lookups: Vec<ShadingPoint> = Vec::new();
     let mut counts: Vec<f32> = Vec::new();
     let mut of_sample = vec![None; samples.len()];
     // The current pixel's (triangle, lookup) pairs: a pixel hits few.
@@ -789,7 +862,7 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
             shadow_targets.push((i, contribution));
         }
     }
-    let (lookups, lookup_of_sample) = pixel_lookups(&surfaces, &hits, &samples);
+    let (lookups, lookup_of_sample) = pixel_lookups(ctx, &surfaces, &hits, &samples);
     stats.lookups = lookups.len() as u64;
     let interpolated = pass.interpolation.interpolate(&lookups, pass.used);
     stats.lookup_records = interpolated

@@ -13,12 +13,39 @@
 
 use super::FrameContext;
 use crate::backend::gpu_cache::{CacheSplat, GpuLookup, PreparedCache};
-use crate::cache::{Interpolated, IrradianceCache};
+use crate::backend::{Hit, Ray};
+use crate::cache::{Interpolated, IrradianceCache, LookupPoint};
+use crate::integrator::offset_origin;
 use glam::Vec3;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// A shading point and its unit normal.
-pub(crate) type Lookup = (Vec3, Vec3);
+/// A shading point, its unit normal and its clearance.
+pub(crate) type Lookup = LookupPoint;
+
+/// Each shading point `(p, n)` as a lookup, with its clearance measured
+/// by one ray from `p` along `n` (the nearest hit's distance, or
+/// [`LookupPoint::OPEN`] on a miss): what keeps a record from being used
+/// under a surface it never saw ([`crate::cache::IrradianceRecord::weight`]).
+pub(crate) fn measure_clearance(ctx: &FrameContext, points: &[(Vec3, Vec3)]) -> Vec<Lookup> {
+    let rays: Vec<Ray> = points
+        .iter()
+        .map(|&(p, n)| Ray::new(offset_origin(p, n, n), n, 0.0, f32::INFINITY))
+        .collect();
+    let mut hits = vec![Hit::MISS; rays.len()];
+    ctx.backend.closest_hit(&rays, &mut hits);
+    points
+        .iter()
+        .zip(&hits)
+        .map(|(&(p, n), hit)| {
+            let clearance = if hit.is_hit() {
+                hit.t
+            } else {
+                LookupPoint::OPEN
+            };
+            LookupPoint::new(p, n, clearance)
+        })
+        .collect()
+}
 
 /// How one render pass interpolates its cache.
 pub(crate) enum Interpolation<'a> {
@@ -77,8 +104,7 @@ impl<'a> Interpolation<'a> {
                 cache,
                 gradients,
             } => {
-                let points: Vec<GpuLookup> =
-                    lookups.iter().map(|&(p, n)| GpuLookup::new(p, n)).collect();
+                let points: Vec<GpuLookup> = lookups.iter().map(GpuLookup::new).collect();
                 match splat.interpolate(prepared, &points, used) {
                     Ok(sums) => sums.iter().map(|s| s.interpolated()).collect(),
                     Err(e) => {
@@ -111,8 +137,8 @@ fn interpolate_on_cpu(
 ) -> Vec<Option<Interpolated>> {
     lookups
         .iter()
-        .map(|&(p, n)| {
-            cache.interpolate_marking(p, n, gradients, |i| {
+        .map(|at| {
+            cache.interpolate_marking(at, gradients, |i| {
                 if let Some(used) = used {
                     used[i].store(true, Ordering::Relaxed);
                 }
@@ -123,7 +149,7 @@ fn interpolate_on_cpu(
 
 /// Flags the records usable at each lookup (no extrapolation needed).
 fn mark_on_cpu(cache: &IrradianceCache, lookups: &[Lookup], used: &[AtomicBool]) {
-    for &(p, n) in lookups {
-        cache.for_each_usable_indexed(p, n, |i, _, _| used[i].store(true, Ordering::Relaxed));
+    for at in lookups {
+        cache.for_each_usable_indexed(at, |i, _, _| used[i].store(true, Ordering::Relaxed));
     }
 }
