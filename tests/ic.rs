@@ -312,7 +312,11 @@ fn ceiling_above_and_beside_the_light(size: u32) -> (Vec<usize>, Vec<usize>) {
 /// when the clearance was added). At 128×128 these pixels see the strip
 /// at a grazing angle, mixed with open ceiling beyond the light's far
 /// edge; `ic` reads them about a third low (at 256×256 the strip's mean is
-/// within 2 %).
+/// within 2 %): the records the fill puts in the strip have their radius
+/// raised to the 2-pixel minimum spacing (`IcSettings::min_spacing_px`,
+/// Tabellion & Lamorlette's clamp), so they reach the open ceiling just
+/// beyond the edge and darken it, as a debug dump of one pixel's samples
+/// showed (open samples interpolating a strip record's irradiance).
 #[test]
 fn ic_keeps_the_ceiling_above_the_light_dark() {
     let size = 128;

@@ -12,15 +12,15 @@
 //!   sample; the glossy lobe's part MIS-weighted against lobe sampling),
 //! - indirect diffuse from the cache: `E_indirect` interpolated with
 //!   gradients (TRC Eq. 1–4), records used where `w ≥ 1/a` (with `R_K`
-//!   no larger than an estimate from the lookup point's clearance, a departure from Ward
-//!   explained at `IrradianceRecord::weight`), looked up
-//!   once per pixel and triangle for the pixel's samples on it — on the CPU,
+//!   no larger than an estimate from the lookup point's clearance, a
+//!   departure from Ward explained at `IrradianceRecord::weight`), looked
+//!   up once per pixel and triangle for the pixel's samples on it — on the CPU,
 //!   or on the GPU by radiance cache splatting (TRC §5,
 //!   `backend::gpu_cache`) when the ray backend is the GPU one,
 //! - the glossy lobe by path tracing from a lobe sample (until radiance
 //!   records for glossy surfaces land).
 
-use super::lookups::{measure_clearance, Interpolation, Lookup};
+use super::lookups::{measure_clearance, Interpolation, Lookup, ShadingPoint};
 use super::pixels::{self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample};
 use super::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::backend::{Hit, Ray};
@@ -336,7 +336,7 @@ impl IrradianceCaching {
         annotate: &(impl Fn(&Gathered) -> X + Sync),
         inserted: &mut Vec<X>,
     ) {
-        let points: Vec<(Vec3, Vec3)> = batch
+        let points: Vec<ShadingPoint> = batch
             .iter()
             .map(|c| (c.point.position, c.point.normal))
             .collect();
@@ -709,7 +709,9 @@ fn pixel_lookups(
     let pixel_of: Vec<u32> = samples.iter().map(|s| s.pixel).collect();
     let (points, of_sample) = share_lookups(&shading_points, &pixel_of);
     let shared = measure_clearance(ctx, &points);
-    split_narrow(ctx, shared, of_sample, &shading_points)
+    let (mut lookups, of_sample, own) = split_narrow(shared, of_sample, &shading_points);
+    lookups.extend(measure_clearance(ctx, &own));
+    (lookups, of_sample)
 }
 
 /// Gives each sample of a shared lookup its own lookup (and clearance)
@@ -720,13 +722,17 @@ fn pixel_lookups(
 /// under it (dark) and the open ceiling beyond the light's edge: one
 /// lookup at their mean point shades the whole pixel with one or the
 /// other. Such pixels are few (one ray per sample of theirs is traced
-/// again); the others keep their index order.
+/// again).
+///
+/// Returns the shared lookups kept, in order; each sample's lookup, where
+/// the samples of split ones index, in sample order, past the kept ones;
+/// and the shading points of those samples, whose lookups (with their
+/// clearance) the caller appends.
 fn split_narrow(
-    ctx: &FrameContext,
     shared: Vec<Lookup>,
     mut of_sample: Vec<Option<u32>>,
     points: &[Option<(u32, ShadingPoint)>],
-) -> (Vec<Lookup>, Vec<Option<u32>>) {
+) -> (Vec<Lookup>, Vec<Option<u32>>, Vec<ShadingPoint>) {
     let point_of = |i: usize| {
         points[i]
             .expect("a sample with a lookup has a shading point")
@@ -745,7 +751,7 @@ fn split_narrow(
         .map(|(at, &s)| at.clearance < s)
         .collect();
     if !narrow.contains(&true) {
-        return (shared, of_sample);
+        return (shared, of_sample, Vec::new());
     }
     // The shared lookups kept, in order, then one per sample of the others.
     let mut index = vec![None; shared.len()];
@@ -765,12 +771,8 @@ fn split_narrow(
             });
         }
     }
-    lookups.extend(measure_clearance(ctx, &own));
-    (lookups, of_sample)
+    (lookups, of_sample, own)
 }
-
-/// A shading point and its unit normal.
-type ShadingPoint = (Vec3, Vec3);
 
 /// [`pixel_lookups`] over each sample's triangle and shading point (`None`:
 /// no lookup) and pixel; a pixel's samples are consecutive (a run of equal
@@ -1075,6 +1077,34 @@ mod tests {
         assert!((lookups[1].1 - tilted).length() < 1e-6);
         assert!((lookups[2].0 - Vec3::new(2.0, 2.0, 0.0)).length() < 1e-6);
         assert!((lookups[2].1 - n).length() < 1e-6);
+    }
+
+    /// Pixel 0's two samples lie 0.5 from their shared point, under a
+    /// surface 0.1 above it: each gets its own lookup, after pixel 1's
+    /// (kept, its clearance 2 above its spread). Nothing splits when every
+    /// clearance exceeds its spread.
+    #[test]
+    fn samples_spread_wider_than_the_clearance_get_their_own_lookups() {
+        let n = Vec3::Z;
+        let points = [
+            Some((7, (Vec3::new(-0.5, 0.0, 0.0), n))),
+            Some((7, (Vec3::new(0.5, 0.0, 0.0), n))),
+            None,
+            Some((8, (Vec3::new(3.0, 0.0, 0.0), n))),
+        ];
+        let of_sample = vec![Some(0), Some(0), None, Some(1)];
+        let shared = |clearance_0| {
+            vec![
+                Lookup::new(Vec3::ZERO, n, clearance_0),
+                Lookup::new(Vec3::new(3.0, 0.0, 0.0), n, 2.0),
+            ]
+        };
+        let (lookups, of, own) = split_narrow(shared(0.1), of_sample.clone(), &points);
+        assert_eq!(lookups, shared(0.1)[1..]);
+        assert_eq!(of, [Some(1), Some(2), None, Some(0)]);
+        assert_eq!(own, [points[0].unwrap().1, points[1].unwrap().1]);
+        let (lookups, of, own) = split_narrow(shared(0.6), of_sample.clone(), &points);
+        assert_eq!((lookups, of, own), (shared(0.6), of_sample, Vec::new()));
     }
 
     /// `trc`'s first pass flags the records the render pass will use: on a

@@ -22,11 +22,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// A shading point, its unit normal and its clearance.
 pub(crate) type Lookup = LookupPoint;
 
+/// A shading point and its unit normal.
+pub(crate) type ShadingPoint = (Vec3, Vec3);
+
 /// Each shading point `(p, n)` as a lookup, with its clearance measured
 /// by one ray from `p` along `n` (the nearest hit's distance, or
 /// [`LookupPoint::OPEN`] on a miss): what keeps a record from being used
 /// under a surface it never saw ([`crate::cache::IrradianceRecord::weight`]).
-pub(crate) fn measure_clearance(ctx: &FrameContext, points: &[(Vec3, Vec3)]) -> Vec<Lookup> {
+pub(crate) fn measure_clearance(ctx: &FrameContext, points: &[ShadingPoint]) -> Vec<Lookup> {
     let rays: Vec<Ray> = points
         .iter()
         .map(|&(p, n)| Ray::new(offset_origin(p, n, n), n, 0.0, f32::INFINITY))
