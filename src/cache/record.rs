@@ -130,3 +130,39 @@ impl IrradianceRecord {
         accuracy * self.radius
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(radius: f32) -> IrradianceRecord {
+        IrradianceRecord {
+            id: 0,
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            irradiance: Vec3::ONE,
+            grad_translation: [Vec3::ZERO; 3],
+            grad_rotation: [Vec3::ZERO; 3],
+            radius,
+            created_frame: 0,
+            object: 0,
+        }
+    }
+
+    /// Ward's weight `R_K/d` at an open point (and at one whose clearance
+    /// is far), `R_p/d = 1.5·h/d` under a surface close above it.
+    #[test]
+    fn weight_uses_the_smaller_of_the_record_and_lookup_radii() {
+        let k = record(1.0);
+        let p = Vec3::new(0.1, 0.0, 0.0);
+        let open = k.weight(&LookupPoint::open(p, Vec3::Y));
+        assert!((open - 10.0).abs() < 1e-4, "{open}");
+        let far = k.weight(&LookupPoint::new(p, Vec3::Y, 2.0));
+        assert_eq!(far, open);
+        let under = k.weight(&LookupPoint::new(p, Vec3::Y, 0.02));
+        assert!((under - 0.3).abs() < 1e-4, "{under}");
+        // At accuracy 0.2 (usable where w ≥ 5) the record covers the open
+        // point and not the one under the surface.
+        assert!(open >= 5.0 && under < 5.0);
+    }
+}
