@@ -100,23 +100,30 @@ fn point_light_over_plane_matches_inverse_square_law() {
         albedo / std::f32::consts::PI * intensity * cos / d2
     };
     for (x, y) in [(2u32, 3u32), (8, 8), (12, 5), (5, 13), (15, 0)] {
-        let sub = 32;
-        let mut expected = 0.0;
-        for i in 0..sub {
-            for j in 0..sub {
-                let sx = (x as f32 + (i as f32 + 0.5) / sub as f32) / size as f32;
-                let sy = (y as f32 + (j as f32 + 0.5) / sub as f32) / size as f32;
-                expected += radiance_at(sx, sy);
-            }
-        }
-        expected /= (sub * sub) as f32;
-        let got = film.get(x, y);
+        let expected = pixel_mean(size, (x, y), 32, |sx, sy| f64::from(radiance_at(sx, sy)));
+        let got = f64::from(film.get(x, y).x);
         assert!(
-            (got.x - expected).abs() / expected < 0.01,
-            "pixel ({x},{y}): {} vs closed form {expected}",
-            got.x
+            (got - expected).abs() / expected < 0.01,
+            "pixel ({x},{y}): {got} vs closed form {expected}"
         );
     }
+}
+
+/// The mean of `radiance_at(sx, sy)` over a `sub` × `sub` grid of film
+/// points in pixel `(x, y)` of a `size`² image: a closed form box-filtered
+/// over the pixel's square, as the renderer's pixels are.
+fn pixel_mean(
+    size: u32,
+    (x, y): (u32, u32),
+    sub: u32,
+    radiance_at: impl Fn(f32, f32) -> f64,
+) -> f64 {
+    let at = |pixel: u32, k: u32| (pixel as f32 + (k as f32 + 0.5) / sub as f32) / size as f32;
+    let sum: f64 = (0..sub)
+        .flat_map(|i| (0..sub).map(move |j| (i, j)))
+        .map(|(i, j)| radiance_at(at(x, i), at(y, j)))
+        .sum();
+    sum / f64::from(sub * sub)
 }
 
 /// The form factor from a point on a plane to the rectangle `[x0, x1] ×
@@ -200,16 +207,7 @@ fn two_rectangular_lights_over_plane_match_the_form_factor() {
             .sum::<f64>()
     };
     for (x, y) in [(0u32, 0u32), (3, 4), (7, 2), (5, 7)] {
-        let sub = 16;
-        let mut expected = 0.0;
-        for i in 0..sub {
-            for j in 0..sub {
-                let sx = (x as f32 + (i as f32 + 0.5) / sub as f32) / size as f32;
-                let sy = (y as f32 + (j as f32 + 0.5) / sub as f32) / size as f32;
-                expected += radiance_at(sx, sy);
-            }
-        }
-        expected /= f64::from(sub * sub);
+        let expected = pixel_mean(size, (x, y), 16, radiance_at);
         let got = f64::from(film.get(x, y).x);
         assert!(
             (got - expected).abs() / expected < 0.01,
