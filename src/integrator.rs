@@ -11,7 +11,7 @@
 //! shadow rays.
 
 use crate::backend::{Hit, Ray};
-use crate::light::emitting_cosine;
+use crate::light::{emitting_cosine, TriangleSampling};
 use crate::material::Bsdf;
 use crate::method::FrameContext;
 use crate::sampling::{power_heuristic, LightChoice, Rng};
@@ -53,8 +53,12 @@ pub enum FirstHitEmission {
     /// hemisphere gathering of indirect-light records).
     Exclude,
     /// MIS-weighted against next-event estimation at the ray's origin, for a
-    /// ray drawn by BSDF sampling with this solid-angle pdf.
-    Mis { bsdf_pdf: f32 },
+    /// ray drawn by BSDF sampling with this solid-angle pdf; `light` is how
+    /// that estimate drew its points on emitting triangles.
+    Mis {
+        bsdf_pdf: f32,
+        light: TriangleSampling,
+    },
 }
 
 /// One radiance estimate to compute: the radiance arriving at `ray.origin`
@@ -224,8 +228,10 @@ fn emission_weight(
     match mode {
         FirstHitEmission::Include => 1.0,
         FirstHitEmission::Exclude => 0.0,
-        FirstHitEmission::Mis { bsdf_pdf } => {
-            let light_pdf = ctx.lights.pdf_triangle(tri, triangle, ray.origin(), p);
+        FirstHitEmission::Mis { bsdf_pdf, light } => {
+            let light_pdf = ctx
+                .lights
+                .pdf_triangle(tri, triangle, ray.origin(), p, light);
             power_heuristic(bsdf_pdf, light_pdf)
         }
     }
@@ -265,9 +271,14 @@ fn shade(
     let ng = tri.geometric_normal();
 
     // Next-event estimation, MIS-weighted against BSDF sampling.
+    // The stratified light sample of a pixel's first hit is seen directly:
+    // it gets the costlier, less noisy points (`TriangleSampling`).
     let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
-    let LightChoice { pick, u } = path.first_light.take().unwrap_or(LightChoice { pick, u });
-    if let Some(ls) = ctx.lights.sample(snapshot, p, pick, u) {
+    let (choice, sampling) = match path.first_light.take() {
+        Some(choice) => (choice, TriangleSampling::SolidAngle),
+        None => (LightChoice { pick, u }, TriangleSampling::Area),
+    };
+    if let Some(ls) = ctx.lights.sample(snapshot, p, choice, sampling) {
         let f = bsdf.eval(wo, ls.wi);
         let cos = bsdf.normal().dot(ls.wi);
         if cos > 0.0 && f.max_element() > 0.0 {
@@ -289,7 +300,10 @@ fn shade(
     let s = bsdf.sample(wo, pick, u)?;
     let cos = bsdf.normal().dot(s.wi);
     path.throughput *= s.f * (cos / s.pdf);
-    path.emission = FirstHitEmission::Mis { bsdf_pdf: s.pdf };
+    path.emission = FirstHitEmission::Mis {
+        bsdf_pdf: s.pdf,
+        light: sampling,
+    };
     path.bounces += 1;
     if path.bounces > length.rr_start {
         // Survive with probability q = min(s·max βᵢ, 0.95), reweight by 1/q.

@@ -34,7 +34,7 @@ use crate::integrator::{
     offset_origin, trace_radiance, trace_radiance_parallel, FirstHitEmission, PathLength,
     RadianceQuery,
 };
-use crate::light::emitting_cosine;
+use crate::light::{emitting_cosine, TriangleSampling};
 use crate::material::{luminance, Bsdf, LUMINANCE};
 use crate::sampling::{cosine_hemisphere, power_heuristic, LightChoice, Rng, SampleKey};
 use crate::store::SampleBlock;
@@ -925,14 +925,15 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
     stats
 }
 
-/// One light sample (`choice`, stratified over the pixel) for the whole
+/// One light sample (`choice`, stratified over the pixel, its point
+/// uniform in solid angle: this light is seen) for the whole
 /// BSDF: the diffuse lobe unweighted (its emission hits are never counted
 /// elsewhere: the cache excludes them), the glossy lobe MIS-weighted against
 /// [`glossy_query`]'s lobe sampling.
 fn direct_light(ctx: &FrameContext, s: &Surface, choice: LightChoice) -> Option<(Ray, Vec3)> {
     let ls = ctx
         .lights
-        .sample(ctx.snapshot, s.p, choice.pick, choice.u)?;
+        .sample(ctx.snapshot, s.p, choice, TriangleSampling::SolidAngle)?;
     let cos = s.bsdf.normal().dot(ls.wi);
     if cos <= 0.0 || s.wo.dot(s.bsdf.normal()) <= 0.0 {
         return None;
@@ -970,8 +971,10 @@ fn glossy_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> {
         first_light: None,
         rng: rng.split(),
         weight: sample.f * (cos / sample.pdf),
+        // The direct light of the same first hit ([`direct_light`]).
         first_hit: FirstHitEmission::Mis {
             bsdf_pdf: sample.pdf,
+            light: TriangleSampling::SolidAngle,
         },
     })
 }
