@@ -582,4 +582,30 @@ mod tests {
             "{estimate} against {lambert}"
         );
     }
+
+    /// Random triangles seen from random points (the map must not panic
+    /// or go NaN on any): a direction, where there is one, is a finite unit
+    /// vector whose barycentrics lie on the triangle, and `Ω` is finite
+    /// and within the hemisphere's 2π.
+    #[test]
+    fn spherical_triangle_stays_finite_on_random_triangles() {
+        let mut rng = Rng::from_seed(11, 0);
+        let mut point = || (rng.next_2d().extend(rng.next_f32()) - 0.5) * 4.0;
+        let mut sampled = 0;
+        for _ in 0..20_000 {
+            let v = [point(), point(), point()];
+            let p = point();
+            let sphere = SphericalTriangle::new(&v, p);
+            assert!(sphere.solid_angle.is_finite(), "{v:?} from {p}");
+            assert!(sphere.solid_angle <= 2.0 * PI + 1e-3, "{v:?} from {p}");
+            let u = Vec2::new(point().x.abs().fract(), point().y.abs().fract());
+            let Some(w) = sphere.sample(u) else { continue };
+            assert!(w.is_finite() && (w.length() - 1.0).abs() < 1e-3, "{w}");
+            if let Some((b1, b2)) = triangle_barycentrics(&v, p, w) {
+                assert!(b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0 + 1e-5, "{b1} {b2}");
+                sampled += 1;
+            }
+        }
+        assert!(sampled > 15_000, "only {sampled} samples");
+    }
 }
