@@ -1,8 +1,9 @@
 //! Acceleration structures over the triangles of one frame, built with
 //! obvhs. The scene is split in two BVHs: the static triangles (built once
 //! per render, rebuilt only if they change) and the dynamic ones (rebuilt
-//! every frame — dynamic parts are small; `radcache bench-rays` measures the
-//! rebuild). A ray is traced through both and keeps the nearer hit.
+//! every frame — dynamic parts are small; `cargo bench --bench rays`
+//! measures the rebuild). A ray is traced through both and keeps the nearer
+//! hit.
 //!
 //! We use obvhs's compressed wide BVH (CWBVH, Ylitie et al. 2017) on the CPU:
 //! STACK.md measured it faster than BVH2 for incoherent rays.
