@@ -3,9 +3,7 @@
 //! per render, rebuilt only if they change) and the dynamic ones (rebuilt
 //! every frame — dynamic parts are small; `cargo bench --bench rays`
 //! measures the rebuild). A ray is traced through both and keeps the nearer
-//! hit. A small static part is not worth a second traversal per ray: up to
-//! [`MERGE_STATIC_TRIANGLES`] static triangles, a frame with moving parts
-//! gets one BVH over all its triangles.
+//! hit.
 //!
 //! We use obvhs's compressed wide BVH (CWBVH, Ylitie et al. 2017) on the CPU:
 //! STACK.md measured it faster than BVH2 for incoherent rays.
@@ -157,17 +155,7 @@ pub struct BuildTimes {
     pub dynamic_build: Duration,
 }
 
-/// Frames with moving parts and at most this many static triangles are
-/// traced through one BVH over all their triangles, rebuilt every frame.
-/// Why: a rebuild costs about 0.27 µs a triangle (`cargo bench --bench
-/// rays`: 2.7 ms for 9,880 triangles), so at most 1.1 ms a frame here,
-/// while tracing every ray through a second BVH cost cube-in-box (26
-/// triangles, 12 of them moving) 8 % of `trc`'s render pass and 10 % of
-/// its aging at 64×64. Frames are bit-identical either way.
-pub const MERGE_STATIC_TRIANGLES: usize = 4096;
-
-/// The static and dynamic BVHs of the current frame, or one BVH over all
-/// its triangles (held as `static_part`) when the static ones are few.
+/// The static and dynamic BVHs of the current frame.
 #[derive(Default)]
 pub struct SceneBvh {
     static_part: Option<TriangleBvh>,
@@ -181,19 +169,9 @@ impl SceneBvh {
         Self::default()
     }
 
-    /// Makes the BVHs match `snapshot`. A merged BVH counts as a dynamic
-    /// build: it is rebuilt every frame.
+    /// Makes the BVHs match `snapshot`.
     pub fn update(&mut self, snapshot: &Snapshot) -> BuildTimes {
         let mut times = BuildTimes::default();
-        let moving = snapshot.static_count < snapshot.triangles.len();
-        if moving && snapshot.static_count <= MERGE_STATIC_TRIANGLES {
-            let start = Instant::now();
-            self.static_part = TriangleBvh::build(snapshot, 0..snapshot.triangles.len());
-            self.static_fingerprint = None;
-            self.dynamic_part = None;
-            times.dynamic_build = start.elapsed();
-            return times;
-        }
         let fp = snapshot.static_fingerprint();
         if self.static_fingerprint != Some(fp) {
             let start = Instant::now();
