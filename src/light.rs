@@ -58,7 +58,8 @@ pub enum TriangleSampling {
     /// walls next to a ceiling light). For the first hits of pixel
     /// samples, whose direct light is seen: it costs about as much as a
     /// ray in a small scene, and at every vertex of every path it made
-    /// `ic` 48 % slower on cube-in-box.
+    /// `ic` 10–26 % slower on cube-in-box (64×64, four A/B pairs) for
+    /// 0.4 % less lit-surface error than at the first hits alone.
     SolidAngle,
     /// Uniform by area: for the vertices of paths (a record's gather, the
     /// continuation of a pixel's path), whose light many paths average.
@@ -286,9 +287,10 @@ impl LightSampler {
 }
 
 /// Solid angles (sr) between which an emitting triangle is sampled by solid
-/// angle (PBRT-v4's bounds): below, the angle sum of Arvo's map cancels in
-/// f32 and area sampling is as good (the triangle is far and small); above,
-/// the triangle fills nearly a hemisphere and the map degenerates.
+/// angle (PBRT-v4's bounds): below, the directions to its corners are
+/// nearly parallel, their cross products lose their digits in f32, and
+/// area sampling is as good (the triangle is far and small); above, the
+/// triangle fills nearly a hemisphere and the map degenerates.
 const SOLID_ANGLE_SAMPLING: std::ops::RangeInclusive<f32> = 3e-4..=6.22;
 
 /// How a point on an emitting triangle is drawn for a shading point: the
@@ -350,6 +352,7 @@ fn emitting_side_cosine(normal: Vec3, double_sided: bool, w: Vec3) -> Option<f32
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sampling::tests::lambert;
     use crate::scene::Scene;
 
     /// `choose` sends each source the share of the unit square its pick
@@ -392,17 +395,6 @@ mod tests {
                 );
             }
         }
-    }
-
-    /// Lambert's closed form for `∫ cosθ dω` over triangle `v` seen from
-    /// `p` with normal `n`: `½ Σ θ_i (n · ĝ_i)`.
-    fn lambert(v: &[Vec3; 3], p: Vec3, n: Vec3) -> f32 {
-        0.5 * (0..3)
-            .map(|i| {
-                let (a, b) = ((v[i] - p).normalize(), (v[(i + 1) % 3] - p).normalize());
-                a.dot(b).acos() * n.dot(b.cross(a).normalize())
-            })
-            .sum::<f32>()
     }
 
     /// cube-in-box's ceiling light seen from the back wall just under it,

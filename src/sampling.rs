@@ -380,8 +380,20 @@ pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// Lambert's closed form for `∫ cosθ dω` over triangle `v` seen from
+    /// `p` with normal `n`: `½ Σ θ_i (n · ĝ_i)`, with `θ_i` the angle an
+    /// edge subtends and `ĝ_i` its plane's unit normal.
+    pub(crate) fn lambert(v: &[Vec3; 3], p: Vec3, n: Vec3) -> f32 {
+        0.5 * (0..3)
+            .map(|i| {
+                let (a, b) = ((v[i] - p).normalize(), (v[(i + 1) % 3] - p).normalize());
+                a.dot(b).acos() * n.dot(b.cross(a).normalize())
+            })
+            .sum::<f32>()
+    }
 
     #[test]
     fn permute_is_a_permutation_that_depends_on_its_key() {
@@ -547,8 +559,7 @@ mod tests {
     /// `∫ cosθ dω` over a triangle close to and slanted over a receiver,
     /// by the solid-angle samples of a 16 × 16 grid (each `Ω·cosθ`, the
     /// points found through [`triangle_barycentrics`]), against Lambert's
-    /// closed form for a polygon, `½ Σ θ_i (n · ĝ_i)` with `θ_i` the angle
-    /// an edge subtends and `ĝ_i` its plane's unit normal.
+    /// closed form for a polygon ([`lambert`]).
     #[test]
     fn solid_angle_samples_integrate_the_cosine_over_a_triangle() {
         let v = [
@@ -569,13 +580,7 @@ mod tests {
             })
             .sum::<f32>()
             / samples as f32;
-        let lambert: f32 = 0.5
-            * (0..3)
-                .map(|i| {
-                    let (a, b) = ((v[i] - p).normalize(), (v[(i + 1) % 3] - p).normalize());
-                    a.dot(b).acos() * n.dot(b.cross(a).normalize())
-                })
-                .sum::<f32>();
+        let lambert = lambert(&v, p, n);
         assert!(lambert > 0.1, "{lambert}");
         assert!(
             (estimate / lambert - 1.0).abs() < 2e-3,
