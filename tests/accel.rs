@@ -5,6 +5,7 @@
 mod common;
 
 use glam::{DVec3, Quat, Vec3};
+use radcache::accel::MERGE_STATIC_TRIANGLES;
 use radcache::backend::cpu::CpuBackend;
 use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::sampling::Rng;
@@ -137,9 +138,11 @@ fn soup(rng: &mut Rng, n: usize, center: Vec3, half: f32) -> Mesh {
 
 /// One static soup and two dynamic soups animated with translation and
 /// rotation channels (key times 0 and 1).
-fn soup_scene(seed: u64) -> Scene {
+/// A static soup of `statics` triangles in a closed room, with two moving
+/// soups of 500 inside.
+fn soup_scene(seed: u64, statics: usize) -> Scene {
     let mut rng = Rng::from_seed(seed, 1);
-    let mut stat = soup(&mut rng, 3000, Vec3::ZERO, 4.0);
+    let mut stat = soup(&mut rng, statics, Vec3::ZERO, 4.0);
     // A closed room around it: large axis-aligned triangles sharing edges
     // (each face's diagonal), and most unbounded rays end on it.
     let room = common::inward_box(Vec3::splat(-5.0), Vec3::splat(5.0), 0);
@@ -413,37 +416,25 @@ fn trace(backend: &CpuBackend, rays: &[Ray]) -> (Vec<Hit>, Vec<bool>) {
 // ---------------------------------------------------------------------------
 // Tests
 
+/// Both layouts: a static part small enough to share one BVH with the
+/// moving soups ([`radcache::accel::MERGE_STATIC_TRIANGLES`]), and one
+/// large enough to keep its own, built once.
 #[test]
 fn bvh_matches_brute_force_on_animated_soup() {
-    let scene = soup_scene(7);
-    let mut backend = CpuBackend::new();
     let mut rng = Rng::from_seed(99, 3);
     let mut total = Stats::default();
-    for (frame, &time) in [0.0f32, 0.3, 0.75, 1.0, 1.6].iter().enumerate() {
-        let snap = scene.snapshot(time);
-        assert!(snap.static_count >= 3000);
-        assert!(snap.dynamic_count() >= 1000);
-        backend.set_geometry(&snap);
-        assert_eq!(backend.last_build().static_build.is_some(), frame == 0);
-        let (lo, hi) = bounds(&snap);
-        let rays = random_rays(&mut rng, lo, hi, 8000);
-        let (hits, occ) = trace(&backend, &rays);
-        let mut stats = Stats::default();
-        for ((ray, hit), &o) in rays.iter().zip(&hits).zip(&occ) {
-            check_ray(&snap, ray, hit, o, &mut stats);
+    for (statics, split) in [(3000, false), (5000, true)] {
+        let scene = soup_scene(7, statics);
+        let mut backend = CpuBackend::new();
+        for (frame, &time) in [0.0f32, 0.3, 0.75, 1.0, 1.6].iter().enumerate() {
+            let snap = scene.snapshot(time);
+            assert_eq!(snap.static_count > MERGE_STATIC_TRIANGLES, split);
+            assert!(snap.dynamic_count() >= 1000);
+            backend.set_geometry(&snap);
+            let build = backend.last_build();
+            assert_eq!(build.static_build.is_some(), split && frame == 0);
+            brute_force_frame(&backend, &snap, &mut rng, &mut total, time);
         }
-        eprintln!(
-            "t={time}: {} rays, {} hits, {} near-ties, {} excused on edges, {} failures",
-            stats.rays,
-            stats.hits,
-            stats.ties,
-            stats.edge_excused,
-            stats.failures.len()
-        );
-        total.rays += stats.rays;
-        total.hits += stats.hits;
-        total.edge_excused += stats.edge_excused;
-        total.failures.extend(stats.failures);
     }
     for f in total.failures.iter().take(10) {
         eprintln!("{f}");
@@ -462,6 +453,35 @@ fn bvh_matches_brute_force_on_animated_soup() {
         total.edge_excused,
         total.rays
     );
+}
+
+/// 4000 random rays of one frame against brute force, added to `total`.
+fn brute_force_frame(
+    backend: &CpuBackend,
+    snap: &Snapshot,
+    rng: &mut Rng,
+    total: &mut Stats,
+    time: f32,
+) {
+    let (lo, hi) = bounds(snap);
+    let rays = random_rays(rng, lo, hi, 4000);
+    let (hits, occ) = trace(backend, &rays);
+    let mut stats = Stats::default();
+    for ((ray, hit), &o) in rays.iter().zip(&hits).zip(&occ) {
+        check_ray(snap, ray, hit, o, &mut stats);
+    }
+    eprintln!(
+        "t={time}: {} rays, {} hits, {} near-ties, {} excused on edges, {} failures",
+        stats.rays,
+        stats.hits,
+        stats.ties,
+        stats.edge_excused,
+        stats.failures.len()
+    );
+    total.rays += stats.rays;
+    total.hits += stats.hits;
+    total.edge_excused += stats.edge_excused;
+    total.failures.extend(stats.failures);
 }
 
 /// Rays aimed at dynamic triangles' current centroids hit them, frame after
@@ -516,23 +536,13 @@ fn dynamic_hits_follow_the_objects() {
     );
     let mut backend = CpuBackend::new();
     let mut previous: Option<Snapshot> = None;
-    for (frame, time) in [0.0f32, 0.25, 0.5, 0.75, 1.0].into_iter().enumerate() {
+    for time in [0.0f32, 0.25, 0.5, 0.75, 1.0] {
         let snap = scene.snapshot(time);
         assert_eq!(snap.static_count, 12);
         assert_eq!(snap.dynamic_count(), 4);
         backend.set_geometry(&snap);
-        let build = backend.last_build();
-        if frame == 0 {
-            assert!(
-                build.static_build.is_some(),
-                "first frame builds the static BVH"
-            );
-        } else {
-            assert!(
-                build.static_build.is_none(),
-                "static BVH rebuilt at t={time}"
-            );
-        }
+        // 12 static triangles: one BVH over all, rebuilt every frame.
+        assert!(backend.last_build().static_build.is_none(), "t={time}");
         for tri in snap.static_count..snap.triangles.len() {
             let tr = &snap.triangles[tri];
             let c = (tr.p[0] + tr.p[1] + tr.p[2]) / 3.0;
@@ -560,19 +570,24 @@ fn dynamic_hits_follow_the_objects() {
         }
         previous = Some(snap);
     }
+}
 
-    // The same time again: still no static rebuild.
-    backend.set_geometry(&scene.snapshot(0.5));
-    assert!(backend.last_build().static_build.is_none());
-    // A different scene: the static BVH is rebuilt.
-    let other = soup_scene(3);
-    backend.set_geometry(&other.snapshot(0.5));
-    assert!(backend.last_build().static_build.is_some());
-    backend.set_geometry(&other.snapshot(0.9));
-    assert!(backend.last_build().static_build.is_none());
-    // Back to the first scene: rebuilt again.
-    backend.set_geometry(&scene.snapshot(0.5));
-    assert!(backend.last_build().static_build.is_some());
+/// A static part above the merge limit keeps its own BVH, built once and
+/// again only when the static triangles change (another scene).
+#[test]
+fn a_large_static_part_is_built_once() {
+    let (a, b) = (soup_scene(3, 5000), soup_scene(4, 5000));
+    let mut backend = CpuBackend::new();
+    let mut builds_static = |scene: &Scene, time: f32| {
+        backend.set_geometry(&scene.snapshot(time));
+        backend.last_build().static_build.is_some()
+    };
+    assert!(builds_static(&a, 0.0));
+    assert!(!builds_static(&a, 0.5));
+    assert!(!builds_static(&a, 0.5), "the same time again");
+    assert!(builds_static(&b, 0.5), "another scene");
+    assert!(!builds_static(&b, 0.9));
+    assert!(builds_static(&a, 0.5), "back to the first");
 }
 
 impl Stats {
@@ -709,7 +724,7 @@ fn edge_excuse_is_only_for_edges() {
 /// and agree with brute force on the soup inside.
 #[test]
 fn axis_aligned_rays_with_signed_zeros() {
-    let scene = soup_scene(21);
+    let scene = soup_scene(21, 3000);
     let snap = scene.snapshot(0.4);
     let mut backend = CpuBackend::new();
     backend.set_geometry(&snap);

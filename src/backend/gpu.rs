@@ -5,8 +5,9 @@
 //! and on every built-in scene).
 //!
 //! Split as bevy_solari splits its passes:
-//! - **extract**: [`GpuBackend::set_geometry`] builds a BVH per part (static
-//!   triangles `0..static_count`, dynamic ones after) in the backend's
+//! - **extract**: [`GpuBackend::set_geometry`] builds a BVH per part (the
+//!   static triangles `0..n` of [`crate::accel::static_part_len`], the rest
+//!   after) in the backend's
 //!   layout (`src/backend/gpu_bvh.rs`) and lays triangles out in leaf order
 //!   ([`GpuTriangle`], with their snapshot triangle and object ids);
 //! - **prepare**: both parts live in one node buffer and one triangle buffer,
@@ -24,9 +25,11 @@
 //!
 //! Why two BVHs traced one after the other instead of one merged BVH: the
 //! static part (most of a scene) is built and uploaded once per render; a
-//! merged BVH would be rebuilt and re-uploaded in full every frame. This is
-//! also exactly what the CPU backend does (`src/accel.rs`), which keeps the
-//! tie-breaking between static and dynamic hits identical.
+//! merged BVH would be rebuilt and re-uploaded in full every frame. Up to
+//! [`crate::accel::MERGE_STATIC_TRIANGLES`] static triangles the static part
+//! is empty and one BVH holds them all, rebuilt every frame. The split is
+//! exactly the CPU backend's (`src/accel.rs`), which keeps the tie-breaking
+//! between equally near hits identical.
 //!
 //! Two layouts, chosen at construction ([`GpuBackend::with_layout`], or
 //! `RADCACHE_GPU_BVH=cwbvh|bvh2` for [`GpuBackend::new`]): CWBVH (Ylitie et
@@ -54,6 +57,7 @@ use super::gpu_bvh::Part;
 pub use super::gpu_bvh::{GpuLayout, GpuNode, CWBVH_STACK_SIZE, STACK_SIZE};
 use super::gpu_cache::{CacheSplat, GpuLookup};
 use super::{Hit, Ray, RayBackend, RayCounts};
+use crate::accel;
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -477,7 +481,8 @@ impl GpuBackend {
     /// whose nodes or triangles exceed the device's storage binding size, or
     /// a BVH deeper than the shaders' stack.
     pub fn try_set_geometry(&mut self, snapshot: &Snapshot) -> Result<(), GpuError> {
-        let fp = snapshot.static_fingerprint();
+        let static_len = accel::static_part_len(snapshot);
+        let fp = accel::static_part_fingerprint(snapshot);
         let build_start = Instant::now();
         let mut encoder = self
             .device
@@ -485,12 +490,12 @@ impl GpuBackend {
                 label: Some("geometry"),
             });
 
-        let static_part = if self.geometry.static_fingerprint != Some(fp) {
-            Some(Part::build(self.bvh, snapshot, 0..snapshot.static_count)?)
+        let static_part = if self.geometry.static_fingerprint != fp {
+            Some(Part::build(self.bvh, snapshot, 0..static_len)?)
         } else {
             None
         };
-        let dynamic_range = snapshot.static_count..snapshot.triangles.len();
+        let dynamic_range = static_len..snapshot.triangles.len();
         let dynamic_part = Part::build(self.bvh, snapshot, dynamic_range)?;
         let bvh_build = build_start.elapsed();
 
@@ -556,7 +561,7 @@ impl GpuBackend {
             g.static_nodes = static_nodes;
             g.static_triangles = static_triangles;
             g.static_root = if part.node_count() == 0 { NONE } else { 0 };
-            g.static_fingerprint = Some(fp);
+            g.static_fingerprint = fp;
             static_upload = Some(start.elapsed());
         }
         let start = Instant::now();
