@@ -6,9 +6,7 @@
 //! lights.
 
 use crate::material::luminance;
-use crate::sampling::{
-    triangle_barycentrics, uniform_triangle, LightChoice, SphericalTriangle, ONE_MINUS_EPSILON,
-};
+use crate::sampling::{uniform_triangle, LightChoice, SphericalTriangle, ONE_MINUS_EPSILON};
 use crate::scene::{Snapshot, Triangle};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -208,20 +206,29 @@ impl LightSampler {
                 // The whole triangle is on one side of p: skip a back face.
                 emitting_side_cosine(normal, double_sided, p - tri.p[0])?;
                 let strategy = TriangleStrategy::from(tri, p, sampling);
-                let (bu, bv) = match &strategy {
+                let (position, wi, distance, d2) = match &strategy {
                     TriangleStrategy::SolidAngle(sphere) => {
-                        triangle_barycentrics(&tri.p, p, sphere.sample(u)?)?
+                        // The direction is drawn: the point is where it
+                        // meets the triangle's plane.
+                        let wi = sphere.sample(u)?;
+                        let distance = normal.dot(tri.p[0] - p) / normal.dot(wi);
+                        if !(distance > 0.0 && distance.is_finite()) {
+                            return None;
+                        }
+                        (p + distance * wi, wi, distance, distance * distance)
                     }
-                    TriangleStrategy::Area => uniform_triangle(u),
+                    TriangleStrategy::Area => {
+                        let (bu, bv) = uniform_triangle(u);
+                        let position = tri.point(bu, bv);
+                        let to_light = position - p;
+                        let d2 = to_light.length_squared();
+                        if d2 <= 0.0 {
+                            return None;
+                        }
+                        let distance = d2.sqrt();
+                        (position, to_light / distance, distance, d2)
+                    }
                 };
-                let position = tri.point(bu, bv);
-                let to_light = position - p;
-                let d2 = to_light.length_squared();
-                if d2 <= 0.0 {
-                    return None;
-                }
-                let distance = d2.sqrt();
-                let wi = to_light / distance;
                 let cos_light = emitting_side_cosine(normal, double_sided, -wi)?;
                 Some(LightSample {
                     position,
@@ -287,11 +294,17 @@ impl LightSampler {
 }
 
 /// Solid angles (sr) between which an emitting triangle is sampled by solid
-/// angle (PBRT-v4's bounds): below, the directions to its corners are
-/// nearly parallel, their cross products lose their digits in f32, and
-/// area sampling is as good (the triangle is far and small); above, the
-/// triangle fills nearly a hemisphere and the map degenerates.
-const SOLID_ANGLE_SAMPLING: std::ops::RangeInclusive<f32> = 3e-4..=6.22;
+/// angle: below, the triangle is small or seen edge-on, the directions to
+/// its corners are nearly coplanar and the map loses its digits in f32, and
+/// area sampling is as good; above, the triangle fills nearly a hemisphere
+/// and the map degenerates. The upper bound is PBRT-v4's; PBRT-v4's lower
+/// bound, 3·10⁻⁴, is ten times lower: between the two, on 200,000 random
+/// triangles and points, the map sent 22 directions more than 10⁻³ (in
+/// barycentric units) off their triangle, the largest 1.3 (its earlier
+/// form, with normalised plane normals, 27, up to 1.6);
+/// above 3·10⁻³, none (`spherical_triangle_stays_finite_on_random_triangles`
+/// checks it).
+pub(crate) const SOLID_ANGLE_SAMPLING: std::ops::RangeInclusive<f32> = 3e-3..=6.22;
 
 /// How a point on an emitting triangle is drawn for a shading point: the
 /// choice depends only on the two and the caller's [`TriangleSampling`],
