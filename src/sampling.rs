@@ -597,7 +597,7 @@ pub(crate) mod tests {
     /// vector and `Ω` is finite and within the hemisphere's 2π. Where `Ω`
     /// is within the bounds the renderer uses the map in
     /// ([`crate::light::SOLID_ANGLE_SAMPLING`]; below them the corners'
-    /// directions are nearly parallel and the map loses its digits), the
+    /// directions are nearly coplanar and the map loses its digits), the
     /// direction points into the triangle: its unclamped barycentrics are
     /// on it.
     #[test]
