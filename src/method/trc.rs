@@ -404,15 +404,22 @@ impl TemporalRadianceCaching {
         // are gathered (reprojection used them at full precision first).
         let dynamic = keep.then(|| dynamic_objects(ctx));
         let pack = |g: &Gathered| dynamic.as_ref().map(|d| SampleBlock::pack(&g.samples, d));
-        let gathered: Vec<(TemporalRecord, Option<SampleBlock>)> = {
+        let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = {
             use rayon::prelude::*;
             self.ic
                 .gather_parallel(ctx, &candidates)
-                .map(|g| (self.temporal(ctx, &next, &g), pack(&g)))
+                .map(|g| {
+                    let inside = back_face_share(ctx.snapshot, &g) > MAX_BACK_FACE_SHARE;
+                    (!inside).then(|| (self.temporal(ctx, &next, &g), pack(&g)))
+                })
                 .collect()
         };
         let mut samples = Vec::new();
-        for ((mut new, s), old) in gathered.into_iter().zip(&replace) {
+        for (gathered, old) in gathered.into_iter().zip(&replace) {
+            let Some((mut new, s)) = gathered else {
+                stats.records_dropped += 1;
+                continue;
+            };
             new.replaces = Some(old.record.id);
             cache.insert(new.at_frame(t, gradients, None));
             alive.push(new);
@@ -1152,4 +1159,29 @@ fn light_ratio(
     };
     let (d0, d1) = (direct_irradiance(l0, p0, n0), direct_irradiance(l1, p1, n1));
     Vec3::select(d0.cmpgt(Vec3::splat(1e-12)), d1 / d0, Vec3::ONE)
+}
+
+/// Above this share of gather rays that hit the back of a surface, a
+/// replacement's point is taken to lie inside an object (see
+/// [`back_face_share`]).
+const MAX_BACK_FACE_SHARE: f32 = 0.5;
+
+/// The share of a gather's rays whose first hit is the back of a triangle
+/// (the ray leaves along the triangle's geometric normal). A record is
+/// replaced where it was created, fixed in world space (§4.4), and a moving
+/// object may since have come over that point: a floor record under the
+/// cube then gathers the cube's inside, seen from behind, and lends its
+/// darkness to the floor pixels around the cube. A point on a visible
+/// surface sees almost only front faces.
+fn back_face_share(snapshot: &Snapshot, g: &Gathered) -> f32 {
+    let hits = g.hits.iter().zip(&g.samples.direction);
+    let back = hits
+        .filter(|(hit, &dir)| {
+            snapshot
+                .triangles
+                .get(hit.triangle as usize)
+                .is_some_and(|tri| tri.geometric_normal().dot(dir) > 0.0)
+        })
+        .count();
+    back as f32 / g.hits.len().max(1) as f32
 }
