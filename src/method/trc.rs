@@ -13,7 +13,10 @@
 //!    valid but contributed to the previous frame is replaced by a new
 //!    record gathered at the same point (§4.4, "p_l = p_K"); one that
 //!    contributed to no pixel is dropped (§5, "Replacement/deletion
-//!    method": no trail of records behind moving objects);
+//!    method": no trail of records behind moving objects). Departure: a
+//!    replacement whose gather rays mostly hit back faces is dropped too
+//!    (`back_face_share`): a moving object has come over its point, and
+//!    gathered inside the object it would darken the pixels around it;
 //! 2. *fill*: `ic`'s fill stage adds records where none is usable;
 //! 3. *render*: `ic`'s render pass, flagging every record a pixel sample
 //!    used (our stand-in for the paper's occlusion query; with the GPU
