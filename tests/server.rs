@@ -670,6 +670,22 @@ fn bench_charts_come_from_the_bench_directory_when_given() {
     );
     assert_eq!(status, 200);
     assert!(String::from_utf8_lossy(&svg).contains("<svg"));
+    // The embedded 400-frame bench sweeps `trc`'s `a_t` and `δt_max`.
+    let (status, csv) = http(
+        &server,
+        "GET",
+        "/web/charts/cube-in-box-400-frames_bench.csv",
+        "",
+    );
+    assert_eq!(status, 200);
+    let csv = String::from_utf8_lossy(&csv);
+    for setting in ["at=", "max_life="] {
+        let runs = csv
+            .lines()
+            .filter(|l| l.contains(",trc,") && l.contains(setting))
+            .count();
+        assert!(runs >= 3, "{runs} trc runs with {setting} in\n{csv}");
+    }
     drop(server);
 
     let bench = dir.path().join("bench-out");

@@ -28,33 +28,34 @@ const FILES: [(&str, &str, &str); 2] = [
     ),
 ];
 
-/// The bench charts in `web/charts/` (README "Benchmarking").
-const CHARTS: [(&str, &str, &str); 5] = [
-    (
-        "cube-in-box_error_vs_time.svg",
-        "image/svg+xml",
-        include_str!("../../web/charts/cube-in-box_error_vs_time.svg"),
-    ),
-    (
-        "cube-in-box_surface_error_vs_time.svg",
-        "image/svg+xml",
-        include_str!("../../web/charts/cube-in-box_surface_error_vs_time.svg"),
-    ),
-    (
-        "cube-in-box_flicker_vs_time.svg",
-        "image/svg+xml",
-        include_str!("../../web/charts/cube-in-box_flicker_vs_time.svg"),
-    ),
-    (
-        "cube-in-box_surface_flicker_vs_time.svg",
-        "image/svg+xml",
-        include_str!("../../web/charts/cube-in-box_surface_flicker_vs_time.svg"),
-    ),
-    (
-        "cube-in-box_bench.csv",
-        "text/csv; charset=utf-8",
-        include_str!("../../web/charts/cube-in-box_bench.csv"),
-    ),
+/// A file of `web/charts/`, embedded: its name, MIME type and text.
+macro_rules! chart {
+    ($name:literal, $mime:expr) => {
+        (
+            $name,
+            $mime,
+            include_str!(concat!("../../web/charts/", $name)),
+        )
+    };
+}
+
+const SVG: &str = "image/svg+xml";
+const CSV: &str = "text/csv; charset=utf-8";
+
+/// The bench charts in `web/charts/` (README "Benchmarking"): methods
+/// against `path` on cube-in-box (128×128, 24 frames, `spp` sweeps), and
+/// `trc` against `ic` over 400 frames (64×64, sweeps of `a_t` and `δt_max`).
+const CHARTS: [(&str, &str, &str); 10] = [
+    chart!("cube-in-box_error_vs_time.svg", SVG),
+    chart!("cube-in-box_surface_error_vs_time.svg", SVG),
+    chart!("cube-in-box_flicker_vs_time.svg", SVG),
+    chart!("cube-in-box_surface_flicker_vs_time.svg", SVG),
+    chart!("cube-in-box_bench.csv", CSV),
+    chart!("cube-in-box-400-frames_error_vs_time.svg", SVG),
+    chart!("cube-in-box-400-frames_surface_error_vs_time.svg", SVG),
+    chart!("cube-in-box-400-frames_flicker_vs_time.svg", SVG),
+    chart!("cube-in-box-400-frames_surface_flicker_vs_time.svg", SVG),
+    chart!("cube-in-box-400-frames_bench.csv", CSV),
 ];
 
 /// The page. With a token, the request that got here carried it (the
@@ -104,9 +105,9 @@ fn chart_mime(name: &str) -> Option<&'static str> {
         return None;
     }
     if name.ends_with(".svg") {
-        Some("image/svg+xml")
+        Some(SVG)
     } else if name.ends_with(".csv") {
-        Some("text/csv; charset=utf-8")
+        Some(CSV)
     } else {
         None
     }
