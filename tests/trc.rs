@@ -249,9 +249,9 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
         100.0 * median_n
     );
     // The paper's gain (Table 1: mean 2.9 % vs 3.7 %) is NOT reproduced
-    // here. Measured (see the module docs of `trc`): the 58 of 241 records
+    // here. Measured (see the module docs of `trc`): the 62 of 276 records
     // whose samples see the moving cube change by ~1 % per frame (constant
-    // estimate: mean 1.09 %), the others by 3.5 % on average — shadows
+    // estimate: mean 1.34 %), the others by 3.7 % on average — shadows
     // moving over what they see, or the record lying on the cube — which
     // neither estimate sees. Against a converged E(t0+1) (32×96 strata)
     // both estimates are at ~4.9 %: a record's own Monte Carlo noise

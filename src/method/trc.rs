@@ -27,14 +27,17 @@
 //! neighbour clamping, direct light, glossy lobes — is `ic`'s code.
 //!
 //! # The E(t0+1) estimate, measured (TRC Table 1)
-//! On cube-in-box (24×24, 6 fps, frames 5 and 20, 241 records; test
-//! `reprojection_estimate_of_next_frame_is_no_worse_than_constant`), against
-//! E(t0+1) regathered with the same random streams: reprojection mean
-//! 2.96 % / median 0.58 %, constant 2.91 % / 0.56 %. Reprojection does not
-//! help here, and the numbers say why:
-//! - only the 58 records whose samples see the moving cube get an estimate
-//!   other than E(t0); they change by ~1 % per frame (constant: 1.09 %,
-//!   reprojection 1.30 %). The other 183 change by 3.5 % on average (moving
+//! On cube-in-box (24×24, 6 fps, frames 5 and 20, 276 records at 3ff86cf;
+//! test `reprojection_estimate_of_next_frame_is_no_worse_than_constant`),
+//! against E(t0+1) regathered with the same random streams: reprojection
+//! mean 3.24 % / median 0.59 %, constant 3.20 % / 0.59 % (at an earlier
+//! commit, 241 records: 2.96 % / 0.58 % against 2.91 % / 0.56 %; the
+//! figures below are from then unless dated). Reprojection does not help
+//! here, and the numbers say why:
+//! - only the records whose samples see the moving cube get an estimate
+//!   other than E(t0) (62 at 3ff86cf, 58 then); they change by about 1 %
+//!   per frame (constant: 1.34 %, reprojection 1.50 %; then 1.09 % and
+//!   1.30 %). The others change by 3.7 % on average (3.5 % then: moving
 //!   shadows on what they see, or records on the cube, which stay fixed in
 //!   world space), and no reprojection of first hits can see that;
 //! - with the same streams, a static sample's noise cancels exactly between
