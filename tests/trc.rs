@@ -522,7 +522,8 @@ fn jumping_object_leaves_no_ghost_after_max_life() {
 /// Records stay where they were created (§4.4), so the replacement of a
 /// covered one would gather the block's inside, seen from behind, and
 /// darken the floor pixels around the block (on cube-in-box at 64×64 with
-/// `--trc-max-life 5` that bias doubled the error along the cube's path).
+/// `--trc-max-life 5`, frames 0..100, it took the relative RMSE from 0.0226
+/// to 0.0254, most of the excess a darkening along the cube's path).
 /// A replacement whose gather rays mostly hit back faces is dropped
 /// instead: no record made in a frame (replaced or new) lies inside the
 /// block in that frame. (A record made on the block's leading face is
@@ -549,7 +550,7 @@ fn a_record_covered_by_a_moving_object_is_not_replaced_inside_it() {
         max_life: 2,
         ..TrcSettings::default()
     });
-    let (mut covered, mut replaced) = (0, 0);
+    let mut replaced = 0;
     for f in 0..frames {
         let _ = render_trc(&mut r, &mut trc, f);
         // The block's volume at frame f, shrunk by 1 cm on every side.
@@ -559,7 +560,6 @@ fn a_record_covered_by_a_moving_object_is_not_replaced_inside_it() {
             let p = k.record.position;
             // Floor records under the block lie on its bottom face's plane.
             let under = p.x > lo.x && p.x < hi.x && p.z > lo.z && p.z < hi.z && p.y < hi.y;
-            covered += usize::from(under);
             replaced += usize::from(k.replaces.is_some());
             assert!(
                 !under,
@@ -572,7 +572,6 @@ fn a_record_covered_by_a_moving_object_is_not_replaced_inside_it() {
         replaced > 100,
         "only {replaced} replacements: the test proves little"
     );
-    assert_eq!(covered, 0);
 }
 
 /// TRC §4.5, Fig. 4c–e: temporal gradients smooth the jump of accuracy when
