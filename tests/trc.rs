@@ -574,6 +574,51 @@ fn a_record_covered_by_a_moving_object_is_not_replaced_inside_it() {
     );
 }
 
+/// The replacements `trc` makes in the static lit room whose room mesh is
+/// `room` (16×16, `δt_max = 2`, 8 frames): records replaced at their point
+/// when they expire.
+fn replacements_in_room(room: Mesh) -> usize {
+    let mut s = lit_room(None, 24.0);
+    s.objects[0].mesh = room;
+    let mut r = renderer(s, 16, 24.0, false);
+    let mut trc = TemporalRadianceCaching::new(TrcSettings {
+        ic: small_ic(),
+        max_life: 2,
+        ..TrcSettings::default()
+    });
+    let mut replaced = 0;
+    for f in 0..8 {
+        let _ = render_trc(&mut r, &mut trc, f);
+        replaced += trc
+            .records()
+            .iter()
+            .filter(|k| k.record.created_frame == f && k.replaces.is_some())
+            .count();
+    }
+    replaced
+}
+
+/// A room modelled with its walls facing out (one-sided, as exporters
+/// leave them), seen from inside: every gather ray meets the back of a
+/// wall. The rule that drops a replacement gathered inside a moving object
+/// (previous test) must not take the static walls for one: the room is
+/// replaced as the same room facing in is (every used record at its
+/// expiry), where counting every back face dropped every replacement.
+#[test]
+fn a_room_seen_from_behind_its_normals_still_replaces_records() {
+    let (min, max) = (Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 2.0, 1.0));
+    let facing_in = replacements_in_room(inward_box(min, max, 0));
+    let facing_out = replacements_in_room(outward_box(min, max, 0));
+    assert!(
+        facing_in > 50,
+        "only {facing_in} replacements: the test proves little"
+    );
+    assert!(
+        facing_out * 10 >= facing_in * 9,
+        "walls facing out: {facing_out} replacements against {facing_in} facing in"
+    );
+}
+
 /// TRC §4.5, Fig. 4c–e: temporal gradients smooth the jump of accuracy when
 /// a record is replaced, extrapolated ones in one pass, interpolated ones
 /// (Eq. 18–20, two passes) towards the replacement's value. Cube-in-box at
