@@ -994,7 +994,7 @@ pub enum FallbackStreams {
     /// the same directions, and the pixel does not flicker with fresh
     /// noise. On `cube-in-box` (64×64, 48 frames) 1.4 % of the pixel samples
     /// fall back, along the box's edges; keying them so took `trc`'s
-    /// lit-surface flicker from 0.038 to 0.034 at no cost (README).
+    /// lit-surface flicker from 0.038 to 0.034 at no cost (`benches/HISTORY.md`).
     Coherent,
 }
 
