@@ -821,6 +821,57 @@ fn panning_cube_in_box(frames: u32, fps: f32, step: Vec3, yaw: f32) -> Scene {
     s
 }
 
+/// `ic` and `trc` (with `trc_settings`, whose `ic` settings both use)
+/// rendered side by side on `r` over the frames of `reference`: each
+/// frame's relative RMSE against it, and the records each computed.
+struct SideBySide {
+    ic_errors: Vec<f64>,
+    trc_errors: Vec<f64>,
+    ic_records: u64,
+    trc_records: u64,
+    trc_replaced: u64,
+}
+
+fn ic_and_trc_against(
+    r: &mut Renderer,
+    trc_settings: TrcSettings,
+    reference: &[Film],
+) -> SideBySide {
+    let mut ic = IrradianceCaching::new(trc_settings.ic.clone());
+    let mut trc = TemporalRadianceCaching::new(trc_settings);
+    let mut out = SideBySide {
+        ic_errors: Vec::new(),
+        trc_errors: Vec::new(),
+        ic_records: 0,
+        trc_records: 0,
+        trc_replaced: 0,
+    };
+    for (f, reference) in (0u32..).zip(reference) {
+        let film = r.with_frame_context(f, |ctx| ic.render_frame(ctx));
+        out.ic_errors.push(rel_rmse(&film, reference));
+        out.ic_records += ic.last_frame_stats().records_created;
+        let film = render_trc(r, &mut trc, f);
+        out.trc_errors.push(rel_rmse(&film, reference));
+        let stats = trc.last_frame_stats();
+        out.trc_records += stats.records_created + stats.records_replaced;
+        out.trc_replaced += stats.records_replaced;
+    }
+    out
+}
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
+}
+
+/// Cheap `ic` settings for the side-by-side tests: 4 spp, 8×24 cells.
+fn quick_ic() -> IcSettings {
+    IcSettings {
+        spp: 4,
+        strata: Strata { theta: 8, phi: 24 },
+        ..IcSettings::default()
+    }
+}
+
 /// A moving camera (the most common animation, absent from the paper's
 /// scenes): records are fixed in world space, so a pan only changes which
 /// of them pixels use; records that left the view are dropped, newly seen
@@ -836,32 +887,16 @@ fn a_moving_camera_keeps_trc_as_accurate_as_ic() {
     // 0.9 m and 25° over the sequence.
     let scene = || panning_cube_in_box(frames, fps, Vec3::new(-0.06, 0.02, -0.05), -0.04);
     let reference = converged_sequence(scene(), size, 0..frames);
-    let ic_settings = IcSettings {
-        spp: 4,
-        strata: Strata { theta: 8, phi: 24 },
-        ..IcSettings::default()
-    };
     let mut r = renderer(scene(), size, fps, false);
-    let mut ic = IrradianceCaching::new(ic_settings.clone());
-    let mut trc = TemporalRadianceCaching::new(TrcSettings {
-        ic: ic_settings,
+    let trc = TrcSettings {
+        ic: quick_ic(),
         ..TrcSettings::default()
-    });
-    let (mut ic_error, mut trc_error) = (0.0, 0.0);
-    let (mut ic_records, mut trc_records) = (0, 0);
-    for f in 0..frames {
-        let film = r.with_frame_context(f, |ctx| ic.render_frame(ctx));
-        ic_error += rel_rmse(&film, &reference[f as usize]);
-        ic_records += ic.last_frame_stats().records_created;
-        let film = render_trc(&mut r, &mut trc, f);
-        trc_error += rel_rmse(&film, &reference[f as usize]);
-        let stats = trc.last_frame_stats();
-        trc_records += stats.records_created + stats.records_replaced;
-    }
+    };
+    let run = ic_and_trc_against(&mut r, trc, &reference);
+    let (ic_error, trc_error) = (mean(&run.ic_errors), mean(&run.trc_errors));
+    let (ic_records, trc_records) = (run.ic_records, run.trc_records);
     eprintln!(
-        "mean relative RMSE: ic {:.4}, trc {:.4}; records: ic {ic_records}, trc {trc_records}",
-        ic_error / f64::from(frames),
-        trc_error / f64::from(frames)
+        "mean relative RMSE: ic {ic_error:.4}, trc {trc_error:.4}; records: ic {ic_records}, trc {trc_records}"
     );
     assert!(
         trc_error < 1.1 * ic_error,
@@ -887,32 +922,19 @@ fn long_lifespans_are_bounded_by_the_temporal_weight() {
     let (size, frames, fps) = (16, 48u32, 24.0);
     let scene = || Scene::builtin("moving-light").unwrap();
     let reference = converged_sequence(scene(), size, 0..frames);
-    let ic_settings = IcSettings {
-        spp: 4,
-        strata: Strata { theta: 8, phi: 24 },
-        ..IcSettings::default()
-    };
     let mut r = renderer(scene(), size, fps, true);
-    let mut ic = IrradianceCaching::new(ic_settings.clone());
-    let mut trc = TemporalRadianceCaching::new(TrcSettings {
-        ic: ic_settings,
+    let trc = TrcSettings {
+        ic: quick_ic(),
         max_life: 1000,
         ..TrcSettings::default()
-    });
-    let (mut ic_errors, mut trc_errors, mut replaced) = (Vec::new(), Vec::new(), 0);
-    for f in 0..frames {
-        let film = r.with_frame_context(f, |ctx| ic.render_frame(ctx));
-        ic_errors.push(rel_rmse(&film, &reference[f as usize]));
-        let film = render_trc(&mut r, &mut trc, f);
-        trc_errors.push(rel_rmse(&film, &reference[f as usize]));
-        replaced += trc.last_frame_stats().records_replaced;
-    }
-    let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
+    };
+    let run = ic_and_trc_against(&mut r, trc, &reference);
+    let (ic_errors, trc_errors, replaced) = (&run.ic_errors, &run.trc_errors, run.trc_replaced);
     let last_third = (2 * frames / 3) as usize;
     eprintln!(
         "relative RMSE: ic {:.4}, trc {:.4} (last third: {:.4}, {:.4}); {replaced} replaced",
-        mean(&ic_errors),
-        mean(&trc_errors),
+        mean(ic_errors),
+        mean(trc_errors),
         mean(&ic_errors[last_third..]),
         mean(&trc_errors[last_third..])
     );
@@ -920,6 +942,6 @@ fn long_lifespans_are_bounded_by_the_temporal_weight() {
         replaced > 100,
         "only {replaced} replacements: records outlive their change"
     );
-    assert!(mean(&trc_errors) < 1.1 * mean(&ic_errors));
+    assert!(mean(trc_errors) < 1.1 * mean(ic_errors));
     assert!(mean(&trc_errors[last_third..]) < 1.1 * mean(&ic_errors[last_third..]));
 }
