@@ -370,99 +370,121 @@ impl TemporalRadianceCaching {
     /// Aging and fill of frame `ctx.frame` (TRC Algorithm 1): the frame's
     /// cache and its records in cache order (new ones not numbered yet).
     fn age_and_fill(&mut self, ctx: &FrameContext) -> (IrradianceCache, Aged) {
-        let t = ctx.frame;
-        let gradients = self.settings.gradients;
-        let mut stats = FrameStats {
-            frame: t,
-            ..FrameStats::default()
-        };
         let start = Instant::now();
         let next = NextFrame::new(ctx);
         let (min, max) = scene_bounds(ctx);
         let mut cache = IrradianceCache::new(min, max, self.settings.ic.accuracy);
+        let mut aged = Aged {
+            alive: Vec::with_capacity(self.records.len()),
+            stats: FrameStats {
+                frame: ctx.frame,
+                ..FrameStats::default()
+            },
+            removed: std::mem::take(&mut self.forgotten),
+            samples: Vec::new(),
+        };
+        let packer = SamplePacker::new(self.keep, ctx);
+        let expired = self.age(ctx.frame, &mut cache, &mut aged);
+        self.replace(ctx, &next, &packer, &expired, &mut cache, &mut aged);
+        let phases = &mut aged.stats.phase_seconds;
+        phases.push(("age".into(), start.elapsed().as_secs_f64()));
 
-        // Age records (TRC Algorithm 1 and §4.4, §5 replacement/deletion).
+        let start = Instant::now();
+        self.fill(ctx, &next, &packer, &mut cache, &mut aged);
+        let phases = &mut aged.stats.phase_seconds;
+        phases.push(("fill".into(), start.elapsed().as_secs_f64()));
+        (cache, aged)
+    }
+
+    /// Ages the records at frame `t` (TRC Algorithm 1, §4.4, §5
+    /// replacement/deletion): one still valid goes into the cache as it
+    /// is; an expired one is returned, to be replaced, if a pixel used it
+    /// in frame `t − 1`, and dropped otherwise.
+    fn age(&mut self, t: u32, cache: &mut IrradianceCache, aged: &mut Aged) -> Vec<TemporalRecord> {
         let follows = self.last_frame.is_some_and(|f| f + 1 == t);
-        let mut alive = Vec::with_capacity(self.records.len());
-        let mut replace = Vec::new();
-        let keep = self.keep;
-        let mut removed = std::mem::take(&mut self.forgotten);
+        let mut expired = Vec::new();
         for r in std::mem::take(&mut self.records) {
             if r.is_valid_at(t) {
-                stats.records_reused += 1;
-                cache.insert_as_is(r.at_frame(t, gradients, None));
-                alive.push(r);
+                aged.stats.records_reused += 1;
+                cache.insert_as_is(r.at_frame(t, self.settings.gradients, None));
+                aged.alive.push(r);
                 continue;
             }
-            if keep {
-                removed.push(r.record.id);
+            if self.keep {
+                aged.removed.push(r.record.id);
             }
             if follows && r.used {
-                replace.push(r);
+                expired.push(r);
             } else {
-                stats.records_dropped += 1;
+                aged.stats.records_dropped += 1;
             }
         }
-        // Replacement at the same location (§4.4: p_l = p_K), inserted
-        // whether or not another record covers the point, gathered with
-        // K's random streams (`ic::first_stream`).
-        let candidates: Vec<Candidate> = replace.iter().map(|r| r.candidate).collect();
-        // Store hook: samples packed to their stored form as soon as they
-        // are gathered (reprojection used them at full precision first).
-        let dynamic = keep.then(|| dynamic_objects(ctx));
-        let pack = |g: &Gathered| dynamic.as_ref().map(|d| SampleBlock::pack(&g.samples, d));
+        expired
+    }
+
+    /// Replaces each of the `expired` records at its location (§4.4:
+    /// p_l = p_K), inserted whether or not another record covers the
+    /// point, gathered with K's random streams (`ic::first_stream`); a
+    /// replacement gathered inside a moving object ([`back_face_share`])
+    /// is dropped instead.
+    fn replace(
+        &self,
+        ctx: &FrameContext,
+        next: &NextFrame,
+        packer: &SamplePacker,
+        expired: &[TemporalRecord],
+        cache: &mut IrradianceCache,
+        aged: &mut Aged,
+    ) {
+        let t = ctx.frame;
+        let candidates: Vec<Candidate> = expired.iter().map(|r| r.candidate).collect();
         let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = {
             use rayon::prelude::*;
             self.ic
                 .gather_parallel(ctx, &candidates)
                 .map(|g| {
                     let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
-                    (!inside).then(|| (self.temporal(ctx, &next, &g), pack(&g)))
+                    (!inside).then(|| (self.temporal(ctx, next, &g), packer.pack(&g)))
                 })
                 .collect()
         };
-        let mut samples = Vec::new();
-        for (gathered, old) in gathered.into_iter().zip(&replace) {
-            let Some((mut new, s)) = gathered else {
-                stats.records_dropped += 1;
+        for (gathered, old) in gathered.into_iter().zip(expired) {
+            let Some((mut new, samples)) = gathered else {
+                aged.stats.records_dropped += 1;
                 continue;
             };
             new.replaces = Some(old.record.id);
-            cache.insert(new.at_frame(t, gradients, None));
-            alive.push(new);
-            samples.extend(s);
-            stats.records_replaced += 1;
+            cache.insert(new.at_frame(t, self.settings.gradients, None));
+            aged.alive.push(new);
+            aged.samples.extend(samples);
+            aged.stats.records_replaced += 1;
         }
-        stats
-            .phase_seconds
-            .push(("age".into(), start.elapsed().as_secs_f64()));
+    }
 
-        // New records where nothing is usable (`ic`'s fill stage).
-        let start = Instant::now();
+    /// New records where nothing is usable (`ic`'s fill stage), each with
+    /// its E(t0+1) estimate.
+    fn fill(
+        &self,
+        ctx: &FrameContext,
+        next: &NextFrame,
+        packer: &SamplePacker,
+        cache: &mut IrradianceCache,
+        aged: &mut Aged,
+    ) {
         let pixels = primary_candidates(ctx);
         let mut created = Vec::new();
         self.ic.fill_from(
             ctx,
-            &mut cache,
+            cache,
             &pixels,
-            |g| (self.temporal(ctx, &next, g), pack(g)),
+            |g| (self.temporal(ctx, next, g), packer.pack(g)),
             &mut created,
         );
-        stats.records_created = created.len() as u64;
-        for (r, s) in created {
-            alive.push(r);
-            samples.extend(s);
+        aged.stats.records_created = created.len() as u64;
+        for (r, samples) in created {
+            aged.alive.push(r);
+            aged.samples.extend(samples);
         }
-        stats
-            .phase_seconds
-            .push(("fill".into(), start.elapsed().as_secs_f64()));
-        let aged = Aged {
-            alive,
-            stats,
-            removed,
-            samples,
-        };
-        (cache, aged)
     }
 
     /// Ends frame `t`'s aging: radii as neighbour clamping left them, the
@@ -728,6 +750,27 @@ impl Method for TemporalRadianceCaching {
         self.forgotten.clear();
         self.kept = None;
         Ok(())
+    }
+}
+
+/// Store hook: packs a gather's samples to their stored form as soon as
+/// they are gathered (the E(t0+1) estimate used them at full precision
+/// first); packs nothing when the records are not kept.
+struct SamplePacker {
+    /// Which objects move, when the records are kept.
+    dynamic: Option<Vec<bool>>,
+}
+
+impl SamplePacker {
+    fn new(keep: bool, ctx: &FrameContext) -> Self {
+        SamplePacker {
+            dynamic: keep.then(|| dynamic_objects(ctx)),
+        }
+    }
+
+    fn pack(&self, g: &Gathered) -> Option<SampleBlock> {
+        let dynamic = self.dynamic.as_ref()?;
+        Some(SampleBlock::pack(&g.samples, dynamic))
     }
 }
 
