@@ -182,6 +182,59 @@ pub struct StateCommit<'a> {
     pub changes: &'a crate::method::StateChanges,
 }
 
+/// A frame's bulk values once in the sample log ([`Store::append_frame`]).
+struct LoggedFrame {
+    frame: FrameValue,
+    /// The encoded [`FrameRecordsValue`] of the frame's record block, if it
+    /// has records.
+    records: Option<Vec<u8>>,
+    /// The samples' size before compression, for the frame's statistics.
+    samples_raw: u64,
+}
+
+/// A frame's changes of the `state` tree, encoded: rows put, rows removed
+/// and the new head.
+#[derive(Default)]
+struct StateRows {
+    put: Vec<([u8; 16], Vec<u8>)>,
+    removed: Vec<[u8; 16]>,
+    head: Option<Vec<u8>>,
+}
+
+impl StateRows {
+    fn new(job: u64, frame: u32, sc: &StateCommit) -> Self {
+        let put = sc
+            .changes
+            .put
+            .iter()
+            .map(|(id, data)| {
+                let value = StateRecordValue {
+                    frame,
+                    data: data.clone(),
+                };
+                (keys::state_record(job, *id), encode(&value))
+            })
+            .collect();
+        let removed = sc
+            .changes
+            .removed
+            .iter()
+            .map(|&id| keys::state_record(job, id))
+            .collect();
+        let head = StateHeadValue {
+            frame,
+            chain_start: sc.chain_start,
+            chain_end: sc.chain_end,
+            global: sc.changes.global.clone(),
+        };
+        StateRows {
+            put,
+            removed,
+            head: Some(encode(&head)),
+        }
+    }
+}
+
 /// FNV-1a 64 of `bytes`, in hex: the scene content hash of a job (stable
 /// across builds and platforms, unlike `std`'s hasher).
 pub fn content_hash(bytes: &[u8]) -> String {
@@ -587,83 +640,15 @@ impl Store {
         // replaces the record block of its former self (or, writing none,
         // removes it).
         let already = self.frame_done(job.id, c.frame)?;
-        let exr_zstd = compress(c.exr);
-        let frame_value = FrameValue {
-            width: c.width,
-            height: c.height,
-            exr_len: c.exr.len() as u64,
-            exr_offset: log.append(&exr_zstd).map_err(|e| self.log_error(e))?,
-            exr_stored_len: exr_zstd.len() as u32,
-        };
-        drop(exr_zstd);
-        let mut records = Vec::with_capacity(c.records.len());
-        let mut samples_raw = 0u64;
-        for rc in c.records {
-            let mut record = rc.record;
-            (
-                record.samples_count,
-                record.samples_offset,
-                record.samples_len,
-            ) = if rc.samples.is_empty() {
-                (0, 0, 0)
-            } else {
-                samples_raw += rc.samples.raw_bytes();
-                let offset = log
-                    .append(&rc.samples.zstd)
-                    .map_err(|e| self.log_error(e))?;
-                (rc.samples.count, offset, rc.samples.zstd.len() as u32)
-            };
-            records.push(record);
-        }
-        // The frame's records, in id order, as one block after their
-        // samples (it says where they lie).
-        // A record given twice keeps its last version, as a second insert
-        // under its key did in schema 3.
-        records.sort_by_key(|r| r.id);
-        records.reverse();
-        records.dedup_by_key(|r| r.id);
-        records.reverse();
-        let records_value = if records.is_empty() {
-            None
-        } else {
-            let block = RecordBlock {
-                job: job.id,
-                frame: c.frame,
-                records,
-            };
-            let value = append_record_block(log, &block).map_err(|e| self.log_error(e))?;
-            Some(encode(&value))
-        };
-        if log.end() > log.committed() {
-            log.sync().map_err(|e| self.log_error(e))?;
-        }
+        let logged =
+            self.append_frame(log, job.id, c.frame, (c.width, c.height), c.exr, c.records)?;
         let log_len = log.end().to_be_bytes();
-        let stats = StatsValue::from_stats(c.stats, samples_raw);
-        let mut state_rows = Vec::new();
-        let mut state_removed = Vec::new();
-        let mut state_head = None;
-        if let Some(sc) = &c.state {
-            for (id, data) in &sc.changes.put {
-                let value = StateRecordValue {
-                    frame: c.frame,
-                    data: data.clone(),
-                };
-                state_rows.push((keys::state_record(job.id, *id), encode(&value)));
-            }
-            state_removed.extend(
-                sc.changes
-                    .removed
-                    .iter()
-                    .map(|&id| keys::state_record(job.id, id)),
-            );
-            let head = StateHeadValue {
-                frame: c.frame,
-                chain_start: sc.chain_start,
-                chain_end: sc.chain_end,
-                global: sc.changes.global.clone(),
-            };
-            state_head = Some(encode(&head));
-        }
+        let stats_bytes = encode(&StatsValue::from_stats(c.stats, logged.samples_raw));
+        let state = c
+            .state
+            .as_ref()
+            .map(|sc| StateRows::new(job.id, c.frame, sc))
+            .unwrap_or_default();
         let state_head_key = keys::state_head(job.id);
         let mut progressed = job.clone();
         if !already {
@@ -671,8 +656,7 @@ impl Store {
         }
         progressed.last_frame = Some(c.frame);
         progressed.updated_unix = now_unix();
-        let frame_bytes = encode(&frame_value);
-        let stats_bytes = encode(&stats);
+        let frame_bytes = encode(&logged.frame);
         let job_bytes = encode(&progressed);
         let job_key = keys::job(&job.name);
         let result: Result<(), TransactionError<()>> = (
@@ -683,17 +667,17 @@ impl Store {
             &self.state,
             &self.jobs,
         )
-            .transaction(|(frames, records, meta, stats, state, jobs)| {
-                for k in &state_removed {
-                    state.remove(&k[..])?;
+            .transaction(|(frames, records, meta, stats, state_tree, jobs)| {
+                for k in &state.removed {
+                    state_tree.remove(&k[..])?;
                 }
-                for (k, v) in &state_rows {
-                    state.insert(&k[..], &v[..])?;
+                for (k, v) in &state.put {
+                    state_tree.insert(&k[..], &v[..])?;
                 }
-                if let Some(head) = &state_head {
-                    state.insert(&state_head_key[..], &head[..])?;
+                if let Some(head) = &state.head {
+                    state_tree.insert(&state_head_key[..], &head[..])?;
                 }
-                match &records_value {
+                match &logged.records {
                     Some(v) => {
                         records.insert(&frame_key[..], &v[..])?;
                     }
@@ -713,6 +697,74 @@ impl Store {
             TransactionError::Abort(()) => unreachable!("the transaction never aborts"),
         })?;
         Ok(progressed)
+    }
+
+    /// Appends frame `frame`'s bulk values to the sample log and syncs it:
+    /// its EXR file, each record's samples, then the records as one block
+    /// (in id order, after their samples: it says where they lie). What
+    /// the frame's transaction then points at.
+    fn append_frame(
+        &self,
+        log: &mut SampleLog,
+        job: u64,
+        frame: u32,
+        (width, height): (u32, u32),
+        exr: &[u8],
+        commits: Vec<RecordCommit>,
+    ) -> Result<LoggedFrame, StoreError> {
+        let exr_zstd = compress(exr);
+        let frame_value = FrameValue {
+            width,
+            height,
+            exr_len: exr.len() as u64,
+            exr_offset: log.append(&exr_zstd).map_err(|e| self.log_error(e))?,
+            exr_stored_len: exr_zstd.len() as u32,
+        };
+        drop(exr_zstd);
+        let mut records = Vec::with_capacity(commits.len());
+        let mut samples_raw = 0u64;
+        for rc in commits {
+            let mut record = rc.record;
+            (
+                record.samples_count,
+                record.samples_offset,
+                record.samples_len,
+            ) = if rc.samples.is_empty() {
+                (0, 0, 0)
+            } else {
+                samples_raw += rc.samples.raw_bytes();
+                let offset = log
+                    .append(&rc.samples.zstd)
+                    .map_err(|e| self.log_error(e))?;
+                (rc.samples.count, offset, rc.samples.zstd.len() as u32)
+            };
+            records.push(record);
+        }
+        // A record given twice keeps its last version, as a second insert
+        // under its key did in schema 3.
+        records.sort_by_key(|r| r.id);
+        records.reverse();
+        records.dedup_by_key(|r| r.id);
+        records.reverse();
+        let records_value = if records.is_empty() {
+            None
+        } else {
+            let block = RecordBlock {
+                job,
+                frame,
+                records,
+            };
+            let value = append_record_block(log, &block).map_err(|e| self.log_error(e))?;
+            Some(encode(&value))
+        };
+        if log.end() > log.committed() {
+            log.sync().map_err(|e| self.log_error(e))?;
+        }
+        Ok(LoggedFrame {
+            frame: frame_value,
+            records: records_value,
+            samples_raw,
+        })
     }
 
     pub fn frame(&self, job: u64, frame: u32) -> Result<Option<FrameValue>, StoreError> {
