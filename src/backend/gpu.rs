@@ -239,76 +239,50 @@ fn instance() -> wgpu::Instance {
     wgpu::Instance::new(desc.with_env())
 }
 
-/// Preference among device types: discrete, integrated, virtual, other,
-/// then software.
-fn rank(t: wgpu::DeviceType) -> u8 {
-    match t {
-        wgpu::DeviceType::DiscreteGpu => 0,
-        wgpu::DeviceType::IntegratedGpu => 1,
-        wgpu::DeviceType::VirtualGpu => 2,
-        wgpu::DeviceType::Other => 3,
-        wgpu::DeviceType::Cpu => 4,
-    }
+/// The first adapter by [`rank`] that `policy` allows.
+fn pick_adapter(policy: AdapterPolicy) -> Result<wgpu::Adapter, GpuError> {
+    let instance = instance();
+    let mut candidates: Vec<wgpu::Adapter> =
+        pollster::block_on(instance.enumerate_adapters(backends()))
+            .into_iter()
+            .filter(|a| {
+                policy == AdapterPolicy::AllowSoftware
+                    || a.get_info().device_type != wgpu::DeviceType::Cpu
+            })
+            .collect();
+    candidates.sort_by_key(|a| rank(a.get_info().device_type));
+    candidates.into_iter().next().ok_or(GpuError::NoAdapter)
 }
 
-/// A byte or element count as `usize`, saturating on 32-bit targets.
-fn usize_of(x: u64) -> usize {
-    usize::try_from(x).unwrap_or(usize::MAX)
-}
-
-impl GpuBackend {
-    /// [`Self::with_layout`] with the layout `RADCACHE_GPU_BVH` names
-    /// (BVH2 when unset).
-    pub fn new(policy: AdapterPolicy) -> Result<Self, GpuError> {
-        Self::with_layout(policy, GpuLayout::from_env()?)
-    }
-
-    /// Picks an adapter by `policy`, opens a device with the adapter's own
-    /// limits, compiles the shaders for BVH layout `bvh` and runs one tiny
-    /// dispatch, so that a backend that is returned can trace.
-    pub fn with_layout(policy: AdapterPolicy, bvh: GpuLayout) -> Result<Self, GpuError> {
-        let instance = instance();
-        let mut candidates: Vec<wgpu::Adapter> =
-            pollster::block_on(instance.enumerate_adapters(backends()))
-                .into_iter()
-                .filter(|a| {
-                    policy == AdapterPolicy::AllowSoftware
-                        || a.get_info().device_type != wgpu::DeviceType::Cpu
-                })
-                .collect();
-        candidates.sort_by_key(|a| rank(a.get_info().device_type));
-        let adapter = candidates.into_iter().next().ok_or(GpuError::NoAdapter)?;
-        let info = adapter.get_info();
-        let adapter_name = format!("{} ({:?})", info.name, info.backend);
-        let setup = |message: String| GpuError::Setup {
-            adapter: adapter_name.clone(),
-            message,
-        };
-        let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("radcache rays"),
-            required_features: wgpu::Features::empty(),
-            required_limits: limits.clone(),
-            ..Default::default()
-        }))
-        .map_err(|e| setup(format!("cannot open a device: {e}")))?;
-
-        let errors: ErrorSlot = Arc::default();
-        {
-            let slot = errors.clone();
-            device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
-                if let Ok(mut s) = slot.lock() {
-                    s.get_or_insert_with(|| e.to_string());
-                }
-            }));
-            let slot = errors.clone();
-            device.set_device_lost_callback(move |reason, message| {
-                if let Ok(mut s) = slot.lock() {
-                    s.get_or_insert_with(|| format!("device lost ({reason:?}): {message}"));
-                }
-            });
+/// A slot that keeps the first uncaptured error or device loss of
+/// `device`, which later dispatches report.
+fn record_device_errors(device: &wgpu::Device) -> ErrorSlot {
+    let errors: ErrorSlot = Arc::default();
+    let slot = errors.clone();
+    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+        if let Ok(mut s) = slot.lock() {
+            s.get_or_insert_with(|| e.to_string());
         }
+    }));
+    let slot = errors.clone();
+    device.set_device_lost_callback(move |reason, message| {
+        if let Ok(mut s) = slot.lock() {
+            s.get_or_insert_with(|| format!("device lost ({reason:?}): {message}"));
+        }
+    });
+    errors
+}
 
+/// The closest-hit and any-hit compute pipelines over `bvh`'s traversal,
+/// with their bind group layout.
+struct RayPipelines {
+    layout: wgpu::BindGroupLayout,
+    closest: wgpu::ComputePipeline,
+    any: wgpu::ComputePipeline,
+}
+
+impl RayPipelines {
+    fn new(device: &wgpu::Device, bvh: &GpuLayout) -> Result<Self, String> {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("rays"),
@@ -345,14 +319,67 @@ impl GpuBackend {
                 cache: None,
             })
         };
-        let closest_pipeline = pipeline(
+        let closest = pipeline(
             "closest_hit",
             include_str!("../../shaders/closest_hit.wgsl"),
         );
-        let any_pipeline = pipeline("any_hit", include_str!("../../shaders/any_hit.wgsl"));
+        let any = pipeline("any_hit", include_str!("../../shaders/any_hit.wgsl"));
         if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(setup(format!("shaders rejected: {e}")));
+            return Err(format!("shaders rejected: {e}"));
         }
+        Ok(RayPipelines {
+            layout,
+            closest,
+            any,
+        })
+    }
+}
+
+/// Preference among device types: discrete, integrated, virtual, other,
+/// then software.
+fn rank(t: wgpu::DeviceType) -> u8 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+/// A byte or element count as `usize`, saturating on 32-bit targets.
+fn usize_of(x: u64) -> usize {
+    usize::try_from(x).unwrap_or(usize::MAX)
+}
+
+impl GpuBackend {
+    /// [`Self::with_layout`] with the layout `RADCACHE_GPU_BVH` names
+    /// (BVH2 when unset).
+    pub fn new(policy: AdapterPolicy) -> Result<Self, GpuError> {
+        Self::with_layout(policy, GpuLayout::from_env()?)
+    }
+
+    /// Picks an adapter by `policy`, opens a device with the adapter's own
+    /// limits, compiles the shaders for BVH layout `bvh` and runs one tiny
+    /// dispatch, so that a backend that is returned can trace.
+    pub fn with_layout(policy: AdapterPolicy, bvh: GpuLayout) -> Result<Self, GpuError> {
+        let adapter = pick_adapter(policy)?;
+        let info = adapter.get_info();
+        let adapter_name = format!("{} ({:?})", info.name, info.backend);
+        let setup = |message: String| GpuError::Setup {
+            adapter: adapter_name.clone(),
+            message,
+        };
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("radcache rays"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| setup(format!("cannot open a device: {e}")))?;
+        let errors = record_device_errors(&device);
+        let pipelines = RayPipelines::new(&device, &bvh).map_err(setup)?;
 
         let max_binding = limits
             .max_storage_buffer_binding_size
@@ -382,10 +409,10 @@ impl GpuBackend {
             device,
             queue,
             info,
-            layout,
+            layout: pipelines.layout,
             bvh,
-            closest_pipeline,
-            any_pipeline,
+            closest_pipeline: pipelines.closest,
+            any_pipeline: pipelines.any,
             geometry,
             rays: Mutex::new(rays),
             chunk_rays,
@@ -398,35 +425,37 @@ impl GpuBackend {
             timings: Mutex::default(),
             splat,
         };
-        // One empty-scene dispatch of each kind: shader compilation and the
-        // readback path fail here, not in the middle of a render.
-        let probe = [Ray::new(glam::Vec3::ZERO, glam::Vec3::X, 0.0, 1.0)];
-        let mut hit = [Hit::MISS];
-        backend
-            .try_closest_hit(&probe, &mut hit)
-            .map_err(|e| setup(format!("test dispatch failed: {e}")))?;
-        let mut occluded = [true];
-        backend
-            .try_any_hit(&probe, &mut occluded)
-            .map_err(|e| setup(format!("test dispatch failed: {e}")))?;
-        if hit[0].is_hit() || occluded[0] {
-            return Err(setup(
-                "test dispatch returned a hit in an empty scene".into(),
-            ));
-        }
-        // And one splat over an empty cache: no record is usable anywhere.
-        let empty = backend
-            .splat
-            .prepare(&[], 0.2, true)
-            .and_then(|c| backend.splat.interpolate(&c, &[GpuLookup::default()], None))
-            .map_err(|e| setup(format!("test splat failed: {e}")))?;
-        if empty.first().is_none_or(|s| s.count != 0) {
-            return Err(setup("test splat found a record in an empty cache".into()));
-        }
+        backend.probe().map_err(setup)?;
         backend.reset_timings();
         backend.closest.store(0, Ordering::Relaxed);
         backend.any.store(0, Ordering::Relaxed);
         Ok(backend)
+    }
+
+    /// One empty-scene dispatch of each kind and one splat over an empty
+    /// cache: shader compilation and the readback paths fail here, not in
+    /// the middle of a render.
+    fn probe(&self) -> Result<(), String> {
+        let probe = [Ray::new(glam::Vec3::ZERO, glam::Vec3::X, 0.0, 1.0)];
+        let mut hit = [Hit::MISS];
+        self.try_closest_hit(&probe, &mut hit)
+            .map_err(|e| format!("test dispatch failed: {e}"))?;
+        let mut occluded = [true];
+        self.try_any_hit(&probe, &mut occluded)
+            .map_err(|e| format!("test dispatch failed: {e}"))?;
+        if hit[0].is_hit() || occluded[0] {
+            return Err("test dispatch returned a hit in an empty scene".into());
+        }
+        // No record is usable anywhere in an empty cache.
+        let empty = self
+            .splat
+            .prepare(&[], 0.2, true)
+            .and_then(|c| self.splat.interpolate(&c, &[GpuLookup::default()], None))
+            .map_err(|e| format!("test splat failed: {e}"))?;
+        if empty.first().is_none_or(|s| s.count != 0) {
+            return Err("test splat found a record in an empty cache".into());
+        }
+        Ok(())
     }
 
     /// The adapter in use.
