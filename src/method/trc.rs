@@ -104,6 +104,31 @@ pub struct Successor {
     pub grad_translation: [Vec3; 3],
 }
 
+impl Successor {
+    /// New record `l` as its predecessor's successor.
+    fn of(l: &TemporalRecord) -> Self {
+        Successor {
+            frame: l.record.created_frame,
+            id: l.record.id,
+            irradiance: l.record.irradiance,
+            grad_rotation: l.record.grad_rotation,
+            grad_translation: l.record.grad_translation,
+        }
+    }
+}
+
+/// The mean of a lifespan histogram (`histogram[n]`: records that live
+/// `n` frames); 0 when it counts none.
+fn mean_lifespan(histogram: &[u64]) -> f64 {
+    let records: u64 = histogram.iter().sum();
+    let frames: u64 = (0u64..).zip(histogram).map(|(life, n)| life * n).sum();
+    if records > 0 {
+        frames as f64 / records as f64
+    } else {
+        0.0
+    }
+}
+
 /// Settings of `trc`, with their sources.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct TrcSettings {
@@ -535,30 +560,11 @@ impl TemporalRadianceCaching {
                 if let (TemporalGradients::Interpolated, Some(old)) =
                     (self.settings.gradients, r.replaces)
                 {
-                    self.successors.insert(
-                        old,
-                        Successor {
-                            frame: t,
-                            id: r.record.id,
-                            irradiance: r.record.irradiance,
-                            grad_rotation: r.record.grad_rotation,
-                            grad_translation: r.record.grad_translation,
-                        },
-                    );
+                    self.successors.insert(old, Successor::of(r));
                 }
             }
         }
-        let computed: u64 = lifespans.iter().sum();
-        let total: u64 = lifespans
-            .iter()
-            .enumerate()
-            .map(|(life, n)| life as u64 * n)
-            .sum();
-        stats.mean_lifespan = if computed > 0 {
-            total as f64 / computed as f64
-        } else {
-            0.0
-        };
+        stats.mean_lifespan = mean_lifespan(&lifespans);
         stats.lifespan_histogram = lifespans;
         stats.records_alive = alive.len() as u64;
         if let Some(k) = kept.as_mut() {
