@@ -458,18 +458,13 @@ impl RenderSummary {
             return None;
         }
         let sum = |f: fn(&FrameStats) -> u64| self.frame_stats.iter().map(f).sum::<u64>();
-        let total: u64 = histogram
-            .iter()
-            .enumerate()
-            .map(|(life, n)| life as u64 * n)
-            .sum();
         let widest = histogram.iter().copied().max().unwrap_or(1).max(1);
         let mut out = format!(
             "records reused {} times, replaced {}, dropped {}; mean lifespan {:.2} frames over {computed} records computed\nlifespan histogram (frames: records):",
             sum(|s| s.records_reused),
             sum(|s| s.records_replaced),
             sum(|s| s.records_dropped),
-            total as f64 / computed as f64,
+            crate::method::mean_lifespan(&histogram),
         );
         for (life, &n) in histogram.iter().enumerate().filter(|(_, n)| **n > 0) {
             let bar = "#".repeat(((n * 40).div_ceil(widest)) as usize);

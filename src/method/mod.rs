@@ -103,6 +103,19 @@ pub struct FrameStats {
     pub phase_seconds: Vec<(String, f64)>,
 }
 
+/// The mean of a lifespan histogram (`histogram[n]`: records that live
+/// `n` frames, as in [`FrameStats::lifespan_histogram`]); 0 when it counts
+/// none.
+pub fn mean_lifespan(histogram: &[u64]) -> f64 {
+    let records: u64 = histogram.iter().sum();
+    let frames: u64 = (0u64..).zip(histogram).map(|(life, n)| life * n).sum();
+    if records > 0 {
+        frames as f64 / records as f64
+    } else {
+        0.0
+    }
+}
+
 impl FrameStats {
     pub fn mean_records_per_lookup(&self) -> f64 {
         self.lookup_records as f64 / self.lookups.max(1) as f64

@@ -60,7 +60,8 @@ use super::ic::{
     Candidate, FallbackStreams, Gathered, IcSettings,
 };
 use super::{
-    FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges, StateError,
+    mean_lifespan, FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges,
+    StateError,
 };
 use crate::backend::Hit;
 use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance, HemisphereSamples};
@@ -114,18 +115,6 @@ impl Successor {
             grad_rotation: l.record.grad_rotation,
             grad_translation: l.record.grad_translation,
         }
-    }
-}
-
-/// The mean of a lifespan histogram (`histogram[n]`: records that live
-/// `n` frames); 0 when it counts none.
-fn mean_lifespan(histogram: &[u64]) -> f64 {
-    let records: u64 = histogram.iter().sum();
-    let frames: u64 = (0u64..).zip(histogram).map(|(life, n)| life * n).sum();
-    if records > 0 {
-        frames as f64 / records as f64
-    } else {
-        0.0
     }
 }
 
