@@ -273,6 +273,48 @@ fn record_device_errors(device: &wgpu::Device) -> ErrorSlot {
     errors
 }
 
+/// Waits for the queue's work, maps the first `bytes` of `staging`, hands
+/// them to `read` and unmaps: the readback of a dispatch whose results
+/// were copied to `staging`. `what` names them in errors; an error the
+/// device reported meanwhile (`errors`) fails it too. Returns the time
+/// spent waiting for the GPU and the time spent mapping and reading.
+pub(crate) fn read_back(
+    device: &wgpu::Device,
+    staging: &wgpu::Buffer,
+    bytes: u64,
+    what: &str,
+    errors: &ErrorSlot,
+    read: impl FnOnce(&[u8]),
+) -> Result<(Duration, Duration), String> {
+    let start = Instant::now();
+    let (tx, rx) = std::sync::mpsc::channel();
+    staging.map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| format!("waiting for the GPU failed: {e}"))?;
+    let waited = start.elapsed();
+    let start = Instant::now();
+    match rx.recv() {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => return Err(format!("cannot map the {what}: {e}")),
+        Err(_) => return Err(format!("the {what} were never mapped")),
+    }
+    if let Some(e) = errors.lock().ok().and_then(|s| s.clone()) {
+        staging.unmap();
+        return Err(e);
+    }
+    {
+        let view = staging
+            .get_mapped_range(0..bytes)
+            .map_err(|e| format!("cannot read the {what}: {e}"))?;
+        read(&view);
+    }
+    staging.unmap();
+    Ok((waited, start.elapsed()))
+}
+
 /// The closest-hit and any-hit compute pipelines over `bvh`'s traversal,
 /// with their bind group layout.
 struct RayPipelines {
@@ -500,12 +542,6 @@ impl GpuBackend {
         failed.is_some()
     }
 
-    /// The first error wgpu reported outside a scope, if any (device lost,
-    /// validation).
-    fn pending_error(&self) -> Option<String> {
-        self.errors.lock().ok().and_then(|s| s.clone())
-    }
-
     /// [`RayBackend::set_geometry`] with the size checks as errors: a part
     /// whose nodes or triangles exceed the device's storage binding size, or
     /// a BVH deeper than the shaders' stack.
@@ -714,36 +750,17 @@ impl GpuBackend {
             let bytes = n * result_bytes;
             encoder.copy_buffer_to_buffer(&buffers.results, 0, &buffers.staging, 0, bytes);
             self.queue.submit([encoder.finish()]);
-            let (tx, rx) = std::sync::mpsc::channel();
-            buffers
-                .staging
-                .map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
-                    let _ = tx.send(r);
-                });
-            self.device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .map_err(|e| gpu_err(format!("waiting for the GPU failed: {e}")))?;
-            let dispatch = start.elapsed();
-
-            let start = Instant::now();
-            match rx.recv() {
-                Ok(Ok(())) => {}
-                Ok(Err(e)) => return Err(gpu_err(format!("cannot map the results: {e}"))),
-                Err(_) => return Err(gpu_err("the results were never mapped".into())),
-            }
-            if let Some(e) = self.pending_error() {
-                buffers.staging.unmap();
-                return Err(gpu_err(e));
-            }
-            {
-                let view = buffers
-                    .staging
-                    .get_mapped_range(0..bytes)
-                    .map_err(|e| gpu_err(format!("cannot read the results: {e}")))?;
-                store(first, &view);
-            }
-            buffers.staging.unmap();
-            let readback = start.elapsed();
+            let submitted = start.elapsed();
+            let (waited, readback) = read_back(
+                &self.device,
+                &buffers.staging,
+                bytes,
+                "results",
+                &self.errors,
+                |view| store(first, view),
+            )
+            .map_err(gpu_err)?;
+            let dispatch = submitted + waited;
             self.add_timings(|t| {
                 t.ray_upload += upload;
                 t.dispatch += dispatch;

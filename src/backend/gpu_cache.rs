@@ -47,7 +47,7 @@
 //! frames; they only grow. Records and grid are uploaded once per render
 //! pass ([`CacheSplat::prepare`]); lookups per render tile.
 
-use super::gpu::{bind, layout_entry, storage_entry, ErrorSlot, FailureSlot, GpuError};
+use super::gpu::{bind, layout_entry, read_back, storage_entry, ErrorSlot, FailureSlot, GpuError};
 use crate::cache::{Interpolated, IrradianceRecord, LookupPoint};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -818,38 +818,23 @@ impl CacheSplat {
             );
         }
         self.queue.submit([encoder.finish()]);
-
-        let total = splat_bytes + used_bytes;
-        let (tx, rx) = std::sync::mpsc::channel();
-        staging.map_async(wgpu::MapMode::Read, 0..total, move |r| {
-            let _ = tx.send(r);
-        });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| self.error(format!("waiting for the GPU failed: {e}")))?;
-        let dispatch = start.elapsed();
-        let start = Instant::now();
-        match rx.recv() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(self.error(format!("cannot map the splat sums: {e}"))),
-            Err(_) => return Err(self.error("the splat sums were never mapped".into())),
-        }
-        if let Some(e) = self.errors.lock().ok().and_then(|s| s.clone()) {
-            staging.unmap();
-            return Err(self.error(e));
-        }
-        {
-            let view = staging
-                .get_mapped_range(0..total)
-                .map_err(|e| self.error(format!("cannot read the splat sums: {e}")))?;
-            let (sums, bits) = view.split_at(splat_bytes as usize);
-            out.extend_from_slice(bytemuck::cast_slice(sums));
-            if let Some(used) = used {
-                mark_used(bytemuck::cast_slice(bits), used);
-            }
-        }
-        staging.unmap();
-        let readback = start.elapsed();
+        let submitted = start.elapsed();
+        let (waited, readback) = read_back(
+            &self.device,
+            staging,
+            splat_bytes + used_bytes,
+            "splat sums",
+            &self.errors,
+            |view| {
+                let (sums, bits) = view.split_at(splat_bytes as usize);
+                out.extend_from_slice(bytemuck::cast_slice(sums));
+                if let Some(used) = used {
+                    mark_used(bytemuck::cast_slice(bits), used);
+                }
+            },
+        )
+        .map_err(|e| self.error(e))?;
+        let dispatch = submitted + waited;
         self.add_timings(|t| {
             t.upload += upload;
             t.dispatch += dispatch;
