@@ -188,6 +188,53 @@ struct GeometryBuffers {
     dynamic_root: u32,
 }
 
+/// An error unless `count` elements of `size` bytes (`what`) fit in one
+/// storage binding of `max_binding` bytes.
+fn check_binding_size(what: &str, count: u64, size: u64, max_binding: u64) -> Result<(), GpuError> {
+    if count * size > max_binding {
+        return Err(GpuError::Geometry(format!(
+            "{count} {what} ({} MiB) exceed the device's storage binding size of {} MiB",
+            (count * size) >> 20,
+            max_binding >> 20
+        )));
+    }
+    Ok(())
+}
+
+/// How the geometry buffers grow: by a quarter more than needed, within
+/// one storage binding.
+struct Growth<'a> {
+    device: &'a wgpu::Device,
+    max_binding: u64,
+}
+
+impl Growth<'_> {
+    /// A new buffer (`label`, elements of `size` bytes) and its capacity
+    /// when `needed` elements exceed the `old` buffer's capacity, with the
+    /// first `kept` elements of the old one copied over by `encoder`;
+    /// `None` when the old one is large enough.
+    fn buffer(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        (label, size): (&str, u64),
+        (old, capacity): (&wgpu::Buffer, u64),
+        needed: u64,
+        kept: u64,
+    ) -> Option<(wgpu::Buffer, u64)> {
+        if needed <= capacity {
+            return None;
+        }
+        let cap = (needed + needed / 4)
+            .min(self.max_binding / size)
+            .max(needed);
+        let buffer = storage_buffer(self.device, label, cap * size);
+        if kept > 0 {
+            encoder.copy_buffer_to_buffer(old, 0, &buffer, 0, kept * size);
+        }
+        Some((buffer, cap))
+    }
+}
+
 /// Errors reported by wgpu outside an error scope, or the device being lost.
 pub(super) type ErrorSlot = Arc<Mutex<Option<String>>>;
 
@@ -572,47 +619,39 @@ impl GpuBackend {
         let nodes_needed = (static_nodes + dynamic_part.node_count() as u64).max(1);
         let triangles_needed = (static_triangles + dynamic_part.triangles.len() as u64).max(1);
         let node_bytes = self.bvh.node_bytes();
-        for (what, count, size) in [
-            ("BVH nodes", nodes_needed, node_bytes),
-            ("triangles", triangles_needed, TRIANGLE_BYTES),
-        ] {
-            if count * size > self.max_binding {
-                return Err(GpuError::Geometry(format!(
-                    "{count} {what} ({} MiB) exceed the device's storage binding size of {} MiB",
-                    (count * size) >> 20,
-                    self.max_binding >> 20
-                )));
-            }
-        }
+        check_binding_size("BVH nodes", nodes_needed, node_bytes, self.max_binding)?;
+        check_binding_size(
+            "triangles",
+            triangles_needed,
+            TRIANGLE_BYTES,
+            self.max_binding,
+        )?;
         // Grow (never shrink) the buffers; a kept static part is copied over
         // on the GPU, not uploaded again.
         let keep_static = static_part.is_none();
-        let grow = |needed: u64, capacity: u64, size: u64| {
-            if needed > capacity {
-                Some(
-                    (needed + needed / 4)
-                        .min(self.max_binding / size)
-                        .max(needed),
-                )
-            } else {
-                None
-            }
+        let grow = Growth {
+            device: &self.device,
+            max_binding: self.max_binding,
         };
-        if let Some(cap) = grow(nodes_needed, g.node_capacity, node_bytes) {
-            let buffer = storage_buffer(&self.device, "nodes", cap * node_bytes);
-            if keep_static && static_nodes > 0 {
-                let bytes = static_nodes * node_bytes;
-                encoder.copy_buffer_to_buffer(&g.nodes, 0, &buffer, 0, bytes);
-            }
+        let kept_nodes = if keep_static { static_nodes } else { 0 };
+        if let Some((buffer, cap)) = grow.buffer(
+            &mut encoder,
+            ("nodes", node_bytes),
+            (&g.nodes, g.node_capacity),
+            nodes_needed,
+            kept_nodes,
+        ) {
             g.nodes = buffer;
             g.node_capacity = cap;
         }
-        if let Some(cap) = grow(triangles_needed, g.triangle_capacity, TRIANGLE_BYTES) {
-            let buffer = storage_buffer(&self.device, "triangles", cap * TRIANGLE_BYTES);
-            if keep_static && static_triangles > 0 {
-                let bytes = static_triangles * TRIANGLE_BYTES;
-                encoder.copy_buffer_to_buffer(&g.triangles, 0, &buffer, 0, bytes);
-            }
+        let kept_triangles = if keep_static { static_triangles } else { 0 };
+        if let Some((buffer, cap)) = grow.buffer(
+            &mut encoder,
+            ("triangles", TRIANGLE_BYTES),
+            (&g.triangles, g.triangle_capacity),
+            triangles_needed,
+            kept_triangles,
+        ) {
             g.triangles = buffer;
             g.triangle_capacity = cap;
         }
