@@ -188,6 +188,17 @@ struct GeometryBuffers {
     dynamic_root: u32,
 }
 
+/// The workgroups of a dispatch over `items` invocations, `size` a
+/// workgroup, as an `(x, y)` grid at most `max_per_dim` wide (devices cap
+/// each dimension, often at 65,535): the shaders number an invocation
+/// `y · row_width + x` with `row_width = x · size`, and skip those past
+/// the last item.
+pub(super) fn workgroup_grid(items: u32, size: u32, max_per_dim: u32) -> (u32, u32) {
+    let groups = items.div_ceil(size);
+    let x = groups.min(max_per_dim).max(1);
+    (x, groups.div_ceil(x))
+}
+
 /// An error unless `count` elements of `size` bytes (`what`) fit in one
 /// storage binding of `max_binding` bytes.
 fn check_binding_size(what: &str, count: u64, size: u64, max_binding: u64) -> Result<(), GpuError> {
@@ -745,9 +756,8 @@ impl GpuBackend {
                 *buffers = RayBuffers::new(&self.device, n);
             }
             let start = Instant::now();
-            let groups = (n as u32).div_ceil(WORKGROUP_SIZE);
-            let groups_x = groups.min(self.max_groups_per_dim);
-            let groups_y = groups.div_ceil(groups_x);
+            let (groups_x, groups_y) =
+                workgroup_grid(n as u32, WORKGROUP_SIZE, self.max_groups_per_dim);
             let params = GpuParams {
                 ray_count: n as u32,
                 row_width: groups_x * WORKGROUP_SIZE,
@@ -970,5 +980,28 @@ impl RayBackend for RaysOnly {
     }
     fn failure(&self) -> Option<String> {
         self.0.failure()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::workgroup_grid;
+
+    /// The grid covers every item, stays within the per-dimension cap and
+    /// adds no whole row of workgroups past the last item.
+    #[test]
+    fn workgroup_grid_covers_items_within_the_cap() {
+        let (size, cap) = (64, 65_535);
+        for items in [0, 1, 63, 64, 65, 64 * 65_535, 64 * 65_535 + 1, 50_000_000] {
+            let (x, y) = workgroup_grid(items, size, cap);
+            assert!((1..=cap).contains(&x), "{items}: x = {x}");
+            let covered = u64::from(x) * u64::from(y) * u64::from(size);
+            assert!(covered >= u64::from(items), "{items}: {x}×{y}");
+            let one_row_less = u64::from(x) * u64::from(y.saturating_sub(1)) * u64::from(size);
+            assert!(
+                items == 0 || one_row_less < u64::from(items),
+                "{items}: {x}×{y}"
+            );
+        }
     }
 }

@@ -47,7 +47,9 @@
 //! frames; they only grow. Records and grid are uploaded once per render
 //! pass ([`CacheSplat::prepare`]); lookups per render tile.
 
-use super::gpu::{bind, layout_entry, read_back, storage_entry, ErrorSlot, FailureSlot, GpuError};
+use super::gpu::{
+    bind, layout_entry, read_back, storage_entry, workgroup_grid, ErrorSlot, FailureSlot, GpuError,
+};
 use crate::cache::{Interpolated, IrradianceRecord, LookupPoint};
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
@@ -749,9 +751,8 @@ impl CacheSplat {
             .staging
             .reserve(&self.device, splat_bytes + used_bytes);
 
-        let groups = (n as u32).div_ceil(SPLAT_WORKGROUP_SIZE);
-        let groups_x = groups.min(self.max_groups_per_dim);
-        let groups_y = groups.div_ceil(groups_x);
+        let (groups_x, groups_y) =
+            workgroup_grid(n as u32, SPLAT_WORKGROUP_SIZE, self.max_groups_per_dim);
         let mut flags = 0;
         if prepared.gradients {
             flags |= FLAG_GRADIENTS;
