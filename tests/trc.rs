@@ -863,12 +863,11 @@ fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len() as f64
 }
 
-/// Cheap `ic` settings for the side-by-side tests: 4 spp, 8×24 cells.
+/// [`small_ic`] with 4 pixel samples, for the side-by-side tests.
 fn quick_ic() -> IcSettings {
     IcSettings {
         spp: 4,
-        strata: Strata { theta: 8, phi: 24 },
-        ..IcSettings::default()
+        ..small_ic()
     }
 }
 
