@@ -11,8 +11,9 @@ use glam::{Vec3, Vec4};
 use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
 use radcache::film::Film;
-use radcache::method::ic::{FallbackStreams, IcSettings, IrradianceCaching};
+use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
+use radcache::method::render_pass::FallbackStreams;
 use radcache::method::trc::{
     TemporalGradients, TemporalRadianceCaching, TemporalRecord, TrcSettings,
 };

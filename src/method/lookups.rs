@@ -1,5 +1,5 @@
 //! The render pass's cache lookups, a tile at a time: TRC Eq. 1–4 at each
-//! shading point (one per pixel and triangle, `ic::pixel_lookups`), on the
+//! shading point (one per pixel and triangle, `render_pass::pixel_lookups`), on the
 //! CPU through the cache's octree, or
 //! on the GPU by radiance cache splatting (TRC §5,
 //! [`crate::backend::gpu_cache`]) when the ray backend has a device. Both

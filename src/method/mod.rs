@@ -7,6 +7,7 @@ pub mod ic;
 mod lookups;
 pub mod path;
 pub mod pixels;
+pub mod render_pass;
 pub mod trc;
 
 use crate::backend::RayBackend;

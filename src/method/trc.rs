@@ -56,9 +56,10 @@
 
 use super::ic::IrradianceCaching;
 use super::ic::{
-    dynamic_objects, limit_gradient, mark_used, primary_candidates, render_pass, scene_bounds,
-    Candidate, FallbackStreams, Gathered, IcSettings,
+    dynamic_objects, limit_gradient, primary_candidates, scene_bounds, Candidate, Gathered,
+    IcSettings,
 };
+use super::render_pass::{mark_used, render_pass, FallbackStreams};
 use super::{
     mean_lifespan, FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges,
     StateError,
