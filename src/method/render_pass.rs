@@ -21,7 +21,7 @@ use super::pixels::{self, CameraSampler, EmitterEdges, FirstLightSampler, PixelS
 use super::{FrameContext, FrameStats};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::GatherPoint;
-use crate::cache::IrradianceCache;
+use crate::cache::{Interpolated, IrradianceCache};
 use crate::film::Film;
 use crate::integrator::{offset_origin, trace_radiance, FirstHitEmission, RadianceQuery};
 use crate::light::{emitting_cosine, TriangleSampling};
@@ -333,51 +333,20 @@ fn share_lookups(
 /// light, collecting the cache lookups of the tile (a G-buffer of shading
 /// points); the lookups interpolated all at once (on the GPU when there is
 /// one); then per sample the cached indirect light or, where no record is
-/// usable, a path-traced fallback, and the glossy lobe.
+/// usable, a path-traced fallback, and the glossy lobe. The shadow rays and
+/// the path-traced parts are traced last, each in one batch.
 fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]) -> FrameStats {
     let spp = pass.settings.spp.max(1);
     let mut stats = FrameStats::default();
     let (primary, edges) = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
-    let PrimarySamples {
-        samples,
-        rays,
-        mut rngs,
-        hits,
-    } = primary;
-    let mut lights = FirstLightSampler::default();
-    let light_samples: Vec<LightChoice> = samples
-        .iter()
-        .zip(&mut rngs)
-        .map(|(s, rng)| lights.sample(ctx, s, rng))
-        .collect();
-    let surfaces: Vec<Option<Surface>> = rays
-        .iter()
-        .zip(&hits)
-        .map(|(ray, hit)| Surface::at(ctx, ray, hit))
-        .collect();
-
-    let mut radiance = vec![Vec3::ZERO; rays.len()];
-    let mut shadow_rays = Vec::new();
-    let mut shadow_targets = Vec::new();
-    for (i, surface) in surfaces.iter().enumerate() {
-        let Some(surface) = surface else {
-            continue;
-        };
-        if surface.material.is_emissive()
-            && emitting_cosine(surface.triangle, surface.material.double_sided, surface.wo)
-                .is_some()
-        {
-            radiance[i] += surface.material.emission;
-        }
-        if surface.bsdf.is_black() {
-            continue;
-        }
-        if let Some((shadow, contribution)) = direct_light(ctx, surface, light_samples[i]) {
-            shadow_rays.push(shadow);
-            shadow_targets.push((i, contribution));
-        }
-    }
-    let (lookups, lookup_of_sample) = pixel_lookups(ctx, &surfaces, &hits, &samples);
+    let mut tile = TileShading::new(ctx, primary);
+    let shadows = tile.direct_light(ctx);
+    let (lookups, lookup_of_sample) = pixel_lookups(
+        ctx,
+        &tile.surfaces,
+        &tile.primary.hits,
+        &tile.primary.samples,
+    );
     stats.lookups = lookups.len() as u64;
     let interpolated = pass.interpolation.interpolate(&lookups, pass.used);
     stats.lookup_records = interpolated
@@ -385,57 +354,141 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
         .flatten()
         .map(|e| u64::from(e.records))
         .sum();
-
-    // Per sample, in the order the CPU-only pass took them: a per-frame
-    // fallback query draws from the sample's stream before the glossy one.
-    let mut deferred = Vec::new();
-    for (i, surface) in surfaces.iter().enumerate() {
-        let Some(surface) = surface else {
-            continue;
-        };
-        if surface.bsdf.is_black() {
-            continue;
-        }
-        let rng = &mut rngs[i];
-        if let Some(lookup) = lookup_of_sample[i] {
-            match &interpolated[lookup as usize] {
-                Some(e) => {
-                    radiance[i] += surface.bsdf.diffuse_albedo() * FRAC_1_PI * e.irradiance;
-                }
-                None => {
-                    stats.fallback_lookups += 1;
-                    let query = match pass.fallback {
-                        FallbackStreams::PerFrame => diffuse_indirect_query(surface, rng),
-                        FallbackStreams::Coherent => diffuse_indirect_query(
-                            surface,
-                            &mut coherent_fallback(ctx, &samples[i]),
-                        ),
-                    };
-                    deferred.push(Deferred { sample: i, query });
-                }
-            }
-        }
-        if let Some(query) = glossy_query(surface, rng) {
-            deferred.push(Deferred { sample: i, query });
-        }
-    }
-    let mut occluded = vec![false; shadow_rays.len()];
-    ctx.backend.any_hit(&shadow_rays, &mut occluded);
-    for ((i, c), blocked) in shadow_targets.into_iter().zip(occluded) {
-        if !blocked {
-            radiance[i] += c;
-        }
-    }
+    let deferred = tile.indirect_light(ctx, pass, &lookup_of_sample, &interpolated, &mut stats);
+    shadows.add_unoccluded(ctx, &mut tile.radiance);
     let (targets, queries): (Vec<usize>, Vec<RadianceQuery>) =
         deferred.into_iter().map(|d| (d.sample, d.query)).unzip();
-    for (i, r) in targets
-        .into_iter()
-        .zip(trace_radiance(ctx, pass.settings.length, queries))
-    {
-        radiance[i] += r.radiance;
+    let traced = trace_radiance(ctx, pass.settings.length, queries);
+    for (i, r) in targets.into_iter().zip(traced) {
+        tile.radiance[i] += r.radiance;
     }
-    edges.resolve(&samples, &radiance, first, out);
+    edges.resolve(&tile.primary.samples, &tile.radiance, first, out);
     stats
+}
+
+/// A tile's primary samples, their shaded first hits and the radiance
+/// summed so far for each.
+struct TileShading<'a> {
+    primary: PrimarySamples,
+    surfaces: Vec<Option<Surface<'a>>>,
+    radiance: Vec<Vec3>,
+}
+
+/// The shadow rays of a tile's direct light and, for each, its sample and
+/// what it adds if unoccluded.
+struct ShadowBatch {
+    rays: Vec<Ray>,
+    targets: Vec<(usize, Vec3)>,
+}
+
+impl ShadowBatch {
+    fn add_unoccluded(self, ctx: &FrameContext, radiance: &mut [Vec3]) {
+        let mut occluded = vec![false; self.rays.len()];
+        ctx.backend.any_hit(&self.rays, &mut occluded);
+        for ((i, c), blocked) in self.targets.into_iter().zip(occluded) {
+            if !blocked {
+                radiance[i] += c;
+            }
+        }
+    }
+}
+
+impl<'a> TileShading<'a> {
+    /// The first hits shaded, with the emission of those that see an
+    /// emitter's emitting side.
+    fn new(ctx: &'a FrameContext, primary: PrimarySamples) -> Self {
+        let surfaces = primary.surfaces(ctx);
+        let radiance = surfaces
+            .iter()
+            .map(|surface| match surface {
+                Some(s)
+                    if s.material.is_emissive()
+                        && emitting_cosine(s.triangle, s.material.double_sided, s.wo).is_some() =>
+                {
+                    s.material.emission
+                }
+                _ => Vec3::ZERO,
+            })
+            .collect();
+        TileShading {
+            primary,
+            surfaces,
+            radiance,
+        }
+    }
+
+    /// Each sample's first light sample (drawn from its stream, before
+    /// anything else draws from it) and the shadow rays of those that may
+    /// add direct light.
+    fn direct_light(&mut self, ctx: &FrameContext) -> ShadowBatch {
+        let mut lights = FirstLightSampler::default();
+        let choices: Vec<LightChoice> = self
+            .primary
+            .samples
+            .iter()
+            .zip(&mut self.primary.rngs)
+            .map(|(s, rng)| lights.sample(ctx, s, rng))
+            .collect();
+        let mut batch = ShadowBatch {
+            rays: Vec::new(),
+            targets: Vec::new(),
+        };
+        for (i, (surface, &choice)) in self.surfaces.iter().zip(&choices).enumerate() {
+            let Some(surface) = surface.as_ref().filter(|s| !s.bsdf.is_black()) else {
+                continue;
+            };
+            if let Some((shadow, contribution)) = direct_light(ctx, surface, choice) {
+                batch.rays.push(shadow);
+                batch.targets.push((i, contribution));
+            }
+        }
+        batch
+    }
+
+    /// Per sample, in the order the CPU-only pass took them: the cached
+    /// indirect light added, or where the sample's lookup found no usable
+    /// record, a path-traced fallback (drawn from the sample's stream
+    /// before the glossy lobe's); and the glossy lobe. Returns the
+    /// path-traced parts.
+    fn indirect_light(
+        &mut self,
+        ctx: &FrameContext,
+        pass: &TilePass,
+        lookup_of_sample: &[Option<u32>],
+        interpolated: &[Option<Interpolated>],
+        stats: &mut FrameStats,
+    ) -> Vec<Deferred> {
+        let mut deferred = Vec::new();
+        for (i, surface) in self.surfaces.iter().enumerate() {
+            let Some(surface) = surface.as_ref().filter(|s| !s.bsdf.is_black()) else {
+                continue;
+            };
+            let rng = &mut self.primary.rngs[i];
+            if let Some(lookup) = lookup_of_sample[i] {
+                match &interpolated[lookup as usize] {
+                    Some(e) => {
+                        self.radiance[i] +=
+                            surface.bsdf.diffuse_albedo() * FRAC_1_PI * e.irradiance;
+                    }
+                    None => {
+                        stats.fallback_lookups += 1;
+                        let query = match pass.fallback {
+                            FallbackStreams::PerFrame => diffuse_indirect_query(surface, rng),
+                            FallbackStreams::Coherent => diffuse_indirect_query(
+                                surface,
+                                &mut coherent_fallback(ctx, &self.primary.samples[i]),
+                            ),
+                        };
+                        deferred.push(Deferred { sample: i, query });
+                    }
+                }
+            }
+            if let Some(query) = glossy_query(surface, rng) {
+                deferred.push(Deferred { sample: i, query });
+            }
+        }
+        deferred
+    }
 }
 
 /// One light sample (`choice`, stratified over the pixel, its point
