@@ -1,0 +1,288 @@
+//! The estimate of a record's irradiance at the next frame, E(t0+1), by
+//! reprojecting its hemisphere samples with the known motion of objects
+//! and lights (TRC §4.7, Fig. 6). How well it does against E(t0+1)
+//! gathered again is measured in the parent module's documentation.
+
+use super::Gathered;
+use crate::backend::Hit;
+use crate::cache::gather::HemisphereSamples;
+use crate::method::FrameContext;
+use crate::sampling::Frame;
+use crate::scene::Snapshot;
+use glam::{Mat4, Vec3};
+use std::f32::consts::{PI, TAU};
+
+/// What changes from this frame to the next (TRC §5: "the transformation
+/// matrix … at time t+1 is known"; "such matrices are available for light
+/// sources as well").
+pub(super) struct NextFrame {
+    /// Per object, its rigid motion from t to t+1 (`Scene::object_motion`,
+    /// from the two snapshots' transforms); `None` when it does not move.
+    motion: Vec<Option<Mat4>>,
+    /// The lights at t and t+1.
+    lights: (Vec<Emitter>, Vec<Emitter>),
+    /// Whether some light moves from t to t+1.
+    lights_move: bool,
+}
+
+/// A light reduced to what the unshadowed direct-light ratio needs.
+#[derive(Clone, Copy, Debug)]
+enum Emitter {
+    /// An emissive triangle: centroid, unit normal, `L_e · area`.
+    Area {
+        center: Vec3,
+        normal: Vec3,
+        power: Vec3,
+        double_sided: bool,
+    },
+    /// A punctual light.
+    Point(crate::scene::PointLight),
+}
+
+impl NextFrame {
+    pub(super) fn new(ctx: &FrameContext) -> Self {
+        let now = ctx.snapshot;
+        let later = ctx.scene.snapshot(ctx.time_of(ctx.frame + 1));
+        let motion = now
+            .object_to_world
+            .iter()
+            .zip(&later.object_to_world)
+            .map(|(w0, w1)| {
+                let m = *w1 * w0.inverse();
+                (!m.abs_diff_eq(Mat4::IDENTITY, 1e-7)).then_some(m)
+            })
+            .collect();
+        let (l0, l1) = (emitters(ctx, now), emitters(ctx, &later));
+        NextFrame {
+            motion,
+            lights_move: !same_lights(&l0, &l1),
+            lights: (l0, l1),
+        }
+    }
+}
+
+/// Whether two frames' lights are in the same places.
+fn same_lights(a: &[Emitter], b: &[Emitter]) -> bool {
+    a.len() == b.len()
+        && a.iter().zip(b).all(|pair| match pair {
+            (
+                Emitter::Area {
+                    center: c0,
+                    normal: n0,
+                    power: p0,
+                    ..
+                },
+                Emitter::Area {
+                    center: c1,
+                    normal: n1,
+                    power: p1,
+                    ..
+                },
+            ) => c0 == c1 && n0 == n1 && p0 == p1,
+            (Emitter::Point(l0), Emitter::Point(l1)) => {
+                l0.position == l1.position
+                    && l0.direction == l1.direction
+                    && l0.intensity == l1.intensity
+            }
+            _ => false,
+        })
+}
+
+fn emitters(ctx: &FrameContext, snapshot: &Snapshot) -> Vec<Emitter> {
+    let mut out = Vec::new();
+    for (tri, &m) in snapshot.triangles.iter().zip(&snapshot.tri_material) {
+        let m = &ctx.scene.materials[m as usize];
+        if m.is_emissive() && tri.area() > 0.0 {
+            out.push(Emitter::Area {
+                center: (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0,
+                normal: tri.geometric_normal(),
+                power: m.emission * tri.area(),
+                double_sided: m.double_sided,
+            });
+        }
+    }
+    out.extend(snapshot.lights.iter().map(|l| Emitter::Point(*l)));
+    out
+}
+
+/// Unshadowed direct irradiance at `p` (normal `n`) from `lights`, each
+/// area light taken as a point at its triangles' centroids.
+fn direct_irradiance(lights: &[Emitter], p: Vec3, n: Vec3) -> Vec3 {
+    let mut e = Vec3::ZERO;
+    for l in lights {
+        match *l {
+            Emitter::Area {
+                center,
+                normal,
+                power,
+                double_sided,
+            } => {
+                let d = center - p;
+                let d2 = d.length_squared().max(1e-8);
+                let w = d / d2.sqrt();
+                let cos_l = -normal.dot(w);
+                let cos_l = if double_sided { cos_l.abs() } else { cos_l };
+                e += power * (cos_l.max(0.0) * n.dot(w).max(0.0) / d2);
+            }
+            Emitter::Point(light) => {
+                let d = light.position - p;
+                let d2 = d.length_squared().max(1e-8);
+                let w = d / d2.sqrt();
+                e += light.intensity_toward(-w) * (n.dot(w).max(0.0) / d2);
+            }
+        }
+    }
+    e
+}
+
+/// TRC §4.7 (Fig. 6): the record's hemisphere samples at t0 moved to
+/// t0+1. The record stays where it is (§4.4: record locations are fixed in
+/// world space, also on dynamic objects). Each sample's first hit moves
+/// with its object (static hits and misses stay), is projected back onto
+/// the record's stratified hemisphere (its cell `(j, k)` from
+/// `sin²θ` and `φ`, as in `cache::gather`), overlaps are resolved by a
+/// depth test (nearest wins), and empty cells are filled from the farthest
+/// neighbouring sample (the local background, Walter et al. 1999), pass
+/// after pass until none is left. Moving lights: each sample's radiance is
+/// scaled by the ratio of unshadowed direct irradiance at its hit point
+/// after and before ("accounting for the rotation and displacement of both
+/// objects and light sources"): shadowing is assumed unchanged and the hit's
+/// own indirect light assumed to scale with its direct light.
+pub(super) fn reproject(
+    snapshot: &Snapshot,
+    next: &NextFrame,
+    g: &Gathered,
+    m: u32,
+    n: u32,
+) -> HemisphereSamples {
+    let (m, n) = (m as usize, n as usize);
+    let s = &g.samples;
+    let origin = g.record.position;
+    let frame = Frame::new(g.record.normal);
+    // (depth, radiance, object) per cell.
+    let mut cells: Vec<Option<(f32, Vec3, u32)>> = vec![None; m * n];
+    let mut own = s.radiance.clone();
+    #[allow(clippy::needless_range_loop)] // i indexes five parallel arrays
+    for i in 0..s.radiance.len() {
+        let (dir, dist, object) = (s.direction[i].normalize(), s.distance[i], s.object[i]);
+        let mut radiance = s.radiance[i];
+        let motion = next
+            .motion
+            .get(object as usize)
+            .copied()
+            .flatten()
+            .filter(|_| dist.is_finite());
+        let hit_point = origin + dir * dist;
+        let (cell, depth, moved) = match motion {
+            Some(mat) => {
+                let moved = mat.transform_point3(hit_point);
+                let d = moved - origin;
+                let depth = d.length();
+                let local = frame.to_local(d / depth.max(1e-12));
+                if !(local.z > 0.0 && depth > 0.0) {
+                    continue; // moved below the record's horizon
+                }
+                // The sample's displacement in (sin²θ, φ) is applied to the
+                // centre of its cell: samples of one rigidly moving surface
+                // then move together, where their jittered positions would
+                // collide and leave holes inside the surface.
+                let before = frame.to_local(dir);
+                let (j0, k0) = (i / n, i % n);
+                let du = before.z * before.z - local.z * local.z;
+                let dphi =
+                    (local.y.atan2(local.x) - before.y.atan2(before.x) + PI).rem_euclid(TAU) - PI;
+                let u = (j0 as f32 + 0.5) / m as f32 + du;
+                if u >= 1.0 {
+                    continue; // below the horizon
+                }
+                let phi = ((k0 as f32 + 0.5) / n as f32 * TAU + dphi).rem_euclid(TAU);
+                let j = ((u.max(0.0) * m as f32) as usize).min(m - 1);
+                let k = ((phi / TAU * n as f32) as usize).min(n - 1);
+                (j * n + k, depth, Some((mat, moved)))
+            }
+            None => (i, dist, None),
+        };
+        if let Some(hit) = g.hits.get(i).filter(|h| next.lights_move && h.is_hit()) {
+            let (l0, l1) = &next.lights;
+            radiance *= light_ratio(snapshot, hit, dir, hit_point, moved, l0, l1);
+        }
+        own[i] = radiance;
+        if cells[cell].is_none_or(|(d, _, _)| depth < d) {
+            cells[cell] = Some((depth, radiance, object));
+        }
+    }
+    // A cell that still sees the object its own sample saw keeps its own
+    // sample: our cells hold one path-traced sample each, and passing
+    // samples between cells of one surface would only reshuffle Monte
+    // Carlo noise (the paper's rasterized hemispheres have none).
+    for (i, cell) in cells.iter_mut().enumerate() {
+        if let Some(c) = cell.as_mut().filter(|c| c.2 == s.object[i]) {
+            c.1 = own[i];
+        }
+    }
+    // Hole filling from the farthest neighbour (Fig. 6d).
+    while cells.iter().any(Option::is_none) {
+        let before = cells.clone();
+        for j in 0..m {
+            for k in 0..n {
+                if before[j * n + k].is_some() {
+                    continue;
+                }
+                let mut best: Option<(f32, Vec3, u32)> = None;
+                for dj in [-1i64, 0, 1] {
+                    let jj = j as i64 + dj;
+                    if jj < 0 || jj >= m as i64 {
+                        continue;
+                    }
+                    for dk in [n - 1, 0, 1] {
+                        let kk = (k + dk) % n;
+                        if let Some(c) = before[jj as usize * n + kk] {
+                            if best.is_none_or(|b| c.0 > b.0) {
+                                best = Some(c);
+                            }
+                        }
+                    }
+                }
+                cells[j * n + k] = best;
+            }
+        }
+        if cells == before {
+            break; // nothing left above the horizon
+        }
+    }
+    HemisphereSamples {
+        direction: s.direction.clone(),
+        radiance: cells
+            .iter()
+            .map(|c| c.map_or(Vec3::ZERO, |c| c.1))
+            .collect(),
+        distance: cells
+            .iter()
+            .map(|c| c.map_or(f32::INFINITY, |c| c.0))
+            .collect(),
+        object: s.object.clone(),
+    }
+}
+
+/// Per channel `D(t0+1)/D(t0)` of the unshadowed direct irradiance at a
+/// sample's hit point (moved with its object), 1 where `D(t0)` is zero.
+fn light_ratio(
+    snapshot: &Snapshot,
+    hit: &Hit,
+    dir: Vec3,
+    p0: Vec3,
+    moved: Option<(Mat4, Vec3)>,
+    l0: &[Emitter],
+    l1: &[Emitter],
+) -> Vec3 {
+    let mut n0 = snapshot.triangles[hit.triangle as usize].geometric_normal();
+    if n0.dot(dir) > 0.0 {
+        n0 = -n0; // the side the record sees
+    }
+    let (p1, n1) = match moved {
+        Some((mat, p1)) => (p1, mat.transform_vector3(n0).normalize_or_zero()),
+        None => (p0, n0),
+    };
+    let (d0, d1) = (direct_irradiance(l0, p0, n0), direct_irradiance(l1, p1, n1));
+    Vec3::select(d0.cmpgt(Vec3::splat(1e-12)), d1 / d0, Vec3::ONE)
+}
