@@ -443,6 +443,11 @@ pub struct BenchRow {
     pub frames: u32,
     /// Wall time of rendering, all frames, file writing excluded.
     pub seconds: f64,
+    /// Of `seconds`, the time of the render pass that `ic` and `trc` share
+    /// (their "render" phase: direct light, cache lookups, glossy lobes);
+    /// the rest is the method's own work on its records. `None` for
+    /// methods without a cache.
+    pub render_pass_seconds: Option<f64>,
     pub rays: u64,
     pub records: u64,
     /// Peak resident memory of the process during the run (MB), where the
@@ -462,7 +467,7 @@ pub struct BenchRow {
 
 /// `bench.csv`'s header line.
 pub const CSV_HEADER: &str =
-    "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces";
+    "scene,method,settings,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -483,12 +488,13 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{:.4},{},{},{},{:.6},{},{:.6},{},{}",
+            "{},{},{},{},{:.4},{},{},{},{},{:.6},{},{:.6},{},{}",
             csv_field(&r.scene),
             csv_field(&r.method),
             csv_field(&r.settings),
             r.frames,
             r.seconds,
+            opt(r.render_pass_seconds, 4),
             r.rays,
             r.records,
             opt(r.peak_mem_mb, 1),
@@ -510,6 +516,7 @@ pub fn to_table(rows: &[BenchRow]) -> String {
         "settings",
         "frames",
         "seconds",
+        "render s",
         "Mrays",
         "records",
         "peak MB",
@@ -519,7 +526,7 @@ pub fn to_table(rows: &[BenchRow]) -> String {
         "flicker",
         "flicker surf",
     ];
-    let cells: Vec<[String; 13]> = rows
+    let cells: Vec<[String; 14]> = rows
         .iter()
         .map(|r| {
             [
@@ -528,6 +535,8 @@ pub fn to_table(rows: &[BenchRow]) -> String {
                 r.settings.clone(),
                 r.frames.to_string(),
                 format!("{:.3}", r.seconds),
+                r.render_pass_seconds
+                    .map_or("-".into(), |v| format!("{v:.3}")),
                 format!("{:.2}", r.rays as f64 / 1e6),
                 r.records.to_string(),
                 r.peak_mem_mb.map_or("-".into(), |v| format!("{v:.0}")),
@@ -885,6 +894,7 @@ fn bench_scene(
                 settings: spec.label(),
                 frames: opts.frames.len() as u32,
                 seconds: stats.render_time.as_secs_f64(),
+                render_pass_seconds: stats.render_pass_seconds,
                 rays: stats.rays,
                 records: stats.records,
                 peak_mem_mb,
@@ -1041,6 +1051,8 @@ fn clear_frames(dir: &Path) -> Result<()> {
 
 struct RunStats {
     render_time: Duration,
+    /// Summed "render" phases of the frames, where the method times one.
+    render_pass_seconds: Option<f64>,
     rays: u64,
     /// Cache records computed over the run (0 for methods without a cache).
     records: u64,
@@ -1069,6 +1081,7 @@ fn render_frames(
     };
     let rays_before = renderer.backend().ray_counts().total();
     let mut render_time = Duration::ZERO;
+    let mut render_pass_seconds = None;
     let mut records = 0;
     renderer.set_frame_end(Some(frames.end));
     for frame in frames {
@@ -1081,12 +1094,20 @@ fn render_frames(
         let stats = renderer.last_frame_stats();
         // Records computed: new ones and replacements at the same point (trc).
         records += stats.records_created + stats.records_replaced;
+        for (_, secs) in stats
+            .phase_seconds
+            .iter()
+            .filter(|(name, _)| name == "render")
+        {
+            *render_pass_seconds.get_or_insert(0.0) += secs;
+        }
         crate::film::write_frame(&film, dir, frame)?;
         bar.inc(1);
     }
     bar.finish_and_clear();
     Ok(RunStats {
         render_time,
+        render_pass_seconds,
         rays: renderer.backend().ray_counts().total() - rays_before,
         records,
     })

@@ -14,6 +14,7 @@ fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
         settings: settings.into(),
         frames: 2,
         seconds,
+        render_pass_seconds: None,
         rays: 100,
         records: 0,
         peak_mem_mb: Some(12.5),
@@ -35,12 +36,12 @@ fn csv_has_header_and_one_line_per_run() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(
         lines[0],
-        "scene,method,settings,frames,seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces"
+        "scene,method,settings,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces"
     );
     assert_eq!(lines[0], CSV_HEADER);
     assert_eq!(lines.len(), 3, "{csv}");
     for l in &lines[1..] {
-        assert_eq!(l.split(',').count(), 13, "{l}");
+        assert_eq!(l.split(',').count(), 14, "{l}");
     }
     assert!(lines[1].starts_with("s,path,spp=1,2,"), "{}", lines[1]);
     // A missing flicker is an empty last field.
@@ -255,4 +256,48 @@ fn same_pattern_runs_flicker_less() {
     let (f, s) = (fresh.flicker.unwrap(), same.flicker.unwrap());
     assert!(s < 0.8 * f, "same pattern {s} vs fresh {f}");
     assert!(same.rel_rmse > 0.0);
+}
+
+/// The render pass's share of a run: timed for the cache methods (their
+/// "render" phase, a part of their time), absent for `path`, which has no
+/// cache to set apart from it.
+#[test]
+fn cache_methods_report_their_render_pass_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        scenes: vec![SceneSource::Builtin("cube-in-box".into())],
+        methods: vec![
+            MethodSweep::parse("path:spp=1").unwrap(),
+            MethodSweep::parse("ic:spp=1").unwrap(),
+            MethodSweep::parse("trc:spp=1").unwrap(),
+        ],
+        frames: 0..2,
+        width: 12,
+        height: 12,
+        reference_spp: 4,
+        out: dir.path().to_path_buf(),
+        quiet: true,
+        ..BenchOptions::default()
+    };
+    let rows = bench::run(&opts).unwrap().rows;
+    assert_eq!(rows.len(), 3);
+    assert_eq!(rows[0].render_pass_seconds, None, "path");
+    for r in &rows[1..] {
+        let pass = r
+            .render_pass_seconds
+            .expect("a cache method times its render pass");
+        assert!(
+            pass > 0.0 && pass < r.seconds,
+            "{}: render pass {pass} s of {} s",
+            r.method,
+            r.seconds
+        );
+    }
+    let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
+    let ic_line = csv
+        .lines()
+        .find(|l| l.starts_with("cube-in-box,ic,"))
+        .unwrap();
+    let fields: Vec<&str> = ic_line.split(',').collect();
+    assert!(fields[5].parse::<f64>().is_ok(), "{ic_line}");
 }
