@@ -444,7 +444,7 @@ pub struct BenchRow {
     /// Wall time of rendering, all frames, file writing excluded.
     pub seconds: f64,
     /// Of `seconds`, the time of the render pass that `ic` and `trc` share
-    /// (their "render" phase: direct light, cache lookups, glossy lobes);
+    /// (their [`crate::method::RENDER_PHASE`]: direct light, cache lookups, glossy lobes);
     /// the rest is the method's own work on its records. `None` for
     /// methods without a cache.
     pub render_pass_seconds: Option<f64>,
@@ -1097,7 +1097,7 @@ fn render_frames(
         for (_, secs) in stats
             .phase_seconds
             .iter()
-            .filter(|(name, _)| name == "render")
+            .filter(|(name, _)| name == crate::method::RENDER_PHASE)
         {
             *render_pass_seconds.get_or_insert(0.0) += secs;
         }

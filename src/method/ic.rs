@@ -13,7 +13,7 @@
 
 use super::lookups::{measure_clearance, ShadingPoint};
 use super::render_pass::{render_pass, FallbackStreams, Surface};
-use super::{FrameContext, FrameRecords, FrameStats, Method};
+use super::{FrameContext, FrameRecords, FrameStats, Method, RENDER_PHASE};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
     gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint,
@@ -166,7 +166,7 @@ impl Method for IrradianceCaching {
         );
         stats
             .phase_seconds
-            .push(("render".into(), start.elapsed().as_secs_f64()));
+            .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
         stats.records_created = cache.len() as u64;
         stats.records_alive = cache.len() as u64;
         self.stats = stats;

@@ -68,7 +68,7 @@ use super::ic::{
 use super::render_pass::{mark_used, render_pass, FallbackStreams};
 use super::{
     mean_lifespan, FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges,
-    StateError,
+    StateError, RENDER_PHASE,
 };
 use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance};
 use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
@@ -599,7 +599,7 @@ impl TemporalRadianceCaching {
         );
         stats
             .phase_seconds
-            .push(("render".into(), start.elapsed().as_secs_f64()));
+            .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
         // A record replaced at t_l is last used at t_l − 1.
         self.successors.retain(|_, l| l.frame > t + 1);
         self.stats = stats;
@@ -629,7 +629,7 @@ impl Method for TemporalRadianceCaching {
         );
         aged.stats
             .phase_seconds
-            .push(("render".into(), start.elapsed().as_secs_f64()));
+            .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
         self.finish(ctx.frame, aged, &cache, &used);
         film
     }
