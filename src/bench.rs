@@ -80,6 +80,9 @@ pub const METHODS: &[MethodInfo] = &[
             ("reprojection", "1"),
             ("spp", "4"),
             ("accuracy", "0.2"),
+            ("strata", "16x48"),
+            ("min_spacing", "2"),
+            ("max_spacing", "64"),
         ],
     },
 ];
@@ -152,6 +155,32 @@ where
     Ok(v)
 }
 
+/// Applies `ic`'s setting `key = v` to `s` (also for `trc`, whose records
+/// are `ic`'s); `false` when `key` is none of them.
+fn ic_setting(method: &str, key: &str, v: &str, s: &mut IcSettings) -> Result<bool, MethodError> {
+    match key {
+        "accuracy" => s.accuracy = value(method, key, v, 0.001..2.001)?,
+        "spp" => s.spp = value(method, key, v, 1..1_000_001)?,
+        "strata" => {
+            let (m, n) = v.split_once('x').ok_or_else(|| MethodError::BadValue {
+                method: method.into(),
+                key: key.into(),
+                value: v.into(),
+                problem: "expected MxN, e.g. 16x48".into(),
+            })?;
+            s.strata = Strata {
+                theta: value(method, key, m, 1..1025)?,
+                phi: value(method, key, n, 1..4097)?,
+            };
+        }
+        "min_spacing" => s.min_spacing_px = value(method, key, v, 0.001..1e6)?,
+        "max_spacing" => s.max_spacing_px = value(method, key, v, 0.001..1e6)?,
+        "gradients" => s.gradients = value::<u8>(method, key, v, 0..2)? == 1,
+        _ => return Ok(false),
+    }
+    Ok(true)
+}
+
 /// The settings of `method` with its defaults, and `setting = (key, value)`
 /// applied when given. **The one place that maps names to
 /// [`MethodSettings`]**: a new method adds an arm here and a row to
@@ -181,25 +210,8 @@ pub fn method_settings(
         "ic" => {
             let mut s = IcSettings::default();
             if let Some((key, v)) = setting {
-                match key {
-                    "accuracy" => s.accuracy = value(method, key, v, 0.001..2.001)?,
-                    "spp" => s.spp = value(method, key, v, 1..1_000_001)?,
-                    "strata" => {
-                        let (m, n) = v.split_once('x').ok_or_else(|| MethodError::BadValue {
-                            method: method.into(),
-                            key: key.into(),
-                            value: v.into(),
-                            problem: "expected MxN, e.g. 16x48".into(),
-                        })?;
-                        s.strata = Strata {
-                            theta: value(method, key, m, 1..1025)?,
-                            phi: value(method, key, n, 1..4097)?,
-                        };
-                    }
-                    "min_spacing" => s.min_spacing_px = value(method, key, v, 0.001..1e6)?,
-                    "max_spacing" => s.max_spacing_px = value(method, key, v, 0.001..1e6)?,
-                    "gradients" => s.gradients = value::<u8>(method, key, v, 0..2)? == 1,
-                    _ => return Err(unknown_key(key)),
+                if !ic_setting(method, key, v, &mut s)? {
+                    return Err(unknown_key(key));
                 }
             }
             Ok(MethodSettings::Ic(s))
@@ -226,9 +238,13 @@ pub fn method_settings(
                         }
                     }
                     "reprojection" => s.reprojection = value::<u8>(method, key, v, 0..2)? == 1,
-                    "spp" => s.ic.spp = value(method, key, v, 1..1_000_001)?,
-                    "accuracy" => s.ic.accuracy = value(method, key, v, 0.001..2.001)?,
-                    _ => return Err(unknown_key(key)),
+                    // `gradients` above names the temporal ones; the
+                    // rest are `ic`'s, whose records `trc` makes.
+                    _ => {
+                        if !ic_setting(method, key, v, &mut s.ic)? {
+                            return Err(unknown_key(key));
+                        }
+                    }
                 }
             }
             Ok(MethodSettings::Trc(s))
@@ -1365,6 +1381,27 @@ mod tests {
                     .unwrap_or_else(|e| panic!("{}:{key}={example}: {e}", m.name));
             }
         }
+    }
+
+    /// `trc` takes `ic`'s record settings into the `ic` settings it makes
+    /// its records with, while its `gradients` stays the temporal one.
+    #[test]
+    fn trc_takes_the_record_settings_of_ic() {
+        let trc = |key, v| match method_settings("trc", Some((key, v))).unwrap() {
+            MethodSettings::Trc(s) => s,
+            other => panic!("{other:?}"),
+        };
+        let strata = trc("strata", "64x32").ic.strata;
+        assert_eq!((strata.theta, strata.phi), (64, 32));
+        assert_eq!(trc("max_spacing", "8").ic.max_spacing_px, 8.0);
+        assert_eq!(trc("min_spacing", "3").ic.min_spacing_px, 3.0);
+        let gradients = trc("gradients", "none");
+        assert_eq!(gradients.gradients, TemporalGradients::None);
+        assert!(gradients.ic.gradients, "spatial gradients stay on");
+        assert!(matches!(
+            method_settings("trc", Some(("strata", "64"))),
+            Err(MethodError::BadValue { .. })
+        ));
     }
 
     #[test]
