@@ -124,7 +124,9 @@ pub struct RenderArgs {
     /// Built-in scene: cube-in-box, moving-light, spheres, glossy-cornell, chairs-room.
     #[arg(long, conflicts_with = "scene")]
     pub builtin: Option<String>,
-    #[arg(long, value_enum, default_value = "path")]
+    /// Rendering method: by default `trc`, the temporal method this
+    /// renderer is built around (`path` is the unbiased yardstick).
+    #[arg(long, value_enum, default_value = "trc")]
     pub method: MethodName,
     /// Half-open frame range START..END (0..24 is frames 0 to 23).
     #[arg(long, default_value = "0..24", value_parser = parse_frames)]

@@ -39,6 +39,21 @@ fn tiny_render_writes_exr_and_png_per_frame() {
     }
 }
 
+/// `render` without `--method` renders with `trc`, the method the product
+/// is built around (the README's first command relies on it).
+#[test]
+fn render_defaults_to_trc() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let (code, stdout, stderr) = radcache(&[
+        "render", "--frames", "0..2", "--size", "8x8", "--spp", "1", "--out", out,
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let said = format!("{stdout}{stderr}");
+    assert!(said.contains("method trc"), "{said}");
+    assert!(said.contains("records reused"), "trc's statistics: {said}");
+}
+
 #[test]
 fn bad_input_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
