@@ -155,113 +155,202 @@ pub(super) fn reproject(
     m: u32,
     n: u32,
 ) -> HemisphereSamples {
-    let (m, n) = (m as usize, n as usize);
+    let mut grid = HemisphereGrid::new(m as usize, n as usize);
+    let frame = Frame::new(g.record.normal);
+    let mut own = g.samples.radiance.clone();
+    for (i, own) in own.iter_mut().enumerate() {
+        if let Some((cell, sample)) = reproject_sample(snapshot, next, g, &frame, &grid, i) {
+            *own = sample.radiance;
+            grid.keep_nearest(cell, sample);
+        }
+    }
+    grid.keep_own_samples(&own, &g.samples.object);
+    grid.fill_holes();
+    grid.into_samples(&g.samples)
+}
+
+/// What a cell of the reprojected hemisphere sees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct CellSample {
+    depth: f32,
+    radiance: Vec3,
+    object: u32,
+}
+
+/// The record's stratified hemisphere at t0+1: `m × n` cells, `(j, k)` at
+/// `j · n + k` as in `cache::gather`, each holding the sample reprojected
+/// into it.
+struct HemisphereGrid {
+    m: usize,
+    n: usize,
+    cells: Vec<Option<CellSample>>,
+}
+
+impl HemisphereGrid {
+    fn new(m: usize, n: usize) -> Self {
+        HemisphereGrid {
+            m,
+            n,
+            cells: vec![None; m * n],
+        }
+    }
+
+    /// The cell of a sample gathered in cell `i` along `before` (local
+    /// frame) that now lies along `after`, or `None` below the horizon.
+    /// The sample's displacement in (sin²θ, φ) is applied to the centre of
+    /// its cell: samples of one rigidly moving surface then move together,
+    /// where their jittered positions would collide and leave holes inside
+    /// the surface.
+    fn moved_cell(&self, i: usize, before: Vec3, after: Vec3) -> Option<usize> {
+        let (m, n) = (self.m, self.n);
+        let (j0, k0) = (i / n, i % n);
+        let du = before.z * before.z - after.z * after.z;
+        let dphi = (after.y.atan2(after.x) - before.y.atan2(before.x) + PI).rem_euclid(TAU) - PI;
+        let u = (j0 as f32 + 0.5) / m as f32 + du;
+        if u >= 1.0 {
+            return None;
+        }
+        let phi = ((k0 as f32 + 0.5) / n as f32 * TAU + dphi).rem_euclid(TAU);
+        let j = ((u.max(0.0) * m as f32) as usize).min(m - 1);
+        let k = ((phi / TAU * n as f32) as usize).min(n - 1);
+        Some(j * n + k)
+    }
+
+    /// The depth test (Fig. 6c): of the samples landing in one cell, the
+    /// nearest wins.
+    fn keep_nearest(&mut self, cell: usize, sample: CellSample) {
+        if self.cells[cell].is_none_or(|c| sample.depth < c.depth) {
+            self.cells[cell] = Some(sample);
+        }
+    }
+
+    /// A cell that still sees the object its own sample saw keeps its own
+    /// sample (`own`, the samples' radiance at t0+1, in gather order): our
+    /// cells hold one path-traced sample each, and passing samples between
+    /// cells of one surface would only reshuffle Monte Carlo noise (the
+    /// paper's rasterized hemispheres have none).
+    fn keep_own_samples(&mut self, own: &[Vec3], objects: &[u32]) {
+        for (i, cell) in self.cells.iter_mut().enumerate() {
+            if let Some(c) = cell.as_mut().filter(|c| c.object == objects[i]) {
+                c.radiance = own[i];
+            }
+        }
+    }
+
+    /// Hole filling from the farthest neighbour (Fig. 6d; the local
+    /// background, Walter et al. 1999), pass after pass until no empty
+    /// cell has a filled neighbour.
+    fn fill_holes(&mut self) {
+        while self.cells.iter().any(Option::is_none) {
+            let before = self.cells.clone();
+            for j in 0..self.m {
+                for k in 0..self.n {
+                    if before[j * self.n + k].is_none() {
+                        self.cells[j * self.n + k] = self.farthest_neighbour(&before, j, k);
+                    }
+                }
+            }
+            if self.cells == before {
+                break; // nothing left above the horizon
+            }
+        }
+    }
+
+    /// The farthest filled cell of `cells` among the eight around `(j, k)`
+    /// (φ wraps around, θ does not).
+    fn farthest_neighbour(
+        &self,
+        cells: &[Option<CellSample>],
+        j: usize,
+        k: usize,
+    ) -> Option<CellSample> {
+        let n = self.n;
+        let mut best: Option<CellSample> = None;
+        for dj in [-1i64, 0, 1] {
+            let jj = j as i64 + dj;
+            if jj < 0 || jj >= self.m as i64 {
+                continue;
+            }
+            for dk in [n - 1, 0, 1] {
+                let kk = (k + dk) % n;
+                if let Some(c) = cells[jj as usize * n + kk] {
+                    if best.is_none_or(|b| c.depth > b.depth) {
+                        best = Some(c);
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    /// The estimate as hemisphere samples: `gathered`'s directions, each
+    /// cell's radiance and depth (none and infinitely far where the grid
+    /// stayed empty).
+    fn into_samples(self, gathered: &HemisphereSamples) -> HemisphereSamples {
+        HemisphereSamples {
+            direction: gathered.direction.clone(),
+            radiance: self
+                .cells
+                .iter()
+                .map(|c| c.map_or(Vec3::ZERO, |c| c.radiance))
+                .collect(),
+            distance: self
+                .cells
+                .iter()
+                .map(|c| c.map_or(f32::INFINITY, |c| c.depth))
+                .collect(),
+            object: gathered.object.clone(),
+        }
+    }
+}
+
+/// Sample `i` of the gather at t0+1: its cell and what the cell sees, or
+/// `None` where it moved below the record's horizon. Its first hit moves
+/// with its object (static hits and misses stay in their cells), and its
+/// radiance follows moving lights ([`light_ratio`]).
+fn reproject_sample(
+    snapshot: &Snapshot,
+    next: &NextFrame,
+    g: &Gathered,
+    frame: &Frame,
+    grid: &HemisphereGrid,
+    i: usize,
+) -> Option<(usize, CellSample)> {
     let s = &g.samples;
     let origin = g.record.position;
-    let frame = Frame::new(g.record.normal);
-    // (depth, radiance, object) per cell.
-    let mut cells: Vec<Option<(f32, Vec3, u32)>> = vec![None; m * n];
-    let mut own = s.radiance.clone();
-    #[allow(clippy::needless_range_loop)] // i indexes five parallel arrays
-    for i in 0..s.radiance.len() {
-        let (dir, dist, object) = (s.direction[i].normalize(), s.distance[i], s.object[i]);
-        let mut radiance = s.radiance[i];
-        let motion = next
-            .motion
-            .get(object as usize)
-            .copied()
-            .flatten()
-            .filter(|_| dist.is_finite());
-        let hit_point = origin + dir * dist;
-        let (cell, depth, moved) = match motion {
-            Some(mat) => {
-                let moved = mat.transform_point3(hit_point);
-                let d = moved - origin;
-                let depth = d.length();
-                let local = frame.to_local(d / depth.max(1e-12));
-                if !(local.z > 0.0 && depth > 0.0) {
-                    continue; // moved below the record's horizon
-                }
-                // The sample's displacement in (sin²θ, φ) is applied to the
-                // centre of its cell: samples of one rigidly moving surface
-                // then move together, where their jittered positions would
-                // collide and leave holes inside the surface.
-                let before = frame.to_local(dir);
-                let (j0, k0) = (i / n, i % n);
-                let du = before.z * before.z - local.z * local.z;
-                let dphi =
-                    (local.y.atan2(local.x) - before.y.atan2(before.x) + PI).rem_euclid(TAU) - PI;
-                let u = (j0 as f32 + 0.5) / m as f32 + du;
-                if u >= 1.0 {
-                    continue; // below the horizon
-                }
-                let phi = ((k0 as f32 + 0.5) / n as f32 * TAU + dphi).rem_euclid(TAU);
-                let j = ((u.max(0.0) * m as f32) as usize).min(m - 1);
-                let k = ((phi / TAU * n as f32) as usize).min(n - 1);
-                (j * n + k, depth, Some((mat, moved)))
+    let (dir, dist, object) = (s.direction[i].normalize(), s.distance[i], s.object[i]);
+    let motion = next
+        .motion
+        .get(object as usize)
+        .copied()
+        .flatten()
+        .filter(|_| dist.is_finite());
+    let hit_point = origin + dir * dist;
+    let (cell, depth, moved) = match motion {
+        Some(mat) => {
+            let moved = mat.transform_point3(hit_point);
+            let d = moved - origin;
+            let depth = d.length();
+            let after = frame.to_local(d / depth.max(1e-12));
+            if !(after.z > 0.0 && depth > 0.0) {
+                return None; // moved below the record's horizon
             }
-            None => (i, dist, None),
-        };
-        if let Some(hit) = g.hits.get(i).filter(|h| next.lights_move && h.is_hit()) {
-            let (l0, l1) = &next.lights;
-            radiance *= light_ratio(snapshot, hit, dir, hit_point, moved, l0, l1);
+            let cell = grid.moved_cell(i, frame.to_local(dir), after)?;
+            (cell, depth, Some((mat, moved)))
         }
-        own[i] = radiance;
-        if cells[cell].is_none_or(|(d, _, _)| depth < d) {
-            cells[cell] = Some((depth, radiance, object));
-        }
+        None => (i, dist, None),
+    };
+    let mut radiance = s.radiance[i];
+    if let Some(hit) = g.hits.get(i).filter(|h| next.lights_move && h.is_hit()) {
+        let (l0, l1) = &next.lights;
+        radiance *= light_ratio(snapshot, hit, dir, hit_point, moved, l0, l1);
     }
-    // A cell that still sees the object its own sample saw keeps its own
-    // sample: our cells hold one path-traced sample each, and passing
-    // samples between cells of one surface would only reshuffle Monte
-    // Carlo noise (the paper's rasterized hemispheres have none).
-    for (i, cell) in cells.iter_mut().enumerate() {
-        if let Some(c) = cell.as_mut().filter(|c| c.2 == s.object[i]) {
-            c.1 = own[i];
-        }
-    }
-    // Hole filling from the farthest neighbour (Fig. 6d).
-    while cells.iter().any(Option::is_none) {
-        let before = cells.clone();
-        for j in 0..m {
-            for k in 0..n {
-                if before[j * n + k].is_some() {
-                    continue;
-                }
-                let mut best: Option<(f32, Vec3, u32)> = None;
-                for dj in [-1i64, 0, 1] {
-                    let jj = j as i64 + dj;
-                    if jj < 0 || jj >= m as i64 {
-                        continue;
-                    }
-                    for dk in [n - 1, 0, 1] {
-                        let kk = (k + dk) % n;
-                        if let Some(c) = before[jj as usize * n + kk] {
-                            if best.is_none_or(|b| c.0 > b.0) {
-                                best = Some(c);
-                            }
-                        }
-                    }
-                }
-                cells[j * n + k] = best;
-            }
-        }
-        if cells == before {
-            break; // nothing left above the horizon
-        }
-    }
-    HemisphereSamples {
-        direction: s.direction.clone(),
-        radiance: cells
-            .iter()
-            .map(|c| c.map_or(Vec3::ZERO, |c| c.1))
-            .collect(),
-        distance: cells
-            .iter()
-            .map(|c| c.map_or(f32::INFINITY, |c| c.0))
-            .collect(),
-        object: s.object.clone(),
-    }
+    let sample = CellSample {
+        depth,
+        radiance,
+        object,
+    };
+    Some((cell, sample))
 }
 
 /// Per channel `D(t0+1)/D(t0)` of the unshadowed direct irradiance at a
@@ -285,4 +374,74 @@ fn light_ratio(
     };
     let (d0, d1) = (direct_irradiance(l0, p0, n0), direct_irradiance(l1, p1, n1));
     Vec3::select(d0.cmpgt(Vec3::splat(1e-12)), d1 / d0, Vec3::ONE)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(depth: f32, object: u32) -> CellSample {
+        CellSample {
+            depth,
+            radiance: Vec3::splat(depth),
+            object,
+        }
+    }
+
+    /// Two samples in one cell: the nearer one is seen (Fig. 6c).
+    #[test]
+    fn the_depth_test_keeps_the_nearest_sample() {
+        let mut grid = HemisphereGrid::new(2, 4);
+        grid.keep_nearest(5, sample(3.0, 1));
+        grid.keep_nearest(5, sample(1.0, 2));
+        grid.keep_nearest(5, sample(2.0, 3));
+        assert_eq!(grid.cells[5], Some(sample(1.0, 2)));
+    }
+
+    /// Holes take the farthest of their neighbours (Fig. 6d), across the
+    /// φ seam too, pass after pass until the grid is full.
+    #[test]
+    fn holes_are_filled_from_the_farthest_neighbour() {
+        // 3 × 5 cells; the near object at (1, 0), the far one at (1, 4),
+        // which is next to (1, 0) across the seam.
+        let mut grid = HemisphereGrid::new(3, 5);
+        grid.keep_nearest(5, sample(1.0, 7));
+        grid.keep_nearest(9, sample(4.0, 8));
+        grid.fill_holes();
+        let full: Vec<CellSample> = grid.cells.iter().map(|c| c.unwrap()).collect();
+        // Every cell next to the far sample takes it, over the near one.
+        for cell in [0, 4, 8, 10, 14] {
+            assert_eq!(full[cell], sample(4.0, 8), "cell {cell}");
+        }
+        // Cells next to the near sample only, at first, keep it.
+        for cell in [1, 6, 11] {
+            assert_eq!(full[cell], sample(1.0, 7), "cell {cell}");
+        }
+        assert_eq!(full[5], sample(1.0, 7), "a filled cell stays");
+    }
+
+    /// A sample's cell moves by its displacement in φ and in sin²θ, and
+    /// one moved past the horizon lands nowhere.
+    #[test]
+    fn moved_cells_follow_the_displacement_in_phi_and_theta() {
+        let grid = HemisphereGrid::new(4, 8);
+        let at = |theta: f32, phi: f32| {
+            Vec3::new(
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            )
+        };
+        let before = at(0.8, 0.3);
+        let i = 2 * 8 + 1;
+        assert_eq!(grid.moved_cell(i, before, before), Some(i));
+        let turned = at(0.8, 0.3 + TAU / 4.0);
+        assert_eq!(grid.moved_cell(i, before, turned), Some(2 * 8 + 3));
+        // Row 2 holds sin²θ in [0.5, 0.75): from sin²θ = 0.6 to 0.8 the
+        // sample moves one row down, to the horizon (sin²θ = 1) past it.
+        let row_2 = at(0.6f32.sqrt().asin(), 0.3);
+        let row_3 = at(0.8f32.sqrt().asin(), 0.3);
+        assert_eq!(grid.moved_cell(i, row_2, row_3), Some(3 * 8 + 1));
+        assert_eq!(grid.moved_cell(i, row_2, at(PI / 2.0, 0.3)), None);
+    }
 }
