@@ -435,39 +435,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         (None, None) => SceneSource::Builtin("cube-in-box".into()),
     };
     let scene = source.load()?;
-    let length = PathLength {
-        max_depth: args.max_depth,
-        ..PathLength::default()
-    };
-    let ic_settings = IcSettings {
-        accuracy: args.ic.ic_accuracy,
-        strata: args.ic.ic_strata,
-        spp: args.spp.unwrap_or(IcSettings::default().spp),
-        min_spacing_px: args.ic.ic_min_spacing,
-        max_spacing_px: args.ic.ic_max_spacing,
-        gradients: !args.ic.ic_no_gradients,
-        length,
-        ..IcSettings::default()
-    };
-    let method = match args.method {
-        MethodName::Path => MethodSettings::Path(PathSettings {
-            spp: args.spp.unwrap_or(PathSettings::default().spp),
-            length,
-        }),
-        MethodName::Ic => MethodSettings::Ic(ic_settings),
-        MethodName::Trc => MethodSettings::Trc(TrcSettings {
-            ic: ic_settings,
-            temporal_accuracy: args.trc.trc_at,
-            max_life: args.trc.trc_max_life,
-            gradients: match args.trc.trc_gradients {
-                TrcGradientsArg::None => TemporalGradients::None,
-                TrcGradientsArg::Extrapolated => TemporalGradients::Extrapolated,
-                TrcGradientsArg::Interpolated => TemporalGradients::Interpolated,
-            },
-            reprojection: args.trc.trc_reprojection == OnOff::On,
-        }),
-    };
-    let spp = method.spp();
+    let method = render_method(&args);
     let backend = render::make_backend(match args.backend {
         BackendArg::Auto => BackendChoice::Auto,
         BackendArg::Cpu => BackendChoice::Cpu,
@@ -481,27 +449,18 @@ fn run_render(args: RenderArgs) -> Result<()> {
         same_pattern: args.same_pattern,
         ..FrameSettings::default()
     };
-    let (w, h) = args.size;
     if !args.quiet {
+        let (w, h) = args.size;
         eprintln!(
             "rendering {source} frames {}..{} at {w}x{h}, method {}, {} spp, backend {}",
             args.frames.start,
             args.frames.end,
             method.name(),
-            spp,
+            method.spp(),
             backend.name()
         );
     }
-    let store_and_job = match &args.job {
-        Some(name) => {
-            let db = args.db.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_DB));
-            let store = Store::open(&db)?;
-            let spec = render::job_spec(name, &source, &method, &settings, args.frames.clone())?;
-            let job = store.begin_job(&spec, args.force)?;
-            Some((store, job))
-        }
-        None => None,
-    };
+    let store_and_job = open_job(&args, &source, &method, &settings)?;
     let mut renderer = Renderer::new(scene, method.instantiate(), backend, settings);
     let mut store_job = store_and_job.as_ref().map(|(store, job)| render::StoreJob {
         store,
@@ -524,7 +483,70 @@ fn run_render(args: RenderArgs) -> Result<()> {
             j.job.frames_done
         );
     }
+    print_render_summary(&args, method.spp(), &summary);
+    Ok(())
+}
+
+/// The method `render`'s flags ask for, with the papers' defaults for
+/// what they leave out.
+fn render_method(args: &RenderArgs) -> MethodSettings {
+    let length = PathLength {
+        max_depth: args.max_depth,
+        ..PathLength::default()
+    };
+    let ic_settings = IcSettings {
+        accuracy: args.ic.ic_accuracy,
+        strata: args.ic.ic_strata,
+        spp: args.spp.unwrap_or(IcSettings::default().spp),
+        min_spacing_px: args.ic.ic_min_spacing,
+        max_spacing_px: args.ic.ic_max_spacing,
+        gradients: !args.ic.ic_no_gradients,
+        length,
+        ..IcSettings::default()
+    };
+    match args.method {
+        MethodName::Path => MethodSettings::Path(PathSettings {
+            spp: args.spp.unwrap_or(PathSettings::default().spp),
+            length,
+        }),
+        MethodName::Ic => MethodSettings::Ic(ic_settings),
+        MethodName::Trc => MethodSettings::Trc(TrcSettings {
+            ic: ic_settings,
+            temporal_accuracy: args.trc.trc_at,
+            max_life: args.trc.trc_max_life,
+            gradients: match args.trc.trc_gradients {
+                TrcGradientsArg::None => TemporalGradients::None,
+                TrcGradientsArg::Extrapolated => TemporalGradients::Extrapolated,
+                TrcGradientsArg::Interpolated => TemporalGradients::Interpolated,
+            },
+            reprojection: args.trc.trc_reprojection == OnOff::On,
+        }),
+    }
+}
+
+/// With `--job`, the store (`--db`, or the default) and the job begun or
+/// resumed in it.
+fn open_job(
+    args: &RenderArgs,
+    source: &SceneSource,
+    method: &MethodSettings,
+    settings: &FrameSettings,
+) -> Result<Option<(Store, store::schema::JobValue)>> {
+    let Some(name) = &args.job else {
+        return Ok(None);
+    };
+    let db = args.db.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_DB));
+    let store = Store::open(&db)?;
+    let spec = render::job_spec(name, source, method, settings, args.frames.clone())?;
+    let job = store.begin_job(&spec, args.force)?;
+    Ok(Some((store, job)))
+}
+
+/// What `render` did: frames, speed, where the frames went, and the
+/// method's own statistics.
+fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSummary) {
     let secs = summary.elapsed.as_secs_f64();
+    let (w, h) = args.size;
     let samples = u64::from(w) * u64::from(h) * u64::from(spp) * u64::from(summary.frames);
     println!(
         "rendered {} frames in {:.2} s ({:.3} s/frame, {:.2} Mrays/s, {:.2} M samples/s) → {}/frame_{:04}..{:04}.{{exr,png}}",
@@ -537,16 +559,14 @@ fn run_render(args: RenderArgs) -> Result<()> {
         args.frames.start,
         args.frames.end - 1,
     );
-    if let Some(report) = summary.frame_time_report() {
+    let reports = [
+        summary.frame_time_report(),
+        summary.cache_report(),
+        summary.lifespan_report(),
+    ];
+    for report in reports.into_iter().flatten() {
         println!("{report}");
     }
-    if let Some(report) = summary.cache_report() {
-        println!("{report}");
-    }
-    if let Some(report) = summary.lifespan_report() {
-        println!("{report}");
-    }
-    Ok(())
 }
 
 fn run_serve(args: ServeArgs) -> Result<()> {
