@@ -17,6 +17,7 @@ use crate::store::{
     self, schema::JobValue, FrameCommit, JobSpec, RecordCommit, StateCommit, Store,
 };
 use anyhow::{bail, Context, Result};
+use std::collections::BTreeSet;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -649,32 +650,10 @@ pub fn render_job_to_dir_with(
 ) -> Result<RenderSummary> {
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create output directory {}", out_dir.display()))?;
-    let mut done = std::collections::BTreeSet::new();
-    if let Some(j) = job.as_deref() {
-        for frame in j.store.frames_done(j.job.id)? {
-            if frames.contains(&frame) {
-                done.insert(frame);
-            }
-        }
-        if renderer.carries_state() {
-            let prefix = frames.clone().take_while(|f| done.contains(f)).count() as u32;
-            if prefix as usize == frames.len() {
-                // Every frame done: nothing to render, no state needed.
-            } else if let Some(state) = resumable_state(j, &frames, prefix, renderer.looks_ahead())?
-            {
-                renderer
-                    .restore_state(state)
-                    .map_err(|e| j.store.state_error(j.job.id, e))?;
-                done.retain(|&f| f < frames.start + prefix);
-            } else {
-                j.store.clear_state(j.job.id)?;
-                done.clear();
-            }
-        }
-        for &frame in &done {
-            restore_frame_files(j, frame, out_dir)?;
-        }
-    }
+    let done = match job.as_deref() {
+        Some(j) => resume(renderer, j, &frames, out_dir)?,
+        None => BTreeSet::new(),
+    };
     renderer.keep_frame_records(job.is_some());
     let progress = progress_bar(frames.len() as u64, quiet);
     progress.set_position(done.len() as u64);
@@ -702,43 +681,8 @@ pub fn render_job_to_dir_with(
         let stats = renderer.last_frame_stats();
         let kept = renderer.take_frame_records();
         if let Some(j) = job.as_deref_mut() {
-            let exr = film::encode_exr(&film)
-                .map_err(|e| anyhow::anyhow!("cannot encode frame {frame} as EXR: {e}"))?;
-            let mut kept = kept.unwrap_or_default();
-            let mut samples = std::mem::take(&mut kept.samples).into_iter();
-            let records = kept
-                .records
-                .iter()
-                .enumerate()
-                .map(|(i, r)| {
-                    let block = samples.next().unwrap_or_default();
-                    let mut c = RecordCommit::from_record(r, block, kept.strata, frame);
-                    if let Some(&last) = kept.last_frames.get(i) {
-                        c.record.last_frame = last;
-                    }
-                    c
-                })
-                .collect();
-            if renderer.carries_state() && kept.state.is_none() {
-                bail!(
-                    "method {} carries state but reported no state changes for frame {frame}",
-                    renderer.method_name()
-                );
-            }
-            let commit = FrameCommit {
-                frame,
-                width: film.width,
-                height: film.height,
-                exr: &exr,
-                records,
-                stats: &stats,
-                state: kept.state.as_ref().map(|changes| StateCommit {
-                    chain_start: frames.start,
-                    chain_end,
-                    changes,
-                }),
-            };
-            j.store.commit_frame(&mut j.job, commit)?;
+            let chain = (frames.start, chain_end);
+            store_frame(renderer, j, &film, frame, &stats, kept, chain)?;
         }
         film::write_frame(&film, out_dir, frame)?;
         frame_stats.push(stats);
@@ -756,6 +700,96 @@ pub fn render_job_to_dir_with(
         rays: renderer.backend().ray_counts().total() - rays_before,
         out_dir: out_dir.to_path_buf(),
     })
+}
+
+/// The frames of `frames` that job `j` has done and that need not be
+/// rendered again, their files written back to `out_dir`. A method that
+/// carries state from frame to frame resumes after the longest finished
+/// prefix whose state the store holds, and renders the rest again; without
+/// such a state it starts the range over.
+fn resume(
+    renderer: &mut Renderer,
+    j: &StoreJob,
+    frames: &Range<u32>,
+    out_dir: &Path,
+) -> Result<BTreeSet<u32>> {
+    let mut done: BTreeSet<u32> = j
+        .store
+        .frames_done(j.job.id)?
+        .into_iter()
+        .filter(|frame| frames.contains(frame))
+        .collect();
+    if renderer.carries_state() {
+        let prefix = frames.clone().take_while(|f| done.contains(f)).count() as u32;
+        if prefix as usize == frames.len() {
+            // Every frame done: nothing to render, no state needed.
+        } else if let Some(state) = resumable_state(j, frames, prefix, renderer.looks_ahead())? {
+            renderer
+                .restore_state(state)
+                .map_err(|e| j.store.state_error(j.job.id, e))?;
+            done.retain(|&f| f < frames.start + prefix);
+        } else {
+            j.store.clear_state(j.job.id)?;
+            done.clear();
+        }
+    }
+    for &frame in &done {
+        restore_frame_files(j, frame, out_dir)?;
+    }
+    Ok(done)
+}
+
+/// Commits rendered `frame` to job `j` in one batch: its EXR, statistics,
+/// the records the method `kept` with their samples, and its state changes.
+fn store_frame(
+    renderer: &Renderer,
+    j: &mut StoreJob,
+    film: &Film,
+    frame: u32,
+    stats: &FrameStats,
+    kept: Option<FrameRecords>,
+    // The first frame of the render's chain of frames and, for a method
+    // that looks ahead, its end: what the stored state is valid for.
+    (chain_start, chain_end): (u32, Option<u32>),
+) -> Result<()> {
+    let exr = film::encode_exr(film)
+        .map_err(|e| anyhow::anyhow!("cannot encode frame {frame} as EXR: {e}"))?;
+    let mut kept = kept.unwrap_or_default();
+    let mut samples = std::mem::take(&mut kept.samples).into_iter();
+    let records = kept
+        .records
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let block = samples.next().unwrap_or_default();
+            let mut c = RecordCommit::from_record(r, block, kept.strata, frame);
+            if let Some(&last) = kept.last_frames.get(i) {
+                c.record.last_frame = last;
+            }
+            c
+        })
+        .collect();
+    if renderer.carries_state() && kept.state.is_none() {
+        bail!(
+            "method {} carries state but reported no state changes for frame {frame}",
+            renderer.method_name()
+        );
+    }
+    let commit = FrameCommit {
+        frame,
+        width: film.width,
+        height: film.height,
+        exr: &exr,
+        records,
+        stats,
+        state: kept.state.as_ref().map(|changes| StateCommit {
+            chain_start,
+            chain_end,
+            changes,
+        }),
+    };
+    j.store.commit_frame(&mut j.job, commit)?;
+    Ok(())
 }
 
 /// The stored state to continue a stateful method after the finished
