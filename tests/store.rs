@@ -740,6 +740,39 @@ fn trc_resumes_from_stored_state(gradients: TemporalGradients) {
     assert_eq!(st.records, state.records.len() as u64);
     let text = radcache::store::inspect::to_text(&report, false);
     assert!(text.contains("carried state after frame 9"), "{text}");
+    // `inspect` shows each frame's record statistics as the uninterrupted
+    // render counted them (frames 0..5 from the first render, 6..9 from
+    // the resume).
+    let rows = &report.jobs[0].frame_details;
+    assert_eq!(rows.len(), 10);
+    for (row, stats) in rows.iter().zip(&uninterrupted.frame_stats) {
+        let shown = (
+            row.records_alive,
+            row.records_created,
+            row.records_reused,
+            row.records_replaced,
+            row.records_dropped,
+            row.mean_lifespan,
+        );
+        let counted = (
+            stats.records_alive,
+            stats.records_created,
+            stats.records_reused,
+            stats.records_replaced,
+            stats.records_dropped,
+            stats.mean_lifespan,
+        );
+        assert_eq!(shown, counted, "frame {}", row.frame);
+    }
+    assert!(
+        rows.iter().skip(1).any(|r| r.records_reused > 0),
+        "{rows:?}"
+    );
+    let text = radcache::store::inspect::to_text(&report, true);
+    assert!(
+        text.contains("created") && text.contains("replaced") && text.contains("life"),
+        "{text}"
+    );
 }
 
 #[test]

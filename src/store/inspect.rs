@@ -92,8 +92,15 @@ pub struct FrameReport {
     pub frame: u32,
     /// Record versions written in this frame.
     pub records_written: u64,
-    /// Records alive at the end of the frame (from the frame's stats).
+    /// Records alive at the end of the frame, and those the frame created,
+    /// reused from earlier frames, replaced and dropped, and the mean
+    /// lifespan of those it computed (from the frame's statistics).
     pub records_alive: u64,
+    pub records_created: u64,
+    pub records_reused: u64,
+    pub records_replaced: u64,
+    pub records_dropped: u64,
+    pub mean_lifespan: f64,
     pub samples: u64,
     pub exr_bytes: u64,
     pub rays: u64,
@@ -212,6 +219,11 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
                 frame,
                 records_written: 0,
                 records_alive: stats.records_alive,
+                records_created: stats.records_created,
+                records_reused: stats.records_reused,
+                records_replaced: stats.records_replaced,
+                records_dropped: stats.records_dropped,
+                mean_lifespan: stats.mean_lifespan,
                 samples: 0,
                 exr_bytes: u64::from(v.exr_stored_len),
                 rays: stats.rays,
@@ -349,14 +361,34 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
         if frames {
             let _ = writeln!(
                 s,
-                "  {:>6} {:>8} {:>8} {:>9} {:>9} {:>10}",
-                "frame", "written", "alive", "samples", "exr B", "rays"
+                "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>9} {:>9} {:>10}",
+                "frame",
+                "written",
+                "alive",
+                "created",
+                "reused",
+                "replaced",
+                "dropped",
+                "life",
+                "samples",
+                "exr B",
+                "rays"
             );
             for f in &j.frame_details {
                 let _ = writeln!(
                     s,
-                    "  {:>6} {:>8} {:>8} {:>9} {:>9} {:>10}",
-                    f.frame, f.records_written, f.records_alive, f.samples, f.exr_bytes, f.rays
+                    "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.2} {:>9} {:>9} {:>10}",
+                    f.frame,
+                    f.records_written,
+                    f.records_alive,
+                    f.records_created,
+                    f.records_reused,
+                    f.records_replaced,
+                    f.records_dropped,
+                    f.mean_lifespan,
+                    f.samples,
+                    f.exr_bytes,
+                    f.rays
                 );
             }
         }
