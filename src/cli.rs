@@ -200,7 +200,7 @@ pub struct TrcArgs {
     /// Temporal accuracy a_t: a record is used while w_t = 1/(|τ−1|(t−t0)) ≥ 1/a_t (TRC Eq. 9–10; the paper uses 0.05).
     #[arg(long, default_value_t = 0.05, value_parser = parse_positive)]
     pub trc_at: f32,
-    /// δt_max: longest life of a record in frames, t − t0 < δt_max (TRC Eq. 11; the paper uses 20).
+    /// δt_max: longest life of a record in frames, t − t0 < δt_max (TRC Eq. 11; the paper uses 20 on Cube in a Box, 5 on Spheres).
     #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub trc_max_life: u32,
     /// Temporal gradients (TRC §4.5): none, extrapolated from the estimate of E(t0+1) (Eq. 15–17, one pass), or interpolated towards the record's replacement (Eq. 18–20, two passes: frames come out up to δt_max frames of first pass late).

@@ -773,6 +773,11 @@ fn trc_resumes_from_stored_state(gradients: TemporalGradients) {
         text.contains("created") && text.contains("replaced") && text.contains("life"),
         "{text}"
     );
+    // A frame the job has not finished is said to be missing, not an
+    // empty table.
+    let report = radcache::store::inspect::report(&store, Some("j"), Some(99)).unwrap();
+    let text = radcache::store::inspect::to_text(&report, true);
+    assert!(text.contains("no finished frame to show"), "{text}");
 }
 
 #[test]

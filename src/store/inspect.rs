@@ -358,7 +358,13 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
             "  record lifespan (frames: records): {}",
             hist.join(", ")
         );
-        if frames {
+        if frames && j.frame_details.is_empty() {
+            let _ = writeln!(
+                s,
+                "  no finished frame to show ({} of frames {} done)",
+                j.frames_done, j.frames
+            );
+        } else if frames {
             let _ = writeln!(
                 s,
                 "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>9} {:>9} {:>10}",
