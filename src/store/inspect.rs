@@ -302,102 +302,116 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
         );
     }
     for j in &r.jobs {
-        let _ = writeln!(
-            s,
-            "\njob {:?} (id {}): {} [{}], {} {} spp {}, fps {}, seed {}, frames {} — {} done, last {}",
-            j.name,
-            j.id,
-            j.scene,
-            j.scene_hash,
-            j.method,
-            j.size,
-            j.spp,
-            j.fps,
-            j.seed,
-            j.frames,
-            j.frames_done,
-            j.last_frame.map_or("-".into(), |f| f.to_string()),
-        );
-        let _ = writeln!(s, "  settings: {}", j.settings);
-        let _ = writeln!(
-            s,
-            "  records {} ({} B of rkyv values, {} B stored in blocks), samples {}: {} B stored / {} B raw (ratio {})",
-            j.records,
-            j.record_value_bytes,
-            j.record_block_bytes,
-            j.samples,
-            j.samples_stored_bytes,
-            j.samples_raw_bytes,
-            ratio(j.samples_raw_bytes, j.samples_stored_bytes)
-        );
-        if let Some(st) = &j.state {
-            let _ = writeln!(
-                s,
-                "  carried state after frame {} (range from frame {}{}): {} records, {} B",
-                st.frame,
-                st.chain_start,
-                st.chain_end.map_or(String::new(), |e| format!(" to {e}")),
-                st.records,
-                st.value_bytes
-            );
-        }
-        let _ = writeln!(
-            s,
-            "  frames: {} B stored / {} B EXR (ratio {})",
-            j.exr_stored_bytes,
-            j.exr_raw_bytes,
-            ratio(j.exr_raw_bytes, j.exr_stored_bytes)
-        );
-        let hist: Vec<String> = j
-            .lifespan_histogram
-            .iter()
-            .map(|(l, n)| format!("{l}: {n}"))
-            .collect();
-        let _ = writeln!(
-            s,
-            "  record lifespan (frames: records): {}",
-            hist.join(", ")
-        );
-        if frames && j.frame_details.is_empty() {
-            let _ = writeln!(
-                s,
-                "  no finished frame to show ({} of frames {} done)",
-                j.frames_done, j.frames
-            );
-        } else if frames {
-            let _ = writeln!(
-                s,
-                "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>9} {:>9} {:>10}",
-                "frame",
-                "written",
-                "alive",
-                "created",
-                "reused",
-                "replaced",
-                "dropped",
-                "life",
-                "samples",
-                "exr B",
-                "rays"
-            );
-            for f in &j.frame_details {
-                let _ = writeln!(
-                    s,
-                    "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.2} {:>9} {:>9} {:>10}",
-                    f.frame,
-                    f.records_written,
-                    f.records_alive,
-                    f.records_created,
-                    f.records_reused,
-                    f.records_replaced,
-                    f.records_dropped,
-                    f.mean_lifespan,
-                    f.samples,
-                    f.exr_bytes,
-                    f.rays
-                );
-            }
+        job_text(&mut s, j);
+        if frames {
+            frame_table(&mut s, j);
         }
     }
     s
+}
+
+/// A job's part of [`to_text`]: what it renders, its records, samples,
+/// state and frames, and its lifespan histogram.
+fn job_text(s: &mut String, j: &JobReport) {
+    let _ = writeln!(
+        s,
+        "\njob {:?} (id {}): {} [{}], {} {} spp {}, fps {}, seed {}, frames {} — {} done, last {}",
+        j.name,
+        j.id,
+        j.scene,
+        j.scene_hash,
+        j.method,
+        j.size,
+        j.spp,
+        j.fps,
+        j.seed,
+        j.frames,
+        j.frames_done,
+        j.last_frame.map_or("-".into(), |f| f.to_string()),
+    );
+    let _ = writeln!(s, "  settings: {}", j.settings);
+    let _ = writeln!(
+        s,
+        "  records {} ({} B of rkyv values, {} B stored in blocks), samples {}: {} B stored / {} B raw (ratio {})",
+        j.records,
+        j.record_value_bytes,
+        j.record_block_bytes,
+        j.samples,
+        j.samples_stored_bytes,
+        j.samples_raw_bytes,
+        ratio(j.samples_raw_bytes, j.samples_stored_bytes)
+    );
+    if let Some(st) = &j.state {
+        let _ = writeln!(
+            s,
+            "  carried state after frame {} (range from frame {}{}): {} records, {} B",
+            st.frame,
+            st.chain_start,
+            st.chain_end.map_or(String::new(), |e| format!(" to {e}")),
+            st.records,
+            st.value_bytes
+        );
+    }
+    let _ = writeln!(
+        s,
+        "  frames: {} B stored / {} B EXR (ratio {})",
+        j.exr_stored_bytes,
+        j.exr_raw_bytes,
+        ratio(j.exr_raw_bytes, j.exr_stored_bytes)
+    );
+    let hist: Vec<String> = j
+        .lifespan_histogram
+        .iter()
+        .map(|(l, n)| format!("{l}: {n}"))
+        .collect();
+    let _ = writeln!(
+        s,
+        "  record lifespan (frames: records): {}",
+        hist.join(", ")
+    );
+}
+
+/// A job's per-frame rows of [`to_text`]: records written, alive, created,
+/// reused, replaced and dropped, mean lifespan, samples, EXR bytes, rays.
+fn frame_table(s: &mut String, j: &JobReport) {
+    if j.frame_details.is_empty() {
+        let _ = writeln!(
+            s,
+            "  no finished frame to show ({} of frames {} done)",
+            j.frames_done, j.frames
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>9} {:>9} {:>10}",
+            "frame",
+            "written",
+            "alive",
+            "created",
+            "reused",
+            "replaced",
+            "dropped",
+            "life",
+            "samples",
+            "exr B",
+            "rays"
+        );
+        for f in &j.frame_details {
+            let _ = writeln!(
+                s,
+                "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.2} {:>9} {:>9} {:>10}",
+                f.frame,
+                f.records_written,
+                f.records_alive,
+                f.records_created,
+                f.records_reused,
+                f.records_replaced,
+                f.records_dropped,
+                f.mean_lifespan,
+                f.samples,
+                f.exr_bytes,
+                f.rays
+            );
+        }
+    }
 }
