@@ -11,6 +11,7 @@ use glam::{Vec3, Vec4};
 use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
 use radcache::film::Film;
+use radcache::integrator::PathLength;
 use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::method::render_pass::FallbackStreams;
@@ -101,11 +102,21 @@ fn render_trc(r: &mut Renderer, trc: &mut TemporalRadianceCaching, frame: u32) -
 /// streams (unchanged samples cancel): the actual `E(t0+1)` their
 /// estimates are measured against.
 fn records_and_their_next_frame(r: &mut Renderer, t0: u32) -> (Vec<TemporalRecord>, Vec<Vec3>) {
+    let ic = IcSettings {
+        spp: 1,
+        ..IcSettings::default()
+    };
+    records_and_their_next_frame_with(r, t0, ic)
+}
+
+/// [`records_and_their_next_frame`] with records made by `ic`.
+fn records_and_their_next_frame_with(
+    r: &mut Renderer,
+    t0: u32,
+    ic: IcSettings,
+) -> (Vec<TemporalRecord>, Vec<Vec3>) {
     let mut trc = TemporalRadianceCaching::new(TrcSettings {
-        ic: IcSettings {
-            spp: 1,
-            ..IcSettings::default()
-        },
+        ic,
         ..TrcSettings::default()
     });
     let _ = render_trc(r, &mut trc, t0);
@@ -267,6 +278,111 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
         median_r <= 1.05 * median_n,
         "median {median_r} vs {median_n}"
     );
+}
+
+/// A white block sliding across a white floor (0.1 m a frame) under a
+/// point light, in a black room. Gathered with one bounce (the first hit's
+/// direct light from the point light, no further path), every gather
+/// sample is a function of its direction alone: E(t0+1) gathered again has
+/// no Monte Carlo noise to hide the estimate's error in (the rasterized
+/// hemispheres of the paper's Table 1 have none either).
+fn sliding_block_under_point_light(fps: f32) -> Scene {
+    let mut floor = Mesh::default();
+    push_quad(
+        &mut floor,
+        Vec3::new(-1.5, 0.0, -1.5),
+        Vec3::Z * 3.0,
+        Vec3::X * 3.0,
+        0,
+    );
+    let materials = vec![
+        Material::diffuse("white", Vec3::splat(0.7)),
+        Material::diffuse("black", Vec3::ZERO),
+    ];
+    let block = outward_box(Vec3::new(-0.15, 0.0, -0.15), Vec3::new(0.15, 0.3, 0.15), 0);
+    // Black walls and ceiling (their own floor hidden under the white
+    // one): they reflect nothing, and bound the records' distances.
+    let room = inward_box(Vec3::new(-1.5, -0.01, -1.5), Vec3::new(1.5, 1.5, 1.5), 1);
+    let slide = Channel {
+        node: 1,
+        property: Property::Translation,
+        interpolation: Interpolation::Linear,
+        times: vec![0.0, 10.0 / fps],
+        values: vec![
+            Vec4::new(-0.5, 0.0, 0.0, 0.0),
+            Vec4::new(0.5, 0.0, 0.0, 0.0),
+        ],
+    };
+    let mut s = scene(
+        vec![floor, block, room],
+        materials,
+        vec![slide],
+        Vec3::new(0.0, 1.4, 1.4),
+        Vec3::new(0.0, -1.0, -1.0),
+        1.0,
+        vec![(Vec3::new(0.3, 1.2, 0.6), Vec3::splat(3.0))],
+    );
+    s.frame_count = 10;
+    s
+}
+
+/// TRC Table 1 where nothing but the estimate can err: on
+/// [`sliding_block_under_point_light`] reprojecting the block's samples
+/// with its motion (§4.7) predicts E(t0+1) better than taking E constant,
+/// in mean over the records (the paper: 2.9 % against 3.7 %). Measured:
+/// 27.5 % against 32.9 % (the block's own records, whose points stay in
+/// the world while the block leaves, err alike in both), 16.0 % against
+/// 21.6 % over the floor's. The median is not lowered (4.35 % against
+/// 3.46 %): over the floor records whose estimate reprojection changes,
+/// the predicted change correlates 0.80 with the true one but is 0.55 of
+/// it where it is large. An approaching block's image grows, but its
+/// samples stay as many and each lands in one cell, so the background
+/// cells its new image covers between them keep their background; and
+/// moving each sample by whole cells adds error of about the size of the
+/// small changes (at the paper's 64 × 64 cells the median is still not
+/// lowered: 3.34 % against 2.80 %). Splatting each sample over the cells
+/// its surface patch covers at t0+1 is the way to lower it.
+#[test]
+fn reprojection_predicts_a_moving_block_better_than_constant_in_mean() {
+    let fps = 6.0;
+    let mut r = renderer(sliding_block_under_point_light(fps), 64, fps, false);
+    let one_bounce = IcSettings {
+        spp: 1,
+        gather_length: PathLength {
+            max_depth: Some(1),
+            ..PathLength::default()
+        },
+        ..IcSettings::default()
+    };
+    let (mut reprojected, mut constant) = (Vec::new(), Vec::new());
+    for t0 in [2u32, 5] {
+        let (records, actual) = records_and_their_next_frame_with(&mut r, t0, one_bounce.clone());
+        let mean: f32 =
+            actual.iter().map(|e| e.element_sum() / 3.0).sum::<f32>() / actual.len().max(1) as f32;
+        assert!(mean > 0.0, "no indirect light");
+        assert!(records.len() > 20, "{} records", records.len());
+        for (k, e1) in records.iter().zip(actual) {
+            let rel = |est: Vec3| ((est - e1).length_squared() / 3.0).sqrt() / mean;
+            reprojected.push(rel(k.next_irradiance));
+            constant.push(rel(k.record.irradiance));
+        }
+    }
+    let stats = |v: &mut Vec<f32>| {
+        v.sort_by(f32::total_cmp);
+        (v.iter().sum::<f32>() / v.len() as f32, v[v.len() / 2])
+    };
+    let (mean_r, median_r) = stats(&mut reprojected);
+    let (mean_c, median_c) = stats(&mut constant);
+    eprintln!(
+        "E(t0+1) error over {} records: reprojection mean {:.2} % median {:.2} %, \
+         constant mean {:.2} % median {:.2} %",
+        reprojected.len(),
+        100.0 * mean_r,
+        100.0 * median_r,
+        100.0 * mean_c,
+        100.0 * median_c
+    );
+    assert!(mean_r < mean_c, "mean {mean_r} vs {mean_c}");
 }
 
 /// A light switched off at frame k: records created before k know nothing
