@@ -336,8 +336,8 @@ fn sliding_block_under_point_light(fps: f32) -> Scene {
 /// 3.46 %): over the floor records whose estimate reprojection changes,
 /// the predicted change correlates 0.80 with the true one but is 0.55 of
 /// it where it is large, and where the true change is small, moving
-/// samples between cells adds an error of about its size. Neither is the
-/// comparison's doing: against E(t0+1) gathered with 16× the rays (64 ×
+/// samples between cells adds an error of about its size. Neither comes
+/// from the comparison: against E(t0+1) gathered with 16× the rays (64 ×
 /// 192) the figures are 28.4 % / 4.41 % against 33.5 % / 3.79 %, and at
 /// the paper's 64 × 64 cells the median is still not lowered (3.34 %
 /// against 2.80 %). Splatting each moved sample over the cells its
