@@ -70,30 +70,63 @@ fn scene(
     Ok(scene)
 }
 
+/// The query of `GET /api/jobs/{id}/records`: `frame=N` (required),
+/// `bbox=x0,y0,z0,x1,y1,z1` and `limit` (1..=[`MAX_LIMIT`]).
+struct RecordsQuery {
+    frame: u32,
+    bbox: Option<Bbox>,
+    limit: usize,
+}
+
+impl RecordsQuery {
+    fn parse(q: &HashMap<String, String>) -> Result<Self, ApiError> {
+        let frame: u32 = q
+            .get("frame")
+            .ok_or_else(|| ApiError::bad_request("missing frame=N".into()))?
+            .parse()
+            .map_err(|_| {
+                ApiError::bad_request(format!("frame {:?} is not a frame number", q["frame"]))
+            })?;
+        let bbox = q.get("bbox").map(|b| parse_bbox(b)).transpose()?;
+        let limit = match q.get("limit") {
+            None => DEFAULT_LIMIT,
+            Some(l) => l
+                .parse::<usize>()
+                .ok()
+                .filter(|l| (1..=MAX_LIMIT).contains(l))
+                .ok_or_else(|| {
+                    ApiError::bad_request(format!("limit {l:?}: expected 1..={MAX_LIMIT}"))
+                })?,
+        };
+        Ok(RecordsQuery { frame, bbox, limit })
+    }
+}
+
+/// Record `r` as the API shows it at `frame`, with where it lies on the
+/// image (`screen`, pixels; `None` behind the camera).
+fn record_json(r: &RecordValue, frame: u32, screen: Option<[f32; 2]>) -> Value {
+    json!({
+        "id": r.id,
+        "position": r.position,
+        "normal": r.normal,
+        "radius": r.radius,
+        "irradiance": r.irradiance,
+        "created": r.created_frame,
+        "last_frame": r.last_frame,
+        "lifespan": r.last_frame - r.created_frame + 1,
+        "reused": frame - r.created_frame,
+        "object": r.object,
+        "screen": screen,
+    })
+}
+
 pub async fn records(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
     query: Result<Query<HashMap<String, String>>, QueryRejection>,
 ) -> Result<Json<Value>, ApiError> {
     let Query(q) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let frame: u32 = q
-        .get("frame")
-        .ok_or_else(|| ApiError::bad_request("missing frame=N".into()))?
-        .parse()
-        .map_err(|_| {
-            ApiError::bad_request(format!("frame {:?} is not a frame number", q["frame"]))
-        })?;
-    let bbox = q.get("bbox").map(|b| parse_bbox(b)).transpose()?;
-    let limit = match q.get("limit") {
-        None => DEFAULT_LIMIT,
-        Some(l) => l
-            .parse::<usize>()
-            .ok()
-            .filter(|l| (1..=MAX_LIMIT).contains(l))
-            .ok_or_else(|| {
-                ApiError::bad_request(format!("limit {l:?}: expected 1..={MAX_LIMIT}"))
-            })?,
-    };
+    let RecordsQuery { frame, bbox, limit } = RecordsQuery::parse(&q)?;
     let job = state.job(&id)?;
     let missing = || ApiError::not_found(format!("job {id} has no frame {frame} (yet)"));
     let sid = state.store_id(&id)?.ok_or_else(missing)?;
@@ -135,19 +168,7 @@ pub async fn records(
             let screen = camera
                 .project(glam::Vec3::from_array(r.position), w / h)
                 .map(|(sx, sy)| [sx * w, sy * h]);
-            out.push(json!({
-                "id": r.id,
-                "position": r.position,
-                "normal": r.normal,
-                "radius": r.radius,
-                "irradiance": r.irradiance,
-                "created": r.created_frame,
-                "last_frame": r.last_frame,
-                "lifespan": r.last_frame - r.created_frame + 1,
-                "reused": frame - r.created_frame,
-                "object": r.object,
-                "screen": screen,
-            }));
+            out.push(record_json(r, frame, screen));
         }
         Ok(Json(json!({
             "id": id,
