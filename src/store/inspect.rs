@@ -163,6 +163,31 @@ pub fn report(
     })
 }
 
+/// The method state job `id` carries (`None` for a method without one, or
+/// before its first frame): the frame it follows, its range, and the
+/// records and bytes it holds.
+fn state_report(store: &Store, id: u64) -> Result<Option<StateReport>, StoreError> {
+    let Some(head) = store.state_head(id)? else {
+        return Ok(None);
+    };
+    let mut state = StateReport {
+        frame: head.frame,
+        chain_start: head.chain_start,
+        chain_end: head.chain_end,
+        records: 0,
+        value_bytes: 0,
+    };
+    for item in store.state.scan_prefix(super::keys::job_prefix(id)) {
+        let (k, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
+        // The head's key is the job prefix alone; longer keys are records.
+        if k.len() != 8 {
+            state.records += 1;
+            state.value_bytes += v.len() as u64;
+        }
+    }
+    Ok(Some(state))
+}
+
 fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobReport, StoreError> {
     let mut r = JobReport {
         name: j.name.clone(),
@@ -190,23 +215,7 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
         frame_details: Vec::new(),
         state: None,
     };
-    if let Some(head) = store.state_head(j.id)? {
-        let mut state = StateReport {
-            frame: head.frame,
-            chain_start: head.chain_start,
-            chain_end: head.chain_end,
-            records: 0,
-            value_bytes: 0,
-        };
-        for item in store.state.scan_prefix(super::keys::job_prefix(j.id)) {
-            let (k, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
-            if k.len() != 8 {
-                state.records += 1;
-                state.value_bytes += v.len() as u64;
-            }
-        }
-        r.state = Some(state);
-    }
+    r.state = state_report(store, j.id)?;
     let mut per_frame: BTreeMap<u32, FrameReport> = BTreeMap::new();
     for frame in store.frames_done(j.id)? {
         let v = store.frame(j.id, frame)?.expect("listed frame exists");
