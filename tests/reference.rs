@@ -1,5 +1,6 @@
-//! The path tracer against independent reference renders (Mitsuba 3, 4096
-//! spp; `tests/data/reference/SOURCE.md` says how they were made).
+//! The path tracer, `ic` and `trc` against independent reference renders
+//! (Mitsuba 3, 4096 spp; `tests/data/reference/SOURCE.md` says how they
+//! were made).
 //!
 //! Tolerances come from the references' own noise: frame 0 was rendered
 //! twice with different seeds, so `RMSE(seed0 − seed1)/√2` is the noise σ_ref
@@ -10,8 +11,11 @@
 //! radiance (an error of a few percent of the indirect light fails it).
 
 use radcache::backend::cpu::CpuBackend;
-use radcache::film::read_exr;
+use radcache::film::{read_exr, Film};
+use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
+use radcache::method::trc::{TemporalRadianceCaching, TrcSettings};
+use radcache::method::Method;
 use radcache::metrics::{block_bias, rmse, BLOCK};
 use radcache::render::{FrameSettings, Renderer};
 use radcache::scene::Scene;
@@ -81,4 +85,77 @@ fn cube_in_box_matches_reference() {
 #[test]
 fn spheres_match_reference() {
     check_scene("spheres.glb", "spheres", &[0], 0.05);
+}
+
+/// The reference halved to `size`×`size` by 2×2 box averaging: the same
+/// image as a 1-pixel box filter at half the resolution, so the means of
+/// blocks of half the side are unchanged.
+fn halved(reference: &Film) -> Film {
+    let (w, h) = (reference.width / 2, reference.height / 2);
+    let mut out = Film::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let sum = reference.get(2 * x, 2 * y)
+                + reference.get(2 * x + 1, 2 * y)
+                + reference.get(2 * x, 2 * y + 1)
+                + reference.get(2 * x + 1, 2 * y + 1);
+            out.pixels[(y * w + x) as usize] = sum / 4.0;
+        }
+    }
+    out
+}
+
+/// `ic` and `trc`, at their defaults, against the independent references of
+/// `cube_in_box.glb` (frames 0, 12 and 23; `trc` renders every frame from 0
+/// so that its records age as in a render). Rendered at 64×64 against the
+/// references halved, so blocks of 8×8 pixels are the 16×16 ones of the
+/// references. Both methods interpolate, so their bias is not zero: 0.6 to
+/// 0.7 % of the mean radiance here (the bench finds about 0.5 % against our
+/// own converged `path`). The bound, 2 %, is three times that and under
+/// DESIGN.md's 5 % target: records gathered with one bounce instead of
+/// unbounded paths fail it (11.9 % at frame 0). The cube of this file moves
+/// little, so records that never expire stay at 0.9 % by frame 23: the
+/// temporal failures are `tests/trc.rs`'s to catch.
+#[test]
+fn ic_and_trc_match_reference() {
+    const SIZE: u32 = 64;
+    const MAX_BLOCK_BIAS: f64 = 0.02;
+    let renderer = |method: Box<dyn Method>| {
+        Renderer::new(
+            Scene::load(&data("scenes/cube_in_box.glb")).unwrap(),
+            method,
+            Box::new(CpuBackend::new()),
+            FrameSettings {
+                width: SIZE,
+                height: SIZE,
+                ..FrameSettings::default()
+            },
+        )
+    };
+    let mut ic = renderer(Box::new(IrradianceCaching::new(IcSettings::default())));
+    let mut trc = renderer(Box::new(TemporalRadianceCaching::new(
+        TrcSettings::default(),
+    )));
+    let checked = [0, 12, 23];
+    for frame in 0..=23 {
+        let trc_image = trc.render_frame(frame);
+        if !checked.contains(&frame) {
+            continue;
+        }
+        let reference = halved(
+            &read_exr(&data(&format!(
+                "reference/cube_in_box/frame_{frame:04}.exr"
+            )))
+            .unwrap(),
+        );
+        let ic_image = ic.render_frame(frame);
+        for (method, image) in [("ic", &ic_image), ("trc", &trc_image)] {
+            let bias = block_bias(image, &reference, BLOCK / 2);
+            eprintln!("cube_in_box frame {frame}: {method} block bias {bias:.4}");
+            assert!(
+                bias < MAX_BLOCK_BIAS,
+                "{method} frame {frame}: block bias {bias} ≥ {MAX_BLOCK_BIAS}"
+            );
+        }
+    }
 }
