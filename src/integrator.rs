@@ -268,37 +268,74 @@ fn shade(
     if bsdf.is_black() {
         return None;
     }
-    let ng = tri.geometric_normal();
+    let vertex = Vertex {
+        p,
+        ng: tri.geometric_normal(),
+        wo,
+        bsdf,
+    };
+    let sampling = next_event(ctx, path, &vertex, shadow);
+    continue_path(length, path, &vertex, sampling)
+}
 
-    // Next-event estimation, MIS-weighted against BSDF sampling.
-    // The stratified light sample of a pixel's first hit is seen directly:
-    // it gets the costlier, less noisy points (`TriangleSampling`).
+/// A path vertex on a surface that scatters light.
+struct Vertex {
+    p: Vec3,
+    ng: Vec3,
+    wo: Vec3,
+    bsdf: Bsdf,
+}
+
+/// Next-event estimation at `v`, MIS-weighted against BSDF sampling: queues
+/// the light sample's shadow ray through `shadow`. The stratified light
+/// sample of a pixel's first hit is seen directly: it gets the costlier,
+/// less noisy points (`TriangleSampling`). Returns how the light sample's
+/// points on emitting triangles were drawn, which the BSDF-sampled
+/// continuation's MIS weight needs.
+fn next_event(
+    ctx: &FrameContext,
+    path: &mut PathState,
+    v: &Vertex,
+    shadow: &mut impl FnMut(Ray, Vec3),
+) -> TriangleSampling {
     let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
     let (choice, sampling) = match path.first_light.take() {
         Some(choice) => (choice, TriangleSampling::SolidAngle),
         None => (LightChoice { pick, u }, TriangleSampling::Area),
     };
-    if let Some(ls) = ctx.lights.sample(snapshot, p, choice, sampling) {
-        let f = bsdf.eval(wo, ls.wi);
-        let cos = bsdf.normal().dot(ls.wi);
-        if cos > 0.0 && f.max_element() > 0.0 {
-            let weight = if ls.is_delta {
-                1.0
-            } else {
-                power_heuristic(ls.pdf, bsdf.pdf(wo, ls.wi))
-            };
-            let contribution = path.throughput * f * ls.radiance * (cos * weight / ls.pdf);
-            shadow(
-                Ray::segment(offset_origin(p, ng, ls.wi), ls.position),
-                contribution,
-            );
-        }
+    let Some(ls) = ctx.lights.sample(ctx.snapshot, v.p, choice, sampling) else {
+        return sampling;
+    };
+    let f = v.bsdf.eval(v.wo, ls.wi);
+    let cos = v.bsdf.normal().dot(ls.wi);
+    if cos > 0.0 && f.max_element() > 0.0 {
+        let weight = if ls.is_delta {
+            1.0
+        } else {
+            power_heuristic(ls.pdf, v.bsdf.pdf(v.wo, ls.wi))
+        };
+        let contribution = path.throughput * f * ls.radiance * (cos * weight / ls.pdf);
+        shadow(
+            Ray::segment(offset_origin(v.p, v.ng, ls.wi), ls.position),
+            contribution,
+        );
     }
+    sampling
+}
 
-    // Continue by BSDF sampling.
+/// Continues the path from `v` by BSDF sampling, with Russian roulette
+/// after `length.rr_start` bounces; `sampling` is how [`next_event`] drew
+/// its light points here, for the MIS weight of an emitter the new ray
+/// hits. Returns the new ray, or `None` when the path ends.
+fn continue_path(
+    length: PathLength,
+    path: &mut PathState,
+    v: &Vertex,
+    sampling: TriangleSampling,
+) -> Option<Ray> {
     let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
-    let s = bsdf.sample(wo, pick, u)?;
-    let cos = bsdf.normal().dot(s.wi);
+    let s = v.bsdf.sample(v.wo, pick, u)?;
+    let cos = v.bsdf.normal().dot(s.wi);
     path.throughput *= s.f * (cos / s.pdf);
     path.emission = FirstHitEmission::Mis {
         bsdf_pdf: s.pdf,
@@ -314,7 +351,7 @@ fn shade(
         path.throughput /= q;
     }
     Some(Ray::new(
-        offset_origin(p, ng, s.wi),
+        offset_origin(v.p, v.ng, s.wi),
         s.wi,
         0.0,
         f32::INFINITY,
