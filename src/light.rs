@@ -206,29 +206,7 @@ impl LightSampler {
                 // The whole triangle is on one side of p: skip a back face.
                 emitting_side_cosine(normal, double_sided, p - tri.p[0])?;
                 let strategy = TriangleStrategy::from(tri, p, sampling);
-                let (position, wi, distance, d2) = match &strategy {
-                    TriangleStrategy::SolidAngle(sphere) => {
-                        // The direction is drawn: the point is where it
-                        // meets the triangle's plane.
-                        let wi = sphere.sample(u)?;
-                        let distance = normal.dot(tri.p[0] - p) / normal.dot(wi);
-                        if !(distance > 0.0 && distance.is_finite()) {
-                            return None;
-                        }
-                        (p + distance * wi, wi, distance, distance * distance)
-                    }
-                    TriangleStrategy::Area => {
-                        let (bu, bv) = uniform_triangle(u);
-                        let position = tri.point(bu, bv);
-                        let to_light = position - p;
-                        let d2 = to_light.length_squared();
-                        if d2 <= 0.0 {
-                            return None;
-                        }
-                        let distance = d2.sqrt();
-                        (position, to_light / distance, distance, d2)
-                    }
-                };
+                let (position, wi, distance, d2) = strategy.point(tri, normal, p, u)?;
                 let cos_light = emitting_side_cosine(normal, double_sided, -wi)?;
                 Some(LightSample {
                     position,
@@ -239,28 +217,7 @@ impl LightSampler {
                     is_delta: false,
                 })
             }
-            Source::Point(i) => {
-                let light = &snapshot.lights[i];
-                let to_light = light.position - p;
-                let d2 = to_light.length_squared();
-                if d2 <= 0.0 {
-                    return None;
-                }
-                let distance = d2.sqrt();
-                let wi = to_light / distance;
-                let radiance = light.intensity_toward(-wi) / d2;
-                if radiance.max_element() <= 0.0 {
-                    return None;
-                }
-                Some(LightSample {
-                    position: light.position,
-                    wi,
-                    distance,
-                    radiance,
-                    pdf: pick_pdf,
-                    is_delta: true,
-                })
-            }
+            Source::Point(i) => point_light_sample(&snapshot.lights[i], p, pick_pdf),
         }
     }
 
@@ -291,6 +248,34 @@ impl LightSampler {
         }
         pick * TriangleStrategy::from(tri, origin, sampling).pdf(tri.area(), d2, cos_light)
     }
+}
+
+/// The sample of punctual light `light` for shading point `p`, picked with
+/// probability `pick_pdf`; `None` where it sends no light towards `p`.
+fn point_light_sample(
+    light: &crate::scene::PointLight,
+    p: Vec3,
+    pick_pdf: f32,
+) -> Option<LightSample> {
+    let to_light = light.position - p;
+    let d2 = to_light.length_squared();
+    if d2 <= 0.0 {
+        return None;
+    }
+    let distance = d2.sqrt();
+    let wi = to_light / distance;
+    let radiance = light.intensity_toward(-wi) / d2;
+    if radiance.max_element() <= 0.0 {
+        return None;
+    }
+    Some(LightSample {
+        position: light.position,
+        wi,
+        distance,
+        radiance,
+        pdf: pick_pdf,
+        is_delta: true,
+    })
 }
 
 /// Solid angles (sr) between which an emitting triangle is sampled by solid
@@ -329,6 +314,41 @@ impl TriangleStrategy {
             TriangleStrategy::SolidAngle(sphere)
         } else {
             TriangleStrategy::Area
+        }
+    }
+
+    /// A point on `tri` (unit normal `normal`) for shading point `p`, from
+    /// `u`: the point, the unit direction and distance to it from `p`, and
+    /// the distance²; `None` where it cannot be drawn.
+    fn point(
+        &self,
+        tri: &Triangle,
+        normal: Vec3,
+        p: Vec3,
+        u: Vec2,
+    ) -> Option<(Vec3, Vec3, f32, f32)> {
+        match self {
+            TriangleStrategy::SolidAngle(sphere) => {
+                // The direction is drawn: the point is where it meets the
+                // triangle's plane.
+                let wi = sphere.sample(u)?;
+                let distance = normal.dot(tri.p[0] - p) / normal.dot(wi);
+                if !(distance > 0.0 && distance.is_finite()) {
+                    return None;
+                }
+                Some((p + distance * wi, wi, distance, distance * distance))
+            }
+            TriangleStrategy::Area => {
+                let (bu, bv) = uniform_triangle(u);
+                let position = tri.point(bu, bv);
+                let to_light = position - p;
+                let d2 = to_light.length_squared();
+                if d2 <= 0.0 {
+                    return None;
+                }
+                let distance = d2.sqrt();
+                Some((position, to_light / distance, distance, d2))
+            }
         }
     }
 
