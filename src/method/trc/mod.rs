@@ -340,32 +340,12 @@ impl TemporalRadianceCaching {
             }
         };
         let e1 = next_gather.irradiance;
-        // Eq. 7: τ = E1/E0 per channel; the worst channel decides.
-        let change = (0..3)
-            .map(|c| {
-                let (a, b) = (e0[c], e1[c]);
-                if a > 0.0 {
-                    (b / a - 1.0).abs()
-                } else if b > 0.0 {
-                    f32::INFINITY
-                } else {
-                    0.0
-                }
-            })
-            .fold(0.0f32, f32::max);
-        // Eq. 9–10: 1/(|τ−1|(t−t0)) ≥ 1/a^t ⇔ t − t0 ≤ a^t/|τ−1|;
-        // Eq. 11: t − t0 < δt_max.
-        let max_age = self.settings.max_life.max(1) - 1;
-        let age = if change > 0.0 {
-            let a = (self.settings.temporal_accuracy / change).floor();
-            if a.is_finite() {
-                (a as u32).min(max_age)
-            } else {
-                max_age
-            }
-        } else {
-            max_age
-        };
+        let change = relative_change(e0, e1);
+        let age = frames_of_validity(
+            change,
+            self.settings.temporal_accuracy,
+            self.settings.max_life,
+        );
         let sub = |a: [Vec3; 3], b: [Vec3; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
         TemporalRecord {
             record: g.record.clone(),
@@ -825,4 +805,64 @@ fn back_face_share(ctx: &FrameContext, g: &Gathered) -> f32 {
         .filter(|(hit, &dir)| is_inside_of_moving(hit.triangle, dir))
         .count();
     back as f32 / g.hits.len().max(1) as f32
+}
+/// `|τ − 1|` of TRC Eq. 7, `τ = E(t0+1)/E(t0)` per channel: the worst
+/// channel decides. A channel dark at t0 that lights up is an infinite
+/// change; one dark at both is none.
+fn relative_change(e0: Vec3, e1: Vec3) -> f32 {
+    (0..3)
+        .map(|c| {
+            let (a, b) = (e0[c], e1[c]);
+            if a > 0.0 {
+                (b / a - 1.0).abs()
+            } else if b > 0.0 {
+                f32::INFINITY
+            } else {
+                0.0
+            }
+        })
+        .fold(0.0f32, f32::max)
+}
+
+/// How many frames after t0 a record whose irradiance changes by `change`
+/// a frame stays valid. Eq. 9–10: `1/(|τ−1|(t−t0)) ≥ 1/a^t ⇔ t − t0 ≤
+/// a^t/|τ−1|`; Eq. 11: `t − t0 < δt_max`.
+fn frames_of_validity(change: f32, temporal_accuracy: f32, max_life: u32) -> u32 {
+    let max_age = max_life.max(1) - 1;
+    if change <= 0.0 {
+        return max_age;
+    }
+    let a = (temporal_accuracy / change).floor();
+    if a.is_finite() {
+        (a as u32).min(max_age)
+    } else {
+        max_age
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The worst channel decides; a channel that lights up from black is an
+    /// infinite change, one black at both frames none.
+    #[test]
+    fn relative_change_is_the_worst_channel() {
+        let e0 = Vec3::new(1.0, 2.0, 0.0);
+        assert!((relative_change(e0, Vec3::new(1.01, 1.9, 0.0)) - 0.05).abs() < 1e-6);
+        assert_eq!(relative_change(e0, e0), 0.0);
+        assert_eq!(relative_change(e0, Vec3::new(1.0, 2.0, 0.1)), f32::INFINITY);
+    }
+
+    /// Eq. 9–11 with `a^t = 0.05`, `δt_max = 20`: 1 % a frame stays valid 5
+    /// frames after t0, 6 % none, and no change at most 19 (t − t0 < 20).
+    #[test]
+    fn validity_follows_the_temporal_weight_and_the_lifespan_bound() {
+        assert_eq!(frames_of_validity(0.01, 0.05, 20), 5);
+        assert_eq!(frames_of_validity(0.06, 0.05, 20), 0);
+        assert_eq!(frames_of_validity(0.0, 0.05, 20), 19);
+        assert_eq!(frames_of_validity(0.001, 0.05, 20), 19);
+        assert_eq!(frames_of_validity(f32::INFINITY, 0.05, 20), 0);
+        assert_eq!(frames_of_validity(0.0, 0.05, 1), 0);
+    }
 }
