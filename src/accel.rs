@@ -143,6 +143,12 @@ impl TriangleBvh {
         }
     }
 
+    /// Whether some triangle of this BVH lies on `ray` (an any-hit query
+    /// outside a backend: `trc`'s estimate of the next frame's shadows).
+    pub fn occludes(&self, ray: &Ray) -> bool {
+        self.occluded(&to_obvhs_ray(ray))
+    }
+
     #[inline]
     fn occluded(&self, ray: &obvhs::ray::Ray) -> bool {
         !self.bvh.ray_traverse_miss(*ray, |r, i| {

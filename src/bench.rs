@@ -78,6 +78,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("max_life", "20"),
             ("gradients", "extrapolated"),
             ("reprojection", "1"),
+            ("next_direct", "0"),
             ("spp", "4"),
             ("accuracy", "0.2"),
             ("strata", "16x48"),
@@ -238,6 +239,7 @@ pub fn method_settings(
                         }
                     }
                     "reprojection" => s.reprojection = value::<u8>(method, key, v, 0..2)? == 1,
+                    "next_direct" => s.next_direct = value::<u8>(method, key, v, 0..2)? == 1,
                     // `gradients` above names the temporal ones; the
                     // rest are `ic`'s, whose records `trc` makes.
                     _ => {

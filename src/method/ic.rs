@@ -77,7 +77,7 @@ impl Default for IcSettings {
 }
 
 /// Tags the random streams of record gathering apart from pixel sampling.
-const RECORD_STREAM: u64 = 1 << 62;
+pub(crate) const RECORD_STREAM: u64 = 1 << 62;
 
 /// The random streams of a record first gathered at `pixel`'s candidate in
 /// this frame: frame and pixel (the pixel alone with `--same-pattern`).

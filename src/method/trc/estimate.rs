@@ -3,6 +3,7 @@
 //! and lights (TRC §4.7, Fig. 6). How well it does against E(t0+1)
 //! gathered again is measured in the parent module's documentation.
 
+use super::direct::{DirectChange, FirstHit, StaticGeometry};
 use super::Gathered;
 use crate::backend::Hit;
 use crate::cache::gather::HemisphereSamples;
@@ -23,6 +24,9 @@ pub(super) struct NextFrame {
     lights: (Vec<Emitter>, Vec<Emitter>),
     /// Whether some light moves from t to t+1.
     lights_move: bool,
+    /// The direct light at the samples' first hits at t and t+1 (`None`
+    /// when nothing moves).
+    direct: Option<DirectChange>,
 }
 
 /// A light reduced to what the unshadowed direct-light ratio needs.
@@ -40,10 +44,13 @@ enum Emitter {
 }
 
 impl NextFrame {
-    pub(super) fn new(ctx: &FrameContext) -> Self {
+    /// What changes after `ctx`'s frame; with `next_direct`, also the
+    /// geometry the samples' direct light at t+1 needs, `statics` keeping
+    /// the static triangles' BVH from frame to frame.
+    pub(super) fn new(ctx: &FrameContext, next_direct: bool, statics: &mut StaticGeometry) -> Self {
         let now = ctx.snapshot;
         let later = ctx.scene.snapshot(ctx.time_of(ctx.frame + 1));
-        let motion = now
+        let motion: Vec<Option<Mat4>> = now
             .object_to_world
             .iter()
             .zip(&later.object_to_world)
@@ -53,10 +60,15 @@ impl NextFrame {
             })
             .collect();
         let (l0, l1) = (emitters(ctx, now), emitters(ctx, &later));
+        let lights_move = !same_lights(&l0, &l1);
+        let objects_move = motion.iter().any(Option::is_some);
         NextFrame {
             motion,
-            lights_move: !same_lights(&l0, &l1),
+            lights_move,
             lights: (l0, l1),
+            direct: next_direct
+                .then(|| DirectChange::new(ctx, later, (objects_move, lights_move), statics))
+                .flatten(),
         }
     }
 }
@@ -149,7 +161,7 @@ fn direct_irradiance(lights: &[Emitter], p: Vec3, n: Vec3) -> Vec3 {
 /// objects and light sources"): shadowing is assumed unchanged and the hit's
 /// own indirect light assumed to scale with its direct light.
 pub(super) fn reproject(
-    snapshot: &Snapshot,
+    ctx: &FrameContext,
     next: &NextFrame,
     g: &Gathered,
     m: u32,
@@ -159,7 +171,7 @@ pub(super) fn reproject(
     let frame = Frame::new(g.record.normal);
     let mut own = g.samples.radiance.clone();
     for (i, own) in own.iter_mut().enumerate() {
-        if let Some((cell, sample)) = reproject_sample(snapshot, next, g, &frame, &grid, i) {
+        if let Some((cell, sample)) = reproject_sample(ctx, next, g, &frame, &grid, i) {
             *own = sample.radiance;
             grid.keep_nearest(cell, sample);
         }
@@ -309,7 +321,7 @@ impl HemisphereGrid {
 /// with its object (static hits and misses stay in their cells), and its
 /// radiance follows moving lights ([`light_ratio`]).
 fn reproject_sample(
-    snapshot: &Snapshot,
+    ctx: &FrameContext,
     next: &NextFrame,
     g: &Gathered,
     frame: &Frame,
@@ -341,9 +353,23 @@ fn reproject_sample(
         None => (i, dist, None),
     };
     let mut radiance = s.radiance[i];
-    if let Some(hit) = g.hits.get(i).filter(|h| next.lights_move && h.is_hit()) {
-        let (l0, l1) = &next.lights;
-        radiance *= light_ratio(snapshot, hit, dir, hit_point, moved, l0, l1);
+    if let Some(hit) = g.hits.get(i).filter(|h| h.is_hit()) {
+        let ratio = if next.lights_move {
+            let (l0, l1) = &next.lights;
+            light_ratio(ctx.snapshot, hit, dir, hit_point, moved, l0, l1)
+        } else {
+            Vec3::ONE
+        };
+        radiance *= ratio;
+        if let Some(direct) = &next.direct {
+            let at = FirstHit {
+                sample: i,
+                hit,
+                point: hit_point,
+                moved,
+            };
+            radiance += direct.change(ctx, g, &at, ratio);
+        }
     }
     let sample = CellSample {
         depth,

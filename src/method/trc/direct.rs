@@ -1,0 +1,215 @@
+//! The direct light at the first hits of a record's hemisphere samples, at
+//! t0 and at t0+1: how the E(t0+1) estimate sees shadows move.
+//!
+//! TRC §5 has the shaders that rasterize a record's hemisphere at t0 output
+//! "an estimate of the position and incoming lighting at time t+1 of each
+//! point visible", and §4.7 estimates the outgoing radiance of the
+//! reprojected points "by accounting for the rotation and displacement of
+//! both objects and light sources". Moving the first hits with their
+//! objects accounts for what the record sees; what lights those hits
+//! changes too, most often through a moving object's shadow falling on a
+//! static surface the record sees. Here each sample's one-bounce part is
+//! evaluated again at t0+1: one light sample at its first hit with the
+//! same random numbers at both times, its shadow ray traced in the
+//! geometry of each, and the difference added to the sample's radiance.
+//! The light sample's own noise then cancels wherever nothing changed.
+
+use super::Gathered;
+use crate::accel::TriangleBvh;
+use crate::backend::{Hit, Ray};
+use crate::integrator::offset_origin;
+use crate::light::{LightSampler, TriangleSampling};
+use crate::material::Bsdf;
+use crate::method::ic::RECORD_STREAM;
+use crate::method::FrameContext;
+use crate::sampling::{LightChoice, Rng, SampleKey};
+use crate::scene::Snapshot;
+use glam::{Mat4, Vec3};
+use std::sync::Arc;
+
+/// The static triangles' BVH, built once a render (while the static part's
+/// fingerprint holds) and shared by every frame's [`DirectChange`].
+#[derive(Default)]
+pub(super) struct StaticGeometry {
+    fingerprint: Option<u64>,
+    bvh: Option<Arc<TriangleBvh>>,
+}
+
+impl StaticGeometry {
+    /// The BVH of `snapshot`'s static triangles (`None`: there are none).
+    fn of(&mut self, snapshot: &Snapshot) -> Option<Arc<TriangleBvh>> {
+        let fingerprint = snapshot.static_fingerprint();
+        if self.fingerprint != Some(fingerprint) {
+            self.bvh = TriangleBvh::build(snapshot, 0..snapshot.static_count).map(Arc::new);
+            self.fingerprint = Some(fingerprint);
+        }
+        self.bvh.clone()
+    }
+}
+
+/// The geometry and lights of t0 and t0+1 that the direct light at a
+/// sample's first hit depends on.
+pub(super) struct DirectChange {
+    statics: Option<Arc<TriangleBvh>>,
+    /// The moving objects' triangles at t0 and at t0+1.
+    moving: [Option<TriangleBvh>; 2],
+    later: Snapshot,
+    later_lights: LightSampler,
+    lights_move: bool,
+}
+
+/// The first hit of a record's hemisphere sample.
+pub(super) struct FirstHit<'a> {
+    /// The sample's index in the gather.
+    pub sample: usize,
+    pub hit: &'a Hit,
+    /// Where it lies at t0.
+    pub point: Vec3,
+    /// Its object's motion to t0+1 and where that takes it; `None`: it
+    /// stays.
+    pub moved: Option<(Mat4, Vec3)>,
+}
+
+/// A first hit as the direct light there needs it.
+struct Shading {
+    p: Vec3,
+    ng: Vec3,
+    /// Towards the record.
+    wo: Vec3,
+    bsdf: Bsdf,
+}
+
+impl DirectChange {
+    /// `None` when nothing moves from t0 to t0+1 (no object, no light):
+    /// then no sample's direct light changes.
+    pub(super) fn new(
+        ctx: &FrameContext,
+        later: Snapshot,
+        (objects_move, lights_move): (bool, bool),
+        statics: &mut StaticGeometry,
+    ) -> Option<Self> {
+        let now = ctx.snapshot;
+        if !objects_move && !lights_move {
+            return None;
+        }
+        let moving = |s: &Snapshot| TriangleBvh::build(s, s.static_count..s.triangles.len());
+        Some(DirectChange {
+            statics: statics.of(now),
+            moving: [moving(now), moving(&later)],
+            later_lights: LightSampler::new(&later, &ctx.scene.materials),
+            later,
+            lights_move,
+        })
+    }
+
+    /// `D(t0+1) − ratio·D(t0)` for the sample of `g` whose first hit is
+    /// `at`: `D` one light sample's direct light reflected by the hit
+    /// towards the record, shadowed in the geometry of its time. `ratio` is
+    /// what the caller scaled the whole sample by for moving lights
+    /// (`light_ratio`): the direct part it scaled is replaced by `D(t0+1)`.
+    pub(super) fn change(
+        &self,
+        ctx: &FrameContext,
+        g: &Gathered,
+        at: &FirstHit,
+        ratio: Vec3,
+    ) -> Vec3 {
+        let choice = self.light_choice(ctx, g, at.sample);
+        let before = shading(ctx, ctx.snapshot, at.hit, at.point, g.record.position)
+            .and_then(|s| unoccluded(ctx.snapshot, ctx.lights, &s, choice));
+        if at.moved.is_none() && !self.lights_move {
+            // The same shadow ray at both times: only moving objects on it
+            // can change what it sees.
+            return before.map_or(Vec3::ZERO, |(ray, d)| self.visibility_change(&ray) * d);
+        }
+        let p1 = at.moved.map_or(at.point, |(_, p)| p);
+        let after = shading(ctx, &self.later, at.hit, p1, g.record.position)
+            .and_then(|s| unoccluded(&self.later, &self.later_lights, &s, choice));
+        let lit = |sample: Option<(Ray, Vec3)>, t: usize| {
+            sample.map_or(Vec3::ZERO, |(ray, d)| {
+                if self.occluded(&ray, t) {
+                    Vec3::ZERO
+                } else {
+                    d
+                }
+            })
+        };
+        lit(after, 1) - ratio * lit(before, 0)
+    }
+
+    /// The light sample of sample `i` of `g`: the same random numbers at
+    /// t0 and t0+1, a stream of the record's own keyed with the frame
+    /// (which its gather's streams are not).
+    fn light_choice(&self, ctx: &FrameContext, g: &Gathered, i: usize) -> LightChoice {
+        let mut rng = Rng::new(SampleKey {
+            seed: ctx.seed,
+            frame: Some(ctx.frame),
+            item: RECORD_STREAM | g.candidate.stream,
+            sample: i as u32,
+        });
+        LightChoice {
+            pick: rng.next_f32(),
+            u: rng.next_2d(),
+        }
+    }
+
+    /// +1 where `ray` is blocked at t0 and clear at t0+1, −1 the other way
+    /// round, 0 where nothing changed.
+    fn visibility_change(&self, ray: &Ray) -> f32 {
+        let blocked = |t: usize| self.moving[t].as_ref().is_some_and(|b| b.occludes(ray));
+        let (before, after) = (blocked(0), blocked(1));
+        if before == after || self.statics.as_ref().is_some_and(|b| b.occludes(ray)) {
+            0.0
+        } else if before {
+            1.0
+        } else {
+            -1.0
+        }
+    }
+
+    /// Whether `ray` is blocked at t0 (`t` = 0) or t0+1 (`t` = 1).
+    fn occluded(&self, ray: &Ray, t: usize) -> bool {
+        self.moving[t].as_ref().is_some_and(|b| b.occludes(ray))
+            || self.statics.as_ref().is_some_and(|b| b.occludes(ray))
+    }
+}
+
+/// The first hit `hit` (of triangle `hit.triangle` in `snapshot`) at `p`,
+/// seen from the record at `record`; `None` where it reflects nothing.
+fn shading(
+    ctx: &FrameContext,
+    snapshot: &Snapshot,
+    hit: &Hit,
+    p: Vec3,
+    record: Vec3,
+) -> Option<Shading> {
+    let tri = &snapshot.triangles[hit.triangle as usize];
+    let material = &ctx.scene.materials[snapshot.tri_material[hit.triangle as usize] as usize];
+    let wo = (record - p).normalize_or_zero();
+    let bsdf = Bsdf::new(material, tri.shading_normal(hit.u, hit.v), wo);
+    (!bsdf.is_black()).then(|| Shading {
+        p,
+        ng: tri.geometric_normal(),
+        wo,
+        bsdf,
+    })
+}
+
+/// One light sample's direct light at `s` towards the record, unshadowed,
+/// and its shadow ray. Points on area lights are drawn by area, as at the
+/// vertices of the gather's paths.
+fn unoccluded(
+    snapshot: &Snapshot,
+    lights: &LightSampler,
+    s: &Shading,
+    choice: LightChoice,
+) -> Option<(Ray, Vec3)> {
+    let ls = lights.sample(snapshot, s.p, choice, TriangleSampling::Area)?;
+    let cos = s.bsdf.normal().dot(ls.wi);
+    let f = s.bsdf.eval(s.wo, ls.wi);
+    if cos <= 0.0 || f.max_element() <= 0.0 {
+        return None;
+    }
+    let ray = Ray::segment(offset_origin(s.p, s.ng, ls.wi), ls.position);
+    Some((ray, f * ls.radiance * (cos / ls.pdf)))
+}
