@@ -43,7 +43,10 @@
 //!   per frame (constant: 1.34 %, reprojection 1.50 %; then 1.09 % and
 //!   1.30 %). The others change by 3.7 % on average (3.5 % then: moving
 //!   shadows on what they see, or records on the cube, which stay fixed in
-//!   world space), and no reprojection of first hits can see that;
+//!   world space), and no reprojection of first hits can see that (the
+//!   optional `direct` estimate evaluates each sample's direct light again
+//!   at t0+1 and sees the shadows: 3.15 % mean, 0.59 % median, at
+//!   8969d42);
 //! - with the same streams, a static sample's noise cancels exactly between
 //!   E(t0) and the regathered E(t0+1), while a reprojected sample lands in
 //!   a cell whose actual sample has other noise: the comparison favours the
