@@ -122,13 +122,11 @@ impl DirectChange {
         ratio: Vec3,
     ) -> Vec3 {
         let choice = self.light_choice(ctx, g, at.sample);
+        if at.moved.is_none() && !self.lights_move {
+            return self.shadow_change(ctx, g, at, choice);
+        }
         let before = shading(ctx, ctx.snapshot, at.hit, at.point, g.record.position)
             .and_then(|s| unoccluded(ctx.snapshot, ctx.lights, &s, choice));
-        if at.moved.is_none() && !self.lights_move {
-            // The same shadow ray at both times: only moving objects on it
-            // can change what it sees.
-            return before.map_or(Vec3::ZERO, |(ray, d)| self.visibility_change(&ray) * d);
-        }
         let p1 = at.moved.map_or(at.point, |(_, p)| p);
         let after = shading(ctx, &self.later, at.hit, p1, g.record.position)
             .and_then(|s| unoccluded(&self.later, &self.later_lights, &s, choice));
@@ -142,6 +140,37 @@ impl DirectChange {
             })
         };
         lit(after, 1) - ratio * lit(before, 0)
+    }
+
+    /// [`Self::change`] for a hit that stays under lights that stay: the
+    /// same shadow ray at both times, so only moving objects on it can
+    /// change what it sees. The hit is shaded only where they do (most
+    /// samples' rays cross no moving object at either time).
+    fn shadow_change(
+        &self,
+        ctx: &FrameContext,
+        g: &Gathered,
+        at: &FirstHit,
+        choice: LightChoice,
+    ) -> Vec3 {
+        let snapshot = ctx.snapshot;
+        let ng = snapshot.triangles[at.hit.triangle as usize].geometric_normal();
+        let Some(ls) = ctx
+            .lights
+            .sample(snapshot, at.point, choice, TriangleSampling::Area)
+        else {
+            return Vec3::ZERO;
+        };
+        let sign = self.visibility_change(&Ray::segment(
+            offset_origin(at.point, ng, ls.wi),
+            ls.position,
+        ));
+        if sign == 0.0 {
+            return Vec3::ZERO;
+        }
+        shading(ctx, snapshot, at.hit, at.point, g.record.position)
+            .and_then(|s| unoccluded(snapshot, ctx.lights, &s, choice))
+            .map_or(Vec3::ZERO, |(_, d)| sign * d)
     }
 
     /// The light sample of sample `i` of `g`: the same random numbers at

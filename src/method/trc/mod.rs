@@ -59,6 +59,11 @@
 //!   their new place and normal (for moving objects, not only moving
 //!   lights) made it worse (mean 3.05 %, median 0.62 %), so it is applied
 //!   only when lights move.
+//!
+//! Where the light moves, reprojection helps as in the paper: on
+//! `moving-light` (24×24, 6 fps, frames 5 and 20, 289 records, at 8969d42;
+//! test `reprojection_follows_a_moving_light_better_than_constant`) mean
+//! 2.66 % / median 0.74 % against 4.06 % / 1.70 % constant.
 
 mod direct;
 mod estimate;
