@@ -1261,6 +1261,8 @@ pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<Path
     Ok(vec![error, surfaces, flicker, surface_flicker])
 }
 
+/// A chart of `y_of` against time on log axes, one line per method sweep
+/// ([`series`]), written as SVG to `path`.
 fn plot(
     path: &Path,
     title: &str,
@@ -1278,27 +1280,9 @@ fn plot(
     let x_range = log_range(rows.iter().filter(usable).map(|r| r.seconds));
     let y_range = log_range(rows.iter().filter(usable).filter_map(&y_of));
 
-    let (x_ticks, x_grid) = log_ticks(&x_range);
-    let (y_ticks, y_grid) = log_ticks(&y_range);
-
     let root = SVGBackend::new(path, (820, 580)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(&e))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 22))
-        .margin(18)
-        .x_label_area_size(52)
-        .y_label_area_size(78)
-        .build_cartesian_2d(
-            x_range
-                .log_scale()
-                .with_key_points(x_ticks)
-                .with_light_points(x_grid),
-            y_range
-                .log_scale()
-                .with_key_points(y_ticks)
-                .with_light_points(y_grid),
-        )
-        .map_err(|e| draw_err(&e))?;
+    let mut chart = log_log_chart(&root, title, x_range, y_range).map_err(|e| draw_err(&e))?;
     chart
         .configure_mesh()
         .x_desc(format!(
@@ -1317,36 +1301,18 @@ fn plot(
 
     let mut any = false;
     for (i, (name, sweep)) in series(rows).into_iter().enumerate() {
-        let color = Palette99::pick(i).to_rgba();
-        let mut pts: Vec<(f64, f64, String)> = sweep
+        let mut points: Vec<(f64, f64, String)> = sweep
             .iter()
             .copied()
             .filter(usable)
             .map(|r| (r.seconds, y_of(r).unwrap_or(f64::NAN), point_label(r)))
             .collect();
-        if pts.is_empty() {
+        if points.is_empty() {
             continue;
         }
         any = true;
-        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        chart
-            .draw_series(LineSeries::new(
-                pts.iter().map(|p| (p.0, p.1)),
-                color.stroke_width(2),
-            ))
-            .map_err(|e| draw_err(&e))?
-            .label(name)
-            .legend(move |(x, y)| {
-                EmptyElement::at((x, y))
-                    + PathElement::new(vec![(0, 0), (22, 0)], color.stroke_width(2))
-                    + Circle::new((11, 0), 4, color.filled())
-            });
-        chart
-            .draw_series(pts.iter().map(|(x, y, label)| {
-                EmptyElement::at((*x, *y))
-                    + Circle::new((0, 0), 4, color.filled())
-                    + Text::new(label.clone(), (6, -16), ("sans-serif", 13))
-            }))
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        draw_sweep(&mut chart, name, Palette99::pick(i).to_rgba(), &points)
             .map_err(|e| draw_err(&e))?;
     }
     if any {
@@ -1367,6 +1333,76 @@ fn plot(
         .map_err(|e| draw_err(&e))?;
     }
     root.present().map_err(|e| draw_err(&e))?;
+    Ok(())
+}
+
+/// The SVG chart area, its axes logarithmic over the ranges, with ticks at
+/// 1–2–5 steps ([`log_ticks`]).
+type LogLogChart<'a> = plotters::chart::ChartContext<
+    'a,
+    plotters::backend::SVGBackend<'a>,
+    plotters::coord::cartesian::Cartesian2d<
+        plotters::coord::combinators::WithKeyPoints<plotters::coord::combinators::LogCoord<f64>>,
+        plotters::coord::combinators::WithKeyPoints<plotters::coord::combinators::LogCoord<f64>>,
+    >,
+>;
+
+/// Builds [`LogLogChart`] on `root` with a caption.
+fn log_log_chart<'a>(
+    root: &plotters::drawing::DrawingArea<
+        plotters::backend::SVGBackend<'a>,
+        plotters::coord::Shift,
+    >,
+    title: &str,
+    x_range: std::ops::Range<f64>,
+    y_range: std::ops::Range<f64>,
+) -> Result<LogLogChart<'a>, plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
+    use plotters::prelude::*;
+    let (x_ticks, x_grid) = log_ticks(&x_range);
+    let (y_ticks, y_grid) = log_ticks(&y_range);
+    ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 22))
+        .margin(18)
+        .x_label_area_size(52)
+        .y_label_area_size(78)
+        .build_cartesian_2d(
+            x_range
+                .log_scale()
+                .with_key_points(x_ticks)
+                .with_light_points(x_grid),
+            y_range
+                .log_scale()
+                .with_key_points(y_ticks)
+                .with_light_points(y_grid),
+        )
+}
+
+/// One method sweep: its points `(seconds, y, label)` joined in time
+/// order, each marked and labelled with its swept value, and a legend
+/// entry `name`.
+fn draw_sweep(
+    chart: &mut LogLogChart,
+    name: String,
+    color: plotters::style::RGBAColor,
+    points: &[(f64, f64, String)],
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
+    use plotters::prelude::*;
+    chart
+        .draw_series(LineSeries::new(
+            points.iter().map(|p| (p.0, p.1)),
+            color.stroke_width(2),
+        ))?
+        .label(name)
+        .legend(move |(x, y)| {
+            EmptyElement::at((x, y))
+                + PathElement::new(vec![(0, 0), (22, 0)], color.stroke_width(2))
+                + Circle::new((11, 0), 4, color.filled())
+        });
+    chart.draw_series(points.iter().map(|(x, y, label)| {
+        EmptyElement::at((*x, *y))
+            + Circle::new((0, 0), 4, color.filled())
+            + Text::new(label.clone(), (6, -16), ("sans-serif", 13))
+    }))?;
     Ok(())
 }
 
