@@ -194,6 +194,16 @@ pub struct TemporalRecord {
 }
 
 impl TemporalRecord {
+    /// Takes the radius neighbour clamping left in the frame's cache and
+    /// whether a pixel used the record; returns whether either changed
+    /// (its carried state must then be written again).
+    fn sync(&mut self, radius: f32, used: bool) -> bool {
+        let changed = self.record.radius.to_bits() != radius.to_bits() || self.used != used;
+        self.record.radius = radius;
+        self.used = used;
+        changed
+    }
+
     /// TRC Eq. 14: the record as it is used at frame `t` (temporal
     /// gradients applied to E and to both spatial gradients): extrapolated
     /// (Eq. 15–17), or interpolated towards its replacement `successor`
@@ -528,24 +538,14 @@ impl TemporalRadianceCaching {
             ..FrameRecords::default()
         });
         for ((r, in_cache), used) in alive.iter_mut().zip(cache.records()).zip(used) {
-            let used = used.load(Ordering::Relaxed);
-            let changed = r.record.radius.to_bits() != in_cache.radius.to_bits() || r.used != used;
-            r.record.radius = in_cache.radius;
-            r.used = used;
+            let changed = r.sync(in_cache.radius, used.load(Ordering::Relaxed));
             let new = r.record.created_frame == t;
             if new {
                 r.record.id = self.next_id;
                 self.next_id += 1;
             }
             if let Some(k) = kept.as_mut() {
-                if new {
-                    k.records.push(r.record.clone());
-                    k.last_frames.push(r.last_valid);
-                }
-                if new || changed {
-                    let put = &mut k.state.as_mut().expect("set above").put;
-                    put.push((r.record.id, state::encode_record(r)));
-                }
+                keep_for_store(k, r, new, changed);
             }
             if new {
                 lifespans[(r.lifespan() as usize).min(longest)] += 1;
@@ -825,6 +825,20 @@ fn back_face_share(ctx: &FrameContext, g: &Gathered) -> f32 {
         .count();
     back as f32 / g.hits.len().max(1) as f32
 }
+/// Adds record `r` of the frame to what the store writes of it: a `new`
+/// record with its samples' block and last frame; its carried state where
+/// it is new or `changed` (radius or used flag).
+fn keep_for_store(kept: &mut FrameRecords, r: &TemporalRecord, new: bool, changed: bool) {
+    if new {
+        kept.records.push(r.record.clone());
+        kept.last_frames.push(r.last_valid);
+    }
+    if new || changed {
+        let put = &mut kept.state.as_mut().expect("a temporal frame's state").put;
+        put.push((r.record.id, state::encode_record(r)));
+    }
+}
+
 /// `|τ − 1|` of TRC Eq. 7, `τ = E(t0+1)/E(t0)` per channel: the worst
 /// channel decides. A channel dark at t0 that lights up is an infinite
 /// change; one dark at both is none.
