@@ -189,56 +189,9 @@ fn state_report(store: &Store, id: u64) -> Result<Option<StateReport>, StoreErro
 }
 
 fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobReport, StoreError> {
-    let mut r = JobReport {
-        name: j.name.clone(),
-        id: j.id,
-        scene: j.scene.clone(),
-        scene_hash: j.scene_hash.clone(),
-        method: j.method.clone(),
-        settings: j.settings.clone(),
-        size: format!("{}x{}", j.width, j.height),
-        spp: j.spp,
-        fps: j.fps,
-        seed: j.seed,
-        frames: format!("{}..{}", j.frame_start, j.frame_end),
-        frames_done: j.frames_done,
-        last_frame: j.last_frame,
-        records: 0,
-        samples: 0,
-        samples_stored_bytes: 0,
-        samples_raw_bytes: 0,
-        exr_stored_bytes: 0,
-        exr_raw_bytes: 0,
-        record_value_bytes: 0,
-        record_block_bytes: 0,
-        lifespan_histogram: BTreeMap::new(),
-        frame_details: Vec::new(),
-        state: None,
-    };
+    let mut r = JobReport::of(j);
     r.state = state_report(store, j.id)?;
-    let mut per_frame: BTreeMap<u32, FrameReport> = BTreeMap::new();
-    for frame in store.frames_done(j.id)? {
-        let v = store.frame(j.id, frame)?.expect("listed frame exists");
-        r.exr_stored_bytes += u64::from(v.exr_stored_len);
-        r.exr_raw_bytes += v.exr_len;
-        let stats = store.frame_stats(j.id, frame)?.unwrap_or_default();
-        per_frame.insert(
-            frame,
-            FrameReport {
-                frame,
-                records_written: 0,
-                records_alive: stats.records_alive,
-                records_created: stats.records_created,
-                records_reused: stats.records_reused,
-                records_replaced: stats.records_replaced,
-                records_dropped: stats.records_dropped,
-                mean_lifespan: stats.mean_lifespan,
-                samples: 0,
-                exr_bytes: u64::from(v.exr_stored_len),
-                rays: stats.rays,
-            },
-        );
-    }
+    let mut per_frame = frame_reports(store, j.id, &mut r)?;
     // Records and samples: one streaming pass over the job's frames.
     for frame in store.frames_done(j.id)? {
         if let Some(v) = store.frame_records_value(j.id, frame)? {
@@ -267,6 +220,71 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
         None => per_frame.into_values().collect(),
     };
     Ok(r)
+}
+
+impl JobReport {
+    /// The report of job `j` before anything is read of its frames.
+    fn of(j: &JobValue) -> Self {
+        JobReport {
+            name: j.name.clone(),
+            id: j.id,
+            scene: j.scene.clone(),
+            scene_hash: j.scene_hash.clone(),
+            method: j.method.clone(),
+            settings: j.settings.clone(),
+            size: format!("{}x{}", j.width, j.height),
+            spp: j.spp,
+            fps: j.fps,
+            seed: j.seed,
+            frames: format!("{}..{}", j.frame_start, j.frame_end),
+            frames_done: j.frames_done,
+            last_frame: j.last_frame,
+            records: 0,
+            samples: 0,
+            samples_stored_bytes: 0,
+            samples_raw_bytes: 0,
+            exr_stored_bytes: 0,
+            exr_raw_bytes: 0,
+            record_value_bytes: 0,
+            record_block_bytes: 0,
+            lifespan_histogram: BTreeMap::new(),
+            frame_details: Vec::new(),
+            state: None,
+        }
+    }
+}
+
+/// Each finished frame of job `job` with its stored statistics (records
+/// and samples still to count), its EXR bytes added to `r`.
+fn frame_reports(
+    store: &Store,
+    job: u64,
+    r: &mut JobReport,
+) -> Result<BTreeMap<u32, FrameReport>, StoreError> {
+    let mut per_frame = BTreeMap::new();
+    for frame in store.frames_done(job)? {
+        let v = store.frame(job, frame)?.expect("listed frame exists");
+        r.exr_stored_bytes += u64::from(v.exr_stored_len);
+        r.exr_raw_bytes += v.exr_len;
+        let stats = store.frame_stats(job, frame)?.unwrap_or_default();
+        per_frame.insert(
+            frame,
+            FrameReport {
+                frame,
+                records_written: 0,
+                records_alive: stats.records_alive,
+                records_created: stats.records_created,
+                records_reused: stats.records_reused,
+                records_replaced: stats.records_replaced,
+                records_dropped: stats.records_dropped,
+                mean_lifespan: stats.mean_lifespan,
+                samples: 0,
+                exr_bytes: u64::from(v.exr_stored_len),
+                rays: stats.rays,
+            },
+        );
+    }
+    Ok(per_frame)
 }
 
 fn ratio(raw: u64, stored: u64) -> String {
