@@ -322,25 +322,7 @@ impl Store {
             Some(found) => Some(migrate::migrate(path, &db, &meta, found, target, steps)?),
             None => None,
         };
-        let meta_u64 = |key: &[u8]| {
-            v2::read_meta_u64(&meta, key).map_err(|detail| StoreError::Corrupt {
-                path: path.to_owned(),
-                tree: "meta",
-                key: keys::describe(key),
-                detail,
-            })
-        };
-        let committed = meta_u64(keys::META_SAMPLES_LOG_LEN)?;
-        let log_generation = meta_u64(keys::META_SAMPLES_LOG_GENERATION)?.unwrap_or(0);
-        let log_error = |detail: String| StoreError::SampleLog {
-            path: path.to_owned(),
-            file: path.join(samples::file_name(log_generation)),
-            detail,
-        };
-        let log = SampleLog::open(path, log_generation, committed).map_err(log_error)?;
-        // Only now that the current log opened: the leftovers of a
-        // compaction killed before or after its switch.
-        samples::remove_stale_logs(path, log_generation).map_err(log_error)?;
+        let (log_generation, log) = open_sample_log(path, &meta)?;
         let store = Store {
             path: path.to_owned(),
             meta,
@@ -354,30 +336,33 @@ impl Store {
             log: std::sync::Mutex::new(log),
             db,
         };
-        match version {
-            Some(_) => {}
-            None => {
-                let empty = TREES
-                    .iter()
-                    .all(|t| store.tree(t).map(|tree| tree.is_empty()).unwrap_or(false));
-                if existing && !empty {
-                    return Err(StoreError::NotAStore {
-                        path: path.to_owned(),
-                        detail: "sled database without a schema version in `meta`".into(),
-                    });
-                }
-                migrate::write_version(path, &store.meta, target)?;
-                store
-                    .meta
-                    .insert(
-                        keys::META_CREATED_BY,
-                        concat!("radcache ", env!("CARGO_PKG_VERSION")).as_bytes(),
-                    )
-                    .map_err(|e| StoreError::sled(path, e))?;
-                store.flush()?;
-            }
+        if version.is_none() {
+            store.initialize(existing, target)?;
         }
         Ok(store)
+    }
+
+    /// Makes a store without a schema version one of schema `target`: a
+    /// new directory (`existing` false), or an existing sled database with
+    /// nothing in it; anything else is not ours to take over.
+    fn initialize(&self, existing: bool, target: u32) -> Result<(), StoreError> {
+        let empty = TREES
+            .iter()
+            .all(|t| self.tree(t).map(|tree| tree.is_empty()).unwrap_or(false));
+        if existing && !empty {
+            return Err(StoreError::NotAStore {
+                path: self.path.clone(),
+                detail: "sled database without a schema version in `meta`".into(),
+            });
+        }
+        migrate::write_version(&self.path, &self.meta, target)?;
+        self.meta
+            .insert(
+                keys::META_CREATED_BY,
+                concat!("radcache ", env!("CARGO_PKG_VERSION")).as_bytes(),
+            )
+            .map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()
     }
 
     pub fn path(&self) -> &Path {
@@ -1046,6 +1031,31 @@ impl Store {
             .map_err(|e| StoreError::sled(&self.path, e))?;
         self.flush()
     }
+}
+
+/// The sample log of the store at `path` as `meta` describes it (its
+/// generation and committed length), cut back to that length, and the
+/// generation; the leftovers of a compaction killed before or after its
+/// switch are removed once the current log has opened.
+fn open_sample_log(path: &Path, meta: &sled::Tree) -> Result<(u64, SampleLog), StoreError> {
+    let meta_u64 = |key: &[u8]| {
+        v2::read_meta_u64(meta, key).map_err(|detail| StoreError::Corrupt {
+            path: path.to_owned(),
+            tree: "meta",
+            key: keys::describe(key),
+            detail,
+        })
+    };
+    let committed = meta_u64(keys::META_SAMPLES_LOG_LEN)?;
+    let generation = meta_u64(keys::META_SAMPLES_LOG_GENERATION)?.unwrap_or(0);
+    let log_error = |detail: String| StoreError::SampleLog {
+        path: path.to_owned(),
+        file: path.join(samples::file_name(generation)),
+        detail,
+    };
+    let log = SampleLog::open(path, generation, committed).map_err(log_error)?;
+    samples::remove_stale_logs(path, generation).map_err(log_error)?;
+    Ok((generation, log))
 }
 
 /// Fields of `spec` that differ from the stored job's (name and frame range
