@@ -156,6 +156,11 @@ fn estimate_errors(records: &[TemporalRecord], actual: &[Vec3]) -> Vec<(f32, f32
         .collect()
 }
 
+/// "mean M % median D %" of a [`mean_and_median`] pair of fractions.
+fn percent((mean, median): (f32, f32)) -> String {
+    format!("mean {:.2} % median {:.2} %", 100.0 * mean, 100.0 * median)
+}
+
 /// Mean and median of `v` (sorted in place).
 fn mean_and_median(v: &mut [f32]) -> (f32, f32) {
     v.sort_by(f32::total_cmp);
@@ -271,24 +276,19 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
             mean_and_median(&mut seeing.1),
         );
         eprintln!(
-            "records that see the moving cube: {}: reprojection mean {:.2} % median {:.2} %, none mean {:.2} % median {:.2} %",
+            "records that see the moving cube: {}: reprojection {}, none {}",
             seeing.0.len(),
-            100.0 * a.0,
-            100.0 * a.1,
-            100.0 * b.0,
-            100.0 * b.1
+            percent(a),
+            percent(b)
         );
     }
     let (mean_r, median_r) = mean_and_median(&mut errors.0);
     let (mean_n, median_n) = mean_and_median(&mut errors.1);
     eprintln!(
-        "E(t0+1) error over {} records: reprojection mean {:.2} % median {:.2} %, \
-         none mean {:.2} % median {:.2} %",
+        "E(t0+1) error over {} records: reprojection {}, none {}",
         errors.0.len(),
-        100.0 * mean_r,
-        100.0 * median_r,
-        100.0 * mean_n,
-        100.0 * median_n
+        percent((mean_r, median_r)),
+        percent((mean_n, median_n))
     );
     // With each sample's direct light evaluated again at t0+1, the
     // estimate also sees the cube's shadow move (`next_direct`).
@@ -307,9 +307,8 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
     }
     let (mean_d, median_d) = mean_and_median(&mut with_direct);
     eprintln!(
-        "with the direct light at t0+1: mean {:.2} % median {:.2} %",
-        100.0 * mean_d,
-        100.0 * median_d
+        "with the direct light at t0+1: {}",
+        percent((mean_d, median_d))
     );
     assert!(mean_d <= 1.05 * mean_n, "mean {mean_d} vs {mean_n}");
     assert!(
@@ -441,16 +440,12 @@ fn reprojection_predicts_a_moving_block_better_than_constant_in_mean() {
     let [(mean_r, median_r), (mean_d, median_d)] = reprojected.map(|mut v| mean_and_median(&mut v));
     let (mean_c, median_c) = mean_and_median(&mut constant);
     eprintln!(
-        "E(t0+1) error over {} records: reprojection with the direct light at t0+1 \
-         mean {:.2} % median {:.2} %, without it mean {:.2} % median {:.2} %, \
-         constant mean {:.2} % median {:.2} %",
+        "E(t0+1) error over {} records: reprojection with the direct light at t0+1 {}, \
+         without it {}, constant {}",
         constant.len(),
-        100.0 * mean_d,
-        100.0 * median_d,
-        100.0 * mean_r,
-        100.0 * median_r,
-        100.0 * mean_c,
-        100.0 * median_c
+        percent((mean_d, median_d)),
+        percent((mean_r, median_r)),
+        percent((mean_c, median_c))
     );
     assert!(mean_r < mean_c, "mean {mean_r} vs {mean_c}");
     assert!(mean_d < mean_r, "mean {mean_d} vs {mean_r}");
@@ -1158,13 +1153,10 @@ fn reprojection_follows_a_moving_light_better_than_constant() {
     let (mean_r, median_r) = mean_and_median(&mut reprojected);
     let (mean_c, median_c) = mean_and_median(&mut constant);
     eprintln!(
-        "E(t0+1) error over {} records under a moving light: reprojection mean {:.2} % \
-         median {:.2} %, constant mean {:.2} % median {:.2} %",
+        "E(t0+1) error over {} records under a moving light: reprojection {}, constant {}",
         reprojected.len(),
-        100.0 * mean_r,
-        100.0 * median_r,
-        100.0 * mean_c,
-        100.0 * median_c
+        percent((mean_r, median_r)),
+        percent((mean_c, median_c))
     );
     assert!(mean_r < mean_c, "mean {mean_r} vs {mean_c}");
     assert!(median_r < median_c, "median {median_r} vs {median_c}");
