@@ -622,78 +622,24 @@ impl GpuBackend {
         let dynamic_part = Part::build(self.bvh, snapshot, dynamic_range)?;
         let bvh_build = build_start.elapsed();
 
-        let g = &mut self.geometry;
-        let (static_nodes, static_triangles) = match &static_part {
+        let g = &self.geometry;
+        let static_size = match &static_part {
             Some(p) => (p.node_count() as u64, p.triangles.len() as u64),
             None => (g.static_nodes, g.static_triangles),
         };
-        let nodes_needed = (static_nodes + dynamic_part.node_count() as u64).max(1);
-        let triangles_needed = (static_triangles + dynamic_part.triangles.len() as u64).max(1);
-        let node_bytes = self.bvh.node_bytes();
-        check_binding_size("BVH nodes", nodes_needed, node_bytes, self.max_binding)?;
-        check_binding_size(
-            "triangles",
-            triangles_needed,
-            TRIANGLE_BYTES,
-            self.max_binding,
+        self.reserve_geometry(
+            &mut encoder,
+            static_size,
+            &dynamic_part,
+            static_part.is_none(),
         )?;
-        // Grow (never shrink) the buffers; a kept static part is copied over
-        // on the GPU, not uploaded again.
-        let keep_static = static_part.is_none();
-        let grow = Growth {
-            device: &self.device,
-            max_binding: self.max_binding,
-        };
-        let kept_nodes = if keep_static { static_nodes } else { 0 };
-        if let Some((buffer, cap)) = grow.buffer(
-            &mut encoder,
-            ("nodes", node_bytes),
-            (&g.nodes, g.node_capacity),
-            nodes_needed,
-            kept_nodes,
-        ) {
-            g.nodes = buffer;
-            g.node_capacity = cap;
-        }
-        let kept_triangles = if keep_static { static_triangles } else { 0 };
-        if let Some((buffer, cap)) = grow.buffer(
-            &mut encoder,
-            ("triangles", TRIANGLE_BYTES),
-            (&g.triangles, g.triangle_capacity),
-            triangles_needed,
-            kept_triangles,
-        ) {
-            g.triangles = buffer;
-            g.triangle_capacity = cap;
-        }
-
-        let mut static_upload = None;
-        if let Some(part) = static_part {
+        let static_upload = static_part.map(|part| {
             let start = Instant::now();
-            self.queue.write_buffer(&g.nodes, 0, part.node_bytes());
-            self.queue
-                .write_buffer(&g.triangles, 0, bytemuck::cast_slice(&part.triangles));
-            g.static_nodes = static_nodes;
-            g.static_triangles = static_triangles;
-            g.static_root = if part.node_count() == 0 { NONE } else { 0 };
-            g.static_fingerprint = fp;
-            static_upload = Some(start.elapsed());
-        }
+            self.upload_static(&part, fp);
+            start.elapsed()
+        });
         let start = Instant::now();
-        let mut dynamic = dynamic_part;
-        dynamic.offset(static_nodes as u32, static_triangles as u32);
-        if dynamic.node_count() > 0 {
-            self.queue
-                .write_buffer(&g.nodes, static_nodes * node_bytes, dynamic.node_bytes());
-            self.queue.write_buffer(
-                &g.triangles,
-                static_triangles * TRIANGLE_BYTES,
-                bytemuck::cast_slice(&dynamic.triangles),
-            );
-            g.dynamic_root = static_nodes as u32;
-        } else {
-            g.dynamic_root = NONE;
-        }
+        self.upload_dynamic(dynamic_part, static_size);
         self.queue.submit([encoder.finish()]);
         let dynamic_upload = start.elapsed();
         self.add_timings(|t| {
@@ -705,6 +651,91 @@ impl GpuBackend {
             }
         });
         Ok(())
+    }
+
+    /// Grows (never shrinks) the geometry buffers to hold a static part of
+    /// `(nodes, triangles)` followed by `dynamic`. With `keep_static`, the
+    /// static part already in the buffers is copied over on the GPU by
+    /// `encoder`, not uploaded again. An error where they would exceed a
+    /// storage binding.
+    fn reserve_geometry(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        (static_nodes, static_triangles): (u64, u64),
+        dynamic: &Part,
+        keep_static: bool,
+    ) -> Result<(), GpuError> {
+        let nodes_needed = (static_nodes + dynamic.node_count() as u64).max(1);
+        let triangles_needed = (static_triangles + dynamic.triangles.len() as u64).max(1);
+        let node_bytes = self.bvh.node_bytes();
+        check_binding_size("BVH nodes", nodes_needed, node_bytes, self.max_binding)?;
+        check_binding_size(
+            "triangles",
+            triangles_needed,
+            TRIANGLE_BYTES,
+            self.max_binding,
+        )?;
+        let grow = Growth {
+            device: &self.device,
+            max_binding: self.max_binding,
+        };
+        let g = &mut self.geometry;
+        let kept_nodes = if keep_static { static_nodes } else { 0 };
+        if let Some((buffer, cap)) = grow.buffer(
+            encoder,
+            ("nodes", node_bytes),
+            (&g.nodes, g.node_capacity),
+            nodes_needed,
+            kept_nodes,
+        ) {
+            g.nodes = buffer;
+            g.node_capacity = cap;
+        }
+        let kept_triangles = if keep_static { static_triangles } else { 0 };
+        if let Some((buffer, cap)) = grow.buffer(
+            encoder,
+            ("triangles", TRIANGLE_BYTES),
+            (&g.triangles, g.triangle_capacity),
+            triangles_needed,
+            kept_triangles,
+        ) {
+            g.triangles = buffer;
+            g.triangle_capacity = cap;
+        }
+        Ok(())
+    }
+
+    /// Writes a new static part (of fingerprint `fp`) at the front of the
+    /// geometry buffers.
+    fn upload_static(&mut self, part: &Part, fp: Option<u64>) {
+        let g = &mut self.geometry;
+        self.queue.write_buffer(&g.nodes, 0, part.node_bytes());
+        self.queue
+            .write_buffer(&g.triangles, 0, bytemuck::cast_slice(&part.triangles));
+        g.static_nodes = part.node_count() as u64;
+        g.static_triangles = part.triangles.len() as u64;
+        g.static_root = if part.node_count() == 0 { NONE } else { 0 };
+        g.static_fingerprint = fp;
+    }
+
+    /// Writes the dynamic part after a static part of `(nodes, triangles)`,
+    /// its node and triangle indices offset past it.
+    fn upload_dynamic(&mut self, mut dynamic: Part, (static_nodes, static_triangles): (u64, u64)) {
+        let g = &mut self.geometry;
+        dynamic.offset(static_nodes as u32, static_triangles as u32);
+        if dynamic.node_count() > 0 {
+            let node_bytes = self.bvh.node_bytes();
+            self.queue
+                .write_buffer(&g.nodes, static_nodes * node_bytes, dynamic.node_bytes());
+            self.queue.write_buffer(
+                &g.triangles,
+                static_triangles * TRIANGLE_BYTES,
+                bytemuck::cast_slice(&dynamic.triangles),
+            );
+            g.dynamic_root = static_nodes as u32;
+        } else {
+            g.dynamic_root = NONE;
+        }
     }
 
     /// [`RayBackend::closest_hit`] returning the device's errors.
