@@ -802,8 +802,10 @@ impl GpuBackend {
             let upload = start.elapsed();
 
             let start = Instant::now();
-            let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("rays"),
+            let bytes = n * result_bytes;
+            let pass = ComputePass {
+                label: "trace",
+                pipeline,
                 layout: &self.layout,
                 entries: &[
                     bind(0, &buffers.params),
@@ -812,24 +814,15 @@ impl GpuBackend {
                     bind(3, &self.geometry.triangles),
                     bind(4, &buffers.results),
                 ],
-            });
-            let mut encoder = self
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("trace"),
-                });
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("trace"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, &bind_group, &[]);
-                pass.dispatch_workgroups(groups_x, groups_y, 1);
-            }
-            let bytes = n * result_bytes;
-            encoder.copy_buffer_to_buffer(&buffers.results, 0, &buffers.staging, 0, bytes);
-            self.queue.submit([encoder.finish()]);
+                groups: (groups_x, groups_y),
+            };
+            pass.submit(
+                &self.device,
+                &self.queue,
+                |_| {},
+                &[(&buffers.results, bytes)],
+                &buffers.staging,
+            );
             let submitted = start.elapsed();
             let (waited, readback) = read_back(
                 &self.device,
@@ -916,6 +909,55 @@ pub(super) fn layout_entry(
 
 pub(super) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
     layout_entry(binding, wgpu::BufferBindingType::Storage { read_only })
+}
+
+/// One compute pass: `pipeline` over a `groups` grid of workgroups with
+/// the buffers `entries` bound as group 0 of `layout`, then each of
+/// `copies` (a buffer, a byte count) copied from its start into `staging`,
+/// one after the other; submitted. `prepare` encodes what must run before
+/// the pass (clearing a buffer).
+pub(super) struct ComputePass<'a> {
+    pub label: &'a str,
+    pub pipeline: &'a wgpu::ComputePipeline,
+    pub layout: &'a wgpu::BindGroupLayout,
+    pub entries: &'a [wgpu::BindGroupEntry<'a>],
+    pub groups: (u32, u32),
+}
+
+impl ComputePass<'_> {
+    pub(super) fn submit(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        prepare: impl FnOnce(&mut wgpu::CommandEncoder),
+        copies: &[(&wgpu::Buffer, u64)],
+        staging: &wgpu::Buffer,
+    ) {
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(self.label),
+            layout: self.layout,
+            entries: self.entries,
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some(self.label),
+        });
+        prepare(&mut encoder);
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some(self.label),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(self.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(self.groups.0, self.groups.1, 1);
+        }
+        let mut offset = 0;
+        for &(source, bytes) in copies {
+            encoder.copy_buffer_to_buffer(source, 0, staging, offset, bytes);
+            offset += bytes;
+        }
+        queue.submit([encoder.finish()]);
+    }
 }
 
 pub(super) fn bind(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {

@@ -48,7 +48,8 @@
 //! pass ([`CacheSplat::prepare`]); lookups per render tile.
 
 use super::gpu::{
-    bind, layout_entry, read_back, storage_entry, workgroup_grid, ErrorSlot, FailureSlot, GpuError,
+    bind, layout_entry, read_back, storage_entry, workgroup_grid, ComputePass, ErrorSlot,
+    FailureSlot, GpuError,
 };
 use crate::cache::{Interpolated, IrradianceRecord, LookupPoint};
 use bytemuck::{Pod, Zeroable};
@@ -164,6 +165,32 @@ struct SplatParams {
     _pad1: f32,
     dims: [u32; 3],
     _pad2: u32,
+}
+
+impl SplatParams {
+    /// The parameters of a dispatch of `lookup_count` lookups over
+    /// `prepared`'s grid, `groups_x` workgroups a row; `mark`: set the used
+    /// bits of the records used.
+    fn new(prepared: &PreparedCache, lookup_count: u32, groups_x: u32, mark: bool) -> Self {
+        let grid = &prepared.grid;
+        let mut flags = 0;
+        if prepared.gradients {
+            flags |= FLAG_GRADIENTS;
+        }
+        if mark {
+            flags |= FLAG_MARK;
+        }
+        SplatParams {
+            lookup_count,
+            row_width: groups_x * SPLAT_WORKGROUP_SIZE,
+            flags,
+            grid_min: grid.grid_min.to_array(),
+            threshold: grid.threshold,
+            inv_cell: [1.0 / grid.cell; 3],
+            dims: grid.dims,
+            ..SplatParams::default()
+        }
+    }
 }
 
 const _: () = assert!(std::mem::size_of::<GpuRecord>() == 144);
@@ -753,32 +780,16 @@ impl CacheSplat {
 
         let (groups_x, groups_y) =
             workgroup_grid(n as u32, SPLAT_WORKGROUP_SIZE, self.max_groups_per_dim);
-        let mut flags = 0;
-        if prepared.gradients {
-            flags |= FLAG_GRADIENTS;
-        }
-        if used.is_some() {
-            flags |= FLAG_MARK;
-        }
-        let params = SplatParams {
-            lookup_count: n as u32,
-            row_width: groups_x * SPLAT_WORKGROUP_SIZE,
-            flags,
-            grid_min: grid.grid_min.to_array(),
-            threshold: grid.threshold,
-            inv_cell: [1.0 / grid.cell; 3],
-            dims: grid.dims,
-            ..SplatParams::default()
-        };
+        let params = SplatParams::new(prepared, n as u32, groups_x, used.is_some());
         self.queue
             .write_buffer(&buffers.params, 0, bytemuck::bytes_of(&params));
         self.queue
             .write_buffer(&buffers.lookups.buffer, 0, bytemuck::cast_slice(lookups));
         let upload = start.elapsed();
         let start = Instant::now();
-
-        let bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("splat records"),
+        let pass = ComputePass {
+            label: "splat records",
+            pipeline: &self.pipeline,
             layout: &self.layout,
             entries: &[
                 bind(0, &buffers.params),
@@ -789,40 +800,30 @@ impl CacheSplat {
                 bind(5, &buffers.splats.buffer),
                 bind(6, &buffers.used.buffer),
             ],
-        });
-        let mut encoder = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("splat records"),
-            });
+            groups: (groups_x, groups_y),
+        };
+        // The used bits are set by the pass: cleared before it.
+        let used_buffer = &buffers.used.buffer;
+        let clear_used = |encoder: &mut wgpu::CommandEncoder| {
+            if used_bytes > 0 {
+                encoder.clear_buffer(used_buffer, 0, Some(used_bytes));
+            }
+        };
+        let mut copies = vec![(&buffers.splats.buffer, splat_bytes)];
         if used_bytes > 0 {
-            encoder.clear_buffer(&buffers.used.buffer, 0, Some(used_bytes));
+            copies.push((used_buffer, used_bytes));
         }
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("splat records"),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(groups_x, groups_y, 1);
-        }
-        let staging = &buffers.staging.buffer;
-        encoder.copy_buffer_to_buffer(&buffers.splats.buffer, 0, staging, 0, splat_bytes);
-        if used_bytes > 0 {
-            encoder.copy_buffer_to_buffer(
-                &buffers.used.buffer,
-                0,
-                staging,
-                splat_bytes,
-                used_bytes,
-            );
-        }
-        self.queue.submit([encoder.finish()]);
+        pass.submit(
+            &self.device,
+            &self.queue,
+            clear_used,
+            &copies,
+            &buffers.staging.buffer,
+        );
         let submitted = start.elapsed();
         let (waited, readback) = read_back(
             &self.device,
-            staging,
+            &buffers.staging.buffer,
             splat_bytes + used_bytes,
             "splat sums",
             &self.errors,
