@@ -220,29 +220,29 @@ struct Growth<'a> {
 }
 
 impl Growth<'_> {
-    /// A new buffer (`label`, elements of `size` bytes) and its capacity
-    /// when `needed` elements exceed the `old` buffer's capacity, with the
-    /// first `kept` elements of the old one copied over by `encoder`;
-    /// `None` when the old one is large enough.
-    fn buffer(
+    /// Replaces `buffer` (`label`, elements of `size` bytes, `capacity` of
+    /// them) by a larger one when `needed` elements exceed its capacity,
+    /// with its first `kept` elements copied over by `encoder`.
+    fn reserve(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         (label, size): (&str, u64),
-        (old, capacity): (&wgpu::Buffer, u64),
+        (buffer, capacity): (&mut wgpu::Buffer, &mut u64),
         needed: u64,
         kept: u64,
-    ) -> Option<(wgpu::Buffer, u64)> {
-        if needed <= capacity {
-            return None;
+    ) {
+        if needed <= *capacity {
+            return;
         }
         let cap = (needed + needed / 4)
             .min(self.max_binding / size)
             .max(needed);
-        let buffer = storage_buffer(self.device, label, cap * size);
+        let grown = storage_buffer(self.device, label, cap * size);
         if kept > 0 {
-            encoder.copy_buffer_to_buffer(old, 0, &buffer, 0, kept * size);
+            encoder.copy_buffer_to_buffer(buffer, 0, &grown, 0, kept * size);
         }
-        Some((buffer, cap))
+        *buffer = grown;
+        *capacity = cap;
     }
 }
 
@@ -680,28 +680,21 @@ impl GpuBackend {
             max_binding: self.max_binding,
         };
         let g = &mut self.geometry;
-        let kept_nodes = if keep_static { static_nodes } else { 0 };
-        if let Some((buffer, cap)) = grow.buffer(
+        let kept = |count: u64| if keep_static { count } else { 0 };
+        grow.reserve(
             encoder,
             ("nodes", node_bytes),
-            (&g.nodes, g.node_capacity),
+            (&mut g.nodes, &mut g.node_capacity),
             nodes_needed,
-            kept_nodes,
-        ) {
-            g.nodes = buffer;
-            g.node_capacity = cap;
-        }
-        let kept_triangles = if keep_static { static_triangles } else { 0 };
-        if let Some((buffer, cap)) = grow.buffer(
+            kept(static_nodes),
+        );
+        grow.reserve(
             encoder,
             ("triangles", TRIANGLE_BYTES),
-            (&g.triangles, g.triangle_capacity),
+            (&mut g.triangles, &mut g.triangle_capacity),
             triangles_needed,
-            kept_triangles,
-        ) {
-            g.triangles = buffer;
-            g.triangle_capacity = cap;
-        }
+            kept(static_triangles),
+        );
         Ok(())
     }
 
