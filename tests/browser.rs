@@ -164,9 +164,10 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
     );
     // Progress from the events.
     assert!(has("3/3 frames"), "{dom}");
-    // Charts: the paths the script drew (4 record series, time, 2 byte series).
+    // Charts: the paths the script drew (5 record series, lifespan, time,
+    // 2 byte series).
     let paths = dom.matches("class=\"series\"").count();
-    assert!(paths >= 7, "{paths} chart paths:\n{dom}");
+    assert!(paths >= 9, "{paths} chart paths:\n{dom}");
     // The record overlay: one dot per record alive in the last frame.
     let dots = dom.matches("class=\"record\"").count();
     let (_, records) = http(

@@ -142,6 +142,11 @@ fn job_renders_and_frames_match_the_cli() {
         .map(|f| f["frame"].as_u64().unwrap())
         .collect();
     assert_eq!(frames, [0, 1]);
+    // `path` keeps no records: none alive, none living.
+    for f in stats["frames"].as_array().unwrap() {
+        assert_eq!(f["records_alive"], 0, "{f}");
+        assert_eq!(f["mean_lifespan"], 0.0, "{f}");
+    }
 
     let (status, metrics) = http(&server, "GET", "/metrics", "");
     assert_eq!(status, 200);

@@ -274,8 +274,10 @@ function drawCharts() {
     series('alive', '#1565c0', (r) => r.records_alive),
     { ...series('created', '#2e7d32', (r) => r.records_created), dash: '5 3' },
     series('reused', '#f9a825', (r) => r.records_reused),
+    series('replaced', '#ef6c00', (r) => r.records_replaced),
     series('dropped', '#c62828', (r) => r.records_dropped),
   ], (v) => String(Math.round(v)));
+  lineChart($('chart-lifespan'), [series('mean lifespan', '#2e7d32', (r) => r.mean_lifespan || 0)], (v) => v.toFixed(1));
   lineChart($('chart-time'), [series('seconds', '#6a1b9a', (r) => r.seconds)], (v) => `${v.toPrecision(2)} s`);
   lineChart($('chart-bytes'), [
     series('frame EXR (stored)', '#00838f', (r) => r.exr_bytes || 0),

@@ -79,6 +79,7 @@ pub fn frame_stats_json(state: &AppState, sid: u64, frame: u32) -> Result<Option
         "records_reused": s.records_reused,
         "records_replaced": s.records_replaced,
         "records_dropped": s.records_dropped,
+        "mean_lifespan": s.mean_lifespan,
         "lookups": s.lookups,
         "rays": s.rays,
         "phase_seconds": phases,
