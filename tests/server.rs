@@ -478,6 +478,29 @@ fn records_match_the_store_and_inspect() {
         trc_counts.push(r["count"].as_u64().unwrap());
     }
     assert!(trc_counts[0] > 0);
+    // Frame 0 computed every record alive in it: the stats' mean lifespan
+    // is theirs, from the records' own first and last frames.
+    let (_, r) = http(
+        &server,
+        "GET",
+        &format!("/api/jobs/{trc}/records?frame=0"),
+        "",
+    );
+    let lives: Vec<f64> = json(&r)["records"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|rec| {
+            (rec["last_frame"].as_u64().unwrap() - rec["created"].as_u64().unwrap() + 1) as f64
+        })
+        .collect();
+    let (_, stats) = http(&server, "GET", &format!("/api/jobs/{trc}/stats"), "");
+    let mean = json(&stats)["frames"][0]["mean_lifespan"].as_f64().unwrap();
+    let expected = lives.iter().sum::<f64>() / lives.len() as f64;
+    assert!(
+        (mean - expected).abs() < 1e-9 * expected,
+        "{mean} vs {expected}"
+    );
     let trc_sid = |store: &radcache::store::Store| store.job(&trc).unwrap().unwrap().id;
 
     // The same job as the store and `inspect` see it (the server holds the
