@@ -36,28 +36,37 @@ fn reference_noise(scene: &str) -> f64 {
     rmse(&a, &b) / 2f64.sqrt()
 }
 
+/// A CPU renderer of `scenes/{scene_file}` with `method`, `size`×`size`.
+fn renderer(scene_file: &str, method: Box<dyn Method>, size: u32, same_pattern: bool) -> Renderer {
+    Renderer::new(
+        Scene::load(&data(&format!("scenes/{scene_file}"))).unwrap(),
+        method,
+        Box::new(CpuBackend::new()),
+        FrameSettings {
+            width: size,
+            height: size,
+            same_pattern,
+            ..FrameSettings::default()
+        },
+    )
+}
+
+/// Frame `frame` of the reference of `scene`.
+fn reference_frame(scene: &str, frame: u32) -> Film {
+    read_exr(&data(&format!("reference/{scene}/frame_{frame:04}.exr"))).unwrap()
+}
+
 fn check_scene(scene_file: &str, scene: &str, frames: &[u32], max_block_bias: f64) {
     let sigma_ref = reference_noise(scene);
     let sigma = sigma_ref * (REFERENCE_SPP / SPP as f64).sqrt();
     let expected_rmse = (sigma * sigma + sigma_ref * sigma_ref).sqrt();
-    let loaded = Scene::load(&data(&format!("scenes/{scene_file}"))).unwrap();
-    let mut renderer = Renderer::new(
-        loaded,
-        Box::new(PathTracer::new(PathSettings {
-            spp: SPP,
-            ..PathSettings::default()
-        })),
-        Box::new(CpuBackend::new()),
-        FrameSettings {
-            width: 128,
-            height: 128,
-            same_pattern: true,
-            ..FrameSettings::default()
-        },
-    );
+    let path = PathTracer::new(PathSettings {
+        spp: SPP,
+        ..PathSettings::default()
+    });
+    let mut renderer = renderer(scene_file, Box::new(path), 128, true);
     for &frame in frames {
-        let reference =
-            read_exr(&data(&format!("reference/{scene}/frame_{frame:04}.exr"))).unwrap();
+        let reference = reference_frame(scene, frame);
         let image = renderer.render_frame(frame);
         let e = rmse(&image, &reference);
         let bias = block_bias(&image, &reference, BLOCK);
@@ -113,30 +122,17 @@ fn halved(reference: &Film) -> Film {
 /// [`check_scene`]'s.
 fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_block_bias: f64) {
     const SIZE: u32 = 64;
-    let renderer = |method: Box<dyn Method>| {
-        Renderer::new(
-            Scene::load(&data(&format!("scenes/{scene_file}"))).unwrap(),
-            method,
-            Box::new(CpuBackend::new()),
-            FrameSettings {
-                width: SIZE,
-                height: SIZE,
-                ..FrameSettings::default()
-            },
-        )
-    };
-    let mut ic = renderer(Box::new(IrradianceCaching::new(IcSettings::default())));
-    let mut trc = renderer(Box::new(TemporalRadianceCaching::new(
-        TrcSettings::default(),
-    )));
+    let ic = IrradianceCaching::new(IcSettings::default());
+    let trc = TemporalRadianceCaching::new(TrcSettings::default());
+    let mut ic = renderer(scene_file, Box::new(ic), SIZE, false);
+    let mut trc = renderer(scene_file, Box::new(trc), SIZE, false);
     let last = frames.iter().copied().max().unwrap_or(0);
     for frame in 0..=last {
         let trc_image = trc.render_frame(frame);
         if !frames.contains(&frame) {
             continue;
         }
-        let reference =
-            halved(&read_exr(&data(&format!("reference/{scene}/frame_{frame:04}.exr"))).unwrap());
+        let reference = halved(&reference_frame(scene, frame));
         let ic_image = ic.render_frame(frame);
         for (method, image) in [("ic", &ic_image), ("trc", &trc_image)] {
             let bias = block_bias(image, &reference, BLOCK / 2);
