@@ -5,8 +5,10 @@
 //! For each scene the bench renders (or reuses) a reference sequence with
 //! `path --same-pattern` at a high sample count into
 //! `DIR/reference/<scene>/`, then renders every run — one method at one value
-//! of one swept setting — into `DIR/runs/<scene>/<method>-<key>=<value>/`,
-//! and compares it with the reference through [`crate::metrics`]. It writes
+//! of one swept setting, on one ray backend — into
+//! `DIR/runs/<scene>/<method>-<key>=<value>/` (with `-<backend>` appended
+//! when the bench has several, [`BenchOptions::backends`]), and compares it
+//! with the reference through [`crate::metrics`]. It writes
 //! `DIR/bench.csv` (one row per run) and two SVG charts per scene:
 //! `DIR/<scene>_error_vs_time.svg` (relative RMSE against seconds, log-log,
 //! one line per method sweep, so the Pareto front shows) and
@@ -381,6 +383,10 @@ pub struct BenchOptions {
     pub same_pattern: bool,
     /// No progress bars or messages on stderr.
     pub quiet: bool,
+    /// The ray backends every run is rendered with, one run per backend
+    /// (`--backends cpu,gpu`: GPU against CPU in one invocation, the
+    /// ratio read off one table). The reference is rendered with `auto`.
+    pub backends: Vec<BackendChoice>,
 }
 
 impl Default for BenchOptions {
@@ -403,6 +409,7 @@ impl Default for BenchOptions {
             out: PathBuf::from("bench-out"),
             same_pattern: false,
             quiet: false,
+            backends: vec![BackendChoice::Auto],
         }
     }
 }
@@ -458,6 +465,9 @@ pub struct BenchRow {
     pub method: String,
     /// `key=value` or `default`.
     pub settings: String,
+    /// The ray backend the run was rendered with, as it names itself
+    /// (`cpu (2 threads)`, `gpu (<adapter>, Vulkan)`).
+    pub backend: String,
     pub frames: u32,
     /// Wall time of rendering, all frames, file writing excluded.
     pub seconds: f64,
@@ -485,7 +495,7 @@ pub struct BenchRow {
 
 /// `bench.csv`'s header line.
 pub const CSV_HEADER: &str =
-    "scene,method,settings,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces";
+    "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -506,10 +516,11 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{:.4},{},{},{},{},{:.6},{},{:.6},{},{}",
+            "{},{},{},{},{},{:.4},{},{},{},{},{:.6},{},{:.6},{},{}",
             csv_field(&r.scene),
             csv_field(&r.method),
             csv_field(&r.settings),
+            csv_field(&r.backend),
             r.frames,
             r.seconds,
             opt(r.render_pass_seconds, 4),
@@ -532,6 +543,7 @@ pub fn to_table(rows: &[BenchRow]) -> String {
         "scene",
         "method",
         "settings",
+        "backend",
         "frames",
         "seconds",
         "render s",
@@ -544,13 +556,14 @@ pub fn to_table(rows: &[BenchRow]) -> String {
         "flicker",
         "flicker surf",
     ];
-    let cells: Vec<[String; 14]> = rows
+    let cells: Vec<[String; 15]> = rows
         .iter()
         .map(|r| {
             [
                 r.scene.clone(),
                 r.method.clone(),
                 r.settings.clone(),
+                r.backend.clone(),
                 r.frames.to_string(),
                 format!("{:.3}", r.seconds),
                 r.render_pass_seconds
@@ -577,7 +590,7 @@ pub fn to_table(rows: &[BenchRow]) -> String {
         let mut s = String::new();
         for (i, (c, w)) in cols.iter().zip(widths).enumerate() {
             // Text columns left-aligned, numbers right-aligned.
-            if i < 3 {
+            if i < 4 {
                 let _ = write!(s, "{c:<w$}  ");
             } else {
                 let _ = write!(s, "{c:>w$}  ");
@@ -658,6 +671,8 @@ pub struct EqualError {
     pub scene: String,
     pub method: String,
     pub settings: String,
+    /// The backend of the run and of the `path` runs it is held against.
+    pub backend: String,
     pub measure: ErrorMeasure,
     pub error: f64,
     pub seconds: f64,
@@ -672,14 +687,15 @@ impl EqualError {
 }
 
 /// [`EqualError`] under `measure` for every run whose method is not `path`
-/// (and that has the measure), against the `path` runs of its scene that
-/// vary only the sample count (`spp=…` or the defaults), or all its `path`
-/// runs when there are none such. Scenes without `path` runs have no rows.
+/// (and that has the measure), against the `path` runs of its scene and
+/// backend that vary only the sample count (`spp=…` or the defaults), or
+/// all those `path` runs when there are none such. Runs without `path` runs
+/// of their scene and backend have no rows.
 pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualError> {
-    let path_curve = |scene: &str| -> Vec<(f64, f64)> {
+    let path_curve = |of: &BenchRow| -> Vec<(f64, f64)> {
         let runs: Vec<&BenchRow> = rows
             .iter()
-            .filter(|p| p.method == "path" && p.scene == scene)
+            .filter(|p| p.method == "path" && p.scene == of.scene && p.backend == of.backend)
             .collect();
         let spp: Vec<&BenchRow> = runs
             .iter()
@@ -696,7 +712,7 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
         .filter(|r| r.method != "path")
         .filter_map(|r| {
             let error = measure.of(r)?;
-            let path = path_curve(&r.scene);
+            let path = path_curve(r);
             if path.is_empty() {
                 return None; // Nothing to compare with on this scene.
             }
@@ -704,6 +720,7 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
                 scene: r.scene.clone(),
                 method: r.method.clone(),
                 settings: r.settings.clone(),
+                backend: r.backend.clone(),
                 measure,
                 error,
                 seconds: r.seconds,
@@ -716,9 +733,15 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
 /// Lines for people: one per [`EqualError`].
 pub fn equal_error_text(table: &[EqualError]) -> String {
     let mut out = String::new();
+    let several_backends = table.iter().any(|e| e.backend != table[0].backend);
     for e in table {
+        let on = if several_backends {
+            format!(" on {}", e.backend)
+        } else {
+            String::new()
+        };
         let what = format!(
-            "{} {} {}: {} {:.5} in {:.3} s",
+            "{} {} {}{on}: {} {:.5} in {:.3} s",
             e.scene,
             e.method,
             e.settings,
@@ -736,6 +759,52 @@ pub fn equal_error_text(table: &[EqualError]) -> String {
                 "{what}; the path sweep does not bracket this error (widen it)"
             ),
         };
+    }
+    out
+}
+
+// ---------------------------------------------------------------- backends
+
+/// Pairs of the same run (scene, method, settings) on the bench's first
+/// backend and on each later one (`--backends cpu,gpu`), in row order:
+/// the ratio of their times is read off one invocation.
+pub fn backend_pairs(rows: &[BenchRow]) -> Vec<(&BenchRow, &BenchRow)> {
+    let Some(first) = rows.first().map(|r| &r.backend) else {
+        return Vec::new();
+    };
+    rows.iter()
+        .filter(|r| r.backend != *first)
+        .filter_map(|other| {
+            let base = rows.iter().find(|r| {
+                r.backend == *first
+                    && (&r.scene, &r.method, &r.settings)
+                        == (&other.scene, &other.method, &other.settings)
+            })?;
+            Some((base, other))
+        })
+        .collect()
+}
+
+/// Lines for people: one per [`backend_pairs`] pair, the later backend's
+/// speed-up over the first (first's seconds ÷ its own) and the change of
+/// the error, which the backends should leave alone (the same hits).
+pub fn backend_text(rows: &[BenchRow]) -> String {
+    let mut out = String::new();
+    for (base, other) in backend_pairs(rows) {
+        let _ = writeln!(
+            out,
+            "{} {} {}: {} {:.3} s against {} {:.3} s → {:.2}× (rel_rmse {:.5} against {:.5})",
+            other.scene,
+            other.method,
+            other.settings,
+            other.backend,
+            other.seconds,
+            base.backend,
+            base.seconds,
+            base.seconds / other.seconds,
+            other.rel_rmse,
+            base.rel_rmse,
+        );
     }
     out
 }
@@ -832,6 +901,14 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
             opts.frames.end
         );
     }
+    if opts.backends.is_empty() {
+        bail!("no backends to bench on");
+    }
+    for (i, b) in opts.backends.iter().enumerate() {
+        if opts.backends[..i].contains(b) {
+            bail!("backend '{}' is named twice", b.name());
+        }
+    }
     let labels: Vec<String> = opts.scenes.iter().map(scene_label).collect();
     for (i, l) in labels.iter().enumerate() {
         if labels[..i].contains(l) {
@@ -881,50 +958,87 @@ fn bench_scene(
     let mut rows = Vec::new();
     for sweep in &opts.methods {
         for spec in sweep.runs() {
-            let settings = spec.settings()?;
-            let dir = opts.out.join("runs").join(label).join(sanitize(&format!(
-                "{}-{}",
-                spec.method,
-                spec.label()
-            )));
-            clear_frames(&dir)?;
-            let scene = source.load()?;
-            let backend = render::make_backend(BackendChoice::Auto)?;
-            let mut renderer = Renderer::new(
-                scene,
-                settings.instantiate(),
-                backend,
-                frame_settings(opts, opts.same_pattern),
-            );
-            if per_run {
-                reset_peak_memory();
+            for &backend in &opts.backends {
+                let run = Run {
+                    spec: &spec,
+                    backend,
+                    // One folder per backend only when there are several,
+                    // so a one-backend bench keeps its folder names.
+                    backend_in_dir: opts.backends.len() > 1,
+                };
+                rows.push(bench_run(opts, source, label, &run, per_run)?);
             }
-            let what = format!("{label} {} {}", spec.method, spec.label());
-            let stats = render_frames(&mut renderer, opts.frames.clone(), &dir, &what, opts.quiet)?;
-            let peak_mem_mb = peak_memory_mb();
-            drop(renderer);
-            let cmp = metrics::compare_dirs(&ref_dir, &dir).with_context(|| {
-                format!("comparing {} with {}", dir.display(), ref_dir.display())
-            })?;
-            rows.push(BenchRow {
-                scene: label.into(),
-                method: spec.method.clone(),
-                settings: spec.label(),
-                frames: opts.frames.len() as u32,
-                seconds: stats.render_time.as_secs_f64(),
-                render_pass_seconds: stats.render_pass_seconds,
-                rays: stats.rays,
-                records: stats.records,
-                peak_mem_mb,
-                rel_rmse: cmp.rel_rmse,
-                rel_rmse_surfaces: cmp.rel_rmse_surfaces,
-                block_bias: cmp.block_bias,
-                flicker: cmp.flicker,
-                flicker_surfaces: cmp.flicker_surfaces,
-            });
         }
     }
     Ok(rows)
+}
+
+/// One run of a bench: a method's settings on one backend.
+struct Run<'a> {
+    spec: &'a RunSpec,
+    backend: BackendChoice,
+    backend_in_dir: bool,
+}
+
+impl Run<'_> {
+    /// The run's folder under `runs/<scene>/`: `<method>-<settings>`, and
+    /// `-<backend>` when the bench has several.
+    fn folder(&self) -> String {
+        let mut name = format!("{}-{}", self.spec.method, self.spec.label());
+        if self.backend_in_dir {
+            name = format!("{name}-{}", self.backend.name());
+        }
+        sanitize(&name)
+    }
+}
+
+/// Renders one run of `source` into its folder and compares it with the
+/// scene's reference.
+fn bench_run(
+    opts: &BenchOptions,
+    source: &SceneSource,
+    label: &str,
+    run: &Run,
+    per_run: bool,
+) -> Result<BenchRow> {
+    let spec = run.spec;
+    let settings = spec.settings()?;
+    let dir = opts.out.join("runs").join(label).join(run.folder());
+    let ref_dir = opts.out.join("reference").join(label);
+    clear_frames(&dir)?;
+    let mut renderer = Renderer::new(
+        source.load()?,
+        settings.instantiate(),
+        render::make_backend(run.backend)?,
+        frame_settings(opts, opts.same_pattern),
+    );
+    let backend = renderer.backend().name();
+    if per_run {
+        reset_peak_memory();
+    }
+    let what = format!("{label} {} {} on {backend}", spec.method, spec.label());
+    let stats = render_frames(&mut renderer, opts.frames.clone(), &dir, &what, opts.quiet)?;
+    let peak_mem_mb = peak_memory_mb();
+    drop(renderer);
+    let cmp = metrics::compare_dirs(&ref_dir, &dir)
+        .with_context(|| format!("comparing {} with {}", dir.display(), ref_dir.display()))?;
+    Ok(BenchRow {
+        scene: label.into(),
+        method: spec.method.clone(),
+        settings: spec.label(),
+        backend,
+        frames: opts.frames.len() as u32,
+        seconds: stats.render_time.as_secs_f64(),
+        render_pass_seconds: stats.render_pass_seconds,
+        rays: stats.rays,
+        records: stats.records,
+        peak_mem_mb,
+        rel_rmse: cmp.rel_rmse,
+        rel_rmse_surfaces: cmp.rel_rmse_surfaces,
+        block_bias: cmp.block_bias,
+        flicker: cmp.flicker,
+        flicker_surfaces: cmp.flicker_surfaces,
+    })
 }
 
 /// Renders the reference of `source` into `dir` unless a matching one is
@@ -1201,14 +1315,20 @@ fn log_ticks(range: &Range<f64>) -> (Vec<f64>, Vec<f64>) {
 
 /// The method sweeps of `rows` in order of appearance: (series name, rows).
 fn series(rows: &[BenchRow]) -> Vec<(String, Vec<&BenchRow>)> {
+    let several_backends = rows.iter().any(|r| r.backend != rows[0].backend);
     let mut out: Vec<(String, Vec<&BenchRow>)> = Vec::new();
     for r in rows {
         let key = r.settings.split_once('=').map_or("", |(k, _)| k);
-        let name = if key.is_empty() {
+        let mut name = if key.is_empty() {
             r.method.clone()
         } else {
             format!("{} ({key})", r.method)
         };
+        if several_backends {
+            // "cpu" or "gpu": the backend's name up to its details.
+            let kind = r.backend.split(" (").next().unwrap_or(&r.backend);
+            name = format!("{name} on {kind}");
+        }
         match out.iter_mut().find(|(n, _)| *n == name) {
             Some((_, v)) => v.push(r),
             None => out.push((name, vec![r])),

@@ -273,6 +273,10 @@ pub struct BenchArgs {
     /// No progress bars or messages (the table is still printed).
     #[arg(long, short)]
     pub quiet: bool,
+    /// Ray backends, comma-separated: every run is rendered once on each
+    /// (`cpu,gpu` compares them in one invocation; the reference uses auto).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "auto")]
+    pub backends: Vec<BackendArg>,
 }
 
 fn parse_bench_scene(s: &str) -> Result<SceneSource, String> {
@@ -405,6 +409,7 @@ fn run_bench(args: BenchArgs) -> Result<()> {
         out: args.out,
         same_pattern: args.same_pattern,
         quiet: args.quiet,
+        backends: args.backends.into_iter().map(backend_choice).collect(),
     };
     let report = bench::run(&opts)?;
     print!("{}", bench::to_table(&report.rows));
@@ -420,6 +425,13 @@ fn run_bench(args: BenchArgs) -> Result<()> {
             println!("\nequal error, {what} (path time interpolated along its sweep, log-log):");
             print!("{}", bench::equal_error_text(&equal));
         }
+    }
+    let backends = bench::backend_text(&report.rows);
+    if !backends.is_empty() {
+        println!(
+            "\nspeed-up of each later backend over the first (the first's seconds ÷ its own):"
+        );
+        print!("{backends}");
     }
     if !report.peak_mem_per_run {
         println!("(peak memory is the process peak so far, not per run)");
@@ -439,11 +451,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
     };
     let scene = source.load()?;
     let method = render_method(&args);
-    let backend = render::make_backend(match args.backend {
-        BackendArg::Auto => BackendChoice::Auto,
-        BackendArg::Cpu => BackendChoice::Cpu,
-        BackendArg::Gpu => BackendChoice::Gpu,
-    })?;
+    let backend = render::make_backend(backend_choice(args.backend))?;
     let settings = FrameSettings {
         width: args.size.0,
         height: args.size.1,

@@ -94,6 +94,17 @@ pub enum BackendChoice {
     Gpu,
 }
 
+impl BackendChoice {
+    /// The choice as the command line spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            BackendChoice::Auto => "auto",
+            BackendChoice::Cpu => "cpu",
+            BackendChoice::Gpu => "gpu",
+        }
+    }
+}
+
 /// Picks the backend:
 /// - `auto`: a real GPU adapter (device type other than `Cpu`) when one
 ///   exists, else the CPU backend. A GPU that is found but cannot be used

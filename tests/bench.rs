@@ -12,6 +12,7 @@ fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
         scene: "s".into(),
         method: method.into(),
         settings: settings.into(),
+        backend: "cpu (2 threads)".into(),
         frames: 2,
         seconds,
         render_pass_seconds: None,
@@ -26,6 +27,25 @@ fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
     }
 }
 
+/// A bench of `methods` on cube-in-box, frames 0..2 at 12×12 against a
+/// 4-spp reference, writing into `out`.
+fn tiny_bench(out: &std::path::Path, methods: &[&str]) -> BenchOptions {
+    BenchOptions {
+        scenes: vec![SceneSource::Builtin("cube-in-box".into())],
+        methods: methods
+            .iter()
+            .map(|m| MethodSweep::parse(m).unwrap())
+            .collect(),
+        frames: 0..2,
+        width: 12,
+        height: 12,
+        reference_spp: 4,
+        out: out.to_path_buf(),
+        quiet: true,
+        ..BenchOptions::default()
+    }
+}
+
 #[test]
 fn csv_has_header_and_one_line_per_run() {
     let rows = vec![
@@ -36,14 +56,18 @@ fn csv_has_header_and_one_line_per_run() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(
         lines[0],
-        "scene,method,settings,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces"
+        "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces"
     );
     assert_eq!(lines[0], CSV_HEADER);
     assert_eq!(lines.len(), 3, "{csv}");
     for l in &lines[1..] {
-        assert_eq!(l.split(',').count(), 14, "{l}");
+        assert_eq!(l.split(',').count(), 15, "{l}");
     }
-    assert!(lines[1].starts_with("s,path,spp=1,2,"), "{}", lines[1]);
+    assert!(
+        lines[1].starts_with("s,path,spp=1,cpu (2 threads),2,"),
+        "{}",
+        lines[1]
+    );
     // A missing flicker is an empty last field.
     assert!(lines[1].ends_with(','), "{}", lines[1]);
 }
@@ -114,6 +138,39 @@ fn equal_error_ratio_for_non_path_runs() {
     let mut elsewhere = rows[2].clone();
     elsewhere.scene = "other scene".into();
     assert!(equal_error_table(&[elsewhere], ErrorMeasure::AllPixels).is_empty());
+}
+
+/// With several backends a run is held against the `path` runs of its own
+/// backend: here the GPU's path is 4× as fast, so the same error is 4× as
+/// cheap for path there and the GPU run's speed-up is a quarter.
+#[test]
+fn equal_error_compares_within_one_backend() {
+    let on_gpu = |mut r: BenchRow| {
+        r.backend = "gpu (test adapter, Vulkan)".into();
+        r
+    };
+    let rows = vec![
+        row("path", "spp=1", 1.0, 0.8),
+        row("path", "spp=64", 64.0, 0.1),
+        on_gpu(row("path", "spp=1", 0.25, 0.8)),
+        on_gpu(row("path", "spp=64", 16.0, 0.1)),
+        row("other", "default", 2.0, 0.2),
+        on_gpu(row("other", "default", 2.0, 0.2)),
+    ];
+    let table = equal_error_table(&rows, ErrorMeasure::AllPixels);
+    assert_eq!(table.len(), 2);
+    assert!((table[0].speedup().unwrap() - 8.0).abs() < 1e-9);
+    assert!((table[1].speedup().unwrap() - 2.0).abs() < 1e-9);
+    let text = bench::equal_error_text(&table);
+    assert!(text.contains("default on gpu (test adapter"), "{text}");
+    // The same run on the later backend against the first: 1× here.
+    let pairs = bench::backend_pairs(&rows);
+    assert_eq!(pairs.len(), 3);
+    assert!(pairs
+        .iter()
+        .all(|(a, b)| a.backend.starts_with("cpu") && b.backend.starts_with("gpu")));
+    assert!(bench::backend_text(&rows).contains("→ 4.00×"));
+    assert!(bench::backend_pairs(&rows[..2]).is_empty());
 }
 
 #[test]
@@ -228,6 +285,61 @@ fn tiny_end_to_end_run() {
     assert!(info.contains("\"spp\": 32"), "{info}");
 }
 
+/// `--backends cpu,gpu`: every run once on each backend, in its own
+/// folder, with the same error (both trace the same hits); a backend named
+/// twice is an error. Needs a wgpu adapter, as the GPU tests do (Mesa's
+/// software Vulkan driver where there is no GPU; `.ci/run` installs it).
+#[test]
+fn each_run_is_rendered_on_each_backend() {
+    use radcache::render::BackendChoice;
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        backends: vec![BackendChoice::Cpu, BackendChoice::Gpu],
+        ..tiny_bench(dir.path(), &["path:spp=2", "trc:spp=1"])
+    };
+    let rows = bench::run(&opts).unwrap().rows;
+    let runs: Vec<(&str, &str)> = rows
+        .iter()
+        .map(|r| (r.method.as_str(), &r.backend[..3]))
+        .collect();
+    assert_eq!(
+        runs,
+        [
+            ("path", "cpu"),
+            ("path", "gpu"),
+            ("trc", "cpu"),
+            ("trc", "gpu")
+        ]
+    );
+    for pair in rows.chunks(2) {
+        let (cpu, gpu) = (&pair[0], &pair[1]);
+        assert!(
+            (cpu.rel_rmse - gpu.rel_rmse).abs() <= 1e-3 * cpu.rel_rmse,
+            "{}: cpu {} gpu {}",
+            cpu.method,
+            cpu.rel_rmse,
+            gpu.rel_rmse
+        );
+        assert_eq!(cpu.records, gpu.records, "{}", cpu.method);
+    }
+    for folder in ["path-spp=2-cpu", "path-spp=2-gpu", "trc-spp=1-gpu"] {
+        let frame = dir
+            .path()
+            .join("runs/cube-in-box")
+            .join(folder)
+            .join("frame_0001.exr");
+        assert!(frame.is_file(), "{}", frame.display());
+    }
+    let svg = std::fs::read_to_string(dir.path().join("cube-in-box_error_vs_time.svg")).unwrap();
+    assert!(svg.contains("trc (spp) on gpu") && svg.contains("trc (spp) on cpu"));
+    let twice = BenchOptions {
+        backends: vec![BackendChoice::Cpu, BackendChoice::Cpu],
+        ..opts
+    };
+    let e = bench::run(&twice).unwrap_err().to_string();
+    assert!(e.contains("'cpu' is named twice"), "{e}");
+}
+
 #[test]
 fn same_pattern_runs_flicker_less() {
     // With the same random sequence in every frame a run's pixel noise is
@@ -264,21 +376,7 @@ fn same_pattern_runs_flicker_less() {
 #[test]
 fn cache_methods_report_their_render_pass_time() {
     let dir = tempfile::tempdir().unwrap();
-    let opts = BenchOptions {
-        scenes: vec![SceneSource::Builtin("cube-in-box".into())],
-        methods: vec![
-            MethodSweep::parse("path:spp=1").unwrap(),
-            MethodSweep::parse("ic:spp=1").unwrap(),
-            MethodSweep::parse("trc:spp=1").unwrap(),
-        ],
-        frames: 0..2,
-        width: 12,
-        height: 12,
-        reference_spp: 4,
-        out: dir.path().to_path_buf(),
-        quiet: true,
-        ..BenchOptions::default()
-    };
+    let opts = tiny_bench(dir.path(), &["path:spp=1", "ic:spp=1", "trc:spp=1"]);
     let rows = bench::run(&opts).unwrap().rows;
     assert_eq!(rows.len(), 3);
     assert_eq!(rows[0].render_pass_seconds, None, "path");
@@ -299,5 +397,5 @@ fn cache_methods_report_their_render_pass_time() {
         .find(|l| l.starts_with("cube-in-box,ic,"))
         .unwrap();
     let fields: Vec<&str> = ic_line.split(',').collect();
-    assert!(fields[5].parse::<f64>().is_ok(), "{ic_line}");
+    assert!(fields[6].parse::<f64>().is_ok(), "{ic_line}");
 }
