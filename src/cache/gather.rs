@@ -161,7 +161,7 @@ pub fn irradiance_and_gradients(
     let l = &samples.radiance;
     let r = &samples.distance;
     let base = |phi: f32| frame.to_world(Vec3::new(phi.cos(), phi.sin(), 0.0));
-    let ring_lower = |j: usize| (j as f32 / m as f32).sqrt().asin();
+    let rings = RingTerms::new(m, n);
 
     let sum: Vec3 = l.iter().copied().sum();
     let irradiance = sum * (PI / (m * n) as f32);
@@ -176,22 +176,15 @@ pub fn irradiance_and_gradients(
         let v_boundary = base(phi_boundary + 0.5 * PI);
         let k_prev = (k + n - 1) % n;
         for j in 0..m {
-            // Angles of the cell centre rather than of the jittered sample:
-            // tanθ of a grazing sample would blow up the rotation term.
-            let sin2 = (j as f32 + 0.5) / m as f32;
-            let (sin_t, cos_t) = (sin2.sqrt(), (1.0 - sin2).sqrt());
-            let tan_t = sin_t / cos_t;
             let lj = l[cell(j, k)];
-            add_scaled(&mut rotation, v_k, lj * (tan_t * PI / (m * n) as f32));
+            add_scaled(&mut rotation, v_k, lj * rings.rotation[j]);
             if j >= 1 {
-                let t = ring_lower(j);
                 let rmin = r[cell(j, k)].min(r[cell(j - 1, k)]);
-                let coef = TAU / n as f32 * t.sin() * t.cos() * t.cos() / rmin;
+                let coef = rings.lower_wall[j] / rmin;
                 add_scaled(&mut translation, u_k, (lj - l[cell(j - 1, k)]) * coef);
             }
-            let (lo, hi) = (ring_lower(j), ring_lower(j + 1));
             let rmin = r[cell(j, k)].min(r[cell(j, k_prev)]);
-            let coef = (hi.sin() - lo.sin()) / rmin;
+            let coef = rings.sin_span[j] / rmin;
             add_scaled(
                 &mut translation,
                 v_boundary,
@@ -209,6 +202,52 @@ pub fn irradiance_and_gradients(
         } else {
             f32::INFINITY
         },
+    }
+}
+
+/// The terms of [`irradiance_and_gradients`] that depend on the ring `j`
+/// alone, computed once a record rather than once a cell (they cost an
+/// `asin` and trigonometry each, a few percent of `ic`'s time when
+/// computed per cell; the values are the same).
+struct RingTerms {
+    /// `tanθ · π/(MN)`, `θ` at ring `j`'s centre (`sin²θ = (j + ½)/M`):
+    /// the angle of the cell centre rather than of the jittered sample,
+    /// since `tanθ` of a grazing sample would blow up the rotation term.
+    rotation: Vec<f32>,
+    /// `2π/N · sinθ⁻ cos²θ⁻` of ring `j`'s lower boundary (used for
+    /// `j ≥ 1`), in the order of operations of the per-cell formula.
+    lower_wall: Vec<f32>,
+    /// `sinθ⁺ − sinθ⁻` over ring `j`.
+    sin_span: Vec<f32>,
+}
+
+impl RingTerms {
+    fn new(m: usize, n: usize) -> Self {
+        // θ⁻ of ring `j`, θ⁺ of ring `j − 1`: `sin²θ = j/M`.
+        let boundary: Vec<f32> = (0..=m)
+            .map(|j| (j as f32 / m as f32).sqrt().asin())
+            .collect();
+        let rotation = (0..m)
+            .map(|j| {
+                let sin2 = (j as f32 + 0.5) / m as f32;
+                let (sin_t, cos_t) = (sin2.sqrt(), (1.0 - sin2).sqrt());
+                let tan_t = sin_t / cos_t;
+                tan_t * PI / (m * n) as f32
+            })
+            .collect();
+        let lower_wall = boundary[..m]
+            .iter()
+            .map(|t| TAU / n as f32 * t.sin() * t.cos() * t.cos())
+            .collect();
+        let sin_span = boundary
+            .windows(2)
+            .map(|w| w[1].sin() - w[0].sin())
+            .collect();
+        RingTerms {
+            rotation,
+            lower_wall,
+            sin_span,
+        }
     }
 }
 
