@@ -34,8 +34,9 @@ use crate::backend::{Hit, Ray};
 use crate::cache::gather::Strata;
 use crate::method::ic::IcSettings;
 use crate::method::path::PathSettings;
-use crate::method::trc::{TemporalGradients, TrcSettings};
-use crate::method::FrameContext;
+use crate::method::trc::estimate_error::{percent, EstimateError, EstimateErrorTally};
+use crate::method::trc::{TemporalGradients, TemporalRadianceCaching, TrcSettings};
+use crate::method::{FrameContext, Method};
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
 use anyhow::{bail, Context, Result};
@@ -383,6 +384,11 @@ pub struct BenchOptions {
     pub same_pattern: bool,
     /// No progress bars or messages on stderr.
     pub quiet: bool,
+    /// For `trc` runs, also measure the error of the records' `E(t0+1)`
+    /// estimate over every record the run computes (TRC Table 1), in a
+    /// second, untimed pass that gathers each record again one frame
+    /// later ([`BenchRow::next_error`]).
+    pub estimate_error: bool,
     /// The ray backends every run is rendered with, one run per backend
     /// (`--backends cpu,gpu`: GPU against CPU in one invocation, the
     /// ratio read off one table). The reference is rendered with `auto`.
@@ -409,6 +415,7 @@ impl Default for BenchOptions {
             out: PathBuf::from("bench-out"),
             same_pattern: false,
             quiet: false,
+            estimate_error: false,
             backends: vec![BackendChoice::Auto],
         }
     }
@@ -491,11 +498,18 @@ pub struct BenchRow {
     /// Flicker without the pixels at directly seen lights
     /// ([`metrics::CompareReport::flicker_surfaces`]).
     pub flicker_surfaces: Option<f64>,
+    /// With [`BenchOptions::estimate_error`], for `trc` runs: the error of
+    /// the `E(t0+1)` estimate of the records the run computed, against
+    /// `E(t0+1)` gathered again (TRC Table 1). Records of the run's last
+    /// frame are measured too (their `t0 + 1` is past the range, but a
+    /// frame of the scene all the same).
+    pub next_error: Option<EstimateError>,
 }
 
 /// `bench.csv`'s header line.
 pub const CSV_HEADER: &str =
-    "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces";
+    "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces,\
+estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,constant_err_median";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -509,6 +523,17 @@ fn opt(v: Option<f64>, decimals: usize) -> String {
     v.map_or(String::new(), |v| format!("{v:.decimals$}"))
 }
 
+/// The five CSV fields of [`BenchRow::next_error`], empty where not measured.
+fn next_error_fields(e: Option<EstimateError>) -> String {
+    match e {
+        Some(e) => format!(
+            "{},{:.6},{:.6},{:.6},{:.6}",
+            e.records, e.estimate.0, e.estimate.1, e.constant.0, e.constant.1
+        ),
+        None => ",,,,".into(),
+    }
+}
+
 /// The CSV text: [`CSV_HEADER`] and one line per row. Missing values
 /// (flicker of a single frame, memory where unknown) are empty fields.
 pub fn to_csv(rows: &[BenchRow]) -> String {
@@ -516,7 +541,7 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{:.4},{},{},{},{},{:.6},{},{:.6},{},{}",
+            "{},{},{},{},{},{:.4},{},{},{},{},{:.6},{},{:.6},{},{},{}",
             csv_field(&r.scene),
             csv_field(&r.method),
             csv_field(&r.settings),
@@ -532,6 +557,7 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
             r.block_bias,
             opt(r.flicker, 6),
             opt(r.flicker_surfaces, 6),
+            next_error_fields(r.next_error),
         );
     }
     out
@@ -759,6 +785,25 @@ pub fn equal_error_text(table: &[EqualError]) -> String {
                 "{what}; the path sweep does not bracket this error (widen it)"
             ),
         };
+    }
+    out
+}
+
+/// Lines for people: one per run with [`BenchRow::next_error`].
+pub fn estimate_error_text(rows: &[BenchRow]) -> String {
+    let mut out = String::new();
+    for r in rows {
+        let Some(e) = r.next_error else { continue };
+        let _ = writeln!(
+            out,
+            "{} {} {}: {} records: estimate {}, constant E {}",
+            r.scene,
+            r.method,
+            r.settings,
+            e.records,
+            percent(e.estimate),
+            percent(e.constant)
+        );
     }
     out
 }
@@ -1022,6 +1067,12 @@ fn bench_run(
     drop(renderer);
     let cmp = metrics::compare_dirs(&ref_dir, &dir)
         .with_context(|| format!("comparing {} with {}", dir.display(), ref_dir.display()))?;
+    let next_error = match &settings {
+        MethodSettings::Trc(trc) if opts.estimate_error => {
+            estimate_error(opts, source, run.backend, trc, &what)?
+        }
+        _ => None,
+    };
     Ok(BenchRow {
         scene: label.into(),
         method: spec.method.clone(),
@@ -1038,7 +1089,75 @@ fn bench_run(
         block_bias: cmp.block_bias,
         flicker: cmp.flicker,
         flicker_surfaces: cmp.flicker_surfaces,
+        next_error,
     })
+}
+
+/// [`BenchRow::next_error`] of a `trc` run with `settings`: the run's frames
+/// rendered again (untimed) by a `trc` the bench holds, passes driven here
+/// as [`Renderer::render_frame`] drives them, and after each pass the
+/// records it computed (new ones and replacements) gathered again one
+/// frame after their own.
+fn estimate_error(
+    opts: &BenchOptions,
+    source: &SceneSource,
+    backend: BackendChoice,
+    settings: &TrcSettings,
+    what: &str,
+) -> Result<Option<EstimateError>> {
+    let mut renderer = Renderer::new(
+        source.load()?,
+        Box::new(render::NoMethod),
+        render::make_backend(backend)?,
+        frame_settings(opts, opts.same_pattern),
+    );
+    let mut trc = TemporalRadianceCaching::new(settings.clone());
+    let mut measured = NextFrameMeasure::default();
+    let bar = render::progress_bar(opts.frames.len() as u64, opts.quiet);
+    let end = opts.frames.end;
+    for frame in opts.frames.clone() {
+        bar.set_message(format!("{what}: E(t0+1) estimates, frame {frame}"));
+        while let Some(f) = trc.next_frame_to_prepare(frame, end) {
+            renderer.with_frame_context(f, |ctx| trc.prepare_frame(ctx));
+            measured.add_new(&mut renderer, &trc);
+        }
+        renderer.with_frame_context(frame, |ctx| trc.render_frame(ctx));
+        measured.add_new(&mut renderer, &trc);
+        if let Some(message) = renderer.backend().failure() {
+            bail!("{what}: E(t0+1) estimates, frame {frame}: the backend failed: {message}");
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(measured.tally.summary())
+}
+
+/// The records of a `trc` measured so far, and their errors.
+#[derive(Default)]
+struct NextFrameMeasure {
+    /// `(id, t0)` of every record measured: a replacement keeps the id of
+    /// the record it replaces, at a later `t0`.
+    seen: std::collections::HashSet<(crate::cache::RecordId, u32)>,
+    tally: EstimateErrorTally,
+}
+
+impl NextFrameMeasure {
+    /// Measures the records of `trc` not measured yet, each gathered again
+    /// at its `t0 + 1`.
+    fn add_new(&mut self, renderer: &mut Renderer, trc: &TemporalRadianceCaching) {
+        let mut new: Vec<_> = trc
+            .records()
+            .iter()
+            .filter(|k| self.seen.insert((k.record.id, k.record.created_frame)))
+            .cloned()
+            .collect();
+        new.sort_by_key(|k| k.record.created_frame);
+        for same_t0 in new.chunk_by(|a, b| a.record.created_frame == b.record.created_frame) {
+            let t1 = same_t0[0].record.created_frame + 1;
+            let actual = renderer.with_frame_context(t1, |ctx| trc.regather(ctx, same_t0));
+            self.tally.add(same_t0, &actual);
+        }
+    }
 }
 
 /// Renders the reference of `source` into `dir` unless a matching one is
@@ -1199,18 +1318,7 @@ fn render_frames(
     what: &str,
     quiet: bool,
 ) -> Result<RunStats> {
-    let bar = if quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        let bar = indicatif::ProgressBar::new(frames.len() as u64);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} frames, eta {eta} {msg}",
-            )
-            .expect("static progress template is valid"),
-        );
-        bar
-    };
+    let bar = render::progress_bar(frames.len() as u64, quiet);
     let rays_before = renderer.backend().ray_counts().total();
     let mut render_time = Duration::ZERO;
     let mut render_pass_seconds = None;

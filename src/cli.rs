@@ -273,6 +273,12 @@ pub struct BenchArgs {
     /// No progress bars or messages (the table is still printed).
     #[arg(long, short)]
     pub quiet: bool,
+    /// For trc runs, also measure the error of the records' E(t0+1)
+    /// estimate, with and without reprojection, over every record the run
+    /// computes (TRC Table 1): a second, untimed pass gathers each record
+    /// again one frame later.
+    #[arg(long)]
+    pub estimate_error: bool,
     /// Ray backends, comma-separated: every run is rendered once on each
     /// (`cpu,gpu` compares them in one invocation; the reference uses auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "auto")]
@@ -409,6 +415,7 @@ fn run_bench(args: BenchArgs) -> Result<()> {
         out: args.out,
         same_pattern: args.same_pattern,
         quiet: args.quiet,
+        estimate_error: args.estimate_error,
         backends: args.backends.into_iter().map(backend_choice).collect(),
     };
     let report = bench::run(&opts)?;
@@ -425,6 +432,14 @@ fn run_bench(args: BenchArgs) -> Result<()> {
             println!("\nequal error, {what} (path time interpolated along its sweep, log-log):");
             print!("{}", bench::equal_error_text(&equal));
         }
+    }
+    let estimates = bench::estimate_error_text(&report.rows);
+    if !estimates.is_empty() {
+        println!(
+            "\nerror of the records' E(t0+1) estimate against E(t0+1) gathered again \
+             (TRC Table 1; relative to their mean E(t0+1)):"
+        );
+        print!("{estimates}");
     }
     let backends = bench::backend_text(&report.rows);
     if !backends.is_empty() {

@@ -370,8 +370,10 @@ pub struct MethodCalls {
     pub prepared: u32,
 }
 
-/// Placeholder while the real method is borrowed out of the renderer.
-struct NoMethod;
+/// Placeholder while the real method is borrowed out of the renderer, and
+/// the method of a renderer only used for its frame contexts
+/// ([`Renderer::with_frame_context`]).
+pub(crate) struct NoMethod;
 
 impl Method for NoMethod {
     fn name(&self) -> &'static str {
@@ -854,7 +856,8 @@ fn restore_frame_files(job: &StoreJob, frame: u32, out_dir: &Path) -> Result<()>
     Ok(())
 }
 
-fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
+/// A progress bar over `len` frames (hidden when `quiet`).
+pub(crate) fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
     if quiet {
         return indicatif::ProgressBar::hidden();
     }

@@ -24,6 +24,7 @@ fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
         block_bias: 0.01,
         flicker: None,
         flicker_surfaces: None,
+        next_error: None,
     }
 }
 
@@ -56,20 +57,21 @@ fn csv_has_header_and_one_line_per_run() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(
         lines[0],
-        "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces"
+        "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces,\
+estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,constant_err_median"
     );
     assert_eq!(lines[0], CSV_HEADER);
     assert_eq!(lines.len(), 3, "{csv}");
     for l in &lines[1..] {
-        assert_eq!(l.split(',').count(), 15, "{l}");
+        assert_eq!(l.split(',').count(), 20, "{l}");
     }
     assert!(
         lines[1].starts_with("s,path,spp=1,cpu (2 threads),2,"),
         "{}",
         lines[1]
     );
-    // A missing flicker is an empty last field.
-    assert!(lines[1].ends_with(','), "{}", lines[1]);
+    // A missing flicker or estimate error is an empty field.
+    assert!(lines[1].ends_with(",,,,,"), "{}", lines[1]);
 }
 
 #[test]
@@ -338,6 +340,39 @@ fn each_run_is_rendered_on_each_backend() {
     };
     let e = bench::run(&twice).unwrap_err().to_string();
     assert!(e.contains("'cpu' is named twice"), "{e}");
+}
+
+/// `--estimate-error`: every `trc` run also gets the error of its records'
+/// E(t0+1) estimates (TRC Table 1), over exactly the records the timed run
+/// computed (the untimed pass is the same deterministic run); without
+/// reprojection the estimate is the constant one; other methods get none.
+#[test]
+fn trc_runs_measure_their_next_frame_estimates() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        estimate_error: true,
+        frames: 0..3,
+        fps: 6.0,
+        ..tiny_bench(dir.path(), &["ic:spp=1", "trc:spp=1", "trc:reprojection=0"])
+    };
+    let rows = bench::run(&opts).unwrap().rows;
+    assert_eq!(rows[0].next_error, None, "ic");
+    for r in &rows[1..] {
+        let e = r.next_error.expect("a trc run measures its estimates");
+        assert_eq!(e.records, r.records, "{}", r.settings);
+        for (mean, median) in [e.estimate, e.constant] {
+            assert!(mean.is_finite() && mean > 0.0 && median.is_finite() && median >= 0.0);
+        }
+    }
+    let (with, without) = (rows[1].next_error.unwrap(), rows[2].next_error.unwrap());
+    assert_ne!(with.estimate, with.constant, "cube-in-box's cube moves");
+    assert_eq!(without.estimate, without.constant);
+    let text = bench::estimate_error_text(&rows);
+    assert_eq!(text.lines().count(), 2, "{text}");
+    let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
+    let trc_line = csv.lines().nth(2).unwrap();
+    let fields: Vec<&str> = trc_line.split(',').collect();
+    assert_eq!(fields[15], rows[1].records.to_string(), "{trc_line}");
 }
 
 #[test]

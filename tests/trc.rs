@@ -15,6 +15,7 @@ use radcache::integrator::PathLength;
 use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::method::render_pass::FallbackStreams;
+use radcache::method::trc::estimate_error::{estimate_errors, mean_and_median, percent};
 use radcache::method::trc::{
     TemporalGradients, TemporalRadianceCaching, TemporalRecord, TrcSettings,
 };
@@ -139,34 +140,6 @@ fn records_and_their_next_frame_by(
     (records, next)
 }
 
-/// Per record, the error of its E(t0+1) estimate with reprojection and
-/// of the constant one (E(t0)) against `actual`, RMS over the colour
-/// channels, relative to the frame's mean actual irradiance: records in
-/// the dark would divide by almost nothing (TRC Table 1's measure).
-fn estimate_errors(records: &[TemporalRecord], actual: &[Vec3]) -> Vec<(f32, f32)> {
-    let mean: f32 =
-        actual.iter().map(|e| e.element_sum() / 3.0).sum::<f32>() / actual.len().max(1) as f32;
-    records
-        .iter()
-        .zip(actual)
-        .map(|(k, &e1)| {
-            let rel = |est: Vec3| ((est - e1).length_squared() / 3.0).sqrt() / mean;
-            (rel(k.next_irradiance), rel(k.record.irradiance))
-        })
-        .collect()
-}
-
-/// "mean M % median D %" of a [`mean_and_median`] pair of fractions.
-fn percent((mean, median): (f32, f32)) -> String {
-    format!("mean {:.2} % median {:.2} %", 100.0 * mean, 100.0 * median)
-}
-
-/// Mean and median of `v` (sorted in place).
-fn mean_and_median(v: &mut [f32]) -> (f32, f32) {
-    v.sort_by(f32::total_cmp);
-    (v.iter().sum::<f32>() / v.len() as f32, v[v.len() / 2])
-}
-
 /// Static scene: τ = 1 exactly (nothing moves, so no sample is
 /// reprojected), so every record lives exactly δt_max frames (Eq. 11), and
 /// frame f < δt_max of `trc` is `ic`'s render of frame f with the cache
@@ -272,8 +245,8 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
     }
     if !seeing.0.is_empty() {
         let (a, b) = (
-            mean_and_median(&mut seeing.0),
-            mean_and_median(&mut seeing.1),
+            mean_and_median(&mut seeing.0).unwrap(),
+            mean_and_median(&mut seeing.1).unwrap(),
         );
         eprintln!(
             "records that see the moving cube: {}: reprojection {}, none {}",
@@ -282,8 +255,8 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
             percent(b)
         );
     }
-    let (mean_r, median_r) = mean_and_median(&mut errors.0);
-    let (mean_n, median_n) = mean_and_median(&mut errors.1);
+    let (mean_r, median_r) = mean_and_median(&mut errors.0).unwrap();
+    let (mean_n, median_n) = mean_and_median(&mut errors.1).unwrap();
     eprintln!(
         "E(t0+1) error over {} records: reprojection {}, none {}",
         errors.0.len(),
@@ -305,7 +278,7 @@ fn reprojection_estimate_of_next_frame_is_no_worse_than_constant() {
         let (records, actual) = records_and_their_next_frame_by(&mut r, t0, settings);
         with_direct.extend(estimate_errors(&records, &actual).into_iter().map(|e| e.0));
     }
-    let (mean_d, median_d) = mean_and_median(&mut with_direct);
+    let (mean_d, median_d) = mean_and_median(&mut with_direct).unwrap();
     eprintln!(
         "with the direct light at t0+1: {}",
         percent((mean_d, median_d))
@@ -437,8 +410,9 @@ fn reprojection_predicts_a_moving_block_better_than_constant_in_mean() {
             }
         }
     }
-    let [(mean_r, median_r), (mean_d, median_d)] = reprojected.map(|mut v| mean_and_median(&mut v));
-    let (mean_c, median_c) = mean_and_median(&mut constant);
+    let [(mean_r, median_r), (mean_d, median_d)] =
+        reprojected.map(|mut v| mean_and_median(&mut v).unwrap());
+    let (mean_c, median_c) = mean_and_median(&mut constant).unwrap();
     eprintln!(
         "E(t0+1) error over {} records: reprojection with the direct light at t0+1 {}, \
          without it {}, constant {}",
@@ -1150,8 +1124,8 @@ fn reprojection_follows_a_moving_light_better_than_constant() {
             constant.push(c);
         }
     }
-    let (mean_r, median_r) = mean_and_median(&mut reprojected);
-    let (mean_c, median_c) = mean_and_median(&mut constant);
+    let (mean_r, median_r) = mean_and_median(&mut reprojected).unwrap();
+    let (mean_c, median_c) = mean_and_median(&mut constant).unwrap();
     eprintln!(
         "E(t0+1) error over {} records under a moving light: reprojection {}, constant {}",
         reprojected.len(),

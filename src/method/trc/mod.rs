@@ -67,6 +67,7 @@
 
 mod direct;
 mod estimate;
+pub mod estimate_error;
 mod state;
 
 use super::ic::IrradianceCaching;
