@@ -949,6 +949,9 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     if opts.backends.is_empty() {
         bail!("no backends to bench on");
     }
+    if opts.estimate_error && !opts.methods.iter().any(|m| m.method == "trc") {
+        bail!("--estimate-error measures the records of trc runs, and no method is trc");
+    }
     for (i, b) in opts.backends.iter().enumerate() {
         if opts.backends[..i].contains(b) {
             bail!("backend '{}' is named twice", b.name());

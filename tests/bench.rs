@@ -369,6 +369,12 @@ fn trc_runs_measure_their_next_frame_estimates() {
     assert_eq!(without.estimate, without.constant);
     let text = bench::estimate_error_text(&rows);
     assert_eq!(text.lines().count(), 2, "{text}");
+    let no_trc = BenchOptions {
+        estimate_error: true,
+        ..tiny_bench(dir.path(), &["ic:spp=1"])
+    };
+    let e = bench::run(&no_trc).unwrap_err().to_string();
+    assert!(e.contains("no method is trc"), "{e}");
     let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
     let trc_line = csv.lines().nth(2).unwrap();
     let fields: Vec<&str> = trc_line.split(',').collect();
