@@ -1,0 +1,318 @@
+//! The SVG charts of a scene's runs: error and flicker against time on
+//! log axes, one line per method sweep.
+
+use super::BenchRow;
+use anyhow::Result;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+/// `1234` → "1234", `0.5` → "0.5", `0.0123` → "0.0123": short tick labels.
+fn tick(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+    let s = format!("{v:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// Axis range covering `values` (positive, finite) with a margin on a log
+/// scale; a fallback when there are none.
+fn log_range(values: impl Iterator<Item = f64>) -> Range<f64> {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .fold((f64::INFINITY, 0.0_f64), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    if !lo.is_finite() {
+        return 0.1..10.0;
+    }
+    // At least a factor of 4 end to end so that a single point has ticks.
+    let span = (hi / lo).max(4.0);
+    let pad = span.powf(0.12);
+    let mid = (hi * lo).sqrt();
+    let half = span.sqrt();
+    (mid / half / pad)..(mid * half * pad)
+}
+
+/// Tick positions of a log axis over `range`: `(labelled, grid only)`.
+/// Labelled ticks are 1, 2, 5 × 10^k, or every 1…9 × 10^k when that gives
+/// fewer than three; grid lines are the other 1…9 × 10^k.
+fn log_ticks(range: &Range<f64>) -> (Vec<f64>, Vec<f64>) {
+    let (lo, hi) = (range.start, range.end);
+    let first = lo.log10().floor() as i32;
+    let last = hi.log10().ceil() as i32;
+    let mut all = Vec::new();
+    for k in first..=last {
+        for m in 1..=9 {
+            let v = f64::from(m) * 10f64.powi(k);
+            if v >= lo && v <= hi {
+                all.push((m, v));
+            }
+        }
+    }
+    let main: Vec<f64> = all
+        .iter()
+        .filter(|(m, _)| [1, 2, 5].contains(m))
+        .map(|&(_, v)| v)
+        .collect();
+    if main.len() >= 3 {
+        let grid = all
+            .iter()
+            .filter(|(m, _)| ![1, 2, 5].contains(m))
+            .map(|&(_, v)| v)
+            .collect();
+        (main, grid)
+    } else {
+        (all.into_iter().map(|(_, v)| v).collect(), Vec::new())
+    }
+}
+
+/// The method sweeps of `rows` in order of appearance: (series name, rows).
+fn series(rows: &[BenchRow]) -> Vec<(String, Vec<&BenchRow>)> {
+    let several_backends = rows.iter().any(|r| r.backend != rows[0].backend);
+    let mut out: Vec<(String, Vec<&BenchRow>)> = Vec::new();
+    for r in rows {
+        let key = r.settings.split_once('=').map_or("", |(k, _)| k);
+        let mut name = if key.is_empty() {
+            r.method.clone()
+        } else {
+            format!("{} ({key})", r.method)
+        };
+        if several_backends {
+            // "cpu" or "gpu": the backend's name up to its details.
+            let kind = r.backend.split(" (").next().unwrap_or(&r.backend);
+            name = format!("{name} on {kind}");
+        }
+        match out.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, v)) => v.push(r),
+            None => out.push((name, vec![r])),
+        }
+    }
+    out
+}
+
+/// Short label of a point: the swept value, or nothing for defaults.
+fn point_label(r: &BenchRow) -> String {
+    r.settings
+        .split_once('=')
+        .map_or(String::new(), |(_, v)| v.to_string())
+}
+
+/// Writes the four charts of one scene; returns their paths.
+pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<PathBuf>> {
+    let error = out.join(format!("{scene}_error_vs_time.svg"));
+    let surfaces = out.join(format!("{scene}_surface_error_vs_time.svg"));
+    let flicker = out.join(format!("{scene}_flicker_vs_time.svg"));
+    let surface_flicker = out.join(format!("{scene}_surface_flicker_vs_time.svg"));
+    plot(
+        &error,
+        &format!("{scene}: error against time"),
+        "relative RMSE against the reference",
+        rows,
+        |r| Some(r.rel_rmse),
+    )?;
+    plot(
+        &surfaces,
+        &format!("{scene}: error of lit surfaces against time"),
+        "relative RMSE without the pixels at seen lights",
+        rows,
+        |r| r.rel_rmse_surfaces,
+    )?;
+    plot(
+        &flicker,
+        &format!("{scene}: flicker against time"),
+        "flicker (RMS of frame-difference error / mean radiance)",
+        rows,
+        |r| r.flicker,
+    )?;
+    plot(
+        &surface_flicker,
+        &format!("{scene}: flicker of lit surfaces against time"),
+        "flicker without the pixels at seen lights",
+        rows,
+        |r| r.flicker_surfaces,
+    )?;
+    Ok(vec![error, surfaces, flicker, surface_flicker])
+}
+
+/// A chart of `y_of` against time on log axes, one line per method sweep
+/// ([`series`]), written as SVG to `path`.
+fn plot(
+    path: &Path,
+    title: &str,
+    y_desc: &str,
+    rows: &[BenchRow],
+    y_of: impl Fn(&BenchRow) -> Option<f64>,
+) -> Result<()> {
+    use plotters::prelude::*;
+    let draw_err = |e: &dyn std::fmt::Display| anyhow::anyhow!("drawing {}: {e}", path.display());
+    let usable = |r: &&BenchRow| {
+        let y = y_of(r);
+        r.seconds.is_finite() && r.seconds > 0.0 && y.is_some_and(|y| y.is_finite() && y > 0.0)
+    };
+    let frames = rows.first().map_or(0, |r| r.frames);
+    let x_range = log_range(rows.iter().filter(usable).map(|r| r.seconds));
+    let y_range = log_range(rows.iter().filter(usable).filter_map(&y_of));
+
+    let root = SVGBackend::new(path, (820, 580)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| draw_err(&e))?;
+    let mut chart = log_log_chart(&root, title, x_range, y_range).map_err(|e| draw_err(&e))?;
+    chart
+        .configure_mesh()
+        .x_desc(format!(
+            "render time, seconds for {frames} frame{} (log scale)",
+            if frames == 1 { "" } else { "s" }
+        ))
+        .y_desc(format!("{y_desc} (log scale)"))
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 15))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(205, 205, 205))
+        .draw()
+        .map_err(|e| draw_err(&e))?;
+
+    let mut any = false;
+    for (i, (name, sweep)) in series(rows).into_iter().enumerate() {
+        let mut points: Vec<(f64, f64, String)> = sweep
+            .iter()
+            .copied()
+            .filter(usable)
+            .map(|r| (r.seconds, y_of(r).unwrap_or(f64::NAN), point_label(r)))
+            .collect();
+        if points.is_empty() {
+            continue;
+        }
+        any = true;
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        draw_sweep(&mut chart, name, Palette99::pick(i).to_rgba(), &points)
+            .map_err(|e| draw_err(&e))?;
+    }
+    if any {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .draw()
+            .map_err(|e| draw_err(&e))?;
+    } else {
+        root.draw(&Text::new(
+            "no data (flicker needs two frames; the surface error, light masks)",
+            (260, 290),
+            ("sans-serif", 16),
+        ))
+        .map_err(|e| draw_err(&e))?;
+    }
+    root.present().map_err(|e| draw_err(&e))?;
+    Ok(())
+}
+
+/// The SVG chart area, its axes logarithmic over the ranges, with ticks at
+/// 1–2–5 steps ([`log_ticks`]).
+type LogLogChart<'a> = plotters::chart::ChartContext<
+    'a,
+    plotters::backend::SVGBackend<'a>,
+    plotters::coord::cartesian::Cartesian2d<
+        plotters::coord::combinators::WithKeyPoints<plotters::coord::combinators::LogCoord<f64>>,
+        plotters::coord::combinators::WithKeyPoints<plotters::coord::combinators::LogCoord<f64>>,
+    >,
+>;
+
+/// Builds [`LogLogChart`] on `root` with a caption.
+fn log_log_chart<'a>(
+    root: &plotters::drawing::DrawingArea<
+        plotters::backend::SVGBackend<'a>,
+        plotters::coord::Shift,
+    >,
+    title: &str,
+    x_range: std::ops::Range<f64>,
+    y_range: std::ops::Range<f64>,
+) -> Result<LogLogChart<'a>, plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
+    use plotters::prelude::*;
+    let (x_ticks, x_grid) = log_ticks(&x_range);
+    let (y_ticks, y_grid) = log_ticks(&y_range);
+    ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 22))
+        .margin(18)
+        .x_label_area_size(52)
+        .y_label_area_size(78)
+        .build_cartesian_2d(
+            x_range
+                .log_scale()
+                .with_key_points(x_ticks)
+                .with_light_points(x_grid),
+            y_range
+                .log_scale()
+                .with_key_points(y_ticks)
+                .with_light_points(y_grid),
+        )
+}
+
+/// One method sweep: its points `(seconds, y, label)` joined in time
+/// order, each marked and labelled with its swept value, and a legend
+/// entry `name`.
+fn draw_sweep(
+    chart: &mut LogLogChart,
+    name: String,
+    color: plotters::style::RGBAColor,
+    points: &[(f64, f64, String)],
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
+    use plotters::prelude::*;
+    chart
+        .draw_series(LineSeries::new(
+            points.iter().map(|p| (p.0, p.1)),
+            color.stroke_width(2),
+        ))?
+        .label(name)
+        .legend(move |(x, y)| {
+            EmptyElement::at((x, y))
+                + PathElement::new(vec![(0, 0), (22, 0)], color.stroke_width(2))
+                + Circle::new((11, 0), 4, color.filled())
+        });
+    chart.draw_series(points.iter().map(|(x, y, label)| {
+        EmptyElement::at((*x, *y))
+            + Circle::new((0, 0), 4, color.filled())
+            + Text::new(label.clone(), (6, -16), ("sans-serif", 13))
+    }))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_are_short() {
+        assert_eq!(tick(1234.0), "1234");
+        assert_eq!(tick(0.5), "0.5");
+        assert_eq!(tick(2.0), "2");
+        assert_eq!(tick(0.0123), "0.0123");
+        assert_eq!(tick(0.2), "0.2");
+    }
+
+    #[test]
+    fn log_ticks_label_an_axis_within_a_decade() {
+        let (main, _) = log_ticks(&(1.3..4.6));
+        assert_eq!(main, [2.0, 3.0, 4.0]);
+        let (main, grid) = log_ticks(&(0.05..30.0));
+        assert_eq!(main, [0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0]);
+        assert!(grid.contains(&3.0) && !grid.contains(&2.0));
+    }
+
+    #[test]
+    fn log_range_covers_points() {
+        let r = log_range([0.5, 8.0].into_iter());
+        assert!(r.start < 0.5 && r.end > 8.0);
+        let one = log_range([3.0].into_iter());
+        assert!(one.start < 3.0 && one.end > 3.0 && one.end / one.start >= 4.0);
+        assert_eq!(log_range(std::iter::empty()), 0.1..10.0);
+    }
+}

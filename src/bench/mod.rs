@@ -1,0 +1,180 @@
+//! `radcache bench`: runs methods over scenes, measures them against a
+//! converged `path` reference and charts speed against accuracy
+//! (DESIGN.md "Measuring").
+//!
+//! For each scene the bench renders (or reuses) a reference sequence with
+//! `path --same-pattern` at a high sample count into
+//! `DIR/reference/<scene>/`, then renders every run — one method at one value
+//! of one swept setting, on one ray backend — into
+//! `DIR/runs/<scene>/<method>-<key>=<value>/` (with `-<backend>` appended
+//! when the bench has several, [`BenchOptions::backends`]), and compares it
+//! with the reference through [`crate::metrics`]. It writes
+//! `DIR/bench.csv` (one row per run) and two SVG charts per scene:
+//! `DIR/<scene>_error_vs_time.svg` (relative RMSE against seconds, log-log,
+//! one line per method sweep, so the Pareto front shows) and
+//! `DIR/<scene>_flicker_vs_time.svg`.
+//!
+//! Beside each reference frame it writes the frame's light mask
+//! ([`crate::metrics::light_mask_path`]: the pixels that see a light source
+//! directly, or border one), so every run also gets `rel_rmse_surfaces`, the
+//! error of the lit surfaces without the rim of a directly seen light, whose
+//! anti-aliasing noise is the same for every method and can weigh heavily
+//! in an all-pixel RMSE at low sample counts, and likewise
+//! `flicker_surfaces`;
+//! `DIR/<scene>_surface_error_vs_time.svg` and
+//! `DIR/<scene>_surface_flicker_vs_time.svg` chart them.
+//!
+//! # Parts
+//! - `methods`: the methods and settings `--methods` accepts;
+//! - `reference`: a scene's converged reference and its light masks;
+//! - `run`: the runs, each timed and compared with the reference (and, with
+//!   `--estimate-error`, `trc`'s E(t0+1) estimates measured);
+//! - `report`: the CSV, the table and the ratios printed after it;
+//! - `charts`: the SVG charts.
+//!
+//! # Adding a method
+//! A method becomes benchable by one row in [`METHODS`] (its name, the keys
+//! it sweeps with an example value each) and one arm in [`method_settings`]
+//! turning `(key, value)` into its [`crate::render::MethodSettings`]; a unit
+//! test checks that the two agree. Record counts come from the method's frame statistics.
+
+mod charts;
+mod methods;
+mod reference;
+mod report;
+mod run;
+
+pub use charts::plot_scene;
+pub use methods::{method_settings, MethodError, MethodInfo, MethodSweep, RunSpec, METHODS};
+pub use report::{
+    backend_pairs, backend_text, equal_error_table, equal_error_text, estimate_error_text,
+    interpolate_time_at_error, to_csv, to_table, BenchRow, EqualError, ErrorMeasure, CSV_HEADER,
+};
+pub use run::{peak_memory_mb, reset_peak_memory, run, BenchReport};
+
+use crate::render::{BackendChoice, SceneSource};
+use anyhow::{bail, Result};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+// ---------------------------------------------------------------- options
+
+/// What `radcache bench` runs.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub scenes: Vec<SceneSource>,
+    pub methods: Vec<MethodSweep>,
+    pub frames: Range<u32>,
+    pub width: u32,
+    pub height: u32,
+    pub fps: f32,
+    pub reference_spp: u32,
+    pub seed: u64,
+    pub out: PathBuf,
+    /// Render the runs, not only the reference, with the same random
+    /// sequence in every frame: pixel noise then stays put from frame to
+    /// frame, so flicker shows what the method itself changes between
+    /// frames (records appearing and moving), not its per-frame noise.
+    pub same_pattern: bool,
+    /// No progress bars or messages on stderr.
+    pub quiet: bool,
+    /// For `trc` runs, also measure the error of the records' `E(t0+1)`
+    /// estimate over every record the run computes (TRC Table 1), in a
+    /// second, untimed pass that gathers each record again one frame
+    /// later ([`BenchRow::next_error`]).
+    pub estimate_error: bool,
+    /// The ray backends every run is rendered with, one run per backend
+    /// (`--backends cpu,gpu`: GPU against CPU in one invocation, the
+    /// ratio read off one table). The reference is rendered with `auto`.
+    pub backends: Vec<BackendChoice>,
+}
+
+impl Default for BenchOptions {
+    /// The small default run: `cube-in-box`, frames 0..4 at 64×64, `path`
+    /// at 4, 16, 64 and 256 spp and `ic` at 16 and 64 spp against a
+    /// 1024-spp reference.
+    fn default() -> Self {
+        BenchOptions {
+            scenes: vec![SceneSource::Builtin("cube-in-box".into())],
+            methods: vec![
+                MethodSweep::parse("path:spp=4,16,64,256").expect("valid default"),
+                MethodSweep::parse("ic:spp=16,64").expect("valid default"),
+            ],
+            frames: 0..4,
+            width: 64,
+            height: 64,
+            fps: crate::scene::DEFAULT_FPS,
+            reference_spp: 1024,
+            seed: 0,
+            out: PathBuf::from("bench-out"),
+            same_pattern: false,
+            quiet: false,
+            estimate_error: false,
+            backends: vec![BackendChoice::Auto],
+        }
+    }
+}
+
+/// A scene argument: a built-in name, or a `.gltf`/`.glb` file.
+pub fn parse_scene(s: &str) -> Result<SceneSource> {
+    let s = s.trim();
+    if crate::scene::builtin::NAMES.contains(&s) {
+        return Ok(SceneSource::Builtin(s.into()));
+    }
+    let lower = s.to_ascii_lowercase();
+    if lower.ends_with(".gltf") || lower.ends_with(".glb") || Path::new(s).is_file() {
+        return Ok(SceneSource::File(PathBuf::from(s)));
+    }
+    bail!(
+        "'{s}' is neither a built-in scene ({}) nor a .gltf/.glb file",
+        crate::scene::builtin::NAMES.join(", ")
+    )
+}
+
+/// The name of a scene in file and folder names: the built-in name, or the
+/// file's stem.
+pub fn scene_label(source: &SceneSource) -> String {
+    let raw = match source {
+        SceneSource::Builtin(name) => name.clone(),
+        SceneSource::File(path) => path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into()),
+    };
+    sanitize(&raw)
+}
+
+/// Keeps `[A-Za-z0-9._=-]`, replaces the rest with `_`.
+fn sanitize(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "._=-".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scene_labels() {
+        assert_eq!(
+            scene_label(&SceneSource::Builtin("cube-in-box".into())),
+            "cube-in-box"
+        );
+        assert_eq!(
+            scene_label(&SceneSource::File("/a/b/my scene.glb".into())),
+            "my_scene"
+        );
+        assert!(parse_scene("nonsense").is_err());
+        assert_eq!(
+            parse_scene("spheres").unwrap(),
+            SceneSource::Builtin("spheres".into())
+        );
+    }
+}

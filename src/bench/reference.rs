@@ -1,0 +1,184 @@
+//! The converged `path` reference of a scene, rendered once into
+//! `DIR/reference/<scene>/` with a light mask per frame, and reused while
+//! its `reference.json` matches.
+
+use super::run::{clear_frames, frame_settings, render_frames};
+use super::{scene_label, BenchOptions};
+use crate::backend::{Hit, Ray};
+use crate::method::path::PathSettings;
+use crate::method::FrameContext;
+use crate::metrics;
+use crate::render::{self, BackendChoice, MethodSettings, Renderer, SceneSource};
+use anyhow::{Context, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+/// What `DIR/reference/<scene>/reference.json` records; a reference is
+/// reused only when all of it matches.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct ReferenceInfo {
+    scene: String,
+    /// FNV-1a of the scene file's bytes (0 for built-in scenes).
+    scene_hash: u64,
+    frames: [u32; 2],
+    width: u32,
+    height: u32,
+    spp: u32,
+    seed: u64,
+    fps: f32,
+    method: String,
+    same_pattern: bool,
+    /// The folder holds a light mask per frame (written since the surface
+    /// error exists; an older reference is rendered again).
+    #[serde(default)]
+    light_masks: bool,
+    /// Coverage-only camera rays of pixels on a seen light's edge, in units
+    /// of `spp` (`method::pixels`; 0 in references made before the edge
+    /// pixels were post-stratified, which are rendered again).
+    #[serde(default)]
+    edge_coverage_factor: u32,
+}
+
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+fn scene_hash(source: &SceneSource) -> Result<u64> {
+    match source {
+        SceneSource::Builtin(_) => Ok(0),
+        SceneSource::File(p) => {
+            let bytes =
+                std::fs::read(p).with_context(|| format!("cannot read scene {}", p.display()))?;
+            Ok(fnv1a(&bytes))
+        }
+    }
+}
+
+/// Renders the reference of `source` into `dir` unless a matching one is
+/// there already.
+pub(super) fn ensure_reference(
+    opts: &BenchOptions,
+    source: &SceneSource,
+    dir: &Path,
+) -> Result<()> {
+    let info = ReferenceInfo {
+        scene: source.to_string(),
+        scene_hash: scene_hash(source)?,
+        frames: [opts.frames.start, opts.frames.end],
+        width: opts.width,
+        height: opts.height,
+        spp: opts.reference_spp,
+        seed: opts.seed,
+        fps: opts.fps,
+        method: "path".into(),
+        same_pattern: true,
+        light_masks: true,
+        edge_coverage_factor: frame_settings(opts, true).edge_coverage_factor,
+    };
+    let json = dir.join("reference.json");
+    let have = std::fs::read_to_string(&json)
+        .ok()
+        .and_then(|s| serde_json::from_str::<ReferenceInfo>(&s).ok());
+    let complete = opts
+        .frames
+        .clone()
+        .all(|f| crate::film::frame_path(dir, f, "exr").is_file());
+    if have.as_ref() == Some(&info) && complete {
+        if !opts.quiet {
+            eprintln!("reference {}: reusing {}", source, dir.display());
+        }
+        return Ok(());
+    }
+    // Stale or partial: start again, so no frame of another reference stays.
+    let _ = std::fs::remove_file(&json);
+    clear_frames(dir)?;
+    if !opts.quiet {
+        eprintln!(
+            "reference {}: rendering frames {}..{} at {}x{}, path {} spp, same pattern → {}",
+            source,
+            opts.frames.start,
+            opts.frames.end,
+            opts.width,
+            opts.height,
+            opts.reference_spp,
+            dir.display()
+        );
+    }
+    let settings = MethodSettings::Path(PathSettings {
+        spp: opts.reference_spp,
+        ..PathSettings::default()
+    });
+    let mut renderer = Renderer::new(
+        source.load()?,
+        settings.instantiate(),
+        render::make_backend(BackendChoice::Auto)?,
+        frame_settings(opts, true),
+    );
+    let what = format!("reference {}", scene_label(source));
+    render_frames(&mut renderer, opts.frames.clone(), dir, &what, opts.quiet)?;
+    for frame in opts.frames.clone() {
+        let mask = renderer.with_frame_context(frame, seen_lights);
+        metrics::write_light_mask(
+            &metrics::light_mask_path(dir, frame),
+            opts.width,
+            opts.height,
+            &mask,
+        )?;
+    }
+    // Written last: its presence says the frames are complete.
+    std::fs::write(&json, serde_json::to_string_pretty(&info)?)
+        .with_context(|| format!("cannot write {}", json.display()))?;
+    Ok(())
+}
+
+/// Which pixels of the frame see a light source directly or border a pixel
+/// that does (the light mask of [`metrics::light_mask_path`]): 8×8 primary
+/// rays per pixel on a regular grid over its square, then a one-pixel
+/// dilation, so that a rim pixel the grid misses is left out as well. An
+/// emissive triangle counts from either side: leaving out a few more pixels
+/// only narrows the surface error, it does not bias it.
+fn seen_lights(ctx: &FrameContext) -> Vec<bool> {
+    const GRID: u32 = 8;
+    let (w, h) = (ctx.width, ctx.height);
+    let camera = &ctx.snapshot.camera;
+    let emissive = |hit: &Hit| {
+        hit.is_hit() && {
+            let material = ctx.snapshot.tri_material[hit.triangle as usize];
+            ctx.scene.materials[material as usize].is_emissive()
+        }
+    };
+    let mut lit = vec![false; (w * h) as usize];
+    for y in 0..h {
+        let rays: Vec<Ray> = (0..w * GRID * GRID)
+            .map(|i| {
+                let (x, s) = (i / (GRID * GRID), i % (GRID * GRID));
+                let sx = (x as f32 + ((s % GRID) as f32 + 0.5) / GRID as f32) / w as f32;
+                let sy = (y as f32 + ((s / GRID) as f32 + 0.5) / GRID as f32) / h as f32;
+                let dir = camera.direction(sx, sy, ctx.aspect());
+                Ray::new(camera.position, dir, 0.0, f32::INFINITY)
+            })
+            .collect();
+        let mut hits = vec![Hit::MISS; rays.len()];
+        ctx.backend.closest_hit(&rays, &mut hits);
+        for (x, pixel_hits) in hits.chunks(GRID as usize * GRID as usize).enumerate() {
+            lit[(y * w) as usize + x] = pixel_hits.iter().any(emissive);
+        }
+    }
+    dilate(&lit, w, h)
+}
+
+/// `mask` grown by one pixel in the eight directions.
+fn dilate(mask: &[bool], w: u32, h: u32) -> Vec<bool> {
+    let at = |x: i64, y: i64| {
+        (0..w as i64).contains(&x)
+            && (0..h as i64).contains(&y)
+            && mask[(y * w as i64 + x) as usize]
+    };
+    (0..(w * h) as i64)
+        .map(|i| {
+            let (x, y) = (i % w as i64, i / w as i64);
+            (-1..=1).any(|dy| (-1..=1).any(|dx| at(x + dx, y + dy)))
+        })
+        .collect()
+}

@@ -1,0 +1,395 @@
+//! What the bench prints and writes: `bench.csv`, the terminal table, the
+//! speed-up over `path` at equal error, TRC Table 1 per `trc` run, and
+//! the speed-up of each backend over the first.
+
+use crate::method::trc::estimate_error::{percent, EstimateError};
+use std::fmt::Write as _;
+
+/// One row of `bench.csv`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchRow {
+    pub scene: String,
+    pub method: String,
+    /// `key=value` or `default`.
+    pub settings: String,
+    /// The ray backend the run was rendered with, as it names itself
+    /// (`cpu (2 threads)`, `gpu (<adapter>, Vulkan)`).
+    pub backend: String,
+    pub frames: u32,
+    /// Wall time of rendering, all frames, file writing excluded.
+    pub seconds: f64,
+    /// Of `seconds`, the time of the render pass that `ic` and `trc` share
+    /// (their [`crate::method::RENDER_PHASE`]: direct light, cache lookups, glossy lobes);
+    /// the rest is the method's own work on its records. `None` for
+    /// methods without a cache.
+    pub render_pass_seconds: Option<f64>,
+    pub rays: u64,
+    pub records: u64,
+    /// Peak resident memory of the process during the run (MB), where the
+    /// platform tells it.
+    pub peak_mem_mb: Option<f64>,
+    pub rel_rmse: f64,
+    /// Relative RMSE without the pixels at directly seen lights
+    /// ([`crate::metrics::CompareReport::rel_rmse_surfaces`]).
+    pub rel_rmse_surfaces: Option<f64>,
+    pub block_bias: f64,
+    /// `None` with a single frame.
+    pub flicker: Option<f64>,
+    /// Flicker without the pixels at directly seen lights
+    /// ([`crate::metrics::CompareReport::flicker_surfaces`]).
+    pub flicker_surfaces: Option<f64>,
+    /// With [`super::BenchOptions::estimate_error`], for `trc` runs: the error of
+    /// the `E(t0+1)` estimate of the records the run computed, against
+    /// `E(t0+1)` gathered again (TRC Table 1). Records of the run's last
+    /// frame are measured too (their `t0 + 1` is past the range, but a
+    /// frame of the scene all the same).
+    pub next_error: Option<EstimateError>,
+}
+
+/// `bench.csv`'s header line.
+pub const CSV_HEADER: &str =
+    "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces,\
+estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,constant_err_median";
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn opt(v: Option<f64>, decimals: usize) -> String {
+    v.map_or(String::new(), |v| format!("{v:.decimals$}"))
+}
+
+/// The five CSV fields of [`BenchRow::next_error`], empty where not measured.
+fn next_error_fields(e: Option<EstimateError>) -> String {
+    match e {
+        Some(e) => format!(
+            "{},{:.6},{:.6},{:.6},{:.6}",
+            e.records, e.estimate.0, e.estimate.1, e.constant.0, e.constant.1
+        ),
+        None => ",,,,".into(),
+    }
+}
+
+/// The CSV text: [`CSV_HEADER`] and one line per row. Missing values
+/// (flicker of a single frame, memory where unknown) are empty fields.
+pub fn to_csv(rows: &[BenchRow]) -> String {
+    let mut out = format!("{CSV_HEADER}\n");
+    for r in rows {
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{:.4},{},{},{},{},{:.6},{},{:.6},{},{},{}",
+            csv_field(&r.scene),
+            csv_field(&r.method),
+            csv_field(&r.settings),
+            csv_field(&r.backend),
+            r.frames,
+            r.seconds,
+            opt(r.render_pass_seconds, 4),
+            r.rays,
+            r.records,
+            opt(r.peak_mem_mb, 1),
+            r.rel_rmse,
+            opt(r.rel_rmse_surfaces, 6),
+            r.block_bias,
+            opt(r.flicker, 6),
+            opt(r.flicker_surfaces, 6),
+            next_error_fields(r.next_error),
+        );
+    }
+    out
+}
+
+/// The rows as an aligned table for the terminal.
+pub fn to_table(rows: &[BenchRow]) -> String {
+    let header = [
+        "scene",
+        "method",
+        "settings",
+        "backend",
+        "frames",
+        "seconds",
+        "render s",
+        "Mrays",
+        "records",
+        "peak MB",
+        "rel_rmse",
+        "rmse surf",
+        "block_bias",
+        "flicker",
+        "flicker surf",
+    ];
+    let cells: Vec<[String; 15]> = rows
+        .iter()
+        .map(|r| {
+            [
+                r.scene.clone(),
+                r.method.clone(),
+                r.settings.clone(),
+                r.backend.clone(),
+                r.frames.to_string(),
+                format!("{:.3}", r.seconds),
+                r.render_pass_seconds
+                    .map_or("-".into(), |v| format!("{v:.3}")),
+                format!("{:.2}", r.rays as f64 / 1e6),
+                r.records.to_string(),
+                r.peak_mem_mb.map_or("-".into(), |v| format!("{v:.0}")),
+                format!("{:.5}", r.rel_rmse),
+                r.rel_rmse_surfaces
+                    .map_or("-".into(), |v| format!("{v:.5}")),
+                format!("{:.5}", r.block_bias),
+                r.flicker.map_or("-".into(), |v| format!("{v:.5}")),
+                r.flicker_surfaces.map_or("-".into(), |v| format!("{v:.5}")),
+            ]
+        })
+        .collect();
+    let mut widths = header.map(str::len);
+    for row in &cells {
+        for (w, c) in widths.iter_mut().zip(row) {
+            *w = (*w).max(c.chars().count());
+        }
+    }
+    let line = |cols: Vec<&str>| {
+        let mut s = String::new();
+        for (i, (c, w)) in cols.iter().zip(widths).enumerate() {
+            // Text columns left-aligned, numbers right-aligned.
+            if i < 4 {
+                let _ = write!(s, "{c:<w$}  ");
+            } else {
+                let _ = write!(s, "{c:>w$}  ");
+            }
+        }
+        s.trim_end().to_string() + "\n"
+    };
+    let mut out = line(header.to_vec());
+    for row in &cells {
+        out += &line(row.iter().map(String::as_str).collect());
+    }
+    out
+}
+
+// ---------------------------------------------------------------- equal error
+
+/// Time at which a sweep reaches relative RMSE `target`, interpolating
+/// linearly in log(seconds)–log(error) between the two consecutive points
+/// (ordered by time) whose errors bracket it. `None` when the sweep does not
+/// bracket the target (no extrapolation) or has no usable points (values
+/// must be positive and finite). With several brackets (a noisy sweep) the
+/// fastest wins.
+pub fn interpolate_time_at_error(points: &[(f64, f64)], target: f64) -> Option<f64> {
+    if !(target.is_finite() && target > 0.0) {
+        return None;
+    }
+    let mut pts: Vec<(f64, f64)> = points
+        .iter()
+        .copied()
+        .filter(|&(t, e)| t.is_finite() && t > 0.0 && e.is_finite() && e > 0.0)
+        .collect();
+    pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if let Some(&(t, _)) = pts.iter().find(|&&(_, e)| e == target) {
+        return Some(t);
+    }
+    let lt = target.ln();
+    pts.windows(2).find_map(|w| {
+        let ((t0, e0), (t1, e1)) = (w[0], w[1]);
+        let (l0, l1) = (e0.ln(), e1.ln());
+        if (l0 - lt) * (l1 - lt) > 0.0 || l0 == l1 {
+            return None;
+        }
+        let s = (lt - l0) / (l1 - l0);
+        Some((t0.ln() + s * (t1.ln() - t0.ln())).exp())
+    })
+}
+
+/// Which error an equal-error comparison holds equal.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorMeasure {
+    /// Relative RMSE over all pixels ([`BenchRow::rel_rmse`]).
+    AllPixels,
+    /// Relative RMSE without the pixels at directly seen lights
+    /// ([`BenchRow::rel_rmse_surfaces`]).
+    Surfaces,
+}
+
+impl ErrorMeasure {
+    pub fn of(self, row: &BenchRow) -> Option<f64> {
+        match self {
+            ErrorMeasure::AllPixels => Some(row.rel_rmse),
+            ErrorMeasure::Surfaces => row.rel_rmse_surfaces,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            ErrorMeasure::AllPixels => "rel_rmse",
+            ErrorMeasure::Surfaces => "rel_rmse_surfaces",
+        }
+    }
+}
+
+/// For a run of another method: how long `path` takes to reach the same
+/// error on the same scene, and the ratio (path time ÷ run time).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EqualError {
+    pub scene: String,
+    pub method: String,
+    pub settings: String,
+    /// The backend of the run and of the `path` runs it is held against.
+    pub backend: String,
+    pub measure: ErrorMeasure,
+    pub error: f64,
+    pub seconds: f64,
+    /// `None` where the path sweep does not bracket the error.
+    pub path_seconds: Option<f64>,
+}
+
+impl EqualError {
+    pub fn speedup(&self) -> Option<f64> {
+        self.path_seconds.map(|p| p / self.seconds)
+    }
+}
+
+/// [`EqualError`] under `measure` for every run whose method is not `path`
+/// (and that has the measure), against the `path` runs of its scene and
+/// backend that vary only the sample count (`spp=…` or the defaults), or
+/// all those `path` runs when there are none such. Runs without `path` runs
+/// of their scene and backend have no rows.
+pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualError> {
+    let path_curve = |of: &BenchRow| -> Vec<(f64, f64)> {
+        let runs: Vec<&BenchRow> = rows
+            .iter()
+            .filter(|p| p.method == "path" && p.scene == of.scene && p.backend == of.backend)
+            .collect();
+        let spp: Vec<&BenchRow> = runs
+            .iter()
+            .copied()
+            .filter(|p| p.settings.starts_with("spp=") || p.settings == "default")
+            .collect();
+        let chosen = if spp.is_empty() { runs } else { spp };
+        chosen
+            .iter()
+            .filter_map(|p| Some((p.seconds, measure.of(p)?)))
+            .collect()
+    };
+    rows.iter()
+        .filter(|r| r.method != "path")
+        .filter_map(|r| {
+            let error = measure.of(r)?;
+            let path = path_curve(r);
+            if path.is_empty() {
+                return None; // Nothing to compare with on this scene.
+            }
+            Some(EqualError {
+                scene: r.scene.clone(),
+                method: r.method.clone(),
+                settings: r.settings.clone(),
+                backend: r.backend.clone(),
+                measure,
+                error,
+                seconds: r.seconds,
+                path_seconds: interpolate_time_at_error(&path, error),
+            })
+        })
+        .collect()
+}
+
+/// Lines for people: one per [`EqualError`].
+pub fn equal_error_text(table: &[EqualError]) -> String {
+    let mut out = String::new();
+    let several_backends = table.iter().any(|e| e.backend != table[0].backend);
+    for e in table {
+        let on = if several_backends {
+            format!(" on {}", e.backend)
+        } else {
+            String::new()
+        };
+        let what = format!(
+            "{} {} {}{on}: {} {:.5} in {:.3} s",
+            e.scene,
+            e.method,
+            e.settings,
+            e.measure.name(),
+            e.error,
+            e.seconds
+        );
+        let _ = match (e.path_seconds, e.speedup()) {
+            (Some(p), Some(x)) => writeln!(
+                out,
+                "{what}; path needs {p:.3} s for it → {x:.2}× faster than path"
+            ),
+            _ => writeln!(
+                out,
+                "{what}; the path sweep does not bracket this error (widen it)"
+            ),
+        };
+    }
+    out
+}
+
+/// Lines for people: one per run with [`BenchRow::next_error`].
+pub fn estimate_error_text(rows: &[BenchRow]) -> String {
+    let mut out = String::new();
+    for r in rows {
+        let Some(e) = r.next_error else { continue };
+        let _ = writeln!(
+            out,
+            "{} {} {}: {} records: estimate {}, constant E {}",
+            r.scene,
+            r.method,
+            r.settings,
+            e.records,
+            percent(e.estimate),
+            percent(e.constant)
+        );
+    }
+    out
+}
+
+// ---------------------------------------------------------------- backends
+
+/// Pairs of the same run (scene, method, settings) on the bench's first
+/// backend and on each later one (`--backends cpu,gpu`), in row order:
+/// the ratio of their times is read off one invocation.
+pub fn backend_pairs(rows: &[BenchRow]) -> Vec<(&BenchRow, &BenchRow)> {
+    let Some(first) = rows.first().map(|r| &r.backend) else {
+        return Vec::new();
+    };
+    rows.iter()
+        .filter(|r| r.backend != *first)
+        .filter_map(|other| {
+            let base = rows.iter().find(|r| {
+                r.backend == *first
+                    && (&r.scene, &r.method, &r.settings)
+                        == (&other.scene, &other.method, &other.settings)
+            })?;
+            Some((base, other))
+        })
+        .collect()
+}
+
+/// Lines for people: one per [`backend_pairs`] pair, the later backend's
+/// speed-up over the first (first's seconds ÷ its own) and the change of
+/// the error, which the backends should leave alone (the same hits).
+pub fn backend_text(rows: &[BenchRow]) -> String {
+    let mut out = String::new();
+    for (base, other) in backend_pairs(rows) {
+        let _ = writeln!(
+            out,
+            "{} {} {}: {} {:.3} s against {} {:.3} s → {:.2}× (rel_rmse {:.5} against {:.5})",
+            other.scene,
+            other.method,
+            other.settings,
+            other.backend,
+            other.seconds,
+            base.backend,
+            base.seconds,
+            base.seconds / other.seconds,
+            other.rel_rmse,
+            base.rel_rmse,
+        );
+    }
+    out
+}

@@ -1,0 +1,358 @@
+//! Running a bench: each scene's reference, then every run on every
+//! backend, measured against it.
+
+use super::charts::plot_scene;
+use super::reference::ensure_reference;
+use super::{sanitize, scene_label, to_csv, BenchOptions, BenchRow, RunSpec};
+use crate::method::trc::estimate_error::{EstimateError, EstimateErrorTally};
+use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
+use crate::method::Method;
+use crate::metrics;
+use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
+use anyhow::{bail, Context, Result};
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// Peak resident set size of this process in MB (`VmHWM` of
+/// /proc/self/status); `None` where there is no such file.
+pub fn peak_memory_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    status_kb(&status, "VmHWM:").map(|kb| kb as f64 / 1024.0)
+}
+
+fn status_kb(status: &str, field: &str) -> Option<u64> {
+    let line = status.lines().find(|l| l.starts_with(field))?;
+    line[field.len()..].split_whitespace().next()?.parse().ok()
+}
+
+/// Resets the process's peak RSS to its current RSS (Linux ≥ 4.0,
+/// `echo 5 > /proc/self/clear_refs`), so that [`peak_memory_mb`] after a run
+/// is that run's peak rather than the whole process's. Returns whether it
+/// worked; where it does not, the figure stays the process peak so far.
+pub fn reset_peak_memory() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
+/// What a bench run produced.
+#[derive(Clone, Debug)]
+pub struct BenchReport {
+    pub rows: Vec<BenchRow>,
+    pub csv: PathBuf,
+    pub charts: Vec<PathBuf>,
+    /// Whether peak memory is per run (true) or the process peak so far.
+    pub peak_mem_per_run: bool,
+}
+
+/// Runs the whole bench: references, runs, CSV, charts.
+pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
+    if opts.scenes.is_empty() {
+        bail!("no scenes to bench");
+    }
+    if opts.methods.is_empty() {
+        bail!("no methods to bench");
+    }
+    if opts.frames.is_empty() {
+        bail!(
+            "frame range {}..{} is empty",
+            opts.frames.start,
+            opts.frames.end
+        );
+    }
+    if opts.backends.is_empty() {
+        bail!("no backends to bench on");
+    }
+    if opts.estimate_error && !opts.methods.iter().any(|m| m.method == "trc") {
+        bail!("--estimate-error measures the records of trc runs, and no method is trc");
+    }
+    for (i, b) in opts.backends.iter().enumerate() {
+        if opts.backends[..i].contains(b) {
+            bail!("backend '{}' is named twice", b.name());
+        }
+    }
+    let labels: Vec<String> = opts.scenes.iter().map(scene_label).collect();
+    for (i, l) in labels.iter().enumerate() {
+        if labels[..i].contains(l) {
+            bail!("two scenes are both named '{l}' in file names; rename one");
+        }
+    }
+    std::fs::create_dir_all(&opts.out)
+        .with_context(|| format!("cannot create output directory {}", opts.out.display()))?;
+    let per_run = reset_peak_memory();
+    let mut rows = Vec::new();
+    let mut charts = Vec::new();
+    for (source, label) in opts.scenes.iter().zip(&labels) {
+        let scene_rows = bench_scene(opts, source, label, per_run)?;
+        charts.extend(plot_scene(&opts.out, label, &scene_rows)?);
+        rows.extend(scene_rows);
+    }
+    let csv = opts.out.join("bench.csv");
+    std::fs::write(&csv, to_csv(&rows))
+        .with_context(|| format!("cannot write {}", csv.display()))?;
+    Ok(BenchReport {
+        rows,
+        csv,
+        charts,
+        peak_mem_per_run: per_run,
+    })
+}
+
+pub(super) fn frame_settings(opts: &BenchOptions, same_pattern: bool) -> FrameSettings {
+    FrameSettings {
+        width: opts.width,
+        height: opts.height,
+        fps: opts.fps,
+        seed: opts.seed,
+        same_pattern,
+        ..FrameSettings::default()
+    }
+}
+
+fn bench_scene(
+    opts: &BenchOptions,
+    source: &SceneSource,
+    label: &str,
+    per_run: bool,
+) -> Result<Vec<BenchRow>> {
+    let ref_dir = opts.out.join("reference").join(label);
+    ensure_reference(opts, source, &ref_dir)?;
+    let mut rows = Vec::new();
+    for sweep in &opts.methods {
+        for spec in sweep.runs() {
+            for &backend in &opts.backends {
+                let run = Run {
+                    spec: &spec,
+                    backend,
+                    // One folder per backend only when there are several,
+                    // so a one-backend bench keeps its folder names.
+                    backend_in_dir: opts.backends.len() > 1,
+                };
+                rows.push(bench_run(opts, source, label, &run, per_run)?);
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// One run of a bench: a method's settings on one backend.
+struct Run<'a> {
+    spec: &'a RunSpec,
+    backend: BackendChoice,
+    backend_in_dir: bool,
+}
+
+impl Run<'_> {
+    /// The run's folder under `runs/<scene>/`: `<method>-<settings>`, and
+    /// `-<backend>` when the bench has several.
+    fn folder(&self) -> String {
+        let mut name = format!("{}-{}", self.spec.method, self.spec.label());
+        if self.backend_in_dir {
+            name = format!("{name}-{}", self.backend.name());
+        }
+        sanitize(&name)
+    }
+}
+
+/// Renders one run of `source` into its folder and compares it with the
+/// scene's reference.
+fn bench_run(
+    opts: &BenchOptions,
+    source: &SceneSource,
+    label: &str,
+    run: &Run,
+    per_run: bool,
+) -> Result<BenchRow> {
+    let spec = run.spec;
+    let settings = spec.settings()?;
+    let dir = opts.out.join("runs").join(label).join(run.folder());
+    let ref_dir = opts.out.join("reference").join(label);
+    clear_frames(&dir)?;
+    let mut renderer = Renderer::new(
+        source.load()?,
+        settings.instantiate(),
+        render::make_backend(run.backend)?,
+        frame_settings(opts, opts.same_pattern),
+    );
+    let backend = renderer.backend().name();
+    if per_run {
+        reset_peak_memory();
+    }
+    let what = format!("{label} {} {} on {backend}", spec.method, spec.label());
+    let stats = render_frames(&mut renderer, opts.frames.clone(), &dir, &what, opts.quiet)?;
+    let peak_mem_mb = peak_memory_mb();
+    drop(renderer);
+    let cmp = metrics::compare_dirs(&ref_dir, &dir)
+        .with_context(|| format!("comparing {} with {}", dir.display(), ref_dir.display()))?;
+    let next_error = match &settings {
+        MethodSettings::Trc(trc) if opts.estimate_error => {
+            estimate_error(opts, source, run.backend, trc, &what)?
+        }
+        _ => None,
+    };
+    Ok(BenchRow {
+        scene: label.into(),
+        method: spec.method.clone(),
+        settings: spec.label(),
+        backend,
+        frames: opts.frames.len() as u32,
+        seconds: stats.render_time.as_secs_f64(),
+        render_pass_seconds: stats.render_pass_seconds,
+        rays: stats.rays,
+        records: stats.records,
+        peak_mem_mb,
+        rel_rmse: cmp.rel_rmse,
+        rel_rmse_surfaces: cmp.rel_rmse_surfaces,
+        block_bias: cmp.block_bias,
+        flicker: cmp.flicker,
+        flicker_surfaces: cmp.flicker_surfaces,
+        next_error,
+    })
+}
+
+/// [`BenchRow::next_error`] of a `trc` run with `settings`: the run's frames
+/// rendered again (untimed) by a `trc` the bench holds, passes driven here
+/// as [`Renderer::render_frame`] drives them, and after each pass the
+/// records it computed (new ones and replacements) gathered again one
+/// frame after their own.
+fn estimate_error(
+    opts: &BenchOptions,
+    source: &SceneSource,
+    backend: BackendChoice,
+    settings: &TrcSettings,
+    what: &str,
+) -> Result<Option<EstimateError>> {
+    let mut renderer = Renderer::new(
+        source.load()?,
+        Box::new(render::NoMethod),
+        render::make_backend(backend)?,
+        frame_settings(opts, opts.same_pattern),
+    );
+    let mut trc = TemporalRadianceCaching::new(settings.clone());
+    let mut measured = NextFrameMeasure::default();
+    let bar = render::progress_bar(opts.frames.len() as u64, opts.quiet);
+    let end = opts.frames.end;
+    for frame in opts.frames.clone() {
+        bar.set_message(format!("{what}: E(t0+1) estimates, frame {frame}"));
+        while let Some(f) = trc.next_frame_to_prepare(frame, end) {
+            renderer.with_frame_context(f, |ctx| trc.prepare_frame(ctx));
+            measured.add_new(&mut renderer, &trc);
+        }
+        renderer.with_frame_context(frame, |ctx| trc.render_frame(ctx));
+        measured.add_new(&mut renderer, &trc);
+        if let Some(message) = renderer.backend().failure() {
+            bail!("{what}: E(t0+1) estimates, frame {frame}: the backend failed: {message}");
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(measured.tally.summary())
+}
+
+/// The records of a `trc` measured so far, and their errors.
+#[derive(Default)]
+struct NextFrameMeasure {
+    /// `(id, t0)` of every record measured: a replacement keeps the id of
+    /// the record it replaces, at a later `t0`.
+    seen: std::collections::HashSet<(crate::cache::RecordId, u32)>,
+    tally: EstimateErrorTally,
+}
+
+impl NextFrameMeasure {
+    /// Measures the records of `trc` not measured yet, each gathered again
+    /// at its `t0 + 1`.
+    fn add_new(&mut self, renderer: &mut Renderer, trc: &TemporalRadianceCaching) {
+        let mut new: Vec<_> = trc
+            .records()
+            .iter()
+            .filter(|k| self.seen.insert((k.record.id, k.record.created_frame)))
+            .cloned()
+            .collect();
+        new.sort_by_key(|k| k.record.created_frame);
+        for same_t0 in new.chunk_by(|a, b| a.record.created_frame == b.record.created_frame) {
+            let t1 = same_t0[0].record.created_frame + 1;
+            let actual = renderer.with_frame_context(t1, |ctx| trc.regather(ctx, same_t0));
+            self.tally.add(same_t0, &actual);
+        }
+    }
+}
+
+/// Creates `dir` and removes the `frame_NNNN.{exr,png}` files in it.
+pub(super) fn clear_frames(dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create directory {}", dir.display()))?;
+    for entry in std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))? {
+        let entry = entry?;
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with("frame_") && (name.ends_with(".exr") || name.ends_with(".png")) {
+            std::fs::remove_file(entry.path())
+                .with_context(|| format!("cannot remove {}", entry.path().display()))?;
+        }
+    }
+    Ok(())
+}
+
+pub(super) struct RunStats {
+    render_time: Duration,
+    /// Summed "render" phases of the frames, where the method times one.
+    render_pass_seconds: Option<f64>,
+    rays: u64,
+    /// Cache records computed over the run (0 for methods without a cache).
+    records: u64,
+}
+
+/// Renders `frames` into `dir` with a progress bar; the time counts
+/// rendering only, not writing files.
+pub(super) fn render_frames(
+    renderer: &mut Renderer,
+    frames: Range<u32>,
+    dir: &Path,
+    what: &str,
+    quiet: bool,
+) -> Result<RunStats> {
+    let bar = render::progress_bar(frames.len() as u64, quiet);
+    let rays_before = renderer.backend().ray_counts().total();
+    let mut render_time = Duration::ZERO;
+    let mut render_pass_seconds = None;
+    let mut records = 0;
+    renderer.set_frame_end(Some(frames.end));
+    for frame in frames {
+        bar.set_message(format!("{what}, frame {frame}"));
+        let start = Instant::now();
+        let film = renderer
+            .try_render_frame(frame)
+            .map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
+        render_time += start.elapsed();
+        let stats = renderer.last_frame_stats();
+        // Records computed: new ones and replacements at the same point (trc).
+        records += stats.records_created + stats.records_replaced;
+        for (_, secs) in stats
+            .phase_seconds
+            .iter()
+            .filter(|(name, _)| name == crate::method::RENDER_PHASE)
+        {
+            *render_pass_seconds.get_or_insert(0.0) += secs;
+        }
+        crate::film::write_frame(&film, dir, frame)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(RunStats {
+        render_time,
+        render_pass_seconds,
+        rays: renderer.backend().ray_counts().total() - rays_before,
+        records,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn status_field() {
+        let s = "Name:\tx\nVmPeak:\t  2000 kB\nVmHWM:\t   1536 kB\n";
+        assert_eq!(status_kb(s, "VmHWM:"), Some(1536));
+        assert_eq!(status_kb(s, "VmRSS:"), None);
+    }
+}
