@@ -115,20 +115,24 @@ struct ShadowQuery {
 }
 
 /// [`trace_radiance`] split over the thread pool, `QUERIES_PER_TASK`
-/// queries a task: the same results, since each query carries its own
-/// random stream. For batches a single task would otherwise shade alone
-/// while the other threads wait — `trc` gathers a handful of records a
-/// frame, and one record is 768 queries.
+/// queries a task, or the backend's [`crate::backend::RayBackend::min_batch`] where that
+/// is more: the same results, since each query carries its own random
+/// stream. For batches a single task would otherwise shade alone while
+/// the other threads wait — `trc` gathers a handful of records a frame,
+/// and one record is 768 queries. On a GPU, tasks of `QUERIES_PER_TASK`
+/// made each path bounce a dispatch of at most 256 rays, whose fixed cost
+/// dwarfed their tracing.
 pub fn trace_radiance_parallel(
     ctx: &FrameContext,
     length: PathLength,
     queries: Vec<RadianceQuery>,
 ) -> Vec<RadianceResult> {
-    if queries.len() <= QUERIES_PER_TASK {
+    let per_task = QUERIES_PER_TASK.max(ctx.backend.min_batch());
+    if queries.len() <= per_task {
         return trace_radiance(ctx, length, queries);
     }
     queries
-        .par_chunks(QUERIES_PER_TASK)
+        .par_chunks(per_task)
         .flat_map_iter(|chunk| trace_radiance(ctx, length, chunk.to_vec()))
         .collect()
 }

@@ -77,6 +77,10 @@ pub const MAX_CHUNK_RAYS: usize = 1 << 22;
 /// map, wait) of a fraction of a millisecond, small beside 1 Mi rays.
 pub const PREFERRED_BATCH: usize = 1 << 20;
 
+/// The fewest rays worth a dispatch ([`RayBackend::min_batch`]): at 64 Ki
+/// rays the fixed cost of a dispatch is a small part of tracing them.
+pub const MIN_BATCH: usize = 1 << 16;
+
 /// "No node / no triangle" (`NONE` in the shaders).
 const NONE: u32 = u32::MAX;
 
@@ -1015,6 +1019,10 @@ impl RayBackend for GpuBackend {
         PREFERRED_BATCH
     }
 
+    fn min_batch(&self) -> usize {
+        MIN_BATCH
+    }
+
     fn cache_splat(&self) -> Option<&CacheSplat> {
         Some(&self.splat)
     }
@@ -1043,6 +1051,9 @@ impl RayBackend for RaysOnly {
     }
     fn preferred_batch(&self) -> usize {
         self.0.preferred_batch()
+    }
+    fn min_batch(&self) -> usize {
+        self.0.min_batch()
     }
     fn failure(&self) -> Option<String> {
         self.0.failure()

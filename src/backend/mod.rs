@@ -120,6 +120,14 @@ pub trait RayBackend: Send + Sync {
     /// Batch size that keeps this backend busy.
     fn preferred_batch(&self) -> usize;
 
+    /// The fewest rays a call should carry for the call's fixed cost not to
+    /// dominate: work split over threads is split no finer than this (1 on
+    /// the CPU, where a call costs nothing; tens of thousands on a GPU,
+    /// where each call is a dispatch, a copy back and a wait).
+    fn min_batch(&self) -> usize {
+        1
+    }
+
     /// Why this backend stopped working, if it did (a GPU device lost, out
     /// of memory, a scene too large for it). The tracing methods cannot
     /// return errors — they run deep inside rayon tasks — so a backend that

@@ -343,13 +343,10 @@ impl TemporalRadianceCaching {
     /// `E(t)` to compare with an estimate (TRC Table 1).
     pub fn regather(&self, ctx: &FrameContext, records: &[TemporalRecord]) -> Vec<Vec3> {
         use rayon::prelude::*;
-        records
-            .iter()
-            .map(|r| {
-                let c = [r.candidate];
-                let g: Vec<Gathered> = self.ic.gather_parallel(ctx, &c).collect();
-                g[0].record.irradiance
-            })
+        let candidates: Vec<Candidate> = records.iter().map(|r| r.candidate).collect();
+        self.ic
+            .gather_parallel(ctx, &candidates)
+            .map(|g| g.record.irradiance)
             .collect()
     }
 

@@ -1,0 +1,115 @@
+//! Work split over threads is split no finer than the backend's
+//! `min_batch`: on a GPU every call is a dispatch, and paths traced in
+//! tasks of 256 queries once made each bounce a dispatch of at most 256
+//! rays (`ic` on lavapipe 10× slower than with large batches). The split
+//! changes only scheduling, never a result.
+
+use glam::Vec3;
+use radcache::backend::cpu::CpuBackend;
+use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
+use radcache::integrator::{trace_radiance_parallel, FirstHitEmission, PathLength, RadianceQuery};
+use radcache::method::path::PathTracer;
+use radcache::render::{FrameSettings, Renderer};
+use radcache::sampling::{Rng, SampleKey};
+use radcache::scene::{Scene, Snapshot};
+use std::sync::{Arc, Mutex};
+
+/// The CPU backend with a chosen `min_batch`, recording the size of every
+/// closest-hit call.
+struct Recording {
+    inner: CpuBackend,
+    min_batch: usize,
+    sizes: Arc<Mutex<Vec<usize>>>,
+}
+
+impl RayBackend for Recording {
+    fn name(&self) -> String {
+        "recording".into()
+    }
+    fn set_geometry(&mut self, snapshot: &Snapshot) {
+        self.inner.set_geometry(snapshot);
+    }
+    fn closest_hit(&self, rays: &[Ray], hits: &mut [Hit]) {
+        self.sizes.lock().unwrap().push(rays.len());
+        self.inner.closest_hit(rays, hits);
+    }
+    fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
+        self.inner.any_hit(rays, occluded);
+    }
+    fn ray_counts(&self) -> RayCounts {
+        self.inner.ray_counts()
+    }
+    fn preferred_batch(&self) -> usize {
+        self.inner.preferred_batch()
+    }
+    fn min_batch(&self) -> usize {
+        self.min_batch
+    }
+}
+
+/// 3000 paths from the middle of cube-in-box traced with
+/// `trace_radiance_parallel` on a backend of `min_batch`: their radiance,
+/// and the sizes of the backend's closest-hit calls.
+fn trace(min_batch: usize) -> (Vec<Vec3>, Vec<usize>) {
+    let sizes = Arc::new(Mutex::new(Vec::new()));
+    let backend = Recording {
+        inner: CpuBackend::new(),
+        min_batch,
+        sizes: sizes.clone(),
+    };
+    let mut renderer = Renderer::new(
+        Scene::builtin("cube-in-box").unwrap(),
+        Box::new(PathTracer::new(Default::default())),
+        Box::new(backend),
+        FrameSettings {
+            width: 8,
+            height: 8,
+            ..Default::default()
+        },
+    );
+    let radiance = renderer.with_frame_context(0, |ctx| {
+        let centre = ctx.snapshot.camera.position * 0.5;
+        let queries = (0..3000u32)
+            .map(|i| {
+                let mut rng = Rng::new(SampleKey {
+                    seed: 7,
+                    frame: None,
+                    item: u64::from(i),
+                    sample: 0,
+                });
+                let u = rng.next_2d();
+                let (z, phi) = (2.0 * u.x - 1.0, std::f32::consts::TAU * u.y);
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                let dir = Vec3::new(r * phi.cos(), r * phi.sin(), z);
+                RadianceQuery {
+                    ray: Ray::new(centre, dir, 0.0, f32::INFINITY),
+                    first_light: None,
+                    rng,
+                    weight: Vec3::ONE,
+                    first_hit: FirstHitEmission::Include,
+                }
+            })
+            .collect();
+        trace_radiance_parallel(ctx, PathLength::default(), queries)
+            .into_iter()
+            .map(|r| r.radiance)
+            .collect()
+    });
+    let sizes = sizes.lock().unwrap().clone();
+    (radiance, sizes)
+}
+
+#[test]
+fn tasks_are_no_smaller_than_the_backends_min_batch() {
+    let (fine, fine_sizes) = trace(1);
+    let (coarse, coarse_sizes) = trace(2000);
+    // On the CPU a task is 256 queries; with a minimum of 2000, the 3000
+    // queries make a task of 2000 and one of 1000, whose first bounces
+    // carry all their rays.
+    assert_eq!(fine_sizes.iter().max(), Some(&256), "{fine_sizes:?}");
+    assert_eq!(coarse_sizes.iter().max(), Some(&2000), "{coarse_sizes:?}");
+    assert!(coarse_sizes.contains(&1000), "{coarse_sizes:?}");
+    assert!(coarse_sizes.len() < fine_sizes.len() / 4);
+    assert_eq!(fine, coarse, "the split changed a result");
+    assert!(fine.iter().any(|l| l.max_element() > 0.0));
+}
