@@ -7,7 +7,9 @@
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
 use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
+use radcache::cache::gather::Strata;
 use radcache::integrator::{trace_radiance_parallel, FirstHitEmission, PathLength, RadianceQuery};
+use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::PathTracer;
 use radcache::render::{FrameSettings, Renderer};
 use radcache::sampling::{Rng, SampleKey};
@@ -47,17 +49,16 @@ impl RayBackend for Recording {
     }
 }
 
-/// 3000 paths from the middle of cube-in-box traced with
-/// `trace_radiance_parallel` on a backend of `min_batch`: their radiance,
-/// and the sizes of the backend's closest-hit calls.
-fn trace(min_batch: usize) -> (Vec<Vec3>, Vec<usize>) {
+/// A renderer of cube-in-box at 8×8 on a [`Recording`] backend of
+/// `min_batch`, and the sizes it records.
+fn renderer(min_batch: usize) -> (Renderer, Arc<Mutex<Vec<usize>>>) {
     let sizes = Arc::new(Mutex::new(Vec::new()));
     let backend = Recording {
         inner: CpuBackend::new(),
         min_batch,
         sizes: sizes.clone(),
     };
-    let mut renderer = Renderer::new(
+    let renderer = Renderer::new(
         Scene::builtin("cube-in-box").unwrap(),
         Box::new(PathTracer::new(Default::default())),
         Box::new(backend),
@@ -67,6 +68,14 @@ fn trace(min_batch: usize) -> (Vec<Vec3>, Vec<usize>) {
             ..Default::default()
         },
     );
+    (renderer, sizes)
+}
+
+/// 3000 paths from the middle of cube-in-box traced with
+/// `trace_radiance_parallel` on a backend of `min_batch`: their radiance,
+/// and the sizes of the backend's closest-hit calls.
+fn trace(min_batch: usize) -> (Vec<Vec3>, Vec<usize>) {
+    let (mut renderer, sizes) = renderer(min_batch);
     let radiance = renderer.with_frame_context(0, |ctx| {
         let centre = ctx.snapshot.camera.position * 0.5;
         let queries = (0..3000u32)
@@ -112,4 +121,41 @@ fn tasks_are_no_smaller_than_the_backends_min_batch() {
     assert!(coarse_sizes.len() < fine_sizes.len() / 4);
     assert_eq!(fine, coarse, "the split changed a result");
     assert!(fine.iter().any(|l| l.max_element() > 0.0));
+}
+
+/// `ic`'s gathers too: with a `min_batch` of many records' rays, the
+/// records of a frame are gathered in fewer, larger calls, as many on 8
+/// threads as on 2 (not split further over more threads), and are the
+/// same records.
+#[test]
+fn gathers_are_no_smaller_than_the_backends_min_batch() {
+    let ic = IrradianceCaching::new(IcSettings {
+        spp: 1,
+        strata: Strata { theta: 4, phi: 12 },
+        ..IcSettings::default()
+    });
+    let cache = |min_batch| {
+        let (mut r, sizes) = renderer(min_batch);
+        let records = r.with_frame_context(0, |ctx| ic.build_cache(ctx).records().to_vec());
+        let calls = sizes.lock().unwrap().len();
+        (records, calls)
+    };
+    let on_threads = |threads, min_batch| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| cache(min_batch))
+    };
+    let (fine, fine_calls) = on_threads(2, 1);
+    let (coarse, coarse_calls) = on_threads(2, 1 << 16);
+    let (wide, wide_calls) = on_threads(8, 1 << 16);
+    assert!(fine.len() > 4, "{} records", fine.len());
+    assert_eq!(fine, coarse);
+    assert_eq!(fine, wide);
+    assert_eq!(wide_calls, coarse_calls, "8 threads against 2");
+    assert!(
+        coarse_calls < fine_calls,
+        "{coarse_calls} calls against {fine_calls}"
+    );
 }
