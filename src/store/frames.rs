@@ -1,0 +1,337 @@
+//! A job's frames: each checkpointed in one atomic commit (EXR, records,
+//! samples, statistics, the carried state and the job's progress), and
+//! read back.
+
+use super::samples::{compress, decompress, SampleBlock, SampleLog};
+use super::schema::{
+    FrameValue, JobValue, RecordBlock, RecordValue, StateHeadValue, StateRecordValue, StatsValue,
+};
+use super::{append_record_block, encode, keys, now_unix, Store, StoreError};
+use sled::transaction::{ConflictableTransactionError, TransactionError};
+use sled::Transactional;
+
+/// One record of a frame with its samples, ready to store.
+pub struct RecordCommit {
+    pub record: RecordValue,
+    /// The record's samples in cell order, stored form (may be empty).
+    /// [`Store::commit_frame`] fills in the record's sample location.
+    pub samples: SampleBlock,
+}
+
+/// Everything one frame writes.
+pub struct FrameCommit<'a> {
+    pub frame: u32,
+    pub width: u32,
+    pub height: u32,
+    /// The frame's EXR file bytes.
+    pub exr: &'a [u8],
+    pub records: Vec<RecordCommit>,
+    pub stats: &'a crate::method::FrameStats,
+    /// The frame's changes of a stateful method's carried state.
+    pub state: Option<StateCommit<'a>>,
+}
+
+/// A stateful method's state changes of one frame, with the chain they
+/// belong to (see [`StateHeadValue`]).
+pub struct StateCommit<'a> {
+    pub chain_start: u32,
+    pub chain_end: Option<u32>,
+    pub changes: &'a crate::method::StateChanges,
+}
+
+/// A frame's bulk values once in the sample log ([`Store::append_frame`]).
+struct LoggedFrame {
+    frame: FrameValue,
+    /// The encoded [`FrameRecordsValue`] of the frame's record block, if it
+    /// has records.
+    records: Option<Vec<u8>>,
+    /// The samples' size before compression, for the frame's statistics.
+    samples_raw: u64,
+}
+
+/// A frame's changes of the `state` tree, encoded: rows put, rows removed
+/// and the new head.
+#[derive(Default)]
+struct StateRows {
+    put: Vec<([u8; 16], Vec<u8>)>,
+    removed: Vec<[u8; 16]>,
+    head: Option<Vec<u8>>,
+}
+
+impl StateRows {
+    fn new(job: u64, frame: u32, sc: &StateCommit) -> Self {
+        let put = sc
+            .changes
+            .put
+            .iter()
+            .map(|(id, data)| {
+                let value = StateRecordValue {
+                    frame,
+                    data: data.clone(),
+                };
+                (keys::state_record(job, *id), encode(&value))
+            })
+            .collect();
+        let removed = sc
+            .changes
+            .removed
+            .iter()
+            .map(|&id| keys::state_record(job, id))
+            .collect();
+        let head = StateHeadValue {
+            frame,
+            chain_start: sc.chain_start,
+            chain_end: sc.chain_end,
+            global: sc.changes.global.clone(),
+        };
+        StateRows {
+            put,
+            removed,
+            head: Some(encode(&head)),
+        }
+    }
+}
+
+impl Store {
+    pub fn frame_done(&self, job: u64, frame: u32) -> Result<bool, StoreError> {
+        self.frames
+            .contains_key(keys::frame(job, frame))
+            .map_err(|e| StoreError::sled(&self.path, e))
+    }
+
+    /// Frames of `job` that are stored, in order.
+    pub fn frames_done(&self, job: u64) -> Result<Vec<u32>, StoreError> {
+        let mut out = Vec::new();
+        for key in self.frames.scan_prefix(keys::job_prefix(job)).keys() {
+            let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
+            let (_, frame) = keys::parse_frame(&key)
+                .ok_or_else(|| self.corrupt("frames", &key, "malformed key"))?;
+            out.push(frame);
+        }
+        Ok(out)
+    }
+
+    /// Writes one finished frame of `job` — image, records with samples,
+    /// stats and progress: the records' sample blocks appended to the
+    /// sample log and synced, then everything else and the log's new
+    /// committed length in one atomic transaction, then a flush. Only
+    /// when this returns `Ok` is the frame acknowledged; `job` is updated
+    /// to the stored progress.
+    pub fn commit_frame(&self, job: &mut JobValue, c: FrameCommit) -> Result<(), StoreError> {
+        let mut log = self.lock_log();
+        let result = self.commit_frame_locked(&mut log, job, c);
+        match &result {
+            // The transaction references the appends, flushed or not.
+            Ok(_) => log.commit(),
+            // No transaction references them: cut them off now (a crash
+            // before this is handled on the next open).
+            Err(_) => log.rollback().map_err(|e| self.log_error(e))?,
+        }
+        let progressed = result?;
+        self.flush()?;
+        *job = progressed;
+        Ok(())
+    }
+
+    fn commit_frame_locked(
+        &self,
+        log: &mut SampleLog,
+        job: &JobValue,
+        c: FrameCommit,
+    ) -> Result<JobValue, StoreError> {
+        let frame_key = keys::frame(job.id, c.frame);
+        // A frame written again (by another chain of a stateful method)
+        // replaces the record block of its former self (or, writing none,
+        // removes it).
+        let already = self.frame_done(job.id, c.frame)?;
+        let logged =
+            self.append_frame(log, job.id, c.frame, (c.width, c.height), c.exr, c.records)?;
+        let log_len = log.end().to_be_bytes();
+        let stats_bytes = encode(&StatsValue::from_stats(c.stats, logged.samples_raw));
+        let state = c
+            .state
+            .as_ref()
+            .map(|sc| StateRows::new(job.id, c.frame, sc))
+            .unwrap_or_default();
+        let state_head_key = keys::state_head(job.id);
+        let mut progressed = job.clone();
+        if !already {
+            progressed.frames_done += 1;
+        }
+        progressed.last_frame = Some(c.frame);
+        progressed.updated_unix = now_unix();
+        let frame_bytes = encode(&logged.frame);
+        let job_bytes = encode(&progressed);
+        let job_key = keys::job(&job.name);
+        let result: Result<(), TransactionError<()>> = (
+            &self.frames,
+            &self.records,
+            &self.meta,
+            &self.stats,
+            &self.state,
+            &self.jobs,
+        )
+            .transaction(|(frames, records, meta, stats, state_tree, jobs)| {
+                for k in &state.removed {
+                    state_tree.remove(&k[..])?;
+                }
+                for (k, v) in &state.put {
+                    state_tree.insert(&k[..], &v[..])?;
+                }
+                if let Some(head) = &state.head {
+                    state_tree.insert(&state_head_key[..], &head[..])?;
+                }
+                match &logged.records {
+                    Some(v) => {
+                        records.insert(&frame_key[..], &v[..])?;
+                    }
+                    None if already => {
+                        records.remove(&frame_key[..])?;
+                    }
+                    None => {}
+                }
+                meta.insert(keys::META_SAMPLES_LOG_LEN, &log_len[..])?;
+                stats.insert(&frame_key[..], &stats_bytes[..])?;
+                frames.insert(&frame_key[..], &frame_bytes[..])?;
+                jobs.insert(&job_key[..], &job_bytes[..])?;
+                Ok::<(), ConflictableTransactionError<()>>(())
+            });
+        result.map_err(|e| match e {
+            TransactionError::Storage(s) => StoreError::sled(&self.path, s),
+            TransactionError::Abort(()) => unreachable!("the transaction never aborts"),
+        })?;
+        Ok(progressed)
+    }
+
+    /// Appends frame `frame`'s bulk values to the sample log and syncs it:
+    /// its EXR file, each record's samples, then the records as one block
+    /// (in id order, after their samples: it says where they lie). What
+    /// the frame's transaction then points at.
+    fn append_frame(
+        &self,
+        log: &mut SampleLog,
+        job: u64,
+        frame: u32,
+        (width, height): (u32, u32),
+        exr: &[u8],
+        commits: Vec<RecordCommit>,
+    ) -> Result<LoggedFrame, StoreError> {
+        let exr_zstd = compress(exr);
+        let frame_value = FrameValue {
+            width,
+            height,
+            exr_len: exr.len() as u64,
+            exr_offset: log.append(&exr_zstd).map_err(|e| self.log_error(e))?,
+            exr_stored_len: exr_zstd.len() as u32,
+        };
+        drop(exr_zstd);
+        let mut records = Vec::with_capacity(commits.len());
+        let mut samples_raw = 0u64;
+        for rc in commits {
+            let mut record = rc.record;
+            (
+                record.samples_count,
+                record.samples_offset,
+                record.samples_len,
+            ) = if rc.samples.is_empty() {
+                (0, 0, 0)
+            } else {
+                samples_raw += rc.samples.raw_bytes();
+                let offset = log
+                    .append(&rc.samples.zstd)
+                    .map_err(|e| self.log_error(e))?;
+                (rc.samples.count, offset, rc.samples.zstd.len() as u32)
+            };
+            records.push(record);
+        }
+        // A record given twice keeps its last version, as a second insert
+        // under its key did in schema 3.
+        records.sort_by_key(|r| r.id);
+        records.reverse();
+        records.dedup_by_key(|r| r.id);
+        records.reverse();
+        let records_value = if records.is_empty() {
+            None
+        } else {
+            let block = RecordBlock {
+                job,
+                frame,
+                records,
+            };
+            let value = append_record_block(log, &block).map_err(|e| self.log_error(e))?;
+            Some(encode(&value))
+        };
+        if log.end() > log.committed() {
+            log.sync().map_err(|e| self.log_error(e))?;
+        }
+        Ok(LoggedFrame {
+            frame: frame_value,
+            records: records_value,
+            samples_raw,
+        })
+    }
+
+    pub fn frame(&self, job: u64, frame: u32) -> Result<Option<FrameValue>, StoreError> {
+        self.get("frames", &keys::frame(job, frame))
+    }
+
+    /// The EXR bytes of a stored frame.
+    pub fn frame_exr(&self, job: u64, frame: u32) -> Result<Option<Vec<u8>>, StoreError> {
+        let key = keys::frame(job, frame);
+        let Some(v) = self.frame(job, frame)? else {
+            return Ok(None);
+        };
+        let in_log = |d: String| {
+            self.log_error(format!(
+                "EXR of {} at offset {}: {d}",
+                keys::describe(&key),
+                v.exr_offset
+            ))
+        };
+        let stored = self
+            .lock_log()
+            .read(v.exr_offset, v.exr_stored_len)
+            .map_err(in_log)?;
+        let exr = decompress(&stored, v.exr_len as usize).map_err(in_log)?;
+        Ok(Some(exr))
+    }
+
+    pub fn frame_stats(&self, job: u64, frame: u32) -> Result<Option<StatsValue>, StoreError> {
+        self.get("stats", &keys::frame(job, frame))
+    }
+}
+
+impl RecordCommit {
+    /// A record created or changed in `frame`, with its samples in their
+    /// stored form.
+    pub fn from_record(
+        record: &crate::cache::IrradianceRecord,
+        samples: SampleBlock,
+        strata: crate::cache::gather::Strata,
+        frame: u32,
+    ) -> Self {
+        let v = |v: glam::Vec3| v.to_array();
+        let has = !samples.is_empty();
+        RecordCommit {
+            record: RecordValue {
+                id: record.id,
+                created_frame: record.created_frame,
+                last_frame: frame,
+                position: v(record.position),
+                normal: v(record.normal),
+                irradiance: v(record.irradiance),
+                grad_translation: record.grad_translation.map(v),
+                grad_rotation: record.grad_rotation.map(v),
+                radius: record.radius,
+                object: record.object,
+                strata_theta: if has { strata.theta } else { 0 },
+                strata_phi: if has { strata.phi } else { 0 },
+                // Filled in by `Store::commit_frame`.
+                samples_count: 0,
+                samples_offset: 0,
+                samples_len: 0,
+            },
+            samples,
+        }
+    }
+}

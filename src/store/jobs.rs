@@ -1,0 +1,224 @@
+//! Jobs: a render recorded under a name, its settings checked when it
+//! resumes, cancelled, or started over with `--force`.
+
+use super::schema::{JobSpec, JobValue};
+use super::v1;
+use super::{encode, keys, now_unix, Store, StoreError};
+
+impl Store {
+    pub fn job(&self, name: &str) -> Result<Option<JobValue>, StoreError> {
+        self.get("jobs", &keys::job(name))
+    }
+
+    pub fn jobs(&self) -> Result<Vec<JobValue>, StoreError> {
+        let mut out = Vec::new();
+        for item in self.jobs.iter() {
+            let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
+            out.push(self.decode("jobs", &k, &v)?);
+        }
+        Ok(out)
+    }
+
+    /// Marks job `name` cancelled (or not) for `radcache serve`, durably
+    /// (a `meta` key; no schema change).
+    pub fn set_job_cancelled(&self, name: &str, cancelled: bool) -> Result<(), StoreError> {
+        let key = keys::meta_cancelled(name);
+        let r = if cancelled {
+            self.meta.insert(key, &[] as &[u8]).map(|_| ())
+        } else {
+            self.meta.remove(key).map(|_| ())
+        };
+        r.map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()
+    }
+
+    /// Whether job `name` is marked cancelled ([`Self::set_job_cancelled`]).
+    pub fn job_cancelled(&self, name: &str) -> Result<bool, StoreError> {
+        self.meta
+            .contains_key(keys::meta_cancelled(name))
+            .map_err(|e| StoreError::sled(&self.path, e))
+    }
+
+    /// Starts or resumes job `spec.name`. A job of that name with another
+    /// scene or other settings is refused unless `force`, which starts it
+    /// over under a new id (the old id's data is then deleted).
+    pub fn begin_job(&self, spec: &JobSpec, force: bool) -> Result<JobValue, StoreError> {
+        let key = keys::job(&spec.name);
+        let now = now_unix();
+        if let Some(mut job) = self.job(&spec.name)? {
+            let diffs = job_differences(&job.spec, spec);
+            if diffs.is_empty() {
+                // Same job: the new range, and the spec as this build
+                // writes it (a schema-1 job's settings and hash upgraded).
+                job.spec = spec.clone();
+                job.updated_unix = now;
+                self.jobs
+                    .insert(&key, encode(&job))
+                    .map_err(|e| StoreError::sled(&self.path, e))?;
+                self.flush()?;
+                return Ok(job);
+            }
+            if !force {
+                return Err(StoreError::Job {
+                    path: self.path.clone(),
+                    job: spec.name.clone(),
+                    detail: format!(
+                        "exists with a different {}; use another --job name, or --force to start it over",
+                        diffs.join(", ")
+                    ),
+                });
+            }
+            let fresh = self.new_job_value(spec, now)?;
+            // The name now points at a fresh id: atomic by construction.
+            self.jobs
+                .insert(&key, encode(&fresh))
+                .map_err(|e| StoreError::sled(&self.path, e))?;
+            self.flush()?;
+            self.delete_job_data(job.id)?;
+            return Ok(fresh);
+        }
+        let fresh = self.new_job_value(spec, now)?;
+        self.jobs
+            .insert(&key, encode(&fresh))
+            .map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()?;
+        Ok(fresh)
+    }
+
+    fn new_job_value(&self, spec: &JobSpec, now: u64) -> Result<JobValue, StoreError> {
+        // Ids are unique over the store's life (sled persists the counter
+        // and skips ahead after a crash), so a restarted job never sees
+        // keys of its former self.
+        let id = self
+            .db
+            .generate_id()
+            .map_err(|e| StoreError::sled(&self.path, e))?
+            + 1;
+        Ok(JobValue {
+            id,
+            spec: spec.clone(),
+            frames_done: 0,
+            last_frame: None,
+            created_unix: now,
+            updated_unix: now,
+        })
+    }
+
+    /// Deletes every key of job id `job` in the per-job trees.
+    fn delete_job_data(&self, job: u64) -> Result<(), StoreError> {
+        let prefix = keys::job_prefix(job);
+        // Their bytes stay in the log, unreferenced (it is append-only),
+        // until `radcache compact` ([`compact`]).
+        for tree in [&self.frames, &self.stats, &self.records, &self.state] {
+            for key in tree.scan_prefix(prefix).keys() {
+                let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
+                tree.remove(key)
+                    .map_err(|e| StoreError::sled(&self.path, e))?;
+            }
+        }
+        self.flush()
+    }
+}
+
+/// Fields of `spec` that differ from the stored job's (name and frame range
+/// aside). Every field is named, so a field added to [`JobSpec`] does not
+/// compile until it is compared here.
+fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
+    let JobSpec {
+        name: _,
+        scene,
+        scene_hash,
+        method,
+        settings,
+        width,
+        height,
+        spp,
+        fps,
+        seed,
+        same_pattern,
+        frame_start: _,
+        frame_end: _,
+    } = spec;
+    let mut d = Vec::new();
+    let mut check = |name: &str, same: bool, stored: String, given: String| {
+        if !same {
+            d.push(format!("{name} (stored {stored}, given {given})"));
+        }
+    };
+    check(
+        "scene",
+        &stored.scene == scene,
+        stored.scene.clone(),
+        scene.clone(),
+    );
+    check(
+        "scene hash",
+        same_scene_hash(&stored.scene_hash, scene_hash),
+        stored.scene_hash.clone(),
+        scene_hash.clone(),
+    );
+    check(
+        "method",
+        &stored.method == method,
+        stored.method.clone(),
+        method.clone(),
+    );
+    check(
+        "method settings",
+        same_settings(&stored.settings, settings),
+        stored.settings.clone(),
+        settings.clone(),
+    );
+    check(
+        "size",
+        (stored.width, stored.height) == (*width, *height),
+        format!("{}x{}", stored.width, stored.height),
+        format!("{width}x{height}"),
+    );
+    check(
+        "spp",
+        stored.spp == *spp,
+        stored.spp.to_string(),
+        spp.to_string(),
+    );
+    check(
+        "fps",
+        stored.fps.to_bits() == fps.to_bits(),
+        stored.fps.to_string(),
+        fps.to_string(),
+    );
+    check(
+        "seed",
+        stored.seed == *seed,
+        stored.seed.to_string(),
+        seed.to_string(),
+    );
+    check(
+        "same-pattern",
+        stored.same_pattern == *same_pattern,
+        stored.same_pattern.to_string(),
+        same_pattern.to_string(),
+    );
+    d
+}
+
+/// Settings are serde JSON: equal as JSON values (text that is not JSON,
+/// as in tests, compares as text).
+fn same_settings(stored: &str, given: &str) -> bool {
+    match (
+        serde_json::from_str::<serde_json::Value>(stored),
+        serde_json::from_str::<serde_json::Value>(given),
+    ) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => stored == given,
+    }
+}
+
+/// Scene hashes are equal, or the stored one is a schema-1 hash (suffix
+/// [`v1::LEGACY_HASH_SUFFIX`], external files not hashed) of the same file.
+fn same_scene_hash(stored: &str, given: &str) -> bool {
+    stored == given
+        || stored
+            .strip_suffix(v1::LEGACY_HASH_SUFFIX)
+            .is_some_and(|main| given.split('+').next() == Some(main))
+}
