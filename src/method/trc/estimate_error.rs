@@ -89,9 +89,13 @@ impl EstimateErrorTally {
         self.actual_sum += f64::from(mean_irradiance(actual)) * actual.len() as f64;
     }
 
-    /// The figures over every record added; `None` before any.
+    /// The figures over every record added; `None` before any, or where
+    /// the records see no indirect light at all (nothing to be relative to).
     pub fn summary(&self) -> Option<EstimateError> {
         let mean = (self.actual_sum / self.absolute.len().max(1) as f64) as f32;
+        if !(mean > 0.0 && mean.is_finite()) {
+            return None;
+        }
         let (mut estimate, mut constant): (Vec<f32>, Vec<f32>) = self
             .absolute
             .iter()
@@ -108,6 +112,11 @@ impl EstimateErrorTally {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_tally_of_nothing_has_no_summary() {
+        assert_eq!(EstimateErrorTally::default().summary(), None);
+    }
 
     #[test]
     fn mean_and_median_of_nothing_is_none() {
