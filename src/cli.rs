@@ -576,11 +576,12 @@ fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSum
     let (w, h) = args.size;
     let samples = u64::from(w) * u64::from(h) * u64::from(spp) * u64::from(summary.frames);
     println!(
-        "rendered {} frames in {:.2} s ({:.3} s/frame, {:.2} Mrays/s, {:.2} M samples/s) → {}/frame_{:04}..{:04}.{{exr,png}}",
+        "rendered {} frames in {:.2} s ({:.3} s/frame, {:.2} Mrays/s in {} backend calls, {:.2} M samples/s) → {}/frame_{:04}..{:04}.{{exr,png}}",
         summary.frames,
         secs,
         secs / summary.frames.max(1) as f64,
         summary.rays_per_second() / 1e6,
+        summary.ray_calls,
         samples as f64 / secs.max(1e-9) / 1e6,
         summary.out_dir.display(),
         args.frames.start,

@@ -396,6 +396,8 @@ pub struct RenderSummary {
     pub frame_stats: Vec<FrameStats>,
     pub elapsed: Duration,
     pub rays: u64,
+    /// Backend calls the rays took (on a GPU, dispatches).
+    pub ray_calls: u64,
     pub out_dir: PathBuf,
 }
 
@@ -672,7 +674,7 @@ pub fn render_job_to_dir_with(
     progress.set_position(done.len() as u64);
     progress.reset_eta();
     let start = Instant::now();
-    let rays_before = renderer.backend().ray_counts().total();
+    let counts_before = renderer.backend().ray_counts();
     let mut frame_stats = Vec::with_capacity(frames.len() - done.len());
     renderer.set_frame_end(Some(frames.end));
     let chain_end = renderer.looks_ahead().then_some(frames.end);
@@ -710,7 +712,8 @@ pub fn render_job_to_dir_with(
         resumed: done.len() as u32,
         frame_stats,
         elapsed: start.elapsed(),
-        rays: renderer.backend().ray_counts().total() - rays_before,
+        rays: renderer.backend().ray_counts().total() - counts_before.total(),
+        ray_calls: renderer.backend().ray_counts().calls - counts_before.calls,
         out_dir: out_dir.to_path_buf(),
     })
 }
@@ -890,6 +893,7 @@ mod tests {
                 .collect(),
             elapsed: Duration::from_secs(1),
             rays: 0,
+            ray_calls: 0,
             out_dir: PathBuf::from("out"),
         }
     }

@@ -17,7 +17,7 @@ use radcache::scene::{Scene, Snapshot};
 use std::sync::{Arc, Mutex};
 
 /// The CPU backend with a chosen `min_batch`, recording the size of every
-/// closest-hit call.
+/// call.
 struct Recording {
     inner: CpuBackend,
     min_batch: usize,
@@ -36,6 +36,7 @@ impl RayBackend for Recording {
         self.inner.closest_hit(rays, hits);
     }
     fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
+        self.sizes.lock().unwrap().push(rays.len());
         self.inner.any_hit(rays, occluded);
     }
     fn ray_counts(&self) -> RayCounts {
@@ -73,7 +74,7 @@ fn renderer(min_batch: usize) -> (Renderer, Arc<Mutex<Vec<usize>>>) {
 
 /// 3000 paths from the middle of cube-in-box traced with
 /// `trace_radiance_parallel` on a backend of `min_batch`: their radiance,
-/// and the sizes of the backend's closest-hit calls.
+/// and the sizes of the backend's calls.
 fn trace(min_batch: usize) -> (Vec<Vec3>, Vec<usize>) {
     let (mut renderer, sizes) = renderer(min_batch);
     let radiance = renderer.with_frame_context(0, |ctx| {
@@ -105,6 +106,8 @@ fn trace(min_batch: usize) -> (Vec<Vec3>, Vec<usize>) {
             .collect()
     });
     let sizes = sizes.lock().unwrap().clone();
+    // The backend counts the calls it served (`render` prints them).
+    assert_eq!(renderer.backend().ray_counts().calls, sizes.len() as u64);
     (radiance, sizes)
 }
 

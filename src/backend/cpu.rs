@@ -16,6 +16,7 @@ pub struct CpuBackend {
     bvh: SceneBvh,
     closest: AtomicU64,
     any: AtomicU64,
+    calls: AtomicU64,
     last_build: BuildTimes,
 }
 
@@ -46,6 +47,7 @@ impl RayBackend for CpuBackend {
             .with_min_len(RAYS_PER_TASK)
             .for_each(|(ray, hit)| *hit = self.bvh.closest_hit(ray));
         self.closest.fetch_add(rays.len() as u64, Ordering::Relaxed);
+        self.calls.fetch_add(1, Ordering::Relaxed);
     }
 
     fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
@@ -55,12 +57,14 @@ impl RayBackend for CpuBackend {
             .with_min_len(RAYS_PER_TASK)
             .for_each(|(ray, o)| *o = self.bvh.occluded(ray));
         self.any.fetch_add(rays.len() as u64, Ordering::Relaxed);
+        self.calls.fetch_add(1, Ordering::Relaxed);
     }
 
     fn ray_counts(&self) -> RayCounts {
         RayCounts {
             closest: self.closest.load(Ordering::Relaxed),
             any: self.any.load(Ordering::Relaxed),
+            calls: self.calls.load(Ordering::Relaxed),
         }
     }
 

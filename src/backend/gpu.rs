@@ -276,6 +276,7 @@ pub struct GpuBackend {
     failed: FailureSlot,
     closest: AtomicU64,
     any: AtomicU64,
+    calls: AtomicU64,
     timings: Mutex<GpuTimings>,
     /// The render pass's cache interpolation on this device.
     splat: CacheSplat,
@@ -526,6 +527,7 @@ impl GpuBackend {
             failed,
             closest: AtomicU64::new(0),
             any: AtomicU64::new(0),
+            calls: AtomicU64::new(0),
             timings: Mutex::default(),
             splat,
         };
@@ -743,6 +745,7 @@ impl GpuBackend {
             hits[first..first + out.len()].copy_from_slice(out);
         })?;
         self.closest.fetch_add(rays.len() as u64, Ordering::Relaxed);
+        self.calls.fetch_add(1, Ordering::Relaxed);
         Ok(())
     }
 
@@ -756,6 +759,7 @@ impl GpuBackend {
             }
         })?;
         self.any.fetch_add(rays.len() as u64, Ordering::Relaxed);
+        self.calls.fetch_add(1, Ordering::Relaxed);
         Ok(())
     }
 
@@ -1012,6 +1016,7 @@ impl RayBackend for GpuBackend {
         RayCounts {
             closest: self.closest.load(Ordering::Relaxed),
             any: self.any.load(Ordering::Relaxed),
+            calls: self.calls.load(Ordering::Relaxed),
         }
     }
 

@@ -86,11 +86,13 @@ impl Hit {
     }
 }
 
-/// Statistics a backend keeps: rays traced since creation.
+/// Statistics a backend keeps: rays traced since creation, and in how many
+/// calls (on a GPU, each a dispatch with its fixed cost).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RayCounts {
     pub closest: u64,
     pub any: u64,
+    pub calls: u64,
 }
 
 impl RayCounts {
