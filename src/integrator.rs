@@ -7,8 +7,8 @@
 //! with the power heuristic (Veach 1997, §9.2), and Russian roulette on the
 //! path throughput. It is written as a wavefront so that it only talks to the
 //! batched [`RayBackend`](crate::backend::RayBackend): all paths of a batch
-//! advance one bounce at a time — trace all extension rays, shade, trace all
-//! shadow rays.
+//! advance one bounce at a time — trace all extension rays (with the
+//! previous bounce's shadow rays), shade, queue the shadow rays.
 
 use crate::backend::{Hit, Ray};
 use crate::light::{emitting_cosine, TriangleSampling};
@@ -97,21 +97,49 @@ pub fn offset_origin(p: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
     }
 }
 
-/// State of one path between bounces.
+/// State of one path between bounces (its radiance so far is summed in
+/// its query's result).
 struct PathState {
     query: usize,
     first_light: Option<LightChoice>,
     rng: Rng,
     throughput: Vec3,
-    radiance: Vec3,
     bounces: u32,
     emission: FirstHitEmission,
 }
 
-/// A shadow ray waiting to be traced and what it adds if unoccluded.
-struct ShadowQuery {
-    path: usize,
-    contribution: Vec3,
+/// The shadow rays of one bounce's light samples, waiting to be traced,
+/// and for each the query it adds to if unoccluded and what it adds.
+#[derive(Default)]
+struct PendingShadows {
+    rays: Vec<Ray>,
+    targets: Vec<(usize, Vec3)>,
+    occluded: Vec<bool>,
+}
+
+impl PendingShadows {
+    fn push(&mut self, ray: Ray, query: usize, contribution: Vec3) {
+        self.rays.push(ray);
+        self.targets.push((query, contribution));
+    }
+
+    /// Sizes `occluded` for the rays queued, for the backend to fill.
+    fn prepare(&mut self) {
+        self.occluded.clear();
+        self.occluded.resize(self.rays.len(), false);
+    }
+
+    /// Adds the unoccluded contributions (`occluded` filled by the backend)
+    /// to their queries' radiance and empties the queue.
+    fn resolve(&mut self, results: &mut [RadianceResult]) {
+        for (&(query, contribution), &blocked) in self.targets.iter().zip(&self.occluded) {
+            if !blocked {
+                results[query].radiance += contribution;
+            }
+        }
+        self.rays.clear();
+        self.targets.clear();
+    }
 }
 
 /// [`trace_radiance`] split over the thread pool, `QUERIES_PER_TASK`
@@ -144,6 +172,13 @@ const QUERIES_PER_TASK: usize = 256;
 /// Computes every query of the batch on the calling thread (the backend may
 /// parallelise each ray batch). Results are in query order and depend only
 /// on the queries, so they are reproducible.
+///
+/// Bounce k's shadow rays are traced with bounce k + 1's extension rays,
+/// in one backend call ([`crate::backend::RayBackend::closest_and_any_hit`]):
+/// a GPU pays a path's round trips once a bounce, not twice. The radiance
+/// of a query is summed in the same order as bounce by bounce (bounce k's
+/// light sample before bounce k + 1's emission), so the results are those
+/// of tracing each bounce's shadows before the next bounce.
 pub fn trace_radiance(
     ctx: &FrameContext,
     length: PathLength,
@@ -165,58 +200,44 @@ pub fn trace_radiance(
             first_light: q.first_light,
             rng: q.rng,
             throughput: q.weight,
-            radiance: Vec3::ZERO,
             bounces: 0,
             emission: q.first_hit,
         });
     }
     let mut hits = Vec::new();
     let mut continuations = Vec::new();
-    let mut shadow_rays = Vec::new();
-    let mut shadow_queries = Vec::new();
-    let mut occluded = Vec::new();
+    let mut shadows = PendingShadows::default();
     while !paths.is_empty() {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
-        ctx.backend.closest_hit(&rays, &mut hits);
-        shadow_rays.clear();
-        shadow_queries.clear();
+        shadows.prepare();
+        ctx.backend
+            .closest_and_any_hit(&rays, &mut hits, &shadows.rays, &mut shadows.occluded);
+        shadows.resolve(&mut results);
         continuations.clear();
-        for (i, path) in paths.iter_mut().enumerate() {
+        for (path, (ray, hit)) in paths.iter_mut().zip(rays.iter().zip(&hits)) {
             if path.bounces == 0 {
-                results[path.query].hit = hits[i];
+                results[path.query].hit = *hit;
             }
-            let mut shadow = |ray: Ray, contribution: Vec3| {
-                shadow_rays.push(ray);
-                shadow_queries.push(ShadowQuery {
-                    path: i,
-                    contribution,
-                });
-            };
-            continuations.push(shade(ctx, length, path, &rays[i], &hits[i], &mut shadow));
-        }
-        occluded.clear();
-        occluded.resize(shadow_rays.len(), false);
-        ctx.backend.any_hit(&shadow_rays, &mut occluded);
-        for (q, &blocked) in shadow_queries.iter().zip(&occluded) {
-            if !blocked {
-                paths[q.path].radiance += q.contribution;
-            }
+            let radiance = &mut results[path.query].radiance;
+            let next = shade(ctx, length, path, ray, hit, radiance, &mut shadows);
+            continuations.push(next);
         }
         // Compact: continuing paths and their rays stay, the others are done.
         rays.clear();
-        let mut alive = Vec::with_capacity(paths.len());
-        for (path, next) in paths.drain(..).zip(continuations.drain(..)) {
-            match next {
-                Some(ray) => {
-                    rays.push(ray);
-                    alive.push(path);
-                }
-                None => results[path.query].radiance = path.radiance,
-            }
-        }
-        paths = alive;
+        paths = paths
+            .drain(..)
+            .zip(continuations.drain(..))
+            .filter_map(|(path, next)| {
+                rays.extend(next);
+                next.map(|_| path)
+            })
+            .collect();
     }
+    // The last bounce's light samples.
+    shadows.prepare();
+    ctx.backend.any_hit(&shadows.rays, &mut shadows.occluded);
+    shadows.resolve(&mut results);
     results
 }
 
@@ -241,8 +262,8 @@ fn emission_weight(
     }
 }
 
-/// Shades the hit of `path`: adds emission, queues a light sample through
-/// `shadow` and draws the continuation. Returns the next ray, or `None` when
+/// Shades the hit of `path`: adds emission to the query's `radiance`,
+/// queues a light sample in `shadows` and draws the continuation. Returns the next ray, or `None` when
 /// the path ends.
 fn shade(
     ctx: &FrameContext,
@@ -250,7 +271,8 @@ fn shade(
     path: &mut PathState,
     ray: &Ray,
     hit: &Hit,
-    shadow: &mut impl FnMut(Ray, Vec3),
+    radiance: &mut Vec3,
+    shadows: &mut PendingShadows,
 ) -> Option<Ray> {
     if !hit.is_hit() {
         return None; // Closed scenes: nothing beyond (black background).
@@ -263,7 +285,7 @@ fn shade(
 
     if material.is_emissive() && emitting_cosine(tri, material.double_sided, wo).is_some() {
         let weight = emission_weight(ctx, path.emission, tri, hit.triangle, ray, p);
-        path.radiance += path.throughput * material.emission * weight;
+        *radiance += path.throughput * material.emission * weight;
     }
     if length.max_depth.is_some_and(|max| path.bounces >= max) {
         return None;
@@ -278,7 +300,7 @@ fn shade(
         wo,
         bsdf,
     };
-    let sampling = next_event(ctx, path, &vertex, shadow);
+    let sampling = next_event(ctx, path, &vertex, shadows);
     continue_path(length, path, &vertex, sampling)
 }
 
@@ -291,7 +313,7 @@ struct Vertex {
 }
 
 /// Next-event estimation at `v`, MIS-weighted against BSDF sampling: queues
-/// the light sample's shadow ray through `shadow`. The stratified light
+/// the light sample's shadow ray in `shadows`. The stratified light
 /// sample of a pixel's first hit is seen directly: it gets the costlier,
 /// less noisy points (`TriangleSampling`). Returns how the light sample's
 /// points on emitting triangles were drawn, which the BSDF-sampled
@@ -300,7 +322,7 @@ fn next_event(
     ctx: &FrameContext,
     path: &mut PathState,
     v: &Vertex,
-    shadow: &mut impl FnMut(Ray, Vec3),
+    shadows: &mut PendingShadows,
 ) -> TriangleSampling {
     let (pick, u) = (path.rng.next_f32(), path.rng.next_2d());
     let (choice, sampling) = match path.first_light.take() {
@@ -319,8 +341,9 @@ fn next_event(
             power_heuristic(ls.pdf, v.bsdf.pdf(v.wo, ls.wi))
         };
         let contribution = path.throughput * f * ls.radiance * (cos * weight / ls.pdf);
-        shadow(
+        shadows.push(
             Ray::segment(offset_origin(v.p, v.ng, ls.wi), ls.position),
+            path.query,
             contribution,
         );
     }

@@ -487,6 +487,48 @@ fn batches_larger_than_a_chunk_and_empty_batches(layout: GpuLayout) {
     assert!(counts.closest >= n as u64);
 }
 
+/// The combined call (a path tracer's bounce with the previous bounce's
+/// shadow rays) gives exactly what the two calls give, in one round trip;
+/// with one side empty it is the other call alone.
+#[test]
+fn gpu_closest_and_any_hit_equals_the_two_calls() {
+    for layout in GpuLayout::ALL {
+        let mut gpu = gpu_with(layout);
+        let s = soup_scene(11);
+        let snap = s.snapshot(0.25);
+        let mut cpu = CpuBackend::new();
+        cpu.set_geometry(&snap);
+        gpu.set_geometry(&snap);
+        let rays = rays_for(&snap, &cpu, 5_000, 21);
+        let shadows = rays_for(&snap, &cpu, 3_001, 22);
+        let mut hits = vec![Hit::MISS; rays.len()];
+        let mut occluded = vec![false; shadows.len()];
+        gpu.try_closest_hit(&rays, &mut hits).unwrap();
+        gpu.try_any_hit(&shadows, &mut occluded).unwrap();
+        assert!(occluded.contains(&true) && occluded.contains(&false));
+
+        let before = gpu.ray_counts();
+        let mut both_hits = vec![Hit::MISS; rays.len()];
+        let mut both_occluded = vec![true; shadows.len()];
+        gpu.closest_and_any_hit(&rays, &mut both_hits, &shadows, &mut both_occluded);
+        let after = gpu.ray_counts();
+        assert_eq!(gpu.failure(), None, "{layout:?}");
+        assert_eq!(both_hits, hits, "{layout:?}: closest hits");
+        assert_eq!(both_occluded, occluded, "{layout:?}: any hits");
+        assert_eq!(after.calls - before.calls, 1, "{layout:?}: one round trip");
+        assert_eq!(after.closest - before.closest, rays.len() as u64);
+        assert_eq!(after.any - before.any, shadows.len() as u64);
+
+        // One side empty: the other call alone.
+        let mut only_occluded = vec![true; shadows.len()];
+        gpu.closest_and_any_hit(&[], &mut [], &shadows, &mut only_occluded);
+        assert_eq!(only_occluded, occluded, "{layout:?}: shadows alone");
+        let mut only_hits = vec![Hit::MISS; rays.len()];
+        gpu.closest_and_any_hit(&rays, &mut only_hits, &[], &mut []);
+        assert_eq!(only_hits, hits, "{layout:?}: rays alone");
+    }
+}
+
 /// A whole path-traced frame: with identical hits the path tracer takes the
 /// same decisions, so the frames agree; we require bit-identical pixels on
 /// all but a handful (a t differing in its last bit may move a hit point by

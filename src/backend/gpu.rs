@@ -266,7 +266,9 @@ pub struct GpuBackend {
     closest_pipeline: wgpu::ComputePipeline,
     any_pipeline: wgpu::ComputePipeline,
     geometry: GeometryBuffers,
-    rays: Mutex<RayBuffers>,
+    /// Two sets: a combined closest-and-any-hit call
+    /// ([`RayBackend::closest_and_any_hit`]) fills both.
+    rays: Mutex<[RayBuffers; 2]>,
     chunk_rays: usize,
     max_binding: u64,
     max_groups_per_dim: u32,
@@ -501,7 +503,7 @@ impl GpuBackend {
             static_root: NONE,
             dynamic_root: NONE,
         };
-        let rays = RayBuffers::new(&device, 1);
+        let rays = [RayBuffers::new(&device, 1), RayBuffers::new(&device, 1)];
         let failed = FailureSlot::default();
         let splat = CacheSplat::new(
             &device,
@@ -741,8 +743,7 @@ impl GpuBackend {
     pub fn try_closest_hit(&self, rays: &[Ray], hits: &mut [Hit]) -> Result<(), GpuError> {
         assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
         self.trace(&self.closest_pipeline, HIT_BYTES, rays, |first, bytes| {
-            let out: &[Hit] = bytemuck::cast_slice(bytes);
-            hits[first..first + out.len()].copy_from_slice(out);
+            store_hits(hits, first, bytes)
         })?;
         self.closest.fetch_add(rays.len() as u64, Ordering::Relaxed);
         self.calls.fetch_add(1, Ordering::Relaxed);
@@ -753,18 +754,98 @@ impl GpuBackend {
     pub fn try_any_hit(&self, rays: &[Ray], occluded: &mut [bool]) -> Result<(), GpuError> {
         assert_eq!(rays.len(), occluded.len(), "one result slot per ray");
         self.trace(&self.any_pipeline, FLAG_BYTES, rays, |first, bytes| {
-            let flags: &[u32] = bytemuck::cast_slice(bytes);
-            for (o, &f) in occluded[first..first + flags.len()].iter_mut().zip(flags) {
-                *o = f != 0;
-            }
+            store_flags(occluded, first, bytes)
         })?;
         self.any.fetch_add(rays.len() as u64, Ordering::Relaxed);
         self.calls.fetch_add(1, Ordering::Relaxed);
         Ok(())
     }
 
-    /// Runs `pipeline` over `rays` chunk by chunk; `store(first, bytes)`
-    /// receives the results of rays `first..` (`result_bytes` each).
+    /// [`RayBackend::closest_and_any_hit`] returning the device's errors:
+    /// both dispatches in one submission and one wait. Batches larger than
+    /// a chunk, or an empty one, go through the two calls.
+    pub fn try_closest_and_any_hit(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Hit],
+        shadows: &[Ray],
+        occluded: &mut [bool],
+    ) -> Result<(), GpuError> {
+        let fits = |r: &[Ray]| !r.is_empty() && r.len() <= self.chunk_rays;
+        if !(fits(rays) && fits(shadows)) {
+            if !rays.is_empty() {
+                self.try_closest_hit(rays, hits)?;
+            }
+            if !shadows.is_empty() {
+                self.try_any_hit(shadows, occluded)?;
+            }
+            return Ok(());
+        }
+        assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
+        assert_eq!(shadows.len(), occluded.len(), "one result slot per ray");
+        let mut buffers = self.rays.lock().unwrap_or_else(|e| e.into_inner());
+        let [closest_buffers, any_buffers] = &mut *buffers;
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("trace both"),
+            });
+        let start = Instant::now();
+        let hit_bytes = self.encode(
+            closest_buffers,
+            &self.closest_pipeline,
+            HIT_BYTES,
+            rays,
+            &mut encoder,
+        );
+        let flag_bytes = self.encode(
+            any_buffers,
+            &self.any_pipeline,
+            FLAG_BYTES,
+            shadows,
+            &mut encoder,
+        );
+        let upload = start.elapsed();
+        let start = Instant::now();
+        self.queue.submit([encoder.finish()]);
+        let submitted = start.elapsed();
+        // The first readback waits for both dispatches; the second finds
+        // its copy done.
+        let read = |buffers: &RayBuffers, bytes, store: &mut dyn FnMut(&[u8])| {
+            read_back(
+                &self.device,
+                &buffers.staging,
+                bytes,
+                "results",
+                &self.errors,
+                store,
+            )
+            .map_err(|message| GpuError::Setup {
+                adapter: self.name(),
+                message,
+            })
+        };
+        let (waited, hits_read) = read(closest_buffers, hit_bytes, &mut |view| {
+            store_hits(hits, 0, view)
+        })?;
+        let (waited_more, flags_read) = read(any_buffers, flag_bytes, &mut |view| {
+            store_flags(occluded, 0, view)
+        })?;
+        self.add_timings(|t| {
+            t.ray_upload += upload;
+            t.dispatch += submitted + waited + waited_more;
+            t.readback += hits_read + flags_read;
+            t.dispatches += 1;
+        });
+        self.closest.fetch_add(rays.len() as u64, Ordering::Relaxed);
+        self.any.fetch_add(shadows.len() as u64, Ordering::Relaxed);
+        self.calls.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+
+    /// Runs `pipeline` over `rays` chunk by chunk, a submission and a wait
+    /// each; `store(first, bytes)` receives the results of rays `first..`
+    /// (`result_bytes` each).
     fn trace(
         &self,
         pipeline: &wgpu::ComputePipeline,
@@ -772,58 +853,25 @@ impl GpuBackend {
         rays: &[Ray],
         mut store: impl FnMut(usize, &[u8]),
     ) -> Result<(), GpuError> {
-        if rays.is_empty() {
-            return Ok(());
-        }
         let gpu_err = |m: String| GpuError::Setup {
             adapter: self.name(),
             message: m,
         };
         // One batch at a time: the buffers are shared.
         let mut buffers = self.rays.lock().unwrap_or_else(|e| e.into_inner());
+        let buffers = &mut buffers[0];
         for (index, chunk) in rays.chunks(self.chunk_rays).enumerate() {
             let first = index * self.chunk_rays;
-            let n = chunk.len() as u64;
-            if n > buffers.capacity {
-                *buffers = RayBuffers::new(&self.device, n);
-            }
+            let mut encoder = self
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("trace"),
+                });
             let start = Instant::now();
-            let (groups_x, groups_y) =
-                workgroup_grid(n as u32, WORKGROUP_SIZE, self.max_groups_per_dim);
-            let params = GpuParams {
-                ray_count: n as u32,
-                row_width: groups_x * WORKGROUP_SIZE,
-                static_root: self.geometry.static_root,
-                dynamic_root: self.geometry.dynamic_root,
-            };
-            self.queue
-                .write_buffer(&buffers.params, 0, bytemuck::bytes_of(&params));
-            self.queue
-                .write_buffer(&buffers.rays, 0, bytemuck::cast_slice(chunk));
+            let bytes = self.encode(buffers, pipeline, result_bytes, chunk, &mut encoder);
             let upload = start.elapsed();
-
             let start = Instant::now();
-            let bytes = n * result_bytes;
-            let pass = ComputePass {
-                label: "trace",
-                pipeline,
-                layout: &self.layout,
-                entries: &[
-                    bind(0, &buffers.params),
-                    bind(1, &buffers.rays),
-                    bind(2, &self.geometry.nodes),
-                    bind(3, &self.geometry.triangles),
-                    bind(4, &buffers.results),
-                ],
-                groups: (groups_x, groups_y),
-            };
-            pass.submit(
-                &self.device,
-                &self.queue,
-                |_| {},
-                &[(&buffers.results, bytes)],
-                &buffers.staging,
-            );
+            self.queue.submit([encoder.finish()]);
             let submitted = start.elapsed();
             let (waited, readback) = read_back(
                 &self.device,
@@ -843,6 +891,73 @@ impl GpuBackend {
             });
         }
         Ok(())
+    }
+
+    /// Writes `rays` (at most a chunk) and their parameters into `buffers`,
+    /// grown as needed, and encodes `pipeline`'s dispatch over them and
+    /// the copy of their results to `buffers.staging` into `encoder`.
+    /// Returns the results' size in bytes (`result_bytes` a ray).
+    fn encode(
+        &self,
+        buffers: &mut RayBuffers,
+        pipeline: &wgpu::ComputePipeline,
+        result_bytes: u64,
+        rays: &[Ray],
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> u64 {
+        let n = rays.len() as u64;
+        if n > buffers.capacity {
+            *buffers = RayBuffers::new(&self.device, n);
+        }
+        let (groups_x, groups_y) =
+            workgroup_grid(n as u32, WORKGROUP_SIZE, self.max_groups_per_dim);
+        let params = GpuParams {
+            ray_count: n as u32,
+            row_width: groups_x * WORKGROUP_SIZE,
+            static_root: self.geometry.static_root,
+            dynamic_root: self.geometry.dynamic_root,
+        };
+        self.queue
+            .write_buffer(&buffers.params, 0, bytemuck::bytes_of(&params));
+        self.queue
+            .write_buffer(&buffers.rays, 0, bytemuck::cast_slice(rays));
+        let bytes = n * result_bytes;
+        let pass = ComputePass {
+            label: "trace",
+            pipeline,
+            layout: &self.layout,
+            entries: &[
+                bind(0, &buffers.params),
+                bind(1, &buffers.rays),
+                bind(2, &self.geometry.nodes),
+                bind(3, &self.geometry.triangles),
+                bind(4, &buffers.results),
+            ],
+            groups: (groups_x, groups_y),
+        };
+        pass.encode(
+            &self.device,
+            encoder,
+            &[(&buffers.results, bytes)],
+            &buffers.staging,
+        );
+        bytes
+    }
+}
+
+/// Copies closest-hit results read back from the device into `hits` from
+/// `first` on.
+fn store_hits(hits: &mut [Hit], first: usize, bytes: &[u8]) {
+    let out: &[Hit] = bytemuck::cast_slice(bytes);
+    hits[first..first + out.len()].copy_from_slice(out);
+}
+
+/// Copies any-hit flags read back from the device into `occluded` from
+/// `first` on.
+fn store_flags(occluded: &mut [bool], first: usize, bytes: &[u8]) {
+    let flags: &[u32] = bytemuck::cast_slice(bytes);
+    for (o, &f) in occluded[first..first + flags.len()].iter_mut().zip(flags) {
+        *o = f != 0;
     }
 }
 
@@ -934,15 +1049,28 @@ impl ComputePass<'_> {
         copies: &[(&wgpu::Buffer, u64)],
         staging: &wgpu::Buffer,
     ) {
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some(self.label),
+        });
+        prepare(&mut encoder);
+        self.encode(device, &mut encoder, copies, staging);
+        queue.submit([encoder.finish()]);
+    }
+
+    /// The pass and its copies encoded into `encoder`, for the caller to
+    /// submit (with other passes).
+    pub(super) fn encode(
+        &self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        copies: &[(&wgpu::Buffer, u64)],
+        staging: &wgpu::Buffer,
+    ) {
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some(self.label),
             layout: self.layout,
             entries: self.entries,
         });
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some(self.label),
-        });
-        prepare(&mut encoder);
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(self.label),
@@ -957,7 +1085,6 @@ impl ComputePass<'_> {
             encoder.copy_buffer_to_buffer(source, 0, staging, offset, bytes);
             offset += bytes;
         }
-        queue.submit([encoder.finish()]);
     }
 }
 
@@ -1001,6 +1128,24 @@ impl RayBackend for GpuBackend {
             Some(_) => Ok(()),
         };
         if self.fail_on(result) {
+            occluded.fill(false);
+        }
+    }
+
+    /// As [`Self::closest_hit`] and [`Self::any_hit`], in one round trip.
+    fn closest_and_any_hit(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Hit],
+        shadows: &[Ray],
+        occluded: &mut [bool],
+    ) {
+        let result = match self.failure() {
+            None => self.try_closest_and_any_hit(rays, hits, shadows, occluded),
+            Some(_) => Ok(()),
+        };
+        if self.fail_on(result) {
+            hits.fill(Hit::MISS);
             occluded.fill(false);
         }
     }
@@ -1050,6 +1195,15 @@ impl RayBackend for RaysOnly {
     }
     fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
         self.0.any_hit(rays, occluded)
+    }
+    fn closest_and_any_hit(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Hit],
+        shadows: &[Ray],
+        occluded: &mut [bool],
+    ) {
+        self.0.closest_and_any_hit(rays, hits, shadows, occluded)
     }
     fn ray_counts(&self) -> RayCounts {
         self.0.ray_counts()

@@ -116,6 +116,26 @@ pub trait RayBackend: Send + Sync {
     /// For each ray, whether anything intersects it in `[tmin, tmax]`.
     fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]);
 
+    /// [`Self::closest_hit`] of `rays` and [`Self::any_hit`] of `shadows`
+    /// together, for callers that have both at hand (a path tracer traces
+    /// bounce k + 1 with bounce k's shadow rays). A GPU backend runs them
+    /// in one round trip, halving the fixed cost of a path's bounces; the
+    /// results are those of the two calls.
+    fn closest_and_any_hit(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Hit],
+        shadows: &[Ray],
+        occluded: &mut [bool],
+    ) {
+        if !rays.is_empty() {
+            self.closest_hit(rays, hits);
+        }
+        if !shadows.is_empty() {
+            self.any_hit(shadows, occluded);
+        }
+    }
+
     /// Rays traced so far.
     fn ray_counts(&self) -> RayCounts;
 
