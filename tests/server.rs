@@ -812,3 +812,123 @@ fn a_token_is_required_on_every_request_and_the_dashboard_carries_it() {
     );
     assert_eq!(get_with(&addr, "/api/jobs?token=%zz", "").0, 401);
 }
+
+/// `radcache render --builtin cube-in-box ARGS… --backend cpu -q --db DB
+/// --job NAME --out OUT`, not yet waited for.
+fn render_job_with_cli(
+    args: &[&str],
+    db: &std::path::Path,
+    name: &str,
+    out: &std::path::Path,
+) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["render", "--builtin", "cube-in-box"])
+        .args(args)
+        .args(["--backend", "cpu", "-q", "--db"])
+        .arg(db)
+        .args(["--job", name, "--out"])
+        .arg(out)
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap()
+}
+
+/// The jobs `radcache render --db --job NAME` left in the store are listed
+/// after the server's own (origin `render`), done or stopped, with their
+/// frames, statistics, records and stream; the server neither runs nor
+/// resumes them, and numbers its own jobs as before.
+#[test]
+fn jobs_of_radcache_render_are_shown_and_not_run() {
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let walk_out = dir.path().join("walk");
+    let status = render_job_with_cli(
+        &[
+            "--method", "trc", "--size", "8x8", "--frames", "0..2", "--spp", "2",
+        ],
+        &db,
+        "walk",
+        &walk_out,
+    )
+    .wait()
+    .unwrap();
+    assert!(status.success());
+    // An interrupted render: killed once its first frame is out.
+    let part_out = dir.path().join("part");
+    let mut part = render_job_with_cli(
+        &[
+            "--method", "ic", "--size", "16x16", "--frames", "0..500", "--spp", "1",
+        ],
+        &db,
+        "part",
+        &part_out,
+    );
+    let started = Instant::now();
+    while !part_out.join("frame_0000.png").exists() {
+        assert!(started.elapsed() < Duration::from_secs(120), "no frame");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    part.kill().unwrap();
+    part.wait().unwrap();
+
+    let server = start(&db, &scenes);
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"8x8","spp":1}"#,
+    );
+    assert_eq!(id, "job-1");
+    wait_done(&server, &id);
+    let (status, body) = http(&server, "GET", "/api/jobs", "");
+    assert_eq!(status, 200);
+    let jobs = json(&body);
+    let summary: Vec<(&str, &str, &str)> = jobs
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| {
+            let field = |k: &str| j[k].as_str().unwrap();
+            (field("id"), field("origin"), field("state"))
+        })
+        .collect();
+    assert_eq!(
+        summary,
+        [
+            ("job-1", "serve", "done"),
+            ("part", "render", "stopped"),
+            ("walk", "render", "done"),
+        ]
+    );
+    let part_done = jobs[1]["frames_done"].as_u64().unwrap();
+    assert!(part_done < 500, "{}", jobs[1]);
+
+    // The finished job: frames, statistics, records and stream.
+    assert_frames_equal_cli(&server, "walk", 2, &walk_out);
+    let (status, body) = http(&server, "GET", "/api/jobs/walk/stats", "");
+    assert_eq!(status, 200);
+    let stats = json(&body);
+    assert_eq!(stats["frames"].as_array().unwrap().len(), 2);
+    let (status, body) = http(&server, "GET", "/api/jobs/walk/records?frame=1", "");
+    assert_eq!(status, 200);
+    assert_eq!(
+        json(&body)["count"],
+        stats["frames"][1]["records_alive"],
+        "records alive at frame 1"
+    );
+    let (status, head, body) = http_full(&server.addr, "GET", "/api/jobs/walk/stream", "");
+    assert_eq!(status, 200);
+    let frames: Vec<u32> = multipart_parts(&head, &body).iter().map(|p| p.0).collect();
+    assert_eq!(frames, [0, 1], "the stream ends with the job's frames");
+
+    // Neither is run or resumed here; the error names the command.
+    let (status, body) = http(&server, "POST", "/api/jobs/part/resume", "");
+    assert_eq!(status, 409);
+    let detail = json(&body)["detail"].as_str().unwrap().to_string();
+    assert!(detail.contains("radcache render --job part"), "{detail}");
+    let (status, _) = http(&server, "POST", "/api/jobs/walk/cancel", "");
+    assert_eq!(status, 409);
+    std::thread::sleep(Duration::from_millis(300));
+    let (_, body) = http(&server, "GET", "/api/jobs/part", "");
+    let job = json(&body);
+    assert_eq!(job["state"], "stopped");
+    assert_eq!(job["frames_done"].as_u64().unwrap(), part_done);
+}

@@ -86,8 +86,10 @@ async function refreshJobs() {
   for (const j of jobs) {
     const tr = el('tr', { class: 'job', 'data-id': j.id });
     if (j.id === view.id) tr.classList.add('selected');
+    // Jobs `radcache render --db` left in the store are shown, not run here.
+    const state = j.origin === 'render' ? `${j.state} (radcache render)` : j.state;
     tr.append(el('td', {}, j.id), el('td', {}, j.scene), el('td', {}, j.method), el('td', {}, j.size),
-      el('td', { class: j.state === 'failed' ? 'error' : '' }, j.state));
+      el('td', { class: j.state === 'failed' ? 'error' : '' }, state));
     const td = el('td');
     const p = el('progress', { max: String(j.frames_total), value: String(j.frames_done) });
     td.append(p, ` ${j.frames_done}/${j.frames_total}`);
@@ -334,13 +336,13 @@ async function loadBench() {
   const charts = await api('/api/charts');
   const box = $('bench');
   box.replaceChildren();
+  // The charts, then their data files on a line of their own.
+  const data = el('p', {}, 'data: ');
   for (const c of charts) {
     if (c.type === 'image/svg+xml') box.append(el('img', { src: withToken(c.url), alt: c.name, title: c.name }));
-    else {
-      const a = el('a', { href: withToken(c.url) }, c.name);
-      box.append(a);
-    }
+    else data.append(el('a', { href: withToken(c.url) }, c.name), ' ');
   }
+  if (data.children.length) box.append(data);
 }
 
 // ---------------------------------------------------------------- wiring

@@ -100,6 +100,7 @@ pub async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
             JobState::Done,
             JobState::Failed,
             JobState::Cancelled,
+            JobState::Stopped,
         ]
         .map(|s| (s, jobs.values().filter(|j| j.state == s).count()))
     };

@@ -1,6 +1,6 @@
 //! `/api/jobs`: create, list, show, cancel, resume.
 
-use super::{ApiError, AppState, Job, JobRequest, JobState};
+use super::{ApiError, AppState, Job, JobKey, JobRequest, JobState};
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
@@ -12,6 +12,7 @@ pub fn job_json(job: &Job) -> Value {
     json!({
         "id": job.id,
         "state": job.state.as_str(),
+        "origin": job.origin(),
         "frames_done": job.frames_done,
         "frames_total": job.request.frames_total(),
         "scene": job.request.scene.to_string(),
@@ -32,7 +33,11 @@ pub async fn create(
     let request = JobRequest::parse(&body, state.options.scenes.as_deref())?;
     let id = {
         let mut jobs = state.jobs.lock().expect("job table lock");
-        let n = jobs.keys().next_back().map_or(1, |n| n + 1);
+        let last = jobs.keys().filter_map(|k| match k {
+            JobKey::Served(n) => Some(*n),
+            JobKey::Rendered(_) => None,
+        });
+        let n = last.max().map_or(1, |n| n + 1);
         let id = format!("job-{n}");
         // Into the store at once, so that a restart finds it queued.
         let spec = crate::render::job_spec(
@@ -47,7 +52,10 @@ pub async fn create(
             .store
             .begin_job(&spec, false)
             .map_err(ApiError::internal)?;
-        jobs.insert(n, Job::new(id.clone(), request, JobState::Queued, 0));
+        jobs.insert(
+            JobKey::Served(n),
+            Job::new(id.clone(), request, JobState::Queued, 0),
+        );
         id
     };
     state.wake.notify_one();
@@ -108,6 +116,14 @@ pub async fn resume(
             j.cancel = false;
             j.error = None;
         }),
+        JobState::Stopped => {
+            return Err(ApiError::conflict(format!(
+                "job {id} was rendered by `radcache render --job {id}` and stopped after {} of {} \
+                 frames; run that command again (with the same --db) to resume it",
+                job.frames_done,
+                job.request.frames_total()
+            )))
+        }
         s => {
             return Err(ApiError::conflict(format!(
                 "job {id} is {}; only cancelled or failed jobs can be resumed",

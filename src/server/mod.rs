@@ -61,14 +61,17 @@ pub enum JobState {
     Done,
     Failed,
     Cancelled,
+    /// A job `radcache render` left unfinished in the store (interrupted):
+    /// shown, not rendered here; the same command resumes it.
+    Stopped,
 }
 
 impl JobState {
-    /// Done, failed or cancelled: nothing changes until a resume.
+    /// Done, failed, cancelled or stopped: nothing changes until a resume.
     pub fn is_final(self) -> bool {
         matches!(
             self,
-            JobState::Done | JobState::Failed | JobState::Cancelled
+            JobState::Done | JobState::Failed | JobState::Cancelled | JobState::Stopped
         )
     }
 
@@ -79,6 +82,28 @@ impl JobState {
             JobState::Done => "done",
             JobState::Failed => "failed",
             JobState::Cancelled => "cancelled",
+            JobState::Stopped => "stopped",
+        }
+    }
+}
+
+/// A job's place in the server's table: the server's own jobs (`job-N`)
+/// by number, in creation order, then the jobs `radcache render --db
+/// --job NAME` left in the store, by name. The server shows those with
+/// their frames, statistics and records but does not render them: their
+/// command line (settings the server's requests cannot express) resumes
+/// them.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum JobKey {
+    Served(u64),
+    Rendered(String),
+}
+
+impl JobKey {
+    pub fn of(id: &str) -> JobKey {
+        match parse_job_id(id) {
+            Some(n) => JobKey::Served(n),
+            None => JobKey::Rendered(id.to_string()),
         }
     }
 }
@@ -110,6 +135,15 @@ impl Job {
             cancel: false,
             run_frames: 0,
             run_seconds: 0.0,
+        }
+    }
+
+    /// `serve` for the server's own jobs, `render` for those `radcache
+    /// render` left in the store ([`JobKey`]).
+    pub fn origin(&self) -> &'static str {
+        match JobKey::of(&self.id) {
+            JobKey::Served(_) => "serve",
+            JobKey::Rendered(_) => "render",
         }
     }
 
@@ -162,8 +196,8 @@ impl PngCache {
 pub struct AppState {
     pub store: Store,
     pub options: ServeOptions,
-    /// Jobs by number (`job-N`), in creation order.
-    pub jobs: Mutex<BTreeMap<u64, Job>>,
+    /// The server's jobs and those `radcache render` left in the store.
+    pub jobs: Mutex<BTreeMap<JobKey, Job>>,
     /// Wakes the worker when a job is queued.
     pub wake: Notify,
     /// Ctrl-C / SIGTERM: stop after the current frame.
@@ -172,7 +206,7 @@ pub struct AppState {
     pub render_micros: AtomicU64,
     /// One watch channel per followed job (stream, events), bumped on every
     /// change of the job: followers wake on changes, never poll.
-    pub watchers: Mutex<HashMap<u64, watch::Sender<u64>>>,
+    pub watchers: Mutex<HashMap<JobKey, watch::Sender<u64>>>,
     pub pngs: Mutex<PngCache>,
     /// The scene of the last `/records` query (its camera projects records).
     pub scene_cache: Mutex<Option<(String, Arc<crate::scene::Scene>)>>,
@@ -180,27 +214,25 @@ pub struct AppState {
 
 impl AppState {
     pub fn job(&self, id: &str) -> Result<Job, ApiError> {
-        let n = parse_job_id(id).ok_or_else(|| ApiError::not_found(format!("no job {id:?}")))?;
         self.jobs
             .lock()
             .expect("job table lock")
-            .get(&n)
+            .get(&JobKey::of(id))
             .cloned()
             .ok_or_else(|| ApiError::not_found(format!("no job {id:?}")))
     }
 
     /// Changes job `id` and wakes its followers.
     pub fn update(&self, id: &str, f: impl FnOnce(&mut Job)) {
-        if let Some(n) = parse_job_id(id) {
-            if let Some(job) = self.jobs.lock().expect("job table lock").get_mut(&n) {
-                f(job);
-            }
-            self.notify(n);
+        let key = JobKey::of(id);
+        if let Some(job) = self.jobs.lock().expect("job table lock").get_mut(&key) {
+            f(job);
         }
+        self.notify(&key);
     }
 
-    fn notify(&self, n: u64) {
-        if let Some(tx) = self.watchers.lock().expect("watchers lock").get(&n) {
+    fn notify(&self, key: &JobKey) {
+        if let Some(tx) = self.watchers.lock().expect("watchers lock").get(key) {
             tx.send_modify(|g| *g += 1);
         }
     }
@@ -216,12 +248,11 @@ impl AppState {
     /// reading the job, so that no change is missed).
     pub fn subscribe(&self, id: &str) -> Result<watch::Receiver<u64>, ApiError> {
         self.job(id)?;
-        let n = parse_job_id(id).expect("an existing job has a valid id");
         Ok(self
             .watchers
             .lock()
             .expect("watchers lock")
-            .entry(n)
+            .entry(JobKey::of(id))
             .or_insert_with(|| watch::channel(0).0)
             .subscribe())
     }

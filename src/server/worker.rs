@@ -2,34 +2,35 @@
 //! `spawn_blocking` through [`render::render_job_to_dir_with`], the same
 //! store job and resume logic as `radcache render --db --job`.
 
-use super::{parse_job_id, AppState, Job, JobRequest, JobState};
+use super::{AppState, Job, JobKey, JobRequest, JobState};
 use crate::render::{self, Renderer, StoreJob};
 use anyhow::Result;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Fills the job table from the store's `job-N` jobs: finished ones are
-/// done, cancelled ones stay cancelled, other unfinished ones (interrupted
-/// by a stop or a crash) are queued again.
+/// Fills the job table from the store's jobs. Of the server's own (`job-N`)
+/// finished ones are done, cancelled ones stay cancelled, other unfinished
+/// ones (interrupted by a stop or a crash) are queued again. Those of
+/// `radcache render --job NAME` are done or stopped ([`JobKey`]).
 pub fn load_jobs(state: &AppState) -> Result<()> {
     let mut jobs = state.jobs.lock().expect("job table lock");
     for stored in state.store.jobs()? {
-        let (Some(n), Some(request)) =
-            (parse_job_id(&stored.name), JobRequest::from_stored(&stored))
-        else {
+        let Some(request) = JobRequest::from_stored(&stored) else {
             continue;
         };
+        let key = JobKey::of(&stored.name);
         let done = frames_done(state, stored.id, &request);
-        let finished = done == request.frames_total();
-        let job_state = if finished {
+        let job_state = if done == request.frames_total() {
             JobState::Done
+        } else if matches!(key, JobKey::Rendered(_)) {
+            JobState::Stopped
         } else if state.store.job_cancelled(&stored.name)? {
             JobState::Cancelled
         } else {
             JobState::Queued
         };
-        jobs.insert(n, Job::new(stored.name.clone(), request, job_state, done));
+        jobs.insert(key, Job::new(stored.name.clone(), request, job_state, done));
     }
     Ok(())
 }
