@@ -164,7 +164,8 @@ pub struct GpuTimings {
     pub dispatch: Duration,
     /// Mapping the staging buffer and copying results out.
     pub readback: Duration,
-    /// Dispatches (chunks) run.
+    /// Submissions waited for: one per chunk, or per combined
+    /// closest-and-any-hit call (two dispatches).
     pub dispatches: u64,
 }
 
