@@ -412,6 +412,11 @@ fn records_match_the_store_and_inspect() {
             "{r}"
         );
     }
+    // The statistics say so too.
+    let (_, stats) = http(&server, "GET", &format!("/api/jobs/{id}/stats"), "");
+    for f in json(&stats)["frames"].as_array().unwrap() {
+        assert_eq!(f["mean_lifespan"], 1.0, "{f}");
+    }
     // A box around the lower half (in y) of the records.
     let ys: Vec<f64> = records
         .iter()

@@ -169,6 +169,9 @@ impl Method for IrradianceCaching {
             .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
         stats.records_created = cache.len() as u64;
         stats.records_alive = cache.len() as u64;
+        // A per-frame cache's records are used in this frame only (the
+        // histogram stays empty: it is for the temporal methods' lives).
+        stats.mean_lifespan = if cache.is_empty() { 0.0 } else { 1.0 };
         self.stats = stats;
         film
     }

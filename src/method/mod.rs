@@ -93,7 +93,8 @@ pub struct FrameStats {
     /// path-traced instead (the name predates per-pixel lookups).
     pub fallback_lookups: u64,
     /// Mean lifespan, in frames, of the records computed in the frame (new
-    /// and replacements; temporal methods: TRC Eq. 10–11, at most δt_max).
+    /// and replacements; temporal methods: TRC Eq. 10–11, at most δt_max;
+    /// `ic`: 1; 0 when none was computed).
     pub mean_lifespan: f64,
     /// Records computed in the frame by lifespan: `[n]` records may be used
     /// in `n` frames (temporal methods; empty for the others).
