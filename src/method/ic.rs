@@ -11,7 +11,7 @@
 //! than an estimate from the lookup point's clearance (a departure from
 //! Ward explained at `IrradianceRecord::weight`).
 
-use super::lookups::{measure_clearance, ShadingPoint};
+use super::lookups::{measure_clearance, Lookup, ShadingPoint};
 use super::render_pass::{render_pass, FallbackStreams, Surface};
 use super::{FrameContext, FrameRecords, FrameStats, Method, RENDER_PHASE};
 use crate::backend::{Hit, Ray};
@@ -291,6 +291,7 @@ impl IrradianceCaching {
         while step * 8 < w.max(h) {
             step *= 2;
         }
+        let clearances = candidate_clearances(ctx, candidates);
         let mut visited = vec![false; w * h];
         while step >= 1 {
             // Four interleaved sub-batches per level: candidates of one batch
@@ -302,8 +303,8 @@ impl IrradianceCaching {
                         let i = y * w + x;
                         if !visited[i] {
                             visited[i] = true;
-                            if let Some(c) = candidates[i] {
-                                batch.push(c);
+                            if let (Some(c), Some(at)) = (candidates[i], clearances[i]) {
+                                batch.push((c, at));
                             }
                         }
                     }
@@ -314,24 +315,18 @@ impl IrradianceCaching {
         }
     }
 
-    /// Gathers records (in parallel) for the candidates no record covers,
-    /// then inserts them in pixel order.
+    /// Gathers records (in parallel) for the candidates no record covers
+    /// (each with its lookup point), then inserts them in pixel order.
     fn create_records<X: Send>(
         &self,
         ctx: &FrameContext,
         cache: &mut IrradianceCache,
-        batch: Vec<Candidate>,
+        batch: Vec<(Candidate, Lookup)>,
         annotate: &(impl Fn(&Gathered) -> X + Sync),
         inserted: &mut Vec<X>,
     ) {
-        let points: Vec<ShadingPoint> = batch
-            .iter()
-            .map(|c| (c.point.position, c.point.normal))
-            .collect();
-        let at = measure_clearance(ctx, &points);
         let needed: Vec<Candidate> = batch
             .into_par_iter()
-            .zip(at)
             .filter(|(_, at)| !cache.covers(at))
             .map(|(c, _)| c)
             .collect();
@@ -493,6 +488,26 @@ pub(crate) fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
                 footprint: hit.t * ray.dir().length() * pixel_angle,
             })
         })
+        .collect()
+}
+
+/// Each candidate's lookup point with its clearance, in one ray batch for
+/// the whole frame (they depend on the candidates only, not on the cache
+/// the fill grows): on a GPU one round trip instead of one per fill
+/// sub-batch.
+fn candidate_clearances(
+    ctx: &FrameContext,
+    candidates: &[Option<Candidate>],
+) -> Vec<Option<Lookup>> {
+    let points: Vec<ShadingPoint> = candidates
+        .iter()
+        .flatten()
+        .map(|c| (c.point.position, c.point.normal))
+        .collect();
+    let mut lookups = measure_clearance(ctx, &points).into_iter();
+    candidates
+        .iter()
+        .map(|c| c.as_ref().and_then(|_| lookups.next()))
         .collect()
 }
 
