@@ -786,11 +786,7 @@ impl GpuBackend {
         assert_eq!(shadows.len(), occluded.len(), "one result slot per ray");
         let mut buffers = self.rays.lock().unwrap_or_else(|e| e.into_inner());
         let [closest_buffers, any_buffers] = &mut *buffers;
-        let mut encoder = self
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("trace both"),
-            });
+        let mut encoder = self.encoder("trace both");
         let start = Instant::now();
         let hit_bytes = self.encode(
             closest_buffers,
@@ -806,38 +802,18 @@ impl GpuBackend {
             shadows,
             &mut encoder,
         );
-        let upload = start.elapsed();
-        let start = Instant::now();
-        self.queue.submit([encoder.finish()]);
-        let submitted = start.elapsed();
-        // The first readback waits for both dispatches; the second finds
-        // its copy done.
-        let read = |buffers: &RayBuffers, bytes, store: &mut dyn FnMut(&[u8])| {
-            read_back(
-                &self.device,
-                &buffers.staging,
-                bytes,
-                "results",
-                &self.errors,
-                store,
-            )
-            .map_err(|message| GpuError::Setup {
-                adapter: self.name(),
-                message,
-            })
-        };
-        let (waited, hits_read) = read(closest_buffers, hit_bytes, &mut |view| {
-            store_hits(hits, 0, view)
-        })?;
-        let (waited_more, flags_read) = read(any_buffers, flag_bytes, &mut |view| {
-            store_flags(occluded, 0, view)
-        })?;
-        self.add_timings(|t| {
-            t.ray_upload += upload;
-            t.dispatch += submitted + waited + waited_more;
-            t.readback += hits_read + flags_read;
-            t.dispatches += 1;
-        });
+        self.submit_and_read(
+            encoder,
+            start.elapsed(),
+            &mut [
+                (closest_buffers, hit_bytes, &mut |view| {
+                    store_hits(hits, 0, view)
+                }),
+                (any_buffers, flag_bytes, &mut |view| {
+                    store_flags(occluded, 0, view)
+                }),
+            ],
+        )?;
         self.closest.fetch_add(rays.len() as u64, Ordering::Relaxed);
         self.any.fetch_add(shadows.len() as u64, Ordering::Relaxed);
         self.calls.fetch_add(1, Ordering::Relaxed);
@@ -854,43 +830,65 @@ impl GpuBackend {
         rays: &[Ray],
         mut store: impl FnMut(usize, &[u8]),
     ) -> Result<(), GpuError> {
-        let gpu_err = |m: String| GpuError::Setup {
-            adapter: self.name(),
-            message: m,
-        };
         // One batch at a time: the buffers are shared.
         let mut buffers = self.rays.lock().unwrap_or_else(|e| e.into_inner());
         let buffers = &mut buffers[0];
         for (index, chunk) in rays.chunks(self.chunk_rays).enumerate() {
             let first = index * self.chunk_rays;
-            let mut encoder = self
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                    label: Some("trace"),
-                });
+            let mut encoder = self.encoder("trace");
             let start = Instant::now();
             let bytes = self.encode(buffers, pipeline, result_bytes, chunk, &mut encoder);
-            let upload = start.elapsed();
-            let start = Instant::now();
-            self.queue.submit([encoder.finish()]);
-            let submitted = start.elapsed();
-            let (waited, readback) = read_back(
+            self.submit_and_read(
+                encoder,
+                start.elapsed(),
+                &mut [(buffers, bytes, &mut |view| store(first, view))],
+            )?;
+        }
+        Ok(())
+    }
+
+    fn encoder(&self, label: &str) -> wgpu::CommandEncoder {
+        self.device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) })
+    }
+
+    /// Submits `encoder` (its uploads took `upload`) and, after one wait,
+    /// hands each read's staging buffer (its first `bytes`) to its `store`;
+    /// adds the times to [`GpuTimings`].
+    fn submit_and_read(
+        &self,
+        encoder: wgpu::CommandEncoder,
+        upload: Duration,
+        reads: &mut [StagedRead],
+    ) -> Result<(), GpuError> {
+        let start = Instant::now();
+        self.queue.submit([encoder.finish()]);
+        let mut dispatch = start.elapsed();
+        let mut readback = Duration::ZERO;
+        // The first read waits for the whole submission; the others find
+        // their copies done.
+        for (buffers, bytes, store) in reads.iter_mut() {
+            let (waited, read) = read_back(
                 &self.device,
                 &buffers.staging,
-                bytes,
+                *bytes,
                 "results",
                 &self.errors,
-                |view| store(first, view),
+                |view| store(view),
             )
-            .map_err(gpu_err)?;
-            let dispatch = submitted + waited;
-            self.add_timings(|t| {
-                t.ray_upload += upload;
-                t.dispatch += dispatch;
-                t.readback += readback;
-                t.dispatches += 1;
-            });
+            .map_err(|message| GpuError::Setup {
+                adapter: self.name(),
+                message,
+            })?;
+            dispatch += waited;
+            readback += read;
         }
+        self.add_timings(|t| {
+            t.ray_upload += upload;
+            t.dispatch += dispatch;
+            t.readback += readback;
+            t.dispatches += 1;
+        });
         Ok(())
     }
 
@@ -945,6 +943,10 @@ impl GpuBackend {
         bytes
     }
 }
+
+/// A submission's results to read back: the buffers whose staging holds
+/// them, their size in bytes, and where they go.
+type StagedRead<'a, 'b> = (&'a RayBuffers, u64, &'b mut dyn FnMut(&[u8]));
 
 /// Copies closest-hit results read back from the device into `hits` from
 /// `first` on.
