@@ -937,3 +937,57 @@ fn jobs_of_radcache_render_are_shown_and_not_run() {
     assert_eq!(job["state"], "stopped");
     assert_eq!(job["frames_done"].as_u64().unwrap(), part_done);
 }
+
+/// A job of `radcache render` whose scene file the server cannot find (a
+/// path relative to where the render ran) still lists and serves its
+/// frames; only its records, whose screen positions need the scene's
+/// camera, are a 409 that says why.
+#[test]
+fn a_render_jobs_scene_the_server_cannot_find_is_a_clear_conflict() {
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    std::fs::copy(
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/scenes/cube_in_box.glb"
+        ),
+        work.join("box.glb"),
+    )
+    .unwrap();
+    let status = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .current_dir(&work)
+        .args([
+            "render", "box.glb", "--method", "ic", "--size", "8x8", "--frames", "0..1",
+        ])
+        .args([
+            "--spp",
+            "1",
+            "--backend",
+            "cpu",
+            "-q",
+            "--job",
+            "boxed",
+            "--out",
+            "out",
+            "--db",
+        ])
+        .arg(&db)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let server = start(&db, &scenes);
+    let (status, body) = http(&server, "GET", "/api/jobs/boxed", "");
+    assert_eq!(status, 200);
+    assert_eq!(json(&body)["state"], "done");
+    let (status, _) = http(&server, "GET", "/api/jobs/boxed/frames/0.png", "");
+    assert_eq!(status, 200);
+    let (status, body) = http(&server, "GET", "/api/jobs/boxed/records?frame=0", "");
+    assert_eq!(status, 409);
+    let detail = json(&body)["detail"].as_str().unwrap().to_string();
+    assert!(
+        detail.contains("box.glb") && detail.contains("working directory"),
+        "{detail}"
+    );
+}

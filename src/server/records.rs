@@ -65,7 +65,15 @@ fn scene(
             return Ok(s.clone());
         }
     }
-    let scene = Arc::new(source.load().map_err(ApiError::internal)?);
+    // A job of `radcache render` names its scene file as that command was
+    // given it, relative to where it ran: the server may not find it.
+    let scene = Arc::new(source.load().map_err(|e| {
+        ApiError::conflict(format!(
+            "the records' screen positions need the job's scene, which the server \
+             cannot load: {e:#} (a relative path is taken from the server's working \
+             directory)"
+        ))
+    })?);
     *cache = Some((key.to_string(), scene.clone()));
     Ok(scene)
 }
