@@ -245,10 +245,10 @@ pub struct BenchArgs {
     pub scenes: Vec<SceneSource>,
     /// Methods, each NAME or NAME:KEY=V1,V2,… sweeping one setting (one run per value),
     /// e.g. `--methods path:spp=4,16,64 ic:accuracy=0.1,0.2`.
-    #[arg(long, num_args = 1.., default_values = ["path:spp=4,16,64,256", "ic:spp=16,64"], value_parser = parse_bench_method)]
+    #[arg(long, num_args = 1.., default_values = bench::DEFAULT_METHODS, value_parser = parse_bench_method)]
     pub methods: Vec<bench::MethodSweep>,
     /// Half-open frame range START..END.
-    #[arg(long, default_value = "0..4", value_parser = parse_frames)]
+    #[arg(long, default_value = "0..24", value_parser = parse_frames)]
     pub frames: Range<u32>,
     /// Image size WxH.
     #[arg(long, default_value = "64x64", value_parser = parse_size)]
@@ -402,8 +402,9 @@ pub fn run(cli: Cli) -> Result<()> {
     }
 }
 
-fn run_bench(args: BenchArgs) -> Result<()> {
-    let opts = bench::BenchOptions {
+/// The bench's options as the command line gives them.
+fn bench_options(args: BenchArgs) -> bench::BenchOptions {
+    bench::BenchOptions {
         scenes: args.scenes,
         methods: args.methods,
         frames: args.frames,
@@ -417,7 +418,11 @@ fn run_bench(args: BenchArgs) -> Result<()> {
         quiet: args.quiet,
         estimate_error: args.estimate_error,
         backends: args.backends.into_iter().map(backend_choice).collect(),
-    };
+    }
+}
+
+fn run_bench(args: BenchArgs) -> Result<()> {
+    let opts = bench_options(args);
     let report = bench::run(&opts)?;
     print!("{}", bench::to_table(&report.rows));
     for (measure, what) in [
@@ -665,4 +670,26 @@ fn run_compare(args: CompareArgs) -> Result<()> {
         print!("{}", report.to_text());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `radcache bench` with no options runs what `BenchOptions::default()`
+    /// documents (the two defaults are written in two places).
+    #[test]
+    fn bench_defaults_are_the_library_defaults() {
+        let cli = Cli::try_parse_from(["radcache", "bench"]).expect("parses");
+        let Command::Bench(args) = cli.command else {
+            panic!("not the bench command");
+        };
+        let (cli, lib) = (bench_options(args), bench::BenchOptions::default());
+        assert_eq!(cli.methods, lib.methods);
+        assert_eq!(cli.frames, lib.frames);
+        assert_eq!((cli.width, cli.height), (lib.width, lib.height));
+        assert_eq!(cli.reference_spp, lib.reference_spp);
+        assert_eq!((cli.fps, cli.seed), (lib.fps, lib.seed));
+        assert_eq!(cli.out, lib.out);
+    }
 }

@@ -89,18 +89,30 @@ pub struct BenchOptions {
     pub backends: Vec<BackendChoice>,
 }
 
+/// The methods of the default run: every method, each as a sweep so that
+/// it draws a curve on the charts (`trc`'s over `δt_max`, TRC Eq. 10: the
+/// longest a record may live, which trades time against stale light).
+pub const DEFAULT_METHODS: [&str; 3] = [
+    "path:spp=4,16,64,256",
+    "ic:spp=16,64",
+    "trc:max_life=2,5,20",
+];
+
+/// The frames of the default run: those `radcache render` renders by
+/// default, enough for `trc`'s records to live out a lifespan.
+pub const DEFAULT_FRAMES: Range<u32> = 0..24;
+
 impl Default for BenchOptions {
-    /// The small default run: `cube-in-box`, frames 0..4 at 64×64, `path`
-    /// at 4, 16, 64 and 256 spp and `ic` at 16 and 64 spp against a
-    /// 1024-spp reference.
+    /// The default run: `cube-in-box`, [`DEFAULT_FRAMES`] at 64×64,
+    /// [`DEFAULT_METHODS`], against a 1024-spp reference.
     fn default() -> Self {
         BenchOptions {
             scenes: vec![SceneSource::Builtin("cube-in-box".into())],
-            methods: vec![
-                MethodSweep::parse("path:spp=4,16,64,256").expect("valid default"),
-                MethodSweep::parse("ic:spp=16,64").expect("valid default"),
-            ],
-            frames: 0..4,
+            methods: DEFAULT_METHODS
+                .iter()
+                .map(|m| MethodSweep::parse(m).expect("valid default"))
+                .collect(),
+            frames: DEFAULT_FRAMES,
             width: 64,
             height: 64,
             fps: crate::scene::DEFAULT_FPS,
