@@ -20,7 +20,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 /// Path-length control shared by every caller.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PathLength {
     /// Hard bounce limit (`None`: unbounded, terminated by Russian roulette
     /// only, as the reference renders are).

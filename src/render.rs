@@ -49,7 +49,7 @@ impl std::fmt::Display for SceneSource {
 
 /// Which rendering method, with its settings. Its serde JSON is a job's
 /// settings identity in the store.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum MethodSettings {
     Path(PathSettings),
     Ic(IcSettings),

@@ -166,6 +166,44 @@ fn job_renders_and_frames_match_the_cli() {
     assert!(text.contains("radcache_jobs{state=\"done\"} 1"), "{text}");
 }
 
+/// A job's `settings` are the method's settings by the bench's names: the
+/// frames are those of the CLI given the same settings as flags, and the
+/// job shows them.
+#[test]
+fn job_settings_are_the_clis_flags() {
+    let (dir, scenes) = workspace();
+    let server = start(&dir.path().join("db"), &scenes);
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"ic","frames":"0..2","size":"16x16","spp":1,
+            "settings":{"accuracy":0.3,"strata":"8x24","gradients":false}}"#,
+    );
+    let job = wait_done(&server, &id);
+    let settings = &job["settings"];
+    assert_eq!(settings["accuracy"], 0.3, "{job}");
+    assert_eq!(settings["strata"]["theta"], 8, "{job}");
+    assert_eq!(settings["strata"]["phi"], 24, "{job}");
+    assert_eq!(settings["gradients"], false, "{job}");
+    assert_eq!(settings["spp"], 1, "{job}");
+    let out = dir.path().join("cli");
+    render_with_cli(
+        &[
+            "--method",
+            "ic",
+            "--frames",
+            "0..2",
+            "--ic-accuracy",
+            "0.3",
+            "--ic-strata",
+            "8x24",
+            "--ic-no-gradients",
+        ],
+        &["--size", "16x16", "--spp", "1"],
+        &out,
+    );
+    assert_frames_equal_cli(&server, &id, 2, &out);
+}
+
 #[test]
 fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
     let (dir, scenes) = workspace();
@@ -213,6 +251,30 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
         "POST",
         "/api/jobs",
         r#"{"scene":"builtin:cube-in-box","method":"nope","frames":"0..1","size":"16x16"}"#,
+        400,
+    );
+    let with_settings = |settings: &str| {
+        format!(
+            r#"{{"scene":"builtin:cube-in-box","method":"trc","frames":"0..1","size":"16x16","spp":1,"settings":{settings}}}"#
+        )
+    };
+    for bad in [
+        r#"{"no_such_setting":1}"#,
+        r#"{"at":"fast"}"#,
+        r#"{"max_life":0}"#,
+        r#"{"strata":"16"}"#,
+        r#"{"gradients":"sideways"}"#,
+        r#"{"at":[0.1]}"#,
+        r#"{"spp":2}"#,
+        r#"{"spp_":2}"#,
+        r#"[1]"#,
+    ] {
+        check("POST", "/api/jobs", &with_settings(bad), 400);
+    }
+    check(
+        "POST",
+        "/api/jobs",
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"16x16","settings":{"spp":100000}}"#,
         400,
     );
     let huge = format!(r#"{{"scene":"{}"}}"#, "a".repeat(100_000));
@@ -563,8 +625,10 @@ fn killed_server_resumes_its_job_and_frames_equal_an_uninterrupted_run() {
     let (dir, scenes) = workspace();
     let db = dir.path().join("db");
     let frames = 24;
+    // Settings other than the defaults: the restarted server must resume
+    // the job with them (the store refuses other settings).
     let request = format!(
-        r#"{{"scene":"builtin:cube-in-box","method":"trc","frames":"0..{frames}","size":"24x24","spp":2}}"#
+        r#"{{"scene":"builtin:cube-in-box","method":"trc","frames":"0..{frames}","size":"24x24","spp":2,"settings":{{"max_life":5,"at":0.02}}}}"#
     );
     let mut server = start(&db, &scenes);
     let id = create_job(&server, &request);
@@ -602,11 +666,21 @@ fn killed_server_resumes_its_job_and_frames_equal_an_uninterrupted_run() {
     let out = dir.path().join("cli");
     let range = format!("0..{frames}");
     render_with_cli(
-        &["--method", "trc", "--frames", &range],
+        &[
+            "--method",
+            "trc",
+            "--frames",
+            &range,
+            "--trc-max-life",
+            "5",
+            "--trc-at",
+            "0.02",
+        ],
         &["--size", "24x24", "--spp", "2"],
         &out,
     );
     assert_frames_equal_cli(&server, &id, frames, &out);
+    assert_eq!(job["settings"]["max_life"], 5, "{job}");
     // The cancelled job resumes on request.
     let (status, _) = http(
         &server,

@@ -347,12 +347,25 @@ async function loadBench() {
 
 // ---------------------------------------------------------------- wiring
 
+// "max_life=5, at=0.02" → {max_life: "5", at: "0.02"}: the job request's
+// settings, which the server checks (values as text, as the bench takes them).
+function parseSettings(text) {
+  const settings = {};
+  for (const part of text.split(/[\s,]+/).filter(Boolean)) {
+    const eq = part.indexOf('=');
+    if (eq <= 0) throw new Error(`setting "${part}" is not NAME=VALUE`);
+    settings[part.slice(0, eq)] = part.slice(eq + 1);
+  }
+  return settings;
+}
+
 $('new-job').addEventListener('submit', async (e) => {
   e.preventDefault();
   $('form-error').textContent = '';
   const body = Object.fromEntries(new FormData(e.target));
   if (body.spp === '') delete body.spp; else body.spp = Number(body.spp);
   try {
+    if (body.settings.trim() === '') delete body.settings; else body.settings = parseSettings(body.settings);
     const r = await api('/api/jobs', { method: 'POST', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(body) });
     await refreshJobs();
     await selectJob(r.id);

@@ -17,7 +17,7 @@ use glam::Vec3;
 use std::f32::consts::{PI, TAU};
 
 /// Stratification of the gathering hemisphere.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Strata {
     /// Cells in θ (`M`).
     pub theta: u32,

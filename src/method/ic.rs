@@ -30,7 +30,7 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 /// Settings of `ic`, with their sources.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct IcSettings {
     /// Accuracy `a` (Ward 1988): records are used where `w ≥ 1/a`. Ward
     /// recommends 0.1–0.3; 0.2 is our default.

@@ -8,6 +8,7 @@ mod lookups;
 pub mod path;
 pub mod pixels;
 pub mod render_pass;
+pub mod settings;
 pub mod trc;
 
 use crate::backend::RayBackend;

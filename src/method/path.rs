@@ -13,7 +13,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 /// Settings of the path tracer.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PathSettings {
     /// Samples per pixel.
     pub spp: u32,

@@ -90,9 +90,9 @@ impl JobState {
 /// A job's place in the server's table: the server's own jobs (`job-N`)
 /// by number, in creation order, then the jobs `radcache render --db
 /// --job NAME` left in the store, by name. The server shows those with
-/// their frames, statistics and records but does not render them: their
-/// command line (settings the server's requests cannot express) resumes
-/// them.
+/// their frames, statistics and records but does not render them: they
+/// belong to the command that started them (whose scene path is relative
+/// to where it ran), which resumes them.
 #[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum JobKey {
     Served(u64),

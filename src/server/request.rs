@@ -2,9 +2,7 @@
 //! library's render settings: the same types `radcache render` builds.
 
 use super::ApiError;
-use crate::method::ic::IcSettings;
-use crate::method::path::PathSettings;
-use crate::method::trc::TrcSettings;
+use crate::method::settings::method_settings;
 use crate::render::{FrameSettings, MethodSettings, SceneSource};
 use crate::store::schema::JobValue;
 use serde::Deserialize;
@@ -27,6 +25,9 @@ struct Body {
     size: String,
     spp: Option<u32>,
     seed: Option<u64>,
+    /// The method's settings by the names `radcache bench --methods`
+    /// takes (`{"max_life": 5, "at": 0.02}`); the rest keep their defaults.
+    settings: Option<serde_json::Map<String, serde_json::Value>>,
 }
 
 /// What a job renders.
@@ -46,15 +47,7 @@ impl JobRequest {
         let scene = parse_scene(&b.scene, scenes)?;
         let frames = parse_frames(&b.frames)?;
         let (width, height) = parse_size(&b.size)?;
-        if let Some(spp) = b.spp {
-            if spp == 0 || spp > MAX_SPP {
-                return Err(ApiError::bad_request(format!(
-                    "spp {spp} is out of range (1..={MAX_SPP})"
-                )));
-            }
-        }
-        let method = method_settings(&b.method, b.spp)
-            .ok_or_else(|| ApiError::bad_request(format!("unknown method {:?}", b.method)))?;
+        let method = parse_method(&b.method, b.settings.as_ref(), b.spp)?;
         let settings = FrameSettings {
             width,
             height,
@@ -77,7 +70,7 @@ impl JobRequest {
         };
         Some(JobRequest {
             scene,
-            method: method_settings(&job.method, Some(job.spp))?,
+            method: stored_method(job)?,
             settings: FrameSettings {
                 width: job.width,
                 height: job.height,
@@ -95,23 +88,58 @@ impl JobRequest {
     }
 }
 
-/// A method by name with its paper defaults (as `radcache render`).
-fn method_settings(name: &str, spp: Option<u32>) -> Option<MethodSettings> {
-    let ic = IcSettings {
-        spp: spp.unwrap_or(IcSettings::default().spp),
-        ..IcSettings::default()
-    };
-    Some(match name {
-        "path" => MethodSettings::Path(PathSettings {
-            spp: spp.unwrap_or(PathSettings::default().spp),
-            ..PathSettings::default()
-        }),
-        "ic" => MethodSettings::Ic(ic),
-        "trc" => MethodSettings::Trc(TrcSettings {
-            ic,
-            ..TrcSettings::default()
-        }),
-        _ => return None,
+/// The method named `name` with `settings` (name-value pairs, as the
+/// bench's `--methods`) and `spp` applied to its defaults.
+fn parse_method(
+    name: &str,
+    settings: Option<&serde_json::Map<String, serde_json::Value>>,
+    spp: Option<u32>,
+) -> Result<MethodSettings, ApiError> {
+    let mut changes = Vec::new();
+    for (key, value) in settings.into_iter().flatten() {
+        changes.push((key.as_str(), setting_text(key, value)?));
+    }
+    let spp = spp.map(|n| n.to_string());
+    if let Some(spp) = &spp {
+        if changes.iter().any(|(key, _)| *key == "spp") {
+            return Err(ApiError::bad_request(
+                "spp is given twice, on its own and in settings".into(),
+            ));
+        }
+        changes.push(("spp", spp.clone()));
+    }
+    let method = method_settings(name, changes.iter().map(|(k, v)| (*k, v.as_str())))
+        .map_err(|e| ApiError::bad_request(e.to_string()))?;
+    let spp = method.spp();
+    if spp > MAX_SPP {
+        return Err(ApiError::bad_request(format!(
+            "spp {spp} is out of range (1..={MAX_SPP})"
+        )));
+    }
+    Ok(method)
+}
+
+/// A setting's JSON value as the text the bench's `KEY=VALUE` would give:
+/// numbers and strings as written, `true`/`false` as `1`/`0`.
+fn setting_text(key: &str, value: &serde_json::Value) -> Result<String, ApiError> {
+    match value {
+        serde_json::Value::String(s) => Ok(s.clone()),
+        serde_json::Value::Number(n) => Ok(n.to_string()),
+        serde_json::Value::Bool(b) => Ok(if *b { "1" } else { "0" }.into()),
+        other => Err(ApiError::bad_request(format!(
+            "setting {key:?}: expected a number, a string or a boolean, not {other}"
+        ))),
+    }
+}
+
+/// A stored job's method settings: its settings identity (serde JSON)
+/// read back; where that cannot be read, the method's defaults at the
+/// job's spp, which the store's settings check refuses clearly should
+/// they differ from the stored ones.
+fn stored_method(job: &JobValue) -> Option<MethodSettings> {
+    serde_json::from_str(&job.settings).ok().or_else(|| {
+        let spp = job.spp.to_string();
+        method_settings(&job.method, [("spp", spp.as_str())]).ok()
     })
 }
 

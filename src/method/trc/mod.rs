@@ -91,7 +91,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Temporal gradients (TRC §4.5).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum TemporalGradients {
     /// A record's value is constant over its life (Fig. 4c).
     None,
@@ -133,7 +133,7 @@ impl Successor {
 }
 
 /// Settings of `trc`, with their sources.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrcSettings {
     /// Everything spatial: accuracy `a`, strata, spp, spacing, spatial
     /// gradients, path lengths (see [`IcSettings`]).

@@ -1,0 +1,294 @@
+//! Methods by name and their settings by name-value pairs: what
+//! `radcache bench --methods trc:max_life=2,5,20` and the `settings` of a
+//! job request (`POST /api/jobs`) are turned into, with one error type
+//! that names what is known.
+
+use crate::cache::gather::Strata;
+use crate::method::ic::IcSettings;
+use crate::method::path::PathSettings;
+use crate::method::trc::{TemporalGradients, TrcSettings};
+use crate::render::MethodSettings;
+use std::ops::Range;
+
+/// A method by name, and the settings its name-value pairs may change.
+pub struct MethodInfo {
+    pub name: &'static str,
+    /// `(key, example value)`: every key [`method_settings`] accepts for
+    /// this method, with a value it accepts (checked by a unit test).
+    pub keys: &'static [(&'static str, &'static str)],
+}
+
+/// Every method `radcache bench --methods` and `POST /api/jobs` accept.
+/// Keep in step with [`method_settings`].
+pub const METHODS: &[MethodInfo] = &[
+    MethodInfo {
+        name: "path",
+        keys: &[("spp", "16"), ("max_depth", "8"), ("rr_start", "3")],
+    },
+    MethodInfo {
+        name: "ic",
+        keys: &[
+            ("accuracy", "0.2"),
+            ("spp", "4"),
+            ("strata", "16x48"),
+            ("min_spacing", "2"),
+            ("max_spacing", "64"),
+            ("gradients", "1"),
+        ],
+    },
+    MethodInfo {
+        name: "trc",
+        keys: &[
+            ("at", "0.05"),
+            ("max_life", "20"),
+            ("gradients", "extrapolated"),
+            ("reprojection", "1"),
+            ("next_direct", "0"),
+            ("spp", "4"),
+            ("accuracy", "0.2"),
+            ("strata", "16x48"),
+            ("min_spacing", "2"),
+            ("max_spacing", "64"),
+        ],
+    },
+];
+
+/// Errors of method specifications; each names what is known.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum MethodError {
+    #[error("unknown method '{name}'; known methods: {known}")]
+    UnknownMethod { name: String, known: String },
+    #[error("method '{method}' has no setting '{key}'; its settings: {known}")]
+    UnknownKey {
+        method: String,
+        key: String,
+        known: String,
+    },
+    #[error("{method}: bad value '{value}' for {key}: {problem}")]
+    BadValue {
+        method: String,
+        key: String,
+        value: String,
+        problem: String,
+    },
+    #[error("bad method specification '{spec}': {problem} (expected NAME or NAME:KEY=V1,V2,…, e.g. path:spp=4,16,64)")]
+    BadSpec { spec: String, problem: String },
+}
+
+fn known_methods() -> String {
+    METHODS
+        .iter()
+        .map(|m| m.name)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn known_keys(method: &str) -> String {
+    METHODS
+        .iter()
+        .find(|m| m.name == method)
+        .map(|m| {
+            m.keys
+                .iter()
+                .map(|(k, _)| *k)
+                .collect::<Vec<_>>()
+                .join(", ")
+        })
+        .unwrap_or_default()
+}
+
+/// Parses `value` of setting `key` of `method` as a `T` in `range`.
+fn value<T>(method: &str, key: &str, value: &str, range: Range<T>) -> Result<T, MethodError>
+where
+    T: std::str::FromStr + PartialOrd + std::fmt::Display + Copy,
+{
+    let bad = |problem: String| MethodError::BadValue {
+        method: method.into(),
+        key: key.into(),
+        value: value.into(),
+        problem,
+    };
+    let v: T = value
+        .trim()
+        .parse()
+        .map_err(|_| bad("not a number of the right kind".into()))?;
+    if !(range.start <= v && v < range.end) {
+        return Err(bad(format!(
+            "out of range {}..{} (end exclusive)",
+            range.start, range.end
+        )));
+    }
+    Ok(v)
+}
+
+/// Applies `ic`'s setting `key = v` to `s` (also for `trc`, whose records
+/// are `ic`'s); `false` when `key` is none of them.
+fn ic_setting(method: &str, key: &str, v: &str, s: &mut IcSettings) -> Result<bool, MethodError> {
+    match key {
+        "accuracy" => s.accuracy = value(method, key, v, 0.001..2.001)?,
+        "spp" => s.spp = value(method, key, v, 1..1_000_001)?,
+        "strata" => {
+            let (m, n) = v.split_once('x').ok_or_else(|| MethodError::BadValue {
+                method: method.into(),
+                key: key.into(),
+                value: v.into(),
+                problem: "expected MxN, e.g. 16x48".into(),
+            })?;
+            s.strata = Strata {
+                theta: value(method, key, m, 1..1025)?,
+                phi: value(method, key, n, 1..4097)?,
+            };
+        }
+        "min_spacing" => s.min_spacing_px = value(method, key, v, 0.001..1e6)?,
+        "max_spacing" => s.max_spacing_px = value(method, key, v, 0.001..1e6)?,
+        "gradients" => s.gradients = value::<u8>(method, key, v, 0..2)? == 1,
+        _ => return Ok(false),
+    }
+    Ok(true)
+}
+
+/// The settings of `method` with its defaults (the papers', as
+/// `radcache render` has them), and each `(key, value)` of `changes`
+/// applied in order. **The one place that maps names to
+/// [`MethodSettings`]**: a new method adds an arm here and in `apply`,
+/// and a row to [`METHODS`].
+pub fn method_settings<'a>(
+    method: &str,
+    changes: impl IntoIterator<Item = (&'a str, &'a str)>,
+) -> Result<MethodSettings, MethodError> {
+    let mut settings = match method {
+        "path" => MethodSettings::Path(PathSettings::default()),
+        "ic" => MethodSettings::Ic(IcSettings::default()),
+        "trc" => MethodSettings::Trc(TrcSettings::default()),
+        _ => {
+            return Err(MethodError::UnknownMethod {
+                name: method.into(),
+                known: known_methods(),
+            })
+        }
+    };
+    for (key, v) in changes {
+        apply(&mut settings, key, v)?;
+    }
+    Ok(settings)
+}
+
+/// Applies setting `key = v` to `settings`.
+fn apply(settings: &mut MethodSettings, key: &str, v: &str) -> Result<(), MethodError> {
+    let method = settings.name();
+    let known = match settings {
+        MethodSettings::Path(s) => path_setting(method, key, v, s)?,
+        MethodSettings::Ic(s) => ic_setting(method, key, v, s)?,
+        MethodSettings::Trc(s) => trc_setting(method, key, v, s)?,
+    };
+    if !known {
+        return Err(MethodError::UnknownKey {
+            method: method.into(),
+            key: key.into(),
+            known: known_keys(method),
+        });
+    }
+    Ok(())
+}
+
+/// Applies `path`'s setting `key = v` to `s`; `false` when `key` is none
+/// of them.
+fn path_setting(
+    method: &str,
+    key: &str,
+    v: &str,
+    s: &mut PathSettings,
+) -> Result<bool, MethodError> {
+    match key {
+        "spp" => s.spp = value(method, key, v, 1..1_000_001)?,
+        "max_depth" => s.length.max_depth = Some(value(method, key, v, 0..10_001)?),
+        "rr_start" => s.length.rr_start = value(method, key, v, 0..10_001)?,
+        _ => return Ok(false),
+    }
+    Ok(true)
+}
+
+/// Applies `trc`'s setting `key = v` to `s`: its temporal ones, and
+/// `ic`'s, with which it makes its records (`gradients` names the
+/// temporal ones here); `false` when `key` is none of them.
+fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<bool, MethodError> {
+    match key {
+        "at" => s.temporal_accuracy = value(method, key, v, 1e-6..1e6)?,
+        "max_life" => s.max_life = value(method, key, v, 1..100_001)?,
+        "gradients" => {
+            s.gradients = match v.trim() {
+                "none" => TemporalGradients::None,
+                "extrapolated" => TemporalGradients::Extrapolated,
+                "interpolated" => TemporalGradients::Interpolated,
+                _ => {
+                    return Err(MethodError::BadValue {
+                        method: method.into(),
+                        key: key.into(),
+                        value: v.into(),
+                        problem: "expected none, extrapolated or interpolated".into(),
+                    })
+                }
+            }
+        }
+        "reprojection" => s.reprojection = value::<u8>(method, key, v, 0..2)? == 1,
+        "next_direct" => s.next_direct = value::<u8>(method, key, v, 0..2)? == 1,
+        _ => return ic_setting(method, key, v, &mut s.ic),
+    }
+    Ok(true)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_listed_key_is_accepted() {
+        for m in METHODS {
+            method_settings(m.name, []).unwrap();
+            for (key, example) in m.keys {
+                method_settings(m.name, [(*key, *example)])
+                    .unwrap_or_else(|e| panic!("{}:{key}={example}: {e}", m.name));
+            }
+        }
+    }
+
+    /// `trc` takes `ic`'s record settings into the `ic` settings it makes
+    /// its records with, while its `gradients` stays the temporal one.
+    #[test]
+    fn trc_takes_the_record_settings_of_ic() {
+        let trc = |key, v| match method_settings("trc", Some((key, v))).unwrap() {
+            MethodSettings::Trc(s) => s,
+            other => panic!("{other:?}"),
+        };
+        let strata = trc("strata", "64x32").ic.strata;
+        assert_eq!((strata.theta, strata.phi), (64, 32));
+        assert_eq!(trc("max_spacing", "8").ic.max_spacing_px, 8.0);
+        assert_eq!(trc("min_spacing", "3").ic.min_spacing_px, 3.0);
+        let gradients = trc("gradients", "none");
+        assert_eq!(gradients.gradients, TemporalGradients::None);
+        assert!(gradients.ic.gradients, "spatial gradients stay on");
+        assert!(matches!(
+            method_settings("trc", Some(("strata", "64"))),
+            Err(MethodError::BadValue { .. })
+        ));
+    }
+
+    /// Several settings apply in order, each checked; a later one of the
+    /// same key wins.
+    #[test]
+    fn several_settings_apply_in_order() {
+        let s = method_settings("trc", [("at", "0.02"), ("max_life", "3"), ("at", "0.1")]).unwrap();
+        let MethodSettings::Trc(s) = s else {
+            panic!("{s:?}")
+        };
+        assert_eq!((s.temporal_accuracy, s.max_life), (0.1, 3));
+        assert!(matches!(
+            method_settings("ic", [("accuracy", "0.3"), ("at", "0.1")]),
+            Err(MethodError::UnknownKey { .. })
+        ));
+        assert!(matches!(
+            method_settings("radiosity", []),
+            Err(MethodError::UnknownMethod { .. })
+        ));
+    }
+}
