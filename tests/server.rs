@@ -267,6 +267,7 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
         r#"{"at":[0.1]}"#,
         r#"{"spp":2}"#,
         r#"{"spp_":2}"#,
+        r#"{"strata":"512x512"}"#,
         r#"[1]"#,
     ] {
         check("POST", "/api/jobs", &with_settings(bad), 400);

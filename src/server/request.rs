@@ -15,6 +15,9 @@ pub const MAX_FRAMES: u32 = 10_000;
 pub const MAX_SIDE: u32 = 4096;
 /// Most samples per pixel.
 pub const MAX_SPP: u32 = 65_536;
+/// Most gather rays per record (`strata` M × N): 64 × 64, the paper's
+/// hemisphere (TRC §6), times 16.
+pub const MAX_GATHER_RAYS: usize = 65_536;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -114,6 +117,19 @@ fn parse_method(
     if spp > MAX_SPP {
         return Err(ApiError::bad_request(format!(
             "spp {spp} is out of range (1..={MAX_SPP})"
+        )));
+    }
+    let strata = match &method {
+        MethodSettings::Path(_) => None,
+        MethodSettings::Ic(s) => Some(s.strata),
+        MethodSettings::Trc(s) => Some(s.ic.strata),
+    };
+    if let Some(strata) = strata.filter(|s| s.count() > MAX_GATHER_RAYS) {
+        return Err(ApiError::bad_request(format!(
+            "strata {}x{} is {} gather rays a record; at most {MAX_GATHER_RAYS}",
+            strata.theta,
+            strata.phi,
+            strata.count()
         )));
     }
     Ok(method)
