@@ -26,7 +26,7 @@ use common::{inward_box, scene};
 use glam::{Quat, Vec3};
 use radcache::backend::cpu::CpuBackend;
 use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuLayout};
-use radcache::backend::{Hit, Ray, RayBackend};
+use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::render::{FrameSettings, Renderer};
 use radcache::sampling::Rng;
@@ -494,6 +494,8 @@ fn batches_larger_than_a_chunk_and_empty_batches(layout: GpuLayout) {
 fn gpu_closest_and_any_hit_equals_the_two_calls() {
     for layout in GpuLayout::ALL {
         let mut gpu = gpu_with(layout);
+        // The start-up probe's calls are not counted.
+        assert_eq!(gpu.ray_counts(), RayCounts::default(), "{layout:?}");
         let s = soup_scene(11);
         let snap = s.snapshot(0.25);
         let mut cpu = CpuBackend::new();

@@ -1,11 +1,10 @@
 //! The CPU ray backend: obvhs traversal of the frame's [`SceneBvh`],
 //! parallel over the rays of a batch with rayon.
 
-use super::{Hit, Ray, RayBackend, RayCounts};
+use super::{Hit, Ray, RayBackend, RayCounters, RayCounts};
 use crate::accel::{BuildTimes, SceneBvh};
 use crate::scene::Snapshot;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Rays per rayon task: large enough to amortise scheduling, small enough
 /// that a batch of a few thousand rays still spreads over all cores.
@@ -14,9 +13,7 @@ const RAYS_PER_TASK: usize = 256;
 #[derive(Default)]
 pub struct CpuBackend {
     bvh: SceneBvh,
-    closest: AtomicU64,
-    any: AtomicU64,
-    calls: AtomicU64,
+    counters: RayCounters,
     last_build: BuildTimes,
 }
 
@@ -46,8 +43,7 @@ impl RayBackend for CpuBackend {
             .zip(hits.par_iter_mut())
             .with_min_len(RAYS_PER_TASK)
             .for_each(|(ray, hit)| *hit = self.bvh.closest_hit(ray));
-        self.closest.fetch_add(rays.len() as u64, Ordering::Relaxed);
-        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.counters.add_call(rays.len(), 0);
     }
 
     fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
@@ -56,16 +52,11 @@ impl RayBackend for CpuBackend {
             .zip(occluded.par_iter_mut())
             .with_min_len(RAYS_PER_TASK)
             .for_each(|(ray, o)| *o = self.bvh.occluded(ray));
-        self.any.fetch_add(rays.len() as u64, Ordering::Relaxed);
-        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.counters.add_call(0, rays.len());
     }
 
     fn ray_counts(&self) -> RayCounts {
-        RayCounts {
-            closest: self.closest.load(Ordering::Relaxed),
-            any: self.any.load(Ordering::Relaxed),
-            calls: self.calls.load(Ordering::Relaxed),
-        }
+        self.counters.counts()
     }
 
     fn preferred_batch(&self) -> usize {

@@ -56,11 +56,10 @@
 use super::gpu_bvh::Part;
 pub use super::gpu_bvh::{GpuLayout, GpuNode, CWBVH_STACK_SIZE, STACK_SIZE};
 use super::gpu_cache::{CacheSplat, GpuLookup};
-use super::{Hit, Ray, RayBackend, RayCounts};
+use super::{Hit, Ray, RayBackend, RayCounters, RayCounts};
 use crate::accel;
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -277,9 +276,7 @@ pub struct GpuBackend {
     /// The first error of a [`RayBackend`] call ([`RayBackend::failure`]),
     /// shared with the cache splat, whose errors fail the backend too.
     failed: FailureSlot,
-    closest: AtomicU64,
-    any: AtomicU64,
-    calls: AtomicU64,
+    counters: RayCounters,
     timings: Mutex<GpuTimings>,
     /// The render pass's cache interpolation on this device.
     splat: CacheSplat,
@@ -528,16 +525,14 @@ impl GpuBackend {
             max_groups_per_dim: limits.max_compute_workgroups_per_dimension.max(1),
             errors,
             failed,
-            closest: AtomicU64::new(0),
-            any: AtomicU64::new(0),
-            calls: AtomicU64::new(0),
+            counters: RayCounters::default(),
             timings: Mutex::default(),
             splat,
         };
         backend.probe().map_err(setup)?;
+        // The probe's calls are no part of any render's.
         backend.reset_timings();
-        backend.closest.store(0, Ordering::Relaxed);
-        backend.any.store(0, Ordering::Relaxed);
+        backend.counters.reset();
         Ok(backend)
     }
 
@@ -746,8 +741,7 @@ impl GpuBackend {
         self.trace(&self.closest_pipeline, HIT_BYTES, rays, |first, bytes| {
             store_hits(hits, first, bytes)
         })?;
-        self.closest.fetch_add(rays.len() as u64, Ordering::Relaxed);
-        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.counters.add_call(rays.len(), 0);
         Ok(())
     }
 
@@ -757,8 +751,7 @@ impl GpuBackend {
         self.trace(&self.any_pipeline, FLAG_BYTES, rays, |first, bytes| {
             store_flags(occluded, first, bytes)
         })?;
-        self.any.fetch_add(rays.len() as u64, Ordering::Relaxed);
-        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.counters.add_call(0, rays.len());
         Ok(())
     }
 
@@ -814,9 +807,7 @@ impl GpuBackend {
                 }),
             ],
         )?;
-        self.closest.fetch_add(rays.len() as u64, Ordering::Relaxed);
-        self.any.fetch_add(shadows.len() as u64, Ordering::Relaxed);
-        self.calls.fetch_add(1, Ordering::Relaxed);
+        self.counters.add_call(rays.len(), shadows.len());
         Ok(())
     }
 
@@ -1161,11 +1152,7 @@ impl RayBackend for GpuBackend {
     }
 
     fn ray_counts(&self) -> RayCounts {
-        RayCounts {
-            closest: self.closest.load(Ordering::Relaxed),
-            any: self.any.load(Ordering::Relaxed),
-            calls: self.calls.load(Ordering::Relaxed),
-        }
+        self.counters.counts()
     }
 
     fn preferred_batch(&self) -> usize {

@@ -16,6 +16,7 @@ pub mod gpu_cache;
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// A ray segment `origin + t·dir`, `t ∈ [tmin, tmax]`. `dir` need not be
 /// unit length; `t` is in units of `dir`.
@@ -98,6 +99,38 @@ pub struct RayCounts {
 impl RayCounts {
     pub fn total(&self) -> u64 {
         self.closest + self.any
+    }
+}
+
+/// The counters behind a backend's [`RayCounts`], updated by its calls
+/// from any thread.
+#[derive(Debug, Default)]
+pub(crate) struct RayCounters {
+    closest: AtomicU64,
+    any: AtomicU64,
+    calls: AtomicU64,
+}
+
+impl RayCounters {
+    /// One call that traced `closest` closest-hit and `any` any-hit rays.
+    pub(crate) fn add_call(&self, closest: usize, any: usize) {
+        self.closest.fetch_add(closest as u64, Ordering::Relaxed);
+        self.any.fetch_add(any as u64, Ordering::Relaxed);
+        self.calls.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub(crate) fn counts(&self) -> RayCounts {
+        RayCounts {
+            closest: self.closest.load(Ordering::Relaxed),
+            any: self.any.load(Ordering::Relaxed),
+            calls: self.calls.load(Ordering::Relaxed),
+        }
+    }
+
+    pub(crate) fn reset(&self) {
+        for counter in [&self.closest, &self.any, &self.calls] {
+            counter.store(0, Ordering::Relaxed);
+        }
     }
 }
 
