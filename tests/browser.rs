@@ -164,6 +164,8 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
     );
     // Progress from the events.
     assert!(has("3/3 frames"), "{dom}");
+    // The title names the job's temporal settings (trc's defaults here).
+    assert!(has("a 0.2, a_t 0.05, δt_max 20, frames 0..3"), "{dom}");
     // Charts: the paths the script drew (5 record series, lifespan, time,
     // 2 byte series).
     let paths = dom.matches("class=\"series\"").count();

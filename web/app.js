@@ -105,9 +105,21 @@ function frameRange(job) {
   return [a, b];
 }
 
+// The settings that say most about a caching method's trade-off: the
+// accuracy a (ic), and a_t and δt_max (trc); empty for path.
+function keySettings(job) {
+  const s = job.settings || {};
+  const ic = job.method === 'trc' ? s.ic : s;
+  const parts = [];
+  if (ic && ic.accuracy != null) parts.push(`a ${ic.accuracy}`);
+  if (s.temporal_accuracy != null) parts.push(`a_t ${s.temporal_accuracy}`);
+  if (s.max_life != null) parts.push(`δt_max ${s.max_life}`);
+  return parts.map((p) => `, ${p}`).join('');
+}
+
 function showProgress(job) {
   view.job = job;
-  $('job-title').textContent = `${job.id}: ${job.scene}, ${job.method}, ${job.size}, ${job.spp} spp, frames ${job.frames} — ${job.state}`;
+  $('job-title').textContent = `${job.id}: ${job.scene}, ${job.method}, ${job.size}, ${job.spp} spp${keySettings(job)}, frames ${job.frames} — ${job.state}`;
   $('progress').max = job.frames_total;
   $('progress').value = job.frames_done;
   $('progress-text').textContent = `${job.frames_done}/${job.frames_total} frames`;
