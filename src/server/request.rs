@@ -113,13 +113,20 @@ fn parse_method(
     }
     let method = method_settings(name, changes.iter().map(|(k, v)| (*k, v.as_str())))
         .map_err(|e| ApiError::bad_request(e.to_string()))?;
+    check_work_limits(&method)?;
+    Ok(method)
+}
+
+/// A job's samples per pixel and gather rays per record within the
+/// server's limits (the bench's ranges allow far more).
+fn check_work_limits(method: &MethodSettings) -> Result<(), ApiError> {
     let spp = method.spp();
     if spp > MAX_SPP {
         return Err(ApiError::bad_request(format!(
             "spp {spp} is out of range (1..={MAX_SPP})"
         )));
     }
-    let strata = match &method {
+    let strata = match method {
         MethodSettings::Path(_) => None,
         MethodSettings::Ic(s) => Some(s.strata),
         MethodSettings::Trc(s) => Some(s.ic.strata),
@@ -132,7 +139,7 @@ fn parse_method(
             strata.count()
         )));
     }
-    Ok(method)
+    Ok(())
 }
 
 /// A setting's JSON value as the text the bench's `KEY=VALUE` would give:
