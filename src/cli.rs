@@ -368,6 +368,14 @@ fn parse_job_name(s: &str) -> Result<String, String> {
             "job name {s:?} must be 1 to 200 characters without control characters"
         ));
     }
+    // `radcache serve` would take such a job in the same store for one of
+    // its own, and queue it if unfinished.
+    if crate::server::parse_job_id(s).is_some() {
+        return Err(format!(
+            "job name {s:?} has the form job-N, which radcache serve gives its own jobs; \
+             pick another name"
+        ));
+    }
     Ok(s.to_string())
 }
 

@@ -82,6 +82,10 @@ fn bad_input_is_a_clear_error() {
             "does not exist",
         ),
         (&["bench", "--methods", "path:warp=9"], "warp"),
+        (
+            &["render", "--job", "job-3"],
+            "radcache serve gives its own jobs",
+        ),
     ];
     for (args, expected) in cases {
         let (code, _, stderr) = radcache(args);
