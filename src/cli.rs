@@ -685,7 +685,7 @@ mod tests {
     use super::*;
 
     /// `radcache bench` with no options runs what `BenchOptions::default()`
-    /// documents (the two defaults are written in two places).
+    /// documents (clap needs the frames as text, so they are written twice).
     #[test]
     fn bench_defaults_are_the_library_defaults() {
         let cli = Cli::try_parse_from(["radcache", "bench"]).expect("parses");

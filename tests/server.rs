@@ -176,7 +176,7 @@ fn job_settings_are_the_clis_flags() {
     let id = create_job(
         &server,
         r#"{"scene":"builtin:cube-in-box","method":"ic","frames":"0..2","size":"16x16","spp":1,
-            "settings":{"accuracy":0.3,"strata":"8x24","gradients":false}}"#,
+            "settings":{"accuracy":0.3,"strata":"8x24","gradients":false,"max_depth":2}}"#,
     );
     let job = wait_done(&server, &id);
     let settings = &job["settings"];
@@ -185,6 +185,7 @@ fn job_settings_are_the_clis_flags() {
     assert_eq!(settings["strata"]["phi"], 24, "{job}");
     assert_eq!(settings["gradients"], false, "{job}");
     assert_eq!(settings["spp"], 1, "{job}");
+    assert_eq!(settings["length"]["max_depth"], 2, "{job}");
     let out = dir.path().join("cli");
     render_with_cli(
         &[
@@ -197,6 +198,8 @@ fn job_settings_are_the_clis_flags() {
             "--ic-strata",
             "8x24",
             "--ic-no-gradients",
+            "--max-depth",
+            "2",
         ],
         &["--size", "16x16", "--spp", "1"],
         &out,

@@ -34,6 +34,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("min_spacing", "2"),
             ("max_spacing", "64"),
             ("gradients", "1"),
+            ("max_depth", "8"),
         ],
     },
     MethodInfo {
@@ -49,6 +50,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("strata", "16x48"),
             ("min_spacing", "2"),
             ("max_spacing", "64"),
+            ("max_depth", "8"),
         ],
     },
 ];
@@ -142,6 +144,8 @@ fn ic_setting(method: &str, key: &str, v: &str, s: &mut IcSettings) -> Result<bo
         "min_spacing" => s.min_spacing_px = value(method, key, v, 0.001..1e6)?,
         "max_spacing" => s.max_spacing_px = value(method, key, v, 0.001..1e6)?,
         "gradients" => s.gradients = value::<u8>(method, key, v, 0..2)? == 1,
+        // The pixel paths' (`render --max-depth`), not the gathers'.
+        "max_depth" => s.length.max_depth = Some(value(method, key, v, 0..10_001)?),
         _ => return Ok(false),
     }
     Ok(true)
