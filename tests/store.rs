@@ -2,8 +2,7 @@
 //! schema, locked, damaged directory), migrations, jobs and resume.
 
 use glam::Vec3;
-use radcache::cache::gather::{HemisphereSamples, Strata};
-use radcache::cache::IrradianceRecord;
+use radcache::cache::gather::Strata;
 use radcache::film;
 use radcache::method::ic::IcSettings;
 use radcache::method::path::PathSettings;
@@ -16,56 +15,8 @@ use radcache::store::{
 };
 use std::path::Path;
 
-fn spec(name: &str) -> JobSpec {
-    JobSpec {
-        name: name.into(),
-        scene: "builtin:cube-in-box".into(),
-        scene_hash: "0123456789abcdef".into(),
-        method: "ic".into(),
-        settings: "Ic(..)".into(),
-        width: 16,
-        height: 16,
-        spp: 4,
-        fps: 24.0,
-        seed: 0,
-        same_pattern: false,
-        frame_start: 0,
-        frame_end: 10,
-    }
-}
-
-fn record(id: u64, frame: u32) -> IrradianceRecord {
-    let f = id as f32;
-    IrradianceRecord {
-        id,
-        position: Vec3::new(f, 1.0, -2.0),
-        normal: Vec3::Y,
-        irradiance: Vec3::new(0.5, 0.25, f),
-        grad_translation: [Vec3::X, Vec3::Y, Vec3::Z],
-        grad_rotation: [Vec3::Z, Vec3::X, Vec3::Y * f],
-        radius: 0.75,
-        created_frame: frame,
-        object: 3,
-    }
-}
-
-fn samples(n: usize, seed: u32) -> HemisphereSamples {
-    let mut s = HemisphereSamples::default();
-    for i in 0..n {
-        let x = (i as f32 + seed as f32) * 0.37;
-        s.direction.push(Vec3::Y);
-        s.radiance
-            .push(Vec3::new(x.sin().abs(), x.cos().abs() * 3.0, 0.01 * x));
-        if i % 5 == 0 {
-            s.distance.push(f32::INFINITY);
-            s.object.push(u32::MAX);
-        } else {
-            s.distance.push(1.0 + x);
-            s.object.push(i as u32 % 4);
-        }
-    }
-    s
-}
+mod store_fixtures;
+use store_fixtures::{record, samples, spec};
 
 fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
     let mut job = store.begin_job(&spec(name), false).unwrap();
@@ -553,70 +504,6 @@ fn resumed_ic_render_is_bit_identical_and_stores_records_with_samples() {
             "{e} vs {want}"
         );
     }
-}
-
-/// Throughput of record writes and reads (records with 768 samples each,
-/// committed 400 per frame as `ic` does at 64×64). Ignored by default; run
-/// `cargo test --release --test store store_throughput -- --ignored --nocapture`.
-#[test]
-#[ignore]
-fn store_throughput() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = Store::open(&dir.path().join("db")).unwrap();
-    let mut job = store.begin_job(&spec("t"), false).unwrap();
-    let strata = Strata { theta: 16, phi: 48 };
-    let (frames, per_frame) = (20u32, 400u64);
-    let hemis: Vec<HemisphereSamples> = (0..8).map(|i| samples(768, i)).collect();
-    // Packing (as the method does when it gathers) is timed with the writes.
-    let exr = vec![0u8; 64 * 1024];
-    let stats = FrameStats::default();
-    let t0 = std::time::Instant::now();
-    for frame in 0..frames {
-        let records = (0..per_frame)
-            .map(|id| {
-                RecordCommit::from_record(
-                    &record(id, frame),
-                    SampleBlock::pack(&hemis[(id % 8) as usize], &[]),
-                    strata,
-                    frame,
-                )
-            })
-            .collect();
-        let c = FrameCommit {
-            frame,
-            width: 64,
-            height: 64,
-            exr: &exr,
-            records,
-            stats: &stats,
-            state: None,
-        };
-        store.commit_frame(&mut job, c).unwrap();
-    }
-    let write = t0.elapsed().as_secs_f64();
-    let t0 = std::time::Instant::now();
-    let mut n = 0u64;
-    let mut s = 0u64;
-    for frame in 0..frames {
-        for r in store.frame_records(job.id, frame).unwrap() {
-            n += 1;
-            s += store.samples_of_record(job.id, frame, &r).unwrap().len() as u64;
-        }
-    }
-    let read = t0.elapsed().as_secs_f64();
-    let total = u64::from(frames) * per_frame;
-    assert_eq!(n, total);
-    let sled_bytes = store.size_on_disk().unwrap();
-    let log_bytes = store.sample_log_bytes();
-    let disk = sled_bytes + log_bytes;
-    eprintln!(
-        "{total} records × 768 samples: write {:.0} records/s ({:.1} M samples/s, pack + commit + flush per frame), read {:.0} records/s ({:.1} M samples/s); {disk} B on disk ({sled_bytes} sled + {log_bytes} sample log) = {:.2} B/sample",
-        total as f64 / write,
-        (total * 768) as f64 / write / 1e6,
-        n as f64 / read,
-        s as f64 / read / 1e6,
-        disk as f64 / (total * 768) as f64
-    );
 }
 
 #[test]
