@@ -5,6 +5,7 @@ use radcache::bench::{
     self, equal_error_table, interpolate_time_at_error, method_settings, to_csv, BenchOptions,
     BenchRow, ErrorMeasure, MethodError, MethodSweep, CSV_HEADER,
 };
+use radcache::method::trc::TrcSettings;
 use radcache::render::SceneSource;
 
 fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
@@ -58,12 +59,13 @@ fn csv_has_header_and_one_line_per_run() {
     assert_eq!(
         lines[0],
         "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces,\
-estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,constant_err_median"
+estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,constant_err_median,\
+estimate_lifespan_mean,actual_lifespan_mean"
     );
     assert_eq!(lines[0], CSV_HEADER);
     assert_eq!(lines.len(), 3, "{csv}");
     for l in &lines[1..] {
-        assert_eq!(l.split(',').count(), 20, "{l}");
+        assert_eq!(l.split(',').count(), 22, "{l}");
     }
     assert!(
         lines[1].starts_with("s,path,spp=1,cpu (2 threads),2,"),
@@ -71,7 +73,7 @@ estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,consta
         lines[1]
     );
     // A missing flicker or estimate error is an empty field.
-    assert!(lines[1].ends_with(",,,,,"), "{}", lines[1]);
+    assert!(lines[1].ends_with(",,,,,,,"), "{}", lines[1]);
 }
 
 #[test]
@@ -367,6 +369,16 @@ fn trc_runs_measure_their_next_frame_estimates() {
     let (with, without) = (rows[1].next_error.unwrap(), rows[2].next_error.unwrap());
     assert_ne!(with.estimate, with.constant, "cube-in-box's cube moves");
     assert_eq!(without.estimate, without.constant);
+    // Lifespans (Eq. 9–11, δt_max = 20): the constant estimate predicts no
+    // change, so it grants every record the whole 20 frames; gathered
+    // again, records that see the cube move (and their noise) change.
+    let max_life = TrcSettings::default().max_life as f32;
+    assert_eq!(without.lifespan.0, max_life);
+    for e in [with, without] {
+        let (by_estimate, by_actual) = e.lifespan;
+        assert!((1.0..=max_life).contains(&by_estimate), "{e:?}");
+        assert!((1.0..max_life).contains(&by_actual), "{e:?}");
+    }
     let text = bench::estimate_error_text(&rows);
     assert_eq!(text.lines().count(), 2, "{text}");
     let no_trc = BenchOptions {

@@ -908,44 +908,6 @@ fn coherent_fallbacks_flicker_less_than_per_frame_ones() {
     assert!((a - b).abs() < 0.05 * b, "mean {a} against {b}");
 }
 
-/// Measurement (README "Benchmarking", the spheres paragraph): how fast the
-/// irradiance of `spheres.glb`'s records really changes from one frame to
-/// the next, against what their reprojected estimate (TRC §4.7) says. The
-/// records of frames 5 and 20 (32×32, 24 fps) are gathered again at the
-/// next frame with their own random streams, so unchanged samples cancel,
-/// and the worst channel of `|E(t0+1)/E(t0) − 1|` is compared with the
-/// estimate's. Ignored by default (it measures, the figures go to the
-/// README); run `cargo test --release --test trc spheres_records -- --ignored
-/// --nocapture`.
-#[test]
-#[ignore]
-fn spheres_records_change_per_frame() {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/scenes/spheres.glb");
-    let scene = Scene::load(&path).unwrap();
-    let mut r = renderer(scene, 32, 24.0, false);
-    let half = TrcSettings::default().temporal_accuracy / 2.0;
-    let (mut records_seen, mut estimated, mut actual) = (0, 0, 0);
-    for t0 in [5u32, 20] {
-        let (records, next) = records_and_their_next_frame(&mut r, t0);
-        for (k, e1) in records.iter().zip(next) {
-            let e0 = k.record.irradiance;
-            let change = (0..3)
-                .filter(|&c| e0[c] > 0.0)
-                .map(|c| (e1[c] / e0[c] - 1.0).abs())
-                .fold(0.0f32, f32::max);
-            records_seen += 1;
-            estimated += usize::from(k.change > half);
-            actual += usize::from(change > half);
-        }
-    }
-    eprintln!(
-        "spheres, frames 5 and 20: {records_seen} records; change above a_t/2 per frame: \
-         {estimated} by the reprojected estimate, {actual} by regathering"
-    );
-    assert!(records_seen > 100, "too few records to say anything");
-}
-
 /// Cube-in-box with its camera moving by `step` and turning left by
 /// `yaw` radians a frame (linear keys over `frames`): every frame shows
 /// surfaces the last one did not, and records leave the view.

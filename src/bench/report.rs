@@ -49,7 +49,8 @@ pub struct BenchRow {
 /// `bench.csv`'s header line.
 pub const CSV_HEADER: &str =
     "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces,\
-estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,constant_err_median";
+estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,constant_err_median,\
+estimate_lifespan_mean,actual_lifespan_mean";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -63,14 +64,20 @@ fn opt(v: Option<f64>, decimals: usize) -> String {
     v.map_or(String::new(), |v| format!("{v:.decimals$}"))
 }
 
-/// The five CSV fields of [`BenchRow::next_error`], empty where not measured.
+/// The seven CSV fields of [`BenchRow::next_error`], empty where not measured.
 fn next_error_fields(e: Option<EstimateError>) -> String {
     match e {
         Some(e) => format!(
-            "{},{:.6},{:.6},{:.6},{:.6}",
-            e.records, e.estimate.0, e.estimate.1, e.constant.0, e.constant.1
+            "{},{:.6},{:.6},{:.6},{:.6},{:.3},{:.3}",
+            e.records,
+            e.estimate.0,
+            e.estimate.1,
+            e.constant.0,
+            e.constant.1,
+            e.lifespan.0,
+            e.lifespan.1
         ),
-        None => ",,,,".into(),
+        None => ",,,,,,".into(),
     }
 }
 
@@ -336,13 +343,16 @@ pub fn estimate_error_text(rows: &[BenchRow]) -> String {
         let Some(e) = r.next_error else { continue };
         let _ = writeln!(
             out,
-            "{} {} {}: {} records: estimate {}, constant E {}",
+            "{} {} {}: {} records: estimate {}, constant E {}; mean lifespan {:.2} frames \
+             by the estimated change, {:.2} by the change gathered again",
             r.scene,
             r.method,
             r.settings,
             e.records,
             percent(e.estimate),
-            percent(e.constant)
+            percent(e.constant),
+            e.lifespan.0,
+            e.lifespan.1
         );
     }
     out

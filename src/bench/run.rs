@@ -228,7 +228,10 @@ fn estimate_error(
         frame_settings(opts, opts.same_pattern),
     );
     let mut trc = TemporalRadianceCaching::new(settings.clone());
-    let mut measured = NextFrameMeasure::default();
+    let mut measured = NextFrameMeasure {
+        seen: Default::default(),
+        tally: EstimateErrorTally::new(settings.temporal_accuracy, settings.max_life),
+    };
     let bar = render::progress_bar(opts.frames.len() as u64, opts.quiet);
     let end = opts.frames.end;
     for frame in opts.frames.clone() {
@@ -249,7 +252,6 @@ fn estimate_error(
 }
 
 /// The records of a `trc` measured so far, and their errors.
-#[derive(Default)]
 struct NextFrameMeasure {
     /// `(id, t0)` of every record measured: a replacement keeps the id of
     /// the record it replaces, at a later `t0`.
