@@ -589,8 +589,9 @@ fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSum
     let (w, h) = args.size;
     let samples = u64::from(w) * u64::from(h) * u64::from(spp) * u64::from(summary.frames);
     println!(
-        "rendered {} frames in {:.2} s ({:.3} s/frame, {:.2} Mrays/s in {} backend calls, {:.2} M samples/s) → {}/frame_{:04}..{:04}.{{exr,png}}",
+        "rendered {} frame{} in {:.2} s ({:.3} s/frame, {:.2} Mrays/s in {} backend calls, {:.2} M samples/s) → {}/frame_{:04}..{:04}.{{exr,png}}",
         summary.frames,
+        if summary.frames == 1 { "" } else { "s" },
         secs,
         secs / summary.frames.max(1) as f64,
         summary.rays_per_second() / 1e6,
