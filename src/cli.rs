@@ -638,7 +638,10 @@ fn backend_choice(b: BackendArg) -> BackendChoice {
 
 fn run_inspect(args: InspectArgs) -> Result<()> {
     let store = Store::open_existing(&args.db)?;
-    let report = store::inspect::report(&store, args.job.as_deref(), args.frame)?;
+    let mut report = store::inspect::report(&store, args.job.as_deref(), args.frame)?;
+    for job in &mut report.jobs {
+        job.moving_objects = moving_objects(&job.scene, &job.scene_hash);
+    }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
@@ -648,6 +651,23 @@ fn run_inspect(args: InspectArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The animated objects of a job's scene (`builtin:NAME` or a file path as
+/// stored), where it still loads and is the scene the job rendered (same
+/// hash); `None` otherwise: `inspect` then only lists records by object.
+fn moving_objects(scene: &str, hash: &str) -> Option<std::collections::BTreeSet<u32>> {
+    let source = match scene.strip_prefix("builtin:") {
+        Some(name) => SceneSource::Builtin(name.to_string()),
+        None => SceneSource::File(PathBuf::from(scene)),
+    };
+    let (_, stored_as) = render::scene_identity(&source).ok()?;
+    if stored_as != hash {
+        return None;
+    }
+    let scene = source.load().ok()?;
+    let moving = (0..scene.objects.len()).filter(|&o| scene.object_is_dynamic(o));
+    Some(moving.map(|o| o as u32).collect())
 }
 
 fn run_compact(args: CompactArgs) -> Result<()> {

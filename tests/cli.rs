@@ -97,3 +97,90 @@ fn bad_input_is_a_clear_error() {
         );
     }
 }
+
+/// `inspect` lists a job's records by object and, where the job's scene
+/// still loads as it was rendered, splits them between the objects that
+/// move and those that do not (here against the scene's own animation);
+/// once the scene file is gone only the list by object is left.
+#[test]
+fn inspect_splits_records_between_moving_and_static_objects() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("cube_in_box.glb");
+    let src =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/scenes/cube_in_box.glb");
+    std::fs::copy(&src, &scene).unwrap();
+    let db = dir.path().join("db");
+    let (db, scene_arg) = (db.to_str().unwrap(), scene.to_str().unwrap());
+    let out = dir.path().join("frames");
+    let (code, _, stderr) = radcache(&[
+        "render",
+        scene_arg,
+        "--method",
+        "trc",
+        "--frames",
+        "0..3",
+        "--size",
+        "16x16",
+        "--spp",
+        "1",
+        "--db",
+        db,
+        "--job",
+        "j",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+
+    let (code, json, stderr) = radcache(&["inspect", "--db", db, "j", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let job = &report["jobs"][0];
+    let by_object = job["records_by_object"].as_object().unwrap();
+    let count = |f: &dyn Fn(&str) -> bool| -> u64 {
+        by_object
+            .iter()
+            .filter(|(object, _)| f(object))
+            .map(|(_, r)| r["records"].as_u64().unwrap())
+            .sum()
+    };
+    assert_eq!(count(&|_| true), job["records"].as_u64().unwrap());
+    let lifespans: u64 = by_object
+        .values()
+        .map(|r| r["lifespan_frames"].as_u64().unwrap())
+        .sum();
+    let histogram: u64 = job["lifespan_histogram"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(life, n)| life.parse::<u64>().unwrap() * n.as_u64().unwrap())
+        .sum();
+    assert_eq!(lifespans, histogram);
+    let loaded = radcache::scene::Scene::load(&scene).unwrap();
+    let animated: Vec<u64> = (0..loaded.objects.len())
+        .filter(|&o| loaded.object_is_dynamic(o))
+        .map(|o| o as u64)
+        .collect();
+    let listed: Vec<u64> = job["moving_objects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|o| o.as_u64().unwrap())
+        .collect();
+    assert_eq!(listed, animated);
+    let on_moving = count(&|o| animated.contains(&o.parse().unwrap()));
+    assert!(on_moving > 0, "the cube holds records: {by_object:?}");
+
+    let (code, text, _) = radcache(&["inspect", "--db", db, "j"]);
+    assert_eq!(code, 0);
+    let split = format!("records on moving objects: {on_moving} ");
+    assert!(text.contains(&split), "{text}");
+    assert!(text.contains("records by object"), "{text}");
+
+    std::fs::remove_file(&scene).unwrap();
+    let (code, text, stderr) = radcache(&["inspect", "--db", db, "j"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(!text.contains("records on moving objects"), "{text}");
+    assert!(text.contains("records by object"), "{text}");
+}

@@ -1,10 +1,11 @@
 //! `radcache inspect`: what a store holds — jobs, frames done, records per
 //! frame, bytes per tree and of the sample log, compression ratios, record
-//! lifespans.
+//! lifespans (per object, and split between moving and static objects when
+//! the caller knows which objects move).
 
 use super::{schema::JobValue, Store, StoreError, TREES};
 use serde::Serialize;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 
 #[derive(Clone, Debug, Serialize)]
@@ -67,11 +68,60 @@ pub struct JobReport {
     pub record_block_bytes: u64,
     /// Lifespan in frames → number of records.
     pub lifespan_histogram: BTreeMap<u32, u64>,
+    /// Object (its index in the scene) → the records on it.
+    pub records_by_object: BTreeMap<u32, ObjectRecords>,
+    /// The scene's animated objects, where the caller could load the job's
+    /// scene (the store keeps only its name and hash; [`report`] leaves
+    /// this `None`): the text then splits the records between moving and
+    /// static objects.
+    pub moving_objects: Option<BTreeSet<u32>>,
     /// Per-frame details (all frames, or the one asked for).
     pub frame_details: Vec<FrameReport>,
     /// The carried state of a stateful method (`trc`) a resume would
     /// continue from, if any.
     pub state: Option<StateReport>,
+}
+
+/// The records computed on some objects, and their lifespans.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct ObjectRecords {
+    pub records: u64,
+    /// Sum of the records' lifespans, in frames.
+    pub lifespan_frames: u64,
+}
+
+impl ObjectRecords {
+    fn add(&mut self, records: u64, lifespan_frames: u64) {
+        self.records += records;
+        self.lifespan_frames += lifespan_frames;
+    }
+
+    /// Mean lifespan in frames; 0 with no records.
+    pub fn mean_lifespan(&self) -> f64 {
+        if self.records == 0 {
+            0.0
+        } else {
+            self.lifespan_frames as f64 / self.records as f64
+        }
+    }
+}
+
+impl JobReport {
+    /// The records on moving objects and those on static ones, by
+    /// [`JobReport::moving_objects`]; `None` where it is not known.
+    pub fn moving_and_static(&self) -> Option<(ObjectRecords, ObjectRecords)> {
+        let moving = self.moving_objects.as_ref()?;
+        let (mut on_moving, mut on_static) = (ObjectRecords::default(), ObjectRecords::default());
+        for (object, r) in &self.records_by_object {
+            let side = if moving.contains(object) {
+                &mut on_moving
+            } else {
+                &mut on_static
+            };
+            side.add(r.records, r.lifespan_frames);
+        }
+        Some((on_moving, on_static))
+    }
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -202,9 +252,12 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
     let mut lifespans = BTreeMap::new();
     store.for_each_record(j.id, |frame, rec| {
         r.records += 1;
-        *lifespans
-            .entry(rec.last_frame.saturating_sub(rec.created_frame) + 1)
-            .or_insert(0) += 1;
+        let lifespan = rec.last_frame.saturating_sub(rec.created_frame) + 1;
+        *lifespans.entry(lifespan).or_insert(0) += 1;
+        r.records_by_object
+            .entry(rec.object)
+            .or_default()
+            .add(1, u64::from(lifespan));
         let samples = u64::from(rec.samples_count);
         r.samples += samples;
         r.samples_stored_bytes += u64::from(rec.samples_len);
@@ -248,6 +301,8 @@ impl JobReport {
             record_value_bytes: 0,
             record_block_bytes: 0,
             lifespan_histogram: BTreeMap::new(),
+            records_by_object: BTreeMap::new(),
+            moving_objects: None,
             frame_details: Vec::new(),
             state: None,
         }
@@ -395,6 +450,46 @@ fn job_text(s: &mut String, j: &JobReport) {
         s,
         "  record lifespan (frames: records): {}",
         hist.join(", ")
+    );
+    objects_text(s, j);
+}
+
+/// How many objects [`objects_text`] names.
+const OBJECTS_SHOWN: usize = 6;
+
+/// A job's records by object: moving against static where known, and the
+/// objects with the most records.
+fn objects_text(s: &mut String, j: &JobReport) {
+    if j.records_by_object.is_empty() {
+        return;
+    }
+    if let Some((moving, fixed)) = j.moving_and_static() {
+        let _ = writeln!(
+            s,
+            "  records on moving objects: {} (mean lifespan {:.2} frames), on static objects: {} ({:.2} frames)",
+            moving.records,
+            moving.mean_lifespan(),
+            fixed.records,
+            fixed.mean_lifespan()
+        );
+    }
+    let mut objects: Vec<(&u32, &ObjectRecords)> = j.records_by_object.iter().collect();
+    objects.sort_by_key(|(object, r)| (std::cmp::Reverse(r.records), **object));
+    let shown: Vec<String> = objects
+        .iter()
+        .take(OBJECTS_SHOWN)
+        .map(|(object, r)| format!("{object}: {} ({:.2})", r.records, r.mean_lifespan()))
+        .collect();
+    let more = objects.len().saturating_sub(OBJECTS_SHOWN);
+    let _ = writeln!(
+        s,
+        "  records by object (object: records (mean lifespan)): {}{}",
+        shown.join(", "),
+        if more > 0 {
+            format!(", and {more} more objects")
+        } else {
+            String::new()
+        }
     );
 }
 
