@@ -446,6 +446,11 @@ fn run_bench(args: BenchArgs) -> Result<()> {
             print!("{}", bench::equal_error_text(&equal));
         }
     }
+    let temporal = bench::temporal_text(&report.rows);
+    if !temporal.is_empty() {
+        println!("\ntrc against per-frame ic (ic's time and records over trc's; trc's error and flicker over ic's):");
+        print!("{temporal}");
+    }
     let estimates = bench::estimate_error_text(&report.rows);
     if !estimates.is_empty() {
         println!(

@@ -2,8 +2,9 @@
 //! a tiny end-to-end run.
 
 use radcache::bench::{
-    self, equal_error_table, interpolate_time_at_error, method_settings, to_csv, BenchOptions,
-    BenchRow, ErrorMeasure, MethodError, MethodSweep, CSV_HEADER,
+    self, equal_error_table, interpolate_time_at_error, method_settings, temporal_pairs,
+    temporal_text, to_csv, BenchOptions, BenchRow, ErrorMeasure, MethodError, MethodSweep,
+    CSV_HEADER,
 };
 use radcache::method::trc::TrcSettings;
 use radcache::render::SceneSource;
@@ -451,4 +452,59 @@ fn cache_methods_report_their_render_pass_time() {
         .unwrap();
     let fields: Vec<&str> = ic_line.split(',').collect();
     assert!(fields[6].parse::<f64>().is_ok(), "{ic_line}");
+}
+
+/// Each `trc` run is set against the `ic` run with its settings label, or
+/// else `ic` at its defaults, on its own scene and backend; the ratios are
+/// the targets' (ic's time and records over trc's, trc's error and flicker
+/// over ic's).
+#[test]
+fn trc_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
+    let with = |mut r: BenchRow, records: u64, flicker: f64| {
+        r.records = records;
+        r.flicker = Some(flicker);
+        r.flicker_surfaces = Some(2.0 * flicker);
+        r
+    };
+    let mut elsewhere = with(row("ic", "default", 1.0, 0.1), 10, 0.1);
+    elsewhere.scene = "other".into();
+    let rows = vec![
+        with(row("ic", "default", 40.0, 0.020), 1000, 0.020),
+        with(row("ic", "strata=64x64", 90.0, 0.018), 990, 0.015),
+        with(row("trc", "default", 10.0, 0.021), 100, 0.010),
+        with(row("trc", "strata=64x64", 10.0, 0.018), 90, 0.012),
+        with(row("trc", "max_life=5", 20.0, 0.020), 250, 0.010),
+        elsewhere,
+        with(row("path", "spp=4", 5.0, 0.2), 0, 0.3),
+    ];
+    let pairs: Vec<(&str, &str)> = temporal_pairs(&rows)
+        .iter()
+        .map(|(ic, trc)| (ic.settings.as_str(), trc.settings.as_str()))
+        .collect();
+    assert_eq!(
+        pairs,
+        [
+            ("default", "default"),
+            ("strata=64x64", "strata=64x64"),
+            ("default", "max_life=5"),
+        ]
+    );
+    let text = temporal_text(&rows);
+    let first = text.lines().next().unwrap();
+    assert_eq!(
+        first,
+        "s trc default against ic default: 4.00× faster, 10.00× fewer records; \
+         error 1.05× (1.05× lit surfaces), flicker 0.50× (0.50× lit surfaces)"
+    );
+    assert!(
+        text.lines()
+            .nth(1)
+            .unwrap()
+            .contains("9.00× faster, 11.00× fewer records"),
+        "{text}"
+    );
+    // A trc run with no ic run on its scene is set against nothing.
+    let mut alone = rows[2].clone();
+    alone.scene = "third".into();
+    assert!(temporal_pairs(&[alone]).is_empty());
 }

@@ -358,6 +358,61 @@ pub fn estimate_error_text(rows: &[BenchRow]) -> String {
     out
 }
 
+// ------------------------------------------------- temporal vs per-frame
+
+/// Pairs of a `trc` run and the `ic` run it is measured against (issue 5,
+/// DESIGN "How we measure"): on the same scene and backend, the `ic` run
+/// with the same settings label where there is one (`ic:strata=64x64`
+/// for `trc:strata=64x64`), else `ic` at its defaults; in row order.
+pub fn temporal_pairs(rows: &[BenchRow]) -> Vec<(&BenchRow, &BenchRow)> {
+    let ic_with = |trc: &BenchRow, settings: &str| {
+        rows.iter().find(|r| {
+            r.method == "ic"
+                && r.settings == settings
+                && (&r.scene, &r.backend) == (&trc.scene, &trc.backend)
+        })
+    };
+    rows.iter()
+        .filter(|r| r.method == "trc")
+        .filter_map(|trc| {
+            let ic = ic_with(trc, &trc.settings).or_else(|| ic_with(trc, "default"))?;
+            Some((ic, trc))
+        })
+        .collect()
+}
+
+/// `a / b`, or "-" where either is missing or `b` is zero.
+fn ratio_of(a: Option<f64>, b: Option<f64>) -> String {
+    match (a, b) {
+        (Some(a), Some(b)) if b > 0.0 => format!("{:.2}×", a / b),
+        _ => "-".into(),
+    }
+}
+
+/// Lines for people: one per [`temporal_pairs`] pair, with the ratios the
+/// temporal method's targets are stated in: `ic`'s time over `trc`'s,
+/// `ic`'s records over `trc`'s, and `trc`'s error and flicker (all pixels,
+/// and without the pixels at directly seen lights) over `ic`'s.
+pub fn temporal_text(rows: &[BenchRow]) -> String {
+    let mut out = String::new();
+    for (ic, trc) in temporal_pairs(rows) {
+        let _ = writeln!(
+            out,
+            "{} trc {} against ic {}: {} faster, {} fewer records; error {} ({} lit surfaces), flicker {} ({} lit surfaces)",
+            trc.scene,
+            trc.settings,
+            ic.settings,
+            ratio_of(Some(ic.seconds), Some(trc.seconds)),
+            ratio_of(Some(ic.records as f64), Some(trc.records as f64)),
+            ratio_of(Some(trc.rel_rmse), Some(ic.rel_rmse)),
+            ratio_of(trc.rel_rmse_surfaces, ic.rel_rmse_surfaces),
+            ratio_of(trc.flicker, ic.flicker),
+            ratio_of(trc.flicker_surfaces, ic.flicker_surfaces),
+        );
+    }
+    out
+}
+
 // ---------------------------------------------------------------- backends
 
 /// Pairs of the same run (scene, method, settings) on the bench's first
