@@ -279,6 +279,11 @@ pub struct BenchArgs {
     /// again one frame later.
     #[arg(long)]
     pub estimate_error: bool,
+    /// Also render every run, untimed, into a store of its own
+    /// (runs/<scene>/<run>/store, left for inspect) and report its bytes
+    /// on disk (sled and sample log).
+    #[arg(long)]
+    pub store_size: bool,
     /// Ray backends, comma-separated: every run is rendered once on each
     /// (`cpu,gpu` compares them in one invocation; the reference uses auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "auto")]
@@ -425,6 +430,7 @@ fn bench_options(args: BenchArgs) -> bench::BenchOptions {
         same_pattern: args.same_pattern,
         quiet: args.quiet,
         estimate_error: args.estimate_error,
+        store_size: args.store_size,
         backends: args.backends.into_iter().map(backend_choice).collect(),
     }
 }

@@ -21,6 +21,7 @@ fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
         rays: 100,
         records: 0,
         peak_mem_mb: Some(12.5),
+        store_bytes: None,
         rel_rmse,
         rel_rmse_surfaces: Some(rel_rmse / 2.0),
         block_bias: 0.01,
@@ -61,12 +62,12 @@ fn csv_has_header_and_one_line_per_run() {
         lines[0],
         "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces,\
 estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,constant_err_median,\
-estimate_lifespan_mean,actual_lifespan_mean"
+estimate_lifespan_mean,actual_lifespan_mean,store_bytes"
     );
     assert_eq!(lines[0], CSV_HEADER);
     assert_eq!(lines.len(), 3, "{csv}");
     for l in &lines[1..] {
-        assert_eq!(l.split(',').count(), 22, "{l}");
+        assert_eq!(l.split(',').count(), 23, "{l}");
     }
     assert!(
         lines[1].starts_with("s,path,spp=1,cpu (2 threads),2,"),
@@ -74,7 +75,7 @@ estimate_lifespan_mean,actual_lifespan_mean"
         lines[1]
     );
     // A missing flicker or estimate error is an empty field.
-    assert!(lines[1].ends_with(",,,,,,,"), "{}", lines[1]);
+    assert!(lines[1].ends_with(",,,,,,,,"), "{}", lines[1]);
 }
 
 #[test]
@@ -507,4 +508,62 @@ fn trc_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
     let mut alone = rows[2].clone();
     alone.scene = "third".into();
     assert!(temporal_pairs(&[alone]).is_empty());
+}
+
+/// `--store-size`: every run is also rendered into a store of its own,
+/// left in its folder; its size is that of the store's files (as `find`
+/// lists them); it holds the run's frames and records; without the option
+/// no store is made.
+#[test]
+fn store_size_is_the_runs_own_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        store_size: true,
+        ..tiny_bench(dir.path(), &["ic:spp=1", "trc:spp=1"])
+    };
+    let rows = bench::run(&opts).unwrap().rows;
+    for (r, folder) in rows.iter().zip(["ic-spp=1", "trc-spp=1"]) {
+        let run = dir.path().join("runs/cube-in-box").join(folder);
+        let find = std::process::Command::new("find")
+            .arg(run.join("store"))
+            .args(["-type", "f", "-printf", "%s\\n"])
+            .output()
+            .unwrap();
+        let files: u64 = String::from_utf8_lossy(&find.stdout)
+            .lines()
+            .map(|l| l.parse::<u64>().unwrap())
+            .sum();
+        assert_eq!(r.store_bytes, Some(files), "{}", r.method);
+        let store = radcache::store::Store::open_existing(&run.join("store")).unwrap();
+        let job = store.job("bench").unwrap().expect("the run's job");
+        assert_eq!(job.frames_done, 2, "{}", r.method);
+        let stored = store.frame_exr(job.id, 1).unwrap().expect("frame 1");
+        let written = std::fs::read(run.join("frame_0001.exr")).unwrap();
+        assert_eq!(
+            stored, written,
+            "{}: the store holds the run's frames",
+            r.method
+        );
+        // Every record computed is in it, with its samples.
+        let records: usize = (0..2)
+            .map(|f| store.frame_records(job.id, f).unwrap().len())
+            .sum();
+        assert_eq!(records as u64, r.records, "{}", r.method);
+    }
+    let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
+    let last = |line: &str| line.rsplit(',').next().unwrap().to_string();
+    assert_eq!(
+        last(csv.lines().nth(1).unwrap()),
+        rows[0].store_bytes.unwrap().to_string()
+    );
+
+    let plain = tempfile::tempdir().unwrap();
+    let rows = bench::run(&tiny_bench(plain.path(), &["ic:spp=1"]))
+        .unwrap()
+        .rows;
+    assert_eq!(rows[0].store_bytes, None);
+    assert!(!plain
+        .path()
+        .join("runs/cube-in-box/ic-spp=1/store")
+        .exists());
 }

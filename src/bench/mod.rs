@@ -84,6 +84,10 @@ pub struct BenchOptions {
     /// second, untimed pass that gathers each record again one frame
     /// later ([`BenchRow::next_error`]).
     pub estimate_error: bool,
+    /// Also render every run, untimed, into a store of its own
+    /// (`runs/<scene>/<run>/store`, left for `radcache inspect`) and report
+    /// its bytes on disk ([`BenchRow::store_bytes`]).
+    pub store_size: bool,
     /// The ray backends every run is rendered with, one run per backend
     /// (`--backends cpu,gpu`: GPU against CPU in one invocation, the
     /// ratio read off one table). The reference is rendered with `auto`.
@@ -123,6 +127,7 @@ impl Default for BenchOptions {
             same_pattern: false,
             quiet: false,
             estimate_error: false,
+            store_size: false,
             backends: vec![BackendChoice::Auto],
         }
     }

@@ -28,6 +28,10 @@ pub struct BenchRow {
     /// Peak resident memory of the process during the run (MB), where the
     /// platform tells it.
     pub peak_mem_mb: Option<f64>,
+    /// With [`super::BenchOptions::store_size`]: bytes of the files of the
+    /// run's store once closed (sled's files and the sample log: records,
+    /// their samples, the frames' EXR and the carried state).
+    pub store_bytes: Option<u64>,
     pub rel_rmse: f64,
     /// Relative RMSE without the pixels at directly seen lights
     /// ([`crate::metrics::CompareReport::rel_rmse_surfaces`]).
@@ -50,7 +54,7 @@ pub struct BenchRow {
 pub const CSV_HEADER: &str =
     "scene,method,settings,backend,frames,seconds,render_pass_seconds,rays,records,peak_mem_mb,rel_rmse,rel_rmse_surfaces,block_bias,flicker,flicker_surfaces,\
 estimated_records,estimate_err_mean,estimate_err_median,constant_err_mean,constant_err_median,\
-estimate_lifespan_mean,actual_lifespan_mean";
+estimate_lifespan_mean,actual_lifespan_mean,store_bytes";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -88,7 +92,7 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{:.4},{},{},{},{},{:.6},{},{:.6},{},{},{}",
+            "{},{},{},{},{},{:.4},{},{},{},{},{:.6},{},{:.6},{},{},{},{}",
             csv_field(&r.scene),
             csv_field(&r.method),
             csv_field(&r.settings),
@@ -105,6 +109,7 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
             opt(r.flicker, 6),
             opt(r.flicker_surfaces, 6),
             next_error_fields(r.next_error),
+            r.store_bytes.map_or(String::new(), |b| b.to_string()),
         );
     }
     out
@@ -123,13 +128,14 @@ pub fn to_table(rows: &[BenchRow]) -> String {
         "Mrays",
         "records",
         "peak MB",
+        "store MB",
         "rel_rmse",
         "rmse surf",
         "block_bias",
         "flicker",
         "flicker surf",
     ];
-    let cells: Vec<[String; 15]> = rows
+    let cells: Vec<[String; 16]> = rows
         .iter()
         .map(|r| {
             [
@@ -144,6 +150,8 @@ pub fn to_table(rows: &[BenchRow]) -> String {
                 format!("{:.2}", r.rays as f64 / 1e6),
                 r.records.to_string(),
                 r.peak_mem_mb.map_or("-".into(), |v| format!("{v:.0}")),
+                r.store_bytes
+                    .map_or("-".into(), |b| format!("{:.1}", b as f64 / 1e6)),
                 format!("{:.5}", r.rel_rmse),
                 r.rel_rmse_surfaces
                     .map_or("-".into(), |v| format!("{v:.5}")),

@@ -9,6 +9,7 @@ use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::Method;
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
+use crate::store::Store;
 use anyhow::{bail, Context, Result};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -189,6 +190,18 @@ fn bench_run(
         }
         _ => None,
     };
+    let store_bytes = if opts.store_size {
+        Some(store_size(
+            opts,
+            source,
+            run.backend,
+            &settings,
+            &dir,
+            &what,
+        )?)
+    } else {
+        None
+    };
     Ok(BenchRow {
         scene: label.into(),
         method: spec.method.clone(),
@@ -200,6 +213,7 @@ fn bench_run(
         rays: stats.rays,
         records: stats.records,
         peak_mem_mb,
+        store_bytes,
         rel_rmse: cmp.rel_rmse,
         rel_rmse_surfaces: cmp.rel_rmse_surfaces,
         block_bias: cmp.block_bias,
@@ -249,6 +263,71 @@ fn estimate_error(
     }
     bar.finish_and_clear();
     Ok(measured.tally.summary())
+}
+
+/// [`BenchRow::store_bytes`] of a run with `settings`: its frames rendered
+/// again (untimed, the same deterministic frames into the run's folder
+/// `dir`) as a job of a new store in `dir/store`, as `radcache render
+/// --job` would, and the bytes of the store's files once it is closed.
+fn store_size(
+    opts: &BenchOptions,
+    source: &SceneSource,
+    backend: BackendChoice,
+    settings: &MethodSettings,
+    dir: &Path,
+    what: &str,
+) -> Result<u64> {
+    let path = dir.join("store");
+    if path.exists() {
+        std::fs::remove_dir_all(&path)
+            .with_context(|| format!("cannot remove the old store {}", path.display()))?;
+    }
+    let frame_settings = frame_settings(opts, opts.same_pattern);
+    let store = Store::open(&path)?;
+    let spec = render::job_spec(
+        "bench",
+        source,
+        settings,
+        &frame_settings,
+        opts.frames.clone(),
+    )?;
+    let mut job = render::StoreJob {
+        job: store.begin_job(&spec, false)?,
+        store: &store,
+    };
+    let mut renderer = Renderer::new(
+        source.load()?,
+        settings.instantiate(),
+        render::make_backend(backend)?,
+        frame_settings,
+    );
+    render::render_job_to_dir(
+        &mut renderer,
+        opts.frames.clone(),
+        dir,
+        opts.quiet,
+        Some(&mut job),
+    )
+    .with_context(|| format!("{what}: rendering into the store {}", path.display()))?;
+    // Measured closed: sled sizes its files as it flushes and reopens.
+    drop(job);
+    drop(store);
+    files_bytes(&path)
+}
+
+/// Bytes of the files under `dir`, folders included.
+fn files_bytes(dir: &Path) -> Result<u64> {
+    let mut total = 0;
+    for entry in std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))? {
+        let entry = entry?;
+        let meta = entry.metadata()?;
+        total += if meta.is_dir() {
+            files_bytes(&entry.path())?
+        } else {
+            meta.len()
+        };
+    }
+    Ok(total)
 }
 
 /// The records of a `trc` measured so far, and their errors.
