@@ -151,7 +151,7 @@ pub fn to_table(rows: &[BenchRow]) -> String {
                 r.records.to_string(),
                 r.peak_mem_mb.map_or("-".into(), |v| format!("{v:.0}")),
                 r.store_bytes
-                    .map_or("-".into(), |b| format!("{:.1}", b as f64 / 1e6)),
+                    .map_or("-".into(), |b| format!("{:.2}", b as f64 / 1e6)),
                 format!("{:.5}", r.rel_rmse),
                 r.rel_rmse_surfaces
                     .map_or("-".into(), |v| format!("{v:.5}")),

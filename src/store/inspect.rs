@@ -446,11 +446,13 @@ fn job_text(s: &mut String, j: &JobReport) {
         .iter()
         .map(|(l, n)| format!("{l}: {n}"))
         .collect();
-    let _ = writeln!(
-        s,
-        "  record lifespan (frames: records): {}",
-        hist.join(", ")
-    );
+    if !hist.is_empty() {
+        let _ = writeln!(
+            s,
+            "  record lifespan (frames: records): {}",
+            hist.join(", ")
+        );
+    }
     objects_text(s, j);
 }
 
