@@ -184,24 +184,7 @@ fn bench_run(
     drop(renderer);
     let cmp = metrics::compare_dirs(&ref_dir, &dir)
         .with_context(|| format!("comparing {} with {}", dir.display(), ref_dir.display()))?;
-    let next_error = match &settings {
-        MethodSettings::Trc(trc) if opts.estimate_error => {
-            estimate_error(opts, source, run.backend, trc, &what)?
-        }
-        _ => None,
-    };
-    let store_bytes = if opts.store_size {
-        Some(store_size(
-            opts,
-            source,
-            run.backend,
-            &settings,
-            &dir,
-            &what,
-        )?)
-    } else {
-        None
-    };
+    let (next_error, store_bytes) = untimed_measures(opts, source, run, &settings, &dir, &what)?;
     Ok(BenchRow {
         scene: label.into(),
         method: spec.method.clone(),
@@ -221,6 +204,29 @@ fn bench_run(
         flicker_surfaces: cmp.flicker_surfaces,
         next_error,
     })
+}
+
+/// What the options ask to measure in untimed passes after a run:
+/// [`BenchRow::next_error`] (`trc` runs) and [`BenchRow::store_bytes`].
+fn untimed_measures(
+    opts: &BenchOptions,
+    source: &SceneSource,
+    run: &Run,
+    settings: &MethodSettings,
+    dir: &Path,
+    what: &str,
+) -> Result<(Option<EstimateError>, Option<u64>)> {
+    let next_error = match settings {
+        MethodSettings::Trc(trc) if opts.estimate_error => {
+            estimate_error(opts, source, run.backend, trc, what)?
+        }
+        _ => None,
+    };
+    let store_bytes = opts
+        .store_size
+        .then(|| store_size(opts, source, run.backend, settings, dir, what))
+        .transpose()?;
+    Ok((next_error, store_bytes))
 }
 
 /// [`BenchRow::next_error`] of a `trc` run with `settings`: the run's frames
