@@ -280,7 +280,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub estimate_error: bool,
     /// Also render every run, untimed, into a store of its own
-    /// (runs/<scene>/<run>/store, left for inspect) and report its bytes
+    /// (`runs/<scene>/<run>/store`, left for inspect) and report its bytes
     /// on disk (sled and sample log).
     #[arg(long)]
     pub store_size: bool,
