@@ -321,7 +321,7 @@ fn store_size(
     files_bytes(&path)
 }
 
-/// Bytes of the files under `dir`, folders included.
+/// Bytes of the files under `dir` and its subfolders.
 fn files_bytes(dir: &Path) -> Result<u64> {
     let mut total = 0;
     for entry in std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))? {
