@@ -35,7 +35,9 @@ impl Default for Strata {
 
 impl Strata {
     pub fn count(&self) -> usize {
-        (self.theta * self.phi) as usize
+        // In usize: settings read back from a store are not range-checked
+        // as flags are, and a u32 product could overflow.
+        self.theta as usize * self.phi as usize
     }
 }
 

@@ -126,12 +126,7 @@ fn check_work_limits(method: &MethodSettings) -> Result<(), ApiError> {
             "spp {spp} is out of range (1..={MAX_SPP})"
         )));
     }
-    let strata = match method {
-        MethodSettings::Path(_) => None,
-        MethodSettings::Ic(s) => Some(s.strata),
-        MethodSettings::Trc(s) => Some(s.ic.strata),
-    };
-    if let Some(strata) = strata.filter(|s| s.count() > MAX_GATHER_RAYS) {
+    if let Some(strata) = gather_strata(method).filter(|s| s.count() > MAX_GATHER_RAYS) {
         return Err(ApiError::bad_request(format!(
             "strata {}x{} is {} gather rays a record; at most {MAX_GATHER_RAYS}",
             strata.theta,
@@ -140,6 +135,15 @@ fn check_work_limits(method: &MethodSettings) -> Result<(), ApiError> {
         )));
     }
     Ok(())
+}
+
+/// The gather hemisphere of a method's records (`None` for `path`).
+fn gather_strata(method: &MethodSettings) -> Option<crate::cache::gather::Strata> {
+    match method {
+        MethodSettings::Path(_) => None,
+        MethodSettings::Ic(s) => Some(s.strata),
+        MethodSettings::Trc(s) => Some(s.ic.strata),
+    }
 }
 
 /// A setting's JSON value as the text the bench's `KEY=VALUE` would give:
@@ -156,11 +160,17 @@ fn setting_text(key: &str, value: &serde_json::Value) -> Result<String, ApiError
 }
 
 /// A stored job's method settings: its settings identity (serde JSON)
-/// read back; where that cannot be read, the method's defaults at the
-/// job's spp, which the store's settings check refuses clearly should
+/// read back; where that cannot be read, or names a gather no job could
+/// have been started with (an empty hemisphere, or more rays a record than
+/// `render` and `serve` allow: a damaged store), the method's defaults at
+/// the job's spp, which the store's settings check refuses clearly should
 /// they differ from the stored ones.
 fn stored_method(job: &JobValue) -> Option<MethodSettings> {
-    serde_json::from_str(&job.settings).ok().or_else(|| {
+    let gathers = |m: &MethodSettings| {
+        gather_strata(m).is_none_or(|s| (1..=MAX_GATHER_RAYS).contains(&s.count()))
+    };
+    let stored = serde_json::from_str(&job.settings).ok().filter(gathers);
+    stored.or_else(|| {
         let spp = job.spp.to_string();
         method_settings(&job.method, [("spp", spp.as_str())]).ok()
     })
@@ -229,4 +239,69 @@ fn parse_size(s: &str) -> Result<(u32, u32), ApiError> {
         )));
     }
     Ok((w, h))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::store::schema::JobSpec;
+
+    fn stored(method: &str, settings: String) -> JobValue {
+        JobValue {
+            id: 1,
+            spec: JobSpec {
+                name: "j".into(),
+                scene: "builtin:cube-in-box".into(),
+                scene_hash: "0".into(),
+                method: method.into(),
+                settings,
+                width: 8,
+                height: 8,
+                spp: 4,
+                fps: 24.0,
+                seed: 0,
+                same_pattern: false,
+                frame_start: 0,
+                frame_end: 2,
+            },
+            frames_done: 0,
+            last_frame: None,
+            created_unix: 0,
+            updated_unix: 0,
+        }
+    }
+
+    fn ic_with_strata(theta: u32, phi: u32) -> String {
+        let ic = crate::method::ic::IcSettings {
+            strata: crate::cache::gather::Strata { theta, phi },
+            accuracy: 0.3,
+            ..Default::default()
+        };
+        serde_json::to_string(&MethodSettings::Ic(ic)).unwrap()
+    }
+
+    /// Stored settings come back as they were; a gather no job can have
+    /// (empty, or past the rays a record may have, even past `u32` when
+    /// multiplied out) reads as the method's defaults at the job's spp, for
+    /// the store's settings check to refuse by name.
+    #[test]
+    fn stored_settings_with_an_impossible_gather_read_as_defaults() {
+        let method = |settings| {
+            JobRequest::from_stored(&stored("ic", settings))
+                .unwrap()
+                .method
+        };
+        let MethodSettings::Ic(kept) = method(ic_with_strata(8, 24)) else {
+            panic!("not ic")
+        };
+        assert_eq!((kept.strata.count(), kept.accuracy), (192, 0.3));
+        for (theta, phi) in [(0, 48), (16, 0), (512, 512), (u32::MAX, u32::MAX)] {
+            let MethodSettings::Ic(read) = method(ic_with_strata(theta, phi)) else {
+                panic!("not ic")
+            };
+            let defaults = crate::method::ic::IcSettings::default();
+            assert_eq!(read.strata, defaults.strata, "{theta}x{phi}");
+            assert_eq!((read.spp, read.accuracy), (4, defaults.accuracy));
+        }
+    }
 }
