@@ -7,6 +7,7 @@ use crate::cache::gather::Strata;
 use crate::integrator::PathLength;
 use crate::method::ic::IcSettings;
 use crate::method::path::PathSettings;
+use crate::method::tcg::TcgSettings;
 use crate::method::trc::{TemporalGradients, TrcSettings};
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
@@ -108,6 +109,8 @@ pub enum MethodName {
     Ic,
     /// Temporal radiance caching (Gautron et al., TVCG 2007): ic records that live across frames.
     Trc,
+    /// Temporally coherent final gathering (Tawara et al., 2004): records keep their samples and re-shoot a share of them each frame.
+    Tcg,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -159,6 +162,8 @@ pub struct RenderArgs {
     pub ic: IcArgs,
     #[command(flatten)]
     pub trc: TrcArgs,
+    #[command(flatten)]
+    pub tcg: TcgArgs,
     /// Record the render as job NAME in the store and resume it if it was interrupted
     /// (frames already finished are skipped). The store is --db, default ./radcache.db.
     #[arg(long, value_name = "NAME", value_parser = parse_job_name)]
@@ -212,6 +217,20 @@ pub struct TrcArgs {
     /// With reprojection, evaluate each hemisphere sample's direct light again at t0+1 (one light sample, shadowed in the next frame's geometry), so that E(t0+1) sees moving shadows and moving lights (TRC §5: the incoming lighting at t+1 of each visible point). Costs 12–48 % more time on our animated scenes; on cube-in-box it lowers the error by 4 %, elsewhere not (README).
     #[arg(long, value_enum, default_value = "off")]
     pub trc_next_direct: OnOff,
+}
+
+/// Settings of `--method tcg` (its spatial settings are the `--ic-*` ones).
+#[derive(Args, Debug)]
+pub struct TcgArgs {
+    /// τ_min of Eq. 2: the share of a record's samples shot again every frame (Tawara et al. 2004; their results use 0.05).
+    #[arg(long, default_value_t = 0.05, value_parser = parse_share)]
+    pub tcg_tau_min: f32,
+    /// τ_max of Eq. 2: the share shot again of the samples that hit moving objects (their results use 1.0).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_share)]
+    pub tcg_tau_max: f32,
+    /// §4.2: a record with more usable neighbours than this is removed as redundant (their example: 10).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(0..=1_000_000))]
+    pub tcg_max_neighbours: u32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -347,6 +366,15 @@ fn parse_accuracy(s: &str) -> Result<f32, String> {
         return Err(format!("accuracy must be in (0, 2], got {s}"));
     }
     Ok(a)
+}
+
+/// A share in [0, 1].
+fn parse_share(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !(0.0..=1.0).contains(&v) {
+        return Err(format!("expected a share from 0 to 1, got {s}"));
+    }
+    Ok(v)
 }
 
 fn parse_positive(s: &str) -> Result<f32, String> {
@@ -571,6 +599,12 @@ fn render_method(args: &RenderArgs) -> MethodSettings {
             },
             reprojection: args.trc.trc_reprojection == OnOff::On,
             next_direct: args.trc.trc_next_direct == OnOff::On,
+        }),
+        MethodName::Tcg => MethodSettings::Tcg(TcgSettings {
+            ic: ic_settings,
+            tau_min: args.tcg.tcg_tau_min,
+            tau_max: args.tcg.tcg_tau_max,
+            max_neighbours: args.tcg.tcg_max_neighbours,
         }),
     }
 }

@@ -10,6 +10,7 @@ use crate::film::{self, Film};
 use crate::light::LightSampler;
 use crate::method::ic::{IcSettings, IrradianceCaching};
 use crate::method::path::{PathSettings, PathTracer};
+use crate::method::tcg::{TcgSettings, TemporallyCoherentGathering};
 use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::scene::{Scene, SceneError};
@@ -54,6 +55,7 @@ pub enum MethodSettings {
     Path(PathSettings),
     Ic(IcSettings),
     Trc(TrcSettings),
+    Tcg(TcgSettings),
 }
 
 impl MethodSettings {
@@ -63,6 +65,7 @@ impl MethodSettings {
             MethodSettings::Path(_) => "path",
             MethodSettings::Ic(_) => "ic",
             MethodSettings::Trc(_) => "trc",
+            MethodSettings::Tcg(_) => "tcg",
         }
     }
 
@@ -72,6 +75,7 @@ impl MethodSettings {
             MethodSettings::Path(s) => s.spp,
             MethodSettings::Ic(s) => s.spp,
             MethodSettings::Trc(s) => s.ic.spp,
+            MethodSettings::Tcg(s) => s.ic.spp,
         }
     }
 
@@ -80,6 +84,7 @@ impl MethodSettings {
             MethodSettings::Path(s) => Box::new(PathTracer::new(s.clone())),
             MethodSettings::Ic(s) => Box::new(IrradianceCaching::new(s.clone())),
             MethodSettings::Trc(s) => Box::new(TemporalRadianceCaching::new(s.clone())),
+            MethodSettings::Tcg(s) => Box::new(TemporallyCoherentGathering::new(s.clone())),
         }
     }
 }

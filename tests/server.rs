@@ -205,6 +205,38 @@ fn job_settings_are_the_clis_flags() {
         &out,
     );
     assert_frames_equal_cli(&server, &id, 2, &out);
+
+    // `tcg`'s own settings and `ic`'s, which make its records.
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"tcg","frames":"0..3","size":"16x16","spp":1,
+            "settings":{"tau_min":0.2,"tau_max":0.5,"max_neighbours":4,"strata":"4x12"}}"#,
+    );
+    let job = wait_done(&server, &id);
+    let settings = &job["settings"];
+    assert_eq!(settings["tau_min"], 0.2, "{job}");
+    assert_eq!(settings["max_neighbours"], 4, "{job}");
+    assert_eq!(settings["ic"]["strata"]["phi"], 12, "{job}");
+    let out = dir.path().join("cli-tcg");
+    render_with_cli(
+        &[
+            "--method",
+            "tcg",
+            "--frames",
+            "0..3",
+            "--tcg-tau-min",
+            "0.2",
+            "--tcg-tau-max",
+            "0.5",
+            "--tcg-max-neighbours",
+            "4",
+            "--ic-strata",
+            "4x12",
+        ],
+        &["--size", "16x16", "--spp", "1"],
+        &out,
+    );
+    assert_frames_equal_cli(&server, &id, 3, &out);
 }
 
 #[test]
@@ -274,6 +306,14 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
         r#"[1]"#,
     ] {
         check("POST", "/api/jobs", &with_settings(bad), 400);
+    }
+    for bad in [
+        r#"{"tau_min":1.5}"#,
+        r#"{"max_neighbours":-1}"#,
+        r#"{"at":0.1}"#,
+    ] {
+        let body = with_settings(bad).replace(r#""method":"trc""#, r#""method":"tcg""#);
+        check("POST", "/api/jobs", &body, 400);
     }
     check(
         "POST",

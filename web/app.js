@@ -106,14 +106,15 @@ function frameRange(job) {
 }
 
 // The settings that say most about a caching method's trade-off: the
-// accuracy a (ic), and a_t and δt_max (trc); empty for path.
+// accuracy a (ic), a_t and δt_max (trc), τ_min (tcg); empty for path.
 function keySettings(job) {
   const s = job.settings || {};
-  const ic = job.method === 'trc' ? s.ic : s;
+  const ic = job.method === 'trc' || job.method === 'tcg' ? s.ic : s;
   const parts = [];
   if (ic && ic.accuracy != null) parts.push(`a ${ic.accuracy}`);
   if (s.temporal_accuracy != null) parts.push(`a_t ${s.temporal_accuracy}`);
   if (s.max_life != null) parts.push(`δt_max ${s.max_life}`);
+  if (s.tau_min != null) parts.push(`τ_min ${s.tau_min}`);
   return parts.map((p) => `, ${p}`).join('');
 }
 

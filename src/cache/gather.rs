@@ -71,30 +71,44 @@ pub struct GatherPoint {
 /// index so that every cell has its own stream.
 pub fn gather_queries(point: &GatherPoint, strata: Strata, key: SampleKey) -> Vec<RadianceQuery> {
     let frame = Frame::new(point.normal);
-    let (m, n) = (strata.theta, strata.phi);
-    let mut queries = Vec::with_capacity(strata.count());
-    for j in 0..m {
-        for k in 0..n {
-            let mut rng = Rng::new(SampleKey {
-                sample: j * n + k,
+    (0..strata.count() as u32)
+        .map(|cell| {
+            let rng = Rng::new(SampleKey {
+                sample: cell,
                 ..key
             });
-            let u = rng.next_2d();
-            let sin2 = (j as f32 + u.x) / m as f32;
-            let phi = TAU * (k as f32 + u.y) / n as f32;
-            let (sin_t, cos_t) = (sin2.sqrt(), (1.0 - sin2).max(0.0).sqrt());
-            let dir = frame.to_world(Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t));
-            let origin = offset_origin(point.position, point.geometric_normal, dir);
-            queries.push(RadianceQuery {
-                ray: Ray::new(origin, dir, 0.0, f32::INFINITY),
-                first_light: None,
-                rng,
-                weight: Vec3::ONE,
-                first_hit: FirstHitEmission::Exclude,
-            });
-        }
+            cell_query(point, &frame, strata, cell, rng)
+        })
+        .collect()
+}
+
+/// The radiance query of cell `cell` (`j·N + k`) of a record at `point`
+/// whose hemisphere is laid out in `frame` (its normal is `frame.n`): a
+/// direction jittered within the cell by `rng`'s first two numbers, the
+/// rest of `rng` for the path. `tcg` re-shoots single cells with it, in
+/// the frame its record carries along with its object.
+pub fn cell_query(
+    point: &GatherPoint,
+    frame: &Frame,
+    strata: Strata,
+    cell: u32,
+    mut rng: Rng,
+) -> RadianceQuery {
+    let (m, n) = (strata.theta, strata.phi);
+    let (j, k) = (cell / n, cell % n);
+    let u = rng.next_2d();
+    let sin2 = (j as f32 + u.x) / m as f32;
+    let phi = TAU * (k as f32 + u.y) / n as f32;
+    let (sin_t, cos_t) = (sin2.sqrt(), (1.0 - sin2).max(0.0).sqrt());
+    let dir = frame.to_world(Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t));
+    let origin = offset_origin(point.position, point.geometric_normal, dir);
+    RadianceQuery {
+        ray: Ray::new(origin, dir, 0.0, f32::INFINITY),
+        first_light: None,
+        rng,
+        weight: Vec3::ONE,
+        first_hit: FirstHitEmission::Exclude,
     }
-    queries
 }
 
 /// Collects the traced queries of [`gather_queries`] into samples.
@@ -157,11 +171,25 @@ pub fn irradiance_and_gradients(
     normal: Vec3,
     strata: Strata,
 ) -> GatheredIrradiance {
-    let frame = Frame::new(normal);
+    irradiance_and_gradients_in(
+        &samples.radiance,
+        &samples.distance,
+        &Frame::new(normal),
+        strata,
+    )
+}
+
+/// [`irradiance_and_gradients`] of cells laid out in `frame` (normal
+/// `frame.n`), from each cell's radiance `l` and hit distance `r` in cell
+/// order: `tcg`'s records keep their cells' frame as their object turns.
+pub fn irradiance_and_gradients_in(
+    l: &[Vec3],
+    r: &[f32],
+    frame: &Frame,
+    strata: Strata,
+) -> GatheredIrradiance {
     let (m, n) = (strata.theta as usize, strata.phi as usize);
     let cell = |j: usize, k: usize| j * n + k;
-    let l = &samples.radiance;
-    let r = &samples.distance;
     let base = |phi: f32| frame.to_world(Vec3::new(phi.cos(), phi.sin(), 0.0));
     let rings = RingTerms::new(m, n);
 

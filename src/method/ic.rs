@@ -440,7 +440,7 @@ impl IrradianceCaching {
     /// was seen), which the radius limit alone cannot bound once `R` is
     /// clamped up. (Křivánek et al. 2006 limit `R` by the gradient; this is
     /// the same bound applied the other way round.)
-    fn limit_radius(&self, g: &GatheredIrradiance, footprint: f32) -> (f32, [Vec3; 3]) {
+    pub(crate) fn limit_radius(&self, g: &GatheredIrradiance, footprint: f32) -> (f32, [Vec3; 3]) {
         let a = self.settings.accuracy;
         let slope = luminance_gradient(&g.grad_translation).length();
         let mut r = g.harmonic_distance;

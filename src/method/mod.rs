@@ -9,6 +9,7 @@ pub mod path;
 pub mod pixels;
 pub mod render_pass;
 pub mod settings;
+pub mod tcg;
 pub mod trc;
 
 use crate::backend::RayBackend;

@@ -6,6 +6,7 @@
 use crate::cache::gather::Strata;
 use crate::method::ic::IcSettings;
 use crate::method::path::PathSettings;
+use crate::method::tcg::TcgSettings;
 use crate::method::trc::{TemporalGradients, TrcSettings};
 use crate::render::MethodSettings;
 use std::ops::Range;
@@ -50,6 +51,21 @@ pub const METHODS: &[MethodInfo] = &[
             ("strata", "16x48"),
             ("min_spacing", "2"),
             ("max_spacing", "64"),
+            ("max_depth", "8"),
+        ],
+    },
+    MethodInfo {
+        name: "tcg",
+        keys: &[
+            ("tau_min", "0.05"),
+            ("tau_max", "1"),
+            ("max_neighbours", "10"),
+            ("spp", "4"),
+            ("accuracy", "0.2"),
+            ("strata", "16x48"),
+            ("min_spacing", "2"),
+            ("max_spacing", "64"),
+            ("gradients", "1"),
             ("max_depth", "8"),
         ],
     },
@@ -164,6 +180,7 @@ pub fn method_settings<'a>(
         "path" => MethodSettings::Path(PathSettings::default()),
         "ic" => MethodSettings::Ic(IcSettings::default()),
         "trc" => MethodSettings::Trc(TrcSettings::default()),
+        "tcg" => MethodSettings::Tcg(TcgSettings::default()),
         _ => {
             return Err(MethodError::UnknownMethod {
                 name: method.into(),
@@ -184,6 +201,7 @@ fn apply(settings: &mut MethodSettings, key: &str, v: &str) -> Result<(), Method
         MethodSettings::Path(s) => path_setting(method, key, v, s)?,
         MethodSettings::Ic(s) => ic_setting(method, key, v, s)?,
         MethodSettings::Trc(s) => trc_setting(method, key, v, s)?,
+        MethodSettings::Tcg(s) => tcg_setting(method, key, v, s)?,
     };
     if !known {
         return Err(MethodError::UnknownKey {
@@ -236,6 +254,19 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
         }
         "reprojection" => s.reprojection = value::<u8>(method, key, v, 0..2)? == 1,
         "next_direct" => s.next_direct = value::<u8>(method, key, v, 0..2)? == 1,
+        _ => return ic_setting(method, key, v, &mut s.ic),
+    }
+    Ok(true)
+}
+
+/// Applies `tcg`'s setting `key = v` to `s`: Eq. 2's shares, §4.2's
+/// neighbour bound, and `ic`'s, with which it makes its records; `false`
+/// when `key` is none of them.
+fn tcg_setting(method: &str, key: &str, v: &str, s: &mut TcgSettings) -> Result<bool, MethodError> {
+    match key {
+        "tau_min" => s.tau_min = value(method, key, v, 0.0..1.000_001)?,
+        "tau_max" => s.tau_max = value(method, key, v, 0.0..1.000_001)?,
+        "max_neighbours" => s.max_neighbours = value(method, key, v, 0..1_000_001)?,
         _ => return ic_setting(method, key, v, &mut s.ic),
     }
     Ok(true)

@@ -143,6 +143,7 @@ fn gather_strata(method: &MethodSettings) -> Option<crate::cache::gather::Strata
         MethodSettings::Path(_) => None,
         MethodSettings::Ic(s) => Some(s.strata),
         MethodSettings::Trc(s) => Some(s.ic.strata),
+        MethodSettings::Tcg(s) => Some(s.ic.strata),
     }
 }
 

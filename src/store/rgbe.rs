@@ -115,6 +115,16 @@ impl PackedSample {
         u32::from(self.flags & flags::AGE_MASK)
     }
 
+    /// The sample one frame older (its age saturates at
+    /// [`flags::MAX_AGE`]).
+    pub fn older(self) -> Self {
+        let age = (self.age() + 1).min(u32::from(flags::MAX_AGE)) as u16;
+        PackedSample {
+            flags: (self.flags & !flags::AGE_MASK) | age,
+            ..self
+        }
+    }
+
     pub fn is_miss(&self) -> bool {
         self.flags & flags::MISS != 0
     }

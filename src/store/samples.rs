@@ -111,21 +111,7 @@ impl SampleBlock {
     /// sample's strata cell (its index), jittered by the record's
     /// deterministic sample key.
     pub fn pack(samples: &HemisphereSamples, dynamic: &[bool]) -> Self {
-        let packed: Vec<PackedSample> = (0..samples.radiance.len())
-            .map(|i| {
-                let object = samples.object.get(i).copied().unwrap_or(u32::MAX);
-                let hit_dynamic =
-                    object != u32::MAX && dynamic.get(object as usize).copied().unwrap_or(false);
-                PackedSample::pack(
-                    samples.radiance[i],
-                    samples.distance[i],
-                    object,
-                    hit_dynamic,
-                    0,
-                )
-            })
-            .collect();
-        Self::from_packed(&packed)
+        Self::from_packed(&pack_samples(samples, dynamic))
     }
 
     /// The block of samples already packed.
@@ -162,6 +148,26 @@ impl SampleBlock {
     pub fn raw_bytes(&self) -> u64 {
         u64::from(self.count) * PackedSample::BYTES as u64
     }
+}
+
+/// Gathered samples in their 8-byte form, in cell order, all of age 0
+/// (shot this frame); `dynamic[object]` tells whether an object is
+/// animated (the sample's hit-dynamic flag).
+pub fn pack_samples(samples: &HemisphereSamples, dynamic: &[bool]) -> Vec<PackedSample> {
+    (0..samples.radiance.len())
+        .map(|i| {
+            let object = samples.object.get(i).copied().unwrap_or(u32::MAX);
+            let hit_dynamic =
+                object != u32::MAX && dynamic.get(object as usize).copied().unwrap_or(false);
+            PackedSample::pack(
+                samples.radiance[i],
+                samples.distance[i],
+                object,
+                hit_dynamic,
+                0,
+            )
+        })
+        .collect()
 }
 
 /// Byte planes of the 8-byte samples: byte 0 of every sample, then byte 1,

@@ -1,0 +1,551 @@
+//! `tcg`: temporally coherent final gathering (Tawara, Myszkowski &
+//! Seidel, "Exploiting Temporal Coherence in Final Gathering for Dynamic
+//! Scenes", CGI 2004 — `papers/temporally-coherent-final-gathering-2004.md`),
+//! built on the irradiance records of [`super::ic`].
+//!
+//! Every record keeps its incoming-radiance samples, one per hemisphere
+//! cell, in the paper's 8-byte form (§3.1: RGBE radiance, half-float hit
+//! distance, and a flag word with the sample's age and whether it hit a
+//! moving object; [`PackedSample`]). Records live from frame to frame, and
+//! each frame only a share of their samples is shot again. Per frame:
+//! 1. *survivors*: records move with the object they lie on (§4.1: object
+//!    id and local frame; the cells turn with it). A record no pixel used
+//!    in the previous frame is dropped. Departure: the paper keeps every
+//!    record and updates it; dropping the unseen ones (`trc`'s rule, TRC
+//!    §5) keeps the work on what the camera sees, and a record covered by
+//!    a moving object is not refreshed for nothing. Then redundant records
+//!    are removed (§4.2): in id order, one with more than
+//!    [`TcgSettings::max_neighbours`] other records usable at its point
+//!    is removed, and hidden from the counts of the records after it;
+//! 2. *update* (§3.2–3.3): each record shoots again `N_update` cells
+//!    (Eq. 2, `select::cells_to_update`), drawn without repetition with
+//!    probability ∝ `2^age` (`select::pick_cells`), each with a new
+//!    jittered direction in its cell; its other samples age by a frame.
+//!    Its irradiance, gradients and harmonic mean distance are computed
+//!    again from all its samples with `ic`'s estimators;
+//! 3. *fill*: `ic`'s fill stage adds records where none is usable;
+//! 4. *render*: `ic`'s render pass, flagging every record a pixel sample
+//!    used.
+//!
+//! A record's irradiance in the frame it is made is `ic`'s, from its
+//! samples at full precision; from the next frame on it is computed from
+//! the stored 8-byte samples, as the paper's records are.
+
+mod select;
+mod state;
+
+use super::ic::{
+    dynamic_objects, primary_candidates, scene_bounds, Candidate, Gathered, IcSettings,
+    IrradianceCaching, RECORD_STREAM,
+};
+use super::render_pass::{render_pass, FallbackStreams};
+use super::{
+    FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges, StateError,
+    RENDER_PHASE,
+};
+use crate::cache::gather::{cell_query, irradiance_and_gradients_in, GatherPoint};
+use crate::cache::{IrradianceCache, IrradianceRecord, LookupPoint, RecordId};
+use crate::film::Film;
+use crate::integrator::trace_radiance_parallel;
+use crate::sampling::{Frame, Rng, SampleKey};
+use crate::scene::Snapshot;
+use crate::store::rgbe::PackedSample;
+use crate::store::samples::{pack_samples, SampleBlock};
+use glam::{Mat3, Mat4, Vec3};
+use rayon::prelude::*;
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+/// Tags the random streams that pick a record's cells apart from those
+/// that shoot them.
+const PICK_STREAM: u64 = RECORD_STREAM | (1 << 61);
+
+/// Settings of `tcg`, with their sources.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TcgSettings {
+    /// Everything spatial: accuracy `a`, strata (the paper uses 192 and
+    /// 768 samples a record, §5), spp, spacing, gradients, path lengths
+    /// (see [`IcSettings`]).
+    pub ic: IcSettings,
+    /// `τ_min` of Eq. 2: the share of a record's samples shot again every
+    /// frame. The paper's results use 0.05 (§5, Table 3).
+    pub tau_min: f32,
+    /// `τ_max` of Eq. 2: the share shot again of the samples that hit
+    /// moving objects. The paper's results use 1.0 (§5).
+    pub tau_max: f32,
+    /// §4.2: a record with more usable neighbours than this is removed.
+    /// The paper's example is 10.
+    pub max_neighbours: u32,
+}
+
+impl Default for TcgSettings {
+    fn default() -> Self {
+        TcgSettings {
+            ic: IcSettings::default(),
+            tau_min: 0.05,
+            tau_max: 1.0,
+            max_neighbours: 10,
+        }
+    }
+}
+
+/// A record with its samples (§3.1).
+#[derive(Clone, Debug)]
+pub struct TcgRecord {
+    /// The record as of the last frame (id, point, normal, irradiance,
+    /// gradients, radius as clamped in that frame's cache).
+    pub record: IrradianceRecord,
+    /// Where it was made: its point then, and its random streams.
+    pub(crate) candidate: Candidate,
+    /// Its object's transform in the frame it was made: since then the
+    /// record moves as its object does (§4.1).
+    pub object_to_world: Mat4,
+    /// One sample a cell, in cell order (`j·N + k`).
+    pub samples: Vec<PackedSample>,
+    /// Whether a pixel sample used it in the last rendered frame.
+    pub used: bool,
+}
+
+impl TcgRecord {
+    /// A record just gathered in the frame of `ctx`.
+    fn gathered(ctx: &FrameContext, g: &Gathered, dynamic: &[bool]) -> Self {
+        TcgRecord {
+            record: g.record.clone(),
+            candidate: g.candidate,
+            object_to_world: object_transform(ctx.snapshot, g.candidate.object),
+            samples: pack_samples(&g.samples, dynamic),
+            used: false,
+        }
+    }
+
+    /// Its point and the frame its cells are laid out in, in the frame of
+    /// `snapshot` (§4.1): its creation point and cells moved with its
+    /// object since.
+    fn pose(&self, snapshot: &Snapshot) -> (GatherPoint, Frame) {
+        let point = self.candidate.point;
+        let frame = Frame::new(point.normal);
+        let motion =
+            object_transform(snapshot, self.candidate.object) * self.object_to_world.inverse();
+        if motion.abs_diff_eq(Mat4::IDENTITY, 1e-7) {
+            return (point, frame);
+        }
+        // Normals by the inverse transpose (right under any scale); the
+        // tangent turned with the object and made orthogonal again.
+        let normals = Mat3::from_mat4(motion).inverse().transpose();
+        let n = (normals * point.normal).normalize_or_zero();
+        let tangent = motion.transform_vector3(frame.t);
+        let t = (tangent - n * n.dot(tangent)).normalize_or_zero();
+        let moved = GatherPoint {
+            position: motion.transform_point3(point.position),
+            normal: n,
+            geometric_normal: (normals * point.geometric_normal).normalize_or_zero(),
+        };
+        (
+            moved,
+            Frame {
+                t,
+                b: n.cross(t),
+                n,
+            },
+        )
+    }
+}
+
+/// `object`'s world transform in `snapshot` (the identity for an object
+/// it does not have, which a damaged state could name).
+fn object_transform(snapshot: &Snapshot, object: u32) -> Mat4 {
+    snapshot
+        .object_to_world
+        .get(object as usize)
+        .copied()
+        .unwrap_or(Mat4::IDENTITY)
+}
+
+/// §4.2: which of `records` (in id order, at their points of this frame,
+/// radii of the last) are redundant: more than `max_neighbours` of the
+/// records not removed before it are usable at its point (`w ≥ 1/a`).
+/// Marking in order and hiding the marked from the later counts, as the
+/// paper does, thins a crowd down to records with `max_neighbours`
+/// neighbours each rather than removing it whole.
+fn redundant(
+    records: &[&IrradianceRecord],
+    accuracy: f32,
+    max_neighbours: u32,
+    (min, max): (Vec3, Vec3),
+) -> Vec<bool> {
+    let mut cache = IrradianceCache::new(min, max, accuracy);
+    for &r in records {
+        cache.insert_as_is(r.clone());
+    }
+    let mut hidden = vec![false; records.len()];
+    for (i, r) in records.iter().enumerate() {
+        let at = LookupPoint::open(r.position, r.normal);
+        let mut neighbours = 0u32;
+        cache.for_each_usable_indexed(&at, |j, _, _| {
+            if j != i && !hidden[j] {
+                neighbours += 1;
+            }
+        });
+        hidden[i] = neighbours > max_neighbours;
+    }
+    hidden
+}
+
+/// `tcg`: see the module documentation.
+pub struct TemporallyCoherentGathering {
+    pub settings: TcgSettings,
+    ic: IrradianceCaching,
+    records: Vec<TcgRecord>,
+    last_frame: Option<u32>,
+    next_id: RecordId,
+    stats: FrameStats,
+    /// Store hook ([`Method::keep_frame_records`]).
+    keep: bool,
+    kept: Option<FrameRecords>,
+}
+
+impl TemporallyCoherentGathering {
+    pub fn new(settings: TcgSettings) -> Self {
+        TemporallyCoherentGathering {
+            ic: IrradianceCaching::new(settings.ic.clone()),
+            settings,
+            records: Vec::new(),
+            last_frame: None,
+            next_id: 0,
+            stats: FrameStats::default(),
+            keep: false,
+            kept: None,
+        }
+    }
+
+    /// The records alive after the last frame, in cache order.
+    pub fn records(&self) -> &[TcgRecord] {
+        &self.records
+    }
+
+    /// Step 1 of the module documentation: the records that go on into
+    /// frame `ctx.frame`, moved to it, each with its pose there. The ids
+    /// of those that do not are added to `removed`.
+    fn survivors(
+        &mut self,
+        ctx: &FrameContext,
+        stats: &mut FrameStats,
+        removed: &mut Vec<RecordId>,
+    ) -> Vec<(TcgRecord, (GatherPoint, Frame))> {
+        // A frame that does not follow the last one starts a new cache.
+        let follows = self.last_frame.is_some_and(|f| f + 1 == ctx.frame);
+        let mut alive = Vec::with_capacity(self.records.len());
+        for mut r in std::mem::take(&mut self.records) {
+            if !(follows && r.used) {
+                removed.push(r.record.id);
+                continue;
+            }
+            let pose = r.pose(ctx.snapshot);
+            r.record.position = pose.0.position;
+            r.record.normal = pose.0.normal;
+            alive.push((r, pose));
+        }
+        let points: Vec<&IrradianceRecord> = alive.iter().map(|(r, _)| &r.record).collect();
+        let redundant = redundant(
+            &points,
+            self.settings.ic.accuracy,
+            self.settings.max_neighbours,
+            scene_bounds(ctx),
+        );
+        let mut kept = Vec::with_capacity(alive.len());
+        for (r, is_redundant) in alive.into_iter().zip(redundant) {
+            if is_redundant {
+                removed.push(r.0.record.id);
+            } else {
+                kept.push(r);
+            }
+        }
+        stats.records_dropped = removed.len() as u64;
+        kept
+    }
+
+    /// Step 2 (§3.2–3.3): shoots each record's picked cells again, ages the
+    /// others and computes the record again from its samples.
+    fn update(
+        &self,
+        ctx: &FrameContext,
+        alive: Vec<(TcgRecord, (GatherPoint, Frame))>,
+    ) -> Vec<TcgRecord> {
+        let strata = self.settings.ic.strata;
+        let picks: Vec<Vec<u32>> = alive
+            .par_iter()
+            .map(|(r, _)| {
+                let count = select::cells_to_update(&self.settings, &r.samples);
+                let mut rng = Rng::new(self.key(ctx, PICK_STREAM, r, 0));
+                select::pick_cells(&r.samples, count, &mut rng)
+            })
+            .collect();
+        let mut ranges: Vec<Range<usize>> = Vec::with_capacity(picks.len());
+        let mut queries = Vec::new();
+        for ((r, (point, frame)), cells) in alive.iter().zip(&picks) {
+            let start = queries.len();
+            for &cell in cells {
+                let rng = Rng::new(self.key(ctx, RECORD_STREAM, r, cell));
+                queries.push(cell_query(point, frame, strata, cell, rng));
+            }
+            ranges.push(start..queries.len());
+        }
+        let results = trace_radiance_parallel(ctx, self.settings.ic.gather_length, queries.clone());
+        let dynamic = dynamic_objects(ctx);
+        alive
+            .into_par_iter()
+            .zip(picks)
+            .zip(ranges)
+            .map(|(((mut r, (point, frame)), cells), range)| {
+                for s in &mut r.samples {
+                    *s = s.older();
+                }
+                for (&cell, (q, result)) in cells
+                    .iter()
+                    .zip(queries[range.clone()].iter().zip(&results[range]))
+                {
+                    let hit = result.hit;
+                    let (distance, object) = if hit.is_hit() {
+                        (hit.t * q.ray.dir().length(), hit.object)
+                    } else {
+                        (f32::INFINITY, u32::MAX)
+                    };
+                    let is_dynamic = dynamic.get(object as usize).copied().unwrap_or(false);
+                    r.samples[cell as usize] =
+                        PackedSample::pack(result.radiance, distance, object, is_dynamic, 0);
+                }
+                self.recompute(&mut r, &point, &frame);
+                r
+            })
+            .collect()
+    }
+
+    /// The sampling key of record `r`'s stream `tag` in this frame, for
+    /// cell `cell`: each frame's picks and shots are new, and repeat
+    /// exactly in a resumed render.
+    fn key(&self, ctx: &FrameContext, tag: u64, r: &TcgRecord, cell: u32) -> SampleKey {
+        SampleKey {
+            seed: ctx.seed,
+            frame: Some(ctx.frame),
+            item: tag | r.candidate.stream,
+            sample: cell,
+        }
+    }
+
+    /// The record's irradiance, gradients and radius from its samples
+    /// (`ic`'s estimators and radius limits), at its point of this frame.
+    fn recompute(&self, r: &mut TcgRecord, point: &GatherPoint, frame: &Frame) {
+        let radiance: Vec<Vec3> = r.samples.iter().map(PackedSample::radiance).collect();
+        let distance: Vec<f32> = r.samples.iter().map(PackedSample::distance).collect();
+        let g = irradiance_and_gradients_in(&radiance, &distance, frame, self.settings.ic.strata);
+        let (radius, grad_translation) = self.ic.limit_radius(&g, r.candidate.footprint);
+        let record = &mut r.record;
+        record.position = point.position;
+        record.normal = point.normal;
+        record.irradiance = g.irradiance;
+        record.grad_translation = grad_translation;
+        record.grad_rotation = g.grad_rotation;
+        record.radius = radius;
+    }
+
+    /// Ends frame `t`: radii as neighbour clamping left them, the `used`
+    /// flags, ids for the new records (those from `first_new` on), and what
+    /// the store keeps of the frame.
+    fn finish(
+        &mut self,
+        t: u32,
+        mut records: Vec<TcgRecord>,
+        first_new: usize,
+        (cache, used): (&IrradianceCache, &[AtomicBool]),
+        mut stats: FrameStats,
+        removed: Vec<RecordId>,
+    ) {
+        debug_assert_eq!(records.len(), cache.len());
+        for (i, ((r, in_cache), used)) in records
+            .iter_mut()
+            .zip(cache.records())
+            .zip(used)
+            .enumerate()
+        {
+            r.record.radius = in_cache.radius;
+            r.used = used.load(Ordering::Relaxed);
+            if i >= first_new {
+                r.record.id = self.next_id;
+                self.next_id += 1;
+            }
+        }
+        stats.records_alive = records.len() as u64;
+        self.kept = self.keep.then(|| FrameRecords {
+            records: records.iter().map(|r| r.record.clone()).collect(),
+            samples: records
+                .iter()
+                .map(|r| SampleBlock::from_packed(&r.samples))
+                .collect(),
+            strata: self.settings.ic.strata,
+            last_frames: Vec::new(),
+            // Every record's samples may have changed: all are put again.
+            state: Some(StateChanges {
+                global: state::encode_global(self.next_id),
+                put: records
+                    .iter()
+                    .map(|r| (r.record.id, state::encode_record(r)))
+                    .collect(),
+                removed,
+            }),
+        });
+        self.records = records;
+        self.last_frame = Some(t);
+        self.stats = stats;
+    }
+}
+
+impl Method for TemporallyCoherentGathering {
+    fn name(&self) -> &'static str {
+        "tcg"
+    }
+
+    fn render_frame(&mut self, ctx: &FrameContext) -> Film {
+        let mut stats = FrameStats {
+            frame: ctx.frame,
+            ..FrameStats::default()
+        };
+        let mut removed = Vec::new();
+        let start = Instant::now();
+        let alive = self.survivors(ctx, &mut stats, &mut removed);
+        let mut records = self.update(ctx, alive);
+        stats.records_reused = records.len() as u64;
+        stats
+            .phase_seconds
+            .push(("update".into(), start.elapsed().as_secs_f64()));
+
+        let start = Instant::now();
+        let (min, max) = scene_bounds(ctx);
+        let mut cache = IrradianceCache::new(min, max, self.settings.ic.accuracy);
+        for r in &records {
+            cache.insert(r.record.clone());
+        }
+        let first_new = records.len();
+        let dynamic = dynamic_objects(ctx);
+        self.ic.fill_from(
+            ctx,
+            &mut cache,
+            &primary_candidates(ctx),
+            |g| TcgRecord::gathered(ctx, g, &dynamic),
+            &mut records,
+        );
+        stats.records_created = (records.len() - first_new) as u64;
+        stats
+            .phase_seconds
+            .push(("fill".into(), start.elapsed().as_secs_f64()));
+
+        let start = Instant::now();
+        let used: Vec<AtomicBool> = (0..cache.len()).map(|_| AtomicBool::new(false)).collect();
+        let film = render_pass(
+            ctx,
+            &cache,
+            &self.settings.ic,
+            FallbackStreams::Coherent,
+            Some(&used),
+            &mut stats,
+        );
+        stats
+            .phase_seconds
+            .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
+        self.finish(
+            ctx.frame,
+            records,
+            first_new,
+            (&cache, &used),
+            stats,
+            removed,
+        );
+        film
+    }
+
+    fn last_frame_stats(&self) -> FrameStats {
+        self.stats.clone()
+    }
+
+    fn keep_frame_records(&mut self, keep: bool) {
+        self.keep = keep;
+    }
+
+    fn take_frame_records(&mut self) -> Option<FrameRecords> {
+        self.kept.take()
+    }
+
+    fn carries_state(&self) -> bool {
+        true
+    }
+
+    /// Continues after frame `state.frame` from the records alive then, in
+    /// id order (cache order: survivors keep their order and new records
+    /// get increasing ids).
+    fn restore_state(&mut self, s: MethodState) -> Result<(), StateError> {
+        let next_id = state::decode_global(&s.global).map_err(|detail| StateError {
+            record: None,
+            detail,
+        })?;
+        let cells = self.settings.ic.strata.count();
+        let mut records: Vec<TcgRecord> = Vec::with_capacity(s.records.len());
+        for (id, bytes) in &s.records {
+            let bad = |detail: String| StateError {
+                record: Some(*id),
+                detail,
+            };
+            let r = state::decode_record(bytes, cells).map_err(bad)?;
+            if r.record.id != *id || r.record.id >= next_id {
+                return Err(bad(format!(
+                    "record state holds id {} (next id {next_id})",
+                    r.record.id
+                )));
+            }
+            if records.last().is_some_and(|p| p.record.id >= r.record.id) {
+                return Err(bad("records out of id order".into()));
+            }
+            records.push(r);
+        }
+        self.records = records;
+        self.next_id = next_id;
+        self.last_frame = Some(s.frame);
+        self.stats = FrameStats::default();
+        self.kept = None;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(id: u64, x: f32) -> IrradianceRecord {
+        IrradianceRecord {
+            id,
+            position: Vec3::new(x, 0.0, 0.0),
+            normal: Vec3::Y,
+            irradiance: Vec3::ONE,
+            grad_translation: [Vec3::ZERO; 3],
+            grad_rotation: [Vec3::ZERO; 3],
+            radius: 1.0,
+            created_frame: 0,
+            object: 0,
+        }
+    }
+
+    /// 15 records on one point (each usable at the others) and one far
+    /// away, at most 10 neighbours: the first 4 go (14, 13, 12 and 11
+    /// neighbours left when their turn comes), the other 11 keep 10 each,
+    /// and the far one stays.
+    #[test]
+    fn redundant_records_are_thinned_to_the_neighbour_bound() {
+        let mut records: Vec<IrradianceRecord> = (0..15).map(|i| record(i, 0.0)).collect();
+        records.push(record(15, 50.0));
+        let refs: Vec<&IrradianceRecord> = records.iter().collect();
+        let bounds = (Vec3::splat(-60.0), Vec3::splat(60.0));
+        let hidden = redundant(&refs, 0.2, 10, bounds);
+        let gone: Vec<usize> = (0..16).filter(|&i| hidden[i]).collect();
+        assert_eq!(gone, vec![0, 1, 2, 3]);
+        assert!(redundant(&refs, 0.2, 14, bounds).iter().all(|h| !h));
+    }
+}

@@ -1,0 +1,132 @@
+//! `tcg`'s carried state as bytes for the store
+//! ([`StateChanges`](crate::method::StateChanges)): rkyv archives,
+//! validated when read back. A record's state is what its next frame is
+//! computed from: where it was made (its candidate and its object's
+//! transform then), its radius as last clamped, whether a pixel used it,
+//! and its samples, zstd-compressed in their 8-byte form. Its irradiance
+//! and gradients are not kept: every frame computes them again from the
+//! samples. The layout is part of the store schema (`migrations/`):
+//! changing it needs a migration.
+
+use super::TcgRecord;
+use crate::cache::gather::GatherPoint;
+use crate::cache::IrradianceRecord;
+use crate::method::ic::Candidate;
+use crate::store::samples::SampleBlock;
+use glam::{Mat4, Vec3};
+use rkyv::rancor;
+use rkyv::util::AlignedVec;
+
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct RecordState {
+    id: u64,
+    created_frame: u32,
+    object: u32,
+    radius: f32,
+    pixel: u32,
+    stream: u64,
+    point_position: [f32; 3],
+    point_normal: [f32; 3],
+    point_geometric_normal: [f32; 3],
+    footprint: f32,
+    object_to_world: [f32; 16],
+    used: bool,
+    sample_count: u32,
+    samples_zstd: Vec<u8>,
+}
+
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct GlobalState {
+    next_id: u64,
+}
+
+pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
+    let c = &r.candidate;
+    let block = SampleBlock::from_packed(&r.samples);
+    let s = RecordState {
+        id: r.record.id,
+        created_frame: r.record.created_frame,
+        object: r.record.object,
+        radius: r.record.radius,
+        pixel: c.pixel,
+        stream: c.stream,
+        point_position: c.point.position.to_array(),
+        point_normal: c.point.normal.to_array(),
+        point_geometric_normal: c.point.geometric_normal.to_array(),
+        footprint: c.footprint,
+        object_to_world: r.object_to_world.to_cols_array(),
+        used: r.used,
+        sample_count: block.count,
+        samples_zstd: block.zstd,
+    };
+    rkyv::to_bytes::<rancor::Error>(&s)
+        .expect("serialising plain data to memory cannot fail")
+        .into_vec()
+}
+
+/// A record back from its bytes; its samples must be `cells` (the job's
+/// strata). Position, normal and irradiance are its creation point's and
+/// zero until its next frame computes them.
+pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, String> {
+    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+    aligned.extend_from_slice(bytes);
+    let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
+        .map_err(|e| format!("tcg record state: {e}"))?;
+    if s.sample_count as usize != cells {
+        return Err(format!(
+            "tcg record state: {} samples, the job's strata have {cells} cells",
+            s.sample_count
+        ));
+    }
+    let samples = SampleBlock::unpack_bytes(&s.samples_zstd, s.sample_count)
+        .map_err(|e| format!("tcg record state: samples: {e}"))?;
+    let object_to_world = Mat4::from_cols_array(&s.object_to_world);
+    if !object_to_world.is_finite() || !s.radius.is_finite() || s.radius <= 0.0 {
+        return Err(
+            "tcg record state: a transform that is not finite or a radius that is not positive"
+                .into(),
+        );
+    }
+    let point = GatherPoint {
+        position: s.point_position.into(),
+        normal: s.point_normal.into(),
+        geometric_normal: s.point_geometric_normal.into(),
+    };
+    Ok(TcgRecord {
+        record: IrradianceRecord {
+            id: s.id,
+            position: point.position,
+            normal: point.normal,
+            irradiance: Vec3::ZERO,
+            grad_translation: [Vec3::ZERO; 3],
+            grad_rotation: [Vec3::ZERO; 3],
+            radius: s.radius,
+            created_frame: s.created_frame,
+            object: s.object,
+        },
+        candidate: Candidate {
+            pixel: s.pixel,
+            stream: s.stream,
+            point,
+            object: s.object,
+            footprint: s.footprint,
+        },
+        object_to_world,
+        samples,
+        used: s.used,
+    })
+}
+
+pub(super) fn encode_global(next_id: u64) -> Vec<u8> {
+    rkyv::to_bytes::<rancor::Error>(&GlobalState { next_id })
+        .expect("serialising plain data to memory cannot fail")
+        .into_vec()
+}
+
+pub(super) fn decode_global(bytes: &[u8]) -> Result<u64, String> {
+    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+    aligned.extend_from_slice(bytes);
+    rkyv::from_bytes::<GlobalState, rancor::Error>(&aligned)
+        .map(|g| g.next_id)
+        .map_err(|e| format!("tcg state: {e}"))
+}
