@@ -482,7 +482,7 @@ fn run_bench(args: BenchArgs) -> Result<()> {
     }
     let temporal = bench::temporal_text(&report.rows);
     if !temporal.is_empty() {
-        println!("\ntrc against per-frame ic (ic's time and records over trc's; trc's error and flicker over ic's):");
+        println!("\ntemporal methods against per-frame ic (ic's time and records over theirs; their error and flicker over ic's):");
         print!("{temporal}");
     }
     let estimates = bench::estimate_error_text(&report.rows);

@@ -455,12 +455,12 @@ fn cache_methods_report_their_render_pass_time() {
     assert!(fields[6].parse::<f64>().is_ok(), "{ic_line}");
 }
 
-/// Each `trc` run is set against the `ic` run with its settings label, or
-/// else `ic` at its defaults, on its own scene and backend; the ratios are
-/// the targets' (ic's time and records over trc's, trc's error and flicker
-/// over ic's).
+/// Each `trc` and `tcg` run is set against the `ic` run with its settings
+/// label, or else `ic` at its defaults, on its own scene and backend; the
+/// ratios are the targets' (ic's time and records over the temporal run's,
+/// its error and flicker over ic's).
 #[test]
-fn trc_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
+fn temporal_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
     let with = |mut r: BenchRow, records: u64, flicker: f64| {
         r.records = records;
         r.flicker = Some(flicker);
@@ -475,6 +475,7 @@ fn trc_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
         with(row("trc", "default", 10.0, 0.021), 100, 0.010),
         with(row("trc", "strata=64x64", 10.0, 0.018), 90, 0.012),
         with(row("trc", "max_life=5", 20.0, 0.020), 250, 0.010),
+        with(row("tcg", "tau_min=0.2", 8.0, 0.022), 50, 0.011),
         elsewhere,
         with(row("path", "spp=4", 5.0, 0.2), 0, 0.3),
     ];
@@ -488,6 +489,7 @@ fn trc_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
             ("default", "default"),
             ("strata=64x64", "strata=64x64"),
             ("default", "max_life=5"),
+            ("default", "tau_min=0.2"),
         ]
     );
     let text = temporal_text(&rows);
@@ -503,6 +505,11 @@ fn trc_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
             .unwrap()
             .contains("9.00× faster, 11.00× fewer records"),
         "{text}"
+    );
+    assert_eq!(
+        text.lines().nth(3).unwrap(),
+        "s tcg tau_min=0.2 against ic default: 5.00× faster, 20.00× fewer records; \
+         error 1.10× (1.10× lit surfaces), flicker 0.55× (0.55× lit surfaces)"
     );
     // A trc run with no ic run on its scene is set against nothing.
     let mut alone = rows[2].clone();

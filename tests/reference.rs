@@ -14,6 +14,7 @@ use radcache::backend::cpu::CpuBackend;
 use radcache::film::{read_exr, Film};
 use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
+use radcache::method::tcg::{TcgSettings, TemporallyCoherentGathering};
 use radcache::method::trc::{TemporalRadianceCaching, TrcSettings};
 use radcache::method::Method;
 use radcache::metrics::{block_bias, rmse, BLOCK};
@@ -114,9 +115,9 @@ fn halved(reference: &Film) -> Film {
     out
 }
 
-/// `ic` and `trc`, at their defaults, against the independent references of
-/// `scene` at `frames` (`trc` renders every frame from 0 up to the last, so
-/// that its records age as in a render). Rendered at 64×64 against the
+/// `ic`, `trc` and `tcg`, at their defaults, against the independent
+/// references of `scene` at `frames` (`trc` and `tcg` render every frame
+/// from 0 up to the last, so that their records age as in a render). Rendered at 64×64 against the
 /// references halved, so blocks of 8×8 pixels are the 16×16 ones of the
 /// references and the block bias is the same measure as
 /// [`check_scene`]'s.
@@ -124,17 +125,20 @@ fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_bloc
     const SIZE: u32 = 64;
     let ic = IrradianceCaching::new(IcSettings::default());
     let trc = TemporalRadianceCaching::new(TrcSettings::default());
+    let tcg = TemporallyCoherentGathering::new(TcgSettings::default());
     let mut ic = renderer(scene_file, Box::new(ic), SIZE, false);
     let mut trc = renderer(scene_file, Box::new(trc), SIZE, false);
+    let mut tcg = renderer(scene_file, Box::new(tcg), SIZE, false);
     let last = frames.iter().copied().max().unwrap_or(0);
     for frame in 0..=last {
         let trc_image = trc.render_frame(frame);
+        let tcg_image = tcg.render_frame(frame);
         if !frames.contains(&frame) {
             continue;
         }
         let reference = halved(&reference_frame(scene, frame));
         let ic_image = ic.render_frame(frame);
-        for (method, image) in [("ic", &ic_image), ("trc", &trc_image)] {
+        for (method, image) in [("ic", &ic_image), ("trc", &trc_image), ("tcg", &tcg_image)] {
             let bias = block_bias(image, &reference, BLOCK / 2);
             eprintln!("{scene} frame {frame}: {method} block bias {bias:.4}");
             assert!(
@@ -153,7 +157,7 @@ fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_bloc
 /// little, so records that never expire stay at 0.9 % by frame 23: the
 /// temporal failures are `tests/trc.rs`'s to catch.
 #[test]
-fn ic_and_trc_match_reference() {
+fn caching_methods_match_reference() {
     check_caching_methods("cube_in_box.glb", "cube_in_box", &[0, 12, 23], 0.02);
 }
 
@@ -161,6 +165,6 @@ fn ic_and_trc_match_reference() {
 /// the glossy spheres differ by BSDF model, so the bound is looser than on
 /// `cube_in_box`: twice the measured bias.
 #[test]
-fn ic_and_trc_match_spheres_reference() {
+fn caching_methods_match_spheres_reference() {
     check_caching_methods("spheres.glb", "spheres", &[0, 12, 23], 0.03);
 }

@@ -368,23 +368,28 @@ pub fn estimate_error_text(rows: &[BenchRow]) -> String {
 
 // ------------------------------------------------- temporal vs per-frame
 
-/// Pairs of a `trc` run and the `ic` run it is measured against (issue 5,
-/// DESIGN "How we measure"): on the same scene and backend, the `ic` run
-/// with the same settings label where there is one (`ic:strata=64x64`
-/// for `trc:strata=64x64`), else `ic` at its defaults; in row order.
+/// The methods that reuse records across frames, each measured against
+/// per-frame `ic`.
+const TEMPORAL_METHODS: [&str; 2] = ["trc", "tcg"];
+
+/// Pairs of a temporal method's run (`trc`, `tcg`) and the `ic` run it is
+/// measured against (issue 5, DESIGN "How we measure"): on the same scene
+/// and backend, the `ic` run with the same settings label where there is
+/// one (`ic:strata=64x64` for `trc:strata=64x64`), else `ic` at its
+/// defaults; in row order.
 pub fn temporal_pairs(rows: &[BenchRow]) -> Vec<(&BenchRow, &BenchRow)> {
-    let ic_with = |trc: &BenchRow, settings: &str| {
+    let ic_with = |run: &BenchRow, settings: &str| {
         rows.iter().find(|r| {
             r.method == "ic"
                 && r.settings == settings
-                && (&r.scene, &r.backend) == (&trc.scene, &trc.backend)
+                && (&r.scene, &r.backend) == (&run.scene, &run.backend)
         })
     };
     rows.iter()
-        .filter(|r| r.method == "trc")
-        .filter_map(|trc| {
-            let ic = ic_with(trc, &trc.settings).or_else(|| ic_with(trc, "default"))?;
-            Some((ic, trc))
+        .filter(|r| TEMPORAL_METHODS.contains(&r.method.as_str()))
+        .filter_map(|run| {
+            let ic = ic_with(run, &run.settings).or_else(|| ic_with(run, "default"))?;
+            Some((ic, run))
         })
         .collect()
 }
@@ -398,16 +403,17 @@ fn ratio_of(a: Option<f64>, b: Option<f64>) -> String {
 }
 
 /// Lines for people: one per [`temporal_pairs`] pair, with the ratios the
-/// temporal method's targets are stated in: `ic`'s time over `trc`'s,
-/// `ic`'s records over `trc`'s, and `trc`'s error and flicker (all pixels,
-/// and without the pixels at directly seen lights) over `ic`'s.
+/// temporal method's targets are stated in: `ic`'s time over the temporal
+/// run's, `ic`'s records over its records, and its error and flicker (all
+/// pixels, and without the pixels at directly seen lights) over `ic`'s.
 pub fn temporal_text(rows: &[BenchRow]) -> String {
     let mut out = String::new();
     for (ic, trc) in temporal_pairs(rows) {
         let _ = writeln!(
             out,
-            "{} trc {} against ic {}: {} faster, {} fewer records; error {} ({} lit surfaces), flicker {} ({} lit surfaces)",
+            "{} {} {} against ic {}: {} faster, {} fewer records; error {} ({} lit surfaces), flicker {} ({} lit surfaces)",
             trc.scene,
+            trc.method,
             trc.settings,
             ic.settings,
             ratio_of(Some(ic.seconds), Some(trc.seconds)),

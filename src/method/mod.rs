@@ -95,11 +95,12 @@ pub struct FrameStats {
     /// path-traced instead (the name predates per-pixel lookups).
     pub fallback_lookups: u64,
     /// Mean lifespan, in frames, of the records computed in the frame (new
-    /// and replacements; temporal methods: TRC Eq. 10–11, at most δt_max;
-    /// `ic`: 1; 0 when none was computed).
+    /// and replacements; `trc`: TRC Eq. 10–11, at most δt_max; `ic`: 1;
+    /// 0 when none was computed, and for `tcg`, whose records have no set
+    /// life: they live while pixels use them).
     pub mean_lifespan: f64,
     /// Records computed in the frame by lifespan: `[n]` records may be used
-    /// in `n` frames (temporal methods; empty for the others).
+    /// in `n` frames (`trc`; empty for the others).
     pub lifespan_histogram: Vec<u64>,
     /// Rays traced in the frame (filled in by the renderer).
     pub rays: u64,

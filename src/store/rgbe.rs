@@ -38,8 +38,18 @@ pub fn decode(rgbe: [u8; 4]) -> Vec3 {
     if e == 0 {
         return Vec3::ZERO;
     }
-    let f = 2f64.powi(i32::from(e) - 136);
-    let ch = |x: u8| ((f64::from(x) + 0.5) * f) as f32;
+    // `(x + ½)·2^k` is exact in f32 for every byte `x` and `k = e − 136 ∈
+    // [−135, 119]`: `2x + 1` has 9 bits and `2^(k−1)` is at least 2^−136,
+    // above f32's smallest step 2^−149. So f32 gives the f64 result's
+    // bits, without f64's `powi` (`tcg` decodes every sample of its
+    // records each frame).
+    let k = i32::from(e) - 136;
+    let f = if k >= -126 {
+        exp2i(k)
+    } else {
+        2f64.powi(k) as f32
+    };
+    let ch = |x: u8| (f32::from(x) + 0.5) * f;
     Vec3::new(ch(r), ch(g), ch(b))
 }
 
@@ -183,6 +193,19 @@ mod tests {
             let bound = c.max_element() / 256.0 * (1.0 + 1e-5);
             let err = (d - c).abs().max_element();
             assert!(err <= bound, "{c:?} → {d:?}: error {err} > {bound}");
+        }
+    }
+
+    /// The f32 decode gives Ward's `(x + ½)·2^(e−136)` computed in f64,
+    /// bit for bit, for every mantissa byte and exponent.
+    #[test]
+    fn decode_in_f32_is_the_f64_formula_exactly() {
+        for e in 1..=255u8 {
+            for x in 0..=255u8 {
+                let want = ((f64::from(x) + 0.5) * 2f64.powi(i32::from(e) - 136)) as f32;
+                let got = decode([x, x, x, e]);
+                assert_eq!(got.x.to_bits(), want.to_bits(), "x {x} e {e}");
+            }
         }
     }
 
