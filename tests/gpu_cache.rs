@@ -36,6 +36,7 @@ use radcache::cache::gather::Strata;
 use radcache::cache::{IrradianceCache, IrradianceRecord, LookupPoint};
 use radcache::film::Film;
 use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::method::tcg::{TcgSettings, TemporallyCoherentGathering};
 use radcache::method::trc::{TemporalGradients, TemporalRadianceCaching, TrcSettings};
 use radcache::method::Method;
 use radcache::render::{FrameSettings, Renderer};
@@ -386,12 +387,19 @@ fn methods() -> Vec<(&'static str, NewMethod)> {
                 ..TrcSettings::default()
             }))
         }),
+        ("tcg", || {
+            Box::new(TemporallyCoherentGathering::new(TcgSettings {
+                ic: small_ic(),
+                ..TcgSettings::default()
+            }))
+        }),
     ]
 }
 
 /// Same GPU rays, CPU vs GPU interpolation: every pixel of every frame
-/// within [`PIXEL_REL_SAME_RAYS`] (only the summation order differs; trc's
-/// used flags, and so its records in later frames, are the same).
+/// within [`PIXEL_REL_SAME_RAYS`] (only the summation order differs; the
+/// temporal methods' used flags, and so their records in later frames,
+/// are the same).
 #[test]
 fn frames_with_gpu_interpolation_equal_cpu_interpolation_on_the_same_rays() {
     for (name, method) in methods() {
@@ -414,7 +422,8 @@ fn frames_with_gpu_interpolation_equal_cpu_interpolation_on_the_same_rays() {
 }
 
 /// `--backend cpu` against `--backend gpu` (GPU rays and GPU interpolation)
-/// with the GPU's BVH2 layout, `ic` and `trc` frames of a built-in scene.
+/// with the GPU's BVH2 layout, `ic`, `trc` and `tcg` frames of a built-in
+/// scene.
 /// The two backends' rays differ
 /// where a record sits on an edge of the room: its gather rays start at
 /// the corner, where the CPU's traversal culls hits nearer than 1e-4 that

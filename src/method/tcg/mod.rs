@@ -30,6 +30,16 @@
 //! A record's irradiance in the frame it is made is `ic`'s, from its
 //! samples at full precision; from the next frame on it is computed from
 //! the stored 8-byte samples, as the paper's records are.
+//!
+//! # Measured
+//! `radcache bench --scenes cube-in-box --size 64x64 --frames 0..400
+//! --reference-spp 256 --methods ic trc tcg` (at 34c0a70): 3.07× faster
+//! than `ic`, the same relative RMSE, 0.56× its flicker; on the 66 moving
+//! balls of `spheres` (48 frames) 1.48× where `trc` is 0.98×. Under a
+//! moving light its block bias is 1.9× `ic`'s: lighting that changes with
+//! no moving object in a record's view reaches the record only as Eq. 2's
+//! `τ_min` share of its samples is shot again each frame (README, "`tcg`
+//! against `ic` and `trc`").
 
 mod select;
 mod state;
