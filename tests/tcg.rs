@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{inward_box, push_quad, scene};
+use common::{inward_box, lit_room, push_quad, scene};
 use glam::{Quat, Vec3, Vec4};
 use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
@@ -48,44 +48,14 @@ fn render(r: &mut Renderer, tcg: &mut TemporallyCoherentGathering, frame: u32) -
     r.with_frame_context(frame, |ctx| tcg.render_frame(ctx))
 }
 
-/// A white room lit by a ceiling panel; with `off_at`, the panel is
-/// scaled to nothing from frame `off_at` on (step key, 24 fps).
-fn lit_room(off_at: Option<u32>) -> Scene {
-    let materials = vec![
-        Material::diffuse("white", Vec3::splat(0.7)),
-        Material::emitter("light", Vec3::splat(20.0)),
-    ];
-    let room = inward_box(Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 2.0, 1.0), 0);
-    let mut panel = Mesh::default();
-    push_quad(
-        &mut panel,
-        Vec3::new(-0.25, 1.9, -0.25),
-        Vec3::X * 0.5,
-        Vec3::Z * 0.5,
-        1,
-    );
-    let channels = off_at
-        .map(|k| {
-            vec![Channel {
-                node: 1,
-                property: Property::Scale,
-                interpolation: Interpolation::Step,
-                times: vec![0.0, (k as f32 - 0.5) / 24.0],
-                values: vec![Vec4::new(1.0, 1.0, 1.0, 0.0), Vec4::ZERO],
-            }]
-        })
-        .unwrap_or_default();
-    let mut s = scene(
-        vec![room, panel],
-        materials,
-        channels,
-        Vec3::new(0.0, 1.0, 0.95),
-        -Vec3::Z,
-        1.2,
-        vec![],
-    );
-    s.frame_count = 64;
-    s
+/// The age of the oldest sample of `tcg`'s records, in frames.
+fn oldest_sample(tcg: &TemporallyCoherentGathering) -> u32 {
+    tcg.records()
+        .iter()
+        .flat_map(|r| &r.samples)
+        .map(|s| s.age())
+        .max()
+        .unwrap_or(0)
 }
 
 /// Every frame after the first, each record that lived on shot exactly
@@ -96,7 +66,7 @@ fn lit_room(off_at: Option<u32>) -> Scene {
 /// sample is shot again (the draw favours the old ones, ∝ 2^age).
 #[test]
 fn records_shoot_again_the_share_of_equation_2_oldest_first() {
-    for scene in [Scene::builtin("cube-in-box").unwrap(), lit_room(None)] {
+    for scene in [Scene::builtin("cube-in-box").unwrap(), lit_room(None, 24.0)] {
         let is_static = scene.animation.channels.is_empty();
         let settings = small(1);
         let mut r = renderer(scene, 12, false);
@@ -136,13 +106,7 @@ fn records_shoot_again_the_share_of_equation_2_oldest_first() {
         if is_static {
             // Ages count frames since each sample was shot: none is older
             // than the frames it took to go round once.
-            let oldest = tcg
-                .records()
-                .iter()
-                .flat_map(|r| &r.samples)
-                .map(|s| s.age())
-                .max()
-                .unwrap();
+            let oldest = oldest_sample(&tcg);
             let round = (1.0 / settings.tau_min).ceil() as u32;
             assert!(oldest <= round, "a sample {oldest} frames old");
         }
@@ -247,19 +211,13 @@ fn a_switched_off_light_leaves_no_indirect_light_once_every_sample_is_shot_again
         ..small(1)
     };
     let rounds = (3.0 / settings.tau_min).ceil() as u32;
-    let mut r = renderer(lit_room(Some(k)), 12, false);
+    let mut r = renderer(lit_room(Some(k), 24.0), 12, false);
     let mut tcg = TemporallyCoherentGathering::new(settings);
     let mut means = Vec::new();
     let mut all_shot_since = None;
     for f in 0..k + rounds {
         means.push(render(&mut r, &mut tcg, f).mean());
-        let oldest = tcg
-            .records()
-            .iter()
-            .flat_map(|r| &r.samples)
-            .map(|s| s.age())
-            .max()
-            .unwrap_or(0);
+        let oldest = oldest_sample(&tcg);
         if f >= k && oldest <= f - k {
             all_shot_since.get_or_insert(f);
         }

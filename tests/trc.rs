@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{inward_box, push_quad, scene};
+use common::{inward_box, lit_room, push_quad, scene};
 use glam::{Vec3, Vec4};
 use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
@@ -52,46 +52,6 @@ fn small_ic() -> IcSettings {
         strata: Strata { theta: 8, phi: 24 },
         ..IcSettings::default()
     }
-}
-
-/// A white room lit by a 0.5 m ceiling panel; with `off_at`, the panel is
-/// scaled to nothing (switched off) from frame `off_at` on (step key).
-fn lit_room(off_at: Option<u32>, fps: f32) -> Scene {
-    let materials = vec![
-        Material::diffuse("white", Vec3::splat(0.7)),
-        Material::emitter("light", Vec3::splat(20.0)),
-    ];
-    let room = inward_box(Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 2.0, 1.0), 0);
-    let mut panel = Mesh::default();
-    push_quad(
-        &mut panel,
-        Vec3::new(-0.25, 1.9, -0.25),
-        Vec3::X * 0.5,
-        Vec3::Z * 0.5,
-        1,
-    );
-    let channels = off_at
-        .map(|k| {
-            vec![Channel {
-                node: 1,
-                property: Property::Scale,
-                interpolation: Interpolation::Step,
-                times: vec![0.0, (k as f32 - 0.5) / fps],
-                values: vec![Vec4::new(1.0, 1.0, 1.0, 0.0), Vec4::ZERO],
-            }]
-        })
-        .unwrap_or_default();
-    let mut s = scene(
-        vec![room, panel],
-        materials,
-        channels,
-        Vec3::new(0.0, 1.0, 0.95),
-        -Vec3::Z,
-        1.2,
-        vec![],
-    );
-    s.frame_count = 64;
-    s
 }
 
 fn render_trc(r: &mut Renderer, trc: &mut TemporalRadianceCaching, frame: u32) -> Film {

@@ -1,9 +1,10 @@
 //! Small scenes built in code for closed-form and brute-force tests.
 #![allow(dead_code)]
 
-use glam::{Quat, Vec3};
+use glam::{Quat, Vec3, Vec4};
 use radcache::scene::{
-    Animation, CameraDef, Channel, Material, Mesh, Node, Object, PunctualLight, Scene, Trs,
+    Animation, CameraDef, Channel, Interpolation, Material, Mesh, Node, Object, Property,
+    PunctualLight, Scene, Trs,
 };
 
 /// Appends the quad `origin + s·u + t·v` (s, t ∈ [0,1]); its front face
@@ -118,4 +119,44 @@ pub fn cpu_renderer(
             ..radcache::render::FrameSettings::default()
         },
     )
+}
+
+/// A white room lit by a 0.5 m ceiling panel; with `off_at`, the panel is
+/// scaled to nothing (switched off) from frame `off_at` on (step key).
+pub fn lit_room(off_at: Option<u32>, fps: f32) -> Scene {
+    let materials = vec![
+        Material::diffuse("white", Vec3::splat(0.7)),
+        Material::emitter("light", Vec3::splat(20.0)),
+    ];
+    let room = inward_box(Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 2.0, 1.0), 0);
+    let mut panel = Mesh::default();
+    push_quad(
+        &mut panel,
+        Vec3::new(-0.25, 1.9, -0.25),
+        Vec3::X * 0.5,
+        Vec3::Z * 0.5,
+        1,
+    );
+    let channels = off_at
+        .map(|k| {
+            vec![Channel {
+                node: 1,
+                property: Property::Scale,
+                interpolation: Interpolation::Step,
+                times: vec![0.0, (k as f32 - 0.5) / fps],
+                values: vec![Vec4::new(1.0, 1.0, 1.0, 0.0), Vec4::ZERO],
+            }]
+        })
+        .unwrap_or_default();
+    let mut s = scene(
+        vec![room, panel],
+        materials,
+        channels,
+        Vec3::new(0.0, 1.0, 0.95),
+        -Vec3::Z,
+        1.2,
+        vec![],
+    );
+    s.frame_count = 64;
+    s
 }

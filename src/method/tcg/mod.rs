@@ -44,6 +44,7 @@
 mod select;
 mod state;
 
+use super::carried;
 use super::ic::{
     dynamic_objects, primary_candidates, scene_bounds, Candidate, Gathered, IcSettings,
     IrradianceCaching, RECORD_STREAM,
@@ -396,7 +397,7 @@ impl TemporallyCoherentGathering {
             last_frames: Vec::new(),
             // Every record's samples may have changed: all are put again.
             state: Some(StateChanges {
-                global: state::encode_global(self.next_id),
+                global: carried::encode_next_id(self.next_id),
                 put: records
                     .iter()
                     .map(|r| (r.record.id, state::encode_record(r)))
@@ -493,29 +494,13 @@ impl Method for TemporallyCoherentGathering {
     /// id order (cache order: survivors keep their order and new records
     /// get increasing ids).
     fn restore_state(&mut self, s: MethodState) -> Result<(), StateError> {
-        let next_id = state::decode_global(&s.global).map_err(|detail| StateError {
-            record: None,
-            detail,
-        })?;
         let cells = self.settings.ic.strata.count();
-        let mut records: Vec<TcgRecord> = Vec::with_capacity(s.records.len());
-        for (id, bytes) in &s.records {
-            let bad = |detail: String| StateError {
-                record: Some(*id),
-                detail,
-            };
-            let r = state::decode_record(bytes, cells).map_err(bad)?;
-            if r.record.id != *id || r.record.id >= next_id {
-                return Err(bad(format!(
-                    "record state holds id {} (next id {next_id})",
-                    r.record.id
-                )));
-            }
-            if records.last().is_some_and(|p| p.record.id >= r.record.id) {
-                return Err(bad("records out of id order".into()));
-            }
-            records.push(r);
-        }
+        let (records, next_id) = carried::restore(
+            "tcg",
+            &s,
+            |bytes| state::decode_record(bytes, cells),
+            |r| r.record.id,
+        )?;
         self.records = records;
         self.next_id = next_id;
         self.last_frame = Some(s.frame);

@@ -11,11 +11,11 @@
 use super::TcgRecord;
 use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceRecord;
+use crate::method::carried::aligned;
 use crate::method::ic::Candidate;
 use crate::store::samples::SampleBlock;
 use glam::{Mat4, Vec3};
 use rkyv::rancor;
-use rkyv::util::AlignedVec;
 
 #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
 struct RecordState {
@@ -33,11 +33,6 @@ struct RecordState {
     used: bool,
     sample_count: u32,
     samples_zstd: Vec<u8>,
-}
-
-#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
-struct GlobalState {
-    next_id: u64,
 }
 
 pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
@@ -68,8 +63,7 @@ pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
 /// strata). Position, normal and irradiance are its creation point's and
 /// zero until its next frame computes them.
 pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, String> {
-    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
-    aligned.extend_from_slice(bytes);
+    let aligned = aligned(bytes);
     let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
         .map_err(|e| format!("tcg record state: {e}"))?;
     if s.sample_count as usize != cells {
@@ -115,18 +109,4 @@ pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, Str
         samples,
         used: s.used,
     })
-}
-
-pub(super) fn encode_global(next_id: u64) -> Vec<u8> {
-    rkyv::to_bytes::<rancor::Error>(&GlobalState { next_id })
-        .expect("serialising plain data to memory cannot fail")
-        .into_vec()
-}
-
-pub(super) fn decode_global(bytes: &[u8]) -> Result<u64, String> {
-    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
-    aligned.extend_from_slice(bytes);
-    rkyv::from_bytes::<GlobalState, rancor::Error>(&aligned)
-        .map(|g| g.next_id)
-        .map_err(|e| format!("tcg state: {e}"))
 }

@@ -70,6 +70,7 @@ mod estimate;
 pub mod estimate_error;
 mod state;
 
+use super::carried;
 use super::ic::IrradianceCaching;
 use super::ic::{
     dynamic_objects, limit_gradient, primary_candidates, scene_bounds, Candidate, Gathered,
@@ -558,7 +559,7 @@ impl TemporalRadianceCaching {
         stats.lifespan_histogram = lifespans;
         stats.records_alive = alive.len() as u64;
         if let Some(k) = kept.as_mut() {
-            k.state.as_mut().expect("set above").global = state::encode_global(self.next_id);
+            k.state.as_mut().expect("set above").global = carried::encode_next_id(self.next_id);
         }
         self.kept = kept;
         self.records = alive;
@@ -712,31 +713,8 @@ impl Method for TemporalRadianceCaching {
     /// is needed again (a record replaced at `t_l ≤ frame` was last used at
     /// `t_l − 1 < frame + 1`).
     fn restore_state(&mut self, s: MethodState) -> Result<(), StateError> {
-        let next_id = state::decode_global(&s.global).map_err(|detail| StateError {
-            record: None,
-            detail,
-        })?;
-        let mut records = Vec::with_capacity(s.records.len());
-        for (id, bytes) in &s.records {
-            let bad = |detail: String| StateError {
-                record: Some(*id),
-                detail,
-            };
-            let r = state::decode_record(bytes).map_err(bad)?;
-            if r.record.id != *id || r.record.id >= next_id {
-                return Err(bad(format!(
-                    "record state holds id {} (next id {next_id})",
-                    r.record.id
-                )));
-            }
-            if records
-                .last()
-                .is_some_and(|p: &TemporalRecord| p.record.id >= r.record.id)
-            {
-                return Err(bad("records out of id order".into()));
-            }
-            records.push(r);
-        }
+        let (records, next_id) =
+            carried::restore("trc", &s, state::decode_record, |r| r.record.id)?;
         self.records = records;
         self.next_id = next_id;
         self.last_frame = Some(s.frame);

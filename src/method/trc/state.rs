@@ -6,10 +6,10 @@
 use super::TemporalRecord;
 use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceRecord;
+use crate::method::carried::aligned;
 use crate::method::ic::Candidate;
 use glam::Vec3;
 use rkyv::rancor;
-use rkyv::util::AlignedVec;
 
 /// Everything of a [`TemporalRecord`], in plain arrays.
 #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
@@ -38,12 +38,6 @@ pub(super) struct RecordState {
     d_grad_translation: [[f32; 3]; 3],
     replaces: Option<u64>,
     used: bool,
-}
-
-/// The method-wide state.
-#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
-pub(super) struct GlobalState {
-    next_id: u64,
 }
 
 fn a(v: Vec3) -> [f32; 3] {
@@ -91,8 +85,7 @@ pub(super) fn encode_record(r: &TemporalRecord) -> Vec<u8> {
 }
 
 pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
-    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
-    aligned.extend_from_slice(bytes);
+    let aligned = aligned(bytes);
     let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
         .map_err(|e| format!("trc record state: {e}"))?;
     if s.last_valid < s.created_frame {
@@ -133,18 +126,4 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
         replaces: s.replaces,
         used: s.used,
     })
-}
-
-pub(super) fn encode_global(next_id: u64) -> Vec<u8> {
-    rkyv::to_bytes::<rancor::Error>(&GlobalState { next_id })
-        .expect("serialising plain data to memory cannot fail")
-        .into_vec()
-}
-
-pub(super) fn decode_global(bytes: &[u8]) -> Result<u64, String> {
-    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
-    aligned.extend_from_slice(bytes);
-    rkyv::from_bytes::<GlobalState, rancor::Error>(&aligned)
-        .map(|g| g.next_id)
-        .map_err(|e| format!("trc state: {e}"))
 }

@@ -1,0 +1,65 @@
+//! What the methods that carry a cache from frame to frame (`trc`, `tcg`)
+//! share of their carried state's bytes ([`super::StateChanges`]): the
+//! method-wide part, the next record id, as an rkyv archive; and reading
+//! the records back in id order. Each method encodes its records itself.
+//! The layouts are part of the store schema (`migrations/`).
+
+use super::{MethodState, StateError};
+use crate::cache::RecordId;
+use rkyv::rancor;
+use rkyv::util::AlignedVec;
+
+/// The method-wide state.
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct GlobalState {
+    next_id: u64,
+}
+
+/// `bytes` copied where an rkyv archive may be read from (aligned).
+pub(crate) fn aligned(bytes: &[u8]) -> AlignedVec<16> {
+    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+    aligned.extend_from_slice(bytes);
+    aligned
+}
+
+pub(crate) fn encode_next_id(next_id: RecordId) -> Vec<u8> {
+    rkyv::to_bytes::<rancor::Error>(&GlobalState { next_id })
+        .expect("serialising plain data to memory cannot fail")
+        .into_vec()
+}
+
+/// The records of `state` decoded by `decode` and the next record id,
+/// checked: each record holds the id it is stored under, below the next
+/// id, in increasing order. Errors name `method` and the record.
+pub(crate) fn restore<R>(
+    method: &str,
+    state: &MethodState,
+    decode: impl Fn(&[u8]) -> Result<R, String>,
+    id_of: impl Fn(&R) -> RecordId,
+) -> Result<(Vec<R>, RecordId), StateError> {
+    let next_id = rkyv::from_bytes::<GlobalState, rancor::Error>(&aligned(&state.global))
+        .map(|g| g.next_id)
+        .map_err(|e| StateError {
+            record: None,
+            detail: format!("{method} state: {e}"),
+        })?;
+    let mut records: Vec<R> = Vec::with_capacity(state.records.len());
+    for (id, bytes) in &state.records {
+        let bad = |detail: String| StateError {
+            record: Some(*id),
+            detail,
+        };
+        let r = decode(bytes).map_err(bad)?;
+        let held = id_of(&r);
+        if held != *id || held >= next_id {
+            return Err(bad(format!(
+                "record state holds id {held} (next id {next_id})"
+            )));
+        }
+        if records.last().is_some_and(|p| id_of(p) >= held) {
+            return Err(bad("records out of id order".into()));
+        }
+        records.push(r);
+    }
+    Ok((records, next_id))
+}
