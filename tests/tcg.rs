@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{inward_box, lit_room, push_quad, scene};
+use common::{converged_sequence, inward_box, lit_room, push_quad, scene};
 use glam::{Quat, Vec3, Vec4};
 use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
@@ -232,19 +232,6 @@ fn a_switched_off_light_leaves_no_indirect_light_once_every_sample_is_shot_again
     for (f, m) in means.iter().enumerate().skip(clean) {
         assert!(*m == 0.0, "indirect light left at frame {f}: {m}");
     }
-}
-
-/// A converged `path` sequence with the same random numbers every frame
-/// (the flicker yardstick, DESIGN.md "Measuring").
-fn converged_sequence(scene: Scene, size: u32, frames: std::ops::Range<u32>) -> Vec<Film> {
-    let mut r = renderer(scene, size, true);
-    let mut path = PathTracer::new(PathSettings {
-        spp: 256,
-        ..PathSettings::default()
-    });
-    frames
-        .map(|f| r.with_frame_context(f, |ctx| path.render_frame(ctx)))
-        .collect()
 }
 
 /// Over 16 frames of cube-in-box, `tcg` computes far fewer gather rays

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{inward_box, lit_room, push_quad, scene};
+use common::{converged_sequence, inward_box, lit_room, push_quad, scene};
 use glam::{Vec3, Vec4};
 use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
@@ -416,19 +416,6 @@ fn switched_off_light_leaves_no_indirect_after_max_life() {
 
 /// Over 16 frames of cube-in-box, `trc` computes far fewer records than
 /// `ic` and flickers less against a same-pattern `path` reference.
-/// The flicker yardstick: `path` at 256 spp with the same random sequence
-/// in every frame (DESIGN.md "Measuring").
-fn converged_sequence(scene: Scene, size: u32, frames: std::ops::Range<u32>) -> Vec<Film> {
-    let mut r = renderer(scene, size, 24.0, true);
-    let mut path = PathTracer::new(PathSettings {
-        spp: 256,
-        ..PathSettings::default()
-    });
-    frames
-        .map(|f| r.with_frame_context(f, |ctx| path.render_frame(ctx)))
-        .collect()
-}
-
 #[test]
 fn trc_computes_fewer_records_and_flickers_less_than_ic() {
     let (size, frames) = (16, 0..16u32);

@@ -2,6 +2,11 @@
 #![allow(dead_code)]
 
 use glam::{Quat, Vec3, Vec4};
+use radcache::backend::cpu::CpuBackend;
+use radcache::film::Film;
+use radcache::method::path::{PathSettings, PathTracer};
+use radcache::method::Method;
+use radcache::render::{FrameSettings, Renderer};
 use radcache::scene::{
     Animation, CameraDef, Channel, Interpolation, Material, Mesh, Node, Object, Property,
     PunctualLight, Scene, Trs,
@@ -159,4 +164,29 @@ pub fn lit_room(off_at: Option<u32>, fps: f32) -> Scene {
     );
     s.frame_count = 64;
     s
+}
+
+/// `path` at 256 spp over `frames` of `scene` (`size`², 24 fps) with the
+/// same random sequence in every frame: the flicker yardstick (DESIGN.md
+/// "Measuring").
+pub fn converged_sequence(scene: Scene, size: u32, frames: std::ops::Range<u32>) -> Vec<Film> {
+    let mut r = Renderer::new(
+        scene,
+        Box::new(PathTracer::new(PathSettings::default())),
+        Box::new(CpuBackend::new()),
+        FrameSettings {
+            width: size,
+            height: size,
+            fps: 24.0,
+            same_pattern: true,
+            ..FrameSettings::default()
+        },
+    );
+    let mut path = PathTracer::new(PathSettings {
+        spp: 256,
+        ..PathSettings::default()
+    });
+    frames
+        .map(|f| r.with_frame_context(f, |ctx| path.render_frame(ctx)))
+        .collect()
 }
