@@ -282,6 +282,7 @@ impl TemporallyCoherentGathering {
         &self,
         ctx: &FrameContext,
         alive: Vec<(TcgRecord, (GatherPoint, Frame))>,
+        dynamic: &[bool],
     ) -> Vec<TcgRecord> {
         let strata = self.settings.ic.strata;
         let picks: Vec<Vec<u32>> = alive
@@ -303,7 +304,6 @@ impl TemporallyCoherentGathering {
             ranges.push(start..queries.len());
         }
         let results = trace_radiance_parallel(ctx, self.settings.ic.gather_length, queries.clone());
-        let dynamic = dynamic_objects(ctx);
         alive
             .into_par_iter()
             .zip(picks)
@@ -424,7 +424,8 @@ impl Method for TemporallyCoherentGathering {
         let mut removed = Vec::new();
         let start = Instant::now();
         let alive = self.survivors(ctx, &mut stats, &mut removed);
-        let mut records = self.update(ctx, alive);
+        let dynamic = dynamic_objects(ctx);
+        let mut records = self.update(ctx, alive, &dynamic);
         stats.records_reused = records.len() as u64;
         stats
             .phase_seconds
@@ -437,7 +438,6 @@ impl Method for TemporallyCoherentGathering {
             cache.insert(r.record.clone());
         }
         let first_new = records.len();
-        let dynamic = dynamic_objects(ctx);
         self.ic.fill_from(
             ctx,
             &mut cache,
