@@ -6,6 +6,8 @@ use crate::bench;
 use crate::cache::gather::Strata;
 use crate::integrator::PathLength;
 use crate::method::ic::IcSettings;
+use crate::method::movies::global::GlobalSettings;
+use crate::method::movies::MoviesSettings;
 use crate::method::path::PathSettings;
 use crate::method::tcg::TcgSettings;
 use crate::method::trc::{TemporalGradients, TrcSettings};
@@ -111,6 +113,8 @@ pub enum MethodName {
     Trc,
     /// Temporally coherent final gathering (Tawara et al., 2004): records keep their samples and re-shoot a share of them each frame.
     Tcg,
+    /// Texture movies with a coarse radiosity global pass (Martín, Pueyo & Tost, 2003): per visible triangle side a texture over time; static shadows found once per movie.
+    Movies,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -164,6 +168,8 @@ pub struct RenderArgs {
     pub trc: TrcArgs,
     #[command(flatten)]
     pub tcg: TcgArgs,
+    #[command(flatten)]
+    pub movies: MoviesArgs,
     /// Record the render as job NAME in the store and resume it if it was interrupted
     /// (frames already finished are skipped). The store is --db, default ./radcache.db.
     #[arg(long, value_name = "NAME", value_parser = parse_job_name)]
@@ -231,6 +237,29 @@ pub struct TcgArgs {
     /// §4.2: a record with more usable neighbours than this is removed as redundant (their example: 10).
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(0..=1_000_000))]
     pub tcg_max_neighbours: u32,
+}
+
+/// Settings of `--method movies`.
+#[derive(Args, Debug)]
+pub struct MoviesArgs {
+    /// Shadow samples per texel: sample points on the lights (the paper's N, §3.1), at most 64.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub movies_shadow_samples: u32,
+    /// Texels across a pixel's footprint (§3.1: at least one texel covers one pixel).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
+    pub movies_texels_per_pixel: f32,
+    /// Finest texture, texels along a triangle's edge.
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub movies_max_resolution: u32,
+    /// Global pass: grid spacing as a fraction of the static scene's diagonal.
+    #[arg(long, default_value_t = 1.0 / 32.0, value_parser = parse_positive)]
+    pub movies_spacing: f32,
+    /// Global pass: links (gather rays) of a grid vertex.
+    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub movies_links: u32,
+    /// Global pass: bounces of indirect light (Jacobi iterations).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(0..=64))]
+    pub movies_bounces: u32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -605,6 +634,19 @@ fn render_method(args: &RenderArgs) -> MethodSettings {
             tau_min: args.tcg.tcg_tau_min,
             tau_max: args.tcg.tcg_tau_max,
             max_neighbours: args.tcg.tcg_max_neighbours,
+        }),
+        MethodName::Movies => MethodSettings::Movies(MoviesSettings {
+            spp: args.spp.unwrap_or(MoviesSettings::default().spp),
+            shadow_samples: args.movies.movies_shadow_samples,
+            texels_per_pixel: args.movies.movies_texels_per_pixel,
+            max_resolution: args.movies.movies_max_resolution,
+            global: GlobalSettings {
+                spacing: args.movies.movies_spacing,
+                links: args.movies.movies_links,
+                bounces: args.movies.movies_bounces,
+                ..GlobalSettings::default()
+            },
+            length,
         }),
     }
 }

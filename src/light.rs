@@ -28,6 +28,15 @@ enum Source {
     Point(usize),
 }
 
+/// A light as [`LightSampler::source_of`] names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightSource {
+    /// An emitting triangle (snapshot triangle id).
+    Triangle(u32),
+    /// A punctual light (index into `Snapshot::lights`, as into `Scene::lights`).
+    Point(usize),
+}
+
 /// A point on a light as seen from a shading point.
 #[derive(Clone, Copy, Debug)]
 pub struct LightSample {
@@ -170,6 +179,25 @@ impl LightSampler {
             pick: u.x,
             u: Vec2::new(x, u.y),
         }
+    }
+
+    /// The light that pick value `pick` (a [`LightChoice::pick`]) selects,
+    /// for callers that must know whether it moves (`movies` keeps the
+    /// shadows of lights that do not).
+    pub fn source_of(&self, pick: f32) -> Option<LightSource> {
+        self.source_at(pick).map(|k| match self.sources[k] {
+            Source::Triangle { id, .. } => LightSource::Triangle(id),
+            Source::Point(i) => LightSource::Point(i),
+        })
+    }
+
+    /// A fingerprint of the pick distribution: equal for two samplers
+    /// whose picks map every `u` to the same source (a light whose power
+    /// changed changes it).
+    pub fn pick_fingerprint(&self) -> u64 {
+        self.cdf.iter().fold(self.cdf.len() as u64, |h, c| {
+            crate::sampling::mix64(h ^ u64::from(c.to_bits()))
+        })
     }
 
     /// The source that pick value `pick` ∈ [0, 1) selects.

@@ -9,6 +9,7 @@ use crate::backend::RayBackend;
 use crate::film::{self, Film};
 use crate::light::LightSampler;
 use crate::method::ic::{IcSettings, IrradianceCaching};
+use crate::method::movies::{MoviesSettings, TextureMovies};
 use crate::method::path::{PathSettings, PathTracer};
 use crate::method::tcg::{TcgSettings, TemporallyCoherentGathering};
 use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
@@ -56,6 +57,7 @@ pub enum MethodSettings {
     Ic(IcSettings),
     Trc(TrcSettings),
     Tcg(TcgSettings),
+    Movies(MoviesSettings),
 }
 
 impl MethodSettings {
@@ -66,6 +68,7 @@ impl MethodSettings {
             MethodSettings::Ic(_) => "ic",
             MethodSettings::Trc(_) => "trc",
             MethodSettings::Tcg(_) => "tcg",
+            MethodSettings::Movies(_) => "movies",
         }
     }
 
@@ -76,6 +79,7 @@ impl MethodSettings {
             MethodSettings::Ic(s) => s.spp,
             MethodSettings::Trc(s) => s.ic.spp,
             MethodSettings::Tcg(s) => s.ic.spp,
+            MethodSettings::Movies(s) => s.spp,
         }
     }
 
@@ -85,6 +89,7 @@ impl MethodSettings {
             MethodSettings::Ic(s) => Box::new(IrradianceCaching::new(s.clone())),
             MethodSettings::Trc(s) => Box::new(TemporalRadianceCaching::new(s.clone())),
             MethodSettings::Tcg(s) => Box::new(TemporallyCoherentGathering::new(s.clone())),
+            MethodSettings::Movies(s) => Box::new(TextureMovies::new(s.clone())),
         }
     }
 }

@@ -13,6 +13,7 @@
 use radcache::backend::cpu::CpuBackend;
 use radcache::film::{read_exr, Film};
 use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::method::movies::{MoviesSettings, TextureMovies};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::method::tcg::{TcgSettings, TemporallyCoherentGathering};
 use radcache::method::trc::{TemporalRadianceCaching, TrcSettings};
@@ -126,19 +127,27 @@ fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_bloc
     let ic = IrradianceCaching::new(IcSettings::default());
     let trc = TemporalRadianceCaching::new(TrcSettings::default());
     let tcg = TemporallyCoherentGathering::new(TcgSettings::default());
+    let movies = TextureMovies::new(MoviesSettings::default());
     let mut ic = renderer(scene_file, Box::new(ic), SIZE, false);
+    let mut movies = renderer(scene_file, Box::new(movies), SIZE, false);
     let mut trc = renderer(scene_file, Box::new(trc), SIZE, false);
     let mut tcg = renderer(scene_file, Box::new(tcg), SIZE, false);
     let last = frames.iter().copied().max().unwrap_or(0);
     for frame in 0..=last {
         let trc_image = trc.render_frame(frame);
         let tcg_image = tcg.render_frame(frame);
+        let movies_image = movies.render_frame(frame);
         if !frames.contains(&frame) {
             continue;
         }
         let reference = halved(&reference_frame(scene, frame));
         let ic_image = ic.render_frame(frame);
-        for (method, image) in [("ic", &ic_image), ("trc", &trc_image), ("tcg", &tcg_image)] {
+        for (method, image) in [
+            ("ic", &ic_image),
+            ("trc", &trc_image),
+            ("tcg", &tcg_image),
+            ("movies", &movies_image),
+        ] {
             let bias = block_bias(image, &reference, BLOCK / 2);
             eprintln!("{scene} frame {frame}: {method} block bias {bias:.4}");
             assert!(

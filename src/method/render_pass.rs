@@ -36,10 +36,10 @@ use std::sync::atomic::AtomicBool;
 pub(crate) struct Surface<'a> {
     p: Vec3,
     ng: Vec3,
-    wo: Vec3,
+    pub(crate) wo: Vec3,
     pub(crate) bsdf: Bsdf,
-    material: &'a crate::scene::Material,
-    triangle: &'a crate::scene::Triangle,
+    pub(crate) material: &'a crate::scene::Material,
+    pub(crate) triangle: &'a crate::scene::Triangle,
 }
 
 impl<'a> Surface<'a> {
@@ -146,17 +146,22 @@ struct Deferred {
 /// the edge of a seen light: [`pixels`]) with their camera rays, random
 /// streams (positioned after the jitter) and first hits.
 #[derive(Default)]
-struct PrimarySamples {
-    samples: Vec<PixelSample>,
-    rays: Vec<Ray>,
-    rngs: Vec<Rng>,
-    hits: Vec<Hit>,
+pub(crate) struct PrimarySamples {
+    pub(crate) samples: Vec<PixelSample>,
+    pub(crate) rays: Vec<Ray>,
+    pub(crate) rngs: Vec<Rng>,
+    pub(crate) hits: Vec<Hit>,
 }
 
 impl PrimarySamples {
     /// The `spp` samples of the `count` pixels from `first`, then the extra
     /// ones of the edge pixels among them, which the returned edges resolve.
-    fn trace(ctx: &FrameContext, first: u32, count: u32, spp: u32) -> (Self, EmitterEdges) {
+    pub(crate) fn trace(
+        ctx: &FrameContext,
+        first: u32,
+        count: u32,
+        spp: u32,
+    ) -> (Self, EmitterEdges) {
         let mut primary = PrimarySamples::default();
         primary.add(ctx, &pixels::tile_samples(first, count, spp));
         // The first hits decide which pixels are on a light's edge.
@@ -180,7 +185,7 @@ impl PrimarySamples {
         self.samples.extend_from_slice(samples);
     }
 
-    fn surfaces<'a>(&self, ctx: &'a FrameContext) -> Vec<Option<Surface<'a>>> {
+    pub(crate) fn surfaces<'a>(&self, ctx: &'a FrameContext) -> Vec<Option<Surface<'a>>> {
         self.rays
             .iter()
             .zip(&self.hits)
@@ -437,7 +442,7 @@ impl<'a> TileShading<'a> {
             let Some(surface) = surface.as_ref().filter(|s| !s.bsdf.is_black()) else {
                 continue;
             };
-            if let Some((shadow, contribution)) = direct_light(ctx, surface, choice) {
+            if let Some((shadow, contribution)) = direct_light(ctx, surface, choice, true) {
                 batch.rays.push(shadow);
                 batch.targets.push((i, contribution));
             }
@@ -495,8 +500,14 @@ impl<'a> TileShading<'a> {
 /// uniform in solid angle: this light is seen) for the whole
 /// BSDF: the diffuse lobe unweighted (its emission hits are never counted
 /// elsewhere: the cache excludes them), the glossy lobe MIS-weighted against
-/// [`glossy_query`]'s lobe sampling.
-fn direct_light(ctx: &FrameContext, s: &Surface, choice: LightChoice) -> Option<(Ray, Vec3)> {
+/// [`glossy_query`]'s lobe sampling. Without `with_diffuse`, the glossy
+/// lobe's part alone (`movies`, whose textures hold the diffuse part).
+pub(crate) fn direct_light(
+    ctx: &FrameContext,
+    s: &Surface,
+    choice: LightChoice,
+    with_diffuse: bool,
+) -> Option<(Ray, Vec3)> {
     let ls = ctx
         .lights
         .sample(ctx.snapshot, s.p, choice, TriangleSampling::SolidAngle)?;
@@ -504,7 +515,11 @@ fn direct_light(ctx: &FrameContext, s: &Surface, choice: LightChoice) -> Option<
     if cos <= 0.0 || s.wo.dot(s.bsdf.normal()) <= 0.0 {
         return None;
     }
-    let diffuse = s.bsdf.diffuse_albedo() * FRAC_1_PI;
+    let diffuse = if with_diffuse {
+        s.bsdf.diffuse_albedo() * FRAC_1_PI
+    } else {
+        Vec3::ZERO
+    };
     let specular = s.bsdf.eval_specular(s.wo, ls.wi);
     let w = if ls.is_delta || !s.bsdf.has_specular() {
         1.0
@@ -521,7 +536,7 @@ fn direct_light(ctx: &FrameContext, s: &Surface, choice: LightChoice) -> Option<
 
 /// The glossy lobe's indirect and MIS-weighted direct light, by sampling
 /// the lobe and path tracing on.
-fn glossy_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> {
+pub(crate) fn glossy_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> {
     if !s.bsdf.has_specular() {
         return None;
     }

@@ -5,6 +5,7 @@
 
 use crate::cache::gather::Strata;
 use crate::method::ic::IcSettings;
+use crate::method::movies::{MoviesSettings, MAX_SHADOW_SAMPLES};
 use crate::method::path::PathSettings;
 use crate::method::tcg::TcgSettings;
 use crate::method::trc::{TemporalGradients, TrcSettings};
@@ -66,6 +67,19 @@ pub const METHODS: &[MethodInfo] = &[
             ("min_spacing", "2"),
             ("max_spacing", "64"),
             ("gradients", "1"),
+            ("max_depth", "8"),
+        ],
+    },
+    MethodInfo {
+        name: "movies",
+        keys: &[
+            ("spp", "16"),
+            ("shadow_samples", "16"),
+            ("texels_per_pixel", "1"),
+            ("max_resolution", "256"),
+            ("spacing", "0.03125"),
+            ("links", "128"),
+            ("bounces", "8"),
             ("max_depth", "8"),
         ],
     },
@@ -181,6 +195,7 @@ pub fn method_settings<'a>(
         "ic" => MethodSettings::Ic(IcSettings::default()),
         "trc" => MethodSettings::Trc(TrcSettings::default()),
         "tcg" => MethodSettings::Tcg(TcgSettings::default()),
+        "movies" => MethodSettings::Movies(MoviesSettings::default()),
         _ => {
             return Err(MethodError::UnknownMethod {
                 name: method.into(),
@@ -202,6 +217,7 @@ fn apply(settings: &mut MethodSettings, key: &str, v: &str) -> Result<(), Method
         MethodSettings::Ic(s) => ic_setting(method, key, v, s)?,
         MethodSettings::Trc(s) => trc_setting(method, key, v, s)?,
         MethodSettings::Tcg(s) => tcg_setting(method, key, v, s)?,
+        MethodSettings::Movies(s) => movies_setting(method, key, v, s)?,
     };
     if !known {
         return Err(MethodError::UnknownKey {
@@ -268,6 +284,28 @@ fn tcg_setting(method: &str, key: &str, v: &str, s: &mut TcgSettings) -> Result<
         "tau_max" => s.tau_max = value(method, key, v, 0.0..1.000_001)?,
         "max_neighbours" => s.max_neighbours = value(method, key, v, 0..1_000_001)?,
         _ => return ic_setting(method, key, v, &mut s.ic),
+    }
+    Ok(true)
+}
+
+/// Applies `movies`' setting `key = v` to `s`; `false` when `key` is
+/// none of them.
+fn movies_setting(
+    method: &str,
+    key: &str,
+    v: &str,
+    s: &mut MoviesSettings,
+) -> Result<bool, MethodError> {
+    match key {
+        "spp" => s.spp = value(method, key, v, 1..1_000_001)?,
+        "shadow_samples" => s.shadow_samples = value(method, key, v, 1..MAX_SHADOW_SAMPLES + 1)?,
+        "texels_per_pixel" => s.texels_per_pixel = value(method, key, v, 0.01..16.000_001)?,
+        "max_resolution" => s.max_resolution = value(method, key, v, 1..1025)?,
+        "spacing" => s.global.spacing = value(method, key, v, 0.001..1.000_001)?,
+        "links" => s.global.links = value(method, key, v, 1..1025)?,
+        "bounces" => s.global.bounces = value(method, key, v, 0..65)?,
+        "max_depth" => s.length.max_depth = Some(value(method, key, v, 0..10_001)?),
+        _ => return Ok(false),
     }
     Ok(true)
 }

@@ -144,6 +144,7 @@ fn gather_strata(method: &MethodSettings) -> Option<crate::cache::gather::Strata
         MethodSettings::Ic(s) => Some(s.strata),
         MethodSettings::Trc(s) => Some(s.ic.strata),
         MethodSettings::Tcg(s) => Some(s.ic.strata),
+        MethodSettings::Movies(_) => None,
     }
 }
 

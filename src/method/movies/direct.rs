@@ -1,0 +1,648 @@
+//! Direct irradiance at a set of surface points (the texels of a movie,
+//! the vertices of the global pass) with the visibility of static and
+//! moving blockers kept apart (paper §5, Fig. 6): which of a point's
+//! shadow samples static blockers stop is found once, when its movie
+//! opens, and each later frame only the moving blockers are tested, and
+//! only on the samples whose segment passes through a moving object's
+//! bounding box (the paper's shaft culling).
+//!
+//! Departure: the paper keeps, per texel, only the fraction of its samples
+//! that each set of blockers stops (`Ts`, `Td`: transmittance textures
+//! drawn by the graphics hardware) and merges them with
+//! `T = (max(Ts,Td) + min(1,Ts+Td))/2`, because which samples were stopped
+//! is lost (its Fig. 7). We keep one bit per sample, so the merge is
+//! exact: a sample is dark if either set stops it. [`paper_merge`] is the
+//! paper's formula, whose two terms bound the exact merge (a unit test
+//! checks it).
+
+use super::super::FrameContext;
+use crate::backend::{Hit, Ray};
+use crate::integrator::offset_origin;
+use crate::light::{LightSource, TriangleSampling};
+use crate::sampling::{Rng, SampleKey, Stratified2d};
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// The most shadow samples a point may take (one bit each in a `u64`).
+pub const MAX_SHADOW_SAMPLES: u32 = 64;
+
+/// A surface point whose direct irradiance is wanted.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadePoint {
+    pub p: Vec3,
+    /// Shading normal, on the side the irradiance is wanted for.
+    pub n: Vec3,
+    /// Geometric normal on the same side.
+    pub ng: Vec3,
+    /// The point's random streams (the same in every frame: a point that
+    /// does not move sees the same light samples, and its static shadows
+    /// stay valid).
+    pub item: u64,
+}
+
+/// An axis-aligned box.
+pub type Aabb = (Vec3, Vec3);
+
+/// What moves in one frame: the bounding boxes of the moving objects, and
+/// which lights do not move (their shadow samples may be kept).
+pub struct Blockers {
+    pub boxes: Vec<Aabb>,
+    /// Bounding box of the lights that do not move (`None`: there are none).
+    pub static_lights: Option<Aabb>,
+    static_count: usize,
+    static_point_light: Vec<bool>,
+    pick_fingerprint: u64,
+}
+
+impl Blockers {
+    pub fn new(ctx: &FrameContext) -> Self {
+        let snapshot = ctx.snapshot;
+        let mut boxes: Vec<Option<Aabb>> = vec![None; ctx.scene.objects.len()];
+        for (i, tri) in snapshot
+            .triangles
+            .iter()
+            .enumerate()
+            .skip(snapshot.static_count)
+        {
+            let b = &mut boxes[snapshot.tri_object[i] as usize];
+            for p in tri.p {
+                let (lo, hi) = b.get_or_insert((p, p));
+                *lo = lo.min(p);
+                *hi = hi.max(p);
+            }
+        }
+        let static_point_light: Vec<bool> = ctx
+            .scene
+            .lights
+            .iter()
+            .map(|l| !ctx.scene.node_is_dynamic(l.node))
+            .collect();
+        let mut static_lights: Option<Aabb> = None;
+        let mut grow = |p: Vec3| {
+            let (lo, hi) = static_lights.get_or_insert((p, p));
+            *lo = lo.min(p);
+            *hi = hi.max(p);
+        };
+        for id in ctx.lights.emitting_triangles() {
+            if id < snapshot.static_count {
+                snapshot.triangles[id].p.into_iter().for_each(&mut grow);
+            }
+        }
+        for (light, &fixed) in snapshot.lights.iter().zip(&static_point_light) {
+            if fixed {
+                grow(light.position);
+            }
+        }
+        Blockers {
+            boxes: boxes.into_iter().flatten().collect(),
+            static_lights,
+            static_count: snapshot.static_count,
+            static_point_light,
+            pick_fingerprint: ctx.lights.pick_fingerprint(),
+        }
+    }
+
+    fn is_static(&self, source: LightSource) -> bool {
+        match source {
+            LightSource::Triangle(id) => (id as usize) < self.static_count,
+            LightSource::Point(i) => self.static_point_light.get(i).copied().unwrap_or(false),
+        }
+    }
+
+    /// Whether segment `a → b` may pass through a moving object.
+    pub fn segment_may_hit(&self, a: Vec3, b: Vec3) -> bool {
+        self.boxes.iter().any(|&bx| segment_hits_box(a, b, bx))
+    }
+
+    /// Whether any moving object's box meets box `b`.
+    fn box_may_hit(&self, b: Aabb) -> bool {
+        self.boxes
+            .iter()
+            .any(|&(lo, hi)| lo.cmple(b.1).all() && b.0.cmple(hi).all())
+    }
+
+    /// Whether triangle `id` belongs to an object that moves.
+    pub fn is_moving_triangle(&self, id: u32) -> bool {
+        id as usize >= self.static_count
+    }
+}
+
+/// Slab test of segment `a → b` against box `(lo, hi)`.
+pub fn segment_hits_box(a: Vec3, b: Vec3, (lo, hi): Aabb) -> bool {
+    let d = b - a;
+    let (mut t0, mut t1) = (0.0f32, 1.0f32);
+    for axis in 0..3 {
+        let (o, v) = (a[axis], d[axis]);
+        if v.abs() < 1e-12 {
+            if o < lo[axis] || o > hi[axis] {
+                return false;
+            }
+            continue;
+        }
+        let (mut near, mut far) = ((lo[axis] - o) / v, (hi[axis] - o) / v);
+        if near > far {
+            std::mem::swap(&mut near, &mut far);
+        }
+        t0 = t0.max(near);
+        t1 = t1.min(far);
+        if t0 > t1 {
+            return false;
+        }
+    }
+    true
+}
+
+/// The shadows static blockers cast on a set of points, kept while the
+/// points and the lights that do not move stay where they are.
+#[derive(Clone, Debug, Default)]
+pub struct StaticShadows {
+    /// The light pick distribution they were found under.
+    fingerprint: u64,
+    points: Vec<PointShadows>,
+}
+
+/// One point's kept shadows.
+#[derive(Clone, Debug, Default)]
+struct PointShadows {
+    /// The summed contributions of its samples on static lights that no
+    /// static blocker stops (what it gets where nothing moves near it).
+    clear: Vec3,
+    /// Its samples on lights that move (bit `s`: sample `s`).
+    moving: u64,
+    /// Its samples on static lights that no static blocker stops: only
+    /// these may be stopped by a moving object, and their segments and
+    /// contributions are kept so that no light is sampled again.
+    open: Vec<OpenSample>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct OpenSample {
+    sample: u32,
+    c: Vec3,
+    ray: Ray,
+}
+
+impl StaticShadows {
+    fn valid_for(&self, blockers: &Blockers, points: usize) -> bool {
+        self.fingerprint == blockers.pick_fingerprint && self.points.len() == points
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.points
+            .iter()
+            .map(|p| {
+                std::mem::size_of::<PointShadows>()
+                    + p.open.len() * std::mem::size_of::<OpenSample>()
+            })
+            .sum()
+    }
+}
+
+/// Shadow samples taken: rays traced against all blockers, and samples
+/// answered by the kept static shadows alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ShadowCounts {
+    pub traced: u64,
+    pub kept: u64,
+}
+
+impl std::ops::AddAssign for ShadowCounts {
+    fn add_assign(&mut self, o: Self) {
+        self.traced += o.traced;
+        self.kept += o.kept;
+    }
+}
+
+/// Light sample `s` of `samples` at `point`, stratified over the point's
+/// samples, and the light it lands on.
+struct PointSampler {
+    layout: Stratified2d,
+    seed: u64,
+    item: u64,
+}
+
+impl PointSampler {
+    fn new(seed: u64, item: u64, samples: u32) -> Self {
+        let mut keys = Rng::new(key(seed, item, u32::MAX));
+        let scramble = keys.next_u32();
+        PointSampler {
+            layout: Stratified2d::new(samples, Some(scramble), keys.next_u32()),
+            seed,
+            item,
+        }
+    }
+
+    /// `(contribution to E before visibility, shadow segment, light)`.
+    fn sample(
+        &self,
+        ctx: &FrameContext,
+        point: &ShadePoint,
+        s: u32,
+    ) -> Option<(Vec3, Ray, LightSource)> {
+        let u = self
+            .layout
+            .sample(s, Rng::new(key(self.seed, self.item, s)).next_2d());
+        let choice = ctx.lights.choose(u);
+        let source = ctx.lights.source_of(choice.pick)?;
+        let ls = ctx
+            .lights
+            .sample(ctx.snapshot, point.p, choice, TriangleSampling::SolidAngle)?;
+        let cos = point.n.dot(ls.wi);
+        if cos <= 0.0 || point.ng.dot(ls.wi) <= 0.0 {
+            return None;
+        }
+        let shadow = Ray::segment(offset_origin(point.p, point.ng, ls.wi), ls.position);
+        Some((ls.radiance * (cos / ls.pdf), shadow, source))
+    }
+}
+
+fn key(seed: u64, item: u64, sample: u32) -> SampleKey {
+    SampleKey {
+        seed,
+        frame: None,
+        item,
+        sample,
+    }
+}
+
+/// Direct irradiance at `points` with `samples` shadow samples each.
+/// With `kept` (points that do not move), the static shadows in it are
+/// used where still valid and found again where not.
+pub fn direct_irradiance(
+    ctx: &FrameContext,
+    blockers: &Blockers,
+    points: &[ShadePoint],
+    samples: u32,
+    kept: Option<&mut StaticShadows>,
+) -> (Vec<Vec3>, ShadowCounts) {
+    let samples = samples.clamp(1, MAX_SHADOW_SAMPLES);
+    let chunk = (ctx.backend.min_batch() / samples as usize).clamp(64, 4096);
+    match kept {
+        None => {
+            let parts: Vec<(Vec<Vec3>, ShadowCounts)> = points
+                .par_chunks(chunk)
+                .map(|p| moving_points(ctx, p, samples))
+                .collect();
+            join(parts)
+        }
+        Some(kept) if kept.valid_for(blockers, points.len()) => {
+            let parts: Vec<(Vec<Vec3>, ShadowCounts)> = points
+                .par_chunks(chunk)
+                .zip(kept.points.par_chunks(chunk))
+                .map(|(p, shadows)| kept_points(ctx, blockers, p, samples, shadows))
+                .collect();
+            join(parts)
+        }
+        Some(kept) => {
+            let parts: Vec<(Vec<Vec3>, ShadowCounts, Vec<PointShadows>)> = points
+                .par_chunks(chunk)
+                .map(|p| first_static_points(ctx, blockers, p, samples))
+                .collect();
+            let mut e = Vec::with_capacity(points.len());
+            let mut counts = ShadowCounts::default();
+            let mut found = Vec::with_capacity(points.len());
+            for (part_e, part_counts, part) in parts {
+                e.extend(part_e);
+                counts += part_counts;
+                found.extend(part);
+            }
+            *kept = StaticShadows {
+                fingerprint: blockers.pick_fingerprint,
+                points: found,
+            };
+            (e, counts)
+        }
+    }
+}
+
+fn join(parts: Vec<(Vec<Vec3>, ShadowCounts)>) -> (Vec<Vec3>, ShadowCounts) {
+    let mut e = Vec::new();
+    let mut counts = ShadowCounts::default();
+    for (part, c) in parts {
+        e.extend(part);
+        counts += c;
+    }
+    (e, counts)
+}
+
+/// Shadow rays waiting to be traced, each with the slot (point · sample)
+/// its contribution goes to if nothing stops it.
+#[derive(Default)]
+struct Pending {
+    rays: Vec<Ray>,
+    targets: Vec<(usize, Vec3)>,
+}
+
+impl Pending {
+    fn push(&mut self, ray: Ray, slot: usize, c: Vec3) {
+        self.rays.push(ray);
+        self.targets.push((slot, c));
+    }
+
+    /// Traces against every blocker and fills the unoccluded slots.
+    fn fill_unoccluded(self, ctx: &FrameContext, slots: &mut [Vec3]) -> u64 {
+        let mut occluded = vec![false; self.rays.len()];
+        ctx.backend.any_hit(&self.rays, &mut occluded);
+        for ((slot, c), blocked) in self.targets.into_iter().zip(occluded) {
+            if !blocked {
+                slots[slot] = c;
+            }
+        }
+        self.rays.len() as u64
+    }
+}
+
+/// Each point's irradiance from its samples' slots, summed in sample
+/// order whatever order they were found in, so that a kept movie and a
+/// new one give the same bits (a resumed render equals an uninterrupted
+/// one).
+fn sum_slots(slots: &[Vec3], samples: u32) -> Vec<Vec3> {
+    let scale = 1.0 / samples as f32;
+    slots
+        .chunks(samples as usize)
+        .map(|s| s.iter().fold(Vec3::ZERO, |a, &c| a + c) * scale)
+        .collect()
+}
+
+/// Points on moving objects: every sample traced against every blocker.
+fn moving_points(
+    ctx: &FrameContext,
+    points: &[ShadePoint],
+    samples: u32,
+) -> (Vec<Vec3>, ShadowCounts) {
+    let mut pending = Pending::default();
+    let per = samples as usize;
+    for (i, point) in points.iter().enumerate() {
+        let sampler = PointSampler::new(ctx.seed, point.item, samples);
+        for s in 0..samples {
+            if let Some((c, ray, _)) = sampler.sample(ctx, point, s) {
+                pending.push(ray, i * per + s as usize, c);
+            }
+        }
+    }
+    let mut slots = vec![Vec3::ZERO; points.len() * per];
+    let traced = pending.fill_unoccluded(ctx, &mut slots);
+    (sum_slots(&slots, samples), ShadowCounts { traced, kept: 0 })
+}
+
+/// Points that do not move, with their static shadows kept: a point whose
+/// view of the static lights no moving object's box can cross takes its
+/// kept sum; the others test their open samples against the moving
+/// objects whose boxes their segments cross. Samples on moving lights are
+/// drawn and traced again.
+fn kept_points(
+    ctx: &FrameContext,
+    blockers: &Blockers,
+    points: &[ShadePoint],
+    samples: u32,
+    shadows: &[PointShadows],
+) -> (Vec<Vec3>, ShadowCounts) {
+    let per = samples as usize;
+    let mut slots = vec![Vec3::ZERO; points.len() * per];
+    let mut shortcut = vec![false; points.len()];
+    let mut pending = Pending::default();
+    let mut kept = 0u64;
+    for (i, (point, kept_shadows)) in points.iter().zip(shadows).enumerate() {
+        let shaft_clear = blockers
+            .static_lights
+            .is_none_or(|(lo, hi)| !blockers.box_may_hit((lo.min(point.p), hi.max(point.p))));
+        if shaft_clear && kept_shadows.moving == 0 {
+            shortcut[i] = true;
+            kept += u64::from(samples);
+            continue;
+        }
+        for o in &kept_shadows.open {
+            let slot = i * per + o.sample as usize;
+            if blockers.segment_may_hit(o.ray.origin(), o.ray.at(o.ray.tmax)) {
+                pending.push(o.ray, slot, o.c);
+            } else {
+                slots[slot] = o.c;
+                kept += 1;
+            }
+        }
+        kept += u64::from(samples)
+            - kept_shadows.open.len() as u64
+            - u64::from(kept_shadows.moving.count_ones());
+        if kept_shadows.moving != 0 {
+            let sampler = PointSampler::new(ctx.seed, point.item, samples);
+            for s in (0..samples).filter(|s| kept_shadows.moving & (1 << s) != 0) {
+                if let Some((c, ray, _)) = sampler.sample(ctx, point, s) {
+                    pending.push(ray, i * per + s as usize, c);
+                }
+            }
+        }
+    }
+    let traced = pending.fill_unoccluded(ctx, &mut slots);
+    let mut e = sum_slots(&slots, samples);
+    for (i, _) in shortcut.iter().enumerate().filter(|(_, &s)| s) {
+        e[i] = shadows[i].clear;
+    }
+    (e, ShadowCounts { traced, kept })
+}
+
+/// Points that do not move, seen for the first time: the static shadows
+/// of their samples on static lights found (and returned), their
+/// irradiance with every blocker.
+fn first_static_points(
+    ctx: &FrameContext,
+    blockers: &Blockers,
+    points: &[ShadePoint],
+    samples: u32,
+) -> (Vec<Vec3>, ShadowCounts, Vec<PointShadows>) {
+    let n = points.len();
+    let per = samples as usize;
+    let mut found = vec![PointShadows::default(); n];
+    let mut pending = Pending::default();
+    // Samples on static lights: (slot, contribution, ray).
+    let mut probes: Vec<(usize, Vec3, Ray)> = Vec::new();
+    for (i, point) in points.iter().enumerate() {
+        let sampler = PointSampler::new(ctx.seed, point.item, samples);
+        for s in 0..samples {
+            let Some((c, ray, source)) = sampler.sample(ctx, point, s) else {
+                continue;
+            };
+            let slot = i * per + s as usize;
+            if blockers.is_static(source) {
+                probes.push((slot, c, ray));
+            } else {
+                found[i].moving |= 1 << s;
+                pending.push(ray, slot, c);
+            }
+        }
+    }
+    let rays: Vec<Ray> = probes.iter().map(|p| p.2).collect();
+    let (by_static, by_any) = static_and_any_blocked(ctx, blockers, &rays);
+    let mut slots = vec![Vec3::ZERO; n * per];
+    let mut static_slots = vec![Vec3::ZERO; n * per];
+    for (k, &(slot, c, ray)) in probes.iter().enumerate() {
+        if !by_static[k] {
+            static_slots[slot] = c;
+            found[slot / per].open.push(OpenSample {
+                sample: (slot % per) as u32,
+                c,
+                ray,
+            });
+        }
+        if !by_any[k] {
+            slots[slot] = c;
+        }
+    }
+    let traced = probes.len() as u64 + pending.fill_unoccluded(ctx, &mut slots);
+    for (f, clear) in found.iter_mut().zip(sum_slots(&static_slots, samples)) {
+        f.clear = clear;
+    }
+    (
+        sum_slots(&slots, samples),
+        ShadowCounts { traced, kept: 0 },
+        found,
+    )
+}
+
+/// For each segment: whether a static blocker stops it, and whether any
+/// blocker does. Segments clear of every moving object's box take one
+/// any-hit ray (the two answers are the same); the others are walked hit
+/// by hit past the moving objects they meet.
+fn static_and_any_blocked(
+    ctx: &FrameContext,
+    blockers: &Blockers,
+    rays: &[Ray],
+) -> (Vec<bool>, Vec<bool>) {
+    let crossing: Vec<bool> = rays
+        .iter()
+        .map(|r| blockers.segment_may_hit(r.origin(), r.at(r.tmax)))
+        .collect();
+    let clear: Vec<Ray> = rays
+        .iter()
+        .zip(&crossing)
+        .filter(|(_, &c)| !c)
+        .map(|(r, _)| *r)
+        .collect();
+    let mut clear_blocked = vec![false; clear.len()];
+    ctx.backend.any_hit(&clear, &mut clear_blocked);
+    let mut walk: Vec<Ray> = rays
+        .iter()
+        .zip(&crossing)
+        .filter(|(_, &c)| c)
+        .map(|(r, _)| *r)
+        .collect();
+    let (walk_static, walk_any) = walk_past_moving(ctx, blockers, &mut walk);
+    let (mut by_static, mut by_any) = (Vec::with_capacity(rays.len()), Vec::new());
+    let (mut clear_it, mut walk_it) = (
+        clear_blocked.into_iter(),
+        walk_static.into_iter().zip(walk_any),
+    );
+    for &c in &crossing {
+        if c {
+            let (s, a) = walk_it.next().expect("one walk per crossing segment");
+            by_static.push(s);
+            by_any.push(a);
+        } else {
+            let b = clear_it.next().expect("one ray per clear segment");
+            by_static.push(b);
+            by_any.push(b);
+        }
+    }
+    (by_static, by_any)
+}
+
+/// The most moving surfaces a static-shadow walk steps past before it
+/// gives up (and calls the segment clear of static blockers).
+const MAX_WALK: usize = 64;
+
+/// Closest hits along each segment, stepping past hits on moving
+/// objects: whether a static surface stops it, and whether anything does.
+fn walk_past_moving(
+    ctx: &FrameContext,
+    blockers: &Blockers,
+    rays: &mut [Ray],
+) -> (Vec<bool>, Vec<bool>) {
+    let n = rays.len();
+    let (mut by_static, mut by_any) = (vec![false; n], vec![false; n]);
+    let mut active: Vec<usize> = (0..n).collect();
+    for step in 0..MAX_WALK {
+        if active.is_empty() {
+            break;
+        }
+        let batch: Vec<Ray> = active.iter().map(|&i| rays[i]).collect();
+        let mut hits = vec![Hit::MISS; batch.len()];
+        ctx.backend.closest_hit(&batch, &mut hits);
+        let mut next = Vec::new();
+        for (&i, hit) in active.iter().zip(&hits) {
+            if !hit.is_hit() {
+                continue;
+            }
+            if step == 0 {
+                by_any[i] = true;
+            }
+            if blockers.is_moving_triangle(hit.triangle) {
+                // On past this surface (t is in units of the segment).
+                rays[i].tmin = hit.t + 1e-5;
+                if rays[i].tmin < rays[i].tmax {
+                    next.push(i);
+                }
+            } else {
+                by_static[i] = true;
+            }
+        }
+        active = next;
+    }
+    (by_static, by_any)
+}
+
+/// The paper's merge of the transmittance of static (`ts`) and moving
+/// (`td`) blockers, each the fraction of a texel's samples stopped
+/// (§5): `T = (max(Ts,Td) + min(1,Ts+Td))/2`, the mean of the merge's
+/// bounds (the blockers overlap wholly, or not at all).
+pub fn paper_merge(ts: f32, td: f32) -> f32 {
+    (ts.max(td) + (ts + td).min(1.0)) / 2.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_segment_meets_a_box_it_crosses_and_not_one_beside_it() {
+        let b = (Vec3::splat(-1.0), Vec3::splat(1.0));
+        assert!(segment_hits_box(
+            Vec3::new(-5.0, 0.0, 0.0),
+            Vec3::new(5.0, 0.0, 0.0),
+            b
+        ));
+        assert!(segment_hits_box(Vec3::ZERO, Vec3::new(5.0, 5.0, 5.0), b));
+        assert!(!segment_hits_box(
+            Vec3::new(-5.0, 2.0, 0.0),
+            Vec3::new(5.0, 2.0, 0.0),
+            b
+        ));
+        // Stops short of the box.
+        assert!(!segment_hits_box(
+            Vec3::new(-5.0, 0.0, 0.0),
+            Vec3::new(-2.0, 0.0, 0.0),
+            b
+        ));
+        // Parallel to a slab, inside it.
+        assert!(segment_hits_box(
+            Vec3::new(0.5, -5.0, 0.5),
+            Vec3::new(0.5, 5.0, 0.5),
+            b
+        ));
+    }
+
+    /// The exact merge of per-sample bits lies between the two bounds the
+    /// paper's formula averages, for every pair of bit sets of 6 samples.
+    #[test]
+    fn the_exact_merge_lies_between_the_bounds_the_paper_averages() {
+        let n = 6u32;
+        for s in 0u64..64 {
+            for d in 0u64..64 {
+                let frac = |bits: u64| bits.count_ones() as f32 / n as f32;
+                let (ts, td, exact) = (frac(s), frac(d), frac(s | d));
+                assert!(ts.max(td) <= exact + 1e-6 && exact <= (ts + td).min(1.0) + 1e-6);
+                let paper = paper_merge(ts, td);
+                assert!((paper - exact).abs() <= ((ts + td).min(1.0) - ts.max(td)) / 2.0 + 1e-6);
+            }
+        }
+    }
+}

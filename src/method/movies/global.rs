@@ -1,0 +1,613 @@
+//! The coarse global pass (paper §3.1, §4.2): a radiosity solution on a
+//! coarse mesh that gives every texel of a movie the light of the "good
+//! links" — here everything but direct light, which the movies compute
+//! per texel (the paper's conservative classification: "bad links are
+//! those corresponding to direct illumination onto visible patches").
+//!
+//! Departures, named: the paper's global pass is hierarchical radiosity
+//! with form factors between patches. Ours is point collocation on a
+//! regular subdivision of each triangle (its *grid*, finer for larger
+//! triangles): each grid vertex gathers along a fixed set of
+//! cosine-distributed rays, its *links*, and the radiosity is solved by
+//! Jacobi iteration over them (`bounces` of them), so that a texel reads
+//! its indirect irradiance by Gouraud interpolation of the vertex values,
+//! as the paper renders its good links. Temporal coherence as in §4.2: a
+//! link is traced again only where motion may have changed it (its
+//! vertex or its hit lies on a moving object, or its segment crosses a
+//! moving object's box: the paper's shaft culling), and the energy
+//! transport is then solved from scratch, as the paper does. A link kept
+//! is what tracing it again would give, so the solution of a frame does
+//! not depend on the frames before it.
+
+use super::direct::{direct_irradiance, Blockers, ShadePoint, StaticShadows};
+use super::FrameContext;
+use crate::backend::{Hit, Ray};
+use crate::integrator::offset_origin;
+use crate::sampling::{cosine_hemisphere, Frame, Rng, SampleKey};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::f32::consts::FRAC_1_PI;
+
+/// Tags the random streams of the global pass's vertices.
+const GLOBAL_STREAM: u64 = 1 << 59;
+
+/// Settings of the global pass.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GlobalSettings {
+    /// Grid spacing as a fraction of the static scene's diagonal: a
+    /// triangle's grid has `⌈longest edge / spacing⌉` segments an edge
+    /// (at most [`MAX_GRID`]).
+    pub spacing: f32,
+    /// Links of a vertex on a triangle whose grid cells are at least a
+    /// spacing across; smaller cells get fewer, in proportion to their
+    /// area, and at least [`MIN_LINKS`].
+    pub links: u32,
+    /// Jacobi iterations: bounces of indirect light.
+    pub bounces: u32,
+    /// Shadow samples of a vertex's direct light.
+    pub shadow_samples: u32,
+}
+
+impl Default for GlobalSettings {
+    fn default() -> Self {
+        GlobalSettings {
+            spacing: 1.0 / 32.0,
+            links: 128,
+            bounces: 8,
+            shadow_samples: 8,
+        }
+    }
+}
+
+/// The finest grid: segments along a triangle's edge.
+pub const MAX_GRID: u32 = 32;
+/// The largest share of a vertex's links that may land on the back of a
+/// surface for the vertex to count as in open space.
+pub const BURIED_SHARE: f32 = 0.1;
+/// The fewest links a vertex gathers along.
+pub const MIN_LINKS: u32 = 8;
+
+/// The regular subdivision of one triangle into `n²` cells; its vertices
+/// `(a, b)`, `a + b ≤ n`, at barycentrics `(a/n, b/n)`, numbered row by
+/// row. Their numbers are *slots*: a vertex shared by several triangles
+/// (a mesh vertex) fills a slot in each.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Grid {
+    pub n: u32,
+    /// Slot of vertex (0, 0) among all the pass's slots.
+    pub first: u32,
+}
+
+impl Grid {
+    pub fn vertex_count(n: u32) -> u32 {
+        (n + 1) * (n + 2) / 2
+    }
+
+    /// The three vertices and weights that interpolate at barycentrics
+    /// `(u, v)` (Gouraud shading over the cell that holds the point).
+    pub fn weights(&self, u: f32, v: f32) -> [(u32, f32); 3] {
+        let n = self.n;
+        let nf = n as f32;
+        let (x, y) = ((u * nf).clamp(0.0, nf), (v * nf).clamp(0.0, nf));
+        let a0 = (x.floor() as u32).min(n - 1);
+        let b0 = (y.floor() as u32).min(n - 1 - a0);
+        let (mut fx, mut fy) = (
+            (x - a0 as f32).clamp(0.0, 1.0),
+            (y - b0 as f32).clamp(0.0, 1.0),
+        );
+        let at = |a: u32, b: u32| self.first + row_start(n, b) + a;
+        if fx + fy <= 1.0 || a0 + b0 + 2 > n {
+            let s = fx + fy;
+            if s > 1.0 {
+                fx /= s;
+                fy /= s;
+            }
+            [
+                (at(a0, b0), 1.0 - fx - fy),
+                (at(a0 + 1, b0), fx),
+                (at(a0, b0 + 1), fy),
+            ]
+        } else {
+            [
+                (at(a0 + 1, b0 + 1), fx + fy - 1.0),
+                (at(a0, b0 + 1), 1.0 - fx),
+                (at(a0 + 1, b0), 1.0 - fy),
+            ]
+        }
+    }
+
+    /// Gouraud interpolation at `(u, v)` of per-vertex `values`
+    /// (`vertex_of[slot]`: the vertex in a slot) over the vertices marked
+    /// `valid` alone, their weights renormalised (all three where none is
+    /// valid).
+    pub fn interpolate(
+        &self,
+        vertex_of: &[u32],
+        values: &[Vec3],
+        valid: &[bool],
+        u: f32,
+        v: f32,
+    ) -> Vec3 {
+        let weights = self
+            .weights(u, v)
+            .map(|(slot, w)| (vertex_of[slot as usize] as usize, w));
+        let total: f32 = weights
+            .iter()
+            .filter(|(i, _)| valid[*i])
+            .map(|(_, w)| w)
+            .sum();
+        let all = total <= 1e-6;
+        let scale = if all { 1.0 } else { 1.0 / total };
+        weights
+            .iter()
+            .filter(|(i, _)| all || valid[*i])
+            .fold(Vec3::ZERO, |acc, &(i, w)| acc + values[i] * (w * scale))
+    }
+}
+
+/// Index of the first vertex of row `b` of a grid of `n` segments.
+fn row_start(n: u32, b: u32) -> u32 {
+    // Rows 0..b hold (n+1) + n + … + (n−b+2) vertices.
+    b * (n + 1) - b * (b.max(1) - 1) / 2
+}
+
+/// Where a vertex of the pass lies: a triangle and its grid position (for
+/// a vertex shared by several triangles, the first of them).
+#[derive(Clone, Copy, Debug)]
+struct Vertex {
+    triangle: u32,
+    a: u32,
+    b: u32,
+    links: u32,
+    /// Index of its first link.
+    first_link: u32,
+}
+
+/// What one link found: the hit (triangle and barycentrics) and how far.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Link {
+    hit: Hit,
+    /// Whether it was traced at all (a direction below the geometric
+    /// surface gathers nothing).
+    live: bool,
+    /// Whether it landed on the front of a surface (the side the
+    /// solution is for).
+    front: bool,
+}
+
+/// The global pass's state: the mesh, the links found so far and the
+/// solution of the last frame.
+pub struct GlobalPass {
+    settings: GlobalSettings,
+    grids: Vec<Grid>,
+    /// The vertex in each slot of the grids.
+    vertex_of: Vec<u32>,
+    vertices: Vec<Vertex>,
+    links: Vec<Link>,
+    /// Static shadows at the vertices that do not move.
+    shadows: StaticShadows,
+    /// Per vertex, indirect irradiance of the last solution.
+    indirect: Vec<Vec3>,
+    /// Per vertex, whether it lies in open space ([`BURIED_SHARE`]).
+    valid: Vec<bool>,
+    /// Links traced in the last frame.
+    pub traced_links: u64,
+}
+
+impl GlobalPass {
+    /// The mesh of the snapshot of `ctx`. Grid sizes come from the static
+    /// scene's size and each triangle's own, so they are the same whatever
+    /// frame the pass starts at (for triangles that move rigidly).
+    pub fn new(ctx: &FrameContext, settings: GlobalSettings) -> Self {
+        let snapshot = ctx.snapshot;
+        let spacing = settings.spacing.max(1e-4) * static_diagonal(ctx);
+        let reference_cell = 0.5 * spacing * spacing;
+        let mut grids = Vec::with_capacity(snapshot.triangles.len());
+        let mut vertex_of = Vec::new();
+        let mut vertices = Vec::new();
+        let mut link_count = 0u32;
+        // Mesh vertices: a triangle corner at the same point of the same
+        // object with the same shading normal is one vertex, so that the
+        // Gouraud shading is continuous across the mesh and a finely
+        // tessellated object (a sphere) has a vertex per mesh vertex, not
+        // three per triangle.
+        let mut corners: HashMap<(u32, [u32; 3], [u32; 3]), u32> = HashMap::new();
+        for (id, tri) in snapshot.triangles.iter().enumerate() {
+            let longest = (0..3)
+                .map(|k| (tri.p[(k + 1) % 3] - tri.p[k]).length())
+                .fold(0.0f32, f32::max);
+            let n = ((longest / spacing).ceil() as u32).clamp(1, MAX_GRID);
+            let cell = tri.area() / (n * n) as f32;
+            let links = ((settings.links as f32 * cell / reference_cell).ceil() as u32)
+                .clamp(MIN_LINKS.min(settings.links), settings.links.max(1));
+            grids.push(Grid {
+                n,
+                first: vertex_of.len() as u32,
+            });
+            let object = snapshot.tri_object[id];
+            for b in 0..=n {
+                for a in 0..=n - b {
+                    let mut new_vertex = || {
+                        vertices.push(Vertex {
+                            triangle: id as u32,
+                            a,
+                            b,
+                            links,
+                            first_link: link_count,
+                        });
+                        link_count += links;
+                        vertices.len() as u32 - 1
+                    };
+                    let corner = match (a, b) {
+                        (0, 0) => Some(0),
+                        (a, 0) if a == n => Some(1),
+                        (0, b) if b == n => Some(2),
+                        _ => None,
+                    };
+                    let vertex = match corner {
+                        Some(k) => *corners
+                            .entry((
+                                object,
+                                tri.p[k].to_array().map(f32::to_bits),
+                                tri.n[k].to_array().map(f32::to_bits),
+                            ))
+                            .or_insert_with(new_vertex),
+                        None => new_vertex(),
+                    };
+                    vertex_of.push(vertex);
+                }
+            }
+        }
+        let count = vertices.len();
+        GlobalPass {
+            settings,
+            grids,
+            vertex_of,
+            vertices,
+            links: Vec::new(),
+            shadows: StaticShadows::default(),
+            indirect: vec![Vec3::ZERO; count],
+            valid: vec![true; count],
+            traced_links: 0,
+        }
+        .with_links(link_count as usize)
+    }
+
+    fn with_links(mut self, count: usize) -> Self {
+        self.links = vec![
+            Link {
+                hit: Hit::MISS,
+                live: false,
+                front: false,
+            };
+            count
+        ];
+        self
+    }
+
+    /// Whether this pass was built for a snapshot with this many triangles.
+    pub fn fits(&self, triangles: usize) -> bool {
+        self.grids.len() == triangles
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.vertices.len()
+    }
+
+    /// The grid of triangle `id`.
+    pub fn grid(&self, id: u32) -> Grid {
+        self.grids[id as usize]
+    }
+
+    /// Indirect irradiance at barycentrics `(u, v)` of triangle `id` (the
+    /// front side), from the last solution.
+    pub fn indirect_at(&self, id: u32, u: f32, v: f32) -> Vec3 {
+        self.grid(id)
+            .interpolate(&self.vertex_of, &self.indirect, &self.valid, u, v)
+    }
+
+    /// The frame of `ctx`: links traced again where motion may have
+    /// changed them, the direct light at the vertices, and the radiosity
+    /// solved. Returns the shadow rays traced.
+    pub fn update(&mut self, ctx: &FrameContext, blockers: &Blockers, first: bool) -> u64 {
+        let points = self.points(ctx);
+        self.retrace_links(ctx, blockers, &points, first);
+        let moving: Vec<bool> = self
+            .vertices
+            .iter()
+            .map(|v| blockers.is_moving_triangle(v.triangle))
+            .collect();
+        let (direct, shadow_rays) = self.direct(ctx, blockers, &points, &moving);
+        self.solve(ctx, &direct);
+        shadow_rays
+    }
+
+    /// Every vertex as a shading point, in the frame of `ctx` (pulled a
+    /// hair towards its triangle's centre, so that a corner vertex does
+    /// not gather from the edge it sits on).
+    fn points(&self, ctx: &FrameContext) -> Vec<ShadePoint> {
+        self.vertices
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let tri = &ctx.snapshot.triangles[v.triangle as usize];
+                let n = self.grids[v.triangle as usize].n as f32;
+                let (u, w) = pulled(v.a as f32 / n, v.b as f32 / n);
+                ShadePoint {
+                    p: tri.point(u, w),
+                    n: tri.shading_normal(u, w),
+                    ng: tri.geometric_normal(),
+                    item: GLOBAL_STREAM | i as u64,
+                }
+            })
+            .collect()
+    }
+
+    /// The rays of vertex `i`'s links (direction from its stream).
+    fn link_ray(ctx: &FrameContext, point: &ShadePoint, link: u32) -> Option<Ray> {
+        let mut rng = Rng::new(SampleKey {
+            seed: ctx.seed,
+            frame: None,
+            item: point.item,
+            sample: link,
+        });
+        let wi = Frame::new(point.n).to_world(cosine_hemisphere(rng.next_2d()));
+        (wi.dot(point.ng) > 0.0)
+            .then(|| Ray::new(offset_origin(point.p, point.ng, wi), wi, 0.0, f32::INFINITY))
+    }
+
+    /// Traces the links that motion may have changed (all of them the
+    /// first time).
+    fn retrace_links(
+        &mut self,
+        ctx: &FrameContext,
+        blockers: &Blockers,
+        points: &[ShadePoint],
+        first: bool,
+    ) {
+        let far = 2.0 * scene_diagonal(ctx);
+        let stale: Vec<(usize, Ray)> = self
+            .vertices
+            .par_iter()
+            .zip(points)
+            .flat_map_iter(|(v, point)| {
+                let moving_vertex = blockers.is_moving_triangle(v.triangle);
+                (0..v.links).filter_map(move |k| {
+                    let index = (v.first_link + k) as usize;
+                    let ray = Self::link_ray(ctx, point, k)?;
+                    Some((index, ray, moving_vertex))
+                })
+            })
+            .filter(|(index, ray, moving_vertex)| {
+                let link = &self.links[*index];
+                if first || *moving_vertex || !link.live {
+                    return true;
+                }
+                if link.hit.is_hit() && blockers.is_moving_triangle(link.hit.triangle) {
+                    return true;
+                }
+                let t = if link.hit.is_hit() { link.hit.t } else { far };
+                blockers.segment_may_hit(ray.origin(), ray.at(t))
+            })
+            .map(|(index, ray, _)| (index, ray))
+            .collect();
+        let rays: Vec<Ray> = stale.iter().map(|s| s.1).collect();
+        let mut hits = vec![Hit::MISS; rays.len()];
+        let batch = ctx.backend.preferred_batch().max(1);
+        rays.par_chunks(batch)
+            .zip(hits.par_chunks_mut(batch))
+            .for_each(|(r, h)| ctx.backend.closest_hit(r, h));
+        for ((index, ray), hit) in stale.iter().zip(hits) {
+            let front = hit.is_hit()
+                && ctx.snapshot.triangles[hit.triangle as usize]
+                    .geometric_normal()
+                    .dot(ray.dir())
+                    < 0.0;
+            self.links[*index] = Link {
+                hit,
+                live: true,
+                front,
+            };
+        }
+        self.traced_links = rays.len() as u64;
+    }
+
+    /// Direct irradiance at every vertex (static shadows kept for the
+    /// vertices that do not move).
+    fn direct(
+        &mut self,
+        ctx: &FrameContext,
+        blockers: &Blockers,
+        points: &[ShadePoint],
+        moving: &[bool],
+    ) -> (Vec<Vec3>, u64) {
+        let (still, moved): (Vec<usize>, Vec<usize>) = (0..points.len()).partition(|&i| !moving[i]);
+        let pick = |set: &[usize]| set.iter().map(|&i| points[i]).collect::<Vec<_>>();
+        let samples = self.settings.shadow_samples;
+        let (e_still, c_still) = direct_irradiance(
+            ctx,
+            blockers,
+            &pick(&still),
+            samples,
+            Some(&mut self.shadows),
+        );
+        let (e_moved, c_moved) = direct_irradiance(ctx, blockers, &pick(&moved), samples, None);
+        let mut direct = vec![Vec3::ZERO; points.len()];
+        for (i, e) in still
+            .into_iter()
+            .zip(e_still)
+            .chain(moved.into_iter().zip(e_moved))
+        {
+            direct[i] = e;
+        }
+        (direct, c_still.traced + c_moved.traced)
+    }
+
+    /// Jacobi iteration of `B = ρ/π·(E_direct + E_indirect)`, with
+    /// `E_indirect` the mean over a vertex's links of the radiance `B`
+    /// interpolated where each lands, times π (cosine-distributed links).
+    /// A link that lands on the back of a surface or on an emitter's
+    /// emission gathers nothing: emitted light is the direct light,
+    /// counted once.
+    fn solve(&mut self, ctx: &FrameContext, direct: &[Vec3]) {
+        let albedo: Vec<Vec3> = self
+            .vertices
+            .iter()
+            .map(|v| {
+                // A glossy surface reflects its lobe's energy too; spread
+                // as if diffuse (radiosity has no view direction) rather
+                // than lost from the light that bounces on.
+                let m =
+                    &ctx.scene.materials[ctx.snapshot.tri_material[v.triangle as usize] as usize];
+                (m.diffuse + m.specular).min(Vec3::ONE)
+            })
+            .collect();
+        let radiance_of = |indirect: &[Vec3]| -> Vec<Vec3> {
+            albedo
+                .iter()
+                .zip(direct)
+                .zip(indirect)
+                .map(|((&rho, &d), &i)| rho * FRAC_1_PI * (d + i))
+                .collect()
+        };
+        self.valid = self
+            .vertices
+            .par_iter()
+            .map(|v| self.in_open_space(v))
+            .collect();
+        let mut indirect = vec![Vec3::ZERO; self.vertices.len()];
+        for _ in 0..self.settings.bounces {
+            let b = radiance_of(&indirect);
+            indirect = self
+                .vertices
+                .par_iter()
+                .map(|v| self.gather(v, &b))
+                .collect();
+        }
+        self.indirect = indirect;
+    }
+
+    fn links_of(&self, v: &Vertex) -> &[Link] {
+        &self.links[v.first_link as usize..(v.first_link + v.links) as usize]
+    }
+
+    /// Whether vertex `v` lies in open space: at most [`BURIED_SHARE`] of
+    /// its links land on the back of a surface. A vertex under another
+    /// surface (the ceiling above a light hung just below it, the floor
+    /// under a block) gathers darkness that no visible point has, and
+    /// Gouraud interpolation would spread it to the visible texels next
+    /// to it (the shadow leaks of coarse radiosity meshes): such vertices
+    /// are left out of every interpolation.
+    fn in_open_space(&self, v: &Vertex) -> bool {
+        let links = self.links_of(v);
+        let live = links.iter().filter(|l| l.live).count();
+        let back = links
+            .iter()
+            .filter(|l| l.live && l.hit.is_hit() && !l.front)
+            .count();
+        back as f32 <= BURIED_SHARE * live as f32
+    }
+
+    /// `π·mean(B at the link's landing point)` over vertex `v`'s links.
+    fn gather(&self, v: &Vertex, b: &[Vec3]) -> Vec3 {
+        let sum =
+            self.links_of(v)
+                .iter()
+                .filter(|l| l.live && l.front)
+                .fold(Vec3::ZERO, |acc, l| {
+                    acc + self.grids[l.hit.triangle as usize].interpolate(
+                        &self.vertex_of,
+                        b,
+                        &self.valid,
+                        l.hit.u,
+                        l.hit.v,
+                    )
+                });
+        sum * (std::f32::consts::PI / v.links.max(1) as f32)
+    }
+}
+
+/// Barycentrics `(u, v)` moved a thousandth of the way to the centroid.
+fn pulled(u: f32, v: f32) -> (f32, f32) {
+    let k = 1e-3;
+    (u + (1.0 / 3.0 - u) * k, v + (1.0 / 3.0 - v) * k)
+}
+
+/// The diagonal of the static triangles' box (of all triangles where none
+/// is static).
+fn static_diagonal(ctx: &FrameContext) -> f32 {
+    let snapshot = ctx.snapshot;
+    let tris = if snapshot.static_count > 0 {
+        &snapshot.triangles[..snapshot.static_count]
+    } else {
+        &snapshot.triangles[..]
+    };
+    diagonal(tris.iter().flat_map(|t| t.p))
+}
+
+fn scene_diagonal(ctx: &FrameContext) -> f32 {
+    diagonal(ctx.snapshot.triangles.iter().flat_map(|t| t.p))
+}
+
+fn diagonal(points: impl Iterator<Item = Vec3>) -> f32 {
+    let (lo, hi) = points.fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(p), hi.max(p)),
+    );
+    let d = (hi - lo).length();
+    if d.is_finite() && d > 0.0 {
+        d
+    } else {
+        1.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_rows_number_every_vertex_once() {
+        for n in 1..=MAX_GRID {
+            let mut seen = vec![false; Grid::vertex_count(n) as usize];
+            for b in 0..=n {
+                for a in 0..=n - b {
+                    let i = (row_start(n, b) + a) as usize;
+                    assert!(!seen[i], "n {n}: ({a}, {b}) numbered twice");
+                    seen[i] = true;
+                }
+            }
+            assert!(seen.iter().all(|&s| s), "n {n}");
+        }
+    }
+
+    /// Gouraud interpolation of a linear function is exact, everywhere in
+    /// the triangle, its edges and corners included.
+    #[test]
+    fn grid_interpolation_reproduces_a_linear_function() {
+        for n in 1..=5 {
+            let grid = Grid { n, first: 0 };
+            let identity: Vec<u32> = (0..Grid::vertex_count(n)).collect();
+            let valid = vec![true; identity.len()];
+            let f = |u: f32, v: f32| Vec3::new(1.0 + 2.0 * u - 3.0 * v, u, v);
+            let mut values = vec![Vec3::ZERO; Grid::vertex_count(n) as usize];
+            for b in 0..=n {
+                for a in 0..=n - b {
+                    values[(row_start(n, b) + a) as usize] =
+                        f(a as f32 / n as f32, b as f32 / n as f32);
+                }
+            }
+            for i in 0..=20 {
+                for j in 0..=20 - i {
+                    let (u, v) = (i as f32 / 20.0, j as f32 / 20.0);
+                    let got = grid.interpolate(&identity, &values, &valid, u, v);
+                    assert!(
+                        (got - f(u, v)).abs().max_element() < 1e-4,
+                        "n {n} at ({u}, {v}): {got}"
+                    );
+                }
+            }
+        }
+    }
+}

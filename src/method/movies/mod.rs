@@ -1,0 +1,368 @@
+//! `movies`: texture movies with a coarse global pass (Martín, Pueyo &
+//! Tost, "Frame-to-Frame Coherent Animation with Two-Pass Radiosity",
+//! 2003 — `papers/texture-movies-two-pass-radiosity-2003.md`).
+//!
+//! Each visible side of a triangle gets a *texture movie*: its diffuse
+//! irradiance as a texture, frame after frame, at the resolution its
+//! projected size needs (§4.1). Per frame:
+//! 1. *global pass* ([`global`]): a coarse radiosity solution whose links
+//!    are traced again only where motion may have changed them (§4.2);
+//! 2. *item buffer*: the camera rays of the frame's pixel samples say
+//!    which sides of which triangles are seen and at what resolution. A
+//!    movie opens when its side becomes visible, closes when it is no
+//!    longer seen, and is replaced by a new one when its resolution
+//!    changes (§4.1's events);
+//! 3. *movies* ([`movie`]): each open movie's texels get their direct
+//!    light (the "bad links"), with the shadows of static blockers found
+//!    once per movie and only the moving blockers tested each frame
+//!    (§5, Fig. 6; [`direct`]), plus the global pass's indirect light
+//!    (the "good links", Gouraud-interpolated);
+//! 4. *render*: each pixel sample reads its texel (bilinear) for the
+//!    diffuse part; a glossy lobe is path-traced, as `ic` does.
+//!
+//! Departures, each named where it is made: the global pass is point
+//! collocation, not hierarchical radiosity ([`global`]); static and
+//! moving shadows merge per sample, exactly, rather than by the paper's
+//! formula ([`direct`]); textures are per triangle side, one level (the
+//! paper subdivides a partly visible patch into a hierarchy); a movie's
+//! frames are computed as the frames are rendered rather than over its
+//! whole interval up front, so that no frame waits for a later one, and
+//! the texture of a frame depends only on that frame (a resumed render
+//! equals an uninterrupted one with no state carried). The paper's disk
+//! cache of movie frames under a memory budget is the store's `movies`
+//! tree: each frame's textures are written with the frame, and only the
+//! frame being rendered is held in memory.
+
+mod direct;
+pub mod global;
+mod movie;
+
+use super::pixels::FirstLightSampler;
+use super::render_pass::{direct_light, glossy_query, PrimarySamples, Surface};
+use super::{FrameContext, FrameStats, Method, RENDER_PHASE};
+use crate::backend::Hit;
+use crate::film::Film;
+use crate::integrator::{trace_radiance, PathLength, RadianceQuery};
+use crate::light::emitting_cosine;
+use crate::method::pixels::EmitterEdges;
+use direct::ShadowCounts;
+pub use direct::{paper_merge, MAX_SHADOW_SAMPLES};
+use glam::Vec3;
+use global::{GlobalPass, GlobalSettings};
+pub use movie::{Movie, MovieKey};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::f32::consts::FRAC_1_PI;
+use std::time::Instant;
+
+/// Settings of `movies`, with their sources.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MoviesSettings {
+    /// Pixel samples (the texture is read per sample; the glossy lobe is
+    /// path-traced per sample).
+    pub spp: u32,
+    /// Shadow samples per texel (the paper's `N` sample points on the
+    /// shooter, §3.1; it takes more for larger form factors, we take a
+    /// fixed number, at most [`MAX_SHADOW_SAMPLES`]).
+    pub shadow_samples: u32,
+    /// Texels across a pixel's footprint (§3.1: at least one texel a
+    /// pixel, so 1).
+    pub texels_per_pixel: f32,
+    /// The finest texture, in texels along an edge.
+    pub max_resolution: u32,
+    pub global: GlobalSettings,
+    /// Paths of the glossy lobes.
+    pub length: PathLength,
+}
+
+impl Default for MoviesSettings {
+    fn default() -> Self {
+        MoviesSettings {
+            spp: 16,
+            shadow_samples: 16,
+            texels_per_pixel: 1.0,
+            max_resolution: 256,
+            global: GlobalSettings::default(),
+            length: PathLength::default(),
+        }
+    }
+}
+
+/// The `movies` method: open movies from frame to frame and the global
+/// pass's links.
+pub struct TextureMovies {
+    pub settings: MoviesSettings,
+    global: Option<GlobalPass>,
+    movies: BTreeMap<MovieKey, Movie>,
+    stats: FrameStats,
+}
+
+impl TextureMovies {
+    pub fn new(settings: MoviesSettings) -> Self {
+        TextureMovies {
+            settings,
+            global: None,
+            movies: BTreeMap::new(),
+            stats: FrameStats::default(),
+        }
+    }
+
+    /// The movies open after the last frame.
+    pub fn movies(&self) -> impl Iterator<Item = &Movie> {
+        self.movies.values()
+    }
+}
+
+/// A tile of pixels: its camera samples and their first hits.
+struct Tile {
+    first: u32,
+    count: u32,
+    primary: PrimarySamples,
+    edges: EmitterEdges,
+}
+
+impl Method for TextureMovies {
+    fn name(&self) -> &'static str {
+        "movies"
+    }
+
+    fn render_frame(&mut self, ctx: &FrameContext) -> Film {
+        let mut stats = FrameStats {
+            frame: ctx.frame,
+            ..FrameStats::default()
+        };
+        let blockers = direct::Blockers::new(ctx);
+
+        let start = Instant::now();
+        let fresh = !self
+            .global
+            .as_ref()
+            .is_some_and(|g| g.fits(ctx.snapshot.triangles.len()));
+        if fresh {
+            self.global = Some(GlobalPass::new(ctx, self.settings.global));
+        }
+        let global = self.global.as_mut().expect("built above");
+        global.update(ctx, &blockers, fresh);
+        stats
+            .phase_seconds
+            .push(("global".into(), start.elapsed().as_secs_f64()));
+
+        let start = Instant::now();
+        let tiles = self.trace_tiles(ctx);
+        let wanted = self.wanted_movies(ctx, &tiles);
+        self.apply_events(ctx, wanted, &blockers, &mut stats);
+        let global = self.global.as_ref().expect("built above");
+        let samples = self.settings.shadow_samples;
+        let counts: Vec<ShadowCounts> = self
+            .movies
+            .par_iter_mut()
+            .map(|(_, m)| m.shade(ctx, &blockers, global, samples))
+            .collect();
+        let mut shadows = ShadowCounts::default();
+        counts.into_iter().for_each(|c| shadows += c);
+        stats
+            .phase_seconds
+            .push(("movies".into(), start.elapsed().as_secs_f64()));
+
+        let start = Instant::now();
+        let film = self.render(ctx, tiles, &mut stats);
+        stats
+            .phase_seconds
+            .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
+        stats.records_alive = self.movies.len() as u64;
+        self.stats = stats;
+        film
+    }
+
+    fn last_frame_stats(&self) -> FrameStats {
+        self.stats.clone()
+    }
+}
+
+impl TextureMovies {
+    fn tile_pixels(&self, ctx: &FrameContext) -> u32 {
+        (ctx.backend.preferred_batch() / self.settings.spp.max(1) as usize).max(1) as u32
+    }
+
+    /// The camera samples of every pixel, tile by tile, with their hits:
+    /// the item buffer of the frame and the first step of its render.
+    fn trace_tiles(&self, ctx: &FrameContext) -> Vec<Tile> {
+        let spp = self.settings.spp.max(1);
+        let per_tile = self.tile_pixels(ctx);
+        let n_pixels = ctx.width * ctx.height;
+        let starts: Vec<u32> = (0..n_pixels).step_by(per_tile as usize).collect();
+        starts
+            .into_par_iter()
+            .map(|first| {
+                let count = per_tile.min(n_pixels - first);
+                let (primary, edges) = PrimarySamples::trace(ctx, first, count, spp);
+                Tile {
+                    first,
+                    count,
+                    primary,
+                    edges,
+                }
+            })
+            .collect()
+    }
+
+    /// Which sides of which triangles the samples see with a diffuse
+    /// part, and the resolution each needs (the finest any sample asks).
+    fn wanted_movies(&self, ctx: &FrameContext, tiles: &[Tile]) -> BTreeMap<MovieKey, u32> {
+        let camera = &ctx.snapshot.camera;
+        let pixel_angle = 2.0 * camera.tan_half_fov() / ctx.height as f32;
+        let s = &self.settings;
+        let mut wanted = BTreeMap::new();
+        for tile in tiles {
+            for (ray, hit) in tile.primary.rays.iter().zip(&tile.primary.hits) {
+                let Some(key) = movie_key(ctx, ray.dir(), hit) else {
+                    continue;
+                };
+                let tri = &ctx.snapshot.triangles[hit.triangle as usize];
+                let distance = hit.t * ray.dir().length();
+                let r = movie::needed_resolution(
+                    tri,
+                    distance,
+                    pixel_angle,
+                    s.texels_per_pixel,
+                    s.max_resolution,
+                );
+                let e = wanted.entry(key).or_insert(r);
+                *e = (*e).max(r);
+            }
+        }
+        wanted
+    }
+
+    /// §4.1's events: movies no longer seen close, movies whose needed
+    /// resolution changed are replaced, new sides open.
+    fn apply_events(
+        &mut self,
+        ctx: &FrameContext,
+        wanted: BTreeMap<MovieKey, u32>,
+        blockers: &direct::Blockers,
+        stats: &mut FrameStats,
+    ) {
+        let mut closed_lengths = Vec::new();
+        self.movies.retain(|key, m| {
+            let keep = wanted.get(key) == Some(&m.resolution);
+            if !keep {
+                closed_lengths.push(ctx.frame.saturating_sub(m.start));
+                if wanted.contains_key(key) {
+                    stats.records_replaced += 1;
+                } else {
+                    stats.records_dropped += 1;
+                }
+            } else {
+                stats.records_reused += 1;
+            }
+            keep
+        });
+        for (key, resolution) in wanted {
+            self.movies.entry(key).or_insert_with(|| {
+                stats.records_created += 1;
+                let moving = blockers.is_moving_triangle(key.triangle);
+                Movie::open(key, resolution, ctx.frame, moving)
+            });
+        }
+        stats.records_created -= stats.records_replaced.min(stats.records_created);
+        // Lengths of the movies that ended, in frames.
+        for length in closed_lengths {
+            let l = length as usize;
+            if stats.lifespan_histogram.len() <= l {
+                stats.lifespan_histogram.resize(l + 1, 0);
+            }
+            stats.lifespan_histogram[l] += 1;
+        }
+        stats.mean_lifespan = super::mean_lifespan(&stats.lifespan_histogram);
+    }
+
+    /// Each pixel sample: emission, the diffuse part from its texel, and
+    /// the glossy lobe path-traced.
+    fn render(&self, ctx: &FrameContext, tiles: Vec<Tile>, stats: &mut FrameStats) -> Film {
+        let mut film = Film::new(ctx.width, ctx.height);
+        let per_tile = self.tile_pixels(ctx) as usize;
+        let lookups: Vec<u64> = film
+            .pixels
+            .par_chunks_mut(per_tile)
+            .zip(tiles)
+            .map(|(out, tile)| {
+                debug_assert_eq!(out.len(), tile.count as usize);
+                self.render_tile(ctx, tile, out)
+            })
+            .collect();
+        stats.lookups = lookups.iter().sum();
+        film
+    }
+
+    fn render_tile(&self, ctx: &FrameContext, mut tile: Tile, out: &mut [Vec3]) -> u64 {
+        let surfaces: Vec<Option<Surface>> = tile.primary.surfaces(ctx);
+        let mut radiance = vec![Vec3::ZERO; surfaces.len()];
+        let mut lights = FirstLightSampler::default();
+        let mut shadows = Vec::new();
+        let mut glossy: Vec<(usize, RadianceQuery)> = Vec::new();
+        let mut lookups = 0u64;
+        for (i, surface) in surfaces.iter().enumerate() {
+            let Some(s) = surface else { continue };
+            if s.material.is_emissive()
+                && emitting_cosine(s.triangle, s.material.double_sided, s.wo).is_some()
+            {
+                radiance[i] += s.material.emission;
+            }
+            if s.bsdf.is_black() {
+                continue;
+            }
+            let (ray, hit) = (&tile.primary.rays[i], &tile.primary.hits[i]);
+            if let Some(movie) = movie_key(ctx, ray.dir(), hit).and_then(|k| self.movies.get(&k)) {
+                lookups += 1;
+                radiance[i] += s.bsdf.diffuse_albedo() * FRAC_1_PI * movie.lookup(hit.u, hit.v);
+            }
+            if s.bsdf.has_specular() {
+                let rng = &mut tile.primary.rngs[i];
+                let choice = lights.sample(ctx, &tile.primary.samples[i], rng);
+                if let Some((shadow, c)) = direct_light(ctx, s, choice, false) {
+                    shadows.push((i, shadow, c));
+                }
+                if let Some(q) = glossy_query(s, rng) {
+                    glossy.push((i, q));
+                }
+            }
+        }
+        let rays: Vec<_> = shadows.iter().map(|s| s.1).collect();
+        let mut occluded = vec![false; rays.len()];
+        ctx.backend.any_hit(&rays, &mut occluded);
+        for ((i, _, c), blocked) in shadows.into_iter().zip(occluded) {
+            if !blocked {
+                radiance[i] += c;
+            }
+        }
+        let (targets, queries): (Vec<usize>, Vec<RadianceQuery>) = glossy.into_iter().unzip();
+        for (i, r) in targets
+            .into_iter()
+            .zip(trace_radiance(ctx, self.settings.length, queries))
+        {
+            radiance[i] += r.radiance;
+        }
+        tile.edges
+            .resolve(&tile.primary.samples, &radiance, tile.first, out);
+        lookups
+    }
+}
+
+/// The movie a camera ray along `dir` that made `hit` reads: the side of
+/// the triangle it sees, where the material has a diffuse part.
+fn movie_key(ctx: &FrameContext, dir: Vec3, hit: &Hit) -> Option<MovieKey> {
+    if !hit.is_hit() {
+        return None;
+    }
+    let id = hit.triangle as usize;
+    let material = &ctx.scene.materials[ctx.snapshot.tri_material[id] as usize];
+    if material.diffuse.max_element() <= 0.0 {
+        return None;
+    }
+    let back = ctx.snapshot.triangles[id].geometric_normal().dot(dir) > 0.0;
+    Some(MovieKey {
+        triangle: hit.triangle,
+        back,
+    })
+}

@@ -1,0 +1,238 @@
+//! A texture movie (paper §4): the diffuse irradiance of one side of one
+//! triangle over an interval of frames, as a texture of `R × R` texels
+//! over the triangle's barycentric square (the texels of the lower half
+//! and one diagonal beyond it, which bilinear lookups inside the triangle
+//! reach). Its resolution is fixed for its life: a triangle whose needed
+//! resolution changes gets a new movie (§4.1).
+
+use super::direct::{direct_irradiance, Blockers, ShadePoint, ShadowCounts, StaticShadows};
+use super::global::GlobalPass;
+use super::FrameContext;
+use crate::scene::Triangle;
+use glam::Vec3;
+
+/// Tags the random streams of the movies' texels.
+const MOVIE_STREAM: u64 = 1 << 60;
+
+/// A movie's identity: which side of which triangle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct MovieKey {
+    pub triangle: u32,
+    /// The side against the geometric normal.
+    pub back: bool,
+}
+
+/// One movie, holding the texels of the frame being rendered.
+#[derive(Clone, Debug)]
+pub struct Movie {
+    pub key: MovieKey,
+    /// Texels along each of the triangle's two parametric edges.
+    pub resolution: u32,
+    /// The frame it opened at.
+    pub start: u32,
+    /// Shadows of static blockers at its texels (kept only for triangles
+    /// that do not move: §5, "static occluders are computed once per movie").
+    shadows: Option<StaticShadows>,
+    /// Irradiance per texel (`j·R + i`; zero outside the band).
+    pub texels: Vec<Vec3>,
+}
+
+/// Texel `(i, j)` is stored when `i + j ≤ R + 1`.
+fn in_band(resolution: u32, i: u32, j: u32) -> bool {
+    i + j <= resolution + 1
+}
+
+impl Movie {
+    pub fn open(key: MovieKey, resolution: u32, start: u32, moving: bool) -> Self {
+        Movie {
+            key,
+            resolution,
+            start,
+            shadows: (!moving).then(StaticShadows::default),
+            texels: Vec::new(),
+        }
+    }
+
+    /// The band's texels, `(index, i, j)`, in storage order.
+    fn band(&self) -> impl Iterator<Item = (usize, u32, u32)> + '_ {
+        let r = self.resolution;
+        (0..r).flat_map(move |j| {
+            (0..r)
+                .filter(move |&i| in_band(r, i, j))
+                .map(move |i| ((j * r + i) as usize, i, j))
+        })
+    }
+
+    /// Texels stored.
+    pub fn texel_count(&self) -> usize {
+        self.band().count()
+    }
+
+    /// Where texel `(i, j)` is evaluated: its centre, moved onto the
+    /// triangle if it lies beyond the long edge, and a hair inside.
+    fn texel_uv(&self, i: u32, j: u32) -> (f32, f32) {
+        let r = self.resolution as f32;
+        let (mut u, mut v) = ((i as f32 + 0.5) / r, (j as f32 + 0.5) / r);
+        let s = u + v;
+        if s > 1.0 {
+            u /= s;
+            v /= s;
+        }
+        let k = 1e-3;
+        (u + (1.0 / 3.0 - u) * k, v + (1.0 / 3.0 - v) * k)
+    }
+
+    fn texel_point(&self, tri: &Triangle, index: usize, i: u32, j: u32) -> ShadePoint {
+        let (u, v) = self.texel_uv(i, j);
+        let side = if self.key.back { -1.0 } else { 1.0 };
+        ShadePoint {
+            p: tri.point(u, v),
+            n: tri.shading_normal(u, v) * side,
+            ng: tri.geometric_normal() * side,
+            item: MOVIE_STREAM
+                | u64::from(self.key.triangle) << 24
+                | u64::from(self.key.back) << 23
+                | index as u64,
+        }
+    }
+
+    /// The movie's frame of `ctx`: direct light per texel (static shadows
+    /// kept from the frame it opened) plus the global pass's indirect.
+    pub fn shade(
+        &mut self,
+        ctx: &FrameContext,
+        blockers: &Blockers,
+        global: &GlobalPass,
+        samples: u32,
+    ) -> ShadowCounts {
+        let tri = &ctx.snapshot.triangles[self.key.triangle as usize];
+        let band: Vec<(usize, u32, u32)> = self.band().collect();
+        let points: Vec<ShadePoint> = band
+            .iter()
+            .map(|&(index, i, j)| self.texel_point(tri, index, i, j))
+            .collect();
+        let (direct, counts) =
+            direct_irradiance(ctx, blockers, &points, samples, self.shadows.as_mut());
+        let r = self.resolution as usize;
+        self.texels.clear();
+        self.texels.resize(r * r, Vec3::ZERO);
+        for (&(index, i, j), e) in band.iter().zip(direct) {
+            let (u, v) = self.texel_uv(i, j);
+            self.texels[index] = e + global.indirect_at(self.key.triangle, u, v);
+        }
+        counts
+    }
+
+    /// Bilinear lookup at barycentrics `(u, v)` of the triangle.
+    pub fn lookup(&self, u: f32, v: f32) -> Vec3 {
+        let r = self.resolution;
+        let rf = r as f32;
+        let axis = |t: f32| {
+            let x = t * rf - 0.5;
+            let i0 = (x.max(0.0).floor() as u32).min(r - 1);
+            let f = (x - i0 as f32).clamp(0.0, 1.0);
+            (i0, (i0 + 1).min(r - 1), f)
+        };
+        let (i0, i1, fx) = axis(u);
+        let (j0, j1, fy) = axis(v);
+        let at = |i: u32, j: u32| self.texels[(j * r + i) as usize];
+        (at(i0, j0) * (1.0 - fx) + at(i1, j0) * fx) * (1.0 - fy)
+            + (at(i0, j1) * (1.0 - fx) + at(i1, j1) * fx) * fy
+    }
+
+    /// Bytes this movie holds in memory.
+    pub fn bytes(&self) -> usize {
+        self.texels.len() * 12 + self.shadows.as_ref().map_or(0, StaticShadows::bytes)
+    }
+}
+
+/// The resolution a triangle needs where a camera ray met it at distance
+/// `t`: texels no larger than the pixel's footprint there (§3.1: "at least
+/// one texel covers one image pixel"), times `texels_per_pixel`, as a
+/// power of two (so that small changes of size are no event) at most
+/// `max`.
+pub fn needed_resolution(
+    tri: &Triangle,
+    t: f32,
+    pixel_angle: f32,
+    texels_per_pixel: f32,
+    max: u32,
+) -> u32 {
+    let longest = (0..3)
+        .map(|k| (tri.p[(k + 1) % 3] - tri.p[k]).length())
+        .fold(0.0f32, f32::max);
+    let footprint = (t * pixel_angle).max(1e-9);
+    let texels = (longest * texels_per_pixel / footprint).ceil();
+    if !texels.is_finite() || texels >= max as f32 {
+        return max.max(1);
+    }
+    (texels.max(1.0) as u32)
+        .next_power_of_two()
+        .clamp(1, max.max(1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn key() -> MovieKey {
+        MovieKey {
+            triangle: 3,
+            back: false,
+        }
+    }
+
+    /// Every texel a lookup inside the triangle reads is in the band.
+    #[test]
+    fn lookups_inside_the_triangle_read_only_band_texels() {
+        for r in [1u32, 2, 3, 8, 16] {
+            let mut movie = Movie::open(key(), r, 0, false);
+            movie.texels = vec![Vec3::ZERO; (r * r) as usize];
+            for (index, _, _) in movie.band().collect::<Vec<_>>() {
+                movie.texels[index] = Vec3::ONE;
+            }
+            for a in 0..=40 {
+                for b in 0..=40 - a {
+                    let (u, v) = (a as f32 / 40.0, b as f32 / 40.0);
+                    let got = movie.lookup(u, v);
+                    assert!(
+                        (got - Vec3::ONE).abs().max_element() < 1e-5,
+                        "R {r} ({u}, {v}): {got}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// A texture of a linear function is read back exactly between texel
+    /// centres (bilinear).
+    #[test]
+    fn a_lookup_between_texel_centres_is_bilinear() {
+        let r = 8u32;
+        let mut movie = Movie::open(key(), r, 0, false);
+        movie.texels = vec![Vec3::ZERO; (r * r) as usize];
+        for (index, i, j) in movie.band().collect::<Vec<_>>() {
+            movie.texels[index] = Vec3::new(i as f32, j as f32, 1.0);
+        }
+        let (u, v) = ((2.5 + 0.5) / 8.0, (1.25 + 0.5) / 8.0);
+        let got = movie.lookup(u, v);
+        assert!(
+            (got - Vec3::new(2.5, 1.25, 1.0)).abs().max_element() < 1e-5,
+            "{got}"
+        );
+    }
+
+    #[test]
+    fn the_needed_resolution_doubles_as_the_footprint_halves() {
+        let tri = Triangle {
+            p: [Vec3::ZERO, Vec3::X, Vec3::Y],
+            n: [Vec3::Z; 3],
+        };
+        let near = needed_resolution(&tri, 1.0, 0.01, 1.0, 1024);
+        let nearer = needed_resolution(&tri, 0.5, 0.01, 1.0, 1024);
+        assert_eq!(near, 256); // ⌈1.414 / 0.01⌉ = 142 → 256
+        assert_eq!(nearer, 512);
+        assert_eq!(needed_resolution(&tri, 0.1, 0.01, 1.0, 256), 256);
+        assert_eq!(needed_resolution(&tri, 1e9, 0.01, 1.0, 256), 1);
+    }
+}
