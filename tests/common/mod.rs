@@ -190,3 +190,85 @@ pub fn converged_sequence(scene: Scene, size: u32, frames: std::ops::Range<u32>)
         .map(|f| r.with_frame_context(f, |ctx| path.render_frame(ctx)))
         .collect()
 }
+
+/// An axis-aligned box whose front faces look outward (a solid block).
+pub fn outward_box(min: Vec3, max: Vec3, material: u32) -> Mesh {
+    let mut m = Mesh::default();
+    let d = max - min;
+    let (x, y, z) = (Vec3::X * d.x, Vec3::Y * d.y, Vec3::Z * d.z);
+    push_quad(&mut m, min, x, z, material); // bottom, faces -y
+    push_quad(&mut m, min + y, z, x, material); // top, faces +y
+    push_quad(&mut m, min, y, x, material); // back, faces -z
+    push_quad(&mut m, min + z, x, y, material); // front, faces +z
+    push_quad(&mut m, min, z, y, material); // left, faces -x
+    push_quad(&mut m, min + x, y, z, material); // right, faces +x
+    m
+}
+
+/// Adds a block (an [`outward_box`] of a new diffuse material `colour`)
+/// on its own node, moved by the translation channel `values` at `times`
+/// with `interpolation`.
+pub fn add_moving_block(
+    s: &mut Scene,
+    (min, max): (Vec3, Vec3),
+    colour: Vec3,
+    interpolation: Interpolation,
+    (times, values): (Vec<f32>, Vec<Vec4>),
+) {
+    s.materials.push(Material::diffuse("block", colour));
+    let block = outward_box(min, max, (s.materials.len() - 1) as u32);
+    s.objects.push(radcache::scene::Object {
+        name: "block".into(),
+        node: s.nodes.len(),
+        mesh: block,
+    });
+    s.nodes.push(radcache::scene::Node {
+        name: "block".into(),
+        parent: None,
+        rest: radcache::scene::Trs::default(),
+    });
+    s.animation.channels.push(Channel {
+        node: s.nodes.len() - 1,
+        property: Property::Translation,
+        interpolation,
+        times,
+        values,
+    });
+}
+
+/// The lit room with a bright red block in its back left corner that
+/// jumps out of the room (20 m down, under the floor) at frame `k`: a STEP
+/// translation key. Before `k` the block bleeds red onto the back and left
+/// walls and the floor and shadows their indirect light.
+pub fn jumping_block_room(k: u32, fps: f32) -> Scene {
+    let mut s = lit_room(None, fps);
+    add_moving_block(
+        &mut s,
+        (Vec3::new(-0.95, 0.0, -0.95), Vec3::new(-0.2, 1.0, -0.2)),
+        Vec3::new(0.9, 0.1, 0.1),
+        Interpolation::Step,
+        (
+            vec![0.0, (k as f32 - 0.5) / fps],
+            vec![Vec4::ZERO, Vec4::new(0.0, -20.0, 0.0, 0.0)],
+        ),
+    );
+    s
+}
+
+/// The bias of `test` over the lower left quarter of the image (where the
+/// block stood): the difference of the region's mean radiance from the
+/// reference's, relative to the reference's, worst colour channel. A ghost
+/// is a bias (the block's red light, its missing shadow); the noise of
+/// records gathered with other random streams mostly averages out over the
+/// region.
+pub fn region_error(test: &Film, reference: &Film) -> f64 {
+    let (w, h) = (reference.width as usize, reference.height as usize);
+    let (mut a, mut b) = (Vec3::ZERO, Vec3::ZERO);
+    for y in h / 2..h {
+        for x in 0..w / 2 {
+            a += test.pixels[y * w + x];
+            b += reference.pixels[y * w + x];
+        }
+    }
+    f64::from(((a - b).abs() / b.max(Vec3::splat(1e-6))).max_element())
+}

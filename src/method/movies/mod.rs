@@ -33,9 +33,9 @@
 //! tree: each frame's textures are written with the frame, and only the
 //! frame being rendered is held in memory.
 
-mod direct;
+pub mod direct;
 pub mod global;
-mod movie;
+pub mod movie;
 
 use super::pixels::FirstLightSampler;
 use super::render_pass::{direct_light, glossy_query, PrimarySamples, Surface};
