@@ -9,9 +9,7 @@
 
 mod common;
 
-use common::{
-    converged_sequence, inward_box, jumping_block_room, lit_room, push_quad, region_error, scene,
-};
+use common::{inward_box, jumping_block_room, lit_room, push_quad, region_error, scene};
 use glam::Vec3;
 use radcache::film::Film;
 use radcache::method::movies::{MoviesSettings, TextureMovies};
