@@ -71,6 +71,7 @@ fn main() {
             records,
             stats: &stats,
             state: None,
+            movies: None,
         };
         store.commit_frame(&mut job, commit).expect("a commit");
     }

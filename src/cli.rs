@@ -251,6 +251,9 @@ pub struct MoviesArgs {
     /// Finest texture, texels along a triangle's edge.
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub movies_max_resolution: u32,
+    /// Memory for the movies' kept static shadows, in MiB (past it the largest give theirs up and find them again).
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(0..=1_048_576))]
+    pub movies_memory_mib: u32,
     /// Global pass: grid spacing as a fraction of the static scene's diagonal.
     #[arg(long, default_value_t = 1.0 / 32.0, value_parser = parse_positive)]
     pub movies_spacing: f32,
@@ -640,6 +643,7 @@ fn render_method(args: &RenderArgs) -> MethodSettings {
             shadow_samples: args.movies.movies_shadow_samples,
             texels_per_pixel: args.movies.movies_texels_per_pixel,
             max_resolution: args.movies.movies_max_resolution,
+            memory_mib: args.movies.movies_memory_mib,
             global: GlobalSettings {
                 spacing: args.movies.movies_spacing,
                 links: args.movies.movies_links,

@@ -813,6 +813,7 @@ fn store_frame(
             chain_end,
             changes,
         }),
+        movies: kept.movies.as_ref(),
     };
     j.store.commit_frame(&mut j.job, commit)?;
     Ok(())

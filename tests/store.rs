@@ -5,10 +5,11 @@ use glam::Vec3;
 use radcache::cache::gather::Strata;
 use radcache::film;
 use radcache::method::ic::IcSettings;
+use radcache::method::movies::{Movie, MoviesSettings, TextureMovies};
 use radcache::method::path::PathSettings;
 use radcache::method::tcg::TcgSettings;
 use radcache::method::trc::{TemporalGradients, TrcSettings};
-use radcache::method::FrameStats;
+use radcache::method::{FrameStats, Method};
 use radcache::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob};
 use radcache::store::migrate::{self, Migration};
 use radcache::store::{
@@ -52,6 +53,7 @@ fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
                     records,
                     stats: &stats,
                     state: None,
+                    movies: None,
                 },
             )
             .unwrap();
@@ -208,7 +210,7 @@ fn newer_schema_is_refused_and_left_as_it_was() {
 fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 5u32.to_be_bytes() {
+    if version.as_ref() != 6u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -218,8 +220,8 @@ fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 6: the
-    // real 1 → 2, 2 → 3, 3 → 4 and 4 → 5, then 5 → 6, in order.
+    // A version-1 store (fixture) brought to a synthetic version 7: the
+    // real 1 → 2, 2 → 3, 3 → 4, 4 → 5 and 5 → 6, then 6 → 7, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -232,15 +234,16 @@ fn older_schema_is_migrated_in_order() {
         migrate::MIGRATIONS[1],
         migrate::MIGRATIONS[2],
         migrate::MIGRATIONS[3],
+        migrate::MIGRATIONS[4],
         Migration {
-            from: 5,
+            from: 6,
             name: "synthetic",
             run: add_marker,
         },
     ];
-    // Without the step for 5 → 6 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 6, &steps[..4]));
-    assert!(msg.contains("no migration from schema 5 to 6"), "{msg}");
+    // Without the step for 6 → 7 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 7, &steps[..5]));
+    assert!(msg.contains("no migration from schema 6 to 7"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -249,8 +252,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 6, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 6);
+        let store = Store::open_with(&path, false, 7, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 7);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -259,9 +262,9 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 5) now refuses the upgraded store.
+    // This build (version 6) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 6 is newer"), "{msg}");
+    assert!(msg.contains("schema version 7 is newer"), "{msg}");
 }
 
 #[test]
@@ -574,6 +577,90 @@ fn resumed_tcg_render_is_bit_identical_from_stored_state() {
     let rays: u64 = uninterrupted.frame_stats[4..].iter().map(|f| f.rays).sum();
     assert_eq!(s.rays, rays, "exactly the rays of frames 4..7");
     assert_eq!(exr_files(&plain, 0..8), exr_files(&resumed, 0..8));
+}
+
+/// A `movies` job keeps no state from frame to frame (a movie kept gives
+/// the texels a new one would), so it resumes as `ic` does: across ranges
+/// its frames equal an uninterrupted run byte for byte. Each frame's
+/// texture movies are stored with it (`movies` tree): every movie open in
+/// the frame, its texels within RGBE's precision of the method's, and a
+/// job started over loses them with its frames.
+#[test]
+fn movies_job_stores_its_texture_movies_and_resumes_bit_identically() {
+    let movies = MoviesSettings {
+        spp: 2,
+        shadow_samples: 4,
+        ..MoviesSettings::default()
+    };
+    let method = MethodSettings::Movies(movies.clone());
+    resume_matches_uninterrupted(method.clone());
+
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let spec = render::job_spec("m", &source, &method, &renderer(&method).settings, 0..3).unwrap();
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    render::render_job_to_dir(
+        &mut renderer(&method),
+        0..3,
+        &dir.path().join("out"),
+        true,
+        Some(&mut sj),
+    )
+    .unwrap();
+    // The method's own movies after frame 2, to compare with the stored ones.
+    let mut r = renderer(&MethodSettings::Path(Default::default()));
+    let mut direct = TextureMovies::new(movies);
+    for f in 0..3 {
+        r.with_frame_context(f, |ctx| direct.render_frame(ctx));
+    }
+    let stored = store.frame_movie_texels(sj.job.id, 2).unwrap();
+    let mine: Vec<&Movie> = direct.movies().collect();
+    assert_eq!(stored.len(), mine.len());
+    assert!(!mine.is_empty());
+    // The movies nothing changed were stored once, with an earlier frame.
+    let value = store.frame_movies(sj.job.id, 2).unwrap().unwrap();
+    assert!(value
+        .movies
+        .iter()
+        .any(|m| m.texels == 0 && m.stored_at < 2));
+    assert!(value
+        .movies
+        .iter()
+        .any(|m| m.texels > 0 && m.stored_at == 2));
+    for ((value, texels), movie) in stored.iter().zip(&mine) {
+        assert_eq!(
+            (value.triangle, value.back, value.resolution, value.start),
+            (
+                movie.key.triangle,
+                movie.key.back,
+                movie.resolution,
+                movie.start
+            )
+        );
+        let band = &movie.direct;
+        assert_eq!(texels.len(), band.len());
+        for (got, want) in texels.iter().zip(band) {
+            // RGBE keeps 8 bits of mantissa for the largest channel.
+            let tolerance = want.max_element() / 128.0 + 1e-30;
+            assert!(
+                (*got - *want).abs().max_element() <= tolerance,
+                "{got} vs {want}"
+            );
+        }
+    }
+    // Started over with other settings, the job's movies go with its frames.
+    let other = MethodSettings::Movies(MoviesSettings {
+        shadow_samples: 8,
+        ..MoviesSettings::default()
+    });
+    let spec = render::job_spec("m", &source, &other, &renderer(&other).settings, 0..3).unwrap();
+    let job = store.begin_job(&spec, true).unwrap();
+    assert_eq!(store.frame_movies(job.id, 2).unwrap(), None);
+    assert_eq!(store.frame_movies(sj.job.id, 2).unwrap(), None);
 }
 
 /// A `trc` render stopped after frame 5 of 0..10 — with records created
@@ -1401,6 +1488,7 @@ fn a_frame_written_again_replaces_its_record_block() {
                     records,
                     stats: &stats,
                     state: None,
+                    movies: None,
                 },
             )
             .unwrap();
@@ -1481,13 +1569,39 @@ fn version_4_store_gets_a_log_generation_and_a_schema_4_build_refuses_it() {
     assert_eq!(meta_generation(&path), None);
     {
         let store = Store::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 5);
+        assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
         assert_eq!(job_j_content(&store), before);
         assert_eq!(store.sample_log_file(), path.join("samples.log"));
     }
     assert_eq!(meta_generation(&path), Some(0u64.to_be_bytes().to_vec()));
     // An older build refuses it (its log may have moved by now).
     assert_an_older_build_refuses(&path, 4);
+}
+
+/// Schema 6 only gives the `movies` tree its texture movies: a schema-5
+/// store opens with its content unchanged and no movie, and a schema-5
+/// build then refuses it (it would leave a job's movies behind when the
+/// job starts over).
+#[test]
+fn version_5_store_opens_as_version_6_and_a_schema_5_build_refuses_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    v4_fixture(&path);
+    let before = {
+        let v5 = Store::open_with(&path, true, 5, migrate::MIGRATIONS).unwrap();
+        assert_eq!(v5.schema_version().unwrap(), 5);
+        job_j_content(&v5)
+    };
+    {
+        let store = Store::open(&path).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 6);
+        assert_eq!(job_j_content(&store), before);
+        let job = store.job("j").unwrap().unwrap();
+        for frame in store.frames_done(job.id).unwrap() {
+            assert_eq!(store.frame_movies(job.id, frame).unwrap(), None);
+        }
+    }
+    assert_an_older_build_refuses(&path, 5);
 }
 
 #[test]
@@ -1510,7 +1624,7 @@ fn interrupted_0004_to_0005_migration_resumes() {
         4
     );
     let store = Store::open(&path).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 5);
+    assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
     assert_eq!(job_j_content(&store), before);
     drop(store);
     assert_eq!(meta_generation(&path), Some(0u64.to_be_bytes().to_vec()));

@@ -223,6 +223,9 @@ pub struct FrameRecords {
     /// The changes of the state carried to the next frame
     /// ([`Method::carries_state`]); `None` for the other methods.
     pub state: Option<StateChanges>,
+    /// The texture movies of the frame (`movies`), for the store's
+    /// `movies` tree.
+    pub movies: Option<crate::store::schema::MovieFramesValue>,
 }
 
 /// How a method's carried state changed in one frame: what the store

@@ -16,7 +16,8 @@
 //!
 //! Nothing else does: `state` holds a stateful method's own bytes (for
 //! `trc`, its records' cache fields and the next id, no offsets), `stats`
-//! the frames' statistics, `jobs` the jobs, `movies` nothing.
+//! the frames' statistics, `jobs` the jobs, `movies` each frame's texture
+//! movies with their texels inline.
 //!
 //! How (crash safety): the referenced blocks are copied, in log order, to
 //! the log of the next generation (`samples.N.log`, created empty); a

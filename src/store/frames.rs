@@ -4,11 +4,54 @@
 
 use super::samples::{compress, decompress, SampleBlock, SampleLog};
 use super::schema::{
-    FrameValue, JobValue, RecordBlock, RecordValue, StateHeadValue, StateRecordValue, StatsValue,
+    FrameValue, JobValue, MovieFramesValue, MovieValue, RecordBlock, RecordValue, StateHeadValue,
+    StateRecordValue, StatsValue,
 };
 use super::{append_record_block, encode, keys, now_unix, Store, StoreError};
 use sled::transaction::{ConflictableTransactionError, TransactionError};
 use sled::Transactional;
+use std::collections::hash_map::{Entry, HashMap};
+
+/// The most texels one frame's movies may hold: 4096 movies at 1024 texels
+/// along an edge (more than any setting allows) would not reach it.
+const MAX_STORED_TEXELS: usize = 1 << 28;
+
+impl MovieFramesValue {
+    /// The global pass's indirect irradiance per vertex (RGBE decoded).
+    pub fn global(&self) -> Result<Vec<glam::Vec3>, String> {
+        let n = self.global_vertices as usize;
+        if n > MAX_STORED_TEXELS {
+            return Err(format!(
+                "{n} global-pass vertices, more than {MAX_STORED_TEXELS}"
+            ));
+        }
+        let raw = decompress(&self.global_zstd, n * 4)?;
+        Ok(raw
+            .chunks_exact(4)
+            .map(|c| super::rgbe::decode([c[0], c[1], c[2], c[3]]))
+            .collect())
+    }
+
+    /// Each movie's stored texels (RGBE decoded), in movie order.
+    pub fn texels(&self) -> Result<Vec<Vec<glam::Vec3>>, String> {
+        let total: usize = self.movies.iter().map(|m| m.texels as usize).sum();
+        // A damaged count must not make the decompression allocate it.
+        if total > MAX_STORED_TEXELS {
+            return Err(format!(
+                "{total} texels in one frame's movies, more than {MAX_STORED_TEXELS}"
+            ));
+        }
+        let raw = decompress(&self.texels_zstd, total * 4)?;
+        let mut rgbe = raw
+            .chunks_exact(4)
+            .map(|c| super::rgbe::decode([c[0], c[1], c[2], c[3]]));
+        Ok(self
+            .movies
+            .iter()
+            .map(|m| rgbe.by_ref().take(m.texels as usize).collect())
+            .collect())
+    }
+}
 
 /// One record of a frame with its samples, ready to store.
 pub struct RecordCommit {
@@ -29,6 +72,8 @@ pub struct FrameCommit<'a> {
     pub stats: &'a crate::method::FrameStats,
     /// The frame's changes of a stateful method's carried state.
     pub state: Option<StateCommit<'a>>,
+    /// The frame's texture movies (`movies`).
+    pub movies: Option<&'a MovieFramesValue>,
 }
 
 /// A stateful method's state changes of one frame, with the chain they
@@ -160,6 +205,7 @@ impl Store {
         }
         progressed.last_frame = Some(c.frame);
         progressed.updated_unix = now_unix();
+        let movies_bytes = c.movies.map(encode);
         let frame_bytes = encode(&logged.frame);
         let job_bytes = encode(&progressed);
         let job_key = keys::job(&job.name);
@@ -170,8 +216,9 @@ impl Store {
             &self.stats,
             &self.state,
             &self.jobs,
+            &self.movies,
         )
-            .transaction(|(frames, records, meta, stats, state_tree, jobs)| {
+            .transaction(|(frames, records, meta, stats, state_tree, jobs, movies)| {
                 for k in &state.removed {
                     state_tree.remove(&k[..])?;
                 }
@@ -187,6 +234,15 @@ impl Store {
                     }
                     None if already => {
                         records.remove(&frame_key[..])?;
+                    }
+                    None => {}
+                }
+                match &movies_bytes {
+                    Some(v) => {
+                        movies.insert(&frame_key[..], &v[..])?;
+                    }
+                    None if already => {
+                        movies.remove(&frame_key[..])?;
                     }
                     None => {}
                 }
@@ -269,6 +325,82 @@ impl Store {
             records: records_value,
             samples_raw,
         })
+    }
+
+    /// The texture movies stored with frame `frame` of `job` (`movies`).
+    pub fn frame_movies(
+        &self,
+        job: u64,
+        frame: u32,
+    ) -> Result<Option<MovieFramesValue>, StoreError> {
+        let key = keys::frame(job, frame);
+        match self
+            .movies
+            .get(key)
+            .map_err(|e| StoreError::sled(&self.path, e))?
+        {
+            Some(bytes) => Ok(Some(self.decode("movies", &key, &bytes)?)),
+            None => Ok(None),
+        }
+    }
+
+    /// Every movie of frame `frame` of `job` with its texels (RGBE
+    /// decoded), those stored with an earlier frame fetched from there.
+    pub fn frame_movie_texels(
+        &self,
+        job: u64,
+        frame: u32,
+    ) -> Result<Vec<(MovieValue, Vec<glam::Vec3>)>, StoreError> {
+        let Some(value) = self.frame_movies(job, frame)? else {
+            return Ok(Vec::new());
+        };
+        // Earlier frames' movies and their decoded texels, read once each.
+        let mut earlier: HashMap<u32, (MovieFramesValue, Vec<Vec<glam::Vec3>>)> = HashMap::new();
+        let corrupt =
+            |f: u32, detail: String| self.corrupt("movies", &keys::frame(job, f), &detail);
+        let own = value.texels().map_err(|e| corrupt(frame, e))?;
+        let mut out = Vec::with_capacity(value.movies.len());
+        for (m, texels) in value.movies.iter().zip(own) {
+            if m.texels > 0 || m.stored_at == frame {
+                out.push((*m, texels));
+                continue;
+            }
+            let (there, texels) = match earlier.entry(m.stored_at) {
+                Entry::Occupied(e) => e.into_mut(),
+                Entry::Vacant(e) => {
+                    let v = self.frame_movies(job, m.stored_at)?.ok_or_else(|| {
+                        corrupt(
+                            frame,
+                            format!(
+                                "a movie's texels are in frame {}, which has none",
+                                m.stored_at
+                            ),
+                        )
+                    })?;
+                    let t = v.texels().map_err(|err| corrupt(m.stored_at, err))?;
+                    e.insert((v, t))
+                }
+            };
+            let found = there
+                .movies
+                .iter()
+                .zip(texels.iter())
+                .find(|(o, _)| {
+                    (o.triangle, o.back, o.start) == (m.triangle, m.back, m.start) && o.texels > 0
+                })
+                .map(|(_, t)| t.clone())
+                .ok_or_else(|| {
+                    corrupt(
+                        frame,
+                        format!(
+                            "movie of triangle {} not stored in frame {}",
+                            m.triangle, m.stored_at
+                        ),
+                    )
+                })?;
+            out.push((*m, found));
+        }
+        Ok(out)
     }
 
     pub fn frame(&self, job: u64, frame: u32) -> Result<Option<FrameValue>, StoreError> {

@@ -80,6 +80,32 @@ pub struct JobReport {
     /// The carried state of a stateful method (`trc`) a resume would
     /// continue from, if any.
     pub state: Option<StateReport>,
+    /// The texture movies of a `movies` job, if it stored any.
+    pub movies: Option<MoviesReport>,
+}
+
+/// What a `movies` job's frames hold in the `movies` tree.
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+pub struct MoviesReport {
+    /// Distinct movies (a side of a triangle from the frame it opened).
+    pub movies: u64,
+    /// Movie frames (a movie in a frame).
+    pub movie_frames: u64,
+    /// Movie frames whose texels are stored (the others encode as an
+    /// earlier frame of theirs, and point at it).
+    pub movie_frames_stored: u64,
+    /// Texels stored over all movie frames.
+    pub texels: u64,
+    /// Bytes of the texels stored (zstd) and raw (4 RGBE bytes each).
+    pub stored_bytes: u64,
+    pub raw_bytes: u64,
+}
+
+impl MoviesReport {
+    /// Mean length of the stored movies, in frames.
+    pub fn mean_length(&self) -> f64 {
+        self.movie_frames as f64 / self.movies.max(1) as f64
+    }
 }
 
 /// The records computed on some objects, and their lifespans.
@@ -268,11 +294,33 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
         }
     })?;
     r.lifespan_histogram = lifespans;
+    r.movies = movies_report(store, j.id)?;
     r.frame_details = match only {
         Some(f) => per_frame.remove(&f).into_iter().collect(),
         None => per_frame.into_values().collect(),
     };
     Ok(r)
+}
+
+/// The texture movies of job `job`'s frames (`None`: it stored none).
+fn movies_report(store: &Store, job: u64) -> Result<Option<MoviesReport>, StoreError> {
+    let mut r = MoviesReport::default();
+    let mut distinct = std::collections::HashSet::new();
+    for frame in store.frames_done(job)? {
+        let Some(v) = store.frame_movies(job, frame)? else {
+            continue;
+        };
+        for m in &v.movies {
+            distinct.insert((m.triangle, m.back, m.start));
+            r.movie_frames += 1;
+            r.movie_frames_stored += u64::from(m.texels > 0);
+            r.texels += u64::from(m.texels);
+        }
+        r.stored_bytes += v.texels_zstd.len() as u64;
+    }
+    r.movies = distinct.len() as u64;
+    r.raw_bytes = r.texels * 4;
+    Ok((r.movie_frames > 0).then_some(r))
 }
 
 impl JobReport {
@@ -305,6 +353,7 @@ impl JobReport {
             moving_objects: None,
             frame_details: Vec::new(),
             state: None,
+            movies: None,
         }
     }
 }
@@ -432,6 +481,20 @@ fn job_text(s: &mut String, j: &JobReport) {
             st.chain_end.map_or(String::new(), |e| format!(" to {e}")),
             st.records,
             st.value_bytes
+        );
+    }
+    if let Some(m) = &j.movies {
+        let _ = writeln!(
+            s,
+            "  texture movies {} (mean length {:.2} frames), {} movie frames ({} stored, the others unchanged), {} texels: {} B stored / {} B raw (ratio {})",
+            m.movies,
+            m.mean_length(),
+            m.movie_frames,
+            m.movie_frames_stored,
+            m.texels,
+            m.stored_bytes,
+            m.raw_bytes,
+            ratio(m.raw_bytes, m.stored_bytes)
         );
     }
     let _ = writeln!(

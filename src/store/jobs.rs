@@ -109,7 +109,13 @@ impl Store {
         let prefix = keys::job_prefix(job);
         // Their bytes stay in the log, unreferenced (it is append-only),
         // until `radcache compact` ([`compact`]).
-        for tree in [&self.frames, &self.stats, &self.records, &self.state] {
+        for tree in [
+            &self.frames,
+            &self.stats,
+            &self.records,
+            &self.state,
+            &self.movies,
+        ] {
             for key in tree.scan_prefix(prefix).keys() {
                 let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
                 tree.remove(key)

@@ -4,8 +4,9 @@
 //! in order. The layout is documented in `migrations/0001_initial.md`,
 //! `migrations/0002_state_and_identity.md`, `migrations/0003_sample_log.md`,
 //! `migrations/0004_record_blocks.md` and
-//! `migrations/0005_log_generations.md` (schema 5, this one: no key
-//! changed but `meta.samples_log_generation`).
+//! `migrations/0005_log_generations.md` (schema 5: no key changed but
+//! `meta.samples_log_generation`) and `migrations/0006_movies.md` (schema
+//! 6, this one: `movies` holds a frame's texture movies).
 //!
 //! | tree      | key                                   | bytes |
 //! |-----------|---------------------------------------|-------|
@@ -16,7 +17,7 @@
 //! | `records` | job id u64 · frame u32                | 12    |
 //! | `state`   | job id u64 (the head)                 | 8     |
 //! | `state`   | job id u64 · record id u64            | 16    |
-//! | `movies`  | (reserved, empty)                     |       |
+//! | `movies`  | job id u64 · frame u32 (schema 6)     | 12    |
 //!
 //! Since schema 3 there is no `samples` tree: a record's samples are in the
 //! sample log (`samples.log`), the record says where. Since schema 4 the

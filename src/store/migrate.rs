@@ -12,7 +12,7 @@ use super::{keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 5;
+pub const CURRENT_VERSION: u32 = 6;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -46,6 +46,11 @@ pub const MIGRATIONS: &[Migration] = &[
         from: 4,
         name: "0005_log_generations",
         run: super::v4::migrate_to_v5,
+    },
+    Migration {
+        from: 5,
+        name: "0006_movies",
+        run: super::v5::migrate_to_v6,
     },
 ];
 

@@ -1,4 +1,5 @@
-//! Value schemas of store schema version 5
+//! Value schemas of store schema version 6 (`migrations/0006_movies.md`:
+//! the `movies` tree holds [`MovieFramesValue`]s), on top of 5
 //! (`migrations/0005_log_generations.md`, on top of
 //! `migrations/0004_record_blocks.md`, `migrations/0003_sample_log.md`,
 //! `migrations/0002_state_and_identity.md` and `migrations/0001_initial.md`;
@@ -187,4 +188,47 @@ pub struct StateRecordValue {
     pub frame: u32,
     /// The record's state (method-defined bytes).
     pub data: Vec<u8>,
+}
+
+/// `movies` value under `job · frame` (schema 6,
+/// `migrations/0006_movies.md`): the texture movies of `movies` open in
+/// one frame, with that frame's texels (DESIGN.md: "texels are packed
+/// RGBE"; the paper's disk cache of movie frames). Held inline, not in the
+/// sample log: a frame's textures are one small block.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
+pub struct MovieFramesValue {
+    /// The movies, in key order (triangle, then side).
+    pub movies: Vec<MovieValue>,
+    /// The stored texels of the movies that hold some, movie after movie,
+    /// 4 RGBE bytes each, zstd-compressed: each texel's *direct*
+    /// irradiance (the paper's "bad links" layer, which the movie computes
+    /// itself, and which does not change where nothing moves near it).
+    pub texels_zstd: Vec<u8>,
+    /// Vertices of the frame's global pass.
+    pub global_vertices: u32,
+    /// Their indirect irradiance, 4 RGBE bytes each, zstd-compressed (the
+    /// "good links": a texel's is the Gouraud interpolation of its
+    /// triangle's grid vertices, `method::movies::global`).
+    pub global_zstd: Vec<u8>,
+}
+
+/// One movie of a [`MovieFramesValue`].
+#[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+pub struct MovieValue {
+    /// Snapshot triangle id.
+    pub triangle: u32,
+    /// The side against the triangle's geometric normal.
+    pub back: bool,
+    /// Texels along each parametric edge (`R`; texel `(i, j)` is stored
+    /// when `i + j ≤ R + 1`, row by row).
+    pub resolution: u32,
+    /// The frame the movie opened at.
+    pub start: u32,
+    /// Texels stored in this value: all of them, or 0 when they are, in
+    /// RGBE, those of an earlier frame of the same movie (a movie that
+    /// nothing changed is stored once).
+    pub texels: u32,
+    /// The frame whose value holds this movie's texels (this frame when
+    /// `texels` > 0).
+    pub stored_at: u32,
 }

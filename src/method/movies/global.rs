@@ -295,6 +295,11 @@ impl GlobalPass {
         self.vertices.len()
     }
 
+    /// Per vertex, the indirect irradiance of the last solution.
+    pub fn indirect(&self) -> &[Vec3] {
+        &self.indirect
+    }
+
     /// The grid of triangle `id`.
     pub fn grid(&self, id: u32) -> Grid {
         self.grids[id as usize]

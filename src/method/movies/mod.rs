@@ -39,12 +39,15 @@ pub mod movie;
 
 use super::pixels::FirstLightSampler;
 use super::render_pass::{direct_light, glossy_query, PrimarySamples, Surface};
-use super::{FrameContext, FrameStats, Method, RENDER_PHASE};
+use super::{FrameContext, FrameRecords, FrameStats, Method, RENDER_PHASE};
 use crate::backend::Hit;
 use crate::film::Film;
 use crate::integrator::{trace_radiance, PathLength, RadianceQuery};
 use crate::light::emitting_cosine;
 use crate::method::pixels::EmitterEdges;
+use crate::store::rgbe;
+use crate::store::samples::compress;
+use crate::store::schema::{MovieFramesValue, MovieValue};
 use direct::ShadowCounts;
 pub use direct::{paper_merge, MAX_SHADOW_SAMPLES};
 use glam::Vec3;
@@ -70,6 +73,11 @@ pub struct MoviesSettings {
     pub texels_per_pixel: f32,
     /// The finest texture, in texels along an edge.
     pub max_resolution: u32,
+    /// Memory for the movies' kept static shadows, in MiB (the paper's
+    /// user-set texture memory, §5): past it, the movies holding the most
+    /// give theirs up and find them again in their next frame, as a new
+    /// movie would (same texels, more rays).
+    pub memory_mib: u32,
     pub global: GlobalSettings,
     /// Paths of the glossy lobes.
     pub length: PathLength,
@@ -82,6 +90,7 @@ impl Default for MoviesSettings {
             shadow_samples: 16,
             texels_per_pixel: 1.0,
             max_resolution: 256,
+            memory_mib: 512,
             global: GlobalSettings::default(),
             length: PathLength::default(),
         }
@@ -95,6 +104,9 @@ pub struct TextureMovies {
     global: Option<GlobalPass>,
     movies: BTreeMap<MovieKey, Movie>,
     stats: FrameStats,
+    /// Whether to hand each frame's movies to the store.
+    keep: bool,
+    kept: Option<FrameRecords>,
 }
 
 impl TextureMovies {
@@ -104,6 +116,73 @@ impl TextureMovies {
             global: None,
             movies: BTreeMap::new(),
             stats: FrameStats::default(),
+            keep: false,
+            kept: None,
+        }
+    }
+
+    /// Frame `frame`'s movies in their stored form: texels RGBE-packed,
+    /// the whole zstd-compressed; a movie whose texels encode as those it
+    /// last stored points at that frame instead.
+    fn stored_movies(&mut self, frame: u32) -> MovieFramesValue {
+        let mut values = Vec::with_capacity(self.movies.len());
+        let mut bytes = Vec::new();
+        for m in self.movies.values_mut() {
+            let band: Vec<[u8; 4]> = m.direct.iter().map(|&e| rgbe::encode(e)).collect();
+            let unchanged = m.stored.as_ref().is_some_and(|(_, last)| *last == band);
+            let (texels, stored_at) = if unchanged {
+                (0, m.stored.as_ref().map_or(frame, |s| s.0))
+            } else {
+                bytes.extend(band.iter().flatten());
+                let n = band.len() as u32;
+                m.stored = Some((frame, band));
+                (n, frame)
+            };
+            values.push(MovieValue {
+                triangle: m.key.triangle,
+                back: m.key.back,
+                resolution: m.resolution,
+                start: m.start,
+                texels,
+                stored_at,
+            });
+        }
+        let global = self
+            .global
+            .as_ref()
+            .map(|g| g.indirect())
+            .unwrap_or_default();
+        let global_bytes: Vec<u8> = global.iter().flat_map(|&e| rgbe::encode(e)).collect();
+        MovieFramesValue {
+            movies: values,
+            texels_zstd: compress(&bytes),
+            global_vertices: global.len() as u32,
+            global_zstd: compress(&global_bytes),
+        }
+    }
+
+    /// Keeps the movies' static shadows within [`MoviesSettings::memory_mib`]:
+    /// the movies holding the most give theirs up.
+    fn keep_within_budget(&mut self) {
+        let budget = self.settings.memory_mib as usize * (1 << 20);
+        let mut held: Vec<(usize, MovieKey)> = self
+            .movies
+            .iter()
+            .map(|(k, m)| (m.shadow_bytes(), *k))
+            .collect();
+        let mut total: usize = held.iter().map(|h| h.0).sum();
+        if total <= budget {
+            return;
+        }
+        held.sort_by(|a, b| b.cmp(a));
+        for (bytes, key) in held {
+            if total <= budget {
+                break;
+            }
+            if let Some(m) = self.movies.get_mut(&key) {
+                m.forget_shadows();
+                total -= bytes;
+            }
         }
     }
 
@@ -160,6 +239,7 @@ impl Method for TextureMovies {
             .collect();
         let mut shadows = ShadowCounts::default();
         counts.into_iter().for_each(|c| shadows += c);
+        self.keep_within_budget();
         stats
             .phase_seconds
             .push(("movies".into(), start.elapsed().as_secs_f64()));
@@ -171,11 +251,23 @@ impl Method for TextureMovies {
             .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
         stats.records_alive = self.movies.len() as u64;
         self.stats = stats;
+        self.kept = self.keep.then(|| FrameRecords {
+            movies: Some(self.stored_movies(ctx.frame)),
+            ..FrameRecords::default()
+        });
         film
     }
 
     fn last_frame_stats(&self) -> FrameStats {
         self.stats.clone()
+    }
+
+    fn keep_frame_records(&mut self, keep: bool) {
+        self.keep = keep;
+    }
+
+    fn take_frame_records(&mut self) -> Option<FrameRecords> {
+        self.kept.take()
     }
 }
 

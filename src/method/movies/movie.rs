@@ -35,6 +35,13 @@ pub struct Movie {
     shadows: Option<StaticShadows>,
     /// Irradiance per texel (`j·R + i`; zero outside the band).
     pub texels: Vec<Vec3>,
+    /// Its direct part alone, per band texel in storage order (the "bad
+    /// links" layer, §3.1: what the movie computes itself; the rest is the
+    /// global pass's, Gouraud-interpolated).
+    pub direct: Vec<Vec3>,
+    /// The texels as last stored, RGBE, and the frame they were stored
+    /// with (a frame whose texels encode the same is not stored again).
+    pub(super) stored: Option<(u32, Vec<[u8; 4]>)>,
 }
 
 /// Texel `(i, j)` is stored when `i + j ≤ R + 1`.
@@ -50,6 +57,8 @@ impl Movie {
             start,
             shadows: (!moving).then(StaticShadows::default),
             texels: Vec::new(),
+            direct: Vec::new(),
+            stored: None,
         }
     }
 
@@ -116,10 +125,11 @@ impl Movie {
         let r = self.resolution as usize;
         self.texels.clear();
         self.texels.resize(r * r, Vec3::ZERO);
-        for (&(index, i, j), e) in band.iter().zip(direct) {
+        for (&(index, i, j), &e) in band.iter().zip(&direct) {
             let (u, v) = self.texel_uv(i, j);
             self.texels[index] = e + global.indirect_at(self.key.triangle, u, v);
         }
+        self.direct = direct;
         counts
     }
 
@@ -140,9 +150,16 @@ impl Movie {
             + (at(i0, j1) * (1.0 - fx) + at(i1, j1) * fx) * fy
     }
 
-    /// Bytes this movie holds in memory.
-    pub fn bytes(&self) -> usize {
-        self.texels.len() * 12 + self.shadows.as_ref().map_or(0, StaticShadows::bytes)
+    /// Bytes its kept static shadows hold.
+    pub fn shadow_bytes(&self) -> usize {
+        self.shadows.as_ref().map_or(0, StaticShadows::bytes)
+    }
+
+    /// Gives up the kept static shadows: the next frame finds them again.
+    pub fn forget_shadows(&mut self) {
+        if let Some(s) = &mut self.shadows {
+            *s = StaticShadows::default();
+        }
     }
 }
 

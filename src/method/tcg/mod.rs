@@ -404,6 +404,7 @@ impl TemporallyCoherentGathering {
                     .collect(),
                 removed,
             }),
+            movies: None,
         });
         self.records = records;
         self.last_frame = Some(t);
