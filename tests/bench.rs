@@ -431,9 +431,12 @@ fn same_pattern_runs_flicker_less() {
 #[test]
 fn cache_methods_report_their_render_pass_time() {
     let dir = tempfile::tempdir().unwrap();
-    let opts = tiny_bench(dir.path(), &["path:spp=1", "ic:spp=1", "trc:spp=1"]);
+    let opts = tiny_bench(
+        dir.path(),
+        &["path:spp=1", "ic:spp=1", "trc:spp=1", "movies:spp=1"],
+    );
     let rows = bench::run(&opts).unwrap().rows;
-    assert_eq!(rows.len(), 3);
+    assert_eq!(rows.len(), 4);
     assert_eq!(rows[0].render_pass_seconds, None, "path");
     for r in &rows[1..] {
         let pass = r
@@ -455,7 +458,7 @@ fn cache_methods_report_their_render_pass_time() {
     assert!(fields[6].parse::<f64>().is_ok(), "{ic_line}");
 }
 
-/// Each `trc` and `tcg` run is set against the `ic` run with its settings
+/// Each `trc`, `tcg` and `movies` run is set against the `ic` run with its settings
 /// label, or else `ic` at its defaults, on its own scene and backend; the
 /// ratios are the targets' (ic's time and records over the temporal run's,
 /// its error and flicker over ic's).
@@ -476,6 +479,7 @@ fn temporal_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
         with(row("trc", "strata=64x64", 10.0, 0.018), 90, 0.012),
         with(row("trc", "max_life=5", 20.0, 0.020), 250, 0.010),
         with(row("tcg", "tau_min=0.2", 8.0, 0.022), 50, 0.011),
+        with(row("movies", "shadow_samples=4", 4.0, 0.019), 25, 0.005),
         elsewhere,
         with(row("path", "spp=4", 5.0, 0.2), 0, 0.3),
     ];
@@ -490,6 +494,7 @@ fn temporal_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
             ("strata=64x64", "strata=64x64"),
             ("default", "max_life=5"),
             ("default", "tau_min=0.2"),
+            ("default", "shadow_samples=4"),
         ]
     );
     let text = temporal_text(&rows);

@@ -36,6 +36,7 @@ use radcache::cache::gather::Strata;
 use radcache::cache::{IrradianceCache, IrradianceRecord, LookupPoint};
 use radcache::film::Film;
 use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::method::movies::{MoviesSettings, TextureMovies};
 use radcache::method::tcg::{TcgSettings, TemporallyCoherentGathering};
 use radcache::method::trc::{TemporalGradients, TemporalRadianceCaching, TrcSettings};
 use radcache::method::Method;
@@ -391,6 +392,13 @@ fn methods() -> Vec<(&'static str, NewMethod)> {
             Box::new(TemporallyCoherentGathering::new(TcgSettings {
                 ic: small_ic(),
                 ..TcgSettings::default()
+            }))
+        }),
+        ("movies", || {
+            Box::new(TextureMovies::new(MoviesSettings {
+                spp: small_ic().spp,
+                shadow_samples: 4,
+                ..MoviesSettings::default()
             }))
         }),
     ]

@@ -237,6 +237,37 @@ fn job_settings_are_the_clis_flags() {
         &out,
     );
     assert_frames_equal_cli(&server, &id, 3, &out);
+
+    // `movies`' settings, its global pass's among them.
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"movies","frames":"0..2","size":"16x16","spp":1,
+            "settings":{"shadow_samples":4,"texels_per_pixel":0.5,"links":16,"bounces":3}}"#,
+    );
+    let job = wait_done(&server, &id);
+    let settings = &job["settings"];
+    assert_eq!(settings["shadow_samples"], 4, "{job}");
+    assert_eq!(settings["global"]["links"], 16, "{job}");
+    let out = dir.path().join("cli-movies");
+    render_with_cli(
+        &[
+            "--method",
+            "movies",
+            "--frames",
+            "0..2",
+            "--movies-shadow-samples",
+            "4",
+            "--movies-texels-per-pixel",
+            "0.5",
+            "--movies-links",
+            "16",
+            "--movies-bounces",
+            "3",
+        ],
+        &["--size", "16x16", "--spp", "1"],
+        &out,
+    );
+    assert_frames_equal_cli(&server, &id, 2, &out);
 }
 
 #[test]
@@ -313,6 +344,15 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
         r#"{"at":0.1}"#,
     ] {
         let body = with_settings(bad).replace(r#""method":"trc""#, r#""method":"tcg""#);
+        check("POST", "/api/jobs", &body, 400);
+    }
+    for bad in [
+        r#"{"shadow_samples":65}"#,
+        r#"{"max_resolution":100000}"#,
+        r#"{"links":0}"#,
+        r#"{"at":0.1}"#,
+    ] {
+        let body = with_settings(bad).replace(r#""method":"trc""#, r#""method":"movies""#);
         check("POST", "/api/jobs", &body, 400);
     }
     check(

@@ -106,7 +106,8 @@ function frameRange(job) {
 }
 
 // The settings that say most about a caching method's trade-off: the
-// accuracy a (ic), a_t and δt_max (trc), τ_min (tcg); empty for path.
+// accuracy a (ic), a_t and δt_max (trc), τ_min (tcg), shadow samples N
+// (movies); empty for path.
 function keySettings(job) {
   const s = job.settings || {};
   const ic = job.method === 'trc' || job.method === 'tcg' ? s.ic : s;
@@ -115,6 +116,7 @@ function keySettings(job) {
   if (s.temporal_accuracy != null) parts.push(`a_t ${s.temporal_accuracy}`);
   if (s.max_life != null) parts.push(`δt_max ${s.max_life}`);
   if (s.tau_min != null) parts.push(`τ_min ${s.tau_min}`);
+  if (s.shadow_samples != null) parts.push(`N ${s.shadow_samples}`);
   return parts.map((p) => `, ${p}`).join('');
 }
 

@@ -98,12 +98,13 @@ pub struct BenchOptions {
 /// it draws a curve on the charts (`trc`'s over `δt_max`, TRC Eq. 10: the
 /// longest a record may live, which trades time against stale light;
 /// `tcg`'s over `τ_min`, Eq. 2: the least share of samples shot again each
-/// frame).
-pub const DEFAULT_METHODS: [&str; 4] = [
+/// frame; `movies`' over the shadow samples a texel takes, the paper's `N`).
+pub const DEFAULT_METHODS: [&str; 5] = [
     "path:spp=4,16,64,256",
     "ic:spp=16,64",
     "trc:max_life=2,5,20",
     "tcg:tau_min=0.02,0.05,0.2",
+    "movies:shadow_samples=4,16,64",
 ];
 
 /// The frames of the default run: those `radcache render` renders by

@@ -368,11 +368,11 @@ pub fn estimate_error_text(rows: &[BenchRow]) -> String {
 
 // ------------------------------------------------- temporal vs per-frame
 
-/// The methods that reuse records across frames, each measured against
+/// The methods that reuse their work across frames, each measured against
 /// per-frame `ic`.
-const TEMPORAL_METHODS: [&str; 2] = ["trc", "tcg"];
+const TEMPORAL_METHODS: [&str; 3] = ["trc", "tcg", "movies"];
 
-/// Pairs of a temporal method's run (`trc`, `tcg`) and the `ic` run it is
+/// Pairs of a temporal method's run (`trc`, `tcg`, `movies`) and the `ic` run it is
 /// measured against (issue 5, DESIGN "How we measure"): on the same scene
 /// and backend, the `ic` run with the same settings label where there is
 /// one (`ic:strata=64x64` for `trc:strata=64x64`), else `ic` at its
