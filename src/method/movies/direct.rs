@@ -249,7 +249,8 @@ impl PointSampler {
             .lights
             .sample(ctx.snapshot, point.p, choice, TriangleSampling::SolidAngle)?;
         let cos = point.n.dot(ls.wi);
-        if cos <= 0.0 || point.ng.dot(ls.wi) <= 0.0 {
+        // Written so that a NaN (a degenerate triangle's normal) fails too.
+        if !(cos > 0.0 && point.ng.dot(ls.wi) > 0.0) {
             return None;
         }
         let shadow = Ray::segment(offset_origin(point.p, point.ng, ls.wi), ls.position);

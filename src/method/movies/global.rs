@@ -116,34 +116,32 @@ impl Grid {
             ]
         }
     }
+}
 
-    /// Gouraud interpolation at `(u, v)` of per-vertex `values`
-    /// (`vertex_of[slot]`: the vertex in a slot) over the vertices marked
-    /// `valid` alone, their weights renormalised (all three where none is
-    /// valid).
-    pub fn interpolate(
-        &self,
-        vertex_of: &[u32],
-        values: &[Vec3],
-        valid: &[bool],
-        u: f32,
-        v: f32,
-    ) -> Vec3 {
-        let weights = self
-            .weights(u, v)
-            .map(|(slot, w)| (vertex_of[slot as usize] as usize, w));
-        let total: f32 = weights
-            .iter()
-            .filter(|(i, _)| valid[*i])
-            .map(|(_, w)| w)
-            .sum();
-        let all = total <= 1e-6;
-        let scale = if all { 1.0 } else { 1.0 / total };
-        weights
-            .iter()
-            .filter(|(i, _)| all || valid[*i])
-            .fold(Vec3::ZERO, |acc, &(i, w)| acc + values[i] * (w * scale))
-    }
+/// Where a point falls among the global pass's vertices: the three that
+/// interpolate at it and their weights (Gouraud shading).
+pub type Gouraud = [(u32, f32); 3];
+
+/// Gouraud interpolation of per-vertex `values` over the vertices marked
+/// `valid` alone, their weights renormalised (all three where none is
+/// valid).
+pub fn blend(values: &[Vec3], valid: &[bool], g: &Gouraud) -> Vec3 {
+    renormalised(valid, g).fold(Vec3::ZERO, |acc, (i, w)| acc + values[i as usize] * w)
+}
+
+/// The vertices of `g` marked `valid` with their weights renormalised
+/// (all three where none is valid).
+fn renormalised<'a>(valid: &'a [bool], g: &'a Gouraud) -> impl Iterator<Item = (u32, f32)> + 'a {
+    let total: f32 = g
+        .iter()
+        .filter(|(i, _)| valid[*i as usize])
+        .map(|(_, w)| w)
+        .sum();
+    let all = total <= 1e-6;
+    let scale = if all { 1.0 } else { 1.0 / total };
+    g.iter()
+        .filter(move |(i, _)| all || valid[*i as usize])
+        .map(move |&(i, w)| (i, w * scale))
 }
 
 /// Index of the first vertex of row `b` of a grid of `n` segments.
@@ -168,12 +166,20 @@ struct Vertex {
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Link {
     hit: Hit,
+    /// Whether it has been looked at since the pass was built.
+    traced: bool,
     /// Whether it was traced at all (a direction below the geometric
     /// surface gathers nothing).
     live: bool,
+    /// The segment it covers, from its origin to its hit (or far out),
+    /// which motion must not cross for it to stay valid.
+    from: Vec3,
+    to: Vec3,
     /// Whether it landed on the front of a surface (the side the
     /// solution is for).
     front: bool,
+    /// The vertices it gathers from, where it landed.
+    landing: Gouraud,
 }
 
 /// The global pass's state: the mesh, the links found so far and the
@@ -278,8 +284,12 @@ impl GlobalPass {
         self.links = vec![
             Link {
                 hit: Hit::MISS,
+                traced: false,
                 live: false,
+                from: Vec3::ZERO,
+                to: Vec3::ZERO,
                 front: false,
+                landing: [(0, 0.0); 3],
             };
             count
         ];
@@ -305,11 +315,18 @@ impl GlobalPass {
         self.grids[id as usize]
     }
 
-    /// Indirect irradiance at barycentrics `(u, v)` of triangle `id` (the
-    /// front side), from the last solution.
-    pub fn indirect_at(&self, id: u32, u: f32, v: f32) -> Vec3 {
+    /// The vertices that interpolate at barycentrics `(u, v)` of triangle
+    /// `id`, and their weights.
+    pub fn gouraud(&self, id: u32, u: f32, v: f32) -> Gouraud {
         self.grid(id)
-            .interpolate(&self.vertex_of, &self.indirect, &self.valid, u, v)
+            .weights(u, v)
+            .map(|(slot, w)| (self.vertex_of[slot as usize], w))
+    }
+
+    /// Indirect irradiance where `g` says (the front side of its
+    /// triangle), from the last solution.
+    pub fn indirect_with(&self, g: &Gouraud) -> Vec3 {
+        blend(&self.indirect, &self.valid, g)
     }
 
     /// The frame of `ctx`: links traced again where motion may have
@@ -372,47 +389,69 @@ impl GlobalPass {
         first: bool,
     ) {
         let far = 2.0 * scene_diagonal(ctx);
-        let stale: Vec<(usize, Ray)> = self
+        // Which links motion may have changed: only their segments are
+        // looked at; only these get their rays drawn again.
+        let stale: Vec<(usize, u32, u32)> = self
             .vertices
             .par_iter()
-            .zip(points)
-            .flat_map_iter(|(v, point)| {
+            .enumerate()
+            .flat_map_iter(|(i, v)| {
                 let moving_vertex = blockers.is_moving_triangle(v.triangle);
+                let links = &self.links;
                 (0..v.links).filter_map(move |k| {
                     let index = (v.first_link + k) as usize;
-                    let ray = Self::link_ray(ctx, point, k)?;
-                    Some((index, ray, moving_vertex))
+                    let link = &links[index];
+                    let stale = first
+                        || moving_vertex
+                        || !link.traced
+                        || (link.hit.is_hit() && blockers.is_moving_triangle(link.hit.triangle))
+                        || (link.live && blockers.segment_may_hit(link.from, link.to));
+                    stale.then_some((index, i as u32, k))
                 })
             })
-            .filter(|(index, ray, moving_vertex)| {
-                let link = &self.links[*index];
-                if first || *moving_vertex || !link.live {
-                    return true;
-                }
-                if link.hit.is_hit() && blockers.is_moving_triangle(link.hit.triangle) {
-                    return true;
-                }
-                let t = if link.hit.is_hit() { link.hit.t } else { far };
-                blockers.segment_may_hit(ray.origin(), ray.at(t))
-            })
-            .map(|(index, ray, _)| (index, ray))
             .collect();
-        let rays: Vec<Ray> = stale.iter().map(|s| s.1).collect();
+        let rays: Vec<(usize, Option<Ray>)> = stale
+            .par_iter()
+            .map(|&(index, i, k)| (index, Self::link_ray(ctx, &points[i as usize], k)))
+            .collect();
+        for (index, ray) in &rays {
+            if ray.is_none() {
+                let link = &mut self.links[*index];
+                link.traced = true;
+                link.live = false;
+                link.front = false;
+                link.hit = Hit::MISS;
+            }
+        }
+        let (indices, rays): (Vec<usize>, Vec<Ray>) = rays
+            .into_iter()
+            .filter_map(|(index, ray)| ray.map(|r| (index, r)))
+            .unzip();
         let mut hits = vec![Hit::MISS; rays.len()];
         let batch = ctx.backend.preferred_batch().max(1);
         rays.par_chunks(batch)
             .zip(hits.par_chunks_mut(batch))
             .for_each(|(r, h)| ctx.backend.closest_hit(r, h));
-        for ((index, ray), hit) in stale.iter().zip(hits) {
+        for ((index, ray), hit) in indices.iter().zip(&rays).zip(hits) {
             let front = hit.is_hit()
                 && ctx.snapshot.triangles[hit.triangle as usize]
                     .geometric_normal()
                     .dot(ray.dir())
                     < 0.0;
+            let landing = if front {
+                self.gouraud(hit.triangle, hit.u, hit.v)
+            } else {
+                [(0, 0.0); 3]
+            };
+            let t = if hit.is_hit() { hit.t } else { far };
             self.links[*index] = Link {
                 hit,
+                traced: true,
                 live: true,
+                from: ray.origin(),
+                to: ray.at(t),
                 front,
+                landing,
             };
         }
         self.traced_links = rays.len() as u64;
@@ -481,13 +520,16 @@ impl GlobalPass {
             .par_iter()
             .map(|v| self.in_open_space(v))
             .collect();
+        let rows: Vec<Vec<(u32, f32)>> = self.vertices.par_iter().map(|v| self.row(v)).collect();
         let mut indirect = vec![Vec3::ZERO; self.vertices.len()];
         for _ in 0..self.settings.bounces {
             let b = radiance_of(&indirect);
-            indirect = self
-                .vertices
+            indirect = rows
                 .par_iter()
-                .map(|v| self.gather(v, &b))
+                .map(|row| {
+                    row.iter()
+                        .fold(Vec3::ZERO, |acc, &(j, w)| acc + b[j as usize] * w)
+                })
                 .collect();
         }
         self.indirect = indirect;
@@ -514,22 +556,29 @@ impl GlobalPass {
         back as f32 <= BURIED_SHARE * live as f32
     }
 
-    /// `π·mean(B at the link's landing point)` over vertex `v`'s links.
-    fn gather(&self, v: &Vertex, b: &[Vec3]) -> Vec3 {
-        let sum =
-            self.links_of(v)
-                .iter()
-                .filter(|l| l.live && l.front)
-                .fold(Vec3::ZERO, |acc, l| {
-                    acc + self.grids[l.hit.triangle as usize].interpolate(
-                        &self.vertex_of,
-                        b,
-                        &self.valid,
-                        l.hit.u,
-                        l.hit.v,
-                    )
-                });
-        sum * (std::f32::consts::PI / v.links.max(1) as f32)
+    /// Vertex `v`'s gather, `E = π·mean(B at each link's landing point)`,
+    /// as weights on the vertices the links land between (one entry per
+    /// vertex, in vertex order): the Jacobi iteration is then a sparse
+    /// product, and the links' landings are not interpolated again in
+    /// every iteration.
+    fn row(&self, v: &Vertex) -> Vec<(u32, f32)> {
+        let mut entries: Vec<(u32, f32)> = self
+            .links_of(v)
+            .iter()
+            .filter(|l| l.live && l.front)
+            .flat_map(|l| renormalised(&self.valid, &l.landing))
+            .collect();
+        entries.sort_by_key(|e| e.0);
+        let scale = std::f32::consts::PI / v.links.max(1) as f32;
+        let mut row: Vec<(u32, f32)> = Vec::with_capacity(entries.len());
+        for (j, w) in entries {
+            match row.last_mut() {
+                Some(last) if last.0 == j => last.1 += w,
+                _ => row.push((j, w)),
+            }
+        }
+        row.iter_mut().for_each(|e| e.1 *= scale);
+        row
     }
 }
 
@@ -606,7 +655,10 @@ mod tests {
             for i in 0..=20 {
                 for j in 0..=20 - i {
                     let (u, v) = (i as f32 / 20.0, j as f32 / 20.0);
-                    let got = grid.interpolate(&identity, &values, &valid, u, v);
+                    let g = grid
+                        .weights(u, v)
+                        .map(|(slot, w)| (identity[slot as usize], w));
+                    let got = blend(&values, &valid, &g);
                     assert!(
                         (got - f(u, v)).abs().max_element() < 1e-4,
                         "n {n} at ({u}, {v}): {got}"

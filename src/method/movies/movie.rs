@@ -6,7 +6,7 @@
 //! resolution changes gets a new movie (§4.1).
 
 use super::direct::{direct_irradiance, Blockers, ShadePoint, ShadowCounts, StaticShadows};
-use super::global::GlobalPass;
+use super::global::{GlobalPass, Gouraud};
 use super::FrameContext;
 use crate::scene::Triangle;
 use glam::Vec3;
@@ -42,6 +42,9 @@ pub struct Movie {
     /// The texels as last stored, RGBE, and the frame they were stored
     /// with (a frame whose texels encode the same is not stored again).
     pub(super) stored: Option<(u32, Vec<[u8; 4]>)>,
+    /// Per band texel: its index, where it is evaluated, and the global
+    /// pass's vertices it interpolates (fixed for the movie's life).
+    layout: Vec<(usize, (f32, f32), Gouraud)>,
 }
 
 /// Texel `(i, j)` is stored when `i + j ≤ R + 1`.
@@ -59,6 +62,7 @@ impl Movie {
             texels: Vec::new(),
             direct: Vec::new(),
             stored: None,
+            layout: Vec::new(),
         }
     }
 
@@ -91,8 +95,7 @@ impl Movie {
         (u + (1.0 / 3.0 - u) * k, v + (1.0 / 3.0 - v) * k)
     }
 
-    fn texel_point(&self, tri: &Triangle, index: usize, i: u32, j: u32) -> ShadePoint {
-        let (u, v) = self.texel_uv(i, j);
+    fn texel_point(&self, tri: &Triangle, index: usize, (u, v): (f32, f32)) -> ShadePoint {
         let side = if self.key.back { -1.0 } else { 1.0 };
         ShadePoint {
             p: tri.point(u, v),
@@ -115,19 +118,27 @@ impl Movie {
         samples: u32,
     ) -> ShadowCounts {
         let tri = &ctx.snapshot.triangles[self.key.triangle as usize];
-        let band: Vec<(usize, u32, u32)> = self.band().collect();
-        let points: Vec<ShadePoint> = band
+        if self.layout.is_empty() {
+            self.layout = self
+                .band()
+                .map(|(index, i, j)| {
+                    let (u, v) = self.texel_uv(i, j);
+                    (index, (u, v), global.gouraud(self.key.triangle, u, v))
+                })
+                .collect();
+        }
+        let points: Vec<ShadePoint> = self
+            .layout
             .iter()
-            .map(|&(index, i, j)| self.texel_point(tri, index, i, j))
+            .map(|&(index, uv, _)| self.texel_point(tri, index, uv))
             .collect();
         let (direct, counts) =
             direct_irradiance(ctx, blockers, &points, samples, self.shadows.as_mut());
         let r = self.resolution as usize;
         self.texels.clear();
         self.texels.resize(r * r, Vec3::ZERO);
-        for (&(index, i, j), &e) in band.iter().zip(&direct) {
-            let (u, v) = self.texel_uv(i, j);
-            self.texels[index] = e + global.indirect_at(self.key.triangle, u, v);
+        for (&(index, _, g), &e) in self.layout.iter().zip(&direct) {
+            self.texels[index] = e + global.indirect_with(&g);
         }
         self.direct = direct;
         counts
