@@ -32,6 +32,16 @@
 //! cache of movie frames under a memory budget is the store's `movies`
 //! tree: each frame's textures are written with the frame, and only the
 //! frame being rendered is held in memory.
+//!
+//! # Measured
+//! `radcache bench --scenes cube-in-box --size 64x64 --frames 0..400
+//! --reference-spp 256 --methods ic trc tcg movies` (at 7ce2534): 2.16×
+//! faster than `ic`, 0.99× its error, 0.41× its flicker (0.25× on lit
+//! surfaces, the least of all methods). Where what moves is everywhere its
+//! coherence goes, as the paper says: under the moving light 0.37× `ic`'s
+//! speed (every shadow sample lands on a moving light), on the 66 moving
+//! balls of `spheres` 0.59× (README, "`movies` against `ic`, `trc` and
+//! `tcg`").
 
 pub mod direct;
 pub mod global;
