@@ -9,13 +9,13 @@
 
 mod common;
 
-use common::{inward_box, jumping_block_room, lit_room, push_quad, region_error, scene};
+use common::{furnace_box, jumping_block_room, lit_room, plane_under_point_light, region_error};
 use glam::Vec3;
 use radcache::film::Film;
 use radcache::method::movies::{MoviesSettings, TextureMovies};
 use radcache::method::{FrameStats, Method};
 use radcache::render::Renderer;
-use radcache::scene::{Material, Mesh, Scene};
+use radcache::scene::Scene;
 
 fn renderer(scene: Scene, size: u32) -> Renderer {
     common::cpu_renderer(
@@ -43,20 +43,7 @@ fn render(r: &mut Renderer, movies: &mut TextureMovies, frame: u32) -> (Film, Fr
 #[test]
 fn furnace_radiance_is_le_over_one_minus_albedo() {
     for (albedo, le) in [(0.5f32, 1.0f32), (0.8, 0.5)] {
-        let material = Material {
-            emission: Vec3::splat(le),
-            ..Material::diffuse("furnace", Vec3::splat(albedo))
-        };
-        let room = inward_box(Vec3::splat(-1.0), Vec3::splat(1.0), 0);
-        let s = scene(
-            vec![room],
-            vec![material],
-            vec![],
-            Vec3::ZERO,
-            -Vec3::Z,
-            1.2,
-            vec![],
-        );
+        let s = furnace_box(albedo, le);
         let mut settings = MoviesSettings::default();
         settings.global.bounces = 64;
         let mut movies = TextureMovies::new(settings);
@@ -86,24 +73,8 @@ fn furnace_radiance_is_le_over_one_minus_albedo() {
 fn point_light_over_plane_matches_inverse_square_law() {
     let (albedo, intensity) = (0.7f32, 5.0f32);
     let light = Vec3::new(0.3, 1.0, -0.2);
-    let mut plane = Mesh::default();
-    push_quad(
-        &mut plane,
-        Vec3::new(-10.0, 0.0, -10.0),
-        Vec3::Z * 20.0,
-        Vec3::X * 20.0,
-        0,
-    );
     let eye = Vec3::new(0.0, 3.0, 0.0);
-    let s = scene(
-        vec![plane],
-        vec![Material::diffuse("plane", Vec3::splat(albedo))],
-        vec![],
-        eye,
-        -Vec3::Y,
-        1.0,
-        vec![(light, Vec3::splat(intensity))],
-    );
+    let s = plane_under_point_light(albedo, intensity, light, eye);
     let size = 16;
     let mut movies = TextureMovies::new(MoviesSettings::default());
     let mut r = renderer(s, size);

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{inward_box, push_quad, scene};
+use common::{furnace_box, inward_box, plane_under_point_light, push_quad, scene};
 use glam::Vec3;
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::render::Renderer;
@@ -25,20 +25,7 @@ fn renderer(scene: radcache::scene::Scene, spp: u32, size: u32) -> Renderer {
 #[test]
 fn furnace_radiance_is_le_over_one_minus_albedo() {
     for (albedo, le) in [(0.5f32, 1.0f32), (0.8, 0.5)] {
-        let material = Material {
-            emission: Vec3::splat(le),
-            ..Material::diffuse("furnace", Vec3::splat(albedo))
-        };
-        let room = inward_box(Vec3::splat(-1.0), Vec3::splat(1.0), 0);
-        let s = scene(
-            vec![room],
-            vec![material],
-            vec![],
-            Vec3::ZERO,
-            -Vec3::Z,
-            1.2,
-            vec![],
-        );
+        let s = furnace_box(albedo, le);
         let film = renderer(s, 256, 32).render_frame(0);
         let expected = le / (1.0 - albedo);
         let mean = film.mean() as f32;
@@ -68,25 +55,8 @@ fn point_light_over_plane_matches_inverse_square_law() {
     let albedo = 0.7;
     let intensity = 5.0;
     let light = Vec3::new(0.3, 1.0, -0.2);
-    let mut plane = Mesh::default();
-    push_quad(
-        &mut plane,
-        Vec3::new(-10.0, 0.0, -10.0),
-        Vec3::Z * 20.0,
-        Vec3::X * 20.0,
-        0,
-    );
     let eye = Vec3::new(0.0, 3.0, 0.0);
-    let yfov = 1.0;
-    let s = scene(
-        vec![plane],
-        vec![Material::diffuse("plane", Vec3::splat(albedo))],
-        vec![],
-        eye,
-        -Vec3::Y,
-        yfov,
-        vec![(light, Vec3::splat(intensity))],
-    );
+    let s = plane_under_point_light(albedo, intensity, light, eye);
     let size = 16;
     let mut r = renderer(s, 4096, size);
     let film = r.render_frame(0);

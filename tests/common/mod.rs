@@ -272,3 +272,46 @@ pub fn region_error(test: &Film, reference: &Film) -> f64 {
     }
     f64::from(((a - b).abs() / b.max(Vec3::splat(1e-6))).max_element())
 }
+
+/// A closed 2 m box whose every surface has albedo `albedo` and emits
+/// `le`, seen from its centre: the furnace, radiance `le/(1−albedo)`
+/// everywhere.
+pub fn furnace_box(albedo: f32, le: f32) -> Scene {
+    let material = Material {
+        emission: Vec3::splat(le),
+        ..Material::diffuse("furnace", Vec3::splat(albedo))
+    };
+    let room = inward_box(Vec3::splat(-1.0), Vec3::splat(1.0), 0);
+    scene(
+        vec![room],
+        vec![material],
+        vec![],
+        Vec3::ZERO,
+        -Vec3::Z,
+        1.2,
+        vec![],
+    )
+}
+
+/// A 20 m Lambertian plane (y = 0) of albedo `albedo` under a point light
+/// of intensity `intensity` at `light`, seen straight down from `eye`
+/// (vertical field of view 1 rad).
+pub fn plane_under_point_light(albedo: f32, intensity: f32, light: Vec3, eye: Vec3) -> Scene {
+    let mut plane = Mesh::default();
+    push_quad(
+        &mut plane,
+        Vec3::new(-10.0, 0.0, -10.0),
+        Vec3::Z * 20.0,
+        Vec3::X * 20.0,
+        0,
+    );
+    scene(
+        vec![plane],
+        vec![Material::diffuse("plane", Vec3::splat(albedo))],
+        vec![],
+        eye,
+        -Vec3::Y,
+        1.0,
+        vec![(light, Vec3::splat(intensity))],
+    )
+}
