@@ -249,7 +249,7 @@ pub struct MoviesArgs {
     #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
     pub movies_texels_per_pixel: f32,
     /// Finest texture, texels along a triangle's edge.
-    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub movies_max_resolution: u32,
     /// Memory for the movies' kept static shadows, in MiB (past it the largest give theirs up and find them again).
     #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(0..=1_048_576))]

@@ -633,10 +633,17 @@ fn movies_job_stores_its_texture_movies_and_resumes_bit_identically() {
         .any(|m| m.texels > 0 && m.stored_at == 2));
     for ((value, texels), movie) in stored.iter().zip(&mine) {
         assert_eq!(
-            (value.triangle, value.back, value.resolution, value.start),
+            (
+                value.triangle,
+                value.back,
+                value.patch,
+                value.resolution,
+                value.start
+            ),
             (
                 movie.key.triangle,
                 movie.key.back,
+                movie.key.patch.code(),
                 movie.resolution,
                 movie.start
             )

@@ -386,7 +386,8 @@ impl Store {
                 .iter()
                 .zip(texels.iter())
                 .find(|(o, _)| {
-                    (o.triangle, o.back, o.start) == (m.triangle, m.back, m.start) && o.texels > 0
+                    (o.triangle, o.back, o.patch, o.start) == (m.triangle, m.back, m.patch, m.start)
+                        && o.texels > 0
                 })
                 .map(|(_, t)| t.clone())
                 .ok_or_else(|| {

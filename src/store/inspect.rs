@@ -311,7 +311,7 @@ fn movies_report(store: &Store, job: u64) -> Result<Option<MoviesReport>, StoreE
             continue;
         };
         for m in &v.movies {
-            distinct.insert((m.triangle, m.back, m.start));
+            distinct.insert((m.triangle, m.back, m.patch, m.start));
             r.movie_frames += 1;
             r.movie_frames_stored += u64::from(m.texels > 0);
             r.texels += u64::from(m.texels);

@@ -219,6 +219,9 @@ pub struct MovieValue {
     pub triangle: u32,
     /// The side against the triangle's geometric normal.
     pub back: bool,
+    /// The part of the triangle it covers: `1` the whole, then two bits a
+    /// level of its sub-triangles (`method::movies::patch::Patch::code`).
+    pub patch: u32,
     /// Texels along each parametric edge (`R`; texel `(i, j)` is stored
     /// when `i + j ≤ R + 1`, row by row).
     pub resolution: u32,

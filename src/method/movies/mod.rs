@@ -46,6 +46,7 @@
 pub mod direct;
 pub mod global;
 pub mod movie;
+pub mod patch;
 
 use super::pixels::FirstLightSampler;
 use super::render_pass::{direct_light, glossy_query, PrimarySamples, Surface};
@@ -63,6 +64,7 @@ pub use direct::{paper_merge, MAX_SHADOW_SAMPLES};
 use glam::Vec3;
 use global::{GlobalPass, GlobalSettings};
 pub use movie::{Movie, MovieKey};
+use patch::Patch;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::f32::consts::FRAC_1_PI;
@@ -151,6 +153,7 @@ impl TextureMovies {
             values.push(MovieValue {
                 triangle: m.key.triangle,
                 back: m.key.back,
+                patch: m.key.patch.code(),
                 resolution: m.resolution,
                 start: m.start,
                 texels,
@@ -308,32 +311,62 @@ impl TextureMovies {
             .collect()
     }
 
-    /// Which sides of which triangles the samples see with a diffuse
-    /// part, and the resolution each needs (the finest any sample asks).
+    /// Which patches of which sides of which triangles the samples see
+    /// with a diffuse part, and the resolution each needs (the finest any
+    /// of its samples asks): each side split where its finest texels are
+    /// asked ([`patch::partition`]).
     fn wanted_movies(&self, ctx: &FrameContext, tiles: &[Tile]) -> BTreeMap<MovieKey, u32> {
         let camera = &ctx.snapshot.camera;
         let pixel_angle = 2.0 * camera.tan_half_fov() / ctx.height as f32;
         let s = &self.settings;
-        let mut wanted = BTreeMap::new();
+        let mut sides: BTreeMap<(u32, bool), Vec<patch::PatchSample>> = BTreeMap::new();
         for tile in tiles {
             for (ray, hit) in tile.primary.rays.iter().zip(&tile.primary.hits) {
-                let Some(key) = movie_key(ctx, ray.dir(), hit) else {
+                let Some(side) = seen_side(ctx, ray.dir(), hit) else {
                     continue;
                 };
                 let tri = &ctx.snapshot.triangles[hit.triangle as usize];
                 let distance = hit.t * ray.dir().length();
-                let r = movie::needed_resolution(
-                    tri,
-                    distance,
-                    pixel_angle,
-                    s.texels_per_pixel,
-                    s.max_resolution,
-                );
-                let e = wanted.entry(key).or_insert(r);
-                *e = (*e).max(r);
+                let needed = movie::texels_needed(tri, distance, pixel_angle, s.texels_per_pixel);
+                sides.entry(side).or_default().push((hit.u, hit.v, needed));
+            }
+        }
+        let mut wanted = BTreeMap::new();
+        for ((triangle, back), samples) in sides {
+            for (patch, needed) in patch::partition(&samples) {
+                let key = MovieKey {
+                    triangle,
+                    back,
+                    patch,
+                };
+                wanted.insert(key, movie::resolution_for(needed, s.max_resolution));
             }
         }
         wanted
+    }
+
+    /// The movie that holds the point a camera ray along `dir` hit, and
+    /// the point in its patch's coordinates: the patches of the hit's side
+    /// descended as [`patch::partition`] split them.
+    fn movie_at(&self, ctx: &FrameContext, dir: Vec3, hit: &Hit) -> Option<(&Movie, (f32, f32))> {
+        let (triangle, back) = seen_side(ctx, dir, hit)?;
+        let mut key = MovieKey {
+            triangle,
+            back,
+            patch: Patch::ROOT,
+        };
+        let mut local = (hit.u, hit.v);
+        loop {
+            if let Some(m) = self.movies.get(&key) {
+                return Some((m, local));
+            }
+            if key.patch.level >= patch::MAX_LEVEL {
+                return None;
+            }
+            let k = patch::child_at(local);
+            local = patch::from_parent(k, local);
+            key.patch = key.patch.child(k);
+        }
     }
 
     /// §4.1's events: movies no longer seen close, movies whose needed
@@ -415,9 +448,9 @@ impl TextureMovies {
                 continue;
             }
             let (ray, hit) = (&tile.primary.rays[i], &tile.primary.hits[i]);
-            if let Some(movie) = movie_key(ctx, ray.dir(), hit).and_then(|k| self.movies.get(&k)) {
+            if let Some((movie, (u, v))) = self.movie_at(ctx, ray.dir(), hit) {
                 lookups += 1;
-                radiance[i] += s.bsdf.diffuse_albedo() * FRAC_1_PI * movie.lookup(hit.u, hit.v);
+                radiance[i] += s.bsdf.diffuse_albedo() * FRAC_1_PI * movie.lookup(u, v);
             }
             if s.bsdf.has_specular() {
                 let rng = &mut tile.primary.rngs[i];
@@ -451,9 +484,10 @@ impl TextureMovies {
     }
 }
 
-/// The movie a camera ray along `dir` that made `hit` reads: the side of
-/// the triangle it sees, where the material has a diffuse part.
-fn movie_key(ctx: &FrameContext, dir: Vec3, hit: &Hit) -> Option<MovieKey> {
+/// The side of the triangle a camera ray along `dir` that made `hit`
+/// sees, where the material has a diffuse part (a movie's to shade):
+/// `(triangle, back)`.
+fn seen_side(ctx: &FrameContext, dir: Vec3, hit: &Hit) -> Option<(u32, bool)> {
     if !hit.is_hit() {
         return None;
     }
@@ -463,8 +497,5 @@ fn movie_key(ctx: &FrameContext, dir: Vec3, hit: &Hit) -> Option<MovieKey> {
         return None;
     }
     let back = ctx.snapshot.triangles[id].geometric_normal().dot(dir) > 0.0;
-    Some(MovieKey {
-        triangle: hit.triangle,
-        back,
-    })
+    Some((hit.triangle, back))
 }

@@ -7,6 +7,7 @@
 
 use super::direct::{direct_irradiance, Blockers, ShadePoint, ShadowCounts, StaticShadows};
 use super::global::{GlobalPass, Gouraud};
+use super::patch::Patch;
 use super::FrameContext;
 use crate::scene::Triangle;
 use glam::Vec3;
@@ -14,12 +15,14 @@ use glam::Vec3;
 /// Tags the random streams of the movies' texels.
 const MOVIE_STREAM: u64 = 1 << 60;
 
-/// A movie's identity: which side of which triangle.
+/// A movie's identity: which side of which patch of which triangle.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct MovieKey {
     pub triangle: u32,
     /// The side against the geometric normal.
     pub back: bool,
+    /// The part of the triangle it covers ([`super::patch`]).
+    pub patch: Patch,
 }
 
 /// One movie, holding the texels of the frame being rendered.
@@ -81,9 +84,15 @@ impl Movie {
         self.band().count()
     }
 
-    /// Where texel `(i, j)` is evaluated: its centre, moved onto the
-    /// triangle if it lies beyond the long edge, and a hair inside.
+    /// Where texel `(i, j)` is evaluated, in the triangle's barycentrics:
+    /// its centre, moved onto the patch if it lies beyond the long edge,
+    /// and a hair inside.
     fn texel_uv(&self, i: u32, j: u32) -> (f32, f32) {
+        self.key.patch.to_triangle(self.texel_st(i, j))
+    }
+
+    /// [`Movie::texel_uv`] in the patch's own coordinates.
+    fn texel_st(&self, i: u32, j: u32) -> (f32, f32) {
         let r = self.resolution as f32;
         let (mut u, mut v) = ((i as f32 + 0.5) / r, (j as f32 + 0.5) / r);
         let s = u + v;
@@ -102,8 +111,9 @@ impl Movie {
             n: tri.shading_normal(u, v) * side,
             ng: tri.geometric_normal() * side,
             item: MOVIE_STREAM
-                | u64::from(self.key.triangle) << 24
-                | u64::from(self.key.back) << 23
+                | u64::from(self.key.triangle) << 28
+                | u64::from(self.key.back) << 27
+                | u64::from(self.key.patch.code()) << 20
                 | index as u64,
         }
     }
@@ -144,7 +154,7 @@ impl Movie {
         counts
     }
 
-    /// Bilinear lookup at barycentrics `(u, v)` of the triangle.
+    /// Bilinear lookup at `(s, t)` of the movie's patch.
     pub fn lookup(&self, u: f32, v: f32) -> Vec3 {
         let r = self.resolution;
         let rf = r as f32;
@@ -174,29 +184,31 @@ impl Movie {
     }
 }
 
-/// The resolution a triangle needs where a camera ray met it at distance
-/// `t`: texels no larger than the pixel's footprint there (§3.1: "at least
-/// one texel covers one image pixel"), times `texels_per_pixel`, as a
-/// power of two (so that small changes of size are no event) at most
-/// `max`.
-pub fn needed_resolution(
-    tri: &Triangle,
-    t: f32,
-    pixel_angle: f32,
-    texels_per_pixel: f32,
-    max: u32,
-) -> u32 {
+/// The texels along an edge the whole triangle would need where a camera
+/// ray met it at distance `t`: texels no larger than the pixel's footprint
+/// there (§3.1: "at least one texel covers one image pixel"), times
+/// `texels_per_pixel`.
+pub fn texels_needed(tri: &Triangle, t: f32, pixel_angle: f32, texels_per_pixel: f32) -> f32 {
     let longest = (0..3)
         .map(|k| (tri.p[(k + 1) % 3] - tri.p[k]).length())
         .fold(0.0f32, f32::max);
     let footprint = (t * pixel_angle).max(1e-9);
-    let texels = (longest * texels_per_pixel / footprint).ceil();
-    if !texels.is_finite() || texels >= max as f32 {
-        return max.max(1);
+    let texels = longest * texels_per_pixel / footprint;
+    if texels.is_finite() {
+        texels
+    } else {
+        f32::MAX
     }
-    (texels.max(1.0) as u32)
-        .next_power_of_two()
-        .clamp(1, max.max(1))
+}
+
+/// A movie's resolution for `needed` texels along an edge: the next power
+/// of two (so that small changes of size are no event), at most `max`.
+pub fn resolution_for(needed: f32, max: u32) -> u32 {
+    let max = max.max(1);
+    if needed.is_nan() || needed >= max as f32 {
+        return max;
+    }
+    (needed.ceil().max(1.0) as u32).next_power_of_two().min(max)
 }
 
 #[cfg(test)]
@@ -207,6 +219,7 @@ mod tests {
         MovieKey {
             triangle: 3,
             back: false,
+            patch: Patch::ROOT,
         }
     }
 
@@ -256,11 +269,17 @@ mod tests {
             p: [Vec3::ZERO, Vec3::X, Vec3::Y],
             n: [Vec3::Z; 3],
         };
-        let near = needed_resolution(&tri, 1.0, 0.01, 1.0, 1024);
-        let nearer = needed_resolution(&tri, 0.5, 0.01, 1.0, 1024);
-        assert_eq!(near, 256); // ⌈1.414 / 0.01⌉ = 142 → 256
-        assert_eq!(nearer, 512);
-        assert_eq!(needed_resolution(&tri, 0.1, 0.01, 1.0, 256), 256);
-        assert_eq!(needed_resolution(&tri, 1e9, 0.01, 1.0, 256), 1);
+        let near = texels_needed(&tri, 1.0, 0.01, 1.0);
+        let nearer = texels_needed(&tri, 0.5, 0.01, 1.0);
+        assert!((near - 141.42).abs() < 0.01 && (nearer - 282.84).abs() < 0.02);
+        assert_eq!(resolution_for(near, 1024), 256);
+        assert_eq!(resolution_for(nearer, 1024), 512);
+        assert_eq!(resolution_for(nearer, 256), 256);
+        assert_eq!(resolution_for(texels_needed(&tri, 1e9, 0.01, 1.0), 256), 1);
+        assert_eq!(
+            resolution_for(texels_needed(&tri, 0.0, 0.01, 1.0), 256),
+            256
+        );
+        assert_eq!(resolution_for(f32::NAN, 64), 64);
     }
 }

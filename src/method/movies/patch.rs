@@ -1,0 +1,219 @@
+//! The patch hierarchy of a triangle (paper §4.1, Fig. 4): a movie covers
+//! the whole triangle or one of its sub-triangles, split four ways by the
+//! midpoints of the edges, down to [`MAX_LEVEL`]. A triangle seen from
+//! near at one end and from far at the other (a floor in perspective) gets
+//! small fine textures near the camera and large coarse ones far away,
+//! instead of one texture as fine as its nearest pixel over all of it.
+//!
+//! A patch maps its own barycentric square `(s, t)` (`s + t ≤ 1`) into
+//! the triangle's `(u, v)`. Child `k` of a patch, in the parent's
+//! coordinates: 0 the corner at `(0, 0)`, 1 at `(1, 0)`, 2 at `(0, 1)`, 3
+//! the middle one, turned half a turn.
+
+/// The deepest level: 4³ = 64 patches a triangle.
+pub const MAX_LEVEL: u8 = 3;
+
+/// A patch texture finer than this many texels along an edge is split
+/// (while the level allows): past it, a quarter of the patch is cheaper
+/// than the part the finest pixel does not need.
+pub const SPLIT_RESOLUTION: f32 = 32.0;
+
+/// A patch of a triangle: its level and the child taken at each level
+/// (two bits a level, the first level highest).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Patch {
+    pub level: u8,
+    pub path: u8,
+}
+
+impl Patch {
+    pub const ROOT: Patch = Patch { level: 0, path: 0 };
+
+    /// Child `k` (0..4).
+    pub fn child(self, k: u8) -> Patch {
+        Patch {
+            level: self.level + 1,
+            path: (self.path << 2) | k,
+        }
+    }
+
+    /// The child at each level, first level first.
+    fn steps(self) -> impl Iterator<Item = u8> {
+        (0..self.level).map(move |l| (self.path >> (2 * (self.level - 1 - l))) & 3)
+    }
+
+    /// A code unique among a triangle's patches (`1` for the root), below
+    /// 2^(2·MAX_LEVEL + 1).
+    pub fn code(self) -> u32 {
+        (1u32 << (2 * self.level)) | u32::from(self.path)
+    }
+
+    /// The patch of [`Patch::code`] `code`, if it is one.
+    pub fn from_code(code: u32) -> Option<Patch> {
+        let level = (0..=MAX_LEVEL).find(|&l| code >> (2 * l) == 1)?;
+        Some(Patch {
+            level,
+            path: (code & ((1 << (2 * level)) - 1)) as u8,
+        })
+    }
+
+    /// The triangle's `(u, v)` of the patch's `(s, t)`.
+    pub fn to_triangle(self, (s, t): (f32, f32)) -> (f32, f32) {
+        let steps: Vec<u8> = self.steps().collect();
+        steps
+            .iter()
+            .rev()
+            .fold((s, t), |(s, t), &k| to_parent(k, (s, t)))
+    }
+
+    /// The patch's `(s, t)` of the triangle's `(u, v)` (outside `[0, 1]`
+    /// where the point is not in the patch).
+    pub fn from_triangle(self, (u, v): (f32, f32)) -> (f32, f32) {
+        self.steps()
+            .fold((u, v), |(u, v), k| from_parent(k, (u, v)))
+    }
+}
+
+/// Child `k`'s `(s, t)` in its parent's coordinates.
+fn to_parent(k: u8, (s, t): (f32, f32)) -> (f32, f32) {
+    match k {
+        0 => (0.5 * s, 0.5 * t),
+        1 => (0.5 + 0.5 * s, 0.5 * t),
+        2 => (0.5 * s, 0.5 + 0.5 * t),
+        _ => (0.5 - 0.5 * s, 0.5 - 0.5 * t),
+    }
+}
+
+/// The inverse of [`to_parent`].
+pub fn from_parent(k: u8, (u, v): (f32, f32)) -> (f32, f32) {
+    match k {
+        0 => (2.0 * u, 2.0 * v),
+        1 => (2.0 * u - 1.0, 2.0 * v),
+        2 => (2.0 * u, 2.0 * v - 1.0),
+        _ => (1.0 - 2.0 * u, 1.0 - 2.0 * v),
+    }
+}
+
+/// The child of a patch that holds the point at `(s, t)` of the patch.
+pub fn child_at((s, t): (f32, f32)) -> u8 {
+    if s >= 0.5 {
+        1
+    } else if t >= 0.5 {
+        2
+    } else if s + t <= 0.5 {
+        0
+    } else {
+        3
+    }
+}
+
+/// The patches a triangle side is split into, each with the texels it
+/// needs along an edge (the most any of its samples asks): `samples` are
+/// the camera rays' hits on it, `(u, v, texels the whole triangle would
+/// need there)`. A patch that asks more than [`SPLIT_RESOLUTION`] is split
+/// (down to [`MAX_LEVEL`]); children no sample hit get no movie.
+pub fn partition(samples: &[PatchSample]) -> Vec<(Patch, f32)> {
+    let mut out = Vec::new();
+    split(Patch::ROOT, samples.to_vec(), &mut out);
+    out
+}
+
+/// A camera ray's hit on a triangle: `(u, v)` (in the patch being split),
+/// and the texels along an edge the whole triangle would need there.
+pub type PatchSample = (f32, f32, f32);
+
+fn split(patch: Patch, samples: Vec<PatchSample>, out: &mut Vec<(Patch, f32)>) {
+    let scale = (1u32 << patch.level) as f32;
+    let needed = samples.iter().map(|s| s.2).fold(0.0f32, f32::max) / scale;
+    if needed <= SPLIT_RESOLUTION || patch.level >= MAX_LEVEL {
+        out.push((patch, needed));
+        return;
+    }
+    let mut children: [Vec<PatchSample>; 4] = Default::default();
+    for (s, t, r) in samples {
+        let k = child_at((s, t));
+        let (cs, ct) = from_parent(k, (s, t));
+        children[k as usize].push((cs, ct, r));
+    }
+    for (k, c) in children.into_iter().enumerate() {
+        if !c.is_empty() {
+            split(patch.child(k as u8), c, out);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn patches() -> Vec<Patch> {
+        let mut all = vec![Patch::ROOT];
+        let mut level = vec![Patch::ROOT];
+        for _ in 0..MAX_LEVEL {
+            level = level
+                .iter()
+                .flat_map(|p| (0..4).map(|k| p.child(k)))
+                .collect();
+            all.extend(&level);
+        }
+        all
+    }
+
+    /// The children tile their parent: every point of the triangle is in
+    /// exactly the patch the descent finds, and maps back to itself.
+    #[test]
+    fn descending_finds_the_patch_that_maps_back_to_the_point() {
+        for i in 0..=40 {
+            for j in 0..=40 - i {
+                let (u, v) = (i as f32 / 40.0, j as f32 / 40.0);
+                let mut p = Patch::ROOT;
+                let mut local = (u, v);
+                while p.level < MAX_LEVEL {
+                    let k = child_at(local);
+                    local = from_parent(k, local);
+                    p = p.child(k);
+                }
+                assert!(local.0 >= -1e-5 && local.1 >= -1e-5 && local.0 + local.1 <= 1.0 + 1e-5);
+                let (bu, bv) = p.to_triangle(local);
+                assert!((bu - u).abs() < 1e-5 && (bv - v).abs() < 1e-5, "({u}, {v})");
+                let again = p.from_triangle((u, v));
+                assert!((again.0 - local.0).abs() < 1e-4 && (again.1 - local.1).abs() < 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn codes_are_unique_and_read_back() {
+        let all = patches();
+        let mut codes: Vec<u32> = all.iter().map(|p| p.code()).collect();
+        for p in &all {
+            assert_eq!(Patch::from_code(p.code()), Some(*p));
+        }
+        codes.sort_unstable();
+        codes.dedup();
+        assert_eq!(codes.len(), all.len());
+        assert_eq!(Patch::from_code(0), None);
+    }
+
+    /// A triangle asked for 100 texels at one corner and 5 elsewhere:
+    /// split where the fine samples are, whole elsewhere.
+    #[test]
+    fn a_partition_splits_only_where_fine_texels_are_asked() {
+        let samples = [(0.02, 0.02, 100.0), (0.9, 0.05, 5.0), (0.05, 0.9, 5.0)];
+        let parts = partition(&samples);
+        let fine = parts
+            .iter()
+            .find(|(p, _)| p.level == 2)
+            .expect("a level-2 patch");
+        assert!((fine.1 - 25.0).abs() < 1e-4, "{parts:?}");
+        assert!(parts.iter().all(|(_, r)| *r <= SPLIT_RESOLUTION));
+        // The coarse corners stay at level 1.
+        assert_eq!(
+            parts.iter().filter(|(p, _)| p.level == 1).count(),
+            2,
+            "{parts:?}"
+        );
+        // A triangle that asks little stays whole.
+        assert_eq!(partition(&[(0.3, 0.3, 8.0)]), vec![(Patch::ROOT, 8.0)]);
+    }
+}
