@@ -84,7 +84,7 @@ fn to_parent(k: u8, (s, t): (f32, f32)) -> (f32, f32) {
     }
 }
 
-/// The inverse of [`to_parent`].
+/// The inverse of `to_parent`: a point of the parent in child `k`'s coordinates.
 pub fn from_parent(k: u8, (u, v): (f32, f32)) -> (f32, f32) {
     match k {
         0 => (2.0 * u, 2.0 * v),
