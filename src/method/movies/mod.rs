@@ -8,10 +8,11 @@
 //! 1. *global pass* ([`global`]): a coarse radiosity solution whose links
 //!    are traced again only where motion may have changed them (§4.2);
 //! 2. *item buffer*: the camera rays of the frame's pixel samples say
-//!    which sides of which triangles are seen and at what resolution. A
-//!    movie opens when its side becomes visible, closes when it is no
-//!    longer seen, and is replaced by a new one when its resolution
-//!    changes (§4.1's events);
+//!    which sides of which triangles are seen and at what resolution; a
+//!    side is split into sub-triangles where its finest texels are asked
+//!    ([`patch`], §4.1's hierarchy). A movie opens when its patch becomes
+//!    visible, closes when it is no longer seen, and is replaced by a new
+//!    one when its resolution changes (§4.1's events);
 //! 3. *movies* ([`movie`]): each open movie's texels get their direct
 //!    light (the "bad links"), with the shadows of static blockers found
 //!    once per movie and only the moving blockers tested each frame
@@ -23,8 +24,10 @@
 //! Departures, each named where it is made: the global pass is point
 //! collocation, not hierarchical radiosity ([`global`]); static and
 //! moving shadows merge per sample, exactly, rather than by the paper's
-//! formula ([`direct`]); textures are per triangle side, one level (the
-//! paper subdivides a partly visible patch into a hierarchy); a movie's
+//! formula ([`direct`]); a patch is split where the texels it needs are
+//! fine, not where it is partly hidden (the paper's criterion is the
+//! visible fraction and the projected size; ours is the size alone, which
+//! also leaves hidden sub-patches without a movie); a movie's
 //! frames are computed as the frames are rendered rather than over its
 //! whole interval up front, so that no frame waits for a later one, and
 //! the texture of a frame depends only on that frame (a resumed render
@@ -35,13 +38,12 @@
 //!
 //! # Measured
 //! `radcache bench --scenes cube-in-box --size 64x64 --frames 0..400
-//! --reference-spp 256 --methods ic trc tcg movies` (at 7ce2534): 2.16×
-//! faster than `ic`, 0.99× its error, 0.41× its flicker (0.25× on lit
-//! surfaces, the least of all methods). Where what moves is everywhere its
-//! coherence goes, as the paper says: under the moving light 0.37× `ic`'s
-//! speed (every shadow sample lands on a moving light), on the 66 moving
-//! balls of `spheres` 0.59× (README, "`movies` against `ic`, `trc` and
-//! `tcg`").
+//! --reference-spp 256 --methods ic movies` (at e9e482c): 3.09× faster
+//! than `ic`, 1.01× its error, 0.41× its flicker (0.25× on lit surfaces,
+//! the least of all methods). Where what moves is everywhere its coherence
+//! goes, as the paper says: under the moving light 0.91× `ic`'s speed
+//! (every shadow sample lands on a moving light), on the 66 moving balls
+//! of `spheres` 1.15× (README, "`movies` against `ic`").
 
 pub mod direct;
 pub mod global;
