@@ -134,6 +134,9 @@ fn a_still_scene_traces_only_camera_rays_after_its_first_frame() {
         );
         let now: Vec<Vec<Vec3>> = movies.movies().map(|m| m.texels.clone()).collect();
         assert!(now == texels, "frame {frame}: texels changed");
+        let shadows = movies.last_shadow_counts();
+        assert_eq!(shadows.traced, 0, "frame {frame}");
+        assert!(shadows.kept > 0, "frame {frame}");
     }
 }
 

@@ -61,7 +61,7 @@ use crate::method::pixels::EmitterEdges;
 use crate::store::rgbe;
 use crate::store::samples::compress;
 use crate::store::schema::{MovieFramesValue, MovieValue};
-use direct::ShadowCounts;
+pub use direct::ShadowCounts;
 pub use direct::{paper_merge, MAX_SHADOW_SAMPLES};
 use glam::Vec3;
 use global::{GlobalPass, GlobalSettings};
@@ -118,6 +118,8 @@ pub struct TextureMovies {
     global: Option<GlobalPass>,
     movies: BTreeMap<MovieKey, Movie>,
     stats: FrameStats,
+    /// The movies' shadow samples of the last frame.
+    shadows: ShadowCounts,
     /// Whether to hand each frame's movies to the store.
     keep: bool,
     kept: Option<FrameRecords>,
@@ -130,6 +132,7 @@ impl TextureMovies {
             global: None,
             movies: BTreeMap::new(),
             stats: FrameStats::default(),
+            shadows: ShadowCounts::default(),
             keep: false,
             kept: None,
         }
@@ -205,6 +208,12 @@ impl TextureMovies {
     pub fn movies(&self) -> impl Iterator<Item = &Movie> {
         self.movies.values()
     }
+
+    /// The movies' shadow samples in the last frame: traced, and answered
+    /// by the kept static shadows alone.
+    pub fn last_shadow_counts(&self) -> ShadowCounts {
+        self.shadows
+    }
 }
 
 /// A tile of pixels: its camera samples and their first hits.
@@ -252,8 +261,8 @@ impl Method for TextureMovies {
             .par_iter_mut()
             .map(|(_, m)| m.shade(ctx, &blockers, global, samples))
             .collect();
-        let mut shadows = ShadowCounts::default();
-        counts.into_iter().for_each(|c| shadows += c);
+        self.shadows = ShadowCounts::default();
+        counts.into_iter().for_each(|c| self.shadows += c);
         self.keep_within_budget();
         stats
             .phase_seconds
