@@ -268,6 +268,44 @@ fn job_settings_are_the_clis_flags() {
         &out,
     );
     assert_frames_equal_cli(&server, &id, 2, &out);
+    // Its texture movies, from the store, frame by frame.
+    let (status, body) = http(
+        &server,
+        "GET",
+        &format!("/api/jobs/{id}/movies?frame=1"),
+        "",
+    );
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    let m = json(&body);
+    let movies = m["movies"].as_array().unwrap();
+    assert!(!movies.is_empty() && m["count"] == movies.len(), "{m}");
+    assert!(m["global_vertices"].as_u64().unwrap() > 0, "{m}");
+    for movie in movies {
+        let (start, stored_at) = (
+            movie["start"].as_u64().unwrap(),
+            movie["stored_at"].as_u64().unwrap(),
+        );
+        assert!(
+            start <= 1 && start <= stored_at && stored_at <= 1,
+            "{movie}"
+        );
+        let r = movie["resolution"].as_u64().unwrap();
+        assert!(r >= 1 && movie["texels"].as_u64().unwrap() >= 1, "{movie}");
+        let mean = movie["mean_direct"].as_array().unwrap();
+        assert!(mean.iter().all(|c| c.as_f64().unwrap() >= 0.0), "{movie}");
+    }
+    assert!(movies
+        .iter()
+        .any(|m| m["mean_direct"][0].as_f64().unwrap() > 0.0));
+    let (status, _) = http(
+        &server,
+        "GET",
+        &format!("/api/jobs/{id}/movies?frame=7"),
+        "",
+    );
+    assert_eq!(status, 404);
+    let (status, _) = http(&server, "GET", &format!("/api/jobs/{id}/movies"), "");
+    assert_eq!(status, 400);
 }
 
 #[test]

@@ -7,6 +7,7 @@
 mod error;
 mod frames;
 mod jobs;
+mod movies;
 mod records;
 mod request;
 mod stream;
@@ -325,6 +326,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/jobs/{id}/stream", get(stream::frames))
         .route("/api/jobs/{id}/events", get(stream::events))
         .route("/api/jobs/{id}/records", get(records::records))
+        .route("/api/jobs/{id}/movies", get(movies::movies))
         .route("/metrics", get(frames::metrics))
         .fallback(|| async { ApiError::not_found("no such route".into()) })
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
