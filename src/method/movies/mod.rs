@@ -2,9 +2,9 @@
 //! Tost, "Frame-to-Frame Coherent Animation with Two-Pass Radiosity",
 //! 2003 — `papers/texture-movies-two-pass-radiosity-2003.md`).
 //!
-//! Each visible side of a triangle gets a *texture movie*: its diffuse
-//! irradiance as a texture, frame after frame, at the resolution its
-//! projected size needs (§4.1). Per frame:
+//! Each visible side of a triangle, or of a part of it ([`patch`]), gets a
+//! *texture movie*: its diffuse irradiance as a texture, frame after
+//! frame, at the resolution its projected size needs (§4.1). Per frame:
 //! 1. *global pass* ([`global`]): a coarse radiosity solution whose links
 //!    are traced again only where motion may have changed them (§4.2);
 //! 2. *item buffer*: the camera rays of the frame's pixel samples say
@@ -381,7 +381,7 @@ impl TextureMovies {
     }
 
     /// §4.1's events: movies no longer seen close, movies whose needed
-    /// resolution changed are replaced, new sides open.
+    /// resolution changed are replaced, newly seen patches open.
     fn apply_events(
         &mut self,
         ctx: &FrameContext,
