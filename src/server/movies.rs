@@ -5,6 +5,7 @@
 //! mean of its texels' direct irradiance. A job of another method has
 //! none (an empty list).
 
+use super::records::{frame_param, stored_frame};
 use super::{ApiError, AppState};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
@@ -20,22 +21,8 @@ pub async fn movies(
     query: Result<Query<HashMap<String, String>>, QueryRejection>,
 ) -> Result<Json<Value>, ApiError> {
     let Query(q) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let frame: u32 = q
-        .get("frame")
-        .ok_or_else(|| ApiError::bad_request("missing frame=N".into()))?
-        .parse()
-        .map_err(|_| {
-            ApiError::bad_request(format!("frame {:?} is not a frame number", q["frame"]))
-        })?;
-    let missing = || ApiError::not_found(format!("job {id} has no frame {frame} (yet)"));
-    let sid = state.store_id(&id)?.ok_or_else(missing)?;
-    if !state
-        .store
-        .frame_done(sid, frame)
-        .map_err(ApiError::internal)?
-    {
-        return Err(missing());
-    }
+    let frame = frame_param(&q)?;
+    let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();
     tokio::task::spawn_blocking(move || {
         let global_vertices = s

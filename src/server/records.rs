@@ -86,15 +86,32 @@ struct RecordsQuery {
     limit: usize,
 }
 
+/// The `frame=N` of a query (required).
+pub(super) fn frame_param(q: &HashMap<String, String>) -> Result<u32, ApiError> {
+    q.get("frame")
+        .ok_or_else(|| ApiError::bad_request("missing frame=N".into()))?
+        .parse()
+        .map_err(|_| ApiError::bad_request(format!("frame {:?} is not a frame number", q["frame"])))
+}
+
+/// Job `id`'s key in the store, where its frame `frame` is done (404
+/// otherwise: no such job, or not that frame yet).
+pub(super) fn stored_frame(state: &AppState, id: &str, frame: u32) -> Result<u64, ApiError> {
+    let missing = || ApiError::not_found(format!("job {id} has no frame {frame} (yet)"));
+    let sid = state.store_id(id)?.ok_or_else(missing)?;
+    if !state
+        .store
+        .frame_done(sid, frame)
+        .map_err(ApiError::internal)?
+    {
+        return Err(missing());
+    }
+    Ok(sid)
+}
+
 impl RecordsQuery {
     fn parse(q: &HashMap<String, String>) -> Result<Self, ApiError> {
-        let frame: u32 = q
-            .get("frame")
-            .ok_or_else(|| ApiError::bad_request("missing frame=N".into()))?
-            .parse()
-            .map_err(|_| {
-                ApiError::bad_request(format!("frame {:?} is not a frame number", q["frame"]))
-            })?;
+        let frame = frame_param(q)?;
         let bbox = q.get("bbox").map(|b| parse_bbox(b)).transpose()?;
         let limit = match q.get("limit") {
             None => DEFAULT_LIMIT,
@@ -136,15 +153,7 @@ pub async fn records(
     let Query(q) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let RecordsQuery { frame, bbox, limit } = RecordsQuery::parse(&q)?;
     let job = state.job(&id)?;
-    let missing = || ApiError::not_found(format!("job {id} has no frame {frame} (yet)"));
-    let sid = state.store_id(&id)?.ok_or_else(missing)?;
-    if !state
-        .store
-        .frame_done(sid, frame)
-        .map_err(ApiError::internal)?
-    {
-        return Err(missing());
-    }
+    let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();
     tokio::task::spawn_blocking(move || {
         // Latest version of each record written at or before `frame`.
