@@ -5,7 +5,7 @@
 use crate::bench;
 use crate::cache::gather::Strata;
 use crate::integrator::PathLength;
-use crate::method::ic::IcSettings;
+use crate::method::ic::{GlossyLobe, IcSettings};
 use crate::method::movies::global::GlobalSettings;
 use crate::method::movies::MoviesSettings;
 use crate::method::path::PathSettings;
@@ -203,6 +203,12 @@ pub struct IcArgs {
     /// Interpolate without the translation and rotation gradients.
     #[arg(long)]
     pub ic_no_gradients: bool,
+    /// Indirect light of glossy lobes: path (traced from a lobe sample per pixel sample) or eas (radiance records of equivalent area light sources, Omidvar et al.; `ic` only).
+    #[arg(long, value_enum, default_value = "path")]
+    pub ic_glossy: GlossyArg,
+    /// EAS precision criterion τ: a record's sources are refined until their reflected radiance is within τ of the finer level's (Eq. 13; the paper uses 0.02).
+    #[arg(long, default_value_t = crate::cache::eas::DEFAULT_TAU, value_parser = parse_positive)]
+    pub ic_eas_tau: f32,
 }
 
 /// Settings of `--method trc` (its spatial settings are the `--ic-*` ones).
@@ -263,6 +269,12 @@ pub struct MoviesArgs {
     /// Global pass: bounces of indirect light (Jacobi iterations).
     #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(0..=64))]
     pub movies_bounces: u32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum GlossyArg {
+    Path,
+    Eas,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -549,7 +561,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         (None, None) => SceneSource::Builtin("cube-in-box".into()),
     };
     let scene = source.load()?;
-    let method = render_method(&args);
+    let method = render_method(&args)?;
     let backend = render::make_backend(backend_choice(args.backend))?;
     let settings = FrameSettings {
         width: args.size.0,
@@ -599,7 +611,13 @@ fn run_render(args: RenderArgs) -> Result<()> {
 
 /// The method `render`'s flags ask for, with the papers' defaults for
 /// what they leave out.
-fn render_method(args: &RenderArgs) -> MethodSettings {
+fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
+    if args.ic.ic_glossy == GlossyArg::Eas && args.method != MethodName::Ic {
+        bail!(
+            "--ic-glossy eas is for --method ic only: {} does not carry radiance records across frames",
+            format!("{:?}", args.method).to_lowercase()
+        );
+    }
     let length = PathLength {
         max_depth: args.max_depth,
         ..PathLength::default()
@@ -612,9 +630,14 @@ fn render_method(args: &RenderArgs) -> MethodSettings {
         max_spacing_px: args.ic.ic_max_spacing,
         gradients: !args.ic.ic_no_gradients,
         length,
+        glossy: match args.ic.ic_glossy {
+            GlossyArg::Path => GlossyLobe::Path,
+            GlossyArg::Eas => GlossyLobe::Eas,
+        },
+        eas_tau: args.ic.ic_eas_tau,
         ..IcSettings::default()
     };
-    match args.method {
+    Ok(match args.method {
         MethodName::Path => MethodSettings::Path(PathSettings {
             spp: args.spp.unwrap_or(PathSettings::default().spp),
             length,
@@ -652,7 +675,7 @@ fn render_method(args: &RenderArgs) -> MethodSettings {
             },
             length,
         }),
-    }
+    })
 }
 
 /// With `--job`, the store (`--db`, or the default) and the job begun or

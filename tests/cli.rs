@@ -78,6 +78,14 @@ fn bad_input_is_a_clear_error() {
         ),
         (&["render", "--method", "teleport"], "invalid value"),
         (
+            &["render", "--method", "trc", "--ic-glossy", "eas"],
+            "--method ic only",
+        ),
+        (
+            &["bench", "--methods", "ic:glossy=mirror"],
+            "expected path or eas",
+        ),
+        (
             &["compare", "/nonexistent/ref", "/nonexistent/test"],
             "does not exist",
         ),

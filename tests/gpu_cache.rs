@@ -109,6 +109,7 @@ fn random_cache(rng: &mut Rng, n: usize, accuracy: f32) -> IrradianceCache {
             radius: 0.3 + 4.0 * rng.next_f32().powi(2),
             created_frame: 0,
             object: 0,
+            eas: None,
         });
     }
     cache

@@ -12,7 +12,7 @@
 
 use radcache::backend::cpu::CpuBackend;
 use radcache::film::{read_exr, Film};
-use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::method::ic::{GlossyLobe, IcSettings, IrradianceCaching};
 use radcache::method::movies::{MoviesSettings, TextureMovies};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::method::tcg::{TcgSettings, TemporallyCoherentGathering};
@@ -116,7 +116,8 @@ fn halved(reference: &Film) -> Film {
     out
 }
 
-/// `ic`, `trc` and `tcg`, at their defaults, against the independent
+/// `ic` (also with radiance records on glossy surfaces), `trc`, `tcg` and
+/// `movies`, at their defaults, against the independent
 /// references of `scene` at `frames` (`trc` and `tcg` render every frame
 /// from 0 up to the last, so that their records age as in a render). Rendered at 64×64 against the
 /// references halved, so blocks of 8×8 pixels are the 16×16 ones of the
@@ -125,10 +126,15 @@ fn halved(reference: &Film) -> Film {
 fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_block_bias: f64) {
     const SIZE: u32 = 64;
     let ic = IrradianceCaching::new(IcSettings::default());
+    let ic_eas = IrradianceCaching::new(IcSettings {
+        glossy: GlossyLobe::Eas,
+        ..IcSettings::default()
+    });
     let trc = TemporalRadianceCaching::new(TrcSettings::default());
     let tcg = TemporallyCoherentGathering::new(TcgSettings::default());
     let movies = TextureMovies::new(MoviesSettings::default());
     let mut ic = renderer(scene_file, Box::new(ic), SIZE, false);
+    let mut ic_eas = renderer(scene_file, Box::new(ic_eas), SIZE, false);
     let mut movies = renderer(scene_file, Box::new(movies), SIZE, false);
     let mut trc = renderer(scene_file, Box::new(trc), SIZE, false);
     let mut tcg = renderer(scene_file, Box::new(tcg), SIZE, false);
@@ -142,8 +148,10 @@ fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_bloc
         }
         let reference = halved(&reference_frame(scene, frame));
         let ic_image = ic.render_frame(frame);
+        let ic_eas_image = ic_eas.render_frame(frame);
         for (method, image) in [
             ("ic", &ic_image),
+            ("ic glossy=eas", &ic_eas_image),
             ("trc", &trc_image),
             ("tcg", &tcg_image),
             ("movies", &movies_image),

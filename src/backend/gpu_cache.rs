@@ -876,6 +876,7 @@ mod tests {
             radius: 0.05 + 2.0 * rng.next_f32().powi(4),
             created_frame: 0,
             object: 0,
+            eas: None,
         }
     }
 

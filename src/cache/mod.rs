@@ -4,6 +4,7 @@
 //! index over their spheres of influence ([`octree`]) and the weighted
 //! interpolation of TRC paper Eq. 1–4 ([`IrradianceCache::interpolate`]).
 
+pub mod eas;
 pub mod gather;
 pub mod octree;
 pub mod record;

@@ -71,6 +71,9 @@ pub struct IrradianceRecord {
     pub created_frame: u32,
     /// Object the record lies on.
     pub object: u32,
+    /// The equivalent area light sources of a record on a glossy surface
+    /// ([`super::eas`]), where the method asks for radiance records.
+    pub eas: Option<std::sync::Arc<[super::eas::Eas]>>,
 }
 
 impl IrradianceRecord {
@@ -146,6 +149,7 @@ mod tests {
             radius,
             created_frame: 0,
             object: 0,
+            eas: None,
         }
     }
 

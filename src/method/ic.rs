@@ -19,10 +19,10 @@ use crate::cache::gather::{
     gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint,
     GatheredIrradiance, HemisphereSamples, Strata,
 };
-use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
+use crate::cache::{eas, IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
 use crate::integrator::{trace_radiance_parallel, PathLength};
-use crate::material::{luminance, LUMINANCE};
+use crate::material::{luminance, Bsdf, LUMINANCE};
 use crate::sampling::SampleKey;
 use crate::store::SampleBlock;
 use glam::Vec3;
@@ -55,6 +55,30 @@ pub struct IcSettings {
     /// less, so roulette starts at once with a lower survival (unbiased,
     /// about 2.5× fewer rays per gather sample in a typical room).
     pub gather_length: PathLength,
+    /// How glossy lobes get their indirect light.
+    #[serde(default)]
+    pub glossy: GlossyLobe,
+    /// The EAS precision criterion `τ` (EAS paper Eq. 13), with
+    /// [`GlossyLobe::Eas`].
+    #[serde(default = "default_eas_tau")]
+    pub eas_tau: f32,
+}
+
+fn default_eas_tau() -> f32 {
+    eas::DEFAULT_TAU
+}
+
+/// Where the indirect light of glossy lobes comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum GlossyLobe {
+    /// Path-traced from one lobe sample per pixel sample (MIS-weighted
+    /// against the light sample for the direct part).
+    #[default]
+    Path,
+    /// Radiance records: glossy surfaces get records too, and each keeps
+    /// equivalent area light sources ([`crate::cache::eas`]) that the
+    /// pixels around it reflect; the direct part is the light sample alone.
+    Eas,
 }
 
 impl Default for IcSettings {
@@ -72,6 +96,8 @@ impl Default for IcSettings {
                 survival: 0.5,
                 ..PathLength::default()
             },
+            glossy: GlossyLobe::Path,
+            eas_tau: eas::DEFAULT_TAU,
         }
     }
 }
@@ -128,6 +154,9 @@ pub(crate) struct Candidate {
     pub(crate) object: u32,
     /// World size of one pixel at this depth.
     pub(crate) footprint: f32,
+    /// The material of a glossy surface whose record keeps equivalent area
+    /// light sources ([`GlossyLobe::Eas`]); `None` for an irradiance record.
+    pub(crate) glossy: Option<u32>,
 }
 
 /// A record just gathered, with the hemisphere samples and first hits it
@@ -257,7 +286,7 @@ impl IrradianceCaching {
     /// clustered along the first scanlines; a record is created wherever no
     /// existing record is usable.
     pub fn fill(&self, ctx: &FrameContext, cache: &mut IrradianceCache) {
-        let candidates = primary_candidates(ctx);
+        let candidates = primary_candidates(ctx, self.settings.glossy);
         self.fill_from(ctx, cache, &candidates, |_| (), &mut Vec::new());
     }
 
@@ -405,6 +434,12 @@ impl IrradianceCaching {
                     kept.push((RecordId::from(c.pixel), block));
                 }
                 let (radius, grad_translation) = self.limit_radius(&g, c.footprint);
+                let eas = c.glossy.map(|material| {
+                    let material = &ctx.scene.materials[material as usize];
+                    let normal = c.point.normal;
+                    let bsdf = Bsdf::new(material, normal, normal);
+                    eas::build(&samples, normal, strata, &bsdf, self.settings.eas_tau).into()
+                });
                 let record = IrradianceRecord {
                     id: RecordId::from(c.pixel),
                     position: c.point.position,
@@ -415,6 +450,7 @@ impl IrradianceCaching {
                     radius,
                     created_frame: ctx.frame,
                     object: c.object,
+                    eas,
                 };
                 Gathered {
                     candidate: *c,
@@ -455,8 +491,9 @@ impl IrradianceCaching {
 }
 
 /// The surface point seen through each pixel centre that wants a record
-/// (a surface with a diffuse part), or `None`.
-pub(crate) fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
+/// (a surface with a diffuse part, or with [`GlossyLobe::Eas`] a glossy
+/// one), or `None`.
+pub(crate) fn primary_candidates(ctx: &FrameContext, glossy: GlossyLobe) -> Vec<Option<Candidate>> {
     let camera = &ctx.snapshot.camera;
     let n_pixels = (ctx.width * ctx.height) as usize;
     let rays: Vec<Ray> = (0..n_pixels as u32)
@@ -480,12 +517,15 @@ pub(crate) fn primary_candidates(ctx: &FrameContext) -> Vec<Option<Candidate>> {
         .enumerate()
         .map(|(pixel, (ray, hit))| {
             let surface = Surface::at(ctx, ray, hit)?;
-            (surface.bsdf.diffuse_albedo().max_element() > 0.0).then(|| Candidate {
+            let radiance = glossy == GlossyLobe::Eas && surface.bsdf.has_specular();
+            let diffuse = surface.bsdf.diffuse_albedo().max_element() > 0.0;
+            (diffuse || radiance).then(|| Candidate {
                 pixel: pixel as u32,
                 stream: first_stream(ctx, pixel as u32),
                 point: surface.gather_point(),
                 object: hit.object,
                 footprint: hit.t * ray.dir().length() * pixel_angle,
+                glossy: radiance.then(|| ctx.snapshot.tri_material[hit.triangle as usize]),
             })
         })
         .collect()
@@ -596,6 +636,7 @@ mod tests {
             radius: r,
             created_frame: 0,
             object: 0,
+            eas: None,
         };
         for k in 0..16 {
             let angle = std::f32::consts::TAU * k as f32 / 16.0;

@@ -119,6 +119,13 @@ impl<'a> Interpolation<'a> {
         }
     }
 
+    /// The cache interpolated (the CPU's, whichever answers the lookups).
+    pub(crate) fn cache(&self) -> &'a IrradianceCache {
+        match self {
+            Interpolation::Cpu { cache, .. } | Interpolation::Gpu { cache, .. } => cache,
+        }
+    }
+
     /// Flags every record usable at some lookup, without interpolating
     /// (the CPU skips the extrapolation; the GPU pass is the same one).
     pub(crate) fn mark_used(&self, lookups: &[Lookup], used: &[AtomicBool]) {

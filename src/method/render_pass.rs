@@ -15,13 +15,13 @@
 //! ([`FallbackStreams`]). `trc` also asks which records the pass uses
 //! (`render_pass`'s `used`, `mark_used`).
 
-use super::ic::IcSettings;
+use super::ic::{GlossyLobe, IcSettings};
 use super::lookups::{measure_clearance, Interpolation, Lookup, ShadingPoint};
 use super::pixels::{self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample};
 use super::{FrameContext, FrameStats};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::GatherPoint;
-use crate::cache::{Interpolated, IrradianceCache};
+use crate::cache::{eas, Interpolated, IrradianceCache};
 use crate::film::Film;
 use crate::integrator::{offset_origin, trace_radiance, FirstHitEmission, RadianceQuery};
 use crate::light::{emitting_cosine, TriangleSampling};
@@ -130,7 +130,13 @@ pub(crate) fn mark_used(
         let count = pixels_per_tile.min(n_pixels - first);
         let (primary, _) = PrimarySamples::trace(ctx, first, count, spp);
         let surfaces = primary.surfaces(ctx);
-        let (lookups, _) = pixel_lookups(ctx, &surfaces, &primary.hits, &primary.samples);
+        let (lookups, _) = pixel_lookups(
+            ctx,
+            &surfaces,
+            &primary.hits,
+            &primary.samples,
+            settings.glossy,
+        );
         interpolation.mark_used(&lookups, used);
     });
 }
@@ -214,14 +220,17 @@ fn pixel_lookups(
     surfaces: &[Option<Surface>],
     hits: &[Hit],
     samples: &[PixelSample],
+    glossy: GlossyLobe,
 ) -> (Vec<Lookup>, Vec<Option<u32>>) {
     let shading_points: Vec<Option<(u32, ShadingPoint)>> = surfaces
         .iter()
         .zip(hits)
         .map(|(surface, hit)| {
             let s = surface.as_ref()?;
-            let diffuse = !s.bsdf.is_black() && s.bsdf.diffuse_albedo().max_element() > 0.0;
-            diffuse.then(|| (hit.triangle, (s.p, s.bsdf.normal())))
+            let diffuse = s.bsdf.diffuse_albedo().max_element() > 0.0;
+            let radiance = glossy == GlossyLobe::Eas && s.bsdf.has_specular();
+            (!s.bsdf.is_black() && (diffuse || radiance))
+                .then(|| (hit.triangle, (s.p, s.bsdf.normal())))
         })
         .collect();
     let pixel_of: Vec<u32> = samples.iter().map(|s| s.pixel).collect();
@@ -345,12 +354,13 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
     let mut stats = FrameStats::default();
     let (primary, edges) = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
     let mut tile = TileShading::new(ctx, primary);
-    let shadows = tile.direct_light(ctx);
+    let shadows = tile.direct_light(ctx, pass.settings.glossy);
     let (lookups, lookup_of_sample) = pixel_lookups(
         ctx,
         &tile.surfaces,
         &tile.primary.hits,
         &tile.primary.samples,
+        pass.settings.glossy,
     );
     stats.lookups = lookups.len() as u64;
     let interpolated = pass.interpolation.interpolate(&lookups, pass.used);
@@ -359,7 +369,13 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
         .flatten()
         .map(|e| u64::from(e.records))
         .sum();
-    let deferred = tile.indirect_light(ctx, pass, &lookup_of_sample, &interpolated, &mut stats);
+    let deferred = tile.indirect_light(
+        ctx,
+        pass,
+        (&lookups, &lookup_of_sample),
+        &interpolated,
+        &mut stats,
+    );
     shadows.add_unoccluded(ctx, &mut tile.radiance);
     let (targets, queries): (Vec<usize>, Vec<RadianceQuery>) =
         deferred.into_iter().map(|d| (d.sample, d.query)).unzip();
@@ -425,7 +441,7 @@ impl<'a> TileShading<'a> {
     /// Each sample's first light sample (drawn from its stream, before
     /// anything else draws from it) and the shadow rays of those that may
     /// add direct light.
-    fn direct_light(&mut self, ctx: &FrameContext) -> ShadowBatch {
+    fn direct_light(&mut self, ctx: &FrameContext, glossy: GlossyLobe) -> ShadowBatch {
         let mut lights = FirstLightSampler::default();
         let choices: Vec<LightChoice> = self
             .primary
@@ -442,7 +458,7 @@ impl<'a> TileShading<'a> {
             let Some(surface) = surface.as_ref().filter(|s| !s.bsdf.is_black()) else {
                 continue;
             };
-            if let Some((shadow, contribution)) = direct_light(ctx, surface, choice, true) {
+            if let Some((shadow, contribution)) = direct_light(ctx, surface, choice, true, glossy) {
                 batch.rays.push(shadow);
                 batch.targets.push((i, contribution));
             }
@@ -453,23 +469,27 @@ impl<'a> TileShading<'a> {
     /// Per sample, in the order the CPU-only pass took them: the cached
     /// indirect light added, or where the sample's lookup found no usable
     /// record, a path-traced fallback (drawn from the sample's stream
-    /// before the glossy lobe's); and the glossy lobe. Returns the
-    /// path-traced parts.
+    /// before the glossy lobe's); and the glossy lobe: path-traced, or
+    /// with [`GlossyLobe::Eas`] reflected from the records' equivalent
+    /// area light sources, once per lookup (path-traced where no record
+    /// there has them). Returns the path-traced parts.
     fn indirect_light(
         &mut self,
         ctx: &FrameContext,
         pass: &TilePass,
-        lookup_of_sample: &[Option<u32>],
+        (lookups, lookup_of_sample): (&[Lookup], &[Option<u32>]),
         interpolated: &[Option<Interpolated>],
         stats: &mut FrameStats,
     ) -> Vec<Deferred> {
         let mut deferred = Vec::new();
+        let mut reflected: Vec<Option<Option<Vec3>>> = vec![None; lookups.len()];
         for (i, surface) in self.surfaces.iter().enumerate() {
             let Some(surface) = surface.as_ref().filter(|s| !s.bsdf.is_black()) else {
                 continue;
             };
             let rng = &mut self.primary.rngs[i];
-            if let Some(lookup) = lookup_of_sample[i] {
+            let diffuse = surface.bsdf.diffuse_albedo().max_element() > 0.0;
+            if let Some(lookup) = lookup_of_sample[i].filter(|_| diffuse) {
                 match &interpolated[lookup as usize] {
                     Some(e) => {
                         self.radiance[i] +=
@@ -488,7 +508,27 @@ impl<'a> TileShading<'a> {
                     }
                 }
             }
-            if let Some(query) = glossy_query(surface, rng) {
+            if pass.settings.glossy == GlossyLobe::Eas && surface.bsdf.has_specular() {
+                let cached = lookup_of_sample[i].and_then(|l| {
+                    *reflected[l as usize].get_or_insert_with(|| {
+                        let cache = pass.interpolation.cache();
+                        eas::reflected_radiance(
+                            cache,
+                            &lookups[l as usize],
+                            &surface.bsdf,
+                            surface.wo,
+                        )
+                    })
+                });
+                match cached {
+                    Some(radiance) => self.radiance[i] += radiance,
+                    None => {
+                        if let Some(query) = glossy_indirect_query(surface, rng) {
+                            deferred.push(Deferred { sample: i, query });
+                        }
+                    }
+                }
+            } else if let Some(query) = glossy_query(surface, rng) {
                 deferred.push(Deferred { sample: i, query });
             }
         }
@@ -500,13 +540,17 @@ impl<'a> TileShading<'a> {
 /// uniform in solid angle: this light is seen) for the whole
 /// BSDF: the diffuse lobe unweighted (its emission hits are never counted
 /// elsewhere: the cache excludes them), the glossy lobe MIS-weighted against
-/// [`glossy_query`]'s lobe sampling. Without `with_diffuse`, the glossy
-/// lobe's part alone (`movies`, whose textures hold the diffuse part).
+/// [`glossy_query`]'s lobe sampling (unweighted with
+/// [`GlossyLobe::Eas`], whose lobe is not sampled: the EAS and
+/// [`glossy_indirect_query`] hold indirect light only). Without
+/// `with_diffuse`, the glossy lobe's part alone (`movies`, whose textures
+/// hold the diffuse part).
 pub(crate) fn direct_light(
     ctx: &FrameContext,
     s: &Surface,
     choice: LightChoice,
     with_diffuse: bool,
+    glossy: GlossyLobe,
 ) -> Option<(Ray, Vec3)> {
     let ls = ctx
         .lights
@@ -521,7 +565,7 @@ pub(crate) fn direct_light(
         Vec3::ZERO
     };
     let specular = s.bsdf.eval_specular(s.wo, ls.wi);
-    let w = if ls.is_delta || !s.bsdf.has_specular() {
+    let w = if ls.is_delta || !s.bsdf.has_specular() || glossy == GlossyLobe::Eas {
         1.0
     } else {
         power_heuristic(ls.pdf, s.bsdf.pdf_specular(s.wo, ls.wi))
@@ -557,6 +601,16 @@ pub(crate) fn glossy_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> 
             bsdf_pdf: sample.pdf,
             light: TriangleSampling::SolidAngle,
         },
+    })
+}
+
+/// The glossy lobe's indirect light alone, by sampling the lobe and path
+/// tracing on ([`GlossyLobe::Eas`] where no record has sources: the light
+/// sample holds the direct part).
+fn glossy_indirect_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> {
+    glossy_query(s, rng).map(|query| RadianceQuery {
+        first_hit: FirstHitEmission::Exclude,
+        ..query
     })
 }
 

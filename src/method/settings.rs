@@ -4,7 +4,7 @@
 //! that names what is known.
 
 use crate::cache::gather::Strata;
-use crate::method::ic::IcSettings;
+use crate::method::ic::{GlossyLobe, IcSettings};
 use crate::method::movies::{MoviesSettings, MAX_SHADOW_SAMPLES};
 use crate::method::path::PathSettings;
 use crate::method::tcg::TcgSettings;
@@ -37,6 +37,8 @@ pub const METHODS: &[MethodInfo] = &[
             ("max_spacing", "64"),
             ("gradients", "1"),
             ("max_depth", "8"),
+            ("glossy", "eas"),
+            ("eas_tau", "0.02"),
         ],
     },
     MethodInfo {
@@ -215,7 +217,9 @@ fn apply(settings: &mut MethodSettings, key: &str, v: &str) -> Result<(), Method
     let method = settings.name();
     let known = match settings {
         MethodSettings::Path(s) => path_setting(method, key, v, s)?,
-        MethodSettings::Ic(s) => ic_setting(method, key, v, s)?,
+        MethodSettings::Ic(s) => {
+            ic_setting(method, key, v, s)? || glossy_setting(method, key, v, s)?
+        }
         MethodSettings::Trc(s) => trc_setting(method, key, v, s)?,
         MethodSettings::Tcg(s) => tcg_setting(method, key, v, s)?,
         MethodSettings::Movies(s) => movies_setting(method, key, v, s)?,
@@ -242,6 +246,36 @@ fn path_setting(
         "spp" => s.spp = value(method, key, v, 1..1_000_001)?,
         "max_depth" => s.length.max_depth = Some(value(method, key, v, 0..10_001)?),
         "rr_start" => s.length.rr_start = value(method, key, v, 0..10_001)?,
+        _ => return Ok(false),
+    }
+    Ok(true)
+}
+
+/// Applies `ic`'s radiance-record setting `key = v` to `s` (`ic` alone:
+/// `trc` and `tcg` do not carry EAS across frames); `false` when `key` is
+/// none of them.
+fn glossy_setting(
+    method: &str,
+    key: &str,
+    v: &str,
+    s: &mut IcSettings,
+) -> Result<bool, MethodError> {
+    match key {
+        "glossy" => {
+            s.glossy = match v.trim() {
+                "path" => GlossyLobe::Path,
+                "eas" => GlossyLobe::Eas,
+                _ => {
+                    return Err(MethodError::BadValue {
+                        method: method.into(),
+                        key: key.into(),
+                        value: v.into(),
+                        problem: "expected path or eas".into(),
+                    })
+                }
+            }
+        }
+        "eas_tau" => s.eas_tau = value(method, key, v, 1e-6..1e6)?,
         _ => return Ok(false),
     }
     Ok(true)

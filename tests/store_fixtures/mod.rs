@@ -39,6 +39,7 @@ pub fn record(id: u64, frame: u32) -> IrradianceRecord {
         radius: 0.75,
         created_frame: frame,
         object: 3,
+        eas: None,
     }
 }
 

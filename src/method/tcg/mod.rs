@@ -442,7 +442,7 @@ impl Method for TemporallyCoherentGathering {
         self.ic.fill_from(
             ctx,
             &mut cache,
-            &primary_candidates(ctx),
+            &primary_candidates(ctx, crate::method::ic::GlossyLobe::Path),
             |g| TcgRecord::gathered(ctx, g, &dynamic),
             &mut records,
         );
@@ -526,6 +526,7 @@ mod tests {
             radius: 1.0,
             created_frame: 0,
             object: 0,
+            eas: None,
         }
     }
 

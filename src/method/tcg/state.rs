@@ -103,6 +103,7 @@ pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, Str
             radius: s.radius,
             created_frame: s.created_frame,
             object: s.object,
+            eas: None,
         },
         candidate: Candidate {
             pixel: s.pixel,
@@ -110,6 +111,7 @@ pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, Str
             point,
             object: s.object,
             footprint: s.footprint,
+            glossy: None,
         },
         object_to_world,
         samples,
@@ -139,6 +141,7 @@ mod tests {
                 radius: 0.3,
                 created_frame: 2,
                 object: 1,
+                eas: None,
             },
             candidate: Candidate {
                 pixel: 40,
@@ -146,6 +149,7 @@ mod tests {
                 point,
                 object: 1,
                 footprint: 0.01,
+                glossy: None,
             },
             object_to_world: Mat4::from_translation(Vec3::X),
             samples: (0..12)

@@ -181,6 +181,7 @@ mod tests {
                 radius: 1.0,
                 created_frame: 0,
                 object: 0,
+                eas: None,
             },
             candidate: crate::method::ic::Candidate {
                 pixel: 0,
@@ -188,6 +189,7 @@ mod tests {
                 point,
                 object: 0,
                 footprint: 0.01,
+                glossy: None,
             },
             next_irradiance: e0 * (1.0 + change),
             change,

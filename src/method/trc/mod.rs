@@ -497,7 +497,7 @@ impl TemporalRadianceCaching {
         cache: &mut IrradianceCache,
         aged: &mut Aged,
     ) {
-        let pixels = primary_candidates(ctx);
+        let pixels = primary_candidates(ctx, crate::method::ic::GlossyLobe::Path);
         let mut created = Vec::new();
         self.ic.fill_from(
             ctx,

@@ -105,6 +105,7 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
             radius: s.radius,
             created_frame: s.created_frame,
             object: s.object,
+            eas: None,
         },
         candidate: Candidate {
             pixel: s.pixel,
@@ -116,6 +117,7 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
             },
             object: s.object,
             footprint: s.footprint,
+            glossy: None,
         },
         next_irradiance: s.next_irradiance.into(),
         change: s.change,
