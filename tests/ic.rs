@@ -9,8 +9,9 @@ use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
 use radcache::backend::{Hit, Ray};
 use radcache::cache::gather::Strata;
-use radcache::cache::{IrradianceCache, LookupPoint};
-use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::cache::{eas, IrradianceCache, LookupPoint};
+use radcache::material::Bsdf;
+use radcache::method::ic::{GlossyLobe, IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::metrics::{block_bias, rel_rmse, BLOCK};
 use radcache::render::{FrameSettings, Renderer};
@@ -26,6 +27,11 @@ const HALF: f32 = 5.0;
 /// ceiling facing down, lit by a point light at `light`; the camera looks
 /// down at the floor from just under the ceiling.
 fn floor_and_ceiling(light: Vec3) -> Scene {
+    floor_of_and_ceiling(Material::diffuse("floor", Vec3::splat(1e-4)), light)
+}
+
+/// [`floor_and_ceiling`] with a floor of `floor_material`.
+fn floor_of_and_ceiling(floor_material: Material, light: Vec3) -> Scene {
     let mut floor = Mesh::default();
     push_quad(
         &mut floor,
@@ -45,7 +51,7 @@ fn floor_and_ceiling(light: Vec3) -> Scene {
     scene(
         vec![floor, ceiling],
         vec![
-            Material::diffuse("floor", Vec3::splat(1e-4)),
+            floor_material,
             Material::diffuse("ceiling", Vec3::splat(CEILING_ALBEDO)),
         ],
         vec![],
@@ -83,9 +89,13 @@ fn floor_irradiance(p: Vec3, light: Vec3) -> f32 {
 }
 
 fn ic_cache(light: Vec3, settings: IcSettings, size: u32) -> (IrradianceCache, Renderer) {
+    ic_cache_of(floor_and_ceiling(light), settings, size)
+}
+
+fn ic_cache_of(scene: Scene, settings: IcSettings, size: u32) -> (IrradianceCache, Renderer) {
     let ic = IrradianceCaching::new(settings);
     let mut renderer = Renderer::new(
-        floor_and_ceiling(light),
+        scene,
         Box::new(IrradianceCaching::new(IcSettings::default())),
         Box::new(CpuBackend::new()),
         FrameSettings {
@@ -107,6 +117,73 @@ fn floor_points(n: usize) -> Vec<Vec3> {
             Vec3::new(s(i), 0.0, s(j))
         })
         .collect()
+}
+
+/// `L(x)` of [`floor_irradiance`] reflected by the glossy lobe at floor
+/// point `p` towards `wo`: `∫ f_s(wo, wi) L(x) cosθ_p cosθ_x / r² dA`, by
+/// the midpoint rule on a 600×600 grid.
+fn floor_glossy_radiance(p: Vec3, wo: Vec3, light: Vec3, bsdf: &Bsdf) -> f32 {
+    let n = 600;
+    let cell = 2.0 * HALF / n as f32;
+    let mut l = 0.0f64;
+    for i in 0..n {
+        for j in 0..n {
+            let x = Vec3::new(
+                -HALF + (i as f32 + 0.5) * cell,
+                CEILING_Y,
+                -HALF + (j as f32 + 0.5) * cell,
+            );
+            let to_light = light - x;
+            let d2 = to_light.length_squared();
+            let radiance = CEILING_ALBEDO / PI * INTENSITY * (-to_light.y / d2.sqrt()) / d2;
+            let r2 = (x - p).length_squared();
+            let wi = (x - p) / r2.sqrt();
+            let cos = wi.y;
+            l += (bsdf.eval_specular(wo, wi).x * radiance * cos * cos / r2) as f64;
+        }
+    }
+    (l * (cell * cell) as f64) as f32
+}
+
+/// Radiance records (`--ic-glossy eas`): a glossy floor (n = 40, no
+/// diffuse part, so it gets records only as a glossy surface) reflects the
+/// lit ceiling. The records' equivalent area light sources, interpolated
+/// and moved to floor points between them (EAS Eq. 16–17), against the same
+/// reflection by quadrature over the ceiling. Its `ks` is small so that
+/// the light it sends back to the ceiling (which the quadrature leaves
+/// out) stays under 1 %.
+#[test]
+fn radiance_records_reflect_the_ceiling_as_quadrature_does() {
+    let light = Vec3::new(0.2, 0.6, -0.1);
+    let floor = Material::glossy("glossy floor", Vec3::ZERO, Vec3::splat(0.01), 40.0);
+    let settings = IcSettings {
+        accuracy: 0.1,
+        strata: Strata { theta: 32, phi: 96 },
+        glossy: GlossyLobe::Eas,
+        ..IcSettings::default()
+    };
+    let (cache, _) = ic_cache_of(floor_of_and_ceiling(floor.clone(), light), settings, 32);
+    let with_sources = cache.records().iter().filter(|r| r.eas.is_some()).count();
+    assert!(with_sources >= 4, "{with_sources} records with sources");
+    let camera = Vec3::new(0.0, 1.95, 0.0);
+    let (mut worst, mut sum, mut count) = (0.0f32, 0.0f32, 0);
+    for p in floor_points(6) {
+        let wo = (camera - p).normalize();
+        let bsdf = Bsdf::new(&floor, Vec3::Y, wo);
+        let at = LookupPoint::open(p, Vec3::Y);
+        let got = eas::reflected_radiance(&cache, &at, &bsdf, wo)
+            .unwrap_or_else(|| panic!("no record with sources covers {p}"))
+            .x;
+        let expected = floor_glossy_radiance(p, wo, light, &bsdf);
+        let err = (got - expected).abs() / expected;
+        worst = worst.max(err);
+        assert!(err < 0.1, "at {p}: {got} against {expected} by quadrature");
+        (sum, count) = (sum + err, count + 1);
+    }
+    // Measured: mean 3.6 %, worst 7.5 % (Monte Carlo noise of 3,072
+    // samples a record, the closed-form mean BRDF, Eq. 16 across records).
+    let mean = sum / count as f32;
+    assert!(mean < 0.05, "mean relative error {mean}, worst {worst}");
 }
 
 /// With accuracy a = 0.1 (Ward's weight bounds the estimated relative error

@@ -23,7 +23,9 @@ use crate::backend::{Hit, Ray};
 use crate::cache::gather::GatherPoint;
 use crate::cache::{eas, Interpolated, IrradianceCache};
 use crate::film::Film;
-use crate::integrator::{offset_origin, trace_radiance, FirstHitEmission, RadianceQuery};
+use crate::integrator::{
+    offset_origin, trace_radiance, FirstHitEmission, PathLength, RadianceQuery,
+};
 use crate::light::{emitting_cosine, TriangleSampling};
 use crate::material::Bsdf;
 use crate::sampling::{cosine_hemisphere, power_heuristic, LightChoice, Rng, SampleKey};
@@ -146,6 +148,9 @@ pub(crate) fn mark_used(
 struct Deferred {
     sample: usize,
     query: RadianceQuery,
+    /// Only the emission at the query's first hit is wanted (a glossy lobe
+    /// whose indirect light the records' sources give).
+    first_hit_only: bool,
 }
 
 /// A tile's pixel samples (`spp` a pixel, then the extra ones of pixels on
@@ -354,7 +359,7 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
     let mut stats = FrameStats::default();
     let (primary, edges) = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
     let mut tile = TileShading::new(ctx, primary);
-    let shadows = tile.direct_light(ctx, pass.settings.glossy);
+    let shadows = tile.direct_light(ctx);
     let (lookups, lookup_of_sample) = pixel_lookups(
         ctx,
         &tile.surfaces,
@@ -377,11 +382,21 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
         &mut stats,
     );
     shadows.add_unoccluded(ctx, &mut tile.radiance);
-    let (targets, queries): (Vec<usize>, Vec<RadianceQuery>) =
-        deferred.into_iter().map(|d| (d.sample, d.query)).unzip();
-    let traced = trace_radiance(ctx, pass.settings.length, queries);
-    for (i, r) in targets.into_iter().zip(traced) {
-        tile.radiance[i] += r.radiance;
+    let (first_hits, paths): (Vec<Deferred>, Vec<Deferred>) =
+        deferred.into_iter().partition(|d| d.first_hit_only);
+    let first_hit = PathLength {
+        max_depth: Some(0),
+        ..pass.settings.length
+    };
+    for (length, deferred) in [(pass.settings.length, paths), (first_hit, first_hits)] {
+        let (targets, queries): (Vec<usize>, Vec<RadianceQuery>) =
+            deferred.into_iter().map(|d| (d.sample, d.query)).unzip();
+        for (i, r) in targets
+            .into_iter()
+            .zip(trace_radiance(ctx, length, queries))
+        {
+            tile.radiance[i] += r.radiance;
+        }
     }
     edges.resolve(&tile.primary.samples, &tile.radiance, first, out);
     stats
@@ -441,7 +456,7 @@ impl<'a> TileShading<'a> {
     /// Each sample's first light sample (drawn from its stream, before
     /// anything else draws from it) and the shadow rays of those that may
     /// add direct light.
-    fn direct_light(&mut self, ctx: &FrameContext, glossy: GlossyLobe) -> ShadowBatch {
+    fn direct_light(&mut self, ctx: &FrameContext) -> ShadowBatch {
         let mut lights = FirstLightSampler::default();
         let choices: Vec<LightChoice> = self
             .primary
@@ -458,7 +473,7 @@ impl<'a> TileShading<'a> {
             let Some(surface) = surface.as_ref().filter(|s| !s.bsdf.is_black()) else {
                 continue;
             };
-            if let Some((shadow, contribution)) = direct_light(ctx, surface, choice, true, glossy) {
+            if let Some((shadow, contribution)) = direct_light(ctx, surface, choice, true) {
                 batch.rays.push(shadow);
                 batch.targets.push((i, contribution));
             }
@@ -470,9 +485,10 @@ impl<'a> TileShading<'a> {
     /// indirect light added, or where the sample's lookup found no usable
     /// record, a path-traced fallback (drawn from the sample's stream
     /// before the glossy lobe's); and the glossy lobe: path-traced, or
-    /// with [`GlossyLobe::Eas`] reflected from the records' equivalent
-    /// area light sources, once per lookup (path-traced where no record
-    /// there has them). Returns the path-traced parts.
+    /// with [`GlossyLobe::Eas`] its indirect light reflected from the
+    /// records' equivalent area light sources, once per lookup, and its
+    /// ray traced to the first hit only (path-traced where no record there
+    /// has sources). Returns the traced parts.
     fn indirect_light(
         &mut self,
         ctx: &FrameContext,
@@ -504,7 +520,11 @@ impl<'a> TileShading<'a> {
                                 &mut coherent_fallback(ctx, &self.primary.samples[i]),
                             ),
                         };
-                        deferred.push(Deferred { sample: i, query });
+                        deferred.push(Deferred {
+                            sample: i,
+                            query,
+                            first_hit_only: false,
+                        });
                     }
                 }
             }
@@ -520,16 +540,32 @@ impl<'a> TileShading<'a> {
                         )
                     })
                 });
-                match cached {
-                    Some(radiance) => self.radiance[i] += radiance,
-                    None => {
-                        if let Some(query) = glossy_indirect_query(surface, rng) {
-                            deferred.push(Deferred { sample: i, query });
-                        }
+                let query = glossy_query(surface, rng);
+                match (cached, query) {
+                    // The sources hold what the lobe's path would gather
+                    // past its first hit; the lobe's ray is still traced
+                    // to its first hit, for the emission there that MIS
+                    // weighs against the light sample.
+                    (Some(radiance), query) => {
+                        self.radiance[i] += radiance;
+                        deferred.extend(query.map(|query| Deferred {
+                            sample: i,
+                            query,
+                            first_hit_only: true,
+                        }));
                     }
+                    (None, query) => deferred.extend(query.map(|query| Deferred {
+                        sample: i,
+                        query,
+                        first_hit_only: false,
+                    })),
                 }
             } else if let Some(query) = glossy_query(surface, rng) {
-                deferred.push(Deferred { sample: i, query });
+                deferred.push(Deferred {
+                    sample: i,
+                    query,
+                    first_hit_only: false,
+                });
             }
         }
         deferred
@@ -540,17 +576,13 @@ impl<'a> TileShading<'a> {
 /// uniform in solid angle: this light is seen) for the whole
 /// BSDF: the diffuse lobe unweighted (its emission hits are never counted
 /// elsewhere: the cache excludes them), the glossy lobe MIS-weighted against
-/// [`glossy_query`]'s lobe sampling (unweighted with
-/// [`GlossyLobe::Eas`], whose lobe is not sampled: the EAS and
-/// [`glossy_indirect_query`] hold indirect light only). Without
-/// `with_diffuse`, the glossy lobe's part alone (`movies`, whose textures
-/// hold the diffuse part).
+/// [`glossy_query`]'s lobe sampling. Without `with_diffuse`, the glossy
+/// lobe's part alone (`movies`, whose textures hold the diffuse part).
 pub(crate) fn direct_light(
     ctx: &FrameContext,
     s: &Surface,
     choice: LightChoice,
     with_diffuse: bool,
-    glossy: GlossyLobe,
 ) -> Option<(Ray, Vec3)> {
     let ls = ctx
         .lights
@@ -565,7 +597,7 @@ pub(crate) fn direct_light(
         Vec3::ZERO
     };
     let specular = s.bsdf.eval_specular(s.wo, ls.wi);
-    let w = if ls.is_delta || !s.bsdf.has_specular() || glossy == GlossyLobe::Eas {
+    let w = if ls.is_delta || !s.bsdf.has_specular() {
         1.0
     } else {
         power_heuristic(ls.pdf, s.bsdf.pdf_specular(s.wo, ls.wi))
@@ -601,16 +633,6 @@ pub(crate) fn glossy_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> 
             bsdf_pdf: sample.pdf,
             light: TriangleSampling::SolidAngle,
         },
-    })
-}
-
-/// The glossy lobe's indirect light alone, by sampling the lobe and path
-/// tracing on ([`GlossyLobe::Eas`] where no record has sources: the light
-/// sample holds the direct part).
-fn glossy_indirect_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> {
-    glossy_query(s, rng).map(|query| RadianceQuery {
-        first_hit: FirstHitEmission::Exclude,
-        ..query
     })
 }
 

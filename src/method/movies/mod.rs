@@ -50,7 +50,6 @@ pub mod global;
 pub mod movie;
 pub mod patch;
 
-use super::ic::GlossyLobe;
 use super::pixels::FirstLightSampler;
 use super::render_pass::{direct_light, glossy_query, PrimarySamples, Surface};
 use super::{FrameContext, FrameRecords, FrameStats, Method, RENDER_PHASE};
@@ -467,7 +466,7 @@ impl TextureMovies {
             if s.bsdf.has_specular() {
                 let rng = &mut tile.primary.rngs[i];
                 let choice = lights.sample(ctx, &tile.primary.samples[i], rng);
-                if let Some((shadow, c)) = direct_light(ctx, s, choice, false, GlossyLobe::Path) {
+                if let Some((shadow, c)) = direct_light(ctx, s, choice, false) {
                     shadows.push((i, shadow, c));
                 }
                 if let Some(q) = glossy_query(s, rng) {
