@@ -67,6 +67,13 @@ fn floor_of_and_ceiling(floor_material: Material, light: Vec3) -> Scene {
 /// over the ceiling, `E(p) = ∫ L(x) cosθ_p cosθ_x / r² dA`, by the midpoint
 /// rule on a 600×600 grid.
 fn floor_irradiance(p: Vec3, light: Vec3) -> f32 {
+    over_ceiling(p, light, |_| 1.0)
+}
+
+/// `∫ w(wi) L(x) cosθ_p cosθ_x / r² dA` over the ceiling for floor point
+/// `p`, `wi` the direction from `p` to `x`: [`floor_irradiance`]'s
+/// quadrature with a weight per direction.
+fn over_ceiling(p: Vec3, light: Vec3, w: impl Fn(Vec3) -> f32) -> f32 {
     let n = 600;
     let cell = 2.0 * HALF / n as f32;
     let mut e = 0.0f64;
@@ -82,7 +89,7 @@ fn floor_irradiance(p: Vec3, light: Vec3) -> f32 {
             let radiance = CEILING_ALBEDO / PI * INTENSITY * (-to_light.y / d2.sqrt()) / d2;
             let r2 = (x - p).length_squared();
             let cos = CEILING_Y / r2.sqrt();
-            e += (radiance * cos * cos / r2) as f64;
+            e += (w((x - p) / r2.sqrt()) * radiance * cos * cos / r2) as f64;
         }
     }
     (e * (cell * cell) as f64) as f32
@@ -120,29 +127,9 @@ fn floor_points(n: usize) -> Vec<Vec3> {
 }
 
 /// `L(x)` of [`floor_irradiance`] reflected by the glossy lobe at floor
-/// point `p` towards `wo`: `∫ f_s(wo, wi) L(x) cosθ_p cosθ_x / r² dA`, by
-/// the midpoint rule on a 600×600 grid.
+/// point `p` towards `wo`: `∫ f_s(wo, wi) L(x) cosθ_p cosθ_x / r² dA`.
 fn floor_glossy_radiance(p: Vec3, wo: Vec3, light: Vec3, bsdf: &Bsdf) -> f32 {
-    let n = 600;
-    let cell = 2.0 * HALF / n as f32;
-    let mut l = 0.0f64;
-    for i in 0..n {
-        for j in 0..n {
-            let x = Vec3::new(
-                -HALF + (i as f32 + 0.5) * cell,
-                CEILING_Y,
-                -HALF + (j as f32 + 0.5) * cell,
-            );
-            let to_light = light - x;
-            let d2 = to_light.length_squared();
-            let radiance = CEILING_ALBEDO / PI * INTENSITY * (-to_light.y / d2.sqrt()) / d2;
-            let r2 = (x - p).length_squared();
-            let wi = (x - p) / r2.sqrt();
-            let cos = wi.y;
-            l += (bsdf.eval_specular(wo, wi).x * radiance * cos * cos / r2) as f64;
-        }
-    }
-    (l * (cell * cell) as f64) as f32
+    over_ceiling(p, light, |wi| bsdf.eval_specular(wo, wi).x)
 }
 
 /// Radiance records (`--ic-glossy eas`): a glossy floor (n = 40, no
