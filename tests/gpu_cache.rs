@@ -35,7 +35,7 @@ use radcache::backend::RayBackend;
 use radcache::cache::gather::Strata;
 use radcache::cache::{IrradianceCache, IrradianceRecord, LookupPoint};
 use radcache::film::Film;
-use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::method::ic::{GlossyLobe, IcSettings, IrradianceCaching};
 use radcache::method::movies::{MoviesSettings, TextureMovies};
 use radcache::method::tcg::{TcgSettings, TemporallyCoherentGathering};
 use radcache::method::trc::{TemporalGradients, TemporalRadianceCaching, TrcSettings};
@@ -427,6 +427,29 @@ fn frames_with_gpu_interpolation_equal_cpu_interpolation_on_the_same_rays() {
                 "{name} frame {f}: pixel off by {worst}"
             );
         }
+    }
+}
+
+/// Radiance records (`--ic-glossy eas`) on the glossy surfaces of
+/// `glossy-cornell`: their lookups go through the GPU splat with the
+/// others (the sources themselves are read on the CPU), and every pixel
+/// matches the CPU's interpolation on the same rays.
+#[test]
+fn radiance_record_frames_with_gpu_interpolation_equal_cpu_interpolation() {
+    let ic = || {
+        Box::new(IrradianceCaching::new(IcSettings {
+            glossy: GlossyLobe::Eas,
+            ..small_ic()
+        })) as Box<dyn Method>
+    };
+    let cpu = render("glossy-cornell", ic(), Box::new(RaysOnly(gpu())), 2);
+    let gpu = render("glossy-cornell", ic(), Box::new(gpu()), 2);
+    for (f, (c, g)) in cpu.iter().zip(&gpu).enumerate() {
+        let worst = *pixel_differences(c, g).last().unwrap();
+        assert!(
+            worst <= PIXEL_REL_SAME_RAYS,
+            "frame {f}: pixel off by {worst}"
+        );
     }
 }
 
