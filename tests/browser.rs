@@ -126,16 +126,7 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
         .as_str()
         .unwrap()
         .to_string();
-    let start = Instant::now();
-    loop {
-        let (_, job) = http(&server.addr, "GET", &with_q(&format!("/api/jobs/{id}")), "");
-        if job.contains("\"state\":\"done\"") {
-            break;
-        }
-        assert!(!job.contains("failed"), "{job}");
-        assert!(start.elapsed() < Duration::from_secs(120), "{job}");
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_until_done(|| http(&server.addr, "GET", &with_q(&format!("/api/jobs/{id}")), "").1);
     let url = format!("http://{}{}", server.addr, with_q(&format!("/?job={id}")));
 
     let (dom, stderr) = run_chromium(&url, "--dump-dom", &dir.path().join("profile1"));
@@ -179,17 +170,7 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
         "",
     );
     let records: serde_json::Value = serde_json::from_str(&records).unwrap();
-    let in_view = records["records"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|r| {
-            r["screen"].as_array().is_some_and(|s| {
-                let (x, y) = (s[0].as_f64().unwrap(), s[1].as_f64().unwrap());
-                (0.0..=16.0).contains(&x) && (0.0..=16.0).contains(&y)
-            })
-        })
-        .count();
+    let in_view = in_view(&records["records"], 16.0);
     assert!(in_view > 0, "no records to show: {records}");
     assert_eq!(dots, in_view, "overlay dots vs records in view");
     // The bench chart.
@@ -221,4 +202,81 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
         png.width(),
         png.height()
     );
+}
+
+/// A `movies` job's overlay draws its texture movies: one square per
+/// movie whose patch centre `/movies` places in the image.
+#[test]
+fn dashboard_draws_the_texture_movies_of_a_movies_job() {
+    chromium();
+    let dir = tempfile::tempdir().unwrap();
+    let server = start(&dir.path().join("db"), &[]);
+    let (status, body) = http(
+        &server.addr,
+        "POST",
+        "/api/jobs",
+        r#"{"scene":"builtin:cube-in-box","method":"movies","frames":"0..2","size":"16x16","spp":1}"#,
+    );
+    assert_eq!(status, 201, "{body}");
+    let id = serde_json::from_str::<serde_json::Value>(&body).unwrap()["id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    wait_until_done(|| http(&server.addr, "GET", &format!("/api/jobs/{id}"), "").1);
+    let url = format!("http://{}/?job={id}", server.addr);
+    let (dom, stderr) = run_chromium(&url, "--dump-dom", &dir.path().join("profile"));
+    let console = console_lines(&stderr);
+    assert!(
+        console.is_empty(),
+        "console messages:\n{}",
+        console.join("\n")
+    );
+    assert!(dom.contains("data-ready=\"1\""), "not loaded:\n{dom}");
+    assert!(
+        !dom.contains("data-errors="),
+        "the page reported errors:\n{dom}"
+    );
+    let (_, movies) = http(
+        &server.addr,
+        "GET",
+        &format!("/api/jobs/{id}/movies?frame=1"),
+        "",
+    );
+    let movies: serde_json::Value = serde_json::from_str(&movies).unwrap();
+    let in_view = in_view(&movies["movies"], 16.0);
+    assert!(in_view > 0, "no movies in view: {movies}");
+    let squares = dom.matches("class=\"movie\"").count();
+    assert_eq!(squares, in_view, "overlay squares vs movies in view");
+    assert!(dom.contains("movies open"), "{dom}");
+}
+
+/// Polls `job` (the job's JSON) until the job is done; fails on a failed
+/// job or after two minutes.
+fn wait_until_done(job: impl Fn() -> String) {
+    let start = Instant::now();
+    loop {
+        let job = job();
+        if job.contains("\"state\":\"done\"") {
+            return;
+        }
+        assert!(!job.contains("failed"), "{job}");
+        assert!(start.elapsed() < Duration::from_secs(120), "{job}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// How many of `items` (each with a `screen` [x, y] or null) lie on a
+/// `size`×`size` image.
+fn in_view(items: &serde_json::Value, size: f64) -> usize {
+    items
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|item| {
+            item["screen"].as_array().is_some_and(|s| {
+                let (x, y) = (s[0].as_f64().unwrap(), s[1].as_f64().unwrap());
+                (0.0..=size).contains(&x) && (0.0..=size).contains(&y)
+            })
+        })
+        .count()
 }

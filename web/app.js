@@ -2,7 +2,8 @@
 // the server. Talks to the API described at /api/openapi.json:
 // the live frame is an <img> on /api/jobs/ID/stream (multipart), progress and
 // per-frame statistics come from /api/jobs/ID/events (SSE), the record
-// overlay from /api/jobs/ID/records (pixel positions computed by the server).
+// overlay from /api/jobs/ID/records, or for a `movies` job /api/jobs/ID/movies
+// (pixel positions computed by the server).
 'use strict';
 
 const $ = (id) => document.getElementById(id);
@@ -230,9 +231,15 @@ async function loadOverlay(frame) {
   view.overlayWanted = null;
   const id = view.id;
   try {
-    const r = await api(`/api/jobs/${id}/records?frame=${frame}&limit=20000`);
-    if (view.id !== id) return;
-    drawOverlay(r);
+    if (view.job && view.job.method === 'movies') {
+      const r = await api(`/api/jobs/${id}/movies?frame=${frame}`);
+      if (view.id !== id) return;
+      drawMovies(r);
+    } else {
+      const r = await api(`/api/jobs/${id}/records?frame=${frame}&limit=20000`);
+      if (view.id !== id) return;
+      drawOverlay(r);
+    }
   } finally {
     view.overlayBusy = false;
   }
@@ -241,13 +248,29 @@ async function loadOverlay(frame) {
   }
 }
 
-function drawOverlay(r) {
+// The overlay emptied and sized for frame `r` (a /records or /movies answer).
+function clearOverlay(r) {
   const svg = $('overlay');
   view.overlayFrame = r.frame;
   svg.setAttribute('viewBox', `0 0 ${r.width} ${r.height}`);
   svg.replaceChildren();
   $('frame-wrap').style.aspectRatio = `${r.width} / ${r.height}`;
   svg.style.display = $('show-overlay').checked ? '' : 'none';
+  return svg;
+}
+
+// Shows `item` (of frame `r`) in the details box when `shape` is clicked.
+function pickable(svg, shape, r, item) {
+  shape.addEventListener('click', (e) => {
+    e.stopPropagation();
+    for (const p of svg.querySelectorAll('.picked')) p.classList.remove('picked');
+    shape.classList.add('picked');
+    $('record-details').textContent = JSON.stringify({ frame: r.frame, ...item }, null, 1);
+  });
+}
+
+function drawOverlay(r) {
+  const svg = clearOverlay(r);
   let maxLife = 1;
   for (const rec of r.records) maxLife = Math.max(maxLife, rec.lifespan);
   const logMax = Math.log(Math.max(2, maxLife));
@@ -262,17 +285,40 @@ function drawOverlay(r) {
       'data-id': String(rec.id), class: 'record',
     });
     c.append(svgEl('title', {}, `record ${rec.id}: lifespan ${rec.lifespan}, created at frame ${rec.created}`));
-    c.addEventListener('click', (e) => {
-      e.stopPropagation();
-      for (const p of svg.querySelectorAll('circle.picked')) p.classList.remove('picked');
-      c.classList.add('picked');
-      $('record-details').textContent = JSON.stringify({ frame: r.frame, ...rec }, null, 1);
-    });
+    pickable(svg, c, r, rec);
     svg.append(c);
   }
   $('legend-range').textContent = `(1–${maxLife} frames)`;
   $('overlay-info').textContent = `frame ${r.frame}: ${r.count} records alive` +
     (r.truncated ? ` (showing ${r.records.length})` : '');
+}
+
+// A `movies` job's texture movies: a square at the centre of each movie's
+// patch, sized by its resolution, coloured by how long it has been open
+// (the records' lifespan colours).
+function drawMovies(r) {
+  const svg = clearOverlay(r);
+  let maxAge = 1;
+  for (const m of r.movies) maxAge = Math.max(maxAge, r.frame - m.start + 1);
+  const logMax = Math.log(Math.max(2, maxAge));
+  const unit = Math.max(r.width, r.height) / 90;
+  for (const m of r.movies) {
+    if (!m.screen) continue;
+    const [x, y] = m.screen;
+    if (x < 0 || y < 0 || x > r.width || y > r.height) continue;
+    const age = r.frame - m.start + 1;
+    const side = unit * (1 + Math.log2(Math.max(1, m.resolution)) / 4);
+    const sq = svgEl('rect', {
+      x: (x - side / 2).toFixed(3), y: (y - side / 2).toFixed(3),
+      width: side.toFixed(3), height: side.toFixed(3),
+      fill: lifespanColour(Math.log(age) / logMax), class: 'movie',
+    });
+    sq.append(svgEl('title', {}, `movie of triangle ${m.triangle} (${m.back ? 'back' : 'front'}, patch ${m.patch}): ${m.resolution} texels an edge, open since frame ${m.start}`));
+    pickable(svg, sq, r, m);
+    svg.append(sq);
+  }
+  $('legend-range').textContent = `(open 1–${maxAge} frames)`;
+  $('overlay-info').textContent = `frame ${r.frame}: ${r.count} movies open, ${r.global_vertices} global-pass vertices`;
 }
 
 // ---------------------------------------------------------------- charts

@@ -2,11 +2,15 @@
 //! job at frame N, read from the store (`movies` tree): for each, which
 //! side of which patch of which triangle it covers, its resolution, the
 //! frame it opened at, the frame whose value holds its texels, and the
-//! mean of its texels' direct irradiance. A job of another method has
-//! none (an empty list).
+//! mean of its texels' direct irradiance; and where the centre of its
+//! patch lies on the image at that frame (`screen`, pixels; `null` behind
+//! the camera or where the server cannot load the job's scene), for the
+//! dashboard's overlay. A job of another method has none (an empty list).
 
-use super::records::{frame_param, stored_frame};
+use super::records::{frame_param, scene, stored_frame};
 use super::{ApiError, AppState};
+use crate::method::movies::patch::Patch;
+use crate::scene::Snapshot;
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::Json;
@@ -22,6 +26,7 @@ pub async fn movies(
 ) -> Result<Json<Value>, ApiError> {
     let Query(q) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let frame = frame_param(&q)?;
+    let job = state.job(&id)?;
     let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();
     tokio::task::spawn_blocking(move || {
@@ -34,10 +39,25 @@ pub async fn movies(
             .store
             .frame_movie_texels(sid, frame)
             .map_err(ApiError::internal)?;
+        let settings = &job.request.settings;
+        let (w, h) = (settings.width as f32, settings.height as f32);
+        // Screen positions are a convenience: a scene the server cannot
+        // load leaves them out rather than failing the list.
+        let view = scene(&s, &job.request.scene.to_string(), &job.request.scene)
+            .ok()
+            .map(|scene| {
+                let t = frame as f32 / settings.fps;
+                (scene.snapshot(t), scene.camera_at(t))
+            });
         let out: Vec<Value> = movies
             .iter()
             .map(|(m, texels)| {
                 let mean = texels.iter().copied().sum::<Vec3>() / texels.len().max(1) as f32;
+                let screen = view.as_ref().and_then(|(snapshot, camera)| {
+                    let centre = patch_centre(snapshot, m.triangle, m.patch)?;
+                    let (sx, sy) = camera.project(centre, w / h)?;
+                    Some([sx * w, sy * h])
+                });
                 json!({
                     "triangle": m.triangle,
                     "back": m.back,
@@ -47,12 +67,15 @@ pub async fn movies(
                     "stored_at": m.stored_at,
                     "texels": texels.len(),
                     "mean_direct": mean.to_array(),
+                    "screen": screen,
                 })
             })
             .collect();
         Ok(Json(json!({
             "id": id,
             "frame": frame,
+            "width": settings.width,
+            "height": settings.height,
             "count": out.len(),
             "global_vertices": global_vertices,
             "movies": out,
@@ -60,4 +83,13 @@ pub async fn movies(
     })
     .await
     .map_err(ApiError::internal)?
+}
+
+/// The centre of patch `code` of `triangle` in `snapshot` (`None` for a
+/// triangle or patch the scene does not have: a store written for another
+/// version of the scene file).
+fn patch_centre(snapshot: &Snapshot, triangle: u32, code: u32) -> Option<Vec3> {
+    let patch = Patch::from_code(code)?;
+    let (u, v) = patch.to_triangle((1.0 / 3.0, 1.0 / 3.0));
+    Some(snapshot.triangles.get(triangle as usize)?.point(u, v))
 }

@@ -54,7 +54,7 @@ fn inside(p: &[f32; 3], (min, max): &Bbox) -> bool {
 }
 
 /// The job's scene, loaded once per scene source (the last one asked).
-fn scene(
+pub(super) fn scene(
     state: &AppState,
     key: &str,
     source: &crate::render::SceneSource,
