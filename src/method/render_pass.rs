@@ -8,7 +8,11 @@
 //!   the pixel's samples on it (`pixel_lookups`) — on the CPU, or on the
 //!   GPU by radiance cache splatting (TRC §5, `backend::gpu_cache`) when
 //!   the ray backend is the GPU one,
-//! - the glossy lobe by path tracing from a lobe sample.
+//! - the glossy lobe by path tracing from a lobe sample, or with
+//!   `--ic-glossy eas` its indirect light from the records' equivalent
+//!   area light sources (EAS paper Eq. 17, [`crate::cache::eas`]) and the
+//!   lobe sample's ray traced to its first hit only, for the emission
+//!   there that MIS weighs against the light sample.
 //!
 //! The methods differ only in the cache they hand it and in how the
 //! path-traced fallbacks of uncovered samples draw their random streams
