@@ -116,7 +116,8 @@ fn halved(reference: &Film) -> Film {
     out
 }
 
-/// `ic` (also with radiance records on glossy surfaces), `trc`, `tcg` and
+/// `ic` and `trc` (both also with radiance records on glossy surfaces),
+/// `tcg` and
 /// `movies`, at their defaults, against the independent
 /// references of `scene` at `frames` (`trc` and `tcg` render every frame
 /// from 0 up to the last, so that their records age as in a render). Rendered at 64×64 against the
@@ -131,16 +132,21 @@ fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_bloc
         ..IcSettings::default()
     });
     let trc = TemporalRadianceCaching::new(TrcSettings::default());
+    let mut trc_eas = TrcSettings::default();
+    trc_eas.ic.glossy = GlossyLobe::Eas;
+    let trc_eas = TemporalRadianceCaching::new(trc_eas);
     let tcg = TemporallyCoherentGathering::new(TcgSettings::default());
     let movies = TextureMovies::new(MoviesSettings::default());
     let mut ic = renderer(scene_file, Box::new(ic), SIZE, false);
     let mut ic_eas = renderer(scene_file, Box::new(ic_eas), SIZE, false);
     let mut movies = renderer(scene_file, Box::new(movies), SIZE, false);
     let mut trc = renderer(scene_file, Box::new(trc), SIZE, false);
+    let mut trc_eas = renderer(scene_file, Box::new(trc_eas), SIZE, false);
     let mut tcg = renderer(scene_file, Box::new(tcg), SIZE, false);
     let last = frames.iter().copied().max().unwrap_or(0);
     for frame in 0..=last {
         let trc_image = trc.render_frame(frame);
+        let trc_eas_image = trc_eas.render_frame(frame);
         let tcg_image = tcg.render_frame(frame);
         let movies_image = movies.render_frame(frame);
         if !frames.contains(&frame) {
@@ -153,6 +159,7 @@ fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_bloc
             ("ic", &ic_image),
             ("ic glossy=eas", &ic_eas_image),
             ("trc", &trc_image),
+            ("trc glossy=eas", &trc_eas_image),
             ("tcg", &tcg_image),
             ("movies", &movies_image),
         ] {

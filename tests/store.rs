@@ -204,13 +204,12 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
-/// A synthetic step 5 → 6: checks that it runs after the real 1 → 2,
-/// 2 → 3, 3 → 4 and 4 → 5 (the stored version is 5 and the jobs are in
-/// the schema-5 layout).
+/// A synthetic step 7 → 8: checks that it runs after the real steps
+/// from 1 to 7 (the stored version is 7).
 fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 6u32.to_be_bytes() {
+    if version.as_ref() != 7u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -220,8 +219,8 @@ fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 7: the
-    // real 1 → 2, 2 → 3, 3 → 4, 4 → 5 and 5 → 6, then 6 → 7, in order.
+    // A version-1 store (fixture) brought to a synthetic version 8: the
+    // real 1 → 2, …, 6 → 7, then 7 → 8, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -229,21 +228,16 @@ fn older_schema_is_migrated_in_order() {
         ..PathSettings::default()
     });
     v1_fixture(&path, &method);
-    let steps = [
-        migrate::MIGRATIONS[0],
-        migrate::MIGRATIONS[1],
-        migrate::MIGRATIONS[2],
-        migrate::MIGRATIONS[3],
-        migrate::MIGRATIONS[4],
-        Migration {
-            from: 6,
-            name: "synthetic",
-            run: add_marker,
-        },
-    ];
-    // Without the step for 6 → 7 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 7, &steps[..5]));
-    assert!(msg.contains("no migration from schema 6 to 7"), "{msg}");
+    let mut steps = migrate::MIGRATIONS.to_vec();
+    assert_eq!(steps.len(), 6);
+    steps.push(Migration {
+        from: 7,
+        name: "synthetic",
+        run: add_marker,
+    });
+    // Without the step for 7 → 8 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 8, &steps[..6]));
+    assert!(msg.contains("no migration from schema 7 to 8"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -252,8 +246,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 7, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 7);
+        let store = Store::open_with(&path, false, 8, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 8);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -262,9 +256,89 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 6) now refuses the upgraded store.
+    // This build (version 7) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 7 is newer"), "{msg}");
+    assert!(msg.contains("schema version 8 is newer"), "{msg}");
+}
+
+/// A `trc` job stopped after frame 2 of 0..6, its carried state put back
+/// in the schema-6 layout (as a schema-6 build wrote it), is migrated
+/// when the store is opened, and the resume renders the frames an
+/// uninterrupted render does, byte for byte; running the step again
+/// converts nothing twice.
+#[test]
+fn schema_6_trc_state_is_migrated_and_resumes_bit_identically() {
+    let mut trc = TrcSettings::default();
+    trc.ic.strata = Strata { theta: 4, phi: 12 };
+    trc.ic.spp = 1;
+    let method = MethodSettings::Trc(trc);
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
+    render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
+    let path = dir.path().join("db");
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let fs = renderer(&method).settings.clone();
+    let job_spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
+    let run = |range: std::ops::Range<u32>| {
+        let store = Store::open(&path).unwrap();
+        let job = store.begin_job(&job_spec, false).unwrap();
+        let mut sj = StoreJob { store: &store, job };
+        render::render_job_to_dir(&mut renderer(&method), range, &resumed, true, Some(&mut sj))
+            .unwrap()
+    };
+    run(0..3);
+    let converted = {
+        let db = open_raw(&path);
+        let state = db.open_tree("state").unwrap();
+        let mut n = 0;
+        for item in state.iter() {
+            let (k, v) = item.unwrap();
+            if keys::parse_state_record(&k).is_none() {
+                continue;
+            }
+            let mut aligned = rkyv::util::AlignedVec::<16>::new();
+            aligned.extend_from_slice(&v);
+            let mut value: radcache::store::schema::StateRecordValue =
+                rkyv::from_bytes::<_, rkyv::rancor::Error>(&aligned).unwrap();
+            value.data = radcache::method::trc::downgrade_to_schema_6_record(&value.data).unwrap();
+            let bytes = rkyv::to_bytes::<rkyv::rancor::Error>(&value).unwrap();
+            state.insert(k, bytes.as_slice()).unwrap();
+            n += 1;
+        }
+        migrate::write_version(&path, &db.open_tree("meta").unwrap(), 6).unwrap();
+        db.flush().unwrap();
+        n
+    };
+    assert!(converted > 0, "the job carries records");
+    // This build reads schema 6's state only through the migration: the
+    // schema-7 decoder refuses the old bytes (a clear error, not a panic).
+    {
+        let store = Store::open_with(&path, false, 6, &[]).unwrap();
+        let job = store.begin_job(&job_spec, false).unwrap();
+        let mut sj = StoreJob { store: &store, job };
+        let msg =
+            render::render_job_to_dir(&mut renderer(&method), 0..6, &resumed, true, Some(&mut sj))
+                .map(|_| ())
+                .unwrap_err()
+                .to_string();
+        assert!(msg.contains("tree `state`"), "{msg}");
+    }
+    let s = run(0..6);
+    assert_eq!((s.resumed, s.frames), (3, 3));
+    assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
+    // The step again (a crash before the version bump): nothing converted
+    // twice, the state still reads.
+    {
+        let db = open_raw(&path);
+        radcache::store::v6::migrate_to_v7(&db, &path).unwrap();
+        db.flush().unwrap();
+    }
+    let version = Store::open(&path).unwrap().schema_version().unwrap();
+    assert_eq!(version, migrate::CURRENT_VERSION);
+    std::fs::remove_dir_all(&resumed).unwrap();
+    let s = run(0..6);
+    assert_eq!((s.resumed, s.frames), (6, 0));
+    assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
 }
 
 #[test]
@@ -396,7 +470,12 @@ fn small_ic_settings() -> IcSettings {
 }
 
 fn renderer(method: &MethodSettings) -> Renderer {
-    let source = SceneSource::Builtin("cube-in-box".into());
+    renderer_of("cube-in-box", method)
+}
+
+/// [`renderer`] of the built-in scene `scene`.
+fn renderer_of(scene: &str, method: &MethodSettings) -> Renderer {
+    let source = SceneSource::Builtin(scene.into());
     let settings = FrameSettings {
         width: 16,
         height: 16,
@@ -417,11 +496,17 @@ fn exr_files(dir: &Path, frames: std::ops::Range<u32>) -> Vec<Vec<u8>> {
 }
 
 fn resume_matches_uninterrupted(method: MethodSettings) {
+    resume_matches_uninterrupted_on("cube-in-box", method);
+}
+
+/// [`resume_matches_uninterrupted`] on the built-in scene `scene`.
+fn resume_matches_uninterrupted_on(scene: &str, method: MethodSettings) {
+    let renderer = |m: &MethodSettings| renderer_of(scene, m);
     let dir = tempfile::tempdir().unwrap();
     let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
     render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
     let path = dir.path().join("db");
-    let source = SceneSource::Builtin("cube-in-box".into());
+    let source = SceneSource::Builtin(scene.into());
     let fs = renderer(&method).settings.clone();
     let job_spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
     let store = Store::open(&path).unwrap();
@@ -518,6 +603,37 @@ fn resumed_trc_render_is_bit_identical() {
     trc.ic.strata = Strata { theta: 4, phi: 12 };
     trc.ic.spp = 1;
     resume_matches_uninterrupted(MethodSettings::Trc(trc));
+}
+
+/// `trc` with radiance records (`--ic-glossy eas`) on `glossy-cornell`,
+/// stopped after frame 2 of 0..6: the resume starts from the stored state,
+/// whose records' material, sources and their temporal gradients come
+/// back (without them the resumed frames would differ: the glossy
+/// surfaces would reflect no sources, or unmoved ones).
+#[test]
+fn resumed_trc_render_with_radiance_records_is_bit_identical() {
+    let mut trc = TrcSettings::default();
+    trc.ic.strata = Strata { theta: 4, phi: 12 };
+    trc.ic.spp = 1;
+    trc.ic.glossy = radcache::method::ic::GlossyLobe::Eas;
+    let method = MethodSettings::Trc(trc);
+    let renderer = |m: &MethodSettings| renderer_of("glossy-cornell", m);
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
+    render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
+    let source = SceneSource::Builtin("glossy-cornell".into());
+    let fs = renderer(&method).settings.clone();
+    let job_spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    for (range, done) in [(0..3, (0, 3)), (0..6, (3, 3))] {
+        let job = store.begin_job(&job_spec, false).unwrap();
+        let mut sj = StoreJob { store: &store, job };
+        let s =
+            render::render_job_to_dir(&mut renderer(&method), range, &resumed, true, Some(&mut sj))
+                .unwrap();
+        assert_eq!((s.resumed, s.frames), done);
+    }
+    assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
 }
 
 /// `tcg` resumes from its stored state, whose records carry their samples
@@ -1585,12 +1701,12 @@ fn version_4_store_gets_a_log_generation_and_a_schema_4_build_refuses_it() {
     assert_an_older_build_refuses(&path, 4);
 }
 
-/// Schema 6 only gives the `movies` tree its texture movies: a schema-5
-/// store opens with its content unchanged and no movie, and a schema-5
-/// build then refuses it (it would leave a job's movies behind when the
-/// job starts over).
+/// Schema 6 only gives the `movies` tree its texture movies (and schema
+/// 7 changes only `trc`'s state): a schema-5 store opens with its content
+/// unchanged and no movie, and a schema-5 build then refuses it (it would
+/// leave a job's movies behind when the job starts over).
 #[test]
-fn version_5_store_opens_as_version_6_and_a_schema_5_build_refuses_it() {
+fn version_5_store_opens_unchanged_and_a_schema_5_build_refuses_it() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     v4_fixture(&path);
@@ -1601,7 +1717,7 @@ fn version_5_store_opens_as_version_6_and_a_schema_5_build_refuses_it() {
     };
     {
         let store = Store::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 6);
+        assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
         assert_eq!(job_j_content(&store), before);
         let job = store.job("j").unwrap().unwrap();
         for frame in store.frames_done(job.id).unwrap() {

@@ -15,7 +15,7 @@ use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
 use radcache::film::Film;
 use radcache::integrator::PathLength;
-use radcache::method::ic::{IcSettings, IrradianceCaching};
+use radcache::method::ic::{GlossyLobe, IcSettings, IrradianceCaching};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::method::render_pass::FallbackStreams;
 use radcache::method::trc::estimate_error::{estimate_errors, mean_and_median, percent};
@@ -113,13 +113,36 @@ fn records_and_their_next_frame_by(
 /// dropped.
 #[test]
 fn static_scene_records_live_max_life_and_frames_match_ic() {
+    static_records_live_max_life(lit_room(None, 24.0), small_ic());
+}
+
+/// The same with radiance records (`--ic-glossy eas`) in a glossy room:
+/// no source changes either (TRC Eq. 21 over the sources gives τ = 1), so
+/// they live `δt_max` frames too, their sources carried unchanged (zero
+/// temporal gradients), and each replacement gathers the sources of the
+/// record it replaces.
+#[test]
+fn static_scene_radiance_records_live_max_life_and_frames_match_ic() {
+    let mut room = lit_room(None, 24.0);
+    room.materials[0] = Material::glossy("glossy", Vec3::splat(0.4), Vec3::splat(0.3), 60.0);
+    let ic = IcSettings {
+        glossy: GlossyLobe::Eas,
+        ..small_ic()
+    };
+    static_records_live_max_life(room, ic);
+}
+
+/// [`static_scene_records_live_max_life_and_frames_match_ic`] in `scene`
+/// (static) with records made by `ic`.
+fn static_records_live_max_life(scene: Scene, ic: IcSettings) {
     let max_life = 4;
+    let radiance_records = ic.glossy == GlossyLobe::Eas;
     let settings = TrcSettings {
-        ic: small_ic(),
+        ic,
         max_life,
         ..TrcSettings::default()
     };
-    let mut r = renderer(lit_room(None, 24.0), 16, 24.0, false);
+    let mut r = renderer(scene, 16, 24.0, false);
     let mut trc = TemporalRadianceCaching::new(settings.clone());
     let ic = IrradianceCaching::new(settings.ic.clone());
     let cache0 = r.with_frame_context(0, |ctx| ic.build_cache(ctx));
@@ -157,11 +180,19 @@ fn static_scene_records_live_max_life_and_frames_match_ic() {
             );
         }
         assert!(trc.records().iter().all(|k| k.last_valid == max_life - 1));
+        if radiance_records {
+            let with_sources = trc.records().iter().filter(|k| k.record.eas.is_some());
+            assert_eq!(with_sources.count() as u64, n, "every record is glossy");
+            assert!(trc.records().iter().all(|k| k
+                .d_eas
+                .as_deref()
+                .is_some_and(|d| d.iter().all(|d| *d == Vec3::ZERO))));
+        }
     }
-    let before: std::collections::HashMap<u64, Vec3> = trc
+    let before: std::collections::HashMap<u64, TemporalRecord> = trc
         .records()
         .iter()
-        .map(|k| (k.record.id, k.record.irradiance))
+        .map(|k| (k.record.id, k.clone()))
         .collect();
     let _ = render_trc(&mut r, &mut trc, max_life);
     let stats = trc.last_frame_stats();
@@ -180,8 +211,13 @@ fn static_scene_records_live_max_life_and_frames_match_ic() {
     // replaces (`ic::first_stream`): nothing changed, so neither does its
     // value, though the frames' pixel streams differ (`same_pattern` off).
     for k in replacements {
-        let old = before[&k.replaces.unwrap()];
-        assert_eq!(k.record.irradiance, old, "record {}", k.record.id);
+        let old = &before[&k.replaces.unwrap()].record;
+        assert_eq!(
+            k.record.irradiance, old.irradiance,
+            "record {}",
+            k.record.id
+        );
+        assert_eq!(k.record.eas, old.eas, "record {}", k.record.id);
     }
 }
 

@@ -68,6 +68,9 @@ pub struct Eas {
     pub solid_angle: f32,
     /// `E`: the irradiance it brings the record.
     pub irradiance: Vec3,
+    /// Its node in the record's tree: which of the record's cells it holds
+    /// ([`irradiance_over`] sums the same cells of other samples).
+    pub node: u32,
 }
 
 impl Eas {
@@ -155,6 +158,27 @@ pub fn build(
     cut.into_iter()
         .map(|node| tree.eas(node))
         .filter(|e| luminance(e.irradiance) > 0.0)
+        .collect()
+}
+
+/// The irradiance each of `sources` (built by [`build`] over one set of a
+/// record's samples) brings over `samples`, other values of the same cells:
+/// the record's incoming light at another time. `trc` compares a radiance
+/// record's sources at `t0` and its estimate of `t0 + 1` this way, as TRC
+/// Eq. 21 compares a radiance record's coefficients. `None` where the
+/// samples are not laid out as `strata`.
+pub fn irradiance_over(
+    sources: &[Eas],
+    samples: &HemisphereSamples,
+    strata: Strata,
+) -> Option<Vec<Vec3>> {
+    if samples.radiance.len() != strata.count() || strata.count() == 0 {
+        return None;
+    }
+    let tree = Tree::new(samples, strata);
+    sources
+        .iter()
+        .map(|s| tree.nodes.get(s.node as usize).map(|n| n.irradiance))
         .collect()
 }
 
@@ -281,6 +305,7 @@ impl Tree {
             offset,
             solid_angle: n.solid_angle,
             irradiance: n.irradiance,
+            node,
         }
     }
 }
@@ -552,6 +577,38 @@ mod tests {
         // A diffuse surface keeps no sources.
         let diffuse = Bsdf::new(&Material::diffuse("d", Vec3::ONE), Vec3::Z, Vec3::Z);
         assert!(build(&s, Vec3::Z, strata, &diffuse, DEFAULT_TAU).is_empty());
+    }
+
+    /// Over the samples they were built from, the sources' irradiance is
+    /// their own; over samples where one cell is brighter, only the source
+    /// holding that cell changes, by exactly that cell's extra irradiance.
+    #[test]
+    fn irradiance_over_other_samples_sums_each_sources_own_cells() {
+        let strata = Strata::default();
+        let s = samples(strata, |d| {
+            (Vec3::splat(0.2 + (d.x * 5.0).cos().abs()), 1.0 + d.z)
+        });
+        let bsdf = Bsdf::new(&phong(100.0), Vec3::Z, Vec3::Z);
+        let sources = build(&s, Vec3::Z, strata, &bsdf, DEFAULT_TAU);
+        let same = irradiance_over(&sources, &s, strata).expect("same layout");
+        for (e, over) in sources.iter().zip(&same) {
+            assert_eq!(e.irradiance, *over);
+        }
+        let cell = 7 * strata.phi as usize + 13;
+        let mut brighter = s.clone();
+        brighter.radiance[cell] += Vec3::ONE;
+        let extra = PI / strata.count() as f32;
+        let moved = irradiance_over(&sources, &brighter, strata).expect("same layout");
+        let changed: Vec<Vec3> = sources
+            .iter()
+            .zip(&moved)
+            .map(|(e, m)| *m - e.irradiance)
+            .filter(|d| *d != Vec3::ZERO)
+            .collect();
+        assert_eq!(changed.len(), 1, "{changed:?}");
+        assert!((changed[0] - Vec3::splat(extra)).abs().max_element() < 1e-5);
+        let short = HemisphereSamples::default();
+        assert!(irradiance_over(&sources, &short, strata).is_none());
     }
 
     /// The glossy radiance a point reflects from a small spherical light,

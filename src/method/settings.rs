@@ -55,6 +55,8 @@ pub const METHODS: &[MethodInfo] = &[
             ("min_spacing", "2"),
             ("max_spacing", "64"),
             ("max_depth", "8"),
+            ("glossy", "eas"),
+            ("eas_tau", "0.02"),
         ],
     },
     MethodInfo {
@@ -251,9 +253,9 @@ fn path_setting(
     Ok(true)
 }
 
-/// Applies `ic`'s radiance-record setting `key = v` to `s` (`ic` alone:
-/// `trc` and `tcg` do not carry EAS across frames); `false` when `key` is
-/// none of them.
+/// Applies the radiance-record setting `key = v` to `s` (`ic` and `trc`:
+/// `tcg` does not carry EAS across frames); `false` when `key` is none of
+/// them.
 fn glossy_setting(
     method: &str,
     key: &str,
@@ -305,7 +307,10 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
         }
         "reprojection" => s.reprojection = value::<u8>(method, key, v, 0..2)? == 1,
         "next_direct" => s.next_direct = value::<u8>(method, key, v, 0..2)? == 1,
-        _ => return ic_setting(method, key, v, &mut s.ic),
+        _ => {
+            return Ok(ic_setting(method, key, v, &mut s.ic)?
+                || glossy_setting(method, key, v, &mut s.ic)?)
+        }
     }
     Ok(true)
 }

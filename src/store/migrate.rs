@@ -12,7 +12,7 @@ use super::{keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 6;
+pub const CURRENT_VERSION: u32 = 7;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -51,6 +51,11 @@ pub const MIGRATIONS: &[Migration] = &[
         from: 5,
         name: "0006_movies",
         run: super::v5::migrate_to_v6,
+    },
+    Migration {
+        from: 6,
+        name: "0007_trc_radiance_records",
+        run: super::v6::migrate_to_v7,
     },
 ];
 

@@ -1,5 +1,8 @@
-//! Value schemas of store schema version 6 (`migrations/0006_movies.md`:
-//! the `movies` tree holds [`MovieFramesValue`]s), on top of 5
+//! Value schemas of store schema version 7 (no type here changed:
+//! `migrations/0007_trc_radiance_records.md` changed the method-defined
+//! bytes of `trc`'s [`StateRecordValue`]s), on top of 6
+//! (`migrations/0006_movies.md`: the `movies` tree holds
+//! [`MovieFramesValue`]s), on top of 5
 //! (`migrations/0005_log_generations.md`, on top of
 //! `migrations/0004_record_blocks.md`, `migrations/0003_sample_log.md`,
 //! `migrations/0002_state_and_identity.md` and `migrations/0001_initial.md`;

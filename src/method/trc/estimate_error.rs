@@ -197,6 +197,7 @@ mod tests {
             d_irradiance: Vec3::ZERO,
             d_grad_rotation: [Vec3::ZERO; 3],
             d_grad_translation: [Vec3::ZERO; 3],
+            d_eas: None,
             replaces: None,
             used: false,
         }

@@ -70,6 +70,8 @@ mod estimate;
 pub mod estimate_error;
 mod state;
 
+pub use state::{downgrade_to_schema_6_record, upgrade_schema_6_record};
+
 use super::carried;
 use super::ic::IrradianceCaching;
 use super::ic::{
@@ -81,6 +83,7 @@ use super::{
     mean_lifespan, FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges,
     StateError, RENDER_PHASE,
 };
+use crate::cache::eas::{self, Eas};
 use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance};
 use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
@@ -89,6 +92,7 @@ use estimate::{reproject, NextFrame};
 use glam::Vec3;
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Temporal gradients (TRC §4.5).
@@ -189,6 +193,10 @@ pub struct TemporalRecord {
     pub d_irradiance: Vec3,
     pub d_grad_rotation: [Vec3; 3],
     pub d_grad_translation: [Vec3; 3],
+    /// A radiance record's (`--ic-glossy eas`) extrapolated temporal
+    /// gradient of each of its sources' irradiance, in the order of
+    /// `record.eas` (§4.6.2: each coefficient's own Eq. 15).
+    pub d_eas: Option<Arc<[Vec3]>>,
     /// The record this one replaced at the same point, if any.
     pub replaces: Option<RecordId>,
     /// Whether a pixel sample used K in the last rendered frame.
@@ -247,6 +255,24 @@ impl TemporalRecord {
         for c in 0..3 {
             r.grad_rotation[c] += d_r[c] * dt;
             r.grad_translation[c] += d_p[c] * dt;
+        }
+        // A radiance record's sources follow their extrapolated gradients
+        // with either kind of gradients: its replacement keeps another cut
+        // of its own tree, so Eq. 18–20 have no source of l to pair with
+        // each source of K.
+        if let (Some(sources), Some(d)) = (&r.eas, &self.d_eas) {
+            if dt > 0.0 {
+                r.eas = Some(
+                    sources
+                        .iter()
+                        .zip(d.iter())
+                        .map(|(s, d)| Eas {
+                            irradiance: (s.irradiance + *d * dt).max(Vec3::ZERO),
+                            ..*s
+                        })
+                        .collect(),
+                );
+            }
         }
         r
     }
@@ -356,19 +382,36 @@ impl TemporalRadianceCaching {
     fn temporal(&self, ctx: &FrameContext, next: &NextFrame, g: &Gathered) -> TemporalRecord {
         let strata = self.settings.ic.strata;
         let e0 = g.record.irradiance;
-        let next_gather = if self.settings.reprojection {
-            let samples = reproject(ctx, next, g, strata.theta, strata.phi);
-            irradiance_and_gradients(&samples, g.record.normal, strata)
-        } else {
-            GatheredIrradiance {
+        let next_samples = self
+            .settings
+            .reprojection
+            .then(|| reproject(ctx, next, g, strata.theta, strata.phi));
+        let next_gather = match &next_samples {
+            Some(samples) => irradiance_and_gradients(samples, g.record.normal, strata),
+            None => GatheredIrradiance {
                 irradiance: e0,
                 grad_translation: g.record.grad_translation,
                 grad_rotation: g.record.grad_rotation,
                 harmonic_distance: 0.0,
-            }
+            },
         };
         let e1 = next_gather.irradiance;
-        let change = relative_change(e0, e1);
+        // §4.6.2: each source's extrapolated gradient, as each coefficient's.
+        let d_eas = g.record.eas.as_ref().map(|sources| {
+            let next = next_samples
+                .as_ref()
+                .and_then(|samples| eas::irradiance_over(sources, samples, strata));
+            let d: Arc<[Vec3]> = match next {
+                Some(next) => sources
+                    .iter()
+                    .zip(next)
+                    .map(|(s, e)| e - s.irradiance)
+                    .collect(),
+                None => vec![Vec3::ZERO; sources.len()].into(),
+            };
+            d
+        });
+        let change = relative_change(e0, e1).max(sources_change(&g.record, d_eas.as_deref()));
         let age = frames_of_validity(
             change,
             self.settings.temporal_accuracy,
@@ -388,6 +431,7 @@ impl TemporalRadianceCaching {
                 limit_gradient(next_gather.grad_translation, e1, g.record.radius),
                 g.record.grad_translation,
             ),
+            d_eas,
             replaces: None,
             used: false,
         }
@@ -497,7 +541,7 @@ impl TemporalRadianceCaching {
         cache: &mut IrradianceCache,
         aged: &mut Aged,
     ) {
-        let pixels = primary_candidates(ctx, crate::method::ic::GlossyLobe::Path);
+        let pixels = primary_candidates(ctx, self.settings.ic.glossy);
         let mut created = Vec::new();
         self.ic.fill_from(
             ctx,
@@ -833,6 +877,22 @@ fn relative_change(e0: Vec3, e1: Vec3) -> f32 {
         .fold(0.0f32, f32::max)
 }
 
+/// TRC Eq. 21 over a radiance record's sources: the largest `|τ − 1|` of
+/// any source (each channel as in [`relative_change`]), given each
+/// source's change `d_eas` to the next frame; 0 for an irradiance record.
+/// The record's irradiance keeps its own Eq. 7 besides: the diffuse part
+/// of a glossy surface interpolates it.
+fn sources_change(record: &IrradianceRecord, d_eas: Option<&[Vec3]>) -> f32 {
+    let (Some(sources), Some(d)) = (&record.eas, d_eas) else {
+        return 0.0;
+    };
+    sources
+        .iter()
+        .zip(d)
+        .map(|(s, d)| relative_change(s.irradiance, s.irradiance + *d))
+        .fold(0.0f32, f32::max)
+}
+
 /// How many frames after t0 a record whose irradiance changes by `change`
 /// a frame stays valid. Eq. 9–10: `1/(|τ−1|(t−t0)) ≥ 1/a^t ⇔ t − t0 ≤
 /// a^t/|τ−1|`; Eq. 11: `t − t0 < δt_max`.
@@ -861,6 +921,38 @@ mod tests {
         assert!((relative_change(e0, Vec3::new(1.01, 1.9, 0.0)) - 0.05).abs() < 1e-6);
         assert_eq!(relative_change(e0, e0), 0.0);
         assert_eq!(relative_change(e0, Vec3::new(1.0, 2.0, 0.1)), f32::INFINITY);
+    }
+
+    /// Eq. 21 over a radiance record's sources: light moving from one
+    /// source to another leaves the irradiance as it was, but not the
+    /// sources; the worst source decides. An irradiance record has none.
+    #[test]
+    fn sources_change_is_the_worst_source() {
+        let source = |node, e: f32| Eas {
+            offset: Vec3::Y,
+            solid_angle: 0.1,
+            irradiance: Vec3::splat(e),
+            node,
+        };
+        let mut record = IrradianceRecord {
+            id: 0,
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            irradiance: Vec3::splat(3.0),
+            grad_translation: [Vec3::ZERO; 3],
+            grad_rotation: [Vec3::ZERO; 3],
+            radius: 1.0,
+            created_frame: 0,
+            object: 0,
+            eas: Some(vec![source(1, 1.0), source(2, 2.0)].into()),
+        };
+        // 0.1 moves from the second source to the first.
+        let d = [Vec3::splat(0.1), Vec3::splat(-0.1)];
+        assert_eq!(relative_change(Vec3::splat(3.0), Vec3::splat(3.0)), 0.0);
+        assert!((sources_change(&record, Some(&d)) - 0.1).abs() < 1e-6);
+        assert_eq!(sources_change(&record, None), 0.0);
+        record.eas = None;
+        assert_eq!(sources_change(&record, Some(&d)), 0.0);
     }
 
     /// Eq. 9–11 with `a^t = 0.05`, `δt_max = 20`: 1 % a frame stays valid 5

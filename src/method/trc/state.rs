@@ -1,19 +1,37 @@
 //! `trc`'s carried state as bytes for the store
 //! ([`StateChanges`](crate::method::StateChanges)): rkyv
 //! archives, validated when read back. The layout is part of the store
-//! schema (`migrations/`): changing it needs a migration.
+//! schema (`migrations/`): changing it needs a migration. Schema 7
+//! (`migrations/0007_trc_radiance_records.md`) added a radiance record's
+//! material and sources after what schema 6 stored of a record;
+//! [`upgrade_schema_6_record`] converts a schema-6 record.
 
 use super::TemporalRecord;
+use crate::cache::eas::Eas;
 use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceRecord;
 use crate::method::carried::aligned;
 use crate::method::ic::Candidate;
+use crate::store::encode;
 use glam::Vec3;
 use rkyv::rancor;
 
 /// Everything of a [`TemporalRecord`], in plain arrays.
 #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
-pub(super) struct RecordState {
+struct RecordState {
+    /// All of an irradiance record: the whole of a schema-6 record.
+    irradiance: IrradianceState,
+    /// The material of a radiance record's surface (`--ic-glossy eas`),
+    /// which a replacement gathers again with.
+    glossy: Option<u32>,
+    /// A radiance record's sources, with their temporal gradients.
+    eas: Option<Vec<EasState>>,
+}
+
+/// Everything of a [`TemporalRecord`] but its radiance-record parts: a
+/// schema-6 record's layout (frozen: changing it changes schema 6).
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct IrradianceState {
     id: u64,
     created_frame: u32,
     object: u32,
@@ -40,6 +58,17 @@ pub(super) struct RecordState {
     used: bool,
 }
 
+/// One source of a radiance record ([`Eas`]) and its extrapolated temporal
+/// gradient.
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct EasState {
+    offset: [f32; 3],
+    solid_angle: f32,
+    irradiance: [f32; 3],
+    node: u32,
+    d_irradiance: [f32; 3],
+}
+
 fn a(v: Vec3) -> [f32; 3] {
     v.to_array()
 }
@@ -54,7 +83,7 @@ fn v3(a: [[f32; 3]; 3]) -> [Vec3; 3] {
 
 pub(super) fn encode_record(r: &TemporalRecord) -> Vec<u8> {
     let c = &r.candidate;
-    let s = RecordState {
+    let irradiance = IrradianceState {
         id: r.record.id,
         created_frame: r.record.created_frame,
         object: r.record.object,
@@ -79,14 +108,34 @@ pub(super) fn encode_record(r: &TemporalRecord) -> Vec<u8> {
         replaces: r.replaces,
         used: r.used,
     };
-    rkyv::to_bytes::<rancor::Error>(&s)
-        .expect("serialising plain data to memory cannot fail")
-        .into_vec()
+    let eas = r.record.eas.as_ref().map(|sources| {
+        let d = r.d_eas.as_deref().unwrap_or(&[]);
+        sources
+            .iter()
+            .enumerate()
+            .map(|(i, e)| EasState {
+                offset: a(e.offset),
+                solid_angle: e.solid_angle,
+                irradiance: a(e.irradiance),
+                node: e.node,
+                d_irradiance: a(d.get(i).copied().unwrap_or(Vec3::ZERO)),
+            })
+            .collect()
+    });
+    encode(&RecordState {
+        irradiance,
+        glossy: c.glossy,
+        eas,
+    })
 }
 
 pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
     let aligned = aligned(bytes);
-    let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
+    let RecordState {
+        irradiance: s,
+        glossy,
+        eas,
+    } = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
         .map_err(|e| format!("trc record state: {e}"))?;
     if s.last_valid < s.created_frame {
         return Err(format!(
@@ -94,6 +143,18 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
             s.last_valid, s.created_frame
         ));
     }
+    let sources = eas.as_ref().map(|sources| {
+        sources
+            .iter()
+            .map(|e| Eas {
+                offset: e.offset.into(),
+                solid_angle: e.solid_angle,
+                irradiance: e.irradiance.into(),
+                node: e.node,
+            })
+            .collect()
+    });
+    let d_eas = eas.map(|sources| sources.iter().map(|e| e.d_irradiance.into()).collect());
     Ok(TemporalRecord {
         record: IrradianceRecord {
             id: s.id,
@@ -105,7 +166,7 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
             radius: s.radius,
             created_frame: s.created_frame,
             object: s.object,
-            eas: None,
+            eas: sources,
         },
         candidate: Candidate {
             pixel: s.pixel,
@@ -117,7 +178,7 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
             },
             object: s.object,
             footprint: s.footprint,
-            glossy: None,
+            glossy,
         },
         next_irradiance: s.next_irradiance.into(),
         change: s.change,
@@ -125,7 +186,33 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
         d_irradiance: s.d_irradiance.into(),
         d_grad_rotation: v3(s.d_grad_rotation),
         d_grad_translation: v3(s.d_grad_translation),
+        d_eas,
         replaces: s.replaces,
         used: s.used,
     })
+}
+
+/// A schema-6 record's bytes in the schema-7 layout: the same record, an
+/// irradiance record (schema 6 had no `trc` radiance records).
+pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    let irradiance = rkyv::from_bytes::<IrradianceState, rancor::Error>(&aligned(bytes))
+        .map_err(|e| format!("schema-6 trc record state: {e}"))?;
+    Ok(encode(&RecordState {
+        irradiance,
+        glossy: None,
+        eas: None,
+    }))
+}
+
+/// A schema-7 irradiance record's bytes in the schema-6 layout: what a
+/// schema-6 build wrote, for tests of the migration. A radiance record has
+/// no schema-6 form.
+#[doc(hidden)]
+pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned(bytes))
+        .map_err(|e| format!("trc record state: {e}"))?;
+    if s.glossy.is_some() || s.eas.is_some() {
+        return Err(format!("record {} is a radiance record", s.irradiance.id));
+    }
+    Ok(encode(&s.irradiance))
 }
