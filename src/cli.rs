@@ -203,7 +203,7 @@ pub struct IcArgs {
     /// Interpolate without the translation and rotation gradients.
     #[arg(long)]
     pub ic_no_gradients: bool,
-    /// Indirect light of glossy lobes: path (traced from a lobe sample per pixel sample) or eas (radiance records of equivalent area light sources, Omidvar et al.; `ic` and `trc`).
+    /// Indirect light of glossy lobes: path (traced from a lobe sample per pixel sample) or eas (radiance records of equivalent area light sources, Omidvar et al.; `ic`, `trc` and `tcg`).
     #[arg(long, value_enum, default_value = "path")]
     pub ic_glossy: GlossyArg,
     /// EAS precision criterion τ: a record's sources are refined until their reflected radiance is within τ of the finer level's (Eq. 13; the paper uses 0.02).
@@ -613,10 +613,13 @@ fn run_render(args: RenderArgs) -> Result<()> {
 /// what they leave out.
 fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
     if args.ic.ic_glossy == GlossyArg::Eas
-        && !matches!(args.method, MethodName::Ic | MethodName::Trc)
+        && !matches!(
+            args.method,
+            MethodName::Ic | MethodName::Trc | MethodName::Tcg
+        )
     {
         bail!(
-            "--ic-glossy eas is for --method ic or trc only: {} does not carry radiance records across frames",
+            "--ic-glossy eas is for the record-caching methods (ic, trc, tcg) only: {} keeps no records",
             format!("{:?}", args.method).to_lowercase()
         );
     }

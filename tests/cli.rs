@@ -78,14 +78,14 @@ fn bad_input_is_a_clear_error() {
         ),
         (&["render", "--method", "teleport"], "invalid value"),
         (
-            &["render", "--method", "tcg", "--ic-glossy", "eas"],
-            "--method ic or trc only",
+            &["render", "--method", "path", "--ic-glossy", "eas"],
+            "record-caching methods",
         ),
         (
             &["bench", "--methods", "ic:glossy=mirror"],
             "expected path or eas",
         ),
-        (&["bench", "--methods", "tcg:glossy=eas"], "glossy"),
+        (&["bench", "--methods", "movies:glossy=eas"], "glossy"),
         (
             &["compare", "/nonexistent/ref", "/nonexistent/test"],
             "does not exist",

@@ -116,8 +116,8 @@ fn halved(reference: &Film) -> Film {
     out
 }
 
-/// `ic` and `trc` (both also with radiance records on glossy surfaces),
-/// `tcg` and
+/// `ic`, `trc` and `tcg` (each also with radiance records on glossy
+/// surfaces) and
 /// `movies`, at their defaults, against the independent
 /// references of `scene` at `frames` (`trc` and `tcg` render every frame
 /// from 0 up to the last, so that their records age as in a render). Rendered at 64×64 against the
@@ -136,6 +136,9 @@ fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_bloc
     trc_eas.ic.glossy = GlossyLobe::Eas;
     let trc_eas = TemporalRadianceCaching::new(trc_eas);
     let tcg = TemporallyCoherentGathering::new(TcgSettings::default());
+    let mut tcg_eas = TcgSettings::default();
+    tcg_eas.ic.glossy = GlossyLobe::Eas;
+    let tcg_eas = TemporallyCoherentGathering::new(tcg_eas);
     let movies = TextureMovies::new(MoviesSettings::default());
     let mut ic = renderer(scene_file, Box::new(ic), SIZE, false);
     let mut ic_eas = renderer(scene_file, Box::new(ic_eas), SIZE, false);
@@ -143,11 +146,13 @@ fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_bloc
     let mut trc = renderer(scene_file, Box::new(trc), SIZE, false);
     let mut trc_eas = renderer(scene_file, Box::new(trc_eas), SIZE, false);
     let mut tcg = renderer(scene_file, Box::new(tcg), SIZE, false);
+    let mut tcg_eas = renderer(scene_file, Box::new(tcg_eas), SIZE, false);
     let last = frames.iter().copied().max().unwrap_or(0);
     for frame in 0..=last {
         let trc_image = trc.render_frame(frame);
         let trc_eas_image = trc_eas.render_frame(frame);
         let tcg_image = tcg.render_frame(frame);
+        let tcg_eas_image = tcg_eas.render_frame(frame);
         let movies_image = movies.render_frame(frame);
         if !frames.contains(&frame) {
             continue;
@@ -161,6 +166,7 @@ fn check_caching_methods(scene_file: &str, scene: &str, frames: &[u32], max_bloc
             ("trc", &trc_image),
             ("trc glossy=eas", &trc_eas_image),
             ("tcg", &tcg_image),
+            ("tcg glossy=eas", &tcg_eas_image),
             ("movies", &movies_image),
         ] {
             let bias = block_bias(image, &reference, BLOCK / 2);

@@ -4,7 +4,7 @@
 use glam::Vec3;
 use radcache::cache::gather::Strata;
 use radcache::film;
-use radcache::method::ic::IcSettings;
+use radcache::method::ic::{GlossyLobe, IcSettings};
 use radcache::method::movies::{Movie, MoviesSettings, TextureMovies};
 use radcache::method::path::PathSettings;
 use radcache::method::tcg::TcgSettings;
@@ -261,71 +261,85 @@ fn older_schema_is_migrated_in_order() {
     assert!(msg.contains("schema version 8 is newer"), "{msg}");
 }
 
-/// A `trc` job stopped after frame 2 of 0..6, its carried state put back
-/// in the schema-6 layout (as a schema-6 build wrote it), is migrated
-/// when the store is opened, and the resume renders the frames an
-/// uninterrupted render does, byte for byte; running the step again
-/// converts nothing twice.
+/// A `trc` and a `tcg` job, each stopped after frame 2 of 0..6, their
+/// carried state put back in the schema-6 layout (as a schema-6 build
+/// wrote it), are migrated when the store is opened, and the resumes
+/// render the frames uninterrupted renders do, byte for byte; running the
+/// step again converts nothing twice.
 #[test]
-fn schema_6_trc_state_is_migrated_and_resumes_bit_identically() {
-    let mut trc = TrcSettings::default();
-    trc.ic.strata = Strata { theta: 4, phi: 12 };
-    trc.ic.spp = 1;
-    let method = MethodSettings::Trc(trc);
-    let dir = tempfile::tempdir().unwrap();
-    let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
-    render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
-    let path = dir.path().join("db");
-    let source = SceneSource::Builtin("cube-in-box".into());
-    let fs = renderer(&method).settings.clone();
-    let job_spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
-    let run = |range: std::ops::Range<u32>| {
-        let store = Store::open(&path).unwrap();
-        let job = store.begin_job(&job_spec, false).unwrap();
-        let mut sj = StoreJob { store: &store, job };
-        render::render_job_to_dir(&mut renderer(&method), range, &resumed, true, Some(&mut sj))
-            .unwrap()
+fn schema_6_carried_state_is_migrated_and_resumes_bit_identically() {
+    let trc = TrcSettings {
+        ic: small_ic_settings(),
+        ..TrcSettings::default()
     };
-    run(0..3);
+    let tcg = TcgSettings {
+        ic: small_ic_settings(),
+        ..TcgSettings::default()
+    };
+    let jobs = [
+        (
+            "t",
+            MethodSettings::Trc(trc),
+            radcache::method::trc::downgrade_to_schema_6_record as fn(&[u8]) -> _,
+        ),
+        (
+            "g",
+            MethodSettings::Tcg(tcg),
+            radcache::method::tcg::downgrade_to_schema_6_record,
+        ),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let fs = renderer(&jobs[0].1).settings.clone();
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let out = |name: &str, kind: &str| dir.path().join(format!("{name}-{kind}"));
+    let run = |name: &str, method: &MethodSettings, range: std::ops::Range<u32>| {
+        let spec = render::job_spec(name, &source, method, &fs, 0..6).unwrap();
+        let store = Store::open(&path).unwrap();
+        let job = store.begin_job(&spec, false).unwrap();
+        let mut sj = StoreJob { store: &store, job };
+        let dir = out(name, "resumed");
+        render::render_job_to_dir(&mut renderer(method), range, &dir, true, Some(&mut sj))
+    };
+    for (name, method, _) in &jobs {
+        render::render_to_dir(&mut renderer(method), 0..6, &out(name, "plain"), true).unwrap();
+        run(name, method, 0..3).unwrap();
+    }
+    let ids: Vec<u64> = {
+        let store = Store::open(&path).unwrap();
+        let id = |name: &str| store.job(name).unwrap().unwrap().id;
+        jobs.iter().map(|(name, _, _)| id(name)).collect()
+    };
     let converted = {
         let db = open_raw(&path);
         let state = db.open_tree("state").unwrap();
-        let mut n = 0;
+        let mut n = [0; 2];
         for item in state.iter() {
             let (k, v) = item.unwrap();
-            if keys::parse_state_record(&k).is_none() {
+            let Some((job, _)) = keys::parse_state_record(&k) else {
                 continue;
-            }
+            };
             let mut aligned = rkyv::util::AlignedVec::<16>::new();
             aligned.extend_from_slice(&v);
             let mut value: radcache::store::schema::StateRecordValue =
                 rkyv::from_bytes::<_, rkyv::rancor::Error>(&aligned).unwrap();
-            value.data = radcache::method::trc::downgrade_to_schema_6_record(&value.data).unwrap();
+            let i = ids.iter().position(|&id| id == job).unwrap();
+            value.data = (jobs[i].2)(&value.data).unwrap();
             let bytes = rkyv::to_bytes::<rkyv::rancor::Error>(&value).unwrap();
             state.insert(k, bytes.as_slice()).unwrap();
-            n += 1;
+            n[i] += 1;
         }
         migrate::write_version(&path, &db.open_tree("meta").unwrap(), 6).unwrap();
         db.flush().unwrap();
         n
     };
-    assert!(converted > 0, "the job carries records");
-    // This build reads schema 6's state only through the migration: the
-    // schema-7 decoder refuses the old bytes (a clear error, not a panic).
-    {
-        let store = Store::open_with(&path, false, 6, &[]).unwrap();
-        let job = store.begin_job(&job_spec, false).unwrap();
-        let mut sj = StoreJob { store: &store, job };
-        let msg =
-            render::render_job_to_dir(&mut renderer(&method), 0..6, &resumed, true, Some(&mut sj))
-                .map(|_| ())
-                .unwrap_err()
-                .to_string();
-        assert!(msg.contains("tree `state`"), "{msg}");
+    assert!(converted.iter().all(|&n| n > 0), "{converted:?}");
+    for (name, method, _) in &jobs {
+        let s = run(name, method, 0..6).unwrap();
+        assert_eq!((s.resumed, s.frames), (3, 3), "{name}");
+        let files = |kind| exr_files(&out(name, kind), 0..6);
+        assert_eq!(files("plain"), files("resumed"), "{name}");
     }
-    let s = run(0..6);
-    assert_eq!((s.resumed, s.frames), (3, 3));
-    assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
     // The step again (a crash before the version bump): nothing converted
     // twice, the state still reads.
     {
@@ -335,10 +349,76 @@ fn schema_6_trc_state_is_migrated_and_resumes_bit_identically() {
     }
     let version = Store::open(&path).unwrap().schema_version().unwrap();
     assert_eq!(version, migrate::CURRENT_VERSION);
-    std::fs::remove_dir_all(&resumed).unwrap();
-    let s = run(0..6);
-    assert_eq!((s.resumed, s.frames), (6, 0));
-    assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
+    for (name, method, _) in &jobs {
+        std::fs::remove_dir_all(out(name, "resumed")).unwrap();
+        let s = run(name, method, 0..6).unwrap();
+        assert_eq!((s.resumed, s.frames), (6, 0), "{name}");
+    }
+}
+
+/// State records of a schema-6 layout in a store stamped schema 7 (what a
+/// schema-6 build's bytes would be without the migration) are a clear
+/// error naming tree and key, not a panic.
+#[test]
+fn schema_6_state_bytes_under_schema_7_are_a_clear_error() {
+    let method = MethodSettings::Trc(TrcSettings {
+        ic: small_ic_settings(),
+        ..TrcSettings::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let fs = renderer(&method).settings.clone();
+    let spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
+    let run = || {
+        let store = Store::open(&path).unwrap();
+        let job = store.begin_job(&spec, false).unwrap();
+        let mut sj = StoreJob { store: &store, job };
+        render::render_job_to_dir(
+            &mut renderer(&method),
+            0..3,
+            &dir.path().join("o"),
+            true,
+            Some(&mut sj),
+        )
+        .map(|_| ())
+    };
+    run().unwrap();
+    {
+        let db = open_raw(&path);
+        let state = db.open_tree("state").unwrap();
+        let (k, v) = state
+            .iter()
+            .map(Result::unwrap)
+            .find(|(k, _)| keys::parse_state_record(k).is_some())
+            .unwrap();
+        let mut aligned = rkyv::util::AlignedVec::<16>::new();
+        aligned.extend_from_slice(&v);
+        let mut value: radcache::store::schema::StateRecordValue =
+            rkyv::from_bytes::<_, rkyv::rancor::Error>(&aligned).unwrap();
+        value.data = radcache::method::trc::downgrade_to_schema_6_record(&value.data).unwrap();
+        let bytes = rkyv::to_bytes::<rkyv::rancor::Error>(&value).unwrap();
+        state.insert(k, bytes.as_slice()).unwrap();
+        db.flush().unwrap();
+    }
+    // A longer range resumes from the state of frame 2.
+    let store = Store::open(&path).unwrap();
+    let job = store.begin_job(&spec, false).unwrap();
+    let mut sj = StoreJob { store: &store, job };
+    let msg = render::render_job_to_dir(
+        &mut renderer(&method),
+        0..6,
+        &dir.path().join("o"),
+        true,
+        Some(&mut sj),
+    )
+    .map(|_| ())
+    .unwrap_err()
+    .to_string();
+    assert!(
+        msg.contains("tree `state`") && msg.contains("record"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -612,16 +692,39 @@ fn resumed_trc_render_is_bit_identical() {
 /// surfaces would reflect no sources, or unmoved ones).
 #[test]
 fn resumed_trc_render_with_radiance_records_is_bit_identical() {
-    let mut trc = TrcSettings::default();
-    trc.ic.strata = Strata { theta: 4, phi: 12 };
-    trc.ic.spp = 1;
-    trc.ic.glossy = radcache::method::ic::GlossyLobe::Eas;
-    let method = MethodSettings::Trc(trc);
-    let renderer = |m: &MethodSettings| renderer_of("glossy-cornell", m);
+    let trc = TrcSettings {
+        ic: IcSettings {
+            glossy: GlossyLobe::Eas,
+            ..small_ic_settings()
+        },
+        ..TrcSettings::default()
+    };
+    resume_from_state_matches_uninterrupted("glossy-cornell", MethodSettings::Trc(trc));
+}
+
+/// `tcg` with radiance records: the material comes back from the stored
+/// state, and the sources are built again from the stored samples.
+#[test]
+fn resumed_tcg_render_with_radiance_records_is_bit_identical() {
+    let tcg = TcgSettings {
+        ic: IcSettings {
+            glossy: GlossyLobe::Eas,
+            ..small_ic_settings()
+        },
+        ..TcgSettings::default()
+    };
+    resume_from_state_matches_uninterrupted("glossy-cornell", MethodSettings::Tcg(tcg));
+}
+
+/// A job of `method` on the built-in `scene` stopped after frame 2 of 0..6
+/// resumes from its stored state (frames 3..5 rendered, not 0..2 again)
+/// and its frames equal an uninterrupted render's byte for byte.
+fn resume_from_state_matches_uninterrupted(scene: &str, method: MethodSettings) {
+    let renderer = |m: &MethodSettings| renderer_of(scene, m);
     let dir = tempfile::tempdir().unwrap();
     let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
     render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
-    let source = SceneSource::Builtin("glossy-cornell".into());
+    let source = SceneSource::Builtin(scene.into());
     let fs = renderer(&method).settings.clone();
     let job_spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
     let store = Store::open(&dir.path().join("db")).unwrap();

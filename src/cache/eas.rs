@@ -24,7 +24,9 @@
 //!   fitted table.
 //!
 //! EAS serve the glossy lobe only; the diffuse part of the same records is
-//! their irradiance with gradients, as in `ic`.
+//! their irradiance with gradients, as in `ic`. `trc` carries them across
+//! frames; [`irradiance_over`] gives its estimate of each source at the
+//! next frame (TRC Eq. 21).
 
 use super::gather::{HemisphereSamples, Strata};
 use super::{IrradianceCache, LookupPoint};

@@ -94,13 +94,7 @@ pub fn cell_query(
     cell: u32,
     mut rng: Rng,
 ) -> RadianceQuery {
-    let (m, n) = (strata.theta, strata.phi);
-    let (j, k) = (cell / n, cell % n);
-    let u = rng.next_2d();
-    let sin2 = (j as f32 + u.x) / m as f32;
-    let phi = TAU * (k as f32 + u.y) / n as f32;
-    let (sin_t, cos_t) = (sin2.sqrt(), (1.0 - sin2).max(0.0).sqrt());
-    let dir = frame.to_world(Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t));
+    let dir = cell_direction(frame, strata, cell, rng.next_2d());
     let origin = offset_origin(point.position, point.geometric_normal, dir);
     RadianceQuery {
         ray: Ray::new(origin, dir, 0.0, f32::INFINITY),
@@ -109,6 +103,18 @@ pub fn cell_query(
         weight: Vec3::ONE,
         first_hit: FirstHitEmission::Exclude,
     }
+}
+
+/// The direction at `u ∈ [0, 1)²` within cell `cell` (`j·N + k`) of a
+/// hemisphere laid out in `frame`: cosine-weighted, rings of equal
+/// projected area. `u = (½, ½)` is the cell's centre.
+pub fn cell_direction(frame: &Frame, strata: Strata, cell: u32, u: glam::Vec2) -> Vec3 {
+    let (m, n) = (strata.theta, strata.phi);
+    let (j, k) = (cell / n, cell % n);
+    let sin2 = (j as f32 + u.x) / m as f32;
+    let phi = TAU * (k as f32 + u.y) / n as f32;
+    let (sin_t, cos_t) = (sin2.sqrt(), (1.0 - sin2).max(0.0).sqrt());
+    frame.to_world(Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t))
 }
 
 /// Collects the traced queries of [`gather_queries`] into samples.

@@ -72,6 +72,8 @@ pub const METHODS: &[MethodInfo] = &[
             ("max_spacing", "64"),
             ("gradients", "1"),
             ("max_depth", "8"),
+            ("glossy", "eas"),
+            ("eas_tau", "0.02"),
         ],
     },
     MethodInfo {
@@ -253,9 +255,8 @@ fn path_setting(
     Ok(true)
 }
 
-/// Applies the radiance-record setting `key = v` to `s` (`ic` and `trc`:
-/// `tcg` does not carry EAS across frames); `false` when `key` is none of
-/// them.
+/// Applies the radiance-record setting `key = v` to `s` (`ic`, `trc`,
+/// `tcg`); `false` when `key` is none of them.
 fn glossy_setting(
     method: &str,
     key: &str,
@@ -323,7 +324,10 @@ fn tcg_setting(method: &str, key: &str, v: &str, s: &mut TcgSettings) -> Result<
         "tau_min" => s.tau_min = value(method, key, v, 0.0..1.000_001)?,
         "tau_max" => s.tau_max = value(method, key, v, 0.0..1.000_001)?,
         "max_neighbours" => s.max_neighbours = value(method, key, v, 0..1_000_001)?,
-        _ => return ic_setting(method, key, v, &mut s.ic),
+        _ => {
+            return Ok(ic_setting(method, key, v, &mut s.ic)?
+                || glossy_setting(method, key, v, &mut s.ic)?)
+        }
     }
     Ok(true)
 }

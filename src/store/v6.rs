@@ -1,8 +1,8 @@
-//! Schema 6 (`migrations/0006_movies.md`) stored a `trc` record's carried
-//! state without a material or sources; schema 7
-//! (`migrations/0007_trc_radiance_records.md`) adds both, for `trc`'s
-//! radiance records (`--ic-glossy eas`). This module holds the 0006 → 0007
-//! step.
+//! Schema 6 (`migrations/0006_movies.md`) stored the carried state of a
+//! `trc` or `tcg` record without a material (nor, for `trc`, sources);
+//! schema 7 (`migrations/0007_trc_radiance_records.md`) adds them, for
+//! their radiance records (`--ic-glossy eas`). This module holds the
+//! 0006 → 0007 step.
 
 use super::keys;
 use super::schema::{JobValue, StateRecordValue};
@@ -12,9 +12,9 @@ use sled::transaction::ConflictableTransactionError;
 use sled::Transactional;
 use std::path::Path;
 
-/// Migration 0006 → 0007: rewrites every state record of every `trc` job
-/// in the schema-7 layout (an irradiance record: no material, no
-/// sources). One transaction over `state` and `meta` per job, which also
+/// Migration 0006 → 0007: rewrites every state record of every `trc` and
+/// `tcg` job in the schema-7 layout (an irradiance record: no material,
+/// no sources). One transaction over `state` and `meta` per job, which also
 /// records the job as done (`meta.migrate_0007_through`), in increasing
 /// job id: a crash mid-step resumes after the last job committed, and no
 /// record is converted twice. Other methods' state is left as it is.
@@ -22,11 +22,11 @@ pub fn migrate_to_v7(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let tree = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
     let (meta, jobs, state) = (tree("meta")?, tree("jobs")?, tree("state")?);
     let through = read_meta_u64(&meta, keys::META_MIGRATE_0007_THROUGH)?;
-    for job in trc_jobs(&jobs)? {
+    for (job, upgrade) in stateful_jobs(&jobs)? {
         if through.is_some_and(|t| job <= t) {
             continue;
         }
-        let records = upgraded_records(&state, job)?;
+        let records = upgraded_records(&state, job, upgrade)?;
         (&meta, &state)
             .transaction(|(meta, state)| {
                 for (k, v) in &records {
@@ -41,27 +41,34 @@ pub fn migrate_to_v7(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     Ok(())
 }
 
-/// The ids of the jobs whose method is `trc`, in increasing order.
-fn trc_jobs(jobs: &sled::Tree) -> Result<Vec<u64>, String> {
-    let mut ids = Vec::new();
+/// A method's conversion of a schema-6 state record.
+type Upgrade = fn(&[u8]) -> Result<Vec<u8>, String>;
+
+/// The ids of the jobs whose method carries records in `state` (`trc`,
+/// `tcg`), each with its method's conversion, in increasing id.
+fn stateful_jobs(jobs: &sled::Tree) -> Result<Vec<(u64, Upgrade)>, String> {
+    let mut found: Vec<(u64, Upgrade)> = Vec::new();
     for item in jobs.iter() {
         let (k, v) = item.map_err(|e| e.to_string())?;
         let job: JobValue =
             decode_value(&v).map_err(|e| format!("tree `jobs` key {}: {e}", keys::describe(&k)))?;
-        if job.method == "trc" {
-            ids.push(job.id);
-        }
+        let upgrade: Upgrade = match job.method.as_str() {
+            "trc" => crate::method::trc::upgrade_schema_6_record,
+            "tcg" => crate::method::tcg::upgrade_schema_6_record,
+            _ => continue,
+        };
+        found.push((job.id, upgrade));
     }
-    ids.sort_unstable();
-    Ok(ids)
+    found.sort_unstable_by_key(|(id, _)| *id);
+    Ok(found)
 }
 
 /// A `state` key and its value.
 type Entry = (Vec<u8>, Vec<u8>);
 
-/// Job `job`'s state records, keys and values, their bytes in the
-/// schema-7 layout.
-fn upgraded_records(state: &sled::Tree, job: u64) -> Result<Vec<Entry>, String> {
+/// Job `job`'s state records, keys and values, their bytes converted to
+/// the schema-7 layout by `upgrade`.
+fn upgraded_records(state: &sled::Tree, job: u64, upgrade: Upgrade) -> Result<Vec<Entry>, String> {
     let mut records = Vec::new();
     for item in state.scan_prefix(keys::job_prefix(job)) {
         let (k, v) = item.map_err(|e| e.to_string())?;
@@ -70,8 +77,7 @@ fn upgraded_records(state: &sled::Tree, job: u64) -> Result<Vec<Entry>, String> 
         }
         let at = || format!("tree `state` key {}", keys::describe(&k));
         let mut value: StateRecordValue = decode_value(&v).map_err(|e| format!("{}: {e}", at()))?;
-        value.data = crate::method::trc::upgrade_schema_6_record(&value.data)
-            .map_err(|e| format!("{}: {e}", at()))?;
+        value.data = upgrade(&value.data).map_err(|e| format!("{}: {e}", at()))?;
         records.push((k.to_vec(), encode(&value)));
     }
     Ok(records)

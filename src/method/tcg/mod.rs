@@ -31,6 +31,12 @@
 //! samples at full precision; from the next frame on it is computed from
 //! the stored 8-byte samples, as the paper's records are.
 //!
+//! With `--ic-glossy eas`, glossy surfaces get radiance records (`ic`'s,
+//! [`crate::cache::eas`]): each frame builds a record's sources again from
+//! its samples, as it computes its irradiance again, so they follow the
+//! samples the frame shot. The stored samples keep no direction: the
+//! sources take each at its cell's centre ([`radiance_sources`]).
+//!
 //! # Measured
 //! `radcache bench --scenes cube-in-box --size 64x64 --frames 0..400
 //! --reference-spp 256 --methods ic trc tcg` (at 34c0a70): 3.07× faster
@@ -44,6 +50,8 @@
 mod select;
 mod state;
 
+pub use state::{downgrade_to_schema_6_record, upgrade_schema_6_record};
+
 use super::carried;
 use super::ic::{
     dynamic_objects, primary_candidates, scene_bounds, Candidate, Gathered, IcSettings,
@@ -54,10 +62,14 @@ use super::{
     FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges, StateError,
     RENDER_PHASE,
 };
-use crate::cache::gather::{cell_query, irradiance_and_gradients_in, GatherPoint};
+use crate::cache::eas::{self, Eas};
+use crate::cache::gather::{
+    cell_direction, cell_query, irradiance_and_gradients_in, GatherPoint, HemisphereSamples, Strata,
+};
 use crate::cache::{IrradianceCache, IrradianceRecord, LookupPoint, RecordId};
 use crate::film::Film;
 use crate::integrator::trace_radiance_parallel;
+use crate::material::Bsdf;
 use crate::sampling::{Frame, Rng, SampleKey};
 use crate::scene::Snapshot;
 use crate::store::rgbe::PackedSample;
@@ -66,6 +78,7 @@ use glam::{Mat3, Mat4, Vec3};
 use rayon::prelude::*;
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Tags the random streams that pick a record's cells apart from those
@@ -171,6 +184,32 @@ fn object_transform(snapshot: &Snapshot, object: u32) -> Mat4 {
         .get(object as usize)
         .copied()
         .unwrap_or(Mat4::IDENTITY)
+}
+
+/// A radiance record's sources ([`eas::build`]) from its stored samples,
+/// laid out in `frame`. The 8-byte samples keep no direction: each is taken
+/// at its cell's centre (departure; the sources' centroids move by at most
+/// half a cell, and a record whose samples are re-shot every frame would
+/// otherwise need its jittered directions stored too).
+fn radiance_sources(
+    radiance: Vec<Vec3>,
+    distance: Vec<f32>,
+    frame: &Frame,
+    strata: Strata,
+    bsdf: &Bsdf,
+    tau: f32,
+) -> Arc<[Eas]> {
+    let centre = glam::Vec2::splat(0.5);
+    let direction = (0..strata.count() as u32)
+        .map(|cell| cell_direction(frame, strata, cell, centre))
+        .collect();
+    let samples = HemisphereSamples {
+        object: vec![u32::MAX; radiance.len()],
+        direction,
+        radiance,
+        distance,
+    };
+    eas::build(&samples, frame.n, strata, bsdf, tau).into()
 }
 
 /// §4.2: which of `records` (in id order, at their points of this frame,
@@ -326,7 +365,7 @@ impl TemporallyCoherentGathering {
                     r.samples[cell as usize] =
                         PackedSample::pack(result.radiance, distance, object, is_dynamic, 0);
                 }
-                self.recompute(&mut r, &point, &frame);
+                self.recompute(ctx, &mut r, &point, &frame);
                 r
             })
             .collect()
@@ -345,12 +384,29 @@ impl TemporallyCoherentGathering {
     }
 
     /// The record's irradiance, gradients and radius from its samples
-    /// (`ic`'s estimators and radius limits), at its point of this frame.
-    fn recompute(&self, r: &mut TcgRecord, point: &GatherPoint, frame: &Frame) {
+    /// (`ic`'s estimators and radius limits), at its point of this frame;
+    /// a radiance record's sources too ([`radiance_sources`]).
+    fn recompute(&self, ctx: &FrameContext, r: &mut TcgRecord, point: &GatherPoint, frame: &Frame) {
+        let strata = self.settings.ic.strata;
         let radiance: Vec<Vec3> = r.samples.iter().map(PackedSample::radiance).collect();
         let distance: Vec<f32> = r.samples.iter().map(PackedSample::distance).collect();
-        let g = irradiance_and_gradients_in(&radiance, &distance, frame, self.settings.ic.strata);
+        let g = irradiance_and_gradients_in(&radiance, &distance, frame, strata);
         let (radius, grad_translation) = self.ic.limit_radius(&g, r.candidate.footprint);
+        let eas = r.candidate.glossy.map(|material| {
+            let bsdf = Bsdf::new(
+                &ctx.scene.materials[material as usize],
+                point.normal,
+                point.normal,
+            );
+            radiance_sources(
+                radiance,
+                distance,
+                frame,
+                strata,
+                &bsdf,
+                self.settings.ic.eas_tau,
+            )
+        });
         let record = &mut r.record;
         record.position = point.position;
         record.normal = point.normal;
@@ -358,6 +414,7 @@ impl TemporallyCoherentGathering {
         record.grad_translation = grad_translation;
         record.grad_rotation = g.grad_rotation;
         record.radius = radius;
+        record.eas = eas;
     }
 
     /// Ends frame `t`: radii as neighbour clamping left them, the `used`
@@ -442,7 +499,7 @@ impl Method for TemporallyCoherentGathering {
         self.ic.fill_from(
             ctx,
             &mut cache,
-            &primary_candidates(ctx, crate::method::ic::GlossyLobe::Path),
+            &primary_candidates(ctx, self.settings.ic.glossy),
             |g| TcgRecord::gathered(ctx, g, &dynamic),
             &mut records,
         );

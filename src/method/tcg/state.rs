@@ -6,19 +6,34 @@
 //! and its samples, zstd-compressed in their 8-byte form. Its irradiance
 //! and gradients are not kept: every frame computes them again from the
 //! samples. The layout is part of the store schema (`migrations/`):
-//! changing it needs a migration.
+//! changing it needs a migration. Schema 7
+//! (`migrations/0007_trc_radiance_records.md`) added a radiance record's
+//! material after what schema 6 stored; [`upgrade_schema_6_record`]
+//! converts a schema-6 record.
 
 use super::TcgRecord;
 use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceRecord;
 use crate::method::carried::aligned;
 use crate::method::ic::Candidate;
+use crate::store::encode;
 use crate::store::samples::SampleBlock;
 use glam::{Mat4, Vec3};
 use rkyv::rancor;
 
 #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
 struct RecordState {
+    /// All of an irradiance record: the whole of a schema-6 record.
+    sampled: SampledState,
+    /// The material of a radiance record's surface (`--ic-glossy eas`),
+    /// whose sources each frame builds again from the samples.
+    glossy: Option<u32>,
+}
+
+/// A record but its material: a schema-6 record's layout (frozen:
+/// changing it changes schema 6).
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct SampledState {
     id: u64,
     created_frame: u32,
     object: u32,
@@ -38,7 +53,7 @@ struct RecordState {
 pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
     let c = &r.candidate;
     let block = SampleBlock::from_packed(&r.samples);
-    let s = RecordState {
+    let sampled = SampledState {
         id: r.record.id,
         created_frame: r.record.created_frame,
         object: r.record.object,
@@ -54,9 +69,10 @@ pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
         sample_count: block.count,
         samples_zstd: block.zstd,
     };
-    rkyv::to_bytes::<rancor::Error>(&s)
-        .expect("serialising plain data to memory cannot fail")
-        .into_vec()
+    encode(&RecordState {
+        sampled,
+        glossy: c.glossy,
+    })
 }
 
 /// A record back from its bytes; its samples must be `cells` (the job's
@@ -64,8 +80,9 @@ pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
 /// zero until its next frame computes them.
 pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, String> {
     let aligned = aligned(bytes);
-    let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
-        .map_err(|e| format!("tcg record state: {e}"))?;
+    let RecordState { sampled: s, glossy } =
+        rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
+            .map_err(|e| format!("tcg record state: {e}"))?;
     if s.sample_count as usize != cells {
         return Err(format!(
             "tcg record state: {} samples, the job's strata have {cells} cells",
@@ -111,12 +128,35 @@ pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, Str
             point,
             object: s.object,
             footprint: s.footprint,
-            glossy: None,
+            glossy,
         },
         object_to_world,
         samples,
         used: s.used,
     })
+}
+
+/// A schema-6 record's bytes in the schema-7 layout: the same record, an
+/// irradiance record (schema 6 had no `tcg` radiance records).
+pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    let sampled = rkyv::from_bytes::<SampledState, rancor::Error>(&aligned(bytes))
+        .map_err(|e| format!("schema-6 tcg record state: {e}"))?;
+    Ok(encode(&RecordState {
+        sampled,
+        glossy: None,
+    }))
+}
+
+/// A schema-7 irradiance record's bytes in the schema-6 layout, for tests
+/// of the migration.
+#[doc(hidden)]
+pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned(bytes))
+        .map_err(|e| format!("tcg record state: {e}"))?;
+    if s.glossy.is_some() {
+        return Err(format!("record {} is a radiance record", s.sampled.id));
+    }
+    Ok(encode(&s.sampled))
 }
 
 #[cfg(test)]

@@ -24,6 +24,17 @@
 //!    backend the render pass splats the records on the GPU as in §5 and
 //!    returns these flags from there, `backend::gpu_cache`).
 //!
+//! With `--ic-glossy eas` glossy surfaces get radiance records (`ic`'s,
+//! [`crate::cache::eas`]), and they live across frames as the paper's
+//! radiance records do (§4.6): the reprojected samples are summed over
+//! each source's cells (`eas::irradiance_over`), τ is the largest ratio
+//! over the sources (Eq. 21; the record's irradiance keeps its own Eq. 7,
+//! for the surface's diffuse part), and each source has its own
+//! extrapolated gradient (§4.6.2). Departure: with interpolated gradients
+//! the sources keep their extrapolated ones, since the replacement keeps
+//! another cut of its own tree and Eq. 18–20 have no source of it to pair
+//! with each of K's.
+//!
 //! Everything spatial — candidates, gathering, weights, gradients,
 //! neighbour clamping, direct light, glossy lobes — is `ic`'s code.
 //! Here are the temporal parts; the E(t0+1) estimate by reprojection is
