@@ -35,7 +35,7 @@
 //! [`crate::cache::eas`]): each frame builds a record's sources again from
 //! its samples, as it computes its irradiance again, so they follow the
 //! samples the frame shot. The stored samples keep no direction: the
-//! sources take each at its cell's centre ([`radiance_sources`]).
+//! sources take each at its cell's centre (`radiance_sources`).
 //!
 //! # Measured
 //! `radcache bench --scenes cube-in-box --size 64x64 --frames 0..400
