@@ -699,7 +699,10 @@ fn resumed_trc_render_with_radiance_records_is_bit_identical() {
         },
         ..TrcSettings::default()
     };
-    resume_from_state_matches_uninterrupted("glossy-cornell", MethodSettings::Trc(trc));
+    let state = resume_from_state_matches_uninterrupted("glossy-cornell", MethodSettings::Trc(trc));
+    // `inspect` counts the radiance records and their sources.
+    assert!(state.radiance_records > 0 && state.radiance_records <= state.records);
+    assert!(state.sources >= state.radiance_records, "{state:?}");
 }
 
 /// `tcg` with radiance records: the material comes back from the stored
@@ -713,13 +716,22 @@ fn resumed_tcg_render_with_radiance_records_is_bit_identical() {
         },
         ..TcgSettings::default()
     };
-    resume_from_state_matches_uninterrupted("glossy-cornell", MethodSettings::Tcg(tcg));
+    let state = resume_from_state_matches_uninterrupted("glossy-cornell", MethodSettings::Tcg(tcg));
+    // `tcg` stores no sources: they are built from the samples.
+    assert!(
+        state.radiance_records > 0 && state.sources == 0,
+        "{state:?}"
+    );
 }
 
 /// A job of `method` on the built-in `scene` stopped after frame 2 of 0..6
 /// resumes from its stored state (frames 3..5 rendered, not 0..2 again)
-/// and its frames equal an uninterrupted render's byte for byte.
-fn resume_from_state_matches_uninterrupted(scene: &str, method: MethodSettings) {
+/// and its frames equal an uninterrupted render's byte for byte. Returns
+/// what `inspect` reports of its carried state, which it also prints.
+fn resume_from_state_matches_uninterrupted(
+    scene: &str,
+    method: MethodSettings,
+) -> radcache::store::inspect::StateReport {
     let renderer = |m: &MethodSettings| renderer_of(scene, m);
     let dir = tempfile::tempdir().unwrap();
     let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
@@ -737,6 +749,12 @@ fn resume_from_state_matches_uninterrupted(scene: &str, method: MethodSettings) 
         assert_eq!((s.resumed, s.frames), done);
     }
     assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
+    let report = radcache::store::inspect::report(&store, Some("j"), None).unwrap();
+    let state = report.jobs[0].state.clone().expect("a carried state");
+    let text = radcache::store::inspect::to_text(&report, false);
+    let shown = format!("{} radiance records", state.radiance_records);
+    assert!(text.contains(&shown), "{text}");
+    state
 }
 
 /// `tcg` resumes from its stored state, whose records carry their samples

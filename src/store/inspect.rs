@@ -3,7 +3,8 @@
 //! lifespans (per object, and split between moving and static objects when
 //! the caller knows which objects move).
 
-use super::{schema::JobValue, Store, StoreError, TREES};
+use super::schema::{JobValue, StateRecordValue};
+use super::{Store, StoreError, TREES};
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
@@ -161,6 +162,11 @@ pub struct StateReport {
     /// Records in the state, and their value bytes.
     pub records: u64,
     pub value_bytes: u64,
+    /// Of the records, the radiance records (`--ic-glossy eas`), and the
+    /// sources they carry (`trc`; `tcg` builds them each frame from the
+    /// samples and stores none).
+    pub radiance_records: u64,
+    pub sources: u64,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -242,8 +248,8 @@ pub fn report(
 /// The method state job `id` carries (`None` for a method without one, or
 /// before its first frame): the frame it follows, its range, and the
 /// records and bytes it holds.
-fn state_report(store: &Store, id: u64) -> Result<Option<StateReport>, StoreError> {
-    let Some(head) = store.state_head(id)? else {
+fn state_report(store: &Store, j: &JobValue) -> Result<Option<StateReport>, StoreError> {
+    let Some(head) = store.state_head(j.id)? else {
         return Ok(None);
     };
     let mut state = StateReport {
@@ -252,21 +258,51 @@ fn state_report(store: &Store, id: u64) -> Result<Option<StateReport>, StoreErro
         chain_end: head.chain_end,
         records: 0,
         value_bytes: 0,
+        radiance_records: 0,
+        sources: 0,
     };
-    for item in store.state.scan_prefix(super::keys::job_prefix(id)) {
+    for item in store.state.scan_prefix(super::keys::job_prefix(j.id)) {
         let (k, v) = item.map_err(|e| StoreError::sled(store.path(), e))?;
         // The head's key is the job prefix alone; longer keys are records.
-        if k.len() != 8 {
-            state.records += 1;
-            state.value_bytes += v.len() as u64;
+        if k.len() == 8 {
+            continue;
+        }
+        state.records += 1;
+        state.value_bytes += v.len() as u64;
+        let value: StateRecordValue = store.decode("state", &k, &v)?;
+        let sources =
+            radiance_sources(&j.method, &value.data).map_err(|e| store.corrupt("state", &k, e))?;
+        if let Some(n) = sources {
+            state.radiance_records += 1;
+            state.sources += n as u64;
         }
     }
     Ok(Some(state))
 }
 
+/// The sources of a record of `method`'s carried state, from its bytes:
+/// `None` for an irradiance record.
+fn radiance_sources(method: &str, data: &[u8]) -> Result<Option<usize>, String> {
+    match method {
+        "trc" => crate::method::trc::sources_in(data),
+        "tcg" => Ok(crate::method::tcg::is_radiance_record(data)?.then_some(0)),
+        _ => Ok(None),
+    }
+}
+
+/// ` (R radiance records, S sources)` where the state holds radiance
+/// records; nothing otherwise.
+fn radiance_text(st: &StateReport) -> String {
+    match (st.radiance_records, st.sources) {
+        (0, _) => String::new(),
+        (r, 0) => format!(" ({r} radiance records)"),
+        (r, s) => format!(" ({r} radiance records, {s} sources)"),
+    }
+}
+
 fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobReport, StoreError> {
     let mut r = JobReport::of(j);
-    r.state = state_report(store, j.id)?;
+    r.state = state_report(store, j)?;
     let mut per_frame = frame_reports(store, j.id, &mut r)?;
     // Records and samples: one streaming pass over the job's frames.
     for frame in store.frames_done(j.id)? {
@@ -475,11 +511,12 @@ fn job_text(s: &mut String, j: &JobReport) {
     if let Some(st) = &j.state {
         let _ = writeln!(
             s,
-            "  carried state after frame {} (range from frame {}{}): {} records, {} B",
+            "  carried state after frame {} (range from frame {}{}): {} records{}, {} B",
             st.frame,
             st.chain_start,
             st.chain_end.map_or(String::new(), |e| format!(" to {e}")),
             st.records,
+            radiance_text(st),
             st.value_bytes
         );
     }

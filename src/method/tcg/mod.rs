@@ -50,7 +50,7 @@
 mod select;
 mod state;
 
-pub use state::{downgrade_to_schema_6_record, upgrade_schema_6_record};
+pub use state::{downgrade_to_schema_6_record, is_radiance_record, upgrade_schema_6_record};
 
 use super::carried;
 use super::ic::{

@@ -136,6 +136,15 @@ pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, Str
     })
 }
 
+/// Whether a record's bytes are a radiance record's (`inspect` counts a
+/// job's radiance records with it).
+pub fn is_radiance_record(bytes: &[u8]) -> Result<bool, String> {
+    let aligned = aligned(bytes);
+    let s = rkyv::access::<ArchivedRecordState, rancor::Error>(&aligned)
+        .map_err(|e| format!("tcg record state: {e}"))?;
+    Ok(s.glossy.is_some())
+}
+
 /// A schema-6 record's bytes in the schema-7 layout: the same record, an
 /// irradiance record (schema 6 had no `tcg` radiance records).
 pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {

@@ -81,7 +81,7 @@ mod estimate;
 pub mod estimate_error;
 mod state;
 
-pub use state::{downgrade_to_schema_6_record, upgrade_schema_6_record};
+pub use state::{downgrade_to_schema_6_record, sources_in, upgrade_schema_6_record};
 
 use super::carried;
 use super::ic::IrradianceCaching;

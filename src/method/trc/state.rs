@@ -192,6 +192,15 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
     })
 }
 
+/// How many sources a record's bytes hold: `None` for an irradiance
+/// record (`inspect` counts a job's radiance records with it).
+pub fn sources_in(bytes: &[u8]) -> Result<Option<usize>, String> {
+    let aligned = aligned(bytes);
+    let s = rkyv::access::<ArchivedRecordState, rancor::Error>(&aligned)
+        .map_err(|e| format!("trc record state: {e}"))?;
+    Ok(s.eas.as_ref().map(|sources| sources.len()))
+}
+
 /// A schema-6 record's bytes in the schema-7 layout: the same record, an
 /// irradiance record (schema 6 had no `trc` radiance records).
 pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
