@@ -7,8 +7,8 @@
 //! `migrations/0005_log_generations.md` (schema 5: no key changed but
 //! `meta.samples_log_generation`), `migrations/0006_movies.md` (schema
 //! 6: `movies` holds a frame's texture movies) and
-//! `migrations/0007_trc_radiance_records.md` (schema 7, this one: no key
-//! changed; `trc`'s state records hold radiance records).
+//! `migrations/0007_radiance_records_in_state.md` (schema 7, this one: no
+//! key changed; `trc`'s and `tcg`'s state records hold radiance records).
 //!
 //! | tree      | key                                   | bytes |
 //! |-----------|---------------------------------------|-------|
@@ -60,9 +60,9 @@ pub const META_MIGRATE_0003_FRAMES_THROUGH: &[u8] = b"migrate_0003_frames_throug
 /// (`job · frame` key) whose records it moved into a block (see
 /// `migrations/0004_record_blocks.md`).
 pub const META_MIGRATE_0004_THROUGH: &[u8] = b"migrate_0004_through";
-/// `meta` key of the 0006 → 0007 migration's progress: the last `trc` job
-/// id (u64 big-endian) whose state records it converted (see
-/// `migrations/0007_trc_radiance_records.md`).
+/// `meta` key of the 0006 → 0007 migration's progress: the last `trc` or
+/// `tcg` job id (u64 big-endian) whose state records it converted (see
+/// `migrations/0007_radiance_records_in_state.md`).
 pub const META_MIGRATE_0007_THROUGH: &[u8] = b"migrate_0007_through";
 
 /// `meta` key marking job `name` as cancelled by `radcache serve` (value

@@ -54,7 +54,7 @@ pub const MIGRATIONS: &[Migration] = &[
     },
     Migration {
         from: 6,
-        name: "0007_trc_radiance_records",
+        name: "0007_radiance_records_in_state",
         run: super::v6::migrate_to_v7,
     },
 ];

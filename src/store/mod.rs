@@ -8,7 +8,7 @@
 //!   `migrations/0001_initial.md`, `migrations/0002_state_and_identity.md`,
 //!   `migrations/0003_sample_log.md`, `migrations/0004_record_blocks.md`,
 //!   `migrations/0005_log_generations.md`, `migrations/0006_movies.md`,
-//!   `migrations/0007_trc_radiance_records.md`).
+//!   `migrations/0007_radiance_records_in_state.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
 //! - Bulk values are zstd-compressed and live in the sample log, whose

@@ -1,6 +1,6 @@
 //! Value schemas of store schema version 7 (no type here changed:
-//! `migrations/0007_trc_radiance_records.md` changed the method-defined
-//! bytes of `trc`'s [`StateRecordValue`]s), on top of 6
+//! `migrations/0007_radiance_records_in_state.md` changed the method-defined
+//! bytes of `trc`'s and `tcg`'s [`StateRecordValue`]s), on top of 6
 //! (`migrations/0006_movies.md`: the `movies` tree holds
 //! [`MovieFramesValue`]s), on top of 5
 //! (`migrations/0005_log_generations.md`, on top of

@@ -1,6 +1,6 @@
 //! Schema 6 (`migrations/0006_movies.md`) stored the carried state of a
 //! `trc` or `tcg` record without a material (nor, for `trc`, sources);
-//! schema 7 (`migrations/0007_trc_radiance_records.md`) adds them, for
+//! schema 7 (`migrations/0007_radiance_records_in_state.md`) adds them, for
 //! their radiance records (`--ic-glossy eas`). This module holds the
 //! 0006 → 0007 step.
 

@@ -7,7 +7,7 @@
 //! and gradients are not kept: every frame computes them again from the
 //! samples. The layout is part of the store schema (`migrations/`):
 //! changing it needs a migration. Schema 7
-//! (`migrations/0007_trc_radiance_records.md`) added a radiance record's
+//! (`migrations/0007_radiance_records_in_state.md`) added a radiance record's
 //! material after what schema 6 stored; [`upgrade_schema_6_record`]
 //! converts a schema-6 record.
 

@@ -2,7 +2,7 @@
 //! ([`StateChanges`](crate::method::StateChanges)): rkyv
 //! archives, validated when read back. The layout is part of the store
 //! schema (`migrations/`): changing it needs a migration. Schema 7
-//! (`migrations/0007_trc_radiance_records.md`) added a radiance record's
+//! (`migrations/0007_radiance_records_in_state.md`) added a radiance record's
 //! material and sources after what schema 6 stored of a record;
 //! [`upgrade_schema_6_record`] converts a schema-6 record.
 
