@@ -434,8 +434,10 @@ impl IrradianceCaching {
                     kept.push((RecordId::from(c.pixel), block));
                 }
                 let (radius, grad_translation) = self.limit_radius(&g, c.footprint);
-                let eas = c.glossy.map(|material| {
-                    let material = &ctx.scene.materials[material as usize];
+                // A replacement's material comes from the carried state: one
+                // the scene lacks (a damaged state) leaves it no sources.
+                let material = c.glossy.and_then(|m| ctx.scene.materials.get(m as usize));
+                let eas = material.map(|material| {
                     let normal = c.point.normal;
                     let bsdf = Bsdf::new(material, normal, normal);
                     eas::build(&samples, normal, strata, &bsdf, self.settings.eas_tau).into()
@@ -570,6 +572,51 @@ pub(crate) fn limit_gradient(grad: [Vec3; 3], e: Vec3, r: f32) -> [Vec3; 3] {
 mod tests {
     use super::*;
     use crate::cache::gather::Strata;
+
+    /// A candidate from a damaged carried state may name a material the
+    /// scene lacks: its record is gathered without sources, not a panic;
+    /// one naming a glossy material the scene has keeps sources.
+    #[test]
+    fn a_candidate_naming_a_missing_material_gathers_no_sources() {
+        let scene = crate::scene::Scene::builtin("glossy-cornell").unwrap();
+        let glossy = scene
+            .materials
+            .iter()
+            .position(|m| m.specular.max_element() > 0.0);
+        let glossy = glossy.expect("glossy-cornell has glossy materials") as u32;
+        let mut renderer = crate::render::Renderer::new(
+            scene,
+            Box::new(crate::method::path::PathTracer::new(Default::default())),
+            Box::new(crate::backend::cpu::CpuBackend::new()),
+            crate::render::FrameSettings {
+                width: 8,
+                height: 8,
+                ..Default::default()
+            },
+        );
+        let ic = IrradianceCaching::new(IcSettings {
+            strata: Strata { theta: 4, phi: 12 },
+            glossy: GlossyLobe::Eas,
+            ..IcSettings::default()
+        });
+        let candidate = |material| Candidate {
+            pixel: 0,
+            stream: 0,
+            point: GatherPoint {
+                position: glam::Vec3::new(0.0, 0.5, 0.0),
+                normal: glam::Vec3::Y,
+                geometric_normal: glam::Vec3::Y,
+            },
+            object: 0,
+            footprint: 0.01,
+            glossy: Some(material),
+        };
+        let gathered = renderer.with_frame_context(0, |ctx| {
+            ic.gather_chunk(ctx, &[candidate(u32::MAX), candidate(glossy)])
+        });
+        assert!(gathered[0].record.eas.is_none());
+        assert!(gathered[1].record.eas.is_some());
+    }
 
     /// A hemisphere lit from one side, gathered next to a wall: one cell's
     /// ray hits the wall at t ≈ 0, which makes Ward & Heckbert's gradient

@@ -392,12 +392,14 @@ impl TemporallyCoherentGathering {
         let distance: Vec<f32> = r.samples.iter().map(PackedSample::distance).collect();
         let g = irradiance_and_gradients_in(&radiance, &distance, frame, strata);
         let (radius, grad_translation) = self.ic.limit_radius(&g, r.candidate.footprint);
-        let eas = r.candidate.glossy.map(|material| {
-            let bsdf = Bsdf::new(
-                &ctx.scene.materials[material as usize],
-                point.normal,
-                point.normal,
-            );
+        // The material comes from the carried state: one the scene lacks
+        // (a damaged state) leaves the record no sources.
+        let material = r
+            .candidate
+            .glossy
+            .and_then(|m| ctx.scene.materials.get(m as usize));
+        let eas = material.map(|material| {
+            let bsdf = Bsdf::new(material, point.normal, point.normal);
             radiance_sources(
                 radiance,
                 distance,
