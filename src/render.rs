@@ -885,6 +885,22 @@ pub(crate) fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
     bar
 }
 
+/// A CPU renderer of built-in `scene` at `size × size`, for unit tests
+/// that need a frame context (its own method is never run).
+#[cfg(test)]
+pub(crate) fn test_renderer(scene: &str, size: u32) -> Renderer {
+    Renderer::new(
+        crate::scene::Scene::builtin(scene).expect("a built-in scene"),
+        Box::new(crate::method::path::PathTracer::new(Default::default())),
+        Box::new(crate::backend::cpu::CpuBackend::new()),
+        FrameSettings {
+            width: size,
+            height: size,
+            ..Default::default()
+        },
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -578,22 +578,15 @@ mod tests {
     /// one naming a glossy material the scene has keeps sources.
     #[test]
     fn a_candidate_naming_a_missing_material_gathers_no_sources() {
-        let scene = crate::scene::Scene::builtin("glossy-cornell").unwrap();
-        let glossy = scene
-            .materials
-            .iter()
-            .position(|m| m.specular.max_element() > 0.0);
-        let glossy = glossy.expect("glossy-cornell has glossy materials") as u32;
-        let mut renderer = crate::render::Renderer::new(
-            scene,
-            Box::new(crate::method::path::PathTracer::new(Default::default())),
-            Box::new(crate::backend::cpu::CpuBackend::new()),
-            crate::render::FrameSettings {
-                width: 8,
-                height: 8,
-                ..Default::default()
-            },
-        );
+        let mut renderer = crate::render::test_renderer("glossy-cornell", 8);
+        let glossy = renderer.with_frame_context(0, |ctx| {
+            let glossy = ctx
+                .scene
+                .materials
+                .iter()
+                .position(|m| m.specular.max_element() > 0.0);
+            glossy.expect("glossy-cornell has glossy materials") as u32
+        });
         let ic = IrradianceCaching::new(IcSettings {
             strata: Strata { theta: 4, phi: 12 },
             glossy: GlossyLobe::Eas,

@@ -778,16 +778,7 @@ mod tests {
     /// the invariant rather than reproducing that case.)
     #[test]
     fn mark_used_flags_exactly_the_records_the_render_pass_uses() {
-        let mut renderer = crate::render::Renderer::new(
-            crate::scene::Scene::builtin("cube-in-box").unwrap(),
-            Box::new(crate::method::path::PathTracer::new(Default::default())),
-            Box::new(crate::backend::cpu::CpuBackend::new()),
-            crate::render::FrameSettings {
-                width: 20,
-                height: 20,
-                ..Default::default()
-            },
-        );
+        let mut renderer = crate::render::test_renderer("cube-in-box", 20);
         let ic = IrradianceCaching::new(IcSettings {
             spp: 4,
             strata: Strata { theta: 4, phi: 12 },
