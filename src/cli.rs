@@ -723,6 +723,7 @@ fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSum
     let reports = [
         summary.frame_time_report(),
         summary.cache_report(),
+        summary.footprint_report(),
         summary.lifespan_report(),
     ];
     for report in reports.into_iter().flatten() {

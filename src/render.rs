@@ -466,6 +466,30 @@ impl RenderSummary {
         })
     }
 
+    /// What the method's cache held and carried: its largest size in
+    /// memory at the end of a frame (and which frame), and the samples
+    /// traced again for carried records. `None` for methods without a
+    /// cache (`path`).
+    pub fn footprint_report(&self) -> Option<String> {
+        let (peak, frame) = self
+            .frame_stats
+            .iter()
+            .map(|s| (s.cache_bytes, s.frame))
+            .fold((0, 0), |a, b| if b.0 > a.0 { b } else { a });
+        if peak == 0 {
+            return None;
+        }
+        let reshot: u64 = self.frame_stats.iter().map(|s| s.samples_reshot).sum();
+        let mut out = format!(
+            "cache in memory: peak {:.2} MB (frame {frame})",
+            peak as f64 / 1e6
+        );
+        if reshot > 0 {
+            out.push_str(&format!(", {reshot} samples re-shot for carried records"));
+        }
+        Some(out)
+    }
+
     /// For temporal methods (records with lifespans): records reused,
     /// replaced and dropped, the mean lifespan of the records computed, and
     /// their lifespan histogram, one line per lifespan in frames.
@@ -935,5 +959,25 @@ mod tests {
         // One frame, or methods that time no phases (`path`): nothing to say.
         assert_eq!(summary(&[0.5]).frame_time_report(), None);
         assert_eq!(summary(&[0.0, 0.0]).frame_time_report(), None);
+    }
+
+    #[test]
+    fn footprint_report_names_the_peak_frame_and_sums_the_reshot_samples() {
+        let mut s = summary(&[0.1, 0.1, 0.1]);
+        assert_eq!(s.footprint_report(), None, "no cache, nothing to say");
+        for (st, (bytes, reshot)) in
+            s.frame_stats
+                .iter_mut()
+                .zip([(1000, 0), (2_500_000, 7), (2_000_000, 5)])
+        {
+            st.cache_bytes = bytes;
+            st.samples_reshot = reshot;
+        }
+        assert_eq!(
+            s.footprint_report().as_deref(),
+            Some(
+                "cache in memory: peak 2.50 MB (frame 11), 12 samples re-shot for carried records"
+            )
+        );
     }
 }

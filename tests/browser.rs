@@ -157,10 +157,11 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
     assert!(has("3/3 frames"), "{dom}");
     // The title names the job's temporal settings (trc's defaults here).
     assert!(has("a 0.2, a_t 0.05, δt_max 20, frames 0..3"), "{dom}");
-    // Charts: the paths the script drew (5 record series, lifespan, time,
-    // 2 byte series).
+    // Charts: the paths the script drew (5 record series, lifespan,
+    // samples re-shot, time, 4 byte series).
     let paths = dom.matches("class=\"series\"").count();
-    assert!(paths >= 9, "{paths} chart paths:\n{dom}");
+    assert!(paths >= 12, "{paths} chart paths:\n{dom}");
+    assert!(has("samples re-shot"), "{dom}");
     // The record overlay: one dot per record alive in the last frame.
     let dots = dom.matches("class=\"record\"").count();
     let (_, records) = http(

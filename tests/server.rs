@@ -142,10 +142,20 @@ fn job_renders_and_frames_match_the_cli() {
         .map(|f| f["frame"].as_u64().unwrap())
         .collect();
     assert_eq!(frames, [0, 1]);
-    // `path` keeps no records: none alive, none living.
+    // `path` keeps no records: none alive, none living, no cache held;
+    // each frame stored its image at least.
     for f in stats["frames"].as_array().unwrap() {
         assert_eq!(f["records_alive"], 0, "{f}");
         assert_eq!(f["mean_lifespan"], 0.0, "{f}");
+        assert_eq!(
+            (&f["cache_bytes"], &f["samples_reshot"]),
+            (&serde_json::json!(0), &serde_json::json!(0)),
+            "{f}"
+        );
+        assert!(
+            f["stored_bytes"].as_u64().unwrap() >= f["exr_bytes"].as_u64().unwrap(),
+            "{f}"
+        );
     }
 
     let (status, metrics) = http(&server, "GET", "/metrics", "");
@@ -684,7 +694,8 @@ fn records_match_the_store_and_inspect() {
         })
         .collect();
     let (_, stats) = http(&server, "GET", &format!("/api/jobs/{trc}/stats"), "");
-    let mean = json(&stats)["frames"][0]["mean_lifespan"].as_f64().unwrap();
+    let trc_rows = json(&stats)["frames"].clone();
+    let mean = trc_rows[0]["mean_lifespan"].as_f64().unwrap();
     let expected = lives.iter().sum::<f64>() / lives.len() as f64;
     assert!(
         (mean - expected).abs() < 1e-9 * expected,
@@ -719,6 +730,12 @@ fn records_match_the_store_and_inspect() {
             trc_counts[f as usize], stats.records_alive,
             "trc frame {f}: records alive vs stats"
         );
+        // `/stats` serves what the store measured of the frame.
+        let row = &trc_rows[f as usize];
+        assert!(stats.cache_bytes > 0 && stats.stored_bytes > 0, "{stats:?}");
+        assert_eq!(row["cache_bytes"], stats.cache_bytes, "{row}");
+        assert_eq!(row["stored_bytes"], stats.stored_bytes, "{row}");
+        assert_eq!(row["samples_reshot"], stats.samples_reshot, "{row}");
     }
     let sid = store.job(&id).unwrap().unwrap().id;
     let stored = store.frame_records(sid, 1).unwrap();

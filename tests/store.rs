@@ -204,12 +204,12 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
-/// A synthetic step 7 → 8: checks that it runs after the real steps
-/// from 1 to 7 (the stored version is 7).
+/// A synthetic step 8 → 9: checks that it runs after the real steps
+/// from 1 to 8 (the stored version is 8).
 fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 7u32.to_be_bytes() {
+    if version.as_ref() != 8u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -219,8 +219,8 @@ fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 8: the
-    // real 1 → 2, …, 6 → 7, then 7 → 8, in order.
+    // A version-1 store (fixture) brought to a synthetic version 9: the
+    // real 1 → 2, …, 7 → 8, then 8 → 9, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -229,15 +229,15 @@ fn older_schema_is_migrated_in_order() {
     });
     v1_fixture(&path, &method);
     let mut steps = migrate::MIGRATIONS.to_vec();
-    assert_eq!(steps.len(), 6);
+    assert_eq!(steps.len(), 7);
     steps.push(Migration {
-        from: 7,
+        from: 8,
         name: "synthetic",
         run: add_marker,
     });
-    // Without the step for 7 → 8 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 8, &steps[..6]));
-    assert!(msg.contains("no migration from schema 7 to 8"), "{msg}");
+    // Without the step for 8 → 9 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 9, &steps[..7]));
+    assert!(msg.contains("no migration from schema 8 to 9"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -246,8 +246,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 8, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 8);
+        let store = Store::open_with(&path, false, 9, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 9);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -256,9 +256,9 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 7) now refuses the upgraded store.
+    // This build (version 8) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 8 is newer"), "{msg}");
+    assert!(msg.contains("schema version 9 is newer"), "{msg}");
 }
 
 /// A `trc` and a `tcg` job, each stopped after frame 2 of 0..6, their
@@ -329,6 +329,7 @@ fn schema_6_carried_state_is_migrated_and_resumes_bit_identically() {
             state.insert(k, bytes.as_slice()).unwrap();
             n[i] += 1;
         }
+        radcache::store::v7::downgrade_stats_to_schema_7(&db).unwrap();
         migrate::write_version(&path, &db.open_tree("meta").unwrap(), 6).unwrap();
         db.flush().unwrap();
         n
@@ -354,6 +355,71 @@ fn schema_6_carried_state_is_migrated_and_resumes_bit_identically() {
         let s = run(name, method, 0..6).unwrap();
         assert_eq!((s.resumed, s.frames), (6, 0), "{name}");
     }
+}
+
+/// Schema-7 statistics (two jobs, the first already converted by a step
+/// that crashed before the second) are rewritten in the schema-8 layout
+/// when the store is opened: every count as it was, what schema 7 did not
+/// measure 0, the first job not converted twice. A schema-7 build then
+/// refuses the store.
+#[test]
+fn schema_7_statistics_are_migrated_once_and_keep_every_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let (before, first) = {
+        let store = Store::open(&path).unwrap();
+        commit_frames(&store, "a", 0..3);
+        commit_frames(&store, "b", 0..2);
+        let ids = ["a", "b"].map(|n| store.job(n).unwrap().unwrap().id);
+        let stats: Vec<FrameStats> = ids
+            .iter()
+            .flat_map(|&id| {
+                let frames = store.frames_done(id).unwrap();
+                let store = &store;
+                frames
+                    .into_iter()
+                    .map(move |f| store.frame_stats(id, f).unwrap().unwrap().stats)
+            })
+            .collect();
+        (stats, ids[0])
+    };
+    assert_eq!(before.len(), 5);
+    {
+        let db = open_raw(&path);
+        radcache::store::v7::downgrade_stats_to_schema_7(&db).unwrap();
+        // The crashed step had converted job "a" and marked it.
+        let stats = db.open_tree("stats").unwrap();
+        for item in stats.scan_prefix(keys::job_prefix(first)) {
+            let (k, v) = item.unwrap();
+            let old: radcache::store::v7::StatsValue = decoded(&v);
+            let new = rkyv::to_bytes::<rkyv::rancor::Error>(&old.to_v8()).unwrap();
+            stats.insert(k, new.as_slice()).unwrap();
+        }
+        let meta = db.open_tree("meta").unwrap();
+        meta.insert(keys::META_MIGRATE_0008_THROUGH, &first.to_be_bytes())
+            .unwrap();
+        migrate::write_version(&path, &meta, 7).unwrap();
+        db.flush().unwrap();
+    }
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.schema_version().unwrap(), migrate::CURRENT_VERSION);
+    let mut after = Vec::new();
+    for name in ["a", "b"] {
+        let id = store.job(name).unwrap().unwrap().id;
+        for f in store.frames_done(id).unwrap() {
+            let v = store.frame_stats(id, f).unwrap().unwrap();
+            assert_eq!(v.stored_bytes, 0, "{name} frame {f}");
+            after.push(v.stats.clone());
+        }
+    }
+    let unmeasured = |s: &FrameStats| FrameStats {
+        samples_reshot: 0,
+        cache_bytes: 0,
+        ..s.clone()
+    };
+    assert_eq!(after, before.iter().map(unmeasured).collect::<Vec<_>>());
+    drop(store);
+    assert_an_older_build_refuses(&path, 7);
 }
 
 /// State records of a schema-6 layout in a store stamped schema 7 (what a
@@ -672,6 +738,53 @@ fn resumed_ic_render_is_bit_identical_and_stores_records_with_samples() {
             (e - want).abs().max_element() <= want.max_element() * 0.01 + 1e-6,
             "{e} vs {want}"
         );
+    }
+}
+
+/// A frame's `stored_bytes` is what its checkpoint wrote. Over a fresh
+/// `ic` job (no carried state, no movies) that is the sample log past its
+/// header, plus each frame's `frames` and `records` values and the job's
+/// value as each frame rewrote it. Each frame's `cache_bytes` holds at
+/// least its records, and `ic` shoots nothing again.
+#[test]
+fn frame_statistics_count_what_each_checkpoint_wrote_and_the_cache_held() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let method = small_ic();
+    let mut r = renderer(&method);
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let spec = render::job_spec("j", &source, &method, &r.settings, 0..3).unwrap();
+    let store = Store::open(&path).unwrap();
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    let s = render::render_job_to_dir(&mut r, 0..3, &dir.path().join("out"), true, Some(&mut sj))
+        .unwrap();
+    let id = sj.job.id;
+    let stored: u64 = (0..3)
+        .map(|f| store.frame_stats(id, f).unwrap().unwrap().stored_bytes)
+        .sum();
+    let log = store.sample_log_bytes() - radcache::store::samples::MAGIC.len() as u64;
+    drop(store);
+    let db = open_raw(&path);
+    let value_len = |tree: &str, key: &[u8]| {
+        let v = db.open_tree(tree).unwrap().get(key).unwrap();
+        v.map_or(0, |v| v.len() as u64)
+    };
+    let job = value_len("jobs", &keys::job("j"));
+    let trees: u64 = (0..3)
+        .map(|f| {
+            value_len("frames", &keys::frame(id, f)) + value_len("records", &keys::frame(id, f))
+        })
+        .sum();
+    assert!(log > 0 && trees > 0);
+    assert_eq!(stored, log + trees + 3 * job);
+    let record = std::mem::size_of::<radcache::cache::IrradianceRecord>() as u64;
+    for f in &s.frame_stats {
+        assert!(f.records_alive > 0);
+        assert!(f.cache_bytes >= f.records_alive * record, "{f:?}");
+        assert_eq!(f.samples_reshot, 0);
     }
 }
 
@@ -1562,22 +1675,36 @@ fn raw_v3_records(path: &Path) -> Vec<(u32, radcache::store::schema::RecordValue
         .collect()
 }
 
-/// The `frames` and `stats` trees of the store at `path` (closed), raw.
-fn raw_frames_and_stats(path: &Path) -> Vec<(Vec<u8>, Vec<u8>)> {
+/// A tree's keys and values, raw.
+type RawRows = Vec<(Vec<u8>, Vec<u8>)>;
+
+/// The `frames` tree of the store at `path` (closed), raw, and its
+/// `stats` values decoded as `decode` reads them.
+fn frames_and_stats<S>(path: &Path, decode: impl Fn(&[u8]) -> S) -> (RawRows, Vec<(Vec<u8>, S)>) {
     let db = open_raw(path);
-    ["frames", "stats"]
-        .iter()
-        .flat_map(|t| {
-            db.open_tree(t)
-                .unwrap()
-                .iter()
-                .map(|i| {
-                    let (k, v) = i.unwrap();
-                    (k.to_vec(), v.to_vec())
-                })
-                .collect::<Vec<_>>()
-        })
-        .collect()
+    let rows = |t: &str| -> RawRows {
+        let tree = db.open_tree(t).unwrap();
+        tree.iter()
+            .map(|i| {
+                let (k, v) = i.unwrap();
+                (k.to_vec(), v.to_vec())
+            })
+            .collect()
+    };
+    let stats = rows("stats").into_iter().map(|(k, v)| (k, decode(&v)));
+    (rows("frames"), stats.collect())
+}
+
+/// An rkyv value of type `T` from stored bytes.
+fn decoded<T>(bytes: &[u8]) -> T
+where
+    T: rkyv::Archive,
+    T::Archived: for<'a> rkyv::bytecheck::CheckBytes<rkyv::api::high::HighValidator<'a, rkyv::rancor::Error>>
+        + rkyv::Deserialize<T, rkyv::api::high::HighDeserializer<rkyv::rancor::Error>>,
+{
+    let mut aligned = rkyv::util::AlignedVec::<16>::new();
+    aligned.extend_from_slice(bytes);
+    rkyv::from_bytes::<T, rkyv::rancor::Error>(&aligned).unwrap()
 }
 
 /// A schema-3 store at `path` (the schema-1 fixture brought to 3 by the
@@ -1653,15 +1780,18 @@ fn version_3_store_moves_its_records_into_blocks_in_the_log() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let (exrs, written, records) = v3_fixture(&path);
-    let frames_before = raw_frames_and_stats(&path);
+    let before = frames_and_stats(&path, |v| {
+        decoded::<radcache::store::v7::StatsValue>(v).to_v8()
+    });
     let log_before = std::fs::metadata(path.join("samples.log")).unwrap().len();
     {
         let store = Store::open(&path).unwrap();
         check_v3_fixture_reads_back(&store, &exrs, &written, &records);
         assert!(store.sample_log_bytes() > log_before);
     }
-    // `frames` and `stats` untouched.
-    assert_eq!(raw_frames_and_stats(&path), frames_before);
+    // `frames` untouched, `stats` only brought to the schema-8 layout.
+    let after = frames_and_stats(&path, decoded::<radcache::store::schema::StatsValue>);
+    assert_eq!(after, before);
     // Running the step again changes nothing.
     let log_len = {
         let db = open_raw(&path);
@@ -1764,11 +1894,15 @@ fn a_frame_written_again_replaces_its_record_block() {
 }
 
 /// A schema-4 store at `path` (written by this build's writer at schema
-/// 4: the layout is the same): frames 0..2 of job "j", closed.
+/// 4, its statistics then put back in the schema-7 layout: the rest is
+/// laid out alike): frames 0..2 of job "j", closed.
 fn v4_fixture(path: &Path) {
-    let store = Store::open_with(path, true, 4, migrate::MIGRATIONS).unwrap();
-    assert_eq!(store.schema_version().unwrap(), 4);
-    commit_frames(&store, "j", 0..2);
+    {
+        let store = Store::open_with(path, true, 4, migrate::MIGRATIONS).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 4);
+        commit_frames(&store, "j", 0..2);
+    }
+    radcache::store::v7::downgrade_stats_to_schema_7(&open_raw(path)).unwrap();
 }
 
 /// The store's frames, records and samples of job "j", as read back.

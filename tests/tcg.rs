@@ -18,6 +18,7 @@ use radcache::method::Method;
 use radcache::metrics::{flicker, rel_rmse};
 use radcache::render::{FrameSettings, Renderer};
 use radcache::scene::{Channel, Interpolation, Material, Mesh, Property, Scene};
+use radcache::store::PackedSample;
 
 fn renderer(scene: Scene, size: u32, same_pattern: bool) -> Renderer {
     Renderer::new(
@@ -81,9 +82,14 @@ fn records_shoot_again_the_share_of_equation_2_oldest_first() {
                 .map(|r| (r.record.id, r.samples.clone()))
                 .collect();
             let _ = render(&mut r, &mut tcg, f);
+            let stats = tcg.last_frame_stats();
             if is_static {
-                assert_eq!(tcg.last_frame_stats().records_created, 0, "frame {f}");
+                assert_eq!(stats.records_created, 0, "frame {f}");
             }
+            // Every record in memory holds its 8-byte samples.
+            let held = (tcg.records().len() * cells * PackedSample::BYTES) as u64;
+            assert!(stats.cache_bytes > held, "frame {f}: {stats:?}");
+            let mut reshot = 0;
             for rec in tcg.records() {
                 let Some(old) = before.get(&rec.record.id) else {
                     continue;
@@ -95,12 +101,16 @@ fn records_shoot_again_the_share_of_equation_2_oldest_first() {
                     .min(cells as f32) as usize;
                 let fresh = rec.samples.iter().filter(|s| s.age() == 0).count();
                 assert_eq!(fresh, want, "frame {f} record {}", rec.record.id);
+                reshot += want as u64;
                 for (new, old) in rec.samples.iter().zip(old) {
                     let aged = new.age() == (old.age() + 1).min(15);
                     assert!(new.age() == 0 || aged, "{new:?} after {old:?}");
                 }
                 checked += 1;
             }
+            // The frame's statistics count those shots (records that did
+            // not live on shot nothing).
+            assert_eq!(stats.samples_reshot, reshot, "frame {f}");
         }
         assert!(checked > 0);
         if is_static {

@@ -13,6 +13,7 @@ use common::{
 use glam::{Vec3, Vec4};
 use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
+use radcache::cache::IrradianceRecord;
 use radcache::film::Film;
 use radcache::integrator::PathLength;
 use radcache::method::ic::{GlossyLobe, IcSettings, IrradianceCaching};
@@ -26,6 +27,7 @@ use radcache::method::Method;
 use radcache::metrics::{flicker, rel_rmse};
 use radcache::render::{FrameSettings, Renderer};
 use radcache::scene::{Channel, Interpolation, Material, Mesh, Property, Scene};
+use std::mem::size_of;
 
 /// Every temporal gradient mode (TRC §4.5).
 const GRADIENT_MODES: [TemporalGradients; 3] = [
@@ -166,6 +168,10 @@ fn static_records_live_max_life(scene: Scene, ic: IcSettings) {
             .map(|(a, b)| (*a - *b).abs().max_element())
             .fold(0.0, f32::max);
         assert!(diff <= 1e-5 * scale, "frame {f}: differs from ic by {diff}");
+        assert_eq!(stats.samples_reshot, 0, "frame {f}: nothing replaced");
+        // Each record is held twice (carried, and in the frame's cache).
+        let record = size_of::<TemporalRecord>() + size_of::<IrradianceRecord>();
+        assert!(stats.cache_bytes >= n * record as u64, "frame {f}");
         if f == 0 {
             assert_eq!((stats.records_created, stats.records_reused), (n, 0));
         } else {
@@ -199,6 +205,10 @@ fn static_records_live_max_life(scene: Scene, ic: IcSettings) {
     assert_eq!(stats.records_reused, 0);
     assert_eq!(stats.records_replaced + stats.records_dropped, n);
     assert!(stats.records_replaced > 0);
+    // A replacement shoots every ray of the record it replaces again; a
+    // record dropped shoots none (no moving object to gather inside).
+    let cells = settings.ic.strata.count() as u64;
+    assert_eq!(stats.samples_reshot, stats.records_replaced * cells);
     let replacements: Vec<_> = trc
         .records()
         .iter()

@@ -340,11 +340,14 @@ function drawCharts() {
     series('replaced', '#ef6c00', (r) => r.records_replaced),
     series('dropped', '#c62828', (r) => r.records_dropped),
   ], (v) => String(Math.round(v)));
+  lineChart($('chart-reshot'), [series('samples re-shot', '#ef6c00', (r) => r.samples_reshot || 0)], (v) => String(Math.round(v)));
   lineChart($('chart-lifespan'), [series('mean lifespan', '#2e7d32', (r) => r.mean_lifespan || 0)], (v) => v.toFixed(1));
   lineChart($('chart-time'), [series('seconds', '#6a1b9a', (r) => r.seconds)], (v) => `${v.toPrecision(2)} s`);
   lineChart($('chart-bytes'), [
-    series('frame EXR (stored)', '#00838f', (r) => r.exr_bytes || 0),
-    series('record samples (raw)', '#ef6c00', (r) => r.samples_raw_bytes || 0),
+    series('cache (memory)', '#1565c0', (r) => r.cache_bytes || 0),
+    series('frame written', '#6a1b9a', (r) => r.stored_bytes || 0),
+    series('EXR (stored)', '#00838f', (r) => r.exr_bytes || 0),
+    series('samples (raw)', '#ef6c00', (r) => r.samples_raw_bytes || 0),
   ], fmtBytes);
 }
 

@@ -50,6 +50,18 @@ impl IrradianceCache {
         self.records.is_empty()
     }
 
+    /// Bytes the cache holds: its records with their sources, and its
+    /// index.
+    pub fn memory_bytes(&self) -> usize {
+        self.records.capacity() * std::mem::size_of::<IrradianceRecord>()
+            + self
+                .records
+                .iter()
+                .map(IrradianceRecord::sources_bytes)
+                .sum::<usize>()
+            + self.index.memory_bytes()
+    }
+
     /// Calls `visit(record, weight)` for every record usable at `at`:
     /// `w_K(p) ≥ 1/a` (TRC Eq. 3) and not in front of `p`.
     pub fn for_each_usable(&self, at: &LookupPoint, mut visit: impl FnMut(&IrradianceRecord, f32)) {

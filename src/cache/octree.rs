@@ -107,6 +107,18 @@ impl SphereOctree {
         node.items.push((id, center, radius));
     }
 
+    /// Bytes the tree holds: its nodes and their item lists.
+    pub fn memory_bytes(&self) -> usize {
+        let mut bytes = 0;
+        let mut stack = vec![&self.root];
+        while let Some(node) = stack.pop() {
+            bytes += std::mem::size_of::<Node>()
+                + node.items.capacity() * std::mem::size_of::<(u32, Vec3, f32)>();
+            stack.extend(node.children.iter().flat_map(|c| c.iter()));
+        }
+        bytes
+    }
+
     /// Calls `visit(id)` for every sphere that contains `p`.
     pub fn query(&self, p: Vec3, mut visit: impl FnMut(u32)) {
         // A fixed stack: at most 8 children are pushed per level (this runs
@@ -194,5 +206,20 @@ mod tests {
                 .collect();
             assert_eq!(found, brute, "at {p}");
         }
+    }
+
+    #[test]
+    fn memory_grows_with_the_spheres_held() {
+        let mut tree = SphereOctree::new(Vec3::splat(-1.0), Vec3::splat(1.0));
+        let empty = tree.memory_bytes();
+        assert!(empty >= std::mem::size_of::<Node>());
+        // Small spheres split the root: eight children at least.
+        tree.insert(0, Vec3::splat(0.5), 0.01);
+        let one = tree.memory_bytes();
+        assert!(one >= empty + 8 * std::mem::size_of::<Node>() + 20, "{one}");
+        for id in 1..100 {
+            tree.insert(id, Vec3::splat(0.5) - 0.004 * id as f32, 0.01);
+        }
+        assert!(tree.memory_bytes() >= one + 99 * 20);
     }
 }

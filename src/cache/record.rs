@@ -77,6 +77,14 @@ pub struct IrradianceRecord {
 }
 
 impl IrradianceRecord {
+    /// Bytes of its sources, held beside the record (shared with the
+    /// record's copies).
+    pub fn sources_bytes(&self) -> usize {
+        self.eas
+            .as_ref()
+            .map_or(0, |s| std::mem::size_of_val::<[super::eas::Eas]>(s))
+    }
+
     /// Eq. 4: the record's irradiance extrapolated to point `p` with normal
     /// `n` through its gradients. `use_gradients = false` gives `E_K`.
     pub fn extrapolate(&self, p: Vec3, n: Vec3, use_gradients: bool) -> Vec3 {

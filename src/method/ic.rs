@@ -198,6 +198,7 @@ impl Method for IrradianceCaching {
             .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
         stats.records_created = cache.len() as u64;
         stats.records_alive = cache.len() as u64;
+        stats.cache_bytes = cache.memory_bytes() as u64;
         // A per-frame cache's records are used in this frame only (the
         // histogram stays empty: it is for the temporal methods' lives).
         stats.mean_lifespan = if cache.is_empty() { 0.0 } else { 1.0 };

@@ -104,6 +104,16 @@ pub struct FrameStats {
     /// Records computed in the frame by lifespan: `[n]` records may be used
     /// in `n` frames (`trc`; empty for the others).
     pub lifespan_histogram: Vec<u64>,
+    /// Hemisphere samples traced again for records carried from earlier
+    /// frames: `tcg`'s re-shot cells (Tawara et al. §3.2), `trc`'s
+    /// replacement gathers (the same rays at the same point as the record
+    /// they replace). 0 for methods that gather every record afresh.
+    pub samples_reshot: u64,
+    /// Bytes the method's cache holds in memory at the end of the frame:
+    /// the frame's records with what they keep (sources, samples, temporal
+    /// state) and their spatial index, or the open texture movies
+    /// (`movies`). 0 for `path`, which keeps none.
+    pub cache_bytes: u64,
     /// Rays traced in the frame (filled in by the renderer).
     pub rays: u64,
     /// Wall time of each phase, in seconds.

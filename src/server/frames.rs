@@ -80,12 +80,15 @@ pub fn frame_stats_json(state: &AppState, sid: u64, frame: u32) -> Result<Option
         "records_replaced": s.records_replaced,
         "records_dropped": s.records_dropped,
         "mean_lifespan": s.mean_lifespan,
+        "samples_reshot": s.samples_reshot,
+        "cache_bytes": s.cache_bytes,
         "lookups": s.lookups,
         "rays": s.rays,
         "phase_seconds": phases,
         "seconds": s.phase_seconds.iter().map(|p| p.1).sum::<f64>(),
         "exr_bytes": exr_bytes,
         "samples_raw_bytes": s.samples_raw_bytes,
+        "stored_bytes": s.stored_bytes,
     })))
 }
 

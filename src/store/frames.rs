@@ -189,10 +189,10 @@ impl Store {
         // replaces the record block of its former self (or, writing none,
         // removes it).
         let already = self.frame_done(job.id, c.frame)?;
+        let log_start = log.end();
         let logged =
             self.append_frame(log, job.id, c.frame, (c.width, c.height), c.exr, c.records)?;
         let log_len = log.end().to_be_bytes();
-        let stats_bytes = encode(&StatsValue::from_stats(c.stats, logged.samples_raw));
         let state = c
             .state
             .as_ref()
@@ -208,6 +208,18 @@ impl Store {
         let movies_bytes = c.movies.map(encode);
         let frame_bytes = encode(&logged.frame);
         let job_bytes = encode(&progressed);
+        let tree_values = [&logged.records, &movies_bytes, &state.head]
+            .into_iter()
+            .flatten()
+            .chain(state.put.iter().map(|(_, v)| v))
+            .chain([&frame_bytes, &job_bytes])
+            .map(Vec::len)
+            .sum::<usize>();
+        let stats_bytes = encode(&StatsValue {
+            stats: c.stats.clone(),
+            samples_raw_bytes: logged.samples_raw,
+            stored_bytes: log.end() - log_start + tree_values as u64,
+        });
         let job_key = keys::job(&job.name);
         let result: Result<(), TransactionError<()>> = (
             &self.frames,

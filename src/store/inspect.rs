@@ -184,6 +184,12 @@ pub struct FrameReport {
     pub records_dropped: u64,
     pub mean_lifespan: f64,
     pub samples: u64,
+    /// Samples the frame shot again for carried records, the bytes the
+    /// method's cache held at its end and the bytes its checkpoint wrote
+    /// (0 for frames stored before schema 8).
+    pub samples_reshot: u64,
+    pub cache_bytes: u64,
+    pub stored_bytes: u64,
     pub exr_bytes: u64,
     pub rays: u64,
 }
@@ -419,6 +425,9 @@ fn frame_reports(
                 records_dropped: stats.records_dropped,
                 mean_lifespan: stats.mean_lifespan,
                 samples: 0,
+                samples_reshot: stats.samples_reshot,
+                cache_bytes: stats.cache_bytes,
+                stored_bytes: stats.stored_bytes,
                 exr_bytes: u64::from(v.exr_stored_len),
                 rays: stats.rays,
             },
@@ -596,7 +605,8 @@ fn objects_text(s: &mut String, j: &JobReport) {
 }
 
 /// A job's per-frame rows of [`to_text`]: records written, alive, created,
-/// reused, replaced and dropped, mean lifespan, samples, EXR bytes, rays.
+/// reused, replaced and dropped, mean lifespan, samples, samples re-shot,
+/// cache bytes, bytes stored, EXR bytes, rays.
 fn frame_table(s: &mut String, j: &JobReport) {
     if j.frame_details.is_empty() {
         let _ = writeln!(
@@ -607,7 +617,7 @@ fn frame_table(s: &mut String, j: &JobReport) {
     } else {
         let _ = writeln!(
             s,
-            "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>9} {:>9} {:>10}",
+            "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>9} {:>9} {:>10} {:>10} {:>9} {:>10}",
             "frame",
             "written",
             "alive",
@@ -617,13 +627,16 @@ fn frame_table(s: &mut String, j: &JobReport) {
             "dropped",
             "life",
             "samples",
+            "re-shot",
+            "cache B",
+            "stored B",
             "exr B",
             "rays"
         );
         for f in &j.frame_details {
             let _ = writeln!(
                 s,
-                "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.2} {:>9} {:>9} {:>10}",
+                "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.2} {:>9} {:>9} {:>10} {:>10} {:>9} {:>10}",
                 f.frame,
                 f.records_written,
                 f.records_alive,
@@ -633,6 +646,9 @@ fn frame_table(s: &mut String, j: &JobReport) {
                 f.records_dropped,
                 f.mean_lifespan,
                 f.samples,
+                f.samples_reshot,
+                f.cache_bytes,
+                f.stored_bytes,
                 f.exr_bytes,
                 f.rays
             );

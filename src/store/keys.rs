@@ -64,6 +64,10 @@ pub const META_MIGRATE_0004_THROUGH: &[u8] = b"migrate_0004_through";
 /// `tcg` job id (u64 big-endian) whose state records it converted (see
 /// `migrations/0007_radiance_records_in_state.md`).
 pub const META_MIGRATE_0007_THROUGH: &[u8] = b"migrate_0007_through";
+/// `meta` key of the 0007 → 0008 migration's progress: the last job id
+/// (u64 big-endian) whose `stats` values it rewrote (see
+/// `migrations/0008_frame_footprint.md`).
+pub const META_MIGRATE_0008_THROUGH: &[u8] = b"migrate_0008_through";
 
 /// `meta` key marking job `name` as cancelled by `radcache serve` (value
 /// empty): a restarted server keeps it cancelled instead of resuming it.

@@ -12,7 +12,7 @@ use super::{keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 7;
+pub const CURRENT_VERSION: u32 = 8;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -57,7 +57,52 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0007_radiance_records_in_state",
         run: super::v6::migrate_to_v7,
     },
+    Migration {
+        from: 7,
+        name: "0008_frame_footprint",
+        run: super::v7::migrate_to_v8,
+    },
 ];
+
+/// A `(key, value)` row of a tree.
+pub(super) type Row = (Vec<u8>, Vec<u8>);
+
+/// The core of a step that rewrites one tree job by job: for each of
+/// `jobs` (increasing ids) after the one `meta[through]` names, puts the
+/// rows `rows(job)` gives into `tree` and the job's id under `through`, in
+/// one transaction, then flushes. A crash mid-step resumes after the last
+/// job committed, so no value is converted twice, and no transaction
+/// holds more than one job's rows.
+pub(super) fn rewrite_job_by_job(
+    db: &sled::Db,
+    tree: &str,
+    through: &[u8],
+    jobs: &[u64],
+    rows: impl Fn(u64) -> Result<Vec<Row>, String>,
+) -> Result<(), String> {
+    use sled::transaction::ConflictableTransactionError;
+    use sled::Transactional;
+    let open = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
+    let (meta, target) = (open("meta")?, open(tree)?);
+    let done = super::v2::read_meta_u64(&meta, through)?;
+    for &job in jobs {
+        if done.is_some_and(|d| job <= d) {
+            continue;
+        }
+        let rows = rows(job)?;
+        (&meta, &target)
+            .transaction(|(meta, target)| {
+                for (k, v) in &rows {
+                    target.insert(&k[..], &v[..])?;
+                }
+                meta.insert(through, &job.to_be_bytes()[..])?;
+                Ok::<(), ConflictableTransactionError<()>>(())
+            })
+            .map_err(|e| format!("{e:?}"))?;
+        db.flush().map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
 
 /// The schema version stored in `meta`, if any.
 pub fn read_version(path: &Path, meta: &sled::Tree) -> Result<Option<u32>, StoreError> {

@@ -1,4 +1,8 @@
-//! Value schemas of store schema version 7 (no type here changed:
+//! Value schemas of store schema version 8
+//! (`migrations/0008_frame_footprint.md`: [`StatsValue`] gained the bytes
+//! a frame stored and, in its statistics, the samples it shot again and
+//! its cache's bytes in memory; the schema-7 value is in [`super::v7`]), on
+//! top of 7 (no type here changed:
 //! `migrations/0007_radiance_records_in_state.md` changed the method-defined
 //! bytes of `trc`'s and `tcg`'s [`StateRecordValue`]s), on top of 6
 //! (`migrations/0006_movies.md`: the `movies` tree holds
@@ -144,21 +148,21 @@ pub struct RecordBlock {
     pub records: Vec<RecordValue>,
 }
 
-/// `stats` value: the [`crate::method::FrameStats`] of one frame, whole.
+/// `stats` value: the [`crate::method::FrameStats`] of one frame, whole,
+/// and what the store measured of the frame (schema 8 added
+/// `stored_bytes` and the statistics' `samples_reshot` and `cache_bytes`:
+/// `migrations/0008_frame_footprint.md`; the schema-7 value is in
+/// [`super::v7`]).
 #[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq, Default)]
 pub struct StatsValue {
     pub stats: crate::method::FrameStats,
     /// Uncompressed bytes of the frame's samples (for compression ratios).
     pub samples_raw_bytes: u64,
-}
-
-impl StatsValue {
-    pub fn from_stats(s: &crate::method::FrameStats, samples_raw_bytes: u64) -> Self {
-        StatsValue {
-            stats: s.clone(),
-            samples_raw_bytes,
-        }
-    }
+    /// Bytes the frame's checkpoint wrote: its appends to the sample log
+    /// (EXR, samples, record block) and the values it put in the trees
+    /// (frame, records, carried state, movies, job), its own statistics
+    /// aside. 0 for frames stored before schema 8.
+    pub stored_bytes: u64,
 }
 
 /// Stats read as the frame's [`crate::method::FrameStats`].

@@ -101,9 +101,9 @@ impl JobValue {
 
 impl StatsValue {
     /// The schema-2 stats (schema 1 stored no lifespans: left empty).
-    pub fn to_v2(&self) -> schema::StatsValue {
-        schema::StatsValue {
-            stats: FrameStats {
+    pub fn to_v2(&self) -> super::v7::StatsValue {
+        super::v7::StatsValue {
+            stats: super::v7::FrameStats {
                 frame: self.frame,
                 records_alive: self.records_alive,
                 records_created: self.records_created,
@@ -115,7 +115,7 @@ impl StatsValue {
                 fallback_lookups: self.fallback_lookups,
                 rays: self.rays,
                 phase_seconds: self.phase_seconds.clone(),
-                ..FrameStats::default()
+                ..super::v7::FrameStats::default()
             },
             samples_raw_bytes: self.samples_raw_bytes,
         }

@@ -5,40 +5,27 @@
 //! 0006 → 0007 step.
 
 use super::keys;
+use super::migrate::Row;
 use super::schema::{JobValue, StateRecordValue};
-use super::v2::read_meta_u64;
 use super::{decode_value, encode};
-use sled::transaction::ConflictableTransactionError;
-use sled::Transactional;
 use std::path::Path;
 
 /// Migration 0006 → 0007: rewrites every state record of every `trc` and
 /// `tcg` job in the schema-7 layout (an irradiance record: no material,
-/// no sources). One transaction over `state` and `meta` per job, which also
-/// records the job as done (`meta.migrate_0007_through`), in increasing
-/// job id: a crash mid-step resumes after the last job committed, and no
-/// record is converted twice. Other methods' state is left as it is.
+/// no sources), one transaction per job (`migrate::rewrite_job_by_job`:
+/// progress in `meta.migrate_0007_through`, nothing converted twice). Other methods' state is left
+/// as it is.
 pub fn migrate_to_v7(db: &sled::Db, _dir: &Path) -> Result<(), String> {
-    let tree = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
-    let (meta, jobs, state) = (tree("meta")?, tree("jobs")?, tree("state")?);
-    let through = read_meta_u64(&meta, keys::META_MIGRATE_0007_THROUGH)?;
-    for (job, upgrade) in stateful_jobs(&jobs)? {
-        if through.is_some_and(|t| job <= t) {
-            continue;
-        }
-        let records = upgraded_records(&state, job, upgrade)?;
-        (&meta, &state)
-            .transaction(|(meta, state)| {
-                for (k, v) in &records {
-                    state.insert(&k[..], &v[..])?;
-                }
-                meta.insert(keys::META_MIGRATE_0007_THROUGH, &job.to_be_bytes()[..])?;
-                Ok::<(), ConflictableTransactionError<()>>(())
-            })
-            .map_err(|e| format!("{e:?}"))?;
-        db.flush().map_err(|e| e.to_string())?;
-    }
-    Ok(())
+    let state = db.open_tree("state").map_err(|e| e.to_string())?;
+    let jobs = stateful_jobs(&db.open_tree("jobs").map_err(|e| e.to_string())?)?;
+    let ids: Vec<u64> = jobs.iter().map(|(id, _)| *id).collect();
+    super::migrate::rewrite_job_by_job(db, "state", keys::META_MIGRATE_0007_THROUGH, &ids, |job| {
+        let (_, upgrade) = jobs
+            .iter()
+            .find(|(id, _)| *id == job)
+            .expect("listed above");
+        upgraded_records(&state, job, *upgrade)
+    })
 }
 
 /// A method's conversion of a schema-6 state record.
@@ -63,12 +50,9 @@ fn stateful_jobs(jobs: &sled::Tree) -> Result<Vec<(u64, Upgrade)>, String> {
     Ok(found)
 }
 
-/// A `state` key and its value.
-type Entry = (Vec<u8>, Vec<u8>);
-
 /// Job `job`'s state records, keys and values, their bytes converted to
 /// the schema-7 layout by `upgrade`.
-fn upgraded_records(state: &sled::Tree, job: u64, upgrade: Upgrade) -> Result<Vec<Entry>, String> {
+fn upgraded_records(state: &sled::Tree, job: u64, upgrade: Upgrade) -> Result<Vec<Row>, String> {
     let mut records = Vec::new();
     for item in state.scan_prefix(keys::job_prefix(job)) {
         let (k, v) = item.map_err(|e| e.to_string())?;

@@ -202,6 +202,19 @@ pub struct GlobalPass {
 }
 
 impl GlobalPass {
+    /// Bytes it holds: its mesh of vertices, their links, static shadows
+    /// and last solution.
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + std::mem::size_of_val(&self.grids[..])
+            + std::mem::size_of_val(&self.vertex_of[..])
+            + std::mem::size_of_val(&self.vertices[..])
+            + std::mem::size_of_val(&self.links[..])
+            + self.shadows.bytes()
+            + std::mem::size_of_val(&self.indirect[..])
+            + std::mem::size_of_val(&self.valid[..])
+    }
+
     /// The mesh of the snapshot of `ctx`. Grid sizes come from the static
     /// scene's size and each triangle's own, so they are the same whatever
     /// frame the pass starts at (for triangles that move rigidly).

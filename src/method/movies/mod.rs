@@ -274,6 +274,9 @@ impl Method for TextureMovies {
             .phase_seconds
             .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
         stats.records_alive = self.movies.len() as u64;
+        stats.cache_bytes = (self.movies.values().map(Movie::memory_bytes).sum::<usize>()
+            + self.global.as_ref().map_or(0, GlobalPass::memory_bytes))
+            as u64;
         self.stats = stats;
         self.kept = self.keep.then(|| FrameRecords {
             movies: Some(self.stored_movies(ctx.frame)),

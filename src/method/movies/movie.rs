@@ -172,6 +172,20 @@ impl Movie {
     }
 
     /// Bytes its kept static shadows hold.
+    /// Bytes it holds: itself, its texels (linear and as last stored),
+    /// their layout and its kept static shadows.
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + std::mem::size_of_val(&self.texels[..])
+            + std::mem::size_of_val(&self.direct[..])
+            + self
+                .stored
+                .as_ref()
+                .map_or(0, |(_, rgbe)| std::mem::size_of_val(&rgbe[..]))
+            + std::mem::size_of_val(&self.layout[..])
+            + self.shadow_bytes()
+    }
+
     pub fn shadow_bytes(&self) -> usize {
         self.shadows.as_ref().map_or(0, StaticShadows::bytes)
     }

@@ -132,6 +132,12 @@ pub struct TcgRecord {
 }
 
 impl TcgRecord {
+    /// Bytes it holds apart from its sources (which the frame's cache
+    /// counts): itself and its samples.
+    fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + std::mem::size_of_val(&self.samples[..])
+    }
+
     /// A record just gathered in the frame of `ctx`.
     fn gathered(ctx: &FrameContext, g: &Gathered, dynamic: &[bool]) -> Self {
         TcgRecord {
@@ -322,6 +328,7 @@ impl TemporallyCoherentGathering {
         ctx: &FrameContext,
         alive: Vec<(TcgRecord, (GatherPoint, Frame))>,
         dynamic: &[bool],
+        stats: &mut FrameStats,
     ) -> Vec<TcgRecord> {
         let strata = self.settings.ic.strata;
         let picks: Vec<Vec<u32>> = alive
@@ -342,6 +349,7 @@ impl TemporallyCoherentGathering {
             }
             ranges.push(start..queries.len());
         }
+        stats.samples_reshot = queries.len() as u64;
         let results = trace_radiance_parallel(ctx, self.settings.ic.gather_length, queries.clone());
         alive
             .into_par_iter()
@@ -446,6 +454,9 @@ impl TemporallyCoherentGathering {
             }
         }
         stats.records_alive = records.len() as u64;
+        stats.cache_bytes = (cache.memory_bytes()
+            + records.iter().map(TcgRecord::memory_bytes).sum::<usize>())
+            as u64;
         self.kept = self.keep.then(|| FrameRecords {
             records: records.iter().map(|r| r.record.clone()).collect(),
             samples: records
@@ -485,7 +496,7 @@ impl Method for TemporallyCoherentGathering {
         let start = Instant::now();
         let alive = self.survivors(ctx, &mut stats, &mut removed);
         let dynamic = dynamic_objects(ctx);
-        let mut records = self.update(ctx, alive, &dynamic);
+        let mut records = self.update(ctx, alive, &dynamic, &mut stats);
         stats.records_reused = records.len() as u64;
         stats
             .phase_seconds

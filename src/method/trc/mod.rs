@@ -225,6 +225,12 @@ impl TemporalRecord {
         changed
     }
 
+    /// Bytes it holds apart from its sources (which the frame's cache
+    /// counts): itself and its sources' temporal gradients.
+    fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + self.d_eas.as_deref().map_or(0, std::mem::size_of_val)
+    }
+
     /// TRC Eq. 14: the record as it is used at frame `t` (temporal
     /// gradients applied to E and to both spatial gradients): extrapolated
     /// (Eq. 15–17), or interpolated towards its replacement `successor`
@@ -519,6 +525,8 @@ impl TemporalRadianceCaching {
     ) {
         let t = ctx.frame;
         let candidates: Vec<Candidate> = expired.iter().map(|r| r.candidate).collect();
+        // Each replacement traces the rays of the record it replaces again.
+        aged.stats.samples_reshot = (candidates.len() * self.settings.ic.strata.count()) as u64;
         let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = {
             use rayon::prelude::*;
             self.ic
@@ -613,6 +621,11 @@ impl TemporalRadianceCaching {
         stats.mean_lifespan = mean_lifespan(&lifespans);
         stats.lifespan_histogram = lifespans;
         stats.records_alive = alive.len() as u64;
+        stats.cache_bytes = (cache.memory_bytes()
+            + alive
+                .iter()
+                .map(TemporalRecord::memory_bytes)
+                .sum::<usize>()) as u64;
         if let Some(k) = kept.as_mut() {
             k.state.as_mut().expect("set above").global = carried::encode_next_id(self.next_id);
         }
