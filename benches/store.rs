@@ -72,6 +72,7 @@ fn main() {
             stats: &stats,
             state: None,
             movies: None,
+            sources: None,
         };
         store.commit_frame(&mut job, commit).expect("a commit");
     }

@@ -16,7 +16,8 @@ use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::scene::{Scene, SceneError};
 use crate::store::{
-    self, schema::JobValue, FrameCommit, JobSpec, RecordCommit, StateCommit, Store,
+    self, schema::FrameSourcesValue, schema::JobValue, FrameCommit, JobSpec, RecordCommit,
+    StateCommit, Store,
 };
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeSet;
@@ -825,6 +826,7 @@ fn store_frame(
             renderer.method_name()
         );
     }
+    let sources = FrameSourcesValue::of(&kept.records);
     let commit = FrameCommit {
         frame,
         width: film.width,
@@ -838,6 +840,7 @@ fn store_frame(
             changes,
         }),
         movies: kept.movies.as_ref(),
+        sources: sources.as_ref(),
     };
     j.store.commit_frame(&mut j.job, commit)?;
     Ok(())

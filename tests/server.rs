@@ -753,6 +753,50 @@ fn records_match_the_store_and_inspect() {
     }
 }
 
+/// An `ic` job with radiance records: `/records` gives each radiance
+/// record its stored sources (their irradiance sums to the record's) and
+/// each irradiance record `null`.
+#[test]
+fn records_show_the_sources_of_radiance_records() {
+    let (dir, scenes) = workspace();
+    let server = start(&dir.path().join("db"), &scenes);
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:glossy-cornell","method":"ic","frames":"0..1","size":"16x16","spp":1,"settings":{"glossy":"eas","strata":"4x12"}}"#,
+    );
+    wait_done(&server, &id);
+    let (status, body) = http(
+        &server,
+        "GET",
+        &format!("/api/jobs/{id}/records?frame=0"),
+        "",
+    );
+    assert_eq!(status, 200);
+    let body = json(&body);
+    let records = body["records"].as_array().unwrap();
+    let (radiance, irradiance): (Vec<_>, Vec<_>) =
+        records.iter().partition(|r| !r["sources"].is_null());
+    assert!(!radiance.is_empty() && !irradiance.is_empty(), "{body}");
+    let v3 =
+        |v: &serde_json::Value| -> [f64; 3] { std::array::from_fn(|i| v[i].as_f64().unwrap()) };
+    for r in radiance {
+        let sources = r["sources"].as_array().unwrap();
+        let mut sum = [0.0; 3];
+        for s in sources {
+            assert!(s["solid_angle"].as_f64().unwrap() > 0.0, "{s}");
+            assert!(v3(&s["offset"]).iter().all(|x| x.is_finite()), "{s}");
+            for (acc, e) in sum.iter_mut().zip(v3(&s["irradiance"])) {
+                *acc += e;
+            }
+        }
+        let want = v3(&r["irradiance"]);
+        let scale = want.iter().cloned().fold(0.0, f64::max);
+        for (a, b) in sum.iter().zip(want) {
+            assert!((a - b).abs() <= 1e-4 * scale + 1e-6, "{r}");
+        }
+    }
+}
+
 fn job_state(server: &Server, id: &str) -> serde_json::Value {
     let (status, body) = http(server, "GET", &format!("/api/jobs/{id}"), "");
     assert_eq!(status, 200);

@@ -54,6 +54,7 @@ fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
                     stats: &stats,
                     state: None,
                     movies: None,
+                    sources: None,
                 },
             )
             .unwrap();
@@ -204,12 +205,12 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
-/// A synthetic step 8 → 9: checks that it runs after the real steps
-/// from 1 to 8 (the stored version is 8).
+/// A synthetic step 9 → 10: checks that it runs after the real steps
+/// from 1 to 9 (the stored version is 9).
 fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 8u32.to_be_bytes() {
+    if version.as_ref() != 9u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -219,8 +220,8 @@ fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 9: the
-    // real 1 → 2, …, 7 → 8, then 8 → 9, in order.
+    // A version-1 store (fixture) brought to a synthetic version 10: the
+    // real 1 → 2, …, 8 → 9, then 9 → 10, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -229,15 +230,15 @@ fn older_schema_is_migrated_in_order() {
     });
     v1_fixture(&path, &method);
     let mut steps = migrate::MIGRATIONS.to_vec();
-    assert_eq!(steps.len(), 7);
+    assert_eq!(steps.len(), 8);
     steps.push(Migration {
-        from: 8,
+        from: 9,
         name: "synthetic",
         run: add_marker,
     });
-    // Without the step for 8 → 9 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 9, &steps[..7]));
-    assert!(msg.contains("no migration from schema 8 to 9"), "{msg}");
+    // Without the step for 9 → 10 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 10, &steps[..8]));
+    assert!(msg.contains("no migration from schema 9 to 10"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -246,8 +247,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 9, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 9);
+        let store = Store::open_with(&path, false, 10, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 10);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -256,9 +257,9 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 8) now refuses the upgraded store.
+    // This build (version 9) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 9 is newer"), "{msg}");
+    assert!(msg.contains("schema version 10 is newer"), "{msg}");
 }
 
 /// A `trc` and a `tcg` job, each stopped after frame 2 of 0..6, their
@@ -360,8 +361,8 @@ fn schema_6_carried_state_is_migrated_and_resumes_bit_identically() {
 /// Schema-7 statistics (two jobs, the first already converted by a step
 /// that crashed before the second) are rewritten in the schema-8 layout
 /// when the store is opened: every count as it was, what schema 7 did not
-/// measure 0, the first job not converted twice. A schema-7 build then
-/// refuses the store.
+/// measure 0, the first job not converted twice. Older builds then
+/// refuse the store.
 #[test]
 fn schema_7_statistics_are_migrated_once_and_keep_every_count() {
     let dir = tempfile::tempdir().unwrap();
@@ -419,7 +420,10 @@ fn schema_7_statistics_are_migrated_once_and_keep_every_count() {
     };
     assert_eq!(after, before.iter().map(unmeasured).collect::<Vec<_>>());
     drop(store);
+    // Neither a schema-7 build nor a schema-8 one (which would leave the
+    // `sources` of a job started over behind) opens it now.
     assert_an_older_build_refuses(&path, 7);
+    assert_an_older_build_refuses(&path, 8);
 }
 
 /// State records of a schema-6 layout in a store stamped schema 7 (what a
@@ -835,6 +839,79 @@ fn resumed_tcg_render_with_radiance_records_is_bit_identical() {
         state.radiance_records > 0 && state.sources == 0,
         "{state:?}"
     );
+}
+
+/// A job with radiance records stores the sources of each record version
+/// it writes, under the frame that wrote it: only records of that frame's
+/// block, the diffuse walls' records without any, and each record's
+/// sources together bring its irradiance (they split its hemisphere's
+/// cells; a source that brings none is not kept). `inspect` counts them,
+/// and a job started over leaves none behind.
+#[test]
+fn radiance_records_store_their_sources_until_the_job_starts_over() {
+    let method = MethodSettings::Ic(IcSettings {
+        glossy: GlossyLobe::Eas,
+        ..small_ic_settings()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let source = SceneSource::Builtin("glossy-cornell".into());
+    let fs = renderer_of("glossy-cornell", &method).settings.clone();
+    let spec = render::job_spec("j", &source, &method, &fs, 0..2).unwrap();
+    let render = |force: bool| {
+        let mut sj = StoreJob {
+            store: &store,
+            job: store.begin_job(&spec, force).unwrap(),
+        };
+        let mut r = renderer_of("glossy-cornell", &method);
+        render::render_job_to_dir(&mut r, 0..2, &dir.path().join("o"), true, Some(&mut sj))
+            .unwrap();
+        sj.job.id
+    };
+    let id = render(false);
+    let mut counted = (0, 0);
+    for f in 0..2 {
+        let records = store.frame_records(id, f).unwrap();
+        let sources = store.frame_sources(id, f).unwrap().unwrap().records;
+        assert!(
+            !sources.is_empty() && sources.len() < records.len(),
+            "frame {f}"
+        );
+        assert!(sources.windows(2).all(|w| w[0].id < w[1].id));
+        for rs in &sources {
+            let record = records.iter().find(|r| r.id == rs.id).unwrap();
+            let sum: Vec3 = rs.sources.iter().map(|s| Vec3::from(s.irradiance)).sum();
+            let want = Vec3::from(record.irradiance);
+            assert!(
+                (sum - want).abs().max_element() <= 1e-4 * want.max_element() + 1e-6,
+                "record {}: sources bring {sum}, the record {want}",
+                rs.id
+            );
+            assert!(rs.sources.iter().all(|s| s.solid_angle > 0.0));
+            counted.0 += 1;
+            counted.1 += rs.sources.len() as u64;
+        }
+    }
+    let report = radcache::store::inspect::report(&store, Some("j"), None).unwrap();
+    let j = &report.jobs[0];
+    assert_eq!((j.radiance_records, j.sources), counted);
+    // Started over with other settings (`--force`): the old frames'
+    // sources are gone with their records.
+    let other = JobSpec {
+        seed: spec.seed + 1,
+        ..spec.clone()
+    };
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&other, true).unwrap(),
+    };
+    for f in 0..2 {
+        assert_eq!(store.frame_sources(id, f).unwrap(), None);
+    }
+    let mut r = renderer_of("glossy-cornell", &method);
+    r.settings.seed = other.seed;
+    render::render_job_to_dir(&mut r, 0..1, &dir.path().join("o2"), true, Some(&mut sj)).unwrap();
+    assert!(store.frame_sources(sj.job.id, 0).unwrap().is_some());
 }
 
 /// A job of `method` on the built-in `scene` stopped after frame 2 of 0..6
@@ -1863,6 +1940,7 @@ fn a_frame_written_again_replaces_its_record_block() {
                     stats: &stats,
                     state: None,
                     movies: None,
+                    sources: None,
                 },
             )
             .unwrap();

@@ -6,15 +6,17 @@
 //! A record's versions are keyed by the frame that wrote them
 //! (`store::keys`); the record at frame N is its latest version written at
 //! or before N, and it is alive there when `created_frame ≤ N ≤ last_frame`
-//! (`store::schema::RecordValue`).
+//! (`store::schema::RecordValue`). A radiance record also shows the
+//! sources that frame stored with it (`store::schema::FrameSourcesValue`).
 
 use super::{ApiError, AppState};
 use crate::scene::Scene;
-use crate::store::schema::RecordValue;
+use crate::store::schema::{RecordValue, SourceValue};
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
 use axum::Json;
 use serde_json::{json, Value};
+use std::collections::hash_map::Entry;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
@@ -128,8 +130,25 @@ impl RecordsQuery {
 }
 
 /// Record `r` as the API shows it at `frame`, with where it lies on the
-/// image (`screen`, pixels; `None` behind the camera).
-fn record_json(r: &RecordValue, frame: u32, screen: Option<[f32; 2]>) -> Value {
+/// image (`screen`, pixels; `None` behind the camera) and, for a radiance
+/// record, its sources (`null` for an irradiance record).
+fn record_json(
+    r: &RecordValue,
+    frame: u32,
+    screen: Option<[f32; 2]>,
+    sources: Option<&[SourceValue]>,
+) -> Value {
+    let sources = sources.map(|list| {
+        list.iter()
+            .map(|s| {
+                json!({
+                    "offset": s.offset,
+                    "solid_angle": s.solid_angle,
+                    "irradiance": s.irradiance,
+                })
+            })
+            .collect::<Vec<_>>()
+    });
     json!({
         "id": r.id,
         "position": r.position,
@@ -142,7 +161,35 @@ fn record_json(r: &RecordValue, frame: u32, screen: Option<[f32; 2]>) -> Value {
         "reused": frame - r.created_frame,
         "object": r.object,
         "screen": screen,
+        "sources": sources,
     })
+}
+
+/// The sources of the radiance records that frames of job `sid` wrote,
+/// read one frame at a time as records ask for them.
+struct StoredSources<'a> {
+    store: &'a crate::store::Store,
+    sid: u64,
+    by_frame: HashMap<u32, HashMap<u64, Vec<SourceValue>>>,
+}
+
+impl StoredSources<'_> {
+    /// The sources of record `id` as frame `written` stored it (`None`: an
+    /// irradiance record).
+    fn of(&mut self, written: u32, id: u64) -> Result<Option<&[SourceValue]>, ApiError> {
+        let frame = match self.by_frame.entry(written) {
+            Entry::Occupied(e) => e.into_mut(),
+            Entry::Vacant(e) => {
+                let stored = self
+                    .store
+                    .frame_sources(self.sid, written)
+                    .map_err(ApiError::internal)?;
+                let records = stored.map_or_else(Vec::new, |v| v.records);
+                e.insert(records.into_iter().map(|r| (r.id, r.sources)).collect())
+            }
+        };
+        Ok(frame.get(&id).map(Vec::as_slice))
+    }
 }
 
 pub async fn records(
@@ -156,22 +203,28 @@ pub async fn records(
     let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();
     tokio::task::spawn_blocking(move || {
-        // Latest version of each record written at or before `frame`.
-        let mut latest: BTreeMap<u64, RecordValue> = BTreeMap::new();
+        // Latest version of each record written at or before `frame`, and
+        // the frame that wrote it.
+        let mut latest: BTreeMap<u64, (u32, RecordValue)> = BTreeMap::new();
         s.store
             .for_each_record(sid, |written, r| {
                 if written <= frame {
-                    latest.insert(r.id, r);
+                    latest.insert(r.id, (written, r));
                 }
             })
             .map_err(ApiError::internal)?;
+        let mut sources = StoredSources {
+            store: &s.store,
+            sid,
+            by_frame: HashMap::new(),
+        };
         let scene = scene(&s, &job.request.scene.to_string(), &job.request.scene)?;
         let settings = &job.request.settings;
         let camera = scene.camera_at(frame as f32 / settings.fps);
         let (w, h) = (settings.width as f32, settings.height as f32);
         let mut out = Vec::new();
         let mut count = 0usize;
-        for r in latest.values() {
+        for (written, r) in latest.values() {
             if !(r.created_frame <= frame && frame <= r.last_frame) {
                 continue;
             }
@@ -185,7 +238,8 @@ pub async fn records(
             let screen = camera
                 .project(glam::Vec3::from_array(r.position), w / h)
                 .map(|(sx, sy)| [sx * w, sy * h]);
-            out.push(record_json(r, frame, screen));
+            let sources = sources.of(*written, r.id)?;
+            out.push(record_json(r, frame, screen, sources));
         }
         Ok(Json(json!({
             "id": id,

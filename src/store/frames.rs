@@ -4,8 +4,8 @@
 
 use super::samples::{compress, decompress, SampleBlock, SampleLog};
 use super::schema::{
-    FrameValue, JobValue, MovieFramesValue, MovieValue, RecordBlock, RecordValue, StateHeadValue,
-    StateRecordValue, StatsValue,
+    FrameSourcesValue, FrameValue, JobValue, MovieFramesValue, MovieValue, RecordBlock,
+    RecordSourcesValue, RecordValue, SourceValue, StateHeadValue, StateRecordValue, StatsValue,
 };
 use super::{append_record_block, encode, keys, now_unix, Store, StoreError};
 use sled::transaction::{ConflictableTransactionError, TransactionError};
@@ -53,6 +53,33 @@ impl MovieFramesValue {
     }
 }
 
+impl FrameSourcesValue {
+    /// The sources of the radiance records among `records` (those with
+    /// [`crate::cache::IrradianceRecord::eas`]), in id order; `None` when
+    /// none is a radiance record.
+    pub fn of(records: &[crate::cache::IrradianceRecord]) -> Option<Self> {
+        let mut out: Vec<RecordSourcesValue> = records
+            .iter()
+            .filter_map(|r| {
+                let sources = r.eas.as_deref()?.iter().map(|e| SourceValue {
+                    offset: e.offset.to_array(),
+                    solid_angle: e.solid_angle,
+                    irradiance: e.irradiance.to_array(),
+                });
+                Some(RecordSourcesValue {
+                    id: r.id,
+                    sources: sources.collect(),
+                })
+            })
+            .collect();
+        // A record given twice keeps its last version, as in its block.
+        out.reverse();
+        out.sort_by_key(|r| r.id);
+        out.dedup_by_key(|r| r.id);
+        (!out.is_empty()).then_some(FrameSourcesValue { records: out })
+    }
+}
+
 /// One record of a frame with its samples, ready to store.
 pub struct RecordCommit {
     pub record: RecordValue,
@@ -74,6 +101,9 @@ pub struct FrameCommit<'a> {
     pub state: Option<StateCommit<'a>>,
     /// The frame's texture movies (`movies`).
     pub movies: Option<&'a MovieFramesValue>,
+    /// The sources of the radiance records among `records`
+    /// ([`FrameSourcesValue::of`]).
+    pub sources: Option<&'a FrameSourcesValue>,
 }
 
 /// A stateful method's state changes of one frame, with the chain they
@@ -206,9 +236,10 @@ impl Store {
         progressed.last_frame = Some(c.frame);
         progressed.updated_unix = now_unix();
         let movies_bytes = c.movies.map(encode);
+        let sources_bytes = c.sources.map(encode);
         let frame_bytes = encode(&logged.frame);
         let job_bytes = encode(&progressed);
-        let tree_values = [&logged.records, &movies_bytes, &state.head]
+        let tree_values = [&logged.records, &movies_bytes, &sources_bytes, &state.head]
             .into_iter()
             .flatten()
             .chain(state.put.iter().map(|(_, v)| v))
@@ -229,41 +260,46 @@ impl Store {
             &self.state,
             &self.jobs,
             &self.movies,
+            &self.sources,
         )
-            .transaction(|(frames, records, meta, stats, state_tree, jobs, movies)| {
-                for k in &state.removed {
-                    state_tree.remove(&k[..])?;
-                }
-                for (k, v) in &state.put {
-                    state_tree.insert(&k[..], &v[..])?;
-                }
-                if let Some(head) = &state.head {
-                    state_tree.insert(&state_head_key[..], &head[..])?;
-                }
-                match &logged.records {
-                    Some(v) => {
-                        records.insert(&frame_key[..], &v[..])?;
+            .transaction(
+                |(frames, records, meta, stats, state_tree, jobs, movies, sources)| {
+                    for k in &state.removed {
+                        state_tree.remove(&k[..])?;
                     }
-                    None if already => {
-                        records.remove(&frame_key[..])?;
+                    for (k, v) in &state.put {
+                        state_tree.insert(&k[..], &v[..])?;
                     }
-                    None => {}
-                }
-                match &movies_bytes {
-                    Some(v) => {
-                        movies.insert(&frame_key[..], &v[..])?;
+                    if let Some(head) = &state.head {
+                        state_tree.insert(&state_head_key[..], &head[..])?;
                     }
-                    None if already => {
-                        movies.remove(&frame_key[..])?;
+                    match &logged.records {
+                        Some(v) => {
+                            records.insert(&frame_key[..], &v[..])?;
+                        }
+                        None if already => {
+                            records.remove(&frame_key[..])?;
+                        }
+                        None => {}
                     }
-                    None => {}
-                }
-                meta.insert(keys::META_SAMPLES_LOG_LEN, &log_len[..])?;
-                stats.insert(&frame_key[..], &stats_bytes[..])?;
-                frames.insert(&frame_key[..], &frame_bytes[..])?;
-                jobs.insert(&job_key[..], &job_bytes[..])?;
-                Ok::<(), ConflictableTransactionError<()>>(())
-            });
+                    for (tree, value) in [(movies, &movies_bytes), (sources, &sources_bytes)] {
+                        match value {
+                            Some(v) => {
+                                tree.insert(&frame_key[..], &v[..])?;
+                            }
+                            None if already => {
+                                tree.remove(&frame_key[..])?;
+                            }
+                            None => {}
+                        }
+                    }
+                    meta.insert(keys::META_SAMPLES_LOG_LEN, &log_len[..])?;
+                    stats.insert(&frame_key[..], &stats_bytes[..])?;
+                    frames.insert(&frame_key[..], &frame_bytes[..])?;
+                    jobs.insert(&job_key[..], &job_bytes[..])?;
+                    Ok::<(), ConflictableTransactionError<()>>(())
+                },
+            );
         result.map_err(|e| match e {
             TransactionError::Storage(s) => StoreError::sled(&self.path, s),
             TransactionError::Abort(()) => unreachable!("the transaction never aborts"),
@@ -337,6 +373,16 @@ impl Store {
             records: records_value,
             samples_raw,
         })
+    }
+
+    /// The sources of the radiance records frame `frame` of `job` wrote
+    /// (`None`: it wrote none, or was stored before schema 9).
+    pub fn frame_sources(
+        &self,
+        job: u64,
+        frame: u32,
+    ) -> Result<Option<FrameSourcesValue>, StoreError> {
+        self.get("sources", &keys::frame(job, frame))
     }
 
     /// The texture movies stored with frame `frame` of `job` (`movies`).

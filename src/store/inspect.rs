@@ -67,6 +67,10 @@ pub struct JobReport {
     pub record_value_bytes: u64,
     /// Bytes of the frames' record blocks in the sample log (zstd).
     pub record_block_bytes: u64,
+    /// Of the record versions, the radiance records (`--ic-glossy eas`),
+    /// and the sources stored with them (the `sources` tree).
+    pub radiance_records: u64,
+    pub sources: u64,
     /// Lifespan in frames → number of records.
     pub lifespan_histogram: BTreeMap<u32, u64>,
     /// Object (its index in the scene) → the records on it.
@@ -316,6 +320,14 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
             r.record_value_bytes += u64::from(v.raw_len);
             r.record_block_bytes += u64::from(v.stored_len);
         }
+        if let Some(v) = store.frame_sources(j.id, frame)? {
+            r.radiance_records += v.records.len() as u64;
+            r.sources += v
+                .records
+                .iter()
+                .map(|r| r.sources.len() as u64)
+                .sum::<u64>();
+        }
     }
     let mut lifespans = BTreeMap::new();
     store.for_each_record(j.id, |frame, rec| {
@@ -390,6 +402,8 @@ impl JobReport {
             exr_raw_bytes: 0,
             record_value_bytes: 0,
             record_block_bytes: 0,
+            radiance_records: 0,
+            sources: 0,
             lifespan_histogram: BTreeMap::new(),
             records_by_object: BTreeMap::new(),
             moving_objects: None,
@@ -517,6 +531,13 @@ fn job_text(s: &mut String, j: &JobReport) {
         j.samples_raw_bytes,
         ratio(j.samples_raw_bytes, j.samples_stored_bytes)
     );
+    if j.radiance_records > 0 {
+        let _ = writeln!(
+            s,
+            "  radiance records {} of the records, with {} sources stored",
+            j.radiance_records, j.sources
+        );
+    }
     if let Some(st) = &j.state {
         let _ = writeln!(
             s,

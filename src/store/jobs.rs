@@ -113,6 +113,7 @@ impl Store {
             &self.frames,
             &self.stats,
             &self.records,
+            &self.sources,
             &self.state,
             &self.movies,
         ] {

@@ -12,7 +12,7 @@ use super::{keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 8;
+pub const CURRENT_VERSION: u32 = 9;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -61,6 +61,11 @@ pub const MIGRATIONS: &[Migration] = &[
         from: 7,
         name: "0008_frame_footprint",
         run: super::v7::migrate_to_v8,
+    },
+    Migration {
+        from: 8,
+        name: "0009_record_sources",
+        run: super::v8::migrate_to_v9,
     },
 ];
 

@@ -1,6 +1,6 @@
 //! The persistent space-time store (DESIGN.md "The store"): a sled 0.34
 //! database directory with one tree per kind — `meta`, `records`,
-//! `movies`, `frames`, `jobs`, `stats`, `state` — and, beside it in the
+//! `sources`, `movies`, `frames`, `jobs`, `stats`, `state` — and, beside it in the
 //! same directory, the append-only sample log `samples.log` (after a
 //! [`compact`]ion, `samples.N.log`: `meta` names it) ([`samples`]).
 //!
@@ -8,7 +8,9 @@
 //!   `migrations/0001_initial.md`, `migrations/0002_state_and_identity.md`,
 //!   `migrations/0003_sample_log.md`, `migrations/0004_record_blocks.md`,
 //!   `migrations/0005_log_generations.md`, `migrations/0006_movies.md`,
-//!   `migrations/0007_radiance_records_in_state.md`).
+//!   `migrations/0007_radiance_records_in_state.md`,
+//!   `migrations/0008_frame_footprint.md`,
+//!   `migrations/0009_record_sources.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
 //! - Bulk values are zstd-compressed and live in the sample log, whose
@@ -20,8 +22,9 @@
 //!   sled sees a few small values per frame, however many records it has.
 //! - A job checkpoints each frame with [`Store::commit_frame`]: the frame's
 //!   EXR, sample blocks and record block are appended to the log and
-//!   synced, then one sled transaction over `frames`, `records`, `stats`,
-//!   `state`, `jobs` and `meta` (the log's committed length), then `flush`;
+//!   synced, then one sled transaction over `frames`, `records`,
+//!   `sources`, `movies`, `stats`, `state`, `jobs` and `meta` (the log's
+//!   committed length), then `flush`;
 //!   the frame counts as acknowledged only after that returns. A log tail
 //!   beyond the committed length (a crash in between) is cut off when the
 //!   store is opened.
@@ -56,6 +59,7 @@ pub mod v4;
 pub mod v5;
 pub mod v6;
 pub mod v7;
+pub mod v8;
 
 use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};
 use rkyv::bytecheck::CheckBytes;
@@ -72,8 +76,8 @@ pub use samples::SampleBlock;
 pub use schema::JobSpec;
 
 /// The trees, in the order `inspect` lists them.
-pub const TREES: [&str; 7] = [
-    "meta", "jobs", "frames", "stats", "records", "state", "movies",
+pub const TREES: [&str; 8] = [
+    "meta", "jobs", "frames", "stats", "records", "sources", "state", "movies",
 ];
 
 /// sled's page cache. Its default (1 GiB) made a render's memory grow
@@ -151,6 +155,7 @@ pub struct Store {
     frames: sled::Tree,
     stats: sled::Tree,
     records: sled::Tree,
+    sources: sled::Tree,
     state: sled::Tree,
     movies: sled::Tree,
     /// The sample log's generation (`meta.samples_log_generation`): its
@@ -256,6 +261,7 @@ impl Store {
             frames: tree("frames")?,
             stats: tree("stats")?,
             records: tree("records")?,
+            sources: tree("sources")?,
             state: tree("state")?,
             movies: tree("movies")?,
             log_generation,
@@ -307,6 +313,7 @@ impl Store {
             "frames" => &self.frames,
             "stats" => &self.stats,
             "records" => &self.records,
+            "sources" => &self.sources,
             "state" => &self.state,
             "movies" => &self.movies,
             _ => return None,

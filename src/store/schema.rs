@@ -1,4 +1,6 @@
-//! Value schemas of store schema version 8
+//! Value schemas of store schema version 9
+//! (`migrations/0009_record_sources.md`: the `sources` tree holds
+//! [`FrameSourcesValue`]s), on top of 8
 //! (`migrations/0008_frame_footprint.md`: [`StatsValue`] gained the bytes
 //! a frame stored and, in its statistics, the samples it shot again and
 //! its cache's bytes in memory; the schema-7 value is in [`super::v7`]), on
@@ -195,6 +197,34 @@ pub struct StateRecordValue {
     pub frame: u32,
     /// The record's state (method-defined bytes).
     pub data: Vec<u8>,
+}
+
+/// `sources` value under `job · frame` (schema 9,
+/// `migrations/0009_record_sources.md`): the equivalent area light sources
+/// of the radiance records (`--ic-glossy eas`) whose versions the frame
+/// wrote to its [`RecordBlock`], in id order (no key when it wrote none).
+/// Held inline, not in the sample log: a frame's sources are one small
+/// value, and their floats would gain little from zstd.
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct FrameSourcesValue {
+    pub records: Vec<RecordSourcesValue>,
+}
+
+/// A radiance record's sources (empty: its sources bring no light).
+#[derive(Archive, Serialize, Deserialize, Clone, Debug, PartialEq)]
+pub struct RecordSourcesValue {
+    pub id: u64,
+    pub sources: Vec<SourceValue>,
+}
+
+/// One equivalent area light source ([`crate::cache::eas::Eas`]): the
+/// offset from its record to its centroid, its solid angle seen from the
+/// record, and the irradiance it brings there.
+#[derive(Archive, Serialize, Deserialize, Clone, Copy, Debug, PartialEq)]
+pub struct SourceValue {
+    pub offset: [f32; 3],
+    pub solid_angle: f32,
+    pub irradiance: [f32; 3],
 }
 
 /// `movies` value under `job · frame` (schema 6,
