@@ -2,6 +2,7 @@
 //! schema, locked, damaged directory), migrations, jobs and resume.
 
 use glam::Vec3;
+use radcache::cache::eas::Eas;
 use radcache::cache::gather::Strata;
 use radcache::film;
 use radcache::method::ic::{GlossyLobe, IcSettings};
@@ -12,6 +13,7 @@ use radcache::method::trc::{TemporalGradients, TrcSettings};
 use radcache::method::{FrameStats, Method};
 use radcache::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob};
 use radcache::store::migrate::{self, Migration};
+use radcache::store::schema::FrameSourcesValue;
 use radcache::store::{
     keys, v1, FrameCommit, JobSpec, PackedSample, RecordCommit, SampleBlock, Store, StoreError,
 };
@@ -1921,12 +1923,14 @@ fn interrupted_0003_to_0004_migration_resumes_where_it_stopped() {
 }
 
 #[test]
-fn a_frame_written_again_replaces_its_record_block() {
+fn a_frame_written_again_replaces_its_record_block_and_sources() {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(&dir.path().join("db")).unwrap();
     let mut job = store.begin_job(&spec("j"), false).unwrap();
     let strata = Strata { theta: 4, phi: 12 };
-    let commit = |job: &mut radcache::store::schema::JobValue, records: Vec<RecordCommit>| {
+    let commit = |job: &mut radcache::store::schema::JobValue,
+                  records: Vec<RecordCommit>,
+                  sources: Option<&FrameSourcesValue>| {
         let stats = FrameStats::default();
         store
             .commit_frame(
@@ -1940,7 +1944,7 @@ fn a_frame_written_again_replaces_its_record_block() {
                     stats: &stats,
                     state: None,
                     movies: None,
-                    sources: None,
+                    sources,
                 },
             )
             .unwrap();
@@ -1950,8 +1954,29 @@ fn a_frame_written_again_replaces_its_record_block() {
         r.irradiance = Vec3::splat(seed as f32);
         RecordCommit::from_record(&r, SampleBlock::pack(&samples(48, seed), &[]), strata, 0)
     };
+    // Record 5 a radiance record, given twice: the sources of its last
+    // version are kept, and record 3 has none.
+    let radiance = |id: u64, seed: u32| {
+        let mut r = record(id, 0);
+        let source = Eas {
+            offset: Vec3::X,
+            solid_angle: 0.5,
+            irradiance: Vec3::splat(seed as f32),
+            node: 0,
+        };
+        r.eas = Some(vec![source].into());
+        r
+    };
+    let sources = FrameSourcesValue::of(&[radiance(5, 1), record(3, 0), radiance(5, 3)]).unwrap();
+    assert_eq!(sources.records.len(), 1);
+    assert_eq!(sources.records[0].id, 5);
+    assert_eq!(sources.records[0].sources[0].irradiance, [3.0; 3]);
     // Out of order, and record 5 twice: its last version is kept.
-    commit(&mut job, vec![rc(5, 1), rc(3, 2), rc(5, 3)]);
+    commit(&mut job, vec![rc(5, 1), rc(3, 2), rc(5, 3)], Some(&sources));
+    assert_eq!(
+        store.frame_sources(job.id, 0).unwrap().as_ref(),
+        Some(&sources)
+    );
     let recs = store.frame_records(job.id, 0).unwrap();
     assert_eq!(recs.iter().map(|r| r.id).collect::<Vec<_>>(), vec![3, 5]);
     assert_eq!(recs[1].irradiance, [3.0; 3]);
@@ -1959,12 +1984,14 @@ fn a_frame_written_again_replaces_its_record_block() {
     assert_eq!(store.record_samples(job.id, 0, 5).unwrap(), want);
     assert_eq!(store.samples_of_record(job.id, 0, &recs[1]).unwrap(), want);
     assert!(store.record_samples(job.id, 0, 4).unwrap().is_empty());
-    // Written again: the new block replaces the old one …
-    commit(&mut job, vec![rc(7, 4)]);
+    // Written again: the new block replaces the old one, and with no
+    // radiance record no sources are left …
+    commit(&mut job, vec![rc(7, 4)], None);
     let recs = store.frame_records(job.id, 0).unwrap();
     assert_eq!(recs.iter().map(|r| r.id).collect::<Vec<_>>(), vec![7]);
+    assert_eq!(store.frame_sources(job.id, 0).unwrap(), None);
     // … and a version with no records leaves none.
-    commit(&mut job, Vec::new());
+    commit(&mut job, Vec::new(), None);
     assert!(store.frame_records(job.id, 0).unwrap().is_empty());
     assert!(store.frame_records_value(job.id, 0).unwrap().is_none());
     assert_eq!(store.frames_done(job.id).unwrap(), vec![0]);

@@ -216,8 +216,8 @@ impl Store {
     ) -> Result<JobValue, StoreError> {
         let frame_key = keys::frame(job.id, c.frame);
         // A frame written again (by another chain of a stateful method)
-        // replaces the record block of its former self (or, writing none,
-        // removes it).
+        // replaces the record block, movies and sources of its former self
+        // (or, writing none, removes them).
         let already = self.frame_done(job.id, c.frame)?;
         let log_start = log.end();
         let logged =
@@ -273,16 +273,14 @@ impl Store {
                     if let Some(head) = &state.head {
                         state_tree.insert(&state_head_key[..], &head[..])?;
                     }
-                    match &logged.records {
-                        Some(v) => {
-                            records.insert(&frame_key[..], &v[..])?;
-                        }
-                        None if already => {
-                            records.remove(&frame_key[..])?;
-                        }
-                        None => {}
-                    }
-                    for (tree, value) in [(movies, &movies_bytes), (sources, &sources_bytes)] {
+                    // A frame written again replaces its former value in
+                    // each, or removes it where it writes none.
+                    let per_frame = [
+                        (records, &logged.records),
+                        (movies, &movies_bytes),
+                        (sources, &sources_bytes),
+                    ];
+                    for (tree, value) in per_frame {
                         match value {
                             Some(v) => {
                                 tree.insert(&frame_key[..], &v[..])?;
