@@ -753,9 +753,10 @@ fn records_match_the_store_and_inspect() {
     }
 }
 
-/// An `ic` job with radiance records: `/records` gives each radiance
-/// record its stored sources (their irradiance sums to the record's) and
-/// each irradiance record `null`.
+/// An `ic` job with radiance records: `/records?sources=true` gives each
+/// radiance record its stored sources (their irradiance sums to the
+/// record's) and each irradiance record `null`; without it, only how many
+/// (`source_count`).
 #[test]
 fn records_show_the_sources_of_radiance_records() {
     let (dir, scenes) = workspace();
@@ -765,15 +766,22 @@ fn records_show_the_sources_of_radiance_records() {
         r#"{"scene":"builtin:glossy-cornell","method":"ic","frames":"0..1","size":"16x16","spp":1,"settings":{"glossy":"eas","strata":"4x12"}}"#,
     );
     wait_done(&server, &id);
-    let (status, body) = http(
-        &server,
-        "GET",
-        &format!("/api/jobs/{id}/records?frame=0"),
-        "",
-    );
-    assert_eq!(status, 200);
-    let body = json(&body);
+    let get = |q: &str| {
+        let (status, body) = http(&server, "GET", &format!("/api/jobs/{id}/records?{q}"), "");
+        (status, json(&body))
+    };
+    let (status, body) = get("frame=0&sources=true");
+    assert_eq!(status, 200, "{body}");
     let records = body["records"].as_array().unwrap();
+    let (_, counted) = get("frame=0");
+    for (full, short) in records.iter().zip(counted["records"].as_array().unwrap()) {
+        assert_eq!(full["id"], short["id"]);
+        let listed = full["sources"].as_array().map(Vec::len);
+        assert_eq!(short["source_count"].as_u64(), listed.map(|n| n as u64));
+        assert!(short.get("sources").is_none(), "{short}");
+    }
+    let (status, _) = get("frame=0&sources=maybe");
+    assert_eq!(status, 400);
     let (radiance, irradiance): (Vec<_>, Vec<_>) =
         records.iter().partition(|r| !r["sources"].is_null());
     assert!(!radiance.is_empty() && !irradiance.is_empty(), "{body}");

@@ -1,4 +1,4 @@
-//! `GET /api/jobs/{id}/records?frame=N&bbox=x0,y0,z0,x1,y1,z1[&limit=L]`:
+//! `GET /api/jobs/{id}/records?frame=N&bbox=x0,y0,z0,x1,y1,z1[&limit=L][&sources=true]`:
 //! the records alive at frame N inside a world-space box, read from the
 //! store, each with its projected pixel position (`screen`) under the
 //! scene's camera at that frame (the dashboard's overlay).
@@ -6,8 +6,10 @@
 //! A record's versions are keyed by the frame that wrote them
 //! (`store::keys`); the record at frame N is its latest version written at
 //! or before N, and it is alive there when `created_frame ≤ N ≤ last_frame`
-//! (`store::schema::RecordValue`). A radiance record also shows the
-//! sources that frame stored with it (`store::schema::FrameSourcesValue`).
+//! (`store::schema::RecordValue`). A radiance record also shows how many
+//! sources that frame stored with it (`store::schema::FrameSourcesValue`)
+//! and, with `sources=true`, the sources themselves: up to 64 a record,
+//! too many to send with every overlay the dashboard draws.
 
 use super::{ApiError, AppState};
 use crate::scene::Scene;
@@ -86,6 +88,8 @@ struct RecordsQuery {
     frame: u32,
     bbox: Option<Bbox>,
     limit: usize,
+    /// List radiance records' sources (`sources=true`), not only count them.
+    list_sources: bool,
 }
 
 /// The `frame=N` of a query (required).
@@ -125,31 +129,36 @@ impl RecordsQuery {
                     ApiError::bad_request(format!("limit {l:?}: expected 1..={MAX_LIMIT}"))
                 })?,
         };
-        Ok(RecordsQuery { frame, bbox, limit })
+        let list_sources = match q.get("sources").map(String::as_str) {
+            None | Some("false") => false,
+            Some("true") => true,
+            Some(other) => {
+                return Err(ApiError::bad_request(format!(
+                    "sources {other:?}: expected true or false"
+                )))
+            }
+        };
+        Ok(RecordsQuery {
+            frame,
+            bbox,
+            limit,
+            list_sources,
+        })
     }
 }
 
 /// Record `r` as the API shows it at `frame`, with where it lies on the
 /// image (`screen`, pixels; `None` behind the camera) and, for a radiance
-/// record, its sources (`null` for an irradiance record).
+/// record, how many sources it has (`source_count`; `null` for an
+/// irradiance record) and, when `list_sources`, the sources.
 fn record_json(
     r: &RecordValue,
     frame: u32,
     screen: Option<[f32; 2]>,
     sources: Option<&[SourceValue]>,
+    list_sources: bool,
 ) -> Value {
-    let sources = sources.map(|list| {
-        list.iter()
-            .map(|s| {
-                json!({
-                    "offset": s.offset,
-                    "solid_angle": s.solid_angle,
-                    "irradiance": s.irradiance,
-                })
-            })
-            .collect::<Vec<_>>()
-    });
-    json!({
+    let mut row = json!({
         "id": r.id,
         "position": r.position,
         "normal": r.normal,
@@ -161,8 +170,23 @@ fn record_json(
         "reused": frame - r.created_frame,
         "object": r.object,
         "screen": screen,
-        "sources": sources,
-    })
+        "source_count": sources.map(<[SourceValue]>::len),
+    });
+    if list_sources {
+        let list = sources.map(|list| {
+            list.iter()
+                .map(|s| {
+                    json!({
+                        "offset": s.offset,
+                        "solid_angle": s.solid_angle,
+                        "irradiance": s.irradiance,
+                    })
+                })
+                .collect::<Vec<_>>()
+        });
+        row["sources"] = json!(list);
+    }
+    row
 }
 
 /// The sources of the radiance records that frames of job `sid` wrote,
@@ -198,7 +222,12 @@ pub async fn records(
     query: Result<Query<HashMap<String, String>>, QueryRejection>,
 ) -> Result<Json<Value>, ApiError> {
     let Query(q) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
-    let RecordsQuery { frame, bbox, limit } = RecordsQuery::parse(&q)?;
+    let RecordsQuery {
+        frame,
+        bbox,
+        limit,
+        list_sources,
+    } = RecordsQuery::parse(&q)?;
     let job = state.job(&id)?;
     let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();
@@ -239,7 +268,7 @@ pub async fn records(
                 .project(glam::Vec3::from_array(r.position), w / h)
                 .map(|(sx, sy)| [sx * w, sy * h]);
             let sources = sources.of(*written, r.id)?;
-            out.push(record_json(r, frame, screen, sources));
+            out.push(record_json(r, frame, screen, sources, list_sources));
         }
         Ok(Json(json!({
             "id": id,
