@@ -1,6 +1,7 @@
 //! The dashboard in headless Chromium (Debian package `chromium`, which
-//! `.ci/run` installs): a server on a loopback port renders a tiny `trc`
-//! job, then Chromium loads the dashboard for it. The test fails, never
+//! `.ci/run` installs): a server on a loopback port renders a tiny job
+//! (`trc`; `movies`; `ic` with radiance records), then Chromium loads the
+//! dashboard for it. The test fails, never
 //! skips, without Chromium (set `CHROMIUM` to use another binary). The
 //! screenshot is kept at `target/tmp/browser/dashboard.png`.
 
@@ -205,19 +206,13 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
     );
 }
 
-/// A `movies` job's overlay draws its texture movies: one square per
-/// movie whose patch centre `/movies` places in the image.
-#[test]
-fn dashboard_draws_the_texture_movies_of_a_movies_job() {
+/// The server (with its store in `dir`) after it rendered the job of
+/// request `body`, the job's id, and the dashboard's DOM for it, loaded
+/// without console messages or reported errors.
+fn dashboard_for_job(dir: &Path, body: &str) -> (Server, String, String) {
     chromium();
-    let dir = tempfile::tempdir().unwrap();
-    let server = start(&dir.path().join("db"), &[]);
-    let (status, body) = http(
-        &server.addr,
-        "POST",
-        "/api/jobs",
-        r#"{"scene":"builtin:cube-in-box","method":"movies","frames":"0..2","size":"16x16","spp":1}"#,
-    );
+    let server = start(&dir.join("db"), &[]);
+    let (status, body) = http(&server.addr, "POST", "/api/jobs", body);
     assert_eq!(status, 201, "{body}");
     let id = serde_json::from_str::<serde_json::Value>(&body).unwrap()["id"]
         .as_str()
@@ -225,7 +220,7 @@ fn dashboard_draws_the_texture_movies_of_a_movies_job() {
         .to_string();
     wait_until_done(|| http(&server.addr, "GET", &format!("/api/jobs/{id}"), "").1);
     let url = format!("http://{}/?job={id}", server.addr);
-    let (dom, stderr) = run_chromium(&url, "--dump-dom", &dir.path().join("profile"));
+    let (dom, stderr) = run_chromium(&url, "--dump-dom", &dir.join("profile"));
     let console = console_lines(&stderr);
     assert!(
         console.is_empty(),
@@ -236,6 +231,18 @@ fn dashboard_draws_the_texture_movies_of_a_movies_job() {
     assert!(
         !dom.contains("data-errors="),
         "the page reported errors:\n{dom}"
+    );
+    (server, id, dom)
+}
+
+/// A `movies` job's overlay draws its texture movies: one square per
+/// movie whose patch centre `/movies` places in the image.
+#[test]
+fn dashboard_draws_the_texture_movies_of_a_movies_job() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, id, dom) = dashboard_for_job(
+        dir.path(),
+        r#"{"scene":"builtin:cube-in-box","method":"movies","frames":"0..2","size":"16x16","spp":1}"#,
     );
     let (_, movies) = http(
         &server.addr,
@@ -249,6 +256,35 @@ fn dashboard_draws_the_texture_movies_of_a_movies_job() {
     let squares = dom.matches("class=\"movie\"").count();
     assert_eq!(squares, in_view, "overlay squares vs movies in view");
     assert!(dom.contains("movies open"), "{dom}");
+}
+
+/// A job with radiance records (`--ic-glossy eas`): the overlay rings
+/// each radiance record in view, and only those.
+#[test]
+fn dashboard_rings_the_radiance_records() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, id, dom) = dashboard_for_job(
+        dir.path(),
+        r#"{"scene":"builtin:glossy-cornell","method":"ic","frames":"0..1","size":"16x16","spp":1,"settings":{"glossy":"eas","strata":"4x12"}}"#,
+    );
+    let (_, records) = http(
+        &server.addr,
+        "GET",
+        &format!("/api/jobs/{id}/records?frame=0"),
+        "",
+    );
+    let records: serde_json::Value = serde_json::from_str(&records).unwrap();
+    let radiance: Vec<serde_json::Value> = records["records"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| !r["source_count"].is_null())
+        .cloned()
+        .collect();
+    let ringed = in_view(&serde_json::Value::Array(radiance), 16.0);
+    assert!(ringed > 0, "no radiance record in view: {records}");
+    assert_eq!(dom.matches("data-sources=").count(), ringed, "{dom}");
+    assert!(dom.contains("radiance records (ringed)"), "{dom}");
 }
 
 /// Polls `job` (the job's JSON) until the job is done; fails on a failed

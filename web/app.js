@@ -275,6 +275,7 @@ function drawOverlay(r) {
   for (const rec of r.records) maxLife = Math.max(maxLife, rec.lifespan);
   const logMax = Math.log(Math.max(2, maxLife));
   const radius = Math.max(r.width, r.height) / 90;
+  let radiance = 0;
   for (const rec of r.records) {
     if (!rec.screen) continue;
     const [x, y] = rec.screen;
@@ -284,13 +285,23 @@ function drawOverlay(r) {
       fill: lifespanColour(Math.log(rec.lifespan) / logMax),
       'data-id': String(rec.id), class: 'record',
     });
-    c.append(svgEl('title', {}, `record ${rec.id}: lifespan ${rec.lifespan}, created at frame ${rec.created}`));
+    let title = `record ${rec.id}: lifespan ${rec.lifespan}, created at frame ${rec.created}`;
+    // A radiance record (glossy surface, --ic-glossy eas): ringed.
+    if (rec.source_count != null) {
+      radiance += 1;
+      c.setAttribute('data-sources', String(rec.source_count));
+      c.setAttribute('stroke', '#000');
+      c.setAttribute('stroke-width', (radius / 2.5).toFixed(3));
+      title += `, radiance record with ${rec.source_count} sources`;
+    }
+    c.append(svgEl('title', {}, title));
     pickable(svg, c, r, rec);
     svg.append(c);
   }
   $('legend-range').textContent = `(1–${maxLife} frames)`;
   $('overlay-info').textContent = `frame ${r.frame}: ${r.count} records alive` +
-    (r.truncated ? ` (showing ${r.records.length})` : '');
+    (r.truncated ? ` (showing ${r.records.length})` : '') +
+    (radiance ? `, ${radiance} shown are radiance records (ringed)` : '');
 }
 
 // A `movies` job's texture movies: a square at the centre of each movie's
