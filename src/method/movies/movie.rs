@@ -171,7 +171,6 @@ impl Movie {
             + (at(i0, j1) * (1.0 - fx) + at(i1, j1) * fx) * fy
     }
 
-    /// Bytes its kept static shadows hold.
     /// Bytes it holds: itself, its texels (linear and as last stored),
     /// their layout and its kept static shadows.
     pub fn memory_bytes(&self) -> usize {
@@ -186,6 +185,7 @@ impl Movie {
             + self.shadow_bytes()
     }
 
+    /// Bytes its kept static shadows hold.
     pub fn shadow_bytes(&self) -> usize {
         self.shadows.as_ref().map_or(0, StaticShadows::bytes)
     }
