@@ -182,6 +182,19 @@ fn corrupt_value_is_an_error_naming_tree_and_key() {
         msg.contains("tree `jobs`") && msg.contains("\"j\""),
         "{msg}"
     );
+    // A frame's statistics and its radiance records' sources.
+    for tree in ["stats", "sources"] {
+        store
+            .raw_insert(tree, &keys::frame(id, 0), b"garbage")
+            .unwrap();
+    }
+    let msg = err_text(store.frame_stats(id, 0));
+    assert!(msg.contains("tree `stats`"), "{msg}");
+    let msg = err_text(store.frame_sources(id, 0));
+    assert!(
+        msg.contains("tree `sources`") && msg.contains(&format!("job {id} frame 0")),
+        "{msg}"
+    );
     // Undamaged values still read.
     assert_eq!(store.frame_records(id, 0).unwrap().len(), 3);
 }
