@@ -6,7 +6,9 @@
 //! lights.
 
 use crate::material::luminance;
-use crate::sampling::{uniform_triangle, LightChoice, SphericalTriangle, ONE_MINUS_EPSILON};
+use crate::sampling::{
+    uniform_triangle, ArvoMap, LightChoice, SphericalTriangle, ONE_MINUS_EPSILON,
+};
 use crate::scene::{Snapshot, Triangle};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
@@ -212,6 +214,7 @@ impl LightSampler {
     /// Samples a light point for shading point `p`. `None` when there are no
     /// lights or the sampled point cannot send light towards `p` (back side
     /// of a one-sided emitter, outside a spot cone, degenerate geometry).
+    /// For many samples at one point, [`LightSampler::at_point`].
     pub fn sample(
         &self,
         snapshot: &Snapshot,
@@ -219,8 +222,64 @@ impl LightSampler {
         choice: LightChoice,
         sampling: TriangleSampling,
     ) -> Option<LightSample> {
-        let LightChoice { pick, u } = choice;
-        let k = self.source_at(pick)?;
+        let k = self.source_at(choice.pick)?;
+        let strategy = self.strategy(snapshot, k, p, sampling);
+        self.sample_source(snapshot, k, strategy.as_ref(), p, choice.u)
+    }
+
+    /// Light samples at shading point `p`, with what each emitting
+    /// triangle's sampling needs of `p` alone worked out once
+    /// ([`PointLights`]).
+    pub fn at_point<'a>(
+        &'a self,
+        snapshot: &'a Snapshot,
+        p: Vec3,
+        sampling: TriangleSampling,
+    ) -> PointLights<'a> {
+        PointLights {
+            lights: self,
+            snapshot,
+            p,
+            sampling,
+            strategies: Vec::new(),
+        }
+    }
+
+    /// How source `k` is sampled from `p`: `None` for a point light, and
+    /// for an emitting triangle wholly behind `p`'s side of it (a back
+    /// face).
+    fn strategy(
+        &self,
+        snapshot: &Snapshot,
+        k: usize,
+        p: Vec3,
+        sampling: TriangleSampling,
+    ) -> Option<TriangleStrategy> {
+        let Source::Triangle {
+            id,
+            normal,
+            double_sided,
+            ..
+        } = self.sources[k]
+        else {
+            return None;
+        };
+        let tri = &snapshot.triangles[id as usize];
+        // The whole triangle is on one side of p: skip a back face.
+        emitting_side_cosine(normal, double_sided, p - tri.p[0])?;
+        Some(TriangleStrategy::from(tri, p, sampling))
+    }
+
+    /// A point on source `k` for `p` from `u`, the triangle's `strategy`
+    /// from [`LightSampler::strategy`].
+    fn sample_source(
+        &self,
+        snapshot: &Snapshot,
+        k: usize,
+        strategy: Option<&TriangleStrategy>,
+        p: Vec3,
+        u: Vec2,
+    ) -> Option<LightSample> {
         let pick_pdf = self.pick_probability(k);
         match self.sources[k] {
             Source::Triangle {
@@ -230,10 +289,8 @@ impl LightSampler {
                 radiance,
                 double_sided,
             } => {
+                let strategy = strategy?;
                 let tri = &snapshot.triangles[id as usize];
-                // The whole triangle is on one side of p: skip a back face.
-                emitting_side_cosine(normal, double_sided, p - tri.p[0])?;
-                let strategy = TriangleStrategy::from(tri, p, sampling);
                 let (position, wi, distance, d2) = strategy.point(tri, normal, p, u)?;
                 let cos_light = emitting_side_cosine(normal, double_sided, -wi)?;
                 Some(LightSample {
@@ -275,6 +332,40 @@ impl LightSampler {
             return 0.0;
         }
         pick * TriangleStrategy::from(tri, origin, sampling).pdf(tri.area(), d2, cos_light)
+    }
+}
+
+/// The lights as seen from one shading point, for many light samples there
+/// (a texel's shadow samples): which side of each emitting triangle faces
+/// the point, and the triangle's spherical triangle and Arvo's map, are
+/// worked out for the first sample that picks it and kept for the others,
+/// rather than once per sample. Its samples are [`LightSampler::sample`]'s,
+/// bit for bit.
+pub struct PointLights<'a> {
+    lights: &'a LightSampler,
+    snapshot: &'a Snapshot,
+    p: Vec3,
+    sampling: TriangleSampling,
+    /// The sources picked so far and how each is sampled from `p`
+    /// ([`LightSampler::strategy`]); a point's samples pick few.
+    strategies: Vec<(usize, Option<TriangleStrategy>)>,
+}
+
+impl PointLights<'_> {
+    /// [`LightSampler::sample`] at this point.
+    pub fn sample(&mut self, choice: LightChoice) -> Option<LightSample> {
+        let lights = self.lights;
+        let k = lights.source_at(choice.pick)?;
+        let at = match self.strategies.iter().position(|(j, _)| *j == k) {
+            Some(at) => at,
+            None => {
+                let strategy = lights.strategy(self.snapshot, k, self.p, self.sampling);
+                self.strategies.push((k, strategy));
+                self.strategies.len() - 1
+            }
+        };
+        let strategy = self.strategies[at].1.as_ref();
+        lights.sample_source(self.snapshot, k, strategy, self.p, choice.u)
     }
 }
 
@@ -325,9 +416,13 @@ pub(crate) const SOLID_ANGLE_SAMPLING: std::ops::RangeInclusive<f32> = 3e-3..=6.
 /// [`LightSampler::sample`] made.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum TriangleStrategy {
-    /// Uniform in the solid angle `Ω` the triangle subtends
-    /// ([`SphericalTriangle::sample`]).
-    SolidAngle(SphericalTriangle),
+    /// Uniform in the solid angle `Ω` the triangle subtends, by Arvo's map
+    /// ([`SphericalTriangle::arvo`]; `None` where the triangle is
+    /// degenerate from the point).
+    SolidAngle {
+        solid_angle: f32,
+        map: Option<ArvoMap>,
+    },
     /// Uniform by area ([`uniform_triangle`]).
     Area,
 }
@@ -339,7 +434,10 @@ impl TriangleStrategy {
         }
         let sphere = SphericalTriangle::new(&tri.p, p);
         if SOLID_ANGLE_SAMPLING.contains(&sphere.solid_angle) {
-            TriangleStrategy::SolidAngle(sphere)
+            TriangleStrategy::SolidAngle {
+                solid_angle: sphere.solid_angle,
+                map: sphere.arvo(),
+            }
         } else {
             TriangleStrategy::Area
         }
@@ -356,10 +454,10 @@ impl TriangleStrategy {
         u: Vec2,
     ) -> Option<(Vec3, Vec3, f32, f32)> {
         match self {
-            TriangleStrategy::SolidAngle(sphere) => {
+            TriangleStrategy::SolidAngle { map, .. } => {
                 // The direction is drawn: the point is where it meets the
                 // triangle's plane.
-                let wi = sphere.sample(u)?;
+                let wi = map.as_ref()?.sample(u)?;
                 let distance = normal.dot(tri.p[0] - p) / normal.dot(wi);
                 if !(distance > 0.0 && distance.is_finite()) {
                     return None;
@@ -384,7 +482,7 @@ impl TriangleStrategy {
     /// cosine `cos_light` on a triangle of area `area`.
     fn pdf(&self, area: f32, d2: f32, cos_light: f32) -> f32 {
         match self {
-            TriangleStrategy::SolidAngle(sphere) => 1.0 / sphere.solid_angle,
+            TriangleStrategy::SolidAngle { solid_angle, .. } => 1.0 / solid_angle,
             // Area pdf 1/A converted to solid angle: d²/(A·cosθ_l).
             TriangleStrategy::Area => d2 / (area * cos_light),
         }
@@ -456,6 +554,59 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Many samples at one point through [`PointLights`] are those of
+    /// [`LightSampler::sample`], bit for bit: on chairs-room (a panel of
+    /// two triangles and a bulb), at points across the room and just
+    /// behind the panel (whose back faces give no sample), under both
+    /// strategies.
+    #[test]
+    fn point_lights_sample_as_the_light_sampler_does() {
+        let scene = Scene::builtin("chairs-room").unwrap();
+        let snapshot = scene.snapshot(0.0);
+        let lights = LightSampler::new(&snapshot, &scene.materials);
+        let (lo, hi) = snapshot.triangles.iter().flat_map(|t| t.p).fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(p), hi.max(p)),
+        );
+        let mut rng = crate::sampling::Rng::from_seed(11, 0);
+        let mut points: Vec<Vec3> = (0..40)
+            .map(|_| lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()))
+            .collect();
+        for id in lights.emitting_triangles() {
+            let tri = &snapshot.triangles[id];
+            let centre = (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0;
+            points.push(centre - 0.01 * tri.geometric_normal());
+        }
+        let (mut drawn, mut refused) = (0, 0);
+        for sampling in [TriangleSampling::SolidAngle, TriangleSampling::Area] {
+            for &p in &points {
+                let mut at_point = lights.at_point(&snapshot, p, sampling);
+                for _ in 0..32 {
+                    let choice = lights.choose(rng.next_2d());
+                    let one = lights.sample(&snapshot, p, choice, sampling);
+                    let many = at_point.sample(choice);
+                    let bits = |s: Option<LightSample>| {
+                        s.map(|s| {
+                            let v = [s.position, s.wi, s.radiance]
+                                .map(|v| v.to_array().map(f32::to_bits));
+                            (v, s.distance.to_bits(), s.pdf.to_bits(), s.is_delta)
+                        })
+                    };
+                    assert_eq!(bits(one), bits(many), "at {p} with {choice:?}");
+                    if one.is_some() {
+                        drawn += 1;
+                    } else {
+                        refused += 1;
+                    }
+                }
+            }
+        }
+        assert!(
+            drawn > 1000 && refused > 0,
+            "{drawn} drawn, {refused} refused"
+        );
     }
 
     /// cube-in-box's ceiling light seen from the back wall just under it,

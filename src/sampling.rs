@@ -286,7 +286,7 @@ pub struct SphericalTriangle {
     a: Vec3,
     b: Vec3,
     c: Vec3,
-    /// `|a·(b×c)|`, kept for [`SphericalTriangle::sample`].
+    /// `|a·(b×c)|`, kept for [`SphericalTriangle::arvo`].
     triple: f32,
     pub solid_angle: f32,
 }
@@ -308,14 +308,17 @@ impl SphericalTriangle {
         }
     }
 
-    /// A direction uniform over the spherical triangle (density `1/Ω`).
-    /// Arvo's map (1995), in the form of PBRT-v4's
-    /// `SampleSphericalTriangle`: `u.x` sets the area `u.x·Ω` of the
-    /// sub-triangle (a, b, c') whose vertex c' on the arc from a to c
-    /// follows in closed form, and `u.y` the point on the arc from b to
-    /// c'. The map is continuous and preserves area, so a stratified `u`
-    /// stays stratified over the solid angle. `None` where the triangle is
-    /// degenerate from its point.
+    /// A direction uniform over the spherical triangle (density `1/Ω`);
+    /// `None` where the triangle is degenerate from its point. One sample
+    /// of [`SphericalTriangle::arvo`]'s map.
+    pub fn sample(&self, u: Vec2) -> Option<Vec3> {
+        self.arvo()?.sample(u)
+    }
+
+    /// Arvo's map over this triangle (1995), in the form of PBRT-v4's
+    /// `SampleSphericalTriangle`, with what does not depend on the sample
+    /// worked out: callers that draw many samples from one point keep it.
+    /// `None` where the triangle is degenerate from its point.
     ///
     /// Departures from PBRT, for speed (it runs for every light sample):
     /// the area is `Ω` rather than the angle sum, which saves the other two
@@ -325,7 +328,7 @@ impl SphericalTriangle {
     /// `(a×b)×(a×c) = (a·(b×c))·a`, so `sin α = |a·(b×c)| / (|a×b||a×c|)`
     /// from the triple product `new` found, and `|a×c|` is also the length
     /// of `c`'s part orthogonal to `a`. Two square roots instead of four.
-    pub fn sample(&self, u: Vec2) -> Option<Vec3> {
+    pub fn arvo(&self) -> Option<ArvoMap> {
         let (a, b, c) = (self.a, self.b, self.c);
         let (n_ab, n_ac) = (a.cross(b), a.cross(c));
         let (len_ab, len_ac) = (n_ab.length(), n_ac.length());
@@ -333,15 +336,52 @@ impl SphericalTriangle {
         if !inv.is_finite() {
             return None;
         }
-        let cos_alpha = (n_ab.dot(n_ac) * inv).clamp(-1.0, 1.0);
-        let sin_alpha = (self.triple * inv).min(1.0);
+        Some(ArvoMap {
+            a,
+            b,
+            c_across: c - c.dot(a) * a,
+            len_ac,
+            a_dot_b: a.dot(b),
+            cos_alpha: (n_ab.dot(n_ac) * inv).clamp(-1.0, 1.0),
+            sin_alpha: (self.triple * inv).min(1.0),
+            solid_angle: self.solid_angle,
+        })
+    }
+}
+
+/// Arvo's area-preserving map from the unit square onto a spherical
+/// triangle ([`SphericalTriangle::arvo`]): `u.x` sets the area `u.x·Ω` of
+/// the sub-triangle (a, b, c') whose vertex c' on the arc from a to c
+/// follows in closed form, and `u.y` the point on the arc from b to c'.
+/// The map is continuous and preserves area, so a stratified `u` stays
+/// stratified over the solid angle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ArvoMap {
+    a: Vec3,
+    b: Vec3,
+    /// `c`'s part orthogonal to `a`, and its length `|a×c|`.
+    c_across: Vec3,
+    len_ac: f32,
+    a_dot_b: f32,
+    /// The angle α at `a`, by its cosine and sine.
+    cos_alpha: f32,
+    sin_alpha: f32,
+    solid_angle: f32,
+}
+
+impl ArvoMap {
+    /// The direction `u` maps to (density `1/Ω`); `None` where the map
+    /// breaks down in f32.
+    pub fn sample(&self, u: Vec2) -> Option<Vec3> {
+        let (a, b) = (self.a, self.b);
+        let (cos_alpha, sin_alpha) = (self.cos_alpha, self.sin_alpha);
         // sin and cos of the sub-triangle's angle sum π + u.x·Ω.
         let (sin_sub, cos_sub) = (u.x * self.solid_angle).sin_cos();
         let (sin_sub, cos_sub) = (-sin_sub, -cos_sub);
         let sin_phi = sin_sub * cos_alpha - cos_sub * sin_alpha;
         let cos_phi = cos_sub * cos_alpha + sin_sub * sin_alpha;
         let k1 = cos_phi + cos_alpha;
-        let k2 = sin_phi - sin_alpha * a.dot(b);
+        let k2 = sin_phi - sin_alpha * self.a_dot_b;
         let cos_bp = (k2 + (k2 * cos_phi - k1 * sin_phi) * cos_alpha)
             / ((k2 * sin_phi + k1 * cos_phi) * sin_alpha);
         if cos_bp.is_nan() {
@@ -349,7 +389,7 @@ impl SphericalTriangle {
         }
         let cos_bp = cos_bp.clamp(-1.0, 1.0);
         let sin_bp = (1.0 - cos_bp * cos_bp).max(0.0).sqrt();
-        let c_sub = cos_bp * a + sin_bp / len_ac * (c - c.dot(a) * a);
+        let c_sub = cos_bp * a + sin_bp / self.len_ac * self.c_across;
         // The direction, on the arc from b to c'.
         let cos_theta = 1.0 - u.y * (1.0 - c_sub.dot(b));
         let sin_theta = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();

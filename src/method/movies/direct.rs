@@ -18,7 +18,7 @@
 use super::super::FrameContext;
 use crate::backend::{Hit, Ray, SHADOW_EPSILON};
 use crate::integrator::offset_origin;
-use crate::light::{LightSource, TriangleSampling};
+use crate::light::{LightSource, PointLights, TriangleSampling};
 use crate::sampling::{Rng, SampleKey, Stratified2d};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -227,39 +227,38 @@ impl std::ops::AddAssign for ShadowCounts {
 }
 
 /// Light sample `s` of `samples` at `point`, stratified over the point's
-/// samples, and the light it lands on.
-struct PointSampler {
+/// samples, and the light it lands on. The point's view of each light is
+/// worked out once for all its samples ([`PointLights`]).
+struct PointSampler<'a> {
     layout: Stratified2d,
     seed: u64,
-    item: u64,
+    point: &'a ShadePoint,
+    lights: PointLights<'a>,
 }
 
-impl PointSampler {
-    fn new(seed: u64, item: u64, samples: u32) -> Self {
-        let mut keys = Rng::new(key(seed, item, u32::MAX));
+impl<'a> PointSampler<'a> {
+    fn new(ctx: &'a FrameContext, point: &'a ShadePoint, samples: u32) -> Self {
+        let mut keys = Rng::new(key(ctx.seed, point.item, u32::MAX));
         let scramble = keys.next_u32();
         PointSampler {
             layout: Stratified2d::new(samples, Some(scramble), keys.next_u32()),
-            seed,
-            item,
+            seed: ctx.seed,
+            point,
+            lights: ctx
+                .lights
+                .at_point(ctx.snapshot, point.p, TriangleSampling::SolidAngle),
         }
     }
 
     /// `(contribution to E before visibility, shadow segment, light)`.
-    fn sample(
-        &self,
-        ctx: &FrameContext,
-        point: &ShadePoint,
-        s: u32,
-    ) -> Option<(Vec3, Ray, LightSource)> {
+    fn sample(&mut self, ctx: &FrameContext, s: u32) -> Option<(Vec3, Ray, LightSource)> {
+        let point = self.point;
         let u = self
             .layout
-            .sample(s, Rng::new(key(self.seed, self.item, s)).next_2d());
+            .sample(s, Rng::new(key(self.seed, point.item, s)).next_2d());
         let choice = ctx.lights.choose(u);
         let source = ctx.lights.source_of(choice.pick)?;
-        let ls = ctx
-            .lights
-            .sample(ctx.snapshot, point.p, choice, TriangleSampling::SolidAngle)?;
+        let ls = self.lights.sample(choice)?;
         let cos = point.n.dot(ls.wi);
         // Written so that a NaN (a degenerate triangle's normal) fails too.
         if !(cos > 0.0 && point.ng.dot(ls.wi) > 0.0) {
@@ -387,9 +386,9 @@ fn moving_points(
     let mut pending = Pending::default();
     let per = samples as usize;
     for (i, point) in points.iter().enumerate() {
-        let sampler = PointSampler::new(ctx.seed, point.item, samples);
+        let mut sampler = PointSampler::new(ctx, point, samples);
         for s in 0..samples {
-            if let Some((c, ray, _)) = sampler.sample(ctx, point, s) {
+            if let Some((c, ray, _)) = sampler.sample(ctx, s) {
                 pending.push(ray, i * per + s as usize, c);
             }
         }
@@ -439,9 +438,9 @@ fn kept_points(
             - kept_shadows.open.len() as u64
             - u64::from(kept_shadows.moving.count_ones());
         if kept_shadows.moving != 0 {
-            let sampler = PointSampler::new(ctx.seed, point.item, samples);
+            let mut sampler = PointSampler::new(ctx, point, samples);
             for s in (0..samples).filter(|s| kept_shadows.moving & (1 << s) != 0) {
-                if let Some((c, ray, _)) = sampler.sample(ctx, point, s) {
+                if let Some((c, ray, _)) = sampler.sample(ctx, s) {
                     pending.push(ray, i * per + s as usize, c);
                 }
             }
@@ -471,9 +470,9 @@ fn first_static_points(
     // Samples on static lights: (slot, contribution, ray).
     let mut probes: Vec<(usize, Vec3, Ray)> = Vec::new();
     for (i, point) in points.iter().enumerate() {
-        let sampler = PointSampler::new(ctx.seed, point.item, samples);
+        let mut sampler = PointSampler::new(ctx, point, samples);
         for s in 0..samples {
-            let Some((c, ray, source)) = sampler.sample(ctx, point, s) else {
+            let Some((c, ray, source)) = sampler.sample(ctx, s) else {
                 continue;
             };
             let slot = i * per + s as usize;
