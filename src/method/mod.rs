@@ -6,6 +6,7 @@
 mod carried;
 pub mod ic;
 mod lookups;
+pub mod motion;
 pub mod movies;
 pub mod path;
 pub mod pixels;

@@ -1,0 +1,269 @@
+//! What moves in one frame: the bounding boxes of the moving objects and
+//! which lights stay where they are. Work that only static geometry
+//! decides (a shadow sample that no moving box meets, a camera ray whose
+//! hit is static) is kept from frame to frame and only what a moving box
+//! meets is traced again: `movies`' static shadows (Martín et al. §5, the
+//! paper's shaft culling) and the render pass's still pixel samples
+//! (`render_pass::StillSamples`).
+
+use super::FrameContext;
+use crate::light::LightSource;
+use glam::Vec3;
+
+/// An axis-aligned box.
+pub type Aabb = (Vec3, Vec3);
+
+/// What moves in one frame: the bounding boxes of the moving objects, and
+/// which lights do not move (their shadow samples may be kept).
+pub struct Blockers {
+    pub boxes: Vec<Aabb>,
+    /// A BVH over `boxes` where they are many ([`BoxIndex`]).
+    index: Option<BoxIndex>,
+    /// Bounding box of the lights that do not move (`None`: there are none).
+    pub static_lights: Option<Aabb>,
+    static_count: usize,
+    static_point_light: Vec<bool>,
+    pub pick_fingerprint: u64,
+}
+
+impl Blockers {
+    pub fn new(ctx: &FrameContext) -> Self {
+        let snapshot = ctx.snapshot;
+        let mut boxes: Vec<Option<Aabb>> = vec![None; ctx.scene.objects.len()];
+        for (i, tri) in snapshot
+            .triangles
+            .iter()
+            .enumerate()
+            .skip(snapshot.static_count)
+        {
+            let b = &mut boxes[snapshot.tri_object[i] as usize];
+            for p in tri.p {
+                let (lo, hi) = b.get_or_insert((p, p));
+                *lo = lo.min(p);
+                *hi = hi.max(p);
+            }
+        }
+        let static_point_light: Vec<bool> = ctx
+            .scene
+            .lights
+            .iter()
+            .map(|l| !ctx.scene.node_is_dynamic(l.node))
+            .collect();
+        let mut static_lights: Option<Aabb> = None;
+        let mut grow = |p: Vec3| {
+            let (lo, hi) = static_lights.get_or_insert((p, p));
+            *lo = lo.min(p);
+            *hi = hi.max(p);
+        };
+        for id in ctx.lights.emitting_triangles() {
+            if id < snapshot.static_count {
+                snapshot.triangles[id].p.into_iter().for_each(&mut grow);
+            }
+        }
+        for (light, &fixed) in snapshot.lights.iter().zip(&static_point_light) {
+            if fixed {
+                grow(light.position);
+            }
+        }
+        let boxes: Vec<Aabb> = boxes.into_iter().flatten().collect();
+        Blockers {
+            index: BoxIndex::over(&boxes),
+            boxes,
+            static_lights,
+            static_count: snapshot.static_count,
+            static_point_light,
+            pick_fingerprint: ctx.lights.pick_fingerprint(),
+        }
+    }
+
+    pub fn is_static(&self, source: LightSource) -> bool {
+        match source {
+            LightSource::Triangle(id) => (id as usize) < self.static_count,
+            LightSource::Point(i) => self.static_point_light.get(i).copied().unwrap_or(false),
+        }
+    }
+
+    /// Whether segment `a → b` may pass through a moving object.
+    pub fn segment_may_hit(&self, a: Vec3, b: Vec3) -> bool {
+        match &self.index {
+            Some(index) => index.segment_hits(&self.boxes, a, b),
+            None => self.boxes.iter().any(|&bx| segment_hits_box(a, b, bx)),
+        }
+    }
+
+    /// Whether any moving object's box meets box `b`.
+    pub fn box_may_hit(&self, b: Aabb) -> bool {
+        self.boxes
+            .iter()
+            .any(|&(lo, hi)| lo.cmple(b.1).all() && b.0.cmple(hi).all())
+    }
+
+    /// Whether triangle `id` belongs to an object that moves.
+    pub fn is_moving_triangle(&self, id: u32) -> bool {
+        id as usize >= self.static_count
+    }
+}
+
+/// A BVH (obvhs's) over the moving objects' boxes, for the segment tests
+/// that every kept link and shadow sample takes each frame: with many
+/// moving objects (`spheres`' 66 balls) testing each box in turn was an
+/// eighth of `movies`' time. Its nodes bound the boxes grown by a hair, so
+/// that they never turn away a segment the exact slab test
+/// ([`segment_hits_box`], still the test of each box) would accept: the
+/// answers are those of the plain loop.
+struct BoxIndex {
+    bvh: obvhs::bvh2::Bvh2,
+}
+
+impl BoxIndex {
+    /// Boxes up to which the plain loop is as fast.
+    const MIN_BOXES: usize = 8;
+
+    fn over(boxes: &[Aabb]) -> Option<Self> {
+        if boxes.len() < Self::MIN_BOXES {
+            return None;
+        }
+        let grown: Vec<obvhs::aabb::Aabb> = boxes
+            .iter()
+            .map(|&(lo, hi)| {
+                // A ten-thousandth of the box's size (of a unit at least)
+                // and of its coordinates: far above the rounding of the
+                // two slab tests, far below any gap between objects.
+                let pad = Vec3::splat(1e-4 * (hi - lo).max_element().max(1.0))
+                    + 1e-4 * lo.abs().max(hi.abs());
+                obvhs::aabb::Aabb::new((lo - pad).into(), (hi + pad).into())
+            })
+            .collect();
+        let mut build_time = std::time::Duration::ZERO;
+        let bvh = obvhs::bvh2::builder::build_bvh2(
+            &grown,
+            obvhs::BvhBuildParams::fast_build(),
+            &mut build_time,
+        );
+        Some(BoxIndex { bvh })
+    }
+
+    /// Whether segment `a → b` meets one of `boxes` (the ones indexed).
+    fn segment_hits(&self, boxes: &[Aabb], a: Vec3, b: Vec3) -> bool {
+        let d = b - a;
+        if !(a.is_finite() && d.is_finite() && d != Vec3::ZERO) {
+            return boxes.iter().any(|&bx| segment_hits_box(a, b, bx));
+        }
+        // `+ 0.0`: obvhs misreads −0.0 components (`accel::to_obvhs_ray`).
+        let ray =
+            obvhs::ray::Ray::new(a.into(), glam::Vec3A::from(d) + glam::Vec3A::ZERO, 0.0, 1.0);
+        let indices = &self.bvh.primitive_indices;
+        !self.bvh.ray_traverse_miss(ray, |_, i| {
+            if segment_hits_box(a, b, boxes[indices[i] as usize]) {
+                0.0
+            } else {
+                f32::INFINITY
+            }
+        })
+    }
+}
+
+/// Slab test of segment `a → b` against box `(lo, hi)`.
+pub fn segment_hits_box(a: Vec3, b: Vec3, (lo, hi): Aabb) -> bool {
+    let d = b - a;
+    let (mut t0, mut t1) = (0.0f32, 1.0f32);
+    for axis in 0..3 {
+        let (o, v) = (a[axis], d[axis]);
+        if v.abs() < 1e-12 {
+            if o < lo[axis] || o > hi[axis] {
+                return false;
+            }
+            continue;
+        }
+        let (mut near, mut far) = ((lo[axis] - o) / v, (hi[axis] - o) / v);
+        if near > far {
+            std::mem::swap(&mut near, &mut far);
+        }
+        t0 = t0.max(near);
+        t1 = t1.min(far);
+        if t0 > t1 {
+            return false;
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The BVH over many boxes answers every segment as testing each box
+    /// in turn does: random segments among 100 random boxes, segments
+    /// along the axes (with −0.0 components), ones that end on a box's
+    /// face or start inside one, and degenerate ones; and both answers
+    /// occur.
+    #[test]
+    fn box_index_answers_as_the_plain_loop() {
+        let mut rng = crate::sampling::Rng::from_seed(5, 0);
+        let mut point = |scale: f32| {
+            Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * scale
+                - Vec3::splat(scale / 2.0)
+        };
+        let boxes: Vec<Aabb> = (0..100)
+            .map(|_| {
+                let c = point(10.0);
+                let h = point(1.0).abs();
+                (c - h, c + h)
+            })
+            .collect();
+        let index = BoxIndex::over(&boxes).expect("many boxes are indexed");
+        let mut segments: Vec<(Vec3, Vec3)> =
+            (0..4000).map(|_| (point(12.0), point(12.0))).collect();
+        for &(lo, hi) in boxes.iter().take(20) {
+            let (a, c) = (point(12.0), (lo + hi) / 2.0);
+            segments.push((a, Vec3::new(lo.x, c.y, c.z)));
+            segments.push((a, Vec3::new(c.x, hi.y, c.z)));
+            segments.push((Vec3::new(c.x, c.y, hi.z + 1.0), Vec3::new(c.x, c.y, hi.z)));
+            segments.push((c, point(12.0)));
+            segments.push((lo, lo));
+            segments.push((
+                c + Vec3::new(-0.0, -0.0, 8.0),
+                c + Vec3::new(-0.0, -0.0, -8.0),
+            ));
+        }
+        let (mut hits, mut misses) = (0, 0);
+        for (a, b) in segments {
+            let plain = boxes.iter().any(|&bx| segment_hits_box(a, b, bx));
+            assert_eq!(index.segment_hits(&boxes, a, b), plain, "{a} → {b}");
+            if plain {
+                hits += 1;
+            } else {
+                misses += 1;
+            }
+        }
+        assert!(hits > 100 && misses > 100, "{hits} hits, {misses} misses");
+    }
+
+    #[test]
+    fn a_segment_meets_a_box_it_crosses_and_not_one_beside_it() {
+        let b = (Vec3::splat(-1.0), Vec3::splat(1.0));
+        assert!(segment_hits_box(
+            Vec3::new(-5.0, 0.0, 0.0),
+            Vec3::new(5.0, 0.0, 0.0),
+            b
+        ));
+        assert!(segment_hits_box(Vec3::ZERO, Vec3::new(5.0, 5.0, 5.0), b));
+        assert!(!segment_hits_box(
+            Vec3::new(-5.0, 2.0, 0.0),
+            Vec3::new(5.0, 2.0, 0.0),
+            b
+        ));
+        // Stops short of the box.
+        assert!(!segment_hits_box(
+            Vec3::new(-5.0, 0.0, 0.0),
+            Vec3::new(-2.0, 0.0, 0.0),
+            b
+        ));
+        // Parallel to a slab, inside it.
+        assert!(segment_hits_box(
+            Vec3::new(0.5, -5.0, 0.5),
+            Vec3::new(0.5, 5.0, 0.5),
+            b
+        ));
+    }
+}
