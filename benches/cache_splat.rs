@@ -32,7 +32,7 @@ use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::cache::LookupPoint;
 use radcache::method::ic::{IcSettings, IrradianceCaching};
 use radcache::method::pixels::{CameraSampler, PixelSample};
-use radcache::method::render_pass::FallbackStreams;
+use radcache::method::render_pass::PixelStreams;
 use radcache::method::FrameContext;
 use radcache::render::{FrameSettings, Renderer};
 use radcache::scene::Scene;
@@ -188,7 +188,7 @@ fn main() {
         best(|| {
             r.with_frame_context(FRAME, |ctx| {
                 let start = Instant::now();
-                std::hint::black_box(ic.render_with_cache(ctx, &cache, FallbackStreams::PerFrame));
+                std::hint::black_box(ic.render_with_cache(ctx, &cache, PixelStreams::PerFrame));
                 start.elapsed()
             })
         })

@@ -12,7 +12,7 @@
 //! Ward explained at `IrradianceRecord::weight`).
 
 use super::lookups::{measure_clearance, Lookup, ShadingPoint};
-use super::render_pass::{render_pass, FallbackStreams, Surface};
+use super::render_pass::{render_pass, PixelStreams, Surface};
 use super::{FrameContext, FrameRecords, FrameStats, Method, RENDER_PHASE};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{
@@ -189,7 +189,8 @@ impl Method for IrradianceCaching {
             ctx,
             &cache,
             &self.settings,
-            FallbackStreams::PerFrame,
+            PixelStreams::PerFrame,
+            None,
             None,
             &mut stats,
         );
@@ -293,15 +294,15 @@ impl IrradianceCaching {
 
     /// Renders this frame with a given cache (what [`Method::render_frame`]
     /// does after [`Self::build_cache`], there with
-    /// [`FallbackStreams::PerFrame`]); tests compare `trc` with it.
+    /// [`PixelStreams::PerFrame`]); tests compare `trc` with it.
     pub fn render_with_cache(
         &self,
         ctx: &FrameContext,
         cache: &IrradianceCache,
-        fallback: FallbackStreams,
+        streams: PixelStreams,
     ) -> Film {
         let mut stats = FrameStats::default();
-        render_pass(ctx, cache, &self.settings, fallback, None, &mut stats)
+        render_pass(ctx, cache, &self.settings, streams, None, None, &mut stats)
     }
 
     /// The fill stage over given candidates (one per pixel). Every record

@@ -112,8 +112,9 @@ pub struct FrameStats {
     pub samples_reshot: u64,
     /// Bytes the method's cache holds in memory at the end of the frame:
     /// the frame's records with what they keep (sources, samples, temporal
-    /// state) and their spatial index, or the open texture movies
-    /// (`movies`). 0 for `path`, which keeps none.
+    /// state) and their spatial index, with the pixel samples `trc` and
+    /// `tcg` keep for the next frame's render pass, or the open texture
+    /// movies (`movies`). 0 for `path`, which keeps none.
     pub cache_bytes: u64,
     /// Rays traced in the frame (filled in by the renderer).
     pub rays: u64,

@@ -4,7 +4,9 @@
 //! more samples at the edge of a seen light: [`super::pixels`]) are handed
 //! to the shared path-tracing engine in [`crate::integrator`].
 
-use super::pixels::{self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample};
+use super::pixels::{
+    self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample, PixelStreams,
+};
 use super::{FrameContext, Method};
 use crate::backend::{Hit, Ray};
 use crate::film::Film;
@@ -86,7 +88,8 @@ impl Method for PathTracer {
                 let (rays, mut results) = self.trace(ctx, &samples);
                 // The first hits decide which pixels are on a light's edge.
                 let hits: Vec<Hit> = results.iter().map(|r| r.hit).collect();
-                let edges = EmitterEdges::find(ctx, &samples, &rays, &hits, spp);
+                let edges =
+                    EmitterEdges::find(ctx, PixelStreams::PerFrame, &samples, &rays, &hits, spp);
                 results.extend(self.trace(ctx, edges.extra_samples()).1);
                 samples.extend_from_slice(edges.extra_samples());
                 let radiance: Vec<Vec3> = results.iter().map(|r| r.radiance).collect();

@@ -33,7 +33,7 @@ use super::FrameContext;
 use crate::accel::ray_hits_triangle;
 use crate::backend::{Hit, Ray};
 use crate::light::{emitting_cosine, LightSampler};
-use crate::sampling::{LightChoice, Rng, Stratified2d};
+use crate::sampling::{LightChoice, Rng, SampleKey, Stratified2d};
 use crate::scene::Snapshot;
 use glam::Vec3;
 
@@ -51,6 +51,44 @@ use glam::Vec3;
 /// rays cost `trc`'s render pass about a fifth more (before 935e7a0 made
 /// them cheaper).
 pub const DEFAULT_EDGE_COVERAGE_FACTOR: u32 = 64;
+
+/// How the random streams of pixel samples (their positions, light
+/// samples, coverage rays and paths) are keyed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PixelStreams {
+    /// By frame too: new every frame (per-frame computation: `ic`,
+    /// `path`, `movies`).
+    #[default]
+    PerFrame,
+    /// By pixel and sample number alone, the same in every frame, as the
+    /// records of `trc` and `tcg` keep theirs (Tawara et al. 2004 shoot the
+    /// same rays every frame). Where nothing changed a sample draws the
+    /// same position, light point and path as in the last frame, so the
+    /// pixel does not flicker with fresh noise, and the render pass takes a
+    /// sample that nothing moving meets from the last frame instead of
+    /// tracing it again ([`super::render_pass::StillSamples`]).
+    Coherent,
+}
+
+/// Tags [`PixelStreams::Coherent`] keys apart from the untagged keys of a
+/// same-pattern reference (a method's noise must not be the reference's)
+/// and from the tagged streams of records, fallbacks and movies.
+const COHERENT_PIXEL_STREAM: u64 = 1 << 59;
+
+impl PixelStreams {
+    /// The key of sample `sample` of pixel `pixel`.
+    pub fn key(self, ctx: &FrameContext, pixel: u32, sample: u32) -> SampleKey {
+        match self {
+            PixelStreams::PerFrame => ctx.pixel_key(pixel, sample),
+            PixelStreams::Coherent => SampleKey {
+                seed: ctx.seed,
+                frame: None,
+                item: COHERENT_PIXEL_STREAM | u64::from(pixel),
+                sample,
+            },
+        }
+    }
+}
 
 /// One sample of one pixel: its random streams are keyed by `key`, its
 /// position is stratum `stratum` of `strata` over the pixel.
@@ -208,6 +246,7 @@ impl EmitterEdges {
     /// candidate whose coverage rays all agree with its samples is no edge.
     pub fn find(
         ctx: &FrameContext,
+        streams: PixelStreams,
         base: &[PixelSample],
         rays: &[Ray],
         hits: &[Hit],
@@ -246,7 +285,7 @@ impl EmitterEdges {
                 (!uniform || !corners_agree).then_some((pixel, seen))
             })
             .collect();
-        let coverage = coverage_counts(ctx, &candidates, spp, extra);
+        let coverage = coverage_counts(ctx, streams, &candidates, spp, extra);
         for (&(pixel, seen), count) in candidates.iter().zip(coverage) {
             edges.add_candidate(pixel, seen, count, spp, extra);
         }
@@ -398,12 +437,13 @@ const COVERAGE_BATCH: usize = 1 << 16;
 /// candidate, traced in batches of at most [`COVERAGE_BATCH`].
 fn coverage_counts(
     ctx: &FrameContext,
+    streams: PixelStreams,
     candidates: &[(u32, u32)],
     spp: u32,
     extra: u32,
 ) -> Vec<CoverageCount> {
     let mut counts = vec![CoverageCount::default(); candidates.len()];
-    let mut camera = CameraSampler::default();
+    let mut camera = CameraSampler::new(streams);
     let mut rays = Vec::new();
     let mut owners = Vec::new();
     let mut flush = |rays: &mut Vec<Ray>, owners: &mut Vec<(usize, u32, f32)>| {
@@ -490,10 +530,18 @@ const LIGHT_PATTERN: u32 = u32::MAX - 1;
 /// Places the camera rays of pixel samples.
 #[derive(Default)]
 pub struct CameraSampler {
+    streams: PixelStreams,
     layouts: LayoutCache,
 }
 
 impl CameraSampler {
+    pub fn new(streams: PixelStreams) -> Self {
+        CameraSampler {
+            streams,
+            layouts: LayoutCache::default(),
+        }
+    }
+
     /// The primary ray of sample `s` and the sample's random stream
     /// positioned after the jitter. The pixel is box-filtered: positions
     /// are uniform over its square, multi-jittered over the samples of
@@ -501,10 +549,10 @@ impl CameraSampler {
     /// inside the pixel falls faster than with independent jitter.
     pub fn query(&mut self, ctx: &FrameContext, s: &PixelSample) -> (Ray, Rng) {
         let layout = self.layouts.of(s, || {
-            let shuffle = Rng::new(ctx.pixel_key(s.pixel, PIXEL_PATTERN)).next_u32();
+            let shuffle = Rng::new(self.streams.key(ctx, s.pixel, PIXEL_PATTERN)).next_u32();
             Stratified2d::new(s.strata, None, shuffle)
         });
-        let mut rng = Rng::new(ctx.pixel_key(s.pixel, s.key));
+        let mut rng = Rng::new(self.streams.key(ctx, s.pixel, s.key));
         let jitter = layout.sample(s.stratum, rng.next_2d());
         let (x, y) = (s.pixel % ctx.width, s.pixel / ctx.width);
         let sx = (x as f32 + jitter.x) / ctx.width as f32;
@@ -521,10 +569,18 @@ impl CameraSampler {
 /// generators of the layout were no longer drawn per sample).
 #[derive(Default)]
 pub struct FirstLightSampler {
+    streams: PixelStreams,
     layouts: LayoutCache,
 }
 
 impl FirstLightSampler {
+    pub fn new(streams: PixelStreams) -> Self {
+        FirstLightSampler {
+            streams,
+            layouts: LayoutCache::default(),
+        }
+    }
+
     /// The light sample used at the first surface sample `s` hits: one 2D
     /// sample stratified over the samples of the sample's set like the
     /// pixel position, with strata paired by a per-pixel random permutation
@@ -534,7 +590,7 @@ impl FirstLightSampler {
     /// left once edges are stratified.
     pub fn sample(&mut self, ctx: &FrameContext, s: &PixelSample, rng: &mut Rng) -> LightChoice {
         let layout = self.layouts.of(s, || {
-            let mut keys = Rng::new(ctx.pixel_key(s.pixel, LIGHT_PATTERN));
+            let mut keys = Rng::new(self.streams.key(ctx, s.pixel, LIGHT_PATTERN));
             let scramble = keys.next_u32();
             Stratified2d::new(s.strata, Some(scramble), keys.next_u32())
         });

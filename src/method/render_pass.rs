@@ -14,13 +14,18 @@
 //!   lobe sample's ray traced to its first hit only, for the emission
 //!   there that MIS weighs against the light sample.
 //!
-//! The methods differ only in the cache they hand it and in how the
-//! path-traced fallbacks of uncovered samples draw their random streams
-//! ([`FallbackStreams`]). `trc` also asks which records the pass uses
-//! (`render_pass`'s `used`, `mark_used`).
+//! The methods differ only in the cache they hand it and in how their
+//! pixel samples draw their random streams ([`PixelStreams`]). `trc` also
+//! asks which records the pass uses (`render_pass`'s `used`, `mark_used`).
+//! With streams that are the same in every frame, the pass keeps the
+//! primary hits and direct light of the last frame's samples and traces
+//! again only those that something moving may have changed
+//! ([`StillSamples`]).
 
 use super::ic::{GlossyLobe, IcSettings};
 use super::lookups::{measure_clearance, Interpolation, Lookup, ShadingPoint};
+use super::motion::Blockers;
+pub use super::pixels::PixelStreams;
 use super::pixels::{self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample};
 use super::{FrameContext, FrameStats};
 use crate::backend::{Hit, Ray};
@@ -32,7 +37,7 @@ use crate::integrator::{
 };
 use crate::light::{emitting_cosine, TriangleSampling};
 use crate::material::Bsdf;
-use crate::sampling::{cosine_hemisphere, power_heuristic, LightChoice, Rng, SampleKey};
+use crate::sampling::{cosine_hemisphere, mix64, power_heuristic, LightChoice, Rng, SampleKey};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -80,37 +85,56 @@ impl<'a> Surface<'a> {
 /// `used` (one flag per cache record), every record that contributes to a
 /// pixel sample is flagged (`trc`'s replace-or-drop rule). The cache is
 /// interpolated on the GPU when the backend has one ([`Interpolation`]).
+/// With `still` (coherent streams only), the samples of the last frame that
+/// nothing moving met are taken again rather than traced, and this frame's
+/// are kept for the next ([`StillSamples`]): the film is the same, bit for
+/// bit, as without.
 pub(crate) fn render_pass(
     ctx: &FrameContext,
     cache: &IrradianceCache,
     settings: &IcSettings,
-    fallback: FallbackStreams,
+    streams: PixelStreams,
     used: Option<&[AtomicBool]>,
+    still: Option<&mut StillSamples>,
     stats: &mut FrameStats,
 ) -> Film {
     let mut film = Film::new(ctx.width, ctx.height);
     let interpolation = Interpolation::new(ctx, cache, settings.gradients);
     let spp = settings.spp.max(1);
     let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1);
-    let tile_stats: Vec<FrameStats> = film
+    let mut still = still.filter(|_| streams == PixelStreams::Coherent);
+    let mut still_pass = still.as_mut().and_then(|s| {
+        let last = s.last.take();
+        StillPass::new(ctx, last, spp, pixels_per_tile)
+    });
+    let pass = TilePass {
+        interpolation: &interpolation,
+        settings,
+        streams,
+        used,
+    };
+    let tiles: Vec<(FrameStats, TileKept)> = film
         .pixels
         .par_chunks_mut(pixels_per_tile)
         .enumerate()
         .map(|(tile, out)| {
             let first = (tile * pixels_per_tile) as u32;
-            let pass = TilePass {
-                interpolation: &interpolation,
-                settings,
-                fallback,
-                used,
-            };
-            render_tile(ctx, &pass, first, out)
+            let still = still_pass.as_ref().map(|p| p.tile(tile));
+            render_tile(ctx, &pass, first, out, still)
         })
         .collect();
-    for t in tile_stats {
+    let mut kept = Vec::with_capacity(tiles.len());
+    let mut taken = 0;
+    for (t, tile) in tiles {
         stats.lookups += t.lookups;
         stats.lookup_records += t.lookup_records;
         stats.fallback_lookups += t.fallback_lookups;
+        taken += tile.taken;
+        kept.push(tile.samples);
+    }
+    if let (Some(still), Some(pass)) = (still, still_pass.take()) {
+        still.last = Some(pass.finish(kept));
+        still.taken = taken;
     }
     film
 }
@@ -125,6 +149,7 @@ pub(crate) fn mark_used(
     ctx: &FrameContext,
     cache: &IrradianceCache,
     settings: &IcSettings,
+    streams: PixelStreams,
     used: &[AtomicBool],
 ) {
     let interpolation = Interpolation::new(ctx, cache, settings.gradients);
@@ -134,7 +159,7 @@ pub(crate) fn mark_used(
     let tiles: Vec<u32> = (0..n_pixels).step_by(pixels_per_tile as usize).collect();
     tiles.into_par_iter().for_each(|first| {
         let count = pixels_per_tile.min(n_pixels - first);
-        let (primary, _) = PrimarySamples::trace(ctx, first, count, spp);
+        let (primary, _) = PrimarySamples::trace(ctx, streams, first, count, spp);
         let surfaces = primary.surfaces(ctx);
         let (lookups, _) = pixel_lookups(
             ctx,
@@ -173,31 +198,82 @@ impl PrimarySamples {
     /// ones of the edge pixels among them, which the returned edges resolve.
     pub(crate) fn trace(
         ctx: &FrameContext,
+        streams: PixelStreams,
         first: u32,
         count: u32,
         spp: u32,
     ) -> (Self, EmitterEdges) {
-        let mut primary = PrimarySamples::default();
-        primary.add(ctx, &pixels::tile_samples(first, count, spp));
-        // The first hits decide which pixels are on a light's edge.
-        let edges = EmitterEdges::find(ctx, &primary.samples, &primary.rays, &primary.hits, spp);
-        primary.add(ctx, edges.extra_samples());
+        let (primary, edges, _) = Self::trace_keeping(ctx, streams, first, count, spp, None);
         (primary, edges)
     }
 
-    /// Appends `samples`, tracing their camera rays.
-    fn add(&mut self, ctx: &FrameContext, samples: &[PixelSample]) {
+    /// [`Self::trace`], taking from `still` the samples of the last frame
+    /// whose hits nothing moving may have changed; and which ones it took.
+    fn trace_keeping(
+        ctx: &FrameContext,
+        streams: PixelStreams,
+        first: u32,
+        count: u32,
+        spp: u32,
+        still: Option<&TileStill>,
+    ) -> (Self, EmitterEdges, Vec<bool>) {
+        let mut primary = PrimarySamples::default();
+        let base = pixels::tile_samples(first, count, spp);
+        let taken = primary.add(ctx, streams, &base, still);
+        // The first hits decide which pixels are on a light's edge.
+        let edges = EmitterEdges::find(
+            ctx,
+            streams,
+            &primary.samples,
+            &primary.rays,
+            &primary.hits,
+            spp,
+        );
+        primary.add(ctx, streams, edges.extra_samples(), None);
+        (primary, edges, taken)
+    }
+
+    /// Appends `samples`, tracing the camera rays of those not taken from
+    /// `still` (whose samples are `samples`, in order, in the last frame);
+    /// returns which were taken.
+    fn add(
+        &mut self,
+        ctx: &FrameContext,
+        streams: PixelStreams,
+        samples: &[PixelSample],
+        still: Option<&TileStill>,
+    ) -> Vec<bool> {
         let start = self.rays.len();
-        let mut camera = CameraSampler::default();
-        for s in samples {
-            let (ray, rng) = camera.query(ctx, s);
-            self.rays.push(ray);
-            self.rngs.push(rng);
+        let mut camera = CameraSampler::new(streams);
+        let mut taken = vec![false; samples.len()];
+        let mut fresh = Vec::new();
+        for (i, s) in samples.iter().enumerate() {
+            if let Some(k) = still.and_then(|st| st.primary(i)) {
+                self.rays.push(k.ray);
+                self.rngs.push(k.rng.clone());
+                self.hits.push(k.hit);
+                taken[i] = true;
+            } else {
+                let (ray, rng) = camera.query(ctx, s);
+                self.rays.push(ray);
+                self.rngs.push(rng);
+                self.hits.push(Hit::MISS);
+                fresh.push(start + i);
+            }
         }
-        self.hits.resize(self.rays.len(), Hit::MISS);
-        ctx.backend
-            .closest_hit(&self.rays[start..], &mut self.hits[start..]);
+        if fresh.len() == samples.len() {
+            ctx.backend
+                .closest_hit(&self.rays[start..], &mut self.hits[start..]);
+        } else if !fresh.is_empty() {
+            let rays: Vec<Ray> = fresh.iter().map(|&i| self.rays[i]).collect();
+            let mut hits = vec![Hit::MISS; rays.len()];
+            ctx.backend.closest_hit(&rays, &mut hits);
+            for (&i, hit) in fresh.iter().zip(hits) {
+                self.hits[i] = hit;
+            }
+        }
         self.samples.extend_from_slice(samples);
+        taken
     }
 
     pub(crate) fn surfaces<'a>(&self, ctx: &'a FrameContext) -> Vec<Option<Surface<'a>>> {
@@ -357,13 +433,34 @@ fn share_lookups(
 /// points); the lookups interpolated all at once (on the GPU when there is
 /// one); then per sample the cached indirect light or, where no record is
 /// usable, a path-traced fallback, and the glossy lobe. The shadow rays and
-/// the path-traced parts are traced last, each in one batch.
-fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]) -> FrameStats {
+/// the path-traced parts are traced last, each in one batch. With `still`,
+/// the primary hits and direct light of the last frame's samples that
+/// nothing moving met are taken from it, and the tile's are returned for
+/// the next frame.
+fn render_tile(
+    ctx: &FrameContext,
+    pass: &TilePass,
+    first: u32,
+    out: &mut [Vec3],
+    still: Option<TileStill>,
+) -> (FrameStats, TileKept) {
     let spp = pass.settings.spp.max(1);
     let mut stats = FrameStats::default();
-    let (primary, edges) = PrimarySamples::trace(ctx, first, out.len() as u32, spp);
+    let (primary, edges, taken) = PrimarySamples::trace_keeping(
+        ctx,
+        pass.streams,
+        first,
+        out.len() as u32,
+        spp,
+        still.as_ref(),
+    );
+    // The streams as the camera left them, for the next frame to go on from.
+    let jittered = match still {
+        Some(_) => primary.rngs[..taken.len()].to_vec(),
+        None => Vec::new(),
+    };
     let mut tile = TileShading::new(ctx, primary);
-    let shadows = tile.direct_light(ctx);
+    let shadows = tile.direct_light(ctx, pass.streams, still.as_ref().map(|s| (s, &taken[..])));
     let (lookups, lookup_of_sample) = pixel_lookups(
         ctx,
         &tile.surfaces,
@@ -385,7 +482,7 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
         &interpolated,
         &mut stats,
     );
-    shadows.add_unoccluded(ctx, &mut tile.radiance);
+    let kept_shadows = shadows.add_unoccluded(ctx, &mut tile.radiance, still.is_some());
     let (first_hits, paths): (Vec<Deferred>, Vec<Deferred>) =
         deferred.into_iter().partition(|d| d.first_hit_only);
     let first_hit = PathLength {
@@ -403,7 +500,8 @@ fn render_tile(ctx: &FrameContext, pass: &TilePass, first: u32, out: &mut [Vec3]
         }
     }
     edges.resolve(&tile.primary.samples, &tile.radiance, first, out);
-    stats
+    let kept = TileKept::of(&tile.primary, &taken, jittered, kept_shadows);
+    (stats, kept)
 }
 
 /// A tile's primary samples, their shaded first hits and the radiance
@@ -415,21 +513,47 @@ struct TileShading<'a> {
 }
 
 /// The shadow rays of a tile's direct light and, for each, its sample and
-/// what it adds if unoccluded.
+/// what it adds if unoccluded; and the shadows taken from the last frame.
+#[derive(Default)]
 struct ShadowBatch {
     rays: Vec<Ray>,
     targets: Vec<(usize, Vec3)>,
+    kept: Vec<(usize, KeptShadow)>,
 }
 
 impl ShadowBatch {
-    fn add_unoccluded(self, ctx: &FrameContext, radiance: &mut [Vec3]) {
+    /// Adds the light of the unoccluded shadow rays to their samples. With
+    /// `keep`, returns each sample's shadow (`None`: it had none), for the
+    /// next frame.
+    fn add_unoccluded(
+        self,
+        ctx: &FrameContext,
+        radiance: &mut [Vec3],
+        keep: bool,
+    ) -> Vec<Option<KeptShadow>> {
         let mut occluded = vec![false; self.rays.len()];
         ctx.backend.any_hit(&self.rays, &mut occluded);
-        for ((i, c), blocked) in self.targets.into_iter().zip(occluded) {
-            if !blocked {
-                radiance[i] += c;
+        let mut kept = vec![None; if keep { radiance.len() } else { 0 }];
+        let traced = self.rays.into_iter().zip(self.targets).zip(occluded);
+        let traced = traced.map(|((ray, (i, contribution)), occluded)| {
+            (
+                i,
+                KeptShadow {
+                    ray,
+                    contribution,
+                    occluded,
+                },
+            )
+        });
+        for (i, shadow) in traced.chain(self.kept) {
+            if !shadow.occluded {
+                radiance[i] += shadow.contribution;
+            }
+            if keep {
+                kept[i] = Some(shadow);
             }
         }
+        kept
     }
 }
 
@@ -459,21 +583,26 @@ impl<'a> TileShading<'a> {
 
     /// Each sample's first light sample (drawn from its stream, before
     /// anything else draws from it) and the shadow rays of those that may
-    /// add direct light.
-    fn direct_light(&mut self, ctx: &FrameContext) -> ShadowBatch {
-        let mut lights = FirstLightSampler::default();
-        let choices: Vec<LightChoice> = self
-            .primary
-            .samples
-            .iter()
-            .zip(&mut self.primary.rngs)
-            .map(|(s, rng)| lights.sample(ctx, s, rng))
-            .collect();
-        let mut batch = ShadowBatch {
-            rays: Vec::new(),
-            targets: Vec::new(),
-        };
-        for (i, (surface, &choice)) in self.surfaces.iter().zip(&choices).enumerate() {
+    /// add direct light; with `still` (and which samples' hits were taken
+    /// from it), the shadows of the last frame that nothing moving met are
+    /// taken instead of sampled and traced again.
+    fn direct_light(
+        &mut self,
+        ctx: &FrameContext,
+        streams: PixelStreams,
+        still: Option<(&TileStill, &[bool])>,
+    ) -> ShadowBatch {
+        let mut lights = FirstLightSampler::new(streams);
+        let mut batch = ShadowBatch::default();
+        for (i, surface) in self.surfaces.iter().enumerate() {
+            let rng = &mut self.primary.rngs[i];
+            if let Some(shadow) = still.and_then(|(s, taken)| s.shadow(i, taken)) {
+                // The light sample's draw, whose outcome the shadow kept.
+                rng.next_2d();
+                batch.kept.extend(shadow.map(|shadow| (i, shadow)));
+                continue;
+            }
+            let choice = lights.sample(ctx, &self.primary.samples[i], rng);
             let Some(surface) = surface.as_ref().filter(|s| !s.bsdf.is_black()) else {
                 continue;
             };
@@ -517,9 +646,9 @@ impl<'a> TileShading<'a> {
                     }
                     None => {
                         stats.fallback_lookups += 1;
-                        let query = match pass.fallback {
-                            FallbackStreams::PerFrame => diffuse_indirect_query(surface, rng),
-                            FallbackStreams::Coherent => diffuse_indirect_query(
+                        let query = match pass.streams {
+                            PixelStreams::PerFrame => diffuse_indirect_query(surface, rng),
+                            PixelStreams::Coherent => diffuse_indirect_query(
                                 surface,
                                 &mut coherent_fallback(ctx, &self.primary.samples[i]),
                             ),
@@ -640,39 +769,26 @@ pub(crate) fn glossy_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> 
     })
 }
 
-/// How the render pass keys the random streams of its path-traced
-/// fallbacks (diffuse indirect light of pixel samples no record covers:
-/// slivers of a surface next to a concave edge, where no pixel centre
-/// hit and so no record was made).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FallbackStreams {
-    /// The pixel sample's own stream, new every frame, as `ic`'s records
-    /// get new streams every frame (per-frame computation).
-    PerFrame,
-    /// A stream of the pixel and sample number alone, the same in every
-    /// frame, as `trc`'s records keep theirs (Tawara et al. 2004: the same
-    /// sample rays every frame): where nothing changed a fallback traces
-    /// the same directions, and the pixel does not flicker with fresh
-    /// noise. On `cube-in-box` (64×64, 48 frames) 1.4 % of the pixel samples
-    /// fall back, along the box's edges; keying them so took `trc`'s
-    /// lit-surface flicker from 0.038 to 0.034 at no cost (`benches/HISTORY.md`).
-    Coherent,
-}
-
 /// What every tile of one render pass shares.
 struct TilePass<'a> {
     interpolation: &'a Interpolation<'a>,
     settings: &'a IcSettings,
-    fallback: FallbackStreams,
+    streams: PixelStreams,
     used: Option<&'a [AtomicBool]>,
 }
 
-/// Tags the random streams of [`FallbackStreams::Coherent`] apart from
-/// records' (bit 62) and pixels' (untagged).
+/// Tags the fallback streams of [`PixelStreams::Coherent`] apart from
+/// records' (bit 62) and pixels' (untagged, or bit 59).
 const FALLBACK_STREAM: u64 = 1 << 63;
 
-/// The stream of sample `s`'s fallback path under
-/// [`FallbackStreams::Coherent`].
+/// The stream of sample `s`'s fallback path (the diffuse indirect light of
+/// a pixel sample no record covers: slivers next to a concave edge, where
+/// no pixel centre hit and so no record was made) under
+/// [`PixelStreams::Coherent`]: the same in every frame, so where nothing
+/// changed a fallback traces the same directions. On `cube-in-box` (64×64,
+/// 48 frames) 1.4 % of the pixel samples fall back, along the box's edges;
+/// keying them so took `trc`'s lit-surface flicker from 0.038 to 0.034 at
+/// no cost (`benches/HISTORY.md`).
 fn coherent_fallback(ctx: &FrameContext, s: &PixelSample) -> Rng {
     Rng::new(SampleKey {
         seed: ctx.seed,
@@ -680,6 +796,285 @@ fn coherent_fallback(ctx: &FrameContext, s: &PixelSample) -> Rng {
         item: FALLBACK_STREAM | u64::from(s.pixel),
         sample: s.key,
     })
+}
+
+/// The pixel samples of a method's last frame, kept for its next one: with
+/// [`PixelStreams::Coherent`] a sample draws the same camera ray and light
+/// point in every frame, so where the camera, the lights and the static
+/// geometry stay, only moving objects can change what the sample's camera
+/// ray hits and whether its shadow ray is stopped. A sample whose camera
+/// ray hit a static triangle (or nothing) and meets no moving object's box
+/// this frame keeps its hit; if its shadow ray meets no moving object's box
+/// in the last frame or this one either, it keeps its direct light. The
+/// rest is traced again, as are the cache lookups, fallbacks and glossy
+/// lobes of every sample. So the film equals, bit for bit, the one traced
+/// afresh, and a resumed job (which starts with none kept) equals an
+/// uninterrupted one.
+///
+/// This is the design's "static parts are never recomputed for motion
+/// they cannot see" applied to the render pass, as `movies` does for its
+/// texels' shadows (Martín et al. §5) and the TRC paper's GPU renderer gets
+/// for little cost by rasterizing. Per-frame computation (`ic`) keeps
+/// nothing: it is the baseline the temporal methods are measured against.
+#[derive(Default)]
+pub struct StillSamples {
+    last: Option<KeptFrame>,
+    /// Samples of the last render pass whose hit was taken from the frame
+    /// before (their direct light too where no moving box met it).
+    pub taken: u64,
+}
+
+impl StillSamples {
+    /// Bytes kept per frame at most: past this (about 4.5 million samples:
+    /// 512 × 512 pixels at 16 spp) the pass keeps nothing and traces every
+    /// sample, as `ic` does.
+    pub const BUDGET_BYTES: usize = 512 << 20;
+
+    /// Bytes the kept samples take.
+    pub fn memory_bytes(&self) -> usize {
+        self.last.as_ref().map_or(0, |f| {
+            f.tiles.iter().map(Vec::len).sum::<usize>() * std::mem::size_of::<StillSample>()
+        })
+    }
+}
+
+/// One frame's kept samples, tile by tile, and what they were traced under.
+struct KeptFrame {
+    frame: u32,
+    view: u64,
+    lights: u64,
+    blockers: Blockers,
+    tiles: Vec<Vec<StillSample>>,
+}
+
+/// One base pixel sample as traced: its camera ray, hit, stream after the
+/// camera's draw, and its direct light's shadow (`None`: it had none).
+#[derive(Clone)]
+struct StillSample {
+    ray: Ray,
+    hit: Hit,
+    rng: Rng,
+    shadow: Option<KeptShadow>,
+}
+
+/// A shadow ray, what its light adds if unoccluded, and whether it was.
+#[derive(Clone, Copy)]
+struct KeptShadow {
+    ray: Ray,
+    contribution: Vec3,
+    occluded: bool,
+}
+
+/// One render pass's view of the kept samples: this frame's moving boxes,
+/// and the last frame's samples where they may be taken.
+struct StillPass {
+    frame: u32,
+    view: u64,
+    lights: u64,
+    blockers: Blockers,
+    /// The last frame, when it was the one before with the same view.
+    last: Option<KeptFrame>,
+    /// Whether the lights are where they were (else no shadow is kept).
+    lights_still: bool,
+    /// A distance from the camera past every moving box: a camera ray that
+    /// hit nothing is tested as a segment that long.
+    far: f32,
+}
+
+impl StillPass {
+    /// `None` where a frame's samples would not fit the budget.
+    fn new(
+        ctx: &FrameContext,
+        last: Option<KeptFrame>,
+        spp: u32,
+        pixels_per_tile: usize,
+    ) -> Option<Self> {
+        let samples = ctx.width as usize * ctx.height as usize * spp as usize;
+        if samples.saturating_mul(std::mem::size_of::<StillSample>()) > StillSamples::BUDGET_BYTES {
+            return None;
+        }
+        let view = view_fingerprint(ctx, spp, pixels_per_tile);
+        let lights = lights_fingerprint(ctx);
+        let last = last.filter(|l| l.frame.checked_add(1) == Some(ctx.frame) && l.view == view);
+        let blockers = Blockers::new(ctx);
+        let camera = ctx.snapshot.camera.position;
+        let far = blockers
+            .boxes
+            .iter()
+            .map(|&(lo, hi)| (lo - camera).abs().max((hi - camera).abs()).length())
+            .fold(0.0f32, f32::max)
+            * 2.0
+            + 1.0;
+        Some(StillPass {
+            frame: ctx.frame,
+            view,
+            lights,
+            lights_still: last.as_ref().is_some_and(|l| l.lights == lights),
+            blockers,
+            last,
+            far,
+        })
+    }
+
+    fn tile(&self, tile: usize) -> TileStill<'_> {
+        let samples = self
+            .last
+            .as_ref()
+            .and_then(|l| l.tiles.get(tile))
+            .map_or(&[][..], Vec::as_slice);
+        TileStill {
+            pass: self,
+            samples,
+        }
+    }
+
+    fn finish(self, tiles: Vec<Vec<StillSample>>) -> KeptFrame {
+        KeptFrame {
+            frame: self.frame,
+            view: self.view,
+            lights: self.lights,
+            blockers: self.blockers,
+            tiles,
+        }
+    }
+
+    /// Whether a camera ray's hit stands this frame: it hit a static
+    /// triangle or nothing, and no moving box lies on its way there.
+    fn hit_stands(&self, ray: &Ray, hit: &Hit) -> bool {
+        if hit.is_hit() && self.blockers.is_moving_triangle(hit.triangle) {
+            return false;
+        }
+        let t = if hit.is_hit() {
+            hit.t
+        } else {
+            self.far / ray.dir().length()
+        };
+        !self.blockers.segment_may_hit(ray.origin(), ray.at(t))
+    }
+
+    /// Whether a shadow ray's outcome stands this frame: the lights stayed
+    /// and no moving box lay on it in the last frame (so what stopped it,
+    /// if anything, was static) nor lies on it now.
+    fn shadow_stands(&self, shadow: &KeptShadow) -> bool {
+        let Some(last) = self.last.as_ref().filter(|_| self.lights_still) else {
+            return false;
+        };
+        let (a, b) = (shadow.ray.origin(), shadow.ray.at(1.0));
+        !last.blockers.segment_may_hit(a, b) && !self.blockers.segment_may_hit(a, b)
+    }
+}
+
+/// One tile's part of a [`StillPass`]: its samples in the last frame.
+struct TileStill<'a> {
+    pass: &'a StillPass,
+    samples: &'a [StillSample],
+}
+
+impl TileStill<'_> {
+    /// Base sample `i` of the last frame, if its hit stands.
+    fn primary(&self, i: usize) -> Option<&StillSample> {
+        self.samples
+            .get(i)
+            .filter(|k| self.pass.hit_stands(&k.ray, &k.hit))
+    }
+
+    /// Base sample `i`'s shadow in the last frame, if its hit was taken
+    /// (`taken`) and its shadow stands (`Some(None)`: it had none, and has
+    /// none again).
+    fn shadow(&self, i: usize, taken: &[bool]) -> Option<Option<KeptShadow>> {
+        if !taken.get(i).copied().unwrap_or(false) || !self.pass.lights_still {
+            return None;
+        }
+        let shadow = self.samples[i].shadow;
+        shadow
+            .is_none_or(|s| self.pass.shadow_stands(&s))
+            .then_some(shadow)
+    }
+}
+
+/// A tile's base samples as traced this frame (empty when nothing is
+/// kept), and how many of them were taken from the last frame.
+struct TileKept {
+    samples: Vec<StillSample>,
+    taken: u64,
+}
+
+impl TileKept {
+    /// The base samples (the first `taken.len()`) of `primary`, with their
+    /// streams as the camera left them (`jittered`; none: nothing is kept)
+    /// and their shadows.
+    fn of(
+        primary: &PrimarySamples,
+        taken: &[bool],
+        jittered: Vec<Rng>,
+        shadows: Vec<Option<KeptShadow>>,
+    ) -> Self {
+        let samples = jittered
+            .into_iter()
+            .enumerate()
+            .map(|(i, rng)| StillSample {
+                ray: primary.rays[i],
+                hit: primary.hits[i],
+                rng,
+                shadow: shadows[i],
+            })
+            .collect();
+        TileKept {
+            samples,
+            taken: taken.iter().filter(|&&t| t).count() as u64,
+        }
+    }
+}
+
+/// What places a frame's pixel samples: the camera, the film, the samples
+/// and tiles, and which triangles are static. Two frames with the same
+/// one draw the same camera rays under coherent streams.
+fn view_fingerprint(ctx: &FrameContext, spp: u32, pixels_per_tile: usize) -> u64 {
+    let camera = &ctx.snapshot.camera;
+    let floats = camera
+        .position
+        .to_array()
+        .into_iter()
+        .chain(camera.basis.to_cols_array())
+        .chain([camera.yfov]);
+    let counts = [
+        u64::from(ctx.width),
+        u64::from(ctx.height),
+        u64::from(spp),
+        pixels_per_tile as u64,
+        u64::from(ctx.edge_coverage_factor),
+        ctx.snapshot.static_count as u64,
+        ctx.snapshot.triangles.len() as u64,
+        ctx.seed,
+    ];
+    fingerprint(floats, counts)
+}
+
+/// Where the lights are and what they send: two frames with the same one
+/// give every shading point the same light samples.
+fn lights_fingerprint(ctx: &FrameContext) -> u64 {
+    let snapshot = ctx.snapshot;
+    let triangles = ctx
+        .lights
+        .emitting_triangles()
+        .flat_map(|id| snapshot.triangles[id].p)
+        .flat_map(|p| p.to_array());
+    let points = snapshot.lights.iter().flat_map(|l| {
+        [l.position, l.direction, l.intensity]
+            .into_iter()
+            .flat_map(|v| v.to_array())
+    });
+    let ids = ctx.lights.emitting_triangles().map(|id| id as u64);
+    fingerprint(
+        triangles.chain(points),
+        ids.chain([ctx.lights.pick_fingerprint(), snapshot.lights.len() as u64]),
+    )
+}
+
+/// A hash of some floats (by their bits) and integers.
+fn fingerprint(floats: impl Iterator<Item = f32>, ints: impl IntoIterator<Item = u64>) -> u64 {
+    let h = floats.fold(0x5eed, |h, f| mix64(h ^ u64::from(f.to_bits())));
+    ints.into_iter().fold(h, |h, i| mix64(h.rotate_left(7) ^ i))
 }
 
 /// Indirect diffuse light by path tracing, where no record is usable:
@@ -771,6 +1166,91 @@ mod tests {
         assert_eq!((lookups, of, own), (shared(0.6), of_sample, Vec::new()));
     }
 
+    /// Renders `frames` in turn with one kept [`StillSamples`] under an
+    /// `ic` cache of each frame, and again each afresh (nothing kept), with
+    /// coherent streams. Returns, per frame, whether the two films are the
+    /// same bit for bit, the samples taken, and the rays each traced.
+    fn kept_against_fresh(scene: &str, frames: &[u32]) -> Vec<(bool, u64, u64, u64)> {
+        let mut renderer = crate::render::test_renderer(scene, 20);
+        let ic = IrradianceCaching::new(IcSettings {
+            spp: 4,
+            strata: Strata { theta: 4, phi: 12 },
+            ..IcSettings::default()
+        });
+        let mut still = StillSamples::default();
+        frames
+            .iter()
+            .map(|&frame| {
+                renderer.with_frame_context(frame, |ctx| {
+                    let cache = ic.build_cache(ctx);
+                    let render = |still: Option<&mut StillSamples>| {
+                        let before = ctx.backend.ray_counts().total();
+                        let film = render_pass(
+                            ctx,
+                            &cache,
+                            &ic.settings,
+                            PixelStreams::Coherent,
+                            None,
+                            still,
+                            &mut FrameStats::default(),
+                        );
+                        (film, ctx.backend.ray_counts().total() - before)
+                    };
+                    let (kept, kept_rays) = render(Some(&mut still));
+                    let (fresh, fresh_rays) = render(None);
+                    let same = kept.pixels.iter().zip(&fresh.pixels).all(|(a, b)| {
+                        a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)
+                    });
+                    (same, still.taken, kept_rays, fresh_rays)
+                })
+            })
+            .collect()
+    }
+
+    /// A frame whose samples are taken from the last one where nothing
+    /// moving met them equals, bit for bit, the frame traced afresh: on
+    /// `cube-in-box` (a cube moves; the camera and light stay) most samples
+    /// are taken and fewer rays traced; where the moving cube's box lies on
+    /// their rays some are not; a frame that does not follow the last one
+    /// takes none.
+    #[test]
+    fn kept_samples_give_the_frame_traced_afresh() {
+        let frames = kept_against_fresh("cube-in-box", &[3, 4, 5, 9]);
+        let samples = 20 * 20 * 4;
+        assert_eq!(frames[0], (true, 0, frames[0].2, frames[0].2));
+        for &(same, taken, kept_rays, fresh_rays) in &frames[1..3] {
+            assert!(same);
+            assert!(
+                taken > samples / 2 && taken < samples,
+                "{taken} of {samples}"
+            );
+            assert!(
+                kept_rays < fresh_rays / 2,
+                "{kept_rays} rays against {fresh_rays}"
+            );
+        }
+        assert_eq!(frames[3], (true, 0, frames[3].2, frames[3].2));
+    }
+
+    /// Under a moving light every sample keeps its hit but traces its
+    /// shadow ray again, and the frames still equal those traced afresh.
+    #[test]
+    fn kept_samples_under_a_moving_light_trace_their_shadows_again() {
+        let frames = kept_against_fresh("moving-light", &[3, 4]);
+        let (same, taken, kept_rays, fresh_rays) = frames[1];
+        assert!(same && frames[0].0);
+        assert!(taken > 0);
+        assert!(
+            kept_rays < fresh_rays,
+            "{kept_rays} rays against {fresh_rays}"
+        );
+        let shadows = fresh_rays - kept_rays;
+        assert!(
+            shadows <= taken,
+            "{shadows} rays saved by {taken} samples taken"
+        );
+    }
+
     /// `trc`'s first pass flags the records the render pass will use: on a
     /// scene whose light is in view (so edge pixels add shaded samples), the
     /// flags of [`mark_used`] equal those the render pass sets. (Here no
@@ -790,14 +1270,15 @@ mod tests {
                 (0..cache.len()).map(|_| AtomicBool::new(false)).collect()
             };
             let (marked, rendered) = (flags(), flags());
-            mark_used(ctx, &cache, &ic.settings, &marked);
+            mark_used(ctx, &cache, &ic.settings, PixelStreams::PerFrame, &marked);
             let mut stats = FrameStats::default();
             render_pass(
                 ctx,
                 &cache,
                 &ic.settings,
-                FallbackStreams::PerFrame,
+                PixelStreams::PerFrame,
                 Some(&rendered),
+                None,
                 &mut stats,
             );
             let read = |f: Vec<AtomicBool>| -> Vec<bool> {

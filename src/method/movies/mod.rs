@@ -51,7 +51,7 @@ pub mod movie;
 pub mod patch;
 
 use super::pixels::FirstLightSampler;
-use super::render_pass::{direct_light, glossy_query, PrimarySamples, Surface};
+use super::render_pass::{direct_light, glossy_query, PixelStreams, PrimarySamples, Surface};
 use super::{FrameContext, FrameRecords, FrameStats, Method, RENDER_PHASE};
 use crate::backend::Hit;
 use crate::film::Film;
@@ -314,7 +314,8 @@ impl TextureMovies {
             .into_par_iter()
             .map(|first| {
                 let count = per_tile.min(n_pixels - first);
-                let (primary, edges) = PrimarySamples::trace(ctx, first, count, spp);
+                let (primary, edges) =
+                    PrimarySamples::trace(ctx, PixelStreams::PerFrame, first, count, spp);
                 Tile {
                     first,
                     count,

@@ -57,7 +57,7 @@ use super::ic::{
     dynamic_objects, primary_candidates, scene_bounds, Candidate, Gathered, IcSettings,
     IrradianceCaching, RECORD_STREAM,
 };
-use super::render_pass::{render_pass, FallbackStreams};
+use super::render_pass::{render_pass, PixelStreams, StillSamples};
 use super::{
     FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges, StateError,
     RENDER_PHASE,
@@ -259,6 +259,9 @@ pub struct TemporallyCoherentGathering {
     /// Store hook ([`Method::keep_frame_records`]).
     keep: bool,
     kept: Option<FrameRecords>,
+    /// The last frame's pixel samples, for the render pass to take again
+    /// where nothing moving met them.
+    still: StillSamples,
 }
 
 impl TemporallyCoherentGathering {
@@ -272,6 +275,7 @@ impl TemporallyCoherentGathering {
             stats: FrameStats::default(),
             keep: false,
             kept: None,
+            still: StillSamples::default(),
         }
     }
 
@@ -455,8 +459,8 @@ impl TemporallyCoherentGathering {
         }
         stats.records_alive = records.len() as u64;
         stats.cache_bytes = (cache.memory_bytes()
-            + records.iter().map(TcgRecord::memory_bytes).sum::<usize>())
-            as u64;
+            + records.iter().map(TcgRecord::memory_bytes).sum::<usize>()
+            + self.still.memory_bytes()) as u64;
         self.kept = self.keep.then(|| FrameRecords {
             records: records.iter().map(|r| r.record.clone()).collect(),
             samples: records
@@ -527,8 +531,9 @@ impl Method for TemporallyCoherentGathering {
             ctx,
             &cache,
             &self.settings.ic,
-            FallbackStreams::Coherent,
+            PixelStreams::Coherent,
             Some(&used),
+            Some(&mut self.still),
             &mut stats,
         );
         stats

@@ -89,7 +89,7 @@ use super::ic::{
     dynamic_objects, limit_gradient, primary_candidates, scene_bounds, Candidate, Gathered,
     IcSettings,
 };
-use super::render_pass::{mark_used, render_pass, FallbackStreams};
+use super::render_pass::{mark_used, render_pass, PixelStreams, StillSamples};
 use super::{
     mean_lifespan, FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges,
     StateError, RENDER_PHASE,
@@ -355,6 +355,9 @@ pub struct TemporalRadianceCaching {
     forgotten: Vec<RecordId>,
     /// The static triangles' BVH for the E(t0+1) estimate's shadow rays.
     statics: direct::StaticGeometry,
+    /// The last frame's pixel samples, for the render pass to take again
+    /// where nothing moving met them.
+    still: StillSamples,
 }
 
 impl TemporalRadianceCaching {
@@ -372,6 +375,7 @@ impl TemporalRadianceCaching {
             kept: None,
             forgotten: Vec::new(),
             statics: direct::StaticGeometry::default(),
+            still: StillSamples::default(),
         }
     }
 
@@ -625,7 +629,8 @@ impl TemporalRadianceCaching {
             + alive
                 .iter()
                 .map(TemporalRecord::memory_bytes)
-                .sum::<usize>()) as u64;
+                .sum::<usize>()
+            + self.still.memory_bytes()) as u64;
         if let Some(k) = kept.as_mut() {
             k.state.as_mut().expect("set above").global = carried::encode_next_id(self.next_id);
         }
@@ -659,8 +664,9 @@ impl TemporalRadianceCaching {
             ctx,
             &cache,
             &self.settings.ic,
-            FallbackStreams::Coherent,
+            PixelStreams::Coherent,
             None,
+            Some(&mut self.still),
             &mut stats,
         );
         stats
@@ -689,8 +695,9 @@ impl Method for TemporalRadianceCaching {
             ctx,
             &cache,
             &self.settings.ic,
-            FallbackStreams::Coherent,
+            PixelStreams::Coherent,
             Some(&used),
+            Some(&mut self.still),
             &mut aged.stats,
         );
         aged.stats
@@ -732,7 +739,13 @@ impl Method for TemporalRadianceCaching {
         let (cache, mut aged) = self.age_and_fill(ctx);
         let start = Instant::now();
         let used: Vec<AtomicBool> = (0..cache.len()).map(|_| AtomicBool::new(false)).collect();
-        mark_used(ctx, &cache, &self.settings.ic, &used);
+        mark_used(
+            ctx,
+            &cache,
+            &self.settings.ic,
+            PixelStreams::Coherent,
+            &used,
+        );
         aged.stats
             .phase_seconds
             .push(("usage".into(), start.elapsed().as_secs_f64()));
