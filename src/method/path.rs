@@ -88,8 +88,13 @@ impl Method for PathTracer {
                 let (rays, mut results) = self.trace(ctx, &samples);
                 // The first hits decide which pixels are on a light's edge.
                 let hits: Vec<Hit> = results.iter().map(|r| r.hit).collect();
-                let edges =
-                    EmitterEdges::find(ctx, PixelStreams::PerFrame, &samples, &rays, &hits, spp);
+                let edges = EmitterEdges::find(
+                    ctx,
+                    PixelStreams::PerFrame,
+                    (&samples, &rays, &hits),
+                    spp,
+                    None,
+                );
                 results.extend(self.trace(ctx, edges.extra_samples()).1);
                 samples.extend_from_slice(edges.extra_samples());
                 let radiance: Vec<Vec3> = results.iter().map(|r| r.radiance).collect();

@@ -219,6 +219,36 @@ pub struct EmitterEdges {
     /// Samples to shade besides the base ones: one for each part of an edge
     /// pixel that only its coverage rays saw.
     extra: Vec<PixelSample>,
+    /// What the coverage rays of every candidate pixel saw, in pixel order
+    /// (for the next frame to keep: [`KeptCoverage`]).
+    coverage: Vec<CandidateCoverage>,
+}
+
+/// A candidate pixel, how many of its base samples saw an emitter, and
+/// what its coverage rays saw.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CandidateCoverage {
+    pixel: u32,
+    seen: u32,
+    count: CoverageCount,
+}
+
+/// The coverage of the last frame's candidate pixels (in pixel order), and
+/// which pixels nothing moving may have changed since: a candidate with the
+/// same base samples seen whose pixel is `clear` keeps what its coverage
+/// rays saw instead of tracing them again (under coherent streams they
+/// are the same rays; `render_pass::StillSamples`).
+pub struct KeptCoverage<'a> {
+    pub last: &'a [CandidateCoverage],
+    pub clear: &'a (dyn Fn(u32) -> bool + Sync),
+}
+
+impl KeptCoverage<'_> {
+    fn count(&self, pixel: u32, seen: u32) -> Option<CoverageCount> {
+        let i = self.last.binary_search_by_key(&pixel, |c| c.pixel).ok()?;
+        let c = self.last[i];
+        (c.seen == seen && (self.clear)(pixel)).then_some(c.count)
+    }
 }
 
 /// Of an edge pixel's camera rays (its base samples and its coverage rays,
@@ -247,10 +277,9 @@ impl EmitterEdges {
     pub fn find(
         ctx: &FrameContext,
         streams: PixelStreams,
-        base: &[PixelSample],
-        rays: &[Ray],
-        hits: &[Hit],
+        (base, rays, hits): (&[PixelSample], &[Ray], &[Hit]),
         spp: u32,
+        kept: Option<&KeptCoverage>,
     ) -> Self {
         let extra = ctx.edge_coverage_factor.saturating_mul(spp);
         // No sample can see an emitter that is out of view.
@@ -285,11 +314,33 @@ impl EmitterEdges {
                 (!uniform || !corners_agree).then_some((pixel, seen))
             })
             .collect();
-        let coverage = coverage_counts(ctx, streams, &candidates, spp, extra);
-        for (&(pixel, seen), count) in candidates.iter().zip(coverage) {
+        let mut counts: Vec<Option<CoverageCount>> = candidates
+            .iter()
+            .map(|&(pixel, seen)| kept.and_then(|k| k.count(pixel, seen)))
+            .collect();
+        let missing: Vec<(u32, u32)> = candidates
+            .iter()
+            .zip(&counts)
+            .filter(|(_, count)| count.is_none())
+            .map(|(&c, _)| c)
+            .collect();
+        let mut traced = coverage_counts(ctx, streams, &missing, spp, extra).into_iter();
+        for count in counts.iter_mut().filter(|c| c.is_none()) {
+            *count = traced.next();
+        }
+        for (&(pixel, seen), count) in candidates.iter().zip(counts) {
+            let count = count.expect("every candidate counted");
+            edges
+                .coverage
+                .push(CandidateCoverage { pixel, seen, count });
             edges.add_candidate(pixel, seen, count, spp, extra);
         }
         edges
+    }
+
+    /// What the coverage rays of the candidate pixels saw, in pixel order.
+    pub fn coverage(&self) -> &[CandidateCoverage] {
+        &self.coverage
     }
 
     /// Adds candidate `pixel`, `seen` of whose `spp` base samples see an

@@ -26,7 +26,10 @@ use super::ic::{GlossyLobe, IcSettings};
 use super::lookups::{measure_clearance, Interpolation, Lookup, ShadingPoint};
 use super::motion::Blockers;
 pub use super::pixels::PixelStreams;
-use super::pixels::{self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample};
+use super::pixels::{
+    self, CameraSampler, CandidateCoverage, EmitterEdges, FirstLightSampler, KeptCoverage,
+    PixelSample,
+};
 use super::{FrameContext, FrameStats};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::GatherPoint;
@@ -130,7 +133,7 @@ pub(crate) fn render_pass(
         stats.lookup_records += t.lookup_records;
         stats.fallback_lookups += t.fallback_lookups;
         taken += tile.taken;
-        kept.push(tile.samples);
+        kept.push(tile.tile);
     }
     if let (Some(still), Some(pass)) = (still, still_pass.take()) {
         still.last = Some(pass.finish(kept));
@@ -221,13 +224,17 @@ impl PrimarySamples {
         let base = pixels::tile_samples(first, count, spp);
         let taken = primary.add(ctx, streams, &base, still);
         // The first hits decide which pixels are on a light's edge.
+        let clear = |pixel: u32| still.is_some_and(|s| s.pass.pixel_clear(pixel));
+        let kept = still.map(|s| KeptCoverage {
+            last: s.coverage,
+            clear: &clear,
+        });
         let edges = EmitterEdges::find(
             ctx,
             streams,
-            &primary.samples,
-            &primary.rays,
-            &primary.hits,
+            (&primary.samples, &primary.rays, &primary.hits),
             spp,
+            kept.as_ref(),
         );
         primary.add(ctx, streams, edges.extra_samples(), None);
         (primary, edges, taken)
@@ -500,7 +507,7 @@ fn render_tile(
         }
     }
     edges.resolve(&tile.primary.samples, &tile.radiance, first, out);
-    let kept = TileKept::of(&tile.primary, &taken, jittered, kept_shadows);
+    let kept = TileKept::of(&tile.primary, &taken, jittered, kept_shadows, &edges);
     (stats, kept)
 }
 
@@ -805,9 +812,11 @@ fn coherent_fallback(ctx: &FrameContext, s: &PixelSample) -> Rng {
 /// ray hits and whether its shadow ray is stopped. A sample whose camera
 /// ray hit a static triangle (or nothing) and meets no moving object's box
 /// this frame keeps its hit; if its shadow ray meets no moving object's box
-/// in the last frame or this one either, it keeps its direct light. The
-/// rest is traced again, as are the cache lookups, fallbacks and glossy
-/// lobes of every sample. So the film equals, bit for bit, the one traced
+/// in the last frame or this one either, it keeps its direct light. A
+/// pixel on the rim of a seen light keeps what its coverage rays saw
+/// ([`pixels::EmitterEdges`]) where no moving box shows within a pixel of
+/// it on the film in either frame. The rest is traced again, as are the
+/// cache lookups, fallbacks and glossy lobes of every sample. So the film equals, bit for bit, the one traced
 /// afresh, and a resumed job (which starts with none kept) equals an
 /// uninterrupted one.
 ///
@@ -833,7 +842,8 @@ impl StillSamples {
     /// Bytes the kept samples take.
     pub fn memory_bytes(&self) -> usize {
         self.last.as_ref().map_or(0, |f| {
-            f.tiles.iter().map(Vec::len).sum::<usize>() * std::mem::size_of::<StillSample>()
+            f.tiles.iter().map(KeptTile::memory_bytes).sum::<usize>()
+                + f.screen.len() * std::mem::size_of::<ScreenRect>()
         })
     }
 }
@@ -844,8 +854,30 @@ struct KeptFrame {
     view: u64,
     lights: u64,
     blockers: Blockers,
-    tiles: Vec<Vec<StillSample>>,
+    /// Where the moving boxes showed on the film.
+    screen: Vec<ScreenRect>,
+    tiles: Vec<KeptTile>,
 }
+
+/// One tile's kept samples (its base samples, in order) and the coverage
+/// of its candidate edge pixels.
+#[derive(Default)]
+struct KeptTile {
+    samples: Vec<StillSample>,
+    coverage: Vec<CandidateCoverage>,
+}
+
+impl KeptTile {
+    fn memory_bytes(&self) -> usize {
+        self.samples.len() * std::mem::size_of::<StillSample>()
+            + self.coverage.len() * std::mem::size_of::<CandidateCoverage>()
+    }
+}
+
+/// The part of the film, in pixels (`x0, y0, x1, y1`), where a box may
+/// show: the bounds of its corners' projections, or the whole plane where
+/// a corner lies behind the camera.
+type ScreenRect = [f32; 4];
 
 /// One base pixel sample as traced: its camera ray, hit, stream after the
 /// camera's draw, and its direct light's shadow (`None`: it had none).
@@ -872,6 +904,10 @@ struct StillPass {
     view: u64,
     lights: u64,
     blockers: Blockers,
+    /// Where this frame's moving boxes show on the film, `width` pixels
+    /// wide.
+    screen: Vec<ScreenRect>,
+    width: u32,
     /// The last frame, when it was the one before with the same view.
     last: Option<KeptFrame>,
     /// Whether the lights are where they were (else no shadow is kept).
@@ -905,37 +941,58 @@ impl StillPass {
             .fold(0.0f32, f32::max)
             * 2.0
             + 1.0;
+        let screen = blockers
+            .boxes
+            .iter()
+            .map(|&b| screen_rect(ctx, b))
+            .collect();
         Some(StillPass {
             frame: ctx.frame,
             view,
             lights,
             lights_still: last.as_ref().is_some_and(|l| l.lights == lights),
             blockers,
+            screen,
+            width: ctx.width,
             last,
             far,
         })
     }
 
     fn tile(&self, tile: usize) -> TileStill<'_> {
-        let samples = self
-            .last
-            .as_ref()
-            .and_then(|l| l.tiles.get(tile))
-            .map_or(&[][..], Vec::as_slice);
+        let kept = self.last.as_ref().and_then(|l| l.tiles.get(tile));
         TileStill {
             pass: self,
-            samples,
+            samples: kept.map_or(&[][..], |k| k.samples.as_slice()),
+            coverage: kept.map_or(&[][..], |k| k.coverage.as_slice()),
         }
     }
 
-    fn finish(self, tiles: Vec<Vec<StillSample>>) -> KeptFrame {
+    fn finish(self, tiles: Vec<KeptTile>) -> KeptFrame {
         KeptFrame {
             frame: self.frame,
             view: self.view,
             lights: self.lights,
             blockers: self.blockers,
+            screen: self.screen,
             tiles,
         }
+    }
+
+    /// Whether no camera ray through `pixel` can have met a moving object
+    /// in the last frame or this one: no moving box's film rect, in either
+    /// frame, comes within a pixel of its square. Then every ray through
+    /// it, whatever its position in the pixel, sees what it saw (lights
+    /// and view staying).
+    fn pixel_clear(&self, pixel: u32) -> bool {
+        let Some(last) = self.last.as_ref().filter(|_| self.lights_still) else {
+            return false;
+        };
+        let (x, y) = ((pixel % self.width) as f32, (pixel / self.width) as f32);
+        let square = [x - 1.0, y - 1.0, x + 2.0, y + 2.0];
+        !self.screen.iter().chain(&last.screen).any(|r| {
+            r[0] <= square[2] && square[0] <= r[2] && r[1] <= square[3] && square[1] <= r[3]
+        })
     }
 
     /// Whether a camera ray's hit stands this frame: it hit a static
@@ -964,10 +1021,12 @@ impl StillPass {
     }
 }
 
-/// One tile's part of a [`StillPass`]: its samples in the last frame.
+/// One tile's part of a [`StillPass`]: its samples in the last frame and
+/// the coverage of its candidate edge pixels then.
 struct TileStill<'a> {
     pass: &'a StillPass,
     samples: &'a [StillSample],
+    coverage: &'a [CandidateCoverage],
 }
 
 impl TileStill<'_> {
@@ -992,23 +1051,26 @@ impl TileStill<'_> {
     }
 }
 
-/// A tile's base samples as traced this frame (empty when nothing is
-/// kept), and how many of them were taken from the last frame.
+/// A tile's base samples as traced this frame and its candidates'
+/// coverage (empty when nothing is kept), and how many of its samples were
+/// taken from the last frame.
 struct TileKept {
-    samples: Vec<StillSample>,
+    tile: KeptTile,
     taken: u64,
 }
 
 impl TileKept {
     /// The base samples (the first `taken.len()`) of `primary`, with their
     /// streams as the camera left them (`jittered`; none: nothing is kept)
-    /// and their shadows.
+    /// and their shadows, and the coverage `edges` found.
     fn of(
         primary: &PrimarySamples,
         taken: &[bool],
         jittered: Vec<Rng>,
         shadows: Vec<Option<KeptShadow>>,
+        edges: &EmitterEdges,
     ) -> Self {
+        let keep = !jittered.is_empty();
         let samples = jittered
             .into_iter()
             .enumerate()
@@ -1019,11 +1081,51 @@ impl TileKept {
                 shadow: shadows[i],
             })
             .collect();
+        let coverage = if keep {
+            edges.coverage().to_vec()
+        } else {
+            Vec::new()
+        };
         TileKept {
-            samples,
+            tile: KeptTile { samples, coverage },
             taken: taken.iter().filter(|&&t| t).count() as u64,
         }
     }
+}
+
+/// Where box `(lo, hi)` may show on the film, in pixels ([`ScreenRect`]).
+fn screen_rect(ctx: &FrameContext, (lo, hi): (Vec3, Vec3)) -> ScreenRect {
+    const WHOLE_PLANE: ScreenRect = [
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+        f32::INFINITY,
+        f32::INFINITY,
+    ];
+    let (w, h) = (ctx.width as f32, ctx.height as f32);
+    let mut rect = [
+        f32::INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+    ];
+    for k in 0..8 {
+        let corner = Vec3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        let Some((sx, sy)) = ctx.snapshot.camera.project(corner, ctx.aspect()) else {
+            return WHOLE_PLANE;
+        };
+        let (x, y) = (sx * w, sy * h);
+        rect = [
+            rect[0].min(x),
+            rect[1].min(y),
+            rect[2].max(x),
+            rect[3].max(y),
+        ];
+    }
+    rect
 }
 
 /// What places a frame's pixel samples: the camera, the film, the samples
@@ -1230,6 +1332,42 @@ mod tests {
             );
         }
         assert_eq!(frames[3], (true, 0, frames[3].2, frames[3].2));
+    }
+
+    /// Every point of a box in front of the camera projects inside the box's
+    /// film rect; a box with a corner behind the camera covers the plane.
+    #[test]
+    fn a_box_shows_only_inside_its_film_rect() {
+        let mut renderer = crate::render::test_renderer("cube-in-box", 32);
+        renderer.with_frame_context(0, |ctx| {
+            let camera = &ctx.snapshot.camera;
+            let mut rng = Rng::from_seed(3, 0);
+            let forward = -camera.basis.z_axis;
+            for _ in 0..200 {
+                let mut v = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                let centre = camera.position + forward * (1.0 + 5.0 * v().x) + (v() - 0.5) * 3.0;
+                let half = v() * 0.5;
+                let (lo, hi) = (centre - half, centre + half);
+                let rect = screen_rect(ctx, (lo, hi));
+                for _ in 0..20 {
+                    let p = lo + (hi - lo) * v();
+                    let Some((sx, sy)) = camera.project(p, ctx.aspect()) else {
+                        assert!(rect[0].is_infinite());
+                        continue;
+                    };
+                    let (x, y) = (sx * 32.0, sy * 32.0);
+                    assert!(
+                        rect[0] <= x + 1e-3
+                            && x <= rect[2] + 1e-3
+                            && rect[1] <= y + 1e-3
+                            && y <= rect[3] + 1e-3,
+                        "{p} at ({x}, {y}) outside {rect:?}"
+                    );
+                }
+            }
+            let around = (camera.position - Vec3::ONE, camera.position + Vec3::ONE);
+            assert_eq!(screen_rect(ctx, around)[0], f32::NEG_INFINITY);
+        });
     }
 
     /// Under a moving light every sample keeps its hit but traces its
