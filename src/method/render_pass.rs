@@ -251,11 +251,26 @@ impl PrimarySamples {
         still: Option<&TileStill>,
     ) -> Vec<bool> {
         let start = self.rays.len();
+        self.rays.reserve(samples.len());
+        self.rngs.reserve(samples.len());
+        self.hits.reserve(samples.len());
+        self.samples.reserve(samples.len());
         let mut camera = CameraSampler::new(streams);
         let mut taken = vec![false; samples.len()];
         let mut fresh = Vec::new();
+        // Whether the current pixel is clear on the film (its samples are
+        // consecutive).
+        let mut film: Option<(u32, bool)> = None;
         for (i, s) in samples.iter().enumerate() {
-            if let Some(k) = still.and_then(|st| st.primary(i)) {
+            let kept = still.and_then(|st| {
+                let clear = match film {
+                    Some((pixel, clear)) if pixel == s.pixel => clear,
+                    _ => st.pass.film_clear(s.pixel),
+                };
+                film = Some((s.pixel, clear));
+                st.primary(i, clear)
+            });
+            if let Some(k) = kept {
                 self.rays.push(k.ray);
                 self.rngs.push(k.rng.clone());
                 self.hits.push(k.hit);
@@ -489,7 +504,8 @@ fn render_tile(
         &interpolated,
         &mut stats,
     );
-    let kept_shadows = shadows.add_unoccluded(ctx, &mut tile.radiance, still.is_some());
+    let kept_shadows =
+        shadows.add_unoccluded(ctx, &mut tile.radiance, still.as_ref().map(|s| s.pass));
     let (first_hits, paths): (Vec<Deferred>, Vec<Deferred>) =
         deferred.into_iter().partition(|d| d.first_hit_only);
     let first_hit = PathLength {
@@ -530,29 +546,35 @@ struct ShadowBatch {
 
 impl ShadowBatch {
     /// Adds the light of the unoccluded shadow rays to their samples. With
-    /// `keep`, returns each sample's shadow (`None`: it had none), for the
-    /// next frame.
+    /// `keep` (this frame's kept samples), returns each sample's shadow
+    /// (`None`: it had none), for the next frame.
     fn add_unoccluded(
         self,
         ctx: &FrameContext,
         radiance: &mut [Vec3],
-        keep: bool,
+        keep: Option<&StillPass>,
     ) -> Vec<Option<KeptShadow>> {
         let mut occluded = vec![false; self.rays.len()];
         ctx.backend.any_hit(&self.rays, &mut occluded);
-        let mut kept = vec![None; if keep { radiance.len() } else { 0 }];
+        let mut kept = vec![None; if keep.is_some() { radiance.len() } else { 0 }];
         let traced = self.rays.into_iter().zip(self.targets).zip(occluded);
         let traced = traced.map(|((ray, (i, contribution)), occluded)| {
-            (
-                i,
-                KeptShadow {
-                    ray,
-                    contribution,
-                    occluded,
-                },
-            )
+            let clear = keep.is_some_and(|pass| pass.shadow_clear(&ray));
+            let shadow = KeptShadow {
+                ray,
+                contribution,
+                occluded,
+                clear,
+            };
+            (i, shadow)
         });
-        for (i, shadow) in traced.chain(self.kept) {
+        // A shadow taken again met no moving box of this frame.
+        let taken = self
+            .kept
+            .into_iter()
+            .map(|(i, s)| (i, KeptShadow { clear: true, ..s }));
+        let keep = keep.is_some();
+        for (i, shadow) in traced.chain(taken) {
             if !shadow.occluded {
                 radiance[i] += shadow.contribution;
             }
@@ -853,7 +875,6 @@ struct KeptFrame {
     frame: u32,
     view: u64,
     lights: u64,
-    blockers: Blockers,
     /// Where the moving boxes showed on the film.
     screen: Vec<ScreenRect>,
     tiles: Vec<KeptTile>,
@@ -889,12 +910,14 @@ struct StillSample {
     shadow: Option<KeptShadow>,
 }
 
-/// A shadow ray, what its light adds if unoccluded, and whether it was.
+/// A shadow ray, what its light adds if unoccluded, whether it was, and
+/// whether no moving box lay on it in the frame it is kept from.
 #[derive(Clone, Copy)]
 struct KeptShadow {
     ray: Ray,
     contribution: Vec3,
     occluded: bool,
+    clear: bool,
 }
 
 /// One render pass's view of the kept samples: this frame's moving boxes,
@@ -973,7 +996,6 @@ impl StillPass {
             frame: self.frame,
             view: self.view,
             lights: self.lights,
-            blockers: self.blockers,
             screen: self.screen,
             tiles,
         }
@@ -988,18 +1010,19 @@ impl StillPass {
         let Some(last) = self.last.as_ref().filter(|_| self.lights_still) else {
             return false;
         };
-        let (x, y) = ((pixel % self.width) as f32, (pixel / self.width) as f32);
-        let square = [x - 1.0, y - 1.0, x + 2.0, y + 2.0];
-        !self.screen.iter().chain(&last.screen).any(|r| {
-            r[0] <= square[2] && square[0] <= r[2] && r[1] <= square[3] && square[1] <= r[3]
-        })
+        self.film_clear(pixel) && film_clear(&last.screen, self.width, pixel)
     }
 
     /// Whether a camera ray's hit stands this frame: it hit a static
-    /// triangle or nothing, and no moving box lies on its way there.
-    fn hit_stands(&self, ray: &Ray, hit: &Hit) -> bool {
+    /// triangle or nothing, and no moving box lies on its way there (none
+    /// shows near its pixel on the film, `film_clear`, or its segment
+    /// misses every box).
+    fn hit_stands(&self, ray: &Ray, hit: &Hit, film_clear: bool) -> bool {
         if hit.is_hit() && self.blockers.is_moving_triangle(hit.triangle) {
             return false;
+        }
+        if film_clear {
+            return true;
         }
         let t = if hit.is_hit() {
             hit.t
@@ -1010,14 +1033,23 @@ impl StillPass {
     }
 
     /// Whether a shadow ray's outcome stands this frame: the lights stayed
-    /// and no moving box lay on it in the last frame (so what stopped it,
-    /// if anything, was static) nor lies on it now.
+    /// and no moving box lay on it in the last frame (`clear`: so what
+    /// stopped it, if anything, was static) nor lies on it now.
     fn shadow_stands(&self, shadow: &KeptShadow) -> bool {
-        let Some(last) = self.last.as_ref().filter(|_| self.lights_still) else {
-            return false;
-        };
-        let (a, b) = (shadow.ray.origin(), shadow.ray.at(1.0));
-        !last.blockers.segment_may_hit(a, b) && !self.blockers.segment_may_hit(a, b)
+        self.lights_still && shadow.clear && self.shadow_clear(&shadow.ray)
+    }
+
+    /// Whether no moving box of this frame lies on shadow ray `ray`.
+    fn shadow_clear(&self, ray: &Ray) -> bool {
+        !self
+            .blockers
+            .segment_may_hit(ray.origin(), ray.origin() + ray.dir())
+    }
+
+    /// Whether no moving box of this frame shows within a pixel of
+    /// `pixel` on the film.
+    fn film_clear(&self, pixel: u32) -> bool {
+        film_clear(&self.screen, self.width, pixel)
     }
 }
 
@@ -1030,11 +1062,12 @@ struct TileStill<'a> {
 }
 
 impl TileStill<'_> {
-    /// Base sample `i` of the last frame, if its hit stands.
-    fn primary(&self, i: usize) -> Option<&StillSample> {
+    /// Base sample `i` of the last frame, if its hit stands (`film_clear`:
+    /// whether no moving box shows near its pixel).
+    fn primary(&self, i: usize, film_clear: bool) -> Option<&StillSample> {
         self.samples
             .get(i)
-            .filter(|k| self.pass.hit_stands(&k.ray, &k.hit))
+            .filter(|k| self.pass.hit_stands(&k.ray, &k.hit, film_clear))
     }
 
     /// Base sample `i`'s shadow in the last frame, if its hit was taken
@@ -1091,6 +1124,16 @@ impl TileKept {
             taken: taken.iter().filter(|&&t| t).count() as u64,
         }
     }
+}
+
+/// Whether none of `rects` comes within a pixel of `pixel`'s square on a
+/// film `width` pixels wide.
+fn film_clear(rects: &[ScreenRect], width: u32, pixel: u32) -> bool {
+    let (x, y) = ((pixel % width) as f32, (pixel / width) as f32);
+    let square = [x - 1.0, y - 1.0, x + 2.0, y + 2.0];
+    !rects
+        .iter()
+        .any(|r| r[0] <= square[2] && square[0] <= r[2] && r[1] <= square[3] && square[1] <= r[3])
 }
 
 /// Where box `(lo, hi)` may show on the film, in pixels ([`ScreenRect`]).
