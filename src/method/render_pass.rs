@@ -1434,9 +1434,10 @@ mod tests {
 
     /// `trc`'s first pass flags the records the render pass will use: on a
     /// scene whose light is in view (so edge pixels add shaded samples), the
-    /// flags of [`mark_used`] equal those the render pass sets. (Here no
-    /// record is used by an edge pixel's extra sample alone, so this guards
-    /// the invariant rather than reproducing that case.)
+    /// flags of [`mark_used`] equal those the render pass sets, with either
+    /// kind of streams, and with samples kept from the frame before. (Here
+    /// no record is used by an edge pixel's extra sample alone, so this
+    /// guards the invariant rather than reproducing that case.)
     #[test]
     fn mark_used_flags_exactly_the_records_the_render_pass_uses() {
         let mut renderer = crate::render::test_renderer("cube-in-box", 20);
@@ -1445,29 +1446,40 @@ mod tests {
             strata: Strata { theta: 4, phi: 12 },
             ..IcSettings::default()
         });
-        let (marked, rendered) = renderer.with_frame_context(2, |ctx| {
-            let cache = ic.build_cache(ctx);
-            let flags = || -> Vec<AtomicBool> {
-                (0..cache.len()).map(|_| AtomicBool::new(false)).collect()
+        for streams in [PixelStreams::PerFrame, PixelStreams::Coherent] {
+            let mut still = StillSamples::default();
+            for frame in [1, 2] {
+                let (marked, rendered) = renderer.with_frame_context(frame, |ctx| {
+                    let cache = ic.build_cache(ctx);
+                    let flags = || -> Vec<AtomicBool> {
+                        (0..cache.len()).map(|_| AtomicBool::new(false)).collect()
+                    };
+                    let (marked, rendered) = (flags(), flags());
+                    mark_used(ctx, &cache, &ic.settings, streams, &marked);
+                    let mut stats = FrameStats::default();
+                    render_pass(
+                        ctx,
+                        &cache,
+                        &ic.settings,
+                        streams,
+                        Some(&rendered),
+                        Some(&mut still),
+                        &mut stats,
+                    );
+                    let read = |f: Vec<AtomicBool>| -> Vec<bool> {
+                        f.into_iter().map(AtomicBool::into_inner).collect()
+                    };
+                    (read(marked), read(rendered))
+                });
+                assert!(rendered.iter().any(|&u| u));
+                assert_eq!(marked, rendered, "{streams:?}, frame {frame}");
+            }
+            let kept = if streams == PixelStreams::Coherent {
+                1
+            } else {
+                0
             };
-            let (marked, rendered) = (flags(), flags());
-            mark_used(ctx, &cache, &ic.settings, PixelStreams::PerFrame, &marked);
-            let mut stats = FrameStats::default();
-            render_pass(
-                ctx,
-                &cache,
-                &ic.settings,
-                PixelStreams::PerFrame,
-                Some(&rendered),
-                None,
-                &mut stats,
-            );
-            let read = |f: Vec<AtomicBool>| -> Vec<bool> {
-                f.into_iter().map(AtomicBool::into_inner).collect()
-            };
-            (read(marked), read(rendered))
-        });
-        assert!(rendered.iter().any(|&u| u));
-        assert_eq!(marked, rendered);
+            assert_eq!(u64::from(still.taken > 0), kept, "{streams:?}");
+        }
     }
 }
