@@ -147,32 +147,63 @@ pub(crate) fn render_pass(
 /// shading points and the same usability test (`w ≥ 1/a`, which depends on
 /// the records' positions, normals and radii, not on their values). `trc`'s
 /// first pass with interpolated gradients (TRC §4.5, two passes) decides
-/// replace-or-drop from it before the frame is rendered.
+/// replace-or-drop from it before the frame is rendered. With `still`
+/// (the first pass's own, frame after frame), the camera hits and rim
+/// coverage of the last frame's samples that nothing moving met are taken
+/// again, as in [`render_pass`].
 pub(crate) fn mark_used(
     ctx: &FrameContext,
     cache: &IrradianceCache,
     settings: &IcSettings,
     streams: PixelStreams,
     used: &[AtomicBool],
+    still: Option<&mut StillSamples>,
 ) {
     let interpolation = Interpolation::new(ctx, cache, settings.gradients);
     let spp = settings.spp.max(1);
-    let n_pixels = ctx.width * ctx.height;
-    let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1) as u32;
-    let tiles: Vec<u32> = (0..n_pixels).step_by(pixels_per_tile as usize).collect();
-    tiles.into_par_iter().for_each(|first| {
-        let count = pixels_per_tile.min(n_pixels - first);
-        let (primary, _) = PrimarySamples::trace(ctx, streams, first, count, spp);
-        let surfaces = primary.surfaces(ctx);
-        let (lookups, _) = pixel_lookups(
-            ctx,
-            &surfaces,
-            &primary.hits,
-            &primary.samples,
-            settings.glossy,
-        );
-        interpolation.mark_used(&lookups, used);
+    let n_pixels = (ctx.width * ctx.height) as usize;
+    let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1);
+    let mut still = still.filter(|_| streams == PixelStreams::Coherent);
+    let mut still_pass = still.as_mut().and_then(|s| {
+        let last = s.last.take();
+        StillPass::new(ctx, last, spp, pixels_per_tile)
     });
+    let tiles: Vec<TileKept> = (0..n_pixels.div_ceil(pixels_per_tile))
+        .into_par_iter()
+        .map(|tile| {
+            let first = tile * pixels_per_tile;
+            let count = pixels_per_tile.min(n_pixels - first);
+            let still = still_pass.as_ref().map(|p| p.tile(tile));
+            let (primary, edges, taken) = PrimarySamples::trace_keeping(
+                ctx,
+                streams,
+                first as u32,
+                count as u32,
+                spp,
+                still.as_ref(),
+            );
+            let surfaces = primary.surfaces(ctx);
+            let (lookups, _) = pixel_lookups(
+                ctx,
+                &surfaces,
+                &primary.hits,
+                &primary.samples,
+                settings.glossy,
+            );
+            interpolation.mark_used(&lookups, used);
+            // No light is sampled here: the samples are kept without shadows.
+            let jittered = match still {
+                Some(_) => primary.rngs[..taken.len()].to_vec(),
+                None => Vec::new(),
+            };
+            let shadows = vec![None; jittered.len()];
+            TileKept::of(&primary, &taken, jittered, shadows, &edges)
+        })
+        .collect();
+    if let (Some(still), Some(pass)) = (still, still_pass.take()) {
+        still.taken = tiles.iter().map(|t| t.taken).sum();
+        still.last = Some(pass.finish(tiles.into_iter().map(|t| t.tile).collect()));
+    }
 }
 
 /// A path-traced part of a pixel sample (glossy lobe, or diffuse indirect
@@ -1447,7 +1478,7 @@ mod tests {
             ..IcSettings::default()
         });
         for streams in [PixelStreams::PerFrame, PixelStreams::Coherent] {
-            let mut still = StillSamples::default();
+            let (mut still, mut first_pass) = (StillSamples::default(), StillSamples::default());
             for frame in [1, 2] {
                 let (marked, rendered) = renderer.with_frame_context(frame, |ctx| {
                     let cache = ic.build_cache(ctx);
@@ -1455,7 +1486,14 @@ mod tests {
                         (0..cache.len()).map(|_| AtomicBool::new(false)).collect()
                     };
                     let (marked, rendered) = (flags(), flags());
-                    mark_used(ctx, &cache, &ic.settings, streams, &marked);
+                    mark_used(
+                        ctx,
+                        &cache,
+                        &ic.settings,
+                        streams,
+                        &marked,
+                        Some(&mut first_pass),
+                    );
                     let mut stats = FrameStats::default();
                     render_pass(
                         ctx,
@@ -1480,6 +1518,7 @@ mod tests {
                 0
             };
             assert_eq!(u64::from(still.taken > 0), kept, "{streams:?}");
+            assert_eq!(u64::from(first_pass.taken > 0), kept, "{streams:?}");
         }
     }
 }

@@ -358,6 +358,9 @@ pub struct TemporalRadianceCaching {
     /// The last frame's pixel samples, for the render pass to take again
     /// where nothing moving met them.
     still: StillSamples,
+    /// The same for the first pass's usage marks (interpolated gradients),
+    /// which runs ahead of rendering.
+    first_pass_still: StillSamples,
 }
 
 impl TemporalRadianceCaching {
@@ -376,6 +379,7 @@ impl TemporalRadianceCaching {
             forgotten: Vec::new(),
             statics: direct::StaticGeometry::default(),
             still: StillSamples::default(),
+            first_pass_still: StillSamples::default(),
         }
     }
 
@@ -630,7 +634,8 @@ impl TemporalRadianceCaching {
                 .iter()
                 .map(TemporalRecord::memory_bytes)
                 .sum::<usize>()
-            + self.still.memory_bytes()) as u64;
+            + self.still.memory_bytes()
+            + self.first_pass_still.memory_bytes()) as u64;
         if let Some(k) = kept.as_mut() {
             k.state.as_mut().expect("set above").global = carried::encode_next_id(self.next_id);
         }
@@ -745,6 +750,7 @@ impl Method for TemporalRadianceCaching {
             &self.settings.ic,
             PixelStreams::Coherent,
             &used,
+            Some(&mut self.first_pass_still),
         );
         aged.stats
             .phase_seconds
