@@ -869,9 +869,9 @@ fn coherent_fallback(ctx: &FrameContext, s: &PixelSample) -> Rng {
 /// pixel on the rim of a seen light keeps what its coverage rays saw
 /// ([`pixels::EmitterEdges`]) where no moving box shows within a pixel of
 /// it on the film in either frame. The rest is traced again, as are the
-/// cache lookups, fallbacks and glossy lobes of every sample. So the film equals, bit for bit, the one traced
-/// afresh, and a resumed job (which starts with none kept) equals an
-/// uninterrupted one.
+/// cache lookups, fallbacks and glossy lobes of every sample. So the film
+/// equals, bit for bit, the one traced afresh, and a resumed job (which
+/// starts with none kept) equals an uninterrupted one.
 ///
 /// This is the design's "static parts are never recomputed for motion
 /// they cannot see" applied to the render pass, as `movies` does for its
