@@ -135,9 +135,9 @@ pub(crate) fn render_pass(
         taken += tile.taken;
         kept.push(tile.tile);
     }
-    if let (Some(still), Some(pass)) = (still, still_pass.take()) {
-        still.last = Some(pass.finish(kept));
+    if let Some(still) = still {
         still.taken = taken;
+        still.last = still_pass.take().map(|pass| pass.finish(kept));
     }
     film
 }
@@ -200,9 +200,11 @@ pub(crate) fn mark_used(
             TileKept::of(&primary, &taken, jittered, shadows, &edges)
         })
         .collect();
-    if let (Some(still), Some(pass)) = (still, still_pass.take()) {
+    if let Some(still) = still {
         still.taken = tiles.iter().map(|t| t.taken).sum();
-        still.last = Some(pass.finish(tiles.into_iter().map(|t| t.tile).collect()));
+        still.last = still_pass
+            .take()
+            .map(|pass| pass.finish(tiles.into_iter().map(|t| t.tile).collect()));
     }
 }
 
