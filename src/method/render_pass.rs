@@ -40,7 +40,7 @@ use crate::integrator::{
 };
 use crate::light::{emitting_cosine, TriangleSampling};
 use crate::material::Bsdf;
-use crate::sampling::{cosine_hemisphere, mix64, power_heuristic, LightChoice, Rng, SampleKey};
+use crate::sampling::{cosine_hemisphere, mix64, power_heuristic, LightChoice, Rng};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -106,10 +106,9 @@ pub(crate) fn render_pass(
     let spp = settings.spp.max(1);
     let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1);
     let mut still = still.filter(|_| streams == PixelStreams::Coherent);
-    let mut still_pass = still.as_mut().and_then(|s| {
-        let last = s.last.take();
-        StillPass::new(ctx, last, spp, pixels_per_tile)
-    });
+    let still_pass = still
+        .as_mut()
+        .and_then(|s| s.begin(ctx, spp, pixels_per_tile));
     let pass = TilePass {
         interpolation: &interpolation,
         settings,
@@ -127,17 +126,14 @@ pub(crate) fn render_pass(
         })
         .collect();
     let mut kept = Vec::with_capacity(tiles.len());
-    let mut taken = 0;
     for (t, tile) in tiles {
         stats.lookups += t.lookups;
         stats.lookup_records += t.lookup_records;
         stats.fallback_lookups += t.fallback_lookups;
-        taken += tile.taken;
-        kept.push(tile.tile);
+        kept.push(tile);
     }
     if let Some(still) = still {
-        still.taken = taken;
-        still.last = still_pass.take().map(|pass| pass.finish(kept));
+        still.end(still_pass, kept);
     }
     film
 }
@@ -164,10 +160,9 @@ pub(crate) fn mark_used(
     let n_pixels = (ctx.width * ctx.height) as usize;
     let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1);
     let mut still = still.filter(|_| streams == PixelStreams::Coherent);
-    let mut still_pass = still.as_mut().and_then(|s| {
-        let last = s.last.take();
-        StillPass::new(ctx, last, spp, pixels_per_tile)
-    });
+    let still_pass = still
+        .as_mut()
+        .and_then(|s| s.begin(ctx, spp, pixels_per_tile));
     let tiles: Vec<TileKept> = (0..n_pixels.div_ceil(pixels_per_tile))
         .into_par_iter()
         .map(|tile| {
@@ -192,19 +187,13 @@ pub(crate) fn mark_used(
             );
             interpolation.mark_used(&lookups, used);
             // No light is sampled here: the samples are kept without shadows.
-            let jittered = match still {
-                Some(_) => primary.rngs[..taken.len()].to_vec(),
-                None => Vec::new(),
-            };
+            let jittered = primary.jittered(taken.len(), still.is_some());
             let shadows = vec![None; jittered.len()];
             TileKept::of(&primary, &taken, jittered, shadows, &edges)
         })
         .collect();
     if let Some(still) = still {
-        still.taken = tiles.iter().map(|t| t.taken).sum();
-        still.last = still_pass
-            .take()
-            .map(|pass| pass.finish(tiles.into_iter().map(|t| t.tile).collect()));
+        still.end(still_pass, tiles);
     }
 }
 
@@ -294,6 +283,7 @@ impl PrimarySamples {
         // Whether the current pixel is clear on the film (its samples are
         // consecutive).
         let mut film: Option<(u32, bool)> = None;
+        let still = still.filter(|st| !st.samples.is_empty());
         for (i, s) in samples.iter().enumerate() {
             let kept = still.and_then(|st| {
                 let clear = match film {
@@ -329,6 +319,16 @@ impl PrimarySamples {
         }
         self.samples.extend_from_slice(samples);
         taken
+    }
+
+    /// The streams of the first `n` samples as the camera left them, for
+    /// the next frame to go on from (none where nothing is `kept`).
+    fn jittered(&self, n: usize, kept: bool) -> Vec<Rng> {
+        if kept {
+            self.rngs[..n].to_vec()
+        } else {
+            Vec::new()
+        }
     }
 
     pub(crate) fn surfaces<'a>(&self, ctx: &'a FrameContext) -> Vec<Option<Surface<'a>>> {
@@ -509,11 +509,7 @@ fn render_tile(
         spp,
         still.as_ref(),
     );
-    // The streams as the camera left them, for the next frame to go on from.
-    let jittered = match still {
-        Some(_) => primary.rngs[..taken.len()].to_vec(),
-        None => Vec::new(),
-    };
+    let jittered = primary.jittered(taken.len(), still.is_some());
     let mut tile = TileShading::new(ctx, primary);
     let shadows = tile.direct_light(ctx, pass.streams, still.as_ref().map(|s| (s, &taken[..])));
     let (lookups, lookup_of_sample) = pixel_lookups(
@@ -531,7 +527,6 @@ fn render_tile(
         .map(|e| u64::from(e.records))
         .sum();
     let deferred = tile.indirect_light(
-        ctx,
         pass,
         (&lookups, &lookup_of_sample),
         &interpolated,
@@ -686,7 +681,6 @@ impl<'a> TileShading<'a> {
     /// has sources). Returns the traced parts.
     fn indirect_light(
         &mut self,
-        ctx: &FrameContext,
         pass: &TilePass,
         (lookups, lookup_of_sample): (&[Lookup], &[Option<u32>]),
         interpolated: &[Option<Interpolated>],
@@ -708,13 +702,10 @@ impl<'a> TileShading<'a> {
                     }
                     None => {
                         stats.fallback_lookups += 1;
-                        let query = match pass.streams {
-                            PixelStreams::PerFrame => diffuse_indirect_query(surface, rng),
-                            PixelStreams::Coherent => diffuse_indirect_query(
-                                surface,
-                                &mut coherent_fallback(ctx, &self.primary.samples[i]),
-                            ),
-                        };
+                        // From the sample's own stream: under coherent
+                        // streams the same in every frame, so where nothing
+                        // changed a fallback traces the same directions.
+                        let query = diffuse_indirect_query(surface, rng);
                         deferred.push(Deferred {
                             sample: i,
                             query,
@@ -839,27 +830,6 @@ struct TilePass<'a> {
     used: Option<&'a [AtomicBool]>,
 }
 
-/// Tags the fallback streams of [`PixelStreams::Coherent`] apart from
-/// records' (bit 62) and pixels' (untagged, or bit 59).
-const FALLBACK_STREAM: u64 = 1 << 63;
-
-/// The stream of sample `s`'s fallback path (the diffuse indirect light of
-/// a pixel sample no record covers: slivers next to a concave edge, where
-/// no pixel centre hit and so no record was made) under
-/// [`PixelStreams::Coherent`]: the same in every frame, so where nothing
-/// changed a fallback traces the same directions. On `cube-in-box` (64×64,
-/// 48 frames) 1.4 % of the pixel samples fall back, along the box's edges;
-/// keying them so took `trc`'s lit-surface flicker from 0.038 to 0.034 at
-/// no cost (`benches/HISTORY.md`).
-fn coherent_fallback(ctx: &FrameContext, s: &PixelSample) -> Rng {
-    Rng::new(SampleKey {
-        seed: ctx.seed,
-        frame: None,
-        item: FALLBACK_STREAM | u64::from(s.pixel),
-        sample: s.key,
-    })
-}
-
 /// The pixel samples of a method's last frame, kept for its next one: with
 /// [`PixelStreams::Coherent`] a sample draws the same camera ray and light
 /// point in every frame, so where the camera, the lights and the static
@@ -893,6 +863,19 @@ impl StillSamples {
     /// 512 × 512 pixels at 16 spp) the pass keeps nothing and traces every
     /// sample, as `ic` does.
     pub const BUDGET_BYTES: usize = 512 << 20;
+
+    /// This frame's pass over the samples kept from the last one (`None`
+    /// where a frame's samples would not fit the budget: nothing is kept).
+    fn begin(&mut self, ctx: &FrameContext, spp: u32, pixels_per_tile: usize) -> Option<StillPass> {
+        let last = self.last.take();
+        StillPass::new(ctx, last, spp, pixels_per_tile)
+    }
+
+    /// Keeps the tiles `pass` traced for the next frame.
+    fn end(&mut self, pass: Option<StillPass>, tiles: Vec<TileKept>) {
+        self.taken = tiles.iter().map(|t| t.taken).sum();
+        self.last = pass.map(|pass| pass.finish(tiles.into_iter().map(|t| t.tile).collect()));
+    }
 
     /// Bytes the kept samples take.
     pub fn memory_bytes(&self) -> usize {
@@ -1410,37 +1393,42 @@ mod tests {
         assert_eq!(frames[3], (true, 0, frames[3].2, frames[3].2));
     }
 
-    /// Every point of a box in front of the camera projects inside the box's
-    /// film rect; a box with a corner behind the camera covers the plane.
+    /// A box's film rect holds every film point whose camera ray meets the
+    /// box, by brute force: rays through random points of the film (and a
+    /// pixel's margin around it) tested against random boxes in front of
+    /// the camera by the slab test; many meet one, and none of those lies
+    /// outside its rect. A box around the camera covers the plane.
     #[test]
     fn a_box_shows_only_inside_its_film_rect() {
-        let mut renderer = crate::render::test_renderer("cube-in-box", 32);
+        let size = 32;
+        let mut renderer = crate::render::test_renderer("cube-in-box", size);
         renderer.with_frame_context(0, |ctx| {
             let camera = &ctx.snapshot.camera;
             let mut rng = Rng::from_seed(3, 0);
             let forward = -camera.basis.z_axis;
+            let mut met = 0;
             for _ in 0..200 {
                 let mut v = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
                 let centre = camera.position + forward * (1.0 + 5.0 * v().x) + (v() - 0.5) * 3.0;
                 let half = v() * 0.5;
                 let (lo, hi) = (centre - half, centre + half);
                 let rect = screen_rect(ctx, (lo, hi));
-                for _ in 0..20 {
-                    let p = lo + (hi - lo) * v();
-                    let Some((sx, sy)) = camera.project(p, ctx.aspect()) else {
-                        assert!(rect[0].is_infinite());
-                        continue;
-                    };
-                    let (x, y) = (sx * 32.0, sy * 32.0);
-                    assert!(
-                        rect[0] <= x + 1e-3
-                            && x <= rect[2] + 1e-3
-                            && rect[1] <= y + 1e-3
-                            && y <= rect[3] + 1e-3,
-                        "{p} at ({x}, {y}) outside {rect:?}"
-                    );
+                for _ in 0..200 {
+                    let film = v() * (size as f32 + 2.0) - Vec3::ONE;
+                    let (sx, sy) = (film.x / size as f32, film.y / size as f32);
+                    let dir = camera.direction(sx, sy, ctx.aspect());
+                    let far = camera.position + dir * 100.0;
+                    if crate::method::motion::segment_hits_box(camera.position, far, (lo, hi)) {
+                        met += 1;
+                        let inside = rect[0] <= film.x + 1e-3
+                            && film.x <= rect[2] + 1e-3
+                            && rect[1] <= film.y + 1e-3
+                            && film.y <= rect[3] + 1e-3;
+                        assert!(inside, "film point {film} meets the box outside {rect:?}");
+                    }
                 }
             }
+            assert!(met > 1000, "only {met} rays met a box");
             let around = (camera.position - Vec3::ONE, camera.position + Vec3::ONE);
             assert_eq!(screen_rect(ctx, around)[0], f32::NEG_INFINITY);
         });
