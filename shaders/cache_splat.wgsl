@@ -28,6 +28,7 @@ const WEIGHT_CAP: f32 = 1e6;
 
 /// `IrradianceRecord::is_in_front_of`'s tolerance, relative to R_K.
 const FRONT_TOLERANCE: f32 = 0.01;
+const FRAC_1_SQRT_2: f32 = 0.70710677;
 
 /// Parameters of one dispatch. Field order must match `SplatParams` in
 /// `src/backend/gpu_cache.rs`.
@@ -159,7 +160,8 @@ fn splat_records(@builtin(global_invocation_id) id: vec3<u32>) {
             // Eq. 2: w = 1/(‖p − p_K‖/R_K + √(1 − n·n_K)); ∞ at p_K itself;
             // R_K no larger than p's own R_p (`IrradianceRecord::weight`).
             let reach = min(r.radius, r_p);
-            let denom = length(d) / reach + sqrt(max(1.0 - dot(n, r.normal), 0.0));
+            // √(1 − n·n_K) as ‖n − n_K‖/√2, free of cancellation (see there).
+            let denom = length(d) / reach + length(n - r.normal) * FRAC_1_SQRT_2;
             var w = WEIGHT_CAP;
             if denom > 0.0 {
                 w = 1.0 / denom;

@@ -116,7 +116,13 @@ impl IrradianceRecord {
     /// is open, so it leaves the weight alone there.
     pub fn weight(&self, at: &LookupPoint) -> f32 {
         let d = (at.position - self.position).length() / self.radius.min(at.radius());
-        let c = (1.0 - at.normal.dot(self.normal)).max(0.0).sqrt();
+        // √(1 − n·n_K) = ‖n − n_K‖/√2 for unit normals, written without the
+        // cancellation of 1 − n·n_K: near-parallel normals lose nothing to
+        // rounding, equal ones give exactly 0, and a GPU that fuses the dot
+        // product's multiply-adds (NVIDIA's does) cannot turn a 1-ulp
+        // change of n·n_K into a term of √ulp ≈ 2.4e-4 at a record's own
+        // point (seen on an H100: weight 4,000 instead of the 1e6 cap).
+        let c = (at.normal - self.normal).length() * std::f32::consts::FRAC_1_SQRT_2;
         let denom = d + c;
         if denom > 0.0 {
             1.0 / denom
@@ -176,5 +182,39 @@ mod tests {
         // At accuracy 0.2 (usable where w ≥ 5) the record covers the open
         // point and not the one under the surface.
         assert!(open >= 5.0 && under < 5.0);
+    }
+
+    /// The normal term of Eq. 2 is `√(1 − n·n_K)`, computed as
+    /// `‖n − n_K‖/√2`: the same for unit normals (checked against f64),
+    /// and exactly 0 for equal normals, where the f32 dot product of a
+    /// normalised vector with itself often rounds below 1 and
+    /// `√(1 − n·n)` gives about 2.4e-4, a weight of ~4,000 at the record's
+    /// own point instead of ∞.
+    #[test]
+    fn the_normal_term_is_exact_for_equal_normals_and_matches_the_dot_form() {
+        let mut rng = crate::sampling::Rng::from_seed(7, 0);
+        let mut rounded_below_one = 0;
+        for _ in 0..1000 {
+            let n = Vec3::new(
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+            )
+            .normalize();
+            let k = IrradianceRecord {
+                normal: n,
+                ..record(1.0)
+            };
+            rounded_below_one += usize::from(n.dot(n) < 1.0);
+            assert_eq!(k.weight(&LookupPoint::open(Vec3::ZERO, n)), f32::INFINITY);
+            let m = (n + 0.3 * Vec3::new(rng.next_f32(), rng.next_f32(), 0.5)).normalize();
+            let p = Vec3::new(0.25, 0.0, 0.0);
+            let (n64, m64) = (n.as_dvec3(), m.as_dvec3());
+            let exact = 1.0 / (0.25 + (1.0 - n64.dot(m64)).max(0.0).sqrt());
+            let w = k.weight(&LookupPoint::open(p, m)) as f64;
+            assert!((w - exact).abs() <= 1e-4 * exact, "{w} against {exact}");
+        }
+        // The case the old form got wrong is common, so the test meets it.
+        assert!(rounded_below_one > 10, "{rounded_below_one}");
     }
 }
