@@ -33,7 +33,8 @@ use radcache::sampling::Rng;
 use radcache::scene::animation::{linear_rotation, linear_translation};
 use radcache::scene::{builtin, Material, Mesh, Scene, Snapshot};
 
-/// Relative tolerance on t (and on ties).
+/// Relative tolerance on t (and on ties), of the larger of t and the
+/// coordinates' scale ([`t_tolerance`]).
 const T_REL: f32 = 1e-5;
 /// Absolute tolerance on barycentrics.
 const UV_ABS: f32 = 1e-4;
@@ -159,6 +160,25 @@ fn rays_for(snapshot: &Snapshot, cpu: &CpuBackend, n: usize, stream: u64) -> Vec
     rays
 }
 
+/// How far the GPU's t may be from the CPU's, for a hit on a triangle
+/// with geometric normal `normal`. Möller–Trumbore computes t from
+/// `o − v₀` and the triangle's edges, rounded at the scale of the
+/// coordinates, so its absolute error stays near `ulp(|o|)/|d|` however
+/// near the hit is, and grows as `1/|cos θ|` for a ray that grazes the
+/// plane. A GPU that fuses multiply-adds rounds those terms differently.
+/// On an H100: a hit at t = 0.0046 from a ray starting 4 units from the
+/// origin moved by 1.2e-6 (2.6e-4 of t); a ray at cos θ = 9e-4 hit at
+/// t = 1.23824 on the CPU and 1.23821 on the GPU, where f64 gives 1.23820.
+/// So t is held to [`T_REL`] of the larger of t and that scale, over
+/// `|cos θ|`.
+fn t_tolerance(ray: &Ray, t: f32, normal: Vec3) -> f32 {
+    let coordinates = ray.origin().abs().max_element().max(1.0);
+    let cos = normal
+        .normalize_or_zero()
+        .dot(ray.dir().normalize_or_zero());
+    T_REL * t.abs().max(coordinates / ray.dir().length()) / cos.abs().max(1e-4)
+}
+
 #[derive(Debug, Default)]
 struct Parity {
     rays: usize,
@@ -219,7 +239,8 @@ fn check_parity(
         if g.t.to_bits() != c.t.to_bits() {
             p.t_not_bitwise += 1;
         }
-        if dt > T_REL * c.t.abs() {
+        let normal = snapshot.triangles[c.triangle as usize].geometric_normal();
+        if dt > t_tolerance(&rays[i], c.t, normal) {
             failures.push(format!(
                 "ray {i}: t cpu {} gpu {} ({c:?} / {g:?})",
                 c.t, g.t
@@ -487,6 +508,41 @@ fn batches_larger_than_a_chunk_and_empty_batches(layout: GpuLayout) {
     assert!(counts.closest >= n as u64);
 }
 
+/// Calls from many threads at once (render tiles on every core): each
+/// takes a pair of ray buffers of its own from the backend's pool, so the
+/// calls are in flight together and each gets its own rays' results,
+/// exactly those of one call over all the rays.
+#[test]
+fn gpu_calls_from_many_threads_get_their_own_results() {
+    let mut gpu = gpu();
+    let s = soup_scene(3);
+    let snap = s.snapshot(0.25);
+    let mut cpu = CpuBackend::new();
+    cpu.set_geometry(&snap);
+    gpu.set_geometry(&snap);
+    let rays = rays_for(&snap, &cpu, 40_000, 77);
+    let mut one_call = vec![Hit::MISS; rays.len()];
+    let mut one_call_occluded = vec![false; rays.len()];
+    gpu.closest_hit(&rays, &mut one_call);
+    gpu.any_hit(&rays, &mut one_call_occluded);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(8)
+        .build()
+        .unwrap();
+    let mut hits = vec![Hit::MISS; rays.len()];
+    let mut occluded = vec![false; rays.len()];
+    pool.install(|| {
+        use rayon::prelude::*;
+        hits.par_chunks_mut(1_000)
+            .zip(occluded.par_chunks_mut(1_000))
+            .zip(rays.par_chunks(1_000))
+            .for_each(|((h, o), r)| gpu.closest_and_any_hit(r, h, r, o));
+    });
+    assert_eq!(hits, one_call);
+    assert_eq!(occluded, one_call_occluded);
+    assert!(gpu.ray_counts().calls >= 42, "{:?}", gpu.ray_counts());
+}
+
 /// The combined call (a path tracer's bounce with the previous bounce's
 /// shadow rays) gives exactly what the two calls give, in one round trip;
 /// with one side empty it is the other call alone.
@@ -532,9 +588,13 @@ fn gpu_closest_and_any_hit_equals_the_two_calls() {
 }
 
 /// A whole path-traced frame: with identical hits the path tracer takes the
-/// same decisions, so the frames agree; we require bit-identical pixels on
-/// all but a handful (a t differing in its last bit may move a hit point by
-/// an ulp) and a tight bound on all.
+/// same decisions, so the frames agree. On a software adapter (which, like
+/// the CPU, fuses no multiply-adds) we require bit-identical pixels on all
+/// but a handful (a t differing in its last bit may move a hit point by an
+/// ulp) and a tight bound on all. A real GPU rounds every hit a little
+/// differently (on an H100 about half the pixels differed, by at most
+/// 2.1e-5 relative), so there only a path that branched elsewhere may
+/// leave the tight bound, on at most 1 % of the pixels.
 #[test]
 fn gpu_path_traced_frame_equals_cpu_frame() {
     for name in ["cube-in-box", "glossy-cornell"] {
@@ -555,30 +615,39 @@ fn gpu_path_traced_frame_equals_cpu_frame() {
             let film = r.render_frame(3);
             (film, r.backend().ray_counts())
         };
+        let gpu = gpu();
+        let software = gpu.is_software();
         let (cpu_film, cpu_counts) = render(Box::new(CpuBackend::new()));
-        let (gpu_film, gpu_counts) = render(Box::new(gpu()));
-        let mut differing = 0;
+        let (gpu_film, gpu_counts) = render(Box::new(gpu));
+        let (mut differing, mut diverged) = (0, 0);
         let mut max_rel = 0.0f32;
         for (c, g) in cpu_film.pixels.iter().zip(&gpu_film.pixels) {
             if c != g {
                 differing += 1;
                 let rel = (*c - *g).abs().max_element() / c.max_element().max(1e-3);
                 max_rel = max_rel.max(rel);
+                diverged += usize::from(rel >= 1e-3);
             }
         }
+        let pixels = cpu_film.pixels.len();
         eprintln!(
-            "{name}: {differing} of {} pixels differ, max relative difference {max_rel:e}; \
-             rays cpu {cpu_counts:?} gpu {gpu_counts:?}",
-            cpu_film.pixels.len()
+            "{name}: {differing} of {pixels} pixels differ, {diverged} by 1e-3 or more, \
+             max relative difference {max_rel:e}; rays cpu {cpu_counts:?} gpu {gpu_counts:?}"
         );
         assert!(
-            differing <= cpu_film.pixels.len() / 100,
-            "{name}: {differing} pixels differ"
+            diverged <= pixels / 100,
+            "{name}: {diverged} pixels differ by 1e-3 or more"
         );
-        assert!(
-            max_rel < 1e-3 || differing <= 2,
-            "{name}: max relative difference {max_rel}"
-        );
+        if software {
+            assert!(
+                differing <= pixels / 100,
+                "{name}: {differing} pixels differ"
+            );
+            assert!(
+                max_rel < 1e-3 || differing <= 2,
+                "{name}: max relative difference {max_rel}"
+            );
+        }
         let (cm, gm) = (cpu_film.mean(), gpu_film.mean());
         assert!((cm - gm).abs() <= 1e-4 * cm, "{name}: mean {cm} vs {gm}");
     }

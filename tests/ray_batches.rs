@@ -16,11 +16,12 @@ use radcache::sampling::{Rng, SampleKey};
 use radcache::scene::{Scene, Snapshot};
 use std::sync::{Arc, Mutex};
 
-/// The CPU backend with a chosen `min_batch`, recording the size of every
-/// call.
+/// The CPU backend with a chosen `min_batch` (and `preferred_batch`),
+/// recording the size of every call.
 struct Recording {
     inner: CpuBackend,
     min_batch: usize,
+    preferred_batch: usize,
     sizes: Arc<Mutex<Vec<usize>>>,
 }
 
@@ -43,7 +44,7 @@ impl RayBackend for Recording {
         self.inner.ray_counts()
     }
     fn preferred_batch(&self) -> usize {
-        self.inner.preferred_batch()
+        self.preferred_batch
     }
     fn min_batch(&self) -> usize {
         self.min_batch
@@ -53,9 +54,21 @@ impl RayBackend for Recording {
 /// A renderer of cube-in-box at 8×8 on a [`Recording`] backend of
 /// `min_batch`, and the sizes it records.
 fn renderer(min_batch: usize) -> (Renderer, Arc<Mutex<Vec<usize>>>) {
+    let preferred_batch = CpuBackend::new().preferred_batch();
+    path_renderer(min_batch, preferred_batch, 8)
+}
+
+/// A `path` renderer of cube-in-box at `size`² on a [`Recording`] backend
+/// of `min_batch` and `preferred_batch`, and the sizes it records.
+fn path_renderer(
+    min_batch: usize,
+    preferred_batch: usize,
+    size: u32,
+) -> (Renderer, Arc<Mutex<Vec<usize>>>) {
     let sizes = Arc::new(Mutex::new(Vec::new()));
     let backend = Recording {
         inner: CpuBackend::new(),
+        preferred_batch,
         min_batch,
         sizes: sizes.clone(),
     };
@@ -64,8 +77,8 @@ fn renderer(min_batch: usize) -> (Renderer, Arc<Mutex<Vec<usize>>>) {
         Box::new(PathTracer::new(Default::default())),
         Box::new(backend),
         FrameSettings {
-            width: 8,
-            height: 8,
+            width: size,
+            height: size,
             ..Default::default()
         },
     );
@@ -161,4 +174,34 @@ fn gathers_are_no_smaller_than_the_backends_min_batch() {
         coarse_calls < fine_calls,
         "{coarse_calls} calls against {fine_calls}"
     );
+}
+
+/// A backend whose preferred batch is a GPU's (1 Mi rays) once made a whole
+/// frame one render tile, shaded on one thread while the others idled (a
+/// 256×256 `path` frame on an H100 beside 16 cores). Tiles are now cut so
+/// every thread gets two, no smaller than `min_batch`
+/// (`RayBackend::items_per_task`), and the frame is the same.
+#[test]
+fn render_tiles_spread_over_the_threads_down_to_min_batch() {
+    let render = |min_batch: usize| {
+        let (mut renderer, sizes) = path_renderer(min_batch, 1 << 20, 32);
+        let film = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap()
+            .install(|| renderer.render_frame(0));
+        let sizes = sizes.lock().unwrap().clone();
+        (film.pixels, sizes)
+    };
+    // 1,024 pixels at 16 spp: with a `min_batch` of a whole frame's
+    // samples, one tile, whose camera rays are one call of 16,384; with a
+    // quarter of it, four tiles of 256 pixels (eight would be two a
+    // thread, but a tile keeps 4,096 samples), four camera calls of 4,096.
+    let tile_calls = |sizes: &[usize], n| sizes.iter().filter(|&&s| s == n).count();
+    let (whole, whole_sizes) = render(1 << 14);
+    let (spread, spread_sizes) = render(1 << 12);
+    assert_eq!(tile_calls(&whole_sizes, 1 << 14), 1, "{whole_sizes:?}");
+    assert_eq!(tile_calls(&spread_sizes, 1 << 14), 0, "{spread_sizes:?}");
+    assert!(tile_calls(&spread_sizes, 1 << 12) >= 4, "{spread_sizes:?}");
+    assert_eq!(whole, spread, "the split changed a pixel");
 }

@@ -77,7 +77,10 @@ pub const MAX_CHUNK_RAYS: usize = 1 << 22;
 pub const PREFERRED_BATCH: usize = 1 << 20;
 
 /// The fewest rays worth a dispatch ([`RayBackend::min_batch`]): at 64 Ki
-/// rays the fixed cost of a dispatch is a small part of tracing them.
+/// rays the fixed cost of a dispatch is a small part of tracing them. On
+/// an H100 beside 16 cores, 16 Ki (more tasks for the threads to shade)
+/// made `ic`, `trc` and `tcg` 1.3–1.5× slower on cube-in-box at 256×256
+/// (README, "--backend").
 pub const MIN_BATCH: usize = 1 << 16;
 
 /// "No node / no triangle" (`NONE` in the shaders).
@@ -266,9 +269,12 @@ pub struct GpuBackend {
     closest_pipeline: wgpu::ComputePipeline,
     any_pipeline: wgpu::ComputePipeline,
     geometry: GeometryBuffers,
-    /// Two sets: a combined closest-and-any-hit call
-    /// ([`RayBackend::closest_and_any_hit`]) fills both.
-    rays: Mutex<[RayBuffers; 2]>,
+    /// Idle buffer pairs. A call takes one (or makes one) and gives it
+    /// back, so render tiles on several threads trace at once: with one
+    /// pair behind a lock, each call's wait for the GPU held the others up
+    /// (the pair: a combined closest-and-any-hit call,
+    /// [`RayBackend::closest_and_any_hit`], fills both).
+    rays: Mutex<Vec<[RayBuffers; 2]>>,
     chunk_rays: usize,
     max_binding: u64,
     max_groups_per_dim: u32,
@@ -501,7 +507,6 @@ impl GpuBackend {
             static_root: NONE,
             dynamic_root: NONE,
         };
-        let rays = [RayBuffers::new(&device, 1), RayBuffers::new(&device, 1)];
         let failed = FailureSlot::default();
         let splat = CacheSplat::new(
             &device,
@@ -519,7 +524,7 @@ impl GpuBackend {
             closest_pipeline: pipelines.closest,
             any_pipeline: pipelines.any,
             geometry,
-            rays: Mutex::new(rays),
+            rays: Mutex::default(),
             chunk_rays,
             max_binding,
             max_groups_per_dim: limits.max_compute_workgroups_per_dimension.max(1),
@@ -777,8 +782,8 @@ impl GpuBackend {
         }
         assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
         assert_eq!(shadows.len(), occluded.len(), "one result slot per ray");
-        let mut buffers = self.rays.lock().unwrap_or_else(|e| e.into_inner());
-        let [closest_buffers, any_buffers] = &mut *buffers;
+        let mut buffers = self.take_buffers();
+        let [closest_buffers, any_buffers] = &mut buffers;
         let mut encoder = self.encoder("trace both");
         let start = Instant::now();
         let hit_bytes = self.encode(
@@ -795,7 +800,7 @@ impl GpuBackend {
             shadows,
             &mut encoder,
         );
-        self.submit_and_read(
+        let read = self.submit_and_read(
             encoder,
             start.elapsed(),
             &mut [
@@ -806,7 +811,9 @@ impl GpuBackend {
                     store_flags(occluded, 0, view)
                 }),
             ],
-        )?;
+        );
+        self.give_back_buffers(buffers);
+        read?;
         self.counters.add_call(rays.len(), shadows.len());
         Ok(())
     }
@@ -821,21 +828,44 @@ impl GpuBackend {
         rays: &[Ray],
         mut store: impl FnMut(usize, &[u8]),
     ) -> Result<(), GpuError> {
-        // One batch at a time: the buffers are shared.
-        let mut buffers = self.rays.lock().unwrap_or_else(|e| e.into_inner());
-        let buffers = &mut buffers[0];
+        let mut pair = self.take_buffers();
+        let buffers = &mut pair[0];
+        let mut traced = Ok(());
         for (index, chunk) in rays.chunks(self.chunk_rays).enumerate() {
             let first = index * self.chunk_rays;
             let mut encoder = self.encoder("trace");
             let start = Instant::now();
             let bytes = self.encode(buffers, pipeline, result_bytes, chunk, &mut encoder);
-            self.submit_and_read(
+            traced = self.submit_and_read(
                 encoder,
                 start.elapsed(),
                 &mut [(buffers, bytes, &mut |view| store(first, view))],
-            )?;
+            );
+            if traced.is_err() {
+                break;
+            }
         }
-        Ok(())
+        self.give_back_buffers(pair);
+        traced
+    }
+
+    /// An idle pair of ray buffers, made (small; they grow on use) when
+    /// every pair is in use by another thread's call.
+    fn take_buffers(&self) -> [RayBuffers; 2] {
+        let idle = self.rays.lock().unwrap_or_else(|e| e.into_inner()).pop();
+        idle.unwrap_or_else(|| {
+            [
+                RayBuffers::new(&self.device, 1),
+                RayBuffers::new(&self.device, 1),
+            ]
+        })
+    }
+
+    fn give_back_buffers(&self, pair: [RayBuffers; 2]) {
+        self.rays
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(pair);
     }
 
     fn encoder(&self, label: &str) -> wgpu::CommandEncoder {

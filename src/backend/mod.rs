@@ -172,6 +172,22 @@ pub trait RayBackend: Send + Sync {
     /// Rays traced so far.
     fn ray_counts(&self) -> RayCounts;
 
+    /// Items (pixels, records, queries) per parallel task when `total`
+    /// items are traced `rays_per_item` rays a batch: about one
+    /// [`Self::preferred_batch`] a task, but cut so that every thread of
+    /// the pool gets two tasks, never below [`Self::min_batch`] rays a task. A
+    /// task's shading runs on one thread: on an H100 a GPU's preferred
+    /// batch of 1 Mi rays made a 256×256 frame one render tile, shaded on
+    /// one of 16 cores. The split changes scheduling only: every sample and
+    /// record has its own random stream.
+    fn items_per_task(&self, total: usize, rays_per_item: usize) -> usize {
+        let rays_per_item = rays_per_item.max(1);
+        let preferred = (self.preferred_batch() / rays_per_item).max(1);
+        let floor = self.min_batch().div_ceil(rays_per_item);
+        let spread = total.div_ceil(2 * rayon::current_num_threads());
+        preferred.min(spread).max(floor).max(1)
+    }
+
     /// Batch size that keeps this backend busy.
     fn preferred_batch(&self) -> usize;
 

@@ -384,18 +384,10 @@ impl IrradianceCaching {
         ctx: &'a FrameContext,
         candidates: &'a [Candidate],
     ) -> impl ParallelIterator<Item = Gathered> + 'a {
-        // About one backend batch of gather rays per task, but no more
-        // candidates per task than spreads the work over every thread: `trc`
-        // and the fine fill levels gather a handful of records at a time, and
-        // one task for all of them would leave the other threads idle. Nor
-        // fewer than the backend's `min_batch` rays: on a GPU each task's
-        // path bounces are dispatches of their own. The split changes only
-        // scheduling: each record has its own streams.
+        // `trc` and the fine fill levels gather a handful of records at a
+        // time: one task for all of them would leave the other threads idle.
         let rays = self.settings.strata.count();
-        let per_batch = (ctx.backend.preferred_batch() / rays).max(1);
-        let per_thread = candidates.len().div_ceil(rayon::current_num_threads());
-        let at_least = ctx.backend.min_batch().div_ceil(rays);
-        let per_task = per_batch.min(per_thread).max(at_least).max(1);
+        let per_task = ctx.backend.items_per_task(candidates.len(), rays);
         candidates
             .par_chunks(per_task)
             .flat_map_iter(move |chunk| self.gather_chunk(ctx, chunk))

@@ -78,7 +78,7 @@ impl Method for PathTracer {
         let mut film = Film::new(ctx.width, ctx.height);
         let spp = self.settings.spp.max(1);
         // Tiles of whole pixels, about one backend batch of paths each.
-        let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1);
+        let pixels_per_tile = ctx.backend.items_per_task(film.pixels.len(), spp as usize);
         film.pixels
             .par_chunks_mut(pixels_per_tile)
             .enumerate()

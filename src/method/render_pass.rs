@@ -104,7 +104,7 @@ pub(crate) fn render_pass(
     let mut film = Film::new(ctx.width, ctx.height);
     let interpolation = Interpolation::new(ctx, cache, settings.gradients);
     let spp = settings.spp.max(1);
-    let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1);
+    let pixels_per_tile = ctx.backend.items_per_task(film.pixels.len(), spp as usize);
     let mut still = still.filter(|_| streams == PixelStreams::Coherent);
     let still_pass = still
         .as_mut()
@@ -158,7 +158,7 @@ pub(crate) fn mark_used(
     let interpolation = Interpolation::new(ctx, cache, settings.gradients);
     let spp = settings.spp.max(1);
     let n_pixels = (ctx.width * ctx.height) as usize;
-    let pixels_per_tile = (ctx.backend.preferred_batch() / spp as usize).max(1);
+    let pixels_per_tile = ctx.backend.items_per_task(n_pixels, spp as usize);
     let mut still = still.filter(|_| streams == PixelStreams::Coherent);
     let still_pass = still
         .as_mut()

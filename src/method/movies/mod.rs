@@ -300,7 +300,9 @@ impl Method for TextureMovies {
 
 impl TextureMovies {
     fn tile_pixels(&self, ctx: &FrameContext) -> u32 {
-        (ctx.backend.preferred_batch() / self.settings.spp.max(1) as usize).max(1) as u32
+        let pixels = (ctx.width * ctx.height) as usize;
+        let spp = self.settings.spp.max(1) as usize;
+        ctx.backend.items_per_task(pixels, spp) as u32
     }
 
     /// The camera samples of every pixel, tile by tile, with their hits:
