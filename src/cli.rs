@@ -229,6 +229,9 @@ pub struct TrcArgs {
     /// With reprojection, evaluate each hemisphere sample's direct light again at t0+1 (one light sample, shadowed in the next frame's geometry), so that E(t0+1) sees moving shadows and moving lights (TRC §5: the incoming lighting at t+1 of each visible point). Costs 12–48 % more time on our animated scenes; on cube-in-box it lowers the error by 4 %, elsewhere not (README).
     #[arg(long, value_enum, default_value = "off")]
     pub trc_next_direct: OnOff,
+    /// A replacement record takes the results of the paths of the record it replaces that nothing moving met, then or now, rather than tracing them again: the same records, faster (not in the paper, which traces them all again).
+    #[arg(long, value_enum, default_value = "on")]
+    pub trc_keep_paths: OnOff,
 }
 
 /// Settings of `--method tcg` (its spatial settings are the `--ic-*` ones).
@@ -659,6 +662,7 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
             },
             reprojection: args.trc.trc_reprojection == OnOff::On,
             next_direct: args.trc.trc_next_direct == OnOff::On,
+            keep_paths: args.trc.trc_keep_paths == OnOff::On,
         }),
         MethodName::Tcg => MethodSettings::Tcg(TcgSettings {
             ic: ic_settings,

@@ -129,6 +129,13 @@ impl PendingShadows {
         self.occluded.resize(self.rays.len(), false);
     }
 
+    /// Tells `sink` the shadow rays queued, with their queries.
+    fn tell(&self, sink: &mut impl SegmentSink) {
+        for (ray, &(query, _)) in self.rays.iter().zip(&self.targets) {
+            sink.shadow(query, ray);
+        }
+    }
+
     /// Adds the unoccluded contributions (`occluded` filled by the backend)
     /// to their queries' radiance and empties the queue.
     fn resolve(&mut self, results: &mut [RadianceResult]) {
@@ -140,6 +147,155 @@ impl PendingShadows {
         self.rays.clear();
         self.targets.clear();
     }
+}
+
+/// Where a batch's paths went, path by path: the segments each traced
+/// (each extension ray to its hit, or far past the scene where it left
+/// it, and each shadow ray to its light), and whether it hit a triangle of
+/// a moving object. A path that no moving object met, whose segments no
+/// moving object meets in a later frame either, gives that frame, from the
+/// same random stream, the very same radiance (the lights staying): `trc`
+/// takes it instead of tracing it again (`method::trc`'s kept paths).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PathTracks {
+    /// Path `i`'s segments are `segments[ends[i - 1]..ends[i]]`.
+    ends: Vec<u32>,
+    segments: Vec<[Vec3; 2]>,
+    hit_moving: Vec<bool>,
+}
+
+impl PathTracks {
+    pub fn len(&self) -> usize {
+        self.ends.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.ends.is_empty()
+    }
+
+    /// Path `i`'s segments.
+    pub fn segments(&self, i: usize) -> &[[Vec3; 2]] {
+        let start = if i == 0 { 0 } else { self.ends[i - 1] as usize };
+        &self.segments[start..self.ends[i] as usize]
+    }
+
+    /// Whether path `i` hit a triangle of a moving object.
+    pub fn hit_moving(&self, i: usize) -> bool {
+        self.hit_moving[i]
+    }
+
+    /// Appends `other`'s paths after these.
+    fn append(&mut self, other: PathTracks) {
+        let base = self.segments.len() as u32;
+        self.ends.extend(other.ends.into_iter().map(|e| e + base));
+        self.segments.extend(other.segments);
+        self.hit_moving.extend(other.hit_moving);
+    }
+}
+
+/// How far past its origin a ray that hit nothing is followed when its
+/// segment is tested against moving boxes.
+const ESCAPE_DISTANCE: f32 = 1e6;
+
+/// Receives the segments paths trace (nothing, for callers that do not
+/// keep them).
+trait SegmentSink {
+    fn extension(&mut self, query: usize, ray: &Ray, hit: &Hit);
+    fn shadow(&mut self, query: usize, ray: &Ray);
+}
+
+impl SegmentSink for () {
+    #[inline]
+    fn extension(&mut self, _: usize, _: &Ray, _: &Hit) {}
+    #[inline]
+    fn shadow(&mut self, _: usize, _: &Ray) {}
+}
+
+/// The segments of a batch's paths as they are traced (bounce by bounce,
+/// all paths interleaved), to be sorted into [`PathTracks`].
+struct TrackSink {
+    traced: Vec<(u32, [Vec3; 2])>,
+    hit_moving: Vec<bool>,
+    /// Triangles at or past this index belong to moving objects.
+    static_count: usize,
+}
+
+impl SegmentSink for TrackSink {
+    fn extension(&mut self, query: usize, ray: &Ray, hit: &Hit) {
+        let end = if hit.is_hit() {
+            ray.at(hit.t)
+        } else {
+            ray.origin() + ray.dir() * (ESCAPE_DISTANCE / ray.dir().length().max(1e-30))
+        };
+        self.traced.push((query as u32, [ray.origin(), end]));
+        self.hit_moving[query] |= hit.is_hit() && hit.triangle as usize >= self.static_count;
+    }
+
+    fn shadow(&mut self, query: usize, ray: &Ray) {
+        // A shadow ray is a segment `origin → origin + dir`.
+        self.traced
+            .push((query as u32, [ray.origin(), ray.origin() + ray.dir()]));
+    }
+}
+
+impl TrackSink {
+    /// The segments path by path, each path's in the order traced.
+    fn into_tracks(self) -> PathTracks {
+        let n = self.hit_moving.len();
+        let mut ends = vec![0u32; n];
+        for &(q, _) in &self.traced {
+            ends[q as usize] += 1;
+        }
+        let mut next = Vec::with_capacity(n);
+        let mut total = 0;
+        for e in ends.iter_mut() {
+            next.push(total);
+            total += *e;
+            *e = total;
+        }
+        let mut segments = vec![[Vec3::ZERO; 2]; total as usize];
+        for (q, segment) in self.traced {
+            let slot = &mut next[q as usize];
+            segments[*slot as usize] = segment;
+            *slot += 1;
+        }
+        PathTracks {
+            ends,
+            segments,
+            hit_moving: self.hit_moving,
+        }
+    }
+}
+
+/// [`trace_radiance_parallel`], also returning where each query's path
+/// went.
+pub fn trace_radiance_tracked(
+    ctx: &FrameContext,
+    length: PathLength,
+    queries: Vec<RadianceQuery>,
+) -> (Vec<RadianceResult>, PathTracks) {
+    let per_task = QUERIES_PER_TASK.max(ctx.backend.min_batch());
+    let n = queries.len();
+    let traced: Vec<(Vec<RadianceResult>, PathTracks)> = queries
+        .into_par_iter()
+        .chunks(per_task)
+        .map(|chunk| {
+            let mut sink = TrackSink {
+                traced: Vec::with_capacity(chunk.len() * 6),
+                hit_moving: vec![false; chunk.len()],
+                static_count: ctx.snapshot.static_count,
+            };
+            let results = trace_radiance_into(ctx, length, chunk, &mut sink);
+            (results, sink.into_tracks())
+        })
+        .collect();
+    let mut results = Vec::with_capacity(n);
+    let mut tracks = PathTracks::default();
+    for (r, t) in traced {
+        results.extend(r);
+        tracks.append(t);
+    }
+    (results, tracks)
 }
 
 /// [`trace_radiance`] split over the thread pool, `QUERIES_PER_TASK`
@@ -184,6 +340,16 @@ pub fn trace_radiance(
     length: PathLength,
     queries: Vec<RadianceQuery>,
 ) -> Vec<RadianceResult> {
+    trace_radiance_into(ctx, length, queries, &mut ())
+}
+
+/// [`trace_radiance`], telling `sink` every segment traced.
+fn trace_radiance_into(
+    ctx: &FrameContext,
+    length: PathLength,
+    queries: Vec<RadianceQuery>,
+    sink: &mut impl SegmentSink,
+) -> Vec<RadianceResult> {
     let mut results = vec![
         RadianceResult {
             radiance: Vec3::ZERO,
@@ -213,9 +379,11 @@ pub fn trace_radiance(
         shadows.prepare();
         ctx.backend
             .closest_and_any_hit(&rays, &mut hits, &shadows.rays, &mut shadows.occluded);
+        shadows.tell(sink);
         shadows.resolve(&mut results);
         continuations.clear();
         for (path, (ray, hit)) in paths.iter_mut().zip(rays.iter().zip(&hits)) {
+            sink.extension(path.query, ray, hit);
             if path.bounces == 0 {
                 results[path.query].hit = *hit;
             }
@@ -237,6 +405,7 @@ pub fn trace_radiance(
     // The last bounce's light samples.
     shadows.prepare();
     ctx.backend.any_hit(&shadows.rays, &mut shadows.occluded);
+    shadows.tell(sink);
     shadows.resolve(&mut results);
     results
 }

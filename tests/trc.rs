@@ -115,7 +115,8 @@ fn records_and_their_next_frame_by(
 /// dropped.
 #[test]
 fn static_scene_records_live_max_life_and_frames_match_ic() {
-    static_records_live_max_life(lit_room(None, 24.0), small_ic());
+    static_records_live_max_life(lit_room(None, 24.0), small_ic(), true);
+    static_records_live_max_life(lit_room(None, 24.0), small_ic(), false);
 }
 
 /// The same with radiance records (`--ic-glossy eas`) in a glossy room:
@@ -131,17 +132,19 @@ fn static_scene_radiance_records_live_max_life_and_frames_match_ic() {
         glossy: GlossyLobe::Eas,
         ..small_ic()
     };
-    static_records_live_max_life(room, ic);
+    static_records_live_max_life(room, ic, true);
 }
 
 /// [`static_scene_records_live_max_life_and_frames_match_ic`] in `scene`
-/// (static) with records made by `ic`.
-fn static_records_live_max_life(scene: Scene, ic: IcSettings) {
+/// (static) with records made by `ic`, replacements taking the paths of
+/// the records they replace or not (`keep_paths`).
+fn static_records_live_max_life(scene: Scene, ic: IcSettings, keep_paths: bool) {
     let max_life = 4;
     let radiance_records = ic.glossy == GlossyLobe::Eas;
     let settings = TrcSettings {
         ic,
         max_life,
+        keep_paths,
         ..TrcSettings::default()
     };
     let mut r = renderer(scene, 16, 24.0, false);
@@ -206,9 +209,19 @@ fn static_records_live_max_life(scene: Scene, ic: IcSettings) {
     assert_eq!(stats.records_replaced + stats.records_dropped, n);
     assert!(stats.records_replaced > 0);
     // A replacement shoots every ray of the record it replaces again; a
-    // record dropped shoots none (no moving object to gather inside).
+    // record dropped shoots none (no moving object to gather inside). With
+    // kept paths nothing moves, so every path is taken but the few with a
+    // segment too short to keep (`trc::paths`' caveat on near hits).
     let cells = settings.ic.strata.count() as u64;
-    assert_eq!(stats.samples_reshot, stats.records_replaced * cells);
+    if keep_paths {
+        assert!(
+            stats.samples_reshot * 100 <= stats.records_replaced * cells,
+            "{} samples shot again",
+            stats.samples_reshot
+        );
+    } else {
+        assert_eq!(stats.samples_reshot, stats.records_replaced * cells);
+    }
     let replacements: Vec<_> = trc
         .records()
         .iter()
@@ -1012,4 +1025,47 @@ fn reprojection_follows_a_moving_light_better_than_constant() {
     );
     assert!(mean_r < mean_c, "mean {mean_r} vs {mean_c}");
     assert!(median_r < median_c, "median {median_r} vs {median_c}");
+}
+
+/// Replacements that take the paths nothing moving met ([`TrcSettings::
+/// keep_paths`]) give, on cube-in-box with its moving cube, the very
+/// records and frames that tracing every path again gives, bit for bit,
+/// while shooting fewer samples (the paths near the cube are traced
+/// again, so some are shot).
+#[test]
+fn kept_paths_give_the_records_and_frames_of_tracing_them_again() {
+    let run = |keep_paths: bool| {
+        let settings = TrcSettings {
+            ic: small_ic(),
+            max_life: 3,
+            keep_paths,
+            ..TrcSettings::default()
+        };
+        let mut r = renderer(Scene::builtin("cube-in-box").unwrap(), 24, 24.0, false);
+        let mut trc = TemporalRadianceCaching::new(settings);
+        let mut frames = Vec::new();
+        let (mut reshot, mut replaced) = (0, 0);
+        for f in 0..12 {
+            frames.push(render_trc(&mut r, &mut trc, f).pixels);
+            let stats = trc.last_frame_stats();
+            reshot += stats.samples_reshot;
+            replaced += stats.records_replaced;
+        }
+        let records: Vec<IrradianceRecord> =
+            trc.records().iter().map(|k| k.record.clone()).collect();
+        (frames, records, reshot, replaced)
+    };
+    let (kept, kept_records, kept_reshot, replaced) = run(true);
+    let (traced, traced_records, traced_reshot, _) = run(false);
+    assert!(replaced > 10, "{replaced} replacements");
+    // (Replacements gathered inside the cube, then dropped, shot theirs too.)
+    assert!(traced_reshot >= replaced * small_ic().strata.count() as u64);
+    assert!(
+        kept_reshot > 0 && kept_reshot < traced_reshot / 2,
+        "{kept_reshot} samples shot against {traced_reshot}"
+    );
+    assert_eq!(kept_records, traced_records);
+    for (f, (a, b)) in kept.iter().zip(&traced).enumerate() {
+        assert!(a == b, "frame {f} differs");
+    }
 }

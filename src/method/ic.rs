@@ -21,12 +21,16 @@ use crate::cache::gather::{
 };
 use crate::cache::{eas, IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
-use crate::integrator::{trace_radiance_parallel, PathLength};
+use crate::integrator::{
+    trace_radiance_parallel, trace_radiance_tracked, PathLength, PathTracks, RadianceQuery,
+    RadianceResult,
+};
 use crate::material::{luminance, Bsdf, LUMINANCE};
 use crate::sampling::SampleKey;
 use crate::store::SampleBlock;
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Settings of `ic`, with their sources.
@@ -165,7 +169,8 @@ pub(crate) struct Gathered {
     pub(crate) candidate: Candidate,
     pub(crate) record: IrradianceRecord,
     pub(crate) samples: HemisphereSamples,
-    pub(crate) hits: Vec<Hit>,
+    /// Each gather query's result (its radiance and first hit).
+    pub(crate) results: Vec<RadianceResult>,
 }
 
 impl Method for IrradianceCaching {
@@ -289,7 +294,7 @@ impl IrradianceCaching {
     /// existing record is usable.
     pub fn fill(&self, ctx: &FrameContext, cache: &mut IrradianceCache) {
         let candidates = primary_candidates(ctx, self.settings.glossy);
-        self.fill_from(ctx, cache, &candidates, |_| (), &mut Vec::new());
+        self.fill_from(ctx, cache, &candidates, false, |_, _| (), &mut Vec::new());
     }
 
     /// Renders this frame with a given cache (what [`Method::render_frame`]
@@ -308,13 +313,16 @@ impl IrradianceCaching {
     /// The fill stage over given candidates (one per pixel). Every record
     /// it inserts is first passed to `annotate` (in parallel, right after
     /// its gather) and the result pushed to `inserted`, in insertion order:
-    /// `trc` estimates each new record's E(t0+1) there.
+    /// `trc` estimates each new record's E(t0+1) there. With `track`, the
+    /// gathers also say where each path went (`annotate`'s second argument,
+    /// `None` without).
     pub(crate) fn fill_from<X: Send>(
         &self,
         ctx: &FrameContext,
         cache: &mut IrradianceCache,
         candidates: &[Option<Candidate>],
-        annotate: impl Fn(&Gathered) -> X + Sync,
+        track: bool,
+        annotate: impl Fn(&Gathered, Option<GatherTracks>) -> X + Sync,
         inserted: &mut Vec<X>,
     ) {
         let (w, h) = (ctx.width as usize, ctx.height as usize);
@@ -340,7 +348,7 @@ impl IrradianceCaching {
                         }
                     }
                 }
-                self.create_records(ctx, cache, batch, &annotate, inserted);
+                self.create_records(ctx, cache, batch, track, &annotate, inserted);
             }
             step /= 2;
         }
@@ -353,7 +361,8 @@ impl IrradianceCaching {
         ctx: &FrameContext,
         cache: &mut IrradianceCache,
         batch: Vec<(Candidate, Lookup)>,
-        annotate: &(impl Fn(&Gathered) -> X + Sync),
+        track: bool,
+        annotate: &(impl Fn(&Gathered, Option<GatherTracks>) -> X + Sync),
         inserted: &mut Vec<X>,
     ) {
         let needed: Vec<Candidate> = batch
@@ -361,13 +370,20 @@ impl IrradianceCaching {
             .filter(|(_, at)| !cache.covers(at))
             .map(|(c, _)| c)
             .collect();
-        let records: Vec<(IrradianceRecord, X)> = self
-            .gather_parallel(ctx, &needed)
-            .map(|g| {
-                let x = annotate(&g);
-                (g.record, x)
-            })
-            .collect();
+        let annotated = |(g, tracks): (Gathered, Option<GatherTracks>)| {
+            let x = annotate(&g, tracks);
+            (g.record, x)
+        };
+        let records: Vec<(IrradianceRecord, X)> = if track {
+            let unknown = vec![None; needed.len()];
+            self.gather_parallel_tracked(ctx, &needed, &unknown)
+                .map(|(g, tracks)| annotated((g, Some(tracks))))
+                .collect()
+        } else {
+            self.gather_parallel(ctx, &needed)
+                .map(|g| annotated((g, None)))
+                .collect()
+        };
         // A record of the batch may already be covered by an earlier one of
         // the same batch (they were gathered in parallel); it is kept all the
         // same: the work is done, and it only adds accuracy.
@@ -388,13 +404,64 @@ impl IrradianceCaching {
         // time: one task for all of them would leave the other threads idle.
         let rays = self.settings.strata.count();
         let per_task = ctx.backend.items_per_task(candidates.len(), rays);
-        candidates
-            .par_chunks(per_task)
-            .flat_map_iter(move |chunk| self.gather_chunk(ctx, chunk))
+        candidates.par_chunks(per_task).flat_map_iter(move |chunk| {
+            let length = self.settings.gather_length;
+            self.gather_chunk(ctx, chunk, |queries| {
+                (trace_radiance_parallel(ctx, length, queries.to_vec()), ())
+            })
+            .0
+        })
     }
 
-    /// Computes the records of `chunk` with one batch of radiance queries.
-    fn gather_chunk(&self, ctx: &FrameContext, chunk: &[Candidate]) -> Vec<Gathered> {
+    /// [`Self::gather_parallel`], taking the results of the paths that
+    /// `known` gives (per candidate, per gather query: `None` traces it)
+    /// and returning, with each record, where its traced paths went
+    /// ([`GatherTracks`]). A path's result depends only on its query and
+    /// the scene it meets, so a path taken where it would have met the same
+    /// leaves the record as tracing it would.
+    pub(crate) fn gather_parallel_tracked<'a>(
+        &'a self,
+        ctx: &'a FrameContext,
+        candidates: &'a [Candidate],
+        known: &'a [Option<Vec<Option<RadianceResult>>>],
+    ) -> impl ParallelIterator<Item = (Gathered, GatherTracks)> + 'a {
+        assert_eq!(candidates.len(), known.len(), "one entry per candidate");
+        let rays = self.settings.strata.count();
+        let per_task = ctx.backend.items_per_task(candidates.len(), rays);
+        candidates
+            .par_chunks(per_task)
+            .zip(known.par_chunks(per_task))
+            .flat_map_iter(move |(chunk, known)| {
+                let length = self.settings.gather_length;
+                let (gathered, (traced, tracks)) = self.gather_chunk(ctx, chunk, |queries| {
+                    trace_unknown(ctx, length, queries, known)
+                });
+                let tracks = Arc::new(tracks);
+                let mut first = 0;
+                let per_record: Vec<GatherTracks> = traced
+                    .chunks(rays)
+                    .map(|traced| {
+                        let own = GatherTracks {
+                            traced: traced.to_vec(),
+                            tracks: tracks.clone(),
+                            first,
+                        };
+                        first += traced.iter().filter(|&&t| t).count();
+                        own
+                    })
+                    .collect();
+                gathered.into_iter().zip(per_record)
+            })
+    }
+
+    /// Computes the records of `chunk` with one batch of radiance queries,
+    /// whose results `trace` gives (with what else it returns).
+    fn gather_chunk<T>(
+        &self,
+        ctx: &FrameContext,
+        chunk: &[Candidate],
+        trace: impl FnOnce(&[RadianceQuery]) -> (Vec<RadianceResult>, T),
+    ) -> (Vec<Gathered>, T) {
         let strata = self.settings.strata;
         let mut queries = Vec::with_capacity(chunk.len() * strata.count());
         for c in chunk {
@@ -407,9 +474,9 @@ impl IrradianceCaching {
             };
             queries.extend(gather_queries(&c.point, strata, key));
         }
-        let results = trace_radiance_parallel(ctx, self.settings.gather_length, queries.clone());
+        let (results, traced) = trace(&queries);
         let dynamic = self.keep_records.then(|| dynamic_objects(ctx));
-        chunk
+        let gathered = chunk
             .iter()
             .enumerate()
             .map(|(i, c)| {
@@ -452,10 +519,11 @@ impl IrradianceCaching {
                     candidate: *c,
                     record,
                     samples,
-                    hits: results[range].iter().map(|r| r.hit).collect(),
+                    results: results[range].to_vec(),
                 }
             })
-            .collect()
+            .collect();
+        (gathered, traced)
     }
 
     /// `R` from the harmonic mean distance, limited by the translation
@@ -547,6 +615,48 @@ fn candidate_clearances(
         .collect()
 }
 
+/// Where the paths a record's gather traced went: for each gather query
+/// whether it was traced (else its result was taken); the tracks of those
+/// traced are, in query order, `tracks`' from `first` on (`tracks` holds
+/// the tracks of a whole task of gathers).
+pub(crate) struct GatherTracks {
+    pub(crate) traced: Vec<bool>,
+    pub(crate) tracks: Arc<PathTracks>,
+    pub(crate) first: usize,
+}
+
+/// The results of `queries` (a chunk's candidates' gather queries, in
+/// order): those `known` gives (per candidate, per query), the others
+/// traced; which were traced, and the tracks of those, in order.
+fn trace_unknown(
+    ctx: &FrameContext,
+    length: PathLength,
+    queries: &[RadianceQuery],
+    known: &[Option<Vec<Option<RadianceResult>>>],
+) -> (Vec<RadianceResult>, (Vec<bool>, PathTracks)) {
+    let per_candidate = (queries.len() / known.len().max(1)).max(1);
+    let known_at = |i: usize| {
+        known[i / per_candidate]
+            .as_ref()
+            .and_then(|k| k.get(i % per_candidate).copied().flatten())
+    };
+    let results: Vec<Option<RadianceResult>> = (0..queries.len()).map(known_at).collect();
+    let traced: Vec<bool> = results.iter().map(Option::is_none).collect();
+    let unknown: Vec<RadianceQuery> = queries
+        .iter()
+        .zip(&traced)
+        .filter(|(_, &t)| t)
+        .map(|(q, _)| q.clone())
+        .collect();
+    let (mut fresh, tracks) = trace_radiance_tracked(ctx, length, unknown);
+    fresh.reverse();
+    let results = results
+        .into_iter()
+        .map(|r| r.unwrap_or_else(|| fresh.pop().expect("one result per query traced")))
+        .collect();
+    (results, (traced, tracks))
+}
+
 /// The luminance of a per-channel gradient.
 fn luminance_gradient(grad: &[Vec3; 3]) -> Vec3 {
     grad[0] * LUMINANCE.x + grad[1] * LUMINANCE.y + grad[2] * LUMINANCE.z
@@ -598,8 +708,9 @@ mod tests {
             footprint: 0.01,
             glossy: Some(material),
         };
-        let gathered = renderer.with_frame_context(0, |ctx| {
-            ic.gather_chunk(ctx, &[candidate(u32::MAX), candidate(glossy)])
+        let gathered: Vec<Gathered> = renderer.with_frame_context(0, |ctx| {
+            let candidates = [candidate(u32::MAX), candidate(glossy)];
+            ic.gather_parallel(ctx, &candidates).collect()
         });
         assert!(gathered[0].record.eas.is_none());
         assert!(gathered[1].record.eas.is_some());

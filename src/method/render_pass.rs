@@ -1213,7 +1213,7 @@ fn view_fingerprint(ctx: &FrameContext, spp: u32, pixels_per_tile: usize) -> u64
 
 /// Where the lights are and what they send: two frames with the same one
 /// give every shading point the same light samples.
-fn lights_fingerprint(ctx: &FrameContext) -> u64 {
+pub(crate) fn lights_fingerprint(ctx: &FrameContext) -> u64 {
     let snapshot = ctx.snapshot;
     let triangles = ctx
         .lights

@@ -49,6 +49,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("gradients", "extrapolated"),
             ("reprojection", "1"),
             ("next_direct", "0"),
+            ("keep_paths", "0"),
             ("spp", "4"),
             ("accuracy", "0.2"),
             ("strata", "16x48"),
@@ -308,6 +309,7 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
         }
         "reprojection" => s.reprojection = value::<u8>(method, key, v, 0..2)? == 1,
         "next_direct" => s.next_direct = value::<u8>(method, key, v, 0..2)? == 1,
+        "keep_paths" => s.keep_paths = value::<u8>(method, key, v, 0..2)? == 1,
         _ => {
             return Ok(ic_setting(method, key, v, &mut s.ic)?
                 || glossy_setting(method, key, v, &mut s.ic)?)

@@ -517,7 +517,8 @@ impl Method for TemporallyCoherentGathering {
             ctx,
             &mut cache,
             &primary_candidates(ctx, self.settings.ic.glossy),
-            |g| TcgRecord::gathered(ctx, g, &dynamic),
+            false,
+            |g, _| TcgRecord::gathered(ctx, g, &dynamic),
             &mut records,
         );
         stats.records_created = (records.len() - first_new) as u64;

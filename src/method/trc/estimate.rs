@@ -353,7 +353,7 @@ fn reproject_sample(
         None => (i, dist, None),
     };
     let mut radiance = s.radiance[i];
-    if let Some(hit) = g.hits.get(i).filter(|h| h.is_hit()) {
+    if let Some(hit) = g.results.get(i).map(|r| &r.hit).filter(|h| h.is_hit()) {
         let ratio = if next.lights_move {
             let (l0, l1) = &next.lights;
             light_ratio(ctx.snapshot, hit, dir, hit_point, moved, l0, l1)

@@ -200,6 +200,7 @@ mod tests {
             d_eas: None,
             replaces: None,
             used: false,
+            paths: None,
         }
     }
 

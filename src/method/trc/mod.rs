@@ -79,6 +79,7 @@
 mod direct;
 mod estimate;
 pub mod estimate_error;
+mod paths;
 mod state;
 
 pub use state::{downgrade_to_schema_6_record, sources_in, upgrade_schema_6_record};
@@ -86,10 +87,11 @@ pub use state::{downgrade_to_schema_6_record, sources_in, upgrade_schema_6_recor
 use super::carried;
 use super::ic::IrradianceCaching;
 use super::ic::{
-    dynamic_objects, limit_gradient, primary_candidates, scene_bounds, Candidate, Gathered,
-    IcSettings,
+    dynamic_objects, limit_gradient, primary_candidates, scene_bounds, Candidate, GatherTracks,
+    Gathered, IcSettings,
 };
-use super::render_pass::{mark_used, render_pass, PixelStreams, StillSamples};
+use super::motion::Blockers;
+use super::render_pass::{lights_fingerprint, mark_used, render_pass, PixelStreams, StillSamples};
 use super::{
     mean_lifespan, FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges,
     StateError, RENDER_PHASE,
@@ -98,9 +100,11 @@ use crate::cache::eas::{self, Eas};
 use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance};
 use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
 use crate::film::Film;
+use crate::integrator::RadianceResult;
 use crate::store::SampleBlock;
 use estimate::{reproject, NextFrame};
 use glam::Vec3;
+use paths::KeptPaths;
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -171,6 +175,17 @@ pub struct TrcSettings {
     /// on the surfaces the record sees. Off by default: it costs more than
     /// it gains on two of our three animated scenes (measured in `direct`).
     pub next_direct: bool,
+    /// A replacement takes the results of the paths of K's gather that
+    /// nothing moving met, then or now, rather than tracing them again
+    /// ([`paths`]): the same records, faster. Off: every path is traced
+    /// again, as the paper's replacement does.
+    #[serde(default = "keep_paths_default")]
+    pub keep_paths: bool,
+}
+
+/// [`TrcSettings::keep_paths`] for settings stored before it existed.
+fn keep_paths_default() -> bool {
+    true
 }
 
 impl Default for TrcSettings {
@@ -182,6 +197,7 @@ impl Default for TrcSettings {
             gradients: TemporalGradients::default(),
             reprojection: true,
             next_direct: false,
+            keep_paths: true,
         }
     }
 }
@@ -212,6 +228,9 @@ pub struct TemporalRecord {
     pub replaces: Option<RecordId>,
     /// Whether a pixel sample used K in the last rendered frame.
     pub used: bool,
+    /// The paths of K's gather that nothing moving met, for its
+    /// replacement to take ([`paths`]; in memory only).
+    pub(crate) paths: Option<Arc<KeptPaths>>,
 }
 
 impl TemporalRecord {
@@ -228,7 +247,9 @@ impl TemporalRecord {
     /// Bytes it holds apart from its sources (which the frame's cache
     /// counts): itself and its sources' temporal gradients.
     fn memory_bytes(&self) -> usize {
-        std::mem::size_of::<Self>() + self.d_eas.as_deref().map_or(0, std::mem::size_of_val)
+        std::mem::size_of::<Self>()
+            + self.d_eas.as_deref().map_or(0, std::mem::size_of_val)
+            + self.paths.as_deref().map_or(0, KeptPaths::memory_bytes)
     }
 
     /// TRC Eq. 14: the record as it is used at frame `t` (temporal
@@ -459,6 +480,7 @@ impl TemporalRadianceCaching {
             d_eas,
             replaces: None,
             used: false,
+            paths: None,
         }
     }
 
@@ -477,15 +499,22 @@ impl TemporalRadianceCaching {
             },
             removed: std::mem::take(&mut self.forgotten),
             samples: Vec::new(),
+            paths_bytes: 0,
         };
         let packer = SamplePacker::new(self.keep, ctx);
+        let motion = FrameMotion {
+            blockers: Blockers::new(ctx),
+            lights: lights_fingerprint(ctx),
+        };
         let expired = self.age(ctx.frame, &mut cache, &mut aged);
-        self.replace(ctx, &next, &packer, &expired, &mut cache, &mut aged);
+        self.replace(
+            ctx, &next, &packer, &motion, &expired, &mut cache, &mut aged,
+        );
         let phases = &mut aged.stats.phase_seconds;
         phases.push(("age".into(), start.elapsed().as_secs_f64()));
 
         let start = Instant::now();
-        self.fill(ctx, &next, &packer, &mut cache, &mut aged);
+        self.fill(ctx, &next, &packer, &motion, &mut cache, &mut aged);
         let phases = &mut aged.stats.phase_seconds;
         phases.push(("fill".into(), start.elapsed().as_secs_f64()));
         (cache, aged)
@@ -502,6 +531,7 @@ impl TemporalRadianceCaching {
             if r.is_valid_at(t) {
                 aged.stats.records_reused += 1;
                 cache.insert_as_is(r.at_frame(t, self.settings.gradients, None));
+                aged.paths_bytes += r.paths.as_deref().map_or(0, KeptPaths::memory_bytes);
                 aged.alive.push(r);
                 continue;
             }
@@ -519,37 +549,67 @@ impl TemporalRadianceCaching {
 
     /// Replaces each of the `expired` records at its location (§4.4:
     /// p_l = p_K), inserted whether or not another record covers the
-    /// point, gathered with K's random streams (`ic::first_stream`); a
-    /// replacement gathered inside a moving object ([`back_face_share`])
-    /// is dropped instead.
+    /// point, gathered with K's random streams (`ic::first_stream`),
+    /// taking the results of K's paths that nothing moving met then or
+    /// meets now ([`paths`]); a replacement gathered inside a moving object
+    /// ([`back_face_share`]) is dropped instead.
+    #[allow(clippy::too_many_arguments)]
     fn replace(
         &self,
         ctx: &FrameContext,
         next: &NextFrame,
         packer: &SamplePacker,
+        motion: &FrameMotion,
         expired: &[TemporalRecord],
         cache: &mut IrradianceCache,
         aged: &mut Aged,
     ) {
+        use rayon::prelude::*;
         let t = ctx.frame;
         let candidates: Vec<Candidate> = expired.iter().map(|r| r.candidate).collect();
-        // Each replacement traces the rays of the record it replaces again.
-        aged.stats.samples_reshot = (candidates.len() * self.settings.ic.strata.count()) as u64;
-        let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = {
-            use rayon::prelude::*;
-            self.ic
-                .gather_parallel(ctx, &candidates)
-                .map(|g| {
-                    let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
-                    (!inside).then(|| (self.temporal(ctx, next, &g), packer.pack(&g)))
+        let known: Vec<Option<Vec<Option<RadianceResult>>>> = expired
+            .par_iter()
+            .map(|r| {
+                r.paths
+                    .as_deref()
+                    .and_then(|p| p.known(&motion.blockers, motion.lights))
+            })
+            .collect();
+        // Each replacement traces again the rays of the record it replaces
+        // that it cannot take.
+        let taken: usize = known
+            .iter()
+            .flatten()
+            .flatten()
+            .filter(|r| r.is_some())
+            .count();
+        aged.stats.samples_reshot =
+            (candidates.len() * self.settings.ic.strata.count() - taken) as u64;
+        let gathered: Vec<(Gathered, GatherTracks)> = self
+            .ic
+            .gather_parallel_tracked(ctx, &candidates, &known)
+            .collect();
+        let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = gathered
+            .into_par_iter()
+            .zip(expired.par_iter())
+            .map(|((g, tracks), old)| {
+                let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
+                (!inside).then(|| {
+                    let mut r = self.temporal(ctx, next, &g);
+                    r.paths = self
+                        .settings
+                        .keep_paths
+                        .then(|| Arc::new(motion.paths(&g, &tracks, old.paths.as_deref())));
+                    (r, packer.pack(&g))
                 })
-                .collect()
-        };
+            })
+            .collect();
         for (gathered, old) in gathered.into_iter().zip(expired) {
             let Some((mut new, samples)) = gathered else {
                 aged.stats.records_dropped += 1;
                 continue;
             };
+            aged.keep_paths_within_budget(&mut new);
             new.replaces = Some(old.record.id);
             cache.insert(new.at_frame(t, self.settings.gradients, None));
             aged.alive.push(new);
@@ -565,6 +625,7 @@ impl TemporalRadianceCaching {
         ctx: &FrameContext,
         next: &NextFrame,
         packer: &SamplePacker,
+        motion: &FrameMotion,
         cache: &mut IrradianceCache,
         aged: &mut Aged,
     ) {
@@ -574,11 +635,17 @@ impl TemporalRadianceCaching {
             ctx,
             cache,
             &pixels,
-            |g| (self.temporal(ctx, next, g), packer.pack(g)),
+            self.settings.keep_paths,
+            |g, tracks| {
+                let mut r = self.temporal(ctx, next, g);
+                r.paths = tracks.map(|tracks| Arc::new(motion.paths(g, &tracks, None)));
+                (r, packer.pack(g))
+            },
             &mut created,
         );
         aged.stats.records_created = created.len() as u64;
-        for (r, samples) in created {
+        for (mut r, samples) in created {
+            aged.keep_paths_within_budget(&mut r);
             aged.alive.push(r);
             aged.samples.extend(samples);
         }
@@ -593,6 +660,7 @@ impl TemporalRadianceCaching {
             mut stats,
             removed,
             samples,
+            ..
         } = aged;
         debug_assert_eq!(alive.len(), cache.len());
         let longest = self.settings.max_life.max(1) as usize;
@@ -844,6 +912,41 @@ struct Aged {
     removed: Vec<RecordId>,
     /// Store hook: samples of the new records, in their order in `alive`.
     samples: Vec<SampleBlock>,
+    /// Bytes of the kept paths of the records in `alive`.
+    paths_bytes: usize,
+}
+
+impl Aged {
+    /// Lets a record just gathered keep its paths while all the records'
+    /// fit [`paths::BUDGET_BYTES`] (past it, its replacement traces every
+    /// path: slower, the same record).
+    fn keep_paths_within_budget(&mut self, r: &mut TemporalRecord) {
+        let bytes = r.paths.as_deref().map_or(0, KeptPaths::memory_bytes);
+        if self.paths_bytes + bytes > paths::BUDGET_BYTES {
+            r.paths = None;
+        } else {
+            self.paths_bytes += bytes;
+        }
+    }
+}
+
+/// What moves in a frame, for the kept paths ([`paths`]).
+struct FrameMotion {
+    blockers: Blockers,
+    lights: u64,
+}
+
+impl FrameMotion {
+    /// The paths of gather `g` to keep: `tracks` of those it traced
+    /// (`None`: taken from `taken_from`).
+    fn paths(
+        &self,
+        g: &Gathered,
+        tracks: &GatherTracks,
+        taken_from: Option<&KeptPaths>,
+    ) -> KeptPaths {
+        KeptPaths::of(&g.results, tracks, taken_from, &self.blockers, self.lights)
+    }
 }
 
 /// Above this share of gather rays that hit the back of a surface, a
@@ -882,11 +985,11 @@ fn back_face_share(ctx: &FrameContext, g: &Gathered) -> f32 {
                 .is_some_and(|tri| tri.cross().dot(dir) > 0.0)
             && !ctx.scene.materials[snapshot.tri_material[t] as usize].double_sided
     };
-    let hits = g.hits.iter().zip(&g.samples.direction);
+    let hits = g.results.iter().map(|r| &r.hit).zip(&g.samples.direction);
     let back = hits
         .filter(|(hit, &dir)| is_inside_of_moving(hit.triangle, dir))
         .count();
-    back as f32 / g.hits.len().max(1) as f32
+    back as f32 / g.results.len().max(1) as f32
 }
 /// Adds record `r` of the frame to what the store writes of it: a `new`
 /// record with its samples' block and last frame; its carried state where

@@ -189,6 +189,9 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
         d_eas,
         replaces: s.replaces,
         used: s.used,
+        // The store keeps no paths: a resumed render's first replacements
+        // trace every path, as the kept ones would have gone.
+        paths: None,
     })
 }
 

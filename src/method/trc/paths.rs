@@ -1,0 +1,145 @@
+//! The paths of a record's gather that nothing moving met, kept for the
+//! record that replaces it.
+//!
+//! A replacement is gathered at K's point with K's random streams (§4.4,
+//! "p_l = p_K"; `ic::first_stream`), so each of its paths starts as K's
+//! did. A path of K that met no moving object — no hit on one, no segment
+//! (extension or shadow ray) through one's box — and whose segments no
+//! moving object's box meets at the replacement's frame either, with the
+//! lights where they were, traces there exactly what it traced for K: the
+//! same static hits, the same light samples, the same radiance. Its result
+//! is taken rather than traced again; only the other paths are traced.
+//! The record is the one a full gather gives (`tests/trc.rs` compares them
+//! bit for bit), so frames, stores and resumed renders (which start with
+//! nothing kept and trace everything) are unchanged.
+//!
+//! Not in the paper, whose GPU renderer gathers a record by rasterising
+//! its hemisphere: this is the CPU counterpart of the render pass's kept
+//! samples (`render_pass::StillSamples`), for the records' gathers, which
+//! are most of `trc`'s time.
+//!
+//! Caveat shared with the kept samples: two static triangles hit at exactly
+//! the same t may be told apart in another order by a BVH rebuilt around
+//! moved objects. A path whose extension ray hit something nearer than
+//! [`NEAR_HIT`] is not kept either: the CPU traversal (obvhs's CWBVH) drops
+//! hits nearer than 1e-4 depending on how its nodes group the triangles.
+
+use crate::integrator::RadianceResult;
+use crate::method::ic::GatherTracks;
+use crate::method::motion::Blockers;
+use glam::Vec3;
+
+/// Segments shorter than this (relative to the size of their origin's
+/// coordinates) make a path not kept: see the module's caveat.
+const NEAR_HIT: f32 = 1e-3;
+
+/// Bytes of kept paths `trc` holds at most over all its records: past
+/// this, new records keep none (their replacements trace every path).
+pub(crate) const BUDGET_BYTES: usize = 256 << 20;
+
+/// One record's gather: each query's result, and the segments of those
+/// kept (the queries whose path nothing moving met).
+pub(crate) struct KeptPaths {
+    /// The lights' fingerprint when the paths were traced.
+    lights: u64,
+    results: Vec<RadianceResult>,
+    /// Query `i`'s segments are `segments[ends[i - 1]..ends[i]]`; a query
+    /// not kept has none and `kept[i]` false.
+    ends: Vec<u32>,
+    kept: Vec<bool>,
+    segments: Vec<[Vec3; 2]>,
+}
+
+impl std::fmt::Debug for KeptPaths {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("KeptPaths")
+            .field("queries", &self.results.len())
+            .field("kept", &self.kept.iter().filter(|&&k| k).count())
+            .field("segments", &self.segments.len())
+            .finish()
+    }
+}
+
+impl KeptPaths {
+    /// The paths of a gather this frame: `results` for each query,
+    /// `tracks` of those traced (the others were taken from `taken_from`,
+    /// which kept them), `blockers` this frame's moving objects, `lights`
+    /// the lights' fingerprint.
+    pub(crate) fn of(
+        results: &[RadianceResult],
+        tracks: &GatherTracks,
+        taken_from: Option<&KeptPaths>,
+        blockers: &Blockers,
+        lights: u64,
+    ) -> Self {
+        let mut paths = KeptPaths {
+            lights,
+            results: results.to_vec(),
+            ends: Vec::with_capacity(results.len()),
+            kept: Vec::with_capacity(results.len()),
+            segments: Vec::new(),
+        };
+        let mut path = tracks.first;
+        for (i, &traced) in tracks.traced.iter().enumerate() {
+            let segments = if traced {
+                let segments = tracks.tracks.segments(path);
+                let moving = tracks.tracks.hit_moving(path);
+                path += 1;
+                (!moving && clear(segments, blockers)).then_some(segments)
+            } else {
+                // Taken: nothing moving met it then or now.
+                taken_from.and_then(|old| old.segments_of(i))
+            };
+            paths.kept.push(segments.is_some());
+            paths.segments.extend_from_slice(segments.unwrap_or(&[]));
+            paths.ends.push(paths.segments.len() as u32);
+        }
+        paths
+    }
+
+    /// The results a gather at this frame (with `blockers` and `lights`)
+    /// may take, per query (`None`: trace it); `None` when the lights
+    /// changed.
+    pub(crate) fn known(
+        &self,
+        blockers: &Blockers,
+        lights: u64,
+    ) -> Option<Vec<Option<RadianceResult>>> {
+        (lights == self.lights).then(|| {
+            (0..self.results.len())
+                .map(|i| {
+                    self.segments_of(i)
+                        .filter(|segments| clear(segments, blockers))
+                        .map(|_| self.results[i])
+                })
+                .collect()
+        })
+    }
+
+    /// Bytes held.
+    pub(crate) fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>()
+            + self.results.len() * std::mem::size_of::<RadianceResult>()
+            + self.ends.len() * 4
+            + self.kept.len()
+            + self.segments.len() * std::mem::size_of::<[Vec3; 2]>()
+    }
+
+    fn segments_of(&self, i: usize) -> Option<&[[Vec3; 2]]> {
+        let start = if i == 0 { 0 } else { self.ends[i - 1] as usize };
+        self.kept
+            .get(i)
+            .copied()
+            .unwrap_or(false)
+            .then(|| &self.segments[start..self.ends[i] as usize])
+    }
+}
+
+/// Whether no moving box meets any of `segments` and none is nearer than
+/// [`NEAR_HIT`] to its origin.
+fn clear(segments: &[[Vec3; 2]], blockers: &Blockers) -> bool {
+    segments.iter().all(|&[a, b]| {
+        let near = NEAR_HIT * (1.0 + a.abs().max_element());
+        (b - a).length_squared() >= near * near && !blockers.segment_may_hit(a, b)
+    })
+}
