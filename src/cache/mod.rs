@@ -77,18 +77,19 @@ impl IrradianceCache {
         let threshold = 1.0 / self.accuracy;
         self.index.query(at.position, |i| {
             let record = &self.records[i as usize];
-            let w = record.weight(at);
-            if w >= threshold && !record.is_in_front_of(at) {
+            if let Some(w) = usable_weight(record, at, threshold) {
                 visit(i as usize, record, w);
             }
         });
     }
 
-    /// Whether some record can be used at `at`.
+    /// Whether some record can be used at `at` (the test of
+    /// [`Self::for_each_usable`], stopping at the first record that passes).
     pub fn covers(&self, at: &LookupPoint) -> bool {
-        let mut covered = false;
-        self.for_each_usable(at, |_, _| covered = true);
-        covered
+        let threshold = 1.0 / self.accuracy;
+        self.index.any(at.position, |i| {
+            usable_weight(&self.records[i as usize], at, threshold).is_some()
+        })
     }
 
     /// TRC Eq. 1 with Eq. 4: `E(p) = Σ w_K E_K(p) / Σ w_K` over usable
@@ -156,5 +157,56 @@ impl IrradianceCache {
         self.index
             .insert(id, record.position, record.influence_radius(self.accuracy));
         self.records.push(record);
+    }
+}
+
+/// The weight of `record` at `at` if it may be used there (TRC Eq. 3:
+/// `w ≥ 1/a`, and Ward's in-front test), the test every lookup applies.
+fn usable_weight(record: &IrradianceRecord, at: &LookupPoint, threshold: f32) -> Option<f32> {
+    let w = record.weight(at);
+    (w >= threshold && !record.is_in_front_of(at)).then_some(w)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::Rng;
+
+    /// `covers` (which stops at the first usable record) answers as
+    /// "some record is usable" does over all of them, on random caches and
+    /// lookups near their records.
+    #[test]
+    fn covers_answers_as_a_full_lookup() {
+        let mut rng = Rng::from_seed(11, 0);
+        let mut v = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+        let (mut covered, mut open) = (0, 0);
+        for _ in 0..20 {
+            let mut cache = IrradianceCache::new(Vec3::ZERO, Vec3::ONE, 0.3);
+            for id in 0..200 {
+                cache.insert(IrradianceRecord {
+                    id,
+                    position: v(),
+                    normal: ((v() - 0.5) * 0.2 + Vec3::Z).normalize(),
+                    irradiance: Vec3::ONE,
+                    grad_translation: [Vec3::ZERO; 3],
+                    grad_rotation: [Vec3::ZERO; 3],
+                    radius: 0.1 + 0.5 * v().x,
+                    created_frame: 0,
+                    object: 0,
+                    eas: None,
+                });
+            }
+            for _ in 0..500 {
+                let at = LookupPoint::open(v(), ((v() - 0.5) * 0.2 + Vec3::Z).normalize());
+                let mut any = false;
+                cache.for_each_usable(&at, |_, _| any = true);
+                assert_eq!(cache.covers(&at), any);
+                *(if any { &mut covered } else { &mut open }) += 1;
+            }
+        }
+        assert!(
+            covered > 100 && open > 100,
+            "{covered} covered, {open} open"
+        );
     }
 }

@@ -121,6 +121,21 @@ impl SphereOctree {
 
     /// Calls `visit(id)` for every sphere that contains `p`.
     pub fn query(&self, p: Vec3, mut visit: impl FnMut(u32)) {
+        self.find(p, |id| {
+            visit(id);
+            false
+        });
+    }
+
+    /// Whether `test(id)` holds for some sphere that contains `p`: the
+    /// spheres are visited as by [`Self::query`] until one passes.
+    pub fn any(&self, p: Vec3, test: impl FnMut(u32) -> bool) -> bool {
+        self.find(p, test)
+    }
+
+    /// Visits the spheres that contain `p` until `stop(id)` is true;
+    /// returns whether it was.
+    fn find(&self, p: Vec3, mut stop: impl FnMut(u32) -> bool) -> bool {
         // A fixed stack: at most 8 children are pushed per level (this runs
         // once per shading point, so it must not allocate).
         let mut stack: [Option<&Node>; 8 * MAX_DEPTH as usize + 1] =
@@ -131,8 +146,8 @@ impl SphereOctree {
             len -= 1;
             let node = stack[len].take().expect("entries below len are set");
             for &(id, c, r) in &node.items {
-                if (p - c).length_squared() <= r * r {
-                    visit(id);
+                if (p - c).length_squared() <= r * r && stop(id) {
+                    return true;
                 }
             }
             if let Some(children) = &node.children {
@@ -142,6 +157,7 @@ impl SphereOctree {
                 }
             }
         }
+        false
     }
 
     /// Shrinks the stored radius of `id` (the sphere stays where it is
