@@ -177,7 +177,7 @@ pub struct TrcSettings {
     pub next_direct: bool,
     /// A replacement takes the results of the paths of K's gather that
     /// nothing moving met, then or now, rather than tracing them again
-    /// ([`paths`]): the same records, faster. Off: every path is traced
+    /// (`trc::paths`): the same records, faster. Off: every path is traced
     /// again, as the paper's replacement does.
     #[serde(default = "keep_paths_default")]
     pub keep_paths: bool,
