@@ -376,7 +376,7 @@ impl IrradianceCaching {
         };
         let records: Vec<(IrradianceRecord, X)> = if track {
             let unknown = vec![None; needed.len()];
-            self.gather_parallel_tracked(ctx, &needed, &unknown)
+            self.gather_parallel_tracked(ctx, &needed, &unknown, true)
                 .map(|(g, tracks)| annotated((g, Some(tracks))))
                 .collect()
         } else {
@@ -424,6 +424,7 @@ impl IrradianceCaching {
         ctx: &'a FrameContext,
         candidates: &'a [Candidate],
         known: &'a [Option<Vec<Option<RadianceResult>>>],
+        track: bool,
     ) -> impl ParallelIterator<Item = (Gathered, GatherTracks)> + 'a {
         assert_eq!(candidates.len(), known.len(), "one entry per candidate");
         let rays = self.settings.strata.count();
@@ -434,7 +435,7 @@ impl IrradianceCaching {
             .flat_map_iter(move |(chunk, known)| {
                 let length = self.settings.gather_length;
                 let (gathered, (traced, tracks)) = self.gather_chunk(ctx, chunk, |queries| {
-                    trace_unknown(ctx, length, queries, known)
+                    trace_unknown(ctx, length, queries, known, track)
                 });
                 let tracks = Arc::new(tracks);
                 let mut first = 0;
@@ -627,12 +628,14 @@ pub(crate) struct GatherTracks {
 
 /// The results of `queries` (a chunk's candidates' gather queries, in
 /// order): those `known` gives (per candidate, per query), the others
-/// traced; which were traced, and the tracks of those, in order.
+/// traced; which were traced, and (with `track`; else none) the tracks of
+/// those, in order.
 fn trace_unknown(
     ctx: &FrameContext,
     length: PathLength,
     queries: &[RadianceQuery],
     known: &[Option<Vec<Option<RadianceResult>>>],
+    track: bool,
 ) -> (Vec<RadianceResult>, (Vec<bool>, PathTracks)) {
     let per_candidate = (queries.len() / known.len().max(1)).max(1);
     let known_at = |i: usize| {
@@ -648,7 +651,14 @@ fn trace_unknown(
         .filter(|(_, &t)| t)
         .map(|(q, _)| q.clone())
         .collect();
-    let (mut fresh, tracks) = trace_radiance_tracked(ctx, length, unknown);
+    let (mut fresh, tracks) = if track {
+        trace_radiance_tracked(ctx, length, unknown)
+    } else {
+        (
+            trace_radiance_parallel(ctx, length, unknown),
+            PathTracks::default(),
+        )
+    };
     fresh.reverse();
     let results = results
         .into_iter()

@@ -382,6 +382,8 @@ pub struct TemporalRadianceCaching {
     /// The same for the first pass's usage marks (interpolated gradients),
     /// which runs ahead of rendering.
     first_pass_still: StillSamples,
+    /// Whether kept paths pay for their keeping here ([`paths::PathsPay`]).
+    paths_pay: paths::PathsPay,
 }
 
 impl TemporalRadianceCaching {
@@ -401,6 +403,7 @@ impl TemporalRadianceCaching {
             statics: direct::StaticGeometry::default(),
             still: StillSamples::default(),
             first_pass_still: StillSamples::default(),
+            paths_pay: paths::PathsPay::default(),
         }
     }
 
@@ -505,11 +508,14 @@ impl TemporalRadianceCaching {
         let motion = FrameMotion {
             blockers: Blockers::new(ctx),
             lights: lights_fingerprint(ctx),
+            track: self.settings.keep_paths
+                && self.paths_pay.track(ctx.frame, self.settings.max_life),
         };
         let expired = self.age(ctx.frame, &mut cache, &mut aged);
-        self.replace(
+        let offered = self.replace(
             ctx, &next, &packer, &motion, &expired, &mut cache, &mut aged,
         );
+        self.paths_pay.measure(offered);
         let phases = &mut aged.stats.phase_seconds;
         phases.push(("age".into(), start.elapsed().as_secs_f64()));
 
@@ -552,7 +558,8 @@ impl TemporalRadianceCaching {
     /// point, gathered with K's random streams (`ic::first_stream`),
     /// taking the results of K's paths that nothing moving met then or
     /// meets now ([`paths`]); a replacement gathered inside a moving object
-    /// ([`back_face_share`]) is dropped instead.
+    /// ([`back_face_share`]) is dropped instead. Returns how many paths the
+    /// replacements were offered and took.
     #[allow(clippy::too_many_arguments)]
     fn replace(
         &self,
@@ -563,7 +570,7 @@ impl TemporalRadianceCaching {
         expired: &[TemporalRecord],
         cache: &mut IrradianceCache,
         aged: &mut Aged,
-    ) {
+    ) -> paths::Offered {
         use rayon::prelude::*;
         let t = ctx.frame;
         let candidates: Vec<Candidate> = expired.iter().map(|r| r.candidate).collect();
@@ -583,11 +590,20 @@ impl TemporalRadianceCaching {
             .flatten()
             .filter(|r| r.is_some())
             .count();
+        // Paths kept under other lights count as offered and not taken.
+        let offered = paths::Offered {
+            taken,
+            paths: expired
+                .iter()
+                .filter_map(|r| r.paths.as_deref())
+                .map(KeptPaths::len)
+                .sum(),
+        };
         aged.stats.samples_reshot =
             (candidates.len() * self.settings.ic.strata.count() - taken) as u64;
         let gathered: Vec<(Gathered, GatherTracks)> = self
             .ic
-            .gather_parallel_tracked(ctx, &candidates, &known)
+            .gather_parallel_tracked(ctx, &candidates, &known, motion.track)
             .collect();
         let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = gathered
             .into_par_iter()
@@ -596,9 +612,8 @@ impl TemporalRadianceCaching {
                 let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
                 (!inside).then(|| {
                     let mut r = self.temporal(ctx, next, &g);
-                    r.paths = self
-                        .settings
-                        .keep_paths
+                    r.paths = motion
+                        .track
                         .then(|| Arc::new(motion.paths(&g, &tracks, old.paths.as_deref())));
                     (r, packer.pack(&g))
                 })
@@ -616,6 +631,7 @@ impl TemporalRadianceCaching {
             aged.samples.extend(samples);
             aged.stats.records_replaced += 1;
         }
+        offered
     }
 
     /// New records where nothing is usable (`ic`'s fill stage), each with
@@ -635,7 +651,7 @@ impl TemporalRadianceCaching {
             ctx,
             cache,
             &pixels,
-            self.settings.keep_paths,
+            motion.track,
             |g, tracks| {
                 let mut r = self.temporal(ctx, next, g);
                 r.paths = tracks.map(|tracks| Arc::new(motion.paths(g, &tracks, None)));
@@ -930,10 +946,12 @@ impl Aged {
     }
 }
 
-/// What moves in a frame, for the kept paths ([`paths`]).
+/// What moves in a frame, for the kept paths ([`paths`]), and whether
+/// the frame's new records keep theirs.
 struct FrameMotion {
     blockers: Blockers,
     lights: u64,
+    track: bool,
 }
 
 impl FrameMotion {
