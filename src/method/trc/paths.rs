@@ -43,10 +43,9 @@ pub(crate) struct KeptPaths {
     /// The lights' fingerprint when the paths were traced.
     lights: u64,
     results: Vec<RadianceResult>,
-    /// Query `i`'s segments are `segments[ends[i - 1]..ends[i]]`; a query
-    /// not kept has none and `kept[i]` false.
+    /// Query `i`'s segments are `segments[ends[i - 1]..ends[i]]`. A path
+    /// traces at least its first ray, so a query not kept is one with none.
     ends: Vec<u32>,
-    kept: Vec<bool>,
     segments: Vec<[Vec3; 2]>,
 }
 
@@ -54,7 +53,12 @@ impl std::fmt::Debug for KeptPaths {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("KeptPaths")
             .field("queries", &self.results.len())
-            .field("kept", &self.kept.iter().filter(|&&k| k).count())
+            .field(
+                "kept",
+                &(0..self.len())
+                    .filter(|&i| self.segments_of(i).is_some())
+                    .count(),
+            )
             .field("segments", &self.segments.len())
             .finish()
     }
@@ -76,7 +80,6 @@ impl KeptPaths {
             lights,
             results: results.to_vec(),
             ends: Vec::with_capacity(results.len()),
-            kept: Vec::with_capacity(results.len()),
             segments: Vec::new(),
         };
         let mut path = tracks.first;
@@ -85,12 +88,11 @@ impl KeptPaths {
                 let segments = tracks.tracks.segments(path);
                 let moving = tracks.tracks.hit_moving(path);
                 path += 1;
-                (!moving && clear(segments, blockers)).then_some(segments)
+                (!moving && long_enough(segments) && clear(segments, blockers)).then_some(segments)
             } else {
                 // Taken: nothing moving met it then or now.
                 taken_from.and_then(|old| old.segments_of(i))
             };
-            paths.kept.push(segments.is_some());
             paths.segments.extend_from_slice(segments.unwrap_or(&[]));
             paths.ends.push(paths.segments.len() as u32);
         }
@@ -126,27 +128,31 @@ impl KeptPaths {
         std::mem::size_of::<Self>()
             + self.results.len() * std::mem::size_of::<RadianceResult>()
             + self.ends.len() * 4
-            + self.kept.len()
             + self.segments.len() * std::mem::size_of::<[Vec3; 2]>()
     }
 
     fn segments_of(&self, i: usize) -> Option<&[[Vec3; 2]]> {
+        let end = *self.ends.get(i)? as usize;
         let start = if i == 0 { 0 } else { self.ends[i - 1] as usize };
-        self.kept
-            .get(i)
-            .copied()
-            .unwrap_or(false)
-            .then(|| &self.segments[start..self.ends[i] as usize])
+        let segments = &self.segments[start..end];
+        (!segments.is_empty()).then_some(segments)
     }
 }
 
-/// Whether no moving box meets any of `segments` and none is nearer than
-/// [`NEAR_HIT`] to its origin.
-fn clear(segments: &[[Vec3; 2]], blockers: &Blockers) -> bool {
+/// Whether no segment is shorter than [`NEAR_HIT`] (relative to its
+/// origin's coordinates): checked once, when a path is first kept.
+fn long_enough(segments: &[[Vec3; 2]]) -> bool {
     segments.iter().all(|&[a, b]| {
         let near = NEAR_HIT * (1.0 + a.abs().max_element());
-        (b - a).length_squared() >= near * near && !blockers.segment_may_hit(a, b)
+        (b - a).length_squared() >= near * near
     })
+}
+
+/// Whether no moving box meets any of `segments`.
+fn clear(segments: &[[Vec3; 2]], blockers: &Blockers) -> bool {
+    segments
+        .iter()
+        .all(|&[a, b]| !blockers.segment_may_hit(a, b))
 }
 
 /// What one frame's replacements were offered by the paths their records
