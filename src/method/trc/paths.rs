@@ -76,11 +76,14 @@ impl KeptPaths {
         blockers: &Blockers,
         lights: u64,
     ) -> Self {
+        // About two segments a path (an extension ray and a shadow ray),
+        // or as many as the paths taken from kept: no regrowing.
+        let segments = taken_from.map_or(2 * results.len(), |old| old.segments.len());
         let mut paths = KeptPaths {
             lights,
             results: results.to_vec(),
             ends: Vec::with_capacity(results.len()),
-            segments: Vec::new(),
+            segments: Vec::with_capacity(segments),
         };
         let mut path = tracks.first;
         for (i, &traced) in tracks.traced.iter().enumerate() {
