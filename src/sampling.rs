@@ -43,7 +43,7 @@ impl SampleKey {
 }
 
 /// PCG32 (XSH-RR variant): small, fast and statistically solid.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Rng {
     state: u64,
     inc: u64,

@@ -5,6 +5,7 @@
 
 mod carried;
 pub mod ic;
+mod kept_queries;
 mod lookups;
 pub mod motion;
 pub mod movies;

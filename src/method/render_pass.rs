@@ -23,6 +23,7 @@
 //! ([`StillSamples`]).
 
 use super::ic::{GlossyLobe, IcSettings};
+use super::kept_queries::{KeptQueries, TileQueries};
 use super::lookups::{measure_clearance, Interpolation, Lookup, ShadingPoint};
 use super::motion::Blockers;
 pub use super::pixels::PixelStreams;
@@ -534,25 +535,75 @@ fn render_tile(
     );
     let kept_shadows =
         shadows.add_unoccluded(ctx, &mut tile.radiance, still.as_ref().map(|s| s.pass));
+    let queries = trace_deferred(
+        ctx,
+        pass,
+        deferred,
+        still.as_ref(),
+        &taken,
+        &mut tile.radiance,
+    );
+    edges.resolve(&tile.primary.samples, &tile.radiance, first, out);
+    let mut kept = TileKept::of(&tile.primary, &taken, jittered, kept_shadows, &edges);
+    if let Some((queries, taken)) = queries {
+        kept.tile.queries = queries;
+        kept.queries_taken = taken;
+    }
+    (stats, kept)
+}
+
+/// Traces the tile's deferred queries (the paths, then the glossy lobes'
+/// first hits) and adds their radiance to their samples. With `still`,
+/// takes the radiance of the last frame's queries that are asked again
+/// and that nothing moving meets ([`KeptQueries`]) and returns this
+/// frame's, with how many were taken; `taken` says how many samples are
+/// base samples (the rest are a light rim's extra ones, never kept).
+fn trace_deferred(
+    ctx: &FrameContext,
+    pass: &TilePass,
+    deferred: Vec<Deferred>,
+    still: Option<&TileStill>,
+    taken: &[bool],
+    radiance: &mut [Vec3],
+) -> Option<(KeptQueries, u64)> {
     let (first_hits, paths): (Vec<Deferred>, Vec<Deferred>) =
         deferred.into_iter().partition(|d| d.first_hit_only);
     let first_hit = PathLength {
         max_depth: Some(0),
         ..pass.settings.length
     };
+    let mut kept = still.map(|_| (KeptQueries::default(), 0));
     for (length, deferred) in [(pass.settings.length, paths), (first_hit, first_hits)] {
         let (targets, queries): (Vec<usize>, Vec<RadianceQuery>) =
             deferred.into_iter().map(|d| (d.sample, d.query)).unzip();
-        for (i, r) in targets
-            .into_iter()
-            .zip(trace_radiance(ctx, length, queries))
-        {
-            tile.radiance[i] += r.radiance;
+        let traced = match (still, kept.as_mut()) {
+            (Some(still), Some((kept, n_taken))) => {
+                let asked = TileQueries {
+                    length,
+                    samples: targets
+                        .iter()
+                        .map(|&i| (i < taken.len()).then_some(i as u32))
+                        .collect(),
+                    queries,
+                };
+                let last = still.queries.filter(|_| still.pass.lights_still);
+                let (traced, n) = kept.trace(ctx, asked, last, &still.pass.blockers);
+                *n_taken += n;
+                traced
+            }
+            _ => trace_radiance(ctx, length, queries)
+                .into_iter()
+                .map(|r| r.radiance)
+                .collect(),
+        };
+        for (i, r) in targets.into_iter().zip(traced) {
+            radiance[i] += r;
         }
     }
-    edges.resolve(&tile.primary.samples, &tile.radiance, first, out);
-    let kept = TileKept::of(&tile.primary, &taken, jittered, kept_shadows, &edges);
-    (stats, kept)
+    if let Some((kept, _)) = kept.as_mut() {
+        kept.finish();
+    }
+    kept
 }
 
 /// A tile's primary samples, their shaded first hits and the radiance
@@ -840,8 +891,12 @@ struct TilePass<'a> {
 /// in the last frame or this one either, it keeps its direct light. A
 /// pixel on the rim of a seen light keeps what its coverage rays saw
 /// ([`pixels::EmitterEdges`]) where no moving box shows within a pixel of
-/// it on the film in either frame. The rest is traced again, as are the
-/// cache lookups, fallbacks and glossy lobes of every sample. So the film
+/// it on the film in either frame. A path-traced part of a sample (the
+/// indirect light where no record is usable, a glossy lobe) asked again
+/// bit for bit keeps its radiance where its path met nothing moving then
+/// and no moving box meets it now, the lights staying
+/// ([`super::kept_queries`]). The rest is traced again, as are the cache
+/// lookups of every sample. So the film
 /// equals, bit for bit, the one traced afresh, and a resumed job (which
 /// starts with none kept) equals an uninterrupted one.
 ///
@@ -856,6 +911,9 @@ pub struct StillSamples {
     /// Samples of the last render pass whose hit was taken from the frame
     /// before (their direct light too where no moving box met it).
     pub taken: u64,
+    /// Path-traced parts of samples (fallbacks, glossy lobes) the last
+    /// render pass took from the frame before ([`KeptQueries`]).
+    pub queries_taken: u64,
 }
 
 impl StillSamples {
@@ -874,6 +932,7 @@ impl StillSamples {
     /// Keeps the tiles `pass` traced for the next frame.
     fn end(&mut self, pass: Option<StillPass>, tiles: Vec<TileKept>) {
         self.taken = tiles.iter().map(|t| t.taken).sum();
+        self.queries_taken = tiles.iter().map(|t| t.queries_taken).sum();
         self.last = pass.map(|pass| pass.finish(tiles.into_iter().map(|t| t.tile).collect()));
     }
 
@@ -902,12 +961,15 @@ struct KeptFrame {
 struct KeptTile {
     samples: Vec<StillSample>,
     coverage: Vec<CandidateCoverage>,
+    /// The path-traced parts of its samples that nothing moving met.
+    queries: KeptQueries,
 }
 
 impl KeptTile {
     fn memory_bytes(&self) -> usize {
         self.samples.len() * std::mem::size_of::<StillSample>()
             + self.coverage.len() * std::mem::size_of::<CandidateCoverage>()
+            + self.queries.memory_bytes()
     }
 }
 
@@ -1004,6 +1066,7 @@ impl StillPass {
             pass: self,
             samples: kept.map_or(&[][..], |k| k.samples.as_slice()),
             coverage: kept.map_or(&[][..], |k| k.coverage.as_slice()),
+            queries: kept.map(|k| &k.queries),
         }
     }
 
@@ -1075,6 +1138,7 @@ struct TileStill<'a> {
     pass: &'a StillPass,
     samples: &'a [StillSample],
     coverage: &'a [CandidateCoverage],
+    queries: Option<&'a KeptQueries>,
 }
 
 impl TileStill<'_> {
@@ -1106,6 +1170,8 @@ impl TileStill<'_> {
 struct TileKept {
     tile: KeptTile,
     taken: u64,
+    /// Path-traced queries taken from the last frame.
+    queries_taken: u64,
 }
 
 impl TileKept {
@@ -1136,8 +1202,13 @@ impl TileKept {
             Vec::new()
         };
         TileKept {
-            tile: KeptTile { samples, coverage },
+            tile: KeptTile {
+                samples,
+                coverage,
+                queries: KeptQueries::default(),
+            },
             taken: taken.iter().filter(|&&t| t).count() as u64,
+            queries_taken: 0,
         }
     }
 }
@@ -1327,11 +1398,23 @@ mod tests {
         assert_eq!((lookups, of, own), (shared(0.6), of_sample, Vec::new()));
     }
 
+    /// One frame rendered with kept samples and afresh.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    struct KeptCheck {
+        /// Whether the two films are the same bit for bit.
+        same: bool,
+        /// Samples and path-traced queries taken from the last frame.
+        taken: u64,
+        queries_taken: u64,
+        /// Rays each traced.
+        kept_rays: u64,
+        fresh_rays: u64,
+    }
+
     /// Renders `frames` in turn with one kept [`StillSamples`] under an
     /// `ic` cache of each frame, and again each afresh (nothing kept), with
-    /// coherent streams. Returns, per frame, whether the two films are the
-    /// same bit for bit, the samples taken, and the rays each traced.
-    fn kept_against_fresh(scene: &str, frames: &[u32]) -> Vec<(bool, u64, u64, u64)> {
+    /// coherent streams.
+    fn kept_against_fresh(scene: &str, frames: &[u32]) -> Vec<KeptCheck> {
         let mut renderer = crate::render::test_renderer(scene, 20);
         let ic = IrradianceCaching::new(IcSettings {
             spp: 4,
@@ -1362,35 +1445,71 @@ mod tests {
                     let same = kept.pixels.iter().zip(&fresh.pixels).all(|(a, b)| {
                         a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)
                     });
-                    (same, still.taken, kept_rays, fresh_rays)
+                    KeptCheck {
+                        same,
+                        taken: still.taken,
+                        queries_taken: still.queries_taken,
+                        kept_rays,
+                        fresh_rays,
+                    }
                 })
             })
             .collect()
     }
 
+    /// What a frame rendered with nothing to take from gives.
+    fn took_nothing(check: KeptCheck) -> bool {
+        check.same
+            && check.taken == 0
+            && check.queries_taken == 0
+            && check.kept_rays == check.fresh_rays
+    }
+
     /// A frame whose samples are taken from the last one where nothing
     /// moving met them equals, bit for bit, the frame traced afresh: on
     /// `cube-in-box` (a cube moves; the camera and light stay) most samples
-    /// are taken and fewer rays traced; where the moving cube's box lies on
+    /// are taken and fewer rays traced, the path-traced indirect light of
+    /// samples no record covers too; where the moving cube's box lies on
     /// their rays some are not; a frame that does not follow the last one
     /// takes none.
     #[test]
     fn kept_samples_give_the_frame_traced_afresh() {
         let frames = kept_against_fresh("cube-in-box", &[3, 4, 5, 9]);
         let samples = 20 * 20 * 4;
-        assert_eq!(frames[0], (true, 0, frames[0].2, frames[0].2));
-        for &(same, taken, kept_rays, fresh_rays) in &frames[1..3] {
+        assert!(took_nothing(frames[0]), "{:?}", frames[0]);
+        for check in &frames[1..3] {
+            let KeptCheck {
+                same,
+                taken,
+                queries_taken,
+                kept_rays,
+                fresh_rays,
+            } = *check;
             assert!(same);
             assert!(
                 taken > samples / 2 && taken < samples,
                 "{taken} of {samples}"
             );
+            assert!(queries_taken > 0, "{check:?}");
             assert!(
                 kept_rays < fresh_rays / 2,
                 "{kept_rays} rays against {fresh_rays}"
             );
         }
-        assert_eq!(frames[3], (true, 0, frames[3].2, frames[3].2));
+        assert!(took_nothing(frames[3]), "{:?}", frames[3]);
+    }
+
+    /// On `glossy-cornell` (glossy walls and blocks, a block moving) the
+    /// glossy lobes of the still samples are taken too, and the frame is
+    /// the one traced afresh.
+    #[test]
+    fn kept_glossy_lobes_give_the_frame_traced_afresh() {
+        let frames = kept_against_fresh("glossy-cornell", &[6, 7]);
+        assert!(took_nothing(frames[0]), "{:?}", frames[0]);
+        let check = frames[1];
+        assert!(check.same, "{check:?}");
+        assert!(check.queries_taken > 100, "{check:?}");
+        assert!(check.kept_rays < check.fresh_rays / 2, "{check:?}");
     }
 
     /// A box's film rect holds every film point whose camera ray meets the
@@ -1435,13 +1554,22 @@ mod tests {
     }
 
     /// Under a moving light every sample keeps its hit but traces its
-    /// shadow ray again, and the frames still equal those traced afresh.
+    /// shadow ray and its path-traced parts again, and the frames still
+    /// equal those traced afresh.
     #[test]
     fn kept_samples_under_a_moving_light_trace_their_shadows_again() {
         let frames = kept_against_fresh("moving-light", &[3, 4]);
-        let (same, taken, kept_rays, fresh_rays) = frames[1];
-        assert!(same && frames[0].0);
+        let KeptCheck {
+            same,
+            taken,
+            queries_taken,
+            kept_rays,
+            fresh_rays,
+        } = frames[1];
+        assert!(same && frames[0].same);
         assert!(taken > 0);
+        // Their paths' light moved too.
+        assert_eq!(queries_taken, 0);
         assert!(
             kept_rays < fresh_rays,
             "{kept_rays} rays against {fresh_rays}"

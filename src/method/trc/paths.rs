@@ -20,18 +20,13 @@
 //!
 //! Caveat shared with the kept samples: two static triangles hit at exactly
 //! the same t may be told apart in another order by a BVH rebuilt around
-//! moved objects. A path whose extension ray hit something nearer than
-//! [`NEAR_HIT`] is not kept either: the CPU traversal (obvhs's CWBVH) drops
-//! hits nearer than 1e-4 depending on how its nodes group the triangles.
+//! moved objects. A path with a segment nearer than 1e-3 is not kept
+//! either ([`path_long_enough`]).
 
 use crate::integrator::RadianceResult;
 use crate::method::ic::GatherTracks;
-use crate::method::motion::Blockers;
+use crate::method::motion::{path_long_enough, Blockers};
 use glam::Vec3;
-
-/// Segments shorter than this (relative to the size of their origin's
-/// coordinates) make a path not kept: see the module's caveat.
-const NEAR_HIT: f32 = 1e-3;
 
 /// Bytes of kept paths `trc` holds at most over all its records: past
 /// this, new records keep none (their replacements trace every path).
@@ -91,7 +86,8 @@ impl KeptPaths {
                 let segments = tracks.tracks.segments(path);
                 let moving = tracks.tracks.hit_moving(path);
                 path += 1;
-                (!moving && long_enough(segments) && clear(segments, blockers)).then_some(segments)
+                (!moving && path_long_enough(segments) && blockers.path_clear(segments))
+                    .then_some(segments)
             } else {
                 // Taken: nothing moving met it then or now.
                 taken_from.and_then(|old| old.segments_of(i))
@@ -114,7 +110,7 @@ impl KeptPaths {
             (0..self.results.len())
                 .map(|i| {
                     self.segments_of(i)
-                        .filter(|segments| clear(segments, blockers))
+                        .filter(|segments| blockers.path_clear(segments))
                         .map(|_| self.results[i])
                 })
                 .collect()
@@ -140,22 +136,6 @@ impl KeptPaths {
         let segments = &self.segments[start..end];
         (!segments.is_empty()).then_some(segments)
     }
-}
-
-/// Whether no segment is shorter than [`NEAR_HIT`] (relative to its
-/// origin's coordinates): checked once, when a path is first kept.
-fn long_enough(segments: &[[Vec3; 2]]) -> bool {
-    segments.iter().all(|&[a, b]| {
-        let near = NEAR_HIT * (1.0 + a.abs().max_element());
-        (b - a).length_squared() >= near * near
-    })
-}
-
-/// Whether no moving box meets any of `segments`.
-fn clear(segments: &[[Vec3; 2]], blockers: &Blockers) -> bool {
-    segments
-        .iter()
-        .all(|&[a, b]| !blockers.segment_may_hit(a, b))
 }
 
 /// What one frame's replacements were offered by the paths their records
