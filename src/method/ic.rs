@@ -294,7 +294,7 @@ impl IrradianceCaching {
     /// existing record is usable.
     pub fn fill(&self, ctx: &FrameContext, cache: &mut IrradianceCache) {
         let candidates = primary_candidates(ctx, self.settings.glossy);
-        self.fill_from(ctx, cache, &candidates, false, |_, _| (), &mut Vec::new());
+        self.fill_from(ctx, cache, &candidates, None, |_, _| (), &mut Vec::new());
     }
 
     /// Renders this frame with a given cache (what [`Method::render_frame`]
@@ -313,15 +313,15 @@ impl IrradianceCaching {
     /// The fill stage over given candidates (one per pixel). Every record
     /// it inserts is first passed to `annotate` (in parallel, right after
     /// its gather) and the result pushed to `inserted`, in insertion order:
-    /// `trc` estimates each new record's E(t0+1) there. With `track`, the
-    /// gathers also say where each path went (`annotate`'s second argument,
-    /// `None` without).
+    /// `trc` estimates each new record's E(t0+1) there. The gathers of the
+    /// candidates `track` picks also say where each path went
+    /// (`annotate`'s second argument, `None` for the others).
     pub(crate) fn fill_from<X: Send>(
         &self,
         ctx: &FrameContext,
         cache: &mut IrradianceCache,
         candidates: &[Option<Candidate>],
-        track: bool,
+        track: Option<&TrackPaths<'_>>,
         annotate: impl Fn(&Gathered, Option<GatherTracks>) -> X + Sync,
         inserted: &mut Vec<X>,
     ) {
@@ -361,7 +361,7 @@ impl IrradianceCaching {
         ctx: &FrameContext,
         cache: &mut IrradianceCache,
         batch: Vec<(Candidate, Lookup)>,
-        track: bool,
+        track: Option<&TrackPaths<'_>>,
         annotate: &(impl Fn(&Gathered, Option<GatherTracks>) -> X + Sync),
         inserted: &mut Vec<X>,
     ) {
@@ -374,15 +374,17 @@ impl IrradianceCaching {
             let x = annotate(&g, tracks);
             (g.record, x)
         };
-        let records: Vec<(IrradianceRecord, X)> = if track {
-            let unknown = vec![None; needed.len()];
-            self.gather_parallel_tracked(ctx, &needed, &unknown, true)
-                .map(|(g, tracks)| annotated((g, Some(tracks))))
-                .collect()
-        } else {
-            self.gather_parallel(ctx, &needed)
+        let records: Vec<(IrradianceRecord, X)> = match track {
+            Some(track) => {
+                let unknown = vec![None; needed.len()];
+                self.gather_parallel_tracked(ctx, &needed, &unknown, track)
+                    .map(annotated)
+                    .collect()
+            }
+            None => self
+                .gather_parallel(ctx, &needed)
                 .map(|g| annotated((g, None)))
-                .collect()
+                .collect(),
         };
         // A record of the batch may already be covered by an earlier one of
         // the same batch (they were gathered in parallel); it is kept all the
@@ -415,17 +417,18 @@ impl IrradianceCaching {
 
     /// [`Self::gather_parallel`], taking the results of the paths that
     /// `known` gives (per candidate, per gather query: `None` traces it)
-    /// and returning, with each record, where its traced paths went
-    /// ([`GatherTracks`]). A path's result depends only on its query and
-    /// the scene it meets, so a path taken where it would have met the same
-    /// leaves the record as tracing it would.
+    /// and returning, with each record `track` picks, where its traced
+    /// paths went ([`GatherTracks`]; a task's records are tracked together,
+    /// where one of them is picked). A path's result depends only on its
+    /// query and the scene it meets, so a path taken where it would have
+    /// met the same leaves the record as tracing it would.
     pub(crate) fn gather_parallel_tracked<'a>(
         &'a self,
         ctx: &'a FrameContext,
         candidates: &'a [Candidate],
         known: &'a [Option<Vec<Option<RadianceResult>>>],
-        track: bool,
-    ) -> impl ParallelIterator<Item = (Gathered, GatherTracks)> + 'a {
+        track: &'a TrackPaths<'a>,
+    ) -> impl ParallelIterator<Item = (Gathered, Option<GatherTracks>)> + 'a {
         assert_eq!(candidates.len(), known.len(), "one entry per candidate");
         let rays = self.settings.strata.count();
         let per_task = ctx.backend.items_per_task(candidates.len(), rays);
@@ -434,12 +437,13 @@ impl IrradianceCaching {
             .zip(known.par_chunks(per_task))
             .flat_map_iter(move |(chunk, known)| {
                 let length = self.settings.gather_length;
+                let tracked = chunk.iter().any(track);
                 let (gathered, (traced, tracks)) = self.gather_chunk(ctx, chunk, |queries| {
-                    trace_unknown(ctx, length, queries, known, track)
+                    trace_unknown(ctx, length, queries, known, tracked)
                 });
                 let tracks = Arc::new(tracks);
                 let mut first = 0;
-                let per_record: Vec<GatherTracks> = traced
+                let per_record: Vec<Option<GatherTracks>> = traced
                     .chunks(rays)
                     .map(|traced| {
                         let own = GatherTracks {
@@ -448,7 +452,7 @@ impl IrradianceCaching {
                             first,
                         };
                         first += traced.iter().filter(|&&t| t).count();
-                        own
+                        tracked.then_some(own)
                     })
                     .collect();
                 gathered.into_iter().zip(per_record)
@@ -615,6 +619,10 @@ fn candidate_clearances(
         .map(|c| c.as_ref().and_then(|_| lookups.next()))
         .collect()
 }
+
+/// Which candidates' gathers say where their paths went
+/// ([`IrradianceCaching::gather_parallel_tracked`]).
+pub(crate) type TrackPaths<'a> = dyn Fn(&Candidate) -> bool + Sync + 'a;
 
 /// Where the paths a record's gather traced went: for each gather query
 /// whether it was traced (else its result was taken); the tracks of those

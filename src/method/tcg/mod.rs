@@ -517,7 +517,7 @@ impl Method for TemporallyCoherentGathering {
             ctx,
             &mut cache,
             &primary_candidates(ctx, self.settings.ic.glossy),
-            false,
+            None,
             |g, _| TcgRecord::gathered(ctx, g, &dynamic),
             &mut records,
         );

@@ -88,7 +88,7 @@ use super::carried;
 use super::ic::IrradianceCaching;
 use super::ic::{
     dynamic_objects, limit_gradient, primary_candidates, scene_bounds, Candidate, GatherTracks,
-    Gathered, IcSettings,
+    Gathered, IcSettings, TrackPaths,
 };
 use super::motion::Blockers;
 use super::render_pass::{lights_fingerprint, mark_used, render_pass, PixelStreams, StillSamples};
@@ -510,6 +510,7 @@ impl TemporalRadianceCaching {
             lights: lights_fingerprint(ctx),
             track: self.settings.keep_paths
                 && self.paths_pay.track(ctx.frame, self.settings.max_life),
+            moving: dynamic_objects(ctx),
         };
         let expired = self.age(ctx.frame, &mut cache, &mut aged);
         let offered = self.replace(
@@ -601,9 +602,10 @@ impl TemporalRadianceCaching {
         };
         aged.stats.samples_reshot =
             (candidates.len() * self.settings.ic.strata.count() - taken) as u64;
-        let gathered: Vec<(Gathered, GatherTracks)> = self
+        let track = |c: &Candidate| motion.tracks(c);
+        let gathered: Vec<(Gathered, Option<GatherTracks>)> = self
             .ic
-            .gather_parallel_tracked(ctx, &candidates, &known, motion.track)
+            .gather_parallel_tracked(ctx, &candidates, &known, &track)
             .collect();
         let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = gathered
             .into_par_iter()
@@ -612,9 +614,8 @@ impl TemporalRadianceCaching {
                 let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
                 (!inside).then(|| {
                     let mut r = self.temporal(ctx, next, &g);
-                    r.paths = motion
-                        .track
-                        .then(|| Arc::new(motion.paths(&g, &tracks, old.paths.as_deref())));
+                    r.paths = tracks
+                        .map(|tracks| Arc::new(motion.paths(&g, &tracks, old.paths.as_deref())));
                     (r, packer.pack(&g))
                 })
             })
@@ -647,11 +648,12 @@ impl TemporalRadianceCaching {
     ) {
         let pixels = primary_candidates(ctx, self.settings.ic.glossy);
         let mut created = Vec::new();
+        let track = |c: &Candidate| motion.tracks(c);
         self.ic.fill_from(
             ctx,
             cache,
             &pixels,
-            motion.track,
+            motion.track.then_some(&track as &TrackPaths),
             |g, tracks| {
                 let mut r = self.temporal(ctx, next, g);
                 r.paths = tracks.map(|tracks| Arc::new(motion.paths(g, &tracks, None)));
@@ -952,9 +954,19 @@ struct FrameMotion {
     blockers: Blockers,
     lights: u64,
     track: bool,
+    /// Which objects move.
+    moving: Vec<bool>,
 }
 
 impl FrameMotion {
+    /// Whether the gather at `c` keeps its paths: in frames whose records
+    /// keep theirs, where `c` lies on no moving object. A path from a
+    /// point on a moving object starts inside that object's box, so none
+    /// would be kept ([`KeptPaths::of`]); tracking them would be waste.
+    fn tracks(&self, c: &Candidate) -> bool {
+        self.track && !self.moving.get(c.object as usize).copied().unwrap_or(true)
+    }
+
     /// The paths of gather `g` to keep: `tracks` of those it traced
     /// (`None`: taken from `taken_from`).
     fn paths(
