@@ -116,7 +116,7 @@ impl Blockers {
 const NEAR_HIT: f32 = 1e-3;
 
 /// Whether a traced path may be kept for another frame as far as its own
-/// segments go: none is shorter than [`NEAR_HIT`] (see there). Kept paths
+/// segments go: none is shorter than `NEAR_HIT`, 1e-3 (see there). Kept paths
 /// (`trc::paths`, the render pass's kept queries) check it once, when a
 /// path is first kept.
 pub fn path_long_enough(segments: &[[Vec3; 2]]) -> bool {

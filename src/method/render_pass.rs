@@ -895,7 +895,7 @@ struct TilePass<'a> {
 /// indirect light where no record is usable, a glossy lobe) asked again
 /// bit for bit keeps its radiance where its path met nothing moving then
 /// and no moving box meets it now, the lights staying
-/// ([`super::kept_queries`]). The rest is traced again, as are the cache
+/// (`method::kept_queries`). The rest is traced again, as are the cache
 /// lookups of every sample. So the film
 /// equals, bit for bit, the one traced afresh, and a resumed job (which
 /// starts with none kept) equals an uninterrupted one.
@@ -912,7 +912,7 @@ pub struct StillSamples {
     /// before (their direct light too where no moving box met it).
     pub taken: u64,
     /// Path-traced parts of samples (fallbacks, glossy lobes) the last
-    /// render pass took from the frame before ([`KeptQueries`]).
+    /// render pass took from the frame before (`KeptQueries`).
     pub queries_taken: u64,
 }
 
