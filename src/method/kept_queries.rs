@@ -26,6 +26,9 @@ pub(crate) struct KeptQueries {
     /// In sample order.
     queries: Vec<KeptQuery>,
     segments: Vec<[Vec3; 2]>,
+    /// Bytes they may take: past this, no more are kept (those are traced
+    /// again in the next frame).
+    budget: usize,
 }
 
 struct KeptQuery {
@@ -47,6 +50,14 @@ pub(crate) struct TileQueries {
 }
 
 impl KeptQueries {
+    /// None yet, to take at most `budget` bytes.
+    pub(crate) fn within(budget: usize) -> Self {
+        KeptQueries {
+            budget,
+            ..KeptQueries::default()
+        }
+    }
+
     /// Traces `asked`, taking from `last` (the tile's kept queries of the
     /// last frame, given only where the lights stayed) the radiance of
     /// those it kept that no moving box of this frame (`blockers`) meets,
@@ -124,6 +135,10 @@ impl KeptQueries {
         radiance: Vec3,
         segments: &[[Vec3; 2]],
     ) {
+        let bytes = std::mem::size_of::<KeptQuery>() + std::mem::size_of_val(segments);
+        if self.memory_bytes() + bytes > self.budget {
+            return;
+        }
         let start = self.segments.len() as u32;
         self.segments.extend_from_slice(segments);
         self.queries.push(KeptQuery {
@@ -159,4 +174,52 @@ fn same_query(a: &RadianceQuery, b: &RadianceQuery) -> bool {
         && bits(a.weight) == bits(b.weight)
         && a.first_light == b.first_light
         && a.first_hit == b.first_hit
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::Ray;
+    use crate::integrator::FirstHitEmission;
+    use crate::sampling::Rng;
+
+    fn query(seed: u64) -> RadianceQuery {
+        RadianceQuery {
+            ray: Ray::new(Vec3::ZERO, Vec3::Y, 0.0, f32::INFINITY),
+            first_light: None,
+            rng: Rng::from_seed(seed, 0),
+            weight: Vec3::ONE,
+            first_hit: FirstHitEmission::Include,
+        }
+    }
+
+    /// A kept query is found only by its sample, its length and the same
+    /// query bit for bit (another random stream, another length: not
+    /// found); past the budget nothing more is kept.
+    #[test]
+    fn queries_are_found_bit_for_bit_and_kept_within_the_budget() {
+        let length = PathLength::default();
+        let segment = [[Vec3::ZERO, Vec3::Y]];
+        let one = std::mem::size_of::<KeptQuery>() + std::mem::size_of_val(&segment);
+        let mut kept = KeptQueries::within(2 * one);
+        kept.keep(3, length, query(1), Vec3::X, &segment);
+        kept.keep(5, length, query(2), Vec3::Y, &segment);
+        kept.keep(7, length, query(3), Vec3::Z, &segment);
+        kept.finish();
+        assert_eq!(kept.memory_bytes(), 2 * one);
+        let found = kept.find(5, length, &query(2)).map(|q| q.radiance);
+        assert_eq!(found, Some(Vec3::Y));
+        assert_eq!(
+            kept.segments_of(kept.find(3, length, &query(1)).unwrap()),
+            &segment
+        );
+        assert!(kept.find(5, length, &query(1)).is_none());
+        assert!(kept.find(3, length, &query(2)).is_none());
+        let shorter = PathLength {
+            max_depth: Some(0),
+            ..length
+        };
+        assert!(kept.find(5, shorter, &query(2)).is_none());
+        assert!(kept.find(7, length, &query(3)).is_none(), "over the budget");
+    }
 }

@@ -572,7 +572,7 @@ fn trace_deferred(
         max_depth: Some(0),
         ..pass.settings.length
     };
-    let mut kept = still.map(|_| (KeptQueries::default(), 0));
+    let mut kept = still.map(|s| (KeptQueries::within(s.pass.queries_budget), 0));
     for (length, deferred) in [(pass.settings.length, paths), (first_hit, first_hits)] {
         let (targets, queries): (Vec<usize>, Vec<RadianceQuery>) =
             deferred.into_iter().map(|d| (d.sample, d.query)).unzip();
@@ -1016,6 +1016,8 @@ struct StillPass {
     /// A distance from the camera past every moving box: a camera ray that
     /// hit nothing is tested as a segment that long.
     far: f32,
+    /// Bytes each tile's kept queries may take ([`KeptQueries`]).
+    queries_budget: usize,
 }
 
 impl StillPass {
@@ -1027,9 +1029,14 @@ impl StillPass {
         pixels_per_tile: usize,
     ) -> Option<Self> {
         let samples = ctx.width as usize * ctx.height as usize * spp as usize;
-        if samples.saturating_mul(std::mem::size_of::<StillSample>()) > StillSamples::BUDGET_BYTES {
+        let samples_bytes = samples.saturating_mul(std::mem::size_of::<StillSample>());
+        if samples_bytes > StillSamples::BUDGET_BYTES {
             return None;
         }
+        // What the samples leave of the budget, shared by the tiles' kept
+        // queries.
+        let tiles = (ctx.width as usize * ctx.height as usize).div_ceil(pixels_per_tile.max(1));
+        let queries_budget = (StillSamples::BUDGET_BYTES - samples_bytes) / tiles.max(1);
         let view = view_fingerprint(ctx, spp, pixels_per_tile);
         let lights = lights_fingerprint(ctx);
         let last = last.filter(|l| l.frame.checked_add(1) == Some(ctx.frame) && l.view == view);
@@ -1057,6 +1064,7 @@ impl StillPass {
             width: ctx.width,
             last,
             far,
+            queries_budget,
         })
     }
 
