@@ -960,9 +960,12 @@ struct FrameMotion {
 
 impl FrameMotion {
     /// Whether the gather at `c` keeps its paths: in frames whose records
-    /// keep theirs, where `c` lies on no moving object. A path from a
-    /// point on a moving object starts inside that object's box, so none
-    /// would be kept ([`KeptPaths::of`]); tracking them would be waste.
+    /// keep theirs, where `c` lies on no moving object. A new record's
+    /// paths there start inside that object's box, so none would be kept
+    /// ([`KeptPaths::of`]); a replacement there is rare (a record its
+    /// object has left is seldom used in its last frame) and its paths
+    /// start where the object was, so few would be. Tracking them is
+    /// waste; it changes no record.
     fn tracks(&self, c: &Candidate) -> bool {
         self.track && !self.moving.get(c.object as usize).copied().unwrap_or(true)
     }
