@@ -18,14 +18,14 @@
 //! pixel samples draw their random streams ([`PixelStreams`]). `trc` also
 //! asks which records the pass uses (`render_pass`'s `used`, `mark_used`).
 //! With streams that are the same in every frame, the pass keeps the
-//! primary hits and direct light of the last frame's samples and traces
-//! again only those that something moving may have changed
-//! ([`StillSamples`]).
+//! primary hits, direct light, path-traced parts and cache lookups of the
+//! last frame's samples and traces again only those that something moving
+//! may have changed ([`StillSamples`]).
 
 use super::ic::{GlossyLobe, IcSettings};
 use super::kept_queries::{KeptQueries, TileQueries};
 use super::lookups::{measure_clearance, Interpolation, Lookup, ShadingPoint};
-use super::motion::Blockers;
+use super::motion::{self, Blockers};
 pub use super::pixels::PixelStreams;
 use super::pixels::{
     self, CameraSampler, CandidateCoverage, EmitterEdges, FirstLightSampler, KeptCoverage,
@@ -34,7 +34,7 @@ use super::pixels::{
 use super::{FrameContext, FrameStats};
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::GatherPoint;
-use crate::cache::{eas, Interpolated, IrradianceCache};
+use crate::cache::{eas, Interpolated, IrradianceCache, LookupPoint};
 use crate::film::Film;
 use crate::integrator::{
     offset_origin, trace_radiance, FirstHitEmission, PathLength, RadianceQuery,
@@ -62,9 +62,8 @@ impl<'a> Surface<'a> {
         if !hit.is_hit() {
             return None;
         }
-        let snapshot = ctx.snapshot;
-        let triangle = &snapshot.triangles[hit.triangle as usize];
-        let material = &ctx.scene.materials[snapshot.tri_material[hit.triangle as usize] as usize];
+        let triangle = &ctx.snapshot.triangles[hit.triangle as usize];
+        let material = material_of(ctx, hit);
         let wo = -ray.dir().normalize();
         Some(Surface {
             p: ray.at(hit.t),
@@ -76,6 +75,16 @@ impl<'a> Surface<'a> {
         })
     }
 
+    /// Whether a hit's shading needs no more than its diffuse albedo and
+    /// cache lookup (a miss, or a material that neither emits nor has a
+    /// glossy lobe): what a pixel kept whole may hold ([`Standing`]).
+    fn is_plain(ctx: &FrameContext, hit: &Hit) -> bool {
+        !hit.is_hit() || {
+            let m = material_of(ctx, hit);
+            !m.is_emissive() && m.specular.max_element() <= 0.0
+        }
+    }
+
     pub(crate) fn gather_point(&self) -> GatherPoint {
         GatherPoint {
             position: self.p,
@@ -83,6 +92,11 @@ impl<'a> Surface<'a> {
             geometric_normal: self.ng,
         }
     }
+}
+
+/// The material of the triangle `hit` hit.
+fn material_of<'a>(ctx: &'a FrameContext, hit: &Hit) -> &'a crate::scene::Material {
+    &ctx.scene.materials[ctx.snapshot.tri_material[hit.triangle as usize] as usize]
 }
 
 /// Rendering stage (EAS Algorithm 1, lines 18–24), tile by tile. With
@@ -190,7 +204,7 @@ pub(crate) fn mark_used(
             // No light is sampled here: the samples are kept without shadows.
             let jittered = primary.jittered(taken.len(), still.is_some());
             let shadows = vec![None; jittered.len()];
-            TileKept::of(&primary, &taken, jittered, shadows, &edges)
+            TileKept::of(&primary, &taken, jittered, shadows, None, &edges)
         })
         .collect();
     if let Some(still) = still {
@@ -511,15 +525,22 @@ fn render_tile(
         still.as_ref(),
     );
     let jittered = primary.jittered(taken.len(), still.is_some());
-    let mut tile = TileShading::new(ctx, primary);
-    let shadows = tile.direct_light(ctx, pass.streams, still.as_ref().map(|s| (s, &taken[..])));
-    let (lookups, lookup_of_sample) = pixel_lookups(
+    let standing = still.as_ref().map(|s| s.standing(ctx, &primary, &taken));
+    let (shadows, whole) = standing.map_or((Vec::new(), Vec::new()), |s| (s.shadows, s.whole));
+    let mut tile = TileShading::new(ctx, primary, whole);
+    let standing = still.as_ref().map(|s| (s, &shadows[..]));
+    let shadows = tile.direct_light(ctx, pass.streams, standing);
+    let (mut lookups, mut lookup_of_sample) = pixel_lookups(
         ctx,
         &tile.surfaces,
         &tile.primary.hits,
         &tile.primary.samples,
         pass.settings.glossy,
     );
+    let first_taken_lookup = lookups.len();
+    let lookups_taken = still.as_ref().map_or(0, |s| {
+        s.take_lookups(&tile.whole, &mut lookups, &mut lookup_of_sample)
+    });
     stats.lookups = lookups.len() as u64;
     let interpolated = pass.interpolation.interpolate(&lookups, pass.used);
     stats.lookup_records = interpolated
@@ -528,6 +549,7 @@ fn render_tile(
         .map(|e| u64::from(e.records))
         .sum();
     let deferred = tile.indirect_light(
+        ctx,
         pass,
         (&lookups, &lookup_of_sample),
         &interpolated,
@@ -535,16 +557,35 @@ fn render_tile(
     );
     let kept_shadows =
         shadows.add_unoccluded(ctx, &mut tile.radiance, still.as_ref().map(|s| s.pass));
+    let kept_lookups = still.as_ref().and_then(|s| {
+        let camera = ctx.snapshot.camera.position;
+        let of_base = (&lookups[..], &lookup_of_sample[..taken.len()]);
+        s.pass
+            .keep_lookups(camera, of_base, first_taken_lookup, s.pass.tile_budget)
+    });
+    let lookups_bytes = kept_lookups
+        .as_ref()
+        .map_or(0, |(l, _)| l.len() * std::mem::size_of::<KeptLookup>());
     let queries = trace_deferred(
         ctx,
         pass,
         deferred,
-        still.as_ref(),
+        still
+            .as_ref()
+            .map(|s| (s, s.pass.tile_budget.saturating_sub(lookups_bytes))),
         &taken,
         &mut tile.radiance,
     );
     edges.resolve(&tile.primary.samples, &tile.radiance, first, out);
-    let mut kept = TileKept::of(&tile.primary, &taken, jittered, kept_shadows, &edges);
+    let mut kept = TileKept::of(
+        &tile.primary,
+        &taken,
+        jittered,
+        kept_shadows,
+        kept_lookups,
+        &edges,
+    );
+    kept.lookups_taken = lookups_taken;
     if let Some((queries, taken)) = queries {
         kept.tile.queries = queries;
         kept.queries_taken = taken;
@@ -554,15 +595,17 @@ fn render_tile(
 
 /// Traces the tile's deferred queries (the paths, then the glossy lobes'
 /// first hits) and adds their radiance to their samples. With `still`
-/// (and lights that did not move since the last frame), takes the radiance of the last frame's queries that are asked again
-/// and that nothing moving meets ([`KeptQueries`]) and returns this
-/// frame's, with how many were taken; `taken` says how many samples are
-/// base samples (the rest are a light rim's extra ones, never kept).
+/// (and lights that did not move since the last frame), takes the
+/// radiance of the last frame's queries that are asked again and that
+/// nothing moving meets ([`KeptQueries`]) and returns this frame's, kept
+/// within `still`'s budget, with how many were taken; `taken` says how
+/// many samples are base samples (the rest are a light rim's extra ones,
+/// never kept).
 fn trace_deferred(
     ctx: &FrameContext,
     pass: &TilePass,
     deferred: Vec<Deferred>,
-    still: Option<&TileStill>,
+    still: Option<(&TileStill, usize)>,
     taken: &[bool],
     radiance: &mut [Vec3],
 ) -> Option<(KeptQueries, u64)> {
@@ -574,8 +617,8 @@ fn trace_deferred(
     };
     // Under lights that moved since the last frame the queries are not
     // kept: they would most likely move again, and nothing could be taken.
-    let still = still.filter(|s| !s.pass.lights_moved());
-    let mut kept = still.map(|s| (KeptQueries::within(s.pass.queries_budget), 0));
+    let (still, budget) = still.filter(|(s, _)| !s.pass.lights_moved()).unzip();
+    let mut kept = budget.map(|budget| (KeptQueries::within(budget), 0));
     for (length, deferred) in [(pass.settings.length, paths), (first_hit, first_hits)] {
         let (targets, queries): (Vec<usize>, Vec<RadianceQuery>) =
             deferred.into_iter().map(|d| (d.sample, d.query)).unzip();
@@ -613,7 +656,12 @@ fn trace_deferred(
 /// summed so far for each.
 struct TileShading<'a> {
     primary: PrimarySamples,
+    /// Each sample's shaded first hit; not shaded (`None`) for the samples
+    /// of pixels kept whole.
     surfaces: Vec<Option<Surface<'a>>>,
+    /// Per base sample, whether its pixel is kept whole ([`Standing`]);
+    /// empty where nothing is kept.
+    whole: Vec<bool>,
     radiance: Vec<Vec3>,
 }
 
@@ -669,10 +717,20 @@ impl ShadowBatch {
 }
 
 impl<'a> TileShading<'a> {
-    /// The first hits shaded, with the emission of those that see an
+    /// The first hits shaded (but for those of pixels kept `whole`, whose
+    /// materials emit nothing), with the emission of those that see an
     /// emitter's emitting side.
-    fn new(ctx: &'a FrameContext, primary: PrimarySamples) -> Self {
-        let surfaces = primary.surfaces(ctx);
+    fn new(ctx: &'a FrameContext, primary: PrimarySamples, whole: Vec<bool>) -> Self {
+        let surfaces: Vec<Option<Surface>> = primary
+            .rays
+            .iter()
+            .zip(&primary.hits)
+            .enumerate()
+            .map(|(i, (ray, hit))| match whole.get(i) {
+                Some(true) => None,
+                _ => Surface::at(ctx, ray, hit),
+            })
+            .collect();
         let radiance = surfaces
             .iter()
             .map(|surface| match surface {
@@ -688,26 +746,28 @@ impl<'a> TileShading<'a> {
         TileShading {
             primary,
             surfaces,
+            whole,
             radiance,
         }
     }
 
     /// Each sample's first light sample (drawn from its stream, before
     /// anything else draws from it) and the shadow rays of those that may
-    /// add direct light; with `still` (and which samples' hits were taken
-    /// from it), the shadows of the last frame that nothing moving met are
+    /// add direct light; the last frame's shadows that stand (`standing`:
+    /// the kept samples and, per base sample, [`Standing::shadows`]) are
     /// taken instead of sampled and traced again.
     fn direct_light(
         &mut self,
         ctx: &FrameContext,
         streams: PixelStreams,
-        still: Option<(&TileStill, &[bool])>,
+        standing: Option<(&TileStill, &[bool])>,
     ) -> ShadowBatch {
         let mut lights = FirstLightSampler::new(streams);
         let mut batch = ShadowBatch::default();
         for (i, surface) in self.surfaces.iter().enumerate() {
             let rng = &mut self.primary.rngs[i];
-            if let Some(shadow) = still.and_then(|(s, taken)| s.shadow(i, taken)) {
+            let kept = standing.filter(|(_, stands)| stands.get(i) == Some(&true));
+            if let Some(shadow) = kept.map(|(still, _)| still.samples[i].shadow) {
                 // The light sample's draw, whose outcome the shadow kept.
                 rng.next_2d();
                 batch.kept.extend(shadow.map(|shadow| (i, shadow)));
@@ -735,6 +795,7 @@ impl<'a> TileShading<'a> {
     /// has sources). Returns the traced parts.
     fn indirect_light(
         &mut self,
+        ctx: &'a FrameContext,
         pass: &TilePass,
         (lookups, lookup_of_sample): (&[Lookup], &[Option<u32>]),
         interpolated: &[Option<Interpolated>],
@@ -743,10 +804,34 @@ impl<'a> TileShading<'a> {
         let mut deferred = Vec::new();
         let mut reflected: Vec<Option<Option<Vec3>>> = vec![None; lookups.len()];
         for (i, surface) in self.surfaces.iter().enumerate() {
+            let rng = &mut self.primary.rngs[i];
+            if self.whole.get(i) == Some(&true) {
+                // A plain material: its diffuse lobe alone, as below.
+                let Some(lookup) = lookup_of_sample[i] else {
+                    continue;
+                };
+                let hit = &self.primary.hits[i];
+                match &interpolated[lookup as usize] {
+                    Some(e) => {
+                        let albedo = material_of(ctx, hit).diffuse;
+                        self.radiance[i] += albedo * FRAC_1_PI * e.irradiance;
+                    }
+                    None => {
+                        stats.fallback_lookups += 1;
+                        let surface = Surface::at(ctx, &self.primary.rays[i], hit)
+                            .expect("a sample that looked the cache up hit something");
+                        deferred.push(Deferred {
+                            sample: i,
+                            query: diffuse_indirect_query(&surface, rng),
+                            first_hit_only: false,
+                        });
+                    }
+                }
+                continue;
+            }
             let Some(surface) = surface.as_ref().filter(|s| !s.bsdf.is_black()) else {
                 continue;
             };
-            let rng = &mut self.primary.rngs[i];
             let diffuse = surface.bsdf.diffuse_albedo().max_element() > 0.0;
             if let Some(lookup) = lookup_of_sample[i].filter(|_| diffuse) {
                 match &interpolated[lookup as usize] {
@@ -898,10 +983,15 @@ struct TilePass<'a> {
 /// indirect light where no record is usable, a glossy lobe) asked again
 /// bit for bit keeps its radiance where its path met nothing moving then
 /// and no moving box meets it now, the lights staying
-/// (`method::kept_queries`). The rest is traced again, as are the cache
-/// lookups of every sample. So the film
-/// equals, bit for bit, the one traced afresh, and a resumed job (which
-/// starts with none kept) equals an uninterrupted one.
+/// (`method::kept_queries`). A pixel all of whose samples keep their hits
+/// and shadows, on materials that neither emit nor have a glossy lobe, is
+/// kept whole where no moving box lies on its lookups' clearance rays in
+/// either frame ([`Standing`]): it keeps its cache lookups, and its
+/// samples' first hits are not shaded again; only the interpolation,
+/// whose records change from frame to frame, is done again. The rest is
+/// traced again. So the film equals, bit for bit, the one traced afresh,
+/// and a resumed job (which starts with none kept) equals an
+/// uninterrupted one.
 ///
 /// This is the design's "static parts are never recomputed for motion
 /// they cannot see" applied to the render pass, as `movies` does for its
@@ -914,6 +1004,9 @@ pub struct StillSamples {
     /// Samples of the last render pass whose hit was taken from the frame
     /// before (their direct light too where no moving box met it).
     pub taken: u64,
+    /// Cache lookups the last render pass took from the frame before (of
+    /// pixels kept whole, [`Standing`]).
+    pub lookups_taken: u64,
     /// Path-traced parts of samples (fallbacks, glossy lobes) the last
     /// render pass took from the frame before (`KeptQueries`).
     pub queries_taken: u64,
@@ -935,6 +1028,7 @@ impl StillSamples {
     /// Keeps the tiles `pass` traced for the next frame.
     fn end(&mut self, pass: Option<StillPass>, tiles: Vec<TileKept>) {
         self.taken = tiles.iter().map(|t| t.taken).sum();
+        self.lookups_taken = tiles.iter().map(|t| t.lookups_taken).sum();
         self.queries_taken = tiles.iter().map(|t| t.queries_taken).sum();
         self.last = pass.map(|pass| pass.finish(tiles.into_iter().map(|t| t.tile).collect()));
     }
@@ -964,6 +1058,9 @@ struct KeptFrame {
 struct KeptTile {
     samples: Vec<StillSample>,
     coverage: Vec<CandidateCoverage>,
+    /// The lookups its samples index (`StillSample::lookup`); `None` where
+    /// they did not fit the budget.
+    lookups: Option<Vec<KeptLookup>>,
     /// The path-traced parts of its samples that nothing moving met.
     queries: KeptQueries,
 }
@@ -972,6 +1069,7 @@ impl KeptTile {
     fn memory_bytes(&self) -> usize {
         self.samples.len() * std::mem::size_of::<StillSample>()
             + self.coverage.len() * std::mem::size_of::<CandidateCoverage>()
+            + self.lookups.as_ref().map_or(0, Vec::len) * std::mem::size_of::<KeptLookup>()
             + self.queries.memory_bytes()
     }
 }
@@ -982,13 +1080,28 @@ impl KeptTile {
 type ScreenRect = [f32; 4];
 
 /// One base pixel sample as traced: its camera ray, hit, stream after the
-/// camera's draw, and its direct light's shadow (`None`: it had none).
+/// camera's draw, its direct light's shadow (`None`: it had none) and its
+/// cache lookup (an index into its tile's kept lookups, [`NO_LOOKUP`]:
+/// none).
 #[derive(Clone)]
 struct StillSample {
     ray: Ray,
     hit: Hit,
     rng: Rng,
     shadow: Option<KeptShadow>,
+    lookup: u32,
+}
+
+/// A kept sample's lookup index where it looked nothing up.
+const NO_LOOKUP: u32 = u32::MAX;
+
+/// A cache lookup of a tile's base samples as this frame made it, and
+/// whether no moving box lay on its clearance ray then (so what the ray
+/// hit, if anything, was static).
+#[derive(Clone, Copy)]
+struct KeptLookup {
+    at: Lookup,
+    clear: bool,
 }
 
 /// A shadow ray, what its light adds if unoccluded, whether it was, and
@@ -1019,8 +1132,9 @@ struct StillPass {
     /// A distance from the camera past every moving box: a camera ray that
     /// hit nothing is tested as a segment that long.
     far: f32,
-    /// Bytes each tile's kept queries may take ([`KeptQueries`]).
-    queries_budget: usize,
+    /// Bytes each tile's kept lookups and queries ([`KeptQueries`]) may
+    /// take, the lookups first.
+    tile_budget: usize,
 }
 
 impl StillPass {
@@ -1037,9 +1151,9 @@ impl StillPass {
             return None;
         }
         // What the samples leave of the budget, shared by the tiles' kept
-        // queries.
+        // lookups and queries.
         let tiles = (ctx.width as usize * ctx.height as usize).div_ceil(pixels_per_tile.max(1));
-        let queries_budget = (StillSamples::BUDGET_BYTES - samples_bytes) / tiles.max(1);
+        let tile_budget = (StillSamples::BUDGET_BYTES - samples_bytes) / tiles.max(1);
         let view = view_fingerprint(ctx, spp, pixels_per_tile);
         let lights = lights_fingerprint(ctx);
         let last = last.filter(|l| l.frame.checked_add(1) == Some(ctx.frame) && l.view == view);
@@ -1067,7 +1181,7 @@ impl StillPass {
             width: ctx.width,
             last,
             far,
-            queries_budget,
+            tile_budget,
         })
     }
 
@@ -1077,6 +1191,7 @@ impl StillPass {
             pass: self,
             samples: kept.map_or(&[][..], |k| k.samples.as_slice()),
             coverage: kept.map_or(&[][..], |k| k.coverage.as_slice()),
+            lookups: kept.and_then(|k| k.lookups.as_deref()),
             queries: kept.map(|k| &k.queries),
         }
     }
@@ -1147,6 +1262,61 @@ impl StillPass {
     fn film_clear(&self, pixel: u32) -> bool {
         film_clear(&self.screen, self.width, pixel)
     }
+
+    /// Whether no moving box of this frame lies on lookup `at`'s clearance
+    /// ray ([`measure_clearance`]'s, to its hit or, where it hit nothing,
+    /// past every box) nor holds its hit, and the ray is not so short that
+    /// another BVH might miss its hit ([`motion::path_long_enough`]): then
+    /// what it hit, if anything, was static.
+    fn clearance_clear(&self, at: &Lookup, camera: Vec3) -> bool {
+        let origin = offset_origin(at.position, at.normal, at.normal);
+        let length = if at.clearance == LookupPoint::OPEN {
+            self.far + (at.position - camera).length()
+        } else {
+            at.clearance
+        };
+        let end = origin + at.normal * length;
+        // A hit on a moving object lies in its box, but the segment may stop
+        // a rounding error short of the box's face: the end is tested with
+        // a margin.
+        let margin = Vec3::splat(1e-4 * (1.0 + end.abs().max_element()));
+        motion::path_long_enough(&[[origin, end]])
+            && !self.blockers.segment_may_hit(origin, end)
+            && !self.blockers.box_may_hit((end - margin, end + margin))
+    }
+
+    /// This frame's lookups of the tile's base samples (`of_sample`, the
+    /// first `taken.len()` of them), for the next frame, where they fit in
+    /// `budget` bytes (`None` where they do not): each with whether its
+    /// clearance ray is clear, known for the lookups from `first_kept` on
+    /// (taken from the last frame, they stood); and each base sample's
+    /// index among them.
+    fn keep_lookups(
+        &self,
+        camera: Vec3,
+        (lookups, of_sample): (&[Lookup], &[Option<u32>]),
+        first_kept: usize,
+        budget: usize,
+    ) -> Option<(Vec<KeptLookup>, Vec<u32>)> {
+        let mut index = vec![NO_LOOKUP; lookups.len()];
+        let mut kept = Vec::new();
+        let of_base = of_sample
+            .iter()
+            .map(|k| {
+                let Some(k) = k.map(|k| k as usize) else {
+                    return NO_LOOKUP;
+                };
+                if index[k] == NO_LOOKUP {
+                    index[k] = kept.len() as u32;
+                    let at = lookups[k];
+                    let clear = k >= first_kept || self.clearance_clear(&at, camera);
+                    kept.push(KeptLookup { at, clear });
+                }
+                index[k]
+            })
+            .collect();
+        (kept.len() * std::mem::size_of::<KeptLookup>() <= budget).then_some((kept, of_base))
+    }
 }
 
 /// One tile's part of a [`StillPass`]: its samples in the last frame and
@@ -1155,6 +1325,7 @@ struct TileStill<'a> {
     pass: &'a StillPass,
     samples: &'a [StillSample],
     coverage: &'a [CandidateCoverage],
+    lookups: Option<&'a [KeptLookup]>,
     queries: Option<&'a KeptQueries>,
 }
 
@@ -1167,17 +1338,103 @@ impl TileStill<'_> {
             .filter(|k| self.pass.hit_stands(&k.ray, &k.hit, film_clear))
     }
 
-    /// Base sample `i`'s shadow in the last frame, if its hit was taken
-    /// (`taken`) and its shadow stands (`Some(None)`: it had none, and has
-    /// none again).
-    fn shadow(&self, i: usize, taken: &[bool]) -> Option<Option<KeptShadow>> {
-        if !taken.get(i).copied().unwrap_or(false) || !self.pass.lights_still {
-            return None;
+    /// Whether base sample `i`'s hit was taken (`taken`) and its shadow in
+    /// the last frame stands (or it had none, and has none again).
+    fn shadow_stands(&self, i: usize, taken: &[bool]) -> bool {
+        taken.get(i).copied().unwrap_or(false)
+            && self.pass.lights_still
+            && self.samples[i]
+                .shadow
+                .is_none_or(|s| self.pass.shadow_stands(&s))
+    }
+}
+
+/// What of the last frame's shading of a tile's base samples stands this
+/// frame.
+struct Standing {
+    /// Per base sample, whether its shadow stands
+    /// ([`TileStill::shadow_stands`]).
+    shadows: Vec<bool>,
+    /// Per base sample, whether its pixel is kept whole: it is no light's
+    /// edge pixel (with extra samples), every sample of it has its hit and
+    /// shadow taken and a plain material ([`Surface::is_plain`]), and no
+    /// moving box lies on the clearance ray of any lookup they made, in the
+    /// last frame or this one. Such a
+    /// pixel takes its lookups from the last frame, and its samples need
+    /// no [`Surface`] unless one falls back to path tracing.
+    whole: Vec<bool>,
+}
+
+impl TileStill<'_> {
+    /// What of the tile's base samples (the first `taken.len()` of
+    /// `primary`, `taken` saying whose hits were taken) stands.
+    fn standing(&self, ctx: &FrameContext, primary: &PrimarySamples, taken: &[bool]) -> Standing {
+        let shadows: Vec<bool> = (0..taken.len())
+            .map(|i| self.shadow_stands(i, taken))
+            .collect();
+        let mut whole = vec![false; taken.len()];
+        let Some(lookups) = self.lookups else {
+            return Standing { shadows, whole };
+        };
+        let camera = ctx.snapshot.camera.position;
+        // Each lookup tested once: a pixel's samples share it.
+        let mut stands = vec![None; lookups.len()];
+        let mut lookup_stands = |k: u32| {
+            k == NO_LOOKUP
+                || *stands[k as usize].get_or_insert_with(|| {
+                    let kept = lookups[k as usize];
+                    kept.clear && self.pass.clearance_clear(&kept.at, camera)
+                })
+        };
+        let (base, extra) = primary.samples.split_at(taken.len());
+        let mut start = 0;
+        while start < base.len() {
+            let pixel = base[start].pixel;
+            let end = start
+                + base[start..]
+                    .iter()
+                    .take_while(|s| s.pixel == pixel)
+                    .count();
+            // A light's edge pixel has extra samples, which may share its
+            // base samples' lookups.
+            let edge = extra.iter().any(|s| s.pixel == pixel);
+            let kept = !edge
+                && (start..end).all(|i| {
+                    shadows[i]
+                        && Surface::is_plain(ctx, &primary.hits[i])
+                        && lookup_stands(self.samples[i].lookup)
+                });
+            whole[start..end].fill(kept);
+            start = end;
         }
-        let shadow = self.samples[i].shadow;
-        shadow
-            .is_none_or(|s| self.pass.shadow_stands(&s))
-            .then_some(shadow)
+        Standing { shadows, whole }
+    }
+
+    /// The last frame's lookups of the samples `whole` keeps, appended to
+    /// `lookups` (each once) and indexed from `of_sample`; how many.
+    fn take_lookups(
+        &self,
+        whole: &[bool],
+        lookups: &mut Vec<Lookup>,
+        of_sample: &mut [Option<u32>],
+    ) -> u64 {
+        let Some(kept) = self.lookups else {
+            return 0;
+        };
+        let first = lookups.len();
+        let mut index = vec![NO_LOOKUP; kept.len()];
+        for (i, _) in whole.iter().enumerate().filter(|(_, &w)| w) {
+            let k = self.samples[i].lookup;
+            if k == NO_LOOKUP {
+                continue;
+            }
+            if index[k as usize] == NO_LOOKUP {
+                index[k as usize] = lookups.len() as u32;
+                lookups.push(kept[k as usize].at);
+            }
+            of_sample[i] = Some(index[k as usize]);
+        }
+        (lookups.len() - first) as u64
     }
 }
 
@@ -1187,22 +1444,28 @@ impl TileStill<'_> {
 struct TileKept {
     tile: KeptTile,
     taken: u64,
+    /// Lookups taken from the last frame (those of pixels kept whole).
+    lookups_taken: u64,
     /// Path-traced queries taken from the last frame.
     queries_taken: u64,
 }
 
 impl TileKept {
     /// The base samples (the first `taken.len()`) of `primary`, with their
-    /// streams as the camera left them (`jittered`; none: nothing is kept)
-    /// and their shadows, and the coverage `edges` found.
+    /// streams as the camera left them (`jittered`; none: nothing is kept),
+    /// their shadows and their lookups (`None`: not kept; then no pixel of
+    /// the tile can be kept whole next frame), and the coverage `edges`
+    /// found.
     fn of(
         primary: &PrimarySamples,
         taken: &[bool],
         jittered: Vec<Rng>,
         shadows: Vec<Option<KeptShadow>>,
+        lookups: Option<(Vec<KeptLookup>, Vec<u32>)>,
         edges: &EmitterEdges,
     ) -> Self {
         let keep = !jittered.is_empty();
+        let (lookups, of_sample) = lookups.unzip();
         let samples = jittered
             .into_iter()
             .enumerate()
@@ -1211,6 +1474,7 @@ impl TileKept {
                 hit: primary.hits[i],
                 rng,
                 shadow: shadows[i],
+                lookup: of_sample.as_ref().map_or(NO_LOOKUP, |l| l[i]),
             })
             .collect();
         let coverage = if keep {
@@ -1222,9 +1486,11 @@ impl TileKept {
             tile: KeptTile {
                 samples,
                 coverage,
+                lookups,
                 queries: KeptQueries::default(),
             },
             taken: taken.iter().filter(|&&t| t).count() as u64,
+            lookups_taken: 0,
             queries_taken: 0,
         }
     }
@@ -1420,8 +1686,10 @@ mod tests {
     struct KeptCheck {
         /// Whether the two films are the same bit for bit.
         same: bool,
-        /// Samples and path-traced queries taken from the last frame.
+        /// Samples, lookups and path-traced queries taken from the last
+        /// frame.
         taken: u64,
+        lookups_taken: u64,
         queries_taken: u64,
         /// Rays each traced.
         kept_rays: u64,
@@ -1465,6 +1733,7 @@ mod tests {
                     KeptCheck {
                         same,
                         taken: still.taken,
+                        lookups_taken: still.lookups_taken,
                         queries_taken: still.queries_taken,
                         kept_rays,
                         fresh_rays,
@@ -1478,6 +1747,7 @@ mod tests {
     fn took_nothing(check: KeptCheck) -> bool {
         check.same
             && check.taken == 0
+            && check.lookups_taken == 0
             && check.queries_taken == 0
             && check.kept_rays == check.fresh_rays
     }
@@ -1486,9 +1756,9 @@ mod tests {
     /// moving met them equals, bit for bit, the frame traced afresh: on
     /// `cube-in-box` (a cube moves; the camera and light stay) most samples
     /// are taken and fewer rays traced, the path-traced indirect light of
-    /// samples no record covers too; where the moving cube's box lies on
-    /// their rays some are not; a frame that does not follow the last one
-    /// takes none.
+    /// samples no record covers and the cache lookups of pixels kept whole
+    /// too; where the moving cube's box lies on their rays some are not; a
+    /// frame that does not follow the last one takes none.
     #[test]
     fn kept_samples_give_the_frame_traced_afresh() {
         let frames = kept_against_fresh("cube-in-box", &[3, 4, 5, 9]);
@@ -1500,6 +1770,7 @@ mod tests {
                 check.taken > samples / 2 && check.taken < samples,
                 "{check:?} of {samples} samples"
             );
+            assert!(check.lookups_taken > 0, "{check:?}");
             assert!(check.queries_taken > 0, "{check:?}");
             assert!(check.kept_rays < check.fresh_rays / 2, "{check:?}");
         }
@@ -1517,6 +1788,50 @@ mod tests {
         assert!(check.same, "{check:?}");
         assert!(check.queries_taken > 100, "{check:?}");
         assert!(check.kept_rays < check.fresh_rays / 2, "{check:?}");
+    }
+
+    /// A lookup whose clearance ray hits the moving cube is not kept, though
+    /// the ray ends on the cube's face (where a segment test alone may stop
+    /// a rounding error short of its box); one whose ray passes beside the
+    /// cube is.
+    #[test]
+    fn a_clearance_ray_that_hits_a_moving_object_is_not_clear() {
+        let mut renderer = crate::render::test_renderer("cube-in-box", 16);
+        // Frame 0: the cube is not turned, so its faces are its box's.
+        renderer.with_frame_context(0, |ctx| {
+            let pass = StillPass::new(ctx, None, 1, 16).expect("a small frame fits");
+            let (lo, hi) = pass.blockers.boxes[0];
+            let camera = ctx.snapshot.camera.position;
+            // Back-wall points behind the cube and beside it, found by rays
+            // from just behind the cube's box.
+            let wall_behind = |x: f32, y: f32| {
+                let ray = Ray::new(
+                    Vec3::new(x, y, lo.z - 1e-3),
+                    Vec3::NEG_Z,
+                    0.0,
+                    f32::INFINITY,
+                );
+                let mut hit = [Hit::MISS];
+                ctx.backend.closest_hit(&[ray], &mut hit);
+                assert!(hit[0].is_hit(), "a wall behind ({x}, {y})");
+                ray.at(hit[0].t)
+            };
+            let mid = (lo + hi) * 0.5;
+            let beside = mid.x + (hi.x - lo.x) * 1.5;
+            let points = [
+                (wall_behind(mid.x, mid.y), Vec3::Z),
+                (wall_behind(beside, mid.y), Vec3::Z),
+            ];
+            let lookups = measure_clearance(ctx, &points);
+            let (behind, open) = (lookups[0], lookups[1]);
+            assert!(
+                (behind.clearance - (lo.z - behind.position.z)).abs() < 1e-2,
+                "the ray behind the cube hits its back: {behind:?}, box {lo}..{hi}"
+            );
+            assert!(open.clearance > hi.z - open.position.z, "{open:?}");
+            assert!(!pass.clearance_clear(&behind, camera));
+            assert!(pass.clearance_clear(&open, camera));
+        });
     }
 
     /// A box's film rect holds every film point whose camera ray meets the
@@ -1569,8 +1884,9 @@ mod tests {
         let check = frames[1];
         assert!(check.same && frames[0].same);
         assert!(check.taken > 0);
-        // Their paths' light moved too.
+        // Their paths' light moved too, and no pixel is kept whole.
         assert_eq!(check.queries_taken, 0);
+        assert_eq!(check.lookups_taken, 0);
         let KeptCheck {
             taken,
             kept_rays,
