@@ -986,7 +986,7 @@ struct TilePass<'a> {
 /// (`method::kept_queries`). A pixel all of whose samples keep their hits
 /// and shadows, on materials that neither emit nor have a glossy lobe, is
 /// kept whole where no moving box lies on its lookups' clearance rays in
-/// either frame ([`Standing`]): it keeps its cache lookups, and its
+/// either frame (`Standing`): it keeps its cache lookups, and its
 /// samples' first hits are not shaded again; only the interpolation,
 /// whose records change from frame to frame, is done again. The rest is
 /// traced again. So the film equals, bit for bit, the one traced afresh,
@@ -1005,7 +1005,7 @@ pub struct StillSamples {
     /// before (their direct light too where no moving box met it).
     pub taken: u64,
     /// Cache lookups the last render pass took from the frame before (of
-    /// pixels kept whole, [`Standing`]).
+    /// pixels kept whole, `Standing`).
     pub lookups_taken: u64,
     /// Path-traced parts of samples (fallbacks, glossy lobes) the last
     /// render pass took from the frame before (`KeptQueries`).
