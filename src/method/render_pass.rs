@@ -528,8 +528,8 @@ fn render_tile(
     let standing = still.as_ref().map(|s| s.standing(ctx, &primary, &taken));
     let (shadows, whole) = standing.map_or((Vec::new(), Vec::new()), |s| (s.shadows, s.whole));
     let mut tile = TileShading::new(ctx, primary, whole);
-    let standing = still.as_ref().map(|s| (s, &shadows[..]));
-    let shadows = tile.direct_light(ctx, pass.streams, standing);
+    let shadows_stand = still.as_ref().map(|s| (s, &shadows[..]));
+    let shadows = tile.direct_light(ctx, pass.streams, shadows_stand);
     let (mut lookups, mut lookup_of_sample) = pixel_lookups(
         ctx,
         &tile.surfaces,
