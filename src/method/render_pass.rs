@@ -222,6 +222,20 @@ struct Deferred {
     first_hit_only: bool,
 }
 
+impl Deferred {
+    /// Sample `sample`'s diffuse indirect light, path-traced where its
+    /// lookup found no usable record: from the sample's own stream (`rng`),
+    /// under coherent streams the same in every frame, so where nothing
+    /// changed a fallback traces the same directions.
+    fn fallback(sample: usize, surface: &Surface, rng: &mut Rng) -> Self {
+        Deferred {
+            sample,
+            query: diffuse_indirect_query(surface, rng),
+            first_hit_only: false,
+        }
+    }
+}
+
 /// A tile's pixel samples (`spp` a pixel, then the extra ones of pixels on
 /// the edge of a seen light: [`pixels`]) with their camera rays, random
 /// streams (positioned after the jitter) and first hits.
@@ -806,7 +820,8 @@ impl<'a> TileShading<'a> {
         for (i, surface) in self.surfaces.iter().enumerate() {
             let rng = &mut self.primary.rngs[i];
             if self.whole.get(i) == Some(&true) {
-                // A plain material: its diffuse lobe alone, as below.
+                // A plain material: its diffuse lobe alone, as below (a
+                // BSDF's diffuse albedo is its material's `diffuse`).
                 let Some(lookup) = lookup_of_sample[i] else {
                     continue;
                 };
@@ -820,11 +835,7 @@ impl<'a> TileShading<'a> {
                         stats.fallback_lookups += 1;
                         let surface = Surface::at(ctx, &self.primary.rays[i], hit)
                             .expect("a sample that looked the cache up hit something");
-                        deferred.push(Deferred {
-                            sample: i,
-                            query: diffuse_indirect_query(&surface, rng),
-                            first_hit_only: false,
-                        });
+                        deferred.push(Deferred::fallback(i, &surface, rng));
                     }
                 }
                 continue;
@@ -841,15 +852,7 @@ impl<'a> TileShading<'a> {
                     }
                     None => {
                         stats.fallback_lookups += 1;
-                        // From the sample's own stream: under coherent
-                        // streams the same in every frame, so where nothing
-                        // changed a fallback traces the same directions.
-                        let query = diffuse_indirect_query(surface, rng);
-                        deferred.push(Deferred {
-                            sample: i,
-                            query,
-                            first_hit_only: false,
-                        });
+                        deferred.push(Deferred::fallback(i, surface, rng));
                     }
                 }
             }
@@ -1387,6 +1390,11 @@ impl TileStill<'_> {
                 })
         };
         let (base, extra) = primary.samples.split_at(taken.len());
+        // A light's edge pixels have extra samples, which may share their
+        // base samples' lookups: those pixels are never kept whole.
+        let mut edges: Vec<u32> = extra.iter().map(|s| s.pixel).collect();
+        edges.sort_unstable();
+        edges.dedup();
         let mut start = 0;
         while start < base.len() {
             let pixel = base[start].pixel;
@@ -1395,10 +1403,7 @@ impl TileStill<'_> {
                     .iter()
                     .take_while(|s| s.pixel == pixel)
                     .count();
-            // A light's edge pixel has extra samples, which may share its
-            // base samples' lookups.
-            let edge = extra.iter().any(|s| s.pixel == pixel);
-            let kept = !edge
+            let kept = edges.binary_search(&pixel).is_err()
                 && (start..end).all(|i| {
                     shadows[i]
                         && Surface::is_plain(ctx, &primary.hits[i])
