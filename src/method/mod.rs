@@ -5,7 +5,6 @@
 
 mod carried;
 pub mod ic;
-mod kept_queries;
 mod lookups;
 pub mod motion;
 pub mod movies;

@@ -376,7 +376,7 @@ impl Buffers {
     }
 
     /// Float values of an accessor of the given type, flattened; integer
-    /// components are converted (normalised ones to [0,1] or [−1,1]).
+    /// components are converted (normalised ones to \[0, 1\] or \[−1, 1\]).
     fn floats(&self, acc: &gltf::Accessor, dims: Dimensions, what: &str) -> Res<Vec<f32>> {
         if acc.dimensions() != dims {
             return Err(format!(

@@ -117,7 +117,7 @@ pub struct StateCommit<'a> {
 /// A frame's bulk values once in the sample log ([`Store::append_frame`]).
 struct LoggedFrame {
     frame: FrameValue,
-    /// The encoded [`FrameRecordsValue`] of the frame's record block, if it
+    /// The encoded [`FrameRecordsValue`](super::schema::FrameRecordsValue) of the frame's record block, if it
     /// has records.
     records: Option<Vec<u8>>,
     /// The samples' size before compression, for the frame's statistics.

@@ -13,8 +13,8 @@
 //! (`trc::paths`) and the render pass its still samples' hits and shadows
 //! (`render_pass::StillSamples`). The film is the one traced afresh.
 
-use super::motion::{path_long_enough, Blockers};
 use crate::integrator::{trace_radiance_tracked, PathLength, RadianceQuery};
+use crate::method::motion::{path_long_enough, Blockers};
 use crate::method::FrameContext;
 use glam::Vec3;
 

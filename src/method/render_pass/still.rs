@@ -1,0 +1,934 @@
+//! What the render pass keeps of a frame for the next one, and the tests
+//! that decide what of it stands there ([`StillSamples`]): a kept sample's
+//! camera hit, its shadow, its pixel's cache lookups; where the boxes of
+//! the moving objects show on the film (`screen_rect`); and the
+//! fingerprints of the view and the lights that say whether the last frame
+//! was rendered under the same ones. The render pass (the parent module)
+//! asks; this module decides, so every rule that keeps the film bit for bit
+//! the one traced afresh lives here.
+
+use super::kept_queries::KeptQueries;
+use super::{PrimarySamples, Surface};
+use crate::backend::{Hit, Ray};
+use crate::cache::LookupPoint;
+use crate::integrator::offset_origin;
+use crate::method::lookups::Lookup;
+use crate::method::motion::{self, Blockers};
+use crate::method::pixels::{CandidateCoverage, EmitterEdges};
+use crate::method::FrameContext;
+use crate::sampling::{mix64, Rng};
+use glam::Vec3;
+
+/// The pixel samples of a method's last frame, kept for its next one: with
+/// [`PixelStreams::Coherent`](super::PixelStreams::Coherent) a sample draws the same camera ray and light
+/// point in every frame, so where the camera, the lights and the static
+/// geometry stay, only moving objects can change what the sample's camera
+/// ray hits and whether its shadow ray is stopped. A sample whose camera
+/// ray hit a static triangle (or nothing) and meets no moving object's box
+/// this frame keeps its hit; if its shadow ray meets no moving object's box
+/// in the last frame or this one either, it keeps its direct light. A
+/// pixel on the rim of a seen light keeps what its coverage rays saw
+/// ([`EmitterEdges`]) where no moving box shows within a pixel of
+/// it on the film in either frame. A path-traced part of a sample (the
+/// indirect light where no record is usable, a glossy lobe) asked again
+/// bit for bit keeps its radiance where its path met nothing moving then
+/// and no moving box meets it now, the lights staying
+/// (`render_pass::kept_queries`). A pixel all of whose samples keep their hits
+/// and shadows, on materials that neither emit nor have a glossy lobe, is
+/// kept whole where no moving box lies on its lookups' clearance rays in
+/// either frame (`Standing`): it keeps its cache lookups, and its
+/// samples' first hits are not shaded again; only the interpolation,
+/// whose records change from frame to frame, is done again. The rest is
+/// traced again. So the film equals, bit for bit, the one traced afresh,
+/// and a resumed job (which starts with none kept) equals an
+/// uninterrupted one.
+///
+/// This is the design's "static parts are never recomputed for motion
+/// they cannot see" applied to the render pass, as `movies` does for its
+/// texels' shadows (Martín et al. §5) and the TRC paper's GPU renderer gets
+/// for little cost by rasterizing. Per-frame computation (`ic`) keeps
+/// nothing: it is the baseline the temporal methods are measured against.
+pub struct StillSamples {
+    last: Option<KeptFrame>,
+    /// Bytes a frame may keep ([`Self::BUDGET_BYTES`]).
+    budget: usize,
+    /// Samples of the last render pass whose hit was taken from the frame
+    /// before (their direct light too where no moving box met it).
+    pub taken: u64,
+    /// Cache lookups the last render pass took from the frame before (of
+    /// pixels kept whole, `Standing`).
+    pub lookups_taken: u64,
+    /// Path-traced parts of samples (fallbacks, glossy lobes) the last
+    /// render pass took from the frame before (`KeptQueries`).
+    pub queries_taken: u64,
+}
+
+impl StillSamples {
+    /// Bytes kept per frame at most: past this (about 4.5 million samples:
+    /// 512 × 512 pixels at 16 spp) the pass keeps nothing and traces every
+    /// sample, as `ic` does.
+    pub const BUDGET_BYTES: usize = 512 << 20;
+
+    /// Kept samples within `budget` bytes a frame, not
+    /// [`Self::BUDGET_BYTES`] (tests of what a full budget drops).
+    #[cfg(test)]
+    fn within(budget: usize) -> Self {
+        StillSamples {
+            budget,
+            ..StillSamples::default()
+        }
+    }
+
+    /// This frame's pass over the samples kept from the last one (`None`
+    /// where a frame's samples would not fit the budget: nothing is kept).
+    pub(super) fn begin(
+        &mut self,
+        ctx: &FrameContext,
+        spp: u32,
+        pixels_per_tile: usize,
+    ) -> Option<StillPass> {
+        let last = self.last.take();
+        StillPass::new(ctx, last, (spp, pixels_per_tile), self.budget)
+    }
+
+    /// Keeps the tiles `pass` traced for the next frame.
+    pub(super) fn end(&mut self, pass: Option<StillPass>, tiles: Vec<TileKept>) {
+        self.taken = tiles.iter().map(|t| t.taken).sum();
+        self.lookups_taken = tiles.iter().map(|t| t.lookups_taken).sum();
+        self.queries_taken = tiles.iter().map(|t| t.queries_taken).sum();
+        self.last = pass.map(|pass| pass.finish(tiles.into_iter().map(|t| t.tile).collect()));
+    }
+
+    /// Bytes the kept samples take.
+    pub fn memory_bytes(&self) -> usize {
+        self.last.as_ref().map_or(0, |f| {
+            f.tiles.iter().map(KeptTile::memory_bytes).sum::<usize>()
+                + f.screen.len() * std::mem::size_of::<ScreenRect>()
+        })
+    }
+}
+
+impl Default for StillSamples {
+    fn default() -> Self {
+        StillSamples {
+            last: None,
+            budget: Self::BUDGET_BYTES,
+            taken: 0,
+            lookups_taken: 0,
+            queries_taken: 0,
+        }
+    }
+}
+
+/// One frame's kept samples, tile by tile, and what they were traced under.
+struct KeptFrame {
+    frame: u32,
+    view: u64,
+    lights: u64,
+    /// Where the moving boxes showed on the film.
+    screen: Vec<ScreenRect>,
+    tiles: Vec<KeptTile>,
+}
+
+/// One tile's kept samples (its base samples, in order) and the coverage
+/// of its candidate edge pixels.
+#[derive(Default)]
+pub(super) struct KeptTile {
+    samples: Vec<StillSample>,
+    coverage: Vec<CandidateCoverage>,
+    /// The lookups its samples index (`StillSample::lookup`); `None` where
+    /// they did not fit the budget.
+    lookups: Option<Vec<KeptLookup>>,
+    /// The path-traced parts of its samples that nothing moving met.
+    pub(super) queries: KeptQueries,
+}
+
+impl KeptTile {
+    fn memory_bytes(&self) -> usize {
+        self.samples.len() * std::mem::size_of::<StillSample>()
+            + self.coverage.len() * std::mem::size_of::<CandidateCoverage>()
+            + self.lookups.as_ref().map_or(0, Vec::len) * std::mem::size_of::<KeptLookup>()
+            + self.queries.memory_bytes()
+    }
+}
+
+/// The part of the film, in pixels (`x0, y0, x1, y1`), where a box may
+/// show: the bounds of its corners' projections, or the whole plane where
+/// a corner lies behind the camera.
+type ScreenRect = [f32; 4];
+
+/// One base pixel sample as traced: its camera ray, hit, stream after the
+/// camera's draw, its direct light's shadow (`None`: it had none) and its
+/// cache lookup (an index into its tile's kept lookups, [`NO_LOOKUP`]:
+/// none).
+#[derive(Clone)]
+pub(super) struct StillSample {
+    pub(super) ray: Ray,
+    pub(super) hit: Hit,
+    pub(super) rng: Rng,
+    pub(super) shadow: Option<KeptShadow>,
+    lookup: u32,
+}
+
+/// A kept sample's lookup index where it looked nothing up.
+const NO_LOOKUP: u32 = u32::MAX;
+
+/// A cache lookup of a tile's base samples as this frame made it, and
+/// whether no moving box lay on its clearance ray then (so what the ray
+/// hit, if anything, was static).
+#[derive(Clone, Copy)]
+pub(super) struct KeptLookup {
+    at: Lookup,
+    clear: bool,
+}
+
+/// A shadow ray, what its light adds if unoccluded, whether it was, and
+/// whether no moving box lay on it in the frame it is kept from.
+#[derive(Clone, Copy)]
+pub(super) struct KeptShadow {
+    pub(super) ray: Ray,
+    pub(super) contribution: Vec3,
+    pub(super) occluded: bool,
+    pub(super) clear: bool,
+}
+
+/// One render pass's view of the kept samples: this frame's moving boxes,
+/// and the last frame's samples where they may be taken.
+pub(super) struct StillPass {
+    frame: u32,
+    view: u64,
+    lights: u64,
+    pub(super) blockers: Blockers,
+    /// Where this frame's moving boxes show on the film, `width` pixels
+    /// wide.
+    screen: Vec<ScreenRect>,
+    width: u32,
+    /// The last frame, when it was the one before with the same view.
+    last: Option<KeptFrame>,
+    /// Whether the lights are where they were (else no shadow is kept).
+    lights_still: bool,
+    /// A distance from the camera past every moving box: a camera ray that
+    /// hit nothing is tested as a segment that long.
+    far: f32,
+    /// Bytes each tile's kept lookups and queries ([`KeptQueries`]) may
+    /// take, the lookups first.
+    pub(super) tile_budget: usize,
+}
+
+impl StillPass {
+    /// `None` where a frame's samples (`spp` a pixel, in tiles of
+    /// `pixels_per_tile`) would not fit in `budget` bytes.
+    fn new(
+        ctx: &FrameContext,
+        last: Option<KeptFrame>,
+        (spp, pixels_per_tile): (u32, usize),
+        budget: usize,
+    ) -> Option<Self> {
+        let samples = ctx.width as usize * ctx.height as usize * spp as usize;
+        let samples_bytes = samples.saturating_mul(std::mem::size_of::<StillSample>());
+        if samples_bytes > budget {
+            return None;
+        }
+        // What the samples leave of the budget, shared by the tiles' kept
+        // lookups and queries.
+        let tiles = (ctx.width as usize * ctx.height as usize).div_ceil(pixels_per_tile.max(1));
+        let tile_budget = (budget - samples_bytes) / tiles.max(1);
+        let view = view_fingerprint(ctx, spp, pixels_per_tile);
+        let lights = lights_fingerprint(ctx);
+        let last = last.filter(|l| l.frame.checked_add(1) == Some(ctx.frame) && l.view == view);
+        let blockers = Blockers::new(ctx);
+        let camera = ctx.snapshot.camera.position;
+        let far = blockers
+            .boxes
+            .iter()
+            .map(|&(lo, hi)| (lo - camera).abs().max((hi - camera).abs()).length())
+            .fold(0.0f32, f32::max)
+            * 2.0
+            + 1.0;
+        let screen = blockers
+            .boxes
+            .iter()
+            .map(|&b| screen_rect(ctx, b))
+            .collect();
+        Some(StillPass {
+            frame: ctx.frame,
+            view,
+            lights,
+            lights_still: last.as_ref().is_some_and(|l| l.lights == lights),
+            blockers,
+            screen,
+            width: ctx.width,
+            last,
+            far,
+            tile_budget,
+        })
+    }
+
+    pub(super) fn tile(&self, tile: usize) -> TileStill<'_> {
+        let kept = self.last.as_ref().and_then(|l| l.tiles.get(tile));
+        TileStill {
+            pass: self,
+            samples: kept.map_or(&[][..], |k| k.samples.as_slice()),
+            coverage: kept.map_or(&[][..], |k| k.coverage.as_slice()),
+            lookups: kept.and_then(|k| k.lookups.as_deref()),
+            queries: kept.map(|k| &k.queries),
+        }
+    }
+
+    fn finish(self, tiles: Vec<KeptTile>) -> KeptFrame {
+        KeptFrame {
+            frame: self.frame,
+            view: self.view,
+            lights: self.lights,
+            screen: self.screen,
+            tiles,
+        }
+    }
+
+    /// Whether no camera ray through `pixel` can have met a moving object
+    /// in the last frame or this one: no moving box's film rect, in either
+    /// frame, comes within a pixel of its square. Then every ray through
+    /// it, whatever its position in the pixel, sees what it saw (lights
+    /// and view staying).
+    pub(super) fn pixel_clear(&self, pixel: u32) -> bool {
+        let Some(last) = self.last.as_ref().filter(|_| self.lights_still) else {
+            return false;
+        };
+        self.film_clear(pixel) && film_clear(&last.screen, self.width, pixel)
+    }
+
+    /// Whether the lights moved since the last frame (not when there is
+    /// none to compare with).
+    pub(super) fn lights_moved(&self) -> bool {
+        self.last.is_some() && !self.lights_still
+    }
+
+    /// Whether a camera ray's hit stands this frame: it hit a static
+    /// triangle or nothing, and no moving box lies on its way there (none
+    /// shows near its pixel on the film, `film_clear`, or its segment
+    /// misses every box).
+    fn hit_stands(&self, ray: &Ray, hit: &Hit, film_clear: bool) -> bool {
+        if hit.is_hit() && self.blockers.is_moving_triangle(hit.triangle) {
+            return false;
+        }
+        if film_clear {
+            return true;
+        }
+        let t = if hit.is_hit() {
+            hit.t
+        } else {
+            self.far / ray.dir().length()
+        };
+        !self.blockers.segment_may_hit(ray.origin(), ray.at(t))
+    }
+
+    /// Whether a shadow ray's outcome stands this frame: the lights stayed
+    /// and no moving box lay on it in the last frame (`clear`: so what
+    /// stopped it, if anything, was static) nor lies on it now.
+    fn shadow_stands(&self, shadow: &KeptShadow) -> bool {
+        self.lights_still && shadow.clear && self.shadow_clear(&shadow.ray)
+    }
+
+    /// Whether no moving box of this frame lies on shadow ray `ray`.
+    pub(super) fn shadow_clear(&self, ray: &Ray) -> bool {
+        !self
+            .blockers
+            .segment_may_hit(ray.origin(), ray.origin() + ray.dir())
+    }
+
+    /// Whether no moving box of this frame shows within a pixel of
+    /// `pixel` on the film.
+    pub(super) fn film_clear(&self, pixel: u32) -> bool {
+        film_clear(&self.screen, self.width, pixel)
+    }
+
+    /// Whether no moving box of this frame lies on lookup `at`'s clearance
+    /// ray ([`measure_clearance`](crate::method::lookups::measure_clearance)'s, to its hit or, where it hit nothing,
+    /// past every box) nor holds its hit, and the ray is not so short that
+    /// another BVH might miss its hit ([`motion::path_long_enough`]): then
+    /// what it hit, if anything, was static.
+    fn clearance_clear(&self, at: &Lookup, camera: Vec3) -> bool {
+        let origin = offset_origin(at.position, at.normal, at.normal);
+        let length = if at.clearance == LookupPoint::OPEN {
+            self.far + (at.position - camera).length()
+        } else {
+            at.clearance
+        };
+        let end = origin + at.normal * length;
+        // A hit on a moving object lies in its box, but the segment may stop
+        // a rounding error short of the box's face: the end is tested with
+        // a margin.
+        let margin = Vec3::splat(1e-4 * (1.0 + end.abs().max_element()));
+        motion::path_long_enough(&[[origin, end]])
+            && !self.blockers.segment_may_hit(origin, end)
+            && !self.blockers.box_may_hit((end - margin, end + margin))
+    }
+
+    /// This frame's lookups of the tile's base samples (`of_sample`, the
+    /// first `taken.len()` of them), for the next frame, where they fit in
+    /// `budget` bytes (`None` where they do not): each with whether its
+    /// clearance ray is clear, known for the lookups from `first_kept` on
+    /// (taken from the last frame, they stood); and each base sample's
+    /// index among them.
+    pub(super) fn keep_lookups(
+        &self,
+        camera: Vec3,
+        (lookups, of_sample): (&[Lookup], &[Option<u32>]),
+        first_kept: usize,
+        budget: usize,
+    ) -> Option<(Vec<KeptLookup>, Vec<u32>)> {
+        let mut index = vec![NO_LOOKUP; lookups.len()];
+        let mut kept = Vec::new();
+        let of_base = of_sample
+            .iter()
+            .map(|k| {
+                let Some(k) = k.map(|k| k as usize) else {
+                    return NO_LOOKUP;
+                };
+                if index[k] == NO_LOOKUP {
+                    index[k] = kept.len() as u32;
+                    let at = lookups[k];
+                    let clear = k >= first_kept || self.clearance_clear(&at, camera);
+                    kept.push(KeptLookup { at, clear });
+                }
+                index[k]
+            })
+            .collect();
+        (kept.len() * std::mem::size_of::<KeptLookup>() <= budget).then_some((kept, of_base))
+    }
+}
+
+/// One tile's part of a [`StillPass`]: its samples in the last frame and
+/// the coverage of its candidate edge pixels then.
+pub(super) struct TileStill<'a> {
+    pub(super) pass: &'a StillPass,
+    pub(super) samples: &'a [StillSample],
+    pub(super) coverage: &'a [CandidateCoverage],
+    pub(super) lookups: Option<&'a [KeptLookup]>,
+    pub(super) queries: Option<&'a KeptQueries>,
+}
+
+impl TileStill<'_> {
+    /// Base sample `i` of the last frame, if its hit stands (`film_clear`:
+    /// whether no moving box shows near its pixel).
+    pub(super) fn primary(&self, i: usize, film_clear: bool) -> Option<&StillSample> {
+        self.samples
+            .get(i)
+            .filter(|k| self.pass.hit_stands(&k.ray, &k.hit, film_clear))
+    }
+
+    /// Whether base sample `i`'s hit was taken (`taken`) and its shadow in
+    /// the last frame stands (or it had none, and has none again).
+    fn shadow_stands(&self, i: usize, taken: &[bool]) -> bool {
+        taken.get(i).copied().unwrap_or(false)
+            && self.pass.lights_still
+            && self.samples[i]
+                .shadow
+                .is_none_or(|s| self.pass.shadow_stands(&s))
+    }
+}
+
+/// What of the last frame's shading of a tile's base samples stands this
+/// frame.
+pub(super) struct Standing {
+    /// Per base sample, whether its shadow stands
+    /// ([`TileStill::shadow_stands`]).
+    pub(super) shadows: Vec<bool>,
+    /// Per base sample, whether its pixel is kept whole: it is no light's
+    /// edge pixel (with extra samples), every sample of it has its hit and
+    /// shadow taken and a plain material ([`Surface::is_plain`]), and no
+    /// moving box lies on the clearance ray of any lookup they made, in the
+    /// last frame or this one. Such a
+    /// pixel takes its lookups from the last frame, and its samples need
+    /// no [`Surface`] unless one falls back to path tracing.
+    pub(super) whole: Vec<bool>,
+}
+
+impl TileStill<'_> {
+    /// What of the tile's base samples (the first `taken.len()` of
+    /// `primary`, `taken` saying whose hits were taken) stands.
+    pub(super) fn standing(
+        &self,
+        ctx: &FrameContext,
+        primary: &PrimarySamples,
+        taken: &[bool],
+    ) -> Standing {
+        let shadows: Vec<bool> = (0..taken.len())
+            .map(|i| self.shadow_stands(i, taken))
+            .collect();
+        let mut whole = vec![false; taken.len()];
+        let Some(lookups) = self.lookups else {
+            return Standing { shadows, whole };
+        };
+        let camera = ctx.snapshot.camera.position;
+        // Each lookup tested once: a pixel's samples share it.
+        let mut stands = vec![None; lookups.len()];
+        let mut lookup_stands = |k: u32| {
+            k == NO_LOOKUP
+                || *stands[k as usize].get_or_insert_with(|| {
+                    let kept = lookups[k as usize];
+                    kept.clear && self.pass.clearance_clear(&kept.at, camera)
+                })
+        };
+        let (base, extra) = primary.samples.split_at(taken.len());
+        // A light's edge pixels have extra samples, which may share their
+        // base samples' lookups: those pixels are never kept whole.
+        let mut edges: Vec<u32> = extra.iter().map(|s| s.pixel).collect();
+        edges.sort_unstable();
+        edges.dedup();
+        let mut start = 0;
+        while start < base.len() {
+            let pixel = base[start].pixel;
+            let end = start
+                + base[start..]
+                    .iter()
+                    .take_while(|s| s.pixel == pixel)
+                    .count();
+            let kept = edges.binary_search(&pixel).is_err()
+                && (start..end).all(|i| {
+                    shadows[i]
+                        && Surface::is_plain(ctx, &primary.hits[i])
+                        && lookup_stands(self.samples[i].lookup)
+                });
+            whole[start..end].fill(kept);
+            start = end;
+        }
+        Standing { shadows, whole }
+    }
+
+    /// The last frame's lookups of the samples `whole` keeps, appended to
+    /// `lookups` (each once) and indexed from `of_sample`; how many.
+    pub(super) fn take_lookups(
+        &self,
+        whole: &[bool],
+        lookups: &mut Vec<Lookup>,
+        of_sample: &mut [Option<u32>],
+    ) -> u64 {
+        let Some(kept) = self.lookups else {
+            return 0;
+        };
+        let first = lookups.len();
+        let mut index = vec![NO_LOOKUP; kept.len()];
+        for (i, _) in whole.iter().enumerate().filter(|(_, &w)| w) {
+            let k = self.samples[i].lookup;
+            if k == NO_LOOKUP {
+                continue;
+            }
+            if index[k as usize] == NO_LOOKUP {
+                index[k as usize] = lookups.len() as u32;
+                lookups.push(kept[k as usize].at);
+            }
+            of_sample[i] = Some(index[k as usize]);
+        }
+        (lookups.len() - first) as u64
+    }
+}
+
+/// A tile's base samples as traced this frame and its candidates'
+/// coverage (empty when nothing is kept), and how many of its samples were
+/// taken from the last frame.
+pub(super) struct TileKept {
+    pub(super) tile: KeptTile,
+    taken: u64,
+    /// Lookups taken from the last frame (those of pixels kept whole).
+    pub(super) lookups_taken: u64,
+    /// Path-traced queries taken from the last frame.
+    pub(super) queries_taken: u64,
+}
+
+impl TileKept {
+    /// The base samples (the first `taken.len()`) of `primary`, with their
+    /// streams as the camera left them (`jittered`; none: nothing is kept),
+    /// their shadows and their lookups (`None`: not kept; then no pixel of
+    /// the tile can be kept whole next frame), and the coverage `edges`
+    /// found.
+    pub(super) fn of(
+        primary: &PrimarySamples,
+        taken: &[bool],
+        jittered: Vec<Rng>,
+        shadows: Vec<Option<KeptShadow>>,
+        lookups: Option<(Vec<KeptLookup>, Vec<u32>)>,
+        edges: &EmitterEdges,
+    ) -> Self {
+        let keep = !jittered.is_empty();
+        let (lookups, of_sample) = lookups.unzip();
+        let samples = jittered
+            .into_iter()
+            .enumerate()
+            .map(|(i, rng)| StillSample {
+                ray: primary.rays[i],
+                hit: primary.hits[i],
+                rng,
+                shadow: shadows[i],
+                lookup: of_sample.as_ref().map_or(NO_LOOKUP, |l| l[i]),
+            })
+            .collect();
+        let coverage = if keep {
+            edges.coverage().to_vec()
+        } else {
+            Vec::new()
+        };
+        TileKept {
+            tile: KeptTile {
+                samples,
+                coverage,
+                lookups,
+                queries: KeptQueries::default(),
+            },
+            taken: taken.iter().filter(|&&t| t).count() as u64,
+            lookups_taken: 0,
+            queries_taken: 0,
+        }
+    }
+}
+
+/// Whether none of `rects` comes within a pixel of `pixel`'s square on a
+/// film `width` pixels wide.
+fn film_clear(rects: &[ScreenRect], width: u32, pixel: u32) -> bool {
+    let (x, y) = ((pixel % width) as f32, (pixel / width) as f32);
+    let square = [x - 1.0, y - 1.0, x + 2.0, y + 2.0];
+    !rects
+        .iter()
+        .any(|r| r[0] <= square[2] && square[0] <= r[2] && r[1] <= square[3] && square[1] <= r[3])
+}
+
+/// Where box `(lo, hi)` may show on the film, in pixels ([`ScreenRect`]).
+fn screen_rect(ctx: &FrameContext, (lo, hi): (Vec3, Vec3)) -> ScreenRect {
+    const WHOLE_PLANE: ScreenRect = [
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+        f32::INFINITY,
+        f32::INFINITY,
+    ];
+    let (w, h) = (ctx.width as f32, ctx.height as f32);
+    let mut rect = [
+        f32::INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+    ];
+    for k in 0..8 {
+        let corner = Vec3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        let Some((sx, sy)) = ctx.snapshot.camera.project(corner, ctx.aspect()) else {
+            return WHOLE_PLANE;
+        };
+        let (x, y) = (sx * w, sy * h);
+        rect = [
+            rect[0].min(x),
+            rect[1].min(y),
+            rect[2].max(x),
+            rect[3].max(y),
+        ];
+    }
+    rect
+}
+
+/// What places a frame's pixel samples: the camera, the film, the samples
+/// and tiles, and which triangles are static. Two frames with the same
+/// one draw the same camera rays under coherent streams.
+fn view_fingerprint(ctx: &FrameContext, spp: u32, pixels_per_tile: usize) -> u64 {
+    let camera = &ctx.snapshot.camera;
+    let floats = camera
+        .position
+        .to_array()
+        .into_iter()
+        .chain(camera.basis.to_cols_array())
+        .chain([camera.yfov]);
+    let counts = [
+        u64::from(ctx.width),
+        u64::from(ctx.height),
+        u64::from(spp),
+        pixels_per_tile as u64,
+        u64::from(ctx.edge_coverage_factor),
+        ctx.snapshot.static_count as u64,
+        ctx.snapshot.triangles.len() as u64,
+        ctx.seed,
+    ];
+    fingerprint(floats, counts)
+}
+
+/// Where the lights are and what they send: two frames with the same one
+/// give every shading point the same light samples.
+pub(crate) fn lights_fingerprint(ctx: &FrameContext) -> u64 {
+    let snapshot = ctx.snapshot;
+    let triangles = ctx
+        .lights
+        .emitting_triangles()
+        .flat_map(|id| snapshot.triangles[id].p)
+        .flat_map(|p| p.to_array());
+    let points = snapshot.lights.iter().flat_map(|l| {
+        [l.position, l.direction, l.intensity]
+            .into_iter()
+            .flat_map(|v| v.to_array())
+    });
+    let ids = ctx.lights.emitting_triangles().map(|id| id as u64);
+    fingerprint(
+        triangles.chain(points),
+        ids.chain([ctx.lights.pick_fingerprint(), snapshot.lights.len() as u64]),
+    )
+}
+
+/// A hash of some floats (by their bits) and integers.
+fn fingerprint(floats: impl Iterator<Item = f32>, ints: impl IntoIterator<Item = u64>) -> u64 {
+    let h = floats.fold(0x5eed, |h, f| mix64(h ^ u64::from(f.to_bits())));
+    ints.into_iter().fold(h, |h, i| mix64(h.rotate_left(7) ^ i))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{render_pass, PixelStreams};
+    use super::*;
+    use crate::cache::gather::Strata;
+    use crate::method::ic::{IcSettings, IrradianceCaching};
+    use crate::method::lookups::measure_clearance;
+    use crate::method::FrameStats;
+    /// One frame rendered with kept samples and afresh.
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    struct KeptCheck {
+        /// Whether the two films are the same bit for bit.
+        same: bool,
+        /// Samples, lookups and path-traced queries taken from the last
+        /// frame.
+        taken: u64,
+        lookups_taken: u64,
+        queries_taken: u64,
+        /// Rays each traced.
+        kept_rays: u64,
+        fresh_rays: u64,
+    }
+
+    /// Renders `frames` in turn with one kept [`StillSamples`] under an
+    /// `ic` cache of each frame, and again each afresh (nothing kept), with
+    /// coherent streams.
+    fn kept_against_fresh(scene: &str, frames: &[u32], mut still: StillSamples) -> Vec<KeptCheck> {
+        let mut renderer = crate::render::test_renderer(scene, 20);
+        let ic = IrradianceCaching::new(IcSettings {
+            spp: 4,
+            strata: Strata { theta: 4, phi: 12 },
+            ..IcSettings::default()
+        });
+        frames
+            .iter()
+            .map(|&frame| {
+                renderer.with_frame_context(frame, |ctx| {
+                    let cache = ic.build_cache(ctx);
+                    let render = |still: Option<&mut StillSamples>| {
+                        let before = ctx.backend.ray_counts().total();
+                        let film = render_pass(
+                            ctx,
+                            &cache,
+                            &ic.settings,
+                            PixelStreams::Coherent,
+                            None,
+                            still,
+                            &mut FrameStats::default(),
+                        );
+                        (film, ctx.backend.ray_counts().total() - before)
+                    };
+                    let (kept, kept_rays) = render(Some(&mut still));
+                    let (fresh, fresh_rays) = render(None);
+                    let same = kept.pixels.iter().zip(&fresh.pixels).all(|(a, b)| {
+                        a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits)
+                    });
+                    KeptCheck {
+                        same,
+                        taken: still.taken,
+                        lookups_taken: still.lookups_taken,
+                        queries_taken: still.queries_taken,
+                        kept_rays,
+                        fresh_rays,
+                    }
+                })
+            })
+            .collect()
+    }
+
+    /// What a frame rendered with nothing to take from gives.
+    fn took_nothing(check: KeptCheck) -> bool {
+        check.same
+            && check.taken == 0
+            && check.lookups_taken == 0
+            && check.queries_taken == 0
+            && check.kept_rays == check.fresh_rays
+    }
+
+    /// A frame whose samples are taken from the last one where nothing
+    /// moving met them equals, bit for bit, the frame traced afresh: on
+    /// `cube-in-box` (a cube moves; the camera and light stay) most samples
+    /// are taken and fewer rays traced, the path-traced indirect light of
+    /// samples no record covers and the cache lookups of pixels kept whole
+    /// too; where the moving cube's box lies on their rays some are not; a
+    /// frame that does not follow the last one takes none.
+    #[test]
+    fn kept_samples_give_the_frame_traced_afresh() {
+        let frames = kept_against_fresh("cube-in-box", &[3, 4, 5, 9], StillSamples::default());
+        let samples = 20 * 20 * 4;
+        assert!(took_nothing(frames[0]), "{:?}", frames[0]);
+        for check in &frames[1..3] {
+            assert!(check.same, "{check:?}");
+            assert!(
+                check.taken > samples / 2 && check.taken < samples,
+                "{check:?} of {samples} samples"
+            );
+            assert!(check.lookups_taken > 0, "{check:?}");
+            assert!(check.queries_taken > 0, "{check:?}");
+            assert!(check.kept_rays < check.fresh_rays / 2, "{check:?}");
+        }
+        assert!(took_nothing(frames[3]), "{:?}", frames[3]);
+    }
+
+    /// A budget that holds a frame's samples and nothing more keeps their
+    /// hits and shadows but no lookups and no path-traced parts, so no
+    /// pixel is kept whole (with the whole budget these frames take both:
+    /// the test above); a budget one byte short of the samples keeps
+    /// nothing. The frames are those traced afresh either way.
+    #[test]
+    fn kept_samples_past_their_budget_are_traced_again() {
+        let samples = 20 * 20 * 4 * std::mem::size_of::<StillSample>();
+        let frames = kept_against_fresh("cube-in-box", &[3, 4], StillSamples::within(samples));
+        let check = frames[1];
+        assert!(check.same && check.taken > 0, "{check:?}");
+        assert_eq!(
+            (check.lookups_taken, check.queries_taken),
+            (0, 0),
+            "{check:?}"
+        );
+        assert!(check.kept_rays < check.fresh_rays, "{check:?}");
+        let short = StillSamples::within(samples - 1);
+        for check in kept_against_fresh("cube-in-box", &[3, 4], short) {
+            assert!(took_nothing(check), "{check:?}");
+        }
+    }
+
+    /// On `glossy-cornell` (glossy walls and blocks, a block moving) the
+    /// glossy lobes of the still samples are taken too, and the frame is
+    /// the one traced afresh.
+    #[test]
+    fn kept_glossy_lobes_give_the_frame_traced_afresh() {
+        let frames = kept_against_fresh("glossy-cornell", &[6, 7], StillSamples::default());
+        assert!(took_nothing(frames[0]), "{:?}", frames[0]);
+        let check = frames[1];
+        assert!(check.same, "{check:?}");
+        assert!(check.queries_taken > 100, "{check:?}");
+        assert!(check.kept_rays < check.fresh_rays / 2, "{check:?}");
+    }
+
+    /// A lookup whose clearance ray hits the moving cube is not kept, though
+    /// the ray ends on the cube's face (where a segment test alone may stop
+    /// a rounding error short of its box); one whose ray passes beside the
+    /// cube is.
+    #[test]
+    fn a_clearance_ray_that_hits_a_moving_object_is_not_clear() {
+        let mut renderer = crate::render::test_renderer("cube-in-box", 16);
+        // Frame 0: the cube is not turned, so its faces are its box's.
+        renderer.with_frame_context(0, |ctx| {
+            let pass = StillPass::new(ctx, None, (1, 16), StillSamples::BUDGET_BYTES)
+                .expect("a small frame fits");
+            let (lo, hi) = pass.blockers.boxes[0];
+            let camera = ctx.snapshot.camera.position;
+            // Back-wall points behind the cube and beside it, found by rays
+            // from just behind the cube's box.
+            let wall_behind = |x: f32, y: f32| {
+                let ray = Ray::new(
+                    Vec3::new(x, y, lo.z - 1e-3),
+                    Vec3::NEG_Z,
+                    0.0,
+                    f32::INFINITY,
+                );
+                let mut hit = [Hit::MISS];
+                ctx.backend.closest_hit(&[ray], &mut hit);
+                assert!(hit[0].is_hit(), "a wall behind ({x}, {y})");
+                ray.at(hit[0].t)
+            };
+            let mid = (lo + hi) * 0.5;
+            let beside = mid.x + (hi.x - lo.x) * 1.5;
+            let points = [
+                (wall_behind(mid.x, mid.y), Vec3::Z),
+                (wall_behind(beside, mid.y), Vec3::Z),
+            ];
+            let lookups = measure_clearance(ctx, &points);
+            let (behind, open) = (lookups[0], lookups[1]);
+            assert!(
+                (behind.clearance - (lo.z - behind.position.z)).abs() < 1e-2,
+                "the ray behind the cube hits its back: {behind:?}, box {lo}..{hi}"
+            );
+            assert!(open.clearance > hi.z - open.position.z, "{open:?}");
+            assert!(!pass.clearance_clear(&behind, camera));
+            assert!(pass.clearance_clear(&open, camera));
+        });
+    }
+
+    /// A box's film rect holds every film point whose camera ray meets the
+    /// box, by brute force: rays through random points of the film (and a
+    /// pixel's margin around it) tested against random boxes in front of
+    /// the camera by the slab test; many meet one, and none of those lies
+    /// outside its rect. A box around the camera covers the plane.
+    #[test]
+    fn a_box_shows_only_inside_its_film_rect() {
+        let size = 32;
+        let mut renderer = crate::render::test_renderer("cube-in-box", size);
+        renderer.with_frame_context(0, |ctx| {
+            let camera = &ctx.snapshot.camera;
+            let mut rng = Rng::from_seed(3, 0);
+            let forward = -camera.basis.z_axis;
+            let mut met = 0;
+            for _ in 0..200 {
+                let mut v = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+                let centre = camera.position + forward * (1.0 + 5.0 * v().x) + (v() - 0.5) * 3.0;
+                let half = v() * 0.5;
+                let (lo, hi) = (centre - half, centre + half);
+                let rect = screen_rect(ctx, (lo, hi));
+                for _ in 0..200 {
+                    let film = v() * (size as f32 + 2.0) - Vec3::ONE;
+                    let (sx, sy) = (film.x / size as f32, film.y / size as f32);
+                    let dir = camera.direction(sx, sy, ctx.aspect());
+                    let far = camera.position + dir * 100.0;
+                    if crate::method::motion::segment_hits_box(camera.position, far, (lo, hi)) {
+                        met += 1;
+                        let inside = rect[0] <= film.x + 1e-3
+                            && film.x <= rect[2] + 1e-3
+                            && rect[1] <= film.y + 1e-3
+                            && film.y <= rect[3] + 1e-3;
+                        assert!(inside, "film point {film} meets the box outside {rect:?}");
+                    }
+                }
+            }
+            assert!(met > 1000, "only {met} rays met a box");
+            let around = (camera.position - Vec3::ONE, camera.position + Vec3::ONE);
+            assert_eq!(screen_rect(ctx, around)[0], f32::NEG_INFINITY);
+        });
+    }
+
+    /// Under a moving light every sample keeps its hit but traces its
+    /// shadow ray and its path-traced parts again, and the frames still
+    /// equal those traced afresh.
+    #[test]
+    fn kept_samples_under_a_moving_light_trace_their_shadows_again() {
+        let frames = kept_against_fresh("moving-light", &[3, 4], StillSamples::default());
+        let check = frames[1];
+        assert!(check.same && frames[0].same);
+        assert!(check.taken > 0);
+        // Their paths' light moved too, and no pixel is kept whole.
+        assert_eq!(check.queries_taken, 0);
+        assert_eq!(check.lookups_taken, 0);
+        let KeptCheck {
+            taken,
+            kept_rays,
+            fresh_rays,
+            ..
+        } = check;
+        assert!(
+            kept_rays < fresh_rays,
+            "{kept_rays} rays against {fresh_rays}"
+        );
+        let shadows = fresh_rays - kept_rays;
+        assert!(
+            shadows <= taken,
+            "{shadows} rays saved by {taken} samples taken"
+        );
+    }
+}
