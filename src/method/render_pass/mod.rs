@@ -49,7 +49,7 @@ use std::f32::consts::FRAC_1_PI;
 use std::sync::atomic::AtomicBool;
 pub(crate) use still::lights_fingerprint;
 pub use still::StillSamples;
-use still::{KeptLookup, KeptShadow, StillPass, TileKept, TileStill};
+use still::{KeptLookup, KeptShadow, KeptTile, StillPass, TileKept, TileStill};
 
 /// A shaded hit: position, normals and BSDF.
 pub(crate) struct Surface<'a> {
@@ -125,9 +125,10 @@ pub(crate) fn render_pass(
     let spp = settings.spp.max(1);
     let pixels_per_tile = ctx.backend.items_per_task(film.pixels.len(), spp as usize);
     let mut still = still.filter(|_| streams == PixelStreams::Coherent);
-    let still_pass = still
+    let mut still_pass = still
         .as_mut()
         .and_then(|s| s.begin(ctx, spp, pixels_per_tile));
+    let last_tiles = take_tiles(still_pass.as_mut(), film.pixels.len(), pixels_per_tile);
     let pass = TilePass {
         interpolation: &interpolation,
         settings,
@@ -137,10 +138,11 @@ pub(crate) fn render_pass(
     let tiles: Vec<(FrameStats, TileKept)> = film
         .pixels
         .par_chunks_mut(pixels_per_tile)
+        .zip(last_tiles)
         .enumerate()
-        .map(|(tile, out)| {
+        .map(|(tile, (out, last))| {
             let first = (tile * pixels_per_tile) as u32;
-            let still = still_pass.as_ref().map(|p| p.tile(tile));
+            let still = still_pass.as_ref().zip(last).map(|(p, last)| p.tile(last));
             render_tile(ctx, &pass, first, out, still)
         })
         .collect();
@@ -179,22 +181,24 @@ pub(crate) fn mark_used(
     let n_pixels = (ctx.width * ctx.height) as usize;
     let pixels_per_tile = ctx.backend.items_per_task(n_pixels, spp as usize);
     let mut still = still.filter(|_| streams == PixelStreams::Coherent);
-    let still_pass = still
+    let mut still_pass = still
         .as_mut()
         .and_then(|s| s.begin(ctx, spp, pixels_per_tile));
-    let tiles: Vec<TileKept> = (0..n_pixels.div_ceil(pixels_per_tile))
+    let last_tiles = take_tiles(still_pass.as_mut(), n_pixels, pixels_per_tile);
+    let tiles: Vec<TileKept> = last_tiles
         .into_par_iter()
-        .map(|tile| {
+        .enumerate()
+        .map(|(tile, last)| {
             let first = tile * pixels_per_tile;
             let count = pixels_per_tile.min(n_pixels - first);
-            let still = still_pass.as_ref().map(|p| p.tile(tile));
+            let mut still = still_pass.as_ref().zip(last).map(|(p, last)| p.tile(last));
             let (primary, edges, taken) = PrimarySamples::trace_keeping(
                 ctx,
                 streams,
                 first as u32,
                 count as u32,
                 spp,
-                still.as_ref(),
+                still.as_mut(),
             );
             let surfaces = primary.surfaces(ctx);
             let (lookups, _) = pixel_lookups(
@@ -208,11 +212,26 @@ pub(crate) fn mark_used(
             // No light is sampled here: the samples are kept without shadows.
             let jittered = primary.jittered(taken.len(), still.is_some());
             let shadows = vec![None; jittered.len()];
-            TileKept::of(&primary, &taken, jittered, shadows, None, &edges)
+            TileKept::of(primary, &taken, jittered, shadows, None, &edges)
         })
         .collect();
     if let Some(still) = still {
         still.end(still_pass, tiles);
+    }
+}
+
+/// The last frame's kept tiles, one per tile of `n_pixels` pixels in
+/// tiles of `pixels_per_tile` (`None` each where nothing is kept), moved
+/// out of `still` for the tiles to take from in parallel.
+fn take_tiles(
+    still: Option<&mut StillPass>,
+    n_pixels: usize,
+    pixels_per_tile: usize,
+) -> Vec<Option<KeptTile>> {
+    let n = n_pixels.div_ceil(pixels_per_tile.max(1));
+    match still {
+        Some(pass) => pass.take_tiles(n).into_iter().map(Some).collect(),
+        None => (0..n).map(|_| None).collect(),
     }
 }
 
@@ -273,15 +292,25 @@ impl PrimarySamples {
         first: u32,
         count: u32,
         spp: u32,
-        still: Option<&TileStill>,
+        mut still: Option<&mut TileStill>,
     ) -> (Self, EmitterEdges, Vec<bool>) {
         let mut primary = PrimarySamples::default();
         let base = pixels::tile_samples(first, count, spp);
-        let taken = primary.add(ctx, streams, &base, still);
+        let last = still
+            .as_deref_mut()
+            .and_then(|s| s.take_primary(base.len()));
+        let still = still.map(|s| &*s);
+        let taken = match still.zip(last) {
+            Some((still, last)) => primary.take_standing(ctx, streams, &base, still, last),
+            None => {
+                primary.add(ctx, streams, &base);
+                vec![false; base.len()]
+            }
+        };
         // The first hits decide which pixels are on a light's edge.
         let clear = |pixel: u32| still.is_some_and(|s| s.pass.pixel_clear(pixel));
         let kept = still.map(|s| KeptCoverage {
-            last: s.coverage,
+            last: s.coverage(),
             clear: &clear,
         });
         let edges = EmitterEdges::find(
@@ -291,57 +320,62 @@ impl PrimarySamples {
             spp,
             kept.as_ref(),
         );
-        primary.add(ctx, streams, edges.extra_samples(), None);
+        primary.add(ctx, streams, edges.extra_samples());
         (primary, edges, taken)
     }
 
-    /// Appends `samples`, tracing the camera rays of those not taken from
-    /// `still` (whose samples are `samples`, in order, in the last frame);
-    /// returns which were taken.
-    fn add(
+    /// Appends `samples`, tracing their camera rays.
+    fn add(&mut self, ctx: &FrameContext, streams: PixelStreams, samples: &[PixelSample]) {
+        let start = self.rays.len();
+        let mut camera = CameraSampler::new(streams);
+        for s in samples {
+            let (ray, rng) = camera.query(ctx, s);
+            self.rays.push(ray);
+            self.rngs.push(rng);
+        }
+        self.hits.resize(self.rays.len(), Hit::MISS);
+        ctx.backend
+            .closest_hit(&self.rays[start..], &mut self.hits[start..]);
+        self.samples.extend_from_slice(samples);
+    }
+
+    /// Starts the samples with the tile's base `samples` as the last frame
+    /// traced them (`last`: camera rays, hits and streams after the camera,
+    /// moved out of `still`), keeping those whose hits stand and tracing
+    /// the camera rays of the others again; returns which were kept.
+    fn take_standing(
         &mut self,
         ctx: &FrameContext,
         streams: PixelStreams,
         samples: &[PixelSample],
-        still: Option<&TileStill>,
+        still: &TileStill,
+        last: (Vec<Ray>, Vec<Hit>, Vec<Rng>),
     ) -> Vec<bool> {
-        let start = self.rays.len();
-        self.rays.reserve(samples.len());
-        self.rngs.reserve(samples.len());
-        self.hits.reserve(samples.len());
-        self.samples.reserve(samples.len());
+        debug_assert!(self.rays.is_empty());
+        (self.rays, self.hits, self.rngs) = last;
         let mut camera = CameraSampler::new(streams);
         let mut taken = vec![false; samples.len()];
         let mut fresh = Vec::new();
         // Whether the current pixel is clear on the film (its samples are
         // consecutive).
         let mut film: Option<(u32, bool)> = None;
-        let still = still.filter(|st| !st.samples.is_empty());
         for (i, s) in samples.iter().enumerate() {
-            let kept = still.and_then(|st| {
-                let clear = match film {
-                    Some((pixel, clear)) if pixel == s.pixel => clear,
-                    _ => st.pass.film_clear(s.pixel),
-                };
-                film = Some((s.pixel, clear));
-                st.primary(i, clear)
-            });
-            if let Some(k) = kept {
-                self.rays.push(k.ray);
-                self.rngs.push(k.rng.clone());
-                self.hits.push(k.hit);
+            let clear = match film {
+                Some((pixel, clear)) if pixel == s.pixel => clear,
+                _ => still.pass.film_clear(s.pixel),
+            };
+            film = Some((s.pixel, clear));
+            if still.hit_stands(&self.rays[i], &self.hits[i], clear) {
                 taken[i] = true;
-            } else {
-                let (ray, rng) = camera.query(ctx, s);
-                self.rays.push(ray);
-                self.rngs.push(rng);
-                self.hits.push(Hit::MISS);
-                fresh.push(start + i);
+                continue;
             }
+            let (ray, rng) = camera.query(ctx, s);
+            self.rays[i] = ray;
+            self.rngs[i] = rng;
+            fresh.push(i);
         }
         if fresh.len() == samples.len() {
-            ctx.backend
-                .closest_hit(&self.rays[start..], &mut self.hits[start..]);
+            ctx.backend.closest_hit(&self.rays, &mut self.hits);
         } else if !fresh.is_empty() {
             let rays: Vec<Ray> = fresh.iter().map(|&i| self.rays[i]).collect();
             let mut hits = vec![Hit::MISS; rays.len()];
@@ -530,7 +564,7 @@ fn render_tile(
     pass: &TilePass,
     first: u32,
     out: &mut [Vec3],
-    still: Option<TileStill>,
+    mut still: Option<TileStill>,
 ) -> (FrameStats, TileKept) {
     let spp = pass.settings.spp.max(1);
     let mut stats = FrameStats::default();
@@ -540,7 +574,7 @@ fn render_tile(
         first,
         out.len() as u32,
         spp,
-        still.as_ref(),
+        still.as_mut(),
     );
     let jittered = primary.jittered(taken.len(), still.is_some());
     let standing = still.as_ref().map(|s| s.standing(ctx, &primary, &taken));
@@ -596,7 +630,7 @@ fn render_tile(
     );
     edges.resolve(&tile.primary.samples, &tile.radiance, first, out);
     let mut kept = TileKept::of(
-        &tile.primary,
+        tile.primary,
         &taken,
         jittered,
         kept_shadows,
@@ -650,7 +684,7 @@ fn trace_deferred(
                         .collect(),
                     queries,
                 };
-                let last = still.queries;
+                let last = Some(still.queries());
                 let (traced, n) = kept.trace(ctx, asked, last, &still.pass.blockers);
                 *n_taken += n;
                 traced
@@ -785,7 +819,7 @@ impl<'a> TileShading<'a> {
         for (i, surface) in self.surfaces.iter().enumerate() {
             let rng = &mut self.primary.rngs[i];
             let kept = standing.filter(|(_, stands)| stands.get(i) == Some(&true));
-            if let Some(shadow) = kept.map(|(still, _)| still.samples[i].shadow) {
+            if let Some(shadow) = kept.map(|(still, _)| still.shadow(i)) {
                 // The light sample's draw, whose outcome the shadow kept.
                 rng.next_2d();
                 batch.kept.extend(shadow.map(|shadow| (i, shadow)));

@@ -130,22 +130,39 @@ struct KeptFrame {
     tiles: Vec<KeptTile>,
 }
 
-/// One tile's kept samples (its base samples, in order) and the coverage
-/// of its candidate edge pixels.
+/// One tile's kept samples (its base samples, in order, a field each: a
+/// frame moves them into its own samples and back rather than copying them
+/// one by one) and the coverage of its candidate edge pixels.
 #[derive(Default)]
 pub(super) struct KeptTile {
-    samples: Vec<StillSample>,
+    /// Each sample's camera ray and hit.
+    rays: Vec<Ray>,
+    hits: Vec<Hit>,
+    /// Each sample's stream after the camera's draw.
+    rngs: Vec<Rng>,
+    /// Each sample's direct light's shadow (`None`: it had none).
+    shadows: Vec<Option<KeptShadow>>,
+    /// Each sample's cache lookup, an index into `lookups` ([`NO_LOOKUP`]:
+    /// none).
+    lookup_of: Vec<u32>,
     coverage: Vec<CandidateCoverage>,
-    /// The lookups its samples index (`StillSample::lookup`); `None` where
-    /// they did not fit the budget.
+    /// The lookups its samples index; `None` where they did not fit the
+    /// budget.
     lookups: Option<Vec<KeptLookup>>,
     /// The path-traced parts of its samples that nothing moving met.
     pub(super) queries: KeptQueries,
 }
 
 impl KeptTile {
+    /// Bytes a kept sample takes.
+    const SAMPLE_BYTES: usize = std::mem::size_of::<Ray>()
+        + std::mem::size_of::<Hit>()
+        + std::mem::size_of::<Rng>()
+        + std::mem::size_of::<Option<KeptShadow>>()
+        + std::mem::size_of::<u32>();
+
     fn memory_bytes(&self) -> usize {
-        self.samples.len() * std::mem::size_of::<StillSample>()
+        self.hits.len() * Self::SAMPLE_BYTES
             + self.coverage.len() * std::mem::size_of::<CandidateCoverage>()
             + self.lookups.as_ref().map_or(0, Vec::len) * std::mem::size_of::<KeptLookup>()
             + self.queries.memory_bytes()
@@ -156,19 +173,6 @@ impl KeptTile {
 /// show: the bounds of its corners' projections, or the whole plane where
 /// a corner lies behind the camera.
 type ScreenRect = [f32; 4];
-
-/// One base pixel sample as traced: its camera ray, hit, stream after the
-/// camera's draw, its direct light's shadow (`None`: it had none) and its
-/// cache lookup (an index into its tile's kept lookups, [`NO_LOOKUP`]:
-/// none).
-#[derive(Clone)]
-pub(super) struct StillSample {
-    pub(super) ray: Ray,
-    pub(super) hit: Hit,
-    pub(super) rng: Rng,
-    pub(super) shadow: Option<KeptShadow>,
-    lookup: u32,
-}
 
 /// A kept sample's lookup index where it looked nothing up.
 const NO_LOOKUP: u32 = u32::MAX;
@@ -225,7 +229,7 @@ impl StillPass {
         budget: usize,
     ) -> Option<Self> {
         let samples = ctx.width as usize * ctx.height as usize * spp as usize;
-        let samples_bytes = samples.saturating_mul(std::mem::size_of::<StillSample>());
+        let samples_bytes = samples.saturating_mul(KeptTile::SAMPLE_BYTES);
         if samples_bytes > budget {
             return None;
         }
@@ -264,15 +268,20 @@ impl StillPass {
         })
     }
 
-    pub(super) fn tile(&self, tile: usize) -> TileStill<'_> {
-        let kept = self.last.as_ref().and_then(|l| l.tiles.get(tile));
-        TileStill {
-            pass: self,
-            samples: kept.map_or(&[][..], |k| k.samples.as_slice()),
-            coverage: kept.map_or(&[][..], |k| k.coverage.as_slice()),
-            lookups: kept.and_then(|k| k.lookups.as_deref()),
-            queries: kept.map(|k| &k.queries),
-        }
+    /// The last frame's `n` tiles, moved out of the pass (empty where none
+    /// was kept), for [`Self::tile`].
+    pub(super) fn take_tiles(&mut self, n: usize) -> Vec<KeptTile> {
+        let mut tiles = self
+            .last
+            .as_mut()
+            .map_or_else(Vec::new, |l| std::mem::take(&mut l.tiles));
+        tiles.resize_with(n, KeptTile::default);
+        tiles
+    }
+
+    /// One tile's part of the pass, with its samples in the last frame.
+    pub(super) fn tile(&self, kept: KeptTile) -> TileStill<'_> {
+        TileStill { pass: self, kept }
     }
 
     fn finish(self, tiles: Vec<KeptTile>) -> KeptFrame {
@@ -402,19 +411,45 @@ impl StillPass {
 /// the coverage of its candidate edge pixels then.
 pub(super) struct TileStill<'a> {
     pub(super) pass: &'a StillPass,
-    pub(super) samples: &'a [StillSample],
-    pub(super) coverage: &'a [CandidateCoverage],
-    pub(super) lookups: Option<&'a [KeptLookup]>,
-    pub(super) queries: Option<&'a KeptQueries>,
+    kept: KeptTile,
 }
 
 impl TileStill<'_> {
-    /// Base sample `i` of the last frame, if its hit stands (`film_clear`:
+    /// The coverage of the tile's candidate edge pixels in the last frame.
+    pub(super) fn coverage(&self) -> &[CandidateCoverage] {
+        &self.kept.coverage
+    }
+
+    /// The path-traced parts of the tile's samples kept from the last
+    /// frame.
+    pub(super) fn queries(&self) -> &KeptQueries {
+        &self.kept.queries
+    }
+
+    /// Base sample `i`'s shadow in the last frame (`None`: it had none).
+    pub(super) fn shadow(&self, i: usize) -> Option<KeptShadow> {
+        self.kept.shadows[i]
+    }
+
+    /// The last frame's camera rays, hits and streams of the tile's `n`
+    /// base samples, moved out (`None` where none were kept): the caller
+    /// keeps those whose hits stand ([`Self::hit_stands`]) and overwrites
+    /// the others.
+    pub(super) fn take_primary(&mut self, n: usize) -> Option<(Vec<Ray>, Vec<Hit>, Vec<Rng>)> {
+        let kept = &mut self.kept;
+        (n > 0 && kept.hits.len() == n).then(|| {
+            (
+                std::mem::take(&mut kept.rays),
+                std::mem::take(&mut kept.hits),
+                std::mem::take(&mut kept.rngs),
+            )
+        })
+    }
+
+    /// Whether a kept sample's camera hit stands this frame (`film_clear`:
     /// whether no moving box shows near its pixel).
-    pub(super) fn primary(&self, i: usize, film_clear: bool) -> Option<&StillSample> {
-        self.samples
-            .get(i)
-            .filter(|k| self.pass.hit_stands(&k.ray, &k.hit, film_clear))
+    pub(super) fn hit_stands(&self, ray: &Ray, hit: &Hit, film_clear: bool) -> bool {
+        self.pass.hit_stands(ray, hit, film_clear)
     }
 
     /// Whether base sample `i`'s hit was taken (`taken`) and its shadow in
@@ -422,9 +457,7 @@ impl TileStill<'_> {
     fn shadow_stands(&self, i: usize, taken: &[bool]) -> bool {
         taken.get(i).copied().unwrap_or(false)
             && self.pass.lights_still
-            && self.samples[i]
-                .shadow
-                .is_none_or(|s| self.pass.shadow_stands(&s))
+            && self.kept.shadows[i].is_none_or(|s| self.pass.shadow_stands(&s))
     }
 }
 
@@ -457,7 +490,7 @@ impl TileStill<'_> {
             .map(|i| self.shadow_stands(i, taken))
             .collect();
         let mut whole = vec![false; taken.len()];
-        let Some(lookups) = self.lookups else {
+        let Some(lookups) = self.kept.lookups.as_deref() else {
             return Standing { shadows, whole };
         };
         let camera = ctx.snapshot.camera.position;
@@ -488,7 +521,7 @@ impl TileStill<'_> {
                 && (start..end).all(|i| {
                     shadows[i]
                         && Surface::is_plain(ctx, &primary.hits[i])
-                        && lookup_stands(self.samples[i].lookup)
+                        && lookup_stands(self.kept.lookup_of[i])
                 });
             whole[start..end].fill(kept);
             start = end;
@@ -504,13 +537,13 @@ impl TileStill<'_> {
         lookups: &mut Vec<Lookup>,
         of_sample: &mut [Option<u32>],
     ) -> u64 {
-        let Some(kept) = self.lookups else {
+        let Some(kept) = self.kept.lookups.as_deref() else {
             return 0;
         };
         let first = lookups.len();
         let mut index = vec![NO_LOOKUP; kept.len()];
         for (i, _) in whole.iter().enumerate().filter(|(_, &w)| w) {
-            let k = self.samples[i].lookup;
+            let k = self.kept.lookup_of[i];
             if k == NO_LOOKUP {
                 continue;
             }
@@ -543,34 +576,35 @@ impl TileKept {
     /// the tile can be kept whole next frame), and the coverage `edges`
     /// found.
     pub(super) fn of(
-        primary: &PrimarySamples,
+        primary: PrimarySamples,
         taken: &[bool],
         jittered: Vec<Rng>,
-        shadows: Vec<Option<KeptShadow>>,
+        mut shadows: Vec<Option<KeptShadow>>,
         lookups: Option<(Vec<KeptLookup>, Vec<u32>)>,
         edges: &EmitterEdges,
     ) -> Self {
-        let keep = !jittered.is_empty();
-        let (lookups, of_sample) = lookups.unzip();
-        let samples = jittered
-            .into_iter()
-            .enumerate()
-            .map(|(i, rng)| StillSample {
-                ray: primary.rays[i],
-                hit: primary.hits[i],
-                rng,
-                shadow: shadows[i],
-                lookup: of_sample.as_ref().map_or(NO_LOOKUP, |l| l[i]),
-            })
-            .collect();
-        let coverage = if keep {
+        let n = jittered.len();
+        let (lookups, lookup_of) = lookups.unzip();
+        let PrimarySamples {
+            mut rays, mut hits, ..
+        } = primary;
+        rays.truncate(n);
+        hits.truncate(n);
+        shadows.truncate(n);
+        let mut lookup_of = lookup_of.unwrap_or_else(|| vec![NO_LOOKUP; n]);
+        lookup_of.truncate(n);
+        let coverage = if n > 0 {
             edges.coverage().to_vec()
         } else {
             Vec::new()
         };
         TileKept {
             tile: KeptTile {
-                samples,
+                rays,
+                hits,
+                rngs: jittered,
+                shadows,
+                lookup_of,
                 coverage,
                 lookups,
                 queries: KeptQueries::default(),
@@ -788,7 +822,7 @@ mod tests {
     /// nothing. The frames are those traced afresh either way.
     #[test]
     fn kept_samples_past_their_budget_are_traced_again() {
-        let samples = 20 * 20 * 4 * std::mem::size_of::<StillSample>();
+        let samples = 20 * 20 * 4 * KeptTile::SAMPLE_BYTES;
         let frames = kept_against_fresh("cube-in-box", &[3, 4], StillSamples::within(samples));
         let check = frames[1];
         assert!(check.same && check.taken > 0, "{check:?}");
