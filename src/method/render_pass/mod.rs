@@ -580,8 +580,7 @@ fn render_tile(
     let standing = still.as_ref().map(|s| s.standing(ctx, &primary, &taken));
     let (shadows, whole) = standing.map_or((Vec::new(), Vec::new()), |s| (s.shadows, s.whole));
     let mut tile = TileShading::new(ctx, primary, whole);
-    let shadows_stand = still.as_ref().map(|s| (s, &shadows[..]));
-    let shadows = tile.direct_light(ctx, pass.streams, shadows_stand);
+    let shadow_rays = tile.direct_light(ctx, pass.streams, &shadows);
     let (mut lookups, mut lookup_of_sample) = pixel_lookups(
         ctx,
         &tile.surfaces,
@@ -607,8 +606,12 @@ fn render_tile(
         &interpolated,
         &mut stats,
     );
-    let kept_shadows =
-        shadows.add_unoccluded(ctx, &mut tile.radiance, still.as_ref().map(|s| s.pass));
+    let last_shadows = still.as_mut().map(|s| (s.take_shadows(), &shadows[..]));
+    let kept_shadows = shadow_rays.add_unoccluded(
+        ctx,
+        &mut tile.radiance,
+        still.as_ref().map(|s| s.pass).zip(last_shadows),
+    );
     let kept_lookups = still.as_ref().and_then(|s| {
         let camera = ctx.snapshot.camera.position;
         let of_base = (&lookups[..], &lookup_of_sample[..taken.len()]);
@@ -718,54 +721,75 @@ struct TileShading<'a> {
 }
 
 /// The shadow rays of a tile's direct light and, for each, its sample and
-/// what it adds if unoccluded; and the shadows taken from the last frame.
+/// what it adds if unoccluded.
 #[derive(Default)]
 struct ShadowBatch {
     rays: Vec<Ray>,
     targets: Vec<(usize, Vec3)>,
-    kept: Vec<(usize, KeptShadow)>,
 }
 
+/// The last frame's shadows of a tile's base samples, moved out of its
+/// kept tile, and per base sample whether its shadow stands
+/// ([`Standing::shadows`](still::Standing::shadows)).
+type LastShadows<'a> = (Vec<Option<KeptShadow>>, &'a [bool]);
+
 impl ShadowBatch {
-    /// Adds the light of the unoccluded shadow rays to their samples. With
-    /// `keep` (this frame's kept samples), returns each sample's shadow
-    /// (`None`: it had none), for the next frame.
+    /// Adds the light of the unoccluded shadow rays to their samples, and
+    /// that of the last frame's shadows that stand (`keep`, with this
+    /// frame's kept samples); with `keep`, returns each sample's shadow
+    /// (`None`: it had none) for the next frame, in the last frame's
+    /// vector: a shadow that stands stays where it is.
     fn add_unoccluded(
         self,
         ctx: &FrameContext,
         radiance: &mut [Vec3],
-        keep: Option<&StillPass>,
+        keep: Option<(&StillPass, LastShadows)>,
     ) -> Vec<Option<KeptShadow>> {
         let mut occluded = vec![false; self.rays.len()];
         ctx.backend.any_hit(&self.rays, &mut occluded);
-        let mut kept = vec![None; if keep.is_some() { radiance.len() } else { 0 }];
-        let traced = self.rays.into_iter().zip(self.targets).zip(occluded);
-        let traced = traced.map(|((ray, (i, contribution)), occluded)| {
-            let clear = keep.is_some_and(|pass| pass.shadow_clear(&ray));
-            let shadow = KeptShadow {
-                ray,
-                contribution,
-                occluded,
-                clear,
-            };
-            (i, shadow)
-        });
-        // A shadow taken again met no moving box of this frame.
-        let taken = self
-            .kept
-            .into_iter()
-            .map(|(i, s)| (i, KeptShadow { clear: true, ..s }));
-        let keep = keep.is_some();
-        for (i, shadow) in traced.chain(taken) {
-            if !shadow.occluded {
-                radiance[i] += shadow.contribution;
+        let (pass, mut kept) = match keep {
+            Some((pass, (last, stands))) => {
+                (Some(pass), take_standing_shadows(last, stands, radiance))
             }
-            if keep {
-                kept[i] = Some(shadow);
+            None => (None, Vec::new()),
+        };
+        let traced = self.rays.into_iter().zip(self.targets).zip(occluded);
+        for ((ray, (i, contribution)), occluded) in traced {
+            if !occluded {
+                radiance[i] += contribution;
+            }
+            if let Some(pass) = pass {
+                kept[i] = Some(KeptShadow {
+                    ray,
+                    contribution,
+                    occluded,
+                    clear: pass.shadow_clear(&ray),
+                });
             }
         }
         kept
     }
+}
+
+/// Adds to `radiance` the light of the last frame's unoccluded shadows
+/// that stand (`stands`, per base sample); returns `last` with the others
+/// cleared, one per sample (the extra ones of a light's rim too), for this
+/// frame's traced shadows to fill. A shadow that stands met no moving box
+/// in either frame, so it stays `clear`.
+fn take_standing_shadows(
+    mut last: Vec<Option<KeptShadow>>,
+    stands: &[bool],
+    radiance: &mut [Vec3],
+) -> Vec<Option<KeptShadow>> {
+    last.resize(radiance.len(), None);
+    for (i, shadow) in last.iter_mut().enumerate() {
+        if stands.get(i) != Some(&true) {
+            *shadow = None;
+        } else if let Some(s) = shadow.filter(|s| !s.occluded) {
+            radiance[i] += s.contribution;
+        }
+    }
+    last
 }
 
 impl<'a> TileShading<'a> {
@@ -805,24 +829,23 @@ impl<'a> TileShading<'a> {
 
     /// Each sample's first light sample (drawn from its stream, before
     /// anything else draws from it) and the shadow rays of those that may
-    /// add direct light; the last frame's shadows that stand (`standing`:
-    /// the kept samples and, per base sample, [`Standing::shadows`](still::Standing::shadows)) are
-    /// taken instead of sampled and traced again.
+    /// add direct light; the samples whose last shadow stands
+    /// (`shadows_stand`, per base sample: [`Standing::shadows`](still::Standing::shadows))
+    /// draw their light sample but trace nothing: their shadows are taken
+    /// from the last frame ([`ShadowBatch::add_unoccluded`]).
     fn direct_light(
         &mut self,
         ctx: &FrameContext,
         streams: PixelStreams,
-        standing: Option<(&TileStill, &[bool])>,
+        shadows_stand: &[bool],
     ) -> ShadowBatch {
         let mut lights = FirstLightSampler::new(streams);
         let mut batch = ShadowBatch::default();
         for (i, surface) in self.surfaces.iter().enumerate() {
             let rng = &mut self.primary.rngs[i];
-            let kept = standing.filter(|(_, stands)| stands.get(i) == Some(&true));
-            if let Some(shadow) = kept.map(|(still, _)| still.shadow(i)) {
+            if shadows_stand.get(i) == Some(&true) {
                 // The light sample's draw, whose outcome the shadow kept.
                 rng.next_2d();
-                batch.kept.extend(shadow.map(|shadow| (i, shadow)));
                 continue;
             }
             let choice = lights.sample(ctx, &self.primary.samples[i], rng);

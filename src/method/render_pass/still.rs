@@ -426,9 +426,11 @@ impl TileStill<'_> {
         &self.kept.queries
     }
 
-    /// Base sample `i`'s shadow in the last frame (`None`: it had none).
-    pub(super) fn shadow(&self, i: usize) -> Option<KeptShadow> {
-        self.kept.shadows[i]
+    /// The last frame's shadows of the tile's base samples (`None`: it had
+    /// none), moved out: call it once the shadows' standing is known
+    /// ([`Self::standing`]).
+    pub(super) fn take_shadows(&mut self) -> Vec<Option<KeptShadow>> {
+        std::mem::take(&mut self.kept.shadows)
     }
 
     /// The last frame's camera rays, hits and streams of the tile's `n`
