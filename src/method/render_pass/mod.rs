@@ -1122,6 +1122,41 @@ mod tests {
         assert_eq!((lookups, of, own), (shared(0.6), of_sample, Vec::new()));
     }
 
+    /// Of the last frame's shadows, those that stand add their light where
+    /// unoccluded and stay; the others are cleared, and the vector covers
+    /// every sample of this frame (a rim's extra samples too), for the
+    /// shadows traced again to fill.
+    #[test]
+    fn shadows_that_stand_add_their_light_and_stay() {
+        let shadow = |contribution: f32, occluded| {
+            Some(KeptShadow {
+                ray: Ray::segment(Vec3::ZERO, Vec3::Z),
+                contribution: Vec3::splat(contribution),
+                occluded,
+                clear: true,
+            })
+        };
+        let last = vec![
+            shadow(1.0, false),
+            shadow(2.0, true),
+            shadow(4.0, false),
+            None,
+        ];
+        let stands = [true, true, false, true];
+        let mut radiance = vec![Vec3::splat(0.5); 6];
+        let kept = take_standing_shadows(last.clone(), &stands, &mut radiance);
+        let sums: Vec<f32> = radiance.iter().map(|r| r.x).collect();
+        assert_eq!(sums, [1.5, 0.5, 0.5, 0.5, 0.5, 0.5]);
+        let expected = [last[0], last[1], None, None, None, None];
+        let same = |a: &Option<KeptShadow>, b: &Option<KeptShadow>| match (a, b) {
+            (Some(a), Some(b)) => a.contribution == b.contribution && a.occluded == b.occluded,
+            (None, None) => true,
+            _ => false,
+        };
+        assert_eq!(kept.len(), 6);
+        assert!(kept.iter().zip(&expected).all(|(a, b)| same(a, b)));
+    }
+
     /// `trc`'s first pass flags the records the render pass will use: on a
     /// scene whose light is in view (so edge pixels add shaded samples), the
     /// flags of [`mark_used`] equal those the render pass sets, with either
