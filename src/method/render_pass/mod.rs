@@ -327,6 +327,13 @@ impl PrimarySamples {
     /// Appends `samples`, tracing their camera rays.
     fn add(&mut self, ctx: &FrameContext, streams: PixelStreams, samples: &[PixelSample]) {
         let start = self.rays.len();
+        // Exactly: the base samples' vectors are kept for the next frame
+        // (`TileKept::of`), and a doubling for a light rim's few extra
+        // samples would be kept with them.
+        self.rays.reserve_exact(samples.len());
+        self.rngs.reserve_exact(samples.len());
+        self.hits.reserve_exact(samples.len());
+        self.samples.reserve_exact(samples.len());
         let mut camera = CameraSampler::new(streams);
         for s in samples {
             let (ray, rng) = camera.query(ctx, s);
@@ -389,10 +396,14 @@ impl PrimarySamples {
     }
 
     /// The streams of the first `n` samples as the camera left them, for
-    /// the next frame to go on from (none where nothing is `kept`).
+    /// the next frame to go on from (none where nothing is `kept`), with
+    /// room for this frame's extra samples: the next frame appends its own
+    /// to them without growing them again, most often.
     fn jittered(&self, n: usize, kept: bool) -> Vec<Rng> {
         if kept {
-            self.rngs[..n].to_vec()
+            let mut rngs = Vec::with_capacity(self.rngs.len());
+            rngs.extend_from_slice(&self.rngs[..n]);
+            rngs
         } else {
             Vec::new()
         }
@@ -781,6 +792,7 @@ fn take_standing_shadows(
     stands: &[bool],
     radiance: &mut [Vec3],
 ) -> Vec<Option<KeptShadow>> {
+    last.reserve_exact(radiance.len().saturating_sub(last.len()));
     last.resize(radiance.len(), None);
     for (i, shadow) in last.iter_mut().enumerate() {
         if stands.get(i) != Some(&true) {

@@ -4,8 +4,9 @@
 //! the moving objects show on the film (`screen_rect`); and the
 //! fingerprints of the view and the lights that say whether the last frame
 //! was rendered under the same ones. The render pass (the parent module)
-//! asks; this module decides, so every rule that keeps the film bit for bit
-//! the one traced afresh lives here.
+//! asks and this module decides, for hits, shadows and lookups; what of a
+//! light rim's coverage stands is `pixels::KeptCoverage`'s to decide, and
+//! what of a path-traced part `render_pass::kept_queries`'s.
 
 use super::kept_queries::KeptQueries;
 use super::{PrimarySamples, Surface};
@@ -64,9 +65,10 @@ pub struct StillSamples {
 }
 
 impl StillSamples {
-    /// Bytes kept per frame at most: past this (about 4.5 million samples:
-    /// 512 × 512 pixels at 16 spp) the pass keeps nothing and traces every
-    /// sample, as `ic` does.
+    /// Bytes kept per frame at most, counted for the base samples (a light
+    /// rim's extra samples, a small share, take room beside them): past
+    /// this (about 4.5 million samples: 512 × 512 pixels at 16 spp) the
+    /// pass keeps nothing and traces every sample, as `ic` does.
     pub const BUDGET_BYTES: usize = 512 << 20;
 
     /// Kept samples within `budget` bytes a frame, not
@@ -161,10 +163,19 @@ impl KeptTile {
         + std::mem::size_of::<Option<KeptShadow>>()
         + std::mem::size_of::<u32>();
 
+    /// Bytes held, counted by capacity: the samples' vectors keep room
+    /// for a light rim's extra samples, which the frames append to them.
     fn memory_bytes(&self) -> usize {
-        self.hits.len() * Self::SAMPLE_BYTES
-            + self.coverage.len() * std::mem::size_of::<CandidateCoverage>()
-            + self.lookups.as_ref().map_or(0, Vec::len) * std::mem::size_of::<KeptLookup>()
+        fn held<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        held(&self.rays)
+            + held(&self.hits)
+            + held(&self.rngs)
+            + held(&self.shadows)
+            + held(&self.lookup_of)
+            + held(&self.coverage)
+            + self.lookups.as_ref().map_or(0, held)
             + self.queries.memory_bytes()
     }
 }
