@@ -310,7 +310,8 @@ pub struct BenchArgs {
     #[arg(long, default_value = "cube-in-box", value_delimiter = ',', value_parser = parse_bench_scene)]
     pub scenes: Vec<SceneSource>,
     /// Methods, each NAME or NAME:KEY=V1,V2,… sweeping one setting (one run per value),
-    /// e.g. `--methods path:spp=4,16,64 ic:accuracy=0.1,0.2`.
+    /// with more :KEY=V settings fixed in every run, e.g.
+    /// `--methods path:spp=4,16,64 ic:accuracy=0.1,0.2 trc:at=0.1:max_life=5,20`.
     #[arg(long, num_args = 1.., default_values = bench::DEFAULT_METHODS, value_parser = parse_bench_method)]
     pub methods: Vec<bench::MethodSweep>,
     /// Half-open frame range START..END.

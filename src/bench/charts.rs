@@ -77,7 +77,7 @@ fn series(rows: &[BenchRow]) -> Vec<(String, Vec<&BenchRow>)> {
     let several_backends = rows.iter().any(|r| r.backend != rows[0].backend);
     let mut out: Vec<(String, Vec<&BenchRow>)> = Vec::new();
     for r in rows {
-        let key = r.settings.split_once('=').map_or("", |(k, _)| k);
+        let (key, _) = sweep_of(&r.settings);
         let mut name = if key.is_empty() {
             r.method.clone()
         } else {
@@ -98,9 +98,15 @@ fn series(rows: &[BenchRow]) -> Vec<(String, Vec<&BenchRow>)> {
 
 /// Short label of a point: the swept value, or nothing for defaults.
 fn point_label(r: &BenchRow) -> String {
-    r.settings
-        .split_once('=')
-        .map_or(String::new(), |(_, v)| v.to_string())
+    sweep_of(&r.settings).1.to_string()
+}
+
+/// A run's settings label (`RunSpec::label`) split at its last `=` into
+/// what names its series (the fixed settings and the swept key) and the
+/// swept value: `at=0.1 max_life=5` → (`at=0.1 max_life`, `5`);
+/// `default` → (``, ``).
+fn sweep_of(settings: &str) -> (&str, &str) {
+    settings.rsplit_once('=').unwrap_or(("", ""))
 }
 
 /// Writes the four charts of one scene; returns their paths.
@@ -305,6 +311,21 @@ mod tests {
         let (main, grid) = log_ticks(&(0.05..30.0));
         assert_eq!(main, [0.05, 0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0]);
         assert!(grid.contains(&3.0) && !grid.contains(&2.0));
+    }
+
+    #[test]
+    fn runs_of_one_sweep_share_a_series() {
+        assert_eq!(sweep_of("spp=16"), ("spp", "16"));
+        assert_eq!(sweep_of("at=0.1 max_life=5"), ("at=0.1 max_life", "5"));
+        assert_eq!(
+            sweep_of("at=0.1 max_life=20").0,
+            sweep_of("at=0.1 max_life=5").0
+        );
+        assert_ne!(
+            sweep_of("at=0.2 max_life=5").0,
+            sweep_of("at=0.1 max_life=5").0
+        );
+        assert_eq!(sweep_of("default"), ("", ""));
     }
 
     #[test]

@@ -1,106 +1,120 @@
 //! The methods `radcache bench --methods` accepts, and how a
-//! specification (`NAME` or `NAME:KEY=V1,V2,…`) becomes their settings
+//! specification (`NAME`, `NAME:KEY=V1,V2,…` or `NAME:KEY=V:KEY=V1,V2,…`) becomes their settings
 //! ([`crate::method::settings`]).
 
 pub use crate::method::settings::{method_settings, MethodError, MethodInfo, METHODS};
 use crate::render::MethodSettings;
 
-/// One method with an optional sweep of one setting:
-/// `path` (defaults) or `path:spp=4,16,64` (one run per value).
+/// One method, the settings it changes from its defaults, and at most one
+/// of them swept: `path` (defaults), `path:spp=4,16,64` (one run per
+/// value) or `trc:at=100000:max_life=2,5,20` (`at` fixed in every run,
+/// `max_life` swept).
 #[derive(Clone, Debug, PartialEq)]
 pub struct MethodSweep {
     pub method: String,
-    /// `None`: one run with the defaults.
-    pub key: Option<String>,
-    pub values: Vec<String>,
+    /// The settings each run changes alike, in the order given.
+    pub fixed: Vec<(String, String)>,
+    /// The setting swept and its values, one run each; `None`: one run.
+    pub swept: Option<(String, Vec<String>)>,
 }
 
 impl MethodSweep {
-    /// Parses `NAME` or `NAME:KEY=V1,V2,…` and checks every value against
+    /// Parses `NAME[:KEY=V1,V2,…[:KEY=V…]]` (at most one setting with
+    /// several values, no setting twice) and checks every value against
     /// [`method_settings`], so a typo fails before anything renders.
     pub fn parse(spec: &str) -> Result<Self, MethodError> {
         let bad = |problem: &str| MethodError::BadSpec {
             spec: spec.into(),
             problem: problem.into(),
         };
-        let (method, sweep) = match spec.split_once(':') {
-            Some((m, s)) => (m.trim(), Some(s)),
-            None => (spec.trim(), None),
-        };
+        let mut parts = spec.split(':');
+        let method = parts.next().unwrap_or_default().trim();
         if method.is_empty() {
             return Err(bad("no method name"));
         }
-        let sweep = match sweep {
-            None => MethodSweep {
-                method: method.into(),
-                key: None,
-                values: Vec::new(),
-            },
-            Some(s) => {
-                let (key, values) = s
-                    .split_once('=')
-                    .ok_or_else(|| bad("no '=' after the setting"))?;
-                let key = key.trim();
-                if key.is_empty() {
-                    return Err(bad("no setting name before '='"));
-                }
-                let values: Vec<String> = values.split(',').map(|v| v.trim().to_string()).collect();
-                if values.iter().any(String::is_empty) {
-                    return Err(bad("empty value in the list"));
-                }
-                MethodSweep {
-                    method: method.into(),
-                    key: Some(key.into()),
-                    values,
-                }
-            }
+        let mut sweep = MethodSweep {
+            method: method.into(),
+            fixed: Vec::new(),
+            swept: None,
         };
+        let mut keys: Vec<String> = Vec::new();
+        for part in parts {
+            let (key, values) = part
+                .split_once('=')
+                .ok_or_else(|| bad("no '=' after the setting"))?;
+            let key = key.trim();
+            if key.is_empty() {
+                return Err(bad("no setting name before '='"));
+            }
+            if keys.iter().any(|k| k == key) {
+                return Err(bad(&format!("setting {key} given twice")));
+            }
+            keys.push(key.into());
+            let values: Vec<String> = values.split(',').map(|v| v.trim().to_string()).collect();
+            if values.iter().any(String::is_empty) {
+                return Err(bad("empty value in the list"));
+            }
+            if values.len() == 1 {
+                sweep.fixed.push((key.into(), values[0].clone()));
+            } else if sweep.swept.is_some() {
+                return Err(bad("more than one setting lists several values"));
+            } else {
+                sweep.swept = Some((key.into(), values));
+            }
+        }
         for run in sweep.runs() {
             run.settings()?;
         }
         Ok(sweep)
     }
 
-    /// The runs of the sweep, in the order given.
+    /// The runs of the sweep, in the order of the swept values.
     pub fn runs(&self) -> Vec<RunSpec> {
-        match &self.key {
-            None => vec![RunSpec {
-                method: self.method.clone(),
-                setting: None,
-            }],
-            Some(key) => self
-                .values
+        let run = |swept: Option<(&String, &String)>| RunSpec {
+            method: self.method.clone(),
+            settings: self
+                .fixed
                 .iter()
-                .map(|v| RunSpec {
-                    method: self.method.clone(),
-                    setting: Some((key.clone(), v.clone())),
-                })
+                .cloned()
+                .chain(swept.map(|(k, v)| (k.clone(), v.clone())))
                 .collect(),
+        };
+        match &self.swept {
+            None => vec![run(None)],
+            Some((key, values)) => values.iter().map(|v| run(Some((key, v)))).collect(),
         }
     }
 }
 
-/// One run: a method and at most one setting changed from its defaults.
+/// One run: a method and the settings changed from its defaults (the
+/// swept one last).
 #[derive(Clone, Debug, PartialEq)]
 pub struct RunSpec {
     pub method: String,
-    pub setting: Option<(String, String)>,
+    pub settings: Vec<(String, String)>,
 }
 
 impl RunSpec {
     pub fn settings(&self) -> Result<MethodSettings, MethodError> {
         method_settings(
             &self.method,
-            self.setting.as_ref().map(|(k, v)| (k.as_str(), v.as_str())),
+            self.settings.iter().map(|(k, v)| (k.as_str(), v.as_str())),
         )
     }
 
-    /// `spp=4`, or `default`.
+    /// `spp=4`, `at=100000 max_life=5` (the swept setting last), or
+    /// `default`. Charts split it at its last `=` into the series and the
+    /// point (`bench::charts`).
     pub fn label(&self) -> String {
-        match &self.setting {
-            Some((k, v)) => format!("{k}={v}"),
-            None => "default".into(),
+        if self.settings.is_empty() {
+            return "default".into();
         }
+        let pairs: Vec<String> = self
+            .settings
+            .iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        pairs.join(" ")
     }
 }
 
@@ -111,7 +125,10 @@ mod tests {
     #[test]
     fn sweep_parses_and_applies_values() {
         let s = MethodSweep::parse("path:spp=4, 16,64").unwrap();
-        assert_eq!(s.values, ["4", "16", "64"]);
+        assert_eq!(
+            s.swept,
+            Some(("spp".into(), vec!["4".into(), "16".into(), "64".into()]))
+        );
         let spps: Vec<u32> = s
             .runs()
             .iter()
@@ -131,6 +148,25 @@ mod tests {
     }
 
     #[test]
+    fn fixed_settings_apply_to_every_run_of_a_sweep() {
+        let s = MethodSweep::parse("trc:at=100000:max_life=2,5").unwrap();
+        let runs = s.runs();
+        let labels: Vec<String> = runs.iter().map(RunSpec::label).collect();
+        assert_eq!(labels, ["at=100000 max_life=2", "at=100000 max_life=5"]);
+        for (run, life) in runs.iter().zip([2, 5]) {
+            match run.settings().unwrap() {
+                MethodSettings::Trc(t) => {
+                    assert_eq!((t.temporal_accuracy, t.max_life), (1e5, life));
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        // The swept setting comes last in the label whatever its place.
+        let s = MethodSweep::parse("trc:max_life=2,5:at=0.1").unwrap();
+        assert_eq!(s.runs()[1].label(), "at=0.1 max_life=5");
+    }
+
+    #[test]
     fn bad_specs_are_errors() {
         for spec in [
             "",
@@ -139,6 +175,10 @@ mod tests {
             "path:=4",
             "path:spp=4,,8",
             "path:spp=0",
+            "path:spp=4:",
+            "trc:at=0.1,0.2:max_life=2,5",
+            "trc:at=0.1:at=0.2",
+            "trc:at=0.1:max_life=0",
         ] {
             assert!(MethodSweep::parse(spec).is_err(), "{spec}");
         }

@@ -111,7 +111,7 @@ pub enum MethodError {
         value: String,
         problem: String,
     },
-    #[error("bad method specification '{spec}': {problem} (expected NAME or NAME:KEY=V1,V2,…, e.g. path:spp=4,16,64)")]
+    #[error("bad method specification '{spec}': {problem} (expected NAME, NAME:KEY=V1,V2,… or NAME:KEY=V:KEY=V1,V2,…, at most one setting with several values, e.g. path:spp=4,16,64 or trc:at=0.1:max_life=2,5)")]
     BadSpec { spec: String, problem: String },
 }
 
