@@ -592,43 +592,19 @@ fn render_tile(
     let (shadows, whole) = standing.map_or((Vec::new(), Vec::new()), |s| (s.shadows, s.whole));
     let mut tile = TileShading::new(ctx, primary, whole);
     let shadow_rays = tile.direct_light(ctx, pass.streams, &shadows);
-    let (mut lookups, mut lookup_of_sample) = pixel_lookups(
-        ctx,
-        &tile.surfaces,
-        &tile.primary.hits,
-        &tile.primary.samples,
-        pass.settings.glossy,
-    );
-    let first_taken_lookup = lookups.len();
-    let lookups_taken = still.as_ref().map_or(0, |s| {
-        s.take_lookups(&tile.whole, &mut lookups, &mut lookup_of_sample)
-    });
-    stats.lookups = lookups.len() as u64;
-    let interpolated = pass.interpolation.interpolate(&lookups, pass.used);
-    stats.lookup_records = interpolated
-        .iter()
-        .flatten()
-        .map(|e| u64::from(e.records))
-        .sum();
-    let deferred = tile.indirect_light(
-        ctx,
-        pass,
-        (&lookups, &lookup_of_sample),
-        &interpolated,
-        &mut stats,
-    );
+    let lookups = TileLookups::new(ctx, pass, &tile, still.as_ref(), &mut stats);
+    let deferred = tile.indirect_light(ctx, pass, &lookups, &mut stats);
     let last_shadows = still.as_mut().map(|s| (s.take_shadows(), &shadows[..]));
     let kept_shadows = shadow_rays.add_unoccluded(
         ctx,
         &mut tile.radiance,
         still.as_ref().map(|s| s.pass).zip(last_shadows),
     );
-    let kept_lookups = still.as_ref().and_then(|s| {
-        let camera = ctx.snapshot.camera.position;
-        let of_base = (&lookups[..], &lookup_of_sample[..taken.len()]);
-        s.pass
-            .keep_lookups(camera, of_base, first_taken_lookup, s.pass.tile_budget)
-    });
+    // The next frame's lookups first, then its path-traced parts, in what
+    // is left of the tile's budget.
+    let kept_lookups = still
+        .as_ref()
+        .and_then(|s| lookups.keep(ctx, s, taken.len()));
     let lookups_bytes = kept_lookups
         .as_ref()
         .map_or(0, |(l, _)| l.len() * std::mem::size_of::<KeptLookup>());
@@ -651,12 +627,85 @@ fn render_tile(
         kept_lookups,
         &edges,
     );
-    kept.lookups_taken = lookups_taken;
+    kept.lookups_taken = lookups.taken;
     if let Some((queries, taken)) = queries {
         kept.tile.queries = queries;
         kept.queries_taken = taken;
     }
     (stats, kept)
+}
+
+/// A tile's cache lookups and their interpolated irradiance: this frame's
+/// (one per pixel and triangle, [`pixel_lookups`]) and, from `first_taken`
+/// on, those the pixels kept whole take from the last frame.
+struct TileLookups {
+    lookups: Vec<Lookup>,
+    /// Each sample's lookup (an index into `lookups`), if it made one.
+    of_sample: Vec<Option<u32>>,
+    first_taken: usize,
+    /// How many lookups were taken from the last frame.
+    taken: u64,
+    interpolated: Vec<Option<Interpolated>>,
+}
+
+impl TileLookups {
+    /// The lookups of `tile`'s shaded samples, those `still` keeps for its
+    /// pixels kept whole, all interpolated at once (flagging the records
+    /// used where the pass asks); counted in `stats`.
+    fn new(
+        ctx: &FrameContext,
+        pass: &TilePass,
+        tile: &TileShading,
+        still: Option<&TileStill>,
+        stats: &mut FrameStats,
+    ) -> Self {
+        let (mut lookups, mut of_sample) = pixel_lookups(
+            ctx,
+            &tile.surfaces,
+            &tile.primary.hits,
+            &tile.primary.samples,
+            pass.settings.glossy,
+        );
+        let first_taken = lookups.len();
+        let taken = still.map_or(0, |s| {
+            s.take_lookups(&tile.whole, &mut lookups, &mut of_sample)
+        });
+        let interpolated = pass.interpolation.interpolate(&lookups, pass.used);
+        stats.lookups = lookups.len() as u64;
+        stats.lookup_records = interpolated
+            .iter()
+            .flatten()
+            .map(|e| u64::from(e.records))
+            .sum();
+        TileLookups {
+            lookups,
+            of_sample,
+            first_taken,
+            taken,
+            interpolated,
+        }
+    }
+
+    /// The lookups of the tile's `n_base` base samples, kept for the next
+    /// frame within `still`'s budget ([`StillPass::keep_lookups`]).
+    fn keep(
+        &self,
+        ctx: &FrameContext,
+        still: &TileStill,
+        n_base: usize,
+    ) -> Option<(Vec<KeptLookup>, Vec<u32>)> {
+        let camera = ctx.snapshot.camera.position;
+        let of_base = (&self.lookups[..], &self.of_sample[..n_base]);
+        still
+            .pass
+            .keep_lookups(camera, of_base, self.first_taken, still.pass.tile_budget)
+    }
+
+    /// Sample `i`'s interpolated irradiance: `None` where it made no
+    /// lookup, `Some(None)` where its lookup found no usable record.
+    fn of(&self, i: usize) -> Option<&Option<Interpolated>> {
+        self.of_sample[i].map(|l| &self.interpolated[l as usize])
+    }
 }
 
 /// Traces the tile's deferred queries (the paths, then the glossy lobes'
@@ -884,92 +933,83 @@ impl<'a> TileShading<'a> {
         &mut self,
         ctx: &'a FrameContext,
         pass: &TilePass,
-        (lookups, lookup_of_sample): (&[Lookup], &[Option<u32>]),
-        interpolated: &[Option<Interpolated>],
+        lookups: &TileLookups,
         stats: &mut FrameStats,
     ) -> Vec<Deferred> {
         let mut deferred = Vec::new();
-        let mut reflected: Vec<Option<Option<Vec3>>> = vec![None; lookups.len()];
-        for (i, surface) in self.surfaces.iter().enumerate() {
-            let rng = &mut self.primary.rngs[i];
+        let mut reflected: Vec<Option<Option<Vec3>>> = vec![None; lookups.lookups.len()];
+        for i in 0..self.surfaces.len() {
             if self.whole.get(i) == Some(&true) {
-                // A plain material: its diffuse lobe alone, as below (a
-                // BSDF's diffuse albedo is its material's `diffuse`).
-                let Some(lookup) = lookup_of_sample[i] else {
-                    continue;
-                };
-                let hit = &self.primary.hits[i];
-                match &interpolated[lookup as usize] {
-                    Some(e) => {
-                        let albedo = material_of(ctx, hit).diffuse;
-                        self.radiance[i] += albedo * FRAC_1_PI * e.irradiance;
-                    }
-                    None => {
-                        stats.fallback_lookups += 1;
-                        let surface = Surface::at(ctx, &self.primary.rays[i], hit)
-                            .expect("a sample that looked the cache up hit something");
-                        deferred.push(Deferred::fallback(i, &surface, rng));
-                    }
-                }
+                deferred.extend(self.whole_indirect(ctx, i, lookups.of(i), stats));
                 continue;
             }
-            let Some(surface) = surface.as_ref().filter(|s| !s.bsdf.is_black()) else {
+            let Some(surface) = self.surfaces[i].as_ref().filter(|s| !s.bsdf.is_black()) else {
                 continue;
             };
-            let diffuse = surface.bsdf.diffuse_albedo().max_element() > 0.0;
-            if let Some(lookup) = lookup_of_sample[i].filter(|_| diffuse) {
-                match &interpolated[lookup as usize] {
-                    Some(e) => {
-                        self.radiance[i] +=
-                            surface.bsdf.diffuse_albedo() * FRAC_1_PI * e.irradiance;
-                    }
-                    None => {
-                        stats.fallback_lookups += 1;
-                        deferred.push(Deferred::fallback(i, surface, rng));
-                    }
+            let rng = &mut self.primary.rngs[i];
+            let albedo = surface.bsdf.diffuse_albedo();
+            match lookups.of(i).filter(|_| albedo.max_element() > 0.0) {
+                Some(Some(e)) => self.radiance[i] += albedo * FRAC_1_PI * e.irradiance,
+                Some(None) => {
+                    stats.fallback_lookups += 1;
+                    deferred.push(Deferred::fallback(i, surface, rng));
                 }
+                None => {}
             }
-            if pass.settings.glossy == GlossyLobe::Eas && surface.bsdf.has_specular() {
-                let cached = lookup_of_sample[i].and_then(|l| {
+            let cached = match lookups.of_sample[i] {
+                Some(l)
+                    if pass.settings.glossy == GlossyLobe::Eas && surface.bsdf.has_specular() =>
+                {
                     *reflected[l as usize].get_or_insert_with(|| {
                         let cache = pass.interpolation.cache();
-                        eas::reflected_radiance(
-                            cache,
-                            &lookups[l as usize],
-                            &surface.bsdf,
-                            surface.wo,
-                        )
+                        let at = &lookups.lookups[l as usize];
+                        eas::reflected_radiance(cache, at, &surface.bsdf, surface.wo)
                     })
-                });
-                let query = glossy_query(surface, rng);
-                match (cached, query) {
-                    // The sources hold what the lobe's path would gather
-                    // past its first hit; the lobe's ray is still traced
-                    // to its first hit, for the emission there that MIS
-                    // weighs against the light sample.
-                    (Some(radiance), query) => {
-                        self.radiance[i] += radiance;
-                        deferred.extend(query.map(|query| Deferred {
-                            sample: i,
-                            query,
-                            first_hit_only: true,
-                        }));
-                    }
-                    (None, query) => deferred.extend(query.map(|query| Deferred {
-                        sample: i,
-                        query,
-                        first_hit_only: false,
-                    })),
                 }
-            } else if let Some(query) = glossy_query(surface, rng) {
-                deferred.push(Deferred {
-                    sample: i,
-                    query,
-                    first_hit_only: false,
-                });
+                _ => None,
+            };
+            let query = glossy_query(surface, rng);
+            // Where the sources hold what the lobe's path would gather past
+            // its first hit, the lobe's ray is still traced to its first
+            // hit, for the emission there that MIS weighs against the
+            // light sample.
+            if let Some(radiance) = cached {
+                self.radiance[i] += radiance;
             }
+            deferred.extend(query.map(|query| Deferred {
+                sample: i,
+                query,
+                first_hit_only: cached.is_some(),
+            }));
         }
         deferred
+    }
+
+    /// Sample `i` of a pixel kept whole (`irradiance`: its lookup's, as
+    /// [`TileLookups::of`] gives it): a plain material, so its diffuse lobe
+    /// alone, as [`Self::indirect_light`] adds it (a BSDF's diffuse albedo
+    /// is its material's `diffuse`), or where no record is usable its
+    /// path-traced fallback, returned.
+    fn whole_indirect(
+        &mut self,
+        ctx: &FrameContext,
+        i: usize,
+        irradiance: Option<&Option<Interpolated>>,
+        stats: &mut FrameStats,
+    ) -> Option<Deferred> {
+        let hit = &self.primary.hits[i];
+        match irradiance? {
+            Some(e) => {
+                self.radiance[i] += material_of(ctx, hit).diffuse * FRAC_1_PI * e.irradiance;
+                None
+            }
+            None => {
+                stats.fallback_lookups += 1;
+                let surface = Surface::at(ctx, &self.primary.rays[i], hit)
+                    .expect("a sample that looked the cache up hit something");
+                Some(Deferred::fallback(i, &surface, &mut self.primary.rngs[i]))
+            }
+        }
     }
 }
 
