@@ -575,33 +575,11 @@ impl TemporalRadianceCaching {
         use rayon::prelude::*;
         let t = ctx.frame;
         let candidates: Vec<Candidate> = expired.iter().map(|r| r.candidate).collect();
-        let known: Vec<Option<Vec<Option<RadianceResult>>>> = expired
-            .par_iter()
-            .map(|r| {
-                r.paths
-                    .as_deref()
-                    .and_then(|p| p.known(&motion.blockers, motion.lights))
-            })
-            .collect();
+        let (known, offered) = motion.known_paths(expired);
         // Each replacement traces again the rays of the record it replaces
         // that it cannot take.
-        let taken: usize = known
-            .iter()
-            .flatten()
-            .flatten()
-            .filter(|r| r.is_some())
-            .count();
-        // Paths kept under other lights count as offered and not taken.
-        let offered = paths::Offered {
-            taken,
-            paths: expired
-                .iter()
-                .filter_map(|r| r.paths.as_deref())
-                .map(KeptPaths::len)
-                .sum(),
-        };
         aged.stats.samples_reshot =
-            (candidates.len() * self.settings.ic.strata.count() - taken) as u64;
+            (candidates.len() * self.settings.ic.strata.count() - offered.taken) as u64;
         let track = |c: &Candidate| motion.tracks(c);
         let gathered: Vec<(Gathered, Option<GatherTracks>)> = self
             .ic
@@ -970,6 +948,38 @@ impl FrameMotion {
         self.track && !self.moving.get(c.object as usize).copied().unwrap_or(true)
     }
 
+    /// What the kept paths of the `expired` records give their
+    /// replacements (per record, per query, the result of each path that
+    /// nothing moving meets now: [`KeptPaths::known`]; `None` where the
+    /// record kept none or the lights moved), and how many paths were
+    /// offered and taken. Paths kept under other lights count as offered
+    /// and not taken.
+    fn known_paths(&self, expired: &[TemporalRecord]) -> (Vec<KnownResults>, paths::Offered) {
+        use rayon::prelude::*;
+        let known: Vec<KnownResults> = expired
+            .par_iter()
+            .map(|r| {
+                r.paths
+                    .as_deref()
+                    .and_then(|p| p.known(&self.blockers, self.lights))
+            })
+            .collect();
+        let offered = paths::Offered {
+            taken: known
+                .iter()
+                .flatten()
+                .flatten()
+                .filter(|r| r.is_some())
+                .count(),
+            paths: expired
+                .iter()
+                .filter_map(|r| r.paths.as_deref())
+                .map(KeptPaths::len)
+                .sum(),
+        };
+        (known, offered)
+    }
+
     /// The paths of gather `g` to keep: `tracks` of those it traced
     /// (`None`: taken from `taken_from`).
     fn paths(
@@ -981,6 +991,10 @@ impl FrameMotion {
         KeptPaths::of(&g.results, tracks, taken_from, &self.blockers, self.lights)
     }
 }
+
+/// Per query of a replacement's gather, the result its record's kept path
+/// gives (`None`: traced again); `None` for a replacement given none.
+type KnownResults = Option<Vec<Option<RadianceResult>>>;
 
 /// Above this share of gather rays that hit the back of a surface, a
 /// replacement's point is taken to lie inside an object (see
