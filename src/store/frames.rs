@@ -124,6 +124,41 @@ struct LoggedFrame {
     samples_raw: u64,
 }
 
+/// Everything one frame's transaction writes, encoded before it starts
+/// (sled may run a transaction's closure more than once).
+struct FrameRows {
+    /// The frame's key in the per-frame trees.
+    key: [u8; 12],
+    /// Whether the frame was written before: the per-frame rows it now
+    /// writes none of are removed.
+    again: bool,
+    state: StateRows,
+    state_head_key: [u8; 8],
+    records: Option<Vec<u8>>,
+    movies: Option<Vec<u8>>,
+    sources: Option<Vec<u8>>,
+    /// The sample log's new committed length.
+    log_len: [u8; 8],
+    stats: Vec<u8>,
+    frame: Vec<u8>,
+    job_key: Vec<u8>,
+    job: Vec<u8>,
+}
+
+impl FrameRows {
+    /// Bytes of the values written to the trees but the stats (which
+    /// count them: [`StatsValue::stored_bytes`]).
+    fn tree_bytes(&self) -> usize {
+        [&self.records, &self.movies, &self.sources, &self.state.head]
+            .into_iter()
+            .flatten()
+            .chain(self.state.put.iter().map(|(_, v)| v))
+            .chain([&self.frame, &self.job])
+            .map(Vec::len)
+            .sum()
+    }
+}
+
 /// A frame's changes of the `state` tree, encoded: rows put, rows removed
 /// and the new head.
 #[derive(Default)]
@@ -208,50 +243,58 @@ impl Store {
         Ok(())
     }
 
+    /// Appends the frame's bulk values to the sample log, then writes its
+    /// rows and the job's progress in one transaction; returns the
+    /// progress.
     fn commit_frame_locked(
         &self,
         log: &mut SampleLog,
         job: &JobValue,
         c: FrameCommit,
     ) -> Result<JobValue, StoreError> {
-        let frame_key = keys::frame(job.id, c.frame);
         // A frame written again (by another chain of a stateful method)
         // replaces the record block, movies and sources of its former self
         // (or, writing none, removes them).
-        let already = self.frame_done(job.id, c.frame)?;
+        let again = self.frame_done(job.id, c.frame)?;
         let log_start = log.end();
         let logged =
             self.append_frame(log, job.id, c.frame, (c.width, c.height), c.exr, c.records)?;
-        let log_len = log.end().to_be_bytes();
-        let state = c
-            .state
-            .as_ref()
-            .map(|sc| StateRows::new(job.id, c.frame, sc))
-            .unwrap_or_default();
-        let state_head_key = keys::state_head(job.id);
         let mut progressed = job.clone();
-        if !already {
+        if !again {
             progressed.frames_done += 1;
         }
         progressed.last_frame = Some(c.frame);
         progressed.updated_unix = now_unix();
-        let movies_bytes = c.movies.map(encode);
-        let sources_bytes = c.sources.map(encode);
-        let frame_bytes = encode(&logged.frame);
-        let job_bytes = encode(&progressed);
-        let tree_values = [&logged.records, &movies_bytes, &sources_bytes, &state.head]
-            .into_iter()
-            .flatten()
-            .chain(state.put.iter().map(|(_, v)| v))
-            .chain([&frame_bytes, &job_bytes])
-            .map(Vec::len)
-            .sum::<usize>();
-        let stats_bytes = encode(&StatsValue {
+        let mut rows = FrameRows {
+            key: keys::frame(job.id, c.frame),
+            again,
+            state: c
+                .state
+                .as_ref()
+                .map(|sc| StateRows::new(job.id, c.frame, sc))
+                .unwrap_or_default(),
+            state_head_key: keys::state_head(job.id),
+            records: logged.records,
+            movies: c.movies.map(encode),
+            sources: c.sources.map(encode),
+            log_len: log.end().to_be_bytes(),
+            stats: Vec::new(),
+            frame: encode(&logged.frame),
+            job_key: keys::job(&job.name),
+            job: encode(&progressed),
+        };
+        rows.stats = encode(&StatsValue {
             stats: c.stats.clone(),
             samples_raw_bytes: logged.samples_raw,
-            stored_bytes: log.end() - log_start + tree_values as u64,
+            stored_bytes: log.end() - log_start + rows.tree_bytes() as u64,
         });
-        let job_key = keys::job(&job.name);
+        self.write_frame_rows(&rows)?;
+        Ok(progressed)
+    }
+
+    /// Writes `rows` in one sled transaction over the trees they touch.
+    fn write_frame_rows(&self, rows: &FrameRows) -> Result<(), StoreError> {
+        let key = &rows.key[..];
         let result: Result<(), TransactionError<()>> = (
             &self.frames,
             &self.records,
@@ -264,45 +307,44 @@ impl Store {
         )
             .transaction(
                 |(frames, records, meta, stats, state_tree, jobs, movies, sources)| {
-                    for k in &state.removed {
+                    for k in &rows.state.removed {
                         state_tree.remove(&k[..])?;
                     }
-                    for (k, v) in &state.put {
+                    for (k, v) in &rows.state.put {
                         state_tree.insert(&k[..], &v[..])?;
                     }
-                    if let Some(head) = &state.head {
-                        state_tree.insert(&state_head_key[..], &head[..])?;
+                    if let Some(head) = &rows.state.head {
+                        state_tree.insert(&rows.state_head_key[..], &head[..])?;
                     }
                     // A frame written again replaces its former value in
                     // each, or removes it where it writes none.
                     let per_frame = [
-                        (records, &logged.records),
-                        (movies, &movies_bytes),
-                        (sources, &sources_bytes),
+                        (records, &rows.records),
+                        (movies, &rows.movies),
+                        (sources, &rows.sources),
                     ];
                     for (tree, value) in per_frame {
                         match value {
                             Some(v) => {
-                                tree.insert(&frame_key[..], &v[..])?;
+                                tree.insert(key, &v[..])?;
                             }
-                            None if already => {
-                                tree.remove(&frame_key[..])?;
+                            None if rows.again => {
+                                tree.remove(key)?;
                             }
                             None => {}
                         }
                     }
-                    meta.insert(keys::META_SAMPLES_LOG_LEN, &log_len[..])?;
-                    stats.insert(&frame_key[..], &stats_bytes[..])?;
-                    frames.insert(&frame_key[..], &frame_bytes[..])?;
-                    jobs.insert(&job_key[..], &job_bytes[..])?;
+                    meta.insert(keys::META_SAMPLES_LOG_LEN, &rows.log_len[..])?;
+                    stats.insert(key, &rows.stats[..])?;
+                    frames.insert(key, &rows.frame[..])?;
+                    jobs.insert(&rows.job_key[..], &rows.job[..])?;
                     Ok::<(), ConflictableTransactionError<()>>(())
                 },
             );
         result.map_err(|e| match e {
             TransactionError::Storage(s) => StoreError::sled(&self.path, s),
             TransactionError::Abort(()) => unreachable!("the transaction never aborts"),
-        })?;
-        Ok(progressed)
+        })
     }
 
     /// Appends frame `frame`'s bulk values to the sample log and syncs it:
