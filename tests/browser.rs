@@ -84,6 +84,16 @@ fn dashboard_works_behind_a_token() {
     check_dashboard(Some("tok/en +1"), false);
 }
 
+/// The `d` of the chart path of series `name` in the dumped DOM.
+fn series_path<'a>(dom: &'a str, name: &str) -> &'a str {
+    let tag = dom
+        .split("<path ")
+        .find(|tag| tag.contains(&format!("data-series=\"{name}\"")))
+        .unwrap_or_else(|| panic!("no chart path of {name}:\n{dom}"));
+    let d = tag.split(" d=\"").nth(1).expect("a path with d");
+    &d[..d.find('"').expect("a quoted d")]
+}
+
 /// Renders a tiny job and checks the dashboard for it in Chromium; keeps a
 /// screenshot when `screenshot`.
 fn check_dashboard(token: Option<&str>, screenshot: bool) {
@@ -163,6 +173,25 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
     let paths = dom.matches("class=\"series\"").count();
     assert!(paths >= 12, "{paths} chart paths:\n{dom}");
     assert!(has("samples re-shot"), "{dom}");
+    // The mean lifespan: a point for each frame that computed records,
+    // none (a gap, not a zero) for the others.
+    let (_, stats) = http(
+        &server.addr,
+        "GET",
+        &with_q(&format!("/api/jobs/{id}/stats")),
+        "",
+    );
+    let stats: serde_json::Value = serde_json::from_str(&stats).unwrap();
+    let computing = stats["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|f| f["mean_lifespan"].as_f64().unwrap() > 0.0)
+        .count();
+    assert!(computing > 0, "no frame computed records: {stats}");
+    let lifespan = series_path(&dom, "mean lifespan");
+    let points = lifespan.matches(['M', 'L']).count();
+    assert_eq!(points, computing, "lifespan path {lifespan:?} against {stats}");
     // The record overlay: one dot per record alive in the last frame.
     let dots = dom.matches("class=\"record\"").count();
     let (_, records) = http(

@@ -352,7 +352,9 @@ function drawCharts() {
     series('dropped', '#c62828', (r) => r.records_dropped),
   ], (v) => String(Math.round(v)));
   lineChart($('chart-reshot'), [series('samples re-shot', '#ef6c00', (r) => r.samples_reshot || 0)], (v) => String(Math.round(v)));
-  lineChart($('chart-lifespan'), [series('mean lifespan', '#2e7d32', (r) => r.mean_lifespan || 0)], (v) => v.toFixed(1));
+  // A frame that computed no record has no mean lifespan (the stats say 0):
+  // a gap in the line, not a fall to zero.
+  lineChart($('chart-lifespan'), [series('mean lifespan', '#2e7d32', (r) => r.mean_lifespan || null)], (v) => v.toFixed(1));
   lineChart($('chart-time'), [series('seconds', '#6a1b9a', (r) => r.seconds)], (v) => `${v.toPrecision(2)} s`);
   lineChart($('chart-bytes'), [
     series('cache (memory)', '#1565c0', (r) => r.cache_bytes || 0),
@@ -363,12 +365,12 @@ function drawCharts() {
 }
 
 // A line chart drawn by hand into an <svg>: axes, min/max labels, one path
-// per series, a legend.
+// per series, a legend. A point whose value is null is a gap in its line.
 function lineChart(svg, series, fmt) {
   const W = 480, H = 170, L = 56, R = 8, T = 22, B = 22;
   svg.setAttribute('viewBox', `0 0 ${W} ${H}`);
   svg.replaceChildren();
-  const pts = series.flatMap((s) => s.points);
+  const pts = series.flatMap((s) => s.points).filter((p) => p[1] != null);
   if (pts.length === 0) {
     svg.append(svgEl('text', { x: W / 2, y: H / 2, 'text-anchor': 'middle' }, 'no frames yet'));
     return;
@@ -391,11 +393,20 @@ function lineChart(svg, series, fmt) {
   let lx = L + 4;
   for (const s of series) {
     if (s.points.length === 0) continue;
-    const d = s.points.map((p, i) => `${i ? 'L' : 'M'}${sx(p[0]).toFixed(1)},${sy(p[1]).toFixed(1)}`).join('');
+    // Each run of points between gaps is a subpath; a lone point is a dot
+    // (a zero-length segment with a round cap).
+    let d = '', pen = false, dots = 0;
+    s.points.forEach(([x, y], i) => {
+      if (y == null) { pen = false; return; }
+      const lone = !pen && (i + 1 === s.points.length || s.points[i + 1][1] == null);
+      d += `${pen ? 'L' : 'M'}${sx(x).toFixed(1)},${sy(y).toFixed(1)}${lone ? 'l0,0' : ''}`;
+      pen = true;
+      if (lone) dots += 1;
+    });
     const path = svgEl('path', { class: 'series', d, stroke: s.colour, 'data-series': s.name });
     // Dashed where it may lie on another series (ic creates every record alive).
     if (s.dash) path.setAttribute('stroke-dasharray', s.dash);
-    if (s.points.length === 1) path.setAttribute('stroke-linecap', 'round');
+    if (dots > 0) path.setAttribute('stroke-linecap', 'round');
     if (s.points.length === 1) path.setAttribute('stroke-width', '5');
     svg.append(path);
     const label = svgEl('text', { x: lx, y: 12, fill: s.colour }, s.name);
