@@ -370,12 +370,14 @@ function lineChart(svg, series, fmt) {
   const W = 480, H = 170, L = 56, R = 8, T = 22, B = 22;
   svg.setAttribute('viewBox', `0 0 ${W} ${H}`);
   svg.replaceChildren();
-  const pts = series.flatMap((s) => s.points).filter((p) => p[1] != null);
+  // The frames span every point; the values only those that have one.
+  const frames = series.flatMap((s) => s.points);
+  const pts = frames.filter((p) => p[1] != null);
   if (pts.length === 0) {
     svg.append(svgEl('text', { x: W / 2, y: H / 2, 'text-anchor': 'middle' }, 'no frames yet'));
     return;
   }
-  let x0 = Math.min(...pts.map((p) => p[0])), x1 = Math.max(...pts.map((p) => p[0]));
+  let x0 = Math.min(...frames.map((p) => p[0])), x1 = Math.max(...frames.map((p) => p[0]));
   let y1 = Math.max(...pts.map((p) => p[1]));
   const y0 = 0;
   if (x1 === x0) { x0 -= 0.5; x1 += 0.5; }
@@ -393,22 +395,23 @@ function lineChart(svg, series, fmt) {
   let lx = L + 4;
   for (const s of series) {
     if (s.points.length === 0) continue;
-    // Each run of points between gaps is a subpath; a lone point is a dot
-    // (a zero-length segment with a round cap).
-    let d = '', pen = false, dots = 0;
+    // Each run of points between gaps is a subpath; a lone point, which
+    // draws no line, also gets a dot.
+    let d = '', pen = false;
+    const dots = [];
     s.points.forEach(([x, y], i) => {
       if (y == null) { pen = false; return; }
-      const lone = !pen && (i + 1 === s.points.length || s.points[i + 1][1] == null);
-      d += `${pen ? 'L' : 'M'}${sx(x).toFixed(1)},${sy(y).toFixed(1)}${lone ? 'l0,0' : ''}`;
+      if (!pen && (i + 1 === s.points.length || s.points[i + 1][1] == null)) dots.push([x, y]);
+      d += `${pen ? 'L' : 'M'}${sx(x).toFixed(1)},${sy(y).toFixed(1)}`;
       pen = true;
-      if (lone) dots += 1;
     });
     const path = svgEl('path', { class: 'series', d, stroke: s.colour, 'data-series': s.name });
     // Dashed where it may lie on another series (ic creates every record alive).
     if (s.dash) path.setAttribute('stroke-dasharray', s.dash);
-    if (dots > 0) path.setAttribute('stroke-linecap', 'round');
-    if (s.points.length === 1) path.setAttribute('stroke-width', '5');
     svg.append(path);
+    for (const [x, y] of dots) {
+      svg.append(svgEl('circle', { class: 'dot', cx: sx(x).toFixed(1), cy: sy(y).toFixed(1), r: 3, fill: s.colour }));
+    }
     const label = svgEl('text', { x: lx, y: 12, fill: s.colour }, s.name);
     label.style.fill = s.colour;
     svg.append(label);
