@@ -191,7 +191,10 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
     assert!(computing > 0, "no frame computed records: {stats}");
     let lifespan = series_path(&dom, "mean lifespan");
     let points = lifespan.matches(['M', 'L']).count();
-    assert_eq!(points, computing, "lifespan path {lifespan:?} against {stats}");
+    assert_eq!(
+        points, computing,
+        "lifespan path {lifespan:?} against {stats}"
+    );
     // The record overlay: one dot per record alive in the last frame.
     let dots = dom.matches("class=\"record\"").count();
     let (_, records) = http(

@@ -37,9 +37,10 @@
 //!
 //! Everything spatial — candidates, gathering, weights, gradients,
 //! neighbour clamping, direct light, glossy lobes — is `ic`'s code.
-//! Here are the temporal parts; the E(t0+1) estimate by reprojection is
-//! the submodule `estimate`, and the encoding of the carried state for the
-//! store the submodule `state`.
+//! Here are the temporal parts: a record's life (the temporal weight and
+//! gradients) in the submodule `record`, the E(t0+1) estimate by
+//! reprojection in `estimate`, the paths a replacement takes in `paths`,
+//! and the encoding of the carried state for the store in `state`.
 //!
 //! # The E(t0+1) estimate, measured (TRC Table 1)
 //! On cube-in-box (24×24, 6 fps, frames 5 and 20, 276 records at 3ff86cf;
@@ -80,8 +81,11 @@ mod direct;
 mod estimate;
 pub mod estimate_error;
 mod paths;
+mod record;
 mod state;
 
+use record::{frames_of_validity, relative_change, sources_change};
+pub use record::{Successor, TemporalRecord};
 pub use state::{downgrade_to_schema_6_record, sources_in, upgrade_schema_6_record};
 
 use super::carried;
@@ -96,9 +100,9 @@ use super::{
     mean_lifespan, FrameContext, FrameRecords, FrameStats, Method, MethodState, StateChanges,
     StateError, RENDER_PHASE,
 };
-use crate::cache::eas::{self, Eas};
+use crate::cache::eas;
 use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance};
-use crate::cache::{IrradianceCache, IrradianceRecord, RecordId};
+use crate::cache::{IrradianceCache, RecordId};
 use crate::film::Film;
 use crate::integrator::RadianceResult;
 use crate::store::SampleBlock;
@@ -125,31 +129,6 @@ pub enum TemporalGradients {
     /// or whose replacement lies beyond the last frame rendered, falls back
     /// to its extrapolated gradients.
     Interpolated,
-}
-
-/// The record l that replaced K at K's point (TRC §4.4), as far as K's
-/// interpolated temporal gradients (Eq. 18–20) need it.
-#[derive(Clone, Debug)]
-pub struct Successor {
-    /// `t_l`, the frame l was gathered in (K's last frame is `t_l − 1`).
-    pub frame: u32,
-    pub id: RecordId,
-    pub irradiance: Vec3,
-    pub grad_rotation: [Vec3; 3],
-    pub grad_translation: [Vec3; 3],
-}
-
-impl Successor {
-    /// New record `l` as its predecessor's successor.
-    fn of(l: &TemporalRecord) -> Self {
-        Successor {
-            frame: l.record.created_frame,
-            id: l.record.id,
-            irradiance: l.record.irradiance,
-            grad_rotation: l.record.grad_rotation,
-            grad_translation: l.record.grad_translation,
-        }
-    }
 }
 
 /// Settings of `trc`, with their sources.
@@ -199,131 +178,6 @@ impl Default for TrcSettings {
             next_direct: false,
             keep_paths: true,
         }
-    }
-}
-
-/// A record with its life (TRC §4.4–4.5).
-#[derive(Clone, Debug)]
-pub struct TemporalRecord {
-    /// The record as gathered at `t0 = record.created_frame` (its radius as
-    /// clamped by the latest cache it was in).
-    pub record: IrradianceRecord,
-    /// Where it was gathered (kept for replacement at the same point).
-    pub(crate) candidate: Candidate,
-    /// Estimate of `E(t0+1)` (§4.7).
-    pub next_irradiance: Vec3,
-    /// Worst channel of `|τ − 1|`, `τ = E(t0+1)/E(t0)` (Eq. 7, 9).
-    pub change: f32,
-    /// Last frame K may contribute to (Eq. 10 and 11).
-    pub last_valid: u32,
-    /// Extrapolated temporal gradients ∇t_E, ∇t_∇r, ∇t_∇p (Eq. 15–17).
-    pub d_irradiance: Vec3,
-    pub d_grad_rotation: [Vec3; 3],
-    pub d_grad_translation: [Vec3; 3],
-    /// A radiance record's (`--ic-glossy eas`) extrapolated temporal
-    /// gradient of each of its sources' irradiance, in the order of
-    /// `record.eas` (§4.6.2: each coefficient's own Eq. 15).
-    pub d_eas: Option<Arc<[Vec3]>>,
-    /// The record this one replaced at the same point, if any.
-    pub replaces: Option<RecordId>,
-    /// Whether a pixel sample used K in the last rendered frame.
-    pub used: bool,
-    /// The paths of K's gather that nothing moving met, for its
-    /// replacement to take ([`paths`]; in memory only).
-    pub(crate) paths: Option<Arc<KeptPaths>>,
-}
-
-impl TemporalRecord {
-    /// Takes the radius neighbour clamping left in the frame's cache and
-    /// whether a pixel used the record; returns whether either changed
-    /// (its carried state must then be written again).
-    fn sync(&mut self, radius: f32, used: bool) -> bool {
-        let changed = self.record.radius.to_bits() != radius.to_bits() || self.used != used;
-        self.record.radius = radius;
-        self.used = used;
-        changed
-    }
-
-    /// Bytes it holds apart from its sources (which the frame's cache
-    /// counts): itself and its sources' temporal gradients.
-    fn memory_bytes(&self) -> usize {
-        std::mem::size_of::<Self>()
-            + self.d_eas.as_deref().map_or(0, std::mem::size_of_val)
-            + self.paths.as_deref().map_or(0, KeptPaths::memory_bytes)
-    }
-
-    /// TRC Eq. 14: the record as it is used at frame `t` (temporal
-    /// gradients applied to E and to both spatial gradients): extrapolated
-    /// (Eq. 15–17), or interpolated towards its replacement `successor`
-    /// (Eq. 18–20) when the gradients are interpolated and it is known.
-    fn at_frame(
-        &self,
-        t: u32,
-        gradients: TemporalGradients,
-        successor: Option<&Successor>,
-    ) -> IrradianceRecord {
-        let mut r = self.record.clone();
-        let t0 = r.created_frame;
-        let (d_e, d_r, d_p) = match (gradients, successor) {
-            (TemporalGradients::None, _) => return r,
-            (TemporalGradients::Interpolated, Some(l)) if l.frame > t0 => {
-                // Eq. 18–20: (X(t_l) − X(t_K)) / (t_l − t_K).
-                let span = (l.frame - t0) as f32;
-                let d = |a: [Vec3; 3], b: [Vec3; 3]| {
-                    [
-                        (a[0] - b[0]) / span,
-                        (a[1] - b[1]) / span,
-                        (a[2] - b[2]) / span,
-                    ]
-                };
-                (
-                    (l.irradiance - r.irradiance) / span,
-                    d(l.grad_rotation, r.grad_rotation),
-                    d(l.grad_translation, r.grad_translation),
-                )
-            }
-            _ => (
-                self.d_irradiance,
-                self.d_grad_rotation,
-                self.d_grad_translation,
-            ),
-        };
-        let dt = t.saturating_sub(t0) as f32;
-        r.irradiance = (r.irradiance + d_e * dt).max(Vec3::ZERO);
-        for c in 0..3 {
-            r.grad_rotation[c] += d_r[c] * dt;
-            r.grad_translation[c] += d_p[c] * dt;
-        }
-        // A radiance record's sources follow their extrapolated gradients
-        // with either kind of gradients: its replacement keeps another cut
-        // of its own tree, so Eq. 18–20 have no source of l to pair with
-        // each source of K.
-        if let (Some(sources), Some(d)) = (&r.eas, &self.d_eas) {
-            if dt > 0.0 {
-                r.eas = Some(
-                    sources
-                        .iter()
-                        .zip(d.iter())
-                        .map(|(s, d)| Eas {
-                            irradiance: (s.irradiance + *d * dt).max(Vec3::ZERO),
-                            ..*s
-                        })
-                        .collect(),
-                );
-            }
-        }
-        r
-    }
-
-    /// TRC Eq. 9–11: `w_t(t) = 1/((τ−1)(t−t0)) ≥ 1/a^t` and `t − t0 < δt_max`.
-    pub fn is_valid_at(&self, t: u32) -> bool {
-        t >= self.record.created_frame && t <= self.last_valid
-    }
-
-    /// Frames K may contribute to (Eq. 10–11): `last_valid − t0 + 1`, from 1
-    /// to `δt_max`.
-    pub fn lifespan(&self) -> u32 {
-        self.last_valid + 1 - self.record.created_frame
     }
 }
 
@@ -1049,114 +903,5 @@ fn keep_for_store(kept: &mut FrameRecords, r: &TemporalRecord, new: bool, change
     if new || changed {
         let put = &mut kept.state.as_mut().expect("a temporal frame's state").put;
         put.push((r.record.id, state::encode_record(r)));
-    }
-}
-
-/// `|τ − 1|` of TRC Eq. 7, `τ = E(t0+1)/E(t0)` per channel: the worst
-/// channel decides. A channel dark at t0 that lights up is an infinite
-/// change; one dark at both is none.
-fn relative_change(e0: Vec3, e1: Vec3) -> f32 {
-    (0..3)
-        .map(|c| {
-            let (a, b) = (e0[c], e1[c]);
-            if a > 0.0 {
-                (b / a - 1.0).abs()
-            } else if b > 0.0 {
-                f32::INFINITY
-            } else {
-                0.0
-            }
-        })
-        .fold(0.0f32, f32::max)
-}
-
-/// TRC Eq. 21 over a radiance record's sources: the largest `|τ − 1|` of
-/// any source (each channel as in [`relative_change`]), given each
-/// source's change `d_eas` to the next frame; 0 for an irradiance record.
-/// The record's irradiance keeps its own Eq. 7 besides: the diffuse part
-/// of a glossy surface interpolates it.
-fn sources_change(record: &IrradianceRecord, d_eas: Option<&[Vec3]>) -> f32 {
-    let (Some(sources), Some(d)) = (&record.eas, d_eas) else {
-        return 0.0;
-    };
-    sources
-        .iter()
-        .zip(d)
-        .map(|(s, d)| relative_change(s.irradiance, s.irradiance + *d))
-        .fold(0.0f32, f32::max)
-}
-
-/// How many frames after t0 a record whose irradiance changes by `change`
-/// a frame stays valid. Eq. 9–10: `1/(|τ−1|(t−t0)) ≥ 1/a^t ⇔ t − t0 ≤
-/// a^t/|τ−1|`; Eq. 11: `t − t0 < δt_max`.
-fn frames_of_validity(change: f32, temporal_accuracy: f32, max_life: u32) -> u32 {
-    let max_age = max_life.max(1) - 1;
-    if change <= 0.0 {
-        return max_age;
-    }
-    let a = (temporal_accuracy / change).floor();
-    if a.is_finite() {
-        (a as u32).min(max_age)
-    } else {
-        max_age
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The worst channel decides; a channel that lights up from black is an
-    /// infinite change, one black at both frames none.
-    #[test]
-    fn relative_change_is_the_worst_channel() {
-        let e0 = Vec3::new(1.0, 2.0, 0.0);
-        assert!((relative_change(e0, Vec3::new(1.01, 1.9, 0.0)) - 0.05).abs() < 1e-6);
-        assert_eq!(relative_change(e0, e0), 0.0);
-        assert_eq!(relative_change(e0, Vec3::new(1.0, 2.0, 0.1)), f32::INFINITY);
-    }
-
-    /// Eq. 21 over a radiance record's sources: light moving from one
-    /// source to another leaves the irradiance as it was, but not the
-    /// sources; the worst source decides. An irradiance record has none.
-    #[test]
-    fn sources_change_is_the_worst_source() {
-        let source = |node, e: f32| Eas {
-            offset: Vec3::Y,
-            solid_angle: 0.1,
-            irradiance: Vec3::splat(e),
-            node,
-        };
-        let mut record = IrradianceRecord {
-            id: 0,
-            position: Vec3::ZERO,
-            normal: Vec3::Y,
-            irradiance: Vec3::splat(3.0),
-            grad_translation: [Vec3::ZERO; 3],
-            grad_rotation: [Vec3::ZERO; 3],
-            radius: 1.0,
-            created_frame: 0,
-            object: 0,
-            eas: Some(vec![source(1, 1.0), source(2, 2.0)].into()),
-        };
-        // 0.1 moves from the second source to the first.
-        let d = [Vec3::splat(0.1), Vec3::splat(-0.1)];
-        assert_eq!(relative_change(Vec3::splat(3.0), Vec3::splat(3.0)), 0.0);
-        assert!((sources_change(&record, Some(&d)) - 0.1).abs() < 1e-6);
-        assert_eq!(sources_change(&record, None), 0.0);
-        record.eas = None;
-        assert_eq!(sources_change(&record, Some(&d)), 0.0);
-    }
-
-    /// Eq. 9–11 with `a^t = 0.05`, `δt_max = 20`: 1 % a frame stays valid 5
-    /// frames after t0, 6 % none, and no change at most 19 (t − t0 < 20).
-    #[test]
-    fn validity_follows_the_temporal_weight_and_the_lifespan_bound() {
-        assert_eq!(frames_of_validity(0.01, 0.05, 20), 5);
-        assert_eq!(frames_of_validity(0.06, 0.05, 20), 0);
-        assert_eq!(frames_of_validity(0.0, 0.05, 20), 19);
-        assert_eq!(frames_of_validity(0.001, 0.05, 20), 19);
-        assert_eq!(frames_of_validity(f32::INFINITY, 0.05, 20), 0);
-        assert_eq!(frames_of_validity(0.0, 0.05, 1), 0);
     }
 }
