@@ -984,6 +984,29 @@ fn bench_charts_come_from_the_bench_directory_when_given() {
             .count();
         assert!(runs >= 3, "{runs} trc runs with {setting} in\n{csv}");
     }
+    // Every method is charted where things move too.
+    for scene in ["moving-light", "spheres"] {
+        let name = format!("{scene}_error_vs_time.svg");
+        assert!(
+            charts.as_array().unwrap().iter().any(|c| c["name"] == name),
+            "no {name} in {charts}"
+        );
+        let (status, csv) = http(
+            &server,
+            "GET",
+            &format!("/web/charts/{scene}_bench.csv"),
+            "",
+        );
+        assert_eq!(status, 200);
+        let csv = String::from_utf8_lossy(&csv);
+        for method in ["path", "ic", "trc", "tcg", "movies"] {
+            let row = format!("{scene},{method},");
+            assert!(
+                csv.lines().any(|l| l.starts_with(&row)),
+                "no {row} in\n{csv}"
+            );
+        }
+    }
     drop(server);
 
     let bench = dir.path().join("bench-out");

@@ -43,9 +43,11 @@ const SVG: &str = "image/svg+xml";
 const CSV: &str = "text/csv; charset=utf-8";
 
 /// The bench charts in `web/charts/` (README "Benchmarking"): methods
-/// against `path` on cube-in-box (128×128, 24 frames, `spp` sweeps), and
-/// `trc` against `ic` over 400 frames (64×64, sweeps of `a_t` and `δt_max`).
-const CHARTS: [(&str, &str, &str); 10] = [
+/// against `path` on cube-in-box (128×128, 24 frames, `spp` sweeps), `trc`
+/// against `ic` over 400 frames (64×64, sweeps of `a_t` and `δt_max`), and
+/// every method at the bench's default sweeps under a moving light and
+/// among moving balls (64×64, 24 frames).
+const CHARTS: [(&str, &str, &str); 16] = [
     chart!("cube-in-box_error_vs_time.svg", SVG),
     chart!("cube-in-box_surface_error_vs_time.svg", SVG),
     chart!("cube-in-box_flicker_vs_time.svg", SVG),
@@ -56,6 +58,12 @@ const CHARTS: [(&str, &str, &str); 10] = [
     chart!("cube-in-box-400-frames_flicker_vs_time.svg", SVG),
     chart!("cube-in-box-400-frames_surface_flicker_vs_time.svg", SVG),
     chart!("cube-in-box-400-frames_bench.csv", CSV),
+    chart!("moving-light_error_vs_time.svg", SVG),
+    chart!("moving-light_flicker_vs_time.svg", SVG),
+    chart!("moving-light_bench.csv", CSV),
+    chart!("spheres_error_vs_time.svg", SVG),
+    chart!("spheres_flicker_vs_time.svg", SVG),
+    chart!("spheres_bench.csv", CSV),
 ];
 
 /// The page. With a token, the request that got here carried it (the
