@@ -1,6 +1,6 @@
 //! The methods `radcache bench --methods` accepts, and how a
-//! specification (`NAME`, `NAME:KEY=V1,V2,…` or `NAME:KEY=V:KEY=V1,V2,…`) becomes their settings
-//! ([`crate::method::settings`]).
+//! specification (`NAME`, `NAME:KEY=V1,V2,…` or `NAME:KEY=V:KEY=V1,V2,…`)
+//! becomes their settings ([`crate::method::settings`]).
 
 pub use crate::method::settings::{method_settings, MethodError, MethodInfo, METHODS};
 use crate::render::MethodSettings;
