@@ -175,13 +175,11 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
     assert!(has("samples re-shot"), "{dom}");
     // The mean lifespan: a point for each frame that computed records,
     // none (a gap, not a zero) for the others.
-    let (_, stats) = http(
-        &server.addr,
-        "GET",
-        &with_q(&format!("/api/jobs/{id}/stats")),
-        "",
-    );
-    let stats: serde_json::Value = serde_json::from_str(&stats).unwrap();
+    let get_json = |path: &str| -> serde_json::Value {
+        let (_, body) = http(&server.addr, "GET", &with_q(path), "");
+        serde_json::from_str(&body).unwrap_or_else(|e| panic!("{path}: {e}: {body}"))
+    };
+    let stats = get_json(&format!("/api/jobs/{id}/stats"));
     let computing = stats["frames"]
         .as_array()
         .unwrap()
@@ -197,13 +195,7 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
     );
     // The record overlay: one dot per record alive in the last frame.
     let dots = dom.matches("class=\"record\"").count();
-    let (_, records) = http(
-        &server.addr,
-        "GET",
-        &with_q(&format!("/api/jobs/{id}/records?frame=2")),
-        "",
-    );
-    let records: serde_json::Value = serde_json::from_str(&records).unwrap();
+    let records = get_json(&format!("/api/jobs/{id}/records?frame=2"));
     let in_view = in_view(&records["records"], 16.0);
     assert!(in_view > 0, "no records to show: {records}");
     assert_eq!(dots, in_view, "overlay dots vs records in view");

@@ -37,7 +37,6 @@ impl MethodSweep {
             fixed: Vec::new(),
             swept: None,
         };
-        let mut keys: Vec<String> = Vec::new();
         for part in parts {
             let (key, values) = part
                 .split_once('=')
@@ -46,10 +45,9 @@ impl MethodSweep {
             if key.is_empty() {
                 return Err(bad("no setting name before '='"));
             }
-            if keys.iter().any(|k| k == key) {
+            if sweep.changes(key) {
                 return Err(bad(&format!("setting {key} given twice")));
             }
-            keys.push(key.into());
             let values: Vec<String> = values.split(',').map(|v| v.trim().to_string()).collect();
             if values.iter().any(String::is_empty) {
                 return Err(bad("empty value in the list"));
@@ -66,6 +64,12 @@ impl MethodSweep {
             run.settings()?;
         }
         Ok(sweep)
+    }
+
+    /// Whether the sweep changes setting `key`, fixed or swept.
+    fn changes(&self, key: &str) -> bool {
+        self.fixed.iter().any(|(k, _)| k == key)
+            || self.swept.as_ref().is_some_and(|(k, _)| k == key)
     }
 
     /// The runs of the sweep, in the order of the swept values.

@@ -139,6 +139,8 @@ struct FrameRows {
     sources: Option<Vec<u8>>,
     /// The sample log's new committed length.
     log_len: [u8; 8],
+    /// Encoded last: it counts the bytes of the others
+    /// ([`FrameRows::tree_bytes`]).
     stats: Vec<u8>,
     frame: Vec<u8>,
     job_key: Vec<u8>,
@@ -278,7 +280,7 @@ impl Store {
             movies: c.movies.map(encode),
             sources: c.sources.map(encode),
             log_len: log.end().to_be_bytes(),
-            stats: Vec::new(),
+            stats: Vec::new(), // below, once the others are encoded
             frame: encode(&logged.frame),
             job_key: keys::job(&job.name),
             job: encode(&progressed),
