@@ -345,7 +345,18 @@ impl TemporalRadianceCaching {
     /// cache and its records in cache order (new ones not numbered yet).
     fn age_and_fill(&mut self, ctx: &FrameContext) -> (IrradianceCache, Aged) {
         let start = Instant::now();
-        let next = NextFrame::new(ctx, self.settings.next_direct, &mut self.statics);
+        let making = RecordMaking {
+            ctx,
+            next: NextFrame::new(ctx, self.settings.next_direct, &mut self.statics),
+            packer: SamplePacker::new(self.keep, ctx),
+            motion: FrameMotion {
+                blockers: Blockers::new(ctx),
+                lights: lights_fingerprint(ctx),
+                track: self.settings.keep_paths
+                    && self.paths_pay.track(ctx.frame, self.settings.max_life),
+                moving: dynamic_objects(ctx),
+            },
+        };
         let (min, max) = scene_bounds(ctx);
         let mut cache = IrradianceCache::new(min, max, self.settings.ic.accuracy);
         let mut aged = Aged {
@@ -358,24 +369,14 @@ impl TemporalRadianceCaching {
             samples: Vec::new(),
             paths_bytes: 0,
         };
-        let packer = SamplePacker::new(self.keep, ctx);
-        let motion = FrameMotion {
-            blockers: Blockers::new(ctx),
-            lights: lights_fingerprint(ctx),
-            track: self.settings.keep_paths
-                && self.paths_pay.track(ctx.frame, self.settings.max_life),
-            moving: dynamic_objects(ctx),
-        };
         let expired = self.age(ctx.frame, &mut cache, &mut aged);
-        let offered = self.replace(
-            ctx, &next, &packer, &motion, &expired, &mut cache, &mut aged,
-        );
+        let offered = self.replace(&making, &expired, &mut cache, &mut aged);
         self.paths_pay.measure(offered);
         let phases = &mut aged.stats.phase_seconds;
         phases.push(("age".into(), start.elapsed().as_secs_f64()));
 
         let start = Instant::now();
-        self.fill(ctx, &next, &packer, &motion, &mut cache, &mut aged);
+        self.fill(&making, &mut cache, &mut aged);
         let phases = &mut aged.stats.phase_seconds;
         phases.push(("fill".into(), start.elapsed().as_secs_f64()));
         (cache, aged)
@@ -415,19 +416,15 @@ impl TemporalRadianceCaching {
     /// meets now ([`paths`]); a replacement gathered inside a moving object
     /// ([`back_face_share`]) is dropped instead. Returns how many paths the
     /// replacements were offered and took.
-    #[allow(clippy::too_many_arguments)]
     fn replace(
         &self,
-        ctx: &FrameContext,
-        next: &NextFrame,
-        packer: &SamplePacker,
-        motion: &FrameMotion,
+        making: &RecordMaking,
         expired: &[TemporalRecord],
         cache: &mut IrradianceCache,
         aged: &mut Aged,
     ) -> paths::Offered {
         use rayon::prelude::*;
-        let t = ctx.frame;
+        let (ctx, motion) = (making.ctx, &making.motion);
         let candidates: Vec<Candidate> = expired.iter().map(|r| r.candidate).collect();
         let (known, offered) = motion.known_paths(expired);
         // Each replacement traces again the rays of the record it replaces
@@ -444,12 +441,7 @@ impl TemporalRadianceCaching {
             .zip(expired.par_iter())
             .map(|((g, tracks), old)| {
                 let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
-                (!inside).then(|| {
-                    let mut r = self.temporal(ctx, next, &g);
-                    r.paths = tracks
-                        .map(|tracks| Arc::new(motion.paths(&g, &tracks, old.paths.as_deref())));
-                    (r, packer.pack(&g))
-                })
+                (!inside).then(|| self.made(making, &g, tracks.as_ref(), old.paths.as_deref()))
             })
             .collect();
         for (gathered, old) in gathered.into_iter().zip(expired) {
@@ -459,7 +451,7 @@ impl TemporalRadianceCaching {
             };
             aged.keep_paths_within_budget(&mut new);
             new.replaces = Some(old.record.id);
-            cache.insert(new.at_frame(t, self.settings.gradients, None));
+            cache.insert(new.at_frame(ctx.frame, self.settings.gradients, None));
             aged.alive.push(new);
             aged.samples.extend(samples);
             aged.stats.records_replaced += 1;
@@ -469,28 +461,17 @@ impl TemporalRadianceCaching {
 
     /// New records where nothing is usable (`ic`'s fill stage), each with
     /// its E(t0+1) estimate.
-    fn fill(
-        &self,
-        ctx: &FrameContext,
-        next: &NextFrame,
-        packer: &SamplePacker,
-        motion: &FrameMotion,
-        cache: &mut IrradianceCache,
-        aged: &mut Aged,
-    ) {
+    fn fill(&self, making: &RecordMaking, cache: &mut IrradianceCache, aged: &mut Aged) {
+        let ctx = making.ctx;
         let pixels = primary_candidates(ctx, self.settings.ic.glossy);
         let mut created = Vec::new();
-        let track = |c: &Candidate| motion.tracks(c);
+        let track = |c: &Candidate| making.motion.tracks(c);
         self.ic.fill_from(
             ctx,
             cache,
             &pixels,
-            motion.track.then_some(&track as &TrackPaths),
-            |g, tracks| {
-                let mut r = self.temporal(ctx, next, g);
-                r.paths = tracks.map(|tracks| Arc::new(motion.paths(g, &tracks, None)));
-                (r, packer.pack(g))
-            },
+            making.motion.track.then_some(&track as &TrackPaths),
+            |g, tracks| self.made(making, g, tracks.as_ref(), None),
             &mut created,
         );
         aged.stats.records_created = created.len() as u64;
@@ -499,6 +480,21 @@ impl TemporalRadianceCaching {
             aged.alive.push(r);
             aged.samples.extend(samples);
         }
+    }
+
+    /// The temporal record of gather `g` (new, or replacing a record whose
+    /// kept paths were `taken_from`), with its paths where `tracks` has
+    /// them, and its samples packed for the store.
+    fn made(
+        &self,
+        making: &RecordMaking,
+        g: &Gathered,
+        tracks: Option<&GatherTracks>,
+        taken_from: Option<&KeptPaths>,
+    ) -> (TemporalRecord, Option<SampleBlock>) {
+        let mut r = self.temporal(making.ctx, &making.next, g);
+        r.paths = tracks.map(|tracks| Arc::new(making.motion.paths(g, tracks, taken_from)));
+        (r, making.packer.pack(g))
     }
 
     /// Ends frame `t`'s aging: radii as neighbour clamping left them, the
@@ -730,6 +726,16 @@ impl Method for TemporalRadianceCaching {
         self.kept = None;
         Ok(())
     }
+}
+
+/// What the records made in a frame need beside their gathers: the frame,
+/// the E(t0+1) estimate's view of the next one, the store's packing of
+/// their samples and what moves (for their kept paths).
+struct RecordMaking<'a> {
+    ctx: &'a FrameContext<'a>,
+    next: NextFrame,
+    packer: SamplePacker,
+    motion: FrameMotion,
 }
 
 /// Store hook: packs a gather's samples to their stored form as soon as
