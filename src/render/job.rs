@@ -1,0 +1,280 @@
+//! A render checkpointed to a store job (`render --db PATH --job NAME`):
+//! what identifies the job (its scene, with the files a glTF references,
+//! and its settings), what a resume may skip and restore, and the one
+//! store batch that commits each rendered frame.
+
+use super::{FrameSettings, MethodSettings, Renderer, SceneSource};
+use crate::film::{self, Film};
+use crate::method::{FrameRecords, FrameStats};
+use crate::store::{
+    self, schema::FrameSourcesValue, schema::JobValue, FrameCommit, JobSpec, RecordCommit,
+    StateCommit, Store,
+};
+use anyhow::{bail, Context, Result};
+use std::collections::BTreeSet;
+use std::ops::Range;
+use std::path::Path;
+
+/// A store job a render checkpoints to (`render --db PATH --job NAME`).
+pub struct StoreJob<'a> {
+    pub store: &'a Store,
+    pub job: JobValue,
+}
+
+/// What a scene source is, as a job records it: its text and content hash.
+/// A built-in scene hashes as `builtin:NAME`; a file as the FNV-1a 64 of its
+/// bytes, followed by `+` and the hash of the external files it references
+/// (the `uri`s of glTF `buffers` and `images` other than `data:` URIs, in
+/// file order, each with its URI) when it references any, so that editing a
+/// `.bin` or a texture next to a `.gltf` changes the hash too.
+pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
+    let hash = match source {
+        SceneSource::Builtin(_) => store::content_hash(source.to_string().as_bytes()),
+        SceneSource::File(path) => {
+            let bytes = std::fs::read(path)
+                .with_context(|| format!("cannot read scene {}", path.display()))?;
+            let main = store::content_hash(&bytes);
+            let uris = external_uris(&bytes);
+            if uris.is_empty() {
+                main
+            } else {
+                let dir = path.parent().unwrap_or(Path::new("."));
+                let mut all = Vec::new();
+                for uri in uris {
+                    let file = dir.join(percent_decode(&uri));
+                    let content = std::fs::read(&file).with_context(|| {
+                        format!(
+                            "cannot read {} (referenced by scene {})",
+                            file.display(),
+                            path.display()
+                        )
+                    })?;
+                    all.extend_from_slice(uri.as_bytes());
+                    all.push(0);
+                    all.extend_from_slice(&(content.len() as u64).to_le_bytes());
+                    all.extend_from_slice(&content);
+                }
+                format!("{main}+{}", store::content_hash(&all))
+            }
+        }
+    };
+    Ok((source.to_string(), hash))
+}
+
+/// The external file URIs of a glTF (`.gltf` JSON, or the JSON chunk of a
+/// `.glb`): `buffers[].uri` then `images[].uri`, `data:` URIs left out.
+/// Anything unreadable gives none (the scene loader reports it).
+fn external_uris(bytes: &[u8]) -> Vec<String> {
+    let json: &[u8] = if bytes.starts_with(b"glTF") && bytes.len() >= 20 {
+        let len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
+        bytes.get(20..20 + len).unwrap_or(&[])
+    } else {
+        bytes
+    };
+    let Ok(doc) = serde_json::from_slice::<serde_json::Value>(json) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for list in ["buffers", "images"] {
+        for item in doc[list].as_array().into_iter().flatten() {
+            if let Some(uri) = item["uri"].as_str() {
+                if !uri.starts_with("data:") {
+                    out.push(uri.to_string());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// `%XX` escapes of a URI decoded (glTF URIs are RFC 3986).
+fn percent_decode(uri: &str) -> String {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' && i + 2 < b.len() {
+            let hex = std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or("");
+            if let Ok(v) = u8::from_str_radix(hex, 16) {
+                out.push(v);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// The job description of a render: compared with the stored job so that a
+/// resume never mixes frames of different scenes or settings.
+pub fn job_spec(
+    name: &str,
+    source: &SceneSource,
+    method: &MethodSettings,
+    settings: &FrameSettings,
+    frames: Range<u32>,
+) -> Result<JobSpec> {
+    let (scene, scene_hash) = scene_identity(source)?;
+    Ok(JobSpec {
+        name: name.to_string(),
+        scene,
+        scene_hash,
+        method: method.name().to_string(),
+        settings: serde_json::to_string(method)
+            .context("cannot write the method settings as JSON")?,
+        width: settings.width,
+        height: settings.height,
+        spp: method.spp(),
+        fps: settings.fps,
+        seed: settings.seed,
+        same_pattern: settings.same_pattern,
+        frame_start: frames.start,
+        frame_end: frames.end,
+    })
+}
+
+/// The frames of `frames` that job `j` has done and that need not be
+/// rendered again, their files written back to `out_dir`. A method that
+/// carries state from frame to frame resumes after the longest finished
+/// prefix whose state the store holds, and renders the rest again; without
+/// such a state it starts the range over.
+pub(super) fn resume(
+    renderer: &mut Renderer,
+    j: &StoreJob,
+    frames: &Range<u32>,
+    out_dir: &Path,
+) -> Result<BTreeSet<u32>> {
+    let mut done: BTreeSet<u32> = j
+        .store
+        .frames_done(j.job.id)?
+        .into_iter()
+        .filter(|frame| frames.contains(frame))
+        .collect();
+    if renderer.carries_state() {
+        let prefix = frames.clone().take_while(|f| done.contains(f)).count() as u32;
+        if prefix as usize == frames.len() {
+            // Every frame done: nothing to render, no state needed.
+        } else if let Some(state) = resumable_state(j, frames, prefix, renderer.looks_ahead())? {
+            renderer
+                .restore_state(state)
+                .map_err(|e| j.store.state_error(j.job.id, e))?;
+            done.retain(|&f| f < frames.start + prefix);
+        } else {
+            j.store.clear_state(j.job.id)?;
+            done.clear();
+        }
+    }
+    for &frame in &done {
+        restore_frame_files(j, frame, out_dir)?;
+    }
+    Ok(done)
+}
+
+/// Commits rendered `frame` to job `j` in one batch: its EXR, statistics,
+/// the records the method `kept` with their samples, and its state changes.
+pub(super) fn store_frame(
+    renderer: &Renderer,
+    j: &mut StoreJob,
+    film: &Film,
+    frame: u32,
+    stats: &FrameStats,
+    kept: Option<FrameRecords>,
+    // The first frame of the render's chain of frames and, for a method
+    // that looks ahead, its end: what the stored state is valid for.
+    (chain_start, chain_end): (u32, Option<u32>),
+) -> Result<()> {
+    let exr = film::encode_exr(film)
+        .map_err(|e| anyhow::anyhow!("cannot encode frame {frame} as EXR: {e}"))?;
+    let mut kept = kept.unwrap_or_default();
+    let mut samples = std::mem::take(&mut kept.samples).into_iter();
+    let records = kept
+        .records
+        .iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let block = samples.next().unwrap_or_default();
+            let mut c = RecordCommit::from_record(r, block, kept.strata, frame);
+            if let Some(&last) = kept.last_frames.get(i) {
+                c.record.last_frame = last;
+            }
+            c
+        })
+        .collect();
+    if renderer.carries_state() && kept.state.is_none() {
+        bail!(
+            "method {} carries state but reported no state changes for frame {frame}",
+            renderer.method_name()
+        );
+    }
+    let sources = FrameSourcesValue::of(&kept.records);
+    let commit = FrameCommit {
+        frame,
+        width: film.width,
+        height: film.height,
+        exr: &exr,
+        records,
+        stats,
+        state: kept.state.as_ref().map(|changes| StateCommit {
+            chain_start,
+            chain_end,
+            changes,
+        }),
+        movies: kept.movies.as_ref(),
+        sources: sources.as_ref(),
+    };
+    j.store.commit_frame(&mut j.job, commit)?;
+    Ok(())
+}
+
+/// The stored state to continue a stateful method after the finished
+/// `prefix` of `frames`, if the job holds the state of exactly that frame of
+/// the same chain.
+fn resumable_state(
+    job: &StoreJob,
+    frames: &Range<u32>,
+    prefix: u32,
+    looks_ahead: bool,
+) -> Result<Option<crate::method::MethodState>> {
+    if prefix == 0 {
+        return Ok(None);
+    }
+    let Some(head) = job.store.state_head(job.job.id)? else {
+        return Ok(None);
+    };
+    let same_chain = head.chain_start == frames.start
+        && head.chain_end == looks_ahead.then_some(frames.end)
+        && head.frame == frames.start + prefix - 1;
+    if !same_chain {
+        return Ok(None);
+    }
+    Ok(job.store.load_state(job.job.id)?)
+}
+
+/// Writes a finished frame's files from the store if `out_dir` lacks its
+/// EXR (a crash between the store's flush and the file write, or another
+/// `--out`).
+fn restore_frame_files(job: &StoreJob, frame: u32, out_dir: &Path) -> Result<()> {
+    let exr_path = film::frame_path(out_dir, frame, "exr");
+    if exr_path.exists() {
+        return Ok(());
+    }
+    let Some(bytes) = job.store.frame_exr(job.job.id, frame)? else {
+        return Ok(());
+    };
+    // PNG first, EXR last (renamed into place): as `film::write_frame`, the
+    // EXR's presence means the frame's files are complete.
+    let temp = out_dir.join(format!(
+        ".frame_{frame:04}.exr.restore-{}",
+        std::process::id()
+    ));
+    std::fs::write(&temp, &bytes)
+        .and_then(|()| std::fs::File::open(&temp)?.sync_all())
+        .with_context(|| format!("cannot write {}", temp.display()))?;
+    let film = film::read_exr(&temp)?;
+    film::write_png(&film, &film::frame_path(out_dir, frame, "png"))?;
+    std::fs::rename(&temp, &exr_path)
+        .with_context(|| format!("cannot write {}", exr_path.display()))?;
+    Ok(())
+}
