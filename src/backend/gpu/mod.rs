@@ -11,17 +11,21 @@
 //!   layout (`src/backend/gpu_bvh.rs`) and lays triangles out in leaf order
 //!   ([`GpuTriangle`], with their snapshot triangle and object ids);
 //! - **prepare**: both parts live in one node buffer and one triangle buffer,
-//!   static part first. The static part is uploaded once and again only when
-//!   its fingerprint changes (a new scene); every frame rewrites only the
-//!   dynamic tail. Ray, result and staging buffers are reused across
-//!   dispatches and only ever grow;
+//!   static part first (`geometry`). The static part is uploaded once and
+//!   again only when its fingerprint changes (a new scene); every frame
+//!   rewrites only the dynamic tail. Ray, result and staging buffers are
+//!   reused across dispatches and only ever grow;
 //! - **passes**: "closest hit" (`shaders/closest_hit.wgsl`) and "any hit"
 //!   (`shaders/any_hit.wgsl`), both on `shaders/ray_common.wgsl` and the
 //!   layout's traversal (`cwbvh_traverse.wgsl` or `bvh2_traverse.wgsl`). A
 //!   batch is cut in chunks of at most [`GpuBackend::chunk_rays`] rays (the storage
 //!   binding limit: 128 MiB on lavapipe), each dispatched as a 2D grid (at
 //!   most 65535 workgroups per dimension), its results copied to a staging
-//!   buffer, mapped and read back.
+//!   buffer, mapped and read back (the plumbing the cache splat shares:
+//!   `compute`).
+//!
+//! The adapter is chosen, and the device's own errors are kept, in
+//! `device`.
 //!
 //! Why two BVHs traced one after the other instead of one merged BVH: the
 //! static part (most of a scene) is built and uploaded once per render; a
@@ -60,8 +64,20 @@ use super::{Hit, Ray, RayBackend, RayCounters, RayCounts};
 use crate::accel;
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
+
+mod compute;
+mod device;
+mod geometry;
+
+pub(crate) use compute::{
+    bind, layout_entry, read_back, storage_entry, workgroup_grid, ComputePass,
+};
+pub use device::{adapters, AdapterPolicy};
+use device::{pick_adapter, record_device_errors};
+pub(crate) use device::{ErrorSlot, FailureSlot};
+use geometry::{GeometryBuffers, Growth};
 
 /// Work items per workgroup. Must match `WORKGROUP_SIZE` in
 /// `shaders/ray_common.wgsl`.
@@ -126,15 +142,6 @@ const _: () = assert!(std::mem::size_of::<GpuTriangle>() == 48);
 const _: () = assert!(std::mem::size_of::<Ray>() == 32);
 const _: () = assert!(std::mem::size_of::<Hit>() == 20);
 
-/// Which adapters [`GpuBackend::new`] may pick.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum AdapterPolicy {
-    /// Only a real GPU (device type other than `Cpu`): `--backend auto`.
-    HardwareOnly,
-    /// Any adapter, a software one (lavapipe) included: `--backend gpu`.
-    AllowSoftware,
-}
-
 /// Why the GPU backend could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
@@ -181,84 +188,6 @@ struct RayBuffers {
     staging: wgpu::Buffer,
 }
 
-/// The node and triangle buffers: static part first, dynamic part after.
-struct GeometryBuffers {
-    nodes: wgpu::Buffer,
-    triangles: wgpu::Buffer,
-    node_capacity: u64,
-    triangle_capacity: u64,
-    /// Nodes and triangles of the static part at the front of the buffers.
-    static_nodes: u64,
-    static_triangles: u64,
-    static_fingerprint: Option<u64>,
-    static_root: u32,
-    dynamic_root: u32,
-}
-
-/// The workgroups of a dispatch over `items` invocations, `size` a
-/// workgroup, as an `(x, y)` grid at most `max_per_dim` wide (devices cap
-/// each dimension, often at 65,535): the shaders number an invocation
-/// `y · row_width + x` with `row_width = x · size`, and skip those past
-/// the last item.
-pub(super) fn workgroup_grid(items: u32, size: u32, max_per_dim: u32) -> (u32, u32) {
-    let groups = items.div_ceil(size);
-    let x = groups.min(max_per_dim).max(1);
-    (x, groups.div_ceil(x))
-}
-
-/// An error unless `count` elements of `size` bytes (`what`) fit in one
-/// storage binding of `max_binding` bytes.
-fn check_binding_size(what: &str, count: u64, size: u64, max_binding: u64) -> Result<(), GpuError> {
-    if count * size > max_binding {
-        return Err(GpuError::Geometry(format!(
-            "{count} {what} ({} MiB) exceed the device's storage binding size of {} MiB",
-            (count * size) >> 20,
-            max_binding >> 20
-        )));
-    }
-    Ok(())
-}
-
-/// How the geometry buffers grow: by a quarter more than needed, within
-/// one storage binding.
-struct Growth<'a> {
-    device: &'a wgpu::Device,
-    max_binding: u64,
-}
-
-impl Growth<'_> {
-    /// Replaces `buffer` (`label`, elements of `size` bytes, `capacity` of
-    /// them) by a larger one when `needed` elements exceed its capacity,
-    /// with its first `kept` elements copied over by `encoder`.
-    fn reserve(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        (label, size): (&str, u64),
-        (buffer, capacity): (&mut wgpu::Buffer, &mut u64),
-        needed: u64,
-        kept: u64,
-    ) {
-        if needed <= *capacity {
-            return;
-        }
-        let cap = (needed + needed / 4)
-            .min(self.max_binding / size)
-            .max(needed);
-        let grown = storage_buffer(self.device, label, cap * size);
-        if kept > 0 {
-            encoder.copy_buffer_to_buffer(buffer, 0, &grown, 0, kept * size);
-        }
-        *buffer = grown;
-        *capacity = cap;
-    }
-}
-
-/// Errors reported by wgpu outside an error scope, or the device being lost.
-pub(super) type ErrorSlot = Arc<Mutex<Option<String>>>;
-
-/// The first error that failed the backend ([`RayBackend::failure`]).
-pub(super) type FailureSlot = Arc<Mutex<Option<String>>>;
-
 pub struct GpuBackend {
     device: wgpu::Device,
     queue: wgpu::Queue,
@@ -286,102 +215,6 @@ pub struct GpuBackend {
     timings: Mutex<GpuTimings>,
     /// The render pass's cache interpolation on this device.
     splat: CacheSplat,
-}
-
-/// The adapters wgpu sees (backends from `WGPU_BACKEND` when set, else
-/// Vulkan, Metal and DX12), with their information.
-pub fn adapters() -> Vec<wgpu::AdapterInfo> {
-    let instance = instance();
-    pollster::block_on(instance.enumerate_adapters(backends()))
-        .iter()
-        .map(|a| a.get_info())
-        .collect()
-}
-
-fn backends() -> wgpu::Backends {
-    wgpu::Backends::PRIMARY.with_env()
-}
-
-fn instance() -> wgpu::Instance {
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-    desc.backends = backends();
-    wgpu::Instance::new(desc.with_env())
-}
-
-/// The first adapter by [`rank`] that `policy` allows.
-fn pick_adapter(policy: AdapterPolicy) -> Result<wgpu::Adapter, GpuError> {
-    let instance = instance();
-    let mut candidates: Vec<wgpu::Adapter> =
-        pollster::block_on(instance.enumerate_adapters(backends()))
-            .into_iter()
-            .filter(|a| {
-                policy == AdapterPolicy::AllowSoftware
-                    || a.get_info().device_type != wgpu::DeviceType::Cpu
-            })
-            .collect();
-    candidates.sort_by_key(|a| rank(a.get_info().device_type));
-    candidates.into_iter().next().ok_or(GpuError::NoAdapter)
-}
-
-/// A slot that keeps the first uncaptured error or device loss of
-/// `device`, which later dispatches report.
-fn record_device_errors(device: &wgpu::Device) -> ErrorSlot {
-    let errors: ErrorSlot = Arc::default();
-    let slot = errors.clone();
-    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
-        if let Ok(mut s) = slot.lock() {
-            s.get_or_insert_with(|| e.to_string());
-        }
-    }));
-    let slot = errors.clone();
-    device.set_device_lost_callback(move |reason, message| {
-        if let Ok(mut s) = slot.lock() {
-            s.get_or_insert_with(|| format!("device lost ({reason:?}): {message}"));
-        }
-    });
-    errors
-}
-
-/// Waits for the queue's work, maps the first `bytes` of `staging`, hands
-/// them to `read` and unmaps: the readback of a dispatch whose results
-/// were copied to `staging`. `what` names them in errors; an error the
-/// device reported meanwhile (`errors`) fails it too. Returns the time
-/// spent waiting for the GPU and the time spent mapping and reading.
-pub(crate) fn read_back(
-    device: &wgpu::Device,
-    staging: &wgpu::Buffer,
-    bytes: u64,
-    what: &str,
-    errors: &ErrorSlot,
-    read: impl FnOnce(&[u8]),
-) -> Result<(Duration, Duration), String> {
-    let start = Instant::now();
-    let (tx, rx) = std::sync::mpsc::channel();
-    staging.map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| format!("waiting for the GPU failed: {e}"))?;
-    let waited = start.elapsed();
-    let start = Instant::now();
-    match rx.recv() {
-        Ok(Ok(())) => {}
-        Ok(Err(e)) => return Err(format!("cannot map the {what}: {e}")),
-        Err(_) => return Err(format!("the {what} were never mapped")),
-    }
-    if let Some(e) = errors.lock().ok().and_then(|s| s.clone()) {
-        staging.unmap();
-        return Err(e);
-    }
-    {
-        let view = staging
-            .get_mapped_range(0..bytes)
-            .map_err(|e| format!("cannot read the {what}: {e}"))?;
-        read(&view);
-    }
-    staging.unmap();
-    Ok((waited, start.elapsed()))
 }
 
 /// The closest-hit and any-hit compute pipelines over `bvh`'s traversal,
@@ -413,7 +246,7 @@ impl RayPipelines {
         let pipeline = |name: &str, stage: &str| {
             let source = format!(
                 "{}\n{}\n{}",
-                include_str!("../../shaders/ray_common.wgsl"),
+                include_str!("../../../shaders/ray_common.wgsl"),
                 bvh.traversal_source(),
                 stage
             );
@@ -432,9 +265,9 @@ impl RayPipelines {
         };
         let closest = pipeline(
             "closest_hit",
-            include_str!("../../shaders/closest_hit.wgsl"),
+            include_str!("../../../shaders/closest_hit.wgsl"),
         );
-        let any = pipeline("any_hit", include_str!("../../shaders/any_hit.wgsl"));
+        let any = pipeline("any_hit", include_str!("../../../shaders/any_hit.wgsl"));
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(format!("shaders rejected: {e}"));
         }
@@ -443,18 +276,6 @@ impl RayPipelines {
             closest,
             any,
         })
-    }
-}
-
-/// Preference among device types: discrete, integrated, virtual, other,
-/// then software.
-fn rank(t: wgpu::DeviceType) -> u8 {
-    match t {
-        wgpu::DeviceType::DiscreteGpu => 0,
-        wgpu::DeviceType::IntegratedGpu => 1,
-        wgpu::DeviceType::VirtualGpu => 2,
-        wgpu::DeviceType::Other => 3,
-        wgpu::DeviceType::Cpu => 4,
     }
 }
 
@@ -496,17 +317,7 @@ impl GpuBackend {
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
         let chunk_rays = MAX_CHUNK_RAYS.min(usize_of(max_binding / RAY_BYTES)).max(1);
-        let geometry = GeometryBuffers {
-            nodes: storage_buffer(&device, "nodes", bvh.node_bytes()),
-            triangles: storage_buffer(&device, "triangles", TRIANGLE_BYTES),
-            node_capacity: 1,
-            triangle_capacity: 1,
-            static_nodes: 0,
-            static_triangles: 0,
-            static_fingerprint: None,
-            static_root: NONE,
-            dynamic_root: NONE,
-        };
+        let geometry = GeometryBuffers::new(&device, bvh.node_bytes());
         let failed = FailureSlot::default();
         let splat = CacheSplat::new(
             &device,
@@ -636,7 +447,12 @@ impl GpuBackend {
             Some(p) => (p.node_count() as u64, p.triangles.len() as u64),
             None => (g.static_nodes, g.static_triangles),
         };
-        self.reserve_geometry(
+        let grow = Growth {
+            device: &self.device,
+            max_binding: self.max_binding,
+        };
+        self.geometry.reserve(
+            &grow,
             &mut encoder,
             static_size,
             &dynamic_part,
@@ -644,11 +460,12 @@ impl GpuBackend {
         )?;
         let static_upload = static_part.map(|part| {
             let start = Instant::now();
-            self.upload_static(&part, fp);
+            self.geometry.upload_static(&self.queue, &part, fp);
             start.elapsed()
         });
         let start = Instant::now();
-        self.upload_dynamic(dynamic_part, static_size);
+        self.geometry
+            .upload_dynamic(&self.queue, dynamic_part, static_size);
         self.queue.submit([encoder.finish()]);
         let dynamic_upload = start.elapsed();
         self.add_timings(|t| {
@@ -660,84 +477,6 @@ impl GpuBackend {
             }
         });
         Ok(())
-    }
-
-    /// Grows (never shrinks) the geometry buffers to hold a static part of
-    /// `(nodes, triangles)` followed by `dynamic`. With `keep_static`, the
-    /// static part already in the buffers is copied over on the GPU by
-    /// `encoder`, not uploaded again. An error where they would exceed a
-    /// storage binding.
-    fn reserve_geometry(
-        &mut self,
-        encoder: &mut wgpu::CommandEncoder,
-        (static_nodes, static_triangles): (u64, u64),
-        dynamic: &Part,
-        keep_static: bool,
-    ) -> Result<(), GpuError> {
-        let nodes_needed = (static_nodes + dynamic.node_count() as u64).max(1);
-        let triangles_needed = (static_triangles + dynamic.triangles.len() as u64).max(1);
-        let node_bytes = self.bvh.node_bytes();
-        check_binding_size("BVH nodes", nodes_needed, node_bytes, self.max_binding)?;
-        check_binding_size(
-            "triangles",
-            triangles_needed,
-            TRIANGLE_BYTES,
-            self.max_binding,
-        )?;
-        let grow = Growth {
-            device: &self.device,
-            max_binding: self.max_binding,
-        };
-        let g = &mut self.geometry;
-        let kept = |count: u64| if keep_static { count } else { 0 };
-        grow.reserve(
-            encoder,
-            ("nodes", node_bytes),
-            (&mut g.nodes, &mut g.node_capacity),
-            nodes_needed,
-            kept(static_nodes),
-        );
-        grow.reserve(
-            encoder,
-            ("triangles", TRIANGLE_BYTES),
-            (&mut g.triangles, &mut g.triangle_capacity),
-            triangles_needed,
-            kept(static_triangles),
-        );
-        Ok(())
-    }
-
-    /// Writes a new static part (of fingerprint `fp`) at the front of the
-    /// geometry buffers.
-    fn upload_static(&mut self, part: &Part, fp: Option<u64>) {
-        let g = &mut self.geometry;
-        self.queue.write_buffer(&g.nodes, 0, part.node_bytes());
-        self.queue
-            .write_buffer(&g.triangles, 0, bytemuck::cast_slice(&part.triangles));
-        g.static_nodes = part.node_count() as u64;
-        g.static_triangles = part.triangles.len() as u64;
-        g.static_root = if part.node_count() == 0 { NONE } else { 0 };
-        g.static_fingerprint = fp;
-    }
-
-    /// Writes the dynamic part after a static part of `(nodes, triangles)`,
-    /// its node and triangle indices offset past it.
-    fn upload_dynamic(&mut self, mut dynamic: Part, (static_nodes, static_triangles): (u64, u64)) {
-        let g = &mut self.geometry;
-        dynamic.offset(static_nodes as u32, static_triangles as u32);
-        if dynamic.node_count() > 0 {
-            let node_bytes = self.bvh.node_bytes();
-            self.queue
-                .write_buffer(&g.nodes, static_nodes * node_bytes, dynamic.node_bytes());
-            self.queue.write_buffer(
-                &g.triangles,
-                static_triangles * TRIANGLE_BYTES,
-                bytemuck::cast_slice(&dynamic.triangles),
-            );
-            g.dynamic_root = static_nodes as u32;
-        } else {
-            g.dynamic_root = NONE;
-        }
     }
 
     /// [`RayBackend::closest_hit`] returning the device's errors.
@@ -1018,107 +757,6 @@ impl RayBuffers {
     }
 }
 
-/// A geometry buffer; COPY_SRC so that it can be copied into its grown
-/// successor.
-fn storage_buffer(device: &wgpu::Device, label: &str, size: u64) -> wgpu::Buffer {
-    device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size,
-        usage: wgpu::BufferUsages::STORAGE
-            | wgpu::BufferUsages::COPY_DST
-            | wgpu::BufferUsages::COPY_SRC,
-        mapped_at_creation: false,
-    })
-}
-
-pub(super) fn layout_entry(
-    binding: u32,
-    ty: wgpu::BufferBindingType,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer {
-            ty,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
-}
-
-pub(super) fn storage_entry(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
-    layout_entry(binding, wgpu::BufferBindingType::Storage { read_only })
-}
-
-/// One compute pass: `pipeline` over a `groups` grid of workgroups with
-/// the buffers `entries` bound as group 0 of `layout`, then each of
-/// `copies` (a buffer, a byte count) copied from its start into `staging`,
-/// one after the other; submitted. `prepare` encodes what must run before
-/// the pass (clearing a buffer).
-pub(super) struct ComputePass<'a> {
-    pub label: &'a str,
-    pub pipeline: &'a wgpu::ComputePipeline,
-    pub layout: &'a wgpu::BindGroupLayout,
-    pub entries: &'a [wgpu::BindGroupEntry<'a>],
-    pub groups: (u32, u32),
-}
-
-impl ComputePass<'_> {
-    pub(super) fn submit(
-        &self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        prepare: impl FnOnce(&mut wgpu::CommandEncoder),
-        copies: &[(&wgpu::Buffer, u64)],
-        staging: &wgpu::Buffer,
-    ) {
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some(self.label),
-        });
-        prepare(&mut encoder);
-        self.encode(device, &mut encoder, copies, staging);
-        queue.submit([encoder.finish()]);
-    }
-
-    /// The pass and its copies encoded into `encoder`, for the caller to
-    /// submit (with other passes).
-    pub(super) fn encode(
-        &self,
-        device: &wgpu::Device,
-        encoder: &mut wgpu::CommandEncoder,
-        copies: &[(&wgpu::Buffer, u64)],
-        staging: &wgpu::Buffer,
-    ) {
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some(self.label),
-            layout: self.layout,
-            entries: self.entries,
-        });
-        {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some(self.label),
-                timestamp_writes: None,
-            });
-            pass.set_pipeline(self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(self.groups.0, self.groups.1, 1);
-        }
-        let mut offset = 0;
-        for &(source, bytes) in copies {
-            encoder.copy_buffer_to_buffer(source, 0, staging, offset, bytes);
-            offset += bytes;
-        }
-    }
-}
-
-pub(super) fn bind(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: buffer.as_entire_binding(),
-    }
-}
-
 impl RayBackend for GpuBackend {
     fn name(&self) -> String {
         format!("gpu ({}, {:?})", self.info.name, self.info.backend)
@@ -1236,28 +874,5 @@ impl RayBackend for RaysOnly {
     }
     fn failure(&self) -> Option<String> {
         self.0.failure()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::workgroup_grid;
-
-    /// The grid covers every item, stays within the per-dimension cap and
-    /// adds no whole row of workgroups past the last item.
-    #[test]
-    fn workgroup_grid_covers_items_within_the_cap() {
-        let (size, cap) = (64, 65_535);
-        for items in [0, 1, 63, 64, 65, 64 * 65_535, 64 * 65_535 + 1, 50_000_000] {
-            let (x, y) = workgroup_grid(items, size, cap);
-            assert!((1..=cap).contains(&x), "{items}: x = {x}");
-            let covered = u64::from(x) * u64::from(y) * u64::from(size);
-            assert!(covered >= u64::from(items), "{items}: {x}×{y}");
-            let one_row_less = u64::from(x) * u64::from(y.saturating_sub(1)) * u64::from(size);
-            assert!(
-                items == 0 || one_row_less < u64::from(items),
-                "{items}: {x}×{y}"
-            );
-        }
     }
 }
