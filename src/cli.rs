@@ -27,6 +27,11 @@ use std::process::ExitCode;
     about = "Global illumination for animations, reusing lighting work across frames"
 )]
 pub struct Cli {
+    /// Worker threads that render, trace and shade [default: one per CPU
+    /// core, or RAYON_NUM_THREADS]. Frames are the same, bit for bit, for
+    /// any count.
+    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..))]
+    pub threads: Option<u16>,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -481,6 +486,9 @@ pub fn main() -> ExitCode {
 }
 
 pub fn run(cli: Cli) -> Result<()> {
+    if let Some(threads) = cli.threads {
+        start_worker_threads(usize::from(threads))?;
+    }
     match cli.command {
         Command::Render(args) => run_render(args),
         Command::Compare(args) => run_compare(args),
@@ -489,6 +497,22 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Serve(args) => run_serve(args),
         Command::Compact(args) => run_compact(args),
     }
+}
+
+/// Starts the process's pool of `threads` worker threads (rayon's global
+/// pool, which every parallel stage uses). The pool starts once per
+/// process: a second call asking for the count it already has is fine.
+fn start_worker_threads(threads: usize) -> Result<()> {
+    let started = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build_global();
+    if started.is_err() && rayon::current_num_threads() != threads {
+        bail!(
+            "--threads {threads}: the worker threads are already started, {} of them",
+            rayon::current_num_threads()
+        );
+    }
+    Ok(())
 }
 
 /// The bench's options as the command line gives them.

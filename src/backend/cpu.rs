@@ -30,7 +30,10 @@ impl CpuBackend {
 
 impl RayBackend for CpuBackend {
     fn name(&self) -> String {
-        format!("cpu ({} threads)", rayon::current_num_threads())
+        match rayon::current_num_threads() {
+            1 => "cpu (1 thread)".to_string(),
+            n => format!("cpu ({n} threads)"),
+        }
     }
 
     fn set_geometry(&mut self, snapshot: &Snapshot) {
