@@ -441,7 +441,8 @@ impl TemporalRadianceCaching {
             .zip(expired.par_iter())
             .map(|((g, tracks), old)| {
                 let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
-                (!inside).then(|| self.made(making, &g, tracks.as_ref(), old.paths.as_deref()))
+                (!inside)
+                    .then(|| self.make_record(making, &g, tracks.as_ref(), old.paths.as_deref()))
             })
             .collect();
         for (gathered, old) in gathered.into_iter().zip(expired) {
@@ -471,7 +472,7 @@ impl TemporalRadianceCaching {
             cache,
             &pixels,
             making.motion.track.then_some(&track as &TrackPaths),
-            |g, tracks| self.made(making, g, tracks.as_ref(), None),
+            |g, tracks| self.make_record(making, g, tracks.as_ref(), None),
             &mut created,
         );
         aged.stats.records_created = created.len() as u64;
@@ -485,7 +486,7 @@ impl TemporalRadianceCaching {
     /// The temporal record of gather `g` (new, or replacing a record whose
     /// kept paths were `taken_from`), with its paths where `tracks` has
     /// them, and its samples packed for the store.
-    fn made(
+    fn make_record(
         &self,
         making: &RecordMaking,
         g: &Gathered,
