@@ -19,6 +19,8 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::ops::Range;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -616,12 +618,14 @@ fn run_render(args: RenderArgs) -> Result<()> {
         store,
         job: job.clone(),
     });
-    let summary = render::render_job_to_dir(
+    let stop = stop_on_ctrl_c();
+    let summary = render::render_job_to_dir_with(
         &mut renderer,
         args.frames.clone(),
         &args.out,
         args.quiet,
         store_job.as_mut(),
+        &mut |_| !stop.load(Ordering::Relaxed),
     )?;
     if let Some(j) = &store_job {
         println!(
@@ -633,8 +637,63 @@ fn run_render(args: RenderArgs) -> Result<()> {
             j.job.frames_done
         );
     }
-    print_render_summary(&args, method.spp(), &summary);
+    let interrupted = stop.load(Ordering::Relaxed);
+    // Interrupted, the files end at the last frame rendered.
+    let last = match summary.frame_stats.last() {
+        Some(s) if interrupted => s.frame,
+        _ => args.frames.end - 1,
+    };
+    print_render_summary(&args, method.spp(), &summary, last);
+    if interrupted {
+        let done = summary.resumed + summary.frames;
+        let rest = match &store_job {
+            Some(j) => format!(
+                "they are saved in job {:?}: the same command renders the rest",
+                j.job.name
+            ),
+            None => "without --db and --job, running it again renders every frame again".into(),
+        };
+        bail!(
+            "interrupted after frame {last}: {done} of {} frames are in {}; {rest}",
+            args.frames.len(),
+            args.out.display()
+        );
+    }
     Ok(())
+}
+
+/// Stops a render at the first Ctrl-C once the frame in progress is
+/// written (and saved, with a job), so a long render ends with a message
+/// saying where it stopped; a second Ctrl-C stops the process at once (a
+/// job still resumes from its last saved frame: each frame is saved in one
+/// atomic batch). Returns the flag the first Ctrl-C sets.
+fn stop_on_ctrl_c() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let watch = move || {
+        let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+        else {
+            return; // Ctrl-C keeps its default: the process stops at once.
+        };
+        runtime.block_on(async {
+            if tokio::signal::ctrl_c().await.is_err() {
+                return;
+            }
+            flag.store(true, Ordering::Relaxed);
+            eprintln!(
+                "\nstopping once the frame in progress is written (Ctrl-C again to stop now)"
+            );
+            let _ = tokio::signal::ctrl_c().await;
+            std::process::exit(130);
+        });
+    };
+    // Without the watcher Ctrl-C keeps its default.
+    let _ = std::thread::Builder::new()
+        .name("ctrl-c".into())
+        .spawn(watch);
+    stop
 }
 
 /// The method `render`'s flags ask for, with the papers' defaults for
@@ -732,7 +791,9 @@ fn open_job(
 
 /// What `render` did: frames, speed, where the frames went, and the
 /// method's own statistics.
-fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSummary) {
+/// Prints what a render did; its frames' files run from the range's
+/// first frame to `last`.
+fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSummary, last: u32) {
     let secs = summary.elapsed.as_secs_f64();
     let (w, h) = args.size;
     let samples = u64::from(w) * u64::from(h) * u64::from(spp) * u64::from(summary.frames);
@@ -747,7 +808,7 @@ fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSum
         samples as f64 / secs.max(1e-9) / 1e6,
         summary.out_dir.display(),
         args.frames.start,
-        args.frames.end - 1,
+        last,
     );
     let reports = [
         summary.frame_time_report(),

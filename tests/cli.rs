@@ -234,3 +234,80 @@ fn inspect_splits_records_between_moving_and_static_objects() {
     assert!(!text.contains("records on moving objects"), "{text}");
     assert!(text.contains("records by object"), "{text}");
 }
+
+/// Ctrl-C (SIGINT) stops a render once the frame in progress is written
+/// and saved, says where it stopped and how to go on, and the same command
+/// then renders the rest from the store.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_stops_after_a_saved_frame_and_the_same_command_resumes() {
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let (db, out) = (dir.path().join("db"), dir.path().join("out"));
+    let args = [
+        "render",
+        "--backend",
+        "cpu",
+        "--frames",
+        "0..200",
+        "--size",
+        "24x24",
+        "--spp",
+        "2",
+        "--db",
+        db.to_str().unwrap(),
+        "--job",
+        "long",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ];
+    let child = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !out.join("frame_0001.exr").exists() {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no frame written"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("interrupted after frame"), "{stderr}");
+    assert!(
+        stderr.contains("the same command renders the rest"),
+        "{stderr}"
+    );
+    let written = (0..200)
+        .take_while(|f| out.join(format!("frame_{f:04}.exr")).exists())
+        .count();
+    assert!((2..200).contains(&written), "{written} frames written");
+    assert!(
+        (written..200).all(|f| !out.join(format!("frame_{f:04}.exr")).exists()),
+        "the frames written are a prefix of the range"
+    );
+    assert!(
+        stderr.contains(&format!("{written} of 200 frames")),
+        "{written}: {stderr}"
+    );
+
+    let (code, stdout, stderr) = radcache(&args);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stdout.contains(&format!("{written} frames resumed from the store")),
+        "{stdout}"
+    );
+    assert!(out.join("frame_0199.exr").exists());
+}
