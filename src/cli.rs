@@ -670,29 +670,46 @@ fn run_render(args: RenderArgs) -> Result<()> {
 fn stop_on_ctrl_c() -> Arc<AtomicBool> {
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
+    let (ready, wait_ready) = std::sync::mpsc::channel();
     let watch = move || {
         let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()
         else {
+            let _ = ready.send(());
             return; // Ctrl-C keeps its default: the process stops at once.
         };
+        let registered = {
+            let _runtime = runtime.enter();
+            #[cfg(unix)]
+            let signal = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt());
+            #[cfg(windows)]
+            let signal = tokio::signal::windows::ctrl_c();
+            signal
+        };
+        let _ = ready.send(());
+        let Ok(mut ctrl_c) = registered else {
+            return;
+        };
         runtime.block_on(async {
-            if tokio::signal::ctrl_c().await.is_err() {
-                return;
-            }
+            ctrl_c.recv().await;
             flag.store(true, Ordering::Relaxed);
             eprintln!(
                 "\nstopping once the frame in progress is written (Ctrl-C again to stop now)"
             );
-            let _ = tokio::signal::ctrl_c().await;
+            ctrl_c.recv().await;
             std::process::exit(130);
-        });
+        })
     };
-    // Without the watcher Ctrl-C keeps its default.
-    let _ = std::thread::Builder::new()
+    // The render starts once the watcher listens, so that no Ctrl-C falls
+    // between the two; without a watcher Ctrl-C keeps its default.
+    if std::thread::Builder::new()
         .name("ctrl-c".into())
-        .spawn(watch);
+        .spawn(watch)
+        .is_ok()
+    {
+        let _ = wait_ready.recv();
+    }
     stop
 }
 
