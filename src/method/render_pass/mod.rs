@@ -228,8 +228,9 @@ pub(crate) fn mark_used(
 }
 
 /// The last frame's kept tiles, one per tile of `n_pixels` pixels in
-/// tiles of `pixels_per_tile` (`None` each where nothing is kept), moved
-/// out of `still` for the tiles to take from in parallel.
+/// tiles of `pixels_per_tile` (`None` each where nothing is kept, or the
+/// tile lies past those the budget keeps), moved out of `still` for the
+/// tiles to take from in parallel.
 fn take_tiles(
     still: Option<&mut StillPass>,
     n_pixels: usize,
@@ -237,7 +238,7 @@ fn take_tiles(
 ) -> Vec<Option<KeptTile>> {
     let n = n_pixels.div_ceil(pixels_per_tile.max(1));
     match still {
-        Some(pass) => pass.take_tiles(n).into_iter().map(Some).collect(),
+        Some(pass) => pass.take_tiles(n),
         None => (0..n).map(|_| None).collect(),
     }
 }

@@ -66,9 +66,10 @@ pub struct StillSamples {
 
 impl StillSamples {
     /// Bytes kept per frame at most, counted for the base samples (a light
-    /// rim's extra samples, a small share, take room beside them): past
-    /// this (about 4.5 million samples: 512 × 512 pixels at 16 spp) the
-    /// pass keeps nothing and traces every sample, as `ic` does.
+    /// rim's extra samples, a small share, take room beside them): about
+    /// 4.5 million samples, 512 × 512 pixels at 16 spp. A larger frame
+    /// keeps its first tiles that fit and traces the others' samples every
+    /// frame, as `ic` does.
     pub const BUDGET_BYTES: usize = 512 << 20;
 
     /// Kept samples within `budget` bytes a frame, not
@@ -82,7 +83,8 @@ impl StillSamples {
     }
 
     /// This frame's pass over the samples kept from the last one (`None`
-    /// where a frame's samples would not fit the budget: nothing is kept).
+    /// where not even one tile's samples fit the budget: nothing is
+    /// kept).
     pub(super) fn begin(
         &mut self,
         ctx: &FrameContext,
@@ -228,26 +230,44 @@ pub(super) struct StillPass {
     /// Bytes each tile's kept lookups and queries ([`KeptQueries`]) may
     /// take, the lookups first.
     pub(super) tile_budget: usize,
+    /// How many tiles, from the first, keep their samples for the next
+    /// frame (and take the last frame's).
+    kept_tiles: usize,
 }
 
 impl StillPass {
-    /// `None` where a frame's samples (`spp` a pixel, in tiles of
-    /// `pixels_per_tile`) would not fit in `budget` bytes.
+    /// The pass over a frame's samples (`spp` a pixel, in tiles of
+    /// `pixels_per_tile`), keeping the first tiles whose samples fit in
+    /// `budget` bytes (all of them in a frame small enough); `None` where
+    /// not even one tile's fit.
     fn new(
         ctx: &FrameContext,
         last: Option<KeptFrame>,
         (spp, pixels_per_tile): (u32, usize),
         budget: usize,
     ) -> Option<Self> {
-        let samples = ctx.width as usize * ctx.height as usize * spp as usize;
-        let samples_bytes = samples.saturating_mul(KeptTile::SAMPLE_BYTES);
-        if samples_bytes > budget {
+        let pixels = ctx.width as usize * ctx.height as usize;
+        let tiles = pixels.div_ceil(pixels_per_tile.max(1)).max(1);
+        let bytes = |pixels: usize| {
+            pixels
+                .saturating_mul(spp as usize)
+                .saturating_mul(KeptTile::SAMPLE_BYTES)
+        };
+        // A frame too large for the budget keeps as many whole tiles as
+        // fit, the same ones every frame, rather than none: a large frame
+        // still takes a share of its samples from the last one.
+        let (kept_tiles, samples_bytes) = if bytes(pixels) <= budget {
+            (tiles, bytes(pixels))
+        } else {
+            let kept = budget / bytes(pixels_per_tile).max(1);
+            (kept, kept * bytes(pixels_per_tile))
+        };
+        if kept_tiles == 0 {
             return None;
         }
-        // What the samples leave of the budget, shared by the tiles' kept
+        // What the samples leave of the budget, shared by the kept tiles'
         // lookups and queries.
-        let tiles = (ctx.width as usize * ctx.height as usize).div_ceil(pixels_per_tile.max(1));
-        let tile_budget = (budget - samples_bytes) / tiles.max(1);
+        let tile_budget = (budget - samples_bytes) / kept_tiles;
         let view = view_fingerprint(ctx, spp, pixels_per_tile);
         let lights = lights_fingerprint(ctx);
         let last = last.filter(|l| l.frame.checked_add(1) == Some(ctx.frame) && l.view == view);
@@ -276,18 +296,22 @@ impl StillPass {
             last,
             far,
             tile_budget,
+            kept_tiles,
         })
     }
 
     /// The last frame's `n` tiles, moved out of the pass (empty where none
-    /// was kept), for [`Self::tile`].
-    pub(super) fn take_tiles(&mut self, n: usize) -> Vec<KeptTile> {
+    /// was kept; `None` past the tiles the budget keeps), for
+    /// [`Self::tile`].
+    pub(super) fn take_tiles(&mut self, n: usize) -> Vec<Option<KeptTile>> {
         let mut tiles = self
             .last
             .as_mut()
             .map_or_else(Vec::new, |l| std::mem::take(&mut l.tiles));
         tiles.resize_with(n, KeptTile::default);
-        tiles
+        let keep = self.kept_tiles;
+        let tiles = tiles.into_iter().enumerate();
+        tiles.map(|(i, t)| (i < keep).then_some(t)).collect()
     }
 
     /// One tile's part of the pass, with its samples in the last frame.
@@ -831,22 +855,35 @@ mod tests {
     /// A budget that holds a frame's samples and nothing more keeps their
     /// hits and shadows but no lookups and no path-traced parts, so no
     /// pixel is kept whole (with the whole budget these frames take both:
-    /// the test above); a budget one byte short of the samples keeps
-    /// nothing. The frames are those traced afresh either way.
+    /// the test above). A budget one byte short of the samples keeps the
+    /// tiles that fit whole, not the last one, so the next frame takes
+    /// fewer samples; one short of a tile's samples keeps nothing. The
+    /// frames are those traced afresh either way.
     #[test]
     fn kept_samples_past_their_budget_are_traced_again() {
+        // On two threads the 20×20 frame is four tiles of 100 pixels.
+        let two = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
         let samples = 20 * 20 * 4 * KeptTile::SAMPLE_BYTES;
-        let frames = kept_against_fresh("cube-in-box", &[3, 4], StillSamples::within(samples));
-        let check = frames[1];
-        assert!(check.same && check.taken > 0, "{check:?}");
-        assert_eq!(
-            (check.lookups_taken, check.queries_taken),
-            (0, 0),
-            "{check:?}"
-        );
-        assert!(check.kept_rays < check.fresh_rays, "{check:?}");
+        let whole = StillSamples::within(samples);
+        let frames = two.install(|| kept_against_fresh("cube-in-box", &[3, 4], whole));
+        let all = frames[1];
+        assert!(all.same && all.taken > 0, "{all:?}");
+        assert_eq!((all.lookups_taken, all.queries_taken), (0, 0), "{all:?}");
+        assert!(all.kept_rays < all.fresh_rays, "{all:?}");
+
         let short = StillSamples::within(samples - 1);
-        for check in kept_against_fresh("cube-in-box", &[3, 4], short) {
+        let frames = two.install(|| kept_against_fresh("cube-in-box", &[3, 4], short));
+        assert!(took_nothing(frames[0]), "{:?}", frames[0]);
+        let part = frames[1];
+        assert!(part.same, "{part:?}");
+        assert!(0 < part.taken && part.taken < all.taken, "{part:?} {all:?}");
+        assert!(part.kept_rays > all.kept_rays, "{part:?} {all:?}");
+
+        let tile = StillSamples::within(100 * 4 * KeptTile::SAMPLE_BYTES - 1);
+        for check in two.install(|| kept_against_fresh("cube-in-box", &[3, 4], tile)) {
             assert!(took_nothing(check), "{check:?}");
         }
     }
