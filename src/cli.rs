@@ -637,7 +637,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
             j.job.frames_done
         );
     }
-    let interrupted = stop.load(Ordering::Relaxed);
+    // A Ctrl-C during the range's last frame stops nothing.
+    let done = summary.resumed + summary.frames;
+    let interrupted = stop.load(Ordering::Relaxed) && (done as usize) < args.frames.len();
     // Interrupted, the files end at the last frame rendered.
     let last = match summary.frame_stats.last() {
         Some(s) if interrupted => s.frame,
@@ -645,7 +647,6 @@ fn run_render(args: RenderArgs) -> Result<()> {
     };
     print_render_summary(&args, method.spp(), &summary, last);
     if interrupted {
-        let done = summary.resumed + summary.frames;
         let rest = match &store_job {
             Some(j) => format!(
                 "they are saved in job {:?}: the same command renders the rest",
@@ -806,10 +807,8 @@ fn open_job(
     Ok(Some((store, job)))
 }
 
-/// What `render` did: frames, speed, where the frames went, and the
-/// method's own statistics.
-/// Prints what a render did; its frames' files run from the range's
-/// first frame to `last`.
+/// Prints what `render` did: frames, speed, where the frames went (from
+/// the range's first frame to `last`), and the method's own statistics.
 fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSummary, last: u32) {
     let secs = summary.elapsed.as_secs_f64();
     let (w, h) = args.size;

@@ -348,7 +348,7 @@ impl TemporalRadianceCaching {
         let making = RecordMaking {
             ctx,
             next: NextFrame::new(ctx, self.settings.next_direct, &mut self.statics),
-            packer: SamplePacker::new(self.keep, ctx),
+            keep: self.keep,
             motion: FrameMotion {
                 blockers: Blockers::new(ctx),
                 lights: lights_fingerprint(ctx),
@@ -495,7 +495,7 @@ impl TemporalRadianceCaching {
     ) -> (TemporalRecord, Option<SampleBlock>) {
         let mut r = self.temporal(making.ctx, &making.next, g);
         r.paths = tracks.map(|tracks| Arc::new(making.motion.paths(g, tracks, taken_from)));
-        (r, making.packer.pack(g))
+        (r, making.pack(g))
     }
 
     /// Ends frame `t`'s aging: radii as neighbour clamping left them, the
@@ -730,33 +730,24 @@ impl Method for TemporalRadianceCaching {
 }
 
 /// What the records made in a frame need beside their gathers: the frame,
-/// the E(t0+1) estimate's view of the next one, the store's packing of
-/// their samples and what moves (for their kept paths).
+/// the E(t0+1) estimate's view of the next one, whether the store keeps
+/// their samples, and what moves (for their kept paths and their samples'
+/// stored form).
 struct RecordMaking<'a> {
     ctx: &'a FrameContext<'a>,
     next: NextFrame,
-    packer: SamplePacker,
+    /// Store hook: the records are kept, with their samples.
+    keep: bool,
     motion: FrameMotion,
 }
 
-/// Store hook: packs a gather's samples to their stored form as soon as
-/// they are gathered (the E(t0+1) estimate used them at full precision
-/// first); packs nothing when the records are not kept.
-struct SamplePacker {
-    /// Which objects move, when the records are kept.
-    dynamic: Option<Vec<bool>>,
-}
-
-impl SamplePacker {
-    fn new(keep: bool, ctx: &FrameContext) -> Self {
-        SamplePacker {
-            dynamic: keep.then(|| dynamic_objects(ctx)),
-        }
-    }
-
+impl RecordMaking<'_> {
+    /// Store hook: gather `g`'s samples in their stored form, packed as
+    /// soon as they are gathered (the E(t0+1) estimate used them at full
+    /// precision first); nothing when the records are not kept.
     fn pack(&self, g: &Gathered) -> Option<SampleBlock> {
-        let dynamic = self.dynamic.as_ref()?;
-        Some(SampleBlock::pack(&g.samples, dynamic))
+        self.keep
+            .then(|| SampleBlock::pack(&g.samples, &self.motion.moving))
     }
 }
 
