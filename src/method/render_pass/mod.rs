@@ -31,6 +31,7 @@
 mod kept_queries;
 mod shading;
 mod still;
+mod still_tile;
 mod tile_lookups;
 
 use super::ic::IcSettings;
@@ -54,8 +55,9 @@ use shading::TileShading;
 pub(crate) use shading::{direct_light, glossy_query};
 use std::sync::atomic::AtomicBool;
 pub(crate) use still::lights_fingerprint;
+use still::StillPass;
 pub use still::StillSamples;
-use still::{KeptLookup, KeptTile, StillPass, TileKept, TileStill};
+use still_tile::{KeptLookup, KeptTile, TileKept, TileStill};
 use tile_lookups::{pixel_lookups, TileLookups};
 
 /// A shaded hit: position, normals and BSDF.
@@ -88,7 +90,7 @@ impl<'a> Surface<'a> {
 
     /// Whether a hit's shading needs no more than its diffuse albedo and
     /// cache lookup (a miss, or a material that neither emits nor has a
-    /// glossy lobe): what a pixel kept whole may hold ([`Standing`](still::Standing)).
+    /// glossy lobe): what a pixel kept whole may hold ([`Standing`](still_tile::Standing)).
     fn is_plain(ctx: &FrameContext, hit: &Hit) -> bool {
         !hit.is_hit() || {
             let m = material_of(ctx, hit);

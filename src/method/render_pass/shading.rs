@@ -4,7 +4,8 @@
 //! stand), and their indirect light from the cache or, where no record is
 //! usable, path-traced, with their glossy lobes.
 
-use super::still::{KeptShadow, StillPass};
+use super::still::StillPass;
+use super::still_tile::KeptShadow;
 use super::tile_lookups::TileLookups;
 use super::{material_of, Deferred, PixelStreams, PrimarySamples, Surface, TilePass};
 use crate::backend::Ray;
@@ -25,7 +26,7 @@ pub(super) struct TileShading<'a> {
     /// Each sample's shaded first hit; not shaded (`None`) for the samples
     /// of pixels kept whole.
     pub(super) surfaces: Vec<Option<Surface<'a>>>,
-    /// Per base sample, whether its pixel is kept whole ([`Standing`](super::still::Standing));
+    /// Per base sample, whether its pixel is kept whole ([`Standing`](super::still_tile::Standing));
     /// empty where nothing is kept.
     pub(super) whole: Vec<bool>,
     pub(super) radiance: Vec<Vec3>,
@@ -41,7 +42,7 @@ pub(super) struct ShadowBatch {
 
 /// The last frame's shadows of a tile's base samples, moved out of its
 /// kept tile, and per base sample whether its shadow stands
-/// ([`Standing::shadows`](super::still::Standing::shadows)).
+/// ([`Standing::shadows`](super::still_tile::Standing::shadows)).
 pub(super) type LastShadows<'a> = (Vec<Option<KeptShadow>>, &'a [bool]);
 
 impl ShadowBatch {
@@ -142,7 +143,7 @@ impl<'a> TileShading<'a> {
     /// Each sample's first light sample (drawn from its stream, before
     /// anything else draws from it) and the shadow rays of those that may
     /// add direct light; the samples whose last shadow stands
-    /// (`shadows_stand`, per base sample: [`Standing::shadows`](super::still::Standing::shadows))
+    /// (`shadows_stand`, per base sample: [`Standing::shadows`](super::still_tile::Standing::shadows))
     /// draw their light sample but trace nothing: their shadows are taken
     /// from the last frame ([`ShadowBatch::add_unoccluded`]).
     pub(super) fn direct_light(

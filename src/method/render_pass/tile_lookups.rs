@@ -3,7 +3,7 @@
 //! kept whole take from the last frame, their interpolation, and what is
 //! kept of them for the next frame ([`TileLookups`]).
 
-use super::still::{KeptLookup, TileStill};
+use super::still_tile::{KeptLookup, TileStill};
 use super::{Surface, TilePass, TileShading};
 use crate::backend::Hit;
 use crate::cache::Interpolated;
@@ -65,7 +65,7 @@ impl TileLookups {
     }
 
     /// The lookups of the tile's `n_base` base samples, kept for the next
-    /// frame within `still`'s budget ([`super::still::StillPass::keep_lookups`]).
+    /// frame within `still`'s budget ([`TileStill::keep_lookups`]).
     pub(super) fn keep(
         &self,
         ctx: &FrameContext,
@@ -74,9 +74,7 @@ impl TileLookups {
     ) -> Option<(Vec<KeptLookup>, Vec<u32>)> {
         let camera = ctx.snapshot.camera.position;
         let of_base = (&self.lookups[..], &self.of_sample[..n_base]);
-        still
-            .pass
-            .keep_lookups(camera, of_base, self.first_taken, still.pass.tile_budget)
+        still.keep_lookups(camera, of_base, self.first_taken)
     }
 
     /// Sample `i`'s interpolated irradiance: `None` where it made no
