@@ -311,3 +311,54 @@ fn ctrl_c_stops_after_a_saved_frame_and_the_same_command_resumes() {
     );
     assert!(out.join("frame_0199.exr").exists());
 }
+
+/// A Ctrl-C during the range's last frame stops nothing: the frame is
+/// finished and written, and the render ends as one that was never
+/// interrupted (exit 0, no "interrupted" error). The signal is sent just
+/// after frame 0 of two is written; should it land before frame 0 is done
+/// (the render then rightly stops after it), the try is made again.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_during_the_last_frame_lets_the_render_finish() {
+    use std::time::{Duration, Instant};
+    for _try in 0..3 {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        let child = Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args(["render", "--backend", "cpu", "--method", "path"])
+            .args(["--spp", "64", "--size", "128x128", "--frames", "0..2"])
+            .args(["--out", out.to_str().unwrap()])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = Instant::now();
+        while !out.join("frame_0000.png").exists() {
+            assert!(
+                start.elapsed() < Duration::from_secs(120),
+                "no frame written"
+            );
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        // The PNG file exists before it is whole: give its writing time
+        // to end (a frame takes about ten times as long).
+        std::thread::sleep(Duration::from_millis(100));
+        let pid = child.id().to_string();
+        let kill = Command::new("kill").args(["-INT", &pid]).status().unwrap();
+        assert!(kill.success());
+        let output = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        if stderr.contains("interrupted after frame 0:") {
+            continue; // the signal came before frame 0 was done
+        }
+        assert_eq!(output.status.code(), Some(0), "{stderr}");
+        assert!(
+            stderr.contains("stopping once the frame in progress"),
+            "{stderr}"
+        );
+        assert!(!stderr.contains("interrupted"), "{stderr}");
+        assert!(out.join("frame_0001.exr").exists() && out.join("frame_0001.png").exists());
+        return;
+    }
+    panic!("in three tries the signal never came during the last frame");
+}
