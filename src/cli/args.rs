@@ -1,0 +1,431 @@
+//! The command line's arguments: one clap struct per verb, their value
+//! enums, and the parsers that turn a bad value into a clear clap error
+//! (never a panic).
+
+use crate::bench;
+use crate::cache::gather::Strata;
+use crate::render::SceneSource;
+use clap::{Args, ValueEnum};
+use std::ops::Range;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct CompactArgs {
+    /// Store directory.
+    #[arg(long, default_value = DEFAULT_DB)]
+    pub db: PathBuf,
+    /// No progress bar (the summary is still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct ServeArgs {
+    /// Store directory.
+    #[arg(long, default_value = DEFAULT_DB)]
+    pub db: PathBuf,
+    /// Address to listen on (non-loopback needs --token).
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub addr: std::net::SocketAddr,
+    /// Directory of scene files jobs may name (relative paths only).
+    #[arg(long)]
+    pub scenes: Option<PathBuf>,
+    /// Token every request must carry (Authorization: Bearer TOKEN or ?token=).
+    #[arg(long, env = "RADCACHE_TOKEN")]
+    pub token: Option<String>,
+    /// Ray backend.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendArg,
+    /// Directory of each job's frame files (DIR/JOB_ID/) [default: DB.frames].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// A `radcache bench --out DIR` directory whose charts (*.svg, *.csv)
+    /// the dashboard shows [default: the charts kept in web/charts].
+    #[arg(long)]
+    pub bench: Option<PathBuf>,
+}
+
+/// Default store directory (DESIGN.md "The store"), used when `--job` is
+/// given without `--db`, and by `inspect`.
+pub const DEFAULT_DB: &str = "radcache.db";
+
+#[derive(Args, Debug)]
+pub struct InspectArgs {
+    /// Only this job (default: every job).
+    pub job: Option<String>,
+    /// Store directory.
+    #[arg(long, default_value = DEFAULT_DB)]
+    pub db: PathBuf,
+    /// Per-frame details of this frame only (default: every frame when a JOB is given).
+    #[arg(long)]
+    pub frame: Option<u32>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Rendering methods available in this build.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MethodName {
+    /// Unbiased path tracer (NEE + MIS + Russian roulette): the accuracy yardstick.
+    Path,
+    /// Per-frame irradiance caching (Ward 1988, Ward & Heckbert 1992): a new cache every frame.
+    Ic,
+    /// Temporal radiance caching (Gautron et al., TVCG 2007): ic records that live across frames.
+    Trc,
+    /// Temporally coherent final gathering (Tawara et al., 2004): records keep their samples and re-shoot a share of them each frame.
+    Tcg,
+    /// Texture movies with a coarse radiosity global pass (Martín, Pueyo & Tost, 2003): per visible triangle side a texture over time; static shadows found once per movie.
+    Movies,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BackendArg {
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// glTF 2.0 scene (.gltf or .glb). Without it, the built-in `cube-in-box`.
+    pub scene: Option<PathBuf>,
+    /// Built-in scene: cube-in-box, moving-light, spheres, glossy-cornell, chairs-room.
+    #[arg(long, conflicts_with = "scene")]
+    pub builtin: Option<String>,
+    /// Rendering method: by default `trc`, the temporal method this
+    /// renderer is built around (`path` is the unbiased yardstick).
+    #[arg(long, value_enum, default_value = "trc")]
+    pub method: MethodName,
+    /// Half-open frame range START..END (0..24 is frames 0 to 23).
+    #[arg(long, default_value = "0..24", value_parser = parse_frames)]
+    pub frames: Range<u32>,
+    /// Image size WxH.
+    #[arg(long, default_value = "256x256", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Samples per pixel [default: 16; for ic the samples of direct light and anti-aliasing].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub spp: Option<u32>,
+    /// Frames per second: frame f is rendered at t = f / fps.
+    #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, value_parser = parse_fps)]
+    pub fps: f32,
+    /// Random seed; the same seed gives the same frames.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Use the same random sequence in every frame (reference sequences for the flicker figure).
+    #[arg(long)]
+    pub same_pattern: bool,
+    /// Output directory.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Ray backend.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub backend: BackendArg,
+    /// Hard limit on path length in bounces (default: unbounded, Russian roulette).
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    #[command(flatten)]
+    pub ic: IcArgs,
+    #[command(flatten)]
+    pub trc: TrcArgs,
+    #[command(flatten)]
+    pub tcg: TcgArgs,
+    #[command(flatten)]
+    pub movies: MoviesArgs,
+    /// Record the render as job NAME in the store and resume it if it was interrupted
+    /// (frames already finished are skipped). The store is --db, default ./radcache.db.
+    #[arg(long, value_name = "NAME", value_parser = parse_job_name)]
+    pub job: Option<String>,
+    /// Store directory for --job [default: ./radcache.db]. Only used with --job.
+    #[arg(long, value_name = "PATH", requires = "job")]
+    pub db: Option<PathBuf>,
+    /// With --job: start the job over when its scene or settings changed (else an error).
+    #[arg(long, requires = "job")]
+    pub force: bool,
+    /// No progress bar.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// Settings of `--method ic`.
+#[derive(Args, Debug)]
+pub struct IcArgs {
+    /// Accuracy a: records are used where their weight w ≥ 1/a (Ward 1988 recommends 0.1–0.3).
+    #[arg(long, default_value_t = 0.2, value_parser = parse_accuracy)]
+    pub ic_accuracy: f32,
+    /// Hemisphere cells per record, MxN (θ × φ; Ward & Heckbert 1992 use N ≈ πM).
+    #[arg(long, default_value = "16x48", value_parser = parse_strata)]
+    pub ic_strata: Strata,
+    /// Smallest record spacing in pixels (screen-space clamp of the record radius).
+    #[arg(long, default_value_t = 2.0, value_parser = parse_positive)]
+    pub ic_min_spacing: f32,
+    /// Largest record influence radius in pixels.
+    #[arg(long, default_value_t = 64.0, value_parser = parse_positive)]
+    pub ic_max_spacing: f32,
+    /// Interpolate without the translation and rotation gradients.
+    #[arg(long)]
+    pub ic_no_gradients: bool,
+    /// Indirect light of glossy lobes: path (traced from a lobe sample per pixel sample) or eas (radiance records of equivalent area light sources, Omidvar et al.; `ic`, `trc` and `tcg`).
+    #[arg(long, value_enum, default_value = "path")]
+    pub ic_glossy: GlossyArg,
+    /// EAS precision criterion τ: a record's sources are refined until their reflected radiance is within τ of the finer level's (Eq. 13; the paper uses 0.02).
+    #[arg(long, default_value_t = crate::cache::eas::DEFAULT_TAU, value_parser = parse_positive)]
+    pub ic_eas_tau: f32,
+}
+
+/// Settings of `--method trc` (its spatial settings are the `--ic-*` ones).
+#[derive(Args, Debug)]
+pub struct TrcArgs {
+    /// Temporal accuracy a_t: a record is used while w_t = 1/(|τ−1|(t−t0)) ≥ 1/a_t (TRC Eq. 9–10; the paper uses 0.05).
+    #[arg(long, default_value_t = 0.05, value_parser = parse_positive)]
+    pub trc_at: f32,
+    /// δt_max: longest life of a record in frames, t − t0 < δt_max (TRC Eq. 11; the paper uses 20 on Cube in a Box, 5 on Spheres).
+    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub trc_max_life: u32,
+    /// Temporal gradients (TRC §4.5): none, extrapolated from the estimate of E(t0+1) (Eq. 15–17, one pass), or interpolated towards the record's replacement (Eq. 18–20, two passes: frames come out up to δt_max frames of first pass late).
+    #[arg(long, value_enum, default_value = "extrapolated")]
+    pub trc_gradients: TrcGradientsArg,
+    /// Estimate E(t0+1) by reprojecting the record's hemisphere samples (TRC §4.7); off: E constant.
+    #[arg(long, value_enum, default_value = "on")]
+    pub trc_reprojection: OnOff,
+    /// With reprojection, evaluate each hemisphere sample's direct light again at t0+1 (one light sample, shadowed in the next frame's geometry), so that E(t0+1) sees moving shadows and moving lights (TRC §5: the incoming lighting at t+1 of each visible point). Costs 12–48 % more time on our animated scenes; on cube-in-box it lowers the error by 4 %, elsewhere not (README).
+    #[arg(long, value_enum, default_value = "off")]
+    pub trc_next_direct: OnOff,
+    /// A replacement record takes the results of the paths of the record it replaces that nothing moving met, then or now, rather than tracing them again: the same records, faster (not in the paper, which traces them all again).
+    #[arg(long, value_enum, default_value = "on")]
+    pub trc_keep_paths: OnOff,
+}
+
+/// Settings of `--method tcg` (its spatial settings are the `--ic-*` ones).
+#[derive(Args, Debug)]
+pub struct TcgArgs {
+    /// τ_min of Eq. 2: the share of a record's samples shot again every frame (Tawara et al. 2004; their results use 0.05).
+    #[arg(long, default_value_t = 0.05, value_parser = parse_share)]
+    pub tcg_tau_min: f32,
+    /// τ_max of Eq. 2: the share shot again of the samples that hit moving objects (their results use 1.0).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_share)]
+    pub tcg_tau_max: f32,
+    /// §4.2: a record with more usable neighbours than this is removed as redundant (their example: 10).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(0..=1_000_000))]
+    pub tcg_max_neighbours: u32,
+}
+
+/// Settings of `--method movies`.
+#[derive(Args, Debug)]
+pub struct MoviesArgs {
+    /// Shadow samples per texel: sample points on the lights (the paper's N, §3.1), at most 64.
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub movies_shadow_samples: u32,
+    /// Texels across a pixel's footprint (§3.1: at least one texel covers one pixel).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
+    pub movies_texels_per_pixel: f32,
+    /// Finest texture, texels along a triangle's edge.
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub movies_max_resolution: u32,
+    /// Memory for the movies' kept static shadows, in MiB (past it the largest give theirs up and find them again).
+    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(0..=1_048_576))]
+    pub movies_memory_mib: u32,
+    /// Global pass: grid spacing as a fraction of the static scene's diagonal.
+    #[arg(long, default_value_t = 1.0 / 32.0, value_parser = parse_positive)]
+    pub movies_spacing: f32,
+    /// Global pass: links (gather rays) of a grid vertex.
+    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub movies_links: u32,
+    /// Global pass: bounces of indirect light (Jacobi iterations).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(0..=64))]
+    pub movies_bounces: u32,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum GlossyArg {
+    Path,
+    Eas,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TrcGradientsArg {
+    None,
+    Extrapolated,
+    Interpolated,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum OnOff {
+    On,
+    Off,
+}
+
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    /// Directory of reference frames (frame_NNNN.exr).
+    pub reference: PathBuf,
+    /// Directory of frames to judge.
+    pub test: PathBuf,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Comma-separated built-in scene names and/or .gltf/.glb files.
+    #[arg(long, default_value = "cube-in-box", value_delimiter = ',', value_parser = parse_bench_scene)]
+    pub scenes: Vec<SceneSource>,
+    /// Methods, each NAME or NAME:KEY=V1,V2,… sweeping one setting (one run per value),
+    /// with more :KEY=V settings fixed in every run, e.g.
+    /// `--methods path:spp=4,16,64 ic:accuracy=0.1,0.2 trc:at=0.1:max_life=5,20`.
+    #[arg(long, num_args = 1.., default_values = bench::DEFAULT_METHODS, value_parser = parse_bench_method)]
+    pub methods: Vec<bench::MethodSweep>,
+    /// Half-open frame range START..END.
+    #[arg(long, default_value = "0..24", value_parser = parse_frames)]
+    pub frames: Range<u32>,
+    /// Image size WxH.
+    #[arg(long, default_value = "64x64", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Samples per pixel of the converged path reference.
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    pub reference_spp: u32,
+    /// Frames per second: frame f is rendered at t = f / fps.
+    #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, value_parser = parse_fps)]
+    pub fps: f32,
+    /// Random seed of the runs and the reference.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Output directory: bench.csv, charts, reference/ and runs/.
+    #[arg(long, default_value = "bench-out")]
+    pub out: PathBuf,
+    /// Render the runs too with the same random sequence in every frame
+    /// (the reference always is): flicker then shows what a method changes
+    /// between frames rather than its per-frame pixel noise.
+    #[arg(long)]
+    pub same_pattern: bool,
+    /// No progress bars or messages (the table is still printed).
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// For trc runs, also measure the error of the records' E(t0+1)
+    /// estimate, with and without reprojection, over every record the run
+    /// computes (TRC Table 1): a second, untimed pass gathers each record
+    /// again one frame later.
+    #[arg(long)]
+    pub estimate_error: bool,
+    /// Also render every run, untimed, into a store of its own
+    /// (`runs/<scene>/<run>/store`, left for inspect) and report its bytes
+    /// on disk (sled and sample log).
+    #[arg(long)]
+    pub store_size: bool,
+    /// Ray backends, comma-separated: every run is rendered once on each
+    /// (`cpu,gpu` compares them in one invocation; the reference uses auto).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "auto")]
+    pub backends: Vec<BackendArg>,
+}
+
+fn parse_bench_scene(s: &str) -> Result<SceneSource, String> {
+    bench::parse_scene(s).map_err(|e| e.to_string())
+}
+
+fn parse_bench_method(s: &str) -> Result<bench::MethodSweep, String> {
+    bench::MethodSweep::parse(s).map_err(|e| e.to_string())
+}
+
+/// Largest image side accepted; beyond it a typo is likelier than intent.
+const MAX_SIDE: u32 = 16384;
+
+fn parse_frames(s: &str) -> Result<Range<u32>, String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("'{s}' is not a frame range; expected START..END, e.g. 0..24"))?;
+    let start: u32 = a
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{a}' is not a frame number"))?;
+    let end: u32 = b
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{b}' is not a frame number"))?;
+    if end <= start {
+        return Err(format!(
+            "frame range {start}..{end} is empty (END is exclusive)"
+        ));
+    }
+    Ok(start..end)
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("'{s}' is not an image size; expected WxH, e.g. 256x256"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{w}' is not a width"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{h}' is not a height"))?;
+    if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
+        return Err(format!(
+            "image size {w}x{h} is out of range (1..={MAX_SIDE} per side)"
+        ));
+    }
+    Ok((w, h))
+}
+
+fn parse_accuracy(s: &str) -> Result<f32, String> {
+    let a: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !(a > 0.0 && a <= 2.0) {
+        return Err(format!("accuracy must be in (0, 2], got {s}"));
+    }
+    Ok(a)
+}
+
+/// A share in [0, 1].
+fn parse_share(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !(0.0..=1.0).contains(&v) {
+        return Err(format!("expected a share from 0 to 1, got {s}"));
+    }
+    Ok(v)
+}
+
+fn parse_positive(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !(v.is_finite() && v > 0.0) {
+        return Err(format!("expected a positive number, got {s}"));
+    }
+    Ok(v)
+}
+
+fn parse_strata(s: &str) -> Result<Strata, String> {
+    let (m, n) = parse_size(s).map_err(|_| format!("'{s}' is not MxN, e.g. 16x48"))?;
+    if m * n > 65_536 {
+        return Err(format!(
+            "{m}x{n} cells per record is too many (at most 65536)"
+        ));
+    }
+    Ok(Strata { theta: m, phi: n })
+}
+
+fn parse_job_name(s: &str) -> Result<String, String> {
+    if s.is_empty() || s.len() > 200 || s.chars().any(|c| c.is_control()) {
+        return Err(format!(
+            "job name {s:?} must be 1 to 200 characters without control characters"
+        ));
+    }
+    // `radcache serve` would take such a job in the same store for one of
+    // its own, and queue it if unfinished.
+    if crate::server::parse_job_id(s).is_some() {
+        return Err(format!(
+            "job name {s:?} has the form job-N, which radcache serve gives its own jobs; \
+             pick another name"
+        ));
+    }
+    Ok(s.to_string())
+}
+
+fn parse_fps(s: &str) -> Result<f32, String> {
+    let fps: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if !fps.is_finite() || fps <= 0.0 {
+        return Err(format!("fps must be a positive number, got {s}"));
+    }
+    Ok(fps)
+}

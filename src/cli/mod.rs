@@ -1,0 +1,273 @@
+//! The `radcache` command line (DESIGN.md "Command line"). Every verb parses
+//! its arguments, calls the library and maps errors to a message and a
+//! non-zero exit status; no input makes it panic. The verbs' arguments are
+//! in `args`, the `render` verb in `render`, the others here.
+
+mod args;
+mod render;
+
+use crate::bench;
+use crate::metrics;
+use crate::render::{BackendChoice, SceneSource};
+use crate::store::{self, Store};
+use anyhow::{bail, Context, Result};
+pub use args::{
+    BackendArg, BenchArgs, CompactArgs, CompareArgs, GlossyArg, IcArgs, InspectArgs, MethodName,
+    MoviesArgs, OnOff, RenderArgs, ServeArgs, TcgArgs, TrcArgs, TrcGradientsArg, DEFAULT_DB,
+};
+use clap::{Parser, Subcommand};
+use render::run_render;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "radcache",
+    version,
+    about = "Global illumination for animations, reusing lighting work across frames"
+)]
+pub struct Cli {
+    /// Worker threads that render, trace and shade [default: one per CPU
+    /// core, or RAYON_NUM_THREADS]. Frames are the same, bit for bit, for
+    /// any count.
+    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..))]
+    pub threads: Option<u16>,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Render frames of an animated scene to DIR/frame_NNNN.{exr,png}.
+    Render(RenderArgs),
+    /// Compare two directories of frame_NNNN.exr: RMSE, relative RMSE, block bias, flicker.
+    Compare(CompareArgs),
+    /// Run methods over scenes against a converged path reference; write bench.csv and charts.
+    Bench(BenchArgs),
+    /// Show what a store holds: jobs, frames done, records, bytes per tree, lifespans.
+    Inspect(InspectArgs),
+    /// Serve the HTTP API and dashboard; render queued jobs in the background.
+    Serve(ServeArgs),
+    /// Rewrite a store's sample log without the bytes nothing references any more (jobs restarted with --force, frames written again).
+    Compact(CompactArgs),
+}
+
+/// Runs the CLI on the process arguments.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("error: {err:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+pub fn run(cli: Cli) -> Result<()> {
+    if let Some(threads) = cli.threads {
+        start_worker_threads(usize::from(threads))?;
+    }
+    match cli.command {
+        Command::Render(args) => run_render(args),
+        Command::Compare(args) => run_compare(args),
+        Command::Bench(args) => run_bench(args),
+        Command::Inspect(args) => run_inspect(args),
+        Command::Serve(args) => run_serve(args),
+        Command::Compact(args) => run_compact(args),
+    }
+}
+
+/// Starts the process's pool of `threads` worker threads (rayon's global
+/// pool, which every parallel stage uses). The pool starts once per
+/// process: a second call asking for the count it already has is fine.
+fn start_worker_threads(threads: usize) -> Result<()> {
+    let started = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build_global();
+    if started.is_err() && rayon::current_num_threads() != threads {
+        bail!(
+            "--threads {threads}: the worker threads are already started, {} of them",
+            rayon::current_num_threads()
+        );
+    }
+    Ok(())
+}
+
+/// The bench's options as the command line gives them.
+fn bench_options(args: BenchArgs) -> bench::BenchOptions {
+    bench::BenchOptions {
+        scenes: args.scenes,
+        methods: args.methods,
+        frames: args.frames,
+        width: args.size.0,
+        height: args.size.1,
+        fps: args.fps,
+        reference_spp: args.reference_spp,
+        seed: args.seed,
+        out: args.out,
+        same_pattern: args.same_pattern,
+        quiet: args.quiet,
+        estimate_error: args.estimate_error,
+        store_size: args.store_size,
+        backends: args.backends.into_iter().map(backend_choice).collect(),
+    }
+}
+
+fn run_bench(args: BenchArgs) -> Result<()> {
+    let opts = bench_options(args);
+    let report = bench::run(&opts)?;
+    print!("{}", bench::to_table(&report.rows));
+    for (measure, what) in [
+        (bench::ErrorMeasure::AllPixels, "all pixels"),
+        (
+            bench::ErrorMeasure::Surfaces,
+            "without the pixels at directly seen lights",
+        ),
+    ] {
+        let equal = bench::equal_error_table(&report.rows, measure);
+        if !equal.is_empty() {
+            println!("\nequal error, {what} (path time interpolated along its sweep, log-log):");
+            print!("{}", bench::equal_error_text(&equal));
+        }
+    }
+    let temporal = bench::temporal_text(&report.rows);
+    if !temporal.is_empty() {
+        println!("\ntemporal methods against per-frame ic (ic's time and records over theirs; their error and flicker over ic's):");
+        print!("{temporal}");
+    }
+    let estimates = bench::estimate_error_text(&report.rows);
+    if !estimates.is_empty() {
+        println!(
+            "\nerror of the records' E(t0+1) estimate against E(t0+1) gathered again \
+             (TRC Table 1; relative to their mean E(t0+1)):"
+        );
+        print!("{estimates}");
+    }
+    let backends = bench::backend_text(&report.rows);
+    if !backends.is_empty() {
+        println!(
+            "\nspeed-up of each later backend over the first (the first's seconds ÷ its own):"
+        );
+        print!("{backends}");
+    }
+    if !report.peak_mem_per_run {
+        println!("(peak memory is the process peak so far, not per run)");
+    }
+    println!("\nwrote {}", report.csv.display());
+    for chart in &report.charts {
+        println!("wrote {}", chart.display());
+    }
+    Ok(())
+}
+fn run_serve(args: ServeArgs) -> Result<()> {
+    let out = args.out.unwrap_or_else(|| {
+        let mut p = args.db.clone().into_os_string();
+        p.push(".frames");
+        PathBuf::from(p)
+    });
+    crate::server::serve(crate::server::ServeOptions {
+        db: args.db,
+        addr: args.addr,
+        scenes: args.scenes,
+        token: args.token,
+        backend: backend_choice(args.backend),
+        out,
+        bench: args.bench,
+    })
+}
+
+fn backend_choice(b: BackendArg) -> BackendChoice {
+    match b {
+        BackendArg::Auto => BackendChoice::Auto,
+        BackendArg::Cpu => BackendChoice::Cpu,
+        BackendArg::Gpu => BackendChoice::Gpu,
+    }
+}
+
+fn run_inspect(args: InspectArgs) -> Result<()> {
+    let store = Store::open_existing(&args.db)?;
+    let mut report = store::inspect::report(&store, args.job.as_deref(), args.frame)?;
+    for job in &mut report.jobs {
+        job.moving_objects = moving_objects(&job.scene, &job.scene_hash);
+    }
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print!(
+            "{}",
+            store::inspect::to_text(&report, args.job.is_some() || args.frame.is_some())
+        );
+    }
+    Ok(())
+}
+
+/// The animated objects of a job's scene (`builtin:NAME` or a file path as
+/// stored), where it still loads and is the scene the job rendered (same
+/// hash); `None` otherwise: `inspect` then only lists records by object.
+fn moving_objects(scene: &str, hash: &str) -> Option<std::collections::BTreeSet<u32>> {
+    let source = match scene.strip_prefix("builtin:") {
+        Some(name) => SceneSource::Builtin(name.to_string()),
+        None => SceneSource::File(PathBuf::from(scene)),
+    };
+    let (_, stored_as) = crate::render::scene_identity(&source).ok()?;
+    if stored_as != hash {
+        return None;
+    }
+    let scene = source.load().ok()?;
+    let moving = (0..scene.objects.len()).filter(|&o| scene.object_is_dynamic(o));
+    Some(moving.map(|o| o as u32).collect())
+}
+
+fn run_compact(args: CompactArgs) -> Result<()> {
+    let mut store = Store::open_existing(&args.db)?;
+    let bar = store::compact::progress_bar(args.quiet);
+    let report = store::compact::compact(&mut store, &bar)?;
+    bar.finish_and_clear();
+    print!("{}", store::compact::to_text(&report));
+    Ok(())
+}
+
+fn run_compare(args: CompareArgs) -> Result<()> {
+    if !args.reference.is_dir() {
+        bail!(
+            "reference directory {} does not exist",
+            args.reference.display()
+        );
+    }
+    let report = metrics::compare_dirs(&args.reference, &args.test).with_context(|| {
+        format!(
+            "comparing {} with {}",
+            args.test.display(),
+            args.reference.display()
+        )
+    })?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print!("{}", report.to_text());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `radcache bench` with no options runs what `BenchOptions::default()`
+    /// documents (clap needs the frames as text, so they are written twice).
+    #[test]
+    fn bench_defaults_are_the_library_defaults() {
+        let cli = Cli::try_parse_from(["radcache", "bench"]).expect("parses");
+        let Command::Bench(args) = cli.command else {
+            panic!("not the bench command");
+        };
+        let (cli, lib) = (bench_options(args), bench::BenchOptions::default());
+        assert_eq!(cli.methods, lib.methods);
+        assert_eq!(cli.frames, lib.frames);
+        assert_eq!((cli.width, cli.height), (lib.width, lib.height));
+        assert_eq!(cli.reference_spp, lib.reference_spp);
+        assert_eq!((cli.fps, cli.seed), (lib.fps, lib.seed));
+        assert_eq!(cli.out, lib.out);
+    }
+}

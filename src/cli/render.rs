@@ -1,0 +1,276 @@
+//! `radcache render`: renders a range of frames to a directory, checkpointed
+//! to a store job when `--db`/`--job` are given, and stops cleanly on
+//! Ctrl-C once the frame in progress is written.
+
+use super::{
+    backend_choice, GlossyArg, MethodName, OnOff, RenderArgs, TrcGradientsArg, DEFAULT_DB,
+};
+use crate::integrator::PathLength;
+use crate::method::ic::{GlossyLobe, IcSettings};
+use crate::method::movies::global::GlobalSettings;
+use crate::method::movies::MoviesSettings;
+use crate::method::path::PathSettings;
+use crate::method::tcg::TcgSettings;
+use crate::method::trc::{TemporalGradients, TrcSettings};
+use crate::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource};
+use crate::store::{self, Store};
+use anyhow::{bail, Result};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// Renders the frames `args` name, prints the summary, and fails with an
+/// "interrupted after frame N" error when a Ctrl-C stopped it before the
+/// range's end (the frames written so far stay, and a job resumes there).
+pub(super) fn run_render(args: RenderArgs) -> Result<()> {
+    let source = match (&args.scene, &args.builtin) {
+        (Some(path), _) => SceneSource::File(path.clone()),
+        (None, Some(name)) => SceneSource::Builtin(name.clone()),
+        (None, None) => SceneSource::Builtin("cube-in-box".into()),
+    };
+    let scene = source.load()?;
+    let method = render_method(&args)?;
+    let backend = render::make_backend(backend_choice(args.backend))?;
+    let settings = FrameSettings {
+        width: args.size.0,
+        height: args.size.1,
+        fps: args.fps,
+        seed: args.seed,
+        same_pattern: args.same_pattern,
+        ..FrameSettings::default()
+    };
+    if !args.quiet {
+        let (w, h) = args.size;
+        eprintln!(
+            "rendering {source} frames {}..{} at {w}x{h}, method {}, {} spp, backend {}",
+            args.frames.start,
+            args.frames.end,
+            method.name(),
+            method.spp(),
+            backend.name()
+        );
+    }
+    let store_and_job = open_job(&args, &source, &method, &settings)?;
+    let mut renderer = Renderer::new(scene, method.instantiate(), backend, settings);
+    let mut store_job = store_and_job.as_ref().map(|(store, job)| render::StoreJob {
+        store,
+        job: job.clone(),
+    });
+    let stop = stop_on_ctrl_c();
+    let summary = render::render_job_to_dir_with(
+        &mut renderer,
+        args.frames.clone(),
+        &args.out,
+        args.quiet,
+        store_job.as_mut(),
+        &mut |_| !stop.load(Ordering::Relaxed),
+    )?;
+    if let Some(j) = &store_job {
+        println!(
+            "job {:?} in {}: {} frames resumed from the store, {} rendered, {} done in all",
+            j.job.name,
+            j.store.path().display(),
+            summary.resumed,
+            summary.frames,
+            j.job.frames_done
+        );
+    }
+    // A Ctrl-C during the range's last frame stops nothing.
+    let done = summary.resumed + summary.frames;
+    let interrupted = stop.load(Ordering::Relaxed) && (done as usize) < args.frames.len();
+    // Interrupted, the files end at the last frame rendered.
+    let last = match summary.frame_stats.last() {
+        Some(s) if interrupted => s.frame,
+        _ => args.frames.end - 1,
+    };
+    print_render_summary(&args, method.spp(), &summary, last);
+    if interrupted {
+        let rest = match &store_job {
+            Some(j) => format!(
+                "they are saved in job {:?}: the same command renders the rest",
+                j.job.name
+            ),
+            None => "without --db and --job, running it again renders every frame again".into(),
+        };
+        bail!(
+            "interrupted after frame {last}: {done} of {} frames are in {}; {rest}",
+            args.frames.len(),
+            args.out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Stops a render at the first Ctrl-C once the frame in progress is
+/// written (and saved, with a job), so a long render ends with a message
+/// saying where it stopped; a second Ctrl-C stops the process at once (a
+/// job still resumes from its last saved frame: each frame is saved in one
+/// atomic batch). Returns the flag the first Ctrl-C sets.
+fn stop_on_ctrl_c() -> Arc<AtomicBool> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let (ready, wait_ready) = std::sync::mpsc::channel();
+    let watch = move || {
+        let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+        else {
+            let _ = ready.send(());
+            return; // Ctrl-C keeps its default: the process stops at once.
+        };
+        let registered = {
+            let _runtime = runtime.enter();
+            #[cfg(unix)]
+            let signal = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt());
+            #[cfg(windows)]
+            let signal = tokio::signal::windows::ctrl_c();
+            signal
+        };
+        let _ = ready.send(());
+        let Ok(mut ctrl_c) = registered else {
+            return;
+        };
+        runtime.block_on(async {
+            ctrl_c.recv().await;
+            flag.store(true, Ordering::Relaxed);
+            eprintln!(
+                "\nstopping once the frame in progress is written (Ctrl-C again to stop now)"
+            );
+            ctrl_c.recv().await;
+            std::process::exit(130);
+        })
+    };
+    // The render starts once the watcher listens, so that no Ctrl-C falls
+    // between the two; without a watcher Ctrl-C keeps its default.
+    if std::thread::Builder::new()
+        .name("ctrl-c".into())
+        .spawn(watch)
+        .is_ok()
+    {
+        let _ = wait_ready.recv();
+    }
+    stop
+}
+
+/// The method `render`'s flags ask for, with the papers' defaults for
+/// what they leave out.
+fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
+    if args.ic.ic_glossy == GlossyArg::Eas
+        && !matches!(
+            args.method,
+            MethodName::Ic | MethodName::Trc | MethodName::Tcg
+        )
+    {
+        bail!(
+            "--ic-glossy eas is for the record-caching methods (ic, trc, tcg) only: {} keeps no records",
+            format!("{:?}", args.method).to_lowercase()
+        );
+    }
+    let length = PathLength {
+        max_depth: args.max_depth,
+        ..PathLength::default()
+    };
+    let ic_settings = IcSettings {
+        accuracy: args.ic.ic_accuracy,
+        strata: args.ic.ic_strata,
+        spp: args.spp.unwrap_or(IcSettings::default().spp),
+        min_spacing_px: args.ic.ic_min_spacing,
+        max_spacing_px: args.ic.ic_max_spacing,
+        gradients: !args.ic.ic_no_gradients,
+        length,
+        glossy: match args.ic.ic_glossy {
+            GlossyArg::Path => GlossyLobe::Path,
+            GlossyArg::Eas => GlossyLobe::Eas,
+        },
+        eas_tau: args.ic.ic_eas_tau,
+        ..IcSettings::default()
+    };
+    Ok(match args.method {
+        MethodName::Path => MethodSettings::Path(PathSettings {
+            spp: args.spp.unwrap_or(PathSettings::default().spp),
+            length,
+        }),
+        MethodName::Ic => MethodSettings::Ic(ic_settings),
+        MethodName::Trc => MethodSettings::Trc(TrcSettings {
+            ic: ic_settings,
+            temporal_accuracy: args.trc.trc_at,
+            max_life: args.trc.trc_max_life,
+            gradients: match args.trc.trc_gradients {
+                TrcGradientsArg::None => TemporalGradients::None,
+                TrcGradientsArg::Extrapolated => TemporalGradients::Extrapolated,
+                TrcGradientsArg::Interpolated => TemporalGradients::Interpolated,
+            },
+            reprojection: args.trc.trc_reprojection == OnOff::On,
+            next_direct: args.trc.trc_next_direct == OnOff::On,
+            keep_paths: args.trc.trc_keep_paths == OnOff::On,
+        }),
+        MethodName::Tcg => MethodSettings::Tcg(TcgSettings {
+            ic: ic_settings,
+            tau_min: args.tcg.tcg_tau_min,
+            tau_max: args.tcg.tcg_tau_max,
+            max_neighbours: args.tcg.tcg_max_neighbours,
+        }),
+        MethodName::Movies => MethodSettings::Movies(MoviesSettings {
+            spp: args.spp.unwrap_or(MoviesSettings::default().spp),
+            shadow_samples: args.movies.movies_shadow_samples,
+            texels_per_pixel: args.movies.movies_texels_per_pixel,
+            max_resolution: args.movies.movies_max_resolution,
+            memory_mib: args.movies.movies_memory_mib,
+            global: GlobalSettings {
+                spacing: args.movies.movies_spacing,
+                links: args.movies.movies_links,
+                bounces: args.movies.movies_bounces,
+                ..GlobalSettings::default()
+            },
+            length,
+        }),
+    })
+}
+
+/// With `--job`, the store (`--db`, or the default) and the job begun or
+/// resumed in it.
+fn open_job(
+    args: &RenderArgs,
+    source: &SceneSource,
+    method: &MethodSettings,
+    settings: &FrameSettings,
+) -> Result<Option<(Store, store::schema::JobValue)>> {
+    let Some(name) = &args.job else {
+        return Ok(None);
+    };
+    let db = args.db.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_DB));
+    let store = Store::open(&db)?;
+    let spec = render::job_spec(name, source, method, settings, args.frames.clone())?;
+    let job = store.begin_job(&spec, args.force)?;
+    Ok(Some((store, job)))
+}
+
+/// Prints what `render` did: frames, speed, where the frames went (from
+/// the range's first frame to `last`), and the method's own statistics.
+fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSummary, last: u32) {
+    let secs = summary.elapsed.as_secs_f64();
+    let (w, h) = args.size;
+    let samples = u64::from(w) * u64::from(h) * u64::from(spp) * u64::from(summary.frames);
+    println!(
+        "rendered {} frame{} in {:.2} s ({:.3} s/frame, {:.2} Mrays/s in {} backend calls, {:.2} M samples/s) → {}/frame_{:04}..{:04}.{{exr,png}}",
+        summary.frames,
+        if summary.frames == 1 { "" } else { "s" },
+        secs,
+        secs / summary.frames.max(1) as f64,
+        summary.rays_per_second() / 1e6,
+        summary.ray_calls,
+        samples as f64 / secs.max(1e-9) / 1e6,
+        summary.out_dir.display(),
+        args.frames.start,
+        last,
+    );
+    let reports = [
+        summary.frame_time_report(),
+        summary.cache_report(),
+        summary.footprint_report(),
+        summary.lifespan_report(),
+    ];
+    for report in reports.into_iter().flatten() {
+        println!("{report}");
+    }
+}
