@@ -1,5 +1,5 @@
 //! The render pass's cache interpolation, CPU (octree, as `--backend cpu`
-//! does it) against GPU (radiance cache splatting, `src/backend/gpu_cache.rs`,
+//! does it) against GPU (radiance cache splatting, `src/backend/gpu/cache_splat.rs`,
 //! as `--backend gpu` does it), on `ic`'s cache of one frame of a built-in
 //! scene.
 //!
@@ -26,8 +26,8 @@
 
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
+use radcache::backend::gpu::cache_splat::{GpuLookup, SplatTimings};
 use radcache::backend::gpu::{AdapterPolicy, GpuBackend, RaysOnly};
-use radcache::backend::gpu_cache::{GpuLookup, SplatTimings};
 use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::cache::LookupPoint;
 use radcache::method::ic::{IcSettings, IrradianceCaching};

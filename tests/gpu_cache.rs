@@ -1,5 +1,5 @@
 //! The render pass's cache interpolation on the GPU (radiance cache
-//! splatting, TRC §5: `src/backend/gpu_cache.rs`, `shaders/cache_splat.wgsl`)
+//! splatting, TRC §5: `src/backend/gpu/cache_splat.rs`, `shaders/cache_splat.wgsl`)
 //! against the CPU's `IrradianceCache::interpolate`.
 //!
 //! Like `tests/gpu_backend.rs` these tests need a wgpu adapter; machines
@@ -29,8 +29,8 @@
 
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
+use radcache::backend::gpu::cache_splat::{CacheSplat, GpuLookup};
 use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuError, GpuLayout, RaysOnly};
-use radcache::backend::gpu_cache::{CacheSplat, GpuLookup};
 use radcache::backend::RayBackend;
 use radcache::cache::gather::Strata;
 use radcache::cache::{IrradianceCache, IrradianceRecord, LookupPoint};

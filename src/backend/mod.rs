@@ -2,7 +2,7 @@
 //! [`RayBackend`]; the CPU backend ([`cpu::CpuBackend`]) works everywhere and
 //! a GPU backend can replace it without any method changing. A backend with
 //! a device also offers the render pass's cache interpolation there
-//! ([`RayBackend::cache_splat`], [`gpu_cache`]); the caching methods use it
+//! ([`RayBackend::cache_splat`], [`gpu::cache_splat`]); the caching methods use it
 //! through `method::lookups`, which falls back to the CPU.
 //!
 //! `Ray` and `Hit` are `#[repr(C)]` plain data so that a GPU backend can upload
@@ -10,8 +10,6 @@
 
 pub mod cpu;
 pub mod gpu;
-pub mod gpu_bvh;
-pub mod gpu_cache;
 
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
@@ -213,8 +211,8 @@ pub trait RayBackend: Send + Sync {
     /// (TRC §5 radiance cache splatting), for backends that have one: the
     /// GPU backend. `ic` and `trc` interpolate on the CPU otherwise. An
     /// error of the splat fails the backend like a ray error
-    /// ([`gpu_cache::CacheSplat::fail`]).
-    fn cache_splat(&self) -> Option<&gpu_cache::CacheSplat> {
+    /// ([`gpu::cache_splat::CacheSplat::fail`]).
+    fn cache_splat(&self) -> Option<&gpu::cache_splat::CacheSplat> {
         None
     }
 }

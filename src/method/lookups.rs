@@ -2,7 +2,7 @@
 //! shading point (one per pixel and triangle, `render_pass::pixel_lookups`), on the
 //! CPU through the cache's octree, or
 //! on the GPU by radiance cache splatting (TRC §5,
-//! [`crate::backend::gpu_cache`]) when the ray backend has a device. Both
+//! [`crate::backend::gpu::cache_splat`]) when the ray backend has a device. Both
 //! give the same usable records and the same irradiance up to f32
 //! summation order; `ic` and `trc` do not know which one runs.
 //!
@@ -12,7 +12,7 @@
 //! checks the backend after the frame, discards it.
 
 use super::FrameContext;
-use crate::backend::gpu_cache::{CacheSplat, GpuLookup, PreparedCache};
+use crate::backend::gpu::cache_splat::{CacheSplat, GpuLookup, PreparedCache};
 use crate::backend::{Hit, Ray};
 use crate::cache::{Interpolated, IrradianceCache, LookupPoint};
 use crate::integrator::offset_origin;

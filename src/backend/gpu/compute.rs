@@ -1,5 +1,5 @@
 //! The wgpu plumbing both GPU passes share (the ray queries here and the
-//! cache splat, [`crate::backend::gpu_cache`]): bind group layout entries,
+//! cache splat, [`cache_splat`](super::cache_splat)): bind group layout entries,
 //! one compute pass with the copies of its results to a staging buffer,
 //! the workgroup grid of a dispatch, and the readback of that buffer.
 

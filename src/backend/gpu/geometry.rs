@@ -3,7 +3,7 @@
 //! the dynamic part after it (written every frame). The buffers only grow,
 //! by a quarter more than needed, within one storage binding.
 
-use super::super::gpu_bvh::Part;
+use super::bvh::Part;
 use super::{GpuError, NONE, TRIANGLE_BYTES};
 
 /// The node and triangle buffers: static part first, dynamic part after.

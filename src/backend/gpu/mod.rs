@@ -8,7 +8,7 @@
 //! - **extract**: [`GpuBackend::set_geometry`] builds a BVH per part (the
 //!   static triangles `0..n` of [`crate::accel::static_part_len`], the rest
 //!   after) in the backend's
-//!   layout (`src/backend/gpu_bvh.rs`) and lays triangles out in leaf order
+//!   layout (`src/backend/gpu/bvh.rs`) and lays triangles out in leaf order
 //!   ([`GpuTriangle`], with their snapshot triangle and object ids);
 //! - **prepare**: both parts live in one node buffer and one triangle buffer,
 //!   static part first (`geometry`). The static part is uploaded once and
@@ -57,16 +57,18 @@
 //! silently swallowed, and it never panics. The `try_` methods return the
 //! errors directly for callers that want to handle them.
 
-use super::gpu_bvh::Part;
-pub use super::gpu_bvh::{GpuLayout, GpuNode, CWBVH_STACK_SIZE, STACK_SIZE};
-use super::gpu_cache::{CacheSplat, GpuLookup};
 use super::{Hit, Ray, RayBackend, RayCounters, RayCounts};
 use crate::accel;
 use crate::scene::Snapshot;
+use bvh::Part;
+pub use bvh::{GpuLayout, GpuNode, CWBVH_STACK_SIZE, STACK_SIZE};
 use bytemuck::{Pod, Zeroable};
+use cache_splat::{CacheSplat, GpuLookup};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
+pub mod bvh;
+pub mod cache_splat;
 mod compute;
 mod device;
 mod geometry;

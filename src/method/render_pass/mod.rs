@@ -6,7 +6,7 @@
 //! - indirect diffuse from the cache: `E_indirect` interpolated with
 //!   gradients (TRC Eq. 1–4), looked up once per pixel and triangle for
 //!   the pixel's samples on it (`tile_lookups`) — on the CPU, or on the
-//!   GPU by radiance cache splatting (TRC §5, `backend::gpu_cache`) when
+//!   GPU by radiance cache splatting (TRC §5, `backend::gpu::cache_splat`) when
 //!   the ray backend is the GPU one,
 //! - the glossy lobe by path tracing from a lobe sample, or with
 //!   `--ic-glossy eas` its indirect light from the records' equivalent

@@ -22,7 +22,7 @@
 //! 3. *render*: `ic`'s render pass, flagging every record a pixel sample
 //!    used (our stand-in for the paper's occlusion query; with the GPU
 //!    backend the render pass splats the records on the GPU as in §5 and
-//!    returns these flags from there, `backend::gpu_cache`).
+//!    returns these flags from there, `backend::gpu::cache_splat`).
 //!
 //! With `--ic-glossy eas` glossy surfaces get radiance records (`ic`'s,
 //! [`crate::cache::eas`]), and they live across frames as the paper's

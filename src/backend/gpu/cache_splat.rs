@@ -47,7 +47,7 @@
 //! frames; they only grow. Records and grid are uploaded once per render
 //! pass ([`CacheSplat::prepare`]); lookups per render tile.
 
-use super::gpu::{
+use super::{
     bind, layout_entry, read_back, storage_entry, workgroup_grid, ComputePass, ErrorSlot,
     FailureSlot, GpuError,
 };
@@ -530,7 +530,7 @@ pub struct CacheSplat {
 impl CacheSplat {
     /// Compiles the shader on the backend's device (`adapter` names it in
     /// errors; `errors` is the backend's slot for uncaptured errors, `failed`
-    /// its [`super::RayBackend::failure`]).
+    /// its [`crate::backend::RayBackend::failure`]).
     pub(super) fn new(
         device: &wgpu::Device,
         queue: &wgpu::Queue,
@@ -558,7 +558,7 @@ impl CacheSplat {
         });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("cache_splat"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../shaders/cache_splat.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(include_str!("../../../shaders/cache_splat.wgsl").into()),
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("splat records"),

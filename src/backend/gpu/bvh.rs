@@ -11,7 +11,7 @@
 //! Both lay triangles out in the BVH's `primitive_indices` order, so that
 //! leaves index the triangle buffer directly.
 
-use super::gpu::{GpuError, GpuTriangle};
+use super::{GpuError, GpuTriangle};
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
 use obvhs::bvh2::builder::build_bvh2_from_tris;
@@ -92,8 +92,8 @@ impl GpuLayout {
     /// `traverse`.
     pub(super) fn traversal_source(self) -> &'static str {
         match self {
-            GpuLayout::Bvh2 => include_str!("../../shaders/bvh2_traverse.wgsl"),
-            GpuLayout::Cwbvh => include_str!("../../shaders/cwbvh_traverse.wgsl"),
+            GpuLayout::Bvh2 => include_str!("../../../shaders/bvh2_traverse.wgsl"),
+            GpuLayout::Cwbvh => include_str!("../../../shaders/cwbvh_traverse.wgsl"),
         }
     }
 }
