@@ -558,7 +558,9 @@ impl CacheSplat {
         });
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("cache_splat"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("../../../shaders/cache_splat.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(
+                include_str!("../../../shaders/cache_splat.wgsl").into(),
+            ),
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("splat records"),

@@ -20,27 +20,28 @@ use crate::sampling::mix64;
 use glam::Vec3;
 
 /// The pixel samples of a method's last frame, kept for its next one: with
-/// [`PixelStreams::Coherent`](super::PixelStreams::Coherent) a sample draws the same camera ray and light
-/// point in every frame, so where the camera, the lights and the static
-/// geometry stay, only moving objects can change what the sample's camera
-/// ray hits and whether its shadow ray is stopped. A sample whose camera
-/// ray hit a static triangle (or nothing) and meets no moving object's box
-/// this frame keeps its hit; if its shadow ray meets no moving object's box
-/// in the last frame or this one either, it keeps its direct light. A
-/// pixel on the rim of a seen light keeps what its coverage rays saw
-/// ([`EmitterEdges`](crate::method::pixels::EmitterEdges)) where no moving box shows within a pixel of
-/// it on the film in either frame. A path-traced part of a sample (the
-/// indirect light where no record is usable, a glossy lobe) asked again
-/// bit for bit keeps its radiance where its path met nothing moving then
-/// and no moving box meets it now, the lights staying
-/// (`render_pass::kept_queries`). A pixel all of whose samples keep their hits
-/// and shadows, on materials that neither emit nor have a glossy lobe, is
-/// kept whole where no moving box lies on its lookups' clearance rays in
-/// either frame (`Standing`): it keeps its cache lookups, and its
-/// samples' first hits are not shaded again; only the interpolation,
-/// whose records change from frame to frame, is done again. The rest is
-/// traced again. So the film equals, bit for bit, the one traced afresh,
-/// and a resumed job (which starts with none kept) equals an
+/// [`PixelStreams::Coherent`](super::PixelStreams::Coherent) a sample draws
+/// the same camera ray and light point in every frame, so where the camera,
+/// the lights and the static geometry stay, only moving objects can change
+/// what the sample's camera ray hits and whether its shadow ray is stopped.
+/// A sample whose camera ray hit a static triangle (or nothing) and meets
+/// no moving object's box this frame keeps its hit; if its shadow ray meets
+/// no moving object's box in the last frame or this one either, it keeps
+/// its direct light. A pixel on the rim of a seen light keeps what its
+/// coverage rays saw
+/// ([`EmitterEdges`](crate::method::pixels::EmitterEdges)) where no moving
+/// box shows within a pixel of it on the film in either frame. A
+/// path-traced part of a sample (the indirect light where no record is
+/// usable, a glossy lobe) asked again bit for bit keeps its radiance where
+/// its path met nothing moving then and no moving box meets it now, the
+/// lights staying (`render_pass::kept_queries`). A pixel all of whose
+/// samples keep their hits and shadows, on materials that neither emit nor
+/// have a glossy lobe, is kept whole where no moving box lies on its
+/// lookups' clearance rays in either frame (`Standing`): it keeps its cache
+/// lookups, and its samples' first hits are not shaded again; only the
+/// interpolation, whose records change from frame to frame, is done again.
+/// The rest is traced again. So the film equals, bit for bit, the one
+/// traced afresh, and a resumed job (which starts with none kept) equals an
 /// uninterrupted one.
 ///
 /// This is the design's "static parts are never recomputed for motion
