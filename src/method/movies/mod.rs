@@ -43,7 +43,7 @@
 //! the least of all methods). Where what moves is everywhere its coherence
 //! goes, as the paper says: under the moving light 0.91× `ic`'s speed
 //! (every shadow sample lands on a moving light), on the 66 moving balls
-//! of `spheres` 1.15× (README, "`movies` against `ic`").
+//! of `spheres` 1.15× (`benches/RESULTS.md`, "`movies` against `ic`").
 
 pub mod direct;
 pub mod global;

@@ -44,8 +44,8 @@
 //! balls of `spheres` (48 frames) 1.48× where `trc` is 0.98×. Under a
 //! moving light its block bias is 1.9× `ic`'s: lighting that changes with
 //! no moving object in a record's view reaches the record only as Eq. 2's
-//! `τ_min` share of its samples is shot again each frame (README, "`tcg`
-//! against `ic` and `trc`").
+//! `τ_min` share of its samples is shot again each frame
+//! (`benches/RESULTS.md`, "`tcg` against `ic` and `trc`").
 
 mod select;
 mod state;

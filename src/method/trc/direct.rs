@@ -14,8 +14,8 @@
 //! geometry of each, and the difference added to the sample's radiance.
 //! The light sample's own noise then cancels wherever nothing changed.
 //!
-//! Off by default (`TrcSettings::next_direct`). Measured at 5e31e19 (README,
-//! "The direct light at t0+1"): it lowers the E(t0+1) error of the
+//! Off by default (`TrcSettings::next_direct`). Measured at 5e31e19
+//! (`benches/RESULTS.md`, "The direct light at t0+1"): it lowers the E(t0+1) error of the
 //! sliding-block test from 27.5 % to 22.6 % in mean, and `trc`'s frame
 //! error on cube-in-box (400 frames) by 3.7 % for 12 % more time, but costs
 //! 15 % on `moving-light` and 48 % on `spheres` (two shadow rays a sample
