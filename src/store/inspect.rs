@@ -500,6 +500,67 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
     s
 }
 
+/// A job's method settings as a reader wants them: `the defaults`, or the
+/// settings that differ from the method's defaults as `path=value`
+/// (dotted into nested settings, e.g. `ic.accuracy=0.3`). The stored JSON
+/// as it is where it cannot be read so (an unknown method, a malformed
+/// value).
+fn settings_text(method: &str, stored: &str) -> String {
+    let defaults = crate::method::settings::method_settings(method, [])
+        .ok()
+        .and_then(|d| serde_json::to_string(&d).ok());
+    let (Some(defaults), Ok(stored_value)) = (defaults, serde_json::from_str(stored)) else {
+        return stored.to_string();
+    };
+    let Ok(defaults) = serde_json::from_str(&defaults) else {
+        return stored.to_string();
+    };
+    let (mut now, mut then) = (BTreeMap::new(), BTreeMap::new());
+    flatten(untagged(stored_value), String::new(), &mut now);
+    flatten(untagged(defaults), String::new(), &mut then);
+    if now.keys().ne(then.keys()) {
+        return stored.to_string(); // not the shape of this method's settings
+    }
+    let changed: Vec<String> = now
+        .iter()
+        .filter(|(k, v)| then.get(*k) != Some(v))
+        .map(|(k, v)| format!("{k}={v}"))
+        .collect();
+    if changed.is_empty() {
+        "the defaults".into()
+    } else {
+        format!("changed from the defaults: {}", changed.join(", "))
+    }
+}
+
+/// The value of a one-key object (serde's tag of an enum variant, here the
+/// method's name), or `v` itself.
+fn untagged(v: serde_json::Value) -> serde_json::Value {
+    match v {
+        serde_json::Value::Object(m) if m.len() == 1 => m.into_iter().next().expect("one").1,
+        v => v,
+    }
+}
+
+/// The leaves of `v` by dotted path from `prefix`.
+fn flatten(v: serde_json::Value, prefix: String, out: &mut BTreeMap<String, serde_json::Value>) {
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, v) in m {
+                let path = if prefix.is_empty() {
+                    k
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                flatten(v, path, out);
+            }
+        }
+        leaf => {
+            out.insert(prefix, leaf);
+        }
+    }
+}
+
 /// A job's part of [`to_text`]: what it renders, its records, samples,
 /// state and frames, and its lifespan histogram.
 fn job_text(s: &mut String, j: &JobReport) {
@@ -519,7 +580,7 @@ fn job_text(s: &mut String, j: &JobReport) {
         j.frames_done,
         j.last_frame.map_or("-".into(), |f| f.to_string()),
     );
-    let _ = writeln!(s, "  settings: {}", j.settings);
+    let _ = writeln!(s, "  settings: {}", settings_text(&j.method, &j.settings));
     let _ = writeln!(
         s,
         "  records {} ({} B of rkyv values, {} B stored in blocks), samples {}: {} B stored / {} B raw (ratio {})",
@@ -674,5 +735,33 @@ fn frame_table(s: &mut String, j: &JobReport) {
                 f.rays
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::settings_text;
+    use crate::method::settings::method_settings;
+
+    fn stored(method: &str, changes: &[(&str, &str)]) -> String {
+        let settings = method_settings(method, changes.iter().copied()).expect("valid settings");
+        serde_json::to_string(&settings).expect("serializes")
+    }
+
+    #[test]
+    fn settings_are_shown_as_what_differs_from_the_defaults() {
+        for method in ["path", "ic", "trc", "tcg", "movies"] {
+            assert_eq!(settings_text(method, &stored(method, &[])), "the defaults");
+        }
+        let changed = stored("trc", &[("at", "0.1"), ("accuracy", "0.3")]);
+        assert_eq!(
+            settings_text("trc", &changed),
+            "changed from the defaults: ic.accuracy=0.3, temporal_accuracy=0.1"
+        );
+        // What cannot be compared is shown as stored.
+        let other = stored("ic", &[]);
+        assert_eq!(settings_text("trc", &other), other);
+        assert_eq!(settings_text("nope", &changed), changed);
+        assert_eq!(settings_text("trc", "{not json"), "{not json");
     }
 }
