@@ -123,6 +123,22 @@ fn job_renders_and_frames_match_the_cli() {
     assert_eq!(status, 200);
     let img = image::load_from_memory(&png).unwrap();
     assert_eq!((img.width(), img.height()), (16, 16));
+    // The same frame by the name `radcache render` gives its file.
+    let (status, named) = http(
+        &server,
+        "GET",
+        &format!("/api/jobs/{id}/frames/frame_0001.png"),
+        "",
+    );
+    assert_eq!(status, 200);
+    assert_eq!(named, png);
+    let (status, _) = http(
+        &server,
+        "GET",
+        &format!("/api/jobs/{id}/frames/frame_x.png"),
+        "",
+    );
+    assert_eq!(status, 404);
 
     let out = dir.path().join("cli");
     render_with_cli(

@@ -16,12 +16,18 @@ pub async fn frame(
     State(state): State<Arc<AppState>>,
     Path((id, file)): Path<(String, String)>,
 ) -> Result<impl IntoResponse, ApiError> {
+    // `N.png`, or `frame_NNNN.png` as `radcache render` names its files.
     let (n, ext) = file
         .split_once('.')
-        .and_then(|(n, ext)| Some((n.parse::<u32>().ok()?, ext)))
+        .and_then(|(n, ext)| {
+            let n = n.strip_prefix("frame_").unwrap_or(n);
+            Some((n.parse::<u32>().ok()?, ext))
+        })
         .filter(|(_, ext)| *ext == "png" || *ext == "exr")
         .ok_or_else(|| {
-            ApiError::not_found(format!("no frame file {file:?}; use N.png or N.exr"))
+            ApiError::not_found(format!(
+                "no frame file {file:?}; use N.png or N.exr (or frame_NNNN.png, as render names them)"
+            ))
         })?;
     let missing = || ApiError::not_found(format!("job {id} has no frame {n} (yet)"));
     let sid = state.store_id(&id)?.ok_or_else(missing)?;
