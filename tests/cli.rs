@@ -235,13 +235,43 @@ fn inspect_splits_records_between_moving_and_static_objects() {
     assert!(text.contains("records by object"), "{text}");
 }
 
+/// Runs `radcache ARGS`, sends it one SIGINT (Ctrl-C) `settle` after
+/// `file` appears, and returns what it printed and how it ended.
+#[cfg(unix)]
+fn interrupt_once_written(
+    args: &[&str],
+    file: &std::path::Path,
+    settle: std::time::Duration,
+) -> std::process::Output {
+    use std::time::{Duration, Instant};
+    let child = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !file.exists() {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no {file:?} written"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    std::thread::sleep(settle);
+    let pid = child.id().to_string();
+    let kill = Command::new("kill").args(["-INT", &pid]).status().unwrap();
+    assert!(kill.success());
+    child.wait_with_output().unwrap()
+}
+
 /// Ctrl-C (SIGINT) stops a render once the frame in progress is written
 /// and saved, says where it stopped and how to go on, and the same command
 /// then renders the rest from the store.
 #[cfg(unix)]
 #[test]
 fn ctrl_c_stops_after_a_saved_frame_and_the_same_command_resumes() {
-    use std::time::{Duration, Instant};
+    use std::time::Duration;
     let dir = tempfile::tempdir().unwrap();
     let (db, out) = (dir.path().join("db"), dir.path().join("out"));
     let args = [
@@ -262,26 +292,7 @@ fn ctrl_c_stops_after_a_saved_frame_and_the_same_command_resumes() {
         out.to_str().unwrap(),
         "-q",
     ];
-    let child = Command::new(env!("CARGO_BIN_EXE_radcache"))
-        .args(args)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let start = Instant::now();
-    while !out.join("frame_0001.exr").exists() {
-        assert!(
-            start.elapsed() < Duration::from_secs(120),
-            "no frame written"
-        );
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    let kill = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success());
-    let output = child.wait_with_output().unwrap();
+    let output = interrupt_once_written(&args, &out.join("frame_0001.exr"), Duration::ZERO);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert_eq!(output.status.code(), Some(1), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
@@ -320,33 +331,29 @@ fn ctrl_c_stops_after_a_saved_frame_and_the_same_command_resumes() {
 #[cfg(unix)]
 #[test]
 fn ctrl_c_during_the_last_frame_lets_the_render_finish() {
-    use std::time::{Duration, Instant};
+    use std::time::Duration;
     for _try in 0..3 {
         let dir = tempfile::tempdir().unwrap();
         let out = dir.path().join("out");
-        let child = Command::new(env!("CARGO_BIN_EXE_radcache"))
-            .args(["render", "--backend", "cpu", "--method", "path"])
-            .args(["--spp", "64", "--size", "128x128", "--frames", "0..2"])
-            .args(["--out", out.to_str().unwrap()])
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let start = Instant::now();
-        while !out.join("frame_0000.png").exists() {
-            assert!(
-                start.elapsed() < Duration::from_secs(120),
-                "no frame written"
-            );
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        let args = [
+            "render",
+            "--backend",
+            "cpu",
+            "--method",
+            "path",
+            "--spp",
+            "64",
+            "--size",
+            "128x128",
+            "--frames",
+            "0..2",
+            "--out",
+            out.to_str().unwrap(),
+        ];
         // The PNG file exists before it is whole: give its writing time
         // to end (a frame takes about ten times as long).
-        std::thread::sleep(Duration::from_millis(100));
-        let pid = child.id().to_string();
-        let kill = Command::new("kill").args(["-INT", &pid]).status().unwrap();
-        assert!(kill.success());
-        let output = child.wait_with_output().unwrap();
+        let settle = Duration::from_millis(100);
+        let output = interrupt_once_written(&args, &out.join("frame_0000.png"), settle);
         let stderr = String::from_utf8_lossy(&output.stderr);
         if stderr.contains("interrupted after frame 0:") {
             continue; // the signal came before frame 0 was done
