@@ -217,6 +217,28 @@ pub fn method_settings<'a>(
     Ok(settings)
 }
 
+/// `settings` as their serde JSON without the enum's tag (the method's
+/// name): every setting, as the store's settings identity holds it. Through
+/// the text, not `to_value`: that widens an `f32` 0.3 to
+/// 0.30000001192092896.
+pub fn settings_json(settings: &MethodSettings) -> serde_json::Value {
+    serde_json::to_string(settings)
+        .and_then(|text| serde_json::from_str(&text))
+        .map_or(serde_json::Value::Null, untagged)
+}
+
+/// The value inside a one-key object (serde's tag of an enum variant), or
+/// `v` itself.
+pub fn untagged(v: serde_json::Value) -> serde_json::Value {
+    match v {
+        serde_json::Value::Object(m) if m.len() == 1 => m
+            .into_iter()
+            .next()
+            .map_or(serde_json::Value::Null, |(_, v)| v),
+        v => v,
+    }
+}
+
 /// Applies setting `key = v` to `settings`.
 fn apply(settings: &mut MethodSettings, key: &str, v: &str) -> Result<(), MethodError> {
     let method = settings.name();

@@ -1,7 +1,6 @@
 //! `/api/jobs`: create, list, show, cancel, resume.
 
 use super::{ApiError, AppState, Job, JobKey, JobRequest, JobState};
-use crate::render::MethodSettings;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
@@ -21,22 +20,11 @@ pub fn job_json(job: &Job) -> Value {
         "frames": format!("{}..{}", job.request.frames.start, job.request.frames.end),
         "size": format!("{}x{}", job.request.settings.width, job.request.settings.height),
         "spp": job.request.method.spp(),
-        "settings": method_settings_json(&job.request.method),
+        "settings": crate::method::settings::settings_json(&job.request.method),
         "error": job.error,
         "seconds_per_frame": (job.run_frames > 0).then(|| job.run_seconds / job.run_frames as f64),
         "eta_seconds": job.eta_seconds(),
     })
-}
-
-/// Every setting of a job's method, as its serde JSON (the store's settings
-/// identity) without the enum's tag, which `"method"` already names. Through
-/// the text, not `to_value`: that widens an `f32` 0.3 to 0.30000001192092896.
-fn method_settings_json(method: &MethodSettings) -> Value {
-    let tagged = serde_json::to_string(method).and_then(|t| serde_json::from_str(&t));
-    match tagged {
-        Ok(Value::Object(tagged)) => tagged.into_iter().next().map_or(Value::Null, |(_, v)| v),
-        _ => Value::Null,
-    }
 }
 
 pub async fn create(

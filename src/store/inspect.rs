@@ -506,39 +506,26 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
 /// as it is where it cannot be read so (an unknown method, a malformed
 /// value).
 fn settings_text(method: &str, stored: &str) -> String {
-    let defaults = crate::method::settings::method_settings(method, [])
-        .ok()
-        .and_then(|d| serde_json::to_string(&d).ok());
-    let (Some(defaults), Ok(stored_value)) = (defaults, serde_json::from_str(stored)) else {
+    use crate::method::settings::{method_settings, settings_json, untagged};
+    let (Ok(defaults), Ok(now)) = (method_settings(method, []), serde_json::from_str(stored))
+    else {
         return stored.to_string();
     };
-    let Ok(defaults) = serde_json::from_str(&defaults) else {
-        return stored.to_string();
-    };
-    let (mut now, mut then) = (BTreeMap::new(), BTreeMap::new());
-    flatten(untagged(stored_value), String::new(), &mut now);
-    flatten(untagged(defaults), String::new(), &mut then);
-    if now.keys().ne(then.keys()) {
+    let (mut now_leaves, mut default_leaves) = (BTreeMap::new(), BTreeMap::new());
+    flatten(untagged(now), String::new(), &mut now_leaves);
+    flatten(settings_json(&defaults), String::new(), &mut default_leaves);
+    if now_leaves.keys().ne(default_leaves.keys()) {
         return stored.to_string(); // not the shape of this method's settings
     }
-    let changed: Vec<String> = now
+    let changed: Vec<String> = now_leaves
         .iter()
-        .filter(|(k, v)| then.get(*k) != Some(v))
+        .filter(|(k, v)| default_leaves.get(*k) != Some(v))
         .map(|(k, v)| format!("{k}={v}"))
         .collect();
     if changed.is_empty() {
         "the defaults".into()
     } else {
         format!("changed from the defaults: {}", changed.join(", "))
-    }
-}
-
-/// The value of a one-key object (serde's tag of an enum variant, here the
-/// method's name), or `v` itself.
-fn untagged(v: serde_json::Value) -> serde_json::Value {
-    match v {
-        serde_json::Value::Object(m) if m.len() == 1 => m.into_iter().next().expect("one").1,
-        v => v,
     }
 }
 
