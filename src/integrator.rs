@@ -373,7 +373,9 @@ fn trace_radiance_into(
     let mut hits = Vec::new();
     let mut continuations = Vec::new();
     let mut shadows = PendingShadows::default();
-    while !paths.is_empty() {
+    // An abandoned frame's paths end at the next bounce: their results are
+    // thrown away.
+    while !paths.is_empty() && !ctx.abandoned() {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
         shadows.prepare();

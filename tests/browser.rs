@@ -341,3 +341,38 @@ fn in_view(items: &serde_json::Value, size: f64) -> usize {
         })
         .count()
 }
+
+/// A job that `radcache render --job` named with URL characters (`?`, `#`,
+/// `/`, a space) is shown like any other: every URL the dashboard builds
+/// for it encodes the name.
+#[test]
+fn dashboard_shows_a_job_named_with_url_characters() {
+    chromium();
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db");
+    let name = "we?ird #1/a";
+    let ok = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["render", "--builtin", "cube-in-box", "--method", "trc"])
+        .args(["--frames", "0..2", "--size", "16x16", "--spp", "1"])
+        .args(["--backend", "cpu", "-q", "--job", name, "--db"])
+        .arg(&db)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let server = start(&db, &[]);
+    let encoded = "we%3Fird%20%231%2Fa";
+    let url = format!("http://{}/?job={encoded}", server.addr);
+    let (dom, stderr) = run_chromium(&url, "--dump-dom", &dir.path().join("profile"));
+    let console = console_lines(&stderr);
+    assert!(console.is_empty(), "console:\n{}", console.join("\n"));
+    assert!(dom.contains("data-ready=\"1\""), "not loaded:\n{dom}");
+    assert!(!dom.contains("data-errors="), "errors:\n{dom}");
+    assert!(
+        dom.contains(&format!("src=\"/api/jobs/{encoded}/stream\"")),
+        "no live stream for the job:\n{dom}"
+    );
+    assert!(dom.contains("data-loaded=\"16x16\""), "no frame:\n{dom}");
+    assert!(dom.contains("2/2 frames"), "{dom}");
+}

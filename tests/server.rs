@@ -425,13 +425,60 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
         r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"16x16","settings":{"spp":100000}}"#,
         400,
     );
+    // One frame over the server's pixel samples (4096² at 17 spp).
+    check(
+        "POST",
+        "/api/jobs",
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"4096x4096","spp":17}"#,
+        400,
+    );
+    // Frame numbers past the last one (temporal methods add lifespans to
+    // them), and a body that is no object.
+    check(
+        "POST",
+        "/api/jobs",
+        &job("builtin:cube-in-box", "999990..1000001"),
+        400,
+    );
+    let (_, resp) = http(&server, "POST", "/api/jobs", "[]");
+    let detail = json(&resp)["detail"].as_str().unwrap().to_string();
+    assert!(detail.contains("JSON object"), "{detail}");
+    // A scene file that does not load is refused at once, named as sent
+    // (not by the server's own path).
+    std::fs::write(scenes.join("broken.gltf"), r#"{"asset":{"version":"2.0"},"#).unwrap();
+    let (status, resp) = http(&server, "POST", "/api/jobs", &job("broken.gltf", "0..1"));
+    assert_eq!(status, 400);
+    let detail = json(&resp)["detail"].as_str().unwrap().to_string();
+    assert!(detail.starts_with("scene broken.gltf: "), "{detail}");
+    assert!(
+        !detail.contains(&dir.path().display().to_string()),
+        "{detail}"
+    );
+    // A scene file that loads is shown by the name it was sent with.
+    std::fs::create_dir(scenes.join("sub")).unwrap();
+    std::fs::copy(
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/scenes/cube_in_box.glb"
+        ),
+        scenes.join("sub/box.glb"),
+    )
+    .unwrap();
+    let (status, resp) = http(&server, "POST", "/api/jobs", &job("sub/box.glb", "0..1"));
+    assert_eq!(status, 201, "{}", String::from_utf8_lossy(&resp));
+    let id = json(&resp)["id"].as_str().unwrap().to_string();
+    assert_eq!(wait_done(&server, &id)["scene"], "sub/box.glb");
+    // Errors axum answers itself are JSON too: a body over the limit, a
+    // wrong method (with its Allow header).
     let huge = format!(r#"{{"scene":"{}"}}"#, "a".repeat(100_000));
-    let (status, _) = http(&server, "POST", "/api/jobs", &huge);
-    assert_eq!(status, 413);
+    check("POST", "/api/jobs", &huge, 413);
+    check("DELETE", "/api/jobs", "", 405);
+    let (_, head, _) = http_full(&server.addr, "PUT", "/api/jobs/job-1/cancel", "");
+    assert!(head.to_ascii_lowercase().contains("allow: post"), "{head}");
     // Still serving.
     let (status, body) = http(&server, "GET", "/api/jobs", "");
     assert_eq!(status, 200);
-    assert_eq!(json(&body), serde_json::json!([]));
+    assert_eq!(json(&body).as_array().map(Vec::len), Some(1), "the box job");
     // Cancel a queued/running job, then resume it: 409 for a wrong state.
     let (status, body) = http(
         &server,
@@ -1294,4 +1341,77 @@ fn a_render_jobs_scene_the_server_cannot_find_is_a_clear_conflict() {
         detail.contains("box.glb") && detail.contains("working directory"),
         "{detail}"
     );
+}
+
+/// Waits until job `id` is running (its first frame under way).
+fn wait_running(server: &Server, id: &str) {
+    let start = Instant::now();
+    while job_state(server, id)["state"] != "running" {
+        assert!(start.elapsed() < Duration::from_secs(60), "never ran");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A frame of this job is an hour of work or more (64² pixels at 65,536 paths
+/// each): a cancel, and then a SIGTERM, must not wait for it.
+const ENDLESS_FRAME: &str =
+    r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"64x64","spp":65536}"#;
+
+#[test]
+fn a_cancel_or_a_sigterm_abandons_a_long_frame_at_once() {
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let mut server = start(&db, &scenes);
+    let long = create_job(&server, ENDLESS_FRAME);
+    let small =
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"8x8","spp":1}"#;
+    let after = create_job(&server, small);
+    wait_running(&server, &long);
+    std::thread::sleep(Duration::from_millis(300));
+    let (status, _) = http(&server, "POST", &format!("/api/jobs/{long}/cancel"), "");
+    assert_eq!(status, 200);
+    let cancelled_at = Instant::now();
+    // The job queued behind it runs once the frame is abandoned.
+    let done = wait_done(&server, &after);
+    let cancelled = job_state(&server, &long);
+    assert_eq!(cancelled["state"], "cancelled", "{cancelled}");
+    assert_eq!(
+        cancelled["frames_done"], 0,
+        "the abandoned frame is no frame"
+    );
+    assert_eq!(done["frames_done"], 1);
+    assert!(
+        cancelled_at.elapsed() < Duration::from_secs(30),
+        "cancel took {:?}",
+        cancelled_at.elapsed()
+    );
+
+    // Resumed, then SIGTERM in the middle of its first frame: the server
+    // exits at once and the job is queued again for the next start.
+    let (status, _) = http(&server, "POST", &format!("/api/jobs/{long}/resume"), "");
+    assert_eq!(status, 200);
+    wait_running(&server, &long);
+    std::thread::sleep(Duration::from_millis(300));
+    let pid = server.child.id().to_string();
+    let term = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+    assert!(term.success());
+    let asked = Instant::now();
+    let exit = loop {
+        if let Some(exit) = server.child.try_wait().unwrap() {
+            break exit;
+        }
+        assert!(
+            asked.elapsed() < Duration::from_secs(30),
+            "the server did not stop within 30 s of SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(exit.success(), "{exit:?}");
+    let server = start_with(&db, &scenes, &[]);
+    let again = job_state(&server, &long);
+    assert!(
+        matches!(again["state"].as_str(), Some("queued" | "running")),
+        "{again}"
+    );
+    assert_eq!(again["frames_done"], 0);
 }

@@ -69,6 +69,13 @@ function fmtBytes(b) {
 
 // ---------------------------------------------------------------- jobs
 
+// The URL of job `id`'s resource `rest`. A job of `radcache render --job`
+// may be named anything, `?`, `#` and `/` included: the id is a path
+// segment, so it is percent-encoded.
+function jobUrl(id, rest = '') {
+  return `/api/jobs/${encodeURIComponent(id)}${rest}`;
+}
+
 const view = {
   id: null,        // selected job id
   job: null,       // its last known state (GET /api/jobs/ID)
@@ -143,12 +150,12 @@ async function selectJob(id) {
   $('job-panel').hidden = false;
   $('overlay').replaceChildren();
   $('record-details').textContent = 'click a record for its details';
-  const job = await api(`/api/jobs/${id}`);
+  const job = await api(jobUrl(id));
   showProgress(job);
   const [start, end] = frameRange(job);
   $('frame-slider').min = start;
   $('frame-slider').max = Math.max(start, end - 1);
-  const stats = await api(`/api/jobs/${id}/stats`);
+  const stats = await api(jobUrl(id, '/stats'));
   for (const row of stats.frames) view.stats.set(row.frame, row);
   drawCharts();
   showLive();
@@ -167,7 +174,7 @@ function lastFrame() {
 }
 
 function follow(id) {
-  const es = new EventSource(withToken(`/api/jobs/${id}/events`));
+  const es = new EventSource(withToken(jobUrl(id, '/events')));
   view.events = es;
   es.addEventListener('progress', (e) => {
     if (view.id !== id) return;
@@ -201,14 +208,14 @@ function follow(id) {
 function showLive() {
   const img = $('live');
   if (view.follow) {
-    img.src = withToken(`/api/jobs/${view.id}/stream`);
+    img.src = withToken(jobUrl(view.id, '/stream'));
     const last = lastFrame();
     $('frame-label').textContent = last == null ? 'waiting for the first frame' : `frame ${last}`;
   }
 }
 
 function showFrame(frame) {
-  $('live').src = withToken(`/api/jobs/${view.id}/frames/${frame}.png`);
+  $('live').src = withToken(jobUrl(view.id, `/frames/${frame}.png`));
   $('frame-label').textContent = `frame ${frame}`;
   requestOverlay(frame);
 }
@@ -232,11 +239,11 @@ async function loadOverlay(frame) {
   const id = view.id;
   try {
     if (view.job && view.job.method === 'movies') {
-      const r = await api(`/api/jobs/${id}/movies?frame=${frame}`);
+      const r = await api(jobUrl(id, `/movies?frame=${frame}`));
       if (view.id !== id) return;
       drawMovies(r);
     } else {
-      const r = await api(`/api/jobs/${id}/records?frame=${frame}&limit=20000`);
+      const r = await api(jobUrl(id, `/records?frame=${frame}&limit=20000`));
       if (view.id !== id) return;
       drawOverlay(r);
     }
@@ -490,9 +497,9 @@ $('show-overlay').addEventListener('change', (e) => {
 });
 
 $('cancel').addEventListener('click', () =>
-  api(`/api/jobs/${view.id}/cancel`, { method: 'POST' }).then(showProgress).then(refreshJobs).catch(reportError));
+  api(jobUrl(view.id, '/cancel'), { method: 'POST' }).then(showProgress).then(refreshJobs).catch(reportError));
 $('resume').addEventListener('click', () =>
-  api(`/api/jobs/${view.id}/resume`, { method: 'POST' }).then(() => selectJob(view.id)).then(refreshJobs).catch(reportError));
+  api(jobUrl(view.id, '/resume'), { method: 'POST' }).then(() => selectJob(view.id)).then(refreshJobs).catch(reportError));
 
 async function main() {
   const jobs = await refreshJobs();

@@ -4,7 +4,7 @@
 
 use crate::bench;
 use crate::cache::gather::Strata;
-use crate::render::SceneSource;
+use crate::render::{SceneSource, FRAME_LIMIT};
 use clap::{Args, ValueEnum};
 use std::ops::Range;
 use std::path::PathBuf;
@@ -345,6 +345,12 @@ fn parse_frames(s: &str) -> Result<Range<u32>, String> {
     if end <= start {
         return Err(format!(
             "frame range {start}..{end} is empty (END is exclusive)"
+        ));
+    }
+    if end > FRAME_LIMIT {
+        return Err(format!(
+            "frame range {start}..{end} ends past the last frame number, {}",
+            FRAME_LIMIT - 1
         ));
     }
     Ok(start..end)

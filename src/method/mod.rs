@@ -20,6 +20,7 @@ use crate::film::Film;
 use crate::light::LightSampler;
 use crate::sampling::SampleKey;
 use crate::scene::{Scene, Snapshot};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Everything a method may read while rendering one frame.
 pub struct FrameContext<'a> {
@@ -43,6 +44,9 @@ pub struct FrameContext<'a> {
     /// The emitting triangles that may show on the film this frame
     /// ([`pixels::emitters_in_view`]).
     pub emitters_in_view: Vec<u32>,
+    /// Set from another thread to abandon the frame in progress
+    /// ([`crate::render::Renderer::abandon_flag`]).
+    pub abandon: &'a AtomicBool,
 }
 
 impl FrameContext<'_> {
@@ -63,6 +67,14 @@ impl FrameContext<'_> {
 
     pub fn aspect(&self) -> f32 {
         self.width as f32 / self.height as f32
+    }
+
+    /// Whether the frame in progress is abandoned: its result will be
+    /// thrown away, so the big loops (pixel tiles, path bounces) skip what
+    /// is left of their work. One frame of an extreme request (4096² pixels
+    /// at 65,536 spp) is days of work; a cancel must not wait for it.
+    pub fn abandoned(&self) -> bool {
+        self.abandon.load(Ordering::Relaxed)
     }
 }
 

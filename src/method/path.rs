@@ -83,6 +83,9 @@ impl Method for PathTracer {
             .par_chunks_mut(pixels_per_tile)
             .enumerate()
             .for_each(|(tile, out)| {
+                if ctx.abandoned() {
+                    return;
+                }
                 let first = (tile * pixels_per_tile) as u32;
                 let mut samples = pixels::tile_samples(first, out.len() as u32, spp);
                 let (rays, mut results) = self.trace(ctx, &samples);

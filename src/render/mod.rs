@@ -20,6 +20,8 @@ use anyhow::{bail, Context, Result};
 use std::collections::BTreeSet;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 mod job;
@@ -177,6 +179,12 @@ impl Default for FrameSettings {
     }
 }
 
+/// Frame numbers lie below this. Frame `f` is at time `f / fps`, an `f32`:
+/// up to a million frames (11.6 hours at 24 fps) that time is still exact
+/// to a tenth of a frame; and temporal methods add lifespans (at most
+/// 100,000 frames) to frame numbers, which must not overflow.
+pub const FRAME_LIMIT: u32 = 1_000_000;
+
 /// Renders frames of one scene with one method and one backend.
 pub struct Renderer {
     pub scene: Scene,
@@ -189,6 +197,8 @@ pub struct Renderer {
     /// The frame after the last one to render (two-pass methods look
     /// ahead no further); `None`: the scene's last frame.
     frame_end: Option<u32>,
+    /// [`Self::abandon_flag`].
+    abandon: Arc<AtomicBool>,
 }
 
 impl Renderer {
@@ -207,7 +217,24 @@ impl Renderer {
             last_frame_rays: 0,
             counts: MethodCalls::default(),
             frame_end: None,
+            abandon: Arc::default(),
         }
+    }
+
+    /// A flag that, once set (from any thread), abandons the frame in
+    /// progress: its loops skip what is left of their work
+    /// ([`FrameContext::abandoned`]) and [`render_job_to_dir_with`] throws
+    /// the frame away and stops. The server sets it to cancel a running
+    /// job or to shut down without waiting for a frame that may take
+    /// hours. The method's state is then garbage: like after a backend
+    /// failure, only a fresh renderer (a resume from the store) goes on.
+    pub fn abandon_flag(&self) -> Arc<AtomicBool> {
+        self.abandon.clone()
+    }
+
+    /// Whether [`Self::abandon_flag`] is set.
+    pub fn abandoned(&self) -> bool {
+        self.abandon.load(Ordering::Relaxed)
     }
 
     pub fn backend(&self) -> &dyn RayBackend {
@@ -346,6 +373,7 @@ impl Renderer {
             same_pattern: self.settings.same_pattern,
             edge_coverage_factor: self.settings.edge_coverage_factor,
             emitters_in_view: Vec::new(),
+            abandon: &self.abandon,
         };
         ctx.emitters_in_view =
             crate::method::pixels::emitters_in_view(&snapshot, &lights, ctx.aspect());
@@ -570,8 +598,9 @@ pub fn render_job_to_dir(
 
 /// [`render_job_to_dir`] calling `after_frame(frame)` once each new frame is
 /// acknowledged and written; returning `false` stops the render there (the
-/// server's cancel and shutdown). A stopped render is resumed like a crashed
-/// one.
+/// server's cancel and shutdown). So does [`Renderer::abandon_flag`], in the
+/// middle of a frame, which is then neither stored nor written. A stopped
+/// render is resumed like a crashed one.
 pub fn render_job_to_dir_with(
     renderer: &mut Renderer,
     frames: Range<u32>,
@@ -592,7 +621,7 @@ pub fn render_job_to_dir_with(
     progress.reset_eta();
     let start = Instant::now();
     let counts_before = renderer.backend().ray_counts();
-    let mut frame_stats = Vec::with_capacity(frames.len() - done.len());
+    let mut frame_stats = Vec::new();
     renderer.set_frame_end(Some(frames.end));
     let chain_end = renderer.looks_ahead().then_some(frames.end);
     for frame in frames.clone() {
@@ -610,6 +639,9 @@ pub fn render_job_to_dir_with(
                 None => anyhow::anyhow!("{e}"),
             }
         })?;
+        if renderer.abandoned() {
+            break; // Half rendered: neither stored nor written.
+        }
         let stats = renderer.last_frame_stats();
         let kept = renderer.take_frame_records();
         if let Some(j) = job.as_deref_mut() {

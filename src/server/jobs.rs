@@ -1,6 +1,7 @@
 //! `/api/jobs`: create, list, show, cancel, resume.
 
 use super::{ApiError, AppState, Job, JobKey, JobRequest, JobState};
+use crate::render::SceneSource;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
@@ -8,20 +9,20 @@ use axum::Json;
 use serde_json::{json, Value};
 use std::sync::Arc;
 
-pub fn job_json(job: &Job) -> Value {
+pub fn job_json(state: &AppState, job: &Job) -> Value {
     json!({
         "id": job.id,
         "state": job.state.as_str(),
         "origin": job.origin(),
         "frames_done": job.frames_done,
         "frames_total": job.request.frames_total(),
-        "scene": job.request.scene.to_string(),
+        "scene": state.scene_name(&job.request.scene),
         "method": job.request.method.name(),
         "frames": format!("{}..{}", job.request.frames.start, job.request.frames.end),
         "size": format!("{}x{}", job.request.settings.width, job.request.settings.height),
         "spp": job.request.method.spp(),
         "settings": crate::method::settings::settings_json(&job.request.method),
-        "error": job.error,
+        "error": job.error.as_deref().map(|e| state.without_scenes_dir(e)),
         "seconds_per_frame": (job.run_frames > 0).then(|| job.run_seconds / job.run_frames as f64),
         "eta_seconds": job.eta_seconds(),
     })
@@ -32,6 +33,7 @@ pub async fn create(
     body: Bytes,
 ) -> Result<(StatusCode, Json<Value>), ApiError> {
     let request = JobRequest::parse(&body, state.options.scenes.as_deref())?;
+    check_scene_loads(&state, &request).await?;
     let id = {
         let mut jobs = state.jobs.lock().expect("job table lock");
         let last = jobs.keys().filter_map(|k| match k {
@@ -63,16 +65,37 @@ pub async fn create(
     Ok((StatusCode::CREATED, Json(json!({ "id": id }))))
 }
 
+/// A scene file is loaded once at submission, so that a malformed one is
+/// a 400 now rather than a failed job later (built-in scenes always load).
+async fn check_scene_loads(state: &AppState, request: &JobRequest) -> Result<(), ApiError> {
+    if matches!(request.scene, SceneSource::Builtin(_)) {
+        return Ok(());
+    }
+    let scene = request.scene.clone();
+    let loaded = tokio::task::spawn_blocking(move || scene.load().map(drop))
+        .await
+        .map_err(ApiError::internal)?;
+    loaded.map_err(|e| {
+        ApiError::bad_request(format!(
+            "scene {}: {}",
+            state.scene_name(&request.scene),
+            state.without_scenes_dir(&e.to_string())
+        ))
+    })
+}
+
 pub async fn list(State(state): State<Arc<AppState>>) -> Json<Value> {
     let jobs = state.jobs.lock().expect("job table lock");
-    Json(Value::Array(jobs.values().map(job_json).collect()))
+    Json(Value::Array(
+        jobs.values().map(|j| job_json(&state, j)).collect(),
+    ))
 }
 
 pub async fn show(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
-    Ok(Json(job_json(&state.job(&id)?)))
+    Ok(Json(job_json(&state, &state.job(&id)?)))
 }
 
 pub async fn cancel(
@@ -89,7 +112,10 @@ pub async fn cancel(
     }
     match job.state {
         JobState::Queued => state.update(&id, |j| j.state = JobState::Cancelled),
-        JobState::Running => state.update(&id, |j| j.cancel = true),
+        JobState::Running => {
+            state.update(&id, |j| j.cancel = true);
+            state.abandon_frame(Some(&id));
+        }
         s => {
             return Err(ApiError::conflict(format!(
                 "job {id} is {}; only queued or running jobs can be cancelled",
@@ -97,7 +123,7 @@ pub async fn cancel(
             )))
         }
     }
-    Ok(Json(job_json(&state.job(&id)?)))
+    Ok(Json(job_json(&state, &state.job(&id)?)))
 }
 
 pub async fn resume(
@@ -133,5 +159,5 @@ pub async fn resume(
         }
     }
     state.wake.notify_one();
-    Ok(Json(job_json(&state.job(&id)?)))
+    Ok(Json(job_json(&state, &state.job(&id)?)))
 }

@@ -19,7 +19,7 @@ pub use web::OPENAPI;
 pub use error::ApiError;
 pub use request::{JobRequest, MAX_FRAMES};
 
-use crate::render::BackendChoice;
+use crate::render::{BackendChoice, SceneSource};
 use crate::store::Store;
 use anyhow::{bail, Context, Result};
 use axum::body::Bytes;
@@ -201,7 +201,8 @@ pub struct AppState {
     pub jobs: Mutex<BTreeMap<JobKey, Job>>,
     /// Wakes the worker when a job is queued.
     pub wake: Notify,
-    /// Ctrl-C / SIGTERM: stop after the current frame.
+    /// Ctrl-C / SIGTERM: stop now, abandoning the frame in progress (it is
+    /// rendered again on the next start).
     pub shutdown: AtomicBool,
     pub frames_rendered: AtomicU64,
     pub render_micros: AtomicU64,
@@ -211,6 +212,10 @@ pub struct AppState {
     pub pngs: Mutex<PngCache>,
     /// The scene of the last `/records` query (its camera projects records).
     pub scene_cache: Mutex<Option<(String, Arc<crate::scene::Scene>)>>,
+    /// The job the worker renders and its renderer's
+    /// [`crate::render::Renderer::abandon_flag`]: a cancel or a shutdown
+    /// abandons the frame in progress rather than waiting for it.
+    pub running_frame: Mutex<Option<(JobKey, Arc<AtomicBool>)>>,
 }
 
 impl AppState {
@@ -235,6 +240,45 @@ impl AppState {
     fn notify(&self, key: &JobKey) {
         if let Some(tx) = self.watchers.lock().expect("watchers lock").get(key) {
             tx.send_modify(|g| *g += 1);
+        }
+    }
+
+    /// How a job's scene is shown: a file under `--scenes` by its path
+    /// there (the server's own directories are none of a client's
+    /// business), others as they are.
+    pub fn scene_name(&self, scene: &SceneSource) -> String {
+        match (scene, self.scenes_root()) {
+            (SceneSource::File(path), Some(root)) => match path.strip_prefix(&root) {
+                Ok(rel) => rel.display().to_string(),
+                Err(_) => scene.to_string(),
+            },
+            _ => scene.to_string(),
+        }
+    }
+
+    /// `text` (an error message) with the `--scenes` directory's path left
+    /// out of the paths it names.
+    pub fn without_scenes_dir(&self, text: &str) -> String {
+        match self.scenes_root() {
+            Some(root) => text.replace(&format!("{}/", root.display()), ""),
+            None => text.to_string(),
+        }
+    }
+
+    /// The `--scenes` directory as job requests resolve it (canonical).
+    fn scenes_root(&self) -> Option<PathBuf> {
+        self.options.scenes.as_ref()?.canonicalize().ok()
+    }
+
+    /// Abandons the frame in progress of job `id` (`None`: of whichever job
+    /// runs). Its renderer stops within a path bounce or a pixel tile, and
+    /// the frame is neither stored nor written.
+    pub fn abandon_frame(&self, id: Option<&str>) {
+        let running = self.running_frame.lock().expect("running frame lock");
+        if let Some((key, flag)) = running.as_ref() {
+            if id.is_none_or(|id| JobKey::of(id) == *key) {
+                flag.store(true, Ordering::Relaxed);
+            }
         }
     }
 
@@ -331,7 +375,47 @@ pub fn router(state: Arc<AppState>) -> Router {
         .fallback(|| async { ApiError::not_found("no such route".into()) })
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
         .layer(middleware::from_fn_with_state(state.clone(), check_token))
+        .layer(middleware::map_response(json_errors))
         .with_state(state)
+}
+
+/// The errors axum answers by itself (a wrong method: 405 with no body; a
+/// body over the limit: 413 in plain text) as the API's JSON
+/// `{error, detail}`, like every other error.
+async fn json_errors(response: Response) -> Response {
+    use axum::http::header::{ALLOW, CONTENT_TYPE};
+    let status = response.status();
+    let json = response
+        .headers()
+        .get(CONTENT_TYPE)
+        .is_some_and(|v| v.as_bytes().starts_with(b"application/json"));
+    if json || !(status.is_client_error() || status.is_server_error()) {
+        return response;
+    }
+    let (parts, body) = response.into_parts();
+    let text = axum::body::to_bytes(body, 64 * 1024)
+        .await
+        .unwrap_or_default();
+    let allow = parts.headers.get(ALLOW).cloned();
+    let detail = match (String::from_utf8_lossy(&text).trim(), &allow) {
+        ("", Some(allow)) => format!(
+            "this route takes {}",
+            allow.to_str().unwrap_or("other methods")
+        ),
+        ("", None) => status.canonical_reason().unwrap_or("error").to_string(),
+        (text, _) => text.to_string(),
+    };
+    let error = match status {
+        axum::http::StatusCode::METHOD_NOT_ALLOWED => "method not allowed",
+        axum::http::StatusCode::PAYLOAD_TOO_LARGE => "payload too large",
+        s if s.is_server_error() => "internal error",
+        _ => "bad request",
+    };
+    let mut response = ApiError::new(status, error, detail).into_response();
+    if let Some(allow) = allow {
+        response.headers_mut().insert(ALLOW, allow);
+    }
+    response
 }
 
 /// With a token configured, every request must carry it as
@@ -407,6 +491,7 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         jobs: Mutex::new(BTreeMap::new()),
         wake: Notify::new(),
         shutdown: AtomicBool::new(false),
+        running_frame: Mutex::new(None),
         frames_rendered: AtomicU64::new(0),
         render_micros: AtomicU64::new(0),
         watchers: Mutex::new(HashMap::new()),
@@ -430,6 +515,7 @@ pub fn serve(options: ServeOptions) -> Result<()> {
             .with_graceful_shutdown(async move {
                 shutdown_signal().await;
                 stopping.shutdown.store(true, Ordering::SeqCst);
+                stopping.abandon_frame(None);
                 stopping.wake.notify_one();
                 stopping.notify_all();
             })

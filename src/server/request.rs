@@ -3,7 +3,7 @@
 
 use super::ApiError;
 use crate::method::settings::method_settings;
-use crate::render::{FrameSettings, MethodSettings, SceneSource};
+use crate::render::{FrameSettings, MethodSettings, SceneSource, FRAME_LIMIT};
 use crate::store::schema::JobValue;
 use serde::Deserialize;
 use std::ops::Range;
@@ -18,6 +18,12 @@ pub const MAX_SPP: u32 = 65_536;
 /// Most gather rays per record (`strata` M × N): 64 × 64, the paper's
 /// hemisphere (TRC §6), times 16.
 pub const MAX_GATHER_RAYS: usize = 65_536;
+/// Most pixel samples per frame (pixels × spp): 4096² at 16 spp, 1024² at
+/// 256. Methods keep per-sample buffers for a frame (`trc` and `tcg` keep
+/// the last frame's camera samples too), so beyond this one frame's memory
+/// grows past what a shared server should give one job; `radcache render`
+/// has no such limit.
+pub const MAX_FRAME_SAMPLES: u64 = 1 << 28;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -45,12 +51,20 @@ pub struct JobRequest {
 impl JobRequest {
     /// Parses and checks a request body; scene files must lie under `scenes`.
     pub fn parse(body: &[u8], scenes: Option<&Path>) -> Result<JobRequest, ApiError> {
-        let b: Body = serde_json::from_slice(body)
-            .map_err(|e| ApiError::bad_request(format!("malformed job request: {e}")))?;
+        let malformed = |e: String| ApiError::bad_request(format!("malformed job request: {e}"));
+        let value: serde_json::Value =
+            serde_json::from_slice(body).map_err(|e| malformed(e.to_string()))?;
+        if !value.is_object() {
+            return Err(malformed(
+                "expected a JSON object with scene, method, frames and size".into(),
+            ));
+        }
+        let b: Body = serde_json::from_value(value).map_err(|e| malformed(e.to_string()))?;
         let scene = parse_scene(&b.scene, scenes)?;
         let frames = parse_frames(&b.frames)?;
         let (width, height) = parse_size(&b.size)?;
         let method = parse_method(&b.method, b.settings.as_ref(), b.spp)?;
+        check_frame_samples(width, height, method.spp())?;
         let settings = FrameSettings {
             width,
             height,
@@ -102,6 +116,11 @@ fn parse_method(
     for (key, value) in settings.into_iter().flatten() {
         changes.push((key.as_str(), setting_text(key, value)?));
     }
+    if let Some(n) = spp.filter(|n| !(1..=MAX_SPP).contains(n)) {
+        return Err(ApiError::bad_request(format!(
+            "spp {n} is out of range (1..={MAX_SPP})"
+        )));
+    }
     let spp = spp.map(|n| n.to_string());
     if let Some(spp) = &spp {
         if changes.iter().any(|(key, _)| *key == "spp") {
@@ -132,6 +151,18 @@ fn check_work_limits(method: &MethodSettings) -> Result<(), ApiError> {
             strata.theta,
             strata.phi,
             strata.count()
+        )));
+    }
+    Ok(())
+}
+
+/// A frame's pixel samples within [`MAX_FRAME_SAMPLES`].
+fn check_frame_samples(width: u32, height: u32, spp: u32) -> Result<(), ApiError> {
+    let samples = u64::from(width) * u64::from(height) * u64::from(spp);
+    if samples > MAX_FRAME_SAMPLES {
+        return Err(ApiError::bad_request(format!(
+            "size {width}x{height} at {spp} spp is {samples} pixel samples a frame; \
+             at most {MAX_FRAME_SAMPLES} (e.g. 4096x4096 at 16 spp, 1024x1024 at 256)"
         )));
     }
     Ok(())
@@ -214,11 +245,27 @@ fn parse_scene(s: &str, scenes: Option<&Path>) -> Result<SceneSource, ApiError> 
 fn parse_frames(s: &str) -> Result<Range<u32>, ApiError> {
     let bad = || ApiError::bad_request(format!("frames {s:?}: expected START..END, e.g. 0..24"));
     let (a, b) = s.split_once("..").ok_or_else(bad)?;
-    let start: u32 = a.trim().parse().map_err(|_| bad())?;
-    let end: u32 = b.trim().parse().map_err(|_| bad())?;
+    let number = |n: &str| {
+        n.trim()
+            .parse::<u32>()
+            .map_err(|_| match n.trim().parse::<u64>() {
+                Ok(_) => ApiError::bad_request(format!(
+                    "frames {s:?}: {n} is past the last frame number, {}",
+                    FRAME_LIMIT - 1
+                )),
+                Err(_) => bad(),
+            })
+    };
+    let (start, end) = (number(a)?, number(b)?);
     if end <= start {
         return Err(ApiError::bad_request(format!(
             "frame range {s:?} is empty (END is exclusive)"
+        )));
+    }
+    if end > FRAME_LIMIT {
+        return Err(ApiError::bad_request(format!(
+            "frame range {s:?} ends past the last frame number, {}",
+            FRAME_LIMIT - 1
         )));
     }
     if end - start > MAX_FRAMES {

@@ -218,7 +218,7 @@ pub async fn events(
                 queue.push_back(
                     Event::default()
                         .event("progress")
-                        .data(job_json(&job).to_string()),
+                        .data(job_json(&f.state, &job).to_string()),
                 );
                 if last_state != Some(job.state) || f.ended {
                     last_state = Some(job.state);

@@ -5,7 +5,7 @@
 use super::{AppState, Job, JobKey, JobRequest, JobState};
 use crate::render::{self, Renderer, StoreJob};
 use anyhow::Result;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -118,6 +118,7 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
         backend,
         request.settings.clone(),
     );
+    let _running = RunningFrame::new(state, id, renderer.abandon_flag());
     let mut job = StoreJob {
         store: &state.store,
         job: stored,
@@ -148,4 +149,28 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
         &mut after_frame,
     )?;
     Ok(())
+}
+
+/// Registers the worker's renderer as [`AppState::running_frame`] while it
+/// renders a job; a cancel or shutdown that came before it did abandons
+/// the first frame at once.
+struct RunningFrame<'a> {
+    state: &'a AppState,
+}
+
+impl<'a> RunningFrame<'a> {
+    fn new(state: &'a AppState, id: &str, abandon: Arc<AtomicBool>) -> Self {
+        *state.running_frame.lock().expect("running frame lock") = Some((JobKey::of(id), abandon));
+        let cancelled = state.job(id).is_ok_and(|j| j.cancel);
+        if cancelled || state.shutdown.load(Ordering::SeqCst) {
+            state.abandon_frame(Some(id));
+        }
+        RunningFrame { state }
+    }
+}
+
+impl Drop for RunningFrame<'_> {
+    fn drop(&mut self) {
+        *self.state.running_frame.lock().expect("running frame lock") = None;
+    }
 }

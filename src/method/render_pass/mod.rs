@@ -198,6 +198,9 @@ pub(crate) fn mark_used(
         .into_par_iter()
         .enumerate()
         .map(|(tile, last)| {
+            if ctx.abandoned() {
+                return TileKept::default();
+            }
             let first = tile * pixels_per_tile;
             let count = pixels_per_tile.min(n_pixels - first);
             let mut still = still_pass.as_ref().zip(last).map(|(p, last)| p.tile(last));
@@ -444,6 +447,9 @@ fn render_tile(
     out: &mut [Vec3],
     mut still: Option<TileStill>,
 ) -> (FrameStats, TileKept) {
+    if ctx.abandoned() {
+        return Default::default();
+    }
     let spp = pass.settings.spp.max(1);
     let mut stats = FrameStats::default();
     let (primary, edges, taken) = PrimarySamples::trace_keeping(

@@ -278,6 +278,7 @@ impl TileStill<'_> {
 /// A tile's base samples as traced this frame and its candidates'
 /// coverage (empty when nothing is kept), and how many of its samples were
 /// taken from the last frame.
+#[derive(Default)]
 pub(super) struct TileKept {
     pub(super) tile: KeptTile,
     pub(super) taken: u64,
