@@ -592,6 +592,36 @@ fn damaged_or_foreign_directories_are_refused_untouched() {
         before,
         "a refused store is left as it was"
     );
+    // A store whose database sled recovers as empty (one byte flipped near
+    // the start of `db`): refused, its sample log kept whole. Taking it
+    // over as a new store would have emptied the log.
+    let flipped = dir.path().join("flipped");
+    {
+        let store = Store::open(&flipped).unwrap();
+        commit_frames(&store, "j", 0..2);
+    }
+    let mut db = std::fs::read(flipped.join("db")).unwrap();
+    db[100] ^= 0xff;
+    std::fs::write(flipped.join("db"), &db).unwrap();
+    let log = std::fs::read(flipped.join("samples.log")).unwrap();
+    assert!(log.len() > 8, "the frames wrote samples");
+    for open in [Store::open, Store::open_existing] {
+        let msg = err_text(open(&flipped));
+        assert!(msg.contains(&flipped.display().to_string()), "{msg}");
+        assert_eq!(std::fs::read(flipped.join("samples.log")).unwrap(), log);
+    }
+    // Another program's sled database: refused, nothing written into it.
+    let other = dir.path().join("other");
+    {
+        let db = sled::open(&other).unwrap();
+        db.open_tree("theirs").unwrap().insert("k", "v").unwrap();
+        db.flush().unwrap();
+    }
+    let msg = err_text(Store::open(&other));
+    assert!(msg.contains("`theirs`"), "{msg}");
+    let db = sled::open(&other).unwrap();
+    assert!(db.open_tree("meta").unwrap().is_empty(), "meta written");
+    assert!(!other.join("samples.log").exists(), "a sample log made");
 }
 
 #[test]
@@ -618,6 +648,15 @@ fn job_with_other_settings_is_refused_unless_forced() {
     assert_eq!(fresh.frames_done, 0);
     assert!(store.frames_done(old.id).unwrap().is_empty());
     assert!(store.frame_records(old.id, 0).unwrap().is_empty());
+    // Forced with the same settings: started over all the same (the way
+    // out for a job whose stored frames are damaged).
+    commit_frames(&store, "k", 0..2);
+    let done = store.job("k").unwrap().unwrap();
+    assert_eq!(done.frames_done, 2);
+    let again = store.begin_job(&spec("k"), true).unwrap();
+    assert_ne!(again.id, done.id);
+    assert_eq!(again.frames_done, 0);
+    assert!(store.frames_done(done.id).unwrap().is_empty());
 }
 
 /// `ic` with few strata and one sample per pixel: fixtures and resumes

@@ -139,7 +139,7 @@ pub struct RenderArgs {
     /// Store directory for --job [default: ./radcache.db]. Only used with --job.
     #[arg(long, value_name = "PATH", requires = "job")]
     pub db: Option<PathBuf>,
-    /// With --job: start the job over when its scene or settings changed (else an error).
+    /// With --job: start the job over, dropping its stored frames: needed when its scene or settings changed (else an error), and the way out for a job whose stored frames are damaged.
     #[arg(long, requires = "job")]
     pub force: bool,
     /// No progress bar.

@@ -40,14 +40,16 @@ impl Store {
     }
 
     /// Starts or resumes job `spec.name`. A job of that name with another
-    /// scene or other settings is refused unless `force`, which starts it
-    /// over under a new id (the old id's data is then deleted).
+    /// scene or other settings is refused unless `force`. `force` starts
+    /// the job over under a new id whatever its settings (the old id's data
+    /// is then deleted): also the way out for a job whose stored frames are
+    /// damaged.
     pub fn begin_job(&self, spec: &JobSpec, force: bool) -> Result<JobValue, StoreError> {
         let key = keys::job(&spec.name);
         let now = now_unix();
         if let Some(mut job) = self.job(&spec.name)? {
             let diffs = job_differences(&job.spec, spec);
-            if diffs.is_empty() {
+            if diffs.is_empty() && !force {
                 // Same job: the new range, and the spec as this build
                 // writes it (a schema-1 job's settings and hash upgraded).
                 job.spec = spec.clone();

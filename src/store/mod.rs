@@ -251,6 +251,10 @@ impl Store {
         let meta = tree("meta")?;
         let version = match migrate::read_version(path, &meta)? {
             Some(found) => Some(migrate::migrate(path, &db, &meta, found, target, steps)?),
+            None if existing => {
+                check_unversioned(path, &db, create)?;
+                None
+            }
             None => None,
         };
         let (log_generation, log) = open_sample_log(path, &meta)?;
@@ -404,6 +408,55 @@ impl Store {
             .map_err(|e| StoreError::sled(&self.path, e))?;
         self.flush()
     }
+}
+
+/// Refuses an existing sled database without a schema version unless it
+/// is one that a `radcache` killed while creating it left behind: nothing
+/// in any tree and no sample in any log. Anything else is either a store
+/// whose database sled could not recover (it then opens with every tree
+/// empty, and taking it over would throw away its sample log) or another
+/// program's database; neither is ours to change. Commands that only read
+/// a store (`create` false) never take one over.
+fn check_unversioned(path: &Path, db: &sled::Db, create: bool) -> Result<(), StoreError> {
+    let refuse = |detail: String| {
+        Err(StoreError::NotAStore {
+            path: path.to_owned(),
+            detail,
+        })
+    };
+    if !create {
+        return refuse(
+            "the sled database holds no schema version (damaged, or not radcache's); \
+             nothing was changed"
+                .into(),
+        );
+    }
+    for name in db.tree_names() {
+        let tree = db.open_tree(&name).map_err(|e| StoreError::sled(path, e))?;
+        if !tree.is_empty() {
+            return refuse(format!(
+                "the sled database holds no schema version but its tree `{}` is not \
+                 empty (another program's database?); nothing was changed",
+                String::from_utf8_lossy(&name)
+            ));
+        }
+    }
+    let entries = std::fs::read_dir(path).map_err(|e| StoreError::NotAStore {
+        path: path.to_owned(),
+        detail: e.to_string(),
+    })?;
+    for entry in entries.filter_map(Result::ok) {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let len = entry.metadata().map_or(0, |m| m.len());
+        if samples::parse_file_name(&name).is_some() && len > samples::MAGIC.len() as u64 {
+            return refuse(format!(
+                "the sled database holds no schema version and no records, but its \
+                 sample log {name} holds {len} bytes: the database is damaged (sled \
+                 recovered nothing from it); nothing was changed"
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The sample log of the store at `path` as `meta` describes it (its
