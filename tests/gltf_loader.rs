@@ -799,3 +799,175 @@ fn mutated_numbers_never_panic() {
         }
     }
 }
+
+/// A rotation channel over keys at t = 0 and 1 whose second key is `q`
+/// (a glTF with its animation in the triangle's buffer).
+fn rotation_keys_case(dir: &Path, name: &str, q: [f32; 4], interpolation: &str) -> PathBuf {
+    let mut bin = tri_bin(TRI, [0, 1, 2]);
+    for v in [0.0f32, 1.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let keys: Vec<[f32; 4]> = match interpolation {
+        // In-tangent, value, out-tangent per key.
+        "CUBICSPLINE" => vec![
+            [0.0; 4],
+            [0.0, 0.0, 0.0, 1.0],
+            [0.0; 4],
+            [0.0; 4],
+            q,
+            [0.0; 4],
+        ],
+        _ => vec![[0.0, 0.0, 0.0, 1.0], q],
+    };
+    for v in keys.iter().flatten() {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let len = bin.len();
+    let count = keys.len();
+    let interpolation = interpolation.to_string();
+    write_case(
+        dir,
+        name,
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(len);
+            let views = d["bufferViews"].as_array_mut().unwrap();
+            views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 8}));
+            views.push(json!({"buffer": 0, "byteOffset": 56, "byteLength": 16 * count}));
+            let acc = d["accessors"].as_array_mut().unwrap();
+            acc.push(json!({"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR", "min": [0.0], "max": [1.0]}));
+            acc.push(
+                json!({"bufferView": 3, "componentType": 5126, "count": count, "type": "VEC4"}),
+            );
+            d["animations"] = json!([{"name": "spin",
+                "channels": [{"sampler": 0, "target": {"node": 0, "path": "rotation"}}],
+                "samplers": [{"input": 2, "output": 3, "interpolation": interpolation}]}]);
+        },
+        Some(bin),
+    )
+}
+
+/// Values that pass as finite numbers but would make NaN or overflowing
+/// geometry (and obvhs panic) are errors that say which.
+#[test]
+fn transforms_that_break_tracing_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    for interpolation in ["LINEAR", "STEP", "CUBICSPLINE"] {
+        let path = rotation_keys_case(
+            dir.path(),
+            &format!("zero_{interpolation}"),
+            [0.0; 4],
+            interpolation,
+        );
+        assert_error(&path, "has no orientation");
+    }
+    let tiny = rotation_keys_case(dir.path(), "tiny", [1e-30, 0.0, 0.0, 0.0], "LINEAR");
+    assert_error(&tiny, "has no orientation");
+    // A proper second key loads, and its frames stay finite.
+    let fine = rotation_keys_case(dir.path(), "fine", [0.0, 1.0, 0.0, 0.0], "CUBICSPLINE");
+    let scene = Scene::load(&fine).unwrap();
+    for t in [0.0, 0.3, 0.5, 0.7, 1.0] {
+        let snap = scene.snapshot(t);
+        assert!(snap
+            .triangles
+            .iter()
+            .all(|tri| tri.p.iter().all(|p| p.is_finite())));
+    }
+    let huge_scale = write_case(
+        dir.path(),
+        "hugescale",
+        |d| d["nodes"][0]["scale"] = json!([1e38, 1e38, 1e38]),
+        good_bin(),
+    );
+    assert_error(&huge_scale, "scale has a component of magnitude 1e38");
+    let huge_position = write_case(
+        dir.path(),
+        "hugeposition",
+        |_| {},
+        Some(tri_bin(
+            [[0.0; 3], [3e38, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            [0, 1, 2],
+        )),
+    );
+    assert_error(&huge_position, "vertex position has a component");
+    // Each within bounds, together past them: 1e8 m scaled by 1e8 under a
+    // parent scaled by 1e8.
+    let far = write_case(
+        dir.path(),
+        "far",
+        |d| {
+            d["nodes"][0]["scale"] = json!([1e8, 1e8, 1e8]);
+            let nodes = d["nodes"].as_array_mut().unwrap();
+            nodes.push(json!({"name": "big", "scale": [1e8, 1e8, 1e8], "children": [0]}));
+            d["scenes"][0]["nodes"] = json!([2, 1]);
+        },
+        Some(tri_bin(
+            [[0.0; 3], [1e8, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            [0, 1, 2],
+        )),
+    );
+    assert_error(&far, "node 'tri' places a vertex");
+}
+
+/// Scenes that would render black without a word: no triangle with any
+/// area, a camera scaled to nothing; and a spot light whose cones cross.
+#[test]
+fn scenes_that_render_nothing_are_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let flat = write_case(
+        dir.path(),
+        "flat",
+        |_| {},
+        Some(tri_bin(
+            [[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+            [0, 1, 2],
+        )),
+    );
+    assert_error(&flat, "no triangle has any area");
+    let squashed = write_case(
+        dir.path(),
+        "squashed",
+        |d| d["nodes"][0]["scale"] = json!([0.0, 0.0, 0.0]),
+        good_bin(),
+    );
+    assert_error(&squashed, "no triangle has any area");
+    let blind = write_case(
+        dir.path(),
+        "blind",
+        |d| d["nodes"][1]["scale"] = json!([0.0, 0.0, 0.0]),
+        good_bin(),
+    );
+    assert_error(&blind, "camera node 'cam' has no orientation");
+    let spot = write_case(
+        dir.path(),
+        "spot",
+        |d| {
+            d["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+            d["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+                {"type": "spot", "intensity": 1.0,
+                 "spot": {"innerConeAngle": 1.0, "outerConeAngle": 0.5}}]}});
+            d["nodes"][1]["extensions"] = json!({"KHR_lights_punctual": {"light": 0}});
+        },
+        good_bin(),
+    );
+    assert_error(&spot, "innerConeAngle 1 is larger than outerConeAngle 0.5");
+    let odd = write_case(
+        dir.path(),
+        "odd",
+        |d| {
+            d["accessors"][1]["count"] = json!(2);
+            d["bufferViews"][1]["byteLength"] = json!(8);
+        },
+        good_bin(),
+    );
+    assert_error(&odd, "2 indices for TRIANGLES, not a multiple of 3");
+}
+
+/// A FIFO or a link to a device is refused before it is read (it would
+/// block, or read until memory runs out).
+#[test]
+fn a_scene_path_that_is_no_regular_file_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("zero.glb");
+    std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+    assert_error(&link, "not a regular file");
+}

@@ -61,6 +61,28 @@ impl Channel {
         if self.values.iter().any(|v| !v.is_finite()) {
             return Err("animation channel has a NaN or infinite value".into());
         }
+        let limit = crate::scene::gltf_loader::MAX_COORDINATE;
+        let largest = self
+            .values
+            .iter()
+            .map(|v| v.abs().max_element())
+            .fold(0.0, f32::max);
+        if largest > limit {
+            return Err(format!(
+                "animation channel has a value of magnitude {largest:e}, beyond {limit:e}, \
+                 past what can be traced"
+            ));
+        }
+        if self.property == Property::Rotation {
+            // A zero quaternion has no orientation: slerp and normalisation
+            // would turn it into NaN transforms.
+            if let Some(k) = (0..self.times.len()).find(|&k| self.key(k).length() < 1e-6) {
+                return Err(format!(
+                    "rotation key {k} is the quaternion {}, which has no orientation",
+                    self.key(k)
+                ));
+            }
+        }
         Ok(())
     }
 
@@ -109,7 +131,10 @@ impl Channel {
                     + v1 * (-2.0 * s3 + 3.0 * s2)
                     + a1 * (dt * (s3 - s2));
                 if rotation {
-                    p.normalize_or_zero()
+                    // The spline may pass through the zero quaternion (keys
+                    // q and −q): the nearer key's orientation then.
+                    let nearer = if s < 0.5 { v0 } else { v1 };
+                    p.try_normalize().unwrap_or(nearer.normalize())
                 } else {
                     p
                 }

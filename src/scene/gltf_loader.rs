@@ -37,6 +37,10 @@ const MAX_VIEWLESS_BYTES: usize = 1 << 28;
 
 /// Albedo of the material given to primitives that have none.
 const DEFAULT_ALBEDO: f32 = 0.8;
+/// Largest translation, scale or vertex coordinate a file may hold (see
+/// [`crate::scene::MAX_WORLD_COORDINATE`]: these leave room for a few
+/// levels of hierarchy).
+pub(crate) const MAX_COORDINATE: f32 = 1e8;
 
 /// Loads a glTF 2.0 scene from `path`. Every error names the file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
@@ -62,6 +66,10 @@ fn check_extension(path: &Path) -> Res<()> {
 }
 
 fn read_file(path: &Path) -> Res<Vec<u8>> {
+    // A FIFO or a device (a link to /dev/zero) would block or read forever.
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Err("not a regular file".into());
+    }
     std::fs::read(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => "file not found".to_string(),
         _ => format!("cannot read file: {e}"),
@@ -130,7 +138,7 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
     let animation = build_animation(&document, &buffers, &hierarchy)?;
     check_renderable(&objects, &materials, &lights)?;
 
-    Ok(Scene {
+    let scene = Scene {
         name: path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
@@ -142,7 +150,46 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
         lights,
         camera,
         animation,
-    })
+    };
+    check_first_frame(&scene)?;
+    Ok(scene)
+}
+
+/// What only the placed scene shows, checked at t = 0: a camera whose
+/// transform has no orientation (scaled to zero: every ray NaN), or
+/// triangles that all have no area (degenerate, or scaled to zero). Either
+/// renders black frames without a word otherwise.
+fn check_first_frame(scene: &Scene) -> Res<()> {
+    let world = scene.node_world_transforms(0.0);
+    for object in &scene.objects {
+        let far = object.mesh.positions.iter().find_map(|&p| {
+            let w = world[object.node].transform_point3(p);
+            (!crate::scene::within_world(w)).then_some(w)
+        });
+        if let Some(w) = far {
+            return Err(format!(
+                "node '{}' places a vertex at a coordinate of magnitude {:e} at t = 0, \
+                 beyond {:e}, past what can be traced",
+                scene.nodes[object.node].name,
+                w.abs().max_element(),
+                crate::scene::MAX_WORLD_COORDINATE
+            ));
+        }
+    }
+    let snapshot = scene.snapshot(0.0);
+    let camera = &snapshot.camera;
+    if !(camera.position.is_finite() && camera.basis.is_finite()) {
+        return Err(format!(
+            "camera node '{}' has no orientation at t = 0 (scaled to zero?)",
+            scene.nodes[scene.camera.node].name
+        ));
+    }
+    let has_area =
+        |t: &crate::scene::Triangle| (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]) != Vec3::ZERO;
+    if !snapshot.triangles.iter().any(has_area) {
+        return Err("no triangle has any area at t = 0 (degenerate, or scaled to zero)".into());
+    }
+    Ok(())
 }
 
 /// Frames covering `t = 0..=duration` at the default rate; the small
@@ -506,6 +553,18 @@ fn build_nodes(gnodes: &[gltf::Node], hierarchy: &Hierarchy) -> Res<Vec<Node>> {
         .collect()
 }
 
+/// A translation, scale or vertex position within ±[`MAX_COORDINATE`].
+fn check_coordinates(v: Vec3, what: &str) -> Res<()> {
+    let largest = v.abs().max_element();
+    if largest > MAX_COORDINATE {
+        return Err(format!(
+            "{what} has a component of magnitude {largest:e}, beyond {MAX_COORDINATE:e}, \
+             past what can be traced"
+        ));
+    }
+    Ok(())
+}
+
 fn all_finite(values: &[f32]) -> bool {
     values.iter().all(|v| v.is_finite())
 }
@@ -523,6 +582,8 @@ fn rest_trs(node: &gltf::Node) -> Res<Trs> {
             if !(scale.is_finite() && rotation.is_finite() && translation.is_finite()) {
                 return Err("transform matrix cannot be decomposed into TRS (singular?)".into());
             }
+            check_coordinates(translation, "translation")?;
+            check_coordinates(scale, "scale")?;
             Ok(Trs {
                 translation,
                 rotation: rotation.normalize(),
@@ -537,6 +598,8 @@ fn rest_trs(node: &gltf::Node) -> Res<Trs> {
             if !(all_finite(&translation) && all_finite(&rotation) && all_finite(&scale)) {
                 return Err(NON_FINITE.into());
             }
+            check_coordinates(Vec3::from(translation), "translation")?;
+            check_coordinates(Vec3::from(scale), "scale")?;
             let rotation = Quat::from_array(rotation);
             if rotation.length() < 1e-6 {
                 return Err("zero rotation quaternion".into());
@@ -644,6 +707,9 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
     if positions.iter().any(|p| !p.is_finite()) {
         return Err("NaN or infinite vertex position".into());
     }
+    for &p in &positions {
+        check_coordinates(p, "vertex position")?;
+    }
     let n = positions.len();
     let indices = match prim.indices() {
         Some(acc) => buffers.indices(&acc, "indices")?,
@@ -652,6 +718,12 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
     if let Some(&bad) = indices.iter().find(|&&i| i as usize >= n) {
         return Err(format!(
             "vertex index {bad} is out of range (the primitive has {n} vertices)"
+        ));
+    }
+    if prim.mode() == Mode::Triangles && indices.len() % 3 != 0 {
+        return Err(format!(
+            "{} indices for TRIANGLES, not a multiple of 3",
+            indices.len()
         ));
     }
     let triangles = triangulate(prim.mode(), &indices);
@@ -728,6 +800,12 @@ fn build_lights(gnodes: &[gltf::Node]) -> Res<Vec<PunctualLight>> {
             } => {
                 if !(all_finite(&[inner_cone_angle, outer_cone_angle]) && outer_cone_angle > 0.0) {
                     return Err(format!("spot light '{name}' has invalid cone angles"));
+                }
+                if inner_cone_angle > outer_cone_angle {
+                    return Err(format!(
+                        "spot light '{name}': innerConeAngle {inner_cone_angle} is larger than \
+                         outerConeAngle {outer_cone_angle}"
+                    ));
                 }
                 Some(Spot {
                     inner_cone: inner_cone_angle.clamp(0.0, outer_cone_angle),

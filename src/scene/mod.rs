@@ -509,7 +509,11 @@ fn append_object(snap: &mut Snapshot, object: u32, mesh: &Mesh, to_world: &Mat4)
             // A mirroring transform reverses winding; keep the front face.
             idx.swap(1, 2);
         }
-        let p = idx.map(|i| to_world.transform_point3(mesh.positions[i]));
+        let mut p = idx.map(|i| to_world.transform_point3(mesh.positions[i]));
+        if !p.iter().all(|v| within_world(*v)) {
+            // Collapsed to a point, which no ray hits; its index stays.
+            p = [Vec3::ZERO; 3];
+        }
         let n = idx.map(|i| {
             mesh.normals
                 .get(i)
@@ -520,6 +524,18 @@ fn append_object(snap: &mut Snapshot, object: u32, mesh: &Mesh, to_world: &Mat4)
         snap.tri_object.push(object);
         snap.tri_material.push(material);
     }
+}
+
+/// Largest world coordinate a triangle may have. Beyond it the BVH
+/// builders' boxes overflow `f32` (a box's surface area of 1e36 is near
+/// its range) and obvhs panics. The loader bounds every transform, key and
+/// vertex by [`gltf_loader::MAX_COORDINATE`] and checks the placed scene at
+/// t = 0 against this; only animation that carries geometry further gets
+/// here later, and its triangles are then collapsed rather than traced.
+pub const MAX_WORLD_COORDINATE: f32 = 1e17;
+
+pub(crate) fn within_world(v: Vec3) -> bool {
+    v.is_finite() && v.abs().max_element() <= MAX_WORLD_COORDINATE
 }
 
 impl Snapshot {
