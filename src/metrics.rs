@@ -42,6 +42,13 @@ pub enum MetricsError {
         b: PathBuf,
         b_size: (u32, u32),
     },
+    #[error("{}: pixel ({x}, {y}) is {value}: every metric would be NaN or infinite", path.display())]
+    NonFinite {
+        path: PathBuf,
+        x: u32,
+        y: u32,
+        value: String,
+    },
     #[error("{}: not a light mask of {}×{} pixels: {detail}", path.display(), size.0, size.1)]
     Mask {
         path: PathBuf,
@@ -387,6 +394,21 @@ struct FramePair {
     surfaces: Option<Vec<bool>>,
 }
 
+/// The first pixel of `film` with a NaN or infinite channel is an error
+/// naming the file and the pixel: one would make every metric NaN (or
+/// infinite) without saying where it came from.
+fn check_finite(path: &Path, film: &Film) -> Result<(), MetricsError> {
+    match film.pixels.iter().position(|p| !p.is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(MetricsError::NonFinite {
+            path: path.to_path_buf(),
+            x: i as u32 % film.width,
+            y: i as u32 / film.width,
+            value: film.pixels[i].to_string(),
+        }),
+    }
+}
+
 fn read_pair(number: u32, ref_path: PathBuf, test_dir: &Path) -> Result<FramePair, MetricsError> {
     let test_path = test_dir.join(ref_path.file_name().expect("listed files have names"));
     if !test_path.is_file() {
@@ -398,6 +420,8 @@ fn read_pair(number: u32, ref_path: PathBuf, test_dir: &Path) -> Result<FramePai
     let reference = read_exr(&ref_path)?;
     let test = read_exr(&test_path)?;
     check_size(&test_path, &test, &ref_path, &reference)?;
+    check_finite(&ref_path, &reference)?;
+    check_finite(&test_path, &test)?;
     let dir = ref_path.parent().unwrap_or(Path::new("."));
     let lights = read_light_mask(&light_mask_path(dir, number), size(&reference))?;
     let surfaces = lights.map(|m| m.into_iter().map(|light| !light).collect());

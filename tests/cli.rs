@@ -136,6 +136,31 @@ fn bad_input_is_a_clear_error() {
             &["render", "--job", "job-3"],
             "radcache serve gives its own jobs",
         ),
+        (&["render", "--fps", "1e-40"], "0.001..=100000"),
+        (
+            &["render", "--frames", "0..1000001"],
+            "last frame number, 999999",
+        ),
+        (
+            &[
+                "render",
+                "--method",
+                "ic",
+                "--ic-min-spacing",
+                "100",
+                "--ic-max-spacing",
+                "2",
+            ],
+            "min_spacing 100 is over max_spacing 2",
+        ),
+        (
+            &["bench", "--methods", "tcg:tau_min=0.5:tau_max=0.1"],
+            "tau_min 0.5 is over tau_max 0.1",
+        ),
+        (
+            &["serve", "--scenes", "/nonexistent/scenes"],
+            "no such directory",
+        ),
     ];
     for (args, expected) in cases {
         let (code, _, stderr) = radcache(args);

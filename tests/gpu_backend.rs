@@ -662,18 +662,21 @@ fn gpu_backend_names_its_adapter() {
     assert!(gpu.preferred_batch() >= 1 << 20);
 }
 
-/// Triangles at exponentially growing distances (each 1.5 times as far as
-/// the one before): the BVH builder peels them off one by one, so the tree
-/// is about as deep as there are triangles (200 gave depth 99).
+/// Triangles at exponentially shrinking distances from the origin, each
+/// as large as it is far (1.5 times smaller than the one before): the
+/// scene looks the same at every scale, so the BVH builder peels them off
+/// one by one and the tree is about as deep as there are triangles. (They
+/// shrink rather than grow so that all stay within a snapshot's bounds,
+/// `scene::MAX_WORLD_COORDINATE`.)
 fn exponential_row(n: usize) -> Mesh {
     let mut m = Mesh::default();
     for i in 0..n {
-        let x = 1.5f32.powi(i as i32);
+        let x = 1.5f32.powi(-(i as i32));
         let base = m.positions.len() as u32;
         for p in [
             Vec3::new(x, 0.0, 0.0),
-            Vec3::new(x, 1.0, 0.0),
-            Vec3::new(x, 0.0, 1.0),
+            Vec3::new(x, x, 0.0),
+            Vec3::new(x, 0.0, x),
         ] {
             m.positions.push(p);
             m.normals.push(Vec3::X);
@@ -687,7 +690,7 @@ fn exponential_row(n: usize) -> Mesh {
 #[test]
 fn a_scene_the_gpu_cannot_take_fails_the_backend_instead_of_panicking() {
     let s = scene(
-        vec![exponential_row(200)],
+        vec![exponential_row(100)],
         vec![Material::diffuse("grey", Vec3::splat(0.5))],
         vec![],
         Vec3::new(-1.0, 0.3, 0.3),

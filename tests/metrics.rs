@@ -188,6 +188,22 @@ fn size_mismatch_names_both_files() {
 }
 
 #[test]
+fn a_nan_or_infinite_pixel_names_the_file_and_the_pixel() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let mut bad = constant(4, 4, 1.0);
+    bad.pixels[4 * 2 + 3] = Vec3::new(1.0, f32::INFINITY, 0.0);
+    write_seq(&r, &[(0, constant(4, 4, 1.0)), (1, constant(4, 4, 1.0))]);
+    write_seq(&t, &[(0, constant(4, 4, 1.0)), (1, bad)]);
+    let err = compare_dirs(&r, &t).unwrap_err();
+    assert!(matches!(err, MetricsError::NonFinite { .. }), "{err}");
+    let message = err.to_string();
+    for needle in ["test/frame_0001.exr", "pixel (3, 2)", "inf"] {
+        assert!(message.contains(needle), "{needle} not in {message}");
+    }
+}
+
+#[test]
 fn empty_or_absent_reference_folder_is_an_error() {
     let tmp = tempfile::tempdir().unwrap();
     let err = compare_dirs(tmp.path(), tmp.path()).unwrap_err();

@@ -430,8 +430,9 @@ fn parse_job_name(s: &str) -> Result<String, String> {
 
 fn parse_fps(s: &str) -> Result<f32, String> {
     let fps: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
-    if !fps.is_finite() || fps <= 0.0 {
-        return Err(format!("fps must be a positive number, got {s}"));
+    // Frame f is at t = f / fps: past these, t overflows or stops moving.
+    if !(0.001..=100_000.0).contains(&fps) {
+        return Err(format!("fps must lie in 0.001..=100000, got {s}"));
     }
     Ok(fps)
 }

@@ -185,7 +185,7 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
         eas_tau: args.ic.ic_eas_tau,
         ..IcSettings::default()
     };
-    Ok(match args.method {
+    let method = match args.method {
         MethodName::Path => MethodSettings::Path(PathSettings {
             spp: args.spp.unwrap_or(PathSettings::default().spp),
             length,
@@ -224,7 +224,9 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
             },
             length,
         }),
-    })
+    };
+    crate::method::settings::check_consistent(&method)?;
+    Ok(method)
 }
 
 /// With `--job`, the store (`--db`, or the default) and the job begun or

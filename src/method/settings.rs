@@ -111,6 +111,8 @@ pub enum MethodError {
         value: String,
         problem: String,
     },
+    #[error("{method}: {problem}")]
+    Inconsistent { method: String, problem: String },
     #[error("bad method specification '{spec}': {problem} (expected NAME, NAME:KEY=V1,V2,… or NAME:KEY=V:KEY=V1,V2,…, at most one setting with several values, e.g. path:spp=4,16,64 or trc:at=0.1:max_life=2,5)")]
     BadSpec { spec: String, problem: String },
 }
@@ -214,7 +216,38 @@ pub fn method_settings<'a>(
     for (key, v) in changes {
         apply(&mut settings, key, v)?;
     }
+    check_consistent(&settings)?;
     Ok(settings)
+}
+
+/// Settings each within its range that contradict each other: a minimum
+/// over its maximum (the method would quietly take one of them).
+pub fn check_consistent(settings: &MethodSettings) -> Result<(), MethodError> {
+    let ic = match settings {
+        MethodSettings::Ic(ic) => Some(ic),
+        MethodSettings::Trc(trc) => Some(&trc.ic),
+        MethodSettings::Tcg(tcg) => Some(&tcg.ic),
+        MethodSettings::Path(_) | MethodSettings::Movies(_) => None,
+    };
+    let inconsistent = |problem: String| MethodError::Inconsistent {
+        method: settings.name().into(),
+        problem,
+    };
+    if let Some(ic) = ic.filter(|ic| ic.min_spacing_px > ic.max_spacing_px) {
+        return Err(inconsistent(format!(
+            "min_spacing {} is over max_spacing {}",
+            ic.min_spacing_px, ic.max_spacing_px
+        )));
+    }
+    if let MethodSettings::Tcg(tcg) = settings {
+        if tcg.tau_min > tcg.tau_max {
+            return Err(inconsistent(format!(
+                "tau_min {} is over tau_max {}",
+                tcg.tau_min, tcg.tau_max
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// `settings` as their serde JSON without the enum's tag (the method's

@@ -476,13 +476,19 @@ pub fn percent_decode(s: &str) -> Option<String> {
 }
 
 /// Runs the server until Ctrl-C or SIGTERM; the job being rendered stops
-/// after its current frame (and resumes on the next start).
+/// at once, its frame in progress abandoned (and rendered again on the next
+/// start).
 pub fn serve(options: ServeOptions) -> Result<()> {
     if !options.addr.ip().is_loopback() && options.token.is_none() {
         bail!(
             "binding to non-loopback address {} requires --token (or RADCACHE_TOKEN)",
             options.addr
         );
+    }
+    for (flag, dir) in [("--scenes", &options.scenes), ("--bench", &options.bench)] {
+        if let Some(dir) = dir.as_ref().filter(|d| !d.is_dir()) {
+            bail!("{flag} {}: no such directory", dir.display());
+        }
     }
     let store = Store::open(&options.db)?;
     let state = Arc::new(AppState {

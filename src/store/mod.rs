@@ -593,9 +593,11 @@ fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
     match opened {
         Ok(Ok(db)) => Ok(db),
         Ok(Err(sled::Error::Io(e))) if e.to_string().contains("could not acquire lock") => {
+            // sled's message ends in the OS error's Debug form; the cause
+            // is always the same.
             Err(StoreError::Locked {
                 path: path.to_owned(),
-                detail: e.to_string(),
+                detail: "another process holds its lock".into(),
             })
         }
         Ok(Err(sled::Error::Corruption { .. })) | Ok(Err(sled::Error::Unsupported(_))) => {
