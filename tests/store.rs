@@ -1541,10 +1541,12 @@ fn settings_are_compared_as_json_values() {
     });
     let other = render::job_spec("s", &source, &other, &fs, 0..2).unwrap();
     let msg = err_text(store.begin_job(&other, false));
+    // Only the setting that differs is named, not both documents.
     assert!(
-        msg.contains("method settings") && msg.contains("0.3"),
+        msg.contains("method settings (Ic.accuracy: stored 0.2, given 0.3)"),
         "{msg}"
     );
+    assert!(!msg.contains("theta"), "{msg}");
 }
 
 /// The sled database under a store, opened directly (retrying while the

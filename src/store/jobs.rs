@@ -4,6 +4,7 @@
 use super::schema::{JobSpec, JobValue};
 use super::v1;
 use super::{encode, keys, now_unix, Store, StoreError};
+use std::collections::{BTreeMap, BTreeSet};
 
 impl Store {
     pub fn job(&self, name: &str) -> Result<Option<JobValue>, StoreError> {
@@ -149,6 +150,9 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
         frame_end: _,
     } = spec;
     let mut d = Vec::new();
+    if !same_settings(&stored.settings, settings) {
+        d.push(settings_differences(&stored.settings, settings));
+    }
     let mut check = |name: &str, same: bool, stored: String, given: String| {
         if !same {
             d.push(format!("{name} (stored {stored}, given {given})"));
@@ -171,12 +175,6 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
         &stored.method == method,
         stored.method.clone(),
         method.clone(),
-    );
-    check(
-        "method settings",
-        same_settings(&stored.settings, settings),
-        stored.settings.clone(),
-        settings.clone(),
     );
     check(
         "size",
@@ -220,6 +218,53 @@ fn same_settings(stored: &str, given: &str) -> bool {
     ) {
         (Ok(a), Ok(b)) => a == b,
         _ => stored == given,
+    }
+}
+
+/// "method settings (max_life: stored 20, given 5; …)": the settings (JSON)
+/// that differ, by their path in the JSON, rather than both documents.
+fn settings_differences(stored: &str, given: &str) -> String {
+    fn leaves(prefix: String, v: &serde_json::Value, out: &mut BTreeMap<String, String>) {
+        match v {
+            serde_json::Value::Object(map) => {
+                for (k, v) in map {
+                    let path = if prefix.is_empty() {
+                        k.clone()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    leaves(path, v, out);
+                }
+            }
+            other => {
+                out.insert(prefix, other.to_string());
+            }
+        }
+    }
+    let parse = |text: &str| {
+        let mut out = BTreeMap::new();
+        if let Ok(v) = serde_json::from_str::<serde_json::Value>(text) {
+            leaves(String::new(), &v, &mut out);
+        }
+        out
+    };
+    let (a, b) = (parse(stored), parse(given));
+    let none = || "none".to_string();
+    let differing: Vec<String> = a
+        .keys()
+        .chain(b.keys())
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .map(|k| {
+            let stored = a.get(k).cloned().unwrap_or_else(none);
+            let given = b.get(k).cloned().unwrap_or_else(none);
+            format!("{k}: stored {stored}, given {given}")
+        })
+        .collect();
+    match differing.is_empty() {
+        true => format!("method settings (stored {stored}, given {given})"),
+        false => format!("method settings ({})", differing.join("; ")),
     }
 }
 
