@@ -138,6 +138,12 @@ fn bad_input_is_a_clear_error() {
         ),
         (&["render", "--fps", "1e-40"], "0.001..=100000"),
         (
+            &[
+                "render", "--size", "8x8", "--frames", "0..1", "--out", garbage,
+            ],
+            "broken.glb is a file",
+        ),
+        (
             &["render", "--frames", "0..1000001"],
             "last frame number, 999999",
         ),

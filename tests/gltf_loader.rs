@@ -962,6 +962,18 @@ fn scenes_that_render_nothing_are_errors() {
     assert_error(&odd, "2 indices for TRIANGLES, not a multiple of 3");
 }
 
+#[test]
+fn another_gltf_version_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "v3",
+        |d| d["asset"]["version"] = json!("3.0"),
+        good_bin(),
+    );
+    assert_error(&path, "glTF version 3.0 is not supported (expected 2.x)");
+}
+
 /// A FIFO or a link to a device is refused before it is read (it would
 /// block, or read until memory runs out).
 #[test]

@@ -90,7 +90,7 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
                 "they are saved in job {:?}: the same command renders the rest",
                 j.job.name
             ),
-            None => "without --db and --job, running it again renders every frame again".into(),
+            None => "without --job, running it again renders every frame again".into(),
         };
         bail!(
             "interrupted after frame {last}: {done} of {} frames are in {}; {rest}",

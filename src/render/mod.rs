@@ -609,6 +609,9 @@ pub fn render_job_to_dir_with(
     mut job: Option<&mut StoreJob>,
     after_frame: &mut dyn FnMut(u32) -> bool,
 ) -> Result<RenderSummary> {
+    if out_dir.exists() && !out_dir.is_dir() {
+        bail!("output directory {} is a file", out_dir.display());
+    }
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create output directory {}", out_dir.display()))?;
     let done = match job.as_deref() {

@@ -40,7 +40,7 @@ const DEFAULT_ALBEDO: f32 = 0.8;
 /// Largest translation, scale or vertex coordinate a file may hold (see
 /// [`crate::scene::MAX_WORLD_COORDINATE`]: these leave room for a few
 /// levels of hierarchy).
-pub(crate) const MAX_COORDINATE: f32 = 1e8;
+pub const MAX_COORDINATE: f32 = 1e8;
 
 /// Loads a glTF 2.0 scene from `path`. Every error names the file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
@@ -113,6 +113,12 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
     let gltf::Gltf { document, blob } =
         gltf::Gltf::from_slice_without_validation(bytes).map_err(parse_error)?;
     let root = document.into_json();
+    if !root.asset.version.starts_with("2.") {
+        return Err(format!(
+            "glTF version {} is not supported (expected 2.x)",
+            root.asset.version
+        ));
+    }
     check_unvalidated_references(&root)?;
     let document = gltf::Document::from_json(root).map_err(parse_error)?;
     let base = path.parent().unwrap_or(Path::new("."));

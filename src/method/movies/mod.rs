@@ -252,6 +252,10 @@ impl Method for TextureMovies {
 
         let start = Instant::now();
         let tiles = self.trace_tiles(ctx);
+        if ctx.abandoned() {
+            // Thrown away (`FrameContext::abandoned`): the tiles are partial.
+            return Film::new(ctx.width, ctx.height);
+        }
         let wanted = self.wanted_movies(ctx, &tiles);
         self.apply_events(ctx, wanted, &blockers, &mut stats);
         let global = self.global.as_ref().expect("built above");
@@ -259,7 +263,10 @@ impl Method for TextureMovies {
         let counts: Vec<ShadowCounts> = self
             .movies
             .par_iter_mut()
-            .map(|(_, m)| m.shade(ctx, &blockers, global, samples))
+            .map(|(_, m)| match ctx.abandoned() {
+                true => ShadowCounts::default(),
+                false => m.shade(ctx, &blockers, global, samples),
+            })
             .collect();
         self.shadows = ShadowCounts::default();
         counts.into_iter().for_each(|c| self.shadows += c);
@@ -314,6 +321,7 @@ impl TextureMovies {
         let starts: Vec<u32> = (0..n_pixels).step_by(per_tile as usize).collect();
         starts
             .into_par_iter()
+            .filter(|_| !ctx.abandoned())
             .map(|first| {
                 let count = per_tile.min(n_pixels - first);
                 let (primary, edges) =
