@@ -468,6 +468,19 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
     assert_eq!(status, 201, "{}", String::from_utf8_lossy(&resp));
     let id = json(&resp)["id"].as_str().unwrap().to_string();
     assert_eq!(wait_done(&server, &id)["scene"], "sub/box.glb");
+    // One URL per frame: its number, or the name `radcache render` gives
+    // its file; other spellings of the number are no frame.
+    for (file, want) in [
+        ("0.png", 200),
+        ("frame_0000.exr", 200),
+        ("+0.png", 404),
+        ("00.png", 404),
+        ("frame_0.png", 404),
+        ("0.jpg", 404),
+    ] {
+        let (status, _) = http(&server, "GET", &format!("/api/jobs/{id}/frames/{file}"), "");
+        assert_eq!(status, want, "{file}");
+    }
     // Errors axum answers itself are JSON too: a body over the limit, a
     // wrong method (with its Allow header).
     let huge = format!(r#"{{"scene":"{}"}}"#, "a".repeat(100_000));

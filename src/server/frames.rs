@@ -12,23 +12,36 @@ use std::fmt::Write;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
+/// The frame and extension a frame file name asks for: `N.png` or `N.exr`,
+/// or `frame_NNNN.png` as `radcache render` names its files; exactly those
+/// spellings (not `+1.png` or `01.png`), so that one frame has one URL.
+fn frame_of_file(file: &str) -> Option<(u32, &str)> {
+    let (stem, ext) = file.split_once('.')?;
+    if ext != "png" && ext != "exr" {
+        return None;
+    }
+    let (digits, padded) = match stem.strip_prefix("frame_") {
+        Some(digits) => (digits, true),
+        None => (stem, false),
+    };
+    let n: u32 = digits.parse().ok()?;
+    let canonical = if padded {
+        format!("{n:04}")
+    } else {
+        n.to_string()
+    };
+    (canonical == digits).then_some((n, ext))
+}
+
 pub async fn frame(
     State(state): State<Arc<AppState>>,
     Path((id, file)): Path<(String, String)>,
 ) -> Result<impl IntoResponse, ApiError> {
-    // `N.png`, or `frame_NNNN.png` as `radcache render` names its files.
-    let (n, ext) = file
-        .split_once('.')
-        .and_then(|(n, ext)| {
-            let n = n.strip_prefix("frame_").unwrap_or(n);
-            Some((n.parse::<u32>().ok()?, ext))
-        })
-        .filter(|(_, ext)| *ext == "png" || *ext == "exr")
-        .ok_or_else(|| {
-            ApiError::not_found(format!(
-                "no frame file {file:?}; use N.png or N.exr (or frame_NNNN.png, as render names them)"
-            ))
-        })?;
+    let (n, ext) = frame_of_file(&file).ok_or_else(|| {
+        ApiError::not_found(format!(
+            "no frame file {file:?}; use N.png or N.exr (or frame_NNNN.png, as render names them)"
+        ))
+    })?;
     let missing = || ApiError::not_found(format!("job {id} has no frame {n} (yet)"));
     let sid = state.store_id(&id)?.ok_or_else(missing)?;
     if ext == "exr" {
