@@ -109,6 +109,17 @@ fn bad_input_is_a_clear_error() {
         (&["render", "--fps", "nan"], "fps"),
         (&["render", "--threads", "0"], "--threads"),
         (&["render", "--threads", "many"], "--threads"),
+        (&["render", "--threads", "5000"], "1..=1024"),
+        (
+            &[
+                "render",
+                "--method",
+                "movies",
+                "--movies-texels-per-pixel",
+                "1e9",
+            ],
+            "expected 0.01 to 16",
+        ),
         (
             &["render", "--method", "ic", "--ic-accuracy", "0"],
             "accuracy",

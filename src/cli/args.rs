@@ -216,8 +216,8 @@ pub struct MoviesArgs {
     /// Shadow samples per texel: sample points on the lights (the paper's N, §3.1), at most 64.
     #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub movies_shadow_samples: u32,
-    /// Texels across a pixel's footprint (§3.1: at least one texel covers one pixel).
-    #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
+    /// Texels across a pixel's footprint (§3.1: at least one texel covers one pixel), 0.01 to 16.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_texels_per_pixel)]
     pub movies_texels_per_pixel: f32,
     /// Finest texture, texels along a triangle's edge.
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=1024))]
@@ -397,6 +397,16 @@ fn parse_positive(s: &str) -> Result<f32, String> {
     let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
     if !(v.is_finite() && v > 0.0) {
         return Err(format!("expected a positive number, got {s}"));
+    }
+    Ok(v)
+}
+
+/// As `radcache bench` and `serve` take `texels_per_pixel`: past 16 a
+/// frame's movies take minutes and gigabytes.
+fn parse_texels_per_pixel(s: &str) -> Result<f32, String> {
+    let v = parse_positive(s)?;
+    if !(0.01..=16.0).contains(&v) {
+        return Err(format!("expected 0.01 to 16, got {s}"));
     }
     Ok(v)
 }

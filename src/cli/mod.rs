@@ -27,10 +27,10 @@ use std::process::ExitCode;
     about = "Global illumination for animations, reusing lighting work across frames"
 )]
 pub struct Cli {
-    /// Worker threads that render, trace and shade [default: one per CPU
-    /// core, or RAYON_NUM_THREADS]. Frames are the same, bit for bit, for
-    /// any count.
-    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..))]
+    /// Worker threads that render, trace and shade, 1 to 1024 [default: one
+    /// per CPU core, or RAYON_NUM_THREADS]. Frames are the same, bit for
+    /// bit, for any count.
+    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..=1024))]
     pub threads: Option<u16>,
     #[command(subcommand)]
     pub command: Command,
