@@ -190,6 +190,33 @@ fn bad_input_is_a_clear_error() {
     }
 }
 
+/// A bench whose last scene does not load fails before it benches the
+/// first: no reference rendered, no minutes lost.
+#[test]
+fn bench_checks_every_scene_before_it_starts() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bench");
+    let out_arg = out.to_str().unwrap();
+    let (code, _, stderr) = radcache(&[
+        "bench",
+        "--scenes",
+        "cube-in-box,/nonexistent/later.glb",
+        "--size",
+        "8x8",
+        "--frames",
+        "0..1",
+        "--reference-spp",
+        "4",
+        "--methods",
+        "path:spp=1",
+        "--out",
+        out_arg,
+    ]);
+    assert_ne!(code, 0);
+    assert!(stderr.contains("later.glb"), "{stderr}");
+    assert!(!out.join("reference").exists(), "a reference was rendered");
+}
+
 /// `inspect` lists a job's records by object and, where the job's scene
 /// still loads as it was rendered, splits them between the objects that
 /// move and those that do not (here against the scene's own animation);

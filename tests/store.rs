@@ -1057,6 +1057,18 @@ fn resumed_tcg_render_is_bit_identical_from_stored_state() {
     assert_eq!(second.method_calls().rendered, 4);
     assert_resumed_rays(&s.frame_stats, &uninterrupted.frame_stats[4..]);
     assert_eq!(exr_files(&plain, 0..8), exr_files(&resumed, 0..8));
+    // `inspect` counts each record once, by its latest version, though
+    // tcg writes its records again every frame.
+    let report = radcache::store::inspect::report(&store, Some("j"), None).unwrap();
+    let job = &report.jobs[0];
+    let computed: u64 = uninterrupted
+        .frame_stats
+        .iter()
+        .map(|f| f.records_created)
+        .sum();
+    assert_eq!(job.records, computed);
+    assert!(job.record_versions > job.records, "{}", job.record_versions);
+    assert_eq!(job.lifespan_histogram.values().sum::<u64>(), job.records);
 }
 
 /// A `movies` job keeps no state from frame to frame (a movie kept gives
@@ -1298,6 +1310,60 @@ fn trc_resumes_from_stored_state(gradients: TemporalGradients) {
     let report = radcache::store::inspect::report(&store, Some("j"), Some(99)).unwrap();
     let text = radcache::store::inspect::to_text(&report, true);
     assert!(text.contains("no finished frame to show"), "{text}");
+}
+
+/// A `trc` job rendered as 0..3 and then 3..6 holds frames 3..5 of a
+/// chain that started at frame 3: asked for 0..6, it renders the whole
+/// range again rather than calling it done, and its frames equal one 0..6
+/// render. Asked then for 0..3, done by that chain, it renders nothing;
+/// with interpolated gradients (frames depend on the range's end) it
+/// renders 0..3 again. A frame whose PNG alone was deleted gets it back.
+#[test]
+fn trc_frames_done_by_another_chain_are_rendered_again() {
+    for gradients in [
+        TemporalGradients::Extrapolated,
+        TemporalGradients::Interpolated,
+    ] {
+        let mut trc = TrcSettings::default();
+        trc.ic.strata = Strata { theta: 4, phi: 12 };
+        trc.ic.spp = 1;
+        trc.gradients = gradients;
+        let method = MethodSettings::Trc(trc);
+        let dir = tempfile::tempdir().unwrap();
+        let plain = dir.path().join("plain");
+        render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
+        let store = Store::open(&dir.path().join("db")).unwrap();
+        let source = SceneSource::Builtin("cube-in-box".into());
+        let out = dir.path().join("out");
+        let run = |frames: std::ops::Range<u32>| {
+            let settings = renderer(&method).settings;
+            let spec = render::job_spec("j", &source, &method, &settings, frames.clone()).unwrap();
+            let mut sj = StoreJob {
+                store: &store,
+                job: store.begin_job(&spec, false).unwrap(),
+            };
+            let mut r = renderer(&method);
+            render::render_job_to_dir(&mut r, frames, &out, true, Some(&mut sj))
+                .unwrap()
+                .frames
+        };
+        assert_eq!(run(0..3), 3);
+        assert_eq!(run(3..6), 3);
+        assert_eq!(
+            run(0..6),
+            6,
+            "{gradients:?}: frames 3..5 are another chain's"
+        );
+        assert_eq!(exr_files(&plain, 0..6), exr_files(&out, 0..6));
+        let again = match gradients {
+            TemporalGradients::Interpolated => 3,
+            _ => 0,
+        };
+        assert_eq!(run(0..3), again, "{gradients:?}");
+        std::fs::remove_file(film::frame_path(&out, 1, "png")).unwrap();
+        run(0..3);
+        assert!(film::frame_path(&out, 1, "png").exists());
+    }
 }
 
 #[test]

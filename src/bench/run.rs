@@ -74,8 +74,13 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let labels: Vec<String> = opts.scenes.iter().map(scene_label).collect();
     for (i, l) in labels.iter().enumerate() {
         if labels[..i].contains(l) {
-            bail!("two scenes are both named '{l}' in file names; rename one");
+            bail!("two scenes are both named '{l}' in the output's file names; name each once");
         }
+    }
+    // Every scene loads before any is benched: a bad one named last must
+    // not cost the minutes the others take.
+    for source in &opts.scenes {
+        source.load()?;
     }
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("cannot create output directory {}", opts.out.display()))?;

@@ -188,7 +188,7 @@ pub struct TrcArgs {
     /// Estimate E(t0+1) by reprojecting the record's hemisphere samples (TRC §4.7); off: E constant.
     #[arg(long, value_enum, default_value = "on")]
     pub trc_reprojection: OnOff,
-    /// With reprojection, evaluate each hemisphere sample's direct light again at t0+1 (one light sample, shadowed in the next frame's geometry), so that E(t0+1) sees moving shadows and moving lights (TRC §5: the incoming lighting at t+1 of each visible point). Costs 12–48 % more time on our animated scenes; on cube-in-box it lowers the error by 4 %, elsewhere not (README).
+    /// With reprojection, evaluate each hemisphere sample's direct light again at t0+1 (one light sample, shadowed in the next frame's geometry), so that E(t0+1) sees moving shadows and moving lights (TRC §5: the incoming lighting at t+1 of each visible point). Costs 12–48 % more time on our animated scenes; on cube-in-box it lowers the error by 4 %, elsewhere not (benches/RESULTS.md).
     #[arg(long, value_enum, default_value = "off")]
     pub trc_next_direct: OnOff,
     /// A replacement record takes the results of the paths of the record it replaces that nothing moving met, then or now, rather than tracing them again: the same records, faster (not in the paper, which traces them all again).

@@ -154,9 +154,10 @@ pub(super) fn resume(
         .collect();
     if renderer.carries_state() {
         let prefix = frames.clone().take_while(|f| done.contains(f)).count() as u32;
-        if prefix as usize == frames.len() {
-            // Every frame done: nothing to render, no state needed.
-        } else if let Some(state) = resumable_state(j, frames, prefix, renderer.looks_ahead())? {
+        let looks_ahead = renderer.looks_ahead();
+        if prefix as usize == frames.len() && rendered_as_one_chain(j, frames, looks_ahead)? {
+            // Every frame done by this range's chain: nothing to render.
+        } else if let Some(state) = resumable_state(j, frames, prefix, looks_ahead)? {
             renderer
                 .restore_state(state)
                 .map_err(|e| j.store.state_error(j.job.id, e))?;
@@ -231,6 +232,22 @@ pub(super) fn store_frame(
 /// The stored state to continue a stateful method after the finished
 /// `prefix` of `frames`, if the job holds the state of exactly that frame of
 /// the same chain.
+/// Whether every frame of `frames` (all done) was rendered by the chain a
+/// render of `frames` makes: started at its first frame (and, for a method
+/// that looks ahead, ending at its end), and still the latest chain at
+/// its last frame. A chain renders its frames in order from its start, and
+/// another chain writing any of them would have become the latest, so the
+/// latest state says it for all. Done frames of other chains (a job
+/// rendered as 0..3 and then 3..6, asked for 0..6) are rendered again.
+fn rendered_as_one_chain(job: &StoreJob, frames: &Range<u32>, looks_ahead: bool) -> Result<bool> {
+    let Some(head) = job.store.state_head(job.job.id)? else {
+        return Ok(false);
+    };
+    Ok(head.chain_start == frames.start
+        && head.chain_end == looks_ahead.then_some(frames.end)
+        && head.frame + 1 >= frames.end)
+}
+
 fn resumable_state(
     job: &StoreJob,
     frames: &Range<u32>,
@@ -253,11 +270,11 @@ fn resumable_state(
 }
 
 /// Writes a finished frame's files from the store if `out_dir` lacks its
-/// EXR (a crash between the store's flush and the file write, or another
-/// `--out`).
+/// EXR or its PNG (a crash between the store's flush and the file write,
+/// another `--out`, a file deleted).
 fn restore_frame_files(job: &StoreJob, frame: u32, out_dir: &Path) -> Result<()> {
     let exr_path = film::frame_path(out_dir, frame, "exr");
-    if exr_path.exists() {
+    if exr_path.exists() && film::frame_path(out_dir, frame, "png").exists() {
         return Ok(());
     }
     let Some(bytes) = job.store.frame_exr(job.job.id, frame)? else {

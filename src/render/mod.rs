@@ -585,7 +585,8 @@ pub fn render_to_dir(
 /// at the same first frame, and for methods that look ahead with the same
 /// range end). Otherwise the range starts over from its first frame (its
 /// frames are rendered and written again). A range whose frames are all
-/// done renders nothing.
+/// done renders nothing, for such a method only if they were rendered by
+/// that range's own chain.
 pub fn render_job_to_dir(
     renderer: &mut Renderer,
     frames: Range<u32>,
