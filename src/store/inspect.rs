@@ -55,11 +55,7 @@ pub struct JobReport {
     pub frames: String,
     pub frames_done: u32,
     pub last_frame: Option<u32>,
-    /// Records computed (distinct ids).
     pub records: u64,
-    /// Record versions written: more than `records` where a method writes
-    /// a record again in later frames (`tcg`, whose samples change).
-    pub record_versions: u64,
     pub samples: u64,
     /// Stored (zstd) and raw bytes of the record samples.
     pub samples_stored_bytes: u64,
@@ -75,7 +71,7 @@ pub struct JobReport {
     /// and the sources stored with them (the `sources` tree).
     pub radiance_records: u64,
     pub sources: u64,
-    /// Lifespan in frames (of each record's latest version) → records.
+    /// Lifespan in frames → number of records.
     pub lifespan_histogram: BTreeMap<u32, u64>,
     /// Object (its index in the scene) → the records on it.
     pub records_by_object: BTreeMap<u32, ObjectRecords>,
@@ -333,17 +329,15 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
                 .sum::<u64>();
         }
     }
-    // Each record's latest version: (frame written, lifespan, object).
-    let mut latest: BTreeMap<u64, (u32, u32, u32)> = BTreeMap::new();
+    let mut lifespans = BTreeMap::new();
     store.for_each_record(j.id, |frame, rec| {
-        r.record_versions += 1;
+        r.records += 1;
         let lifespan = rec.last_frame.saturating_sub(rec.created_frame) + 1;
-        let entry = latest
-            .entry(rec.id)
-            .or_insert((frame, lifespan, rec.object));
-        if frame >= entry.0 {
-            *entry = (frame, lifespan, rec.object);
-        }
+        *lifespans.entry(lifespan).or_insert(0) += 1;
+        r.records_by_object
+            .entry(rec.object)
+            .or_default()
+            .add(1, u64::from(lifespan));
         let samples = u64::from(rec.samples_count);
         r.samples += samples;
         r.samples_stored_bytes += u64::from(rec.samples_len);
@@ -353,14 +347,7 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
             f.samples += samples;
         }
     })?;
-    r.records = latest.len() as u64;
-    for &(_, lifespan, object) in latest.values() {
-        *r.lifespan_histogram.entry(lifespan).or_insert(0) += 1;
-        r.records_by_object
-            .entry(object)
-            .or_default()
-            .add(1, u64::from(lifespan));
-    }
+    r.lifespan_histogram = lifespans;
     r.movies = movies_report(store, j.id)?;
     r.frame_details = match only {
         Some(f) => per_frame.remove(&f).into_iter().collect(),
@@ -408,7 +395,6 @@ impl JobReport {
             frames_done: j.frames_done,
             last_frame: j.last_frame,
             records: 0,
-            record_versions: 0,
             samples: 0,
             samples_stored_bytes: 0,
             samples_raw_bytes: 0,
@@ -584,12 +570,8 @@ fn job_text(s: &mut String, j: &JobReport) {
     let _ = writeln!(s, "  settings: {}", settings_text(&j.method, &j.settings));
     let _ = writeln!(
         s,
-        "  records {}{} ({} B of rkyv values, {} B stored in blocks), samples {}: {} B stored / {} B raw (ratio {})",
+        "  records {} ({} B of rkyv values, {} B stored in blocks), samples {}: {} B stored / {} B raw (ratio {})",
         j.records,
-        match j.record_versions {
-            v if v > j.records => format!(" in {v} versions (written again in later frames)"),
-            _ => String::new(),
-        },
         j.record_value_bytes,
         j.record_block_bytes,
         j.samples,
