@@ -229,9 +229,6 @@ pub(super) fn store_frame(
     Ok(())
 }
 
-/// The stored state to continue a stateful method after the finished
-/// `prefix` of `frames`, if the job holds the state of exactly that frame of
-/// the same chain.
 /// Whether every frame of `frames` (all done) was rendered by the chain a
 /// render of `frames` makes: started at its first frame (and, for a method
 /// that looks ahead, ending at its end), and still the latest chain at
@@ -248,6 +245,9 @@ fn rendered_as_one_chain(job: &StoreJob, frames: &Range<u32>, looks_ahead: bool)
         && head.frame + 1 >= frames.end)
 }
 
+/// The stored state to continue a stateful method after the finished
+/// `prefix` of `frames`, if the job holds the state of exactly that frame of
+/// the same chain.
 fn resumable_state(
     job: &StoreJob,
     frames: &Range<u32>,

@@ -97,8 +97,8 @@ const MAX_BLOCK_RECORDS: u32 = 1 << 24;
 pub enum StoreError {
     #[error("store {}: no store here (create one with `radcache render --db PATH --job NAME`)", path.display())]
     Missing { path: PathBuf },
-    #[error("store {}: locked by another process (is a render or inspect still running?): {detail}", path.display())]
-    Locked { path: PathBuf, detail: String },
+    #[error("store {}: locked by another process (is a render or inspect still running?)", path.display())]
+    Locked { path: PathBuf },
     #[error("store {}: not a radcache store: {detail}", path.display())]
     NotAStore { path: PathBuf, detail: String },
     #[error("store {}: schema version {found} is newer than this radcache supports (version {supported}); use a newer radcache", path.display())]
@@ -592,12 +592,10 @@ fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
     let opened = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| config.open()));
     match opened {
         Ok(Ok(db)) => Ok(db),
+        // sled's message (the OS error's Debug form) adds nothing to ours.
         Ok(Err(sled::Error::Io(e))) if e.to_string().contains("could not acquire lock") => {
-            // sled's message ends in the OS error's Debug form; the cause
-            // is always the same.
             Err(StoreError::Locked {
                 path: path.to_owned(),
-                detail: "another process holds its lock".into(),
             })
         }
         Ok(Err(sled::Error::Corruption { .. })) | Ok(Err(sled::Error::Unsupported(_))) => {
