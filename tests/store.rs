@@ -1057,6 +1057,18 @@ fn resumed_tcg_render_is_bit_identical_from_stored_state() {
     assert_eq!(second.method_calls().rendered, 4);
     assert_resumed_rays(&s.frame_stats, &uninterrupted.frame_stats[4..]);
     assert_eq!(exr_files(&plain, 0..8), exr_files(&resumed, 0..8));
+    // `inspect` counts each record once, by its latest version, though
+    // tcg writes its records again every frame.
+    let report = radcache::store::inspect::report(&store, Some("j"), None).unwrap();
+    let job = &report.jobs[0];
+    let computed: u64 = uninterrupted
+        .frame_stats
+        .iter()
+        .map(|f| f.records_created)
+        .sum();
+    assert_eq!(job.records, computed);
+    assert!(job.record_versions > job.records, "{}", job.record_versions);
+    assert_eq!(job.lifespan_histogram.values().sum::<u64>(), job.records);
 }
 
 /// A `movies` job keeps no state from frame to frame (a movie kept gives
@@ -1297,7 +1309,10 @@ fn trc_resumes_from_stored_state(gradients: TemporalGradients) {
     // empty table.
     let report = radcache::store::inspect::report(&store, Some("j"), Some(99)).unwrap();
     let text = radcache::store::inspect::to_text(&report, true);
-    assert!(text.contains("no finished frame to show"), "{text}");
+    assert!(
+        text.contains("frame 99 is not among this job's finished frames (10 of frames 0..10 done, the last 9)"),
+        "{text}"
+    );
 }
 
 /// A `trc` job rendered as 0..3 and then 3..6 holds frames 3..5 of a

@@ -28,6 +28,9 @@ pub struct InspectReport {
     pub trees: Vec<TreeReport>,
     /// `size_on_disk` / Σ (key + value bytes): sled's space amplification.
     pub space_amplification: f64,
+    /// The frame asked for (`inspect --frame`), whose row alone each job
+    /// shows.
+    pub frame: Option<u32>,
     pub jobs: Vec<JobReport>,
 }
 
@@ -55,7 +58,12 @@ pub struct JobReport {
     pub frames: String,
     pub frames_done: u32,
     pub last_frame: Option<u32>,
+    /// Records computed: distinct (creation frame, id) pairs, since `ic`
+    /// numbers each frame's records from 0 again.
     pub records: u64,
+    /// Record versions written: more than `records` where a method writes
+    /// a record again in later frames (`tcg`, whose samples change).
+    pub record_versions: u64,
     pub samples: u64,
     /// Stored (zstd) and raw bytes of the record samples.
     pub samples_stored_bytes: u64,
@@ -71,7 +79,7 @@ pub struct JobReport {
     /// and the sources stored with them (the `sources` tree).
     pub radiance_records: u64,
     pub sources: u64,
-    /// Lifespan in frames → number of records.
+    /// Lifespan in frames (of each record's latest version) → records.
     pub lifespan_histogram: BTreeMap<u32, u64>,
     /// Object (its index in the scene) → the records on it.
     pub records_by_object: BTreeMap<u32, ObjectRecords>,
@@ -251,6 +259,7 @@ pub fn report(
         sample_log_unreferenced_bytes: usage.unreferenced,
         trees,
         space_amplification: size_on_disk as f64 / logical.max(1) as f64,
+        frame,
         jobs: reports,
     })
 }
@@ -329,15 +338,18 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
                 .sum::<u64>();
         }
     }
-    let mut lifespans = BTreeMap::new();
+    // Each record's latest version, keyed by (creation frame, id):
+    // (frame written, lifespan, object).
+    let mut latest: BTreeMap<(u32, u64), (u32, u32, u32)> = BTreeMap::new();
     store.for_each_record(j.id, |frame, rec| {
-        r.records += 1;
+        r.record_versions += 1;
         let lifespan = rec.last_frame.saturating_sub(rec.created_frame) + 1;
-        *lifespans.entry(lifespan).or_insert(0) += 1;
-        r.records_by_object
-            .entry(rec.object)
-            .or_default()
-            .add(1, u64::from(lifespan));
+        let entry = latest
+            .entry((rec.created_frame, rec.id))
+            .or_insert((frame, lifespan, rec.object));
+        if frame >= entry.0 {
+            *entry = (frame, lifespan, rec.object);
+        }
         let samples = u64::from(rec.samples_count);
         r.samples += samples;
         r.samples_stored_bytes += u64::from(rec.samples_len);
@@ -347,7 +359,14 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
             f.samples += samples;
         }
     })?;
-    r.lifespan_histogram = lifespans;
+    r.records = latest.len() as u64;
+    for &(_, lifespan, object) in latest.values() {
+        *r.lifespan_histogram.entry(lifespan).or_insert(0) += 1;
+        r.records_by_object
+            .entry(object)
+            .or_default()
+            .add(1, u64::from(lifespan));
+    }
     r.movies = movies_report(store, j.id)?;
     r.frame_details = match only {
         Some(f) => per_frame.remove(&f).into_iter().collect(),
@@ -395,6 +414,7 @@ impl JobReport {
             frames_done: j.frames_done,
             last_frame: j.last_frame,
             records: 0,
+            record_versions: 0,
             samples: 0,
             samples_stored_bytes: 0,
             samples_raw_bytes: 0,
@@ -494,7 +514,7 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
     for j in &r.jobs {
         job_text(&mut s, j);
         if frames {
-            frame_table(&mut s, j);
+            frame_table(&mut s, j, r.frame);
         }
     }
     s
@@ -570,8 +590,12 @@ fn job_text(s: &mut String, j: &JobReport) {
     let _ = writeln!(s, "  settings: {}", settings_text(&j.method, &j.settings));
     let _ = writeln!(
         s,
-        "  records {} ({} B of rkyv values, {} B stored in blocks), samples {}: {} B stored / {} B raw (ratio {})",
+        "  records {}{} ({} B of rkyv values, {} B stored in blocks), samples {}: {} B stored / {} B raw (ratio {})",
         j.records,
+        match j.record_versions {
+            v if v > j.records => format!(" in {v} versions (written again in later frames)"),
+            _ => String::new(),
+        },
         j.record_value_bytes,
         j.record_block_bytes,
         j.samples,
@@ -676,8 +700,19 @@ fn objects_text(s: &mut String, j: &JobReport) {
 /// A job's per-frame rows of [`to_text`]: records written, alive, created,
 /// reused, replaced and dropped, mean lifespan, samples, samples re-shot,
 /// cache bytes, bytes stored, EXR bytes, rays.
-fn frame_table(s: &mut String, j: &JobReport) {
-    if j.frame_details.is_empty() {
+fn frame_table(s: &mut String, j: &JobReport, asked: Option<u32>) {
+    if let (true, Some(frame)) = (j.frame_details.is_empty(), asked) {
+        let _ = writeln!(
+            s,
+            "  frame {frame} is not among this job's finished frames ({} of frames {} done{})",
+            j.frames_done,
+            j.frames,
+            match j.last_frame {
+                Some(last) => format!(", the last {last}"),
+                None => String::new(),
+            }
+        );
+    } else if j.frame_details.is_empty() {
         let _ = writeln!(
             s,
             "  no finished frame to show ({} of frames {} done)",
@@ -705,7 +740,7 @@ fn frame_table(s: &mut String, j: &JobReport) {
         for f in &j.frame_details {
             let _ = writeln!(
                 s,
-                "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6.2} {:>9} {:>9} {:>10} {:>10} {:>9} {:>10}",
+                "  {:>6} {:>8} {:>8} {:>8} {:>8} {:>8} {:>8} {:>6} {:>9} {:>9} {:>10} {:>10} {:>9} {:>10}",
                 f.frame,
                 f.records_written,
                 f.records_alive,
@@ -713,7 +748,7 @@ fn frame_table(s: &mut String, j: &JobReport) {
                 f.records_reused,
                 f.records_replaced,
                 f.records_dropped,
-                f.mean_lifespan,
+                life_text(f.mean_lifespan),
                 f.samples,
                 f.samples_reshot,
                 f.cache_bytes,
@@ -725,6 +760,17 @@ fn frame_table(s: &mut String, j: &JobReport) {
     }
 }
 
+/// A frame's mean lifespan for the table: "-" where the frame computed no
+/// record or its method sets no life (`tcg`, `path`; see
+/// [`FrameStats::mean_lifespan`](crate::method::FrameStats::mean_lifespan)).
+fn life_text(mean_lifespan: f64) -> String {
+    if mean_lifespan > 0.0 {
+        format!("{mean_lifespan:.2}")
+    } else {
+        "-".into()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::settings_text;
@@ -733,6 +779,12 @@ mod tests {
     fn stored(method: &str, changes: &[(&str, &str)]) -> String {
         let settings = method_settings(method, changes.iter().copied()).expect("valid settings");
         serde_json::to_string(&settings).expect("serializes")
+    }
+
+    #[test]
+    fn frames_without_a_set_life_show_a_dash() {
+        assert_eq!(super::life_text(0.0), "-");
+        assert_eq!(super::life_text(2.5), "2.50");
     }
 
     #[test]
