@@ -389,6 +389,14 @@ fn trc_runs_measure_their_next_frame_estimates() {
     };
     let e = bench::run(&no_trc).unwrap_err().to_string();
     assert!(e.contains("no method is trc"), "{e}");
+    // A run named twice (here once alone, once in a sweep) would write one
+    // folder twice: refused before anything renders.
+    let twice = tiny_bench(dir.path(), &["trc:max_life=5", "ic", "trc:max_life=2,5"]);
+    let e = bench::run(&twice).unwrap_err().to_string();
+    assert!(
+        e.contains("gives the run trc max_life=5 twice") && e.contains("trc-max_life=5"),
+        "{e}"
+    );
     let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
     let trc_line = csv.lines().nth(2).unwrap();
     let fields: Vec<&str> = trc_line.split(',').collect();

@@ -3,7 +3,7 @@
 
 use super::charts::plot_scene;
 use super::reference::ensure_reference;
-use super::{sanitize, scene_label, to_csv, BenchOptions, BenchRow, RunSpec};
+use super::{sanitize, scene_label, to_csv, BenchOptions, BenchRow, MethodSweep, RunSpec};
 use crate::method::trc::estimate_error::{EstimateError, EstimateErrorTally};
 use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::Method;
@@ -70,6 +70,18 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         if opts.backends[..i].contains(b) {
             bail!("backend '{}' is named twice", b.name());
         }
+    }
+    let mut folders: Vec<String> = Vec::new();
+    for spec in opts.methods.iter().flat_map(MethodSweep::runs) {
+        let folder = Run::folder_of(&spec, None);
+        if folders.contains(&folder) {
+            bail!(
+                "--methods gives the run {} {} twice (both would write runs/<scene>/{folder}); name each run once",
+                spec.method,
+                spec.label()
+            );
+        }
+        folders.push(folder);
     }
     let labels: Vec<String> = opts.scenes.iter().map(scene_label).collect();
     for (i, l) in labels.iter().enumerate() {
@@ -151,9 +163,14 @@ impl Run<'_> {
     /// The run's folder under `runs/<scene>/`: `<method>-<settings>`, and
     /// `-<backend>` when the bench has several.
     fn folder(&self) -> String {
-        let mut name = format!("{}-{}", self.spec.method, self.spec.label());
-        if self.backend_in_dir {
-            name = format!("{name}-{}", self.backend.name());
+        Run::folder_of(self.spec, self.backend_in_dir.then_some(self.backend))
+    }
+
+    /// [`Run::folder`] of `spec`, with `backend` in the name if given.
+    fn folder_of(spec: &RunSpec, backend: Option<BackendChoice>) -> String {
+        let mut name = format!("{}-{}", spec.method, spec.label());
+        if let Some(backend) = backend {
+            name = format!("{name}-{}", backend.name());
         }
         sanitize(&name)
     }
