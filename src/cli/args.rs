@@ -4,7 +4,7 @@
 
 use crate::bench;
 use crate::cache::gather::Strata;
-use crate::render::{SceneSource, FRAME_LIMIT};
+use crate::render::{self, SceneSource};
 use clap::{Args, ValueEnum};
 use std::ops::Range;
 use std::path::PathBuf;
@@ -331,49 +331,11 @@ fn parse_bench_method(s: &str) -> Result<bench::MethodSweep, String> {
 const MAX_SIDE: u32 = 16384;
 
 fn parse_frames(s: &str) -> Result<Range<u32>, String> {
-    let (a, b) = s
-        .split_once("..")
-        .ok_or_else(|| format!("'{s}' is not a frame range; expected START..END, e.g. 0..24"))?;
-    let start: u32 = a
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{a}' is not a frame number"))?;
-    let end: u32 = b
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{b}' is not a frame number"))?;
-    if end <= start {
-        return Err(format!(
-            "frame range {start}..{end} is empty (END is exclusive)"
-        ));
-    }
-    if end > FRAME_LIMIT {
-        return Err(format!(
-            "frame range {start}..{end} ends past the last frame number, {}",
-            FRAME_LIMIT - 1
-        ));
-    }
-    Ok(start..end)
+    render::parse_frame_range(s)
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| format!("'{s}' is not an image size; expected WxH, e.g. 256x256"))?;
-    let w: u32 = w
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{w}' is not a width"))?;
-    let h: u32 = h
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{h}' is not a height"))?;
-    if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
-        return Err(format!(
-            "image size {w}x{h} is out of range (1..={MAX_SIDE} per side)"
-        ));
-    }
-    Ok((w, h))
+    render::parse_image_size(s, MAX_SIDE)
 }
 
 fn parse_accuracy(s: &str) -> Result<f32, String> {

@@ -185,6 +185,51 @@ impl Default for FrameSettings {
 /// 100,000 frames) to frame numbers, which must not overflow.
 pub const FRAME_LIMIT: u32 = 1_000_000;
 
+/// Parses a frame range `START..END` (END exclusive, below
+/// [`FRAME_LIMIT`]), as the CLI's `--frames` and the API's `frames` take
+/// it. The error says what is wrong with `s`.
+pub fn parse_frame_range(s: &str) -> Result<Range<u32>, String> {
+    let (a, b) = s
+        .split_once("..")
+        .ok_or_else(|| format!("'{s}' is not a frame range; expected START..END, e.g. 0..24"))?;
+    let number = |n: &str| match (n.parse::<u32>(), n.parse::<u64>()) {
+        (Ok(n), _) => Ok(n),
+        (Err(_), Ok(_)) => Err(format!(
+            "frame range '{s}': {n} is past the last frame number, {}",
+            FRAME_LIMIT - 1
+        )),
+        _ => Err(format!("frame range '{s}': '{n}' is not a frame number")),
+    };
+    let (start, end) = (number(a)?, number(b)?);
+    if end <= start {
+        return Err(format!("frame range '{s}' is empty (END is exclusive)"));
+    }
+    if end > FRAME_LIMIT {
+        return Err(format!(
+            "frame range '{s}' ends past the last frame number, {}",
+            FRAME_LIMIT - 1
+        ));
+    }
+    Ok(start..end)
+}
+
+/// Parses an image size `WxH` with sides in `1..=max_side`, as the CLI's
+/// `--size` and the API's `size` take it.
+pub fn parse_image_size(s: &str, max_side: u32) -> Result<(u32, u32), String> {
+    let bad = || format!("'{s}' is not an image size; expected WxH, e.g. 256x256");
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = match (w.parse(), h.parse()) {
+        (Ok(w), Ok(h)) => (w, h),
+        _ => return Err(bad()),
+    };
+    if w == 0 || h == 0 || w > max_side || h > max_side {
+        return Err(format!(
+            "image size {w}x{h} is out of range (1..={max_side} per side)"
+        ));
+    }
+    Ok((w, h))
+}
+
 /// Renders frames of one scene with one method and one backend.
 pub struct Renderer {
     pub scene: Scene,
@@ -723,6 +768,40 @@ mod tests {
             rays: 0,
             ray_calls: 0,
             out_dir: PathBuf::from("out"),
+        }
+    }
+
+    #[test]
+    fn frame_ranges_and_sizes_parse_strictly() {
+        assert_eq!(parse_frame_range("0..24"), Ok(0..24));
+        assert_eq!(
+            parse_frame_range("999999..1000000"),
+            Ok(999_999..FRAME_LIMIT)
+        );
+        for (bad, says) in [
+            ("0-24", "not a frame range"),
+            (" 0..1", "' 0' is not a frame number"),
+            ("0..x", "'x' is not a frame number"),
+            ("5..2", "is empty"),
+            ("0..1000001", "ends past the last frame number, 999999"),
+            (
+                "0..99999999999",
+                "99999999999 is past the last frame number",
+            ),
+        ] {
+            let e = parse_frame_range(bad).unwrap_err();
+            assert!(e.contains(says), "{bad}: {e}");
+        }
+        assert_eq!(parse_image_size("16x8", 64), Ok((16, 8)));
+        assert_eq!(parse_image_size("16X8", 64), Ok((16, 8)));
+        for (bad, says) in [
+            ("16", "not an image size"),
+            ("16 x8", "not an image size"),
+            ("0x8", "out of range (1..=64 per side)"),
+            ("65x8", "out of range"),
+        ] {
+            let e = parse_image_size(bad, 64).unwrap_err();
+            assert!(e.contains(says), "{bad}: {e}");
         }
     }
 

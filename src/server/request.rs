@@ -3,7 +3,7 @@
 
 use super::ApiError;
 use crate::method::settings::method_settings;
-use crate::render::{FrameSettings, MethodSettings, SceneSource, FRAME_LIMIT};
+use crate::render::{self, FrameSettings, MethodSettings, SceneSource};
 use crate::store::schema::JobValue;
 use serde::Deserialize;
 use std::ops::Range;
@@ -243,51 +243,18 @@ fn parse_scene(s: &str, scenes: Option<&Path>) -> Result<SceneSource, ApiError> 
 }
 
 fn parse_frames(s: &str) -> Result<Range<u32>, ApiError> {
-    let bad = || ApiError::bad_request(format!("frames {s:?}: expected START..END, e.g. 0..24"));
-    let (a, b) = s.split_once("..").ok_or_else(bad)?;
-    let number = |n: &str| {
-        n.trim()
-            .parse::<u32>()
-            .map_err(|_| match n.trim().parse::<u64>() {
-                Ok(_) => ApiError::bad_request(format!(
-                    "frames {s:?}: {n} is past the last frame number, {}",
-                    FRAME_LIMIT - 1
-                )),
-                Err(_) => bad(),
-            })
-    };
-    let (start, end) = (number(a)?, number(b)?);
-    if end <= start {
+    let frames = render::parse_frame_range(s).map_err(ApiError::bad_request)?;
+    if frames.len() > MAX_FRAMES as usize {
         return Err(ApiError::bad_request(format!(
-            "frame range {s:?} is empty (END is exclusive)"
+            "frame range '{s}' has {} frames; at most {MAX_FRAMES}",
+            frames.len()
         )));
     }
-    if end > FRAME_LIMIT {
-        return Err(ApiError::bad_request(format!(
-            "frame range {s:?} ends past the last frame number, {}",
-            FRAME_LIMIT - 1
-        )));
-    }
-    if end - start > MAX_FRAMES {
-        return Err(ApiError::bad_request(format!(
-            "frame range {s:?} has {} frames; at most {MAX_FRAMES}",
-            end - start
-        )));
-    }
-    Ok(start..end)
+    Ok(frames)
 }
 
 fn parse_size(s: &str) -> Result<(u32, u32), ApiError> {
-    let bad = || ApiError::bad_request(format!("size {s:?}: expected WxH, e.g. 128x128"));
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let w: u32 = w.trim().parse().map_err(|_| bad())?;
-    let h: u32 = h.trim().parse().map_err(|_| bad())?;
-    if w == 0 || h == 0 || w > MAX_SIDE || h > MAX_SIDE {
-        return Err(ApiError::bad_request(format!(
-            "size {w}x{h} is out of range (1..={MAX_SIDE} per side)"
-        )));
-    }
-    Ok((w, h))
+    render::parse_image_size(s, MAX_SIDE).map_err(ApiError::bad_request)
 }
 
 #[cfg(test)]
