@@ -444,7 +444,7 @@ pub fn to_text(r: &CompactReport) -> String {
     }
     format!(
         "store {}: sample log {} → {}: {} → {} bytes\n\
-         dropped {} unreferenced bytes in {} range(s); kept {} bytes: {} frame EXRs, {} record blocks, {} sample blocks\n",
+         dropped {} unreferenced bytes in {} range(s); kept {} frame EXRs, {} record blocks and {} sample blocks ({} bytes before, as they were encoded)\n",
         r.path.display(),
         name(&r.old_file),
         name(&r.new_file),
@@ -452,9 +452,9 @@ pub fn to_text(r: &CompactReport) -> String {
         r.bytes_after,
         u.unreferenced,
         u.unreferenced_ranges,
-        u.referenced,
         u.exr_blocks,
         u.record_blocks,
         u.sample_blocks,
+        u.referenced,
     )
 }
