@@ -2,8 +2,8 @@
 //! `DIR/reference/<scene>/` with a light mask per frame, and reused while
 //! its `reference.json` matches.
 
-use super::run::{clear_frames, frame_settings, render_frames};
-use super::{scene_label, BenchOptions};
+use super::run::{clear_frames, frame_settings, render_frames, BenchScene};
+use super::BenchOptions;
 use crate::backend::{Hit, Ray};
 use crate::method::path::PathSettings;
 use crate::method::FrameContext;
@@ -55,13 +55,10 @@ fn scene_hash(source: &SceneSource) -> Result<u64> {
     }
 }
 
-/// Renders the reference of `source` into `dir` unless a matching one is
+/// Renders the reference of `scene` into `dir` unless a matching one is
 /// there already.
-pub(super) fn ensure_reference(
-    opts: &BenchOptions,
-    source: &SceneSource,
-    dir: &Path,
-) -> Result<()> {
+pub(super) fn ensure_reference(opts: &BenchOptions, scene: &BenchScene, dir: &Path) -> Result<()> {
+    let source = scene.source;
     let info = ReferenceInfo {
         scene: source.to_string(),
         scene_hash: scene_hash(source)?,
@@ -110,12 +107,12 @@ pub(super) fn ensure_reference(
         ..PathSettings::default()
     });
     let mut renderer = Renderer::new(
-        source.load()?,
+        scene.scene.clone(),
         settings.instantiate(),
         render::make_backend(BackendChoice::Auto)?,
         frame_settings(opts, true),
     );
-    let what = format!("reference {}", scene_label(source));
+    let what = format!("reference {}", scene.label);
     render_frames(&mut renderer, opts.frames.clone(), dir, &what, opts.quiet)?;
     for frame in opts.frames.clone() {
         let mask = renderer.with_frame_context(frame, seen_lights);

@@ -9,6 +9,7 @@ use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::Method;
 use crate::metrics;
 use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
+use crate::scene::Scene;
 use crate::store::Store;
 use anyhow::{bail, Context, Result};
 use std::ops::Range;
@@ -90,7 +91,9 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         }
     }
     // Every scene loads before any is benched: a bad one named last must
-    // not cost the minutes the others take.
+    // not cost the minutes the others take. Each is loaded again when its
+    // turn comes rather than kept, so that a run's peak memory holds only
+    // its own scene.
     for source in &opts.scenes {
         source.load()?;
     }
@@ -100,7 +103,12 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let mut rows = Vec::new();
     let mut charts = Vec::new();
     for (source, label) in opts.scenes.iter().zip(&labels) {
-        let scene_rows = bench_scene(opts, source, label, per_run)?;
+        let scene = BenchScene {
+            source,
+            label,
+            scene: source.load()?,
+        };
+        let scene_rows = bench_scene(opts, &scene, per_run)?;
         charts.extend(plot_scene(&opts.out, label, &scene_rows)?);
         rows.extend(scene_rows);
     }
@@ -126,14 +134,18 @@ pub(super) fn frame_settings(opts: &BenchOptions, same_pattern: bool) -> FrameSe
     }
 }
 
-fn bench_scene(
-    opts: &BenchOptions,
-    source: &SceneSource,
-    label: &str,
-    per_run: bool,
-) -> Result<Vec<BenchRow>> {
-    let ref_dir = opts.out.join("reference").join(label);
-    ensure_reference(opts, source, &ref_dir)?;
+/// A scene being benched: where it came from, its name in the output's
+/// file names, and the scene itself, loaded once for its reference and
+/// every run.
+pub(super) struct BenchScene<'a> {
+    pub source: &'a SceneSource,
+    pub label: &'a str,
+    pub scene: Scene,
+}
+
+fn bench_scene(opts: &BenchOptions, scene: &BenchScene, per_run: bool) -> Result<Vec<BenchRow>> {
+    let ref_dir = opts.out.join("reference").join(scene.label);
+    ensure_reference(opts, scene, &ref_dir)?;
     let mut rows = Vec::new();
     for sweep in &opts.methods {
         for spec in sweep.runs() {
@@ -145,7 +157,7 @@ fn bench_scene(
                     // so a one-backend bench keeps its folder names.
                     backend_in_dir: opts.backends.len() > 1,
                 };
-                rows.push(bench_run(opts, source, label, &run, per_run)?);
+                rows.push(bench_run(opts, scene, &run, per_run)?);
             }
         }
     }
@@ -176,22 +188,22 @@ impl Run<'_> {
     }
 }
 
-/// Renders one run of `source` into its folder and compares it with the
+/// Renders one run of `scene` into its folder and compares it with the
 /// scene's reference.
 fn bench_run(
     opts: &BenchOptions,
-    source: &SceneSource,
-    label: &str,
+    scene: &BenchScene,
     run: &Run,
     per_run: bool,
 ) -> Result<BenchRow> {
+    let label = scene.label;
     let spec = run.spec;
     let settings = spec.settings()?;
     let dir = opts.out.join("runs").join(label).join(run.folder());
     let ref_dir = opts.out.join("reference").join(label);
     clear_frames(&dir)?;
     let mut renderer = Renderer::new(
-        source.load()?,
+        scene.scene.clone(),
         settings.instantiate(),
         render::make_backend(run.backend)?,
         frame_settings(opts, opts.same_pattern),
@@ -206,7 +218,7 @@ fn bench_run(
     drop(renderer);
     let cmp = metrics::compare_dirs(&ref_dir, &dir)
         .with_context(|| format!("comparing {} with {}", dir.display(), ref_dir.display()))?;
-    let (next_error, store_bytes) = untimed_measures(opts, source, run, &settings, &dir, &what)?;
+    let (next_error, store_bytes) = untimed_measures(opts, scene, run, &settings, &dir, &what)?;
     Ok(BenchRow {
         scene: label.into(),
         method: spec.method.clone(),
@@ -232,7 +244,7 @@ fn bench_run(
 /// [`BenchRow::next_error`] (`trc` runs) and [`BenchRow::store_bytes`].
 fn untimed_measures(
     opts: &BenchOptions,
-    source: &SceneSource,
+    scene: &BenchScene,
     run: &Run,
     settings: &MethodSettings,
     dir: &Path,
@@ -240,13 +252,13 @@ fn untimed_measures(
 ) -> Result<(Option<EstimateError>, Option<u64>)> {
     let next_error = match settings {
         MethodSettings::Trc(trc) if opts.estimate_error => {
-            estimate_error(opts, source, run.backend, trc, what)?
+            estimate_error(opts, scene, run.backend, trc, what)?
         }
         _ => None,
     };
     let store_bytes = opts
         .store_size
-        .then(|| store_size(opts, source, run.backend, settings, dir, what))
+        .then(|| store_size(opts, scene, run.backend, settings, dir, what))
         .transpose()?;
     Ok((next_error, store_bytes))
 }
@@ -258,13 +270,13 @@ fn untimed_measures(
 /// frame after their own.
 fn estimate_error(
     opts: &BenchOptions,
-    source: &SceneSource,
+    scene: &BenchScene,
     backend: BackendChoice,
     settings: &TrcSettings,
     what: &str,
 ) -> Result<Option<EstimateError>> {
     let mut renderer = Renderer::new(
-        source.load()?,
+        scene.scene.clone(),
         Box::new(render::NoMethod),
         render::make_backend(backend)?,
         frame_settings(opts, opts.same_pattern),
@@ -299,7 +311,7 @@ fn estimate_error(
 /// --job` would, and the bytes of the store's files once it is closed.
 fn store_size(
     opts: &BenchOptions,
-    source: &SceneSource,
+    scene: &BenchScene,
     backend: BackendChoice,
     settings: &MethodSettings,
     dir: &Path,
@@ -314,7 +326,7 @@ fn store_size(
     let store = Store::open(&path)?;
     let spec = render::job_spec(
         "bench",
-        source,
+        scene.source,
         settings,
         &frame_settings,
         opts.frames.clone(),
@@ -324,7 +336,7 @@ fn store_size(
         store: &store,
     };
     let mut renderer = Renderer::new(
-        source.load()?,
+        scene.scene.clone(),
         settings.instantiate(),
         render::make_backend(backend)?,
         frame_settings,
