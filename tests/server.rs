@@ -485,6 +485,20 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
     // wrong method (with its Allow header).
     let huge = format!(r#"{{"scene":"{}"}}"#, "a".repeat(100_000));
     check("POST", "/api/jobs", &huge, 413);
+    // A body announced over the limit is refused before it comes.
+    {
+        use std::io::{Read, Write};
+        let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
+        s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
+        write!(
+            s,
+            "POST /api/jobs HTTP/1.1\r\nHost: x\r\nConnection: close\r\nContent-Length: 100000000\r\n\r\n{{"
+        )
+        .unwrap();
+        let mut head = [0u8; 12];
+        s.read_exact(&mut head).expect("an answer without the body");
+        assert_eq!(&head, b"HTTP/1.1 413");
+    }
     check("DELETE", "/api/jobs", "", 405);
     let (_, head, _) = http_full(&server.addr, "PUT", "/api/jobs/job-1/cancel", "");
     assert!(head.to_ascii_lowercase().contains("allow: post"), "{head}");
@@ -502,6 +516,10 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
     assert_eq!(status, 201);
     let id = json(&body)["id"].as_str().unwrap().to_string();
     check("POST", &format!("/api/jobs/{id}/resume"), "", 409);
+    // One job, one id: `job-02` is not `job-2`.
+    let padded = id.replace("job-", "job-0");
+    check("GET", &format!("/api/jobs/{padded}"), "", 404);
+    check("GET", &format!("/api/jobs/{padded}/stats"), "", 404);
     let job = wait_done(&server, &id);
     assert_eq!(job["frames_done"], 2);
     check("POST", &format!("/api/jobs/{id}/cancel"), "", 409);
@@ -1144,9 +1162,24 @@ fn a_token_is_required_on_every_request_and_the_dashboard_carries_it() {
     let encoded = "s3cret%2F%2B%20%26x";
     let server = start_with(&dir.path().join("db"), &scenes, &["--token", token]);
     let addr = server.addr.clone();
-    let (status, body) = get_with(&addr, "/api/jobs", "");
+    let (status, head, body) = request(&addr, "GET", "/api/jobs", "", "");
     assert_eq!(status, 401);
     assert!(json(&body)["detail"].is_string());
+    assert!(
+        head.to_ascii_lowercase()
+            .contains("www-authenticate: bearer"),
+        "{head}"
+    );
+    // The scheme's case does not matter (RFC 7235).
+    assert_eq!(
+        get_with(
+            &addr,
+            "/api/jobs",
+            &format!("authorization: bearer {token}\r\n")
+        )
+        .0,
+        200
+    );
     assert_eq!(
         get_with(&addr, "/api/jobs", "Authorization: Bearer wrong\r\n").0,
         401
@@ -1381,8 +1414,15 @@ fn a_cancel_or_a_sigterm_abandons_a_long_frame_at_once() {
     let after = create_job(&server, small);
     wait_running(&server, &long);
     std::thread::sleep(Duration::from_millis(300));
-    let (status, _) = http(&server, "POST", &format!("/api/jobs/{long}/cancel"), "");
+    let (status, answer) = http(&server, "POST", &format!("/api/jobs/{long}/cancel"), "");
     assert_eq!(status, 200);
+    // The answer comes once the job has stopped.
+    let answer = json(&answer);
+    assert_eq!(
+        (answer["state"].as_str(), answer["cancelling"].as_bool()),
+        (Some("cancelled"), Some(false)),
+        "{answer}"
+    );
     let cancelled_at = Instant::now();
     // The job queued behind it runs once the frame is abandoned.
     let done = wait_done(&server, &after);
@@ -1404,6 +1444,11 @@ fn a_cancel_or_a_sigterm_abandons_a_long_frame_at_once() {
     let (status, _) = http(&server, "POST", &format!("/api/jobs/{long}/resume"), "");
     assert_eq!(status, 200);
     wait_running(&server, &long);
+    let events = {
+        let addr = server.addr.clone();
+        let path = format!("/api/jobs/{long}/events");
+        std::thread::spawn(move || http_full(&addr, "GET", &path, ""))
+    };
     std::thread::sleep(Duration::from_millis(300));
     let pid = server.child.id().to_string();
     let term = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
@@ -1420,6 +1465,14 @@ fn a_cancel_or_a_sigterm_abandons_a_long_frame_at_once() {
         std::thread::sleep(Duration::from_millis(20));
     };
     assert!(exit.success(), "{exit:?}");
+    // Its events end with a state that is not final: the job goes on
+    // after a restart.
+    let (_, _, body) = events.join().unwrap();
+    let events = sse_events(&body);
+    let (kind, last) = events.last().expect("events");
+    assert_eq!(kind, "state");
+    assert_eq!(last["final"], false, "{last}");
+    assert!(last["closing"].is_string(), "{last}");
     let server = start_with(&db, &scenes, &[]);
     let again = job_state(&server, &long);
     assert!(

@@ -8,6 +8,8 @@ use axum::http::StatusCode;
 use axum::Json;
 use serde_json::{json, Value};
 use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::watch;
 
 pub fn job_json(state: &AppState, job: &Job) -> Value {
     json!({
@@ -25,6 +27,7 @@ pub fn job_json(state: &AppState, job: &Job) -> Value {
         "error": job.error.as_deref().map(|e| state.without_scenes_dir(e)),
         "seconds_per_frame": (job.run_frames > 0).then(|| job.run_seconds / job.run_frames as f64),
         "eta_seconds": job.eta_seconds(),
+        "cancelling": job.cancel,
     })
 }
 
@@ -113,8 +116,10 @@ pub async fn cancel(
     match job.state {
         JobState::Queued => state.update(&id, |j| j.state = JobState::Cancelled),
         JobState::Running => {
+            let mut changes = state.subscribe(&id)?;
             state.update(&id, |j| j.cancel = true);
             state.abandon_frame(Some(&id));
+            wait_while_running(&state, &id, &mut changes).await;
         }
         s => {
             return Err(ApiError::conflict(format!(
@@ -124,6 +129,23 @@ pub async fn cancel(
         }
     }
     Ok(Json(job_json(&state, &state.job(&id)?)))
+}
+
+/// How long `cancel` waits for the worker to stop a running job, so that
+/// its answer shows the job cancelled (the frame in progress is abandoned
+/// within a path bounce; storing the last finished frame may take longer).
+const CANCEL_WAIT: Duration = Duration::from_secs(10);
+
+/// Waits (at most [`CANCEL_WAIT`]) until job `id` no longer runs.
+async fn wait_while_running(state: &AppState, id: &str, changes: &mut watch::Receiver<u64>) {
+    let stopped = async {
+        while state.job(id).is_ok_and(|j| j.state == JobState::Running) {
+            if changes.changed().await.is_err() {
+                return;
+            }
+        }
+    };
+    let _ = tokio::time::timeout(CANCEL_WAIT, stopped).await;
 }
 
 pub async fn resume(

@@ -348,9 +348,12 @@ impl AppState {
     }
 }
 
-/// `job-N` → N.
+/// `job-N` → N, spelled as the server spells it (not `job-01` or
+/// `job-+1`), so that one job has one id.
 pub fn parse_job_id(id: &str) -> Option<u64> {
-    id.strip_prefix("job-")?.parse().ok()
+    let digits = id.strip_prefix("job-")?;
+    let n: u64 = digits.parse().ok()?;
+    (n.to_string() == digits).then_some(n)
 }
 
 /// The API router over `state`.
@@ -374,6 +377,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/metrics", get(frames::metrics))
         .fallback(|| async { ApiError::not_found("no such route".into()) })
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
+        .layer(middleware::from_fn(refuse_long_bodies))
         .layer(middleware::from_fn_with_state(state.clone(), check_token))
         .layer(middleware::map_response(json_errors))
         .with_state(state)
@@ -419,29 +423,56 @@ async fn json_errors(response: Response) -> Response {
 }
 
 /// With a token configured, every request must carry it as
-/// `Authorization: Bearer TOKEN` or `?token=TOKEN`.
+/// `Authorization: Bearer TOKEN` (the scheme in any case, RFC 7235 §2.1)
+/// or `?token=TOKEN`.
 async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Next) -> Response {
     if let Some(token) = &state.options.token {
         let bearer = req
             .headers()
             .get(axum::http::header::AUTHORIZATION)
             .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.strip_prefix("Bearer "));
+            .and_then(|v| v.split_once(' '))
+            .and_then(|(scheme, t)| scheme.eq_ignore_ascii_case("bearer").then_some(t.trim()));
         let query = req
             .uri()
             .query()
             .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")))
             .and_then(percent_decode);
         if bearer != Some(token.as_str()) && query.as_deref() != Some(token.as_str()) {
-            return ApiError::new(
+            let mut response = ApiError::new(
                 axum::http::StatusCode::UNAUTHORIZED,
                 "unauthorized",
                 "missing or wrong token".into(),
             )
             .into_response();
+            response.headers_mut().insert(
+                axum::http::header::WWW_AUTHENTICATE,
+                axum::http::HeaderValue::from_static("Bearer realm=\"radcache\""),
+            );
+            return response;
         }
     }
     next.run(req).await
+}
+
+/// A body announced (`Content-Length`) over [`MAX_BODY_BYTES`] is refused
+/// at once with 413, before it is read: the limit on the body alone would
+/// wait for bytes the client may never send.
+async fn refuse_long_bodies(req: Request, next: Next) -> Response {
+    let announced = req
+        .headers()
+        .get(axum::http::header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    match announced {
+        Some(n) if n > MAX_BODY_BYTES as u64 => ApiError::new(
+            axum::http::StatusCode::PAYLOAD_TOO_LARGE,
+            "payload too large",
+            format!("the body has {n} bytes; at most {MAX_BODY_BYTES}"),
+        )
+        .into_response(),
+        _ => next.run(req).await,
+    }
 }
 
 /// `s` with every byte outside RFC 3986's unreserved set as `%XX`.

@@ -126,6 +126,18 @@ impl Follower {
     }
 }
 
+/// A `state` event: `final` when the job has ended (done, failed,
+/// cancelled); a stream that closes while the job has not (the server
+/// stops) says so in `closing`, and the client reconnects later.
+fn state_event(job: &Job, closing: bool) -> Event {
+    let ended = job.state.is_final();
+    let mut s = serde_json::json!({ "id": job.id, "state": job.state.as_str(), "final": ended });
+    if closing && !ended {
+        s["closing"] = "the server is stopping".into();
+    }
+    Event::default().event("state").data(s.to_string())
+}
+
 /// `GET /api/jobs/{id}/stream`.
 pub async fn frames(
     State(state): State<Arc<AppState>>,
@@ -222,8 +234,7 @@ pub async fn events(
                 );
                 if last_state != Some(job.state) || f.ended {
                     last_state = Some(job.state);
-                    let s = serde_json::json!({ "id": job.id, "state": job.state.as_str(), "final": f.ended });
-                    queue.push_back(Event::default().event("state").data(s.to_string()));
+                    queue.push_back(state_event(&job, f.ended));
                 }
             }
         },
