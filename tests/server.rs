@@ -363,6 +363,23 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
             r#"{{"scene":"{scene}","method":"path","frames":"{frames}","size":"16x16","spp":1}}"#
         )
     };
+    // A field or a setting given twice is refused, not one of its values
+    // quietly kept.
+    for (body, says) in [
+        (
+            r#"{"scene":"x","scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"8x8"}"#,
+            "duplicate field `scene`",
+        ),
+        (
+            r#"{"scene":"builtin:cube-in-box","method":"trc","frames":"0..1","size":"8x8","settings":{"at":0.1,"at":0.5}}"#,
+            "setting `at` given twice",
+        ),
+    ] {
+        let (status, resp) = http(&server, "POST", "/api/jobs", body);
+        assert_eq!(status, 400, "{body}");
+        let detail = json(&resp)["detail"].as_str().unwrap().to_string();
+        assert!(detail.contains(says), "{detail}");
+    }
     check("POST", "/api/jobs", &job("../secret.gltf", "0..1"), 400);
     check("POST", "/api/jobs", &job("/etc/passwd", "0..1"), 400);
     check(
@@ -731,6 +748,7 @@ fn records_match_the_store_and_inspect() {
         "frame=x",
         "bbox=0,0,0,1,1,1",
         "frame=1&limit=0",
+        "frame=0&frame=1",
     ] {
         let (status, err) = get(bad);
         assert_eq!(status, 400, "{bad}: {err}");
@@ -1213,6 +1231,13 @@ fn a_token_is_required_on_every_request_and_the_dashboard_carries_it() {
         200
     );
     assert_eq!(get_with(&addr, "/api/jobs?token=%zz", "").0, 401);
+    // Of two tokens, neither is taken, whichever comes first.
+    for query in [
+        format!("token={encoded}&token=x"),
+        format!("token=x&token={encoded}"),
+    ] {
+        assert_eq!(get_with(&addr, &format!("/api/jobs?{query}"), "").0, 401);
+    }
 }
 
 /// `radcache render --builtin cube-in-box ARGS… --backend cpu -q --db DB

@@ -433,11 +433,17 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
             .and_then(|v| v.to_str().ok())
             .and_then(|v| v.split_once(' '))
             .and_then(|(scheme, t)| scheme.eq_ignore_ascii_case("bearer").then_some(t.trim()));
-        let query = req
+        // One `token=` only: of several, none is taken.
+        let mut tokens = req
             .uri()
             .query()
-            .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")))
-            .and_then(percent_decode);
+            .into_iter()
+            .flat_map(|q| q.split('&'))
+            .filter_map(|kv| kv.strip_prefix("token="));
+        let query = match (tokens.next(), tokens.next()) {
+            (Some(t), None) => percent_decode(t),
+            _ => None,
+        };
         if bearer != Some(token.as_str()) && query.as_deref() != Some(token.as_str()) {
             let mut response = ApiError::new(
                 axum::http::StatusCode::UNAUTHORIZED,

@@ -7,7 +7,7 @@
 //! the camera or where the server cannot load the job's scene), for the
 //! dashboard's overlay. A job of another method has none (an empty list).
 
-use super::records::{frame_param, scene, stored_frame};
+use super::records::{frame_param, query_params, scene, stored_frame};
 use super::{ApiError, AppState};
 use crate::method::movies::patch::Patch;
 use crate::scene::Snapshot;
@@ -16,15 +16,14 @@ use axum::extract::{Path, Query, State};
 use axum::Json;
 use glam::Vec3;
 use serde_json::{json, Value};
-use std::collections::HashMap;
 use std::sync::Arc;
 
 pub async fn movies(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
-    query: Result<Query<HashMap<String, String>>, QueryRejection>,
+    query: Result<Query<Vec<(String, String)>>, QueryRejection>,
 ) -> Result<Json<Value>, ApiError> {
-    let Query(q) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let q = query_params(query)?;
     let frame = frame_param(&q)?;
     let job = state.job(&id)?;
     let sid = stored_frame(&state, &id, frame)?;

@@ -92,6 +92,22 @@ struct RecordsQuery {
     list_sources: bool,
 }
 
+/// A query's parameters by name, each given once (`frame=0&frame=1` is a
+/// 400, not one of them quietly taken).
+pub(super) fn query_params(
+    query: Result<Query<Vec<(String, String)>>, QueryRejection>,
+) -> Result<HashMap<String, String>, ApiError> {
+    let Query(pairs) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let mut params = HashMap::with_capacity(pairs.len());
+    for (key, value) in pairs {
+        if params.contains_key(&key) {
+            return Err(ApiError::bad_request(format!("{key}= is given twice")));
+        }
+        params.insert(key, value);
+    }
+    Ok(params)
+}
+
 /// The `frame=N` of a query (required).
 pub(super) fn frame_param(q: &HashMap<String, String>) -> Result<u32, ApiError> {
     q.get("frame")
@@ -219,9 +235,9 @@ impl StoredSources<'_> {
 pub async fn records(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
-    query: Result<Query<HashMap<String, String>>, QueryRejection>,
+    query: Result<Query<Vec<(String, String)>>, QueryRejection>,
 ) -> Result<Json<Value>, ApiError> {
-    let Query(q) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
+    let q = query_params(query)?;
     let RecordsQuery {
         frame,
         bbox,

@@ -36,7 +36,39 @@ struct Body {
     seed: Option<u64>,
     /// The method's settings by the names `radcache bench --methods`
     /// takes (`{"max_life": 5, "at": 0.02}`); the rest keep their defaults.
-    settings: Option<serde_json::Map<String, serde_json::Value>>,
+    settings: Option<SettingsObject>,
+}
+
+/// A JSON object of settings, in the order given, each name once: a name
+/// given twice is refused rather than one of its values quietly kept.
+struct SettingsObject(Vec<(String, serde_json::Value)>);
+
+impl<'de> Deserialize<'de> for SettingsObject {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = SettingsObject;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("an object of settings")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> Result<Self::Value, A::Error> {
+                let mut pairs: Vec<(String, serde_json::Value)> = Vec::new();
+                while let Some((key, value)) = map.next_entry::<String, serde_json::Value>()? {
+                    if pairs.iter().any(|(k, _)| *k == key) {
+                        return Err(serde::de::Error::custom(format!(
+                            "setting `{key}` given twice"
+                        )));
+                    }
+                    pairs.push((key, value));
+                }
+                Ok(SettingsObject(pairs))
+            }
+        }
+        d.deserialize_map(Visitor)
+    }
 }
 
 /// What a job renders.
@@ -59,7 +91,9 @@ impl JobRequest {
                 "expected a JSON object with scene, method, frames and size".into(),
             ));
         }
-        let b: Body = serde_json::from_value(value).map_err(|e| malformed(e.to_string()))?;
+        // From the text, not the value: a `Value` keeps only the last of
+        // a field given twice, where the text is refused.
+        let b: Body = serde_json::from_slice(body).map_err(|e| malformed(e.to_string()))?;
         let scene = parse_scene(&b.scene, scenes)?;
         let frames = parse_frames(&b.frames)?;
         let (width, height) = parse_size(&b.size)?;
@@ -109,11 +143,11 @@ impl JobRequest {
 /// bench's `--methods`) and `spp` applied to its defaults.
 fn parse_method(
     name: &str,
-    settings: Option<&serde_json::Map<String, serde_json::Value>>,
+    settings: Option<&SettingsObject>,
     spp: Option<u32>,
 ) -> Result<MethodSettings, ApiError> {
     let mut changes = Vec::new();
-    for (key, value) in settings.into_iter().flatten() {
+    for (key, value) in settings.into_iter().flat_map(|s| &s.0) {
         changes.push((key.as_str(), setting_text(key, value)?));
     }
     if let Some(n) = spp.filter(|n| !(1..=MAX_SPP).contains(n)) {
