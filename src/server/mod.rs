@@ -118,7 +118,8 @@ pub struct Job {
     pub state: JobState,
     pub frames_done: u32,
     pub error: Option<String>,
-    /// Set by `cancel`; the worker stops after the current frame.
+    /// Set by `cancel` of a running job until the worker has stopped it
+    /// (the frame in progress abandoned); shown as `cancelling`.
     pub cancel: bool,
     /// Frames rendered and seconds spent by the current run (the ETA).
     pub run_frames: u32,
