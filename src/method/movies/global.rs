@@ -67,8 +67,80 @@ pub const MAX_GRID: u32 = 32;
 /// The largest share of a vertex's links that may land on the back of a
 /// surface for the vertex to count as in open space.
 pub const BURIED_SHARE: f32 = 0.1;
-/// The fewest links a vertex gathers along.
+/// The fewest links a vertex gathers along (unless [`MAX_LINKS`] leaves
+/// fewer).
 pub const MIN_LINKS: u32 = 8;
+/// The most links a pass keeps (each about 80 bytes, with its share of the
+/// transport rows). The built-in scenes need 0.25–0.5 M at the defaults;
+/// where a scene would need more (many triangles, or a static part so
+/// small that the spacing it sets is tiny), the grids coarsen and then the
+/// links thin until they fit, rather than the pass asking for gigabytes.
+/// A vertex keeps one link at least, so past about 1.4 M triangles the
+/// pass grows with the scene (three links a triangle at most).
+pub const MAX_LINKS: u64 = 1 << 22;
+
+/// How finely the pass meshes a snapshot: the grid spacing (world units),
+/// the links of a vertex on a cell a spacing across, and the fewest links
+/// of a vertex.
+#[derive(Clone, Copy, Debug)]
+struct Meshing {
+    spacing: f32,
+    links: u32,
+    min_links: u32,
+}
+
+impl Meshing {
+    /// The settings' meshing, coarsened until it needs at most
+    /// [`MAX_LINKS`] links (counting each triangle's corners as its own:
+    /// an upper bound).
+    fn fitting(
+        triangles: &[crate::scene::Triangle],
+        settings: &GlobalSettings,
+        diagonal: f32,
+    ) -> Self {
+        let mut m = Meshing {
+            spacing: settings.spacing.max(1e-4) * diagonal,
+            links: settings.links.max(1),
+            min_links: MIN_LINKS.min(settings.links).max(1),
+        };
+        for _ in 0..64 {
+            let needed: u64 = triangles
+                .iter()
+                .map(|t| {
+                    let (n, links) = m.grid(t);
+                    u64::from((n + 1) * (n + 2) / 2) * u64::from(links)
+                })
+                .sum();
+            if needed <= MAX_LINKS {
+                break;
+            }
+            let excess = (needed as f64 / MAX_LINKS as f64) as f32;
+            let coarsest = triangles.iter().all(|t| m.grid(t).0 == 1);
+            if coarsest {
+                // One cell a triangle already: fewer links a vertex.
+                let scale = excess.recip();
+                m.links = ((m.links as f32 * scale) as u32).max(1);
+                m.min_links = ((m.min_links as f32 * scale) as u32).clamp(1, m.links);
+            } else {
+                m.spacing *= excess.sqrt().max(1.1);
+            }
+        }
+        m
+    }
+
+    /// Triangle `tri`'s grid segments an edge and links a vertex.
+    fn grid(&self, tri: &crate::scene::Triangle) -> (u32, u32) {
+        let longest = (0..3)
+            .map(|k| (tri.p[(k + 1) % 3] - tri.p[k]).length())
+            .fold(0.0f32, f32::max);
+        let n = ((longest / self.spacing).ceil() as u32).clamp(1, MAX_GRID);
+        let cell = tri.area() / (n * n) as f32;
+        let reference_cell = 0.5 * self.spacing * self.spacing;
+        let links = ((self.links as f32 * cell / reference_cell).ceil() as u32)
+            .clamp(self.min_links, self.links);
+        (n, links)
+    }
+}
 
 /// The regular subdivision of one triangle into `n²` cells; its vertices
 /// `(a, b)`, `a + b ≤ n`, at barycentrics `(a/n, b/n)`, numbered row by
@@ -233,26 +305,19 @@ impl GlobalPass {
     /// frame the pass starts at (for triangles that move rigidly).
     pub fn new(ctx: &FrameContext, settings: GlobalSettings) -> Self {
         let snapshot = ctx.snapshot;
-        let spacing = settings.spacing.max(1e-4) * static_diagonal(ctx);
-        let reference_cell = 0.5 * spacing * spacing;
+        let meshing = Meshing::fitting(&snapshot.triangles, &settings, static_diagonal(ctx));
         let mut grids = Vec::with_capacity(snapshot.triangles.len());
         let mut vertex_of = Vec::new();
         let mut vertices = Vec::new();
-        let mut link_count = 0u32;
-        // Mesh vertices: a triangle corner at the same point of the same
-        // object with the same shading normal is one vertex, so that the
-        // Gouraud shading is continuous across the mesh and a finely
-        // tessellated object (a sphere) has a vertex per mesh vertex, not
-        // three per triangle.
+        let mut link_count = 0u32; // at most MAX_LINKS
+                                   // Mesh vertices: a triangle corner at the same point of the same
+                                   // object with the same shading normal is one vertex, so that the
+                                   // Gouraud shading is continuous across the mesh and a finely
+                                   // tessellated object (a sphere) has a vertex per mesh vertex, not
+                                   // three per triangle.
         let mut corners: HashMap<(u32, [u32; 3], [u32; 3]), u32> = HashMap::new();
         for (id, tri) in snapshot.triangles.iter().enumerate() {
-            let longest = (0..3)
-                .map(|k| (tri.p[(k + 1) % 3] - tri.p[k]).length())
-                .fold(0.0f32, f32::max);
-            let n = ((longest / spacing).ceil() as u32).clamp(1, MAX_GRID);
-            let cell = tri.area() / (n * n) as f32;
-            let links = ((settings.links as f32 * cell / reference_cell).ceil() as u32)
-                .clamp(MIN_LINKS.min(settings.links), settings.links.max(1));
+            let (n, links) = meshing.grid(tri);
             grids.push(Grid {
                 n,
                 first: vertex_of.len() as u32,
@@ -687,6 +752,55 @@ fn diagonal(points: impl Iterator<Item = Vec3>) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn needed_links(triangles: &[crate::scene::Triangle], m: &Meshing) -> u64 {
+        triangles
+            .iter()
+            .map(|t| {
+                let (n, links) = m.grid(t);
+                u64::from((n + 1) * (n + 2) / 2) * u64::from(links)
+            })
+            .sum()
+    }
+
+    /// A scene within the budget keeps the settings' meshing; one far over
+    /// it (a static part a thousandth of its size, so a tiny spacing; or
+    /// more triangles than the budget has links) is coarsened to fit.
+    #[test]
+    fn meshing_fits_the_link_budget() {
+        let settings = GlobalSettings::default();
+        let quad = |x: f32, size: f32| crate::scene::Triangle {
+            p: [
+                Vec3::new(x, 0.0, 0.0),
+                Vec3::new(x + size, 0.0, 0.0),
+                Vec3::new(x, size, 0.0),
+            ],
+            n: [Vec3::Z; 3],
+        };
+        let room: Vec<_> = (0..100).map(|i| quad(i as f32, 1.0)).collect();
+        let m = Meshing::fitting(&room, &settings, 10.0);
+        assert_eq!(
+            (m.spacing, m.links, m.min_links),
+            (10.0 / 32.0, 128, MIN_LINKS)
+        );
+        let tiny_static = Meshing::fitting(&room, &settings, 0.01);
+        assert!(needed_links(&room, &tiny_static) <= MAX_LINKS);
+        assert!(
+            needed_links(
+                &room,
+                &Meshing {
+                    spacing: 0.01 / 32.0,
+                    ..m
+                }
+            ) > MAX_LINKS
+        );
+        let many: Vec<_> = (0..1_000_000)
+            .map(|i| quad(i as f32 * 1e-3, 1e-3))
+            .collect();
+        let thinned = Meshing::fitting(&many, &settings, 1000.0);
+        assert!(needed_links(&many, &thinned) <= MAX_LINKS, "{thinned:?}");
+        assert!(thinned.links >= 1 && thinned.min_links >= 1);
+    }
 
     /// The rows kept across frames are those built again from scratch, on
     /// a scene whose moving cube changes links and open-space flags every
