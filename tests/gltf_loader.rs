@@ -599,7 +599,7 @@ fn empty_scene() {
         },
         good_bin(),
     );
-    assert_error(&path, "no triangles");
+    assert_error(&path, "no triangle with any area");
     // Only line primitives: still nothing to render.
     let path = write_case(
         dir.path(),
@@ -607,7 +607,38 @@ fn empty_scene() {
         |d| d["meshes"][0]["primitives"][0]["mode"] = json!(1),
         good_bin(),
     );
-    assert_error(&path, "no triangles");
+    assert_error(&path, "no triangle with any area");
+}
+
+/// Triangles without area are dropped at load (a BVH cannot split many of
+/// them at one point, and every ray near it would test them all): one
+/// good triangle and 20,000 on a single vertex load as the one.
+#[test]
+fn triangles_without_area_are_dropped() {
+    let dir = tempfile::tempdir().unwrap();
+    let count = 3 + 3 * 20_000;
+    let mut indices = vec![0u32, 1, 2];
+    indices.resize(count, 1);
+    let mut bin = Vec::new();
+    for v in TRI.iter().flatten() {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    for i in &indices {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let path = write_case(
+        dir.path(),
+        "needle",
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(bin.len());
+            d["bufferViews"][1]["byteLength"] = json!(4 * count);
+            d["accessors"][1]["count"] = json!(count);
+        },
+        Some(bin.clone()),
+    );
+    let scene = Scene::load(&path).unwrap();
+    let triangles: usize = scene.objects.iter().map(|o| o.mesh.triangles.len()).sum();
+    assert_eq!(triangles, 1);
 }
 
 #[test]
@@ -922,7 +953,7 @@ fn scenes_that_render_nothing_are_errors() {
             [0, 1, 2],
         )),
     );
-    assert_error(&flat, "no triangle has any area");
+    assert_error(&flat, "no triangle with any area");
     let squashed = write_case(
         dir.path(),
         "squashed",

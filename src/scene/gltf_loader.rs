@@ -732,7 +732,17 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
             indices.len()
         ));
     }
-    let triangles = triangulate(prim.mode(), &indices);
+    // Triangles without area (an index repeated, or corners on one line)
+    // are never hit, and shape is kept by rigid motion; but a BVH cannot
+    // split many of them at one point, and every ray near it would test
+    // them all.
+    let triangles: Vec<[u32; 3]> = triangulate(prim.mode(), &indices)
+        .into_iter()
+        .filter(|t| {
+            let [a, b, c] = t.map(|i| positions[i as usize]);
+            (b - a).cross(c - a) != Vec3::ZERO
+        })
+        .collect();
     let given = match prim.get(&Semantic::Normals) {
         Some(acc) => Some(buffers.vec3s(&acc, "NORMAL")?),
         None => None,
@@ -934,7 +944,11 @@ fn check_renderable(
     lights: &[PunctualLight],
 ) -> Res<()> {
     if objects.iter().all(|o| o.mesh.triangles.is_empty()) {
-        return Err("the scene has no triangles (no mesh with triangle primitives)".into());
+        return Err(
+            "the scene has no triangle with any area (no mesh with triangle primitives, \
+             or only degenerate triangles)"
+                .into(),
+        );
     }
     let is_emissive = |m: &u32| {
         materials
