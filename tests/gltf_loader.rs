@@ -368,32 +368,39 @@ fn animated_gltf_channels() {
         bin.extend_from_slice(&v.to_le_bytes());
     }
     let len = bin.len();
-    let path = write_case(
+    let animated = |d: &mut serde_json::Value| {
+        d["buffers"][0]["byteLength"] = json!(len);
+        let views = d["bufferViews"].as_array_mut().unwrap();
+        views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 12}));
+        views.push(json!({"buffer": 0, "byteOffset": 60, "byteLength": 36}));
+        views.push(json!({"buffer": 0, "byteOffset": 96, "byteLength": 108}));
+        let acc = d["accessors"].as_array_mut().unwrap();
+        acc.push(json!({"bufferView": 2, "componentType": 5126, "count": 3, "type": "SCALAR", "min": [0.0], "max": [1.0]}));
+        acc.push(json!({"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3"}));
+        acc.push(json!({"bufferView": 4, "componentType": 5126, "count": 9, "type": "VEC3"}));
+        d["animations"] = json!([{
+            "channels": [
+                {"sampler": 0, "target": {"node": 0, "path": "translation"}},
+                {"sampler": 1, "target": {"node": 0, "path": "scale"}}
+            ],
+            "samplers": [
+                {"input": 2, "output": 3, "interpolation": "STEP"},
+                {"input": 2, "output": 4, "interpolation": "CUBICSPLINE"}
+            ]
+        }]);
+    };
+    // One animation may drive a node's property once (glTF §3.11).
+    let twice = write_case(
         dir.path(),
-        "anim",
+        "twice",
         |d| {
-            d["buffers"][0]["byteLength"] = json!(len);
-            let views = d["bufferViews"].as_array_mut().unwrap();
-            views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 12}));
-            views.push(json!({"buffer": 0, "byteOffset": 60, "byteLength": 36}));
-            views.push(json!({"buffer": 0, "byteOffset": 96, "byteLength": 108}));
-            let acc = d["accessors"].as_array_mut().unwrap();
-            acc.push(json!({"bufferView": 2, "componentType": 5126, "count": 3, "type": "SCALAR", "min": [0.0], "max": [1.0]}));
-            acc.push(json!({"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3"}));
-            acc.push(json!({"bufferView": 4, "componentType": 5126, "count": 9, "type": "VEC3"}));
-            d["animations"] = json!([{
-                "channels": [
-                    {"sampler": 0, "target": {"node": 0, "path": "translation"}},
-                    {"sampler": 1, "target": {"node": 0, "path": "scale"}}
-                ],
-                "samplers": [
-                    {"input": 2, "output": 3, "interpolation": "STEP"},
-                    {"input": 2, "output": 4, "interpolation": "CUBICSPLINE"}
-                ]
-            }]);
+            animated(d);
+            d["animations"][0]["channels"][1]["target"]["path"] = json!("translation");
         },
-        Some(bin),
+        Some(bin.clone()),
     );
+    assert_error(&twice, "its translation is driven twice in this animation");
+    let path = write_case(dir.path(), "anim", animated, Some(bin));
     let scene = Scene::load(&path).unwrap();
     assert_eq!(scene.animation.channels.len(), 2);
     // 1 s at 24 fps: frames 0..=24.
@@ -639,6 +646,39 @@ fn triangles_without_area_are_dropped() {
     let scene = Scene::load(&path).unwrap();
     let triangles: usize = scene.objects.iter().map(|o| o.mesh.triangles.len()).sum();
     assert_eq!(triangles, 1);
+}
+
+/// What glTF forbids and its parser lets through: a node with both a
+/// matrix and TRS, and a file that needs a later glTF than 2.0.
+#[test]
+fn what_gltf_forbids_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let both = write_case(
+        dir.path(),
+        "both",
+        |d| {
+            d["nodes"][0]["matrix"] = json!([
+                1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0
+            ]);
+            d["nodes"][0]["translation"] = json!([1.0, 0.0, 0.0]);
+        },
+        good_bin(),
+    );
+    assert_error(&both, "node 'tri' has both a matrix and translation");
+    let later = write_case(
+        dir.path(),
+        "later",
+        |d| d["asset"]["minVersion"] = json!("2.1"),
+        good_bin(),
+    );
+    assert_error(&later, "needs glTF 2.1 at least");
+    let fine = write_case(
+        dir.path(),
+        "fine",
+        |d| d["asset"]["minVersion"] = json!("2.0"),
+        good_bin(),
+    );
+    Scene::load(&fine).unwrap();
 }
 
 #[test]

@@ -6,11 +6,22 @@
 use super::Trs;
 use glam::{Quat, Vec3, Vec4};
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Property {
     Translation,
     Rotation,
     Scale,
+}
+
+impl Property {
+    /// Its name in glTF (`target.path`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Property::Translation => "translation",
+            Property::Rotation => "rotation",
+            Property::Scale => "scale",
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -5,7 +5,7 @@
 //! metallic-roughness materials with `KHR_materials_emissive_strength`,
 //! `KHR_lights_punctual` point and spot lights, the first perspective camera
 //! and all TRS animation channels. Textures, skins and morph targets are
-//! ignored.
+//! ignored, with a warning.
 //!
 //! Bad input must give an error naming the file and the problem, never a
 //! panic. The `gltf` crate's own accessor readers can panic on malformed
@@ -108,6 +108,50 @@ fn quietly_catch_panics<T>(f: impl FnOnce() -> Res<T>) -> Res<T> {
     })
 }
 
+/// What glTF forbids and the `gltf` crate does not check: an
+/// `asset.minVersion` past the 2.0 this reader reads, and a node with both
+/// a matrix and translation, rotation or scale (§5.25: one or the other).
+fn check_asset_and_nodes(root: &gltf::json::Root) -> Res<()> {
+    if let Some(min) = root.asset.min_version.as_deref().filter(|&v| v != "2.0") {
+        return Err(format!(
+            "the file needs glTF {min} at least (asset.minVersion); this reader reads 2.0"
+        ));
+    }
+    for (i, node) in root.nodes.iter().enumerate() {
+        let trs = node.translation.is_some() || node.rotation.is_some() || node.scale.is_some();
+        if node.matrix.is_some() && trs {
+            let name = node.name.clone().unwrap_or_else(|| format!("node{i}"));
+            return Err(format!(
+                "node '{name}' has both a matrix and translation, rotation or scale \
+                 (glTF allows one or the other)"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Says what the file has that this reader ignores (textures, skins,
+/// morph targets), so that a render that looks wrong is not a surprise.
+fn warn_of_ignored_features(root: &gltf::json::Root) {
+    if !root.textures.is_empty() {
+        eprintln!(
+            "warning: {} texture(s) ignored: materials use their colour and emissive factors",
+            root.textures.len()
+        );
+    }
+    if !root.skins.is_empty() {
+        eprintln!("warning: skins ignored: skinned meshes render in their bind pose");
+    }
+    let morphs = root
+        .meshes
+        .iter()
+        .flat_map(|m| &m.primitives)
+        .any(|p| p.targets.as_ref().is_some_and(|t| !t.is_empty()));
+    if morphs {
+        eprintln!("warning: morph targets ignored: meshes render in their base shape");
+    }
+}
+
 fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
     check_glb_length(bytes)?;
     let gltf::Gltf { document, blob } =
@@ -119,6 +163,8 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
             root.asset.version
         ));
     }
+    check_asset_and_nodes(&root)?;
+    warn_of_ignored_features(&root);
     check_unvalidated_references(&root)?;
     let document = gltf::Document::from_json(root).map_err(parse_error)?;
     let base = path.parent().unwrap_or(Path::new("."));
@@ -875,6 +921,8 @@ fn build_animation(
     hierarchy: &Hierarchy,
 ) -> Res<Animation> {
     let mut channels = Vec::new();
+    // The animation that drives each (node, property), to name a second.
+    let mut driven: HashMap<(usize, Property), (usize, String)> = HashMap::new();
     for anim in document.animations() {
         let anim_name = anim
             .name()
@@ -891,13 +939,34 @@ fn build_animation(
                 gltf::animation::Property::Scale => Property::Scale,
                 gltf::animation::Property::MorphTargetWeights => continue,
             };
-            let channel = read_channel(&ch, node, property, buffers).map_err(|e| {
+            let where_ = || {
                 format!(
-                    "animation '{anim_name}', channel {} (node '{}'): {e}",
+                    "animation '{anim_name}', channel {} (node '{}')",
                     ch.index(),
                     node_name(&target.node())
                 )
-            })?;
+            };
+            let channel = read_channel(&ch, node, property, buffers)
+                .map_err(|e| format!("{}: {e}", where_()))?;
+            // glTF §3.11: one animation drives a node's property once.
+            // Several animations may (clips meant to play one at a time);
+            // all play at once here, and the last one sets the property.
+            match driven.insert((node, property), (anim.index(), anim_name.clone())) {
+                Some((other, _)) if other == anim.index() => {
+                    return Err(format!(
+                        "{}: its {} is driven twice in this animation",
+                        where_(),
+                        property.name()
+                    ))
+                }
+                Some((_, other)) => eprintln!(
+                    "warning: {}: its {} is driven by animation '{other}' too; \
+                     all animations play at once, and this later one sets it",
+                    where_(),
+                    property.name()
+                ),
+                None => {}
+            }
             channels.push(channel);
         }
     }
