@@ -90,9 +90,8 @@ struct Meshing {
 }
 
 impl Meshing {
-    /// The settings' meshing, coarsened until it needs at most
-    /// [`MAX_LINKS`] links (counting each triangle's corners as its own:
-    /// an upper bound).
+    /// The settings' meshing, coarsened until
+    /// [`links_needed`](Self::links_needed) is at most [`MAX_LINKS`].
     fn fitting(
         triangles: &[crate::scene::Triangle],
         settings: &GlobalSettings,
@@ -104,13 +103,7 @@ impl Meshing {
             min_links: MIN_LINKS.min(settings.links).max(1),
         };
         for _ in 0..64 {
-            let needed: u64 = triangles
-                .iter()
-                .map(|t| {
-                    let (n, links) = m.grid(t);
-                    u64::from((n + 1) * (n + 2) / 2) * u64::from(links)
-                })
-                .sum();
+            let needed = m.links_needed(triangles);
             if needed <= MAX_LINKS {
                 break;
             }
@@ -126,6 +119,18 @@ impl Meshing {
             }
         }
         m
+    }
+
+    /// The links `triangles` need, counting each triangle's corners as its
+    /// own (shared corners are one vertex in the pass: an upper bound).
+    fn links_needed(&self, triangles: &[crate::scene::Triangle]) -> u64 {
+        triangles
+            .iter()
+            .map(|t| {
+                let (n, links) = self.grid(t);
+                u64::from((n + 1) * (n + 2) / 2) * u64::from(links)
+            })
+            .sum()
     }
 
     /// Triangle `tri`'s grid segments an edge and links a vertex.
@@ -301,20 +306,22 @@ impl GlobalPass {
     }
 
     /// The mesh of the snapshot of `ctx`. Grid sizes come from the static
-    /// scene's size and each triangle's own, so they are the same whatever
-    /// frame the pass starts at (for triangles that move rigidly).
+    /// scene's size, each triangle's own and the link budget (triangles'
+    /// sizes again), so they are the same whatever frame the pass starts
+    /// at (for triangles that move rigidly).
     pub fn new(ctx: &FrameContext, settings: GlobalSettings) -> Self {
         let snapshot = ctx.snapshot;
         let meshing = Meshing::fitting(&snapshot.triangles, &settings, static_diagonal(ctx));
         let mut grids = Vec::with_capacity(snapshot.triangles.len());
         let mut vertex_of = Vec::new();
         let mut vertices = Vec::new();
-        let mut link_count = 0u32; // at most MAX_LINKS
-                                   // Mesh vertices: a triangle corner at the same point of the same
-                                   // object with the same shading normal is one vertex, so that the
-                                   // Gouraud shading is continuous across the mesh and a finely
-                                   // tessellated object (a sphere) has a vertex per mesh vertex, not
-                                   // three per triangle.
+        // At most MAX_LINKS, or three a triangle: within u32.
+        let mut link_count = 0u32;
+        // Mesh vertices: a triangle corner at the same point of the same
+        // object with the same shading normal is one vertex, so that the
+        // Gouraud shading is continuous across the mesh and a finely
+        // tessellated object (a sphere) has a vertex per mesh vertex, not
+        // three per triangle.
         let mut corners: HashMap<(u32, [u32; 3], [u32; 3]), u32> = HashMap::new();
         for (id, tri) in snapshot.triangles.iter().enumerate() {
             let (n, links) = meshing.grid(tri);
@@ -753,16 +760,6 @@ fn diagonal(points: impl Iterator<Item = Vec3>) -> f32 {
 mod tests {
     use super::*;
 
-    fn needed_links(triangles: &[crate::scene::Triangle], m: &Meshing) -> u64 {
-        triangles
-            .iter()
-            .map(|t| {
-                let (n, links) = m.grid(t);
-                u64::from((n + 1) * (n + 2) / 2) * u64::from(links)
-            })
-            .sum()
-    }
-
     /// A scene within the budget keeps the settings' meshing; one far over
     /// it (a static part a thousandth of its size, so a tiny spacing; or
     /// more triangles than the budget has links) is coarsened to fit.
@@ -784,21 +781,20 @@ mod tests {
             (10.0 / 32.0, 128, MIN_LINKS)
         );
         let tiny_static = Meshing::fitting(&room, &settings, 0.01);
-        assert!(needed_links(&room, &tiny_static) <= MAX_LINKS);
+        assert!(tiny_static.links_needed(&room) <= MAX_LINKS);
         assert!(
-            needed_links(
-                &room,
-                &Meshing {
-                    spacing: 0.01 / 32.0,
-                    ..m
-                }
-            ) > MAX_LINKS
+            Meshing {
+                spacing: 0.01 / 32.0,
+                ..m
+            }
+            .links_needed(&room)
+                > MAX_LINKS
         );
         let many: Vec<_> = (0..1_000_000)
             .map(|i| quad(i as f32 * 1e-3, 1e-3))
             .collect();
         let thinned = Meshing::fitting(&many, &settings, 1000.0);
-        assert!(needed_links(&many, &thinned) <= MAX_LINKS, "{thinned:?}");
+        assert!(thinned.links_needed(&many) <= MAX_LINKS, "{thinned:?}");
         assert!(thinned.links >= 1 && thinned.min_links >= 1);
     }
 
