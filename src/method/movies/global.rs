@@ -70,8 +70,9 @@ pub const BURIED_SHARE: f32 = 0.1;
 /// The fewest links a vertex gathers along (unless [`MAX_LINKS`] leaves
 /// fewer).
 pub const MIN_LINKS: u32 = 8;
-/// The most links a pass keeps (each about 80 bytes, with its share of the
-/// transport rows). The built-in scenes need 0.25–0.5 M at the defaults;
+/// The most links a pass keeps: each is 72 bytes (`Link`), and adds at
+/// most three 8-byte entries to its vertex's transport row, so 4 M links
+/// hold at most 400 MB. The built-in scenes need 0.25–0.5 M at the defaults;
 /// where a scene would need more (many triangles, or a static part so
 /// small that the spacing it sets is tiny), the grids coarsen and then the
 /// links thin until they fit, rather than the pass asking for gigabytes.
