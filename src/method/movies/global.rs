@@ -802,6 +802,28 @@ mod tests {
     /// The rows kept across frames are those built again from scratch, on
     /// a scene whose moving cube changes links and open-space flags every
     /// frame; and both kinds of kept row occur (else this checks nothing).
+    /// The pass a budget-breaking setting builds (the finest grid and 1024
+    /// links a vertex on cube-in-box: 26 × 561 × 1024 = 15 M links asked)
+    /// holds at most [`MAX_LINKS`] links, counted in the pass itself, and
+    /// still solves to finite light.
+    #[test]
+    fn a_pass_past_the_budget_is_built_within_it() {
+        let mut renderer = crate::render::test_renderer("cube-in-box", 8);
+        let settings = GlobalSettings {
+            spacing: 1e-4,
+            links: 1024,
+            bounces: 1,
+            shadow_samples: 1,
+        };
+        renderer.with_frame_context(0, |ctx| {
+            let mut pass = GlobalPass::new(ctx, settings);
+            let links = pass.links.len() as u64;
+            assert!(links > MAX_LINKS / 4 && links <= MAX_LINKS, "{links}");
+            pass.update(ctx, &Blockers::new(ctx), true);
+            assert!(pass.indirect.iter().all(|e| e.is_finite()));
+        });
+    }
+
     #[test]
     fn kept_rows_equal_rows_built_again() {
         let mut renderer = crate::render::test_renderer("cube-in-box", 8);
