@@ -681,6 +681,71 @@ fn what_gltf_forbids_is_refused() {
     Scene::load(&fine).unwrap();
 }
 
+/// `KHR_mesh_quantization` (gltfpack's default output): integer vertex
+/// positions decoded as the extension says; without it they are refused.
+#[test]
+fn quantized_positions_need_their_extension() {
+    let dir = tempfile::tempdir().unwrap();
+    // u16 positions, not normalised (the node's scale would dequantise
+    // them), 8-byte stride as vertex attributes need; then u32 indices.
+    let mut bin = Vec::new();
+    for v in [[0u16, 0, 0], [2, 0, 0], [0, 3, 0]] {
+        for c in v.into_iter().chain([0]) {
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    for i in [0u32, 1, 2] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let quantize = |d: &mut Value| {
+        d["bufferViews"][0] =
+            json!({"buffer": 0, "byteOffset": 0, "byteLength": 24, "byteStride": 8});
+        d["bufferViews"][1] = json!({"buffer": 0, "byteOffset": 24, "byteLength": 12});
+        d["buffers"][0]["byteLength"] = json!(36);
+        d["accessors"][0]["componentType"] = json!(5123);
+        d["accessors"][0]["max"] = json!([2.0, 3.0, 0.0]);
+    };
+    let bare = write_case(dir.path(), "bare", quantize, Some(bin.clone()));
+    assert_error(
+        &bare,
+        "accessor 0 (POSITION) holds U16 components; glTF allows FLOAT unless the file uses KHR_mesh_quantization",
+    );
+    let declared = write_case(
+        dir.path(),
+        "declared",
+        |d| {
+            quantize(d);
+            d["extensionsUsed"] = json!(["KHR_mesh_quantization"]);
+            d["extensionsRequired"] = json!(["KHR_mesh_quantization"]);
+        },
+        Some(bin),
+    );
+    let scene = Scene::load(&declared).unwrap();
+    let mesh = &scene.objects[0].mesh;
+    assert_eq!(
+        mesh.positions,
+        [
+            Vec3::ZERO,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(0.0, 3.0, 0.0)
+        ]
+    );
+    // An extension the loader cannot decode stays refused.
+    let draco = write_case(
+        dir.path(),
+        "draco",
+        |d| {
+            d["extensionsUsed"] = json!(["KHR_draco_mesh_compression"]);
+            d["extensionsRequired"] = json!(["KHR_draco_mesh_compression"]);
+        },
+        good_bin(),
+    );
+    assert_error(
+        &draco,
+        "requires the extension KHR_draco_mesh_compression, which radcache cannot read",
+    );
+}
+
 #[test]
 fn no_emitter_no_light() {
     let dir = tempfile::tempdir().unwrap();

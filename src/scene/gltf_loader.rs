@@ -3,8 +3,9 @@
 //! What is read (DESIGN.md, "Scenes"): the default scene's node hierarchy with
 //! rest TRS, every mesh node as one object (its triangle primitives merged),
 //! metallic-roughness materials with `KHR_materials_emissive_strength`,
-//! `KHR_lights_punctual` point and spot lights, the first perspective camera
-//! and all TRS animation channels. Textures, skins and morph targets are
+//! `KHR_lights_punctual` point and spot lights, integer vertex attributes
+//! of `KHR_mesh_quantization`, the first perspective camera and all TRS
+//! animation channels. Textures, skins and morph targets are
 //! ignored, with a warning.
 //!
 //! Bad input must give an error naming the file and the problem, never a
@@ -152,11 +153,32 @@ fn warn_of_ignored_features(root: &gltf::json::Root) {
     }
 }
 
+/// The glTF extension that lets vertex positions and normals be integers
+/// (what gltfpack writes by default). The `gltf` crate does not know it, so
+/// it is taken off `extensionsRequired` before the crate validates the file:
+/// this loader decodes such accessors itself ([`component`]).
+const MESH_QUANTIZATION: &str = "KHR_mesh_quantization";
+
+/// Whether `root` uses [`MESH_QUANTIZATION`]; removes it from the required
+/// extensions, and refuses a file that requires one this loader cannot
+/// read (a compressed mesh, say), naming it.
+fn take_mesh_quantization(root: &mut gltf::json::Root) -> Res<bool> {
+    root.extensions_required.retain(|e| e != MESH_QUANTIZATION);
+    let readable = gltf::json::extensions::ENABLED_EXTENSIONS;
+    if let Some(e) = (root.extensions_required.iter()).find(|e| !readable.contains(&e.as_str())) {
+        return Err(format!(
+            "the file requires the extension {e}, which radcache cannot read (it reads {} and {MESH_QUANTIZATION})",
+            readable.join(", ")
+        ));
+    }
+    Ok(root.extensions_used.iter().any(|e| e == MESH_QUANTIZATION))
+}
+
 fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
     check_glb_length(bytes)?;
     let gltf::Gltf { document, blob } =
         gltf::Gltf::from_slice_without_validation(bytes).map_err(parse_error)?;
-    let root = document.into_json();
+    let mut root = document.into_json();
     if !root.asset.version.starts_with("2.") {
         return Err(format!(
             "glTF version {} is not supported (expected 2.x)",
@@ -166,10 +188,12 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
     check_asset_and_nodes(&root)?;
     warn_of_ignored_features(&root);
     check_unvalidated_references(&root)?;
+    let quantized = take_mesh_quantization(&mut root)?;
     let document = gltf::Document::from_json(root).map_err(parse_error)?;
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = Buffers {
         data: load_buffers(&document, base, blob)?,
+        quantized,
     };
     let scene_def = document
         .default_scene()
@@ -373,6 +397,9 @@ fn load_buffers(
 /// crate's readers are not used).
 struct Buffers {
     data: Vec<Vec<u8>>,
+    /// Whether the file uses `KHR_mesh_quantization`: vertex attributes
+    /// may then be integers.
+    quantized: bool,
 }
 
 impl Buffers {
@@ -490,6 +517,29 @@ impl Buffers {
             .chunks_exact(ty.size())
             .map(|c| component(c, ty, acc.normalized()))
             .collect())
+    }
+
+    /// glTF 2.0 keeps vertex positions and normals in floats (§3.7.2.1);
+    /// `KHR_mesh_quantization` also allows 8- and 16-bit integers.
+    fn check_vertex_type(&self, acc: &gltf::Accessor, what: &str) -> Res<()> {
+        let ty = acc.data_type();
+        let allowed = match ty {
+            DataType::F32 => true,
+            DataType::U32 => false,
+            _ => self.quantized,
+        };
+        if allowed {
+            return Ok(());
+        }
+        let why = if self.quantized {
+            "integers of 8 or 16 bits at most"
+        } else {
+            "FLOAT unless the file uses KHR_mesh_quantization"
+        };
+        Err(format!(
+            "accessor {} ({what}) holds {ty:?} components; glTF allows {why}",
+            acc.index()
+        ))
     }
 
     fn vec3s(&self, acc: &gltf::Accessor, what: &str) -> Res<Vec<Vec3>> {
@@ -755,6 +805,7 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
     let pos_acc = prim
         .get(&Semantic::Positions)
         .ok_or("no POSITION attribute")?;
+    buffers.check_vertex_type(&pos_acc, "POSITION")?;
     let positions = buffers.vec3s(&pos_acc, "POSITION")?;
     if positions.iter().any(|p| !p.is_finite()) {
         return Err("NaN or infinite vertex position".into());
@@ -790,7 +841,10 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
         })
         .collect();
     let given = match prim.get(&Semantic::Normals) {
-        Some(acc) => Some(buffers.vec3s(&acc, "NORMAL")?),
+        Some(acc) => {
+            buffers.check_vertex_type(&acc, "NORMAL")?;
+            Some(buffers.vec3s(&acc, "NORMAL")?)
+        }
         None => None,
     };
     // Unusable normals (missing, wrong count, NaN) are recomputed rather
