@@ -853,9 +853,9 @@ type KnownResults = Option<Vec<Option<RadianceResult>>>;
 /// [`back_face_share`]).
 const MAX_BACK_FACE_SHARE: f32 = 0.5;
 
-/// The share of a gather's rays whose first hit is the back of a one-sided
-/// triangle of a moving object (the ray leaves along the triangle's
-/// geometric normal). A record is replaced where it was created, fixed in
+/// The share of a gather's rays whose first hit is the back of a triangle
+/// of a moving object (the ray leaves along the triangle's geometric
+/// normal). A record is replaced where it was created, fixed in
 /// world space (§4.4), and a moving object may since have come over that
 /// point: a floor record under the cube then gathers the cube's inside,
 /// seen from behind, and lends its darkness to the floor pixels around the
@@ -869,8 +869,13 @@ const MAX_BACK_FACE_SHARE: f32 = 0.5;
 /// and on cube-in-box it changed nothing measurable: 64×64, frames 0..100,
 /// `--trc-max-life 5`, relative RMSE 0.0226 (all triangles) against 0.0232
 /// (moving ones) with seed 0 and 0.02256 against 0.02258 with seed 1, with
-/// lit-surface errors within 0.1 % in both (0.0255 without the rule). A
-/// double-sided triangle has no inside: its back is a surface too.
+/// lit-surface errors within 0.1 % in both (0.0255 without the rule).
+/// Double-sided triangles count too: their backs are surfaces, but a closed
+/// object's inside is dark whatever its material's sidedness (Blender
+/// exports every material double-sided, and a growing sphere's records
+/// were replaced inside it as black blotches). At worst a record under a
+/// thin double-sided moving object is dropped, and `fill` makes a new one
+/// where a pixel needs it.
 fn back_face_share(ctx: &FrameContext, g: &Gathered) -> f32 {
     let snapshot = ctx.snapshot;
     let is_inside_of_moving = |triangle: u32, dir: Vec3| {
@@ -882,7 +887,6 @@ fn back_face_share(ctx: &FrameContext, g: &Gathered) -> f32 {
                 // The sign alone: the unnormalised normal spares a square
                 // root and a division per gather ray.
                 .is_some_and(|tri| tri.cross().dot(dir) > 0.0)
-            && !ctx.scene.materials[snapshot.tri_material[t] as usize].double_sided
     };
     let hits = g.results.iter().map(|r| &r.hit).zip(&g.samples.direction);
     let back = hits
