@@ -438,3 +438,77 @@ fn ctrl_c_during_the_last_frame_lets_the_render_finish() {
     }
     panic!("in three tries the signal never came during the last frame");
 }
+
+/// `cube_in_box.glb` with its JSON chunk edited by `edit`, written to
+/// `path` (the binary chunk kept as it is).
+fn edited_cube_in_box(path: &std::path::Path, edit: impl FnOnce(&mut serde_json::Value)) {
+    let glb = std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/scenes/cube_in_box.glb"),
+    )
+    .unwrap();
+    let word = |at: usize| u32::from_le_bytes(glb[at..at + 4].try_into().unwrap()) as usize;
+    let json_len = word(12);
+    let mut json: serde_json::Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    edit(&mut json);
+    let mut text = serde_json::to_vec(&json).unwrap();
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let rest = &glb[20 + json_len..];
+    let mut out = Vec::new();
+    out.extend_from_slice(&glb[..8]);
+    out.extend_from_slice(&((20 + text.len() + rest.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+    out.extend_from_slice(&glb[16..20]);
+    out.extend_from_slice(&text);
+    out.extend_from_slice(rest);
+    std::fs::write(path, out).unwrap();
+}
+
+/// What a file from Blender needs said: which of its cameras renders, and
+/// that its point lights' intensities may be in candela.
+#[test]
+fn a_blender_file_is_told_its_camera_and_light_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("from_blender.glb");
+    edited_cube_in_box(&file, |j| {
+        j["asset"]["generator"] = serde_json::json!("Khronos glTF Blender I/O v3.4.50");
+        j["extensionsUsed"] = serde_json::json!(["KHR_lights_punctual"]);
+        j["extensions"] = serde_json::json!({"KHR_lights_punctual": {"lights": [
+            {"type": "point", "intensity": 1.0}
+        ]}});
+        let nodes = j["nodes"].as_array_mut().unwrap();
+        let camera = nodes
+            .iter()
+            .position(|n| n.get("camera").is_some())
+            .unwrap();
+        let mut second = nodes[camera].clone();
+        second["name"] = serde_json::json!("second camera");
+        nodes.push(second);
+        nodes.push(
+            serde_json::json!({"name": "bulb", "translation": [0.0, 1.0, 0.0],
+                                      "extensions": {"KHR_lights_punctual": {"light": 0}}}),
+        );
+        let n = nodes.len();
+        let roots = j["scenes"][0]["nodes"].as_array_mut().unwrap();
+        roots.extend([serde_json::json!(n - 2), serde_json::json!(n - 1)]);
+    });
+    let out = dir.path().join("out");
+    let (code, _, stderr) = radcache(&[
+        "render",
+        file.to_str().unwrap(),
+        "--method",
+        "path",
+        "--spp",
+        "1",
+        "--size",
+        "4x4",
+        "--frames",
+        "0..1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stderr.contains("2 cameras in the scene"), "{stderr}");
+    assert!(stderr.contains("683 times too bright"), "{stderr}");
+}

@@ -2,7 +2,7 @@
 //! files state, and broken files give an error naming the file and the
 //! problem instead of a panic.
 
-use glam::{Quat, Vec3};
+use glam::{Mat4, Quat, Vec3};
 use radcache::scene::Scene;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -744,6 +744,65 @@ fn quantized_positions_need_their_extension() {
         &draco,
         "requires the extension KHR_draco_mesh_compression, which radcache cannot read",
     );
+}
+
+/// A skinned mesh (skins are ignored) is placed by its first joint, never
+/// by its own node (glTF §3.7.3.3), and follows that joint's animation.
+#[test]
+fn a_skinned_mesh_rides_its_first_joint() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = good_bin().unwrap();
+    // The joint's inverse bind matrix: the joint's rest pose is at x = 1.
+    let inverse_bind = Mat4::from_translation(Vec3::new(-1.0, 0.0, 0.0));
+    let times = [0.0f32, 1.0];
+    let joint_at = [[1.0f32, 0.0, 0.0], [1.0, 2.0, 0.0]];
+    let floats = inverse_bind.to_cols_array().into_iter().chain(times);
+    for x in floats.chain(joint_at.into_iter().flatten()) {
+        bin.extend_from_slice(&x.to_le_bytes());
+    }
+    let len = bin.len();
+    let path = write_case(
+        dir.path(),
+        "skinned",
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(len);
+            d["nodes"][0]["skin"] = json!(0);
+            d["nodes"][0]["translation"] = json!([5.0, 0.0, 0.0]);
+            d["nodes"]
+                .as_array_mut()
+                .unwrap()
+                .push(json!({"name": "joint", "translation": [1.0, 0.0, 0.0]}));
+            d["scenes"][0]["nodes"] = json!([0, 1, 2]);
+            d["skins"] = json!([{"joints": [2], "inverseBindMatrices": 2}]);
+            let views = d["bufferViews"].as_array_mut().unwrap();
+            views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 64}));
+            views.push(json!({"buffer": 0, "byteOffset": 112, "byteLength": 8}));
+            views.push(json!({"buffer": 0, "byteOffset": 120, "byteLength": 24}));
+            let accessors = d["accessors"].as_array_mut().unwrap();
+            accessors
+                .push(json!({"bufferView": 2, "componentType": 5126, "count": 1, "type": "MAT4"}));
+            accessors.push(
+                json!({"bufferView": 3, "componentType": 5126, "count": 2, "type": "SCALAR",
+                                  "min": [0.0], "max": [1.0]}),
+            );
+            accessors
+                .push(json!({"bufferView": 4, "componentType": 5126, "count": 2, "type": "VEC3"}));
+            d["animations"] = json!([{
+                "channels": [{"sampler": 0, "target": {"node": 2, "path": "translation"}}],
+                "samplers": [{"input": 3, "output": 4}]
+            }]);
+        },
+        Some(bin),
+    );
+    let scene = Scene::load(&path).unwrap();
+    for (t, lift) in [(0.0, 0.0), (1.0, 2.0)] {
+        let snap = scene.snapshot(t);
+        let corners = snap.triangles[0].p;
+        for (c, want) in corners.iter().zip(TRI) {
+            let want = Vec3::from(want) + Vec3::Y * lift;
+            assert!(close(*c, want, 1e-5), "t = {t}: {c} vs {want}");
+        }
+    }
 }
 
 #[test]

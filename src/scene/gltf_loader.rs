@@ -141,7 +141,9 @@ fn warn_of_ignored_features(root: &gltf::json::Root) {
         );
     }
     if !root.skins.is_empty() {
-        eprintln!("warning: skins ignored: skinned meshes render in their bind pose");
+        eprintln!(
+            "warning: skins ignored: a skinned mesh keeps its bind pose, carried rigidly by its first joint"
+        );
     }
     let morphs = root
         .meshes
@@ -150,6 +152,17 @@ fn warn_of_ignored_features(root: &gltf::json::Root) {
         .any(|p| p.targets.as_ref().is_some_and(|t| !t.is_empty()));
     if morphs {
         eprintln!("warning: morph targets ignored: meshes render in their base shape");
+    }
+    let punctual = (root.extensions.as_ref())
+        .and_then(|e| e.khr_lights_punctual.as_ref())
+        .is_some_and(|l| !l.lights.is_empty());
+    let from_blender = (root.asset.generator.as_deref()).is_some_and(|g| g.contains("Blender"));
+    if punctual && from_blender {
+        eprintln!(
+            "warning: this file comes from Blender; its point and spot light intensities are \
+             read as W/sr, but Blender's exporter writes candela (683 × W/sr) unless its \
+             Lighting Mode is 'Unitless': exported in candela, they render 683 times too bright"
+        );
     }
 }
 
@@ -208,7 +221,7 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
 
     let nodes = build_nodes(&gnodes, &hierarchy)?;
     let mut materials = build_materials(&document)?;
-    let objects = build_objects(&gnodes, &buffers, &mut materials)?;
+    let objects = build_objects(&gnodes, &hierarchy, &buffers, &mut materials)?;
     let lights = build_lights(&gnodes)?;
     let camera = find_camera(&gnodes)?;
     let animation = build_animation(&document, &buffers, &hierarchy)?;
@@ -747,6 +760,7 @@ fn convert_material(m: &gltf::Material) -> Res<Material> {
 
 fn build_objects(
     gnodes: &[gltf::Node],
+    hierarchy: &Hierarchy,
     buffers: &Buffers,
     materials: &mut Vec<Material>,
 ) -> Res<Vec<Object>> {
@@ -755,11 +769,57 @@ fn build_objects(
     for (node, gnode) in gnodes.iter().enumerate() {
         let Some(mesh) = gnode.mesh() else { continue };
         let name = node_name(gnode);
-        let mesh = build_mesh(&mesh, buffers, materials, &mut default_material)
+        let mut mesh = build_mesh(&mesh, buffers, materials, &mut default_material)
             .map_err(|e| format!("mesh of node '{name}': {e}"))?;
+        let node = match gnode.skin() {
+            Some(skin) => rigid_skin(&skin, hierarchy, buffers, &mut mesh)
+                .map_err(|e| format!("skin of node '{name}': {e}"))?
+                .unwrap_or(node),
+            None => node,
+        };
         objects.push(Object { name, node, mesh });
     }
     Ok(objects)
+}
+
+/// A skinned mesh without its skinning (skins are ignored): glTF places it
+/// by its joints alone, never by its own node's transform (§3.7.3.3). It is
+/// carried rigidly by its first joint: its vertices are taken into that
+/// joint's space by the joint's inverse bind matrix, so that at the bind
+/// pose they lie where the file put them, and the mesh then follows the
+/// joint's animation. Returns that joint's node (`None`: the joint is not
+/// in the scene, and the mesh stays on its own node).
+fn rigid_skin(
+    skin: &gltf::Skin,
+    hierarchy: &Hierarchy,
+    buffers: &Buffers,
+    mesh: &mut Mesh,
+) -> Res<Option<usize>> {
+    let Some(joint) = skin.joints().next() else {
+        return Ok(None);
+    };
+    let Some(&node) = hierarchy.ours.get(&joint.index()) else {
+        return Ok(None);
+    };
+    let inverse_bind = match skin.inverse_bind_matrices() {
+        Some(acc) => {
+            let m = buffers.floats(&acc, Dimensions::Mat4, "inverseBindMatrices")?;
+            Mat4::from_cols_slice(&m[..16])
+        }
+        None => Mat4::IDENTITY,
+    };
+    let normals = glam::Mat3::from_mat4(inverse_bind).inverse().transpose();
+    if !inverse_bind.is_finite() || !normals.is_finite() {
+        return Err("the first joint's inverse bind matrix is not invertible".into());
+    }
+    for p in &mut mesh.positions {
+        *p = inverse_bind.transform_point3(*p);
+        check_coordinates(*p, "vertex position")?;
+    }
+    for n in &mut mesh.normals {
+        *n = (normals * *n).normalize_or_zero();
+    }
+    Ok(Some(node))
 }
 
 /// Merges the triangle primitives of `mesh`; primitives without a material
@@ -954,6 +1014,14 @@ fn find_camera(gnodes: &[gltf::Node]) -> Res<CameraDef> {
                         "camera of node '{}' has yfov {yfov} out of range (0, π)",
                         node_name(gnode)
                     ));
+                }
+                let cameras = gnodes.iter().filter(|n| n.camera().is_some()).count();
+                if cameras > 1 {
+                    eprintln!(
+                        "note: {cameras} cameras in the scene; rendering through the first \
+                         perspective one, on node '{}'",
+                        node_name(gnode)
+                    );
                 }
                 return Ok(CameraDef { node, yfov });
             }
