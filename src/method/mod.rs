@@ -14,6 +14,7 @@ pub mod render_pass;
 pub mod settings;
 pub mod tcg;
 pub mod trc;
+mod unshadowed;
 
 use crate::backend::RayBackend;
 use crate::film::Film;

@@ -7,6 +7,7 @@ use super::direct::{DirectChange, FirstHit, StaticGeometry};
 use super::Gathered;
 use crate::backend::Hit;
 use crate::cache::gather::HemisphereSamples;
+use crate::method::unshadowed::UnshadowedLights;
 use crate::method::FrameContext;
 use crate::sampling::Frame;
 use crate::scene::Snapshot;
@@ -21,26 +22,12 @@ pub(super) struct NextFrame {
     /// from the two snapshots' transforms); `None` when it does not move.
     motion: Vec<Option<Mat4>>,
     /// The lights at t and t+1.
-    lights: (Vec<Emitter>, Vec<Emitter>),
+    lights: (UnshadowedLights, UnshadowedLights),
     /// Whether some light moves from t to t+1.
     lights_move: bool,
     /// The direct light at the samples' first hits at t and t+1 (`None`
     /// when nothing moves).
     direct: Option<DirectChange>,
-}
-
-/// A light reduced to what the unshadowed direct-light ratio needs.
-#[derive(Clone, Copy, Debug)]
-enum Emitter {
-    /// An emissive triangle: centroid, unit normal, `L_e · area`.
-    Area {
-        center: Vec3,
-        normal: Vec3,
-        power: Vec3,
-        double_sided: bool,
-    },
-    /// A punctual light.
-    Point(crate::scene::PointLight),
 }
 
 impl NextFrame {
@@ -59,8 +46,11 @@ impl NextFrame {
                 (!m.abs_diff_eq(Mat4::IDENTITY, 1e-7)).then_some(m)
             })
             .collect();
-        let (l0, l1) = (emitters(ctx, now), emitters(ctx, &later));
-        let lights_move = !same_lights(&l0, &l1);
+        let (l0, l1) = (
+            UnshadowedLights::of(ctx, now),
+            UnshadowedLights::of(ctx, &later),
+        );
+        let lights_move = !l0.same_as(&l1);
         let objects_move = motion.iter().any(Option::is_some);
         NextFrame {
             motion,
@@ -71,80 +61,6 @@ impl NextFrame {
                 .flatten(),
         }
     }
-}
-
-/// Whether two frames' lights are in the same places.
-fn same_lights(a: &[Emitter], b: &[Emitter]) -> bool {
-    a.len() == b.len()
-        && a.iter().zip(b).all(|pair| match pair {
-            (
-                Emitter::Area {
-                    center: c0,
-                    normal: n0,
-                    power: p0,
-                    ..
-                },
-                Emitter::Area {
-                    center: c1,
-                    normal: n1,
-                    power: p1,
-                    ..
-                },
-            ) => c0 == c1 && n0 == n1 && p0 == p1,
-            (Emitter::Point(l0), Emitter::Point(l1)) => {
-                l0.position == l1.position
-                    && l0.direction == l1.direction
-                    && l0.intensity == l1.intensity
-            }
-            _ => false,
-        })
-}
-
-fn emitters(ctx: &FrameContext, snapshot: &Snapshot) -> Vec<Emitter> {
-    let mut out = Vec::new();
-    for (tri, &m) in snapshot.triangles.iter().zip(&snapshot.tri_material) {
-        let m = &ctx.scene.materials[m as usize];
-        if m.is_emissive() && tri.area() > 0.0 {
-            out.push(Emitter::Area {
-                center: (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0,
-                normal: tri.geometric_normal(),
-                power: m.emission * tri.area(),
-                double_sided: m.double_sided,
-            });
-        }
-    }
-    out.extend(snapshot.lights.iter().map(|l| Emitter::Point(*l)));
-    out
-}
-
-/// Unshadowed direct irradiance at `p` (normal `n`) from `lights`, each
-/// area light taken as a point at its triangles' centroids.
-fn direct_irradiance(lights: &[Emitter], p: Vec3, n: Vec3) -> Vec3 {
-    let mut e = Vec3::ZERO;
-    for l in lights {
-        match *l {
-            Emitter::Area {
-                center,
-                normal,
-                power,
-                double_sided,
-            } => {
-                let d = center - p;
-                let d2 = d.length_squared().max(1e-8);
-                let w = d / d2.sqrt();
-                let cos_l = -normal.dot(w);
-                let cos_l = if double_sided { cos_l.abs() } else { cos_l };
-                e += power * (cos_l.max(0.0) * n.dot(w).max(0.0) / d2);
-            }
-            Emitter::Point(light) => {
-                let d = light.position - p;
-                let d2 = d.length_squared().max(1e-8);
-                let w = d / d2.sqrt();
-                e += light.intensity_toward(-w) * (n.dot(w).max(0.0) / d2);
-            }
-        }
-    }
-    e
 }
 
 /// TRC §4.7 (Fig. 6): the record's hemisphere samples at t0 moved to
@@ -387,8 +303,8 @@ fn light_ratio(
     dir: Vec3,
     p0: Vec3,
     moved: Option<(Mat4, Vec3)>,
-    l0: &[Emitter],
-    l1: &[Emitter],
+    l0: &UnshadowedLights,
+    l1: &UnshadowedLights,
 ) -> Vec3 {
     let mut n0 = snapshot.triangles[hit.triangle as usize].geometric_normal();
     if n0.dot(dir) > 0.0 {
@@ -398,7 +314,7 @@ fn light_ratio(
         Some((mat, p1)) => (p1, mat.transform_vector3(n0).normalize_or_zero()),
         None => (p0, n0),
     };
-    let (d0, d1) = (direct_irradiance(l0, p0, n0), direct_irradiance(l1, p1, n1));
+    let (d0, d1) = (l0.irradiance(p0, n0), l1.irradiance(p1, n1));
     Vec3::select(d0.cmpgt(Vec3::splat(1e-12)), d1 / d0, Vec3::ONE)
 }
 

@@ -1,0 +1,110 @@
+//! Lights reduced to the unshadowed direct light they give a point: how
+//! the light reaching a surface changes from one frame to another when
+//! lights move, without a shadow ray. `trc` scales its reprojected samples
+//! by it (TRC §4.7), and `tcg` finds with it the samples that moving
+//! lights have left stale.
+
+use super::FrameContext;
+use crate::scene::Snapshot;
+use glam::Vec3;
+
+/// A frame's lights, each area light taken as a point at its triangle's
+/// centroid.
+#[derive(Clone, Debug)]
+pub(crate) struct UnshadowedLights {
+    emitters: Vec<Emitter>,
+}
+
+/// A light reduced to what the unshadowed direct light needs.
+#[derive(Clone, Copy, Debug)]
+enum Emitter {
+    /// An emissive triangle: centroid, unit normal, `L_e · area`.
+    Area {
+        center: Vec3,
+        normal: Vec3,
+        power: Vec3,
+        double_sided: bool,
+    },
+    /// A punctual light.
+    Point(crate::scene::PointLight),
+}
+
+impl UnshadowedLights {
+    /// The lights of `snapshot` (a frame of `ctx`'s scene).
+    pub(crate) fn of(ctx: &FrameContext, snapshot: &Snapshot) -> Self {
+        let mut emitters = Vec::new();
+        for (tri, &m) in snapshot.triangles.iter().zip(&snapshot.tri_material) {
+            let m = &ctx.scene.materials[m as usize];
+            if m.is_emissive() && tri.area() > 0.0 {
+                emitters.push(Emitter::Area {
+                    center: (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0,
+                    normal: tri.geometric_normal(),
+                    power: m.emission * tri.area(),
+                    double_sided: m.double_sided,
+                });
+            }
+        }
+        emitters.extend(snapshot.lights.iter().map(|l| Emitter::Point(*l)));
+        UnshadowedLights { emitters }
+    }
+
+    /// Whether the two frames' lights are in the same places.
+    pub(crate) fn same_as(&self, other: &Self) -> bool {
+        self.emitters.len() == other.emitters.len()
+            && self
+                .emitters
+                .iter()
+                .zip(&other.emitters)
+                .all(|pair| match pair {
+                    (
+                        Emitter::Area {
+                            center: c0,
+                            normal: n0,
+                            power: p0,
+                            ..
+                        },
+                        Emitter::Area {
+                            center: c1,
+                            normal: n1,
+                            power: p1,
+                            ..
+                        },
+                    ) => c0 == c1 && n0 == n1 && p0 == p1,
+                    (Emitter::Point(l0), Emitter::Point(l1)) => {
+                        l0.position == l1.position
+                            && l0.direction == l1.direction
+                            && l0.intensity == l1.intensity
+                    }
+                    _ => false,
+                })
+    }
+
+    /// Unshadowed direct irradiance at `p` (normal `n`).
+    pub(crate) fn irradiance(&self, p: Vec3, n: Vec3) -> Vec3 {
+        let mut e = Vec3::ZERO;
+        for l in &self.emitters {
+            match *l {
+                Emitter::Area {
+                    center,
+                    normal,
+                    power,
+                    double_sided,
+                } => {
+                    let d = center - p;
+                    let d2 = d.length_squared().max(1e-8);
+                    let w = d / d2.sqrt();
+                    let cos_l = -normal.dot(w);
+                    let cos_l = if double_sided { cos_l.abs() } else { cos_l };
+                    e += power * (cos_l.max(0.0) * n.dot(w).max(0.0) / d2);
+                }
+                Emitter::Point(light) => {
+                    let d = light.position - p;
+                    let d2 = d.length_squared().max(1e-8);
+                    let w = d / d2.sqrt();
+                    e += light.intensity_toward(-w) * (n.dot(w).max(0.0) / d2);
+                }
+            }
+        }
+        e
+    }
+}
