@@ -208,6 +208,9 @@ pub struct TcgArgs {
     /// §4.2: a record with more usable neighbours than this is removed as redundant (their example: 10).
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(0..=1_000_000))]
     pub tcg_max_neighbours: u32,
+    /// Samples whose light moving lights changed by more than 5 % since they were shot are shot again as those that hit moving objects are (not in the paper, whose Eq. 2 counts only the latter; off, a moving light's indirect light lags by up to 1/τ_min frames).
+    #[arg(long, value_enum, default_value = "on")]
+    pub tcg_light_refresh: OnOff,
 }
 
 /// Settings of `--method movies`.

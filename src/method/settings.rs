@@ -66,6 +66,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("tau_min", "0.05"),
             ("tau_max", "1"),
             ("max_neighbours", "10"),
+            ("light_refresh", "0"),
             ("spp", "4"),
             ("accuracy", "0.2"),
             ("strata", "16x48"),
@@ -381,6 +382,7 @@ fn tcg_setting(method: &str, key: &str, v: &str, s: &mut TcgSettings) -> Result<
         "tau_min" => s.tau_min = value(method, key, v, 0.0..1.000_001)?,
         "tau_max" => s.tau_max = value(method, key, v, 0.0..1.000_001)?,
         "max_neighbours" => s.max_neighbours = value(method, key, v, 0..1_000_001)?,
+        "light_refresh" => s.light_refresh = value::<u8>(method, key, v, 0..2)? == 1,
         _ => {
             return Ok(ic_setting(method, key, v, &mut s.ic)?
                 || glossy_setting(method, key, v, &mut s.ic)?)

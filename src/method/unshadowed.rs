@@ -79,8 +79,36 @@ impl UnshadowedLights {
                 })
     }
 
+    /// The power the lights emit (W): `π·L_e·A` an area light (each side
+    /// that emits), `4π·I` a punctual one (spots taken as points).
+    pub(crate) fn power(&self) -> Vec3 {
+        use std::f32::consts::PI;
+        let each = |l: &Emitter| match *l {
+            Emitter::Area {
+                power,
+                double_sided,
+                ..
+            } => power * PI * if double_sided { 2.0 } else { 1.0 },
+            Emitter::Point(light) => light.intensity * 4.0 * PI,
+        };
+        self.emitters.iter().map(each).sum()
+    }
+
     /// Unshadowed direct irradiance at `p` (normal `n`).
     pub(crate) fn irradiance(&self, p: Vec3, n: Vec3) -> Vec3 {
+        self.arriving(p, |w| n.dot(w).max(0.0))
+    }
+
+    /// The unshadowed light arriving at `p` from every direction (each
+    /// light's irradiance on a surface facing it): where the normal at `p`
+    /// is not known, any change of the lights shows in it.
+    pub(crate) fn arriving_at(&self, p: Vec3) -> Vec3 {
+        self.arriving(p, |_| 1.0)
+    }
+
+    /// Σ over the lights of what each sends to `p` from direction `w`
+    /// (unit, towards the light), times `cos_at(w)`.
+    fn arriving(&self, p: Vec3, cos_at: impl Fn(Vec3) -> f32) -> Vec3 {
         let mut e = Vec3::ZERO;
         for l in &self.emitters {
             match *l {
@@ -95,13 +123,13 @@ impl UnshadowedLights {
                     let w = d / d2.sqrt();
                     let cos_l = -normal.dot(w);
                     let cos_l = if double_sided { cos_l.abs() } else { cos_l };
-                    e += power * (cos_l.max(0.0) * n.dot(w).max(0.0) / d2);
+                    e += power * (cos_l.max(0.0) * cos_at(w) / d2);
                 }
                 Emitter::Point(light) => {
                     let d = light.position - p;
                     let d2 = d.length_squared().max(1e-8);
                     let w = d / d2.sqrt();
-                    e += light.intensity_toward(-w) * (n.dot(w).max(0.0) / d2);
+                    e += light.intensity_toward(-w) * (cos_at(w) / d2);
                 }
             }
         }

@@ -7,11 +7,19 @@ use crate::sampling::Rng;
 use crate::store::rgbe::PackedSample;
 
 /// Eq. 2: `N_update(x) = (τ_max − τ_min)·x + τ_min·N`, `x` the samples that
-/// hit moving objects, `N` all of them; rounded up (so that any `τ_min > 0`
-/// refreshes every sample in time) and at most `N`.
-pub(super) fn cells_to_update(settings: &TcgSettings, samples: &[PackedSample]) -> usize {
+/// hit moving objects or whose light moving lights changed (`stale`, by
+/// cell; a departure: see [`super::stale`]), `N` all of them; rounded up
+/// (so that any `τ_min > 0` refreshes every sample in time) and at most
+/// `N`.
+pub(super) fn cells_to_update(
+    settings: &TcgSettings,
+    samples: &[PackedSample],
+    stale: impl Fn(usize, &PackedSample) -> bool,
+) -> usize {
     let total = samples.len();
-    let dynamic = samples.iter().filter(|s| s.hit_dynamic()).count();
+    let dynamic = (samples.iter().enumerate())
+        .filter(|&(cell, s)| s.hit_dynamic() || stale(cell, s))
+        .count();
     let n =
         (settings.tau_max - settings.tau_min) * dynamic as f32 + settings.tau_min * total as f32;
     (n.max(0.0).ceil() as usize).min(total)
@@ -81,21 +89,31 @@ mod tests {
     #[test]
     fn the_share_updated_follows_equation_2() {
         let settings = TcgSettings::default();
+        let fresh = |_: usize, _: &PackedSample| false;
         let still = aged(&[0; 100], &[false; 100]);
-        assert_eq!(cells_to_update(&settings, &still), 5);
+        assert_eq!(cells_to_update(&settings, &still, fresh), 5);
         let mut some = [false; 100];
         some[..10].fill(true);
         // 0.95·10 + 0.05·100 = 14.5 → 15.
-        assert_eq!(cells_to_update(&settings, &aged(&[0; 100], &some)), 15);
         assert_eq!(
-            cells_to_update(&settings, &aged(&[0; 100], &[true; 100])),
+            cells_to_update(&settings, &aged(&[0; 100], &some), fresh),
+            15
+        );
+        assert_eq!(
+            cells_to_update(&settings, &aged(&[0; 100], &[true; 100]), fresh),
             100
+        );
+        // Stale samples count as those that hit moving objects, once each.
+        let stale = |cell: usize, _: &PackedSample| (5..15).contains(&cell);
+        assert_eq!(
+            cells_to_update(&settings, &aged(&[0; 100], &some), stale),
+            20 // 0.95·15 + 5 = 19.25 → 20
         );
         let none = TcgSettings {
             tau_min: 0.0,
             ..TcgSettings::default()
         };
-        assert_eq!(cells_to_update(&none, &still), 0);
+        assert_eq!(cells_to_update(&none, &still, fresh), 0);
     }
 
     /// The picks are distinct cells, as many as asked.
