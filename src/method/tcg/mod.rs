@@ -19,7 +19,7 @@
 //!    is removed, and hidden from the counts of the records after it;
 //! 2. *update* (§3.2–3.3): each record shoots again `N_update` cells
 //!    (Eq. 2, `select::cells_to_update`; departure: its `x` also counts
-//!    the samples whose light moving lights changed, [`stale`]), drawn
+//!    the samples whose light moving lights changed, `stale`), drawn
 //!    without repetition with
 //!    probability ∝ `2^age` (`select::pick_cells`), each with a new
 //!    jittered direction in its cell; its other samples age by a frame.
@@ -47,7 +47,7 @@
 //! moving light, as the paper has it (`light_refresh` off), its block bias
 //! was 1.9× `ic`'s: lighting that changes with no moving object in a
 //! record's view reaches the record only as Eq. 2's `τ_min` share of its
-//! samples is shot again each frame; [`stale`] shoots again the samples
+//! samples is shot again each frame; `stale` shoots again the samples
 //! whose light changed (`benches/RESULTS.md`, "`tcg` against `ic` and
 //! `trc`").
 
@@ -108,7 +108,7 @@ pub struct TcgSettings {
     pub max_neighbours: u32,
     /// Whether the samples whose light moving lights changed since they
     /// were shot count in Eq. 2's `x` as those that hit moving objects do
-    /// (departure, on by default: [`stale`]); off, `tcg` is the paper's.
+    /// (departure, on by default: the module `stale`); off, `tcg` is the paper's.
     #[serde(default = "light_refresh_default")]
     pub light_refresh: bool,
 }
