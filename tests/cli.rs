@@ -465,15 +465,23 @@ fn edited_cube_in_box(path: &std::path::Path, edit: impl FnOnce(&mut serde_json:
     std::fs::write(path, out).unwrap();
 }
 
-/// What a file from Blender needs said: which of its cameras renders, and
-/// that its point lights' intensities may be in candela.
+/// What a file from Blender needs said: which of its cameras renders, that
+/// its point lights' intensities may be in candela, and what it holds that
+/// is not rendered (a material extension, a line primitive).
 #[test]
 fn a_blender_file_is_told_its_camera_and_light_units() {
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("from_blender.glb");
     edited_cube_in_box(&file, |j| {
         j["asset"]["generator"] = serde_json::json!("Khronos glTF Blender I/O v3.4.50");
-        j["extensionsUsed"] = serde_json::json!(["KHR_lights_punctual"]);
+        j["extensionsUsed"] =
+            serde_json::json!(["KHR_lights_punctual", "KHR_materials_transmission"]);
+        let mut line = j["meshes"][0]["primitives"][0].clone();
+        line["mode"] = serde_json::json!(1);
+        j["meshes"][0]["primitives"]
+            .as_array_mut()
+            .unwrap()
+            .push(line);
         j["extensions"] = serde_json::json!({"KHR_lights_punctual": {"lights": [
             {"type": "point", "intensity": 1.0}
         ]}});
@@ -511,4 +519,12 @@ fn a_blender_file_is_told_its_camera_and_light_units() {
     assert_eq!(code, 0, "{stderr}");
     assert!(stderr.contains("2 cameras in the scene"), "{stderr}");
     assert!(stderr.contains("683 times too bright"), "{stderr}");
+    assert!(
+        stderr.contains("extension(s) ignored: KHR_materials_transmission"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("1 point or line primitive(s) ignored"),
+        "{stderr}"
+    );
 }

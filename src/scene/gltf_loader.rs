@@ -153,6 +153,36 @@ fn warn_of_ignored_features(root: &gltf::json::Root) {
     if morphs {
         eprintln!("warning: morph targets ignored: meshes render in their base shape");
     }
+    let read = [
+        "KHR_lights_punctual",
+        "KHR_materials_emissive_strength",
+        MESH_QUANTIZATION,
+    ];
+    let ignored: Vec<&str> = (root.extensions_used.iter())
+        .map(String::as_str)
+        .filter(|e| !read.contains(e))
+        .collect();
+    if !ignored.is_empty() {
+        eprintln!(
+            "warning: extension(s) ignored: {} (materials use their metallic-roughness and emissive factors)",
+            ignored.join(", ")
+        );
+    }
+    let surfaceless = (root.meshes.iter())
+        .flat_map(|m| &m.primitives)
+        .filter(|p| {
+            use gltf::json::{mesh::Mode as M, validation::Checked};
+            matches!(
+                p.mode,
+                Checked::Valid(M::Points | M::Lines | M::LineLoop | M::LineStrip)
+            )
+        })
+        .count();
+    if surfaceless > 0 {
+        eprintln!(
+            "warning: {surfaceless} point or line primitive(s) ignored: they have no surface"
+        );
+    }
     let punctual = (root.extensions.as_ref())
         .and_then(|e| e.khr_lights_punctual.as_ref())
         .is_some_and(|l| !l.lights.is_empty());
