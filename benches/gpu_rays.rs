@@ -102,7 +102,11 @@ fn scene() -> Scene {
         }],
         materials: vec![Material::diffuse("grey", Vec3::splat(0.5))],
         lights: vec![],
-        camera: CameraDef { node: 1, yfov: 1.0 },
+        camera: CameraDef {
+            node: 1,
+            yfov: 1.0,
+            aspect_ratio: None,
+        },
         animation: Animation { channels: vec![] },
         frame_count: 1,
     }

@@ -278,7 +278,11 @@ fn hierarchy_scene() -> Scene {
         ],
         materials: vec![Material::emitter("glow", Vec3::ONE)],
         lights: vec![],
-        camera: CameraDef { node: 3, yfov: 0.8 },
+        camera: CameraDef {
+            node: 3,
+            yfov: 0.8,
+            aspect_ratio: None,
+        },
         animation: Animation {
             channels: vec![
                 linear_translation(0, &[(0.0, Vec3::ZERO), (2.0, Vec3::new(2.0, 0.0, -1.0))]),

@@ -528,3 +528,42 @@ fn a_blender_file_is_told_its_camera_and_light_units() {
         "{stderr}"
     );
 }
+
+/// A size whose ratio is not the camera's `aspectRatio` renders (the
+/// vertical field of view kept) with a note; the file's own ratio without.
+#[test]
+fn an_image_ratio_other_than_the_cameras_is_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/scenes/l_hall.glb");
+    let render = |size: &str| {
+        let out = dir.path().join(size);
+        let args = [
+            "render",
+            scene.to_str().unwrap(),
+            "--method",
+            "path",
+            "--spp",
+            "1",
+        ];
+        let rest = [
+            "--size",
+            size,
+            "--frames",
+            "0..1",
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ];
+        let (code, _, stderr) = radcache(&[&args[..], &rest[..]].concat());
+        assert_eq!(code, 0, "{stderr}");
+        stderr
+    };
+    let square = render("8x8");
+    assert!(
+        square.contains("camera's aspectRatio is 1.600 and the image's 1.000"),
+        "{square}"
+    );
+    let own = render("16x10");
+    assert!(!own.contains("aspectRatio"), "{own}");
+}

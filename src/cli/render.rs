@@ -39,6 +39,16 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         same_pattern: args.same_pattern,
         ..FrameSettings::default()
     };
+    if let Some(file) = scene.camera.aspect_ratio {
+        let (w, h) = args.size;
+        let image = w as f32 / h as f32;
+        if (image / file - 1.0).abs() > 0.01 {
+            eprintln!(
+                "note: the camera's aspectRatio is {file:.3} and the image's {image:.3}: the \
+                 vertical field of view is kept, so the image shows more or less at its sides"
+            );
+        }
+    }
     if !args.quiet {
         let (w, h) = args.size;
         eprintln!(

@@ -1053,7 +1053,12 @@ fn find_camera(gnodes: &[gltf::Node]) -> Res<CameraDef> {
                         node_name(gnode)
                     );
                 }
-                return Ok(CameraDef { node, yfov });
+                let aspect_ratio = p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0);
+                return Ok(CameraDef {
+                    node,
+                    yfov,
+                    aspect_ratio,
+                });
             }
             gltf::camera::Projection::Orthographic(_) => saw_orthographic = true,
         }

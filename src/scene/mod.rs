@@ -202,6 +202,10 @@ pub struct CameraDef {
     pub node: usize,
     /// Vertical field of view in radians.
     pub yfov: f32,
+    /// The width-to-height ratio the file gives (glTF `aspectRatio`), if
+    /// any. Frames keep `yfov` and take the image's own ratio; this is only
+    /// to say when the two differ.
+    pub aspect_ratio: Option<f32>,
 }
 
 /// A whole animated scene.

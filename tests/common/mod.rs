@@ -102,6 +102,7 @@ pub fn scene(
         camera: CameraDef {
             node: camera_node,
             yfov,
+            aspect_ratio: None,
         },
         animation: Animation { channels },
         frame_count: 2,

@@ -59,7 +59,11 @@ impl Builder {
                 objects: Vec::new(),
                 materials: Vec::new(),
                 lights: Vec::new(),
-                camera: CameraDef { node: 0, yfov: 1.0 },
+                camera: CameraDef {
+                    node: 0,
+                    yfov: 1.0,
+                    aspect_ratio: None,
+                },
                 animation: Animation::default(),
                 frame_count,
             },
@@ -106,7 +110,11 @@ impl Builder {
 
     pub(super) fn camera(&mut self, rest: Trs, yfov: f32) {
         let node = self.node("camera", rest);
-        self.scene.camera = CameraDef { node, yfov };
+        self.scene.camera = CameraDef {
+            node,
+            yfov,
+            aspect_ratio: None,
+        };
         self.has_camera = true;
     }
 
