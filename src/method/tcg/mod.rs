@@ -363,13 +363,16 @@ impl TemporallyCoherentGathering {
         let picks: Vec<Vec<u32>> = alive
             .par_iter()
             .map(|(r, (point, frame))| {
-                let stale = |cell: usize, s: &PackedSample| {
-                    (staleness.as_ref())
-                        .is_some_and(|l| l.is_stale((point, frame), strata, cell, s))
+                let stale: Vec<bool> = match &staleness {
+                    Some(l) => (r.samples.iter().enumerate())
+                        .map(|(cell, s)| l.is_stale((point, frame), strata, cell, s))
+                        .collect(),
+                    None => Vec::new(),
                 };
-                let count = select::cells_to_update(&self.settings, &r.samples, stale);
+                let is_stale = |cell: usize| stale.get(cell).copied().unwrap_or(false);
+                let count = select::cells_to_update(&self.settings, &r.samples, |c, _| is_stale(c));
                 let mut rng = Rng::new(self.key(ctx, PICK_STREAM, r, 0));
-                select::pick_cells(&r.samples, count, &mut rng)
+                select::pick_cells(&r.samples, count, &mut rng, is_stale)
             })
             .collect();
         let mut ranges: Vec<Range<usize>> = Vec::with_capacity(picks.len());

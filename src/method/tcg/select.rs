@@ -37,27 +37,41 @@ pub(super) fn cells_to_update(
 /// Spirakis 2006, "Weighted random sampling with a reservoir"): the same
 /// distribution of draws without repetition, in `O(N)`. The unit test
 /// checks it against the sequential draw's exact probabilities.
-pub(super) fn pick_cells(samples: &[PackedSample], count: usize, rng: &mut Rng) -> Vec<u32> {
+///
+/// The `first` cells (those moving lights left stale, [`super::stale`]:
+/// counted in Eq. 2's `x` to be shot again) are drawn before the others,
+/// by age among themselves; the rest of the count by age among the others.
+pub(super) fn pick_cells(
+    samples: &[PackedSample],
+    count: usize,
+    rng: &mut Rng,
+    first: impl Fn(usize) -> bool,
+) -> Vec<u32> {
     if count >= samples.len() {
         return (0..samples.len() as u32).collect();
     }
     if count == 0 {
         return Vec::new();
     }
-    let mut keyed: Vec<(f32, u32)> = samples
+    let mut keyed: Vec<(bool, f32, u32)> = samples
         .iter()
         .zip(0u32..)
         .map(|(s, cell)| {
             // u ∈ (0, 1]: ln(u) is finite.
             let u = 1.0 - rng.next_f32();
             let weight = (1u32 << s.age()) as f32;
-            (u.ln() / weight, cell)
+            (first(cell as usize), u.ln() / weight, cell)
         })
         .collect();
-    // Largest key first; equal keys by cell, so the draw is deterministic.
-    let by_key = |a: &(f32, u32), b: &(f32, u32)| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1));
+    // `first` cells, then the largest key; equal keys by cell, so the draw
+    // is deterministic.
+    let by_key = |a: &(bool, f32, u32), b: &(bool, f32, u32)| {
+        (b.0.cmp(&a.0))
+            .then(b.1.total_cmp(&a.1))
+            .then(a.2.cmp(&b.2))
+    };
     keyed.select_nth_unstable_by(count - 1, by_key);
-    let mut cells: Vec<u32> = keyed[..count].iter().map(|&(_, cell)| cell).collect();
+    let mut cells: Vec<u32> = keyed[..count].iter().map(|&(_, _, cell)| cell).collect();
     cells.sort_unstable();
     cells
 }
@@ -121,9 +135,22 @@ mod tests {
     fn picks_are_distinct_and_as_many_as_asked() {
         let samples = aged(&[0, 3, 1, 15, 2, 0, 7, 4], &[false; 8]);
         for count in 0..=9 {
-            let cells = pick_cells(&samples, count, &mut rng(count as u32));
+            let cells = pick_cells(&samples, count, &mut rng(count as u32), |_| false);
             assert_eq!(cells.len(), count.min(8));
             assert!(cells.windows(2).all(|w| w[0] < w[1]), "{cells:?}");
+        }
+    }
+
+    /// Stale cells are drawn first, whatever their age; the rest of the
+    /// count goes by age among the others.
+    #[test]
+    fn stale_cells_are_drawn_first() {
+        let samples = aged(&[15, 0, 0, 15, 0, 0, 15, 0], &[false; 8]);
+        let stale = |cell: usize| cell == 1 || cell == 4;
+        for i in 0..50 {
+            assert_eq!(pick_cells(&samples, 2, &mut rng(i), stale), vec![1, 4]);
+            let three = pick_cells(&samples, 3, &mut rng(i), stale);
+            assert!(three.contains(&1) && three.contains(&4), "{three:?}");
         }
     }
 
@@ -151,7 +178,7 @@ mod tests {
         let n = 40_000;
         let mut counts = [0u32; 3];
         for i in 0..n {
-            let cells = pick_cells(&samples, 2, &mut rng(i));
+            let cells = pick_cells(&samples, 2, &mut rng(i), |_| false);
             let out = (0..3u32).find(|c| !cells.contains(c)).unwrap();
             counts[out as usize] += 1;
         }

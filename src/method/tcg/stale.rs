@@ -11,7 +11,8 @@
 //! point (the record's point plus its cell's centre direction times its
 //! stored distance) has changed by more than [`STALE_LIGHT`] since the
 //! frame it was shot in, which its age gives, and every sample where the
-//! lights' power has (a light switched off). A hit that no light reaches
+//! lights' power has (a light switched off). Stale samples are drawn
+//! before the others (`select::pick_cells`). A hit that no light reaches
 //! directly (a ceiling above a panel facing down) shows indirect light
 //! only, which the moving light changes too: such samples are still shot
 //! again only at Eq. 2's `τ_min` share. Where no light moves over the
