@@ -567,3 +567,40 @@ fn an_image_ratio_other_than_the_cameras_is_noted() {
     let own = render("16x10");
     assert!(!own.contains("aspectRatio"), "{own}");
 }
+
+/// Keys that fall on the frames of another rate than `--fps` (a 30 fps
+/// export rendered at the default 24) are noted with the rate they fit.
+#[test]
+fn keys_on_another_frame_rate_are_noted() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |fps: &str| {
+        let out = dir.path().join(fps);
+        let (code, _, stderr) = radcache(&[
+            "render",
+            "--builtin",
+            "cube-in-box",
+            "--fps",
+            fps,
+            "--method",
+            "path",
+            "--spp",
+            "1",
+            "--size",
+            "4x4",
+            "--frames",
+            "0..1",
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ]);
+        assert_eq!(code, 0, "{stderr}");
+        stderr
+    };
+    let other = render("30");
+    assert!(
+        other.contains("keys fall on frames of 1/24 s, not of 1/30 s"),
+        "{other}"
+    );
+    let own = render("24");
+    assert!(!own.contains("keys fall"), "{own}");
+}

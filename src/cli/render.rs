@@ -39,6 +39,13 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         same_pattern: args.same_pattern,
         ..FrameSettings::default()
     };
+    if let Some(rate) = key_rate_other_than(&scene, args.fps) {
+        eprintln!(
+            "note: the animation's keys fall on frames of 1/{rate} s, not of 1/{} s (--fps): \
+             exporters key every frame, so the scene may have been made at --fps {rate}",
+            args.fps
+        );
+    }
     if let Some(file) = scene.camera.aspect_ratio {
         let (w, h) = args.size;
         let image = w as f32 / h as f32;
@@ -286,4 +293,25 @@ fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSum
     for report in reports.into_iter().flatten() {
         println!("{report}");
     }
+}
+
+/// The frame rate the animation's key times fall on (exporters key every
+/// frame), among the usual ones, where they do not fall on frames of
+/// `fps`; `None` when they do, or fall on none, or are too few to tell.
+fn key_rate_other_than(scene: &crate::scene::Scene, fps: f32) -> Option<u32> {
+    let times: Vec<f32> = (scene.animation.channels.iter())
+        .flat_map(|c| c.times.iter().copied())
+        .filter(|&t| t > 0.0)
+        .collect();
+    let on_frames = |rate: f32| {
+        times
+            .iter()
+            .all(|&t| ((t * rate).round() - t * rate).abs() < 1e-3)
+    };
+    if times.len() < 3 || on_frames(fps) {
+        return None;
+    }
+    [24u32, 25, 30, 48, 50, 60]
+        .into_iter()
+        .find(|&rate| on_frames(rate as f32))
 }
