@@ -501,22 +501,7 @@ fn a_blender_file_is_told_its_camera_and_light_units() {
         let roots = j["scenes"][0]["nodes"].as_array_mut().unwrap();
         roots.extend([serde_json::json!(n - 2), serde_json::json!(n - 1)]);
     });
-    let out = dir.path().join("out");
-    let (code, _, stderr) = radcache(&[
-        "render",
-        file.to_str().unwrap(),
-        "--method",
-        "path",
-        "--spp",
-        "1",
-        "--size",
-        "4x4",
-        "--frames",
-        "0..1",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, 0, "{stderr}");
+    let stderr = one_tiny_frame(&[file.to_str().unwrap()], &dir.path().join("out"));
     assert!(stderr.contains("2 cameras in the scene"), "{stderr}");
     assert!(stderr.contains("683 times too bright"), "{stderr}");
     assert!(
@@ -538,26 +523,7 @@ fn an_image_ratio_other_than_the_cameras_is_noted() {
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/scenes/l_hall.glb");
     let render = |size: &str| {
         let out = dir.path().join(size);
-        let args = [
-            "render",
-            scene.to_str().unwrap(),
-            "--method",
-            "path",
-            "--spp",
-            "1",
-        ];
-        let rest = [
-            "--size",
-            size,
-            "--frames",
-            "0..1",
-            "--out",
-            out.to_str().unwrap(),
-            "-q",
-        ];
-        let (code, _, stderr) = radcache(&[&args[..], &rest[..]].concat());
-        assert_eq!(code, 0, "{stderr}");
-        stderr
+        one_tiny_frame(&[scene.to_str().unwrap(), "--size", size], &out)
     };
     let square = render("8x8");
     assert!(
@@ -575,26 +541,7 @@ fn keys_on_another_frame_rate_are_noted() {
     let dir = tempfile::tempdir().unwrap();
     let render = |fps: &str| {
         let out = dir.path().join(fps);
-        let (code, _, stderr) = radcache(&[
-            "render",
-            "--builtin",
-            "cube-in-box",
-            "--fps",
-            fps,
-            "--method",
-            "path",
-            "--spp",
-            "1",
-            "--size",
-            "4x4",
-            "--frames",
-            "0..1",
-            "--out",
-            out.to_str().unwrap(),
-            "-q",
-        ]);
-        assert_eq!(code, 0, "{stderr}");
-        stderr
+        one_tiny_frame(&["--builtin", "cube-in-box", "--fps", fps], &out)
     };
     let other = render("30");
     assert!(
@@ -603,4 +550,21 @@ fn keys_on_another_frame_rate_are_noted() {
     );
     let own = render("24");
     assert!(!own.contains("keys fall"), "{own}");
+}
+
+/// `radcache render` of one 4×4 frame (`path`, 1 spp; `scene` may also
+/// give another `--size` or `--fps`) into `out`, which must succeed; its
+/// stderr.
+fn one_tiny_frame(scene: &[&str], out: &std::path::Path) -> String {
+    let fixed = ["--method", "path", "--spp", "1", "--frames", "0..1", "-q"];
+    let size: &[&str] = if scene.contains(&"--size") {
+        &[]
+    } else {
+        &["--size", "4x4"]
+    };
+    let out = ["--out", out.to_str().unwrap()];
+    let args = [&["render"], scene, &fixed, size, &out].concat();
+    let (code, _, stderr) = radcache(&args);
+    assert_eq!(code, 0, "{stderr}");
+    stderr
 }
