@@ -131,8 +131,10 @@ fn check_asset_and_nodes(root: &gltf::json::Root) -> Res<()> {
     Ok(())
 }
 
-/// Says what the file has that this reader ignores (textures, skins,
-/// morph targets), so that a render that looks wrong is not a surprise.
+/// Says what the file has that this reader ignores (textures, skins, morph
+/// targets, extensions, point and line primitives) or reads otherwise than
+/// its maker may have meant (a Blender file's light units), so that a
+/// render that looks wrong is not a surprise.
 fn warn_of_ignored_features(root: &gltf::json::Root) {
     if !root.textures.is_empty() {
         eprintln!(
@@ -153,14 +155,9 @@ fn warn_of_ignored_features(root: &gltf::json::Root) {
     if morphs {
         eprintln!("warning: morph targets ignored: meshes render in their base shape");
     }
-    let read = [
-        "KHR_lights_punctual",
-        "KHR_materials_emissive_strength",
-        MESH_QUANTIZATION,
-    ];
     let ignored: Vec<&str> = (root.extensions_used.iter())
         .map(String::as_str)
-        .filter(|e| !read.contains(e))
+        .filter(|e| !reads_extension(e))
         .collect();
     if !ignored.is_empty() {
         eprintln!(
@@ -202,18 +199,24 @@ fn warn_of_ignored_features(root: &gltf::json::Root) {
 /// this loader decodes such accessors itself ([`component`]).
 const MESH_QUANTIZATION: &str = "KHR_mesh_quantization";
 
-/// Whether `root` uses [`MESH_QUANTIZATION`]; removes it from the required
-/// extensions, and refuses a file that requires one this loader cannot
-/// read (a compressed mesh, say), naming it.
-fn take_mesh_quantization(root: &mut gltf::json::Root) -> Res<bool> {
-    root.extensions_required.retain(|e| e != MESH_QUANTIZATION);
-    let readable = gltf::json::extensions::ENABLED_EXTENSIONS;
-    if let Some(e) = (root.extensions_required.iter()).find(|e| !readable.contains(&e.as_str())) {
+/// Whether this loader reads extension `e`: those the `gltf` crate is
+/// built to read (its features in Cargo.toml) and [`MESH_QUANTIZATION`].
+fn reads_extension(e: &str) -> bool {
+    gltf::json::extensions::ENABLED_EXTENSIONS.contains(&e) || e == MESH_QUANTIZATION
+}
+
+/// Refuses a file that requires an extension this loader cannot read (a
+/// compressed mesh, say), naming it; takes [`MESH_QUANTIZATION`] off the
+/// required extensions (the crate would refuse it) and says whether the
+/// file uses it.
+fn check_extensions(root: &mut gltf::json::Root) -> Res<bool> {
+    if let Some(e) = (root.extensions_required.iter()).find(|e| !reads_extension(e)) {
+        let readable = gltf::json::extensions::ENABLED_EXTENSIONS.join(", ");
         return Err(format!(
-            "the file requires the extension {e}, which radcache cannot read (it reads {} and {MESH_QUANTIZATION})",
-            readable.join(", ")
+            "the file requires the extension {e}, which radcache cannot read (it reads {readable} and {MESH_QUANTIZATION})"
         ));
     }
+    root.extensions_required.retain(|e| e != MESH_QUANTIZATION);
     Ok(root.extensions_used.iter().any(|e| e == MESH_QUANTIZATION))
 }
 
@@ -231,7 +234,7 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
     check_asset_and_nodes(&root)?;
     warn_of_ignored_features(&root);
     check_unvalidated_references(&root)?;
-    let quantized = take_mesh_quantization(&mut root)?;
+    let quantized = check_extensions(&mut root)?;
     let document = gltf::Document::from_json(root).map_err(parse_error)?;
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = Buffers {
