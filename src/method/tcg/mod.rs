@@ -370,7 +370,7 @@ impl TemporallyCoherentGathering {
                     None => Vec::new(),
                 };
                 let is_stale = |cell: usize| stale.get(cell).copied().unwrap_or(false);
-                let count = select::cells_to_update(&self.settings, &r.samples, |c, _| is_stale(c));
+                let count = select::cells_to_update(&self.settings, &r.samples, is_stale);
                 let mut rng = Rng::new(self.key(ctx, PICK_STREAM, r, 0));
                 select::pick_cells(&r.samples, count, &mut rng, is_stale)
             })

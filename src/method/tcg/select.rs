@@ -14,11 +14,11 @@ use crate::store::rgbe::PackedSample;
 pub(super) fn cells_to_update(
     settings: &TcgSettings,
     samples: &[PackedSample],
-    stale: impl Fn(usize, &PackedSample) -> bool,
+    stale: impl Fn(usize) -> bool,
 ) -> usize {
     let total = samples.len();
     let dynamic = (samples.iter().enumerate())
-        .filter(|&(cell, s)| s.hit_dynamic() || stale(cell, s))
+        .filter(|&(cell, s)| s.hit_dynamic() || stale(cell))
         .count();
     let n =
         (settings.tau_max - settings.tau_min) * dynamic as f32 + settings.tau_min * total as f32;
@@ -103,7 +103,7 @@ mod tests {
     #[test]
     fn the_share_updated_follows_equation_2() {
         let settings = TcgSettings::default();
-        let fresh = |_: usize, _: &PackedSample| false;
+        let fresh = |_: usize| false;
         let still = aged(&[0; 100], &[false; 100]);
         assert_eq!(cells_to_update(&settings, &still, fresh), 5);
         let mut some = [false; 100];
@@ -118,7 +118,7 @@ mod tests {
             100
         );
         // Stale samples count as those that hit moving objects, once each.
-        let stale = |cell: usize, _: &PackedSample| (5..15).contains(&cell);
+        let stale = |cell: usize| (5..15).contains(&cell);
         assert_eq!(
             cells_to_update(&settings, &aged(&[0; 100], &some), stale),
             20 // 0.95·15 + 5 = 19.25 → 20

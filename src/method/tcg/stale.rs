@@ -74,13 +74,14 @@ impl LightHistory {
                 .expect("every frame of the window is in the history")
         };
         let now = at(t);
+        let power = now.power();
         // By age a: the lights of frame t − 1 − a where they differ.
         let then: Vec<Option<Then>> = (0..WINDOW)
             .map(|a| {
                 let lights = at(t.saturating_sub(1 + a));
                 (!lights.same_as(now)).then(|| Then {
                     lights,
-                    power_changed: relative_change(lights.power(), now.power()) > STALE_LIGHT,
+                    power_changed: relative_change(lights.power(), power) > STALE_LIGHT,
                 })
             })
             .collect();
