@@ -25,13 +25,14 @@ mod common;
 use common::{inward_box, scene};
 use glam::{Quat, Vec3};
 use radcache::backend::cpu::CpuBackend;
-use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuLayout};
+use radcache::backend::gpu::{AdapterPolicy, GpuBackend, GpuLayout, WAIT_LIMIT};
 use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::render::{FrameSettings, Renderer};
 use radcache::sampling::Rng;
 use radcache::scene::animation::{linear_rotation, linear_translation};
 use radcache::scene::{builtin, Material, Mesh, Scene, Snapshot};
+use std::time::Duration;
 
 /// Relative tolerance on t (and on ties), of the larger of t and the
 /// coordinates' scale ([`t_tolerance`]).
@@ -733,4 +734,45 @@ fn a_scene_the_gpu_cannot_take_fails_the_backend_instead_of_panicking() {
         "a failed backend reports misses"
     );
     assert_eq!(gpu.failure(), Some(expected), "the first error is kept");
+}
+
+/// A GPU that does not finish a dispatch within the wait limit (here
+/// 1 µs, where tracing these rays takes milliseconds even on a GPU) fails
+/// the backend with an error that says so, instead of a render that waits
+/// for ever; later calls report misses without waiting. The same rays
+/// with the default limit trace.
+#[test]
+fn a_gpu_that_does_not_answer_in_time_fails_the_backend() {
+    let snapshot = soup_scene(0).snapshot(0.3);
+    let mut cpu = CpuBackend::new();
+    cpu.set_geometry(&snapshot);
+    let rays = rays_for(&snapshot, &cpu, 1 << 18, 7);
+    let mut hits = vec![Hit::MISS; rays.len()];
+
+    let mut gpu = gpu();
+    RayBackend::set_geometry(&mut gpu, &snapshot);
+    gpu.set_wait_limit(Duration::from_micros(1));
+    gpu.closest_hit(&rays, &mut hits);
+    let failure = gpu
+        .failure()
+        .expect("the wait past the limit failed the backend");
+    assert!(
+        failure.contains("did not finish") && failure.contains("hangs"),
+        "{failure}"
+    );
+    assert!(
+        hits.iter().all(|h| !h.is_hit()),
+        "a failed call reports misses"
+    );
+    gpu.set_wait_limit(WAIT_LIMIT);
+    let mut occluded = vec![true; rays.len()];
+    gpu.any_hit(&rays, &mut occluded);
+    assert!(occluded.iter().all(|o| !o), "a failed backend stays failed");
+    assert_eq!(gpu.failure(), Some(failure), "the first error is kept");
+
+    let mut patient = self::gpu();
+    RayBackend::set_geometry(&mut patient, &snapshot);
+    patient.closest_hit(&rays, &mut hits);
+    assert_eq!(patient.failure(), None);
+    assert!(hits.iter().any(|h| h.is_hit()));
 }

@@ -49,7 +49,7 @@
 
 use super::{
     bind, layout_entry, read_back, storage_entry, workgroup_grid, ComputePass, ErrorSlot,
-    FailureSlot, GpuError,
+    FailureSlot, GpuError, Submitted,
 };
 use crate::cache::{Interpolated, IrradianceRecord, LookupPoint};
 use bytemuck::{Pod, Zeroable};
@@ -525,6 +525,8 @@ pub struct CacheSplat {
     /// The GPU backend's failure, which [`Self::fail`] sets.
     failed: FailureSlot,
     timings: Mutex<SplatTimings>,
+    /// The backend's [`super::WAIT_LIMIT`] or what it was set to.
+    wait_limit: Duration,
 }
 
 impl CacheSplat {
@@ -624,7 +626,13 @@ impl CacheSplat {
             errors,
             failed,
             timings: Mutex::default(),
+            wait_limit: super::WAIT_LIMIT,
         })
+    }
+
+    /// Set with the backend's, [`super::GpuBackend::set_wait_limit`].
+    pub(super) fn set_wait_limit(&mut self, limit: Duration) {
+        self.wait_limit = limit;
     }
 
     pub fn timings(&self) -> SplatTimings {
@@ -815,7 +823,7 @@ impl CacheSplat {
         if used_bytes > 0 {
             copies.push((used_buffer, used_bytes));
         }
-        pass.submit(
+        let index = pass.submit(
             &self.device,
             &self.queue,
             clear_used,
@@ -823,8 +831,13 @@ impl CacheSplat {
             &buffers.staging.buffer,
         );
         let submitted = start.elapsed();
+        let wait = Submitted {
+            index,
+            limit: self.wait_limit,
+        };
         let (waited, readback) = read_back(
             &self.device,
+            wait,
             &buffers.staging.buffer,
             splat_bytes + used_bytes,
             "splat sums",

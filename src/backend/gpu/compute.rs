@@ -17,13 +17,32 @@ pub(crate) fn workgroup_grid(items: u32, size: u32, max_per_dim: u32) -> (u32, u
     (x, groups.div_ceil(x))
 }
 
-/// Waits for the queue's work, maps the first `bytes` of `staging`, hands
-/// them to `read` and unmaps: the readback of a dispatch whose results
-/// were copied to `staging`. `what` names them in errors; an error the
-/// device reported meanwhile (`errors`) fails it too. Returns the time
-/// spent waiting for the GPU and the time spent mapping and reading.
+/// How long a readback waits for its submission before the GPU counts as
+/// hung ([`Submitted::limit`]). No dispatch of this backend comes near it:
+/// a chunk of 4 Mi rays takes milliseconds on a GPU and seconds on
+/// lavapipe, even behind the other threads' submissions queued before it.
+/// It turns a device or driver that never answers into the backend's
+/// error, so that a render stops and its job can resume, where it would
+/// otherwise wait for ever.
+pub const WAIT_LIMIT: Duration = Duration::from_secs(300);
+
+/// A submission whose results are to be read back, and how long to wait
+/// for it.
+pub(crate) struct Submitted {
+    pub index: wgpu::SubmissionIndex,
+    pub limit: Duration,
+}
+
+/// Waits for `submitted` (and the queue's work before it, not the later
+/// submissions of other threads), maps the first `bytes` of `staging`,
+/// hands them to `read` and unmaps: the readback of a dispatch whose
+/// results were copied to `staging`. `what` names them in errors; an error
+/// the device reported meanwhile (`errors`) fails it too, and so does a
+/// wait past `submitted.limit`. Returns the time spent waiting for the GPU
+/// and the time spent mapping and reading.
 pub(crate) fn read_back(
     device: &wgpu::Device,
+    submitted: Submitted,
     staging: &wgpu::Buffer,
     bytes: u64,
     what: &str,
@@ -35,11 +54,24 @@ pub(crate) fn read_back(
     staging.map_async(wgpu::MapMode::Read, 0..bytes, move |r| {
         let _ = tx.send(r);
     });
+    let limit = submitted.limit;
     device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| format!("waiting for the GPU failed: {e}"))?;
+        .poll(wgpu::PollType::Wait {
+            submission_index: Some(submitted.index),
+            timeout: Some(limit),
+        })
+        .map_err(|e| match e {
+            wgpu::PollError::Timeout => format!(
+                "the GPU did not finish the work of the {what} within {:.3} s: \
+                 the device or its driver hangs",
+                limit.as_secs_f64()
+            ),
+            e => format!("waiting for the GPU failed: {e}"),
+        })?;
     let waited = start.elapsed();
     let start = Instant::now();
+    // Once the wait has returned, the callback has run or is running on
+    // the thread whose poll took it up: it comes.
     match rx.recv() {
         Ok(Ok(())) => {}
         Ok(Err(e)) => return Err(format!("cannot map the {what}: {e}")),
@@ -100,13 +132,13 @@ impl ComputePass<'_> {
         prepare: impl FnOnce(&mut wgpu::CommandEncoder),
         copies: &[(&wgpu::Buffer, u64)],
         staging: &wgpu::Buffer,
-    ) {
+    ) -> wgpu::SubmissionIndex {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some(self.label),
         });
         prepare(&mut encoder);
         self.encode(device, &mut encoder, copies, staging);
-        queue.submit([encoder.finish()]);
+        queue.submit([encoder.finish()])
     }
 
     /// The pass and its copies encoded into `encoder`, for the caller to

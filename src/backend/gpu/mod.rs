@@ -73,8 +73,9 @@ mod compute;
 mod device;
 mod geometry;
 
+pub use compute::WAIT_LIMIT;
 pub(crate) use compute::{
-    bind, layout_entry, read_back, storage_entry, workgroup_grid, ComputePass,
+    bind, layout_entry, read_back, storage_entry, workgroup_grid, ComputePass, Submitted,
 };
 pub use device::{adapters, AdapterPolicy};
 use device::{pick_adapter, record_device_errors};
@@ -215,6 +216,9 @@ pub struct GpuBackend {
     failed: FailureSlot,
     counters: RayCounters,
     timings: Mutex<GpuTimings>,
+    /// How long a readback waits before the GPU counts as hung
+    /// ([`WAIT_LIMIT`]).
+    wait_limit: Duration,
     /// The render pass's cache interpolation on this device.
     splat: CacheSplat,
 }
@@ -345,6 +349,7 @@ impl GpuBackend {
             failed,
             counters: RayCounters::default(),
             timings: Mutex::default(),
+            wait_limit: WAIT_LIMIT,
             splat,
         };
         backend.probe().map_err(setup)?;
@@ -406,6 +411,14 @@ impl GpuBackend {
 
     pub fn reset_timings(&self) {
         *self.timings.lock().unwrap_or_else(|e| e.into_inner()) = GpuTimings::default();
+    }
+
+    /// How long a readback of the rays or the cache splat waits for the
+    /// GPU before the backend fails ([`WAIT_LIMIT`] unless set): a device
+    /// or driver that hangs becomes an error that stops the render.
+    pub fn set_wait_limit(&mut self, limit: Duration) {
+        self.wait_limit = limit;
+        self.splat.set_wait_limit(limit);
     }
 
     fn add_timings(&self, f: impl FnOnce(&mut GpuTimings)) {
@@ -553,7 +566,7 @@ impl GpuBackend {
                 }),
             ],
         );
-        self.give_back_buffers(buffers);
+        self.give_back_buffers(buffers, &read);
         read?;
         self.counters.add_call(rays.len(), shadows.len());
         Ok(())
@@ -586,7 +599,7 @@ impl GpuBackend {
                 break;
             }
         }
-        self.give_back_buffers(pair);
+        self.give_back_buffers(pair, &traced);
         traced
     }
 
@@ -602,7 +615,14 @@ impl GpuBackend {
         })
     }
 
-    fn give_back_buffers(&self, pair: [RayBuffers; 2]) {
+    /// Returns `pair` to the pool after a call that `went` well. After an
+    /// error its staging buffer may still wait for a mapping that never
+    /// came (a wait past the limit): it is dropped, not handed to the next
+    /// call.
+    fn give_back_buffers<T>(&self, pair: [RayBuffers; 2], went: &Result<(), T>) {
+        if went.is_err() {
+            return;
+        }
         self.rays
             .lock()
             .unwrap_or_else(|e| e.into_inner())
@@ -624,14 +644,19 @@ impl GpuBackend {
         reads: &mut [StagedRead],
     ) -> Result<(), GpuError> {
         let start = Instant::now();
-        self.queue.submit([encoder.finish()]);
+        let index = self.queue.submit([encoder.finish()]);
         let mut dispatch = start.elapsed();
         let mut readback = Duration::ZERO;
         // The first read waits for the whole submission; the others find
         // their copies done.
         for (buffers, bytes, store) in reads.iter_mut() {
+            let submitted = Submitted {
+                index: index.clone(),
+                limit: self.wait_limit,
+            };
             let (waited, read) = read_back(
                 &self.device,
+                submitted,
                 &buffers.staging,
                 *bytes,
                 "results",
