@@ -659,6 +659,61 @@ fn job_with_other_settings_is_refused_unless_forced() {
     assert!(store.frames_done(done.id).unwrap().is_empty());
 }
 
+/// `method`'s spec for job `name`, its settings JSON as `render` writes it
+/// less the keys `without` (a job stored before those settings existed).
+fn spec_of(name: &str, method: &MethodSettings, without: &[&str]) -> JobSpec {
+    // Through the text, as `render` writes it: `to_value` widens an f32.
+    let text = serde_json::to_string(method).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let fields = json
+        .as_object_mut()
+        .and_then(|tagged| tagged.values_mut().next())
+        .and_then(|inner| inner.as_object_mut())
+        .unwrap();
+    for key in without {
+        assert!(fields.remove(*key).is_some(), "no setting {key}");
+    }
+    JobSpec {
+        method: method.name().into(),
+        settings: json.to_string(),
+        ..spec(name)
+    }
+}
+
+/// A job stored before a setting existed resumes under the value it ran
+/// with, the setting's serde default, and is refused, naming the setting,
+/// under another: `tcg` before its light rule ran the paper's rule (off),
+/// `trc` before kept paths traced them again (its frames are the same
+/// with them on, so on is the default it resumes with).
+#[test]
+fn a_job_stored_before_a_setting_existed_resumes_under_the_value_it_ran() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let tcg = |light_refresh| {
+        MethodSettings::Tcg(TcgSettings {
+            light_refresh,
+            ..TcgSettings::default()
+        })
+    };
+    let old = store
+        .begin_job(&spec_of("t", &tcg(false), &["light_refresh"]), false)
+        .unwrap();
+    let msg = err_text(store.begin_job(&spec_of("t", &tcg(true), &[]), false));
+    assert!(
+        msg.contains("light_refresh: stored false, given true"),
+        "{msg}"
+    );
+    let resumed = store.begin_job(&spec_of("t", &tcg(false), &[]), false);
+    assert_eq!(resumed.unwrap().id, old.id);
+
+    let trc = MethodSettings::Trc(TrcSettings::default());
+    let old = store
+        .begin_job(&spec_of("r", &trc, &["keep_paths"]), false)
+        .unwrap();
+    let resumed = store.begin_job(&spec_of("r", &trc, &[]), false);
+    assert_eq!(resumed.unwrap().id, old.id);
+}
+
 /// `ic` with few strata and one sample per pixel: fixtures and resumes
 /// that stay fast.
 fn small_ic() -> MethodSettings {

@@ -522,12 +522,14 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
 
 /// A job's method settings as a reader wants them: `the defaults`, or the
 /// settings that differ from the method's defaults as `path=value`
-/// (dotted into nested settings, e.g. `ic.accuracy=0.3`). The stored JSON
-/// as it is where it cannot be read so (an unknown method, a malformed
-/// value).
+/// (dotted into nested settings, e.g. `ic.accuracy=0.3`), read as this
+/// build reads them (a setting added since, at the value the job ran). The
+/// stored JSON as it is where it cannot be read so (an unknown method, a
+/// malformed value).
 fn settings_text(method: &str, stored: &str) -> String {
     use crate::method::settings::{method_settings, settings_json, untagged};
-    let (Ok(defaults), Ok(now)) = (method_settings(method, []), serde_json::from_str(stored))
+    let read_now = super::jobs::settings_as_read_now(stored);
+    let (Ok(defaults), Ok(now)) = (method_settings(method, []), serde_json::from_str(&read_now))
     else {
         return stored.to_string();
     };

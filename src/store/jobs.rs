@@ -4,6 +4,8 @@
 use super::schema::{JobSpec, JobValue};
 use super::v1;
 use super::{encode, keys, now_unix, Store, StoreError};
+use crate::render::MethodSettings;
+use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
 
 impl Store {
@@ -150,8 +152,9 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
         frame_end: _,
     } = spec;
     let mut d = Vec::new();
-    if !same_settings(&stored.settings, settings) {
-        d.push(settings_differences(&stored.settings, settings));
+    let stored_settings = settings_as_read_now(&stored.settings);
+    if !same_settings(&stored_settings, settings) {
+        d.push(settings_differences(&stored_settings, settings));
     }
     let mut check = |name: &str, same: bool, stored: String, given: String| {
         if !same {
@@ -207,6 +210,18 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
         same_pattern.to_string(),
     );
     d
+}
+
+/// A stored job's settings as this build reads and writes them. A setting
+/// added since the job was stored takes its serde default, which is what
+/// the job ran before the setting existed; so the job resumes when given
+/// that value, and is refused, naming the setting, when given another.
+/// Settings this build cannot read stay as stored.
+pub(crate) fn settings_as_read_now(stored: &str) -> Cow<'_, str> {
+    serde_json::from_str::<MethodSettings>(stored)
+        .ok()
+        .and_then(|m| serde_json::to_string(&m).ok())
+        .map_or(Cow::Borrowed(stored), Cow::Owned)
 }
 
 /// Settings are serde JSON: equal as JSON values (text that is not JSON,

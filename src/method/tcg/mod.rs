@@ -113,9 +113,12 @@ pub struct TcgSettings {
     pub light_refresh: bool,
 }
 
-/// [`TcgSettings::light_refresh`] for settings stored before it existed.
+/// [`TcgSettings::light_refresh`] for settings stored before it existed:
+/// off, the paper's rule, which such a job ran; so it resumes with the
+/// frames it would have made (given `--tcg-light-refresh off`), and is
+/// refused with the rule on.
 fn light_refresh_default() -> bool {
-    true
+    false
 }
 
 impl Default for TcgSettings {
