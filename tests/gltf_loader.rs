@@ -750,10 +750,25 @@ fn quantized_positions_need_their_extension() {
 /// by its own node (glTF §3.7.3.3), and follows that joint's animation.
 #[test]
 fn a_skinned_mesh_rides_its_first_joint() {
+    skinned_mesh_rides_its_first_joint(Vec3::ONE);
+}
+
+/// The same with a mirrored joint (a rig's left side): the joint and its
+/// inverse bind matrix mirror each other, so at the bind pose the mesh lies
+/// as the file put it, its winding (and so its front face) too.
+#[test]
+fn a_skinned_mesh_on_a_mirrored_joint_keeps_its_front_face() {
+    skinned_mesh_rides_its_first_joint(Vec3::new(-1.0, 1.0, 1.0));
+}
+
+/// The mesh's corners, in order, where the file put them, lifted by the
+/// joint's animation; the joint (rest pose at x = 1) scaled by `scale`.
+fn skinned_mesh_rides_its_first_joint(scale: Vec3) {
     let dir = tempfile::tempdir().unwrap();
     let mut bin = good_bin().unwrap();
-    // The joint's inverse bind matrix: the joint's rest pose is at x = 1.
-    let inverse_bind = Mat4::from_translation(Vec3::new(-1.0, 0.0, 0.0));
+    // The joint's inverse bind matrix: the inverse of its rest pose.
+    let rest = Mat4::from_scale_rotation_translation(scale, Quat::IDENTITY, Vec3::X);
+    let inverse_bind = rest.inverse();
     let times = [0.0f32, 1.0];
     let joint_at = [[1.0f32, 0.0, 0.0], [1.0, 2.0, 0.0]];
     let floats = inverse_bind.to_cols_array().into_iter().chain(times);
@@ -771,7 +786,8 @@ fn a_skinned_mesh_rides_its_first_joint() {
             d["nodes"]
                 .as_array_mut()
                 .unwrap()
-                .push(json!({"name": "joint", "translation": [1.0, 0.0, 0.0]}));
+                .push(json!({"name": "joint", "translation": [1.0, 0.0, 0.0],
+                             "scale": scale.to_array()}));
             d["scenes"][0]["nodes"] = json!([0, 1, 2]);
             d["skins"] = json!([{"joints": [2], "inverseBindMatrices": 2}]);
             let views = d["bufferViews"].as_array_mut().unwrap();

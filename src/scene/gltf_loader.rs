@@ -821,7 +821,8 @@ fn build_objects(
 /// joint's space by the joint's inverse bind matrix, so that at the bind
 /// pose they lie where the file put them, and the mesh then follows the
 /// joint's animation. Returns that joint's node (`None`: the joint is not
-/// in the scene, and the mesh stays on its own node).
+/// in the scene, and the mesh stays on its own node). A mirrored joint
+/// keeps the mesh's front faces.
 fn rigid_skin(
     skin: &gltf::Skin,
     hierarchy: &Hierarchy,
@@ -851,6 +852,14 @@ fn rigid_skin(
     }
     for n in &mut mesh.normals {
         *n = (normals * *n).normalize_or_zero();
+    }
+    if inverse_bind.determinant() < 0.0 {
+        // A mirrored joint: the scene reverses the winding of what its
+        // mirroring transform carries, and the joint's inverse bind matrix
+        // mirrors back, so the two turn the triangles as the file put them.
+        for tri in &mut mesh.triangles {
+            tri.swap(1, 2);
+        }
     }
     Ok(Some(node))
 }
