@@ -18,7 +18,7 @@ pub(crate) fn workgroup_grid(items: u32, size: u32, max_per_dim: u32) -> (u32, u
 }
 
 /// How long a readback waits for its submission before the GPU counts as
-/// hung ([`Submitted::limit`]). No dispatch of this backend comes near it:
+/// hung (each readback's own limit starts at this value). No dispatch of this backend comes near it:
 /// a chunk of 4 Mi rays takes milliseconds on a GPU and seconds on
 /// lavapipe, even behind the other threads' submissions queued before it.
 /// It turns a device or driver that never answers into the backend's
