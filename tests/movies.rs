@@ -16,6 +16,8 @@ use radcache::method::movies::{MoviesSettings, TextureMovies};
 use radcache::method::{FrameStats, Method};
 use radcache::render::Renderer;
 use radcache::scene::Scene;
+use radcache::scene::{Channel, Interpolation, Property};
+use std::f32::consts::{FRAC_PI_2, PI};
 
 fn renderer(scene: Scene, size: u32) -> Renderer {
     common::cpu_renderer(
@@ -140,6 +142,39 @@ fn a_still_scene_traces_only_camera_rays_after_its_first_frame() {
     }
 }
 
+/// Renders frames `frames` of `scene` with one `movies` instance kept
+/// across them and, for each frame after the first, with a fresh instance
+/// opening every movie at that frame; asserts the two give the same
+/// pixels. Returns, per frame after the first, the kept instance's
+/// statistics and rays and the fresh one's rays.
+fn kept_against_fresh(
+    scene: impl Fn() -> Scene,
+    size: u32,
+    frames: std::ops::Range<u32>,
+) -> Vec<(FrameStats, u64, u64)> {
+    let mut kept = TextureMovies::new(MoviesSettings::default());
+    let mut r = renderer(scene(), size);
+    let first = frames.start;
+    let mut out = Vec::new();
+    for frame in frames {
+        let (film, stats, rays) = render(&mut r, &mut kept, frame);
+        if frame == first {
+            continue;
+        }
+        let mut fresh = TextureMovies::new(MoviesSettings::default());
+        let mut r2 = renderer(scene(), size);
+        let (fresh_film, _, fresh_rays) = render(&mut r2, &mut fresh, frame);
+        assert!(
+            film.pixels == fresh_film.pixels,
+            "frame {frame}: kept and fresh movies differ (mean {} against {})",
+            film.mean(),
+            fresh_film.mean()
+        );
+        out.push((stats, rays, fresh_rays));
+    }
+    out
+}
+
 /// A movie kept since earlier frames (static shadows found when it
 /// opened, links of the global pass kept) gives exactly the frame that a
 /// fresh instance, opening every movie at that frame, gives: so a render
@@ -147,33 +182,62 @@ fn a_still_scene_traces_only_camera_rays_after_its_first_frame() {
 /// And keeping them saves most of the shadow rays.
 #[test]
 fn kept_movies_equal_movies_opened_at_the_frame() {
-    let size = 24;
-    let fps = 24.0;
     let k = 3;
-    let scene = || jumping_block_room(k, fps);
-    let mut kept = TextureMovies::new(MoviesSettings::default());
-    let mut r = renderer(scene(), size);
-    let mut kept_rays = 0;
-    for frame in 0..6 {
-        let (film, stats, rays) = render(&mut r, &mut kept, frame);
-        kept_rays = rays;
-        if frame == 0 {
-            continue;
-        }
+    let frames = kept_against_fresh(|| jumping_block_room(k, 24.0), 24, 0..6);
+    for (frame, (stats, rays, fresh_rays)) in (1..).zip(&frames) {
         assert!(stats.records_reused > 0, "frame {frame}: no movie kept");
-        let mut fresh = TextureMovies::new(MoviesSettings::default());
-        let mut r2 = renderer(scene(), size);
-        let (fresh_film, _, fresh_rays) = render(&mut r2, &mut fresh, frame);
         assert!(
-            film.pixels == fresh_film.pixels,
-            "frame {frame}: kept and fresh movies differ"
-        );
-        assert!(
-            rays * 2 < fresh_rays,
+            rays * 2 < *fresh_rays,
             "frame {frame}: {rays} rays kept against {fresh_rays} fresh"
         );
     }
-    assert!(kept_rays > 0);
+    assert!(frames.last().is_some_and(|f| f.1 > 0));
+}
+
+/// The same under a one-sided panel light that turns over: at frame 0 it
+/// faces the ceiling, so only the ceiling is lit by it (the rest of the
+/// room by the ceiling); over the next frames it turns to face the floor. A point's samples on a moving
+/// light are drawn again each frame, also those its back face stopped
+/// when the movie opened (kept movies stayed dark where fresh ones were
+/// lit).
+#[test]
+fn kept_movies_equal_fresh_ones_under_a_light_that_turns_to_face_them() {
+    let fps = 24.0;
+    let scene = || {
+        let mut s = lit_room(None, fps);
+        // The panel about its own centre, on node 1.
+        let mut panel = radcache::scene::Mesh::default();
+        common::push_quad(
+            &mut panel,
+            Vec3::new(-0.25, 0.0, -0.25),
+            Vec3::X * 0.5,
+            Vec3::Z * 0.5,
+            1,
+        );
+        s.objects[1].mesh = panel;
+        s.nodes[1].rest.translation = Vec3::new(0.0, 1.9, 0.0);
+        let turn = |a: f32| glam::Quat::from_rotation_x(a).into();
+        s.animation.channels.push(Channel {
+            node: 1,
+            property: Property::Rotation,
+            interpolation: Interpolation::Linear,
+            times: vec![0.0, 2.0 / fps, 4.0 / fps],
+            values: vec![turn(PI), turn(FRAC_PI_2), turn(0.0)],
+        });
+        s
+    };
+    let frames = kept_against_fresh(scene, 16, 0..5);
+    let mut r = renderer(scene(), 16);
+    let mut movies = TextureMovies::new(MoviesSettings::default());
+    let (dark, _, _) = render(&mut r, &mut movies, 0);
+    let (lit, _, _) = render(&mut r, &mut movies, 4);
+    assert!(
+        lit.mean() > 2.0 * dark.mean(),
+        "the panel does not turn to light the room: {} then {}",
+        dark.mean(),
+        lit.mean()
+    );
+    assert_eq!(frames.len(), 4);
 }
 
 /// Ghosts (the temporal methods' failure, issue 5): a red block jumps out

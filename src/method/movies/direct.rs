@@ -140,23 +140,37 @@ impl<'a> PointSampler<'a> {
         }
     }
 
-    /// `(contribution to E before visibility, shadow segment, light)`.
-    fn sample(&mut self, ctx: &FrameContext, s: u32) -> Option<(Vec3, Ray, LightSource)> {
+    /// Sample `s`: the light it picks, and its contribution to E (before
+    /// visibility) and shadow segment where that light can send light to
+    /// the point in this frame.
+    fn sample(&mut self, ctx: &FrameContext, s: u32) -> Option<Drawn> {
         let point = self.point;
         let u = self
             .layout
             .sample(s, Rng::new(key(self.seed, point.item, s)).next_2d());
         let choice = ctx.lights.choose(u);
         let source = ctx.lights.source_of(choice.pick)?;
-        let ls = self.lights.sample(choice)?;
-        let cos = point.n.dot(ls.wi);
-        // Written so that a NaN (a degenerate triangle's normal) fails too.
-        if !(cos > 0.0 && point.ng.dot(ls.wi) > 0.0) {
-            return None;
-        }
-        let shadow = Ray::segment(offset_origin(point.p, point.ng, ls.wi), ls.position);
-        Some((ls.radiance * (cos / ls.pdf), shadow, source))
+        let lit = self.lights.sample(choice).and_then(|ls| {
+            let cos = point.n.dot(ls.wi);
+            // Written so that a NaN (a degenerate triangle's normal) fails too.
+            (cos > 0.0 && point.ng.dot(ls.wi) > 0.0).then(|| {
+                let shadow = Ray::segment(offset_origin(point.p, point.ng, ls.wi), ls.position);
+                (ls.radiance * (cos / ls.pdf), shadow)
+            })
+        });
+        Some(Drawn { source, lit })
     }
+}
+
+/// A drawn light sample.
+struct Drawn {
+    source: LightSource,
+    /// `(contribution to E before visibility, shadow segment)`; `None`
+    /// where the light cannot reach the point in this frame (its back
+    /// face, outside its cone). A light that moves may reach it in a later
+    /// frame, so the sample is still one of the point's samples on a
+    /// moving light.
+    lit: Option<(Vec3, Ray)>,
 }
 
 fn key(seed: u64, item: u64, sample: u32) -> SampleKey {
@@ -278,7 +292,7 @@ fn moving_points(
     for (i, point) in points.iter().enumerate() {
         let mut sampler = PointSampler::new(ctx, point, samples);
         for s in 0..samples {
-            if let Some((c, ray, _)) = sampler.sample(ctx, s) {
+            if let Some((c, ray)) = sampler.sample(ctx, s).and_then(|d| d.lit) {
                 pending.push(ray, i * per + s as usize, c);
             }
         }
@@ -330,7 +344,7 @@ fn kept_points(
         if kept_shadows.moving != 0 {
             let mut sampler = PointSampler::new(ctx, point, samples);
             for s in (0..samples).filter(|s| kept_shadows.moving & (1 << s) != 0) {
-                if let Some((c, ray, _)) = sampler.sample(ctx, s) {
+                if let Some((c, ray)) = sampler.sample(ctx, s).and_then(|d| d.lit) {
                     pending.push(ray, i * per + s as usize, c);
                 }
             }
@@ -362,15 +376,19 @@ fn first_static_points(
     for (i, point) in points.iter().enumerate() {
         let mut sampler = PointSampler::new(ctx, point, samples);
         for s in 0..samples {
-            let Some((c, ray, source)) = sampler.sample(ctx, s) else {
+            let Some(drawn) = sampler.sample(ctx, s) else {
                 continue;
             };
             let slot = i * per + s as usize;
-            if blockers.is_static(source) {
-                probes.push((slot, c, ray));
-            } else {
+            if !blockers.is_static(drawn.source) {
+                // Drawn again every frame, also where the light cannot
+                // reach the point now: it may later.
                 found[i].moving |= 1 << s;
-                pending.push(ray, slot, c);
+                if let Some((c, ray)) = drawn.lit {
+                    pending.push(ray, slot, c);
+                }
+            } else if let Some((c, ray)) = drawn.lit {
+                probes.push((slot, c, ray));
             }
         }
     }
