@@ -148,6 +148,56 @@ fn an_unfinished_sled_snapshot_left_by_a_kill_does_not_lose_the_store() {
     assert!(!unfinished.exists());
 }
 
+/// A process killed in its first milliseconds on a new store leaves what
+/// sled had made by then: an empty `blobs/`, then `conf`, then an empty
+/// `db` (and maybe the store's sample log, still empty). Nothing was stored, so the next render makes the store there
+/// (it refused the directory as "not a radcache store" for good), and a
+/// command that only reads finds no store. With something in `blobs/`, or
+/// beside them, the directory is still refused untouched.
+#[test]
+fn a_store_whose_creation_was_cut_off_is_made_anew() {
+    let dir = tempfile::tempdir().unwrap();
+    let made = dir.path().join("made");
+    drop(Store::open(&made).unwrap());
+    let conf = std::fs::read(made.join("conf")).unwrap();
+    // Without a sample: sled writes `db`'s first bytes from a thread of its
+    // own, possibly after the log is made.
+    let log = std::fs::read(made.join("samples.log")).unwrap();
+    let states: [&[(&str, &[u8])]; 4] = [
+        &[],
+        &[("conf", &conf)],
+        &[("conf", &conf), ("db", b"")],
+        &[("conf", &conf), ("db", b""), ("samples.log", &log)],
+    ];
+    for (k, files) in states.iter().enumerate() {
+        let path = dir.path().join(format!("cut{k}"));
+        std::fs::create_dir_all(path.join("blobs")).unwrap();
+        for (name, bytes) in *files {
+            std::fs::write(path.join(name), bytes).unwrap();
+        }
+        let msg = err_text(Store::open_existing(&path));
+        assert!(msg.contains("no store here"), "state {k}: {msg}");
+        {
+            let store = Store::open(&path).expect("the store is made");
+            commit_frames(&store, "j", 0..2);
+        }
+        let store = Store::open_existing(&path).expect("the store reopens");
+        let id = store.job("j").unwrap().unwrap().id;
+        assert_eq!(store.frames_done(id).unwrap(), vec![0, 1], "state {k}");
+    }
+    // Not a cut-off creation: a file in `blobs/`, a file of someone else's.
+    for (k, extra) in ["blobs/1", "notes.txt"].into_iter().enumerate() {
+        let path = dir.path().join(format!("other{k}"));
+        std::fs::create_dir_all(path.join("blobs")).unwrap();
+        std::fs::write(path.join("conf"), &conf).unwrap();
+        std::fs::write(path.join(extra), b"mine").unwrap();
+        let msg = err_text(Store::open(&path));
+        assert!(msg.contains("not a radcache store"), "{extra}: {msg}");
+        assert_eq!(std::fs::read(path.join(extra)).unwrap(), b"mine");
+        assert!(!path.join("db").exists(), "{extra}: sled made a database");
+    }
+}
+
 #[test]
 fn corrupt_value_is_an_error_naming_tree_and_key() {
     let dir = tempfile::tempdir().unwrap();
@@ -557,7 +607,8 @@ fn damaged_or_foreign_directories_are_refused_untouched() {
     let msg = err_text(Store::open(&foreign));
     assert!(msg.contains("not a radcache store"), "{msg}");
     assert_eq!(snapshot(&foreign).len(), 1);
-    // A store whose `db` file was truncated to nothing.
+    // A store whose `db` file was truncated to nothing (its sample log
+    // holds samples: not a store whose creation was cut off).
     let truncated = dir.path().join("truncated");
     {
         let store = Store::open(&truncated).unwrap();

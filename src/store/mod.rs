@@ -487,7 +487,8 @@ fn open_sample_log(path: &Path, meta: &sled::Tree) -> Result<(u64, SampleLog), S
 /// Checks the directory before sled touches it. Returns whether a store
 /// already existed. A directory that has files but not sled's `conf` and
 /// `db` is refused, so that sled never "repairs" something that is not its
-/// own.
+/// own, unless they are the beginnings of a store whose creation was cut
+/// off ([`is_unfinished_creation`]): that one is made as a new store.
 fn check_directory(path: &Path, create: bool) -> Result<bool, StoreError> {
     let not_a_store = |detail: String| StoreError::NotAStore {
         path: path.to_owned(),
@@ -511,7 +512,7 @@ fn check_directory(path: &Path, create: bool) -> Result<bool, StoreError> {
                 .filter_map(|e| e.ok())
                 .map(|e| e.file_name().to_string_lossy().into_owned())
                 .collect();
-            if entries.is_empty() {
+            if entries.is_empty() || is_unfinished_creation(path, &entries) {
                 return if create {
                     Ok(false)
                 } else {
@@ -537,6 +538,28 @@ fn check_directory(path: &Path, create: bool) -> Result<bool, StoreError> {
             Ok(true)
         }
     }
+}
+
+/// Whether the directory holds only what a `radcache` killed while it
+/// created the store leaves: sled makes `blobs/`, then writes `conf`, then
+/// creates an empty `db`, whose first bytes it writes from a background
+/// thread, possibly after the store has made its (empty) sample log. An
+/// empty `blobs/`, at most `conf`, an empty `db` and a sample log without
+/// a sample stored nothing: it is a store still to be made (and sled
+/// makes it, under its lock, from what is there). A store whose `db` was
+/// emptied after it stored samples is refused.
+fn is_unfinished_creation(path: &Path, entries: &[String]) -> bool {
+    let len = |name: &str| std::fs::metadata(path.join(name)).map(|m| (m.is_file(), m.len()));
+    let blobs_empty = std::fs::read_dir(path.join("blobs")).is_ok_and(|mut d| d.next().is_none());
+    blobs_empty
+        && entries.iter().all(|name| match name.as_str() {
+            "blobs" | "conf" => true,
+            "db" => len(name).is_ok_and(|l| l == (true, 0)),
+            _ if samples::parse_file_name(name).is_some() => {
+                len(name).is_ok_and(|(file, l)| file && l <= samples::MAGIC.len() as u64)
+            }
+            _ => false,
+        })
 }
 
 /// How long to retry a lock held by someone else: sled releases its lock
