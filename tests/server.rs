@@ -1506,3 +1506,101 @@ fn a_cancel_or_a_sigterm_abandons_a_long_frame_at_once() {
     );
     assert_eq!(again["frames_done"], 0);
 }
+
+/// Bytes read from `s` until the server closes it, and how long that took;
+/// panics if it stays open past `limit`.
+fn read_until_closed(s: &mut std::net::TcpStream, limit: Duration) -> (Vec<u8>, Duration) {
+    use std::io::Read;
+    s.set_read_timeout(Some(limit)).unwrap();
+    let started = Instant::now();
+    let mut got = Vec::new();
+    match s.read_to_end(&mut got) {
+        Ok(_) => {}
+        // A reset also closes it.
+        Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => {}
+        Err(e) => panic!(
+            "still open after {:?} ({e}); read {got:?}",
+            started.elapsed()
+        ),
+    }
+    (got, started.elapsed())
+}
+
+/// A client that never finishes its request's head, one that never sends
+/// the body it announced, and one that stays idle on a kept-alive
+/// connection are each let go after `--client-timeout` (they held a
+/// connection, and with enough of them the process's file descriptors,
+/// for ever); the server goes on serving.
+#[test]
+fn clients_too_slow_to_send_their_request_are_let_go() {
+    use std::io::Write;
+    let (dir, scenes) = workspace();
+    let server = start_with(&dir.path().join("db"), &scenes, &["--client-timeout", "1"]);
+    let connect = || std::net::TcpStream::connect(&server.addr).unwrap();
+    let limit = Duration::from_secs(20);
+    let mut head = connect();
+    write!(head, "GET /api/jobs HTTP/1.1\r\nHost: x\r\n").unwrap();
+    let mut body = connect();
+    write!(
+        body,
+        "POST /api/jobs HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n{{\"scene\""
+    )
+    .unwrap();
+    let mut idle = connect();
+    write!(idle, "GET /api/jobs HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    let (_, waited) = read_until_closed(&mut head, limit);
+    assert!(waited < Duration::from_secs(10), "head: {waited:?}");
+    let (answer, waited) = read_until_closed(&mut body, limit);
+    let answer = String::from_utf8_lossy(&answer);
+    assert!(answer.starts_with("HTTP/1.1 408"), "{answer}");
+    assert!(answer.contains("not sent within 1 s"), "{answer}");
+    assert!(waited < Duration::from_secs(10), "body: {waited:?}");
+    let (answer, _) = read_until_closed(&mut idle, limit);
+    assert!(
+        String::from_utf8_lossy(&answer).starts_with("HTTP/1.1 200"),
+        "the idle client's request was answered"
+    );
+    let (status, _) = http(&server, "GET", "/api/jobs", "");
+    assert_eq!(status, 200);
+}
+
+/// SIGTERM while a client holds a request it never finishes (here with a
+/// client timeout of an hour): the server stops within its grace period
+/// of 5 s, and the store opens again at once (it stayed locked by a
+/// server that waited for the client).
+#[test]
+fn a_shutdown_does_not_wait_for_a_client_that_never_finishes() {
+    use std::io::Write;
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let mut server = start_with(&db, &scenes, &["--client-timeout", "3600"]);
+    let mut stuck = std::net::TcpStream::connect(&server.addr).unwrap();
+    write!(
+        stuck,
+        "POST /api/jobs HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n{{"
+    )
+    .unwrap();
+    let mut half = std::net::TcpStream::connect(&server.addr).unwrap();
+    write!(half, "GET /api/jobs HTTP/1.1\r\n").unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let pid = server.child.id().to_string();
+    assert!(Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let asked = Instant::now();
+    let exit = loop {
+        if let Some(exit) = server.child.try_wait().unwrap() {
+            break exit;
+        }
+        assert!(
+            asked.elapsed() < Duration::from_secs(20),
+            "the server did not stop within 20 s of SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(exit.success(), "{exit:?}");
+    assert!(radcache::store::Store::open_existing(&db).is_ok());
+    drop((stuck, half));
+}

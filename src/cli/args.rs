@@ -43,6 +43,23 @@ pub struct ServeArgs {
     /// the dashboard shows [default: the charts kept in web/charts].
     #[arg(long)]
     pub bench: Option<PathBuf>,
+    /// Seconds a client may take to send a request's head, and then its
+    /// body (a slower one is disconnected, or answered 408); an idle
+    /// kept-alive connection is closed after as long.
+    #[arg(long, default_value_t = 30.0, value_parser = client_timeout)]
+    pub client_timeout: f64,
+}
+
+/// `--client-timeout`: a number of seconds in [0.1, 86400].
+fn client_timeout(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number of seconds"))?;
+    if (0.1..=86_400.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} s is outside 0.1 s to 86400 s"))
+    }
 }
 
 /// Default store directory (DESIGN.md "The store"), used when `--job` is

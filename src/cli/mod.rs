@@ -174,6 +174,7 @@ fn run_serve(args: ServeArgs) -> Result<()> {
         backend: backend_choice(args.backend),
         out,
         bench: args.bench,
+        client_timeout: std::time::Duration::from_secs_f64(args.client_timeout),
     })
 }
 

@@ -33,6 +33,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 use tokio::sync::{watch, Notify};
 
 /// Largest accepted request body (a job request is a few hundred bytes).
@@ -52,6 +53,9 @@ pub struct ServeOptions {
     /// A `radcache bench --out` directory whose charts the dashboard shows
     /// instead of the ones embedded from `web/charts`.
     pub bench: Option<PathBuf>,
+    /// How long a client may take to send a request's head, and then its
+    /// body; an idle kept-alive connection is closed after it too.
+    pub client_timeout: Duration,
 }
 
 /// A job's lifecycle state.
@@ -378,7 +382,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/metrics", get(frames::metrics))
         .fallback(|| async { ApiError::not_found("no such route".into()) })
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
-        .layer(middleware::from_fn(refuse_long_bodies))
+        .layer(middleware::from_fn_with_state(state.clone(), read_bodies))
         .layer(middleware::from_fn_with_state(state.clone(), check_token))
         .layer(middleware::map_response(json_errors))
         .with_state(state)
@@ -462,24 +466,48 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
     next.run(req).await
 }
 
-/// A body announced (`Content-Length`) over [`MAX_BODY_BYTES`] is refused
-/// at once with 413, before it is read: the limit on the body alone would
-/// wait for bytes the client may never send.
-async fn refuse_long_bodies(req: Request, next: Next) -> Response {
+/// A request's body, read whole before the handler runs: one announced
+/// (`Content-Length`) over [`MAX_BODY_BYTES`] is refused at once with 413,
+/// before it is read (the limit on the body alone would wait for bytes the
+/// client may never send), and one not sent within
+/// [`ServeOptions::client_timeout`] gets 408.
+async fn read_bodies(State(state): State<Arc<AppState>>, req: Request, next: Next) -> Response {
     let announced = req
         .headers()
         .get(axum::http::header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.parse::<u64>().ok());
-    match announced {
-        Some(n) if n > MAX_BODY_BYTES as u64 => ApiError::new(
+    if let Some(n) = announced.filter(|&n| n > MAX_BODY_BYTES as u64) {
+        return ApiError::new(
             axum::http::StatusCode::PAYLOAD_TOO_LARGE,
             "payload too large",
             format!("the body has {n} bytes; at most {MAX_BODY_BYTES}"),
         )
-        .into_response(),
-        _ => next.run(req).await,
+        .into_response();
     }
+    let (parts, body) = req.into_parts();
+    let limit = state.options.client_timeout;
+    let body = match tokio::time::timeout(limit, axum::body::to_bytes(body, MAX_BODY_BYTES)).await {
+        Ok(Ok(bytes)) => bytes,
+        Ok(Err(e)) => {
+            return ApiError::new(
+                axum::http::StatusCode::PAYLOAD_TOO_LARGE,
+                "payload too large",
+                format!("the body could not be read within {MAX_BODY_BYTES} bytes: {e}"),
+            )
+            .into_response()
+        }
+        Err(_) => {
+            return ApiError::new(
+                axum::http::StatusCode::REQUEST_TIMEOUT,
+                "request timeout",
+                format!("the body was not sent within {} s", limit.as_secs_f64()),
+            )
+            .into_response()
+        }
+    };
+    next.run(Request::from_parts(parts, axum::body::Body::from(body)))
+        .await
 }
 
 /// `s` with every byte outside RFC 3986's unreserved set as `%XX`.
@@ -553,22 +581,88 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         use std::io::Write;
         std::io::stdout().flush().ok();
         let worker = tokio::spawn(worker::run(state.clone()));
-        let app = router(state.clone());
-        let stopping = state.clone();
-        axum::serve(listener, app)
-            .with_graceful_shutdown(async move {
-                shutdown_signal().await;
-                stopping.shutdown.store(true, Ordering::SeqCst);
-                stopping.abandon_frame(None);
-                stopping.wake.notify_one();
-                stopping.notify_all();
-            })
-            .await
-            .context("server error")?;
+        serve_connections(listener, router(state.clone()), &state).await;
         worker.await.context("worker panicked")?;
         state.store.flush()?;
         Ok(())
     })
+}
+
+/// The most connections served at once; past it, new ones wait in the
+/// listen queue until one closes (a client opening connections without
+/// end would otherwise run the process out of file descriptors).
+const MAX_CONNECTIONS: usize = 512;
+
+/// How long a shutdown waits for the requests under way to finish before
+/// it closes their connections (the event and frame streams end at once;
+/// this bounds a client that reads its answer slowly).
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
+
+/// Serves `app` on `listener` until Ctrl-C or SIGTERM, each connection
+/// under [`ServeOptions::client_timeout`] (hyper's limit on reading a
+/// request's head, which also closes an idle kept-alive connection), then
+/// stops the worker and closes the connections within
+/// [`SHUTDOWN_GRACE`].
+async fn serve_connections(listener: tokio::net::TcpListener, app: Router, state: &AppState) {
+    let graceful = hyper_util::server::graceful::GracefulShutdown::new();
+    let slots = Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS));
+    let signal = shutdown_signal();
+    tokio::pin!(signal);
+    loop {
+        let accepted = tokio::select! {
+            accepted = accept(&listener, &slots) => accepted,
+            _ = &mut signal => break,
+        };
+        let (stream, slot) = accepted;
+        let service = hyper_util::service::TowerToHyperService::new(app.clone());
+        let mut http = hyper::server::conn::http1::Builder::new();
+        http.timer(hyper_util::rt::TokioTimer::new())
+            .header_read_timeout(state.options.client_timeout);
+        let connection =
+            graceful.watch(http.serve_connection(hyper_util::rt::TokioIo::new(stream), service));
+        tokio::spawn(async move {
+            // A client that went away or sent garbage: nothing to report.
+            let _ = connection.await;
+            drop(slot);
+        });
+    }
+    state.shutdown.store(true, Ordering::SeqCst);
+    state.abandon_frame(None);
+    state.wake.notify_one();
+    state.notify_all();
+    if tokio::time::timeout(SHUTDOWN_GRACE, graceful.shutdown())
+        .await
+        .is_err()
+    {
+        eprintln!(
+            "closing the connections still open {} s after the shutdown began",
+            SHUTDOWN_GRACE.as_secs()
+        );
+    }
+}
+
+/// The next connection, once fewer than [`MAX_CONNECTIONS`] are open, with
+/// its slot. Accept errors (out of file descriptors, a connection reset
+/// before it was accepted) are waited out, as `axum::serve` does.
+async fn accept(
+    listener: &tokio::net::TcpListener,
+    slots: &Arc<tokio::sync::Semaphore>,
+) -> (tokio::net::TcpStream, tokio::sync::OwnedSemaphorePermit) {
+    let slot = slots
+        .clone()
+        .acquire_owned()
+        .await
+        .expect("the connection semaphore is never closed");
+    loop {
+        match listener.accept().await {
+            Ok((stream, _)) => {
+                // Frames and events are small writes that should leave at once.
+                stream.set_nodelay(true).ok();
+                return (stream, slot);
+            }
+            Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
+        }
+    }
 }
 
 async fn shutdown_signal() {
