@@ -6,6 +6,7 @@ use glam::{Mat4, Quat, Vec3};
 use radcache::scene::Scene;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
+use std::process::Command;
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -1193,4 +1194,73 @@ fn a_scene_path_that_is_no_regular_file_is_refused() {
     let link = dir.path().join("zero.glb");
     std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
     assert_error(&link, "not a regular file");
+}
+
+/// `Scene::load(path)` on a thread of its own, waited for at most 20 s: a
+/// loader that reads a device or a FIFO to its end fails the test instead
+/// of hanging it.
+fn load_within_20s(path: &Path) -> Result<Scene, String> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let owned = path.to_owned();
+    std::thread::spawn(move || {
+        let _ = tx.send(Scene::load(&owned).map_err(|e| e.to_string()));
+    });
+    rx.recv_timeout(std::time::Duration::from_secs(20))
+        .unwrap_or_else(|_| panic!("loading {} did not end within 20 s", path.display()))
+}
+
+/// A buffer URI is read as the file it names with its `%XX` escapes
+/// decoded and a `file:` scheme taken off — and, like the scene path, only
+/// if that is a regular file: `file:///dev/zero`, `%2Fdev%2Fzero` and a
+/// FIFO whose name is escaped slipped past the check (the crate read them
+/// for ever, or blocked). Other schemes are refused by name; a buffer far
+/// longer than declared is read only as far as declared.
+#[test]
+fn buffer_uris_are_decoded_and_read_only_from_regular_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let with_uri = |name: &str, uri: &str| {
+        let uri = uri.to_string();
+        write_case(
+            dir.path(),
+            name,
+            move |doc| doc["buffers"][0]["uri"] = json!(uri),
+            None,
+        )
+    };
+    let fifo = dir.path().join("a fifo.bin");
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    for (name, uri) in [
+        ("file_zero", "file:///dev/zero"),
+        ("escaped_zero", "%2Fdev%2Fzero"),
+        ("escaped_fifo", "a%20fifo.bin"),
+    ] {
+        let err = load_within_20s(&with_uri(name, uri)).unwrap_err();
+        assert!(
+            err.contains("not a regular file") && err.contains("buffer 0"),
+            "{uri}: {err}"
+        );
+    }
+    let err = load_within_20s(&with_uri("web", "https://example.com/t.bin")).unwrap_err();
+    assert!(err.contains("'https:' URIs"), "{err}");
+    let err = load_within_20s(&with_uri("missing", "no%20such.bin")).unwrap_err();
+    assert!(
+        err.contains("missing buffer file") && err.contains("no such.bin"),
+        "{err}"
+    );
+    // Escaped names, a file: URI relative to the scene, and a buffer file
+    // with a gigabyte's worth of zeros after its 48 declared bytes (sparse)
+    // load, and read what they name.
+    std::fs::write(dir.path().join("my mesh.bin"), good_bin().unwrap()).unwrap();
+    let long = std::fs::File::create(dir.path().join("long.bin")).unwrap();
+    std::io::Write::write_all(&mut &long, &good_bin().unwrap()).unwrap();
+    long.set_len(1 << 30).unwrap();
+    for (name, uri) in [
+        ("escaped", "my%20mesh.bin"),
+        ("file_relative", "file:my%20mesh.bin"),
+        ("long", "long.bin"),
+    ] {
+        let scene = load_within_20s(&with_uri(name, uri)).unwrap_or_else(|e| panic!("{uri}: {e}"));
+        assert_eq!(scene.objects[0].mesh.triangles, [[0, 1, 2]], "{uri}");
+    }
 }

@@ -6,6 +6,7 @@
 use super::{FrameSettings, MethodSettings, Renderer, SceneSource};
 use crate::film::{self, Film};
 use crate::method::{FrameRecords, FrameStats};
+use crate::scene::gltf_loader;
 use crate::store::{
     self, schema::FrameSourcesValue, schema::JobValue, FrameCommit, JobSpec, RecordCommit,
     StateCommit, Store,
@@ -31,8 +32,8 @@ pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
     let hash = match source {
         SceneSource::Builtin(_) => store::content_hash(source.to_string().as_bytes()),
         SceneSource::File(path) => {
-            let bytes = std::fs::read(path)
-                .with_context(|| format!("cannot read scene {}", path.display()))?;
+            let bytes = gltf_loader::read_regular_file(path, None)
+                .map_err(|e| anyhow::anyhow!("cannot read scene {}: {e}", path.display()))?;
             let main = store::content_hash(&bytes);
             let uris = external_uris(&bytes);
             if uris.is_empty() {
@@ -41,14 +42,12 @@ pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
                 let dir = path.parent().unwrap_or(Path::new("."));
                 let mut all = Vec::new();
                 for uri in uris {
-                    let file = dir.join(percent_decode(&uri));
-                    let content = std::fs::read(&file).with_context(|| {
-                        format!(
-                            "cannot read {} (referenced by scene {})",
-                            file.display(),
-                            path.display()
-                        )
-                    })?;
+                    let cannot = |what: String| {
+                        anyhow::anyhow!("{what} (referenced by scene {})", path.display())
+                    };
+                    let file = gltf_loader::uri_file(dir, &uri).map_err(cannot)?;
+                    let content = gltf_loader::read_regular_file(&file, None)
+                        .map_err(|e| cannot(format!("cannot read {}: {e}", file.display())))?;
                     all.extend_from_slice(uri.as_bytes());
                     all.push(0);
                     all.extend_from_slice(&(content.len() as u64).to_le_bytes());
@@ -85,26 +84,6 @@ fn external_uris(bytes: &[u8]) -> Vec<String> {
         }
     }
     out
-}
-
-/// `%XX` escapes of a URI decoded (glTF URIs are RFC 3986).
-fn percent_decode(uri: &str) -> String {
-    let b = uri.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        if b[i] == b'%' && i + 2 < b.len() {
-            let hex = std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or("");
-            if let Ok(v) = u8::from_str_radix(hex, 16) {
-                out.push(v);
-                i += 3;
-                continue;
-            }
-        }
-        out.push(b[i]);
-        i += 1;
-    }
-    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// The job description of a render: compared with the stored job so that a

@@ -67,14 +67,82 @@ fn check_extension(path: &Path) -> Res<()> {
 }
 
 fn read_file(path: &Path) -> Res<Vec<u8>> {
-    // A FIFO or a device (a link to /dev/zero) would block or read forever.
-    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
-        return Err("not a regular file".into());
-    }
-    std::fs::read(path).map_err(|e| match e.kind() {
+    read_regular_file(path, None)
+}
+
+/// The bytes of `path`, at most `limit` of them: a FIFO or a device (a
+/// link to `/dev/zero`) is refused, as it would block or never end, and a
+/// limit keeps a file far longer than needed out of memory.
+pub fn read_regular_file(path: &Path, limit: Option<u64>) -> Res<Vec<u8>> {
+    use std::io::Read;
+    let cannot = |e: std::io::Error| match e.kind() {
         std::io::ErrorKind::NotFound => "file not found".to_string(),
         _ => format!("cannot read file: {e}"),
-    })
+    };
+    // Asked of the path before it is opened (opening a FIFO blocks), and
+    // of the file opened (the path may have changed between).
+    let regular = |m: std::fs::Metadata| {
+        if m.is_file() {
+            Ok(())
+        } else {
+            Err("not a regular file".to_string())
+        }
+    };
+    regular(std::fs::metadata(path).map_err(cannot)?)?;
+    let file = std::fs::File::open(path).map_err(cannot)?;
+    regular(file.metadata().map_err(cannot)?)?;
+    let mut bytes = Vec::new();
+    file.take(limit.unwrap_or(u64::MAX))
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot read file: {e}"))?;
+    Ok(bytes)
+}
+
+/// The file that a glTF `uri` other than a `data:` URI names, relative to
+/// the directory `base` of the file that holds it: `%XX` escapes decoded
+/// (glTF URIs are RFC 3986), a `file:` scheme allowed; other schemes (a
+/// `http:` URI) are refused, as nothing is fetched.
+pub fn uri_file(base: &Path, uri: &str) -> Res<std::path::PathBuf> {
+    let path = match uri.split_once(':') {
+        Some((scheme, rest)) if is_uri_scheme(scheme) => {
+            if !scheme.eq_ignore_ascii_case("file") {
+                return Err(format!(
+                    "URI '{uri}': only files are read, not '{scheme}:' URIs"
+                ));
+            }
+            rest.strip_prefix("//").unwrap_or(rest)
+        }
+        _ => uri,
+    };
+    let decoded = percent_decode(path)
+        .ok_or_else(|| format!("URI '{uri}': malformed %-escape or not UTF-8"))?;
+    Ok(base.join(decoded))
+}
+
+/// Whether `s` is a URI scheme (RFC 3986: a letter, then letters, digits,
+/// `+`, `-`, `.`), longer than one letter so that a Windows drive (`C:`)
+/// stays a path.
+fn is_uri_scheme(s: &str) -> bool {
+    let mut chars = s.chars();
+    s.len() > 1
+        && chars.next().is_some_and(|c| c.is_ascii_alphabetic())
+        && chars.all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
+}
+
+/// `%XX` escapes decoded; `None` for a malformed escape or bytes that are
+/// not UTF-8.
+fn percent_decode(s: &str) -> Option<String> {
+    let mut out = Vec::with_capacity(s.len());
+    let mut bytes = s.bytes();
+    while let Some(b) = bytes.next() {
+        if b == b'%' {
+            let hex = [bytes.next()?, bytes.next()?];
+            out.push(u8::from_str_radix(std::str::from_utf8(&hex).ok()?, 16).ok()?);
+        } else {
+            out.push(b);
+        }
+    }
+    String::from_utf8(out).ok()
 }
 
 thread_local! {
@@ -407,26 +475,32 @@ fn load_buffers(
     for buffer in document.buffers() {
         let i = buffer.index();
         let source = buffer.source();
-        if let gltf::buffer::Source::Uri(uri) = source {
-            // Check relative files first: the crate's I/O error does not say
-            // which file is missing.
-            if !uri.contains(':') && !uri.contains('%') {
-                let file = base.join(uri);
-                if !file.is_file() {
-                    return Err(format!(
-                        "missing buffer file '{}' (buffer {i})",
-                        file.display()
-                    ));
-                }
+        let data = match source {
+            // Read here, not by the crate: its errors do not name the file,
+            // and it reads whatever the URI names to its end (a device, a
+            // FIFO).
+            gltf::buffer::Source::Uri(uri) if !uri.starts_with("data:") => {
+                let file = uri_file(base, uri).map_err(|e| format!("buffer {i}: {e}"))?;
+                read_regular_file(&file, Some(buffer.length() as u64)).map_err(|e| {
+                    let e = if e == "file not found" {
+                        "missing buffer file".into()
+                    } else {
+                        e
+                    };
+                    format!("{e} '{}' (buffer {i})", file.display())
+                })?
             }
-        }
-        let data = gltf::buffer::Data::from_source_and_blob(source, Some(base), &mut blob)
-            .map_err(|e| match e {
-                gltf::Error::MissingBlob => {
-                    format!("buffer {i} refers to the GLB binary chunk, which is missing (truncated GLB?)")
-                }
-                e => format!("cannot load buffer {i}: {e}"),
-            })?;
+            _ => {
+                gltf::buffer::Data::from_source_and_blob(source, Some(base), &mut blob)
+                    .map_err(|e| match e {
+                        gltf::Error::MissingBlob => format!(
+                            "buffer {i} refers to the GLB binary chunk, which is missing (truncated GLB?)"
+                        ),
+                        e => format!("cannot load buffer {i}: {e}"),
+                    })?
+                    .0
+            }
+        };
         if data.len() < buffer.length() {
             return Err(format!(
                 "buffer {i} is truncated: it declares {} bytes but has {}",
@@ -434,7 +508,7 @@ fn load_buffers(
                 data.len()
             ));
         }
-        out.push(data.0);
+        out.push(data);
     }
     Ok(out)
 }
