@@ -311,10 +311,96 @@ fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()))
 }
 
+/// Removes from `dir` the temporary frame files (`.frame_NNNN.png.tmp-PID-N`,
+/// `.frame_NNNN.exr.restore-PID`) of processes that no longer run: a
+/// render killed while it wrote a frame leaves its temporary file, which
+/// nothing else would ever remove. Those of running processes (another
+/// render into the same folder) are left alone; where liveness cannot be
+/// asked (no `/proc`), every one is. Returns how many went.
+pub fn remove_stale_temporaries(dir: &Path) -> usize {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(pid) = name.to_str().and_then(temporary_owner) else {
+            continue;
+        };
+        let running = pid == std::process::id() || process_may_run(pid);
+        if !running && fs::remove_file(entry.path()).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// The process id in a temporary frame file's name ([`temp_path`]'s
+/// `.frame_NNNN.EXT.tmp-PID-N`, or `.frame_NNNN.exr.restore-PID` of a
+/// resumed job's restored files); `None` for any other name.
+fn temporary_owner(name: &str) -> Option<u32> {
+    let rest = name.strip_prefix(".frame_")?;
+    let (digits, rest) = rest.split_at_checked(4)?;
+    if !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    let pid = if let Some(tail) = rest
+        .strip_prefix(".png.tmp-")
+        .or_else(|| rest.strip_prefix(".exr.tmp-"))
+    {
+        let (pid, n) = tail.split_once('-')?;
+        n.parse::<u64>().ok()?;
+        pid
+    } else {
+        rest.strip_prefix(".exr.restore-")?
+    };
+    pid.parse().ok()
+}
+
+/// Whether process `pid` may be running: `false` only where `/proc` says
+/// it is not.
+fn process_may_run(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    !proc.join("self").exists() || proc.join(pid.to_string()).exists()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::sampling::mix64;
+
+    /// The temporary files of a process that no longer runs go; those of
+    /// this process, of a running one, and other files stay.
+    #[test]
+    fn stale_temporary_frame_files_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        // Beyond the kernel's largest pid (2^22): never running.
+        let gone = 4_194_304 + 17;
+        let me = std::process::id();
+        let stale = [
+            format!(".frame_0003.png.tmp-{gone}-0"),
+            format!(".frame_0003.exr.tmp-{gone}-12"),
+            format!(".frame_0010.exr.restore-{gone}"),
+        ];
+        let kept = [
+            format!(".frame_0004.png.tmp-{me}-1"),
+            ".frame_0005.png.tmp-1-0".to_string(), // init runs
+            format!("frame_0003.png.tmp-{gone}-0"),
+            format!(".frame_03.png.tmp-{gone}-0"),
+            format!(".frame_0003.png.tmp-{gone}"),
+            "frame_0003.exr".to_string(),
+        ];
+        for name in stale.iter().chain(&kept) {
+            fs::write(dir.path().join(name), b"x").unwrap();
+        }
+        assert_eq!(remove_stale_temporaries(dir.path()), stale.len());
+        for name in &stale {
+            assert!(!dir.path().join(name).exists(), "{name} stayed");
+        }
+        for name in &kept {
+            assert!(dir.path().join(name).exists(), "{name} went");
+        }
+    }
 
     fn reference(rel: &str) -> PathBuf {
         Path::new(env!("CARGO_MANIFEST_DIR"))

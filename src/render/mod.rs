@@ -660,6 +660,7 @@ pub fn render_job_to_dir_with(
     }
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create output directory {}", out_dir.display()))?;
+    film::remove_stale_temporaries(out_dir);
     let done = match job.as_deref() {
         Some(j) => resume(renderer, j, &frames, out_dir)?,
         None => BTreeSet::new(),
