@@ -1604,3 +1604,40 @@ fn a_shutdown_does_not_wait_for_a_client_that_never_finishes() {
     assert!(radcache::store::Store::open_existing(&db).is_ok());
     drop((stuck, half));
 }
+
+/// `/metrics`' store bytes hold the sample log's, most of a caching
+/// method's store (they were sled's database alone), and the log's own
+/// gauge is its file's length.
+#[test]
+fn metrics_count_the_sample_log_in_the_store_bytes() {
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let server = start(&db, &scenes);
+    let (status, body) = http(
+        &server,
+        "POST",
+        "/api/jobs",
+        r#"{"scene":"builtin:cube-in-box","method":"ic","frames":"0..1","size":"16x16","spp":1}"#,
+    );
+    assert_eq!(status, 201, "{}", String::from_utf8_lossy(&body));
+    let id = json(&body)["id"].as_str().unwrap().to_string();
+    wait_done(&server, &id);
+    let (status, metrics) = http(&server, "GET", "/metrics", "");
+    assert_eq!(status, 200);
+    let text = String::from_utf8(metrics).unwrap();
+    let gauge = |name: &str| -> u64 {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(&format!("{name} ")))
+            .unwrap_or_else(|| panic!("no {name}: {text}"));
+        line.rsplit_once(' ').unwrap().1.parse().unwrap()
+    };
+    let log = std::fs::metadata(db.join("samples.log")).unwrap().len();
+    let database = std::fs::metadata(db.join("db")).unwrap().len();
+    assert!(
+        log > database,
+        "the job's samples: {log} bytes, database {database}"
+    );
+    assert_eq!(gauge("radcache_store_sample_log_bytes"), log);
+    assert!(gauge("radcache_store_bytes") > log, "{text}");
+}

@@ -140,10 +140,16 @@ pub async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         "# HELP radcache_render_seconds_total Seconds spent rendering frames.\n# TYPE radcache_render_seconds_total counter\nradcache_render_seconds_total {}",
         state.render_micros.load(Ordering::Relaxed) as f64 / 1e6
     );
-    let bytes = state.store.size_on_disk().unwrap_or(0);
+    let database = state.store.size_on_disk().unwrap_or(0);
+    let log = state.store.sample_log_bytes();
     let _ = writeln!(
         out,
-        "# HELP radcache_store_bytes Bytes of the store on disk.\n# TYPE radcache_store_bytes gauge\nradcache_store_bytes {bytes}"
+        "# HELP radcache_store_bytes Bytes of the store on disk: its database and its sample log.\n# TYPE radcache_store_bytes gauge\nradcache_store_bytes {}",
+        database + log
+    );
+    let _ = writeln!(
+        out,
+        "# HELP radcache_store_sample_log_bytes Committed bytes of the store's sample log (of radcache_store_bytes).\n# TYPE radcache_store_sample_log_bytes gauge\nradcache_store_sample_log_bytes {log}"
     );
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out)
 }
