@@ -1264,3 +1264,35 @@ fn buffer_uris_are_decoded_and_read_only_from_regular_files() {
         assert_eq!(scene.objects[0].mesh.triangles, [[0, 1, 2]], "{uri}");
     }
 }
+
+/// A triangle repeated (the same corners in the same winding, whichever
+/// corner comes first) is kept once; the one facing the other way stays.
+/// 20,000 copies load into two triangles (the BVH builder took time
+/// quadratic in the copies).
+#[test]
+fn repeated_triangles_are_kept_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut indices = vec![0u32, 1, 2, 1, 2, 0, 0, 2, 1, 2, 0, 1];
+    for _ in 0..20_000 {
+        indices.extend([0, 1, 2]);
+    }
+    let mut bin = tri_bin(TRI, [0, 1, 2])[..36].to_vec();
+    for i in &indices {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let len = bin.len();
+    let count = indices.len();
+    let path = write_case(
+        dir.path(),
+        "copies",
+        move |doc| {
+            doc["buffers"][0]["byteLength"] = json!(len);
+            doc["bufferViews"][1]["byteLength"] = json!(len - 36);
+            doc["accessors"][1]["count"] = json!(count);
+        },
+        Some(bin),
+    );
+    let scene = Scene::load(&path).unwrap();
+    assert_eq!(scene.objects[0].mesh.triangles, [[0, 1, 2], [0, 2, 1]]);
+    assert_eq!(scene.objects[0].mesh.materials.len(), 2);
+}
