@@ -673,6 +673,25 @@ fn what_gltf_forbids_is_refused() {
         good_bin(),
     );
     assert_error(&later, "needs glTF 2.1 at least");
+    // A camera whose type names an object it lacks (the parser unwrapped it).
+    for (kind, other) in [
+        (
+            "perspective",
+            json!({"orthographic": {"xmag": 1.0, "ymag": 1.0, "znear": 0.1, "zfar": 9.0}}),
+        ),
+        (
+            "orthographic",
+            json!({"perspective": {"yfov": 0.8, "znear": 0.01}}),
+        ),
+    ] {
+        let mut camera = other;
+        camera["type"] = json!(kind);
+        let path = write_case(dir.path(), kind, |d| d["cameras"][0] = camera, good_bin());
+        assert_error(
+            &path,
+            &format!("camera 0: its type is \"{kind}\" but it has no \"{kind}\" object"),
+        );
+    }
     let fine = write_case(
         dir.path(),
         "fine",

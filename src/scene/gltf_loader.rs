@@ -447,6 +447,20 @@ fn check_unvalidated_references(root: &gltf::json::Root) -> Res<()> {
             }
         }
     }
+    // The crate unwraps the object its type names.
+    for (i, camera) in root.cameras.iter().enumerate() {
+        use gltf::json::camera::Type;
+        use gltf::json::validation::Checked;
+        let missing = match camera.type_ {
+            Checked::Valid(Type::Perspective) if camera.perspective.is_none() => "perspective",
+            Checked::Valid(Type::Orthographic) if camera.orthographic.is_none() => "orthographic",
+            Checked::Valid(_) => continue,
+            Checked::Invalid => return Err(format!("camera {i}: unknown type")),
+        };
+        return Err(format!(
+            "camera {i}: its type is \"{missing}\" but it has no \"{missing}\" object"
+        ));
+    }
     Ok(())
 }
 
