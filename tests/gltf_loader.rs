@@ -1181,6 +1181,39 @@ fn scenes_that_render_nothing_are_errors() {
         good_bin(),
     );
     assert_error(&spot, "innerConeAngle 1 is larger than outerConeAngle 0.5");
+    // Light near f32's limit: infinite and NaN pixels. 1e6 is fine.
+    for (strength, fine) in [(3e38f32, false), (1e6, true)] {
+        let name = format!("strength{fine}");
+        let glow = write_case(
+            dir.path(),
+            &name,
+            |d| {
+                d["extensionsUsed"] = json!(["KHR_materials_emissive_strength"]);
+                d["materials"][0]["extensions"] =
+                    json!({"KHR_materials_emissive_strength": {"emissiveStrength": strength}});
+            },
+            good_bin(),
+        );
+        let name = format!("lamp{fine}");
+        let lamp = write_case(
+            dir.path(),
+            &name,
+            |d| {
+                d["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+                d["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+                    {"type": "point", "intensity": strength}]}});
+                d["nodes"][1]["extensions"] = json!({"KHR_lights_punctual": {"light": 0}});
+            },
+            good_bin(),
+        );
+        if fine {
+            Scene::load(&glow).unwrap();
+            Scene::load(&lamp).unwrap();
+        } else {
+            assert_error(&glow, "material 'glow' emits 3e38 nits");
+            assert_error(&lamp, "over the 1e12 allowed");
+        }
+    }
     let odd = write_case(
         dir.path(),
         "odd",

@@ -43,6 +43,11 @@ const DEFAULT_ALBEDO: f32 = 0.8;
 /// [`crate::scene::MAX_WORLD_COORDINATE`]: these leave room for a few
 /// levels of hierarchy).
 pub const MAX_COORDINATE: f32 = 1e8;
+/// Largest emitted radiance (nits) or point light intensity (candela) a
+/// file may give: the sun's disc is about 1.6e9 nits; values near f32's
+/// limit (3e38) overflowed the sums of light and left infinite and NaN
+/// pixels.
+pub const MAX_EMISSION: f32 = 1e12;
 
 /// Loads a glTF 2.0 scene from `path`. Every error names the file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
@@ -867,6 +872,12 @@ fn convert_material(m: &gltf::Material) -> Res<Material> {
     if !all_finite(&factors) || !emission.is_finite() {
         return Err(format!("material '{name}' has a NaN or infinite factor"));
     }
+    if emission.max_element() > MAX_EMISSION {
+        return Err(format!(
+            "material '{name}' emits {:e} nits (emissive factor × strength), over the {MAX_EMISSION:e} allowed",
+            emission.max_element()
+        ));
+    }
     // Out-of-range factors would make surfaces gain energy; glTF forbids them.
     let unit = |x: f32| x.clamp(0.0, 1.0);
     let mut material = Material::from_metallic_roughness(
@@ -1126,6 +1137,12 @@ fn build_lights(gnodes: &[gltf::Node]) -> Res<Vec<PunctualLight>> {
         if !intensity.is_finite() || intensity.min_element() < 0.0 {
             return Err(format!(
                 "light '{name}' has a NaN, infinite or negative intensity"
+            ));
+        }
+        if intensity.max_element() > MAX_EMISSION {
+            return Err(format!(
+                "light '{name}' has an intensity of {:e} cd (colour × intensity), over the {MAX_EMISSION:e} allowed",
+                intensity.max_element()
             ));
         }
         let spot = match light.kind() {
