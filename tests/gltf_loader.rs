@@ -309,6 +309,11 @@ fn data_uri_buffer_and_extras_load() {
                     json!({"name": "sun", "extensions": {"KHR_lights_punctual": {"light": 1}}}),
                 );
                 d["scenes"][0]["nodes"] = json!([0, 1, 2, 3]);
+                // `extras` of any JSON type, as the spec allows (objects
+                // alone loaded before).
+                d["extras"] = json!([1, 2]);
+                d["nodes"][0]["extras"] = json!("a note");
+                d["materials"][0]["extras"] = json!(42);
             },
             None,
         );
