@@ -1166,13 +1166,6 @@ fn scenes_that_render_nothing_are_errors() {
         good_bin(),
     );
     assert_error(&squashed, "no triangle has any area");
-    let blind = write_case(
-        dir.path(),
-        "blind",
-        |d| d["nodes"][1]["scale"] = json!([0.0, 0.0, 0.0]),
-        good_bin(),
-    );
-    assert_error(&blind, "camera node 'cam' has no orientation");
     let spot = write_case(
         dir.path(),
         "spot",
@@ -1352,4 +1345,66 @@ fn repeated_triangles_are_kept_once() {
     let scene = Scene::load(&path).unwrap();
     assert_eq!(scene.objects[0].mesh.triangles, [[0, 1, 2], [0, 2, 1]]);
     assert_eq!(scene.objects[0].mesh.materials.len(), 2);
+}
+
+/// A camera scaled to nothing, at rest or by its animation, has no
+/// orientation in its matrix: it keeps the one its rotation gives (its
+/// frames were black, or the file refused), and sees what the unscaled
+/// camera sees.
+#[test]
+fn a_camera_scaled_to_nothing_keeps_its_orientation() {
+    let dir = tempfile::tempdir().unwrap();
+    let turned =
+        |d: &mut Value| d["nodes"][1]["rotation"] = json!([0.0, 0.0, 0.38268343, 0.9238795]);
+    let seeing = Scene::load(&write_case(dir.path(), "seeing", turned, good_bin())).unwrap();
+    let expected = seeing.camera_at(0.0);
+    let blind = write_case(
+        dir.path(),
+        "blind",
+        |d| {
+            turned(d);
+            d["nodes"][1]["scale"] = json!([0.0, 0.0, 0.0]);
+        },
+        good_bin(),
+    );
+    let shrinking = write_case(
+        dir.path(),
+        "shrinking",
+        |d| {
+            turned(d);
+            let times = [0.0f32, 1.0];
+            let scales = [1.0f32, 1.0, 1.0, 0.0, 0.0, 0.0];
+            let mut bin = tri_bin(TRI, [0, 1, 2]);
+            for v in times.iter().chain(&scales) {
+                bin.extend_from_slice(&v.to_le_bytes());
+            }
+            d["buffers"][0]["byteLength"] = json!(bin.len());
+            d["bufferViews"].as_array_mut().unwrap().extend([
+                json!({"buffer": 0, "byteOffset": 48, "byteLength": 8}),
+                json!({"buffer": 0, "byteOffset": 56, "byteLength": 24}),
+            ]);
+            d["accessors"].as_array_mut().unwrap().extend([
+                json!({"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR",
+                       "min": [0.0], "max": [1.0]}),
+                json!({"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"}),
+            ]);
+            d["animations"] = json!([{
+                "channels": [{"sampler": 0, "target": {"node": 1, "path": "scale"}}],
+                "samplers": [{"input": 2, "output": 3}]
+            }]);
+            std::fs::write(dir.path().join("shrinking.bin"), bin).unwrap();
+        },
+        None,
+    );
+    for (path, t) in [(blind, 0.0), (shrinking, 1.0)] {
+        let scene = Scene::load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let camera = scene.snapshot(t).camera;
+        assert!(
+            camera.basis.abs_diff_eq(expected.basis, 1e-6) && camera.position == expected.position,
+            "{}: {:?} against {:?}",
+            path.display(),
+            camera.basis,
+            expected.basis
+        );
+    }
 }

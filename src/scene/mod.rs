@@ -402,7 +402,32 @@ impl Scene {
     /// The camera at time `t` (as [`Scene::snapshot`] evaluates it).
     pub fn camera_at(&self, t: f32) -> Camera {
         let world = self.node_world_transforms(t);
-        camera_at(&world[self.camera.node], self.camera.yfov)
+        self.camera_in(&world, t)
+    }
+
+    /// The camera at time `t` given the world transforms of that time. A
+    /// camera scaled to nothing (its node or an ancestor animated to scale
+    /// 0) has no orientation in its matrix; it keeps the one its nodes'
+    /// rotations give (its frames were black).
+    fn camera_in(&self, world: &[Mat4], t: f32) -> Camera {
+        let mut camera = camera_at(&world[self.camera.node], self.camera.yfov);
+        if !camera.basis.is_finite() {
+            camera.basis = Mat3::from_quat(self.chain_rotation(self.camera.node, t));
+        }
+        camera
+    }
+
+    /// The product of the rotations of `node` and its ancestors at `t`.
+    fn chain_rotation(&self, node: usize, t: f32) -> Quat {
+        let local = self
+            .animation
+            .local_trs(node, self.nodes[node].rest, t)
+            .rotation;
+        match self.nodes[node].parent {
+            Some(parent) => self.chain_rotation(parent, t) * local,
+            None => local,
+        }
+        .normalize()
     }
 
     /// World transforms of all nodes at time `t`.
@@ -475,7 +500,7 @@ impl Scene {
                     }
                 })
                 .collect(),
-            camera: camera_at(&world[self.camera.node], self.camera.yfov),
+            camera: self.camera_in(&world, t),
         };
         for object in self.object_order() {
             if !self.object_is_dynamic(object) {
