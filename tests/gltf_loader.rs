@@ -406,6 +406,7 @@ fn animated_gltf_channels() {
         Some(bin.clone()),
     );
     assert_error(&twice, "its translation is driven twice in this animation");
+    let bin_for_pointer = bin.clone();
     let path = write_case(dir.path(), "anim", animated, Some(bin));
     let scene = Scene::load(&path).unwrap();
     assert_eq!(scene.animation.channels.len(), 2);
@@ -418,6 +419,32 @@ fn animated_gltf_channels() {
     // Zero tangents: the midpoint of a segment is the average of its keys.
     assert!(close(trs(0.75).scale, Vec3::splat(2.5), 1e-6));
     assert!(scene.object_is_dynamic(0));
+    // A channel without a target node (spec-valid: an extension would name
+    // its target) is ignored, and an animation left without channels too;
+    // the crate refused the file.
+    let pointer = write_case(
+        dir.path(),
+        "pointer",
+        |d| {
+            animated(d);
+            let channels = d["animations"][0]["channels"].as_array_mut().unwrap();
+            channels.push(json!({"sampler": 0, "target": {"path": "pointer"}}));
+            let mut only = d["animations"][0].clone();
+            only["channels"] = json!([{"sampler": 1, "target": {"path": "pointer"}}]);
+            d["animations"].as_array_mut().unwrap().push(only);
+        },
+        Some(bin_for_pointer),
+    );
+    let with_pointer = Scene::load(&pointer).unwrap();
+    assert_eq!(with_pointer.animation.channels.len(), 2);
+    assert!(close(
+        with_pointer
+            .animation
+            .local_trs(0, with_pointer.nodes[0].rest, 0.75)
+            .scale,
+        Vec3::splat(2.5),
+        1e-6
+    ));
 }
 
 #[test]

@@ -279,6 +279,52 @@ fn reads_extension(e: &str) -> bool {
     gltf::json::extensions::ENABLED_EXTENSIONS.contains(&e) || e == MESH_QUANTIZATION
 }
 
+/// The file without its animation channels that name no target node, if
+/// it has any (`None`: nothing to take off, or JSON the parser will
+/// report). The spec lets an extension (`KHR_animation_pointer`) name what
+/// such a channel animates, but the crate refuses a channel without a
+/// node; they are ignored with a warning, and so is an animation left
+/// without channels.
+fn without_channels_lacking_a_node(bytes: &[u8]) -> Option<Vec<u8>> {
+    let glb = if bytes.starts_with(b"glTF") {
+        Some(gltf::binary::Glb::from_slice(bytes).ok()?)
+    } else {
+        None
+    };
+    let json = glb.as_ref().map_or(bytes, |g| &g.json);
+    let mut root: serde_json::Value = serde_json::from_slice(json).ok()?;
+    let animations = root.get_mut("animations")?.as_array_mut()?;
+    let mut dropped = 0;
+    for animation in animations.iter_mut() {
+        if let Some(channels) = animation.get_mut("channels").and_then(|c| c.as_array_mut()) {
+            let before = channels.len();
+            channels.retain(|c| c.get("target").is_none_or(|t| t.get("node").is_some()));
+            dropped += before - channels.len();
+        }
+    }
+    if dropped == 0 {
+        return None;
+    }
+    animations.retain(|a| {
+        a.get("channels")
+            .and_then(|c| c.as_array())
+            .is_none_or(|c| !c.is_empty())
+    });
+    eprintln!(
+        "warning: {dropped} animation channel(s) without a target node ignored (an extension names what they animate)"
+    );
+    let json = serde_json::to_vec(&root).ok()?;
+    match glb {
+        None => Some(json),
+        Some(glb) => gltf::binary::Glb {
+            json: json.into(),
+            ..glb
+        }
+        .to_vec()
+        .ok(),
+    }
+}
+
 /// Refuses a file that requires an extension this loader cannot read (a
 /// compressed mesh, say), naming it; takes [`MESH_QUANTIZATION`] off the
 /// required extensions (the crate would refuse it) and says whether the
@@ -296,6 +342,8 @@ fn check_extensions(root: &mut gltf::json::Root) -> Res<bool> {
 
 fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
     check_glb_length(bytes)?;
+    let rewritten = without_channels_lacking_a_node(bytes);
+    let bytes = rewritten.as_deref().unwrap_or(bytes);
     let gltf::Gltf { document, blob } =
         gltf::Gltf::from_slice_without_validation(bytes).map_err(parse_error)?;
     let mut root = document.into_json();
