@@ -1475,21 +1475,7 @@ fn a_cancel_or_a_sigterm_abandons_a_long_frame_at_once() {
         std::thread::spawn(move || http_full(&addr, "GET", &path, ""))
     };
     std::thread::sleep(Duration::from_millis(300));
-    let pid = server.child.id().to_string();
-    let term = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
-    assert!(term.success());
-    let asked = Instant::now();
-    let exit = loop {
-        if let Some(exit) = server.child.try_wait().unwrap() {
-            break exit;
-        }
-        assert!(
-            asked.elapsed() < Duration::from_secs(30),
-            "the server did not stop within 30 s of SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    assert!(exit.success(), "{exit:?}");
+    terminate(&mut server, Duration::from_secs(30));
     // Its events end with a state that is not final: the job goes on
     // after a restart.
     let (_, _, body) = events.join().unwrap();
@@ -1583,24 +1569,7 @@ fn a_shutdown_does_not_wait_for_a_client_that_never_finishes() {
     let mut half = std::net::TcpStream::connect(&server.addr).unwrap();
     write!(half, "GET /api/jobs HTTP/1.1\r\n").unwrap();
     std::thread::sleep(Duration::from_millis(300));
-    let pid = server.child.id().to_string();
-    assert!(Command::new("kill")
-        .args(["-TERM", &pid])
-        .status()
-        .unwrap()
-        .success());
-    let asked = Instant::now();
-    let exit = loop {
-        if let Some(exit) = server.child.try_wait().unwrap() {
-            break exit;
-        }
-        assert!(
-            asked.elapsed() < Duration::from_secs(20),
-            "the server did not stop within 20 s of SIGTERM"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    assert!(exit.success(), "{exit:?}");
+    terminate(&mut server, Duration::from_secs(20));
     assert!(radcache::store::Store::open_existing(&db).is_ok());
     drop((stuck, half));
 }
@@ -1613,14 +1582,10 @@ fn metrics_count_the_sample_log_in_the_store_bytes() {
     let (dir, scenes) = workspace();
     let db = dir.path().join("db");
     let server = start(&db, &scenes);
-    let (status, body) = http(
+    let id = create_job(
         &server,
-        "POST",
-        "/api/jobs",
         r#"{"scene":"builtin:cube-in-box","method":"ic","frames":"0..1","size":"16x16","spp":1}"#,
     );
-    assert_eq!(status, 201, "{}", String::from_utf8_lossy(&body));
-    let id = json(&body)["id"].as_str().unwrap().to_string();
     wait_done(&server, &id);
     let (status, metrics) = http(&server, "GET", "/metrics", "");
     assert_eq!(status, 200);
@@ -1640,4 +1605,24 @@ fn metrics_count_the_sample_log_in_the_store_bytes() {
     );
     assert_eq!(gauge("radcache_store_sample_log_bytes"), log);
     assert!(gauge("radcache_store_bytes") > log, "{text}");
+}
+
+/// Sends SIGTERM to the server and waits for it to exit, successfully,
+/// within `limit`.
+fn terminate(server: &mut Server, limit: Duration) {
+    let pid = server.child.id().to_string();
+    let term = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+    assert!(term.success());
+    let asked = Instant::now();
+    let exit = loop {
+        if let Some(exit) = server.child.try_wait().unwrap() {
+            break exit;
+        }
+        assert!(
+            asked.elapsed() < limit,
+            "the server did not stop within {limit:?} of SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(exit.success(), "{exit:?}");
 }
