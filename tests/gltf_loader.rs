@@ -1435,3 +1435,45 @@ fn a_camera_scaled_to_nothing_keeps_its_orientation() {
         );
     }
 }
+
+/// An accessor without a buffer view (and without sparse values) holds
+/// zeros (glTF §3.6.2.1; the crate refused it): zero normals are
+/// recomputed from the face, a view-less index list draws one triangle of
+/// vertex 0, which has no area.
+#[test]
+fn an_accessor_without_a_buffer_view_holds_zeros() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "viewless",
+        |d| {
+            d["accessors"]
+                .as_array_mut()
+                .unwrap()
+                .push(json!({"componentType": 5126, "count": 3, "type": "VEC3"}));
+            d["meshes"][0]["primitives"][0]["attributes"]["NORMAL"] = json!(2);
+        },
+        good_bin(),
+    );
+    let scene = Scene::load(&path).unwrap();
+    let mesh = &scene.objects[0].mesh;
+    assert!(
+        mesh.normals.iter().all(|&n| close(n, Vec3::Z, 1e-6)),
+        "{:?}",
+        mesh.normals
+    );
+    let path = write_case(
+        dir.path(),
+        "viewless_indices",
+        |d| {
+            d["accessors"][1]
+                .as_object_mut()
+                .unwrap()
+                .remove("bufferView")
+                .map(drop)
+                .unwrap()
+        },
+        good_bin(),
+    );
+    assert_error(&path, "the scene has no triangle with any area");
+}

@@ -357,7 +357,7 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
     warn_of_ignored_features(&root);
     check_unvalidated_references(&root)?;
     let quantized = check_extensions(&mut root)?;
-    let document = gltf::Document::from_json(root).map_err(parse_error)?;
+    let document = validated(root)?;
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = Buffers {
         data: load_buffers(&document, base, blob)?,
@@ -515,6 +515,29 @@ fn check_unvalidated_references(root: &gltf::json::Root) -> Res<()> {
         ));
     }
     Ok(())
+}
+
+/// The document of `root` once the crate's validation passes, but for one
+/// rule of the crate's own: an accessor without a buffer view and without
+/// sparse values is refused there, where glTF (§3.6.2.1) says it holds
+/// zeros, as [`Buffers`] reads it.
+fn validated(root: gltf::json::Root) -> Res<gltf::Document> {
+    use gltf::json::validation::{Error, Validate};
+    let mut errors = Vec::new();
+    root.validate(&root, gltf::json::Path::new, &mut |path, error| {
+        let path = path();
+        let viewless = matches!(error, Error::Missing)
+            && path.as_str().starts_with("accessors[")
+            && path.as_str().ends_with("].bufferView");
+        if !viewless {
+            errors.push((path, error));
+        }
+    });
+    if errors.is_empty() {
+        Ok(gltf::Document::from_json_without_validation(root))
+    } else {
+        Err(parse_error(gltf::Error::Validation(errors)))
+    }
 }
 
 fn parse_error(e: gltf::Error) -> String {
@@ -1130,11 +1153,20 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
         }
         None => None,
     };
-    // Unusable normals (missing, wrong count, NaN) are recomputed rather
-    // than rejected: they only affect shading.
+    // Unusable normals (missing, wrong count, NaN, zero) are recomputed
+    // rather than rejected: they only affect shading.
     let normals = match given {
         Some(normals) if normals.len() == n && normals.iter().all(|v| v.is_finite()) => {
-            normals.into_iter().map(Vec3::normalize_or_zero).collect()
+            let mut normals: Vec<Vec3> = normals.into_iter().map(Vec3::normalize_or_zero).collect();
+            if normals.contains(&Vec3::ZERO) {
+                let faces = vertex_normals(&positions, &triangles);
+                for (given, face) in normals.iter_mut().zip(faces) {
+                    if *given == Vec3::ZERO {
+                        *given = face;
+                    }
+                }
+            }
+            normals
         }
         _ => vertex_normals(&positions, &triangles),
     };
