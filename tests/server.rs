@@ -1626,3 +1626,86 @@ fn terminate(server: &mut Server, limit: Duration) {
     };
     assert!(exit.success(), "{exit:?}");
 }
+
+/// A connection to the server with a 4 KiB receive buffer: an answer of a
+/// few megabytes stays mostly unsent while the client does not read.
+fn connect_with_small_buffer(addr: &str) -> std::net::TcpStream {
+    let addr: std::net::SocketAddr = addr.parse().unwrap();
+    let socket = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).unwrap();
+    socket.set_recv_buffer_size(4096).unwrap();
+    socket.connect(&addr.into()).unwrap();
+    socket.into()
+}
+
+/// A client that asks for a large answer and stops reading is let go once
+/// nothing of the answer has left for `--client-timeout` (it held its
+/// connection slot and the answer's bytes for as long as it liked: 512 of
+/// them stopped the server answering anyone); a client that shuts its
+/// sending side after its request still gets the answer (hyper dropped
+/// it, mostly); a broken chunked body is a 400, not a 413; a request head
+/// over 64 KiB is a 431.
+#[test]
+fn clients_that_stop_reading_or_half_close_are_served_as_they_should() {
+    use std::io::{Read, Write};
+    let (dir, scenes) = workspace();
+    let server = start_with(&dir.path().join("db"), &scenes, &["--client-timeout", "1"]);
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"1024x1024","spp":1}"#,
+    );
+    wait_done(&server, &id);
+    let path = format!("/api/jobs/{id}/frames/0.exr");
+    let (status, _, exr) = http_full(&server.addr, "GET", &path, "");
+    assert_eq!(status, 200);
+    assert!(
+        exr.len() > 4 << 20,
+        "{} bytes: too few to fill the socket buffers",
+        exr.len()
+    );
+    let mut stalled = connect_with_small_buffer(&server.addr);
+    write!(stalled, "GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    std::thread::sleep(Duration::from_secs(4));
+    let (got, _) = read_until_closed(&mut stalled, Duration::from_secs(20));
+    assert!(
+        got.len() < exr.len(),
+        "the whole answer ({} bytes) waited for a client that stopped reading",
+        got.len()
+    );
+    for _ in 0..10 {
+        let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
+        write!(
+            s,
+            "GET /metrics HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        s.shutdown(std::net::Shutdown::Write).unwrap();
+        let (got, _) = read_until_closed(&mut s, Duration::from_secs(20));
+        assert!(
+            got.starts_with(b"HTTP/1.1 200"),
+            "{:?}",
+            String::from_utf8_lossy(&got)
+        );
+    }
+    let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
+    write!(
+        s,
+        "POST /api/jobs HTTP/1.1\r\nHost: x\r\nConnection: close\r\nTransfer-Encoding: chunked\r\n\r\nzz\r\nabc\r\n0\r\n\r\n"
+    )
+    .unwrap();
+    let (got, _) = read_until_closed(&mut s, Duration::from_secs(20));
+    assert!(
+        got.starts_with(b"HTTP/1.1 400"),
+        "{:?}",
+        String::from_utf8_lossy(&got)
+    );
+    let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
+    let long = "a".repeat(100 * 1024);
+    write!(
+        s,
+        "GET /api/jobs HTTP/1.1\r\nHost: x\r\nX-Long: {long}\r\n\r\n"
+    )
+    .unwrap();
+    let mut head = [0u8; 12];
+    s.read_exact(&mut head).unwrap();
+    assert_eq!(&head, b"HTTP/1.1 431");
+}

@@ -4,6 +4,7 @@
 //! ([`crate::render::render_job_to_dir_with`]). Handlers are thin: parse,
 //! call the library or the job table, map errors to a status.
 
+mod connection;
 mod error;
 mod frames;
 mod jobs;
@@ -487,16 +488,9 @@ async fn read_bodies(State(state): State<Arc<AppState>>, req: Request, next: Nex
     }
     let (parts, body) = req.into_parts();
     let limit = state.options.client_timeout;
-    let body = match tokio::time::timeout(limit, axum::body::to_bytes(body, MAX_BODY_BYTES)).await {
+    let body = match tokio::time::timeout(limit, read_body(body)).await {
         Ok(Ok(bytes)) => bytes,
-        Ok(Err(e)) => {
-            return ApiError::new(
-                axum::http::StatusCode::PAYLOAD_TOO_LARGE,
-                "payload too large",
-                format!("the body could not be read within {MAX_BODY_BYTES} bytes: {e}"),
-            )
-            .into_response()
-        }
+        Ok(Err(e)) => return e.into_response(),
         Err(_) => {
             return ApiError::new(
                 axum::http::StatusCode::REQUEST_TIMEOUT,
@@ -508,6 +502,27 @@ async fn read_bodies(State(state): State<Arc<AppState>>, req: Request, next: Nex
     };
     next.run(Request::from_parts(parts, axum::body::Body::from(body)))
         .await
+}
+
+/// A request's body, at most [`MAX_BODY_BYTES`] of it (413 past them); a
+/// body that breaks off or is malformed (a bad chunk size) is a 400.
+async fn read_body(body: axum::body::Body) -> Result<Vec<u8>, ApiError> {
+    use futures_util::StreamExt;
+    let mut stream = body.into_data_stream();
+    let mut bytes = Vec::new();
+    while let Some(chunk) = stream.next().await {
+        let chunk =
+            chunk.map_err(|e| ApiError::bad_request(format!("the body could not be read: {e}")))?;
+        if bytes.len() + chunk.len() > MAX_BODY_BYTES {
+            return Err(ApiError::new(
+                axum::http::StatusCode::PAYLOAD_TOO_LARGE,
+                "payload too large",
+                format!("the body has more than {MAX_BODY_BYTES} bytes"),
+            ));
+        }
+        bytes.extend_from_slice(&chunk);
+    }
+    Ok(bytes)
 }
 
 /// `s` with every byte outside RFC 3986's unreserved set as `%XX`.
@@ -581,91 +596,14 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         use std::io::Write;
         std::io::stdout().flush().ok();
         let worker = tokio::spawn(worker::run(state.clone()));
-        serve_connections(listener, router(state.clone()), &state).await;
+        connection::serve(listener, router(state.clone()), &state).await;
         worker.await.context("worker panicked")?;
         state.store.flush()?;
         Ok(())
     })
 }
 
-/// The most connections served at once; past it, new ones wait in the
-/// listen queue until one closes (a client opening connections without
-/// end would otherwise run the process out of file descriptors).
-const MAX_CONNECTIONS: usize = 512;
-
-/// How long a shutdown waits for the requests under way to finish before
-/// it closes their connections (the event and frame streams end at once;
-/// this bounds a client that reads its answer slowly).
-const SHUTDOWN_GRACE: Duration = Duration::from_secs(5);
-
-/// Serves `app` on `listener` until Ctrl-C or SIGTERM, each connection
-/// under [`ServeOptions::client_timeout`] (hyper's limit on reading a
-/// request's head, which also closes an idle kept-alive connection), then
-/// stops the worker and closes the connections within
-/// [`SHUTDOWN_GRACE`].
-async fn serve_connections(listener: tokio::net::TcpListener, app: Router, state: &AppState) {
-    let graceful = hyper_util::server::graceful::GracefulShutdown::new();
-    let slots = Arc::new(tokio::sync::Semaphore::new(MAX_CONNECTIONS));
-    let signal = shutdown_signal();
-    tokio::pin!(signal);
-    loop {
-        let accepted = tokio::select! {
-            accepted = accept(&listener, &slots) => accepted,
-            _ = &mut signal => break,
-        };
-        let (stream, slot) = accepted;
-        let service = hyper_util::service::TowerToHyperService::new(app.clone());
-        let mut http = hyper::server::conn::http1::Builder::new();
-        http.timer(hyper_util::rt::TokioTimer::new())
-            .header_read_timeout(state.options.client_timeout);
-        let connection =
-            graceful.watch(http.serve_connection(hyper_util::rt::TokioIo::new(stream), service));
-        tokio::spawn(async move {
-            // A client that went away or sent garbage: nothing to report.
-            let _ = connection.await;
-            drop(slot);
-        });
-    }
-    state.shutdown.store(true, Ordering::SeqCst);
-    state.abandon_frame(None);
-    state.wake.notify_one();
-    state.notify_all();
-    if tokio::time::timeout(SHUTDOWN_GRACE, graceful.shutdown())
-        .await
-        .is_err()
-    {
-        eprintln!(
-            "closing the connections still open {} s after the shutdown began",
-            SHUTDOWN_GRACE.as_secs()
-        );
-    }
-}
-
-/// The next connection, once fewer than [`MAX_CONNECTIONS`] are open, with
-/// its slot. Accept errors (out of file descriptors, a connection reset
-/// before it was accepted) are waited out, as `axum::serve` does.
-async fn accept(
-    listener: &tokio::net::TcpListener,
-    slots: &Arc<tokio::sync::Semaphore>,
-) -> (tokio::net::TcpStream, tokio::sync::OwnedSemaphorePermit) {
-    let slot = slots
-        .clone()
-        .acquire_owned()
-        .await
-        .expect("the connection semaphore is never closed");
-    loop {
-        match listener.accept().await {
-            Ok((stream, _)) => {
-                // Frames and events are small writes that should leave at once.
-                stream.set_nodelay(true).ok();
-                return (stream, slot);
-            }
-            Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
-        }
-    }
-}
-
-async fn shutdown_signal() {
+pub(super) async fn shutdown_signal() {
     let ctrl_c = async {
         tokio::signal::ctrl_c().await.ok();
     };
