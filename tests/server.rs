@@ -755,8 +755,16 @@ fn records_match_the_store_and_inspect() {
         assert!(err["detail"].is_string());
     }
     assert_eq!(get("frame=7").0, 404);
-    let (status, _) = http(&server, "GET", "/api/jobs/job-42/records?frame=0", "");
-    assert_eq!(status, 404);
+    // An unknown job is a 404 whatever the query (a missing frame was a
+    // 400 first).
+    for path in [
+        "/api/jobs/job-42/records?frame=0",
+        "/api/jobs/job-42/records",
+        "/api/jobs/job-42/movies",
+    ] {
+        let (status, _) = http(&server, "GET", path, "");
+        assert_eq!(status, 404, "{path}");
+    }
     let frame0 = get("frame=0").1["count"].as_u64().unwrap();
 
     // A trc job: records live across frames.

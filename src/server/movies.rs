@@ -23,9 +23,10 @@ pub async fn movies(
     Path(id): Path<String>,
     query: Result<Query<Vec<(String, String)>>, QueryRejection>,
 ) -> Result<Json<Value>, ApiError> {
+    // An unknown job is a 404 whatever its query.
+    let job = state.job(&id)?;
     let q = query_params(query)?;
     let frame = frame_param(&q)?;
-    let job = state.job(&id)?;
     let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();
     tokio::task::spawn_blocking(move || {

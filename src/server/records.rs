@@ -237,6 +237,8 @@ pub async fn records(
     Path(id): Path<String>,
     query: Result<Query<Vec<(String, String)>>, QueryRejection>,
 ) -> Result<Json<Value>, ApiError> {
+    // An unknown job is a 404 whatever its query.
+    let job = state.job(&id)?;
     let q = query_params(query)?;
     let RecordsQuery {
         frame,
@@ -244,7 +246,6 @@ pub async fn records(
         limit,
         list_sources,
     } = RecordsQuery::parse(&q)?;
-    let job = state.job(&id)?;
     let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();
     tokio::task::spawn_blocking(move || {
