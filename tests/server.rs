@@ -1707,12 +1707,15 @@ fn clients_that_stop_reading_or_half_close_are_served_as_they_should() {
         String::from_utf8_lossy(&got)
     );
     let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
     let long = "a".repeat(100 * 1024);
-    write!(
+    // The server stops reading at 64 KiB, answers and closes with the rest
+    // unread, so the end of this write may meet a reset (EPIPE): what
+    // counts is the answer, which Linux still hands over after the reset.
+    let _ = write!(
         s,
         "GET /api/jobs HTTP/1.1\r\nHost: x\r\nX-Long: {long}\r\n\r\n"
-    )
-    .unwrap();
+    );
     let mut head = [0u8; 12];
     s.read_exact(&mut head).unwrap();
     assert_eq!(&head, b"HTTP/1.1 431");
