@@ -193,6 +193,7 @@ pub fn parse_frame_range(s: &str) -> Result<Range<u32>, String> {
         .split_once("..")
         .ok_or_else(|| format!("'{s}' is not a frame range; expected START..END, e.g. 0..24"))?;
     let number = |n: &str| match (n.parse::<u32>(), n.parse::<u64>()) {
+        _ if !all_digits(n) => Err(format!("frame range '{s}': '{n}' is not a frame number")),
         (Ok(n), _) => Ok(n),
         (Err(_), Ok(_)) => Err(format!(
             "frame range '{s}': {n} is past the last frame number, {}",
@@ -213,13 +214,19 @@ pub fn parse_frame_range(s: &str) -> Result<Range<u32>, String> {
     Ok(start..end)
 }
 
+/// Whether `n` is a plain decimal number: `str::parse` also takes a
+/// leading `+`, which no frame number or side is written with.
+fn all_digits(n: &str) -> bool {
+    !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit())
+}
+
 /// Parses an image size `WxH` with sides in `1..=max_side`, as the CLI's
 /// `--size` and the API's `size` take it.
 pub fn parse_image_size(s: &str, max_side: u32) -> Result<(u32, u32), String> {
     let bad = || format!("'{s}' is not an image size; expected WxH, e.g. 256x256");
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(bad)?;
-    let (w, h): (u32, u32) = match (w.parse(), h.parse()) {
-        (Ok(w), Ok(h)) => (w, h),
+    let (w_text, h_text) = s.split_once(['x', 'X']).ok_or_else(bad)?;
+    let (w, h): (u32, u32) = match (w_text.parse(), h_text.parse()) {
+        (Ok(w), Ok(h)) if all_digits(w_text) && all_digits(h_text) => (w, h),
         _ => return Err(bad()),
     };
     if w == 0 || h == 0 || w > max_side || h > max_side {
@@ -783,6 +790,7 @@ mod tests {
             ("0-24", "not a frame range"),
             (" 0..1", "' 0' is not a frame number"),
             ("0..x", "'x' is not a frame number"),
+            ("+0..+1", "'+0' is not a frame number"),
             ("5..2", "is empty"),
             ("0..1000001", "ends past the last frame number, 999999"),
             (
@@ -798,6 +806,7 @@ mod tests {
         for (bad, says) in [
             ("16", "not an image size"),
             ("16 x8", "not an image size"),
+            ("+16x8", "not an image size"),
             ("0x8", "out of range (1..=64 per side)"),
             ("65x8", "out of range"),
         ] {
