@@ -294,15 +294,33 @@ fn gpu_interpolation_of_empty_and_interleaved_caches() {
 }
 
 /// A splat error (reported by a render tile, which cannot return it) fails
-/// the GPU backend as a ray error does, so the renderer discards the frame.
+/// the GPU backend as a ray error does, so the renderer discards the frame;
+/// the tiles that already traced their rays get an error from the splat
+/// without a dispatch (each waited out its own limit behind a hung GPU).
 #[test]
 fn a_splat_error_fails_the_gpu_backend() {
     let gpu = gpu();
+    let mut rng = Rng::from_seed(5, 5);
+    let cache = random_cache(&mut rng, 50, 0.2);
+    let points: Vec<GpuLookup> = random_lookups(&mut rng, &cache, 10)
+        .iter()
+        .map(GpuLookup::new)
+        .collect();
+    let prepared = splat(&gpu)
+        .prepare(cache.records(), cache.accuracy, true)
+        .unwrap();
     assert!(gpu.failure().is_none() && !splat(&gpu).has_failed());
     splat(&gpu).fail(&GpuError::Geometry("test".into()));
     splat(&gpu).fail(&GpuError::NoAdapter);
     assert_eq!(gpu.failure().as_deref(), Some("GPU ray backend: test"));
     assert!(splat(&gpu).has_failed());
+    let late = splat(&gpu)
+        .interpolate(&prepared, &points, None)
+        .unwrap_err();
+    assert!(
+        late.to_string().contains("an earlier GPU call failed"),
+        "{late}"
+    );
     let mut r = Renderer::new(
         Scene::builtin("cube-in-box").unwrap(),
         Box::new(IrradianceCaching::new(small_ic())),

@@ -657,10 +657,15 @@ impl CacheSplat {
 
     /// Whether the GPU backend has failed (then the splat is not used).
     pub fn has_failed(&self) -> bool {
+        self.failure().is_some()
+    }
+
+    /// The first error [`Self::fail`] kept.
+    fn failure(&self) -> Option<String> {
         self.failed
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .is_some()
+            .clone()
     }
 
     fn error(&self, message: String) -> GpuError {
@@ -758,6 +763,11 @@ impl CacheSplat {
             self.upload(&mut buffers, prepared);
         }
         for chunk in lookups.chunks(self.chunk_lookups()) {
+            // Once a wait failed (a hung device), each tile queued on the
+            // buffers would otherwise wait out its own WAIT_LIMIT behind it.
+            if let Some(failure) = self.failure() {
+                return Err(self.error(format!("an earlier GPU call failed: {failure}")));
+            }
             self.dispatch(&mut buffers, prepared, chunk, used, &mut out)?;
         }
         Ok(out)
