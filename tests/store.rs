@@ -1675,6 +1675,11 @@ fn scene_hash_covers_external_buffers_and_images() {
     std::fs::write(dir.path().join("tex.png"), b"PNG").unwrap();
     let (_, h3) = render::scene_identity(&source).unwrap();
     assert_ne!(h2, h3, "a changed image changes the hash");
+    // Of a buffer, what the loader reads counts: its declared byteLength
+    // (a huge file named by a small buffer is not read whole).
+    std::fs::write(dir.path().join("a b.bin"), [1u8, 2, 3, 5, 9, 9]).unwrap();
+    let (_, longer) = render::scene_identity(&source).unwrap();
+    assert_eq!(longer, h3, "bytes past byteLength are not the scene's");
     // A missing external file is a clear error.
     std::fs::remove_file(dir.path().join("tex.png")).unwrap();
     let msg = render::scene_identity(&source).unwrap_err().to_string();

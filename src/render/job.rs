@@ -41,12 +41,12 @@ pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
             } else {
                 let dir = path.parent().unwrap_or(Path::new("."));
                 let mut all = Vec::new();
-                for uri in uris {
+                for (uri, declared) in uris {
                     let cannot = |what: String| {
                         anyhow::anyhow!("{what} (referenced by scene {})", path.display())
                     };
                     let file = gltf_loader::uri_file(dir, &uri).map_err(cannot)?;
-                    let content = gltf_loader::read_regular_file(&file, None)
+                    let content = gltf_loader::read_regular_file(&file, declared)
                         .map_err(|e| cannot(format!("cannot read {}: {e}", file.display())))?;
                     all.extend_from_slice(uri.as_bytes());
                     all.push(0);
@@ -61,9 +61,11 @@ pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
 }
 
 /// The external file URIs of a glTF (`.gltf` JSON, or the JSON chunk of a
-/// `.glb`): `buffers[].uri` then `images[].uri`, `data:` URIs left out.
+/// `.glb`): `buffers[].uri` then `images[].uri`, `data:` URIs left out,
+/// each with the length the loader reads of it (a buffer's `byteLength`:
+/// a 12-byte buffer naming a huge file is not read whole here either).
 /// Anything unreadable gives none (the scene loader reports it).
-fn external_uris(bytes: &[u8]) -> Vec<String> {
+fn external_uris(bytes: &[u8]) -> Vec<(String, Option<u64>)> {
     let json: &[u8] = if bytes.starts_with(b"glTF") && bytes.len() >= 20 {
         let len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
         bytes.get(20..20 + len).unwrap_or(&[])
@@ -78,7 +80,7 @@ fn external_uris(bytes: &[u8]) -> Vec<String> {
         for item in doc[list].as_array().into_iter().flatten() {
             if let Some(uri) = item["uri"].as_str() {
                 if !uri.starts_with("data:") {
-                    out.push(uri.to_string());
+                    out.push((uri.to_string(), item["byteLength"].as_u64()));
                 }
             }
         }
