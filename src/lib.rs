@@ -21,6 +21,7 @@
 //! | [`bench`](mod@bench) | `radcache bench`: methods against a reference, CSV and charts |
 //! | [`cli`]     | the `radcache` command line                                    |
 //! | [`store`]   | the persistent space-time store (sled + rkyv + zstd), jobs, resume |
+//! | [`uri`]     | percent-encoding of glTF URIs and query strings                |
 
 pub mod accel;
 pub mod backend;
@@ -38,3 +39,4 @@ pub mod sampling;
 pub mod scene;
 pub mod server;
 pub mod store;
+pub mod uri;

@@ -1309,6 +1309,7 @@ fn buffer_uris_are_decoded_and_read_only_from_regular_files() {
     assert!(made.success());
     for (name, uri) in [
         ("file_zero", "file:///dev/zero"),
+        ("localhost_zero", "file://LocalHost/dev/zero"),
         ("escaped_zero", "%2Fdev%2Fzero"),
         ("escaped_fifo", "a%20fifo.bin"),
     ] {
@@ -1320,6 +1321,8 @@ fn buffer_uris_are_decoded_and_read_only_from_regular_files() {
     }
     let err = load_within_20s(&with_uri("web", "https://example.com/t.bin")).unwrap_err();
     assert!(err.contains("'https:' URIs"), "{err}");
+    let err = load_within_20s(&with_uri("remote", "file://example.com/t.bin")).unwrap_err();
+    assert!(err.contains("only local files"), "{err}");
     let err = load_within_20s(&with_uri("missing", "no%20such.bin")).unwrap_err();
     assert!(
         err.contains("missing buffer file") && err.contains("no such.bin"),
@@ -1332,11 +1335,16 @@ fn buffer_uris_are_decoded_and_read_only_from_regular_files() {
     let long = std::fs::File::create(dir.path().join("long.bin")).unwrap();
     std::io::Write::write_all(&mut &long, &good_bin().unwrap()).unwrap();
     long.set_len(1 << 30).unwrap();
+    let absolute = dir.path().join("my mesh.bin");
+    let absolute = absolute.to_str().unwrap().replace(' ', "%20");
     for (name, uri) in [
-        ("escaped", "my%20mesh.bin"),
-        ("file_relative", "file:my%20mesh.bin"),
-        ("long", "long.bin"),
+        ("escaped", "my%20mesh.bin".to_string()),
+        ("file_relative", "file:my%20mesh.bin".to_string()),
+        ("file_absolute", format!("file://{absolute}")),
+        ("file_localhost", format!("file://localhost{absolute}")),
+        ("long", "long.bin".to_string()),
     ] {
+        let uri = uri.as_str();
         let scene = load_within_20s(&with_uri(name, uri)).unwrap_or_else(|e| panic!("{uri}: {e}"));
         assert_eq!(scene.objects[0].mesh.triangles, [[0, 1, 2]], "{uri}");
     }

@@ -44,8 +44,9 @@ pub struct ServeArgs {
     #[arg(long)]
     pub bench: Option<PathBuf>,
     /// Seconds a client may take to send a request's head, and then its
-    /// body (a slower one is disconnected, or answered 408); an idle
-    /// kept-alive connection is closed after as long.
+    /// body (a slower one is disconnected, or answered 408), and, while an
+    /// answer is written, to take some of it (else it is disconnected); an
+    /// idle kept-alive connection is closed after as long.
     #[arg(long, default_value_t = 30.0, value_parser = client_timeout)]
     pub client_timeout: f64,
 }

@@ -116,13 +116,28 @@ pub fn uri_file(base: &Path, uri: &str) -> Res<std::path::PathBuf> {
                     "URI '{uri}': only files are read, not '{scheme}:' URIs"
                 ));
             }
-            rest.strip_prefix("//").unwrap_or(rest)
+            file_uri_path(rest).ok_or_else(|| {
+                format!("URI '{uri}': only local files are read (its host is not this machine)")
+            })?
         }
         _ => uri,
     };
-    let decoded = percent_decode(path)
+    let decoded = crate::uri::percent_decode(path)
         .ok_or_else(|| format!("URI '{uri}': malformed %-escape or not UTF-8"))?;
     Ok(base.join(decoded))
+}
+
+/// The path of a `file:` URI after its scheme (RFC 8089): `/p`, or
+/// `//HOST/p` with no host or `localhost`; `None` for another host.
+fn file_uri_path(rest: &str) -> Option<&str> {
+    let Some(authority_and_path) = rest.strip_prefix("//") else {
+        return Some(rest);
+    };
+    let (host, path) = match authority_and_path.find('/') {
+        Some(i) => authority_and_path.split_at(i),
+        None => (authority_and_path, ""),
+    };
+    (host.is_empty() || host.eq_ignore_ascii_case("localhost")).then_some(path)
 }
 
 /// Whether `s` is a URI scheme (RFC 3986: a letter, then letters, digits,
@@ -133,22 +148,6 @@ fn is_uri_scheme(s: &str) -> bool {
     s.len() > 1
         && chars.next().is_some_and(|c| c.is_ascii_alphabetic())
         && chars.all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
-}
-
-/// `%XX` escapes decoded; `None` for a malformed escape or bytes that are
-/// not UTF-8.
-fn percent_decode(s: &str) -> Option<String> {
-    let mut out = Vec::with_capacity(s.len());
-    let mut bytes = s.bytes();
-    while let Some(b) = bytes.next() {
-        if b == b'%' {
-            let hex = [bytes.next()?, bytes.next()?];
-            out.push(u8::from_str_radix(std::str::from_utf8(&hex).ok()?, 16).ok()?);
-        } else {
-            out.push(b);
-        }
-    }
-    String::from_utf8(out).ok()
 }
 
 thread_local! {

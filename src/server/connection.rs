@@ -1,9 +1,9 @@
 //! The server's connections: accepted under a cap, each served by hyper's
 //! HTTP/1 with limits on how long a client may take (to send its request,
-//! to read its answer) and how large a request head may be, and all
-//! closed within a grace period at shutdown. `axum::serve` sets none of
-//! these: a client that stopped sending or reading held its connection,
-//! and a shutdown, for ever.
+//! to read its answer, to stay on after it has gone) and how large a
+//! request head may be, and all closed within a grace period at shutdown.
+//! `axum::serve` sets none of these: a client that stopped sending or
+//! reading held its connection, and a shutdown, for ever.
 
 use super::{shutdown_signal, AppState};
 use axum::Router;
@@ -37,33 +37,35 @@ const MAX_HEAD_BYTES: usize = 64 * 1024;
 /// worker and closes the connections within [`SHUTDOWN_GRACE`]. Each
 /// connection has [`super::ServeOptions::client_timeout`] to send a
 /// request's head (hyper's header read timeout, which also closes an idle
-/// kept-alive connection) and, whenever an answer is being written, to
-/// take some of it ([`StalledWrites`]).
-pub(super) async fn serve(listener: TcpListener, app: Router, state: &AppState) {
+/// kept-alive connection), whenever an answer is being written, to take
+/// some of it, and after its client shut its side, to be answered
+/// ([`ClientIo`]).
+pub(super) async fn serve(listener: TcpListener, app: Router, state: &Arc<AppState>) {
     let graceful = hyper_util::server::graceful::GracefulShutdown::new();
     let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+    let mut connections = tokio::task::JoinSet::new();
     let limit = state.options.client_timeout;
     let signal = shutdown_signal();
     tokio::pin!(signal);
     loop {
         let (stream, slot) = tokio::select! {
             accepted = accept(&listener, &slots) => accepted,
+            // Reaps the finished ones, which the set keeps until joined.
+            Some(_) = connections.join_next(), if !connections.is_empty() => continue,
             _ = &mut signal => break,
         };
         let service = hyper_util::service::TowerToHyperService::new(app.clone());
         let mut http = hyper::server::conn::http1::Builder::new();
         http.timer(hyper_util::rt::TokioTimer::new())
             .header_read_timeout(limit)
-            .max_header_size(MAX_HEAD_BYTES)
-            // A client that shuts its side after its request (`nc -N`, some
-            // HTTP/1.0 tools) still gets the answer.
-            .half_close(true);
-        let io = hyper_util::rt::TokioIo::new(StalledWrites::new(stream, limit));
+            .max_header_size(MAX_HEAD_BYTES);
+        let io = hyper_util::rt::TokioIo::new(ClientIo::new(stream, limit));
         let connection = graceful.watch(http.serve_connection(io, service));
-        tokio::spawn(async move {
+        let open = OpenConnection::new(state.clone(), slot);
+        connections.spawn(async move {
             // A client that went away or sent garbage: nothing to report.
             let _ = connection.await;
-            drop(slot);
+            drop(open);
         });
     }
     state.shutdown.store(true, Ordering::SeqCst);
@@ -78,6 +80,27 @@ pub(super) async fn serve(listener: TcpListener, app: Router, state: &AppState) 
             "closing the connections still open {} s after the shutdown began",
             SHUTDOWN_GRACE.as_secs()
         );
+        connections.shutdown().await;
+    }
+}
+
+/// A served connection: holds its slot of [`MAX_CONNECTIONS`] and counts
+/// in [`AppState::open_connections`] (`/metrics`) until dropped.
+struct OpenConnection {
+    state: Arc<AppState>,
+    _slot: OwnedSemaphorePermit,
+}
+
+impl OpenConnection {
+    fn new(state: Arc<AppState>, slot: OwnedSemaphorePermit) -> Self {
+        state.open_connections.fetch_add(1, Ordering::Relaxed);
+        OpenConnection { state, _slot: slot }
+    }
+}
+
+impl Drop for OpenConnection {
+    fn drop(&mut self) {
+        self.state.open_connections.fetch_sub(1, Ordering::Relaxed);
     }
 }
 
@@ -105,24 +128,39 @@ async fn accept(
     }
 }
 
-/// A connection whose writes fail once none of them has made progress for
-/// `limit`: a client that stopped reading (its socket buffers full) let
-/// go, where it held its connection slot, and the answer's bytes, for as
-/// long as it liked. A stream waiting for its next frame writes nothing
-/// and is not timed.
-struct StalledWrites {
+/// A client's connection under two limits of `limit` each.
+///
+/// Writes fail once none of them has made progress for `limit`: a client
+/// that stopped reading (its socket buffers full) is let go, where it held
+/// its connection slot, and the answer's bytes, for as long as it liked.
+/// A stream waiting for its next frame writes nothing and is not timed.
+///
+/// The end of the client's data is handed to hyper `limit` after it came.
+/// TCP cannot tell a client that shut its sending side after its request
+/// (`nc -N`, some HTTP/1.0 tools), which waits for the answer, from one
+/// that closed its socket, until a write meets the reset; and a frame
+/// stream may write nothing for hours. hyper's `half_close(true)` served
+/// the first and kept the second, with its slot, until the job's next
+/// frame; its default closed both at once, before the first got an
+/// answer not ready at once (`/records`). So the first gets an answer
+/// that comes within `limit`, and the second is let go after `limit`.
+struct ClientIo {
     stream: TcpStream,
     limit: Duration,
     /// Armed when a write finds the socket full; cleared by any progress.
     stalled: Option<Pin<Box<tokio::time::Sleep>>>,
+    /// Armed when a read finds the end of the client's data; when it
+    /// fires, reads return that end.
+    ended: Option<Pin<Box<tokio::time::Sleep>>>,
 }
 
-impl StalledWrites {
+impl ClientIo {
     fn new(stream: TcpStream, limit: Duration) -> Self {
-        StalledWrites {
+        ClientIo {
             stream,
             limit,
             stalled: None,
+            ended: None,
         }
     }
 
@@ -147,17 +185,27 @@ impl StalledWrites {
     }
 }
 
-impl AsyncRead for StalledWrites {
+impl AsyncRead for ClientIo {
     fn poll_read(
         mut self: Pin<&mut Self>,
         cx: &mut Context<'_>,
         buf: &mut ReadBuf<'_>,
     ) -> Poll<io::Result<()>> {
-        Pin::new(&mut self.stream).poll_read(cx, buf)
+        if self.ended.is_none() {
+            let before = buf.filled().len();
+            std::task::ready!(Pin::new(&mut self.stream).poll_read(cx, buf))?;
+            if buf.filled().len() > before || buf.remaining() == 0 {
+                return Poll::Ready(Ok(()));
+            }
+            self.ended = Some(Box::pin(tokio::time::sleep(self.limit)));
+        }
+        // Nothing read: the end of the data, once the timer has fired.
+        let ended = self.ended.as_mut().expect("armed above");
+        ended.as_mut().poll(cx).map(Ok)
     }
 }
 
-impl AsyncWrite for StalledWrites {
+impl AsyncWrite for ClientIo {
     fn poll_write(
         mut self: Pin<&mut Self>,
         cx: &mut Context<'_>,

@@ -140,6 +140,11 @@ pub async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         "# HELP radcache_render_seconds_total Seconds spent rendering frames.\n# TYPE radcache_render_seconds_total counter\nradcache_render_seconds_total {}",
         state.render_micros.load(Ordering::Relaxed) as f64 / 1e6
     );
+    let _ = writeln!(
+        out,
+        "# HELP radcache_http_connections Client connections being served (this one among them).\n# TYPE radcache_http_connections gauge\nradcache_http_connections {}",
+        state.open_connections.load(Ordering::Relaxed)
+    );
     let database = state.store.size_on_disk().unwrap_or(0);
     let log = state.store.sample_log_bytes();
     let _ = writeln!(

@@ -54,8 +54,9 @@ pub struct ServeOptions {
     /// A `radcache bench --out` directory whose charts the dashboard shows
     /// instead of the ones embedded from `web/charts`.
     pub bench: Option<PathBuf>,
-    /// How long a client may take to send a request's head, and then its
-    /// body; an idle kept-alive connection is closed after it too.
+    /// How long a client may take to send a request's head, then its
+    /// body, and to take some of an answer being written; an idle
+    /// kept-alive connection is closed after it too.
     pub client_timeout: Duration,
 }
 
@@ -212,6 +213,8 @@ pub struct AppState {
     pub shutdown: AtomicBool,
     pub frames_rendered: AtomicU64,
     pub render_micros: AtomicU64,
+    /// Client connections being served (`/metrics`).
+    pub open_connections: AtomicU64,
     /// One watch channel per followed job (stream, events), bumped on every
     /// change of the job: followers wake on changes, never poll.
     pub watchers: Mutex<HashMap<JobKey, watch::Sender<u64>>>,
@@ -447,7 +450,7 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
             .flat_map(|q| q.split('&'))
             .filter_map(|kv| kv.strip_prefix("token="));
         let query = match (tokens.next(), tokens.next()) {
-            (Some(t), None) => percent_decode(t),
+            (Some(t), None) => crate::uri::query_decode(t),
             _ => None,
         };
         if bearer != Some(token.as_str()) && query.as_deref() != Some(token.as_str()) {
@@ -525,37 +528,6 @@ async fn read_body(body: axum::body::Body) -> Result<Vec<u8>, ApiError> {
     Ok(bytes)
 }
 
-/// `s` with every byte outside RFC 3986's unreserved set as `%XX`.
-pub fn percent_encode(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for b in s.bytes() {
-        if b.is_ascii_alphanumeric() || b"-._~".contains(&b) {
-            out.push(b as char);
-        } else {
-            out.push_str(&format!("%{b:02X}"));
-        }
-    }
-    out
-}
-
-/// Decodes `%XX` escapes (and `+` as a space, as forms send it); `None`
-/// for a malformed escape or bytes that are not UTF-8.
-pub fn percent_decode(s: &str) -> Option<String> {
-    let mut out = Vec::with_capacity(s.len());
-    let mut bytes = s.bytes();
-    while let Some(b) = bytes.next() {
-        match b {
-            b'%' => {
-                let hex = [bytes.next()?, bytes.next()?];
-                out.push(u8::from_str_radix(std::str::from_utf8(&hex).ok()?, 16).ok()?);
-            }
-            b'+' => out.push(b' '),
-            b => out.push(b),
-        }
-    }
-    String::from_utf8(out).ok()
-}
-
 /// Runs the server until Ctrl-C or SIGTERM; the job being rendered stops
 /// at once, its frame in progress abandoned (and rendered again on the next
 /// start).
@@ -581,13 +553,14 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         running_frame: Mutex::new(None),
         frames_rendered: AtomicU64::new(0),
         render_micros: AtomicU64::new(0),
+        open_connections: AtomicU64::new(0),
         watchers: Mutex::new(HashMap::new()),
         pngs: Mutex::new(PngCache::default()),
         scene_cache: Mutex::new(None),
     });
     worker::load_jobs(&state)?;
     let runtime = tokio::runtime::Runtime::new().context("cannot start the tokio runtime")?;
-    runtime.block_on(async move {
+    let served = runtime.block_on(async move {
         let listener = tokio::net::TcpListener::bind(options.addr)
             .await
             .with_context(|| format!("cannot listen on {}", options.addr))?;
@@ -600,7 +573,12 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         worker.await.context("worker panicked")?;
         state.store.flush()?;
         Ok(())
-    })
+    });
+    // Blocking work a request began (a scene load, a records query) is not
+    // waited for, as dropping the runtime would: the store is flushed, and
+    // such work only reads it.
+    runtime.shutdown_timeout(std::time::Duration::from_millis(100));
+    served
 }
 
 pub(super) async fn shutdown_signal() {

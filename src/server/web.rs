@@ -74,7 +74,7 @@ pub async fn index(State(state): State<Arc<AppState>>) -> impl IntoResponse {
     let html = match &state.options.token {
         None => html.to_string(),
         Some(token) => {
-            let q = format!("?token={}", super::percent_encode(token));
+            let q = format!("?token={}", crate::uri::percent_encode(token));
             html.replace("/web/app.js", &format!("/web/app.js{q}"))
                 .replace("/web/app.css", &format!("/web/app.css{q}"))
         }
