@@ -1605,6 +1605,29 @@ fn metrics_count_the_sample_log_in_the_store_bytes() {
     assert!(gauge(&metrics, "radcache_store_bytes") > log);
 }
 
+/// Reads one answer with a `Content-Length` from a kept-alive connection.
+fn read_one_answer(s: &mut std::net::TcpStream) -> Vec<u8> {
+    use std::io::Read;
+    s.set_read_timeout(Some(Duration::from_secs(20))).unwrap();
+    let mut got = Vec::new();
+    let mut byte = [0u8; 1];
+    while !got.ends_with(b"\r\n\r\n") {
+        s.read_exact(&mut byte).unwrap();
+        got.push(byte[0]);
+    }
+    let head = String::from_utf8_lossy(&got).to_ascii_lowercase();
+    let length: usize = head
+        .lines()
+        .find_map(|l| l.strip_prefix("content-length: "))
+        .unwrap_or_else(|| panic!("no content-length: {head}"))
+        .trim()
+        .parse()
+        .unwrap();
+    let mut body = vec![0u8; length];
+    s.read_exact(&mut body).unwrap();
+    body
+}
+
 /// The value of gauge `name` in a `/metrics` answer.
 fn gauge(metrics: &[u8], name: &str) -> u64 {
     let text = String::from_utf8_lossy(metrics);
@@ -1758,6 +1781,30 @@ fn clients_that_stop_reading_or_half_close_are_served_as_they_should() {
             "{:?}",
             String::from_utf8_lossy(&got)
         );
+    }
+    // Clients that close a kept-alive connection after their answer (a
+    // `curl` in a loop) are let go at once, not after the client timeout.
+    let kept: Vec<_> = (0..5)
+        .map(|_| {
+            let mut s = std::net::TcpStream::connect(&patient.addr).unwrap();
+            write!(s, "GET /api/jobs HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+            read_one_answer(&mut s);
+            s
+        })
+        .collect();
+    drop(kept);
+    let waited = Instant::now();
+    loop {
+        let (_, metrics) = http(&patient, "GET", "/metrics", "");
+        let open = gauge(&metrics, "radcache_http_connections");
+        if open == 1 {
+            break;
+        }
+        assert!(
+            waited.elapsed() < Duration::from_secs(10),
+            "{open} connections open 10 s after their clients closed them"
+        );
+        std::thread::sleep(Duration::from_millis(100));
     }
     let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
     write!(

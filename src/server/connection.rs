@@ -6,11 +6,15 @@
 //! reading held its connection, and a shutdown, for ever.
 
 use super::{shutdown_signal, AppState};
+use axum::body::{Body, Bytes};
 use axum::Router;
+use hyper::body::{Frame, SizeHint};
+use hyper::service::Service;
+use std::convert::Infallible;
 use std::future::Future;
 use std::io;
 use std::pin::Pin;
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::task::{Context, Poll};
 use std::time::Duration;
@@ -54,12 +58,13 @@ pub(super) async fn serve(listener: TcpListener, app: Router, state: &Arc<AppSta
             Some(_) = connections.join_next(), if !connections.is_empty() => continue,
             _ = &mut signal => break,
         };
-        let service = hyper_util::service::TowerToHyperService::new(app.clone());
+        let answering = Arc::new(AtomicUsize::new(0));
+        let service = counting_answers(&app, &answering);
         let mut http = hyper::server::conn::http1::Builder::new();
         http.timer(hyper_util::rt::TokioTimer::new())
             .header_read_timeout(limit)
             .max_header_size(MAX_HEAD_BYTES);
-        let io = hyper_util::rt::TokioIo::new(ClientIo::new(stream, limit));
+        let io = hyper_util::rt::TokioIo::new(ClientIo::new(stream, limit, answering));
         let connection = graceful.watch(http.serve_connection(io, service));
         let open = OpenConnection::new(state.clone(), slot);
         connections.spawn(async move {
@@ -81,6 +86,77 @@ pub(super) async fn serve(listener: TcpListener, app: Router, state: &Arc<AppSta
             SHUTDOWN_GRACE.as_secs()
         );
         connections.shutdown().await;
+    }
+}
+
+/// `app` as one connection's hyper service, counting in `answering` the
+/// answers under way (from the request's call to the end of its answer's
+/// body), which tells [`ClientIo`] whether the client's end of data came
+/// while it waits for one.
+fn counting_answers(
+    app: &Router,
+    answering: &Arc<AtomicUsize>,
+) -> impl Service<
+    hyper::Request<hyper::body::Incoming>,
+    Response = hyper::Response<Answered>,
+    Error = Infallible,
+    Future = impl Future<Output = Result<hyper::Response<Answered>, Infallible>> + Send,
+> + Clone {
+    let app = hyper_util::service::TowerToHyperService::new(app.clone());
+    let answering = answering.clone();
+    hyper::service::service_fn(move |request| {
+        let answer = Answer::begin(&answering);
+        let call = app.call(request);
+        async move {
+            let response = call.await?;
+            Ok(response.map(|body| Answered {
+                body,
+                _answer: answer,
+            }))
+        }
+    })
+}
+
+/// One answer under way on a connection, counted until dropped: with its
+/// request, or with its body once hyper has sent it.
+struct Answer(Arc<AtomicUsize>);
+
+impl Answer {
+    fn begin(answering: &Arc<AtomicUsize>) -> Self {
+        answering.fetch_add(1, Ordering::SeqCst);
+        Answer(answering.clone())
+    }
+}
+
+impl Drop for Answer {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// An answer's body, carrying its [`Answer`].
+struct Answered {
+    body: Body,
+    _answer: Answer,
+}
+
+impl hyper::body::Body for Answered {
+    type Data = Bytes;
+    type Error = axum::Error;
+
+    fn poll_frame(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<Frame<Bytes>, axum::Error>>> {
+        Pin::new(&mut self.body).poll_frame(cx)
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.body.is_end_stream()
+    }
+
+    fn size_hint(&self) -> SizeHint {
+        self.body.size_hint()
     }
 }
 
@@ -135,7 +211,9 @@ async fn accept(
 /// its connection slot, and the answer's bytes, for as long as it liked.
 /// A stream waiting for its next frame writes nothing and is not timed.
 ///
-/// The end of the client's data is handed to hyper `limit` after it came.
+/// The end of the client's data, when it comes while an answer is under
+/// way (`answering`), is handed to hyper once the answer is done or
+/// `limit` after it came, whichever is first; between answers, at once.
 /// TCP cannot tell a client that shut its sending side after its request
 /// (`nc -N`, some HTTP/1.0 tools), which waits for the answer, from one
 /// that closed its socket, until a write meets the reset; and a frame
@@ -147,6 +225,8 @@ async fn accept(
 struct ClientIo {
     stream: TcpStream,
     limit: Duration,
+    /// Answers under way on this connection ([`counting_answers`]).
+    answering: Arc<AtomicUsize>,
     /// Armed when a write finds the socket full; cleared by any progress.
     stalled: Option<Pin<Box<tokio::time::Sleep>>>,
     /// Armed when a read finds the end of the client's data; when it
@@ -155,10 +235,11 @@ struct ClientIo {
 }
 
 impl ClientIo {
-    fn new(stream: TcpStream, limit: Duration) -> Self {
+    fn new(stream: TcpStream, limit: Duration, answering: Arc<AtomicUsize>) -> Self {
         ClientIo {
             stream,
             limit,
+            answering,
             stalled: None,
             ended: None,
         }
@@ -199,7 +280,11 @@ impl AsyncRead for ClientIo {
             }
             self.ended = Some(Box::pin(tokio::time::sleep(self.limit)));
         }
-        // Nothing read: the end of the data, once the timer has fired.
+        // Nothing read: the end of the data, now if no answer is under way,
+        // else once the timer has fired (hyper reads again after an answer).
+        if self.answering.load(Ordering::SeqCst) == 0 {
+            return Poll::Ready(Ok(()));
+        }
         let ended = self.ended.as_mut().expect("armed above");
         ended.as_mut().poll(cx).map(Ok)
     }
