@@ -1704,6 +1704,21 @@ fn clients_that_stop_reading_or_half_close_are_served_as_they_should() {
         "the whole answer ({} bytes) waited for a client that stopped reading",
         got.len()
     );
+    // A client that half-closes after asking for the large answer, and
+    // reads it, gets all of it: the answer is done when written, not when
+    // hyper holds the last of it.
+    for _ in 0..3 {
+        let mut s = connect_with_small_buffer(&server.addr);
+        write!(s, "GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+        s.shutdown(std::net::Shutdown::Write).unwrap();
+        let (got, _) = read_until_closed(&mut s, Duration::from_secs(20));
+        assert!(
+            got.len() > exr.len(),
+            "{} bytes of the {}-byte frame for a half-closed client",
+            got.len(),
+            exr.len()
+        );
+    }
     // Streams of a job queued behind a long one write nothing for as long.
     create_job(
         &server,

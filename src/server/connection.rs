@@ -197,6 +197,15 @@ async fn accept(
             Ok((stream, _)) => {
                 // Frames and events are small writes that should leave at once.
                 stream.set_nodelay(true).ok();
+                // A client that vanished without a FIN or reset (its machine
+                // or network gone) fails the reads hyper makes during a
+                // silent frame stream within minutes, not never.
+                let probes = socket2::TcpKeepalive::new()
+                    .with_time(Duration::from_secs(60))
+                    .with_interval(Duration::from_secs(10));
+                socket2::SockRef::from(&stream)
+                    .set_tcp_keepalive(&probes)
+                    .ok();
                 return (stream, slot);
             }
             Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
@@ -229,8 +238,9 @@ struct ClientIo {
     answering: Arc<AtomicUsize>,
     /// Armed when a write finds the socket full; cleared by any progress.
     stalled: Option<Pin<Box<tokio::time::Sleep>>>,
-    /// Armed when a read finds the end of the client's data; when it
-    /// fires, reads return that end.
+    /// Armed when a read finds the end of the client's data, pushed back by
+    /// every write that makes progress; when it fires, reads return that
+    /// end.
     ended: Option<Pin<Box<tokio::time::Sleep>>>,
 }
 
@@ -250,6 +260,12 @@ impl ClientIo {
     fn timed<T>(&mut self, cx: &mut Context<'_>, poll: Poll<io::Result<T>>) -> Poll<io::Result<T>> {
         if poll.is_ready() {
             self.stalled = None;
+            // A half-closed client taking a long answer is not cut off.
+            if let Some(ended) = self.ended.as_mut() {
+                ended
+                    .as_mut()
+                    .reset(tokio::time::Instant::now() + self.limit);
+            }
             return poll;
         }
         let limit = self.limit;
@@ -280,9 +296,12 @@ impl AsyncRead for ClientIo {
             }
             self.ended = Some(Box::pin(tokio::time::sleep(self.limit)));
         }
-        // Nothing read: the end of the data, now if no answer is under way,
-        // else once the timer has fired (hyper reads again after an answer).
-        if self.answering.load(Ordering::SeqCst) == 0 {
+        // Nothing read: the end of the data, now if no answer is under way
+        // nor left to write (hyper drops an answer's body once the body is
+        // in its buffer, and reads before it writes the rest), else once
+        // the timer has fired. Once the answer is written hyper reads again
+        // (its header read timeout has it, going idle, ask for a read).
+        if self.answering.load(Ordering::SeqCst) == 0 && self.stalled.is_none() {
             return Poll::Ready(Ok(()));
         }
         let ended = self.ended.as_mut().expect("armed above");
