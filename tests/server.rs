@@ -1605,6 +1605,24 @@ fn metrics_count_the_sample_log_in_the_store_bytes() {
     assert!(gauge(&metrics, "radcache_store_bytes") > log);
 }
 
+/// Waits (10 s at most) until the server's open connections, as
+/// `/metrics` counts them with its own, are as `want` says, once `after`.
+fn wait_for_connections(server: &Server, want: impl Fn(u64) -> bool, after: &str) {
+    let waited = Instant::now();
+    loop {
+        let (_, metrics) = http(server, "GET", "/metrics", "");
+        let open = gauge(&metrics, "radcache_http_connections");
+        if want(open) {
+            return;
+        }
+        assert!(
+            waited.elapsed() < Duration::from_secs(10),
+            "{open} connections open 10 s after {after}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
 /// Reads one answer with a `Content-Length` from a kept-alive connection.
 fn read_one_answer(s: &mut std::net::TcpStream) -> Vec<u8> {
     use std::io::Read;
@@ -1739,32 +1757,9 @@ fn clients_that_stop_reading_or_half_close_are_served_as_they_should() {
             s
         })
         .collect();
-    let connections = || {
-        let (_, metrics) = http(&server, "GET", "/metrics", "");
-        gauge(&metrics, "radcache_http_connections")
-    };
-    let waited = Instant::now();
-    while connections() < 21 {
-        assert!(
-            waited.elapsed() < Duration::from_secs(20),
-            "{}",
-            connections()
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    wait_for_connections(&server, |open| open >= 21, "the frame streams served");
     drop(streams);
-    let waited = Instant::now();
-    loop {
-        let open = connections();
-        if open == 1 {
-            break;
-        }
-        assert!(
-            waited.elapsed() < Duration::from_secs(10),
-            "{open} connections open 10 s after the frame streams' clients left"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    wait_for_connections(&server, |open| open == 1, "the frame streams' clients left");
     // Half-closing clients, of a server that gives them long enough to be
     // answered on a busy machine.
     let patient = start(&dir.path().join("db2"), &scenes);
@@ -1808,19 +1803,7 @@ fn clients_that_stop_reading_or_half_close_are_served_as_they_should() {
         })
         .collect();
     drop(kept);
-    let waited = Instant::now();
-    loop {
-        let (_, metrics) = http(&patient, "GET", "/metrics", "");
-        let open = gauge(&metrics, "radcache_http_connections");
-        if open == 1 {
-            break;
-        }
-        assert!(
-            waited.elapsed() < Duration::from_secs(10),
-            "{open} connections open 10 s after their clients closed them"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    wait_for_connections(&patient, |open| open == 1, "their clients closed them");
     let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
     write!(
         s,
