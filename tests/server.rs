@@ -1560,7 +1560,8 @@ fn clients_too_slow_to_send_their_request_are_let_go() {
 
 /// SIGTERM while a client holds a request it never finishes (here with a
 /// client timeout of an hour): the server stops within its grace period
-/// of 5 s (it waited for the client, holding the store's lock).
+/// of 5 s (it waited for the client, holding the store's lock), and
+/// refuses new clients in the meantime.
 #[test]
 fn a_shutdown_does_not_wait_for_a_client_that_never_finishes() {
     use std::io::Write;
@@ -1576,7 +1577,13 @@ fn a_shutdown_does_not_wait_for_a_client_that_never_finishes() {
     let mut half = std::net::TcpStream::connect(&server.addr).unwrap();
     write!(half, "GET /api/jobs HTTP/1.1\r\n").unwrap();
     std::thread::sleep(Duration::from_millis(300));
-    terminate(&mut server, Duration::from_secs(20));
+    let addr = server.addr.clone();
+    terminate_then(&mut server, Duration::from_secs(20), || {
+        // Within the grace period, a new client is refused, not queued.
+        std::thread::sleep(Duration::from_secs(1));
+        let late = std::net::TcpStream::connect(&addr);
+        assert!(late.is_err(), "a client connected after SIGTERM");
+    });
     drop((stuck, half));
 }
 
@@ -1659,10 +1666,16 @@ fn gauge(metrics: &[u8], name: &str) -> u64 {
 /// Sends SIGTERM to the server and waits for it to exit, successfully,
 /// within `limit`.
 fn terminate(server: &mut Server, limit: Duration) {
+    terminate_then(server, limit, || {});
+}
+
+/// [`terminate`], calling `meanwhile` once SIGTERM is sent.
+fn terminate_then(server: &mut Server, limit: Duration, meanwhile: impl FnOnce()) {
     let pid = server.child.id().to_string();
     let term = Command::new("kill").args(["-TERM", &pid]).status().unwrap();
     assert!(term.success());
     let asked = Instant::now();
+    meanwhile();
     let exit = loop {
         if let Some(exit) = server.child.try_wait().unwrap() {
             break exit;

@@ -73,6 +73,9 @@ pub(super) async fn serve(listener: TcpListener, app: Router, state: &Arc<AppSta
             drop(open);
         });
     }
+    // New clients are refused at once, not queued through the grace period
+    // and then reset.
+    drop(listener);
     state.shutdown.store(true, Ordering::SeqCst);
     state.abandon_frame(None);
     state.wake.notify_one();
