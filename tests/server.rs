@@ -548,6 +548,13 @@ fn create_job(server: &Server, body: &str) -> String {
     json(&resp)["id"].as_str().unwrap().to_string()
 }
 
+/// Creates job `first`, then job `then` (queued behind it while `first`
+/// renders); returns `then`'s id.
+fn create_job_behind(server: &Server, first: &str, then: &str) -> String {
+    create_job(server, first);
+    create_job(server, then)
+}
+
 /// The parts of a `multipart/x-mixed-replace` body: (X-Frame, bytes).
 fn multipart_parts(head: &str, body: &[u8]) -> Vec<(u32, Vec<u8>)> {
     let ct = head
@@ -615,12 +622,9 @@ fn stream_and_events_deliver_every_frame_in_order_to_two_clients() {
     let server = start(&dir.path().join("db"), &scenes);
     // A slower job first, so that the followed job is still queued when
     // its clients connect: they then see every frame live.
-    create_job(
+    let id = create_job_behind(
         &server,
         r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"48x48","spp":32}"#,
-    );
-    let id = create_job(
-        &server,
         r#"{"scene":"builtin:cube-in-box","method":"trc","frames":"0..4","size":"16x16","spp":1}"#,
     );
     let clients: Vec<_> = (0..2)
@@ -1751,12 +1755,9 @@ fn clients_that_stop_reading_or_half_close_are_served_as_they_should() {
         );
     }
     // Streams of a job queued behind a long one write nothing for as long.
-    create_job(
+    let queued = create_job_behind(
         &server,
         r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..10000","size":"64x64","spp":4}"#,
-    );
-    let queued = create_job(
-        &server,
         r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"8x8","spp":1}"#,
     );
     let streams: Vec<_> = (0..20)
