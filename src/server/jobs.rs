@@ -37,35 +37,40 @@ pub async fn create(
 ) -> Result<(StatusCode, Json<Value>), ApiError> {
     let request = JobRequest::parse(&body, state.options.scenes.as_deref())?;
     check_scene_loads(&state, &request).await?;
-    let id = {
-        let mut jobs = state.jobs.lock().expect("job table lock");
-        let last = jobs.keys().filter_map(|k| match k {
+    // Off the async workers and outside the job table's lock, which every
+    // request and the render worker take: the scene's files are read and
+    // hashed and the store flushed. All of it in the blocking task, so that
+    // a client gone meanwhile cannot leave a job stored but not listed.
+    let s = state.clone();
+    let id = tokio::task::spawn_blocking(move || add_queued_job(&s, request))
+        .await
+        .map_err(ApiError::internal)?
+        .map_err(ApiError::internal)?;
+    Ok((StatusCode::CREATED, Json(json!({ "id": id }))))
+}
+
+/// Stores `request` as the next `job-N`, queued, lists it and wakes the
+/// worker; its id. Into the store first, so that a restart finds it queued.
+fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<String> {
+    let _creating = state.creating.lock().expect("job creation lock");
+    let n = {
+        let jobs = state.jobs.lock().expect("job table lock");
+        let served = jobs.keys().filter_map(|k| match k {
             JobKey::Served(n) => Some(*n),
             JobKey::Rendered(_) => None,
         });
-        let n = last.max().map_or(1, |n| n + 1);
-        let id = format!("job-{n}");
-        // Into the store at once, so that a restart finds it queued.
-        let spec = crate::render::job_spec(
-            &id,
-            &request.scene,
-            &request.method,
-            &request.settings,
-            request.frames.clone(),
-        )
-        .map_err(ApiError::internal)?;
-        state
-            .store
-            .begin_job(&spec, false)
-            .map_err(ApiError::internal)?;
-        jobs.insert(
-            JobKey::Served(n),
-            Job::new(id.clone(), request, JobState::Queued, 0),
-        );
-        id
+        served.max().map_or(1, |n| n + 1)
     };
+    let id = format!("job-{n}");
+    let r = &request;
+    let spec = crate::render::job_spec(&id, &r.scene, &r.method, &r.settings, r.frames.clone())?;
+    state.store.begin_job(&spec, false)?;
+    state.jobs.lock().expect("job table lock").insert(
+        JobKey::Served(n),
+        Job::new(id.clone(), request, JobState::Queued, 0),
+    );
     state.wake.notify_one();
-    Ok((StatusCode::CREATED, Json(json!({ "id": id }))))
+    Ok(id)
 }
 
 /// A scene file is loaded once at submission, so that a malformed one is
@@ -106,27 +111,33 @@ pub async fn cancel(
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
     let job = state.job(&id)?;
-    if matches!(job.state, JobState::Queued | JobState::Running) {
-        // Durable first: a restart keeps the job cancelled.
-        state
-            .store
-            .set_job_cancelled(&id, true)
-            .map_err(ApiError::internal)?;
+    if !matches!(job.state, JobState::Queued | JobState::Running) {
+        return Err(ApiError::conflict(format!(
+            "job {id} is {}; only queued or running jobs can be cancelled",
+            job.state.as_str()
+        )));
     }
-    match job.state {
-        JobState::Queued => state.update(&id, |j| j.state = JobState::Cancelled),
+    // Durable first: a restart keeps the job cancelled.
+    state
+        .store
+        .set_job_cancelled(&id, true)
+        .map_err(ApiError::internal)?;
+    let mut changes = state.subscribe(&id)?;
+    // Decided on the state as it is under the table's lock, not on the copy
+    // above: the worker may have started the job in between, and a running
+    // job must be stopped by the worker, not only shown cancelled.
+    let mut running = false;
+    state.update(&id, |j| match j.state {
+        JobState::Queued => j.state = JobState::Cancelled,
         JobState::Running => {
-            let mut changes = state.subscribe(&id)?;
-            state.update(&id, |j| j.cancel = true);
-            state.abandon_frame(Some(&id));
-            wait_while_running(&state, &id, &mut changes).await;
+            j.cancel = true;
+            running = true;
         }
-        s => {
-            return Err(ApiError::conflict(format!(
-                "job {id} is {}; only queued or running jobs can be cancelled",
-                s.as_str()
-            )))
-        }
+        _ => {}
+    });
+    if running {
+        state.abandon_frame(Some(&id));
+        wait_while_running(&state, &id, &mut changes).await;
     }
     Ok(Json(job_json(&state, &state.job(&id)?)))
 }

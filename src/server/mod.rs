@@ -206,6 +206,10 @@ pub struct AppState {
     pub options: ServeOptions,
     /// The server's jobs and those `radcache render` left in the store.
     pub jobs: Mutex<BTreeMap<JobKey, Job>>,
+    /// Held by a job's creation from choosing its id to its insertion in
+    /// `jobs`, so that two creations never choose the same id while the
+    /// table's own lock is free during the creation's file and store work.
+    pub creating: Mutex<()>,
     /// Wakes the worker when a job is queued.
     pub wake: Notify,
     /// Ctrl-C / SIGTERM: stop now, abandoning the frame in progress (it is
@@ -548,6 +552,7 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         store,
         options: options.clone(),
         jobs: Mutex::new(BTreeMap::new()),
+        creating: Mutex::new(()),
         wake: Notify::new(),
         shutdown: AtomicBool::new(false),
         running_frame: Mutex::new(None),

@@ -253,10 +253,8 @@ pub async fn records(
         // the frame that wrote it.
         let mut latest: BTreeMap<u64, (u32, RecordValue)> = BTreeMap::new();
         s.store
-            .for_each_record(sid, |written, r| {
-                if written <= frame {
-                    latest.insert(r.id, (written, r));
-                }
+            .for_each_record(sid, frame, |written, r| {
+                latest.insert(r.id, (written, r));
             })
             .map_err(ApiError::internal)?;
         let mut sources = StoredSources {

@@ -113,8 +113,12 @@ impl JobRequest {
         })
     }
 
-    /// The request of a job found in the store (a restart resumes it).
+    /// The request of a job found in the store (a restart resumes it);
+    /// none for one whose method or frame range no request could give.
     pub fn from_stored(job: &JobValue) -> Option<JobRequest> {
+        if job.frame_start >= job.frame_end {
+            return None;
+        }
         let scene = match job.scene.strip_prefix("builtin:") {
             Some(name) => SceneSource::Builtin(name.to_string()),
             None => SceneSource::File(job.scene.clone().into()),
@@ -135,7 +139,7 @@ impl JobRequest {
     }
 
     pub fn frames_total(&self) -> u32 {
-        self.frames.end - self.frames.start
+        self.frames.len() as u32
     }
 }
 

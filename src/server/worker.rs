@@ -17,6 +17,10 @@ pub fn load_jobs(state: &AppState) -> Result<()> {
     let mut jobs = state.jobs.lock().expect("job table lock");
     for stored in state.store.jobs()? {
         let Some(request) = JobRequest::from_stored(&stored) else {
+            eprintln!(
+                "warning: job {:?} in the store names no method or frames this server can render; left out",
+                stored.name
+            );
             continue;
         };
         let key = JobKey::of(&stored.name);
@@ -74,7 +78,6 @@ pub async fn run(state: Arc<AppState>) {
             Ok(r) => r,
             Err(e) => Err(anyhow::anyhow!("render panicked: {e}")),
         };
-        let stopping = state.shutdown.load(Ordering::SeqCst);
         state.update(&id, |j| match result {
             Err(e) => {
                 j.state = JobState::Failed;
@@ -86,7 +89,6 @@ pub async fn run(state: Arc<AppState>) {
                 j.cancel = false;
             }
             // Stopped by shutdown: resumed on the next start.
-            Ok(()) if stopping => j.state = JobState::Queued,
             Ok(()) => j.state = JobState::Queued,
         });
     }
