@@ -113,6 +113,24 @@ fn store_round_trips_frames_records_samples_and_progress() {
             3
         );
     }
+    // The records written through a frame, and only those: the blocks of
+    // later frames are not read.
+    for through in [0, 2, 3, u32::MAX] {
+        let mut seen = Vec::new();
+        store
+            .for_each_record(job.id, through, |frame, r| seen.push((frame, r.id)))
+            .unwrap();
+        let want: Vec<(u32, u64)> = (0..=through.min(3))
+            .flat_map(|f| {
+                store
+                    .frame_records(job.id, f)
+                    .unwrap()
+                    .into_iter()
+                    .map(move |r| (f, r.id))
+            })
+            .collect();
+        assert_eq!(seen, want, "records through frame {through}");
+    }
     let report = radcache::store::inspect::report(&store, Some("j"), None).unwrap();
     assert_eq!(report.jobs[0].records, 12);
     assert_eq!(report.jobs[0].samples, 12 * 48);
@@ -1322,7 +1340,7 @@ fn trc_resumes_from_stored_state(gradients: TemporalGradients) {
     let alive: std::collections::HashSet<u64> = state.records.iter().map(|r| r.0).collect();
     let (mut spanning, mut ending) = (0, 0);
     store
-        .for_each_record(id, |_, rec| {
+        .for_each_record(id, u32::MAX, |_, rec| {
             if alive.contains(&rec.id) && rec.created_frame < 5 {
                 spanning += u32::from(rec.last_frame > 5);
                 ending += u32::from(rec.last_frame == 5);
@@ -1957,7 +1975,7 @@ fn corrupt_record_block_is_an_error_naming_the_log_and_the_frame() {
     assert!(names_block(&msg, 1), "{msg}");
     let msg = err_text(store.record_samples(id, 1, 2));
     assert!(names_block(&msg, 1), "{msg}");
-    let msg = err_text(store.for_each_record(id, |_, _| {}));
+    let msg = err_text(store.for_each_record(id, u32::MAX, |_, _| {}));
     assert!(names_block(&msg, 1), "{msg}");
     // The other frames still read.
     assert_eq!(store.frame_records(id, 0).unwrap().len(), 3);
@@ -2061,7 +2079,9 @@ fn check_v3_fixture_reads_back(
         );
     }
     let mut all = Vec::new();
-    store.for_each_record(7, |f, r| all.push((f, r))).unwrap();
+    store
+        .for_each_record(7, u32::MAX, |f, r| all.push((f, r)))
+        .unwrap();
     assert_eq!(all, records);
     for (frame, id, samples) in written {
         assert_eq!(&store.record_samples(7, *frame, *id).unwrap(), samples);

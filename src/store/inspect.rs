@@ -341,7 +341,7 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
     // Each record's latest version, keyed by (creation frame, id):
     // (frame written, lifespan, object).
     let mut latest: BTreeMap<(u32, u64), (u32, u32, u32)> = BTreeMap::new();
-    store.for_each_record(j.id, |frame, rec| {
+    store.for_each_record(j.id, u32::MAX, |frame, rec| {
         r.record_versions += 1;
         let lifespan = rec.last_frame.saturating_sub(rec.created_frame) + 1;
         let entry = latest

@@ -36,8 +36,6 @@
 //! state of a stateful method (`trc`) after the job's last frame: its head
 //! under the job id, then its records in id order.
 
-use std::ops::Range;
-
 /// `meta` key of the schema version (value: u32 big-endian, 4 bytes).
 pub const META_SCHEMA_VERSION: &[u8] = b"schema_version";
 /// `meta` key of the crate version that created the store (UTF-8).
@@ -122,11 +120,6 @@ pub fn parse_state_record(key: &[u8]) -> Option<(u64, u64)> {
         u64::from_be_bytes(k[..8].try_into().ok()?),
         u64::from_be_bytes(k[8..].try_into().ok()?),
     ))
-}
-
-/// Key range of frames `frames` of `job` (frames, stats, records).
-pub fn frame_range(job: u64, frames: Range<u32>) -> Range<[u8; 12]> {
-    frame(job, frames.start)..frame(job, frames.end)
 }
 
 /// Decodes a `job · frame` key.

@@ -114,14 +114,19 @@ impl Store {
         }
     }
 
-    /// Every record version of `job`, in (frame, id) order, through `f`
-    /// (streams: one frame's block at a time).
+    /// Every record version of `job` written in frames `0..=through`, in
+    /// (frame, id) order, through `f` (streams: one frame's block at a time;
+    /// the blocks of later frames are not read).
     pub fn for_each_record(
         &self,
         job: u64,
+        through: u32,
         mut f: impl FnMut(u32, RecordValue),
     ) -> Result<(), StoreError> {
-        for item in self.records.scan_prefix(keys::job_prefix(job)) {
+        for item in self
+            .records
+            .range(keys::frame(job, 0)..=keys::frame(job, through))
+        {
             let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
             let (_, frame) = keys::parse_frame(&k)
                 .ok_or_else(|| self.corrupt("records", &k, "malformed key"))?;
