@@ -5,7 +5,9 @@
 //! The layouts are part of the store schema (`migrations/`).
 
 use super::{MethodState, StateError};
+use crate::cache::gather::GatherPoint;
 use crate::cache::RecordId;
+use glam::Vec3;
 use rkyv::rancor;
 use rkyv::util::AlignedVec;
 
@@ -62,4 +64,27 @@ pub(crate) fn restore<R>(
         records.push(r);
     }
     Ok((records, next_id))
+}
+
+/// What a carried record of either method must hold to be used: a finite
+/// point with normals of unit length, a positive radius and a pixel
+/// footprint of at least 0. Bytes that pass rkyv's check may hold any
+/// floats, and a NaN point or radius would make NaN records and the
+/// octree's cells from them. `Err` says what is wrong.
+pub(crate) fn check_record_geometry(
+    point: &GatherPoint,
+    radius: f32,
+    footprint: f32,
+) -> Result<(), String> {
+    let unit = |n: Vec3| n.is_finite() && (n.length() - 1.0).abs() < 1e-3;
+    if !point.position.is_finite() {
+        return Err("a point that is not finite".into());
+    }
+    if !unit(point.normal) || !unit(point.geometric_normal) {
+        return Err("a normal that is not of unit length".into());
+    }
+    if !(radius.is_finite() && radius > 0.0 && footprint.is_finite() && footprint >= 0.0) {
+        return Err("a radius or pixel footprint out of range".into());
+    }
+    Ok(())
 }

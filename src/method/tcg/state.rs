@@ -14,7 +14,7 @@
 use super::TcgRecord;
 use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceRecord;
-use crate::method::carried::aligned;
+use crate::method::carried::{aligned, check_record_geometry};
 use crate::method::ic::Candidate;
 use crate::store::encode;
 use crate::store::samples::SampleBlock;
@@ -97,18 +97,11 @@ pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, Str
         normal: s.point_normal.into(),
         geometric_normal: s.point_geometric_normal.into(),
     };
-    // Bytes that pass rkyv's check may still hold any floats: a NaN point
-    // or transform would make NaN records, and the octree's cells from them.
-    let unit = |n: Vec3| n.is_finite() && (n.length() - 1.0).abs() < 1e-3;
-    if !object_to_world.is_finite() || !point.position.is_finite() {
-        return Err("tcg record state: a point or transform that is not finite".into());
+    if !object_to_world.is_finite() {
+        return Err("tcg record state: a transform that is not finite".into());
     }
-    if !unit(point.normal) || !unit(point.geometric_normal) {
-        return Err("tcg record state: a normal that is not of unit length".into());
-    }
-    if !(s.radius.is_finite() && s.radius > 0.0 && s.footprint.is_finite() && s.footprint >= 0.0) {
-        return Err("tcg record state: a radius or pixel footprint out of range".into());
-    }
+    check_record_geometry(&point, s.radius, s.footprint)
+        .map_err(|e| format!("tcg record state: {e}"))?;
     Ok(TcgRecord {
         record: IrradianceRecord {
             id: s.id,

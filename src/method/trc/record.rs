@@ -160,6 +160,51 @@ impl TemporalRecord {
     }
 }
 
+#[cfg(test)]
+impl TemporalRecord {
+    /// A record at the origin facing +y, of irradiance `e0`, whose
+    /// estimate predicts `change` (for tests).
+    pub(super) fn test_record(e0: Vec3, change: f32) -> TemporalRecord {
+        let point = crate::cache::gather::GatherPoint {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            geometric_normal: Vec3::Y,
+        };
+        TemporalRecord {
+            record: crate::cache::IrradianceRecord {
+                id: 0,
+                position: Vec3::ZERO,
+                normal: Vec3::Y,
+                irradiance: e0,
+                grad_translation: [Vec3::ZERO; 3],
+                grad_rotation: [Vec3::ZERO; 3],
+                radius: 1.0,
+                created_frame: 0,
+                object: 0,
+                eas: None,
+            },
+            candidate: crate::method::ic::Candidate {
+                pixel: 0,
+                stream: 0,
+                point,
+                object: 0,
+                footprint: 0.01,
+                glossy: None,
+            },
+            next_irradiance: e0 * (1.0 + change),
+            change,
+            last_valid: 0,
+            d_irradiance: Vec3::ZERO,
+            d_grad_rotation: [Vec3::ZERO; 3],
+            d_grad_translation: [Vec3::ZERO; 3],
+            d_eas: None,
+            replaces: None,
+            used: false,
+            paths: None,
+        }
+    }
+}
+
 /// `|τ − 1|` of TRC Eq. 7, `τ = E(t0+1)/E(t0)` per channel: the worst
 /// channel decides. A channel dark at t0 that lights up is an infinite
 /// change; one dark at both is none.

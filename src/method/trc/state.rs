@@ -10,7 +10,7 @@ use super::TemporalRecord;
 use crate::cache::eas::Eas;
 use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceRecord;
-use crate::method::carried::aligned;
+use crate::method::carried::{aligned, check_record_geometry};
 use crate::method::ic::Candidate;
 use crate::store::encode;
 use glam::Vec3;
@@ -137,9 +137,9 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
         eas,
     } = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
         .map_err(|e| format!("trc record state: {e}"))?;
-    if s.last_valid < s.created_frame {
+    if s.last_valid < s.created_frame || s.last_valid == u32::MAX {
         return Err(format!(
-            "trc record state: last valid frame {} before its creation {}",
+            "trc record state: last valid frame {} before its creation {} or past the last frame",
             s.last_valid, s.created_frame
         ));
     }
@@ -155,7 +155,7 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
             .collect()
     });
     let d_eas = eas.map(|sources| sources.iter().map(|e| e.d_irradiance.into()).collect());
-    Ok(TemporalRecord {
+    let r = TemporalRecord {
         record: IrradianceRecord {
             id: s.id,
             position: s.position.into(),
@@ -192,7 +192,38 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
         // The store keeps no paths: a resumed render's first replacements
         // trace every path, as the kept ones would have gone.
         paths: None,
-    })
+    };
+    check_values(&r).map_err(|e| format!("trc record state: {e}"))?;
+    Ok(r)
+}
+
+/// What [`check_record_geometry`] checks, and that every irradiance,
+/// gradient and source is finite (a change to the next frame may be
+/// infinite: a channel dark at t0 that lights up, [`super::record`]).
+fn check_values(r: &TemporalRecord) -> Result<(), String> {
+    let c = &r.candidate;
+    check_record_geometry(&c.point, r.record.radius, c.footprint)?;
+    let record = &r.record;
+    let vectors = [record.position, record.normal, record.irradiance]
+        .into_iter()
+        .chain(record.grad_translation)
+        .chain(record.grad_rotation)
+        .chain([r.next_irradiance, r.d_irradiance])
+        .chain(r.d_grad_rotation)
+        .chain(r.d_grad_translation)
+        .chain(r.d_eas.as_deref().unwrap_or(&[]).iter().copied());
+    let sources = record.eas.as_deref().unwrap_or(&[]);
+    let finite = vectors.into_iter().all(Vec3::is_finite)
+        && sources
+            .iter()
+            .all(|e| e.offset.is_finite() && e.irradiance.is_finite() && e.solid_angle.is_finite());
+    if !finite {
+        return Err("an irradiance, gradient or source that is not finite".into());
+    }
+    if r.change.is_nan() || r.change < 0.0 {
+        return Err(format!("a change to the next frame of {}", r.change));
+    }
+    Ok(())
 }
 
 /// How many sources a record's bytes hold: `None` for an irradiance
@@ -227,4 +258,41 @@ pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
         return Err(format!("record {} is a radiance record", s.irradiance.id));
     }
     Ok(encode(&s.irradiance))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A record whose bytes decode to values no render could use is
+    /// refused with what is wrong, not restored into the cache.
+    #[test]
+    fn records_with_unusable_values_are_refused() {
+        let good = TemporalRecord::test_record(Vec3::ONE, 0.01);
+        let back = decode_record(&encode_record(&good)).expect("a good record decodes");
+        assert_eq!(back.record.irradiance, good.record.irradiance);
+        let mut infinite_change = TemporalRecord::test_record(Vec3::ZERO, f32::INFINITY);
+        infinite_change.next_irradiance = Vec3::ONE;
+        decode_record(&encode_record(&infinite_change)).expect("an infinite change is one");
+
+        type Spoil = fn(&mut TemporalRecord);
+        let cases: [(&str, Spoil); 6] = [
+            ("irradiance", |r| r.record.irradiance.y = f32::NAN),
+            ("gradient", |r| r.d_grad_rotation[1].x = f32::INFINITY),
+            ("normal", |r| r.candidate.point.normal = Vec3::ZERO),
+            ("radius", |r| r.record.radius = 0.0),
+            ("change", |r| r.change = f32::NAN),
+            ("last frame", |r| r.last_valid = u32::MAX),
+        ];
+        for (what, spoil) in cases {
+            let mut r = TemporalRecord::test_record(Vec3::ONE, 0.01);
+            spoil(&mut r);
+            let e = decode_record(&encode_record(&r)).err();
+            assert!(
+                e.as_deref()
+                    .is_some_and(|e| e.starts_with("trc record state: ")),
+                "{what}: {e:?}"
+            );
+        }
+    }
 }
