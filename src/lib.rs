@@ -16,6 +16,7 @@
 //! | [`method`]  | rendering methods behind one trait (`path`, `ic`, `trc`)   |
 //! | [`integrator`] | path tracing of ray batches, shared by all methods        |
 //! | [`film`]    | RGB f32 images, EXR and PNG input/output                        |
+//! | [`hash`]    | FNV-1a 64, the content hash of scenes and their files          |
 //! | [`metrics`] | RMSE, relative RMSE, block bias and flicker; `compare`         |
 //! | [`render`]  | the frame loop: animation → geometry → method → files         |
 //! | [`bench`](mod@bench) | `radcache bench`: methods against a reference, CSV and charts |
@@ -29,6 +30,7 @@ pub mod bench;
 pub mod cache;
 pub mod cli;
 pub mod film;
+pub mod hash;
 pub mod integrator;
 pub mod light;
 pub mod material;

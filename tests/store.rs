@@ -1684,7 +1684,7 @@ fn scene_hash_covers_external_buffers_and_images() {
     let (main, ext) = h1.split_once('+').expect("external files hashed");
     assert_eq!(
         main,
-        radcache::store::content_hash(&std::fs::read(&gltf).unwrap())
+        radcache::hash::content_hash(&std::fs::read(&gltf).unwrap())
     );
     std::fs::write(dir.path().join("a b.bin"), [1u8, 2, 3, 5]).unwrap();
     let (_, h2) = render::scene_identity(&source).unwrap();

@@ -8,7 +8,7 @@ use crate::backend::{Hit, Ray};
 use crate::method::path::PathSettings;
 use crate::method::FrameContext;
 use crate::metrics;
-use crate::render::{self, BackendChoice, MethodSettings, Renderer, SceneSource};
+use crate::render::{self, BackendChoice, MethodSettings, Renderer};
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -17,8 +17,10 @@ use std::path::Path;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 struct ReferenceInfo {
     scene: String,
-    /// FNV-1a of the scene file's bytes (0 for built-in scenes).
-    scene_hash: u64,
+    /// The scene's content hash as a job records it
+    /// ([`render::scene_identity`]): a file's, with those of the buffers and
+    /// images it names, so that editing a `.bin` renders the reference again.
+    scene_hash: String,
     frames: [u32; 2],
     width: u32,
     height: u32,
@@ -38,30 +40,13 @@ struct ReferenceInfo {
     edge_coverage_factor: u32,
 }
 
-fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-    })
-}
-
-fn scene_hash(source: &SceneSource) -> Result<u64> {
-    match source {
-        SceneSource::Builtin(_) => Ok(0),
-        SceneSource::File(p) => {
-            let bytes =
-                std::fs::read(p).with_context(|| format!("cannot read scene {}", p.display()))?;
-            Ok(fnv1a(&bytes))
-        }
-    }
-}
-
 /// Renders the reference of `scene` into `dir` unless a matching one is
 /// there already.
 pub(super) fn ensure_reference(opts: &BenchOptions, scene: &BenchScene, dir: &Path) -> Result<()> {
     let source = scene.source;
     let info = ReferenceInfo {
         scene: source.to_string(),
-        scene_hash: scene_hash(source)?,
+        scene_hash: render::scene_identity(source)?.1,
         frames: [opts.frames.start, opts.frames.end],
         width: opts.width,
         height: opts.height,

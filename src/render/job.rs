@@ -8,8 +8,8 @@ use crate::film::{self, Film};
 use crate::method::{FrameRecords, FrameStats};
 use crate::scene::gltf_loader;
 use crate::store::{
-    self, schema::FrameSourcesValue, schema::JobValue, FrameCommit, JobSpec, RecordCommit,
-    StateCommit, Store,
+    schema::FrameSourcesValue, schema::JobValue, FrameCommit, JobSpec, RecordCommit, StateCommit,
+    Store,
 };
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeSet;
@@ -30,11 +30,11 @@ pub struct StoreJob<'a> {
 /// `.bin` or a texture next to a `.gltf` changes the hash too.
 pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
     let hash = match source {
-        SceneSource::Builtin(_) => store::content_hash(source.to_string().as_bytes()),
+        SceneSource::Builtin(_) => crate::hash::content_hash(source.to_string().as_bytes()),
         SceneSource::File(path) => {
             let bytes = gltf_loader::read_regular_file(path, None)
                 .map_err(|e| anyhow::anyhow!("cannot read scene {}: {e}", path.display()))?;
-            let main = store::content_hash(&bytes);
+            let main = crate::hash::content_hash(&bytes);
             let uris = external_uris(&bytes);
             if uris.is_empty() {
                 main
@@ -53,7 +53,7 @@ pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
                     all.extend_from_slice(&(content.len() as u64).to_le_bytes());
                     all.extend_from_slice(&content);
                 }
-                format!("{main}+{}", store::content_hash(&all))
+                format!("{main}+{}", crate::hash::content_hash(&all))
             }
         }
     };

@@ -576,8 +576,8 @@ impl Snapshot {
     /// backends rebuild (and re-upload) their static part only when this
     /// changes (a new scene), without keeping a copy of the geometry.
     pub fn static_fingerprint(&self) -> u64 {
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        let mut eat = |x: u32| h = (h ^ u64::from(x)).wrapping_mul(0x0100_0000_01b3);
+        let mut h = crate::hash::Fnv1a::default();
+        let mut eat = |x: u32| h.write(&x.to_le_bytes());
         let statics = self.triangles[..self.static_count]
             .iter()
             .zip(&self.tri_object);
@@ -589,7 +589,7 @@ impl Snapshot {
             }
             eat(object);
         }
-        h ^ self.static_count as u64
+        h.finish() ^ self.static_count as u64
     }
 }
 

@@ -166,17 +166,6 @@ pub struct Store {
     log: std::sync::Mutex<SampleLog>,
 }
 
-/// FNV-1a 64 of `bytes`, in hex: the scene content hash of a job (stable
-/// across builds and platforms, unlike `std`'s hasher).
-pub fn content_hash(bytes: &[u8]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
-    format!("{h:016x}")
-}
-
 /// Appends a frame's records to the sample log as one zstd block (schema
 /// 4) and returns the frame's `records` value, which says where it is.
 fn append_record_block(
