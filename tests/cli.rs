@@ -178,6 +178,10 @@ fn bad_input_is_a_clear_error() {
             &["serve", "--scenes", "/nonexistent/scenes"],
             "no such directory",
         ),
+        (
+            &["serve", "--addr", "0.0.0.0:1", "--token", ""],
+            "--token (or RADCACHE_TOKEN) is empty",
+        ),
     ];
     for (args, expected) in cases {
         let (code, _, stderr) = radcache(args);
@@ -188,6 +192,84 @@ fn bad_input_is_a_clear_error() {
             "{args:?}: expected '{expected}' in: {stderr}"
         );
     }
+}
+
+/// `RAYON_NUM_THREADS`, which stands for `--threads` where that is not
+/// given, is held to the same range (99,999 threads swamped the machine).
+#[test]
+fn rayon_num_threads_is_held_to_the_threads_range() {
+    for (value, expected) in [
+        ("1100", "RAYON_NUM_THREADS=1100: at most 1024"),
+        ("lots", "is not a number of worker threads"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args(["render", "--size", "4x4", "--frames", "0..1"])
+            .env("RAYON_NUM_THREADS", value)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{value}: {stderr}");
+        assert!(stderr.contains(expected), "{value}: {stderr}");
+    }
+}
+
+/// Standard output closed by its reader (`radcache … | head -1`) ends the
+/// output quietly once the work is done; a full one is a clear error. Both
+/// panicked in `println!`.
+#[test]
+fn a_closed_or_full_standard_output_is_no_panic() {
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let render = [
+        "render", "--size", "4x4", "--frames", "0..1", "--spp", "1", "--out",
+    ];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(render)
+        .arg(dir.path())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(dir.path().join("frame_0000.exr").is_file());
+
+    let full = std::fs::OpenOptions::new().write(true).open("/dev/full");
+    if let Ok(full) = full {
+        let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args(render)
+            .arg(dir.path())
+            .stdout(full)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(
+            stderr.contains("cannot write to standard output"),
+            "{stderr}"
+        );
+    }
+}
+
+/// `serve` on an address another program holds fails before it makes a
+/// store, so no empty store is left where `--db` pointed.
+#[test]
+fn serve_on_a_taken_address_leaves_no_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = taken.local_addr().unwrap().to_string();
+    let db = dir.path().join("db");
+    let (code, _, stderr) = radcache(&["serve", "--addr", &addr, "--db", db.to_str().unwrap()]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains(&format!("cannot listen on {addr}")),
+        "{stderr}"
+    );
+    assert!(!db.exists(), "a store was made at {}", db.display());
 }
 
 /// A bench whose last scene does not load fails before it benches the

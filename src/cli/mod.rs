@@ -4,6 +4,7 @@
 //! in `args`, the `render` verb in `render`, the others here.
 
 mod args;
+mod output;
 mod render;
 
 use crate::bench;
@@ -16,6 +17,7 @@ pub use args::{
     MoviesArgs, OnOff, RenderArgs, ServeArgs, TcgArgs, TrcArgs, TrcGradientsArg, DEFAULT_DB,
 };
 use clap::{Parser, Subcommand};
+use output::{out, outln};
 use render::run_render;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -30,7 +32,7 @@ pub struct Cli {
     /// Worker threads that render, trace and shade, 1 to 1024 [default: one
     /// per CPU core, or RAYON_NUM_THREADS]. Frames are the same, bit for
     /// bit, for any count.
-    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..=1024))]
+    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..=MAX_THREADS as i64))]
     pub threads: Option<u16>,
     #[command(subcommand)]
     pub command: Command,
@@ -57,6 +59,7 @@ pub fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(err) if err.is::<output::StdoutClosed>() => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("error: {err:#}");
             ExitCode::FAILURE
@@ -67,6 +70,8 @@ pub fn main() -> ExitCode {
 pub fn run(cli: Cli) -> Result<()> {
     if let Some(threads) = cli.threads {
         start_worker_threads(usize::from(threads))?;
+    } else {
+        check_rayon_num_threads()?;
     }
     match cli.command {
         Command::Render(args) => run_render(args),
@@ -94,6 +99,27 @@ fn start_worker_threads(threads: usize) -> Result<()> {
     Ok(())
 }
 
+/// Most worker threads `--threads` and `RAYON_NUM_THREADS` may ask for.
+const MAX_THREADS: usize = 1024;
+
+/// `RAYON_NUM_THREADS`, which rayon reads where `--threads` is not given,
+/// held to `--threads`' range: tens of thousands of threads would swamp the
+/// machine. 0 is rayon's "one per core".
+fn check_rayon_num_threads() -> Result<()> {
+    let Some(value) = std::env::var_os("RAYON_NUM_THREADS") else {
+        return Ok(());
+    };
+    let text = value.to_string_lossy();
+    if text.trim().is_empty() {
+        return Ok(());
+    }
+    match text.trim().parse::<usize>() {
+        Ok(n) if n <= MAX_THREADS => Ok(()),
+        Ok(n) => bail!("RAYON_NUM_THREADS={n}: at most {MAX_THREADS} worker threads"),
+        Err(_) => bail!("RAYON_NUM_THREADS={text:?} is not a number of worker threads"),
+    }
+}
+
 /// The bench's options as the command line gives them.
 fn bench_options(args: BenchArgs) -> bench::BenchOptions {
     bench::BenchOptions {
@@ -117,7 +143,7 @@ fn bench_options(args: BenchArgs) -> bench::BenchOptions {
 fn run_bench(args: BenchArgs) -> Result<()> {
     let opts = bench_options(args);
     let report = bench::run(&opts)?;
-    print!("{}", bench::to_table(&report.rows));
+    out!("{}", bench::to_table(&report.rows))?;
     for (measure, what) in [
         (bench::ErrorMeasure::AllPixels, "all pixels"),
         (
@@ -127,36 +153,34 @@ fn run_bench(args: BenchArgs) -> Result<()> {
     ] {
         let equal = bench::equal_error_table(&report.rows, measure);
         if !equal.is_empty() {
-            println!("\nequal error, {what} (path time interpolated along its sweep, log-log):");
-            print!("{}", bench::equal_error_text(&equal));
+            outln!("\nequal error, {what} (path time interpolated along its sweep, log-log):")?;
+            out!("{}", bench::equal_error_text(&equal))?;
         }
     }
     let temporal = bench::temporal_text(&report.rows);
     if !temporal.is_empty() {
-        println!("\ntemporal methods against per-frame ic (ic's time and records over theirs; their error and flicker over ic's):");
-        print!("{temporal}");
+        outln!("\ntemporal methods against per-frame ic (ic's time and records over theirs; their error and flicker over ic's):")?;
+        out!("{temporal}")?;
     }
     let estimates = bench::estimate_error_text(&report.rows);
     if !estimates.is_empty() {
-        println!(
+        outln!(
             "\nerror of the records' E(t0+1) estimate against E(t0+1) gathered again \
              (TRC Table 1; relative to their mean E(t0+1)):"
-        );
-        print!("{estimates}");
+        )?;
+        out!("{estimates}")?;
     }
     let backends = bench::backend_text(&report.rows);
     if !backends.is_empty() {
-        println!(
-            "\nspeed-up of each later backend over the first (the first's seconds ÷ its own):"
-        );
-        print!("{backends}");
+        outln!("\nspeed-up of each later backend over the first (the first's seconds ÷ its own):")?;
+        out!("{backends}")?;
     }
     if !report.peak_mem_per_run {
-        println!("(peak memory is the process peak so far, not per run)");
+        outln!("(peak memory is the process peak so far, not per run)")?;
     }
-    println!("\nwrote {}", report.csv.display());
+    outln!("\nwrote {}", report.csv.display())?;
     for chart in &report.charts {
-        println!("wrote {}", chart.display());
+        outln!("wrote {}", chart.display())?;
     }
     Ok(())
 }
@@ -193,12 +217,12 @@ fn run_inspect(args: InspectArgs) -> Result<()> {
         job.moving_objects = moving_objects(&job.scene, &job.scene_hash);
     }
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        outln!("{}", serde_json::to_string(&report)?)?;
     } else {
-        print!(
+        out!(
             "{}",
             store::inspect::to_text(&report, args.job.is_some() || args.frame.is_some())
-        );
+        )?;
     }
     Ok(())
 }
@@ -225,7 +249,7 @@ fn run_compact(args: CompactArgs) -> Result<()> {
     let bar = store::compact::progress_bar(args.quiet);
     let report = store::compact::compact(&mut store, &bar)?;
     bar.finish_and_clear();
-    print!("{}", store::compact::to_text(&report));
+    out!("{}", store::compact::to_text(&report))?;
     Ok(())
 }
 
@@ -244,9 +268,9 @@ fn run_compare(args: CompareArgs) -> Result<()> {
         )
     })?;
     if args.json {
-        println!("{}", serde_json::to_string(&report)?);
+        outln!("{}", serde_json::to_string(&report)?)?;
     } else {
-        print!("{}", report.to_text());
+        out!("{}", report.to_text())?;
     }
     Ok(())
 }

@@ -2,6 +2,7 @@
 //! to a store job when `--db`/`--job` are given, and stops cleanly on
 //! Ctrl-C once the frame in progress is written.
 
+use super::output::outln;
 use super::{
     backend_choice, GlossyArg, MethodName, OnOff, RenderArgs, TrcGradientsArg, DEFAULT_DB,
 };
@@ -83,14 +84,14 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         &mut |_| !stop.load(Ordering::Relaxed),
     )?;
     if let Some(j) = &store_job {
-        println!(
+        outln!(
             "job {:?} in {}: {} frames resumed from the store, {} rendered, {} done in all",
             j.job.name,
             j.store.path().display(),
             summary.resumed,
             summary.frames,
             j.job.frames_done
-        );
+        )?;
     }
     // A Ctrl-C during the range's last frame stops nothing.
     let done = summary.resumed + summary.frames;
@@ -100,7 +101,7 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         Some(s) if interrupted => s.frame,
         _ => args.frames.end - 1,
     };
-    print_render_summary(&args, method.spp(), &summary, last);
+    print_render_summary(&args, method.spp(), &summary, last)?;
     if interrupted {
         let rest = match &store_job {
             Some(j) => format!(
@@ -267,11 +268,16 @@ fn open_job(
 
 /// Prints what `render` did: frames, speed, where the frames went (from
 /// the range's first frame to `last`), and the method's own statistics.
-fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSummary, last: u32) {
+fn print_render_summary(
+    args: &RenderArgs,
+    spp: u32,
+    summary: &render::RenderSummary,
+    last: u32,
+) -> Result<()> {
     let secs = summary.elapsed.as_secs_f64();
     let (w, h) = args.size;
     let samples = u64::from(w) * u64::from(h) * u64::from(spp) * u64::from(summary.frames);
-    println!(
+    outln!(
         "rendered {} frame{} in {:.2} s ({:.3} s/frame, {:.2} Mrays/s in {} backend calls, {:.2} M samples/s) → {}/frame_{:04}..{:04}.{{exr,png}}",
         summary.frames,
         if summary.frames == 1 { "" } else { "s" },
@@ -283,7 +289,7 @@ fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSum
         summary.out_dir.display(),
         args.frames.start,
         last,
-    );
+    )?;
     let reports = [
         summary.frame_time_report(),
         summary.cache_report(),
@@ -291,8 +297,9 @@ fn print_render_summary(args: &RenderArgs, spp: u32, summary: &render::RenderSum
         summary.lifespan_report(),
     ];
     for report in reports.into_iter().flatten() {
-        println!("{report}");
+        outln!("{report}")?;
     }
+    Ok(())
 }
 
 /// The frame rate the animation's key times fall on (exporters key every

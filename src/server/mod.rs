@@ -536,6 +536,9 @@ async fn read_body(body: axum::body::Body) -> Result<Vec<u8>, ApiError> {
 /// at once, its frame in progress abandoned (and rendered again on the next
 /// start).
 pub fn serve(options: ServeOptions) -> Result<()> {
+    if options.token.as_deref() == Some("") {
+        bail!("--token (or RADCACHE_TOKEN) is empty; give a secret, or no token on a loopback address");
+    }
     if !options.addr.ip().is_loopback() && options.token.is_none() {
         bail!(
             "binding to non-loopback address {} requires --token (or RADCACHE_TOKEN)",
@@ -547,6 +550,11 @@ pub fn serve(options: ServeOptions) -> Result<()> {
             bail!("{flag} {}: no such directory", dir.display());
         }
     }
+    let runtime = tokio::runtime::Runtime::new().context("cannot start the tokio runtime")?;
+    // Listening first: a taken address leaves no new store behind.
+    let listener = runtime
+        .block_on(tokio::net::TcpListener::bind(options.addr))
+        .with_context(|| format!("cannot listen on {}", options.addr))?;
     let store = Store::open(&options.db)?;
     let state = Arc::new(AppState {
         store,
@@ -564,15 +572,14 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         scene_cache: Mutex::new(None),
     });
     worker::load_jobs(&state)?;
-    let runtime = tokio::runtime::Runtime::new().context("cannot start the tokio runtime")?;
     let served = runtime.block_on(async move {
-        let listener = tokio::net::TcpListener::bind(options.addr)
-            .await
-            .with_context(|| format!("cannot listen on {}", options.addr))?;
         let local = listener.local_addr()?;
-        println!("listening on http://{local}");
+        // Tests and scripts read the port from this line; a closed standard
+        // output does not stop the server.
         use std::io::Write;
-        std::io::stdout().flush().ok();
+        let mut stdout = std::io::stdout().lock();
+        let _ = writeln!(stdout, "listening on http://{local}").and_then(|()| stdout.flush());
+        drop(stdout);
         let worker = tokio::spawn(worker::run(state.clone()));
         connection::serve(listener, router(state.clone()), &state).await;
         worker.await.context("worker panicked")?;
