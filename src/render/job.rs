@@ -66,11 +66,8 @@ pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
 /// a 12-byte buffer naming a huge file is not read whole here either).
 /// Anything unreadable gives none (the scene loader reports it).
 fn external_uris(bytes: &[u8]) -> Vec<(String, Option<u64>)> {
-    let json: &[u8] = if bytes.starts_with(b"glTF") && bytes.len() >= 20 {
-        let len = u32::from_le_bytes(bytes[12..16].try_into().expect("4 bytes")) as usize;
-        bytes.get(20..20 + len).unwrap_or(&[])
-    } else {
-        bytes
+    let Some(json) = gltf_loader::json_chunk(bytes) else {
+        return Vec::new();
     };
     let Ok(doc) = serde_json::from_slice::<serde_json::Value>(json) else {
         return Vec::new();

@@ -1,0 +1,81 @@
+//! Reading the files a scene names: the scene file itself, and the local
+//! files its URIs name (the loader reads buffers; `render::job` hashes
+//! buffers and images too). Only regular files are read, and nothing is
+//! fetched from a network.
+
+use super::Res;
+use std::path::Path;
+
+/// The bytes of `path`, at most `limit` of them: a FIFO or a device (a
+/// link to `/dev/zero`) is refused, as it would block or never end, and a
+/// limit keeps a file far longer than needed out of memory.
+pub fn read_regular_file(path: &Path, limit: Option<u64>) -> Res<Vec<u8>> {
+    use std::io::Read;
+    let cannot = |e: std::io::Error| match e.kind() {
+        std::io::ErrorKind::NotFound => "file not found".to_string(),
+        _ => format!("cannot read file: {e}"),
+    };
+    // Asked of the path before it is opened (opening a FIFO blocks), and
+    // of the file opened (the path may have changed between).
+    let regular = |m: std::fs::Metadata| {
+        if m.is_file() {
+            Ok(())
+        } else {
+            Err("not a regular file".to_string())
+        }
+    };
+    regular(std::fs::metadata(path).map_err(cannot)?)?;
+    let file = std::fs::File::open(path).map_err(cannot)?;
+    regular(file.metadata().map_err(cannot)?)?;
+    let mut bytes = Vec::new();
+    file.take(limit.unwrap_or(u64::MAX))
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot read file: {e}"))?;
+    Ok(bytes)
+}
+
+/// The file that a glTF `uri` other than a `data:` URI names, relative to
+/// the directory `base` of the file that holds it: `%XX` escapes decoded
+/// (glTF URIs are RFC 3986), a `file:` scheme allowed; other schemes (a
+/// `http:` URI) are refused, as nothing is fetched.
+pub fn uri_file(base: &Path, uri: &str) -> Res<std::path::PathBuf> {
+    let path = match uri.split_once(':') {
+        Some((scheme, rest)) if is_uri_scheme(scheme) => {
+            if !scheme.eq_ignore_ascii_case("file") {
+                return Err(format!(
+                    "URI '{uri}': only files are read, not '{scheme}:' URIs"
+                ));
+            }
+            file_uri_path(rest).ok_or_else(|| {
+                format!("URI '{uri}': only local files are read (its host is not this machine)")
+            })?
+        }
+        _ => uri,
+    };
+    let decoded = crate::uri::percent_decode(path)
+        .ok_or_else(|| format!("URI '{uri}': malformed %-escape or not UTF-8"))?;
+    Ok(base.join(decoded))
+}
+
+/// The path of a `file:` URI after its scheme (RFC 8089): `/p`, or
+/// `//HOST/p` with no host or `localhost`; `None` for another host.
+fn file_uri_path(rest: &str) -> Option<&str> {
+    let Some(authority_and_path) = rest.strip_prefix("//") else {
+        return Some(rest);
+    };
+    let (host, path) = match authority_and_path.find('/') {
+        Some(i) => authority_and_path.split_at(i),
+        None => (authority_and_path, ""),
+    };
+    (host.is_empty() || host.eq_ignore_ascii_case("localhost")).then_some(path)
+}
+
+/// Whether `s` is a URI scheme (RFC 3986: a letter, then letters, digits,
+/// `+`, `-`, `.`), longer than one letter so that a Windows drive (`C:`)
+/// stays a path.
+fn is_uri_scheme(s: &str) -> bool {
+    let mut chars = s.chars();
+    s.len() > 1
+        && chars.next().is_some_and(|c| c.is_ascii_alphabetic())
+        && chars.all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
+}

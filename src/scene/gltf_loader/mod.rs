@@ -1,0 +1,262 @@
+//! glTF 2.0 loader (`.gltf` and `.glb`) producing a [`Scene`].
+//!
+//! What is read (DESIGN.md, "Scenes"): the default scene's node hierarchy with
+//! rest TRS, every mesh node as one object (its triangle primitives merged),
+//! metallic-roughness materials with `KHR_materials_emissive_strength`,
+//! `KHR_lights_punctual` point and spot lights, integer vertex attributes
+//! of `KHR_mesh_quantization`, the first perspective camera and all TRS
+//! animation channels. A skinned mesh is not skinned: it keeps its bind
+//! pose, carried rigidly by its first joint (`mesh::rigid_skin`), with a
+//! warning. Textures and morph targets are ignored, with a warning, and so
+//! are a mesh's triangles that repeat another's corners.
+//!
+//! Bad input must give an error naming the file and the problem, never a
+//! panic. The `gltf` crate's own accessor readers can panic on malformed
+//! files (reads past a buffer end, a zero count, a stride smaller than an
+//! element), so accessors are decoded here with bounds-checked code, and the
+//! whole parse additionally runs under `catch_unwind` as a last line of
+//! defence.
+//!
+//! This module holds the entry point ([`load`]), the order of the steps
+//! (`load_bytes`) and the checks of the whole scene; each step lives in its
+//! own module:
+//! - `document`: the JSON document before the `gltf` crate reads it (the
+//!   GLB container, extensions, references the crate leaves unchecked), and
+//!   the panic guard;
+//! - `files`: reading the file and the files its URIs name;
+//! - `accessors`: buffers, and bounds-checked accessor decoding;
+//! - `nodes`: the node hierarchy, rest transforms and the camera;
+//! - `mesh`: mesh objects, their primitives and skins;
+//! - `materials` and `lights`: surfaces and punctual lights;
+//! - `animation`: TRS animation channels.
+
+mod accessors;
+mod animation;
+mod document;
+mod files;
+mod lights;
+mod materials;
+mod mesh;
+mod nodes;
+
+pub(crate) use document::json_chunk;
+pub use files::{read_regular_file, uri_file};
+
+use super::{Material, Object, PunctualLight, Scene, SceneError, DEFAULT_FPS};
+use accessors::{load_buffers, Buffers};
+use document::{
+    check_asset_and_nodes, check_extensions, check_glb_length, check_unvalidated_references,
+    parse_error, quietly_catch_panics, validated, warn_of_ignored_features,
+    without_channels_lacking_a_node,
+};
+use glam::Vec3;
+use nodes::{build_nodes, find_camera, node_at, Hierarchy};
+use std::path::Path;
+
+/// Internal results carry only the problem; [`load`] prefixes the file path.
+type Res<T> = Result<T, String>;
+
+/// Largest translation, scale or vertex coordinate a file may hold (see
+/// [`crate::scene::MAX_WORLD_COORDINATE`]: these leave room for a few
+/// levels of hierarchy).
+pub const MAX_COORDINATE: f32 = 1e8;
+/// Largest emitted radiance (W·sr⁻¹·m⁻²) or point light intensity
+/// (W·sr⁻¹) a file may give: the sun's disc is about 2e7 W·sr⁻¹·m⁻²;
+/// values near f32's limit (3e38) overflowed the sums of light and left
+/// infinite and NaN pixels.
+pub const MAX_EMISSION: f32 = 1e12;
+
+/// Loads a glTF 2.0 scene from `path`. Every error names the file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let source = path.display().to_string();
+    let fail = |message: String| SceneError::invalid(source.clone(), message);
+    check_extension(path).map_err(fail)?;
+    let bytes = read_regular_file(path, None).map_err(fail)?;
+    quietly_catch_panics(|| load_bytes(path, &bytes)).map_err(fail)
+}
+
+fn check_extension(path: &Path) -> Res<()> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    match ext.as_deref() {
+        Some("gltf") | Some("glb") => Ok(()),
+        Some(other) => Err(format!(
+            "unsupported file extension '.{other}' (expected .gltf or .glb)"
+        )),
+        None => Err("unsupported file: no extension (expected .gltf or .glb)".into()),
+    }
+}
+
+fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
+    check_glb_length(bytes)?;
+    let rewritten = without_channels_lacking_a_node(bytes);
+    let bytes = rewritten.as_deref().unwrap_or(bytes);
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(parse_error)?;
+    let mut root = document.into_json();
+    if !root.asset.version.starts_with("2.") {
+        return Err(format!(
+            "glTF version {} is not supported (expected 2.x)",
+            root.asset.version
+        ));
+    }
+    check_asset_and_nodes(&root)?;
+    warn_of_ignored_features(&root);
+    check_unvalidated_references(&root)?;
+    let quantized = check_extensions(&mut root)?;
+    let document = validated(root)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let buffers = Buffers {
+        data: load_buffers(&document, base, blob)?,
+        quantized,
+    };
+    let scene_def = document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+        .ok_or("the file has no scene")?;
+    let hierarchy = Hierarchy::collect(&document, &scene_def)?;
+    let gnodes: Vec<gltf::Node> = hierarchy
+        .order
+        .iter()
+        .map(|&g| node_at(&document, g))
+        .collect();
+
+    let nodes = build_nodes(&gnodes, &hierarchy)?;
+    let mut materials = materials::build_materials(&document)?;
+    let objects = mesh::build_objects(&gnodes, &hierarchy, &buffers, &mut materials)?;
+    let lights = lights::build_lights(&gnodes)?;
+    let camera = find_camera(&gnodes)?;
+    let animation = animation::build_animation(&document, &buffers, &hierarchy)?;
+    check_renderable(&objects, &materials, &lights)?;
+
+    let scene = Scene {
+        name: path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "scene".into()),
+        frame_count: frame_count(animation.duration()),
+        nodes,
+        objects,
+        materials,
+        lights,
+        camera,
+        animation,
+    };
+    check_first_frame(&scene)?;
+    Ok(scene)
+}
+
+/// What only the placed scene shows, checked at t = 0: a vertex that its
+/// node's world transform carries beyond
+/// [`crate::scene::MAX_WORLD_COORDINATE`] (each transform and vertex is
+/// within [`MAX_COORDINATE`], but a hierarchy compounds them, and past it
+/// the BVH builders overflow), a camera whose transform has no orientation
+/// (scaled to zero: every ray NaN), or triangles that all have no area
+/// (degenerate, or scaled to zero). The last two render black frames
+/// without a word otherwise.
+fn check_first_frame(scene: &Scene) -> Res<()> {
+    let world = scene.node_world_transforms(0.0);
+    for object in &scene.objects {
+        let far = object.mesh.positions.iter().find_map(|&p| {
+            let w = world[object.node].transform_point3(p);
+            (!crate::scene::within_world(w)).then_some(w)
+        });
+        if let Some(w) = far {
+            return Err(format!(
+                "node '{}' places a vertex at a coordinate of magnitude {:e} at t = 0, \
+                 beyond {:e}, past what can be traced",
+                scene.nodes[object.node].name,
+                w.abs().max_element(),
+                crate::scene::MAX_WORLD_COORDINATE
+            ));
+        }
+    }
+    let snapshot = scene.snapshot(0.0);
+    let camera = &snapshot.camera;
+    if !(camera.position.is_finite() && camera.basis.is_finite()) {
+        return Err(format!(
+            "camera node '{}' has no orientation at t = 0 (scaled to zero?)",
+            scene.nodes[scene.camera.node].name
+        ));
+    }
+    let has_area =
+        |t: &crate::scene::Triangle| (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]) != Vec3::ZERO;
+    if !snapshot.triangles.iter().any(has_area) {
+        return Err("no triangle has any area at t = 0 (degenerate, or scaled to zero)".into());
+    }
+    Ok(())
+}
+
+/// Frames covering `t = 0..=duration` at the default rate; the small
+/// tolerance keeps a duration of exactly N/24 s (stored as f32) at N+1 frames.
+fn frame_count(duration: f32) -> u32 {
+    if duration > 0.0 {
+        ((duration as f64 * DEFAULT_FPS as f64 - 1e-3)
+            .ceil()
+            .max(0.0) as u32)
+            .saturating_add(1)
+    } else {
+        1
+    }
+}
+
+/// A renderable scene has triangles and something that emits light.
+fn check_renderable(
+    objects: &[Object],
+    materials: &[Material],
+    lights: &[PunctualLight],
+) -> Res<()> {
+    if objects.iter().all(|o| o.mesh.triangles.is_empty()) {
+        return Err(
+            "the scene has no triangle with any area (no mesh with triangle primitives, \
+             or only degenerate triangles)"
+                .into(),
+        );
+    }
+    let is_emissive = |m: &u32| {
+        materials
+            .get(*m as usize)
+            .is_some_and(Material::is_emissive)
+    };
+    let emissive = objects
+        .iter()
+        .any(|o| o.mesh.materials.iter().any(is_emissive));
+    if !emissive && lights.is_empty() {
+        return Err(
+            "no light source: no triangle has an emissive material and there are no punctual lights"
+                .into(),
+        );
+    }
+    Ok(())
+}
+
+/// A translation, scale or vertex position within ±[`MAX_COORDINATE`].
+fn check_coordinates(v: Vec3, what: &str) -> Res<()> {
+    let largest = v.abs().max_element();
+    if largest > MAX_COORDINATE {
+        return Err(format!(
+            "{what} has a component of magnitude {largest:e}, beyond {MAX_COORDINATE:e}, \
+             past what can be traced"
+        ));
+    }
+    Ok(())
+}
+
+fn all_finite(values: &[f32]) -> bool {
+    values.iter().all(|v| v.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_counts() {
+        assert_eq!(frame_count(0.0), 1);
+        assert_eq!(frame_count(1.0), 25);
+        assert_eq!(frame_count(100.0 / 24.0), 101);
+        assert_eq!(frame_count(1.01), 26);
+    }
+}

@@ -1,0 +1,163 @@
+//! The scene's nodes: the hierarchy reachable from the default scene
+//! (proven a forest), each node's rest transform, and the camera node.
+
+use super::{all_finite, check_coordinates, Res};
+use crate::scene::{CameraDef, Node, Trs};
+use glam::{Mat4, Quat, Vec3};
+use std::collections::HashMap;
+
+pub(super) fn node_at<'a>(document: &'a gltf::Document, index: usize) -> gltf::Node<'a> {
+    // Indices come from the document's own node list, so this is in range.
+    document
+        .nodes()
+        .nth(index)
+        .expect("node index from the document")
+}
+
+pub(super) fn node_name(node: &gltf::Node) -> String {
+    node.name()
+        .map(str::to_string)
+        .unwrap_or_else(|| format!("node{}", node.index()))
+}
+
+/// The nodes reachable from the scene's roots, in document order, with
+/// their parents; proven to be a forest.
+pub(super) struct Hierarchy {
+    /// glTF node index of each of our nodes.
+    pub(super) order: Vec<usize>,
+    /// Our node index of each reachable glTF node.
+    pub(super) ours: HashMap<usize, usize>,
+    /// glTF parent of each reachable glTF node.
+    pub(super) parent_of: HashMap<usize, Option<usize>>,
+}
+
+impl Hierarchy {
+    pub(super) fn collect(document: &gltf::Document, scene: &gltf::Scene) -> Res<Hierarchy> {
+        let mut parent_of: HashMap<usize, Option<usize>> = HashMap::new();
+        let mut stack: Vec<(usize, Option<usize>)> =
+            scene.nodes().map(|n| (n.index(), None)).collect();
+        while let Some((g, parent)) = stack.pop() {
+            // A node reached twice has two parents or lies on a cycle; the
+            // world-transform recursion relies on neither happening.
+            if parent_of.insert(g, parent).is_some() {
+                let name = node_name(&node_at(document, g));
+                return Err(format!(
+                    "node hierarchy is not a tree: node '{name}' is reached twice (a cycle or two parents)"
+                ));
+            }
+            stack.extend(
+                node_at(document, g)
+                    .children()
+                    .map(|c| (c.index(), Some(g))),
+            );
+        }
+        let mut order: Vec<usize> = parent_of.keys().copied().collect();
+        order.sort_unstable();
+        let ours = order.iter().enumerate().map(|(i, &g)| (g, i)).collect();
+        Ok(Hierarchy {
+            order,
+            ours,
+            parent_of,
+        })
+    }
+}
+
+pub(super) fn build_nodes(gnodes: &[gltf::Node], hierarchy: &Hierarchy) -> Res<Vec<Node>> {
+    gnodes
+        .iter()
+        .map(|n| {
+            let parent = hierarchy.parent_of[&n.index()].map(|p| hierarchy.ours[&p]);
+            let rest = rest_trs(n).map_err(|e| format!("node '{}': {e}", node_name(n)))?;
+            Ok(Node {
+                name: node_name(n),
+                parent,
+                rest,
+            })
+        })
+        .collect()
+}
+
+fn rest_trs(node: &gltf::Node) -> Res<Trs> {
+    const NON_FINITE: &str = "NaN or infinite value in its transform";
+    match node.transform() {
+        gltf::scene::Transform::Matrix { matrix } => {
+            if !all_finite(matrix.as_flattened()) {
+                return Err(NON_FINITE.into());
+            }
+            let (scale, rotation, translation) =
+                Mat4::from_cols_array_2d(&matrix).to_scale_rotation_translation();
+            // A singular matrix decomposes into NaN rotations.
+            if !(scale.is_finite() && rotation.is_finite() && translation.is_finite()) {
+                return Err("transform matrix cannot be decomposed into TRS (singular?)".into());
+            }
+            check_coordinates(translation, "translation")?;
+            check_coordinates(scale, "scale")?;
+            Ok(Trs {
+                translation,
+                rotation: rotation.normalize(),
+                scale,
+            })
+        }
+        gltf::scene::Transform::Decomposed {
+            translation,
+            rotation,
+            scale,
+        } => {
+            if !(all_finite(&translation) && all_finite(&rotation) && all_finite(&scale)) {
+                return Err(NON_FINITE.into());
+            }
+            check_coordinates(Vec3::from(translation), "translation")?;
+            check_coordinates(Vec3::from(scale), "scale")?;
+            let rotation = Quat::from_array(rotation);
+            if rotation.length() < 1e-6 {
+                return Err("zero rotation quaternion".into());
+            }
+            Ok(Trs {
+                translation: Vec3::from(translation),
+                rotation: rotation.normalize(),
+                scale: Vec3::from(scale),
+            })
+        }
+    }
+}
+
+/// The first scene node (document order) with a perspective camera.
+pub(super) fn find_camera(gnodes: &[gltf::Node]) -> Res<CameraDef> {
+    let mut saw_orthographic = false;
+    for (node, gnode) in gnodes.iter().enumerate() {
+        let Some(camera) = gnode.camera() else {
+            continue;
+        };
+        match camera.projection() {
+            gltf::camera::Projection::Perspective(p) => {
+                let yfov = p.yfov();
+                if !(yfov.is_finite() && yfov > 0.0 && yfov < std::f32::consts::PI) {
+                    return Err(format!(
+                        "camera of node '{}' has yfov {yfov} out of range (0, π)",
+                        node_name(gnode)
+                    ));
+                }
+                let cameras = gnodes.iter().filter(|n| n.camera().is_some()).count();
+                if cameras > 1 {
+                    eprintln!(
+                        "note: {cameras} cameras in the scene; rendering through the first \
+                         perspective one, on node '{}'",
+                        node_name(gnode)
+                    );
+                }
+                let aspect_ratio = p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0);
+                return Ok(CameraDef {
+                    node,
+                    yfov,
+                    aspect_ratio,
+                });
+            }
+            gltf::camera::Projection::Orthographic(_) => saw_orthographic = true,
+        }
+    }
+    Err(if saw_orthographic {
+        "no perspective camera (orthographic cameras are not supported)".into()
+    } else {
+        "no camera in the scene".into()
+    })
+}
