@@ -9,6 +9,8 @@ use radcache::bench::{
 use radcache::method::trc::TrcSettings;
 use radcache::render::SceneSource;
 
+mod common;
+
 fn row(method: &str, settings: &str, seconds: f64, rel_rmse: f64) -> BenchRow {
     BenchRow {
         scene: "s".into(),
@@ -289,6 +291,47 @@ fn tiny_end_to_end_run() {
     bench::run(&other).unwrap();
     let info = std::fs::read_to_string(&json).unwrap();
     assert!(info.contains("\"spp\": 32"), "{info}");
+}
+
+/// A reference is kept for the scene it was rendered of: editing the
+/// `.bin` beside a `.gltf` (the triangle moved) renders it again, as it
+/// changes the scene a job records.
+#[test]
+fn an_edited_buffer_file_renders_the_reference_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let gltf = dir.path().join("tri.gltf");
+    let json = serde_json::to_vec(&common::tri_json("tri.bin")).unwrap();
+    std::fs::write(&gltf, json).unwrap();
+    let write_bin = |x: f32| {
+        let corners = common::TRI.map(|[a, b, c]| [a - x, b - 0.5, c]);
+        std::fs::write(
+            dir.path().join("tri.bin"),
+            common::tri_bin(corners, [0, 1, 2]),
+        )
+        .unwrap();
+    };
+    write_bin(0.0);
+    let opts = BenchOptions {
+        scenes: vec![SceneSource::File(gltf)],
+        frames: 0..1,
+        ..tiny_bench(&dir.path().join("bench"), &["path:spp=1"])
+    };
+    let reference = dir.path().join("bench/reference/tri/frame_0000.exr");
+    bench::run(&opts).unwrap();
+    let first = std::fs::read(&reference).unwrap();
+    bench::run(&opts).unwrap();
+    assert_eq!(
+        std::fs::read(&reference).unwrap(),
+        first,
+        "same scene, same reference"
+    );
+    write_bin(0.8);
+    bench::run(&opts).unwrap();
+    assert_ne!(
+        std::fs::read(&reference).unwrap(),
+        first,
+        "the reference of the old triangle was kept"
+    );
 }
 
 /// `--backends cpu,gpu`: every run once on each backend, in its own

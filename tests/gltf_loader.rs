@@ -8,6 +8,9 @@ use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod common;
+use common::{tri_bin, tri_json, TRI};
+
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/scenes")
@@ -184,45 +187,6 @@ fn spheres_materials_and_motion() {
 }
 
 // ------------------------------------------------------- a small valid file
-
-/// One emissive triangle (external buffer `<stem>.bin`) and a camera.
-fn tri_json(bin_name: &str) -> Value {
-    json!({
-        "asset": {"version": "2.0"},
-        "scene": 0,
-        "scenes": [{"nodes": [0, 1]}],
-        "nodes": [
-            {"name": "tri", "mesh": 0},
-            {"name": "cam", "camera": 0, "translation": [0.0, 0.0, 3.0]}
-        ],
-        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.01}}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
-        "materials": [{"name": "glow", "emissiveFactor": [1.0, 1.0, 1.0]}],
-        "buffers": [{"uri": bin_name, "byteLength": 48}],
-        "bufferViews": [
-            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
-            {"buffer": 0, "byteOffset": 36, "byteLength": 12}
-        ],
-        "accessors": [
-            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
-             "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
-            {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"}
-        ]
-    })
-}
-
-fn tri_bin(positions: [[f32; 3]; 3], indices: [u32; 3]) -> Vec<u8> {
-    let mut bytes = Vec::new();
-    for v in positions.iter().flatten() {
-        bytes.extend_from_slice(&v.to_le_bytes());
-    }
-    for i in indices {
-        bytes.extend_from_slice(&i.to_le_bytes());
-    }
-    bytes
-}
-
-const TRI: [[f32; 3]; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
 
 /// Writes `<name>.gltf` (and, if given, its `<name>.bin`) into `dir`.
 fn write_case(
@@ -1235,7 +1199,7 @@ fn scenes_that_render_nothing_are_errors() {
             Scene::load(&glow).unwrap();
             Scene::load(&lamp).unwrap();
         } else {
-            assert_error(&glow, "material 'glow' emits 3e38 nits");
+            assert_error(&glow, "material 'glow' emits 3e38 W·sr⁻¹·m⁻²");
             assert_error(&lamp, "over the 1e12 allowed");
         }
     }

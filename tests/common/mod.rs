@@ -316,3 +316,44 @@ pub fn plane_under_point_light(albedo: f32, intensity: f32, light: Vec3, eye: Ve
         vec![(light, Vec3::splat(intensity))],
     )
 }
+
+// ------------------------------------------- a small glTF file with a .bin
+
+/// One emissive triangle (external buffer `<stem>.bin`) and a camera.
+pub fn tri_json(bin_name: &str) -> serde_json::Value {
+    serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0, 1]}],
+        "nodes": [
+            {"name": "tri", "mesh": 0},
+            {"name": "cam", "camera": 0, "translation": [0.0, 0.0, 3.0]}
+        ],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.01}}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [{"name": "glow", "emissiveFactor": [1.0, 1.0, 1.0]}],
+        "buffers": [{"uri": bin_name, "byteLength": 48}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 12}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [0.0, 0.0, 0.0], "max": [1.0, 1.0, 0.0]},
+            {"bufferView": 1, "componentType": 5125, "count": 3, "type": "SCALAR"}
+        ]
+    })
+}
+
+pub fn tri_bin(positions: [[f32; 3]; 3], indices: [u32; 3]) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    for v in positions.iter().flatten() {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    for i in indices {
+        bytes.extend_from_slice(&i.to_le_bytes());
+    }
+    bytes
+}
+
+pub const TRI: [[f32; 3]; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];

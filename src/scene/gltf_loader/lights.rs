@@ -24,7 +24,7 @@ pub(super) fn build_lights(gnodes: &[gltf::Node]) -> Res<Vec<PunctualLight>> {
         }
         if intensity.max_element() > MAX_EMISSION {
             return Err(format!(
-                "light '{name}' has an intensity of {:e} cd (colour × intensity), over the {MAX_EMISSION:e} allowed",
+                "light '{name}' has an intensity of {:e} W·sr⁻¹ (colour × intensity), over the {MAX_EMISSION:e} allowed",
                 intensity.max_element()
             ));
         }

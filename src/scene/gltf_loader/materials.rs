@@ -25,7 +25,7 @@ fn convert_material(m: &gltf::Material) -> Res<Material> {
     }
     if emission.max_element() > MAX_EMISSION {
         return Err(format!(
-            "material '{name}' emits {:e} nits (emissive factor × strength), over the {MAX_EMISSION:e} allowed",
+            "material '{name}' emits {:e} W·sr⁻¹·m⁻² (emissive factor × strength), over the {MAX_EMISSION:e} allowed",
             emission.max_element()
         ));
     }
