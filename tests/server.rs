@@ -207,11 +207,19 @@ fn job_settings_are_the_clis_flags() {
     let job = wait_done(&server, &id);
     let settings = &job["settings"];
     assert_eq!(settings["accuracy"], 0.3, "{job}");
-    assert_eq!(settings["strata"]["theta"], 8, "{job}");
-    assert_eq!(settings["strata"]["phi"], 24, "{job}");
+    assert_eq!(settings["strata"], "8x24", "{job}");
     assert_eq!(settings["gradients"], false, "{job}");
     assert_eq!(settings["spp"], 1, "{job}");
-    assert_eq!(settings["length"]["max_depth"], 2, "{job}");
+    assert_eq!(settings["max_depth"], 2, "{job}");
+    // A job's settings as shown, posted again, make the same job.
+    let again = create_job(
+        &server,
+        &serde_json::json!({"scene":"builtin:cube-in-box","method":"ic","frames":"0..1",
+            "size":"16x16","settings":settings})
+        .to_string(),
+    );
+    let (_, shown) = http(&server, "GET", &format!("/api/jobs/{again}"), "");
+    assert_eq!(&json(&shown)["settings"], settings);
     let out = dir.path().join("cli");
     render_with_cli(
         &[
@@ -242,7 +250,7 @@ fn job_settings_are_the_clis_flags() {
     let settings = &job["settings"];
     assert_eq!(settings["tau_min"], 0.2, "{job}");
     assert_eq!(settings["max_neighbours"], 4, "{job}");
-    assert_eq!(settings["ic"]["strata"]["phi"], 12, "{job}");
+    assert_eq!(settings["strata"], "4x12", "{job}");
     let out = dir.path().join("cli-tcg");
     render_with_cli(
         &[
@@ -273,7 +281,7 @@ fn job_settings_are_the_clis_flags() {
     let job = wait_done(&server, &id);
     let settings = &job["settings"];
     assert_eq!(settings["shadow_samples"], 4, "{job}");
-    assert_eq!(settings["global"]["links"], 16, "{job}");
+    assert_eq!(settings["links"], 16, "{job}");
     let out = dir.path().join("cli-movies");
     render_with_cli(
         &[

@@ -693,6 +693,41 @@ fn damaged_or_foreign_directories_are_refused_untouched() {
     assert!(!other.join("samples.log").exists(), "a sample log made");
 }
 
+/// A job's scene is its content: the same file named by another path
+/// (`./s.gltf`, an absolute path, a run from another directory) resumes
+/// the job, and the job then names it as last given; another file, or
+/// another built-in scene, is refused, naming the scene.
+#[test]
+fn a_job_resumes_its_scene_file_named_by_another_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let file = |scene: &str, hash: &str| JobSpec {
+        scene: scene.into(),
+        scene_hash: hash.into(),
+        ..spec("f")
+    };
+    let first = store.begin_job(&file("hs/s.gltf", "aaaa"), false).unwrap();
+    let again = store
+        .begin_job(&file("/work/hs/s.gltf", "aaaa"), false)
+        .unwrap();
+    assert_eq!(again.id, first.id);
+    assert_eq!(store.job("f").unwrap().unwrap().scene, "/work/hs/s.gltf");
+    let msg = err_text(store.begin_job(&file("other.gltf", "bbbb"), false));
+    assert!(
+        msg.contains("scene (stored /work/hs/s.gltf, given other.gltf)"),
+        "{msg}"
+    );
+    assert!(msg.contains("scene hash"), "{msg}");
+
+    store.begin_job(&spec("b"), false).unwrap();
+    let builtin = JobSpec {
+        scene: "builtin:spheres".into(),
+        ..spec("b")
+    };
+    let msg = err_text(store.begin_job(&builtin, false));
+    assert!(msg.contains("scene (stored builtin:cube-in-box"), "{msg}");
+}
+
 #[test]
 fn job_with_other_settings_is_refused_unless_forced() {
     let dir = tempfile::tempdir().unwrap();
@@ -1741,7 +1776,7 @@ fn settings_are_compared_as_json_values() {
     let msg = err_text(store.begin_job(&other, false));
     // Only the setting that differs is named, not both documents.
     assert!(
-        msg.contains("method settings (Ic.accuracy: stored 0.2, given 0.3)"),
+        msg.contains("method settings (accuracy: stored 0.2, given 0.3)"),
         "{msg}"
     );
     assert!(!msg.contains("theta"), "{msg}");

@@ -118,10 +118,9 @@ function frameRange(job) {
 // (movies); empty for path.
 function keySettings(job) {
   const s = job.settings || {};
-  const ic = job.method === 'trc' || job.method === 'tcg' ? s.ic : s;
   const parts = [];
-  if (ic && ic.accuracy != null) parts.push(`a ${ic.accuracy}`);
-  if (s.temporal_accuracy != null) parts.push(`a_t ${s.temporal_accuracy}`);
+  if (s.accuracy != null) parts.push(`a ${s.accuracy}`);
+  if (s.at != null) parts.push(`a_t ${s.at}`);
   if (s.max_life != null) parts.push(`δt_max ${s.max_life}`);
   if (s.tau_min != null) parts.push(`τ_min ${s.tau_min}`);
   if (s.shadow_samples != null) parts.push(`N ${s.shadow_samples}`);

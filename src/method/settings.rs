@@ -164,6 +164,21 @@ where
     Ok(v)
 }
 
+/// Parses the on/off setting `key` of `method`: `1`, `on` or `true`, or
+/// `0`, `off` or `false` (as the CLI's flags and JSON's booleans give it).
+fn flag(method: &str, key: &str, v: &str) -> Result<bool, MethodError> {
+    match v.trim() {
+        "1" | "on" | "true" => Ok(true),
+        "0" | "off" | "false" => Ok(false),
+        _ => Err(MethodError::BadValue {
+            method: method.into(),
+            key: key.into(),
+            value: v.into(),
+            problem: "expected 1, on or true, or 0, off or false".into(),
+        }),
+    }
+}
+
 /// Applies `ic`'s setting `key = v` to `s` (also for `trc`, whose records
 /// are `ic`'s); `false` when `key` is none of them.
 fn ic_setting(method: &str, key: &str, v: &str, s: &mut IcSettings) -> Result<bool, MethodError> {
@@ -184,7 +199,7 @@ fn ic_setting(method: &str, key: &str, v: &str, s: &mut IcSettings) -> Result<bo
         }
         "min_spacing" => s.min_spacing_px = value(method, key, v, 0.001..1e6)?,
         "max_spacing" => s.max_spacing_px = value(method, key, v, 0.001..1e6)?,
-        "gradients" => s.gradients = value::<u8>(method, key, v, 0..2)? == 1,
+        "gradients" => s.gradients = flag(method, key, v)?,
         // The pixel paths' (`render --max-depth`), not the gathers'.
         "max_depth" => s.length.max_depth = Some(value(method, key, v, 0..10_001)?),
         _ => return Ok(false),
@@ -259,6 +274,103 @@ pub fn settings_json(settings: &MethodSettings) -> serde_json::Value {
     serde_json::to_string(settings)
         .and_then(|text| serde_json::from_str(&text))
         .map_or(serde_json::Value::Null, untagged)
+}
+
+/// Every setting of `settings` that a name sets, by that name (as
+/// [`method_settings`] and `POST /api/jobs` take them), with its value:
+/// numbers as numbers, flags as booleans, the rest as their text. Given
+/// back to [`method_settings`] they make the same settings. A path length
+/// left unbounded (`max_depth` none) has no name and is left out.
+pub fn named_settings(settings: &MethodSettings) -> serde_json::Map<String, serde_json::Value> {
+    let mut out = NamedSettings::default();
+    match settings {
+        MethodSettings::Path(s) => {
+            out.number("spp", s.spp);
+            out.depth(s.length.max_depth);
+            out.number("rr_start", s.length.rr_start);
+        }
+        MethodSettings::Ic(s) => {
+            out.ic(s);
+            out.flag("gradients", s.gradients);
+        }
+        MethodSettings::Trc(s) => {
+            out.number("at", s.temporal_accuracy);
+            out.number("max_life", s.max_life);
+            out.text("gradients", s.gradients.name());
+            out.flag("reprojection", s.reprojection);
+            out.flag("next_direct", s.next_direct);
+            out.flag("keep_paths", s.keep_paths);
+            // `gradients` names the temporal ones here: `ic`'s stay on.
+            out.ic(&s.ic);
+        }
+        MethodSettings::Tcg(s) => {
+            out.number("tau_min", s.tau_min);
+            out.number("tau_max", s.tau_max);
+            out.number("max_neighbours", s.max_neighbours);
+            out.flag("light_refresh", s.light_refresh);
+            out.ic(&s.ic);
+            out.flag("gradients", s.ic.gradients);
+        }
+        MethodSettings::Movies(s) => {
+            out.number("spp", s.spp);
+            out.number("shadow_samples", s.shadow_samples);
+            out.number("texels_per_pixel", s.texels_per_pixel);
+            out.number("max_resolution", s.max_resolution);
+            out.number("memory_mib", s.memory_mib);
+            out.number("spacing", s.global.spacing);
+            out.number("links", s.global.links);
+            out.number("bounces", s.global.bounces);
+            out.depth(s.length.max_depth);
+        }
+    }
+    out.0
+}
+
+/// [`named_settings`]' map as it is filled.
+#[derive(Default)]
+struct NamedSettings(serde_json::Map<String, serde_json::Value>);
+
+impl NamedSettings {
+    /// Through its text, so that an `f32` 0.3 stays 0.3 (not
+    /// 0.30000001192092896, as a widening to `f64` would give).
+    fn number(&mut self, key: &str, v: impl std::fmt::Display) {
+        let text = v.to_string();
+        let value = serde_json::from_str(&text).unwrap_or(serde_json::Value::String(text));
+        self.0.insert(key.into(), value);
+    }
+
+    fn flag(&mut self, key: &str, on: bool) {
+        self.0.insert(key.into(), on.into());
+    }
+
+    fn text(&mut self, key: &str, v: &str) {
+        self.0.insert(key.into(), v.into());
+    }
+
+    fn depth(&mut self, max_depth: Option<u32>) {
+        if let Some(d) = max_depth {
+            self.number("max_depth", d);
+        }
+    }
+
+    /// `ic`'s record settings, which `trc` and `tcg` make their records
+    /// with (its `gradients` aside: `trc`'s are temporal).
+    fn ic(&mut self, s: &IcSettings) {
+        self.number("accuracy", s.accuracy);
+        self.number("spp", s.spp);
+        self.text("strata", &format!("{}x{}", s.strata.theta, s.strata.phi));
+        self.number("min_spacing", s.min_spacing_px);
+        self.number("max_spacing", s.max_spacing_px);
+        self.depth(s.length.max_depth);
+        self.text(
+            "glossy",
+            match s.glossy {
+                GlossyLobe::Path => "path",
+                GlossyLobe::Eas => "eas",
+            },
+        );
+        self.number("eas_tau", s.eas_tau);
+    }
 }
 
 /// The value inside a one-key object (serde's tag of an enum variant), or
@@ -363,9 +475,9 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
                 }
             }
         }
-        "reprojection" => s.reprojection = value::<u8>(method, key, v, 0..2)? == 1,
-        "next_direct" => s.next_direct = value::<u8>(method, key, v, 0..2)? == 1,
-        "keep_paths" => s.keep_paths = value::<u8>(method, key, v, 0..2)? == 1,
+        "reprojection" => s.reprojection = flag(method, key, v)?,
+        "next_direct" => s.next_direct = flag(method, key, v)?,
+        "keep_paths" => s.keep_paths = flag(method, key, v)?,
         _ => {
             return Ok(ic_setting(method, key, v, &mut s.ic)?
                 || glossy_setting(method, key, v, &mut s.ic)?)
@@ -382,7 +494,7 @@ fn tcg_setting(method: &str, key: &str, v: &str, s: &mut TcgSettings) -> Result<
         "tau_min" => s.tau_min = value(method, key, v, 0.0..1.000_001)?,
         "tau_max" => s.tau_max = value(method, key, v, 0.0..1.000_001)?,
         "max_neighbours" => s.max_neighbours = value(method, key, v, 0..1_000_001)?,
-        "light_refresh" => s.light_refresh = value::<u8>(method, key, v, 0..2)? == 1,
+        "light_refresh" => s.light_refresh = flag(method, key, v)?,
         _ => {
             return Ok(ic_setting(method, key, v, &mut s.ic)?
                 || glossy_setting(method, key, v, &mut s.ic)?)
@@ -417,6 +529,67 @@ fn movies_setting(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What [`named_settings`] shows, given back by name (as a client
+    /// posts a job's settings again), makes the same settings: for every
+    /// method's defaults and each listed key at its example value. It names
+    /// only listed keys, and all of them once a path length is bounded.
+    #[test]
+    fn named_settings_make_the_same_settings_again() {
+        let as_text = |v: &serde_json::Value| match v {
+            serde_json::Value::String(s) => s.clone(),
+            other => other.to_string(),
+        };
+        for m in METHODS {
+            let changes = std::iter::once(None).chain(m.keys.iter().map(Some));
+            for change in changes {
+                let settings = method_settings(m.name, change.map(|&(k, v)| (k, v))).unwrap();
+                let named = named_settings(&settings);
+                let pairs: Vec<(String, String)> =
+                    named.iter().map(|(k, v)| (k.clone(), as_text(v))).collect();
+                let again = method_settings(m.name, pairs.iter().map(|(k, v)| (&k[..], &v[..])));
+                assert_eq!(
+                    again.as_ref(),
+                    Ok(&settings),
+                    "{} {change:?}: {named:?}",
+                    m.name
+                );
+                let listed: Vec<&str> = m.keys.iter().map(|(k, _)| *k).collect();
+                assert!(
+                    named.keys().all(|k| listed.contains(&k.as_str())),
+                    "{named:?}"
+                );
+                if change.is_some_and(|(k, _)| *k == "max_depth") {
+                    assert_eq!(named.len(), listed.len(), "{} {named:?}", m.name);
+                }
+            }
+        }
+        let trc = named_settings(&method_settings("trc", [("keep_paths", "on")]).unwrap());
+        assert_eq!(trc["keep_paths"], serde_json::Value::Bool(true));
+        assert_eq!(trc["at"].to_string(), "0.05");
+        assert_eq!(trc["gradients"], "extrapolated");
+    }
+
+    /// On/off settings take what the CLI's flags and JSON's booleans give;
+    /// a number setting takes no boolean.
+    #[test]
+    fn flags_take_on_and_off() {
+        for (v, on) in [
+            ("1", true),
+            ("on", true),
+            ("true", true),
+            ("off", false),
+            ("false", false),
+        ] {
+            let s = method_settings("trc", [("reprojection", v)]).unwrap();
+            assert!(
+                matches!(s, MethodSettings::Trc(t) if t.reprojection == on),
+                "{v}"
+            );
+        }
+        assert!(method_settings("trc", [("reprojection", "2")]).is_err());
+        assert!(method_settings("trc", [("at", "true")]).is_err());
+    }
 
     #[test]
     fn every_listed_key_is_accepted() {

@@ -4,6 +4,7 @@
 use super::schema::{JobSpec, JobValue};
 use super::v1;
 use super::{encode, keys, now_unix, Store, StoreError};
+use crate::method::settings::named_settings;
 use crate::render::MethodSettings;
 use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
@@ -68,7 +69,7 @@ impl Store {
                     path: self.path.clone(),
                     job: spec.name.clone(),
                     detail: format!(
-                        "exists with a different {}; use another --job name, or --force to start it over",
+                        "exists with other settings: {}; use another --job name, or --force to start it over",
                         diffs.join(", ")
                     ),
                 });
@@ -153,7 +154,8 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
     } = spec;
     let mut d = Vec::new();
     let stored_settings = settings_as_read_now(&stored.settings);
-    if !same_settings(&stored_settings, settings) {
+    // Another method's settings differ as a whole: the method says it.
+    if &stored.method == method && !same_settings(&stored_settings, settings) {
         d.push(settings_differences(&stored_settings, settings));
     }
     let mut check = |name: &str, same: bool, stored: String, given: String| {
@@ -161,15 +163,18 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
             d.push(format!("{name} (stored {stored}, given {given})"));
         }
     };
+    // The scene is its content: the same file named by another path
+    // (`./s.gltf`, an absolute path, a run from another directory) resumes.
+    let same_content = same_scene_hash(&stored.scene_hash, scene_hash);
     check(
         "scene",
-        &stored.scene == scene,
+        &stored.scene == scene || (same_content && is_file_scene(scene)),
         stored.scene.clone(),
         scene.clone(),
     );
     check(
         "scene hash",
-        same_scene_hash(&stored.scene_hash, scene_hash),
+        same_content,
         stored.scene_hash.clone(),
         scene_hash.clone(),
     );
@@ -236,9 +241,55 @@ fn same_settings(stored: &str, given: &str) -> bool {
     }
 }
 
-/// "method settings (max_life: stored 20, given 5; …)": the settings (JSON)
-/// that differ, by their path in the JSON, rather than both documents.
+/// Whether job scene text `scene` names a file (not `builtin:NAME`).
+fn is_file_scene(scene: &str) -> bool {
+    !scene.starts_with("builtin:")
+}
+
+/// "method settings (max_life: stored 20, given 5; …)": the settings that
+/// differ, by the names `--methods` and job requests give them
+/// ([`named_settings`]); where those do not tell them apart, or the
+/// settings cannot be read, by their path in the JSON.
 fn settings_differences(stored: &str, given: &str) -> String {
+    let named = |text: &str| {
+        let settings = serde_json::from_str::<MethodSettings>(text).ok()?;
+        let plain = |v: serde_json::Value| match v {
+            serde_json::Value::String(s) => s,
+            v => v.to_string(),
+        };
+        Some(
+            named_settings(&settings)
+                .into_iter()
+                .map(|(k, v)| (k, plain(v)))
+                .collect::<BTreeMap<_, _>>(),
+        )
+    };
+    if let (Some(a), Some(b)) = (named(stored), named(given)) {
+        let differing = differing_values(&a, &b);
+        if !differing.is_empty() {
+            return format!("method settings ({})", differing.join("; "));
+        }
+    }
+    json_differences(stored, given)
+}
+
+/// "KEY: stored A, given B" for each key whose value differs.
+fn differing_values<V: PartialEq + std::fmt::Display>(
+    a: &BTreeMap<String, V>,
+    b: &BTreeMap<String, V>,
+) -> Vec<String> {
+    let text = |v: Option<&V>| v.map_or_else(|| "none".to_string(), V::to_string);
+    a.keys()
+        .chain(b.keys())
+        .collect::<BTreeSet<_>>()
+        .into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .map(|k| format!("{k}: stored {}, given {}", text(a.get(k)), text(b.get(k))))
+        .collect()
+}
+
+/// [`settings_differences`] by the settings' paths in their JSON.
+fn json_differences(stored: &str, given: &str) -> String {
     fn leaves(prefix: String, v: &serde_json::Value, out: &mut BTreeMap<String, String>) {
         match v {
             serde_json::Value::Object(map) => {
@@ -263,20 +314,7 @@ fn settings_differences(stored: &str, given: &str) -> String {
         }
         out
     };
-    let (a, b) = (parse(stored), parse(given));
-    let none = || "none".to_string();
-    let differing: Vec<String> = a
-        .keys()
-        .chain(b.keys())
-        .collect::<BTreeSet<_>>()
-        .into_iter()
-        .filter(|k| a.get(*k) != b.get(*k))
-        .map(|k| {
-            let stored = a.get(k).cloned().unwrap_or_else(none);
-            let given = b.get(k).cloned().unwrap_or_else(none);
-            format!("{k}: stored {stored}, given {given}")
-        })
-        .collect();
+    let differing = differing_values(&parse(stored), &parse(given));
     match differing.is_empty() {
         true => format!("method settings (stored {stored}, given {given})"),
         false => format!("method settings ({})", differing.join("; ")),

@@ -131,6 +131,17 @@ pub enum TemporalGradients {
     Interpolated,
 }
 
+impl TemporalGradients {
+    /// The name `--trc-gradients` and the `gradients` setting take.
+    pub fn name(self) -> &'static str {
+        match self {
+            TemporalGradients::None => "none",
+            TemporalGradients::Extrapolated => "extrapolated",
+            TemporalGradients::Interpolated => "interpolated",
+        }
+    }
+}
+
 /// Settings of `trc`, with their sources.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrcSettings {
