@@ -530,7 +530,7 @@ fn temporal_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
         with(row("trc", "strata=64x64", 10.0, 0.018), 90, 0.012),
         with(row("trc", "max_life=5", 20.0, 0.020), 250, 0.010),
         with(row("tcg", "tau_min=0.2", 8.0, 0.022), 50, 0.011),
-        with(row("movies", "shadow_samples=4", 4.0, 0.019), 25, 0.005),
+        with(row("movies", "shadow_samples=4", 80.0, 0.019), 25, 0.005),
         elsewhere,
         with(row("path", "spp=4", 5.0, 0.2), 0, 0.3),
     ];
@@ -566,6 +566,12 @@ fn temporal_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
         text.lines().nth(3).unwrap(),
         "s tcg tau_min=0.2 against ic default: 5.00× faster, 20.00× fewer records; \
          error 1.10× (1.10× lit surfaces), flicker 0.55× (0.55× lit surfaces)"
+    );
+    // A run slower than ic's is said to be so, not "0.50× faster".
+    let movies = text.lines().nth(4).unwrap();
+    assert!(
+        movies.contains("ic default: 2.00× slower, 40.00× fewer records"),
+        "{movies}"
     );
     // A trc run with no ic run on its scene is set against nothing.
     let mut alone = rows[2].clone();

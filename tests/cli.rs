@@ -179,6 +179,26 @@ fn bad_input_is_a_clear_error() {
             "no such directory",
         ),
         (
+            &["render", "/"],
+            "is a directory; expected a .gltf or .glb file",
+        ),
+        (
+            &["render", "--method", "ic", "--ic-strata", "1x65537"],
+            "1x65537 cells per record is too many",
+        ),
+        (
+            &["render", "--method", "ic", "--ic-strata", "+4x4"],
+            "is not MxN",
+        ),
+        (
+            &["compare", "/", "/nonexistent/test"],
+            "test directory /nonexistent/test does not exist",
+        ),
+        (
+            &["compare", garbage, "/"],
+            "broken.glb is a file; expected a directory",
+        ),
+        (
             &["serve", "--addr", "0.0.0.0:1", "--token", ""],
             "--token (or RADCACHE_TOKEN) is empty",
         ),

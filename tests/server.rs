@@ -1147,6 +1147,8 @@ fn bench_charts_come_from_the_bench_directory_when_given() {
     std::fs::write(bench.join("bench.csv"), "scene,method\n").unwrap();
     std::fs::write(bench.join("notes.txt"), "no").unwrap();
     std::fs::write(dir.path().join("secret.svg"), "<svg id='secret'></svg>").unwrap();
+    // A link in the directory that leads out of it is neither listed nor served.
+    std::os::unix::fs::symlink(dir.path().join("secret.svg"), bench.join("link.svg")).unwrap();
     let server = start_with(
         &dir.path().join("db"),
         &scenes,
@@ -1170,6 +1172,7 @@ fn bench_charts_come_from_the_bench_directory_when_given() {
         "%2E%2E%2Fsecret.svg",
         "missing.svg",
         ".hidden.svg",
+        "link.svg",
     ] {
         let (status, body) = http(&server, "GET", &format!("/web/charts/{bad}"), "");
         assert_eq!(status, 404, "{bad}: {}", String::from_utf8_lossy(&body));

@@ -333,7 +333,8 @@ pub fn equal_error_text(table: &[EqualError]) -> String {
         let _ = match (e.path_seconds, e.speedup()) {
             (Some(p), Some(x)) => writeln!(
                 out,
-                "{what}; path needs {p:.3} s for it → {x:.2}× faster than path"
+                "{what}; path needs {p:.3} s for it → {} than path",
+                faster_or_slower(x)
             ),
             _ => writeln!(
                 out,
@@ -394,6 +395,17 @@ pub fn temporal_pairs(rows: &[BenchRow]) -> Vec<(&BenchRow, &BenchRow)> {
         .collect()
 }
 
+/// "2.00× faster" for a speed ratio `x` (the other's time over this
+/// one's) of at least 1, "1.96× slower" below it, rather than "0.51×
+/// faster".
+fn faster_or_slower(x: f64) -> String {
+    if x >= 1.0 {
+        format!("{x:.2}× faster")
+    } else {
+        format!("{:.2}× slower", 1.0 / x)
+    }
+}
+
 /// `a / b`, or "-" where either is missing or `b` is zero.
 fn ratio_of(a: Option<f64>, b: Option<f64>) -> String {
     match (a, b) {
@@ -411,12 +423,15 @@ pub fn temporal_text(rows: &[BenchRow]) -> String {
     for (ic, trc) in temporal_pairs(rows) {
         let _ = writeln!(
             out,
-            "{} {} {} against ic {}: {} faster, {} fewer records; error {} ({} lit surfaces), flicker {} ({} lit surfaces)",
+            "{} {} {} against ic {}: {}, {} fewer records; error {} ({} lit surfaces), flicker {} ({} lit surfaces)",
             trc.scene,
             trc.method,
             trc.settings,
             ic.settings,
-            ratio_of(Some(ic.seconds), Some(trc.seconds)),
+            match trc.seconds > 0.0 {
+                true => faster_or_slower(ic.seconds / trc.seconds),
+                false => "- faster".into(),
+            },
             ratio_of(Some(ic.records as f64), Some(trc.records as f64)),
             ratio_of(Some(trc.rel_rmse), Some(ic.rel_rmse)),
             ratio_of(trc.rel_rmse_surfaces, ic.rel_rmse_surfaces),

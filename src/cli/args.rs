@@ -395,8 +395,16 @@ fn parse_texels_per_pixel(s: &str) -> Result<f32, String> {
 }
 
 fn parse_strata(s: &str) -> Result<Strata, String> {
-    let (m, n) = parse_size(s).map_err(|_| format!("'{s}' is not MxN, e.g. 16x48"))?;
-    if m * n > 65_536 {
+    let not_mxn = || format!("'{s}' is not MxN, e.g. 16x48");
+    let (m, n) = s.split_once('x').ok_or_else(not_mxn)?;
+    // Plain decimal sides of at least 1 (`str::parse` would take a `+`).
+    let side = |v: &str| {
+        let digits = v.bytes().all(|b| b.is_ascii_digit());
+        let v = digits.then(|| v.parse::<u32>().ok()).flatten();
+        v.filter(|&v| v > 0).ok_or_else(not_mxn)
+    };
+    let (m, n) = (side(m)?, side(n)?);
+    if u64::from(m) * u64::from(n) > 65_536 {
         return Err(format!(
             "{m}x{n} cells per record is too many (at most 65536)"
         ));

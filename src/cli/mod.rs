@@ -254,11 +254,16 @@ fn run_compact(args: CompactArgs) -> Result<()> {
 }
 
 fn run_compare(args: CompareArgs) -> Result<()> {
-    if !args.reference.is_dir() {
-        bail!(
-            "reference directory {} does not exist",
-            args.reference.display()
-        );
+    for (what, dir) in [("reference", &args.reference), ("test", &args.test)] {
+        if dir.is_file() {
+            bail!(
+                "{what} directory {} is a file; expected a directory of frame_NNNN.exr",
+                dir.display()
+            );
+        }
+        if !dir.is_dir() {
+            bail!("{what} directory {} does not exist", dir.display());
+        }
     }
     let report = metrics::compare_dirs(&args.reference, &args.test).with_context(|| {
         format!(

@@ -165,6 +165,12 @@ pub trait Method: Send {
     /// The name used on the command line (`--method NAME`).
     fn name(&self) -> &'static str;
 
+    /// What the records of its [`FrameStats`] count, as a render's summary
+    /// names them: records, or `movies`' texture movies.
+    fn cache_unit(&self) -> &'static str {
+        "records"
+    }
+
     /// Renders one frame into a linear-radiance image.
     fn render_frame(&mut self, ctx: &FrameContext) -> Film;
 

@@ -293,6 +293,11 @@ impl Renderer {
         self.backend.as_ref()
     }
 
+    /// What the method's statistics count ([`Method::cache_unit`]).
+    pub fn cache_unit(&self) -> &'static str {
+        self.method.cache_unit()
+    }
+
     pub fn method_name(&self) -> &'static str {
         self.method.name()
     }
@@ -492,6 +497,8 @@ pub struct RenderSummary {
     /// Backend calls the rays took (on a GPU, dispatches).
     pub ray_calls: u64,
     pub out_dir: PathBuf,
+    /// What the frames' record statistics count ([`Method::cache_unit`]).
+    pub cache_unit: &'static str,
 }
 
 impl RenderSummary {
@@ -516,10 +523,19 @@ impl RenderSummary {
             .iter()
             .map(|(n, s)| format!("{n} {s:.2} s"))
             .collect();
+        // Lookups that interpolate records say how many each used; those
+        // of texture movies read texels, and fall back to nothing.
+        let interpolated = match used + fallbacks {
+            0 => String::new(),
+            _ => format!(
+                ", {:.1} records/lookup, {fallbacks} path-traced fallbacks",
+                used as f64 / lookups as f64
+            ),
+        };
         Some(format!(
-            "records created {created} ({:.0}/frame), lookups {lookups}, {:.1} records/lookup, {fallbacks} path-traced fallbacks; {}",
+            "{} created {created} ({:.0}/frame), lookups {lookups}{interpolated}; {}",
+            self.cache_unit,
             created as f64 / self.frames.max(1) as f64,
-            used as f64 / lookups as f64,
             phases.join(", ")
         ))
     }
@@ -592,8 +608,9 @@ impl RenderSummary {
         }
         let sum = |f: fn(&FrameStats) -> u64| self.frame_stats.iter().map(f).sum::<u64>();
         let widest = histogram.iter().copied().max().unwrap_or(1).max(1);
+        let unit = self.cache_unit;
         let mut out = format!(
-            "records reused {} times, replaced {}, dropped {}; mean lifespan {:.2} frames over {computed} records computed\nlifespan histogram (frames: records):",
+            "{unit} reused {} times, replaced {}, dropped {}; mean lifespan {:.2} frames over {computed} {unit} computed\nlifespan histogram (frames: {unit}):",
             sum(|s| s.records_reused),
             sum(|s| s.records_replaced),
             sum(|s| s.records_dropped),
@@ -721,6 +738,7 @@ pub fn render_job_to_dir_with(
         rays: renderer.backend().ray_counts().total() - counts_before.total(),
         ray_calls: renderer.backend().ray_counts().calls - counts_before.calls,
         out_dir: out_dir.to_path_buf(),
+        cache_unit: renderer.cache_unit(),
     })
 }
 
@@ -775,6 +793,7 @@ mod tests {
             elapsed: Duration::from_secs(1),
             rays: 0,
             ray_calls: 0,
+            cache_unit: "records",
             out_dir: PathBuf::from("out"),
         }
     }
@@ -825,6 +844,30 @@ mod tests {
         // One frame, or methods that time no phases (`path`): nothing to say.
         assert_eq!(summary(&[0.5]).frame_time_report(), None);
         assert_eq!(summary(&[0.0, 0.0]).frame_time_report(), None);
+    }
+
+    /// Records that interpolate say how many a lookup used; texture
+    /// movies, whose lookups read texels, are named as such instead.
+    #[test]
+    fn cache_report_names_what_the_method_caches() {
+        let mut s = summary(&[0.1, 0.1]);
+        for st in &mut s.frame_stats {
+            (st.records_created, st.lookups, st.lookup_records) = (3, 10, 20);
+        }
+        let records = s.cache_report().unwrap();
+        assert!(
+            records.starts_with("records created 6 (3/frame), lookups 20, 2.0 records/lookup"),
+            "{records}"
+        );
+        for st in &mut s.frame_stats {
+            st.lookup_records = 0;
+        }
+        s.cache_unit = "texture movies";
+        let movies = s.cache_report().unwrap();
+        assert!(
+            movies.starts_with("texture movies created 6 (3/frame), lookups 20; fill"),
+            "{movies}"
+        );
     }
 
     #[test]

@@ -131,10 +131,16 @@ pub async fn chart(
     let missing = || ApiError::not_found(format!("no chart {file:?}"));
     let mime = chart_mime(&file).ok_or_else(missing)?;
     let path = dir.join(&file);
-    let body = tokio::task::spawn_blocking(move || std::fs::read(path))
+    // As `/api/charts` lists them: files of the directory itself, not
+    // links that may lead out of it.
+    let read = move || match std::fs::symlink_metadata(&path) {
+        Ok(m) if m.file_type().is_file() => std::fs::read(&path).ok(),
+        _ => None,
+    };
+    let body = tokio::task::spawn_blocking(read)
         .await
         .map_err(ApiError::internal)?
-        .map_err(|_| missing())?;
+        .ok_or_else(missing)?;
     Ok((
         [
             (header::CONTENT_TYPE, mime),

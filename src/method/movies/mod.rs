@@ -229,6 +229,10 @@ impl Method for TextureMovies {
         "movies"
     }
 
+    fn cache_unit(&self) -> &'static str {
+        "texture movies"
+    }
+
     fn render_frame(&mut self, ctx: &FrameContext) -> Film {
         let mut stats = FrameStats {
             frame: ctx.frame,

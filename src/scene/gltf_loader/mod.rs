@@ -70,6 +70,9 @@ pub const MAX_EMISSION: f32 = 1e12;
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
     let source = path.display().to_string();
     let fail = |message: String| SceneError::invalid(source.clone(), message);
+    if path.is_dir() {
+        return Err(fail("is a directory; expected a .gltf or .glb file".into()));
+    }
     check_extension(path).map_err(fail)?;
     let bytes = read_regular_file(path, None).map_err(fail)?;
     quietly_catch_panics(|| load_bytes(path, &bytes)).map_err(fail)
