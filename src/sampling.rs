@@ -10,16 +10,52 @@
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
-/// What a random stream is keyed by. `frame` is `None` for the
-/// `--same-pattern` reference renders, whose random sequence is identical in
-/// every frame so that frame differences show the scene's change, not noise.
+/// What a random stream is keyed by. `frame` is `None` for streams that
+/// are the same in every frame: those of `--same-pattern` renders (so that
+/// frame differences show the scene's change, not noise), and the streams
+/// a method keeps from frame to frame on purpose (a record's gathers, the
+/// coherent pixel samples, the movies' texels).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SampleKey {
     pub seed: u64,
     pub frame: Option<u32>,
-    /// Pixel index (`y·width + x`) or record id.
+    /// What draws the stream: a pixel index (`y·width + x`), untagged, or
+    /// one of [`streams`]' tags with the index of what it tags.
     pub item: u64,
     pub sample: u32,
+}
+
+/// The tags that keep the random streams of different uses apart. A
+/// tagged [`SampleKey::item`] is a tag ORed with an index below 2^57 (a
+/// pixel, a vertex, a texel, or a record's first stream); an untagged one
+/// is a pixel of the per-frame pixel streams. Every tag differs from every
+/// other in its bits from 57 up, so no two uses draw the same numbers.
+pub mod streams {
+    /// A record's hemisphere gathers (`ic`, and `trc` and `tcg`, which make
+    /// their records as `ic` does).
+    pub const RECORD: u64 = 1 << 62;
+    /// `tcg`'s picks of the cells it shoots again, apart from the shots.
+    pub const RECORD_PICK: u64 = RECORD | (1 << 61);
+    /// The texels of `movies`' texture movies.
+    pub const MOVIE_TEXEL: u64 = 1 << 60;
+    /// Pixel samples drawn the same in every frame (`trc`, `tcg`), apart
+    /// from a same-pattern reference's untagged ones.
+    pub const COHERENT_PIXEL: u64 = 1 << 59;
+    /// The vertices of `movies`' global pass: their direct light.
+    pub const GLOBAL_VERTEX: u64 = 1 << 58;
+    /// The links of the global pass's vertices, apart from their direct
+    /// light (the same vertex's link `k` and light sample `k` drew the
+    /// same numbers): ORed onto a vertex's item.
+    pub const GLOBAL_LINK: u64 = GLOBAL_VERTEX | (1 << 57);
+    /// Every tag, for the test that they are apart.
+    pub const ALL: [u64; 6] = [
+        RECORD,
+        RECORD_PICK,
+        MOVIE_TEXEL,
+        COHERENT_PIXEL,
+        GLOBAL_VERTEX,
+        GLOBAL_LINK,
+    ];
 }
 
 /// SplitMix64 finaliser: a bijective 64-bit mix with good avalanche.
@@ -411,6 +447,19 @@ pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+
+    /// Every stream tag differs from every other, and from an untagged
+    /// item, in the bits above the indices they tag.
+    #[test]
+    fn stream_tags_are_apart() {
+        let high = |tag: u64| tag >> 57;
+        for (i, a) in streams::ALL.iter().enumerate() {
+            assert_ne!(high(*a), 0, "{a:#x} is no tag");
+            for b in &streams::ALL[i + 1..] {
+                assert_ne!(high(*a), high(*b), "{a:#x} and {b:#x}");
+            }
+        }
+    }
 
     /// Lambert's closed form for `∫ cosθ dω` over triangle `v` seen from
     /// `p` with normal `n`: `½ Σ θ_i (n · ĝ_i)`, with `θ_i` the angle an

@@ -145,7 +145,7 @@ fn a_still_scene_traces_only_camera_rays_after_its_first_frame() {
 /// Renders frames `frames` of `scene` with one `movies` instance kept
 /// across them and, for each frame after the first, with a fresh instance
 /// opening every movie at that frame; asserts the two give the same
-/// pixels. Returns, per frame after the first, the kept instance's
+/// pixels, up to rounding. Returns, per frame after the first, the kept instance's
 /// statistics and rays and the fresh one's rays.
 fn kept_against_fresh(
     scene: impl Fn() -> Scene,
@@ -164,9 +164,23 @@ fn kept_against_fresh(
         let mut fresh = TextureMovies::new(MoviesSettings::default());
         let mut r2 = renderer(scene(), size);
         let (fresh_film, _, fresh_rays) = render(&mut r2, &mut fresh, frame);
+        // Equal up to rounding: a link kept from an earlier frame was
+        // traced in that frame's BVH (small scenes get one BVH over all
+        // their triangles, built anew every frame), and a link that ends on
+        // an edge two triangles share lands on either one as the BVH
+        // breaks the tie; Gouraud interpolation on the shared edge agrees
+        // between them only up to rounding (2e-5 at most seen).
+        let worst = film
+            .pixels
+            .iter()
+            .zip(&fresh_film.pixels)
+            .map(|(a, b)| {
+                ((*a - *b).abs() / a.abs().max(b.abs()).max(Vec3::splat(1e-3))).max_element()
+            })
+            .fold(0.0f32, f32::max);
         assert!(
-            film.pixels == fresh_film.pixels,
-            "frame {frame}: kept and fresh movies differ (mean {} against {})",
+            worst < 1e-4,
+            "frame {frame}: kept and fresh movies differ by {worst} (mean {} against {})",
             film.mean(),
             fresh_film.mean()
         );

@@ -21,14 +21,14 @@ pub fn write(args: fmt::Arguments) -> anyhow::Result<()> {
     }
 }
 
-/// `print!` that returns [`write`]'s result.
+/// `print!` that returns [`write()`]'s result.
 macro_rules! out {
     ($($arg:tt)*) => {
         $crate::cli::output::write(format_args!($($arg)*))
     };
 }
 
-/// `println!` that returns [`write`]'s result.
+/// `println!` that returns [`write()`]'s result.
 macro_rules! outln {
     () => {
         $crate::cli::output::write(format_args!("\n"))

@@ -26,7 +26,7 @@ use crate::integrator::{
     RadianceResult,
 };
 use crate::material::{luminance, Bsdf, LUMINANCE};
-use crate::sampling::SampleKey;
+use crate::sampling::{streams, SampleKey};
 use crate::store::SampleBlock;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -105,9 +105,6 @@ impl Default for IcSettings {
         }
     }
 }
-
-/// Tags the random streams of record gathering apart from pixel sampling.
-pub(crate) const RECORD_STREAM: u64 = 1 << 62;
 
 /// The random streams of a record first gathered at `pixel`'s candidate in
 /// this frame: frame and pixel (the pixel alone with `--same-pattern`).
@@ -474,7 +471,7 @@ impl IrradianceCaching {
                 seed: ctx.seed,
                 // The frame is in the stream (`first_stream`).
                 frame: None,
-                item: RECORD_STREAM | c.stream,
+                item: streams::RECORD | c.stream,
                 sample: 0,
             };
             queries.extend(gather_queries(&c.point, strata, key));

@@ -33,7 +33,7 @@ use super::FrameContext;
 use crate::accel::ray_hits_triangle;
 use crate::backend::{Hit, Ray};
 use crate::light::{emitting_cosine, LightSampler};
-use crate::sampling::{LightChoice, Rng, SampleKey, Stratified2d};
+use crate::sampling::{streams, LightChoice, Rng, SampleKey, Stratified2d};
 use crate::scene::Snapshot;
 use glam::Vec3;
 
@@ -70,11 +70,6 @@ pub enum PixelStreams {
     Coherent,
 }
 
-/// Tags [`PixelStreams::Coherent`] keys apart from the untagged keys of a
-/// same-pattern reference (a method's noise must not be the reference's)
-/// and from the tagged streams of records, fallbacks and movies.
-const COHERENT_PIXEL_STREAM: u64 = 1 << 59;
-
 impl PixelStreams {
     /// The key of sample `sample` of pixel `pixel`.
     pub fn key(self, ctx: &FrameContext, pixel: u32, sample: u32) -> SampleKey {
@@ -83,7 +78,7 @@ impl PixelStreams {
             PixelStreams::Coherent => SampleKey {
                 seed: ctx.seed,
                 frame: None,
-                item: COHERENT_PIXEL_STREAM | u64::from(pixel),
+                item: streams::COHERENT_PIXEL | u64::from(pixel),
                 sample,
             },
         }

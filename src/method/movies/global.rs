@@ -25,14 +25,11 @@ use super::direct::{direct_irradiance, Blockers, ShadePoint, StaticShadows};
 use super::FrameContext;
 use crate::backend::{Hit, Ray};
 use crate::integrator::offset_origin;
-use crate::sampling::{cosine_hemisphere, Frame, Rng, SampleKey};
+use crate::sampling::{cosine_hemisphere, streams, Frame, Rng, SampleKey};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::f32::consts::FRAC_1_PI;
-
-/// Tags the random streams of the global pass's vertices.
-const GLOBAL_STREAM: u64 = 1 << 59;
 
 /// Settings of the global pass.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -460,7 +457,7 @@ impl GlobalPass {
                     p: tri.point(u, w),
                     n: tri.shading_normal(u, w),
                     ng: tri.geometric_normal(),
-                    item: GLOBAL_STREAM | i as u64,
+                    item: streams::GLOBAL_VERTEX | i as u64,
                 }
             })
             .collect()
@@ -471,7 +468,7 @@ impl GlobalPass {
         let mut rng = Rng::new(SampleKey {
             seed: ctx.seed,
             frame: None,
-            item: point.item,
+            item: streams::GLOBAL_LINK | point.item,
             sample: link,
         });
         let wi = Frame::new(point.n).to_world(cosine_hemisphere(rng.next_2d()));

@@ -9,11 +9,9 @@ use super::direct::{direct_irradiance, Blockers, ShadePoint, ShadowCounts, Stati
 use super::global::{GlobalPass, Gouraud};
 use super::patch::Patch;
 use super::FrameContext;
+use crate::sampling::streams;
 use crate::scene::Triangle;
 use glam::Vec3;
-
-/// Tags the random streams of the movies' texels.
-const MOVIE_STREAM: u64 = 1 << 60;
 
 /// A movie's identity: which side of which patch of which triangle.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -110,7 +108,7 @@ impl Movie {
             p: tri.point(u, v),
             n: tri.shading_normal(u, v) * side,
             ng: tri.geometric_normal() * side,
-            item: MOVIE_STREAM
+            item: streams::MOVIE_TEXEL
                 | u64::from(self.key.triangle) << 28
                 | u64::from(self.key.back) << 27
                 | u64::from(self.key.patch.code()) << 20

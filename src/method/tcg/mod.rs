@@ -60,7 +60,7 @@ pub use state::{downgrade_to_schema_6_record, is_radiance_record, upgrade_schema
 use super::carried;
 use super::ic::{
     dynamic_objects, primary_candidates, scene_bounds, Candidate, Gathered, IcSettings,
-    IrradianceCaching, RECORD_STREAM,
+    IrradianceCaching,
 };
 use super::render_pass::{render_pass, PixelStreams, StillSamples};
 use super::{
@@ -75,7 +75,7 @@ use crate::cache::{IrradianceCache, IrradianceRecord, LookupPoint, RecordId};
 use crate::film::Film;
 use crate::integrator::trace_radiance_parallel;
 use crate::material::Bsdf;
-use crate::sampling::{Frame, Rng, SampleKey};
+use crate::sampling::{streams, Frame, Rng, SampleKey};
 use crate::scene::Snapshot;
 use crate::store::rgbe::PackedSample;
 use crate::store::samples::{pack_samples, SampleBlock};
@@ -85,10 +85,6 @@ use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
-
-/// Tags the random streams that pick a record's cells apart from those
-/// that shoot them.
-const PICK_STREAM: u64 = RECORD_STREAM | (1 << 61);
 
 /// Settings of `tcg`, with their sources.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -374,7 +370,7 @@ impl TemporallyCoherentGathering {
                 };
                 let is_stale = |cell: usize| stale.get(cell).copied().unwrap_or(false);
                 let count = select::cells_to_update(&self.settings, &r.samples, is_stale);
-                let mut rng = Rng::new(self.key(ctx, PICK_STREAM, r, 0));
+                let mut rng = Rng::new(self.key(ctx, streams::RECORD_PICK, r, 0));
                 select::pick_cells(&r.samples, count, &mut rng, is_stale)
             })
             .collect();
@@ -383,7 +379,7 @@ impl TemporallyCoherentGathering {
         for ((r, (point, frame)), cells) in alive.iter().zip(&picks) {
             let start = queries.len();
             for &cell in cells {
-                let rng = Rng::new(self.key(ctx, RECORD_STREAM, r, cell));
+                let rng = Rng::new(self.key(ctx, streams::RECORD, r, cell));
                 queries.push(cell_query(point, frame, strata, cell, rng));
             }
             ranges.push(start..queries.len());

@@ -27,8 +27,8 @@ use crate::backend::{Hit, Ray};
 use crate::integrator::offset_origin;
 use crate::light::{LightSampler, TriangleSampling};
 use crate::material::Bsdf;
-use crate::method::ic::RECORD_STREAM;
 use crate::method::FrameContext;
+use crate::sampling::streams;
 use crate::sampling::{LightChoice, Rng, SampleKey};
 use crate::scene::Snapshot;
 use glam::{Mat4, Vec3};
@@ -180,7 +180,7 @@ impl DirectChange {
         let mut rng = Rng::new(SampleKey {
             seed: ctx.seed,
             frame: Some(ctx.frame),
-            item: RECORD_STREAM | g.candidate.stream,
+            item: streams::RECORD | g.candidate.stream,
             sample: i as u32,
         });
         LightChoice {
