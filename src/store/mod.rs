@@ -191,6 +191,14 @@ fn now_unix() -> u64 {
         .unwrap_or(0)
 }
 
+/// `bytes` copied where an rkyv archive may be read from: sled values
+/// carry no alignment guarantee, and rkyv needs 16.
+pub(crate) fn aligned(bytes: &[u8]) -> AlignedVec<16> {
+    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+    aligned.extend_from_slice(bytes);
+    aligned
+}
+
 /// Reads an rkyv archive (validated) of a `T`.
 pub(crate) fn decode_value<T>(bytes: &[u8]) -> Result<T, String>
 where
@@ -198,10 +206,7 @@ where
     T::Archived: for<'a> CheckBytes<HighValidator<'a, rancor::Error>>
         + rkyv::Deserialize<T, HighDeserializer<rancor::Error>>,
 {
-    // sled values carry no alignment guarantee; rkyv needs 16.
-    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
-    aligned.extend_from_slice(bytes);
-    rkyv::from_bytes::<T, rancor::Error>(&aligned).map_err(|e| e.to_string())
+    rkyv::from_bytes::<T, rancor::Error>(&aligned(bytes)).map_err(|e| e.to_string())
 }
 
 /// An rkyv archive of `value`.
