@@ -46,6 +46,7 @@ mod frames;
 pub mod inspect;
 mod jobs;
 pub mod keys;
+mod meta;
 pub mod migrate;
 mod records;
 pub mod rgbe;
@@ -61,6 +62,7 @@ pub mod v6;
 pub mod v7;
 pub mod v8;
 
+use meta::read_meta_u64;
 use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};
 use rkyv::bytecheck::CheckBytes;
 use rkyv::rancor;
@@ -459,7 +461,7 @@ fn check_unversioned(path: &Path, db: &sled::Db, create: bool) -> Result<(), Sto
 /// switch are removed once the current log has opened.
 fn open_sample_log(path: &Path, meta: &sled::Tree) -> Result<(u64, SampleLog), StoreError> {
     let meta_u64 = |key: &[u8]| {
-        v2::read_meta_u64(meta, key).map_err(|detail| StoreError::Corrupt {
+        read_meta_u64(meta, key).map_err(|detail| StoreError::Corrupt {
             path: path.to_owned(),
             tree: "meta",
             key: keys::describe(key),
