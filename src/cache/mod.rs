@@ -11,7 +11,7 @@ pub mod record;
 
 use glam::Vec3;
 use octree::SphereOctree;
-pub use record::{IrradianceRecord, LookupPoint, RecordId};
+pub use record::{IrradianceRecord, LookupPoint, RecordId, WEIGHT_CAP};
 
 /// Records of one cache with their spatial index.
 pub struct IrradianceCache {
@@ -109,8 +109,7 @@ impl IrradianceCache {
         let (mut sum, mut weights, mut count) = (Vec3::ZERO, 0.0f32, 0u32);
         self.for_each_usable_indexed(at, |i, record, w| {
             mark(i);
-            // A record exactly at p has infinite weight: it alone decides.
-            let w = w.min(1e6);
+            let w = w.min(WEIGHT_CAP);
             sum += record.extrapolate(at.position, at.normal, use_gradients) * w;
             weights += w;
             count += 1;
