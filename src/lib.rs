@@ -29,6 +29,7 @@ pub mod backend;
 pub mod bench;
 pub mod cache;
 pub mod cli;
+pub mod decimal;
 pub mod film;
 pub mod hash;
 pub mod integrator;
