@@ -580,7 +580,7 @@ pub(crate) fn primary_candidates(ctx: &FrameContext, glossy: GlossyLobe) -> Vec<
         .collect();
     let mut hits = vec![Hit::MISS; rays.len()];
     ctx.backend.closest_hit(&rays, &mut hits);
-    let pixel_angle = 2.0 * camera.tan_half_fov() / ctx.height as f32;
+    let pixel_angle = ctx.pixel_angle();
     rays.iter()
         .zip(&hits)
         .enumerate()
@@ -706,7 +706,7 @@ mod tests {
                 .scene
                 .materials
                 .iter()
-                .position(|m| m.specular.max_element() > 0.0);
+                .position(crate::scene::Material::is_glossy);
             glossy.expect("glossy-cornell has glossy materials") as u32
         });
         let ic = IrradianceCaching::new(IcSettings {

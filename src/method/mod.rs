@@ -70,6 +70,13 @@ impl FrameContext<'_> {
         self.width as f32 / self.height as f32
     }
 
+    /// A pixel's size at the film's centre on a plane at distance 1 from
+    /// the camera, `2·tan(fov/2)/height` (≈ the angle it spans, in
+    /// radians): a pixel seen at distance `t` is about `t` times this wide.
+    pub fn pixel_angle(&self) -> f32 {
+        2.0 * self.snapshot.camera.tan_half_fov() / self.height as f32
+    }
+
     /// Whether the frame in progress is abandoned: its result will be
     /// thrown away, so the big loops (pixel tiles, path bounces) skip what
     /// is left of their work. One frame of an extreme request (4096² pixels

@@ -94,7 +94,7 @@ impl<'a> Surface<'a> {
     fn is_plain(ctx: &FrameContext, hit: &Hit) -> bool {
         !hit.is_hit() || {
             let m = material_of(ctx, hit);
-            !m.is_emissive() && m.specular.max_element() <= 0.0
+            !m.is_emissive() && !m.is_glossy()
         }
     }
 
