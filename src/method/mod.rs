@@ -160,12 +160,6 @@ pub fn mean_lifespan(histogram: &[u64]) -> f64 {
     }
 }
 
-impl FrameStats {
-    pub fn mean_records_per_lookup(&self) -> f64 {
-        self.lookup_records as f64 / self.lookups.max(1) as f64
-    }
-}
-
 /// A rendering method. Methods may keep state from frame to frame (the
 /// temporal caches do), so frames are rendered in order through `&mut self`.
 pub trait Method: Send {

@@ -390,12 +390,6 @@ impl Store {
         }
     }
 
-    // ------------------------------------------------------------ jobs
-
-    // ------------------------------------------------------------ frames
-
-    // ------------------------------------------------------------ state
-
     /// Writes a raw value (tests use it to corrupt a store on purpose).
     #[doc(hidden)]
     pub fn raw_insert(&self, tree: &str, key: &[u8], value: &[u8]) -> Result<(), StoreError> {
