@@ -11,7 +11,7 @@
 //! than an estimate from the lookup point's clearance (a departure from
 //! Ward explained at `IrradianceRecord::weight`).
 
-use super::lookups::{measure_clearance, Lookup, ShadingPoint};
+use super::lookups::{measure_clearance, ShadingPoint};
 use super::render_pass::{render_pass, PixelStreams, Surface};
 use super::{FrameContext, FrameRecords, FrameStats, Method, RENDER_PHASE};
 use crate::backend::{Hit, Ray};
@@ -19,7 +19,7 @@ use crate::cache::gather::{
     gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint,
     GatheredIrradiance, HemisphereSamples, Strata,
 };
-use crate::cache::{eas, IrradianceCache, IrradianceRecord, RecordId};
+use crate::cache::{eas, IrradianceCache, IrradianceRecord, LookupPoint, RecordId};
 use crate::film::Film;
 use crate::integrator::{
     trace_radiance_parallel, trace_radiance_tracked, PathLength, PathTracks, RadianceQuery,
@@ -360,7 +360,7 @@ impl IrradianceCaching {
         &self,
         ctx: &FrameContext,
         cache: &mut IrradianceCache,
-        batch: Vec<(Candidate, Lookup)>,
+        batch: Vec<(Candidate, LookupPoint)>,
         track: Option<&TrackPaths<'_>>,
         annotate: &(impl Fn(&Gathered, Option<GatherTracks>) -> X + Sync),
         inserted: &mut Vec<X>,
@@ -607,7 +607,7 @@ pub(crate) fn primary_candidates(ctx: &FrameContext, glossy: GlossyLobe) -> Vec<
 fn candidate_clearances(
     ctx: &FrameContext,
     candidates: &[Option<Candidate>],
-) -> Vec<Option<Lookup>> {
+) -> Vec<Option<LookupPoint>> {
     let points: Vec<ShadingPoint> = candidates
         .iter()
         .flatten()
