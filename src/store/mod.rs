@@ -28,10 +28,11 @@
 //!   the frame counts as acknowledged only after that returns. A log tail
 //!   beyond the committed length (a crash in between) is cut off when the
 //!   store is opened.
-//! - `state` holds the cache a stateful method (`trc`) carries to the next
-//!   frame, as of the job's last frame: each frame writes only its changes
-//!   (records put and removed, and the head), and a resume loads it
-//!   ([`Store::load_state`]) instead of rendering the finished frames again.
+//! - `state` holds the cache a stateful method (`trc`, `tcg`) carries to
+//!   the next frame, as of the job's last frame: each frame writes only
+//!   its changes (records put and removed, and the head), and a resume
+//!   loads it ([`Store::load_state`]) instead of rendering the finished
+//!   frames again.
 //! - Bytes of the log no value references any more (a job restarted with
 //!   `--force`, a frame written again) stay until [`compact`] rewrites the
 //!   log without them.
