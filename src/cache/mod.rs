@@ -1,5 +1,5 @@
-//! Record caches shared by the caching methods (`ic` now; `trc` and `tcg`
-//! reuse the same records, weights and interpolation): irradiance records
+//! The record cache of the methods that cache irradiance (`ic`, and `trc`
+//! and `tcg`, which carry its records across frames): irradiance records
 //! with gradients ([`record`]), hemisphere gathering ([`gather`]), a spatial
 //! index over their spheres of influence ([`octree`]) and the weighted
 //! interpolation of TRC paper Eq. 1–4 ([`IrradianceCache::interpolate`]).
@@ -121,7 +121,8 @@ impl IrradianceCache {
     }
 
     /// Adds a record without neighbour clamping: for records that were
-    /// clamped when first inserted and come back in a later frame (`trc`).
+    /// clamped when first inserted and come back in a later frame (`trc`,
+    /// `tcg`).
     pub fn insert_as_is(&mut self, record: IrradianceRecord) {
         let id = self.records.len() as u32;
         self.index

@@ -6,7 +6,8 @@
 //! cache is built every frame — the "per-frame computation" every temporal
 //! method is compared with.
 //!
-//! The rendering stage, which `trc` shares, is [`super::render_pass`]; in
+//! The rendering stage, which `trc` and `tcg` share, is
+//! [`super::render_pass`]; in
 //! it the cache's records are used where `w ≥ 1/a`, with `R_K` no larger
 //! than an estimate from the lookup point's clearance (a departure from
 //! Ward explained at `IrradianceRecord::weight`).

@@ -4,7 +4,7 @@
 //! on the GPU by radiance cache splatting (TRC §5,
 //! [`crate::backend::gpu::cache_splat`]) when the ray backend has a device. Both
 //! give the same usable records and the same irradiance up to f32
-//! summation order; `ic` and `trc` do not know which one runs.
+//! summation order; `ic`, `trc` and `tcg` do not know which one runs.
 //!
 //! A GPU error cannot be returned from a render tile: it fails the backend
 //! ([`CacheSplat::fail`], as a ray error does) and the lookups are

@@ -142,9 +142,9 @@ pub struct FrameStats {
     pub phase_seconds: Vec<(String, f64)>,
 }
 
-/// The name in [`FrameStats::phase_seconds`] of the render pass that `ic`
-/// and `trc` share (`render_pass`): `bench` sets its time apart from the
-/// methods' own work on their records.
+/// The name in [`FrameStats::phase_seconds`] of the render pass, the one
+/// `ic`, `trc` and `tcg` share ([`render_pass`]) or `movies`' own:
+/// `bench` sets its time apart from the methods' own work on their records.
 pub const RENDER_PHASE: &str = "render";
 
 /// The mean of a lifespan histogram (`histogram[n]`: records that live

@@ -1,6 +1,6 @@
 //! Pass "splat records": the render pass's irradiance-cache interpolation
-//! (TRC Eq. 1–4) on the GPU, for `ic` and `trc` when the ray backend is the
-//! GPU one. WGSL in `shaders/cache_splat.wgsl`.
+//! (TRC Eq. 1–4) on the GPU, for `ic`, `trc` and `tcg` when the ray backend
+//! is the GPU one. WGSL in `shaders/cache_splat.wgsl`.
 //!
 //! # How this is the paper's radiance cache splatting (TRC §5)
 //! TRC §5 (after Gautron et al. 2005) observes that a record K cannot
