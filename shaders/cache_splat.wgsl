@@ -1,17 +1,18 @@
 // Pass "splat records": the render pass's irradiance-cache interpolation
 // (TRC Eq. 1–4) for a batch of lookups, each the shading point and normal of
-// a pixel sample. Driven by `src/backend/gpu_cache.rs`, which explains how
-// this maps to the paper's radiance cache splatting (TRC §5) and why the
-// records are binned into a grid first (WGSL has no float atomics).
+// a pixel sample. Driven by `src/backend/gpu/cache_splat.rs`, which
+// explains how this maps to the paper's radiance cache splatting (TRC §5)
+// and why the records are binned into a grid first (WGSL has no float
+// atomics).
 //
 // Each work item is one lookup. It visits the records binned into its grid
 // cell and applies exactly the CPU's tests (`IrradianceCache::
 // interpolate_marking` in `src/cache/mod.rs`): p inside the record's sphere
 // of influence (the octree's test), w ≥ 1/a (Eq. 3), not in front of p,
-// w capped at 1e6; then sums w·E_K(p) (Eq. 4) and w (Eq. 1).
+// w capped at WEIGHT_CAP; then sums w·E_K(p) (Eq. 4) and w (Eq. 1).
 
 /// Work items per workgroup. Must match `SPLAT_WORKGROUP_SIZE` in
-/// `src/backend/gpu_cache.rs`; 64 as the ray stages use.
+/// `src/backend/gpu/cache_splat.rs`; 64 as the ray stages use.
 const WORKGROUP_SIZE: u32 = 64u;
 
 /// A lookup outside the grid lies in no sphere of influence.
@@ -23,7 +24,7 @@ const FLAG_GRADIENTS: u32 = 1u;
 const FLAG_MARK: u32 = 2u;
 
 /// Weight of a record exactly at p (w = ∞): it alone decides. Must match
-/// the cap in `IrradianceCache::interpolate_marking`.
+/// `WEIGHT_CAP` in `src/cache/record.rs`.
 const WEIGHT_CAP: f32 = 1e6;
 
 /// `IrradianceRecord::is_in_front_of`'s tolerance, relative to R_K.
@@ -31,7 +32,7 @@ const FRONT_TOLERANCE: f32 = 0.01;
 const FRAC_1_SQRT_2: f32 = 0.70710677;
 
 /// Parameters of one dispatch. Field order must match `SplatParams` in
-/// `src/backend/gpu_cache.rs`.
+/// `src/backend/gpu/cache_splat.rs`.
 struct Params {
     /// Lookups in this chunk.
     lookup_count: u32,
@@ -53,7 +54,7 @@ struct Params {
 }
 
 /// One record (144 bytes). Field order must match `GpuRecord` in
-/// `src/backend/gpu_cache.rs`.
+/// `src/backend/gpu/cache_splat.rs`.
 struct Record {
     position: vec3<f32>,
     /// Radius of the sphere of influence, a·R_K, computed on the CPU so that
@@ -71,7 +72,7 @@ struct Record {
 }
 
 /// A shading point to interpolate at (32 bytes). Field order must match
-/// `GpuLookup` in `src/backend/gpu_cache.rs`.
+/// `GpuLookup` in `src/backend/gpu/cache_splat.rs`.
 struct Lookup {
     position: vec3<f32>,
     /// R_p, the point's own harmonic distance estimate (`LookupPoint::radius`).
@@ -81,7 +82,7 @@ struct Lookup {
 }
 
 /// The sums of one lookup (32 bytes). Field order must match `GpuSplat` in
-/// `src/backend/gpu_cache.rs`.
+/// `src/backend/gpu/cache_splat.rs`.
 struct Splat {
     /// Σ w_K·E_K(p).
     sum: vec3<f32>,

@@ -8,12 +8,12 @@
 //! |-------------|---------------------------------------------------------------|
 //! | [`scene`]   | scene description, glTF loading, built-in scenes, animation   |
 //! | [`accel`]   | BVHs over the triangles of one frame (obvhs)                   |
-//! | [`backend`] | the batched ray interface and its CPU implementation          |
+//! | [`backend`] | the batched ray interface; its CPU and wgpu (GPU) implementations |
 //! | [`cache`]   | irradiance records, gathering, gradients, interpolation      |
 //! | [`sampling`]| deterministic random numbers keyed by (seed, frame, pixel, sample) |
 //! | [`material`]| BSDFs: Lambertian and energy-conserving modified Phong         |
 //! | [`light`]   | light sampling: emissive triangles by power, point and spot   |
-//! | [`method`]  | rendering methods behind one trait (`path`, `ic`, `trc`)   |
+//! | [`method`]  | rendering methods behind one trait (`path`, `ic`, `trc`, `tcg`, `movies`) |
 //! | [`integrator`] | path tracing of ray batches, shared by all methods        |
 //! | [`film`]    | RGB f32 images, EXR and PNG input/output                        |
 //! | [`hash`]    | FNV-1a 64, the content hash of scenes and their files          |
@@ -21,7 +21,9 @@
 //! | [`render`]  | the frame loop: animation → geometry → method → files         |
 //! | [`bench`](mod@bench) | `radcache bench`: methods against a reference, CSV and charts |
 //! | [`cli`]     | the `radcache` command line                                    |
+//! | [`server`]  | `radcache serve`: the HTTP API (axum) and its job worker        |
 //! | [`store`]   | the persistent space-time store (sled + rkyv + zstd), jobs, resume |
+//! | [`decimal`] | numbers in names read back only in the spelling they are written |
 //! | [`uri`]     | percent-encoding of glTF URIs and query strings                |
 
 pub mod accel;
@@ -29,6 +31,7 @@ pub mod backend;
 pub mod bench;
 pub mod cache;
 pub mod cli;
+pub mod decimal;
 pub mod film;
 pub mod hash;
 pub mod integrator;

@@ -209,7 +209,7 @@ pub trait RayBackend: Send + Sync {
 
     /// The render pass's cache interpolation on this backend's device
     /// (TRC §5 radiance cache splatting), for backends that have one: the
-    /// GPU backend. `ic` and `trc` interpolate on the CPU otherwise. An
+    /// GPU backend. `ic`, `trc` and `tcg` interpolate on the CPU otherwise. An
     /// error of the splat fails the backend like a ray error
     /// ([`gpu::cache_splat::CacheSplat::fail`]).
     fn cache_splat(&self) -> Option<&gpu::cache_splat::CacheSplat> {

@@ -136,12 +136,9 @@ mod tests {
         let spps: Vec<u32> = s
             .runs()
             .iter()
-            .map(|r| {
-                #[allow(unreachable_patterns)]
-                match r.settings().unwrap() {
-                    MethodSettings::Path(p) => p.spp,
-                    other => panic!("{other:?}"),
-                }
+            .map(|r| match r.settings().unwrap() {
+                MethodSettings::Path(p) => p.spp,
+                other => panic!("{other:?}"),
             })
             .collect();
         assert_eq!(spps, [4, 16, 64]);

@@ -18,7 +18,7 @@ pub struct BenchRow {
     pub frames: u32,
     /// Wall time of rendering, all frames, file writing excluded.
     pub seconds: f64,
-    /// Of `seconds`, the time of the render pass that `ic` and `trc` share
+    /// Of `seconds`, the time of the render pass of `ic`, `trc`, `tcg` (shared) or `movies`
     /// (their [`crate::method::RENDER_PHASE`]: direct light, cache lookups, glossy lobes);
     /// the rest is the method's own work on its records. `None` for
     /// methods without a cache.

@@ -29,7 +29,7 @@
 //! next frame (TRC Eq. 21).
 
 use super::gather::{HemisphereSamples, Strata};
-use super::{IrradianceCache, LookupPoint};
+use super::{IrradianceCache, LookupPoint, WEIGHT_CAP};
 use crate::material::{luminance, Bsdf};
 use crate::sampling::Frame;
 use glam::Vec3;
@@ -123,8 +123,7 @@ pub fn reflected_radiance(
         let Some(sources) = &record.eas else {
             return;
         };
-        // A record exactly at p has infinite weight: it alone decides.
-        let w = w.min(1e6);
+        let w = w.min(WEIGHT_CAP);
         let mut radiance = Vec3::ZERO;
         for eas in sources.iter() {
             if let Some(seen) =

@@ -1,5 +1,5 @@
-//! Record caches shared by the caching methods (`ic` now; `trc` and `tcg`
-//! reuse the same records, weights and interpolation): irradiance records
+//! The record cache of the methods that cache irradiance (`ic`, and `trc`
+//! and `tcg`, which carry its records across frames): irradiance records
 //! with gradients ([`record`]), hemisphere gathering ([`gather`]), a spatial
 //! index over their spheres of influence ([`octree`]) and the weighted
 //! interpolation of TRC paper Eq. 1–4 ([`IrradianceCache::interpolate`]).
@@ -11,7 +11,7 @@ pub mod record;
 
 use glam::Vec3;
 use octree::SphereOctree;
-pub use record::{IrradianceRecord, LookupPoint, RecordId};
+pub use record::{IrradianceRecord, LookupPoint, RecordId, WEIGHT_CAP};
 
 /// Records of one cache with their spatial index.
 pub struct IrradianceCache {
@@ -109,8 +109,7 @@ impl IrradianceCache {
         let (mut sum, mut weights, mut count) = (Vec3::ZERO, 0.0f32, 0u32);
         self.for_each_usable_indexed(at, |i, record, w| {
             mark(i);
-            // A record exactly at p has infinite weight: it alone decides.
-            let w = w.min(1e6);
+            let w = w.min(WEIGHT_CAP);
             sum += record.extrapolate(at.position, at.normal, use_gradients) * w;
             weights += w;
             count += 1;
@@ -122,7 +121,8 @@ impl IrradianceCache {
     }
 
     /// Adds a record without neighbour clamping: for records that were
-    /// clamped when first inserted and come back in a later frame (`trc`).
+    /// clamped when first inserted and come back in a later frame (`trc`,
+    /// `tcg`).
     pub fn insert_as_is(&mut self, record: IrradianceRecord) {
         let id = self.records.len() as u32;
         self.index

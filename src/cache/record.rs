@@ -51,6 +51,12 @@ impl LookupPoint {
     }
 }
 
+/// The most weight ([`IrradianceRecord::weight`]) a record has in an
+/// interpolation: a record exactly at p has infinite weight, and capped it
+/// alone decides, where ∞/∞ would give NaN. `shaders/cache_splat.wgsl`'s
+/// `WEIGHT_CAP` must match.
+pub const WEIGHT_CAP: f32 = 1e6;
+
 /// One cached irradiance sample of the indirect light on a surface.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IrradianceRecord {

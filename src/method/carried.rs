@@ -7,9 +7,8 @@
 use super::{MethodState, StateError};
 use crate::cache::gather::GatherPoint;
 use crate::cache::RecordId;
+use crate::store::{decode_value, encode};
 use glam::Vec3;
-use rkyv::rancor;
-use rkyv::util::AlignedVec;
 
 /// The method-wide state.
 #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
@@ -17,17 +16,8 @@ struct GlobalState {
     next_id: u64,
 }
 
-/// `bytes` copied where an rkyv archive may be read from (aligned).
-pub(crate) fn aligned(bytes: &[u8]) -> AlignedVec<16> {
-    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
-    aligned.extend_from_slice(bytes);
-    aligned
-}
-
 pub(crate) fn encode_next_id(next_id: RecordId) -> Vec<u8> {
-    rkyv::to_bytes::<rancor::Error>(&GlobalState { next_id })
-        .expect("serialising plain data to memory cannot fail")
-        .into_vec()
+    encode(&GlobalState { next_id })
 }
 
 /// The records of `state` decoded by `decode` and the next record id,
@@ -39,7 +29,7 @@ pub(crate) fn restore<R>(
     decode: impl Fn(&[u8]) -> Result<R, String>,
     id_of: impl Fn(&R) -> RecordId,
 ) -> Result<(Vec<R>, RecordId), StateError> {
-    let next_id = rkyv::from_bytes::<GlobalState, rancor::Error>(&aligned(&state.global))
+    let next_id = decode_value::<GlobalState>(&state.global)
         .map(|g| g.next_id)
         .map_err(|e| StateError {
             record: None,

@@ -6,12 +6,13 @@
 //! cache is built every frame — the "per-frame computation" every temporal
 //! method is compared with.
 //!
-//! The rendering stage, which `trc` shares, is [`super::render_pass`]; in
+//! The rendering stage, which `trc` and `tcg` share, is
+//! [`super::render_pass`]; in
 //! it the cache's records are used where `w ≥ 1/a`, with `R_K` no larger
 //! than an estimate from the lookup point's clearance (a departure from
 //! Ward explained at `IrradianceRecord::weight`).
 
-use super::lookups::{measure_clearance, Lookup, ShadingPoint};
+use super::lookups::{measure_clearance, ShadingPoint};
 use super::render_pass::{render_pass, PixelStreams, Surface};
 use super::{FrameContext, FrameRecords, FrameStats, Method, RENDER_PHASE};
 use crate::backend::{Hit, Ray};
@@ -19,7 +20,7 @@ use crate::cache::gather::{
     gather_queries, irradiance_and_gradients, samples_from_results, GatherPoint,
     GatheredIrradiance, HemisphereSamples, Strata,
 };
-use crate::cache::{eas, IrradianceCache, IrradianceRecord, RecordId};
+use crate::cache::{eas, IrradianceCache, IrradianceRecord, LookupPoint, RecordId};
 use crate::film::Film;
 use crate::integrator::{
     trace_radiance_parallel, trace_radiance_tracked, PathLength, PathTracks, RadianceQuery,
@@ -357,7 +358,7 @@ impl IrradianceCaching {
         &self,
         ctx: &FrameContext,
         cache: &mut IrradianceCache,
-        batch: Vec<(Candidate, Lookup)>,
+        batch: Vec<(Candidate, LookupPoint)>,
         track: Option<&TrackPaths<'_>>,
         annotate: &(impl Fn(&Gathered, Option<GatherTracks>) -> X + Sync),
         inserted: &mut Vec<X>,
@@ -577,7 +578,7 @@ pub(crate) fn primary_candidates(ctx: &FrameContext, glossy: GlossyLobe) -> Vec<
         .collect();
     let mut hits = vec![Hit::MISS; rays.len()];
     ctx.backend.closest_hit(&rays, &mut hits);
-    let pixel_angle = 2.0 * camera.tan_half_fov() / ctx.height as f32;
+    let pixel_angle = ctx.pixel_angle();
     rays.iter()
         .zip(&hits)
         .enumerate()
@@ -604,7 +605,7 @@ pub(crate) fn primary_candidates(ctx: &FrameContext, glossy: GlossyLobe) -> Vec<
 fn candidate_clearances(
     ctx: &FrameContext,
     candidates: &[Option<Candidate>],
-) -> Vec<Option<Lookup>> {
+) -> Vec<Option<LookupPoint>> {
     let points: Vec<ShadingPoint> = candidates
         .iter()
         .flatten()
@@ -703,7 +704,7 @@ mod tests {
                 .scene
                 .materials
                 .iter()
-                .position(|m| m.specular.max_element() > 0.0);
+                .position(crate::scene::Material::is_glossy);
             glossy.expect("glossy-cornell has glossy materials") as u32
         });
         let ic = IrradianceCaching::new(IcSettings {

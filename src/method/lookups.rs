@@ -4,7 +4,7 @@
 //! on the GPU by radiance cache splatting (TRC §5,
 //! [`crate::backend::gpu::cache_splat`]) when the ray backend has a device. Both
 //! give the same usable records and the same irradiance up to f32
-//! summation order; `ic` and `trc` do not know which one runs.
+//! summation order; `ic`, `trc` and `tcg` do not know which one runs.
 //!
 //! A GPU error cannot be returned from a render tile: it fails the backend
 //! ([`CacheSplat::fail`], as a ray error does) and the lookups are
@@ -19,9 +19,6 @@ use crate::integrator::offset_origin;
 use glam::Vec3;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// A shading point, its unit normal and its clearance.
-pub(crate) type Lookup = LookupPoint;
-
 /// A shading point and its unit normal.
 pub(crate) type ShadingPoint = (Vec3, Vec3);
 
@@ -29,7 +26,7 @@ pub(crate) type ShadingPoint = (Vec3, Vec3);
 /// by one ray from `p` along `n` (the nearest hit's distance, or
 /// [`LookupPoint::OPEN`] on a miss): what keeps a record from being used
 /// under a surface it never saw ([`crate::cache::IrradianceRecord::weight`]).
-pub(crate) fn measure_clearance(ctx: &FrameContext, points: &[ShadingPoint]) -> Vec<Lookup> {
+pub(crate) fn measure_clearance(ctx: &FrameContext, points: &[ShadingPoint]) -> Vec<LookupPoint> {
     let rays: Vec<Ray> = points
         .iter()
         .map(|&(p, n)| Ray::new(offset_origin(p, n, n), n, 0.0, f32::INFINITY))
@@ -94,7 +91,7 @@ impl<'a> Interpolation<'a> {
     /// is usable), in order. With `used`, every record used is flagged.
     pub(crate) fn interpolate(
         &self,
-        lookups: &[Lookup],
+        lookups: &[LookupPoint],
         used: Option<&[AtomicBool]>,
     ) -> Vec<Option<Interpolated>> {
         match self {
@@ -128,7 +125,7 @@ impl<'a> Interpolation<'a> {
 
     /// Flags every record usable at some lookup, without interpolating
     /// (the CPU skips the extrapolation; the GPU pass is the same one).
-    pub(crate) fn mark_used(&self, lookups: &[Lookup], used: &[AtomicBool]) {
+    pub(crate) fn mark_used(&self, lookups: &[LookupPoint], used: &[AtomicBool]) {
         match self {
             Interpolation::Cpu { cache, .. } => mark_on_cpu(cache, lookups, used),
             Interpolation::Gpu { .. } => {
@@ -142,7 +139,7 @@ impl<'a> Interpolation<'a> {
 fn interpolate_on_cpu(
     cache: &IrradianceCache,
     gradients: bool,
-    lookups: &[Lookup],
+    lookups: &[LookupPoint],
     used: Option<&[AtomicBool]>,
 ) -> Vec<Option<Interpolated>> {
     lookups
@@ -158,7 +155,7 @@ fn interpolate_on_cpu(
 }
 
 /// Flags the records usable at each lookup (no extrapolation needed).
-fn mark_on_cpu(cache: &IrradianceCache, lookups: &[Lookup], used: &[AtomicBool]) {
+fn mark_on_cpu(cache: &IrradianceCache, lookups: &[LookupPoint], used: &[AtomicBool]) {
     for at in lookups {
         cache.for_each_usable_indexed(at, |i, _, _| used[i].store(true, Ordering::Relaxed));
     }

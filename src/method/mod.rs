@@ -70,6 +70,13 @@ impl FrameContext<'_> {
         self.width as f32 / self.height as f32
     }
 
+    /// A pixel's size at the film's centre on a plane at distance 1 from
+    /// the camera, `2·tan(fov/2)/height` (≈ the angle it spans, in
+    /// radians): a pixel seen at distance `t` is about `t` times this wide.
+    pub fn pixel_angle(&self) -> f32 {
+        2.0 * self.snapshot.camera.tan_half_fov() / self.height as f32
+    }
+
     /// Whether the frame in progress is abandoned: its result will be
     /// thrown away, so the big loops (pixel tiles, path bounces) skip what
     /// is left of their work. One frame of an extreme request (4096² pixels
@@ -135,9 +142,9 @@ pub struct FrameStats {
     pub phase_seconds: Vec<(String, f64)>,
 }
 
-/// The name in [`FrameStats::phase_seconds`] of the render pass that `ic`
-/// and `trc` share (`render_pass`): `bench` sets its time apart from the
-/// methods' own work on their records.
+/// The name in [`FrameStats::phase_seconds`] of the render pass, the one
+/// `ic`, `trc` and `tcg` share ([`render_pass`]) or `movies`' own:
+/// `bench` sets its time apart from the methods' own work on their records.
 pub const RENDER_PHASE: &str = "render";
 
 /// The mean of a lifespan histogram (`histogram[n]`: records that live
@@ -150,12 +157,6 @@ pub fn mean_lifespan(histogram: &[u64]) -> f64 {
         frames as f64 / records as f64
     } else {
         0.0
-    }
-}
-
-impl FrameStats {
-    pub fn mean_records_per_lookup(&self) -> f64 {
-        self.lookup_records as f64 / self.lookups.max(1) as f64
     }
 }
 

@@ -2,6 +2,7 @@
 //! the store.
 
 use super::{ApiError, AppState, JobState};
+use crate::decimal::{parse_canonical_u64, parse_padded_u64};
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::header;
@@ -20,17 +21,11 @@ fn frame_of_file(file: &str) -> Option<(u32, &str)> {
     if ext != "png" && ext != "exr" {
         return None;
     }
-    let (digits, padded) = match stem.strip_prefix("frame_") {
-        Some(digits) => (digits, true),
-        None => (stem, false),
+    let n = match stem.strip_prefix("frame_") {
+        Some(digits) => parse_padded_u64(digits, 4)?,
+        None => parse_canonical_u64(stem)?,
     };
-    let n: u32 = digits.parse().ok()?;
-    let canonical = if padded {
-        format!("{n:04}")
-    } else {
-        n.to_string()
-    };
-    (canonical == digits).then_some((n, ext))
+    Some((u32::try_from(n).ok()?, ext))
 }
 
 pub async fn frame(

@@ -20,6 +20,7 @@ pub use web::OPENAPI;
 pub use error::ApiError;
 pub use request::{JobRequest, MAX_FRAMES};
 
+use crate::decimal::parse_canonical_u64;
 use crate::render::{BackendChoice, SceneSource};
 use crate::store::Store;
 use anyhow::{bail, Context, Result};
@@ -364,9 +365,7 @@ impl AppState {
 /// `job-N` → N, spelled as the server spells it (not `job-01` or
 /// `job-+1`), so that one job has one id.
 pub fn parse_job_id(id: &str) -> Option<u64> {
-    let digits = id.strip_prefix("job-")?;
-    let n: u64 = digits.parse().ok()?;
-    (n.to_string() == digits).then_some(n)
+    parse_canonical_u64(id.strip_prefix("job-")?)
 }
 
 /// The API router over `state`.

@@ -90,8 +90,8 @@ pub struct JobReport {
     pub moving_objects: Option<BTreeSet<u32>>,
     /// Per-frame details (all frames, or the one asked for).
     pub frame_details: Vec<FrameReport>,
-    /// The carried state of a stateful method (`trc`) a resume would
-    /// continue from, if any.
+    /// The carried state of a stateful method (`trc`, `tcg`) a resume
+    /// would continue from, if any.
     pub state: Option<StateReport>,
     /// The texture movies of a `movies` job, if it stored any.
     pub movies: Option<MoviesReport>,

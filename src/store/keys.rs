@@ -1,14 +1,17 @@
 //! Every key the store writes, and nothing else: no other module builds or
 //! parses raw keys (STYLE.md). Integers are big-endian so that sled's
 //! lexicographic order is numeric order and prefix scans walk space-time
-//! in order. The layout is documented in `migrations/0001_initial.md`,
-//! `migrations/0002_state_and_identity.md`, `migrations/0003_sample_log.md`,
-//! `migrations/0004_record_blocks.md` and
-//! `migrations/0005_log_generations.md` (schema 5: no key changed but
-//! `meta.samples_log_generation`), `migrations/0006_movies.md` (schema
-//! 6: `movies` holds a frame's texture movies) and
-//! `migrations/0007_radiance_records_in_state.md` (schema 7, this one: no
-//! key changed; `trc`'s and `tcg`'s state records hold radiance records).
+//! in order. The layout is documented in `migrations/`, one file per
+//! schema version: `0001_initial.md`, `0002_state_and_identity.md`,
+//! `0003_sample_log.md`, `0004_record_blocks.md`,
+//! `0005_log_generations.md` (no key changed but
+//! `meta.samples_log_generation`), `0006_movies.md` (`movies` holds a
+//! frame's texture movies), `0007_radiance_records_in_state.md` (no key
+//! changed; `trc`'s and `tcg`'s state records hold radiance records),
+//! `0008_frame_footprint.md` (no key changed; a frame's `stats` value
+//! grew) and `0009_record_sources.md` (`sources` holds the sources of a
+//! frame's radiance records). The version this build writes is
+//! [`super::migrate::CURRENT_VERSION`].
 //!
 //! | tree      | key                                   | bytes |
 //! |-----------|---------------------------------------|-------|
@@ -17,6 +20,7 @@
 //! | `frames`  | job id u64 · frame u32                | 12    |
 //! | `stats`   | job id u64 · frame u32                | 12    |
 //! | `records` | job id u64 · frame u32                | 12    |
+//! | `sources` | job id u64 · frame u32 (schema 9)     | 12    |
 //! | `state`   | job id u64 (the head)                 | 8     |
 //! | `state`   | job id u64 · record id u64            | 16    |
 //! | `movies`  | job id u64 · frame u32 (schema 6)     | 12    |
@@ -32,9 +36,10 @@
 //! In `records`, `frame` is the frame in which these versions of the
 //! records were written (their creation frame for `ic`), so the frame's
 //! block holds one frame's record changes, and a `job` prefix scan walks
-//! them in frame order. `state` holds the carried
-//! state of a stateful method (`trc`) after the job's last frame: its head
-//! under the job id, then its records in id order.
+//! them in frame order; `sources` is keyed as `records`, for the radiance
+//! records among them. `state` holds the carried state of a method that
+//! carries its cache from frame to frame (`trc`, `tcg`) after the job's
+//! last frame: its head under the job id, then its records in id order.
 
 /// `meta` key of the schema version (value: u32 big-endian, 4 bytes).
 pub const META_SCHEMA_VERSION: &[u8] = b"schema_version";

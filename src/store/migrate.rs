@@ -8,6 +8,7 @@
 //!
 //! One `migrations/NNNN_*.md` per version documents its layout.
 
+use super::meta::{read_meta_u32, read_meta_u64, MetaError};
 use super::{keys, StoreError};
 use std::path::Path;
 
@@ -89,7 +90,7 @@ pub(super) fn rewrite_job_by_job(
     use sled::Transactional;
     let open = |name: &str| db.open_tree(name).map_err(|e| e.to_string());
     let (meta, target) = (open("meta")?, open(tree)?);
-    let done = super::v2::read_meta_u64(&meta, through)?;
+    let done = read_meta_u64(&meta, through)?;
     for &job in jobs {
         if done.is_some_and(|d| job <= d) {
             continue;
@@ -111,19 +112,15 @@ pub(super) fn rewrite_job_by_job(
 
 /// The schema version stored in `meta`, if any.
 pub fn read_version(path: &Path, meta: &sled::Tree) -> Result<Option<u32>, StoreError> {
-    let Some(v) = meta
-        .get(keys::META_SCHEMA_VERSION)
-        .map_err(|e| StoreError::sled(path, e))?
-    else {
-        return Ok(None);
-    };
-    let bytes: [u8; 4] = v.as_ref().try_into().map_err(|_| StoreError::Corrupt {
-        path: path.to_owned(),
-        tree: "meta",
-        key: keys::describe(keys::META_SCHEMA_VERSION),
-        detail: format!("expected 4 bytes, found {}", v.len()),
-    })?;
-    Ok(Some(u32::from_be_bytes(bytes)))
+    read_meta_u32(meta, keys::META_SCHEMA_VERSION).map_err(|e| match e {
+        MetaError::Sled(e) => StoreError::sled(path, e),
+        MetaError::Width { .. } => StoreError::Corrupt {
+            path: path.to_owned(),
+            tree: "meta",
+            key: keys::describe(keys::META_SCHEMA_VERSION),
+            detail: e.to_string(),
+        },
+    })
 }
 
 pub fn write_version(path: &Path, meta: &sled::Tree, version: u32) -> Result<(), StoreError> {

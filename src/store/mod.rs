@@ -28,10 +28,11 @@
 //!   the frame counts as acknowledged only after that returns. A log tail
 //!   beyond the committed length (a crash in between) is cut off when the
 //!   store is opened.
-//! - `state` holds the cache a stateful method (`trc`) carries to the next
-//!   frame, as of the job's last frame: each frame writes only its changes
-//!   (records put and removed, and the head), and a resume loads it
-//!   ([`Store::load_state`]) instead of rendering the finished frames again.
+//! - `state` holds the cache a stateful method (`trc`, `tcg`) carries to
+//!   the next frame, as of the job's last frame: each frame writes only
+//!   its changes (records put and removed, and the head), and a resume
+//!   loads it ([`Store::load_state`]) instead of rendering the finished
+//!   frames again.
 //! - Bytes of the log no value references any more (a job restarted with
 //!   `--force`, a frame written again) stay until [`compact`] rewrites the
 //!   log without them.
@@ -46,6 +47,7 @@ mod frames;
 pub mod inspect;
 mod jobs;
 pub mod keys;
+mod meta;
 pub mod migrate;
 mod records;
 pub mod rgbe;
@@ -61,6 +63,7 @@ pub mod v6;
 pub mod v7;
 pub mod v8;
 
+use meta::read_meta_u64;
 use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};
 use rkyv::bytecheck::CheckBytes;
 use rkyv::rancor;
@@ -191,6 +194,14 @@ fn now_unix() -> u64 {
         .unwrap_or(0)
 }
 
+/// `bytes` copied where an rkyv archive may be read from: sled values
+/// carry no alignment guarantee, and rkyv needs 16.
+pub(crate) fn aligned(bytes: &[u8]) -> AlignedVec<16> {
+    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
+    aligned.extend_from_slice(bytes);
+    aligned
+}
+
 /// Reads an rkyv archive (validated) of a `T`.
 pub(crate) fn decode_value<T>(bytes: &[u8]) -> Result<T, String>
 where
@@ -198,10 +209,7 @@ where
     T::Archived: for<'a> CheckBytes<HighValidator<'a, rancor::Error>>
         + rkyv::Deserialize<T, HighDeserializer<rancor::Error>>,
 {
-    // sled values carry no alignment guarantee; rkyv needs 16.
-    let mut aligned = AlignedVec::<16>::with_capacity(bytes.len());
-    aligned.extend_from_slice(bytes);
-    rkyv::from_bytes::<T, rancor::Error>(&aligned).map_err(|e| e.to_string())
+    rkyv::from_bytes::<T, rancor::Error>(&aligned(bytes)).map_err(|e| e.to_string())
 }
 
 /// An rkyv archive of `value`.
@@ -383,12 +391,6 @@ impl Store {
         }
     }
 
-    // ------------------------------------------------------------ jobs
-
-    // ------------------------------------------------------------ frames
-
-    // ------------------------------------------------------------ state
-
     /// Writes a raw value (tests use it to corrupt a store on purpose).
     #[doc(hidden)]
     pub fn raw_insert(&self, tree: &str, key: &[u8], value: &[u8]) -> Result<(), StoreError> {
@@ -454,7 +456,7 @@ fn check_unversioned(path: &Path, db: &sled::Db, create: bool) -> Result<(), Sto
 /// switch are removed once the current log has opened.
 fn open_sample_log(path: &Path, meta: &sled::Tree) -> Result<(u64, SampleLog), StoreError> {
     let meta_u64 = |key: &[u8]| {
-        v2::read_meta_u64(meta, key).map_err(|detail| StoreError::Corrupt {
+        read_meta_u64(meta, key).map_err(|detail| StoreError::Corrupt {
             path: path.to_owned(),
             tree: "meta",
             key: keys::describe(key),

@@ -32,6 +32,7 @@
 
 use super::rgbe::PackedSample;
 use crate::cache::gather::HemisphereSamples;
+use crate::decimal::parse_canonical_u64;
 use std::fs::{File, OpenOptions};
 use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
@@ -56,9 +57,8 @@ pub fn parse_file_name(name: &str) -> Option<u64> {
         return Some(0);
     }
     let digits = name.strip_prefix("samples.")?.strip_suffix(".log")?;
-    let n: u64 = digits.parse().ok()?;
     // Exactly what `file_name` writes: no `samples.0.log`, `samples.01.log`.
-    (n > 0 && file_name(n) == name).then_some(n)
+    parse_canonical_u64(digits).filter(|&n| n > 0)
 }
 
 /// Removes every log file in store directory `dir` but generation

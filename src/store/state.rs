@@ -1,5 +1,5 @@
-//! The cache a stateful method (`trc`) carries to the next frame, as of a
-//! job's last frame: its head and records, loaded on resume.
+//! The cache a stateful method (`trc`, `tcg`) carries to the next frame,
+//! as of a job's last frame: its head and records, loaded on resume.
 
 use super::schema::{StateHeadValue, StateRecordValue};
 use super::{keys, Store, StoreError};

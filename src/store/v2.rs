@@ -5,6 +5,7 @@
 //! out of the `samples` tree, and every frame's EXR file out of its
 //! `frames` value, into the sample log.
 
+use super::meta::read_meta_u64;
 use super::samples::{SampleLog, FILE_NAME as LOG_FILE};
 use super::{encode, keys, schema};
 use rkyv::{Archive, Deserialize, Serialize};
@@ -253,21 +254,5 @@ fn convert_tree(
         db.flush().map_err(|e| e.to_string())?;
         log.commit();
         through = Some(last);
-    }
-}
-
-pub(crate) fn read_meta_u64(meta: &sled::Tree, key: &[u8]) -> Result<Option<u64>, String> {
-    match meta.get(key).map_err(|e| e.to_string())? {
-        None => Ok(None),
-        Some(v) => {
-            let b: [u8; 8] = v.as_ref().try_into().map_err(|_| {
-                format!(
-                    "tree `meta` key {}: expected 8 bytes, found {}",
-                    keys::describe(key),
-                    v.len()
-                )
-            })?;
-            Ok(Some(u64::from_be_bytes(b)))
-        }
     }
 }

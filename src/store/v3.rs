@@ -6,9 +6,9 @@
 //! small `records` key per frame. This module holds the 0003 → 0004
 //! migration step.
 
+use super::meta::read_meta_u64;
 use super::samples::{SampleLog, FILE_NAME as LOG_FILE};
 use super::schema::{RecordBlock, RecordValue};
-use super::v2::read_meta_u64;
 use super::{append_record_block, encode, keys};
 use sled::transaction::ConflictableTransactionError;
 use sled::{IVec, Transactional};

@@ -4,7 +4,7 @@
 //! `meta`. This module holds the 0004 → 0005 migration step.
 
 use super::keys;
-use super::v2::read_meta_u64;
+use super::meta::read_meta_u64;
 use std::path::Path;
 
 /// Migration 0004 → 0005: writes `meta.samples_log_generation` = 0 (the

@@ -1,6 +1,6 @@
 //! Pass "splat records": the render pass's irradiance-cache interpolation
-//! (TRC Eq. 1–4) on the GPU, for `ic` and `trc` when the ray backend is the
-//! GPU one. WGSL in `shaders/cache_splat.wgsl`.
+//! (TRC Eq. 1–4) on the GPU, for `ic`, `trc` and `tcg` when the ray backend
+//! is the GPU one. WGSL in `shaders/cache_splat.wgsl`.
 //!
 //! # How this is the paper's radiance cache splatting (TRC §5)
 //! TRC §5 (after Gautron et al. 2005) observes that a record K cannot
@@ -28,7 +28,8 @@
 //! 2. *splat* (the shader, one work item per lookup): each lookup walks the
 //!    records of its cell in record order and evaluates exactly the CPU's
 //!    tests of [`crate::cache::IrradianceCache::interpolate_marking`] —
-//!    inside the sphere, `w ≥ 1/a`, not in front, `w` capped at 1e6,
+//!    inside the sphere, `w ≥ 1/a`, not in front, `w` capped at
+//!    [`WEIGHT_CAP`](crate::cache::WEIGHT_CAP),
 //!    gradients when enabled — summing `w·E_K(p)` and `w` in registers (the
 //!    blending), with no atomics and a deterministic order.
 //!

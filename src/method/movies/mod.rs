@@ -345,8 +345,7 @@ impl TextureMovies {
     /// of its samples asks): each side split where its finest texels are
     /// asked ([`patch::partition`]).
     fn wanted_movies(&self, ctx: &FrameContext, tiles: &[Tile]) -> BTreeMap<MovieKey, u32> {
-        let camera = &ctx.snapshot.camera;
-        let pixel_angle = 2.0 * camera.tan_half_fov() / ctx.height as f32;
+        let pixel_angle = ctx.pixel_angle();
         let s = &self.settings;
         let mut sides: BTreeMap<(u32, bool), Vec<patch::PatchSample>> = BTreeMap::new();
         for tile in tiles {

@@ -77,11 +77,6 @@ impl Movie {
         })
     }
 
-    /// Texels stored.
-    pub fn texel_count(&self) -> usize {
-        self.band().count()
-    }
-
     /// Where texel `(i, j)` is evaluated, in the triangle's barycentrics:
     /// its centre, moved onto the patch if it lies beyond the long edge,
     /// and a hair inside.

@@ -1,5 +1,5 @@
-//! The rendering stage that `ic` and `trc` share (EAS Algorithm 1, lines
-//! 18–24): per pixel sample the outgoing radiance is split as
+//! The rendering stage that `ic`, `trc` and `tcg` share (EAS Algorithm
+//! 1, lines 18–24): per pixel sample the outgoing radiance is split as
 //! `L = Le + L_direct + kd/π·E_indirect + L_glossy`:
 //! - direct light by next-event estimation (one light sample per pixel
 //!   sample; the glossy lobe's part MIS-weighted against lobe sampling),
@@ -15,8 +15,10 @@
 //!   there that MIS weighs against the light sample.
 //!
 //! The methods differ only in the cache they hand it and in how their
-//! pixel samples draw their random streams ([`PixelStreams`]). `trc` also
-//! asks which records the pass uses (`render_pass`'s `used`, `mark_used`).
+//! pixel samples draw their random streams ([`PixelStreams`]). `trc` and
+//! `tcg` also ask which records the pass uses (`render_pass`'s `used`,
+//! `mark_used`). `movies` has a render pass of its own but shades with
+//! this one's parts (its direct light, glossy lobes and primary samples).
 //! With streams that are the same in every frame, the pass keeps the
 //! primary hits, direct light, path-traced parts and cache lookups of the
 //! last frame's samples and traces again only those that something moving
@@ -94,7 +96,7 @@ impl<'a> Surface<'a> {
     fn is_plain(ctx: &FrameContext, hit: &Hit) -> bool {
         !hit.is_hit() || {
             let m = material_of(ctx, hit);
-            !m.is_emissive() && m.specular.max_element() <= 0.0
+            !m.is_emissive() && !m.is_glossy()
         }
     }
 

@@ -13,7 +13,6 @@ use super::still_tile::{KeptShadow, KeptTile, TileKept, TileStill};
 use crate::backend::{Hit, Ray};
 use crate::cache::LookupPoint;
 use crate::integrator::offset_origin;
-use crate::method::lookups::Lookup;
 use crate::method::motion::{self, Blockers};
 use crate::method::FrameContext;
 use crate::sampling::mix64;
@@ -322,7 +321,7 @@ impl StillPass {
     /// past every box) nor holds its hit, and the ray is not so short that
     /// another BVH might miss its hit ([`motion::path_long_enough`]): then
     /// what it hit, if anything, was static.
-    pub(super) fn clearance_clear(&self, at: &Lookup, camera: Vec3) -> bool {
+    pub(super) fn clearance_clear(&self, at: &LookupPoint, camera: Vec3) -> bool {
         let origin = offset_origin(at.position, at.normal, at.normal);
         let length = if at.clearance == LookupPoint::OPEN {
             self.far + (at.position - camera).length()

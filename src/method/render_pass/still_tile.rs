@@ -9,7 +9,7 @@ use super::kept_queries::KeptQueries;
 use super::still::StillPass;
 use super::{PrimarySamples, Surface};
 use crate::backend::{Hit, Ray};
-use crate::method::lookups::Lookup;
+use crate::cache::LookupPoint;
 use crate::method::pixels::{CandidateCoverage, EmitterEdges};
 use crate::method::FrameContext;
 use crate::sampling::Rng;
@@ -71,7 +71,7 @@ const NO_LOOKUP: u32 = u32::MAX;
 /// hit, if anything, was static).
 #[derive(Clone, Copy)]
 pub(super) struct KeptLookup {
-    at: Lookup,
+    at: LookupPoint,
     clear: bool,
 }
 
@@ -219,7 +219,7 @@ impl TileStill<'_> {
     pub(super) fn take_lookups(
         &self,
         whole: &[bool],
-        lookups: &mut Vec<Lookup>,
+        lookups: &mut Vec<LookupPoint>,
         of_sample: &mut [Option<u32>],
     ) -> u64 {
         let Some(kept) = self.kept.lookups.as_deref() else {
@@ -250,7 +250,7 @@ impl TileStill<'_> {
     pub(super) fn keep_lookups(
         &self,
         camera: Vec3,
-        (lookups, of_sample): (&[Lookup], &[Option<u32>]),
+        (lookups, of_sample): (&[LookupPoint], &[Option<u32>]),
         first_kept: usize,
     ) -> Option<(Vec<KeptLookup>, Vec<u32>)> {
         let mut index = vec![NO_LOOKUP; lookups.len()];

@@ -6,9 +6,9 @@
 use super::still_tile::{KeptLookup, TileStill};
 use super::{Surface, TilePass, TileShading};
 use crate::backend::Hit;
-use crate::cache::Interpolated;
+use crate::cache::{Interpolated, LookupPoint};
 use crate::method::ic::GlossyLobe;
-use crate::method::lookups::{measure_clearance, Lookup, ShadingPoint};
+use crate::method::lookups::{measure_clearance, ShadingPoint};
 use crate::method::pixels::PixelSample;
 use crate::method::{FrameContext, FrameStats};
 use glam::Vec3;
@@ -17,7 +17,7 @@ use glam::Vec3;
 /// (one per pixel and triangle, [`pixel_lookups`]) and, from `first_taken`
 /// on, those the pixels kept whole take from the last frame.
 pub(super) struct TileLookups {
-    pub(super) lookups: Vec<Lookup>,
+    pub(super) lookups: Vec<LookupPoint>,
     /// Each sample's lookup (an index into `lookups`), if it made one.
     pub(super) of_sample: Vec<Option<u32>>,
     first_taken: usize,
@@ -105,7 +105,7 @@ pub(super) fn pixel_lookups(
     hits: &[Hit],
     samples: &[PixelSample],
     glossy: GlossyLobe,
-) -> (Vec<Lookup>, Vec<Option<u32>>) {
+) -> (Vec<LookupPoint>, Vec<Option<u32>>) {
     let shading_points: Vec<Option<(u32, ShadingPoint)>> = surfaces
         .iter()
         .zip(hits)
@@ -140,10 +140,10 @@ pub(super) fn pixel_lookups(
 /// and the shading points of those samples, whose lookups (with their
 /// clearance) the caller appends.
 fn split_narrow(
-    shared: Vec<Lookup>,
+    shared: Vec<LookupPoint>,
     mut of_sample: Vec<Option<u32>>,
     points: &[Option<(u32, ShadingPoint)>],
-) -> (Vec<Lookup>, Vec<Option<u32>>, Vec<ShadingPoint>) {
+) -> (Vec<LookupPoint>, Vec<Option<u32>>, Vec<ShadingPoint>) {
     let point_of = |i: usize| {
         points[i]
             .expect("a sample with a lookup has a shading point")
@@ -289,8 +289,8 @@ mod tests {
         let of_sample = vec![Some(0), Some(0), None, Some(1)];
         let shared = |clearance_0| {
             vec![
-                Lookup::new(Vec3::ZERO, n, clearance_0),
-                Lookup::new(Vec3::new(3.0, 0.0, 0.0), n, 2.0),
+                LookupPoint::new(Vec3::ZERO, n, clearance_0),
+                LookupPoint::new(Vec3::new(3.0, 0.0, 0.0), n, 2.0),
             ]
         };
         let (lookups, of, own) = split_narrow(shared(0.1), of_sample.clone(), &points);

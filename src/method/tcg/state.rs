@@ -14,10 +14,10 @@
 use super::TcgRecord;
 use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceRecord;
-use crate::method::carried::{aligned, check_record_geometry};
+use crate::method::carried::check_record_geometry;
 use crate::method::ic::Candidate;
-use crate::store::encode;
 use crate::store::samples::SampleBlock;
+use crate::store::{aligned, decode_value, encode};
 use glam::{Mat4, Vec3};
 use rkyv::rancor;
 
@@ -79,10 +79,8 @@ pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
 /// strata). Position, normal and irradiance are its creation point's and
 /// zero until its next frame computes them.
 pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, String> {
-    let aligned = aligned(bytes);
     let RecordState { sampled: s, glossy } =
-        rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
-            .map_err(|e| format!("tcg record state: {e}"))?;
+        decode_value::<RecordState>(bytes).map_err(|e| format!("tcg record state: {e}"))?;
     if s.sample_count as usize != cells {
         return Err(format!(
             "tcg record state: {} samples, the job's strata have {cells} cells",
@@ -141,7 +139,7 @@ pub fn is_radiance_record(bytes: &[u8]) -> Result<bool, String> {
 /// A schema-6 record's bytes in the schema-7 layout: the same record, an
 /// irradiance record (schema 6 had no `tcg` radiance records).
 pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
-    let sampled = rkyv::from_bytes::<SampledState, rancor::Error>(&aligned(bytes))
+    let sampled = decode_value::<SampledState>(bytes)
         .map_err(|e| format!("schema-6 tcg record state: {e}"))?;
     Ok(encode(&RecordState {
         sampled,
@@ -153,8 +151,7 @@ pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
 /// of the migration.
 #[doc(hidden)]
 pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
-    let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned(bytes))
-        .map_err(|e| format!("tcg record state: {e}"))?;
+    let s = decode_value::<RecordState>(bytes).map_err(|e| format!("tcg record state: {e}"))?;
     if s.glossy.is_some() {
         return Err(format!("record {} is a radiance record", s.sampled.id));
     }

@@ -42,40 +42,31 @@
 //! reprojection in `estimate`, the paths a replacement takes in `paths`,
 //! and the encoding of the carried state for the store in `state`.
 //!
-//! # The E(t0+1) estimate, measured (TRC Table 1)
-//! On cube-in-box (24×24, 6 fps, frames 5 and 20, 276 records at 3ff86cf;
-//! test `reprojection_estimate_of_next_frame_is_no_worse_than_constant`),
-//! against E(t0+1) regathered with the same random streams: reprojection
-//! mean 3.24 % / median 0.59 %, constant 3.20 % / 0.59 % (at an earlier
-//! commit, 241 records: 2.96 % / 0.58 % against 2.91 % / 0.56 %; the
-//! figures below are from then unless dated). Reprojection does not help
-//! here, and the numbers say why:
-//! - only the records whose samples see the moving cube get an estimate
-//!   other than E(t0) (62 at 3ff86cf, 58 then); they change by about 1 %
-//!   per frame (constant: 1.34 %, reprojection 1.50 %; then 1.09 % and
-//!   1.30 %). The others change by 3.7 % on average (3.5 % then: moving
-//!   shadows on what they see, or records on the cube, which stay fixed in
-//!   world space), and no reprojection of first hits can see that (the
-//!   optional `direct` estimate evaluates each sample's direct light again
-//!   at t0+1 and sees the shadows: 3.15 % mean, 0.59 % median, at
-//!   8969d42);
-//! - with the same streams, a static sample's noise cancels exactly between
-//!   E(t0) and the regathered E(t0+1), while a reprojected sample lands in
-//!   a cell whose actual sample has other noise: the comparison favours the
-//!   constant estimate. Against a converged E(t0+1) (32×96 strata) both
-//!   are at 4.9 % (seeing the cube: 4.88 % vs 4.87 %; at 2 fps 5.35 % vs
-//!   5.31 %, median 4.40 % vs 4.57 %): a record's own Monte Carlo noise
-//!   (16×48 cells, one path each) is larger than its change in one frame,
-//!   where the paper's rasterized hemispheres are noise-free;
+//! # The E(t0+1) estimate (TRC Table 1)
+//! Reprojection makes the estimate of E(t0+1) no better than E(t0) itself
+//! where objects move (cube-in-box; test
+//! `reprojection_estimate_of_next_frame_is_no_worse_than_constant`), for
+//! reasons the measurements show (`benches/RESULTS.md`, "The E(t0+1)
+//! estimate with and without reprojection"):
+//! - only the records whose samples see a moving object get an estimate
+//!   other than E(t0). Most records change through moving shadows on what
+//!   they see (or lie on a moving object, fixed in world space), which no
+//!   reprojection of first hits can see; the optional `direct` estimate
+//!   evaluates each sample's direct light again at t0+1 and sees the
+//!   shadows;
+//! - a record's own Monte Carlo noise (16×48 cells, one path each) is
+//!   larger than its change in one frame, where the paper's rasterized
+//!   hemispheres are noise-free. With the same random streams a static
+//!   sample's noise cancels exactly between E(t0) and the regathered
+//!   E(t0+1), while a reprojected sample lands in a cell whose actual
+//!   sample has other noise: that comparison favours the constant
+//!   estimate;
 //! - scaling moved samples by the ratio of unshadowed direct light at
-//!   their new place and normal (for moving objects, not only moving
-//!   lights) made it worse (mean 3.05 %, median 0.62 %), so it is applied
-//!   only when lights move.
+//!   their new place and normal made the estimate worse where only
+//!   objects move, so it is applied only when lights move.
 //!
-//! Where the light moves, reprojection helps as in the paper: on
-//! `moving-light` (24×24, 6 fps, frames 5 and 20, 289 records, at 8969d42;
-//! test `reprojection_follows_a_moving_light_better_than_constant`) mean
-//! 2.66 % / median 0.74 % against 4.06 % / 1.70 % constant.
+//! Where the light moves, reprojection helps as in the paper (test
+//! `reprojection_follows_a_moving_light_better_than_constant`).
 
 mod direct;
 mod estimate;

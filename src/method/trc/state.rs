@@ -10,9 +10,9 @@ use super::TemporalRecord;
 use crate::cache::eas::Eas;
 use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceRecord;
-use crate::method::carried::{aligned, check_record_geometry};
+use crate::method::carried::check_record_geometry;
 use crate::method::ic::Candidate;
-use crate::store::encode;
+use crate::store::{aligned, decode_value, encode};
 use glam::Vec3;
 use rkyv::rancor;
 
@@ -130,13 +130,11 @@ pub(super) fn encode_record(r: &TemporalRecord) -> Vec<u8> {
 }
 
 pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
-    let aligned = aligned(bytes);
     let RecordState {
         irradiance: s,
         glossy,
         eas,
-    } = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned)
-        .map_err(|e| format!("trc record state: {e}"))?;
+    } = decode_value::<RecordState>(bytes).map_err(|e| format!("trc record state: {e}"))?;
     if s.last_valid < s.created_frame || s.last_valid == u32::MAX {
         return Err(format!(
             "trc record state: last valid frame {} before its creation {} or past the last frame",
@@ -238,7 +236,7 @@ pub fn sources_in(bytes: &[u8]) -> Result<Option<usize>, String> {
 /// A schema-6 record's bytes in the schema-7 layout: the same record, an
 /// irradiance record (schema 6 had no `trc` radiance records).
 pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
-    let irradiance = rkyv::from_bytes::<IrradianceState, rancor::Error>(&aligned(bytes))
+    let irradiance = decode_value::<IrradianceState>(bytes)
         .map_err(|e| format!("schema-6 trc record state: {e}"))?;
     Ok(encode(&RecordState {
         irradiance,
@@ -252,8 +250,7 @@ pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
 /// no schema-6 form.
 #[doc(hidden)]
 pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
-    let s = rkyv::from_bytes::<RecordState, rancor::Error>(&aligned(bytes))
-        .map_err(|e| format!("trc record state: {e}"))?;
+    let s = decode_value::<RecordState>(bytes).map_err(|e| format!("trc record state: {e}"))?;
     if s.glossy.is_some() || s.eas.is_some() {
         return Err(format!("record {} is a radiance record", s.irradiance.id));
     }
