@@ -1383,6 +1383,35 @@ fn jobs_of_radcache_render_are_shown_and_not_run() {
     assert_eq!(job["frames_done"].as_u64().unwrap(), part_done);
 }
 
+/// A stored `job-N` that the server leaves out of its table (here a frame
+/// range no request gives, as a damaged store might hold) keeps its name:
+/// a new job is numbered past it, rather than taking over its frames or
+/// failing on it for good.
+#[test]
+fn new_jobs_are_numbered_past_stored_jobs_the_server_left_out() {
+    use radcache::render::{self, FrameSettings, MethodSettings, SceneSource};
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    {
+        let store = radcache::store::Store::open(&db).unwrap();
+        let method = MethodSettings::Path(Default::default());
+        let source = SceneSource::Builtin("cube-in-box".into());
+        let mut spec =
+            render::job_spec("job-1", &source, &method, &FrameSettings::default(), 0..1).unwrap();
+        spec.frame_end = spec.frame_start;
+        store.begin_job(&spec, false).unwrap();
+    }
+    let server = start(&db, &scenes);
+    let (_, listed) = http(&server, "GET", "/api/jobs", "");
+    assert_eq!(json(&listed), serde_json::json!([]));
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"8x8","spp":1}"#,
+    );
+    assert_eq!(id, "job-2");
+    wait_done(&server, &id);
+}
+
 /// A job of `radcache render` whose scene file the server cannot find (a
 /// path relative to where the render ran) still lists and serves its
 /// frames; only its records, whose screen positions need the scene's

@@ -719,6 +719,23 @@ fn a_job_resumes_its_scene_file_named_by_another_path() {
     );
     assert!(msg.contains("scene hash"), "{msg}");
 
+    // A schema-1 hash left out the files beside the `.gltf`: another path
+    // is not taken for the same scene on its strength.
+    let legacy = JobSpec {
+        name: "l".into(),
+        ..file("old/s.gltf", "cccc+v1")
+    };
+    store.begin_job(&legacy, false).unwrap();
+    let moved = JobSpec {
+        name: "l".into(),
+        ..file("new/s.gltf", "cccc+dddd")
+    };
+    let msg = err_text(store.begin_job(&moved, false));
+    assert!(
+        msg.contains("scene (stored old/s.gltf, given new/s.gltf)"),
+        "{msg}"
+    );
+
     store.begin_job(&spec("b"), false).unwrap();
     let builtin = JobSpec {
         scene: "builtin:spheres".into(),

@@ -83,16 +83,6 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         store_job.as_mut(),
         &mut |_| !stop.load(Ordering::Relaxed),
     )?;
-    if let Some(j) = &store_job {
-        outln!(
-            "job {:?} in {}: {} frames resumed from the store, {} rendered, {} done in all",
-            j.job.name,
-            j.store.path().display(),
-            summary.resumed,
-            summary.frames,
-            j.job.frames_done
-        )?;
-    }
     // A Ctrl-C during the range's last frame stops nothing.
     let done = summary.resumed + summary.frames;
     let interrupted = stop.load(Ordering::Relaxed) && (done as usize) < args.frames.len();
@@ -101,22 +91,36 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         Some(s) if interrupted => s.frame,
         _ => args.frames.end - 1,
     };
-    print_render_summary(&args, method.spp(), &summary, last)?;
-    if interrupted {
-        let rest = match &store_job {
-            Some(j) => format!(
-                "they are saved in job {:?}: the same command renders the rest",
-                j.job.name
-            ),
-            None => "without --job, running it again renders every frame again".into(),
-        };
-        bail!(
-            "interrupted after frame {last}: {done} of {} frames are in {}; {rest}",
-            args.frames.len(),
-            args.out.display()
-        );
+    let printed = store_job
+        .as_ref()
+        .map_or(Ok(()), |j| {
+            outln!(
+                "job {:?} in {}: {} frames resumed from the store, {} rendered, {} done in all",
+                j.job.name,
+                j.store.path().display(),
+                summary.resumed,
+                summary.frames,
+                j.job.frames_done
+            )
+        })
+        .and_then(|()| print_render_summary(&args, method.spp(), &summary, last));
+    // An interrupted render says so whatever became of its summary (a
+    // Ctrl-C in `radcache render | tee log` also ends `tee`).
+    if !interrupted {
+        return printed;
     }
-    Ok(())
+    let rest = match &store_job {
+        Some(j) => format!(
+            "they are saved in job {:?}: the same command renders the rest",
+            j.job.name
+        ),
+        None => "without --job, running it again renders every frame again".into(),
+    };
+    bail!(
+        "interrupted after frame {last}: {done} of {} frames are in {}; {rest}",
+        args.frames.len(),
+        args.out.display()
+    );
 }
 
 /// Stops a render at the first Ctrl-C once the frame in progress is

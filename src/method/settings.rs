@@ -50,6 +50,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("reprojection", "1"),
             ("next_direct", "0"),
             ("keep_paths", "0"),
+            ("spatial_gradients", "0"),
             ("spp", "4"),
             ("accuracy", "0.2"),
             ("strata", "16x48"),
@@ -300,7 +301,8 @@ pub fn named_settings(settings: &MethodSettings) -> serde_json::Map<String, serd
             out.flag("reprojection", s.reprojection);
             out.flag("next_direct", s.next_direct);
             out.flag("keep_paths", s.keep_paths);
-            // `gradients` names the temporal ones here: `ic`'s stay on.
+            // `gradients` names the temporal ones here.
+            out.flag("spatial_gradients", s.ic.gradients);
             out.ic(&s.ic);
         }
         MethodSettings::Tcg(s) => {
@@ -478,6 +480,8 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
         "reprojection" => s.reprojection = flag(method, key, v)?,
         "next_direct" => s.next_direct = flag(method, key, v)?,
         "keep_paths" => s.keep_paths = flag(method, key, v)?,
+        // `ic`'s `gradients` (spatial), which `gradients` names no more here.
+        "spatial_gradients" => s.ic.gradients = flag(method, key, v)?,
         _ => {
             return Ok(ic_setting(method, key, v, &mut s.ic)?
                 || glossy_setting(method, key, v, &mut s.ic)?)

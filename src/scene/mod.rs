@@ -577,7 +577,7 @@ impl Snapshot {
     /// changes (a new scene), without keeping a copy of the geometry.
     pub fn static_fingerprint(&self) -> u64 {
         let mut h = crate::hash::Fnv1a::default();
-        let mut eat = |x: u32| h.write(&x.to_le_bytes());
+        let mut eat = |x: u32| h.write_word(x);
         let statics = self.triangles[..self.static_count]
             .iter()
             .zip(&self.tri_object);

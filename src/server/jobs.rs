@@ -62,6 +62,13 @@ fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<Strin
         });
         served.max().map_or(1, |n| n + 1)
     };
+    // Past any `job-N` of the store that the table left out (a method or
+    // frame range this build cannot run): a new job must not take over
+    // its frames, nor fail on it for good.
+    let mut n = n;
+    while state.store.job(&format!("job-{n}"))?.is_some() {
+        n += 1;
+    }
     let id = format!("job-{n}");
     let r = &request;
     let spec = crate::render::job_spec(&id, &r.scene, &r.method, &r.settings, r.frames.clone())?;
@@ -128,14 +135,30 @@ pub async fn cancel(
     // above: the worker may have started the job in between, and a running
     // job must be stopped by the worker, not only shown cancelled.
     let mut running = false;
+    let mut ended = None;
     state.update(&id, |j| match j.state {
         JobState::Queued => j.state = JobState::Cancelled,
         JobState::Running => {
             j.cancel = true;
             running = true;
         }
-        _ => {}
+        s => ended = Some(s),
     });
+    if let Some(s) = ended {
+        // It ended meanwhile (done, failed, or cancelled by another
+        // request): unless cancelled, not marked so, and a failed job is
+        // queued again on the next start as before.
+        if s != JobState::Cancelled {
+            state
+                .store
+                .set_job_cancelled(&id, false)
+                .map_err(ApiError::internal)?;
+        }
+        return Err(ApiError::conflict(format!(
+            "job {id} is {}; only queued or running jobs can be cancelled",
+            s.as_str()
+        )));
+    }
     if running {
         state.abandon_frame(Some(&id));
         wait_while_running(&state, &id, &mut changes).await;

@@ -78,18 +78,19 @@ pub async fn run(state: Arc<AppState>) {
             Ok(r) => r,
             Err(e) => Err(anyhow::anyhow!("render panicked: {e}")),
         };
-        state.update(&id, |j| match result {
-            Err(e) => {
-                j.state = JobState::Failed;
-                j.error = Some(format!("{e:#}"));
-            }
-            Ok(()) if j.frames_done == j.request.frames_total() => j.state = JobState::Done,
-            Ok(()) if j.cancel => {
-                j.state = JobState::Cancelled;
-                j.cancel = false;
-            }
-            // Stopped by shutdown: resumed on the next start.
-            Ok(()) => j.state = JobState::Queued,
+        state.update(&id, |j| {
+            j.state = match result {
+                Err(e) => {
+                    j.error = Some(format!("{e:#}"));
+                    JobState::Failed
+                }
+                Ok(()) if j.frames_done == j.request.frames_total() => JobState::Done,
+                Ok(()) if j.cancel => JobState::Cancelled,
+                // Stopped by shutdown: resumed on the next start.
+                Ok(()) => JobState::Queued,
+            };
+            // A cancel that came as the job ended is over either way.
+            j.cancel = false;
         });
     }
 }

@@ -165,16 +165,19 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
     };
     // The scene is its content: the same file named by another path
     // (`./s.gltf`, an absolute path, a run from another directory) resumes.
-    let same_content = same_scene_hash(&stored.scene_hash, scene_hash);
+    // Only by a hash of everything the scene reads: a schema-1 hash
+    // ([`same_scene_hash`]) leaves out the files beside the `.gltf`.
+    let same_file =
+        is_file_scene(&stored.scene) && is_file_scene(scene) && stored.scene_hash == *scene_hash;
     check(
         "scene",
-        &stored.scene == scene || (same_content && is_file_scene(scene)),
+        &stored.scene == scene || same_file,
         stored.scene.clone(),
         scene.clone(),
     );
     check(
         "scene hash",
-        same_content,
+        same_scene_hash(&stored.scene_hash, scene_hash),
         stored.scene_hash.clone(),
         scene_hash.clone(),
     );
