@@ -82,6 +82,26 @@ pub struct IrradianceRecord {
     pub eas: Option<std::sync::Arc<[super::eas::Eas]>>,
 }
 
+#[cfg(test)]
+impl IrradianceRecord {
+    /// A record `id` at `position` facing +y, of irradiance `irradiance`,
+    /// radius 1 and no gradients, made at frame 0 on object 0 (for tests).
+    pub(crate) fn flat(id: u64, position: Vec3, irradiance: Vec3) -> IrradianceRecord {
+        IrradianceRecord {
+            id,
+            position,
+            normal: Vec3::Y,
+            irradiance,
+            grad_translation: [Vec3::ZERO; 3],
+            grad_rotation: [Vec3::ZERO; 3],
+            radius: 1.0,
+            created_frame: 0,
+            object: 0,
+            eas: None,
+        }
+    }
+}
+
 impl IrradianceRecord {
     /// Bytes of its sources, held beside the record (shared with the
     /// record's copies).

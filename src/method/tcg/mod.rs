@@ -623,18 +623,7 @@ mod tests {
     use super::*;
 
     fn record(id: u64, x: f32) -> IrradianceRecord {
-        IrradianceRecord {
-            id,
-            position: Vec3::new(x, 0.0, 0.0),
-            normal: Vec3::Y,
-            irradiance: Vec3::ONE,
-            grad_translation: [Vec3::ZERO; 3],
-            grad_rotation: [Vec3::ZERO; 3],
-            radius: 1.0,
-            created_frame: 0,
-            object: 0,
-            eas: None,
-        }
+        IrradianceRecord::flat(id, Vec3::new(x, 0.0, 0.0), Vec3::ONE)
     }
 
     /// 15 records on one point (each usable at the others) and one far

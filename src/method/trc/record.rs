@@ -171,18 +171,7 @@ impl TemporalRecord {
             geometric_normal: Vec3::Y,
         };
         TemporalRecord {
-            record: crate::cache::IrradianceRecord {
-                id: 0,
-                position: Vec3::ZERO,
-                normal: Vec3::Y,
-                irradiance: e0,
-                grad_translation: [Vec3::ZERO; 3],
-                grad_rotation: [Vec3::ZERO; 3],
-                radius: 1.0,
-                created_frame: 0,
-                object: 0,
-                eas: None,
-            },
+            record: crate::cache::IrradianceRecord::flat(0, Vec3::ZERO, e0),
             candidate: crate::method::ic::Candidate {
                 pixel: 0,
                 stream: 0,

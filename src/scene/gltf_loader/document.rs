@@ -338,6 +338,22 @@ pub(super) fn parse_error(e: gltf::Error) -> String {
 mod tests {
     use super::*;
 
+    /// A GLB of `json` and the binary chunk `bin`, as the `gltf` crate
+    /// writes it.
+    fn glb(json: &[u8], bin: &[u8]) -> Vec<u8> {
+        gltf::binary::Glb {
+            header: gltf::binary::Header {
+                magic: *b"glTF",
+                version: 2,
+                length: 0,
+            },
+            json: json.into(),
+            bin: Some(bin.into()),
+        }
+        .to_vec()
+        .unwrap()
+    }
+
     #[test]
     fn panics_become_errors() {
         let result: Res<()> = quietly_catch_panics(|| panic!("index out of bounds"));
@@ -353,17 +369,7 @@ mod tests {
     fn json_chunk_is_what_the_crate_reads() {
         let json = br#"{"asset":{"version":"2.0"}}"#;
         assert_eq!(json_chunk(json), Some(&json[..]));
-        let glb = gltf::binary::Glb {
-            header: gltf::binary::Header {
-                magic: *b"glTF",
-                version: 2,
-                length: 0,
-            },
-            json: json[..].into(),
-            bin: Some(vec![1, 2, 3, 4][..].into()),
-        }
-        .to_vec()
-        .unwrap();
+        let glb = glb(json, &[1, 2, 3, 4]);
         let read = gltf::binary::Glb::from_slice(&glb).unwrap();
         assert_eq!(json_chunk(&glb), Some(&*read.json));
         // Too short for its chunk header or its JSON, or the first chunk
@@ -384,17 +390,7 @@ mod tests {
         ]}]});
         let json = serde_json::to_vec(&json).unwrap();
         let bin = [1u8, 2, 3, 4, 5, 6, 7, 8];
-        let glb = gltf::binary::Glb {
-            header: gltf::binary::Header {
-                magic: *b"glTF",
-                version: 2,
-                length: 0,
-            },
-            json: json[..].into(),
-            bin: Some(bin[..].into()),
-        }
-        .to_vec()
-        .unwrap();
+        let glb = glb(&json, &bin);
         let rewritten = without_channels_lacking_a_node(&glb).unwrap();
         let read = gltf::binary::Glb::from_slice(&rewritten).unwrap();
         assert_eq!(read.bin.as_deref(), Some(&bin[..]));
