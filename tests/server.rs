@@ -1383,6 +1383,54 @@ fn jobs_of_radcache_render_are_shown_and_not_run() {
     assert_eq!(job["frames_done"].as_u64().unwrap(), part_done);
 }
 
+/// A job `radcache render --job NAME` rendered over two ranges shows both:
+/// its last range with its progress, every stored frame as runs, and its
+/// stream and events carry all of them in order (they showed the last
+/// range only).
+#[test]
+fn a_job_rendered_over_two_ranges_shows_and_streams_both() {
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let out = dir.path().join("out");
+    for frames in ["0..2", "3..5"] {
+        let args = [
+            "--method", "ic", "--size", "8x8", "--spp", "1", "--frames", frames,
+        ];
+        let status = render_job_with_cli(&args, &db, "walk", &out)
+            .wait()
+            .unwrap();
+        assert!(status.success());
+    }
+    let server = start(&db, &scenes);
+    let (status, body) = http(&server, "GET", "/api/jobs/walk", "");
+    assert_eq!(status, 200);
+    let job = json(&body);
+    assert_eq!(job["frames"], "3..5", "{job}");
+    assert_eq!(
+        (job["frames_done"].as_u64(), job["frames_total"].as_u64()),
+        (Some(2), Some(2))
+    );
+    assert_eq!(job["frames_stored"], 4, "{job}");
+    assert_eq!(
+        job["stored_ranges"],
+        serde_json::json!(["0..2", "3..5"]),
+        "{job}"
+    );
+    assert_eq!(job["state"], "done");
+    let (status, head, body) = http_full(&server.addr, "GET", "/api/jobs/walk/stream", "");
+    assert_eq!(status, 200);
+    let frames: Vec<u32> = multipart_parts(&head, &body).iter().map(|p| p.0).collect();
+    assert_eq!(frames, [0, 1, 3, 4]);
+    let (status, _, body) = http_full(&server.addr, "GET", "/api/jobs/walk/events", "");
+    assert_eq!(status, 200);
+    let events: Vec<u64> = sse_events(&body)
+        .iter()
+        .filter(|e| e.0 == "frame")
+        .map(|e| e.1["frame"].as_u64().unwrap())
+        .collect();
+    assert_eq!(events, [0, 1, 3, 4]);
+}
+
 /// A stored `job-N` that the server leaves out of its table (here a frame
 /// range no request gives, as a damaged store might hold) keeps its name:
 /// a new job is numbered past it, rather than taking over its frames or

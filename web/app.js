@@ -108,8 +108,20 @@ async function refreshJobs() {
   return jobs;
 }
 
+function parseRange(text) {
+  const [a, b] = text.split('..').map(Number);
+  return [a, b];
+}
+
+// Every frame the job has or will have: its range, and the frames stored
+// by earlier renders of it with other ranges (`radcache render --job`).
 function frameRange(job) {
-  const [a, b] = job.frames.split('..').map(Number);
+  let [a, b] = parseRange(job.frames);
+  for (const r of job.stored_ranges || []) {
+    const [s, e] = parseRange(r);
+    a = Math.min(a, s);
+    b = Math.max(b, e);
+  }
   return [a, b];
 }
 
@@ -132,7 +144,9 @@ function showProgress(job) {
   $('job-title').textContent = `${job.id}: ${job.scene}, ${job.method}, ${job.size}, ${job.spp} spp${keySettings(job)}, frames ${job.frames} — ${job.state}`;
   $('progress').max = job.frames_total;
   $('progress').value = job.frames_done;
-  $('progress-text').textContent = `${job.frames_done}/${job.frames_total} frames`;
+  const others = (job.frames_stored ?? job.frames_done) - job.frames_done;
+  $('progress-text').textContent = `${job.frames_done}/${job.frames_total} frames`
+    + (others > 0 ? ` (and ${others} stored outside ${job.frames}: ${job.stored_ranges.join(', ')})` : '');
   $('eta').textContent = job.state === 'running' && job.eta_seconds != null
     ? `ETA ${fmtSeconds(job.eta_seconds)} (${fmtSeconds(job.seconds_per_frame)}/frame)` : job.state;
   $('cancel').disabled = !(job.state === 'queued' || job.state === 'running');

@@ -185,6 +185,19 @@ impl Default for FrameSettings {
 /// 100,000 frames) to frame numbers, which must not overflow.
 pub const FRAME_LIMIT: u32 = 1_000_000;
 
+/// Runs of consecutive frames in `frames` (ascending), as ranges: what a
+/// job has stored after renders of several ranges, e.g. `[0..10, 15..20]`.
+pub fn frame_runs(frames: impl IntoIterator<Item = u32>) -> Vec<Range<u32>> {
+    let mut runs: Vec<Range<u32>> = Vec::new();
+    for f in frames {
+        match runs.last_mut() {
+            Some(r) if r.end == f => r.end = f + 1,
+            _ => runs.push(f..f + 1),
+        }
+    }
+    runs
+}
+
 /// Parses a frame range `START..END` (END exclusive, below
 /// [`FRAME_LIMIT`]), as the CLI's `--frames` and the API's `frames` take
 /// it. The error says what is wrong with `s`.
@@ -796,6 +809,13 @@ mod tests {
             cache_unit: "records",
             out_dir: PathBuf::from("out"),
         }
+    }
+
+    #[test]
+    fn frame_runs_merge_consecutive_frames_only() {
+        assert_eq!(frame_runs([]), Vec::<Range<u32>>::new());
+        assert_eq!(frame_runs([3]), vec![3..4]);
+        assert_eq!(frame_runs([0, 1, 2, 5, 6, 9]), vec![0..3, 5..7, 9..10]);
     }
 
     #[test]

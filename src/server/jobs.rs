@@ -21,6 +21,8 @@ pub fn job_json(state: &AppState, job: &Job) -> Value {
         "scene": state.scene_name(&job.request.scene),
         "method": job.request.method.name(),
         "frames": format!("{}..{}", job.request.frames.start, job.request.frames.end),
+        "frames_stored": job.frames_stored(),
+        "stored_ranges": job.stored.iter().map(|r| format!("{}..{}", r.start, r.end)).collect::<Vec<_>>(),
         "size": format!("{}x{}", job.request.settings.width, job.request.settings.height),
         "spp": job.request.method.spp(),
         "seed": job.request.settings.seed,
@@ -75,7 +77,7 @@ fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<Strin
     state.store.begin_job(&spec, false)?;
     state.jobs.lock().expect("job table lock").insert(
         JobKey::Served(n),
-        Job::new(id.clone(), request, JobState::Queued, 0),
+        Job::new(id.clone(), request, JobState::Queued, &[]),
     );
     state.wake.notify_one();
     Ok(id)

@@ -123,7 +123,12 @@ pub struct Job {
     pub id: String,
     pub request: JobRequest,
     pub state: JobState,
+    /// Frames of `request.frames` stored.
     pub frames_done: u32,
+    /// Every frame stored, as runs: a job rendered over several ranges
+    /// (`radcache render --job NAME --frames ...` again) holds frames
+    /// outside `request.frames`, its last range.
+    pub stored: Vec<std::ops::Range<u32>>,
     pub error: Option<String>,
     /// Set by `cancel` of a running job until the worker has stopped it
     /// (the frame in progress abandoned); shown as `cancelling`.
@@ -134,17 +139,33 @@ pub struct Job {
 }
 
 impl Job {
-    pub fn new(id: String, request: JobRequest, state: JobState, frames_done: u32) -> Job {
-        Job {
+    /// Job `id`, whose store job has `stored` frames (ascending).
+    pub fn new(id: String, request: JobRequest, state: JobState, stored: &[u32]) -> Job {
+        let mut job = Job {
             id,
             request,
             state,
-            frames_done,
+            frames_done: 0,
+            stored: Vec::new(),
             error: None,
             cancel: false,
             run_frames: 0,
             run_seconds: 0.0,
-        }
+        };
+        job.set_stored(stored);
+        job
+    }
+
+    /// Takes the frames its store job holds now (ascending).
+    pub fn set_stored(&mut self, stored: &[u32]) {
+        let range = &self.request.frames;
+        self.frames_done = stored.iter().filter(|f| range.contains(f)).count() as u32;
+        self.stored = crate::render::frame_runs(stored.iter().copied());
+    }
+
+    /// Frames stored, in all of the job's ranges.
+    pub fn frames_stored(&self) -> u32 {
+        self.stored.iter().map(|r| r.len() as u32).sum()
     }
 
     /// `serve` for the server's own jobs, `render` for those `radcache

@@ -17,6 +17,7 @@ use axum::response::{IntoResponse, Response};
 use futures_util::stream;
 use std::collections::VecDeque;
 use std::convert::Infallible;
+use std::ops::Range;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Duration;
@@ -27,7 +28,8 @@ const BOUNDARY: &str = "radcache-frame";
 
 /// What a follower sees next.
 enum Step {
-    /// A frame was stored (frames come in frame order).
+    /// A frame is stored (frames come in frame order, over all of the
+    /// job's ranges).
     Frame(u32),
     /// The job changed (progress or state), no new frame.
     Changed(Job),
@@ -41,7 +43,7 @@ struct Follower {
     state: Arc<AppState>,
     id: String,
     rx: watch::Receiver<u64>,
-    /// Next frame to report.
+    /// Frames before this one have been reported (or are not stored).
     next: u32,
     /// Store id, once the job has one.
     sid: Option<u64>,
@@ -54,49 +56,15 @@ impl Follower {
     fn new(state: Arc<AppState>, id: String) -> Result<Follower, ApiError> {
         // Subscribe first: a change after this point wakes us.
         let rx = state.subscribe(&id)?;
-        let next = state.job(&id)?.request.frames.start;
         Ok(Follower {
             state,
             id,
             rx,
-            next,
+            next: 0,
             sid: None,
             seen: None,
             ended: false,
         })
-    }
-
-    /// The next stored frame at or after `self.next` within the job's range.
-    fn next_frame(&mut self, job: &Job, final_scan: bool) -> Result<Option<u32>, ApiError> {
-        if self.sid.is_none() {
-            self.sid = self.state.store_id(&self.id)?;
-        }
-        let Some(sid) = self.sid else {
-            return Ok(None);
-        };
-        let range = &job.request.frames;
-        if self.next >= range.end {
-            return Ok(None);
-        }
-        // Frames are rendered in order, so the next one is the one to look
-        // for; once the job ended, anything left (out of order) is reported.
-        if self
-            .state
-            .store
-            .frame_done(sid, self.next)
-            .map_err(ApiError::internal)?
-        {
-            return Ok(Some(self.next));
-        }
-        if final_scan {
-            let done = self
-                .state
-                .store
-                .frames_done(sid)
-                .map_err(ApiError::internal)?;
-            return Ok(done.into_iter().find(|f| *f >= self.next && *f < range.end));
-        }
-        Ok(None)
     }
 
     async fn step(&mut self) -> Result<Step, ApiError> {
@@ -105,7 +73,10 @@ impl Follower {
             // State before frames: a job seen ended has stored all its frames.
             let job = self.state.job(&self.id)?;
             let over = job.state.is_final() || self.state.shutdown.load(Ordering::SeqCst);
-            if let Some(frame) = self.next_frame(&job, over)? {
+            if let Some(frame) = next_to_report(&job.stored, &job.request.frames, self.next, over) {
+                if self.sid.is_none() {
+                    self.sid = self.state.store_id(&self.id)?;
+                }
                 self.next = frame + 1;
                 return Ok(Step::Frame(frame));
             }
@@ -124,6 +95,30 @@ impl Follower {
             }
         }
     }
+}
+
+/// The next frame to report of a job whose stored frames are the runs
+/// `stored` and which renders `range`: the first stored frame at or after
+/// `next`, over all of the job's ranges (frames of earlier renders of it
+/// may lie outside `range`), unless the job may still render an earlier
+/// frame of `range`. Frames come in frame order, and a job renders its
+/// range in order. Once the job is `over`, every stored frame left is
+/// reported.
+fn next_to_report(stored: &[Range<u32>], range: &Range<u32>, next: u32, over: bool) -> Option<u32> {
+    let next_stored = stored
+        .iter()
+        .find(|r| r.end > next)
+        .map(|r| r.start.max(next))?;
+    if over {
+        return Some(next_stored);
+    }
+    let from = range.start.max(next);
+    // Runs are maximal, so the end of the one holding `from` is not stored.
+    let unrendered = stored
+        .iter()
+        .find(|r| r.contains(&from))
+        .map_or(from, |r| r.end);
+    (next_stored < unrendered || unrendered >= range.end).then_some(next_stored)
 }
 
 /// A `state` event: `final` when the job has ended (done, failed,
@@ -240,4 +235,31 @@ pub async fn events(
         },
     );
     Ok(Sse::new(events).keep_alive(KeepAlive::new().interval(Duration::from_secs(15))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::next_to_report;
+
+    #[test]
+    fn frames_are_reported_in_order_over_all_stored_ranges() {
+        // Rendering 10..20: frames 0..3 of an earlier range come first, then
+        // 10 and 11 as stored; 12 is awaited, though 15..20 (stored by an
+        // earlier render of that range) are there already.
+        let stored = [0..3, 10..12, 15..20];
+        let report = |next, over| next_to_report(&stored, &(10..20), next, over);
+        assert_eq!(report(0, false), Some(0));
+        assert_eq!(report(3, false), Some(10));
+        assert_eq!(report(12, false), None);
+        assert_eq!(report(12, true), Some(15));
+        assert_eq!(report(20, false), None);
+        // Once 12..15 are stored, the runs merge and 15.. follow.
+        let stored = [0..3, 10..20];
+        assert_eq!(next_to_report(&stored, &(10..20), 12, false), Some(12));
+        assert_eq!(next_to_report(&stored, &(10..20), 15, false), Some(15));
+        // Frames stored past the range are reported after it.
+        let stored = [5..8, 30..32];
+        assert_eq!(next_to_report(&stored, &(5..8), 8, false), Some(30));
+        assert_eq!(next_to_report(&stored, &(5..10), 8, false), None);
+    }
 }

@@ -24,8 +24,9 @@ pub fn load_jobs(state: &AppState) -> Result<()> {
             continue;
         };
         let key = JobKey::of(&stored.name);
-        let done = frames_done(state, stored.id, &request);
-        let job_state = if done == request.frames_total() {
+        let frames = stored_frames(state, stored.id);
+        let job = Job::new(stored.name.clone(), request, JobState::Queued, &frames);
+        let job_state = if job.frames_done == job.request.frames_total() {
             JobState::Done
         } else if matches!(key, JobKey::Rendered(_)) {
             JobState::Stopped
@@ -34,17 +35,22 @@ pub fn load_jobs(state: &AppState) -> Result<()> {
         } else {
             JobState::Queued
         };
-        jobs.insert(key, Job::new(stored.name.clone(), request, job_state, done));
+        jobs.insert(
+            key,
+            Job {
+                state: job_state,
+                ..job
+            },
+        );
     }
     Ok(())
 }
 
-fn frames_done(state: &AppState, store_id: u64, request: &JobRequest) -> u32 {
-    state
-        .store
-        .frames_done(store_id)
-        .map(|f| f.iter().filter(|f| request.frames.contains(f)).count() as u32)
-        .unwrap_or(0)
+/// The frames store job `store_id` holds (none if the store cannot say:
+/// progress is then shown as none, and the render itself reports the
+/// store's error).
+fn stored_frames(state: &AppState, store_id: u64) -> Vec<u32> {
+    state.store.frames_done(store_id).unwrap_or_default()
 }
 
 /// Runs queued jobs until shutdown.
@@ -112,9 +118,8 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
     )?;
     let stored = state.store.begin_job(&spec, false)?;
     let store_id = stored.id;
-    state.update(id, |j| {
-        j.frames_done = frames_done(state, store_id, &request)
-    });
+    let frames = stored_frames(state, store_id);
+    state.update(id, |j| j.set_stored(&frames));
     let mut renderer = Renderer::new(
         scene,
         request.method.instantiate(),
@@ -133,10 +138,10 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
         last = Instant::now();
         state.frames_rendered.fetch_add(1, Ordering::Relaxed);
         state.render_micros.fetch_add(micros, Ordering::Relaxed);
-        let done = frames_done(state, store_id, &request);
+        let frames = stored_frames(state, store_id);
         let mut go_on = !state.shutdown.load(Ordering::SeqCst);
         state.update(id, |j| {
-            j.frames_done = done;
+            j.set_stored(&frames);
             j.run_frames += 1;
             j.run_seconds += micros as f64 / 1e6;
             go_on &= !j.cancel;
