@@ -290,6 +290,58 @@ fn compaction_stopped_after_any_step_leaves_the_old_or_the_new_store_whole() {
     }
 }
 
+/// The keys of job id `id` in every per-job tree.
+fn keys_of_job(store: &Store, id: u64) -> usize {
+    ["frames", "stats", "records", "sources", "state", "movies"]
+        .iter()
+        .map(|t| {
+            store
+                .tree(t)
+                .unwrap()
+                .scan_prefix(keys::job_prefix(id))
+                .count()
+        })
+        .sum()
+}
+
+/// A deleted job leaves nothing but log bytes, which compaction reclaims;
+/// the other job reads back the same. A kill after a job's name went and
+/// before its keys did (simulated: the name removed alone) leaves keys no
+/// job holds: compaction removes them first, then reclaims their bytes.
+#[test]
+fn deleted_jobs_and_keys_a_kill_left_without_a_job_are_reclaimed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, _) = fixture(dir.path());
+    let mut store = Store::open(&path).unwrap();
+    let a = store.job("a").unwrap().unwrap();
+    let t = store.job("t").unwrap().unwrap();
+    assert!(keys_of_job(&store, a.id) > 0 && keys_of_job(&store, t.id) > 0);
+    let only_t: Content = content(&store)
+        .into_iter()
+        .filter(|j| j.0.contains("name: \"t\""))
+        .collect();
+    assert_eq!(only_t.len(), 1);
+
+    assert_eq!(store.delete_job("a").unwrap().map(|j| j.id), Some(a.id));
+    assert_eq!(store.delete_job("a").unwrap(), None, "deleted once");
+    assert_eq!(keys_of_job(&store, a.id), 0);
+    let report = compact::compact(&mut store, &hidden()).unwrap();
+    assert_eq!(report.orphaned_jobs_removed, 0);
+    assert_eq!(content(&store), only_t);
+    assert_eq!(compact::log_usage(&store).unwrap().unreferenced, 0);
+
+    // "t" loses its name only, as a kill in `delete_job` would leave it.
+    store.tree("jobs").unwrap().remove(keys::job("t")).unwrap();
+    store.flush().unwrap();
+    assert!(keys_of_job(&store, t.id) > 0);
+    let report = compact::compact(&mut store, &hidden()).unwrap();
+    assert_eq!(report.orphaned_jobs_removed, 1);
+    assert_eq!(keys_of_job(&store, t.id), 0);
+    assert!(report.before.unreferenced > 0, "t's bytes are reclaimed");
+    assert_eq!(store.sample_log_bytes(), 8, "only the log's header is left");
+    assert!(compact::to_text(&report).contains("1 job id(s) no job holds"));
+}
+
 fn exr_files(dir: &Path, frames: std::ops::Range<u32>) -> Vec<Vec<u8>> {
     frames
         .map(|f| std::fs::read(film::frame_path(dir, f, "exr")).unwrap())
@@ -368,6 +420,42 @@ fn compact_command_reports_bytes_and_inspect_shows_unreferenced_bytes() {
     let out = radcache(&["compact"], &path);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8_lossy(&out.stdout).contains("nothing to do"));
+}
+
+/// `radcache delete`: an unknown name deletes nothing and lists the jobs;
+/// the jobs named go, the others stay, and `compact` reclaims their bytes.
+#[test]
+fn delete_command_deletes_the_named_jobs_or_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, _) = fixture(dir.path());
+    let out = radcache(&["delete", "a", "nope"], &path);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(
+        err.contains("no job \"nope\" (jobs: a, t); nothing deleted"),
+        "{err}"
+    );
+    let names = |path: &Path| -> Vec<String> {
+        let store = Store::open_existing(path).unwrap();
+        store
+            .jobs()
+            .unwrap()
+            .into_iter()
+            .map(|j| j.spec.name)
+            .collect()
+    };
+    assert_eq!(names(&path), ["a", "t"]);
+    let out = radcache(&["delete", "a"], &path);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("deleted job a (3 frames)") && stdout.contains("radcache compact"),
+        "{stdout}"
+    );
+    assert_eq!(names(&path), ["t"]);
+    let out = radcache(&["compact", "-q"], &path);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("dropped"));
 }
 
 #[test]

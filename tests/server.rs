@@ -1431,6 +1431,86 @@ fn a_job_rendered_over_two_ranges_shows_and_streams_both() {
     assert_eq!(events, [0, 1, 3, 4]);
 }
 
+/// `DELETE /api/jobs/{id}`: a queued job is refused (cancel it first); an
+/// ended one goes with its frames and frame files, its number is not
+/// given again (also after a restart), and a `radcache render` job goes
+/// from the store too.
+#[test]
+fn ended_jobs_are_deleted_with_their_frames_and_their_numbers_stay_taken() {
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let status = render_job_with_cli(
+        &[
+            "--method", "ic", "--size", "8x8", "--frames", "0..1", "--spp", "1",
+        ],
+        &db,
+        "walk",
+        &dir.path().join("walk"),
+    )
+    .wait()
+    .unwrap();
+    assert!(status.success());
+    let mut server = start(&db, &scenes);
+    let fast =
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"8x8","spp":1}"#;
+    let done = create_job(&server, fast);
+    wait_done(&server, &done);
+    let files = dir.path().join("db.frames").join(&done);
+    assert!(files.join("frame_0001.png").exists());
+    let queued = create_job_behind(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"48x48","spp":32}"#,
+        fast,
+    );
+    let (status, body) = http(&server, "DELETE", &format!("/api/jobs/{queued}"), "");
+    assert_eq!(status, 409, "{}", String::from_utf8_lossy(&body));
+    assert!(String::from_utf8_lossy(&body).contains("cancel it first"));
+
+    let (status, body) = http(&server, "DELETE", &format!("/api/jobs/{done}"), "");
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(json(&body)["deleted"], true);
+    for path in ["", "/stats", "/frames/0.png", "/stream"] {
+        let (status, _) = http(&server, "GET", &format!("/api/jobs/{done}{path}"), "");
+        assert_eq!(status, 404, "{path}");
+    }
+    assert!(
+        !files.exists(),
+        "the server's frame files of {done} are gone"
+    );
+    let (status, _) = http(&server, "DELETE", &format!("/api/jobs/{done}"), "");
+    assert_eq!(status, 404);
+    let (status, _) = http(&server, "DELETE", "/api/jobs/walk", "");
+    assert_eq!(status, 200);
+    assert!(
+        dir.path().join("walk").join("frame_0000.png").exists(),
+        "render's own files stay"
+    );
+
+    // Numbers given once stay taken, across a restart too.
+    wait_done(&server, &queued);
+    let next = create_job(&server, fast);
+    assert_eq!((done.as_str(), next.as_str()), ("job-1", "job-4"));
+    wait_done(&server, &next);
+    terminate(&mut server, Duration::from_secs(10));
+    drop(server);
+    let server = start(&db, &scenes);
+    let (_, body) = http(&server, "GET", "/api/jobs", "");
+    let ids: Vec<String> = json(&body)
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|j| j["id"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(
+        ids,
+        ["job-2", "job-3", "job-4"],
+        "job-1 and walk are gone from the store"
+    );
+    let (status, body) = http(&server, "DELETE", "/api/jobs/job-4", "");
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    assert_eq!(create_job(&server, fast), "job-5");
+}
+
 /// A stored `job-N` that the server leaves out of its table (here a frame
 /// range no request gives, as a damaged store might hold) keeps its name:
 /// a new job is numbered past it, rather than taking over its frames or

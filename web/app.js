@@ -151,6 +151,7 @@ function showProgress(job) {
     ? `ETA ${fmtSeconds(job.eta_seconds)} (${fmtSeconds(job.seconds_per_frame)}/frame)` : job.state;
   $('cancel').disabled = !(job.state === 'queued' || job.state === 'running');
   $('resume').disabled = !(job.state === 'cancelled' || job.state === 'failed');
+  $('delete').disabled = job.state === 'queued' || job.state === 'running';
   if (job.error) $('eta').textContent += ` — ${job.error}`;
 }
 
@@ -511,6 +512,16 @@ $('show-overlay').addEventListener('change', (e) => {
 
 $('cancel').addEventListener('click', () =>
   api(jobUrl(view.id, '/cancel'), { method: 'POST' }).then(showProgress).then(refreshJobs).catch(reportError));
+$('delete').addEventListener('click', () => {
+  const id = view.id;
+  if (!window.confirm(`Delete job ${id} with its frames and records?`)) return;
+  api(jobUrl(id), { method: 'DELETE' }).then(() => {
+    if (view.events) view.events.close();
+    Object.assign(view, { id: null, job: null, events: null });
+    $('job-panel').hidden = true;
+    history.replaceState(null, '', withToken('/'));
+  }).then(refreshJobs).catch(reportError);
+});
 $('resume').addEventListener('click', () =>
   api(jobUrl(view.id, '/resume'), { method: 'POST' }).then(() => selectJob(view.id)).then(refreshJobs).catch(reportError));
 

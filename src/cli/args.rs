@@ -20,6 +20,17 @@ pub struct CompactArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct DeleteArgs {
+    /// Store directory.
+    #[arg(long, default_value = DEFAULT_DB)]
+    pub db: PathBuf,
+    /// Jobs to delete, by name (as `inspect` lists them). All must exist:
+    /// a name that does not deletes none.
+    #[arg(required = true, value_name = "JOB")]
+    pub jobs: Vec<String>,
+}
+
+#[derive(Args, Debug)]
 pub struct ServeArgs {
     /// Store directory.
     #[arg(long, default_value = DEFAULT_DB)]

@@ -13,8 +13,9 @@ use crate::render::{BackendChoice, SceneSource};
 use crate::store::{self, Store};
 use anyhow::{bail, Context, Result};
 pub use args::{
-    BackendArg, BenchArgs, CompactArgs, CompareArgs, GlossyArg, IcArgs, InspectArgs, MethodName,
-    MoviesArgs, OnOff, RenderArgs, ServeArgs, TcgArgs, TrcArgs, TrcGradientsArg, DEFAULT_DB,
+    BackendArg, BenchArgs, CompactArgs, CompareArgs, DeleteArgs, GlossyArg, IcArgs, InspectArgs,
+    MethodName, MoviesArgs, OnOff, RenderArgs, ServeArgs, TcgArgs, TrcArgs, TrcGradientsArg,
+    DEFAULT_DB,
 };
 use clap::{Parser, Subcommand};
 use output::{out, outln};
@@ -52,6 +53,8 @@ pub enum Command {
     Serve(ServeArgs),
     /// Rewrite a store's sample log without the bytes nothing references any more (jobs restarted with --force, frames written again).
     Compact(CompactArgs),
+    /// Delete jobs from a store: their frames, statistics, records and state (`compact` then reclaims their bytes).
+    Delete(DeleteArgs),
 }
 
 /// Runs the CLI on the process arguments.
@@ -80,6 +83,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Inspect(args) => run_inspect(args),
         Command::Serve(args) => run_serve(args),
         Command::Compact(args) => run_compact(args),
+        Command::Delete(args) => run_delete(args),
     }
 }
 
@@ -250,6 +254,36 @@ fn run_compact(args: CompactArgs) -> Result<()> {
     let report = store::compact::compact(&mut store, &bar)?;
     bar.finish_and_clear();
     out!("{}", store::compact::to_text(&report))?;
+    Ok(())
+}
+
+/// Deletes the jobs named, once all of them are found. The frame files a
+/// render wrote under its `--out` are the user's and stay.
+fn run_delete(args: DeleteArgs) -> Result<()> {
+    let store = Store::open_existing(&args.db)?;
+    for name in &args.jobs {
+        if store.job(name)?.is_none() {
+            let known: Vec<String> = store.jobs()?.into_iter().map(|j| j.spec.name).collect();
+            bail!(
+                "store {}: no job {name:?} (jobs: {}); nothing deleted",
+                args.db.display(),
+                if known.is_empty() {
+                    "none".to_string()
+                } else {
+                    known.join(", ")
+                }
+            );
+        }
+    }
+    for name in &args.jobs {
+        if let Some(job) = store.delete_job(name)? {
+            outln!("deleted job {name} ({} frames)", job.frames_done)?;
+        }
+    }
+    outln!(
+        "their bytes in the sample log are unreferenced now; `radcache compact --db {}` reclaims them",
+        args.db.display()
+    )?;
     Ok(())
 }
 

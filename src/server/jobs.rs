@@ -62,16 +62,18 @@ fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<Strin
             JobKey::Served(n) => Some(*n),
             JobKey::Rendered(_) => None,
         });
-        served.max().map_or(1, |n| n + 1)
+        served.max().unwrap_or(0)
     };
-    // Past any `job-N` of the store that the table left out (a method or
-    // frame range this build cannot run): a new job must not take over
-    // its frames, nor fail on it for good.
-    let mut n = n;
+    // Past any number given before, also to a job deleted since (a client
+    // may still hold its URLs), and past any `job-N` of the store that the
+    // table left out (a method or frame range this build cannot run): a new
+    // job must not take over its frames, nor fail on it for good.
+    let mut n = n.max(state.store.served_jobs_high()?) + 1;
     while state.store.job(&format!("job-{n}"))?.is_some() {
         n += 1;
     }
     let id = format!("job-{n}");
+    state.store.set_served_jobs_high(n)?;
     let r = &request;
     let spec = crate::render::job_spec(&id, &r.scene, &r.method, &r.settings, r.frames.clone())?;
     state.store.begin_job(&spec, false)?;
@@ -183,6 +185,55 @@ async fn wait_while_running(state: &AppState, id: &str, changes: &mut watch::Rec
         }
     };
     let _ = tokio::time::timeout(CANCEL_WAIT, stopped).await;
+}
+
+/// `DELETE /api/jobs/{id}`: a job that is neither queued nor running goes,
+/// with its frames, statistics and records (their bytes in the sample log
+/// stay until `radcache compact`) and, for the server's own jobs, the
+/// frame files it wrote under `--out`. Its followers' streams end.
+pub async fn delete(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Json<Value>, ApiError> {
+    let key = JobKey::of(&id);
+    {
+        // Decided and removed under the table's lock: the worker starts
+        // only jobs it finds there, queued.
+        let mut jobs = state.jobs.lock().expect("job table lock");
+        let job = jobs
+            .get(&key)
+            .ok_or_else(|| ApiError::not_found(format!("no job {id:?}")))?;
+        if matches!(job.state, JobState::Queued | JobState::Running) {
+            return Err(ApiError::conflict(format!(
+                "job {id} is {}; cancel it first",
+                job.state.as_str()
+            )));
+        }
+        jobs.remove(&key);
+    }
+    let s = state.clone();
+    let name = id.clone();
+    let frames = match key {
+        JobKey::Served(_) => Some(state.options.out.join(&id)),
+        JobKey::Rendered(_) => None,
+    };
+    tokio::task::spawn_blocking(move || -> anyhow::Result<()> {
+        s.store.delete_job(&name)?;
+        if let Some(dir) = frames {
+            match std::fs::remove_dir_all(&dir) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(anyhow::anyhow!("removing {}: {e}", dir.display()))
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    })
+    .await
+    .map_err(ApiError::internal)?
+    .map_err(ApiError::internal)?;
+    state.forget(&key);
+    Ok(Json(json!({ "id": id, "deleted": true })))
 }
 
 pub async fn resume(

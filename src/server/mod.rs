@@ -272,6 +272,14 @@ impl AppState {
         self.notify(&key);
     }
 
+    /// Wakes the followers of a deleted job (they find it gone and end)
+    /// and drops its watch channel.
+    pub fn forget(&self, key: &JobKey) {
+        if let Some(tx) = self.watchers.lock().expect("watchers lock").remove(key) {
+            tx.send_modify(|g| *g += 1);
+        }
+    }
+
     fn notify(&self, key: &JobKey) {
         if let Some(tx) = self.watchers.lock().expect("watchers lock").get(key) {
             tx.send_modify(|g| *g += 1);
@@ -398,7 +406,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/charts", get(web::charts))
         .route("/api/openapi.json", get(web::openapi))
         .route("/api/jobs", post(jobs::create).get(jobs::list))
-        .route("/api/jobs/{id}", get(jobs::show))
+        .route("/api/jobs/{id}", get(jobs::show).delete(jobs::delete))
         .route("/api/jobs/{id}/cancel", post(jobs::cancel))
         .route("/api/jobs/{id}/resume", post(jobs::resume))
         .route("/api/jobs/{id}/frames/{file}", get(frames::frame))

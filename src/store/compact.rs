@@ -1,10 +1,13 @@
 //! `radcache compact`: rewrites the sample log ([`super::samples`]) without
 //! the bytes no value references any more, and reclaims them.
 //!
-//! The log is append-only: a job restarted with `--force` leaves its
-//! frames' EXRs, record blocks and samples there, unreferenced (its keys
-//! are deleted), and so does a frame written again (its former EXR and
-//! record block). Nothing else reclaims them.
+//! The log is append-only: a job deleted (`radcache delete`) or restarted
+//! with `--force` leaves its frames' EXRs, record blocks and samples
+//! there, unreferenced (its keys are deleted), and so does a frame written
+//! again (its former EXR and record block). Nothing else reclaims them.
+//! A kill while a job's keys are being deleted leaves keys of a job id no
+//! job holds; compaction removes those first
+//! ([`Store::remove_orphaned_job_data`]).
 //!
 //! What references the log (every kind; see `schema.rs`):
 //! - `frames`: a frame's compressed EXR ([`FrameValue`] `exr_offset`,
@@ -118,6 +121,10 @@ pub struct CompactReport {
     /// The log after (the old one when there was nothing to reclaim).
     pub new_file: PathBuf,
     pub bytes_after: u64,
+    /// Job ids whose keys no job held (a kill during a job's deletion or
+    /// restart left them), removed first: their log bytes are then
+    /// unreferenced.
+    pub orphaned_jobs_removed: usize,
     /// Set when a test stopped it early ([`compact_with`]).
     #[serde(skip)]
     pub stopped_after: Option<Step>,
@@ -149,6 +156,7 @@ pub fn compact_with(
     progress: &indicatif::ProgressBar,
     stop_after: Option<Step>,
 ) -> Result<CompactReport, StoreError> {
+    let orphaned_jobs_removed = store.remove_orphaned_job_data()?;
     let blocks = referenced_blocks(store)?;
     let before = usage(store, &blocks)?;
     let mut report = CompactReport {
@@ -156,6 +164,7 @@ pub fn compact_with(
         old_file: store.sample_log_file(),
         new_file: store.sample_log_file(),
         bytes_after: before.committed,
+        orphaned_jobs_removed,
         before: before.clone(),
         stopped_after: None,
     };
@@ -434,15 +443,22 @@ pub fn to_text(r: &CompactReport) -> String {
         p.file_name()
             .map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into())
     };
+    let orphans = match r.orphaned_jobs_removed {
+        0 => String::new(),
+        n => format!(
+            "removed the keys of {n} job id(s) no job holds (a deletion or --force restart cut short)\n"
+        ),
+    };
     if u.unreferenced == 0 {
         return format!(
-            "store {}: sample log {} is compact ({} bytes, all referenced); nothing to do\n",
+            "{orphans}store {}: sample log {} is compact ({} bytes, all referenced); nothing to do\n",
             r.path.display(),
             name(&r.old_file),
             u.committed
         );
     }
-    format!(
+    orphans
+        + &format!(
         "store {}: sample log {} → {}: {} → {} bytes\n\
          dropped {} unreferenced bytes in {} range(s); kept {} frame EXRs, {} record blocks and {} sample blocks ({} bytes before, as they were encoded)\n",
         r.path.display(),

@@ -43,6 +43,24 @@ impl Store {
             .map_err(|e| StoreError::sled(&self.path, e))
     }
 
+    /// The highest `job-N` number `radcache serve` has given
+    /// ([`keys::META_SERVED_JOBS_HIGH`]); 0 before the first.
+    pub fn served_jobs_high(&self) -> Result<u64, StoreError> {
+        let key = keys::META_SERVED_JOBS_HIGH;
+        super::meta::read_meta_u64(&self.meta, key)
+            .map(|n| n.unwrap_or(0))
+            .map_err(|detail| self.corrupt("meta", key, detail))
+    }
+
+    /// Records `n` as the highest `job-N` number given (made durable by
+    /// the next flush).
+    pub fn set_served_jobs_high(&self, n: u64) -> Result<(), StoreError> {
+        self.meta
+            .insert(keys::META_SERVED_JOBS_HIGH, &n.to_be_bytes())
+            .map(drop)
+            .map_err(|e| StoreError::sled(&self.path, e))
+    }
+
     /// Starts or resumes job `spec.name`. A job of that name with another
     /// scene or other settings is refused unless `force`. `force` starts
     /// the job over under a new id whatever its settings (the old id's data
@@ -110,19 +128,64 @@ impl Store {
         })
     }
 
+    /// Deletes job `name`, if there is one, and returns it. Its name goes
+    /// first, in one write: from then on the job is gone. Then its durable
+    /// cancel mark and every key of its id; a kill meanwhile leaves keys no
+    /// job owns, which `radcache compact` removes
+    /// ([`Self::remove_orphaned_job_data`]). Its bytes in the sample log
+    /// stay until `radcache compact`.
+    pub fn delete_job(&self, name: &str) -> Result<Option<JobValue>, StoreError> {
+        let Some(job) = self.job(name)? else {
+            return Ok(None);
+        };
+        self.jobs
+            .remove(keys::job(name))
+            .map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()?;
+        self.set_job_cancelled(name, false)?;
+        self.delete_job_data(job.id)?;
+        Ok(Some(job))
+    }
+
+    /// Deletes the keys of every job id that no job holds: those a kill
+    /// left between a job's deletion, or its restart with `--force`, and
+    /// the deletion of its data. The number of such ids.
+    pub fn remove_orphaned_job_data(&self) -> Result<usize, StoreError> {
+        let live: BTreeSet<u64> = self.jobs()?.iter().map(|j| j.id).collect();
+        let mut orphans = BTreeSet::new();
+        for (name, tree) in self.per_job_trees() {
+            // One key per job id: a seek past each id's keys.
+            let mut from = keys::job_prefix(0);
+            while let Some(key) = tree.range(from..).keys().next() {
+                let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
+                let id =
+                    keys::job_of(&key).ok_or_else(|| self.corrupt(name, &key, "malformed key"))?;
+                if !live.contains(&id) {
+                    orphans.insert(id);
+                }
+                let Some(next) = id.checked_add(1) else { break };
+                from = keys::job_prefix(next);
+            }
+        }
+        for &id in &orphans {
+            self.delete_job_data(id)?;
+        }
+        Ok(orphans.len())
+    }
+
+    /// The trees whose keys start with a job id ([`keys::job_prefix`]),
+    /// by name.
+    fn per_job_trees(&self) -> [(&'static str, &sled::Tree); 6] {
+        ["frames", "stats", "records", "sources", "state", "movies"]
+            .map(|name| (name, self.tree(name).expect("known tree")))
+    }
+
     /// Deletes every key of job id `job` in the per-job trees.
     fn delete_job_data(&self, job: u64) -> Result<(), StoreError> {
         let prefix = keys::job_prefix(job);
         // Their bytes stay in the log, unreferenced (it is append-only),
         // until `radcache compact` ([`compact`]).
-        for tree in [
-            &self.frames,
-            &self.stats,
-            &self.records,
-            &self.sources,
-            &self.state,
-            &self.movies,
-        ] {
+        for (_, tree) in self.per_job_trees() {
             for key in tree.scan_prefix(prefix).keys() {
                 let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
                 tree.remove(key)

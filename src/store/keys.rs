@@ -72,6 +72,11 @@ pub const META_MIGRATE_0007_THROUGH: &[u8] = b"migrate_0007_through";
 /// `migrations/0008_frame_footprint.md`).
 pub const META_MIGRATE_0008_THROUGH: &[u8] = b"migrate_0008_through";
 
+/// `meta` key of the highest `job-N` number `radcache serve` has given
+/// (u64 big-endian; no schema change: older builds ignore it), so that a
+/// deleted job's number is not given again.
+pub const META_SERVED_JOBS_HIGH: &[u8] = b"served_jobs_high";
+
 /// `meta` key marking job `name` as cancelled by `radcache serve` (value
 /// empty): a restarted server keeps it cancelled instead of resuming it.
 pub fn meta_cancelled(name: &str) -> Vec<u8> {
@@ -102,6 +107,12 @@ pub fn record(job: u64, frame: u32, id: u64) -> [u8; 20] {
 /// Prefix of every key of one job in `frames`, `stats`, `records`.
 pub fn job_prefix(job: u64) -> [u8; 8] {
     job.to_be_bytes()
+}
+
+/// The job id a key of `frames`, `stats`, `records`, `sources`, `state`
+/// or `movies` starts with.
+pub fn job_of(key: &[u8]) -> Option<u64> {
+    Some(u64::from_be_bytes(key.get(..8)?.try_into().ok()?))
 }
 
 /// `state` key of a job's state head (= [`job_prefix`]: it sorts before the
