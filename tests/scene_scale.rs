@@ -7,6 +7,9 @@
 //! scales apart: an absolute epsilon sized for a metre-scale room leaks
 //! light, or loses contact shadows, in a room a few centimetres across.
 
+mod common;
+
+use common::{tri_bin, tri_json, TRI};
 use radcache::backend::cpu::CpuBackend;
 use radcache::cache::gather::Strata;
 use radcache::film::Film;
@@ -103,4 +106,50 @@ fn scaled_scenes_render_the_same_images() {
             );
         }
     }
+}
+
+/// Below `SMALLEST_SCENE` across the ray offset's floor matters, and a
+/// scene file that small is loaded with a warning that says why (a scene
+/// in millimetres written as metres, say); one at the limit's scale up is
+/// not.
+#[test]
+fn a_scene_too_small_for_the_ray_offsets_is_loaded_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let render = |k: f32| {
+        let tri = TRI.map(|p| p.map(|c| c * k));
+        let name = format!("tri{k}");
+        std::fs::write(
+            dir.path().join(format!("{name}.bin")),
+            tri_bin(tri, [0, 1, 2]),
+        )
+        .unwrap();
+        let gltf = dir.path().join(format!("{name}.gltf"));
+        let json = tri_json(&format!("{name}.bin"));
+        std::fs::write(&gltf, serde_json::to_vec(&json).unwrap()).unwrap();
+        let scene = radcache::scene::Scene::load(&gltf).unwrap();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args([
+                "render", "--method", "path", "--spp", "1", "--size", "4x4", "--frames", "0..1",
+                "-q",
+            ])
+            .arg(&gltf)
+            .arg("--out")
+            .arg(dir.path().join(&name))
+            .output()
+            .unwrap();
+        assert!(out.status.success());
+        (
+            scene.diagonal_at(0.0),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (size, stderr) = render(1e-3);
+    assert!((size - 2f32.sqrt() * 1e-3).abs() < 1e-8, "{size}");
+    assert!(
+        stderr.contains("units across") && stderr.contains("scale the scene up"),
+        "{stderr}"
+    );
+    let (size, stderr) = render(0.1);
+    assert!(size > radcache::scene::SMALLEST_SCENE);
+    assert!(!stderr.contains("units across"), "{stderr}");
 }
