@@ -89,7 +89,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("memory_mib", "512"),
             ("spacing", "0.03125"),
             ("links", "128"),
-            ("bounces", "8"),
+            ("bounces", "64"),
             ("max_depth", "8"),
         ],
     },

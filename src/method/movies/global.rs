@@ -42,7 +42,8 @@ pub struct GlobalSettings {
     /// spacing across; smaller cells get fewer, in proportion to their
     /// area, and at least [`MIN_LINKS`].
     pub links: u32,
-    /// Jacobi iterations: bounces of indirect light.
+    /// Most Jacobi iterations (bounces of indirect light); the iteration
+    /// stops sooner once converged ([`CONVERGED`]).
     pub bounces: u32,
     /// Shadow samples of a vertex's direct light.
     pub shadow_samples: u32,
@@ -53,11 +54,18 @@ impl Default for GlobalSettings {
         GlobalSettings {
             spacing: 1.0 / 32.0,
             links: 128,
-            bounces: 8,
+            bounces: 64,
             shadow_samples: 8,
         }
     }
 }
+
+/// The Jacobi iteration stops once an iteration changes the indirect
+/// light by at most this share of it (summed over vertices). The error
+/// left is about that share times `r/(1 − r)`, with `r` the scene's mean
+/// albedo: 0.1 % for `r` = 0.5, 1 % for 0.9. A fixed 8 bounces lost a
+/// third of the light in a closed box of albedo 0.9 (`0.9⁹`).
+pub const CONVERGED: f64 = 1e-3;
 
 /// The finest grid: segments along a triangle's edge.
 pub const MAX_GRID: u32 = 32;
@@ -622,7 +630,7 @@ impl GlobalPass {
         let mut indirect = vec![Vec3::ZERO; self.vertices.len()];
         for _ in 0..self.settings.bounces {
             let b = radiance_of(&indirect);
-            indirect = self
+            let next: Vec<Vec3> = self
                 .rows
                 .par_iter()
                 .map(|row| {
@@ -630,6 +638,11 @@ impl GlobalPass {
                         .fold(Vec3::ZERO, |acc, &(j, w)| acc + b[j as usize] * w)
                 })
                 .collect();
+            let converged = converged(&indirect, &next);
+            indirect = next;
+            if converged {
+                break;
+            }
         }
         self.indirect = indirect;
     }
@@ -735,6 +748,18 @@ fn static_diagonal(ctx: &FrameContext) -> f32 {
         &snapshot.triangles[..]
     };
     diagonal(tris.iter().flat_map(|t| t.p))
+}
+
+/// Whether a Jacobi iteration from `before` to `after` changed the
+/// indirect light by at most [`CONVERGED`] of it. Summed in order, in
+/// `f64`: where it stops must not depend on the thread count.
+fn converged(before: &[Vec3], after: &[Vec3]) -> bool {
+    let (mut change, mut total) = (0.0f64, 0.0f64);
+    for (a, b) in before.iter().zip(after) {
+        change += f64::from((*b - *a).abs().element_sum());
+        total += f64::from(b.abs().element_sum());
+    }
+    change <= CONVERGED * total
 }
 
 fn scene_diagonal(ctx: &FrameContext) -> f32 {
