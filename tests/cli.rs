@@ -670,3 +670,46 @@ fn one_tiny_frame(scene: &[&str], out: &std::path::Path) -> String {
     assert_eq!(code, 0, "{stderr}");
     stderr
 }
+
+/// `inspect --json` shows a job's `settings` as an object of every setting
+/// by the names a served job shows and `POST /api/jobs` takes (flags as
+/// booleans), not as their JSON text in a string.
+#[test]
+fn inspect_json_shows_settings_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db");
+    let out = dir.path().join("frames");
+    let (code, _, stderr) = radcache(&[
+        "render",
+        "--method",
+        "ic",
+        "--ic-accuracy",
+        "0.3",
+        "--ic-strata",
+        "4x12",
+        "--ic-no-gradients",
+        "--frames",
+        "0..1",
+        "--size",
+        "8x8",
+        "--spp",
+        "1",
+        "--db",
+        db.to_str().unwrap(),
+        "--job",
+        "j",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, json, stderr) = radcache(&["inspect", "--db", db.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let settings = &report["jobs"][0]["settings"];
+    assert!(settings.is_object(), "{settings}");
+    assert_eq!(settings["accuracy"], 0.3, "{settings}");
+    assert_eq!(settings["strata"], "4x12", "{settings}");
+    assert_eq!(settings["gradients"], false, "{settings}");
+    assert_eq!(settings["spp"], 1, "{settings}");
+}
