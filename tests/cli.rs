@@ -202,6 +202,32 @@ fn bad_input_is_a_clear_error() {
             &["serve", "--addr", "0.0.0.0:1", "--token", ""],
             "--token (or RADCACHE_TOKEN) is empty",
         ),
+        // Past the range `POST /api/jobs` takes too: each flag has the
+        // range of its name, and says it.
+        (
+            &[
+                "render",
+                "--method",
+                "movies",
+                "--movies-spacing",
+                "2",
+                "--out",
+                garbage,
+            ],
+            "invalid value '2' for '--movies-spacing <MOVIES_SPACING>': expected 0.001 to 1",
+        ),
+        (
+            &[
+                "render",
+                "--method",
+                "ic",
+                "--max-depth",
+                "20000",
+                "--out",
+                garbage,
+            ],
+            "invalid value '20000' for '--max-depth <MAX_DEPTH>': expected 0 to 10000",
+        ),
     ];
     for (args, expected) in cases {
         let (code, _, stderr) = radcache(args);
