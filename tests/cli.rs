@@ -739,3 +739,82 @@ fn inspect_json_shows_settings_by_name() {
     assert_eq!(settings["gradients"], false, "{settings}");
     assert_eq!(settings["spp"], 1, "{settings}");
 }
+
+/// `radcache render` of one 4×4 frame with `args` (a `--method` among
+/// them), which must succeed; its stderr.
+fn one_tiny_frame_with(args: &[&str], out: &std::path::Path) -> String {
+    let fixed = ["--spp", "1", "--frames", "0..1", "--size", "4x4", "-q"];
+    let out = ["--out", out.to_str().unwrap()];
+    let args = [&["render"], args, &fixed, &out].concat();
+    let (code, _, stderr) = radcache(&args);
+    assert_eq!(code, 0, "{stderr}");
+    stderr
+}
+
+/// A flag of a method other than the one rendered is not dropped without a
+/// word: each is named with the methods it applies to. `ic`'s flags, with
+/// which `trc` and `tcg` make their records, and the flags every method
+/// takes (`--spp`, `--max-depth`) are not.
+#[test]
+fn flags_of_another_method_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let ic = one_tiny_frame_with(
+        &[
+            "--method",
+            "ic",
+            "--trc-at",
+            "5",
+            "--movies-links",
+            "4",
+            "--ic-accuracy",
+            "0.3",
+            "--max-depth",
+            "3",
+        ],
+        &dir.path().join("ic"),
+    );
+    assert!(
+        ic.contains("warning: --trc-at applies to --method trc only; --method ic ignores it"),
+        "{ic}"
+    );
+    assert!(
+        ic.contains("warning: --movies-links applies to --method movies only"),
+        "{ic}"
+    );
+    assert!(!ic.contains("--ic-accuracy"), "{ic}");
+    assert!(!ic.contains("--max-depth"), "{ic}");
+    let path = one_tiny_frame_with(
+        &[
+            "--method",
+            "path",
+            "--ic-no-gradients",
+            "--tcg-tau-min",
+            "0.1",
+        ],
+        &dir.path().join("path"),
+    );
+    assert!(
+        path.contains(
+            "warning: --ic-no-gradients applies to --method ic, trc or tcg; --method path ignores it"
+        ),
+        "{path}"
+    );
+    assert!(
+        path.contains("warning: --tcg-tau-min applies to --method tcg only"),
+        "{path}"
+    );
+    for method in ["trc", "tcg"] {
+        let said = one_tiny_frame_with(
+            &[
+                "--method",
+                method,
+                "--ic-strata",
+                "4x12",
+                "--ic-accuracy",
+                "0.5",
+            ],
+            &dir.path().join(method),
+        );
+        assert!(!said.contains("warning"), "{method}: {said}");
+    }
+}

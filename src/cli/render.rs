@@ -4,7 +4,8 @@
 
 use super::output::outln;
 use super::{
-    backend_choice, GlossyArg, MethodName, OnOff, RenderArgs, TrcGradientsArg, DEFAULT_DB,
+    backend_choice, GlossyArg, IcArgs, MethodName, MoviesArgs, OnOff, RenderArgs, TcgArgs, TrcArgs,
+    TrcGradientsArg, DEFAULT_DB,
 };
 use crate::integrator::PathLength;
 use crate::method::ic::{GlossyLobe, IcSettings};
@@ -250,6 +251,69 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
     };
     crate::method::settings::check_consistent(&method)?;
     Ok(method)
+}
+
+/// The groups of `render`'s method flags (an `Args` struct each, as
+/// [`render_method`] reads them) with the methods that read them: `ic`'s
+/// flags make the records of `trc` and `tcg` too. Every method reads
+/// `--spp` and `--max-depth`.
+fn method_flag_groups() -> [(clap::Command, &'static [MethodName]); 4] {
+    use clap::Args;
+    let flags = |augment: fn(clap::Command) -> clap::Command| augment(clap::Command::new("flags"));
+    [
+        (
+            flags(IcArgs::augment_args),
+            &[MethodName::Ic, MethodName::Trc, MethodName::Tcg],
+        ),
+        (flags(TrcArgs::augment_args), &[MethodName::Trc]),
+        (flags(TcgArgs::augment_args), &[MethodName::Tcg]),
+        (flags(MoviesArgs::augment_args), &[MethodName::Movies]),
+    ]
+}
+
+/// The flags `given` on the command line that `method` does not read, each
+/// said with the methods that do: "--trc-at applies to --method trc only;
+/// --method ic ignores it".
+///
+/// A warning, not an error: `render`'s flags are not tied to the method
+/// they set (where `bench --methods trc:at=0.1` gives a setting to a
+/// method by name, and a name that method lacks is an error), a script may
+/// render a scene with each method in turn under the same flags, and the
+/// frames are still what `--method` asks for. A flag that asks for what
+/// the method cannot do (`--ic-glossy eas` with `path`) is an error, in
+/// [`render_method`].
+pub(super) fn flags_of_other_methods(given: &clap::ArgMatches, method: MethodName) -> Vec<String> {
+    let name = |m: MethodName| {
+        use clap::ValueEnum;
+        m.to_possible_value()
+            .map_or_else(|| format!("{m:?}"), |v| v.get_name().to_string())
+    };
+    let mut warnings = Vec::new();
+    for (group, methods) in method_flag_groups() {
+        if methods.contains(&method) {
+            continue;
+        }
+        let names: Vec<String> = methods.iter().map(|&m| name(m)).collect();
+        let applies = match names.split_last() {
+            Some((last, [])) => format!("{last} only"),
+            Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+            None => continue,
+        };
+        for arg in group.get_arguments() {
+            let id = arg.get_id().as_str();
+            if given.value_source(id) != Some(clap::parser::ValueSource::CommandLine) {
+                continue;
+            }
+            let flag = arg
+                .get_long()
+                .map_or_else(|| id.to_string(), |l| format!("--{l}"));
+            warnings.push(format!(
+                "{flag} applies to --method {applies}; --method {} ignores it",
+                name(method)
+            ));
+        }
+    }
+    warnings
 }
 
 /// With `--job`, the store (`--db`, or the default) and the job begun or
