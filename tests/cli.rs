@@ -818,3 +818,42 @@ fn flags_of_another_method_are_warned_of() {
         assert!(!said.contains("warning"), "{method}: {said}");
     }
 }
+
+/// A material's factors outside [0, 1] (the range glTF gives them) are
+/// clamped with a warning naming the file, the material (index and name)
+/// and the value; so is an alpha below 1 that blending would need, which
+/// the renderer, drawing every surface opaque, ignores.
+#[test]
+fn material_factors_out_of_range_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("overbright.glb");
+    edited_cube_in_box(&file, |j| {
+        let red = &mut j["materials"][1];
+        assert_eq!(red["name"], "red");
+        red["pbrMetallicRoughness"]["baseColorFactor"] = serde_json::json!([1.5, 0.5, -0.25, 1.0]);
+        red["pbrMetallicRoughness"]["metallicFactor"] = serde_json::json!(2.0);
+        red["pbrMetallicRoughness"]["roughnessFactor"] = serde_json::json!(-1.0);
+        let green = &mut j["materials"][2];
+        green["pbrMetallicRoughness"]["baseColorFactor"] = serde_json::json!([0.1, 0.4, 0.1, 0.5]);
+        green["alphaMode"] = serde_json::json!("BLEND");
+        j["materials"][3]["emissiveFactor"] = serde_json::json!([3.0, 0.9, 0.75]);
+    });
+    let stderr = one_tiny_frame(&[file.to_str().unwrap()], &dir.path().join("out"));
+    for said in [
+        "material 1 'red': baseColorFactor [1.5, 0.5, -0.25, 1] is outside [0, 1]; clamped to [1, 0.5, 0, 1]",
+        "material 1 'red': metallicFactor 2 is outside [0, 1]; clamped to 1",
+        "material 1 'red': roughnessFactor -1 is outside [0, 1]; clamped to 0",
+        "material 2 'green': baseColorFactor alpha 0.5 (alphaMode BLEND) is ignored",
+        "material 3 'light': emissiveFactor [3, 0.9, 0.75] is outside [0, 1]; clamped to [1, 0.9, 0.75]",
+    ] {
+        assert!(stderr.contains(said), "expected {said:?} in: {stderr}");
+    }
+    let warnings: Vec<&str> = stderr.lines().filter(|l| l.contains("material ")).collect();
+    assert_eq!(warnings.len(), 5, "{stderr}");
+    assert!(
+        warnings
+            .iter()
+            .all(|l| l.starts_with("warning: ") && l.contains(file.to_str().unwrap())),
+        "{stderr}"
+    );
+}
