@@ -202,6 +202,32 @@ fn bad_input_is_a_clear_error() {
             &["serve", "--addr", "0.0.0.0:1", "--token", ""],
             "--token (or RADCACHE_TOKEN) is empty",
         ),
+        // Past the range `POST /api/jobs` takes too: each flag has the
+        // range of its name, and says it.
+        (
+            &[
+                "render",
+                "--method",
+                "movies",
+                "--movies-spacing",
+                "2",
+                "--out",
+                garbage,
+            ],
+            "invalid value '2' for '--movies-spacing <MOVIES_SPACING>': expected 0.001 to 1",
+        ),
+        (
+            &[
+                "render",
+                "--method",
+                "ic",
+                "--max-depth",
+                "20000",
+                "--out",
+                garbage,
+            ],
+            "invalid value '20000' for '--max-depth <MAX_DEPTH>': expected 0 to 10000",
+        ),
     ];
     for (args, expected) in cases {
         let (code, _, stderr) = radcache(args);
@@ -669,4 +695,165 @@ fn one_tiny_frame(scene: &[&str], out: &std::path::Path) -> String {
     let (code, _, stderr) = radcache(&args);
     assert_eq!(code, 0, "{stderr}");
     stderr
+}
+
+/// `inspect --json` shows a job's `settings` as an object of every setting
+/// by the names a served job shows and `POST /api/jobs` takes (flags as
+/// booleans), not as their JSON text in a string.
+#[test]
+fn inspect_json_shows_settings_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db");
+    let out = dir.path().join("frames");
+    let (code, _, stderr) = radcache(&[
+        "render",
+        "--method",
+        "ic",
+        "--ic-accuracy",
+        "0.3",
+        "--ic-strata",
+        "4x12",
+        "--ic-no-gradients",
+        "--frames",
+        "0..1",
+        "--size",
+        "8x8",
+        "--spp",
+        "1",
+        "--db",
+        db.to_str().unwrap(),
+        "--job",
+        "j",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, json, stderr) = radcache(&["inspect", "--db", db.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let settings = &report["jobs"][0]["settings"];
+    assert!(settings.is_object(), "{settings}");
+    assert_eq!(settings["accuracy"], 0.3, "{settings}");
+    assert_eq!(settings["strata"], "4x12", "{settings}");
+    assert_eq!(settings["gradients"], false, "{settings}");
+    assert_eq!(settings["spp"], 1, "{settings}");
+}
+
+/// `radcache render` of one 4×4 frame with `args` (a `--method` among
+/// them), which must succeed; its stderr.
+fn one_tiny_frame_with(args: &[&str], out: &std::path::Path) -> String {
+    let fixed = ["--spp", "1", "--frames", "0..1", "--size", "4x4", "-q"];
+    let out = ["--out", out.to_str().unwrap()];
+    let args = [&["render"], args, &fixed, &out].concat();
+    let (code, _, stderr) = radcache(&args);
+    assert_eq!(code, 0, "{stderr}");
+    stderr
+}
+
+/// A flag of a method other than the one rendered is not dropped without a
+/// word: each is named with the methods it applies to. `ic`'s flags, with
+/// which `trc` and `tcg` make their records, and the flags every method
+/// takes (`--spp`, `--max-depth`) are not.
+#[test]
+fn flags_of_another_method_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let ic = one_tiny_frame_with(
+        &[
+            "--method",
+            "ic",
+            "--trc-at",
+            "5",
+            "--movies-links",
+            "4",
+            "--ic-accuracy",
+            "0.3",
+            "--max-depth",
+            "3",
+        ],
+        &dir.path().join("ic"),
+    );
+    assert!(
+        ic.contains("warning: --trc-at applies to --method trc only; --method ic ignores it"),
+        "{ic}"
+    );
+    assert!(
+        ic.contains("warning: --movies-links applies to --method movies only"),
+        "{ic}"
+    );
+    assert!(!ic.contains("--ic-accuracy"), "{ic}");
+    assert!(!ic.contains("--max-depth"), "{ic}");
+    let path = one_tiny_frame_with(
+        &[
+            "--method",
+            "path",
+            "--ic-no-gradients",
+            "--tcg-tau-min",
+            "0.1",
+        ],
+        &dir.path().join("path"),
+    );
+    assert!(
+        path.contains(
+            "warning: --ic-no-gradients applies to --method ic, trc or tcg; --method path ignores it"
+        ),
+        "{path}"
+    );
+    assert!(
+        path.contains("warning: --tcg-tau-min applies to --method tcg only"),
+        "{path}"
+    );
+    for method in ["trc", "tcg"] {
+        let said = one_tiny_frame_with(
+            &[
+                "--method",
+                method,
+                "--ic-strata",
+                "4x12",
+                "--ic-accuracy",
+                "0.5",
+            ],
+            &dir.path().join(method),
+        );
+        assert!(!said.contains("warning"), "{method}: {said}");
+    }
+}
+
+/// A material's factors outside [0, 1] (the range glTF gives them) are
+/// clamped with a warning naming the file, the material (index and name)
+/// and the value; so is an alpha below 1 that blending would need, which
+/// the renderer, drawing every surface opaque, ignores.
+#[test]
+fn material_factors_out_of_range_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("overbright.glb");
+    edited_cube_in_box(&file, |j| {
+        let red = &mut j["materials"][1];
+        assert_eq!(red["name"], "red");
+        red["pbrMetallicRoughness"]["baseColorFactor"] = serde_json::json!([1.5, 0.5, -0.25, 1.0]);
+        red["pbrMetallicRoughness"]["metallicFactor"] = serde_json::json!(2.0);
+        red["pbrMetallicRoughness"]["roughnessFactor"] = serde_json::json!(-1.0);
+        let green = &mut j["materials"][2];
+        green["pbrMetallicRoughness"]["baseColorFactor"] = serde_json::json!([0.1, 0.4, 0.1, 0.5]);
+        green["alphaMode"] = serde_json::json!("BLEND");
+        j["materials"][3]["emissiveFactor"] = serde_json::json!([3.0, 0.9, 0.75]);
+    });
+    let stderr = one_tiny_frame(&[file.to_str().unwrap()], &dir.path().join("out"));
+    for said in [
+        "material 1 'red': baseColorFactor [1.5, 0.5, -0.25, 1] is outside [0, 1]; clamped to [1, 0.5, 0, 1]",
+        "material 1 'red': metallicFactor 2 is outside [0, 1]; clamped to 1",
+        "material 1 'red': roughnessFactor -1 is outside [0, 1]; clamped to 0",
+        "material 2 'green': baseColorFactor alpha 0.5 (alphaMode BLEND) is ignored",
+        "material 3 'light': emissiveFactor [3, 0.9, 0.75] is outside [0, 1]; clamped to [1, 0.9, 0.75]",
+    ] {
+        assert!(stderr.contains(said), "expected {said:?} in: {stderr}");
+    }
+    let warnings: Vec<&str> = stderr.lines().filter(|l| l.contains("material ")).collect();
+    assert_eq!(warnings.len(), 5, "{stderr}");
+    assert!(
+        warnings
+            .iter()
+            .all(|l| l.starts_with("warning: ") && l.contains(file.to_str().unwrap())),
+        "{stderr}"
+    );
 }

@@ -237,6 +237,30 @@ fn small_valid_gltf_loads() {
     assert!((scene.camera.yfov - 0.8).abs() < 1e-6);
 }
 
+/// Factors outside [0, 1], where glTF puts them, are clamped to it (with a
+/// warning, `tests/cli.rs`): a base colour over 1 would make the surface
+/// give back more light than it receives, and an emissive factor over 1
+/// is brightness that only `KHR_materials_emissive_strength` may add.
+#[test]
+fn factors_outside_the_unit_range_are_clamped() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "overbright",
+        |d| {
+            d["materials"][0]["emissiveFactor"] = json!([2.0, 0.5, -1.0]);
+            d["materials"][0]["pbrMetallicRoughness"] =
+                json!({"baseColorFactor": [1.5, 0.25, -0.5, 1.0], "roughnessFactor": 7.0});
+        },
+        good_bin(),
+    );
+    let scene = Scene::load(&path).unwrap();
+    let glow = material(&scene, "glow");
+    assert_eq!(glow.emission, Vec3::new(1.0, 0.5, 0.0));
+    assert_eq!(glow.diffuse, Vec3::new(1.0, 0.25, 0.0));
+    assert!(!glow.is_glossy());
+}
+
 #[test]
 fn data_uri_buffer_and_extras_load() {
     use base64_like::encode;

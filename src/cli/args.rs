@@ -1,9 +1,12 @@
 //! The command line's arguments: one clap struct per verb, their value
 //! enums, and the parsers that turn a bad value into a clear clap error
-//! (never a panic).
+//! (never a panic). A method setting's flag takes the range of its name
+//! (`method::settings::limits`), so that every value a flag takes can be
+//! posted back by name.
 
 use crate::bench;
 use crate::cache::gather::Strata;
+use crate::method::settings::{limits, parse_strata};
 use crate::render::{self, SceneSource};
 use clap::{Args, ValueEnum};
 use std::ops::Range;
@@ -133,7 +136,7 @@ pub struct RenderArgs {
     #[arg(long, default_value = "256x256", value_parser = parse_size)]
     pub size: (u32, u32),
     /// Samples per pixel [default: 16; for ic the samples of direct light and anti-aliasing].
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    #[arg(long, value_parser = limits::SPP.parser())]
     pub spp: Option<u32>,
     /// Frames per second: frame f is rendered at t = f / fps.
     #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, value_parser = parse_fps)]
@@ -150,8 +153,8 @@ pub struct RenderArgs {
     /// Ray backend.
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
-    /// Hard limit on path length in bounces (default: unbounded, Russian roulette).
-    #[arg(long)]
+    /// Hard limit on path length in bounces, 0 to 10000 (default: unbounded, Russian roulette).
+    #[arg(long, value_parser = limits::PATH_DEPTH.parser())]
     pub max_depth: Option<u32>,
     #[command(flatten)]
     pub ic: IcArgs,
@@ -180,16 +183,16 @@ pub struct RenderArgs {
 #[derive(Args, Debug)]
 pub struct IcArgs {
     /// Accuracy a: records are used where their weight w ≥ 1/a (Ward 1988 recommends 0.1–0.3).
-    #[arg(long, default_value_t = 0.2, value_parser = parse_accuracy)]
+    #[arg(long, default_value_t = 0.2, value_parser = limits::ACCURACY.parser())]
     pub ic_accuracy: f32,
-    /// Hemisphere cells per record, MxN (θ × φ; Ward & Heckbert 1992 use N ≈ πM).
+    /// Hemisphere cells per record, MxN (θ × φ; Ward & Heckbert 1992 use N ≈ πM), at most 65536.
     #[arg(long, default_value = "16x48", value_parser = parse_strata)]
     pub ic_strata: Strata,
     /// Smallest record spacing in pixels (screen-space clamp of the record radius).
-    #[arg(long, default_value_t = 2.0, value_parser = parse_positive)]
+    #[arg(long, default_value_t = 2.0, value_parser = limits::SPACING_PX.parser())]
     pub ic_min_spacing: f32,
     /// Largest record influence radius in pixels.
-    #[arg(long, default_value_t = 64.0, value_parser = parse_positive)]
+    #[arg(long, default_value_t = 64.0, value_parser = limits::SPACING_PX.parser())]
     pub ic_max_spacing: f32,
     /// Interpolate without the translation and rotation gradients.
     #[arg(long)]
@@ -198,7 +201,7 @@ pub struct IcArgs {
     #[arg(long, value_enum, default_value = "path")]
     pub ic_glossy: GlossyArg,
     /// EAS precision criterion τ: a record's sources are refined until their reflected radiance is within τ of the finer level's (Eq. 13; the paper uses 0.02).
-    #[arg(long, default_value_t = crate::cache::eas::DEFAULT_TAU, value_parser = parse_positive)]
+    #[arg(long, default_value_t = crate::cache::eas::DEFAULT_TAU, value_parser = limits::EAS_TAU.parser())]
     pub ic_eas_tau: f32,
 }
 
@@ -206,10 +209,10 @@ pub struct IcArgs {
 #[derive(Args, Debug)]
 pub struct TrcArgs {
     /// Temporal accuracy a_t: a record is used while w_t = 1/(|τ−1|(t−t0)) ≥ 1/a_t (TRC Eq. 9–10; the paper uses 0.05).
-    #[arg(long, default_value_t = 0.05, value_parser = parse_positive)]
+    #[arg(long, default_value_t = 0.05, value_parser = limits::TEMPORAL_ACCURACY.parser())]
     pub trc_at: f32,
     /// δt_max: longest life of a record in frames, t − t0 < δt_max (TRC Eq. 11; the paper uses 20 on Cube in a Box, 5 on Spheres).
-    #[arg(long, default_value_t = 20, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    #[arg(long, default_value_t = 20, value_parser = limits::MAX_LIFE.parser())]
     pub trc_max_life: u32,
     /// Temporal gradients (TRC §4.5): none, extrapolated from the estimate of E(t0+1) (Eq. 15–17, one pass), or interpolated towards the record's replacement (Eq. 18–20, two passes: frames come out up to δt_max frames of first pass late).
     #[arg(long, value_enum, default_value = "extrapolated")]
@@ -229,13 +232,13 @@ pub struct TrcArgs {
 #[derive(Args, Debug)]
 pub struct TcgArgs {
     /// τ_min of Eq. 2: the share of a record's samples shot again every frame (Tawara et al. 2004; their results use 0.05).
-    #[arg(long, default_value_t = 0.05, value_parser = parse_share)]
+    #[arg(long, default_value_t = 0.05, value_parser = limits::SHARE.parser())]
     pub tcg_tau_min: f32,
     /// τ_max of Eq. 2: the share shot again of the samples that hit moving objects (their results use 1.0).
-    #[arg(long, default_value_t = 1.0, value_parser = parse_share)]
+    #[arg(long, default_value_t = 1.0, value_parser = limits::SHARE.parser())]
     pub tcg_tau_max: f32,
     /// §4.2: a record with more usable neighbours than this is removed as redundant (their example: 10).
-    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(0..=1_000_000))]
+    #[arg(long, default_value_t = 10, value_parser = limits::MAX_NEIGHBOURS.parser())]
     pub tcg_max_neighbours: u32,
     /// Samples whose light moving lights changed by more than 5 % since they were shot are shot again as those that hit moving objects are (not in the paper, whose Eq. 2 counts only the latter; off, a moving light's indirect light lags by up to 1/τ_min frames).
     #[arg(long, value_enum, default_value = "on")]
@@ -246,25 +249,25 @@ pub struct TcgArgs {
 #[derive(Args, Debug)]
 pub struct MoviesArgs {
     /// Shadow samples per texel: sample points on the lights (the paper's N, §3.1), at most 64.
-    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=64))]
+    #[arg(long, default_value_t = 16, value_parser = limits::SHADOW_SAMPLES.parser())]
     pub movies_shadow_samples: u32,
     /// Texels across a pixel's footprint (§3.1: at least one texel covers one pixel), 0.01 to 16.
-    #[arg(long, default_value_t = 1.0, value_parser = parse_texels_per_pixel)]
+    #[arg(long, default_value_t = 1.0, value_parser = limits::TEXELS_PER_PIXEL.parser())]
     pub movies_texels_per_pixel: f32,
-    /// Finest texture, texels along a triangle's edge.
-    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    /// Finest texture, texels along a triangle's edge, at most 1024.
+    #[arg(long, default_value_t = 256, value_parser = limits::MAX_RESOLUTION.parser())]
     pub movies_max_resolution: u32,
     /// Memory for the movies' kept static shadows, in MiB (past it the largest give theirs up and find them again).
-    #[arg(long, default_value_t = 512, value_parser = clap::value_parser!(u32).range(0..=1_048_576))]
+    #[arg(long, default_value_t = 512, value_parser = limits::MEMORY_MIB.parser())]
     pub movies_memory_mib: u32,
-    /// Global pass: grid spacing as a fraction of the static scene's diagonal.
-    #[arg(long, default_value_t = 1.0 / 32.0, value_parser = parse_positive)]
+    /// Global pass: grid spacing as a fraction of the static scene's diagonal, 0.001 to 1.
+    #[arg(long, default_value_t = 1.0 / 32.0, value_parser = limits::GRID_SPACING.parser())]
     pub movies_spacing: f32,
-    /// Global pass: links (gather rays) of a grid vertex.
-    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    /// Global pass: links (gather rays) of a grid vertex, at most 1024.
+    #[arg(long, default_value_t = 128, value_parser = limits::LINKS.parser())]
     pub movies_links: u32,
-    /// Global pass: most bounces of indirect light (Jacobi iterations; it stops sooner once they change it by under 0.1 %).
-    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(0..=64))]
+    /// Global pass: most bounces of indirect light (Jacobi iterations, at most 64; it stops sooner once they change it by under 0.1 %).
+    #[arg(long, default_value_t = 64, value_parser = limits::BOUNCES.parser())]
     pub movies_bounces: u32,
 }
 
@@ -368,59 +371,6 @@ fn parse_frames(s: &str) -> Result<Range<u32>, String> {
 
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
     render::parse_image_size(s, MAX_SIDE)
-}
-
-fn parse_accuracy(s: &str) -> Result<f32, String> {
-    let a: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
-    if !(a > 0.0 && a <= 2.0) {
-        return Err(format!("accuracy must be in (0, 2], got {s}"));
-    }
-    Ok(a)
-}
-
-/// A share in [0, 1].
-fn parse_share(s: &str) -> Result<f32, String> {
-    let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
-    if !(0.0..=1.0).contains(&v) {
-        return Err(format!("expected a share from 0 to 1, got {s}"));
-    }
-    Ok(v)
-}
-
-fn parse_positive(s: &str) -> Result<f32, String> {
-    let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
-    if !(v.is_finite() && v > 0.0) {
-        return Err(format!("expected a positive number, got {s}"));
-    }
-    Ok(v)
-}
-
-/// As `radcache bench` and `serve` take `texels_per_pixel`: past 16 a
-/// frame's movies take minutes and gigabytes.
-fn parse_texels_per_pixel(s: &str) -> Result<f32, String> {
-    let v = parse_positive(s)?;
-    if !(0.01..=16.0).contains(&v) {
-        return Err(format!("expected 0.01 to 16, got {s}"));
-    }
-    Ok(v)
-}
-
-fn parse_strata(s: &str) -> Result<Strata, String> {
-    let not_mxn = || format!("'{s}' is not MxN, e.g. 16x48");
-    let (m, n) = s.split_once('x').ok_or_else(not_mxn)?;
-    // Plain decimal sides of at least 1 (`str::parse` would take a `+`).
-    let side = |v: &str| {
-        let digits = v.bytes().all(|b| b.is_ascii_digit());
-        let v = digits.then(|| v.parse::<u32>().ok()).flatten();
-        v.filter(|&v| v > 0).ok_or_else(not_mxn)
-    };
-    let (m, n) = (side(m)?, side(n)?);
-    if u64::from(m) * u64::from(n) > 65_536 {
-        return Err(format!(
-            "{m}x{n} cells per record is too many (at most 65536)"
-        ));
-    }
-    Ok(Strata { theta: m, phi: n })
 }
 
 fn parse_job_name(s: &str) -> Result<String, String> {

@@ -17,7 +17,7 @@ pub use args::{
     MethodName, MoviesArgs, OnOff, RenderArgs, ServeArgs, TcgArgs, TrcArgs, TrcGradientsArg,
     DEFAULT_DB,
 };
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use output::{out, outln};
 use render::run_render;
 use std::path::PathBuf;
@@ -59,7 +59,18 @@ pub enum Command {
 
 /// Runs the CLI on the process arguments.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    // As `Cli::parse`, keeping the matches to tell the flags given from
+    // their defaults.
+    let matches = Cli::command().get_matches();
+    let cli = match Cli::from_arg_matches(&matches) {
+        Ok(cli) => cli,
+        Err(err) => err.format(&mut Cli::command()).exit(),
+    };
+    if let (Command::Render(args), Some(("render", given))) = (&cli.command, matches.subcommand()) {
+        for warning in render::flags_of_other_methods(given, args.method) {
+            eprintln!("warning: {warning}");
+        }
+    }
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) if err.is::<output::StdoutClosed>() => ExitCode::SUCCESS,

@@ -4,7 +4,8 @@
 
 use super::output::outln;
 use super::{
-    backend_choice, GlossyArg, MethodName, OnOff, RenderArgs, TrcGradientsArg, DEFAULT_DB,
+    backend_choice, GlossyArg, IcArgs, MethodName, MoviesArgs, OnOff, RenderArgs, TcgArgs, TrcArgs,
+    TrcGradientsArg, DEFAULT_DB,
 };
 use crate::integrator::PathLength;
 use crate::method::ic::{GlossyLobe, IcSettings};
@@ -252,6 +253,69 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
     Ok(method)
 }
 
+/// The groups of `render`'s method flags (an `Args` struct each, as
+/// [`render_method`] reads them) with the methods that read them: `ic`'s
+/// flags make the records of `trc` and `tcg` too. Every method reads
+/// `--spp` and `--max-depth`.
+fn method_flag_groups() -> [(clap::Command, &'static [MethodName]); 4] {
+    use clap::Args;
+    let flags = |augment: fn(clap::Command) -> clap::Command| augment(clap::Command::new("flags"));
+    [
+        (
+            flags(IcArgs::augment_args),
+            &[MethodName::Ic, MethodName::Trc, MethodName::Tcg],
+        ),
+        (flags(TrcArgs::augment_args), &[MethodName::Trc]),
+        (flags(TcgArgs::augment_args), &[MethodName::Tcg]),
+        (flags(MoviesArgs::augment_args), &[MethodName::Movies]),
+    ]
+}
+
+/// The flags `given` on the command line that `method` does not read, each
+/// said with the methods that do: "--trc-at applies to --method trc only;
+/// --method ic ignores it".
+///
+/// A warning, not an error: `render`'s flags are not tied to the method
+/// they set (where `bench --methods trc:at=0.1` gives a setting to a
+/// method by name, and a name that method lacks is an error), a script may
+/// render a scene with each method in turn under the same flags, and the
+/// frames are still what `--method` asks for. A flag that asks for what
+/// the method cannot do (`--ic-glossy eas` with `path`) is an error, in
+/// [`render_method`].
+pub(super) fn flags_of_other_methods(given: &clap::ArgMatches, method: MethodName) -> Vec<String> {
+    let name = |m: MethodName| {
+        use clap::ValueEnum;
+        m.to_possible_value()
+            .map_or_else(|| format!("{m:?}"), |v| v.get_name().to_string())
+    };
+    let mut warnings = Vec::new();
+    for (group, methods) in method_flag_groups() {
+        if methods.contains(&method) {
+            continue;
+        }
+        let names: Vec<String> = methods.iter().map(|&m| name(m)).collect();
+        let applies = match names.split_last() {
+            Some((last, [])) => format!("{last} only"),
+            Some((last, rest)) => format!("{} or {last}", rest.join(", ")),
+            None => continue,
+        };
+        for arg in group.get_arguments() {
+            let id = arg.get_id().as_str();
+            if given.value_source(id) != Some(clap::parser::ValueSource::CommandLine) {
+                continue;
+            }
+            let flag = arg
+                .get_long()
+                .map_or_else(|| id.to_string(), |l| format!("--{l}"));
+            warnings.push(format!(
+                "{flag} applies to --method {applies}; --method {} ignores it",
+                name(method)
+            ));
+        }
+    }
+    warnings
+}
+
 /// With `--job`, the store (`--db`, or the default) and the job begun or
 /// resumed in it.
 fn open_job(
@@ -325,4 +389,103 @@ fn key_rate_other_than(scene: &crate::scene::Scene, fps: f32) -> Option<u32> {
     [24u32, 25, 30, 48, 50, 60]
         .into_iter()
         .find(|&rate| on_frames(rate as f32))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::render_method;
+    use crate::cli::{Cli, Command};
+    use crate::method::settings::{method_settings, named_settings};
+    use clap::Parser;
+
+    /// Every value a method's flag takes can be posted back by its name
+    /// (`POST /api/jobs`, `--methods`): at the ends of each flag's range,
+    /// and just past them, the flag and the name take the same values, to
+    /// the same settings, and what a flag sets, shown by name
+    /// ([`named_settings`], as a job shows it), makes those settings again.
+    #[test]
+    fn every_value_a_flag_takes_posts_back_by_name() {
+        // (method, flag, name, values, other settings (flag, name, value))
+        type Case = (
+            &'static str,
+            &'static str,
+            &'static str,
+            &'static [&'static str],
+            &'static [(&'static str, &'static str, &'static str)],
+        );
+        #[rustfmt::skip]
+        let cases: &[Case] = &[
+            ("path", "--spp", "spp", &["0", "1", "1000000", "1000001"], &[]),
+            ("ic", "--spp", "spp", &["1", "1000000", "1000001"], &[]),
+            ("movies", "--spp", "spp", &["1", "1000000", "1000001"], &[]),
+            ("path", "--max-depth", "max_depth", &["0", "10000", "10001", "4294967295"], &[]),
+            ("trc", "--max-depth", "max_depth", &["0", "10000", "10001"], &[]),
+            ("movies", "--max-depth", "max_depth", &["0", "10000", "10001"], &[]),
+            ("ic", "--ic-accuracy", "accuracy", &["0", "0.0001", "0.001", "0.2", "2", "2.0005", "2.1"], &[]),
+            ("ic", "--ic-strata", "strata",
+             &["1x1", "0x4", "2048x32", "32x2048", "1x65536", "65536x1", "1024x64", "1024x4096",
+               "1x65537", "2048x33", "4096x4096"], &[]),
+            ("tcg", "--ic-strata", "strata", &["2048x32", "1024x4096"], &[]),
+            ("ic", "--ic-min-spacing", "min_spacing", &["0.0001", "0.001", "1", "64"],
+             &[("--ic-max-spacing", "max_spacing", "1000000")]),
+            ("ic", "--ic-max-spacing", "max_spacing", &["0.001", "1000000", "10000000"],
+             &[("--ic-min-spacing", "min_spacing", "0.001")]),
+            ("ic", "--ic-min-spacing", "min_spacing", &["1000000", "10000000"],
+             &[("--ic-max-spacing", "max_spacing", "1000000")]),
+            ("trc", "--ic-eas-tau", "eas_tau", &["0.0000001", "0.000001", "1000000", "10000000"], &[]),
+            ("trc", "--trc-at", "at", &["0.0000001", "0.000001", "1000000", "10000000"], &[]),
+            ("trc", "--trc-max-life", "max_life", &["0", "1", "100000", "100001"], &[]),
+            ("tcg", "--tcg-tau-min", "tau_min", &["-0.1", "0", "1", "1.1"], &[]),
+            ("tcg", "--tcg-tau-max", "tau_max", &["0", "1", "1.1"], &[("--tcg-tau-min", "tau_min", "0")]),
+            ("tcg", "--tcg-max-neighbours", "max_neighbours", &["0", "1000000", "1000001"], &[]),
+            ("movies", "--movies-shadow-samples", "shadow_samples", &["0", "1", "64", "65"], &[]),
+            ("movies", "--movies-texels-per-pixel", "texels_per_pixel",
+             &["0.009", "0.01", "16", "16.1"], &[]),
+            ("movies", "--movies-max-resolution", "max_resolution", &["0", "1", "1024", "1025"], &[]),
+            ("movies", "--movies-memory-mib", "memory_mib", &["0", "1048576", "1048577"], &[]),
+            ("movies", "--movies-spacing", "spacing", &["0.0001", "0.001", "1", "2"], &[]),
+            ("movies", "--movies-links", "links", &["0", "1", "1024", "1025"], &[]),
+            ("movies", "--movies-bounces", "bounces", &["0", "64", "65"], &[]),
+        ];
+        let as_text = |v: &serde_json::Value| match v {
+            serde_json::Value::String(s) => s.clone(),
+            other => other.to_string(),
+        };
+        for &(method, flag, name, values, others) in cases {
+            for &value in values {
+                let mut argv = vec!["radcache", "render", "--method", method, flag, value];
+                let mut names = vec![];
+                for &(flag, name, value) in others {
+                    argv.extend([flag, value]);
+                    names.push((name, value));
+                }
+                names.push((name, value));
+                let by_flag = Cli::try_parse_from(&argv)
+                    .map_err(|e| e.to_string())
+                    .and_then(|cli| match cli.command {
+                        Command::Render(args) => render_method(&args).map_err(|e| e.to_string()),
+                        _ => unreachable!(),
+                    });
+                let by_name = method_settings(method, names.iter().copied());
+                let case = format!("{method} {flag} {value} / {name}={value}");
+                match (by_flag, by_name) {
+                    (Ok(by_flag), Ok(by_name)) => {
+                        assert_eq!(by_flag, by_name, "{case}");
+                        let shown = named_settings(&by_flag);
+                        let pairs: Vec<(String, String)> =
+                            shown.iter().map(|(k, v)| (k.clone(), as_text(v))).collect();
+                        let again =
+                            method_settings(method, pairs.iter().map(|(k, v)| (&k[..], &v[..])));
+                        assert_eq!(again.as_ref(), Ok(&by_flag), "{case}: {shown:?}");
+                    }
+                    (Err(_), Err(_)) => {}
+                    (by_flag, by_name) => panic!(
+                        "{case}: by flag {:?}, by name {:?}",
+                        by_flag.map(|_| "taken"),
+                        by_name.map(|_| "taken")
+                    ),
+                }
+            }
+        }
+    }
 }

@@ -1,16 +1,178 @@
 //! Methods by name and their settings by name-value pairs: what
 //! `radcache bench --methods trc:max_life=2,5,20` and the `settings` of a
 //! job request (`POST /api/jobs`) are turned into, with one error type
-//! that names what is known.
+//! that names what is known; and the range of every setting ([`limits`]),
+//! which `radcache render`'s flags take too.
 
 use crate::cache::gather::Strata;
 use crate::method::ic::{GlossyLobe, IcSettings};
-use crate::method::movies::{MoviesSettings, MAX_SHADOW_SAMPLES};
+use crate::method::movies::MoviesSettings;
 use crate::method::path::PathSettings;
 use crate::method::tcg::TcgSettings;
 use crate::method::trc::{TemporalGradients, TrcSettings};
 use crate::render::MethodSettings;
-use std::ops::Range;
+use std::fmt::Display;
+use std::str::FromStr;
+
+/// The values a number setting may take, both ends included. Each
+/// setting's are in [`limits`], the one place they are set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limits<T> {
+    pub min: T,
+    pub max: T,
+}
+
+impl<T: FromStr + PartialOrd + Display + Copy> Limits<T> {
+    /// `text` as a `T` within the limits; else what was expected
+    /// ("expected 1 to 64"), for the caller to say whose value it was.
+    pub fn parse(&self, text: &str) -> Result<T, String> {
+        let v: T = text
+            .parse()
+            .map_err(|_| format!("expected a number from {} to {}", self.min, self.max))?;
+        // Written so that NaN is outside.
+        if self.min <= v && v <= self.max {
+            Ok(v)
+        } else {
+            Err(format!("expected {} to {}", self.min, self.max))
+        }
+    }
+
+    /// [`Self::parse`] as a clap value parser: a flag's error then names
+    /// the flag, the value and the range.
+    pub fn parser(self) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync + 'static
+    where
+        T: Send + Sync + 'static,
+    {
+        move |text: &str| self.parse(text)
+    }
+}
+
+/// The range of every number setting: **the one place it is set**. The
+/// names ([`method_settings`]: `radcache bench --methods`, `POST
+/// /api/jobs`) and `radcache render`'s flags (`cli::args`) both check
+/// their values against these, so that every value a flag takes can be
+/// posted back by its name (the server has work limits of its own on top:
+/// `server::request`).
+pub mod limits {
+    use super::Limits;
+    use crate::method::movies::MAX_SHADOW_SAMPLES;
+
+    /// Samples per pixel (`spp`, `--spp`; for `ic`, `trc` and `tcg` those
+    /// of direct light and anti-aliasing).
+    pub const SPP: Limits<u32> = Limits {
+        min: 1,
+        max: 1_000_000,
+    };
+    /// Bounces of a pixel's paths (`max_depth`, `--max-depth`) and the
+    /// bounce where Russian roulette starts (`rr_start`): Russian roulette
+    /// ends paths long before 10,000 bounces, so a larger bound is a typo.
+    pub const PATH_DEPTH: Limits<u32> = Limits {
+        min: 0,
+        max: 10_000,
+    };
+    /// Accuracy `a` of the irradiance cache (`accuracy`, `--ic-accuracy`):
+    /// Ward 1988 recommends 0.1–0.3; below 0.001 nearly every pixel is a
+    /// record of its own, and past 2 records reach past anything they saw.
+    pub const ACCURACY: Limits<f32> = Limits {
+        min: 0.001,
+        max: 2.0,
+    };
+    /// Record spacing in pixels (`min_spacing`, `max_spacing`,
+    /// `--ic-min-spacing`, `--ic-max-spacing`): 10⁶ pixels is past any
+    /// image (`render` takes sides up to 16384).
+    pub const SPACING_PX: Limits<f32> = Limits {
+        min: 0.001,
+        max: 1e6,
+    };
+    /// EAS precision τ (`eas_tau`, `--ic-eas-tau`; the paper uses 0.02).
+    pub const EAS_TAU: Limits<f32> = Limits {
+        min: 1e-6,
+        max: 1e6,
+    };
+    /// `trc`'s temporal accuracy `a_t` (`at`, `--trc-at`; the paper uses
+    /// 0.05, and 100000 is how the bench turns the temporal weight off).
+    pub const TEMPORAL_ACCURACY: Limits<f32> = Limits {
+        min: 1e-6,
+        max: 1e6,
+    };
+    /// `trc`'s δt_max in frames (`max_life`, `--trc-max-life`).
+    pub const MAX_LIFE: Limits<u32> = Limits {
+        min: 1,
+        max: 100_000,
+    };
+    /// A share of `tcg`'s Eq. 2 (`tau_min`, `tau_max`, `--tcg-tau-min`,
+    /// `--tcg-tau-max`).
+    pub const SHARE: Limits<f32> = Limits { min: 0.0, max: 1.0 };
+    /// `tcg`'s §4.2 neighbour bound (`max_neighbours`,
+    /// `--tcg-max-neighbours`).
+    pub const MAX_NEIGHBOURS: Limits<u32> = Limits {
+        min: 0,
+        max: 1_000_000,
+    };
+    /// `movies`' shadow samples per texel (`shadow_samples`,
+    /// `--movies-shadow-samples`): what the direct pass holds per texel.
+    pub const SHADOW_SAMPLES: Limits<u32> = Limits {
+        min: 1,
+        max: MAX_SHADOW_SAMPLES,
+    };
+    /// `movies`' texels across a pixel (`texels_per_pixel`,
+    /// `--movies-texels-per-pixel`): past 16 a frame's movies take minutes
+    /// and gigabytes.
+    pub const TEXELS_PER_PIXEL: Limits<f32> = Limits {
+        min: 0.01,
+        max: 16.0,
+    };
+    /// `movies`' finest texture, texels along an edge (`max_resolution`,
+    /// `--movies-max-resolution`).
+    pub const MAX_RESOLUTION: Limits<u32> = Limits { min: 1, max: 1024 };
+    /// `movies`' memory for kept static shadows in MiB (`memory_mib`,
+    /// `--movies-memory-mib`): up to 1 TiB.
+    pub const MEMORY_MIB: Limits<u32> = Limits {
+        min: 0,
+        max: 1_048_576,
+    };
+    /// `movies`' global-pass grid spacing, a fraction of the static
+    /// scene's diagonal (`spacing`, `--movies-spacing`). At 1 every static
+    /// triangle is one cell already; below 0.001 the pass would coarsen
+    /// the grid anyway to keep its links within `global::MAX_LINKS`.
+    pub const GRID_SPACING: Limits<f32> = Limits {
+        min: 0.001,
+        max: 1.0,
+    };
+    /// `movies`' global-pass links of a vertex (`links`, `--movies-links`).
+    pub const LINKS: Limits<u32> = Limits { min: 1, max: 1024 };
+    /// `movies`' global-pass bounces (`bounces`, `--movies-bounces`).
+    pub const BOUNCES: Limits<u32> = Limits { min: 0, max: 64 };
+    /// Most gather rays, and hemisphere cells, of a record (`strata`
+    /// M × N, `--ic-strata`): 64 × 64, the paper's hemisphere (TRC §6),
+    /// times 16. A record keeps a sample of 8 bytes a cell (`tcg` keeps
+    /// them in memory across frames, and the store keeps them all), so a
+    /// record holds at most 512 KiB; each side may be anything from 1 that
+    /// keeps the product within this.
+    pub const MAX_GATHER_RAYS: u32 = 65_536;
+}
+
+/// `text` as `MxN` hemisphere cells of a record (`strata`, `--ic-strata`):
+/// plain decimal sides of at least 1, at most [`limits::MAX_GATHER_RAYS`]
+/// cells in all.
+pub fn parse_strata(text: &str) -> Result<Strata, String> {
+    let not_mxn = || format!("'{text}' is not MxN, e.g. 16x48");
+    let (m, n) = text.split_once('x').ok_or_else(not_mxn)?;
+    // Plain decimal sides of at least 1 (`str::parse` would take a `+`).
+    let side = |v: &str| {
+        let digits = !v.is_empty() && v.bytes().all(|b| b.is_ascii_digit());
+        let v = digits.then(|| v.parse::<u32>().ok()).flatten();
+        v.filter(|&v| v > 0).ok_or_else(not_mxn)
+    };
+    let (m, n) = (side(m)?, side(n)?);
+    let max = limits::MAX_GATHER_RAYS;
+    if u64::from(m) * u64::from(n) > u64::from(max) {
+        return Err(format!(
+            "{m}x{n} cells per record is too many (at most {max})"
+        ));
+    }
+    Ok(Strata { theta: m, phi: n })
+}
 
 /// A method by name, and the settings its name-value pairs may change.
 pub struct MethodInfo {
@@ -141,28 +303,19 @@ fn known_keys(method: &str) -> String {
         .unwrap_or_default()
 }
 
-/// Parses `value` of setting `key` of `method` as a `T` in `range`.
-fn value<T>(method: &str, key: &str, value: &str, range: Range<T>) -> Result<T, MethodError>
+/// Parses `value` of setting `key` of `method` as a `T` within `range`.
+fn value<T>(method: &str, key: &str, value: &str, range: Limits<T>) -> Result<T, MethodError>
 where
-    T: std::str::FromStr + PartialOrd + std::fmt::Display + Copy,
+    T: FromStr + PartialOrd + Display + Copy,
 {
-    let bad = |problem: String| MethodError::BadValue {
-        method: method.into(),
-        key: key.into(),
-        value: value.into(),
-        problem,
-    };
-    let v: T = value
-        .trim()
-        .parse()
-        .map_err(|_| bad("not a number of the right kind".into()))?;
-    if !(range.start <= v && v < range.end) {
-        return Err(bad(format!(
-            "out of range {}..{} (end exclusive)",
-            range.start, range.end
-        )));
-    }
-    Ok(v)
+    range
+        .parse(value.trim())
+        .map_err(|problem| MethodError::BadValue {
+            method: method.into(),
+            key: key.into(),
+            value: value.into(),
+            problem,
+        })
 }
 
 /// Parses the on/off setting `key` of `method`: `1`, `on` or `true`, or
@@ -184,25 +337,21 @@ fn flag(method: &str, key: &str, v: &str) -> Result<bool, MethodError> {
 /// are `ic`'s); `false` when `key` is none of them.
 fn ic_setting(method: &str, key: &str, v: &str, s: &mut IcSettings) -> Result<bool, MethodError> {
     match key {
-        "accuracy" => s.accuracy = value(method, key, v, 0.001..2.001)?,
-        "spp" => s.spp = value(method, key, v, 1..1_000_001)?,
+        "accuracy" => s.accuracy = value(method, key, v, limits::ACCURACY)?,
+        "spp" => s.spp = value(method, key, v, limits::SPP)?,
         "strata" => {
-            let (m, n) = v.split_once('x').ok_or_else(|| MethodError::BadValue {
+            s.strata = parse_strata(v.trim()).map_err(|problem| MethodError::BadValue {
                 method: method.into(),
                 key: key.into(),
                 value: v.into(),
-                problem: "expected MxN, e.g. 16x48".into(),
-            })?;
-            s.strata = Strata {
-                theta: value(method, key, m, 1..1025)?,
-                phi: value(method, key, n, 1..4097)?,
-            };
+                problem,
+            })?
         }
-        "min_spacing" => s.min_spacing_px = value(method, key, v, 0.001..1e6)?,
-        "max_spacing" => s.max_spacing_px = value(method, key, v, 0.001..1e6)?,
+        "min_spacing" => s.min_spacing_px = value(method, key, v, limits::SPACING_PX)?,
+        "max_spacing" => s.max_spacing_px = value(method, key, v, limits::SPACING_PX)?,
         "gradients" => s.gradients = flag(method, key, v)?,
         // The pixel paths' (`render --max-depth`), not the gathers'.
-        "max_depth" => s.length.max_depth = Some(value(method, key, v, 0..10_001)?),
+        "max_depth" => s.length.max_depth = Some(value(method, key, v, limits::PATH_DEPTH)?),
         _ => return Ok(false),
     }
     Ok(true)
@@ -418,9 +567,9 @@ fn path_setting(
     s: &mut PathSettings,
 ) -> Result<bool, MethodError> {
     match key {
-        "spp" => s.spp = value(method, key, v, 1..1_000_001)?,
-        "max_depth" => s.length.max_depth = Some(value(method, key, v, 0..10_001)?),
-        "rr_start" => s.length.rr_start = value(method, key, v, 0..10_001)?,
+        "spp" => s.spp = value(method, key, v, limits::SPP)?,
+        "max_depth" => s.length.max_depth = Some(value(method, key, v, limits::PATH_DEPTH)?),
+        "rr_start" => s.length.rr_start = value(method, key, v, limits::PATH_DEPTH)?,
         _ => return Ok(false),
     }
     Ok(true)
@@ -449,7 +598,7 @@ fn glossy_setting(
                 }
             }
         }
-        "eas_tau" => s.eas_tau = value(method, key, v, 1e-6..1e6)?,
+        "eas_tau" => s.eas_tau = value(method, key, v, limits::EAS_TAU)?,
         _ => return Ok(false),
     }
     Ok(true)
@@ -460,8 +609,8 @@ fn glossy_setting(
 /// temporal ones here); `false` when `key` is none of them.
 fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<bool, MethodError> {
     match key {
-        "at" => s.temporal_accuracy = value(method, key, v, 1e-6..1e6)?,
-        "max_life" => s.max_life = value(method, key, v, 1..100_001)?,
+        "at" => s.temporal_accuracy = value(method, key, v, limits::TEMPORAL_ACCURACY)?,
+        "max_life" => s.max_life = value(method, key, v, limits::MAX_LIFE)?,
         "gradients" => {
             s.gradients = match v.trim() {
                 "none" => TemporalGradients::None,
@@ -495,9 +644,9 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
 /// when `key` is none of them.
 fn tcg_setting(method: &str, key: &str, v: &str, s: &mut TcgSettings) -> Result<bool, MethodError> {
     match key {
-        "tau_min" => s.tau_min = value(method, key, v, 0.0..1.000_001)?,
-        "tau_max" => s.tau_max = value(method, key, v, 0.0..1.000_001)?,
-        "max_neighbours" => s.max_neighbours = value(method, key, v, 0..1_000_001)?,
+        "tau_min" => s.tau_min = value(method, key, v, limits::SHARE)?,
+        "tau_max" => s.tau_max = value(method, key, v, limits::SHARE)?,
+        "max_neighbours" => s.max_neighbours = value(method, key, v, limits::MAX_NEIGHBOURS)?,
         "light_refresh" => s.light_refresh = flag(method, key, v)?,
         _ => {
             return Ok(ic_setting(method, key, v, &mut s.ic)?
@@ -516,15 +665,15 @@ fn movies_setting(
     s: &mut MoviesSettings,
 ) -> Result<bool, MethodError> {
     match key {
-        "spp" => s.spp = value(method, key, v, 1..1_000_001)?,
-        "shadow_samples" => s.shadow_samples = value(method, key, v, 1..MAX_SHADOW_SAMPLES + 1)?,
-        "texels_per_pixel" => s.texels_per_pixel = value(method, key, v, 0.01..16.000_001)?,
-        "max_resolution" => s.max_resolution = value(method, key, v, 1..1025)?,
-        "memory_mib" => s.memory_mib = value(method, key, v, 0..1_048_577)?,
-        "spacing" => s.global.spacing = value(method, key, v, 0.001..1.000_001)?,
-        "links" => s.global.links = value(method, key, v, 1..1025)?,
-        "bounces" => s.global.bounces = value(method, key, v, 0..65)?,
-        "max_depth" => s.length.max_depth = Some(value(method, key, v, 0..10_001)?),
+        "spp" => s.spp = value(method, key, v, limits::SPP)?,
+        "shadow_samples" => s.shadow_samples = value(method, key, v, limits::SHADOW_SAMPLES)?,
+        "texels_per_pixel" => s.texels_per_pixel = value(method, key, v, limits::TEXELS_PER_PIXEL)?,
+        "max_resolution" => s.max_resolution = value(method, key, v, limits::MAX_RESOLUTION)?,
+        "memory_mib" => s.memory_mib = value(method, key, v, limits::MEMORY_MIB)?,
+        "spacing" => s.global.spacing = value(method, key, v, limits::GRID_SPACING)?,
+        "links" => s.global.links = value(method, key, v, limits::LINKS)?,
+        "bounces" => s.global.bounces = value(method, key, v, limits::BOUNCES)?,
+        "max_depth" => s.length.max_depth = Some(value(method, key, v, limits::PATH_DEPTH)?),
         _ => return Ok(false),
     }
     Ok(true)

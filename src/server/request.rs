@@ -2,7 +2,7 @@
 //! library's render settings: the same types `radcache render` builds.
 
 use super::ApiError;
-use crate::method::settings::method_settings;
+use crate::method::settings::{limits, method_settings};
 use crate::render::{self, FrameSettings, MethodSettings, SceneSource};
 use crate::store::schema::JobValue;
 use serde::Deserialize;
@@ -15,9 +15,10 @@ pub const MAX_FRAMES: u32 = 10_000;
 pub const MAX_SIDE: u32 = 4096;
 /// Most samples per pixel.
 pub const MAX_SPP: u32 = 65_536;
-/// Most gather rays per record (`strata` M × N): 64 × 64, the paper's
-/// hemisphere (TRC §6), times 16.
-pub const MAX_GATHER_RAYS: usize = 65_536;
+/// Most gather rays per record (`strata` M × N): the limit of the
+/// setting itself ([`limits::MAX_GATHER_RAYS`]), which `radcache render`
+/// and `bench` hold it to as well.
+pub const MAX_GATHER_RAYS: usize = limits::MAX_GATHER_RAYS as usize;
 /// Most pixel samples per frame (pixels × spp): 4096² at 16 spp, 1024² at
 /// 256. Methods keep per-sample buffers for a frame (`trc` and `tcg` keep
 /// the last frame's camera samples too), so beyond this one frame's memory
@@ -174,21 +175,15 @@ fn parse_method(
     Ok(method)
 }
 
-/// A job's samples per pixel and gather rays per record within the
-/// server's limits (the bench's ranges allow far more).
+/// A job's samples per pixel within the server's limit (the setting's
+/// range, [`limits::SPP`], allows far more). Its gather rays a record need
+/// no check here: [`MAX_GATHER_RAYS`] is the setting's own limit, which
+/// the names hold it to.
 fn check_work_limits(method: &MethodSettings) -> Result<(), ApiError> {
     let spp = method.spp();
     if spp > MAX_SPP {
         return Err(ApiError::bad_request(format!(
             "spp {spp} is out of range (1..={MAX_SPP})"
-        )));
-    }
-    if let Some(strata) = gather_strata(method).filter(|s| s.count() > MAX_GATHER_RAYS) {
-        return Err(ApiError::bad_request(format!(
-            "strata {}x{} is {} gather rays a record; at most {MAX_GATHER_RAYS}",
-            strata.theta,
-            strata.phi,
-            strata.count()
         )));
     }
     Ok(())

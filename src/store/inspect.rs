@@ -49,6 +49,10 @@ pub struct JobReport {
     pub scene: String,
     pub scene_hash: String,
     pub method: String,
+    /// The method's settings as the store holds them (serde JSON). In
+    /// JSON, an object of every setting by the names `POST /api/jobs`
+    /// takes and a served job shows (`settings_by_name`).
+    #[serde(serialize_with = "settings_by_name")]
     pub settings: String,
     pub size: String,
     pub spp: u32,
@@ -551,6 +555,27 @@ fn settings_text(method: &str, stored: &str) -> String {
     }
 }
 
+/// Stored settings `stored` as JSON: an object of every setting by name
+/// ([`named_settings`](crate::method::settings::named_settings)), as a
+/// served job shows them and `POST /api/jobs` takes them back, read as this
+/// build reads them (a setting added since, at the value the job ran).
+/// Where they cannot be read so, the stored JSON without its method tag,
+/// or the stored text where that is no JSON: never JSON inside a string
+/// that is JSON.
+fn settings_by_name<S: serde::Serializer>(stored: &str, out: S) -> Result<S::Ok, S::Error> {
+    use crate::method::settings::{named_settings, untagged};
+    use crate::render::MethodSettings;
+    use serde::Serialize as _;
+    let read_now = super::jobs::settings_as_read_now(stored);
+    if let Ok(settings) = serde_json::from_str::<MethodSettings>(&read_now) {
+        return named_settings(&settings).serialize(out);
+    }
+    match serde_json::from_str::<serde_json::Value>(stored) {
+        Ok(v) => untagged(v).serialize(out),
+        Err(_) => out.serialize_str(stored),
+    }
+}
+
 /// The leaves of `v` by dotted path from `prefix`.
 fn flatten(v: serde_json::Value, prefix: String, out: &mut BTreeMap<String, serde_json::Value>) {
     match v {
@@ -804,5 +829,59 @@ mod tests {
         assert_eq!(settings_text("trc", &other), other);
         assert_eq!(settings_text("nope", &changed), changed);
         assert_eq!(settings_text("trc", "{not json"), "{not json");
+    }
+
+    /// A job's `settings` in `inspect --json` are an object of every
+    /// setting by name, which the names take back to the same settings; not
+    /// their JSON text in a string. Settings this build cannot read are the
+    /// stored JSON (untagged), or the stored text where that is no JSON.
+    #[test]
+    fn json_settings_are_an_object_by_name() {
+        use crate::store::schema::{JobSpec, JobValue};
+        let as_json = |settings: String| {
+            let job = JobValue {
+                id: 1,
+                spec: JobSpec {
+                    name: "j".into(),
+                    scene: "builtin:cube-in-box".into(),
+                    scene_hash: "0".into(),
+                    method: "trc".into(),
+                    settings,
+                    width: 8,
+                    height: 8,
+                    spp: 4,
+                    fps: 24.0,
+                    seed: 0,
+                    same_pattern: false,
+                    frame_start: 0,
+                    frame_end: 2,
+                },
+                frames_done: 0,
+                last_frame: None,
+                created_unix: 0,
+                updated_unix: 0,
+            };
+            serde_json::to_value(super::JobReport::of(&job)).unwrap()["settings"].clone()
+        };
+        let changes = [("at", "0.1"), ("accuracy", "0.3"), ("strata", "8x24")];
+        let shown = as_json(stored("trc", &changes));
+        let object = shown.as_object().expect("an object");
+        assert_eq!(shown["at"].to_string(), "0.1", "{shown}");
+        assert_eq!(shown["accuracy"].to_string(), "0.3", "{shown}");
+        assert_eq!(shown["strata"], "8x24", "{shown}");
+        assert_eq!(shown["keep_paths"], true, "{shown}");
+        let text = |v: &serde_json::Value| match v {
+            serde_json::Value::String(s) => s.clone(),
+            v => v.to_string(),
+        };
+        let pairs: Vec<(String, String)> =
+            object.iter().map(|(k, v)| (k.clone(), text(v))).collect();
+        let again = method_settings("trc", pairs.iter().map(|(k, v)| (&k[..], &v[..])));
+        assert_eq!(again, method_settings("trc", changes));
+        assert_eq!(
+            as_json(r#"{"Radiosity":{"patches":4}}"#.into()),
+            serde_json::json!({"patches": 4})
+        );
+        assert_eq!(as_json("{not json".into()), "{not json");
     }
 }

@@ -127,7 +127,7 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
         .collect();
 
     let nodes = build_nodes(&gnodes, &hierarchy)?;
-    let mut materials = materials::build_materials(&document)?;
+    let mut materials = materials::build_materials(&document, path)?;
     let objects = mesh::build_objects(&gnodes, &hierarchy, &buffers, &mut materials)?;
     let lights = lights::build_lights(&gnodes)?;
     let camera = find_camera(&gnodes)?;
