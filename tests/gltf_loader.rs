@@ -1338,6 +1338,93 @@ fn buffer_uris_are_decoded_and_read_only_from_regular_files() {
     }
 }
 
+/// Loading confined to a directory (as `radcache serve --scenes DIR`
+/// does) reads buffers inside it only: `..`, an absolute path, a link to a
+/// file or a folder outside, and the scene file itself outside are refused
+/// naming the URI; a buffer in a subdirectory, a `data:` URI and a missing
+/// file inside (reported missing) behave as unconfined. Unconfined (the
+/// command line), a buffer outside loads as before; the scene's hash reads
+/// the same files under the same confinement.
+#[test]
+fn a_confined_load_reads_files_inside_its_directory_only() {
+    use radcache::render::{scene_identity, scene_identity_confined, SceneSource};
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("scenes");
+    std::fs::create_dir_all(root.join("bins")).unwrap();
+    std::fs::write(dir.path().join("outside.bin"), good_bin().unwrap()).unwrap();
+    std::fs::write(root.join("bins/inside.bin"), good_bin().unwrap()).unwrap();
+    std::os::unix::fs::symlink(dir.path().join("outside.bin"), root.join("link.bin")).unwrap();
+    std::os::unix::fs::symlink(dir.path(), root.join("up")).unwrap();
+    let with_uri = |name: &str, uri: &str| {
+        let uri = uri.to_string();
+        write_case(
+            &root,
+            name,
+            move |d| d["buffers"][0]["uri"] = json!(uri),
+            None,
+        )
+    };
+    let absolute = dir.path().join("outside.bin").display().to_string();
+    for (name, uri) in [
+        ("parent", "../outside.bin"),
+        ("absolute", absolute.as_str()),
+        ("file_uri", &format!("file://{absolute}")),
+        ("linked", "link.bin"),
+        ("through", "up/outside.bin"),
+        ("escaped", "%2E%2E/outside.bin"),
+    ] {
+        let path = with_uri(name, uri);
+        let err = Scene::load_confined(&path, Some(&root))
+            .map(drop)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(&format!("buffer 0: URI '{uri}' names no file inside")),
+            "{uri}: {err}"
+        );
+        let source = SceneSource::File(path.clone());
+        let err = scene_identity_confined(&source, Some(&root)).unwrap_err();
+        assert!(err.to_string().contains(&format!("URI '{uri}'")), "{err}");
+        // The command line reads what the user's file names.
+        Scene::load(&path).unwrap_or_else(|e| panic!("{uri}: {e}"));
+        scene_identity(&source).unwrap();
+    }
+    for (name, uri) in [
+        ("sub", "bins/inside.bin".to_string()),
+        ("sub_dotted", "bins/../bins/inside.bin".to_string()),
+        (
+            "embedded",
+            format!(
+                "data:application/octet-stream;base64,{}",
+                base64_like::encode(&good_bin().unwrap())
+            ),
+        ),
+    ] {
+        let path = with_uri(name, &uri);
+        let scene = Scene::load_confined(&path, Some(&root)).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(scene.objects[0].mesh.triangles, [[0, 1, 2]], "{uri}");
+        scene_identity_confined(&SceneSource::File(path), Some(&root)).unwrap();
+    }
+    let err = Scene::load_confined(&with_uri("gone", "bins/gone.bin"), Some(&root))
+        .map(drop)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("missing buffer file"), "{err}");
+    // The scene file itself, outside the directory or linked out of it.
+    let elsewhere = write_case(dir.path(), "elsewhere", |_| {}, good_bin());
+    std::os::unix::fs::symlink(&elsewhere, root.join("elsewhere.gltf")).unwrap();
+    Scene::load(&elsewhere).unwrap();
+    for path in [elsewhere, root.join("elsewhere.gltf")] {
+        let err = Scene::load_confined(&path, Some(&root))
+            .map(drop)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("not inside the directory"), "{err}");
+        let source = SceneSource::File(path);
+        assert!(scene_identity_confined(&source, Some(&root)).is_err());
+    }
+}
+
 /// A triangle repeated (the same corners in the same winding, whichever
 /// corner comes first) is kept once; the one facing the other way stays.
 /// 20,000 copies load into two triangles (the BVH builder took time

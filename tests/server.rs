@@ -563,6 +563,120 @@ fn create_job_behind(server: &Server, first: &str, then: &str) -> String {
     create_job(server, then)
 }
 
+/// A job's state once it is no longer queued or running.
+fn wait_ended(server: &Server, id: &str) -> serde_json::Value {
+    let start = Instant::now();
+    loop {
+        let job = job_state(server, id);
+        if !matches!(job["state"].as_str(), Some("queued" | "running")) {
+            return job;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "job not ended: {job}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// A scene under `--scenes` reads its files there only: a buffer (or an
+/// image, which the scene's hash reads) named `../outside.bin`, by an
+/// absolute path, or through a symbolic link out of the directory (a file
+/// or a folder) is a 400 naming the scene and the URI, not the directory's
+/// path; a buffer in a subdirectory loads and renders. The worker loads
+/// the job confined too: a buffer turned into a link out of the directory
+/// after the job was accepted fails the job, naming the URI.
+#[test]
+fn scene_files_are_read_only_inside_the_scenes_directory() {
+    let (dir, scenes) = workspace();
+    let server = start(&dir.path().join("db"), &scenes);
+    let glb = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/scenes/cube_in_box.glb"
+    ))
+    .unwrap();
+    let glb = gltf::binary::Glb::from_slice(&glb).unwrap();
+    let bin = glb.bin.as_deref().unwrap().to_vec();
+    let doc: serde_json::Value = serde_json::from_slice(&glb.json).unwrap();
+    let write_scene = |name: &str, edit: &dyn Fn(&mut serde_json::Value)| {
+        let mut doc = doc.clone();
+        edit(&mut doc);
+        std::fs::write(scenes.join(name), serde_json::to_vec(&doc).unwrap()).unwrap();
+    };
+    let outside = dir.path().join("outside.bin");
+    std::fs::write(&outside, &bin).unwrap();
+    std::fs::create_dir(scenes.join("bins")).unwrap();
+    std::fs::write(scenes.join("bins/inside.bin"), &bin).unwrap();
+    std::os::unix::fs::symlink(&outside, scenes.join("link.bin")).unwrap();
+    std::os::unix::fs::symlink(dir.path(), scenes.join("out")).unwrap();
+    let job = |scene: &str| {
+        format!(r#"{{"scene":"{scene}","method":"path","frames":"0..1","size":"8x8","spp":1}}"#)
+    };
+    let absolute = outside.display().to_string();
+    for (scene, uri) in [
+        ("up.gltf", "../outside.bin"),
+        ("absolute.gltf", absolute.as_str()),
+        ("linked.gltf", "link.bin"),
+        ("through.gltf", "out/outside.bin"),
+        ("missing.gltf", "../no-such.bin"),
+    ] {
+        write_scene(scene, &|d| d["buffers"][0]["uri"] = serde_json::json!(uri));
+        let (status, resp) = http(&server, "POST", "/api/jobs", &job(scene));
+        assert_eq!(status, 400, "{scene}: {}", String::from_utf8_lossy(&resp));
+        let detail = json(&resp)["detail"].as_str().unwrap().to_string();
+        assert!(detail.starts_with(&format!("scene {scene}: ")), "{detail}");
+        assert!(detail.contains(&format!("URI '{uri}'")), "{detail}");
+        if uri != absolute {
+            assert!(
+                !detail.contains(&dir.path().display().to_string()),
+                "{detail}"
+            );
+        }
+    }
+    // An image outside: the loader ignores it, the scene's hash reads it.
+    write_scene("image.gltf", &|d| {
+        d["buffers"][0]["uri"] = serde_json::json!("bins/inside.bin");
+        d["images"] = serde_json::json!([{ "uri": "../outside.bin" }]);
+    });
+    let (status, resp) = http(&server, "POST", "/api/jobs", &job("image.gltf"));
+    assert_eq!(status, 400, "{}", String::from_utf8_lossy(&resp));
+    let detail = json(&resp)["detail"].as_str().unwrap().to_string();
+    assert!(detail.contains("URI '../outside.bin'"), "{detail}");
+    assert!(
+        !detail.contains(&dir.path().display().to_string()),
+        "{detail}"
+    );
+    let (_, body) = http(&server, "GET", "/api/jobs", "");
+    assert_eq!(json(&body).as_array().map(Vec::len), Some(0));
+    // Inside, in a subdirectory: accepted and rendered.
+    write_scene("sub.gltf", &|d| {
+        d["buffers"][0]["uri"] = serde_json::json!("bins/inside.bin")
+    });
+    let id = create_job(&server, &job("sub.gltf"));
+    assert_eq!(wait_done(&server, &id)["scene"], "sub.gltf");
+    // Accepted, then its buffer becomes a link out before the worker
+    // loads it.
+    std::fs::write(scenes.join("bins/later.bin"), &bin).unwrap();
+    write_scene("later.gltf", &|d| {
+        d["buffers"][0]["uri"] = serde_json::json!("bins/later.bin")
+    });
+    let long = r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..10000","size":"64x64","spp":4}"#;
+    let first = create_job(&server, long);
+    let later = create_job(&server, &job("later.gltf"));
+    std::fs::remove_file(scenes.join("bins/later.bin")).unwrap();
+    std::os::unix::fs::symlink(&outside, scenes.join("bins/later.bin")).unwrap();
+    let (status, _) = http(&server, "POST", &format!("/api/jobs/{first}/cancel"), "");
+    assert_eq!(status, 200);
+    let ended = wait_ended(&server, &later);
+    assert_eq!(ended["state"], "failed", "{ended}");
+    let error = ended["error"].as_str().unwrap();
+    assert!(error.contains("URI 'bins/later.bin'"), "{error}");
+    assert!(
+        !error.contains(&dir.path().display().to_string()),
+        "{error}"
+    );
+}
+
 /// The parts of a `multipart/x-mixed-replace` body: (X-Frame, bytes).
 fn multipart_parts(head: &str, body: &[u8]) -> Vec<(u32, Vec<u8>)> {
     let ct = head

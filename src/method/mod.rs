@@ -134,7 +134,11 @@ pub struct FrameStats {
     /// the frame's records with what they keep (sources, samples, temporal
     /// state) and their spatial index, with the pixel samples `trc` and
     /// `tcg` keep for the next frame's render pass, or the open texture
-    /// movies (`movies`). 0 for `path`, which keeps none.
+    /// movies and the global pass's solution (`movies`), with the peak of
+    /// the working buffers that pass makes each frame beside it (it keeps
+    /// its links across frames, and tracing them all again takes about one
+    /// and a half times their bytes more: `GlobalPass::working_bytes`). 0
+    /// for `path`, which keeps none.
     pub cache_bytes: u64,
     /// Rays traced in the frame (filled in by the renderer).
     pub rays: u64,

@@ -29,11 +29,28 @@ pub struct StoreJob<'a> {
 /// file order, each with its URI) when it references any, so that editing a
 /// `.bin` or a texture next to a `.gltf` changes the hash too.
 pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
+    scene_identity_confined(source, None)
+}
+
+/// [`scene_identity`], the external files read only inside `root` when it
+/// is given, as [`SceneSource::load_confined`] reads them (a URI that leads
+/// out is an error naming it).
+pub fn scene_identity_confined(
+    source: &SceneSource,
+    root: Option<&Path>,
+) -> Result<(String, String)> {
     let hash = match source {
         SceneSource::Builtin(_) => crate::hash::content_hash(source.to_string().as_bytes()),
         SceneSource::File(path) => {
-            let bytes = gltf_loader::read_regular_file(path, None)
-                .map_err(|e| anyhow::anyhow!("cannot read scene {}: {e}", path.display()))?;
+            let cannot_read =
+                |e: String| anyhow::anyhow!("cannot read scene {}: {e}", path.display());
+            let file = match root {
+                None => path.clone(),
+                Some(root) => gltf_loader::confined_file(path, root).ok_or_else(|| {
+                    cannot_read("not inside the directory it is confined to".to_string())
+                })?,
+            };
+            let bytes = gltf_loader::read_regular_file(&file, None).map_err(cannot_read)?;
             let main = crate::hash::content_hash(&bytes);
             let uris = external_uris(&bytes);
             if uris.is_empty() {
@@ -45,7 +62,7 @@ pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
                     let cannot = |what: String| {
                         anyhow::anyhow!("{what} (referenced by scene {})", path.display())
                     };
-                    let file = gltf_loader::uri_file(dir, &uri).map_err(cannot)?;
+                    let file = gltf_loader::confined_uri_file(dir, &uri, root).map_err(cannot)?;
                     let content = gltf_loader::read_regular_file(&file, declared)
                         .map_err(|e| cannot(format!("cannot read {}: {e}", file.display())))?;
                     all.extend_from_slice(uri.as_bytes());
@@ -94,7 +111,20 @@ pub fn job_spec(
     settings: &FrameSettings,
     frames: Range<u32>,
 ) -> Result<JobSpec> {
-    let (scene, scene_hash) = scene_identity(source)?;
+    job_spec_confined(name, source, None, method, settings, frames)
+}
+
+/// [`job_spec`], the scene's external files hashed only inside `root` when
+/// it is given ([`scene_identity_confined`]).
+pub fn job_spec_confined(
+    name: &str,
+    source: &SceneSource,
+    root: Option<&Path>,
+    method: &MethodSettings,
+    settings: &FrameSettings,
+    frames: Range<u32>,
+) -> Result<JobSpec> {
+    let (scene, scene_hash) = scene_identity_confined(source, root)?;
     Ok(JobSpec {
         name: name.to_string(),
         scene,

@@ -26,7 +26,7 @@ use std::time::{Duration, Instant};
 
 mod job;
 
-pub use job::{job_spec, scene_identity, StoreJob};
+pub use job::{job_spec, job_spec_confined, scene_identity, scene_identity_confined, StoreJob};
 use job::{resume, store_frame};
 
 /// Where a scene comes from.
@@ -37,10 +37,18 @@ pub enum SceneSource {
 }
 
 impl SceneSource {
+    /// The scene, a file's read with every file its URIs name wherever
+    /// they are (the command line's).
     pub fn load(&self) -> Result<Scene, SceneError> {
+        self.load_confined(None)
+    }
+
+    /// The scene; a file and the files its URIs name read only inside
+    /// `root` when it is given (`radcache serve --scenes DIR`).
+    pub fn load_confined(&self, root: Option<&Path>) -> Result<Scene, SceneError> {
         match self {
             SceneSource::Builtin(name) => Scene::builtin(name),
-            SceneSource::File(path) => Scene::load(path),
+            SceneSource::File(path) => Scene::load_confined(path, root),
         }
     }
 }

@@ -422,6 +422,13 @@ impl Scene {
         }
     }
 
+    /// Loads a scene from a `.gltf`/`.glb` file that, with every file its
+    /// URIs name, must lie inside `root` when it is given
+    /// ([`gltf_loader::load_confined`]).
+    pub fn load_confined(path: &Path, root: Option<&Path>) -> Result<Scene, SceneError> {
+        gltf_loader::load_confined(path, root)
+    }
+
     /// A built-in scene by name (see [`builtin::NAMES`]).
     pub fn builtin(name: &str) -> Result<Scene, SceneError> {
         builtin::build(name)

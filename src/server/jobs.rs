@@ -75,7 +75,15 @@ fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<Strin
     let id = format!("job-{n}");
     state.store.set_served_jobs_high(n)?;
     let r = &request;
-    let spec = crate::render::job_spec(&id, &r.scene, &r.method, &r.settings, r.frames.clone())?;
+    let root = state.scene_root(&r.scene);
+    let spec = crate::render::job_spec_confined(
+        &id,
+        &r.scene,
+        root.as_deref(),
+        &r.method,
+        &r.settings,
+        r.frames.clone(),
+    )?;
     state.store.begin_job(&spec, false)?;
     state.jobs.lock().expect("job table lock").insert(
         JobKey::Served(n),
@@ -85,21 +93,29 @@ fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<Strin
     Ok(id)
 }
 
-/// A scene file is loaded once at submission, so that a malformed one is
-/// a 400 now rather than a failed job later (built-in scenes always load).
+/// A scene file is loaded and hashed once at submission, as the worker
+/// will, confined to the scenes directory ([`AppState::scene_root`]), so
+/// that a malformed one, or one whose buffers or images lie outside the
+/// directory, is a 400 now rather than a failed job later (built-in scenes
+/// always load).
 async fn check_scene_loads(state: &AppState, request: &JobRequest) -> Result<(), ApiError> {
     if matches!(request.scene, SceneSource::Builtin(_)) {
         return Ok(());
     }
     let scene = request.scene.clone();
-    let loaded = tokio::task::spawn_blocking(move || scene.load().map(drop))
-        .await
-        .map_err(ApiError::internal)?;
+    let root = state.scene_root(&scene);
+    let loaded = tokio::task::spawn_blocking(move || -> anyhow::Result<()> {
+        scene.load_confined(root.as_deref())?;
+        crate::render::scene_identity_confined(&scene, root.as_deref())?;
+        Ok(())
+    })
+    .await
+    .map_err(ApiError::internal)?;
     loaded.map_err(|e| {
         ApiError::bad_request(format!(
             "scene {}: {}",
             state.scene_name(&request.scene),
-            state.without_scenes_dir(&e.to_string())
+            state.without_scenes_dir(&format!("{e:#}"))
         ))
     })
 }

@@ -308,6 +308,20 @@ impl AppState {
         }
     }
 
+    /// The directory a job's scene must read its files in: the `--scenes`
+    /// directory, for a scene file inside it (every job request's, as
+    /// [`JobRequest::parse`] resolves them; a job of `radcache render`
+    /// whose file lies elsewhere reads where its file points, as there).
+    /// Neither the scene's buffers nor the images hashed with it may then
+    /// lie outside it, `..`, absolute paths and symbolic links included.
+    pub fn scene_root(&self, scene: &SceneSource) -> Option<PathBuf> {
+        let root = self.scenes_root()?;
+        match scene {
+            SceneSource::File(path) if path.starts_with(&root) => Some(root),
+            _ => None,
+        }
+    }
+
     /// The `--scenes` directory as job requests resolve it (canonical).
     fn scenes_root(&self) -> Option<PathBuf> {
         self.options.scenes.as_ref()?.canonicalize().ok()

@@ -71,7 +71,8 @@ pub(super) fn scene(
     }
     // A job of `radcache render` names its scene file as that command was
     // given it, relative to where it ran: the server may not find it.
-    let scene = Arc::new(source.load().map_err(|e| {
+    let root = state.scene_root(source);
+    let scene = Arc::new(source.load_confined(root.as_deref()).map_err(|e| {
         ApiError::conflict(format!(
             "the records' screen positions need the job's scene, which the server \
              cannot load: {e:#} (a relative path is taken from the server's working \

@@ -107,11 +107,13 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
         .job(id)
         .map_err(|e| anyhow::anyhow!("{}", e.detail))?
         .request;
-    let scene = request.scene.load()?;
+    let root = state.scene_root(&request.scene);
+    let scene = request.scene.load_confined(root.as_deref())?;
     let backend = render::make_backend(state.options.backend)?;
-    let spec = render::job_spec(
+    let spec = render::job_spec_confined(
         id,
         &request.scene,
+        root.as_deref(),
         &request.method,
         &request.settings,
         request.frames.clone(),

@@ -289,11 +289,53 @@ pub struct GlobalPass {
     rows: Vec<Vec<(u32, f32)>>,
     /// Links traced in the last frame.
     pub traced_links: u64,
+    /// The most bytes the last frame's working buffers held at once
+    /// ([`GlobalPass::working_bytes`]).
+    working_bytes: usize,
+}
+
+/// The bytes of the buffers a pass makes for one frame and lets go by its
+/// end, counted as they are made and let go: how many are held, and the
+/// most held at once. Each is counted by its length, as
+/// [`GlobalPass::memory_bytes`] counts what the pass keeps.
+#[derive(Debug, Default)]
+struct Working {
+    held: usize,
+    peak: usize,
+}
+
+impl Working {
+    fn hold<T>(&mut self, buffer: &[T]) {
+        self.hold_bytes(std::mem::size_of_val(buffer));
+    }
+
+    fn hold_bytes(&mut self, bytes: usize) {
+        self.held += bytes;
+        self.peak = self.peak.max(self.held);
+    }
+
+    fn release<T>(&mut self, buffer: &[T]) {
+        self.release_bytes(std::mem::size_of_val(buffer));
+    }
+
+    fn release_bytes(&mut self, bytes: usize) {
+        debug_assert!(bytes <= self.held, "released more than was held");
+        self.held = self.held.saturating_sub(bytes);
+    }
+}
+
+/// Bytes of transport rows: the list and each row.
+fn rows_bytes(rows: &[Vec<(u32, f32)>]) -> usize {
+    std::mem::size_of_val(rows)
+        + rows
+            .iter()
+            .map(|r| std::mem::size_of_val(&r[..]))
+            .sum::<usize>()
 }
 
 impl GlobalPass {
-    /// Bytes it holds: its mesh of vertices, their links, static shadows
-    /// and last solution.
+    /// Bytes it holds from frame to frame: its mesh of vertices, their
+    /// links, static shadows and last solution, and transport rows.
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + std::mem::size_of_val(&self.grids[..])
@@ -303,12 +345,21 @@ impl GlobalPass {
             + self.shadows.bytes()
             + std::mem::size_of_val(&self.indirect[..])
             + std::mem::size_of_val(&self.valid[..])
-            + std::mem::size_of_val(&self.rows[..])
-            + self
-                .rows
-                .iter()
-                .map(|r| std::mem::size_of_val(&r[..]))
-                .sum::<usize>()
+            + rows_bytes(&self.rows)
+    }
+
+    /// The most bytes held at once, beside [`memory_bytes`](Self::memory_bytes),
+    /// by the buffers the last [`update`](Self::update) made and let go:
+    /// a shading point per vertex, the links to trace again with their
+    /// rays and hits, the vertices' direct light, and the solution's
+    /// iterates and rows built again. On a frame that traces every link
+    /// (the first) this is about one and a half times the links' own
+    /// bytes (a stale entry, a drawn ray, then its index and ray, as they
+    /// are unzipped). The shadow
+    /// rays of the direct light, made and traced a bounded batch at a time,
+    /// are left out.
+    pub fn working_bytes(&self) -> usize {
+        self.working_bytes
     }
 
     /// The mesh of the snapshot of `ctx`. Grid sizes come from the static
@@ -381,6 +432,7 @@ impl GlobalPass {
             valid: vec![true; count],
             rows: Vec::new(),
             traced_links: 0,
+            working_bytes: 0,
         }
         .with_links(link_count as usize)
     }
@@ -410,6 +462,10 @@ impl GlobalPass {
         self.vertices.len()
     }
 
+    pub fn link_count(&self) -> usize {
+        self.links.len()
+    }
+
     /// Per vertex, the indirect irradiance of the last solution.
     pub fn indirect(&self) -> &[Vec3] {
         &self.indirect
@@ -437,16 +493,21 @@ impl GlobalPass {
     /// The frame of `ctx`: links traced again where motion may have
     /// changed them, the direct light at the vertices, and the radiosity
     /// solved. Returns the shadow rays traced.
+    /// Its working buffers' peak is then [`working_bytes`](Self::working_bytes).
     pub fn update(&mut self, ctx: &FrameContext, blockers: &Blockers, first: bool) -> u64 {
+        let mut working = Working::default();
         let points = self.points(ctx);
-        let retraced = self.retrace_links(ctx, blockers, &points, first);
+        working.hold(&points);
+        let retraced = self.retrace_links(ctx, blockers, &points, first, &mut working);
         let moving: Vec<bool> = self
             .vertices
             .iter()
             .map(|v| blockers.is_moving_triangle(v.triangle))
             .collect();
-        let (direct, shadow_rays) = self.direct(ctx, blockers, &points, &moving);
-        self.solve(ctx, &direct, &retraced);
+        working.hold(&moving);
+        let (direct, shadow_rays) = self.direct(ctx, blockers, &points, &moving, &mut working);
+        self.solve(ctx, &direct, &retraced, &mut working);
+        self.working_bytes = working.peak;
         shadow_rays
     }
 
@@ -485,13 +546,15 @@ impl GlobalPass {
     }
 
     /// Traces the links that motion may have changed (all of them the
-    /// first time). Returns, per vertex, whether any of its links was.
+    /// first time). Returns, per vertex, whether any of its links was
+    /// (held in `working` until the frame's end).
     fn retrace_links(
         &mut self,
         ctx: &FrameContext,
         blockers: &Blockers,
         points: &[ShadePoint],
         first: bool,
+        working: &mut Working,
     ) -> Vec<bool> {
         let far = 2.0 * scene_diagonal(ctx);
         // Which links motion may have changed: only their segments are
@@ -515,7 +578,9 @@ impl GlobalPass {
                 })
             })
             .collect();
+        working.hold(&stale);
         let mut retraced = vec![false; self.vertices.len()];
+        working.hold(&retraced);
         for &(_, i, _) in &stale {
             retraced[i as usize] = true;
         }
@@ -523,6 +588,8 @@ impl GlobalPass {
             .par_iter()
             .map(|&(index, i, k)| (index, Self::link_ray(ctx, &points[i as usize], k)))
             .collect();
+        working.hold(&rays);
+        let drawn_bytes = std::mem::size_of_val(&rays[..]);
         for (index, ray) in &rays {
             if ray.is_none() {
                 let link = &mut self.links[*index];
@@ -536,11 +603,20 @@ impl GlobalPass {
             .into_iter()
             .filter_map(|(index, ray)| ray.map(|r| (index, r)))
             .unzip();
+        working.hold(&indices);
+        working.hold(&rays);
+        working.release_bytes(drawn_bytes);
         let mut hits = vec![Hit::MISS; rays.len()];
+        working.hold(&hits);
         let batch = ctx.backend.preferred_batch().max(1);
         rays.par_chunks(batch)
             .zip(hits.par_chunks_mut(batch))
             .for_each(|(r, h)| ctx.backend.closest_hit(r, h));
+        // Let go of as this function returns (nothing is held after).
+        working.release(&stale);
+        working.release(&indices);
+        working.release(&rays);
+        working.release(&hits);
         for ((index, ray), hit) in indices.iter().zip(&rays).zip(hits) {
             let front = hit.is_hit()
                 && ctx.snapshot.triangles[hit.triangle as usize]
@@ -568,26 +644,49 @@ impl GlobalPass {
     }
 
     /// Direct irradiance at every vertex (static shadows kept for the
-    /// vertices that do not move).
+    /// vertices that do not move), held in `working` until the frame's
+    /// end.
     fn direct(
         &mut self,
         ctx: &FrameContext,
         blockers: &Blockers,
         points: &[ShadePoint],
         moving: &[bool],
+        working: &mut Working,
     ) -> (Vec<Vec3>, u64) {
         let (still, moved): (Vec<usize>, Vec<usize>) = (0..points.len()).partition(|&i| !moving[i]);
-        let pick = |set: &[usize]| set.iter().map(|&i| points[i]).collect::<Vec<_>>();
+        working.hold(&still);
+        working.hold(&moved);
+        // Each set's points, held while their light is found.
+        let pick = |set: &[usize], working: &mut Working| {
+            let picked: Vec<ShadePoint> = set.iter().map(|&i| points[i]).collect();
+            working.hold(&picked);
+            picked
+        };
         let samples = self.settings.shadow_samples;
+        let still_points = pick(&still, working);
         let (e_still, c_still) = direct_irradiance(
             ctx,
             blockers,
-            &pick(&still),
+            &still_points,
             samples,
             Some(&mut self.shadows),
         );
-        let (e_moved, c_moved) = direct_irradiance(ctx, blockers, &pick(&moved), samples, None);
+        working.hold(&e_still);
+        working.release(&still_points);
+        drop(still_points);
+        let moved_points = pick(&moved, working);
+        let (e_moved, c_moved) = direct_irradiance(ctx, blockers, &moved_points, samples, None);
+        working.hold(&e_moved);
+        working.release(&moved_points);
+        drop(moved_points);
         let mut direct = vec![Vec3::ZERO; points.len()];
+        working.hold(&direct);
+        // Let go of as this function returns (nothing is held after).
+        working.release(&still);
+        working.release(&moved);
+        working.release(&e_still);
+        working.release(&e_moved);
         for (i, e) in still
             .into_iter()
             .zip(e_still)
@@ -605,7 +704,13 @@ impl GlobalPass {
     /// emission gathers nothing: emitted light is the direct light,
     /// counted once. `retraced` marks the vertices whose links were traced
     /// again this frame.
-    fn solve(&mut self, ctx: &FrameContext, direct: &[Vec3], retraced: &[bool]) {
+    fn solve(
+        &mut self,
+        ctx: &FrameContext,
+        direct: &[Vec3],
+        retraced: &[bool],
+        working: &mut Working,
+    ) {
         let albedo: Vec<Vec3> = self
             .vertices
             .iter()
@@ -618,6 +723,7 @@ impl GlobalPass {
                 (m.diffuse + m.specular).min(Vec3::ONE)
             })
             .collect();
+        working.hold(&albedo);
         let radiance_of = |indirect: &[Vec3]| -> Vec<Vec3> {
             albedo
                 .iter()
@@ -626,10 +732,12 @@ impl GlobalPass {
                 .map(|((&rho, &d), &i)| rho * FRAC_1_PI * (d + i))
                 .collect()
         };
-        self.update_rows(retraced);
+        self.update_rows(retraced, working);
         let mut indirect = vec![Vec3::ZERO; self.vertices.len()];
+        working.hold(&indirect);
         for _ in 0..self.settings.bounces {
             let b = radiance_of(&indirect);
+            working.hold(&b);
             let next: Vec<Vec3> = self
                 .rows
                 .par_iter()
@@ -638,12 +746,18 @@ impl GlobalPass {
                         .fold(Vec3::ZERO, |acc, &(j, w)| acc + b[j as usize] * w)
                 })
                 .collect();
+            working.hold(&next);
+            working.release(&indirect);
+            working.release(&b);
             let converged = converged(&indirect, &next);
             indirect = next;
             if converged {
                 break;
             }
         }
+        // Kept: counted by `memory_bytes` from here.
+        working.release(&indirect);
+        working.release(&albedo);
         self.indirect = indirect;
     }
 
@@ -653,16 +767,21 @@ impl GlobalPass {
     /// whose flag changed. Each row kept is then the one [`GlobalPass::row`]
     /// would build, so the solution is the same as with every row built
     /// again (`kept_rows_equal_rows_built_again` checks it).
-    fn update_rows(&mut self, retraced: &[bool]) {
+    fn update_rows(&mut self, retraced: &[bool], working: &mut Working) {
         let valid: Vec<bool> = self
             .vertices
             .par_iter()
             .map(|v| self.in_open_space(v))
             .collect();
+        working.hold(&valid);
         let flipped: Vec<bool> = valid.iter().zip(&self.valid).map(|(a, b)| a != b).collect();
+        working.hold(&flipped);
         let any_flipped = flipped.contains(&true);
+        // Kept: counted by `memory_bytes` from here, as the rows are.
+        working.release(&valid);
         self.valid = valid;
         if self.rows.len() != self.vertices.len() {
+            working.release(&flipped);
             self.rows = self.vertices.par_iter().map(|v| self.row(v)).collect();
             return;
         }
@@ -676,10 +795,17 @@ impl GlobalPass {
                         }))
             })
             .collect();
+        working.hold(&dirty);
         let built: Vec<Vec<(u32, f32)>> = dirty
             .par_iter()
             .map(|&i| self.row(&self.vertices[i]))
             .collect();
+        // Built beside the rows they replace; let go of (or kept in their
+        // place) as this function returns.
+        working.hold_bytes(rows_bytes(&built));
+        working.release(&flipped);
+        working.release(&dirty);
+        working.release_bytes(rows_bytes(&built));
         for (i, row) in dirty.into_iter().zip(built) {
             self.rows[i] = row;
         }

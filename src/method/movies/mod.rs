@@ -285,8 +285,15 @@ impl Method for TextureMovies {
             .phase_seconds
             .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
         stats.records_alive = self.movies.len() as u64;
+        // The global pass's solution is part of the cache, and it needs
+        // its working buffers beside it each frame (about one and a half
+        // times its links' bytes on a frame that traces them all): their
+        // peak counts.
         stats.cache_bytes = (self.movies.values().map(Movie::memory_bytes).sum::<usize>()
-            + self.global.as_ref().map_or(0, GlobalPass::memory_bytes))
+            + self
+                .global
+                .as_ref()
+                .map_or(0, |g| g.memory_bytes() + g.working_bytes()))
             as u64;
         self.stats = stats;
         self.kept = self.keep.then(|| FrameRecords {
@@ -526,4 +533,49 @@ fn seen_side(ctx: &FrameContext, dir: Vec3, hit: &Hit) -> Option<(u32, bool)> {
     }
     let back = ctx.snapshot.triangles[id].geometric_normal().dot(dir) > 0.0;
     Some((hit.triangle, back))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backend::Ray;
+    use direct::ShadePoint;
+    use std::mem::size_of;
+
+    /// The memory a frame reports holds the global pass's working buffers
+    /// as well as what it keeps: on a first frame (every link traced) at
+    /// least the buffers held at once while the links are drawn (a shading
+    /// point and a flag a vertex, each link as a stale entry and as its
+    /// ray), and those held while the radiosity is solved (a point, two
+    /// flags and five irradiances a vertex), counted here from their
+    /// lengths and element sizes.
+    #[test]
+    fn reported_memory_holds_the_global_pass_working_buffers() {
+        let mut renderer = crate::render::test_renderer("cube-in-box", 8);
+        let mut movies = TextureMovies::new(MoviesSettings {
+            spp: 1,
+            shadow_samples: 1,
+            global: GlobalSettings {
+                spacing: 1.0 / 8.0,
+                links: 16,
+                bounces: 2,
+                shadow_samples: 1,
+            },
+            ..MoviesSettings::default()
+        });
+        renderer.with_frame_context(0, |ctx| movies.render_frame(ctx));
+        let global = movies.global.as_ref().expect("built in the frame");
+        let (vertices, links) = (global.vertex_count(), global.link_count());
+        assert!(vertices > 0 && links > 0);
+        let drawing = vertices * (size_of::<ShadePoint>() + size_of::<bool>())
+            + links * (size_of::<(usize, u32, u32)>() + size_of::<(usize, Option<Ray>)>());
+        let solving =
+            vertices * (size_of::<ShadePoint>() + 2 * size_of::<bool>() + 5 * size_of::<Vec3>());
+        let kept = movies.movies().map(Movie::memory_bytes).sum::<usize>() + global.memory_bytes();
+        let reported = movies.last_frame_stats().cache_bytes as usize;
+        assert!(
+            reported >= kept + drawing.max(solving),
+            "reported {reported} bytes; kept {kept}, drawing {drawing}, solving {solving}"
+        );
+    }
 }

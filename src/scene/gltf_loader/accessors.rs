@@ -4,7 +4,7 @@
 //! substitutions and `KHR_mesh_quantization`'s integer vertex attributes
 //! included.
 
-use super::files::{read_regular_file, uri_file};
+use super::files::{confined_uri_file, read_regular_file};
 use super::Res;
 use glam::Vec3;
 use gltf::accessor::{DataType, Dimensions};
@@ -14,10 +14,12 @@ use std::path::Path;
 /// their `count` is the only thing bounding the allocation: cap it.
 const MAX_VIEWLESS_BYTES: usize = 1 << 28;
 
-/// Buffer contents, indexed like the document's buffers.
+/// Buffer contents, indexed like the document's buffers; the files their
+/// URIs name are read inside `root` only, when given.
 pub(super) fn load_buffers(
     document: &gltf::Document,
     base: &Path,
+    root: Option<&Path>,
     mut blob: Option<Vec<u8>>,
 ) -> Res<Vec<Vec<u8>>> {
     let mut out = Vec::new();
@@ -29,7 +31,8 @@ pub(super) fn load_buffers(
             // and it reads whatever the URI names to its end (a device, a
             // FIFO).
             gltf::buffer::Source::Uri(uri) if !uri.starts_with("data:") => {
-                let file = uri_file(base, uri).map_err(|e| format!("buffer {i}: {e}"))?;
+                let file = confined_uri_file(base, uri, root)
+                    .map_err(|e| format!("buffer {i}: {e}"))?;
                 read_regular_file(&file, Some(buffer.length() as u64)).map_err(|e| {
                     let e = if e == "file not found" {
                         "missing buffer file".into()

@@ -1,10 +1,12 @@
 //! Reading the files a scene names: the scene file itself, and the local
 //! files its URIs name (the loader reads buffers; `render::job` hashes
 //! buffers and images too). Only regular files are read, and nothing is
-//! fetched from a network.
+//! fetched from a network. A scene's reads may be confined to a directory
+//! (`radcache serve --scenes DIR`: [`confined_file`]); the command line
+//! reads wherever the user's file points.
 
 use super::Res;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The bytes of `path`, at most `limit` of them: a FIFO or a device (a
 /// link to `/dev/zero`) is refused, as it would block or never end, and a
@@ -55,6 +57,44 @@ pub fn uri_file(base: &Path, uri: &str) -> Res<std::path::PathBuf> {
     let decoded = crate::uri::percent_decode(path)
         .ok_or_else(|| format!("URI '{uri}': malformed %-escape or not UTF-8"))?;
     Ok(base.join(decoded))
+}
+
+/// The file a glTF `uri` names, as [`uri_file`] resolves it against the
+/// directory `base` of the file that holds it, and, when `root` is given,
+/// only inside that directory ([`confined_file`]). A refusal names the URI
+/// only, neither path: a server must not tell a client where its scenes
+/// lie, nor which files outside them exist.
+pub fn confined_uri_file(base: &Path, uri: &str, root: Option<&Path>) -> Res<PathBuf> {
+    let file = uri_file(base, uri)?;
+    match root {
+        None => Ok(file),
+        Some(root) => confined_file(&file, root).ok_or_else(|| {
+            format!("URI '{uri}' names no file inside the directory the scene is confined to")
+        }),
+    }
+}
+
+/// The canonical path of `file` if it lies inside directory `root` once
+/// both are canonical, so that neither `..`, an absolute path nor a
+/// symbolic link leads out of it; reading that path reads what was
+/// checked. A file not there is inside when its directory is (a dangling
+/// link is not), so that it is reported missing; `None` otherwise.
+pub fn confined_file(file: &Path, root: &Path) -> Option<PathBuf> {
+    let root = root.canonicalize().ok()?;
+    let real = match file.canonicalize() {
+        Ok(real) => real,
+        Err(_) => {
+            let name = match file.components().next_back() {
+                Some(std::path::Component::Normal(name)) => name,
+                _ => return None,
+            };
+            if file.symlink_metadata().is_ok() {
+                return None;
+            }
+            file.parent()?.canonicalize().ok()?.join(name)
+        }
+    };
+    (real.starts_with(&root) && real != root).then_some(real)
 }
 
 /// The path of a `file:` URI after its scheme (RFC 8089): `/p`, or

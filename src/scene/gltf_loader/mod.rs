@@ -23,7 +23,8 @@
 //! - `document`: the JSON document before the `gltf` crate reads it (the
 //!   GLB container, extensions, references the crate leaves unchecked), and
 //!   the panic guard;
-//! - `files`: reading the file and the files its URIs name;
+//! - `files`: reading the file and the files its URIs name, confined to a
+//!   directory or not;
 //! - `accessors`: buffers, and bounds-checked accessor decoding;
 //! - `nodes`: the node hierarchy, rest transforms and the camera;
 //! - `mesh`: mesh objects, their primitives and skins;
@@ -40,7 +41,7 @@ mod mesh;
 mod nodes;
 
 pub(crate) use document::json_chunk;
-pub use files::{read_regular_file, uri_file};
+pub use files::{confined_file, confined_uri_file, read_regular_file, uri_file};
 
 use super::{Material, Object, PunctualLight, Scene, SceneError, DEFAULT_FPS};
 use accessors::{load_buffers, Buffers};
@@ -66,16 +67,33 @@ pub const MAX_COORDINATE: f32 = 1e8;
 /// infinite and NaN pixels.
 pub const MAX_EMISSION: f32 = 1e12;
 
-/// Loads a glTF 2.0 scene from `path`. Every error names the file.
+/// Loads a glTF 2.0 scene from `path`, reading the files its URIs name
+/// wherever they are. Every error names the file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    load_confined(path, None)
+}
+
+/// Loads a glTF 2.0 scene from `path`; when `root` is given, the scene file
+/// and every file its buffer URIs name must lie inside that directory
+/// (canonical paths compared: see [`confined_file`]), as for the scenes
+/// of `radcache serve --scenes DIR`. `data:` URIs and a GLB's own binary
+/// chunk read no file, and load either way. Every error names the file.
+pub fn load_confined(path: &Path, root: Option<&Path>) -> Result<Scene, SceneError> {
     let source = path.display().to_string();
     let fail = |message: String| SceneError::invalid(source.clone(), message);
     if path.is_dir() {
         return Err(fail("is a directory; expected a .gltf or .glb file".into()));
     }
     check_extension(path).map_err(fail)?;
-    let bytes = read_regular_file(path, None).map_err(fail)?;
-    quietly_catch_panics(|| load_bytes(path, &bytes)).map_err(fail)
+    // Confined, the file read is the canonical path checked.
+    let file = match root {
+        None => path.to_path_buf(),
+        Some(root) => confined_file(path, root).ok_or_else(|| {
+            fail("the scene file is not inside the directory it is confined to".into())
+        })?,
+    };
+    let bytes = read_regular_file(&file, None).map_err(fail)?;
+    quietly_catch_panics(|| load_bytes(path, &bytes, root)).map_err(fail)
 }
 
 fn check_extension(path: &Path) -> Res<()> {
@@ -92,7 +110,7 @@ fn check_extension(path: &Path) -> Res<()> {
     }
 }
 
-fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
+fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scene> {
     check_glb_length(bytes)?;
     let rewritten = without_channels_lacking_a_node(bytes);
     let bytes = rewritten.as_deref().unwrap_or(bytes);
@@ -112,7 +130,7 @@ fn load_bytes(path: &Path, bytes: &[u8]) -> Res<Scene> {
     let document = validated(root)?;
     let base = path.parent().unwrap_or(Path::new("."));
     let buffers = Buffers {
-        data: load_buffers(&document, base, blob)?,
+        data: load_buffers(&document, base, confined_to, blob)?,
         quantized,
     };
     let scene_def = document
