@@ -9,7 +9,10 @@
 
 mod common;
 
-use common::{furnace_box, jumping_block_room, lit_room, plane_under_point_light, region_error};
+use common::{
+    furnace_box, inward_box, jumping_block_room, lit_room, plane_under_point_light, region_error,
+    scene,
+};
 use glam::Vec3;
 use radcache::film::Film;
 use radcache::method::movies::{MoviesSettings, TextureMovies};
@@ -63,6 +66,33 @@ fn furnace_radiance_is_le_over_one_minus_albedo() {
             );
         }
     }
+}
+
+/// A closed room lit inside, seen from outside: the camera sees the backs
+/// of its walls, where no light arrives (`path` renders them black). The
+/// global pass's values are the insides' light; a back side read them
+/// and glowed.
+#[test]
+fn the_outside_of_a_closed_lit_room_stays_dark() {
+    let room = inward_box(Vec3::splat(-1.0), Vec3::splat(1.0), 0);
+    let s = scene(
+        vec![room],
+        vec![radcache::scene::Material::diffuse("wall", Vec3::splat(0.7))],
+        vec![],
+        Vec3::new(0.3, 0.8, 4.0),
+        -Vec3::Z,
+        0.9,
+        vec![(Vec3::new(0.2, 0.5, -0.1), Vec3::splat(4.0))],
+    );
+    let mut movies = TextureMovies::new(MoviesSettings::default());
+    let (film, stats, _) = render(&mut renderer(s, 16), &mut movies, 0);
+    assert!(stats.records_alive > 0, "the walls' backs have movies");
+    let brightest = film
+        .pixels
+        .iter()
+        .map(|p| p.max_element())
+        .fold(0.0f32, f32::max);
+    assert_eq!(brightest, 0.0, "the outside of the room is lit");
 }
 
 /// A point light of intensity I over a Lambertian plane: the texels hold

@@ -384,8 +384,12 @@ pub struct Snapshot {
 impl Scene {
     /// Loads a scene from a `.gltf`/`.glb` file.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let scene = gltf_loader::load(path)?;
-        let size = scene.diagonal_at(0.0);
+        Scene::load_confined(path, None)
+    }
+
+    /// Warns of a scene too small for the ray offsets ([`SMALLEST_SCENE`]).
+    fn warn_if_tiny(&self, path: &Path) {
+        let size = self.diagonal_at(0.0);
         if size < SMALLEST_SCENE {
             eprintln!(
                 "warning: {}: the scene is {size:.2e} units across (its bounding box at time 0); \
@@ -395,7 +399,6 @@ impl Scene {
                 crate::integrator::RAY_OFFSET
             );
         }
-        Ok(scene)
     }
 
     /// The diagonal of the bounding box of every mesh's vertices at time
@@ -426,7 +429,9 @@ impl Scene {
     /// URIs name, must lie inside `root` when it is given
     /// ([`gltf_loader::load_confined`]).
     pub fn load_confined(path: &Path, root: Option<&Path>) -> Result<Scene, SceneError> {
-        gltf_loader::load_confined(path, root)
+        let scene = gltf_loader::load_confined(path, root)?;
+        scene.warn_if_tiny(path);
+        Ok(scene)
     }
 
     /// A built-in scene by name (see [`builtin::NAMES`]).

@@ -293,31 +293,9 @@ fn parse_size(s: &str) -> Result<(u32, u32), ApiError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::schema::JobSpec;
 
     fn stored(method: &str, settings: String) -> JobValue {
-        JobValue {
-            id: 1,
-            spec: JobSpec {
-                name: "j".into(),
-                scene: "builtin:cube-in-box".into(),
-                scene_hash: "0".into(),
-                method: method.into(),
-                settings,
-                width: 8,
-                height: 8,
-                spp: 4,
-                fps: 24.0,
-                seed: 0,
-                same_pattern: false,
-                frame_start: 0,
-                frame_end: 2,
-            },
-            frames_done: 0,
-            last_frame: None,
-            created_unix: 0,
-            updated_unix: 0,
-        }
+        JobValue::for_test(method, settings)
     }
 
     fn ic_with_strata(theta: u32, phi: u32) -> String {

@@ -837,30 +837,9 @@ mod tests {
     /// stored JSON (untagged), or the stored text where that is no JSON.
     #[test]
     fn json_settings_are_an_object_by_name() {
-        use crate::store::schema::{JobSpec, JobValue};
+        use crate::store::schema::JobValue;
         let as_json = |settings: String| {
-            let job = JobValue {
-                id: 1,
-                spec: JobSpec {
-                    name: "j".into(),
-                    scene: "builtin:cube-in-box".into(),
-                    scene_hash: "0".into(),
-                    method: "trc".into(),
-                    settings,
-                    width: 8,
-                    height: 8,
-                    spp: 4,
-                    fps: 24.0,
-                    seed: 0,
-                    same_pattern: false,
-                    frame_start: 0,
-                    frame_end: 2,
-                },
-                frames_done: 0,
-                last_frame: None,
-                created_unix: 0,
-                updated_unix: 0,
-            };
+            let job = JobValue::for_test("trc", settings);
             serde_json::to_value(super::JobReport::of(&job)).unwrap()["settings"].clone()
         };
         let changes = [("at", "0.1"), ("accuracy", "0.3"), ("strata", "8x24")];

@@ -73,6 +73,36 @@ pub struct JobValue {
     pub updated_unix: u64,
 }
 
+#[cfg(test)]
+impl JobValue {
+    /// A job `j` of `method` with `settings` (JSON text), frames 0..2 of
+    /// `cube-in-box` at 8×8, none done: unit tests' stored job.
+    pub fn for_test(method: &str, settings: String) -> JobValue {
+        JobValue {
+            id: 1,
+            spec: JobSpec {
+                name: "j".into(),
+                scene: "builtin:cube-in-box".into(),
+                scene_hash: "0".into(),
+                method: method.into(),
+                settings,
+                width: 8,
+                height: 8,
+                spp: 4,
+                fps: 24.0,
+                seed: 0,
+                same_pattern: false,
+                frame_start: 0,
+                frame_end: 2,
+            },
+            frames_done: 0,
+            last_frame: None,
+            created_unix: 0,
+            updated_unix: 0,
+        }
+    }
+}
+
 /// A job reads as its spec (`job.scene`, `job.width`, …).
 impl std::ops::Deref for JobValue {
     type Target = JobSpec;

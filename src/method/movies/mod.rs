@@ -31,7 +31,9 @@
 //! frames are computed as the frames are rendered rather than over its
 //! whole interval up front, so that no frame waits for a later one, and
 //! the texture of a frame depends only on that frame (a resumed render
-//! equals an uninterrupted one with no state carried). The paper's disk
+//! equals an uninterrupted one with no state carried); a back side the
+//! camera sees gets its direct light only ([`movie`]: the global pass
+//! solves front sides). The paper's disk
 //! cache of movie frames under a memory budget is the store's `movies`
 //! tree: each frame's textures are written with the frame, and only the
 //! frame being rendered is held in memory.

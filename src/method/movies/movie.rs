@@ -140,8 +140,20 @@ impl Movie {
         let r = self.resolution as usize;
         self.texels.clear();
         self.texels.resize(r * r, Vec3::ZERO);
+        // The global pass solves the front sides only (a link landing on a
+        // back gathers nothing: backs neither take nor give light there,
+        // as one-sided radiosity polygons). Its values are the front's
+        // light, so a back side takes none of them: reading them lit the
+        // outside of closed rooms and the dark side of thin walls with the
+        // light of the inside. A back side seen by the camera gets its
+        // direct light only.
         for (&(index, _, g), &e) in self.layout.iter().zip(&direct) {
-            self.texels[index] = e + global.indirect_with(&g);
+            let indirect = if self.key.back {
+                Vec3::ZERO
+            } else {
+                global.indirect_with(&g)
+            };
+            self.texels[index] = e + indirect;
         }
         self.direct = direct;
         counts
