@@ -684,17 +684,7 @@ fn keys_on_another_frame_rate_are_noted() {
 /// give another `--size` or `--fps`) into `out`, which must succeed; its
 /// stderr.
 fn one_tiny_frame(scene: &[&str], out: &std::path::Path) -> String {
-    let fixed = ["--method", "path", "--spp", "1", "--frames", "0..1", "-q"];
-    let size: &[&str] = if scene.contains(&"--size") {
-        &[]
-    } else {
-        &["--size", "4x4"]
-    };
-    let out = ["--out", out.to_str().unwrap()];
-    let args = [&["render"], scene, &fixed, size, &out].concat();
-    let (code, _, stderr) = radcache(&args);
-    assert_eq!(code, 0, "{stderr}");
-    stderr
+    one_tiny_frame_with(&[&["--method", "path"], scene].concat(), out)
 }
 
 /// `inspect --json` shows a job's `settings` as an object of every setting
@@ -740,12 +730,18 @@ fn inspect_json_shows_settings_by_name() {
     assert_eq!(settings["spp"], 1, "{settings}");
 }
 
-/// `radcache render` of one 4×4 frame with `args` (a `--method` among
-/// them), which must succeed; its stderr.
+/// `radcache render` of one 4×4 frame (1 spp) with `args` (a `--method`
+/// among them; they may give another `--size`) into `out`, which must
+/// succeed; its stderr.
 fn one_tiny_frame_with(args: &[&str], out: &std::path::Path) -> String {
-    let fixed = ["--spp", "1", "--frames", "0..1", "--size", "4x4", "-q"];
+    let fixed = ["--spp", "1", "--frames", "0..1", "-q"];
+    let size: &[&str] = if args.contains(&"--size") {
+        &[]
+    } else {
+        &["--size", "4x4"]
+    };
     let out = ["--out", out.to_str().unwrap()];
-    let args = [&["render"], args, &fixed, &out].concat();
+    let args = [&["render"], args, &fixed, size, &out].concat();
     let (code, _, stderr) = radcache(&args);
     assert_eq!(code, 0, "{stderr}");
     stderr

@@ -199,8 +199,9 @@ pub fn frame_runs(frames: impl IntoIterator<Item = u32>) -> Vec<Range<u32>> {
     let mut runs: Vec<Range<u32>> = Vec::new();
     for f in frames {
         match runs.last_mut() {
-            Some(r) if r.end == f => r.end = f + 1,
-            _ => runs.push(f..f + 1),
+            Some(r) if r.end == f => r.end = f.saturating_add(1),
+            // A damaged store's frame u32::MAX ends its run one short.
+            _ => runs.push(f..f.saturating_add(1)),
         }
     }
     runs
@@ -824,6 +825,11 @@ mod tests {
         assert_eq!(frame_runs([]), Vec::<Range<u32>>::new());
         assert_eq!(frame_runs([3]), vec![3..4]);
         assert_eq!(frame_runs([0, 1, 2, 5, 6, 9]), vec![0..3, 5..7, 9..10]);
+        // A damaged store's last frame number does not overflow.
+        assert_eq!(
+            frame_runs([u32::MAX - 1, u32::MAX]),
+            vec![u32::MAX - 1..u32::MAX]
+        );
     }
 
     #[test]

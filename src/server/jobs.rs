@@ -2,6 +2,7 @@
 
 use super::{ApiError, AppState, Job, JobKey, JobRequest, JobState};
 use crate::render::SceneSource;
+use anyhow::Context;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
 use axum::http::StatusCode;
@@ -68,9 +69,13 @@ fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<Strin
     // may still hold its URLs), and past any `job-N` of the store that the
     // table left out (a method or frame range this build cannot run): a new
     // job must not take over its frames, nor fail on it for good.
-    let mut n = n.max(state.store.served_jobs_high()?) + 1;
+    let next = |n: u64| {
+        n.checked_add(1)
+            .context("job numbers are used up (past u64::MAX)")
+    };
+    let mut n = next(n.max(state.store.served_jobs_high()?))?;
     while state.store.job(&format!("job-{n}"))?.is_some() {
-        n += 1;
+        n = next(n)?;
     }
     let id = format!("job-{n}");
     state.store.set_served_jobs_high(n)?;
@@ -212,7 +217,7 @@ pub async fn delete(
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
     let key = JobKey::of(&id);
-    {
+    let job = {
         // Decided and removed under the table's lock: the worker starts
         // only jobs it finds there, queued.
         let mut jobs = state.jobs.lock().expect("job table lock");
@@ -225,30 +230,36 @@ pub async fn delete(
                 job.state.as_str()
             )));
         }
-        jobs.remove(&key);
-    }
+        jobs.remove(&key).expect("found above")
+    };
     let s = state.clone();
     let name = id.clone();
-    let frames = match key {
-        JobKey::Served(_) => Some(state.options.out.join(&id)),
-        JobKey::Rendered(_) => None,
-    };
-    tokio::task::spawn_blocking(move || -> anyhow::Result<()> {
-        s.store.delete_job(&name)?;
-        if let Some(dir) = frames {
-            match std::fs::remove_dir_all(&dir) {
-                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                    return Err(anyhow::anyhow!("removing {}: {e}", dir.display()))
-                }
-                _ => {}
-            }
-        }
-        Ok(())
-    })
-    .await
-    .map_err(ApiError::internal)?
-    .map_err(ApiError::internal)?;
+    let deleted = tokio::task::spawn_blocking(move || s.store.delete_job(&name))
+        .await
+        .map_err(ApiError::internal)
+        .and_then(|r| r.map_err(ApiError::internal));
+    if let Err(e) = deleted {
+        // Still in the store: listed again, as a restart would list it.
+        state.jobs.lock().expect("job table lock").insert(key, job);
+        return Err(e);
+    }
+    // Gone from the store: its followers end whatever happens to its files.
     state.forget(&key);
+    if let JobKey::Served(_) = key {
+        let dir = state.options.out.join(&id);
+        let name = id.clone();
+        let removed = tokio::task::spawn_blocking(move || match std::fs::remove_dir_all(&dir) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(anyhow::anyhow!(
+                "job {name} deleted, but not its frame files: {}: {e}",
+                dir.display()
+            )),
+            _ => Ok(()),
+        });
+        removed
+            .await
+            .map_err(ApiError::internal)?
+            .map_err(ApiError::internal)?;
+    }
     Ok(Json(json!({ "id": id, "deleted": true })))
 }
 

@@ -126,7 +126,13 @@ impl Movie {
                 .band()
                 .map(|(index, i, j)| {
                     let (u, v) = self.texel_uv(i, j);
-                    (index, (u, v), global.gouraud(self.key.triangle, u, v))
+                    // A back side reads no vertex values (below).
+                    let g = if self.key.back {
+                        [(0, 0.0); 3]
+                    } else {
+                        global.gouraud(self.key.triangle, u, v)
+                    };
+                    (index, (u, v), g)
                 })
                 .collect();
         }
