@@ -186,13 +186,26 @@ impl Store {
         // Their bytes stay in the log, unreferenced (it is append-only),
         // until `radcache compact` ([`compact`]).
         for (_, tree) in self.per_job_trees() {
-            for key in tree.scan_prefix(prefix).keys() {
-                let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
-                tree.remove(key)
-                    .map_err(|e| StoreError::sled(&self.path, e))?;
-            }
+            self.remove_prefix(tree, &prefix)?;
         }
         self.flush()
+    }
+
+    /// Removes every key of `tree` under `prefix`, in batches of at most
+    /// `BATCH` keys: a job's millions of records go in thousands of writes
+    /// rather than one each, without holding all their keys at once.
+    pub(super) fn remove_prefix(&self, tree: &sled::Tree, prefix: &[u8]) -> Result<(), StoreError> {
+        const BATCH: usize = 4096;
+        let mut keys = tree.scan_prefix(prefix).keys().peekable();
+        while keys.peek().is_some() {
+            let mut batch = sled::Batch::default();
+            for key in keys.by_ref().take(BATCH) {
+                batch.remove(key.map_err(|e| StoreError::sled(&self.path, e))?);
+            }
+            tree.apply_batch(batch)
+                .map_err(|e| StoreError::sled(&self.path, e))?;
+        }
+        Ok(())
     }
 }
 
@@ -394,4 +407,28 @@ fn same_scene_hash(stored: &str, given: &str) -> bool {
         || stored
             .strip_suffix(v1::LEGACY_HASH_SUFFIX)
             .is_some_and(|main| given.split('+').next() == Some(main))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Store;
+
+    /// Every key under the prefix goes, over several batches; a key of
+    /// another job that sorts right after them stays.
+    #[test]
+    fn remove_prefix_takes_every_key_of_the_prefix_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(&dir.path().join("db")).unwrap();
+        let tree = &store.state;
+        let (job, other) = (7u64.to_be_bytes(), 8u64.to_be_bytes());
+        for i in 0u32..10_000 {
+            let key = [&job[..], &i.to_be_bytes()[..]].concat();
+            tree.insert(key, &[1u8][..]).unwrap();
+        }
+        tree.insert([&other[..], &[0u8; 4][..]].concat(), &[2u8][..])
+            .unwrap();
+        store.remove_prefix(tree, &job).unwrap();
+        assert_eq!(tree.scan_prefix(job).count(), 0);
+        assert_eq!(tree.scan_prefix(other).count(), 1);
+    }
 }

@@ -43,12 +43,7 @@ impl Store {
             .remove(keys::state_head(job))
             .map_err(|e| StoreError::sled(&self.path, e))?;
         self.flush()?;
-        for key in self.state.scan_prefix(keys::job_prefix(job)).keys() {
-            let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
-            self.state
-                .remove(key)
-                .map_err(|e| StoreError::sled(&self.path, e))?;
-        }
+        self.remove_prefix(&self.state, &keys::job_prefix(job))?;
         self.flush()
     }
 
