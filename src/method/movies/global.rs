@@ -724,37 +724,37 @@ impl GlobalPass {
             })
             .collect();
         working.hold(&albedo);
-        let radiance_of = |indirect: &[Vec3]| -> Vec<Vec3> {
-            albedo
-                .iter()
-                .zip(direct)
-                .zip(indirect)
-                .map(|((&rho, &d), &i)| rho * FRAC_1_PI * (d + i))
-                .collect()
-        };
         self.update_rows(retraced, working);
-        let mut indirect = vec![Vec3::ZERO; self.vertices.len()];
+        // Three buffers for the whole iteration (up to `bounces` steps):
+        // each step writes the radiance leaving every vertex into `b` and
+        // the indirect light gathered from it into `next`, then swaps
+        // `next` with `indirect`.
+        let count = self.vertices.len();
+        let (mut indirect, mut b, mut next) = (
+            vec![Vec3::ZERO; count],
+            vec![Vec3::ZERO; count],
+            vec![Vec3::ZERO; count],
+        );
         working.hold(&indirect);
+        working.hold(&b);
+        working.hold(&next);
         for _ in 0..self.settings.bounces {
-            let b = radiance_of(&indirect);
-            working.hold(&b);
-            let next: Vec<Vec3> = self
-                .rows
-                .par_iter()
-                .map(|row| {
-                    row.iter()
-                        .fold(Vec3::ZERO, |acc, &(j, w)| acc + b[j as usize] * w)
-                })
-                .collect();
-            working.hold(&next);
-            working.release(&indirect);
-            working.release(&b);
+            for (((b, &rho), &d), &i) in b.iter_mut().zip(&albedo).zip(direct).zip(&indirect) {
+                *b = rho * FRAC_1_PI * (d + i);
+            }
+            next.par_iter_mut().zip(&self.rows).for_each(|(out, row)| {
+                *out = row
+                    .iter()
+                    .fold(Vec3::ZERO, |acc, &(j, w)| acc + b[j as usize] * w);
+            });
             let converged = converged(&indirect, &next);
-            indirect = next;
+            std::mem::swap(&mut indirect, &mut next);
             if converged {
                 break;
             }
         }
+        working.release(&next);
+        working.release(&b);
         // Kept: counted by `memory_bytes` from here.
         working.release(&indirect);
         working.release(&albedo);
