@@ -447,32 +447,103 @@ fn reprojection_predicts_a_moving_block_better_than_constant_in_mean() {
     assert!(mean_d < mean_r, "mean {mean_d} vs {mean_r}");
 }
 
-/// A light switched off at frame k: records created before k know nothing
-/// of it (τ = 1) and keep its indirect light as a ghost, but every one has
-/// expired by k + δt_max (Eq. 11). The room is lit by that light only, so
-/// the reference from then on is black.
+/// A block at rest until frame k − 1 that then slides 1 m over three
+/// frames: the records of frame 0 see nothing move from t0 to t0+1 (τ = 1)
+/// and the paper gives each of them δt_max frames. With reprojection
+/// (`trc::later`) the frame the block first moves in departs from that
+/// extrapolation: records that see the block change there by more than
+/// a^t and end their life at k − 1 (others at a later frame of the
+/// slide), and before it nothing departs, so none ends sooner. With the constant estimate all live δt_max frames.
 #[test]
-fn switched_off_light_leaves_no_indirect_after_max_life() {
-    let (k, max_life) = (3u32, 4u32);
-    let mut r = renderer(lit_room(Some(k), 24.0), 12, 24.0, false);
-    let mut trc = TemporalRadianceCaching::new(TrcSettings {
-        ic: small_ic(),
-        max_life,
-        ..TrcSettings::default()
-    });
-    let mut means = Vec::new();
-    for f in 0..k + max_life + 2 {
-        let film = render_trc(&mut r, &mut trc, f);
-        means.push(film.mean());
-    }
-    eprintln!("mean radiance per frame: {means:?}");
-    assert!(means[0] > 0.0);
+fn records_that_see_an_object_start_moving_end_their_life_before_it() {
+    let (k, max_life, fps) = (3u32, 8u32, 24.0);
+    let scene = || {
+        let mut s = lit_room(None, fps);
+        add_moving_block(
+            &mut s,
+            (Vec3::new(-0.95, 0.0, -0.95), Vec3::new(-0.2, 1.0, -0.2)),
+            Vec3::new(0.9, 0.1, 0.1),
+            Interpolation::Linear,
+            (
+                vec![0.0, (k - 1) as f32 / fps, (k + 2) as f32 / fps],
+                vec![Vec4::ZERO, Vec4::ZERO, Vec4::new(1.0, 0.0, 0.0, 0.0)],
+            ),
+        );
+        s
+    };
+    let last_frames = |reprojection| -> Vec<u32> {
+        let mut r = renderer(scene(), 16, fps, false);
+        let mut trc = TemporalRadianceCaching::new(TrcSettings {
+            ic: small_ic(),
+            max_life,
+            reprojection,
+            ..TrcSettings::default()
+        });
+        render_trc(&mut r, &mut trc, 0);
+        trc.records().iter().map(|r| r.last_valid).collect()
+    };
+    let constant = last_frames(false);
+    assert!(constant.iter().all(|&l| l == max_life - 1), "{constant:?}");
+    let checked = last_frames(true);
+    let ended = checked.iter().filter(|&&l| l == k - 1).count();
+    eprintln!(
+        "{ended} of {} records of frame 0 end at frame k − 1",
+        checked.len()
+    );
     assert!(
-        means[k as usize] > 0.0,
+        ended > 0,
+        "no record ended before the block moved: {checked:?}"
+    );
+    // Frames from k on depart; a record that changes little at k may end
+    // at a later one, as the block goes on.
+    assert!(
+        checked.iter().all(|&l| l >= k - 1),
+        "a life ended before anything departed: {checked:?}"
+    );
+}
+
+/// A light switched off at frame k. With the constant estimate (no
+/// reprojection) records created before k know nothing of it (τ = 1) and
+/// keep its indirect light as a ghost, but every one has expired by
+/// k + δt_max (Eq. 11). With reprojection (the default) the frames of a
+/// record's life where the lights, still from t0 to t0+1, have changed are
+/// checked (`trc::later`): its samples' light falls to nothing there, and
+/// every record ends its life at k − 1. The room is lit by that light
+/// only, so the reference from frame k on is black.
+#[test]
+fn switched_off_light_leaves_no_indirect() {
+    let (k, max_life) = (3u32, 4u32);
+    let means = |reprojection| -> Vec<f64> {
+        let mut r = renderer(lit_room(Some(k), 24.0), 12, 24.0, false);
+        let mut trc = TemporalRadianceCaching::new(TrcSettings {
+            ic: small_ic(),
+            max_life,
+            reprojection,
+            ..TrcSettings::default()
+        });
+        let means: Vec<f64> = (0..k + max_life + 2)
+            .map(|f| render_trc(&mut r, &mut trc, f).mean())
+            .collect();
+        eprintln!("reprojection {reprojection}: mean radiance per frame: {means:?}");
+        assert!(means[0] > 0.0);
+        means
+    };
+    let constant = means(false);
+    assert!(
+        constant[k as usize] > 0.0,
         "no ghost at frame k: test proves nothing"
     );
-    for (f, m) in means.iter().enumerate().skip((k + max_life) as usize) {
-        assert!(*m == 0.0, "indirect light left at frame {f}: {m}");
+    for (f, m) in constant.iter().enumerate().skip((k + max_life) as usize) {
+        assert!(
+            *m == 0.0,
+            "constant estimate: indirect light left at frame {f}: {m}"
+        );
+    }
+    for (f, m) in means(true).iter().enumerate().skip(k as usize) {
+        assert!(
+            *m == 0.0,
+            "reprojection: indirect light left at frame {f}: {m}"
+        );
     }
 }
 
@@ -527,11 +598,17 @@ fn trc_computes_fewer_records_and_flickers_less_than_ic() {
 }
 
 /// Ghosts (issue 5, "Stability where it fails"): a red block jumps out of
-/// the room at frame k. Records created before k saw it and, as nothing
-/// moved in their next frame (τ = 1), keep its red indirect light after it
-/// left: a ghost near its old place. Each lives less than δt_max frames
-/// (Eq. 11) and is then replaced by a fresh gather, so from frame
-/// k + δt_max − 1 on every record was gathered after the jump.
+/// the room at frame k. Records created before k saw it; as nothing moved
+/// in their next frame, τ = 1.
+///
+/// - With the constant estimate (no reprojection) they know nothing more,
+///   keep its red indirect light after it left (a ghost near its old
+///   place), each for less than δt_max frames (Eq. 11): from frame
+///   k + δt_max − 1 on every record was gathered after the jump.
+/// - With reprojection (the default) each is also reprojected to the
+///   frames of its life whose motion departs from τ's extrapolation
+///   (`trc::later`): the jump is one, their light changes there by more
+///   than a^t, and their life ends at k − 1. No ghost at frame k.
 ///
 /// The reference is `ic` with the same spatial settings at the same
 /// frames, both with `--same-pattern` sampling: a fresh cache every frame
@@ -541,7 +618,7 @@ fn trc_computes_fewer_records_and_flickers_less_than_ic() {
 /// add `ic`'s spatial bias, of the order of the ghost at this tiny size).
 /// Checked for every temporal gradient mode.
 #[test]
-fn jumping_object_leaves_no_ghost_after_max_life() {
+fn jumping_object_leaves_no_ghost() {
     let (k, max_life, size, fps) = (2u32, 6u32, 16u32, 24.0);
     let frames = 0..k + max_life + 2;
     let ic_settings = IcSettings {
@@ -555,16 +632,12 @@ fn jumping_object_leaves_no_ghost_after_max_life() {
         .clone()
         .map(|f| reference.with_frame_context(f, |ctx| ic.render_frame(ctx)))
         .collect();
-    // The ghost of the one-pass modes at frame k: the records of frame 0
-    // (τ = 1: frame 1 looks like frame 0) live through frame
-    // δt_max − 1 = k + 3 with the block's light. Interpolated gradients
-    // fade it towards the replacements from frame k on.
-    let mut ghost = None;
-    for gradients in GRADIENT_MODES {
+    let errors = |gradients, reprojection| -> Vec<f64> {
         let trc = TemporalRadianceCaching::new(TrcSettings {
             ic: ic_settings.clone(),
             max_life,
             gradients,
+            reprojection,
             ..TrcSettings::default()
         });
         let mut r = Renderer::new(
@@ -584,22 +657,36 @@ fn jumping_object_leaves_no_ghost_after_max_life() {
             .clone()
             .map(|f| region_error(&r.render_frame(f), &ic_frames[f as usize]))
             .collect();
-        eprintln!("{gradients:?}: bias near the block's old place per frame: {errors:.4?}");
-        let at_k = errors[k as usize];
-        let ghost = *ghost.get_or_insert(at_k);
+        eprintln!(
+            "{gradients:?}, reprojection {reprojection}: bias near the block's old place \
+             per frame: {errors:.4?}"
+        );
+        errors
+    };
+    for gradients in GRADIENT_MODES {
+        // The ghost with the constant estimate: the records of frame 0
+        // (τ = 1) live through frame δt_max − 1 = k + 3 with the block's
+        // light. Interpolated gradients fade it towards the replacements
+        // from frame k on.
+        let constant = errors(gradients, false);
+        let ghost = constant[k as usize];
         assert!(
-            at_k > 0.03,
-            "{gradients:?}: no ghost at frame k ({at_k}): the test proves nothing"
+            ghost > 0.03,
+            "{gradients:?}: no ghost at frame k ({ghost}): the test proves nothing"
         );
         // What is left once every record is younger than the jump is the
         // difference between two record sets (other points, other random
-        // streams): 15–18 % of the ghost here.
-        for (f, e) in errors.iter().enumerate().skip((k + max_life) as usize) {
-            assert!(
-                *e < 0.3 * ghost,
-                "{gradients:?}: ghost left at frame {f}: {e} (at k: {ghost})"
-            );
-        }
+        // streams): 10–20 % of the ghost here.
+        let left = |errors: &[f64], from: u32, what: &str| {
+            for (f, e) in errors.iter().enumerate().skip(from as usize) {
+                assert!(
+                    *e < 0.3 * ghost,
+                    "{gradients:?}, {what}: ghost left at frame {f}: {e} (at k: {ghost})"
+                );
+            }
+        };
+        left(&constant, k + max_life, "constant estimate");
+        left(&errors(gradients, true), k, "reprojection");
     }
 }
 

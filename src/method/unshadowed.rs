@@ -7,12 +7,49 @@
 use super::FrameContext;
 use crate::scene::Snapshot;
 use glam::Vec3;
+use std::collections::BTreeMap;
+use std::ops::RangeInclusive;
+use std::sync::Arc;
 
 /// A frame's lights, each area light taken as a point at its triangle's
 /// centroid.
 #[derive(Clone, Debug)]
 pub(crate) struct UnshadowedLights {
     emitters: Vec<Emitter>,
+}
+
+/// The lights of the frames around the one rendered, each evaluated once
+/// (other frames need a snapshot of the whole scene) and found again by
+/// frame number, so that a resumed render computes the same ones.
+#[derive(Default)]
+pub(crate) struct LightsByFrame {
+    frames: BTreeMap<u32, Arc<UnshadowedLights>>,
+}
+
+impl LightsByFrame {
+    /// Forgets the frames outside `keep`.
+    pub(crate) fn keep(&mut self, keep: RangeInclusive<u32>) {
+        self.frames.retain(|f, _| keep.contains(f));
+    }
+
+    /// The lights of frame `f` of `ctx`'s scene, evaluated if new.
+    pub(crate) fn at(&mut self, ctx: &FrameContext, f: u32) -> Arc<UnshadowedLights> {
+        self.frames
+            .entry(f)
+            .or_insert_with(|| {
+                Arc::new(if f == ctx.frame {
+                    UnshadowedLights::of(ctx, ctx.snapshot)
+                } else {
+                    UnshadowedLights::of(ctx, &ctx.scene.snapshot(ctx.time_of(f)))
+                })
+            })
+            .clone()
+    }
+
+    /// The lights of frame `f`, if kept.
+    pub(crate) fn get(&self, f: u32) -> Option<&UnshadowedLights> {
+        self.frames.get(&f).map(|l| &**l)
+    }
 }
 
 /// A light reduced to what the unshadowed direct light needs.

@@ -19,12 +19,11 @@
 //! frames the ages span, nothing is computed and `tcg` is the paper's.
 
 use crate::cache::gather::{cell_direction, GatherPoint, Strata};
-use crate::method::unshadowed::UnshadowedLights;
+use crate::method::unshadowed::{LightsByFrame, UnshadowedLights};
 use crate::method::FrameContext;
 use crate::sampling::Frame;
 use crate::store::rgbe::{flags, PackedSample};
 use glam::{Vec2, Vec3};
-use std::collections::VecDeque;
 
 /// The relative change of a sample's unshadowed direct light (any colour
 /// channel) past which it is stale: the 5 % of Eq. 2's `τ_min` and of
@@ -40,7 +39,7 @@ const WINDOW: u32 = flags::MAX_AGE as u32 + 1;
 /// finds the same ones: they are computed again from the scene).
 #[derive(Default)]
 pub(super) struct LightHistory {
-    frames: VecDeque<(u32, UnshadowedLights)>,
+    frames: LightsByFrame,
 }
 
 impl LightHistory {
@@ -49,16 +48,9 @@ impl LightHistory {
     pub(super) fn advance(&mut self, ctx: &FrameContext) {
         let t = ctx.frame;
         let first = t.saturating_sub(WINDOW);
-        self.frames.retain(|&(f, _)| (first..=t).contains(&f));
+        self.frames.keep(first..=t);
         for f in first..=t {
-            if self.frames.iter().all(|&(g, _)| g != f) {
-                let lights = if f == t {
-                    UnshadowedLights::of(ctx, ctx.snapshot)
-                } else {
-                    UnshadowedLights::of(ctx, &ctx.scene.snapshot(ctx.time_of(f)))
-                };
-                self.frames.push_back((f, lights));
-            }
+            self.frames.at(ctx, f);
         }
     }
 
@@ -68,9 +60,7 @@ impl LightHistory {
     pub(super) fn staleness(&self, t: u32) -> Option<Staleness<'_>> {
         let at = |f: u32| {
             self.frames
-                .iter()
-                .find(|&&(g, _)| g == f)
-                .map(|(_, l)| l)
+                .get(f)
                 .expect("every frame of the window is in the history")
         };
         let now = at(t);

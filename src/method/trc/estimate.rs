@@ -13,6 +13,7 @@ use crate::sampling::Frame;
 use crate::scene::Snapshot;
 use glam::{Mat4, Vec3};
 use std::f32::consts::{PI, TAU};
+use std::sync::Arc;
 
 /// What changes from this frame to the next (TRC §5: "the transformation
 /// matrix … at time t+1 is known"; "such matrices are available for light
@@ -22,7 +23,7 @@ pub(super) struct NextFrame {
     /// from the two snapshots' transforms); `None` when it does not move.
     motion: Vec<Option<Mat4>>,
     /// The lights at t and t+1.
-    lights: (UnshadowedLights, UnshadowedLights),
+    lights: (Arc<UnshadowedLights>, Arc<UnshadowedLights>),
     /// Whether some light moves from t to t+1.
     lights_move: bool,
     /// The direct light at the samples' first hits at t and t+1 (`None`
@@ -41,14 +42,11 @@ impl NextFrame {
             .object_to_world
             .iter()
             .zip(&later.object_to_world)
-            .map(|(w0, w1)| {
-                let m = *w1 * w0.inverse();
-                (!m.abs_diff_eq(Mat4::IDENTITY, 1e-7)).then_some(m)
-            })
+            .map(|(w0, w1)| rigid_motion(*w0, *w1))
             .collect();
         let (l0, l1) = (
-            UnshadowedLights::of(ctx, now),
-            UnshadowedLights::of(ctx, &later),
+            Arc::new(UnshadowedLights::of(ctx, now)),
+            Arc::new(UnshadowedLights::of(ctx, &later)),
         );
         let lights_move = !l0.same_as(&l1);
         let objects_move = motion.iter().any(Option::is_some);
@@ -61,6 +59,39 @@ impl NextFrame {
                 .flatten(),
         }
     }
+
+    /// What changes from t0 to a later frame t (`super::later`): each
+    /// object's rigid motion from t0 to t and the lights at both. The
+    /// direct light is not evaluated again there (`next_direct` looks at
+    /// t0+1 only).
+    pub(super) fn later(
+        motion: Vec<Option<Mat4>>,
+        lights: (Arc<UnshadowedLights>, Arc<UnshadowedLights>),
+    ) -> Self {
+        NextFrame {
+            motion,
+            lights_move: !lights.0.same_as(&lights.1),
+            lights,
+            direct: None,
+        }
+    }
+
+    /// The lights at t0.
+    pub(super) fn lights_now(&self) -> &Arc<UnshadowedLights> {
+        &self.lights.0
+    }
+
+    /// Whether some light moves from t0 to t0+1.
+    pub(super) fn lights_move(&self) -> bool {
+        self.lights_move
+    }
+}
+
+/// The motion taking a point of an object placed by `w0` to where `w1`
+/// places it; `None` when it stays.
+pub(super) fn rigid_motion(w0: Mat4, w1: Mat4) -> Option<Mat4> {
+    let m = w1 * w0.inverse();
+    (!m.abs_diff_eq(Mat4::IDENTITY, 1e-7)).then_some(m)
 }
 
 /// TRC §4.7 (Fig. 6): the record's hemisphere samples at t0 moved to

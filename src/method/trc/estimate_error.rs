@@ -72,7 +72,8 @@ pub struct EstimateError {
     /// The constant estimate, `E(t0+1) = E(t0)`.
     pub constant: (f32, f32),
     /// Mean lifespan in frames (t0 included) that the temporal weight
-    /// (Eq. 9–11) grants the records: with the change their estimate
+    /// (Eq. 9–11) grants the records (the check of the later frames,
+    /// `trc::later`, may end a life sooner): with the change their estimate
     /// predicts, and with the change measured by gathering again. Equal
     /// means say the estimate neither cuts lives short nor stretches them;
     /// the measured change also holds the gathers' Monte Carlo noise

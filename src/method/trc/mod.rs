@@ -8,7 +8,13 @@
 //! hemisphere samples (§4.7, `reproject`); the ratio `τ = E(t0+1)/E(t0)`
 //! sets how many frames K may be used (Eq. 9–11) and the difference gives
 //! its extrapolated temporal gradients (Eq. 15–17), applied at lookup by
-//! Eq. 14. Each frame:
+//! Eq. 14. Departure: the paper extrapolates the change to t0+1 over the
+//! whole life, blind to an object at rest that starts moving or jumps
+//! later, or a light switched off later; as the animation is known ahead,
+//! the record is also reprojected to the later frames of its life where
+//! the motion departs from that extrapolation, and its life ends before
+//! the first where it has changed by more than `a^t` (`later`). Each
+//! frame:
 //! 1. *age records*: a record still valid is reused; one that is no longer
 //!    valid but contributed to the previous frame is replaced by a new
 //!    record gathered at the same point (§4.4, "p_l = p_K"); one that
@@ -39,7 +45,8 @@
 //! neighbour clamping, direct light, glossy lobes — is `ic`'s code.
 //! Here are the temporal parts: a record's life (the temporal weight and
 //! gradients) in the submodule `record`, the E(t0+1) estimate by
-//! reprojection in `estimate`, the paths a replacement takes in `paths`,
+//! reprojection in `estimate`, its check against the later frames in
+//! `later`, the paths a replacement takes in `paths`,
 //! and the encoding of the carried state for the store in `state`.
 //!
 //! # The E(t0+1) estimate (TRC Table 1)
@@ -71,6 +78,7 @@
 mod direct;
 mod estimate;
 pub mod estimate_error;
+mod later;
 mod paths;
 mod record;
 mod state;
@@ -92,15 +100,16 @@ use super::{
     StateError, RENDER_PHASE,
 };
 use crate::cache::eas;
-use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance};
+use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance, HemisphereSamples};
 use crate::cache::{IrradianceCache, RecordId};
 use crate::film::Film;
 use crate::integrator::RadianceResult;
 use crate::store::SampleBlock;
 use estimate::{reproject, NextFrame};
 use glam::Vec3;
+use later::LaterFrames;
 use paths::KeptPaths;
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -146,9 +155,10 @@ pub struct TrcSettings {
     /// paper's examples use 20 frames (§6); 1 gives per-frame computation.
     pub max_life: u32,
     pub gradients: TemporalGradients,
-    /// Estimate E(t0+1) by reprojection (§4.7); off: E(t0+1) = E(t0), the
-    /// "no reprojection" column of Table 1 (then every record lives
-    /// `δt_max` frames).
+    /// Estimate E(t0+1) by reprojection (§4.7), and check each record's
+    /// life against the later frames by reprojection too (`trc::later`);
+    /// off: E(t0+1) = E(t0), the "no reprojection" column of Table 1
+    /// (then every record lives `δt_max` frames).
     pub reprojection: bool,
     /// With reprojection, also evaluate each sample's direct light again at
     /// t0+1 (one light sample, shadowed in the next frame's geometry,
@@ -240,6 +250,9 @@ pub struct TemporalRadianceCaching {
     first_pass_still: StillSamples,
     /// Whether kept paths pay for their keeping here ([`paths::PathsPay`]).
     paths_pay: paths::PathsPay,
+    /// The transforms and lights of the frames after the next, for the
+    /// records' life checks ([`later`]).
+    ahead: later::Ahead,
 }
 
 impl TemporalRadianceCaching {
@@ -260,6 +273,7 @@ impl TemporalRadianceCaching {
             still: StillSamples::default(),
             first_pass_still: StillSamples::default(),
             paths_pay: paths::PathsPay::default(),
+            ahead: later::Ahead::default(),
         }
     }
 
@@ -283,63 +297,78 @@ impl TemporalRadianceCaching {
     }
 
     /// TRC §4.4–4.7 for a record just gathered at `ctx.frame`: estimate
-    /// E(t0+1), derive τ, lifespan and temporal gradients.
-    fn temporal(&self, ctx: &FrameContext, next: &NextFrame, g: &Gathered) -> TemporalRecord {
-        let strata = self.settings.ic.strata;
+    /// E(t0+1), derive τ, lifespan and temporal gradients; the lifespan
+    /// then checked against the frames after t0+1 ([`later`]).
+    fn temporal(&self, making: &RecordMaking, g: &Gathered) -> TemporalRecord {
+        let (ctx, strata) = (making.ctx, self.settings.ic.strata);
+        let a_t = self.settings.temporal_accuracy;
         let e0 = g.record.irradiance;
         let next_samples = self
             .settings
             .reprojection
-            .then(|| reproject(ctx, next, g, strata.theta, strata.phi));
-        let next_gather = match &next_samples {
+            .then(|| reproject(ctx, &making.next, g, strata.theta, strata.phi));
+        let next = self.change_to(g, next_samples.as_ref());
+        let age = frames_of_validity(next.change, a_t, self.settings.max_life);
+        let mut last_valid = ctx.frame + age;
+        if let Some(later) = &making.later {
+            last_valid = later.last_valid(ctx, g, strata, last_valid, |samples| {
+                self.change_to(g, Some(samples)).change > a_t
+            });
+        }
+        let e1 = next.gather.irradiance;
+        let sub = |a: [Vec3; 3], b: [Vec3; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        TemporalRecord {
+            record: g.record.clone(),
+            candidate: g.candidate,
+            next_irradiance: e1,
+            change: next.change,
+            last_valid,
+            // Eq. 15–17 (t1 − t0 = 1).
+            d_irradiance: e1 - e0,
+            d_grad_rotation: sub(next.gather.grad_rotation, g.record.grad_rotation),
+            d_grad_translation: sub(
+                limit_gradient(next.gather.grad_translation, e1, g.record.radius),
+                g.record.grad_translation,
+            ),
+            d_eas: next.d_eas,
+            replaces: None,
+            used: false,
+            paths: None,
+        }
+    }
+
+    /// Gather `g`'s record as its `samples` at a later frame give it (none:
+    /// unchanged): irradiance and spatial gradients, each source's change
+    /// (§4.6.2) and the worst relative change `|τ − 1|` (Eq. 7, 21).
+    fn change_to(&self, g: &Gathered, samples: Option<&HemisphereSamples>) -> Change {
+        let strata = self.settings.ic.strata;
+        let gather = match samples {
             Some(samples) => irradiance_and_gradients(samples, g.record.normal, strata),
             None => GatheredIrradiance {
-                irradiance: e0,
+                irradiance: g.record.irradiance,
                 grad_translation: g.record.grad_translation,
                 grad_rotation: g.record.grad_rotation,
                 harmonic_distance: 0.0,
             },
         };
-        let e1 = next_gather.irradiance;
-        // §4.6.2: each source's extrapolated gradient, as each coefficient's.
         let d_eas = g.record.eas.as_ref().map(|sources| {
-            let next = next_samples
-                .as_ref()
-                .and_then(|samples| eas::irradiance_over(sources, samples, strata));
-            let d: Arc<[Vec3]> = match next {
-                Some(next) => sources
+            let later = samples.and_then(|samples| eas::irradiance_over(sources, samples, strata));
+            let d: Arc<[Vec3]> = match later {
+                Some(later) => sources
                     .iter()
-                    .zip(next)
+                    .zip(later)
                     .map(|(s, e)| e - s.irradiance)
                     .collect(),
                 None => vec![Vec3::ZERO; sources.len()].into(),
             };
             d
         });
-        let change = relative_change(e0, e1).max(sources_change(&g.record, d_eas.as_deref()));
-        let age = frames_of_validity(
-            change,
-            self.settings.temporal_accuracy,
-            self.settings.max_life,
-        );
-        let sub = |a: [Vec3; 3], b: [Vec3; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-        TemporalRecord {
-            record: g.record.clone(),
-            candidate: g.candidate,
-            next_irradiance: e1,
-            change,
-            last_valid: ctx.frame + age,
-            // Eq. 15–17 (t1 − t0 = 1).
-            d_irradiance: e1 - e0,
-            d_grad_rotation: sub(next_gather.grad_rotation, g.record.grad_rotation),
-            d_grad_translation: sub(
-                limit_gradient(next_gather.grad_translation, e1, g.record.radius),
-                g.record.grad_translation,
-            ),
+        let change = relative_change(g.record.irradiance, gather.irradiance)
+            .max(sources_change(&g.record, d_eas.as_deref()));
+        Change {
+            gather,
             d_eas,
-            replaces: None,
-            used: false,
-            paths: None,
+            change,
         }
     }
 
@@ -347,9 +376,15 @@ impl TemporalRadianceCaching {
     /// cache and its records in cache order (new ones not numbered yet).
     fn age_and_fill(&mut self, ctx: &FrameContext) -> (IrradianceCache, Aged) {
         let start = Instant::now();
+        let next = NextFrame::new(ctx, self.settings.next_direct, &mut self.statics);
+        let later = self
+            .settings
+            .reprojection
+            .then(|| LaterFrames::new(ctx, &next, self.settings.max_life, &mut self.ahead));
         let making = RecordMaking {
             ctx,
-            next: NextFrame::new(ctx, self.settings.next_direct, &mut self.statics),
+            next,
+            later,
             keep: self.keep,
             motion: FrameMotion {
                 blockers: Blockers::new(ctx),
@@ -370,6 +405,7 @@ impl TemporalRadianceCaching {
             removed: std::mem::take(&mut self.forgotten),
             samples: Vec::new(),
             paths_bytes: 0,
+            after_departure: HashSet::new(),
         };
         let expired = self.age(ctx.frame, &mut cache, &mut aged);
         let offered = self.replace(&making, &expired, &mut cache, &mut aged);
@@ -454,6 +490,10 @@ impl TemporalRadianceCaching {
             };
             aged.keep_paths_within_budget(&mut new);
             new.replaces = Some(old.record.id);
+            let settings = &self.settings;
+            if old.ended_at_a_departure(settings.temporal_accuracy, settings.max_life) {
+                aged.after_departure.insert(old.record.id);
+            }
             cache.insert(new.at_frame(ctx.frame, self.settings.gradients, None));
             aged.alive.push(new);
             aged.samples.extend(samples);
@@ -495,7 +535,7 @@ impl TemporalRadianceCaching {
         tracks: Option<&GatherTracks>,
         taken_from: Option<&KeptPaths>,
     ) -> (TemporalRecord, Option<SampleBlock>) {
-        let mut r = self.temporal(making.ctx, &making.next, g);
+        let mut r = self.temporal(making, g);
         r.paths = tracks.map(|tracks| Arc::new(making.motion.paths(g, tracks, taken_from)));
         (r, making.pack(g))
     }
@@ -509,6 +549,7 @@ impl TemporalRadianceCaching {
             mut stats,
             removed,
             samples,
+            after_departure,
             ..
         } = aged;
         debug_assert_eq!(alive.len(), cache.len());
@@ -539,7 +580,9 @@ impl TemporalRadianceCaching {
                 if let (TemporalGradients::Interpolated, Some(old)) =
                     (self.settings.gradients, r.replaces)
                 {
-                    self.successors.insert(old, Successor::of(r));
+                    if !after_departure.contains(&old) {
+                        self.successors.insert(old, Successor::of(r));
+                    }
                 }
             }
         }
@@ -738,6 +781,9 @@ impl Method for TemporalRadianceCaching {
 struct RecordMaking<'a> {
     ctx: &'a FrameContext<'a>,
     next: NextFrame,
+    /// The frames after the next, for the records' life checks (with
+    /// reprojection).
+    later: Option<LaterFrames>,
     /// Store hook: the records are kept, with their samples.
     keep: bool,
     motion: FrameMotion,
@@ -753,6 +799,15 @@ impl RecordMaking<'_> {
     }
 }
 
+/// A record's change to a later frame, as its reprojected samples give it.
+struct Change {
+    gather: GatheredIrradiance,
+    /// A radiance record's change of each source's irradiance.
+    d_eas: Option<Arc<[Vec3]>>,
+    /// The worst relative change from t0 (`|τ − 1|` for t0+1).
+    change: f32,
+}
+
 /// A frame through aging and fill, before its lookups.
 struct Aged {
     /// The frame's records in cache order (new ones not numbered yet).
@@ -764,6 +819,10 @@ struct Aged {
     samples: Vec<SampleBlock>,
     /// Bytes of the kept paths of the records in `alive`.
     paths_bytes: usize,
+    /// Records replaced whose life a later frame's departure ended: their
+    /// replacements are not their successors (they keep extrapolated
+    /// gradients).
+    after_departure: HashSet<RecordId>,
 }
 
 impl Aged {

@@ -153,6 +153,16 @@ impl TemporalRecord {
         t >= self.record.created_frame && t <= self.last_valid
     }
 
+    /// Whether its life ended before its temporal weight ended it (Eq.
+    /// 10–11): at a later frame whose motion departed from the
+    /// extrapolated one ([`super::later`]). Its replacement then shows the
+    /// light after that departure, which interpolated gradients (Eq.
+    /// 18–20, a steady change) must not spread over K's life.
+    pub(super) fn ended_at_a_departure(&self, temporal_accuracy: f32, max_life: u32) -> bool {
+        let t0 = self.record.created_frame;
+        self.last_valid < t0 + frames_of_validity(self.change, temporal_accuracy, max_life)
+    }
+
     /// Frames K may contribute to (Eq. 10–11): `last_valid − t0 + 1`, from 1
     /// to `δt_max`.
     pub fn lifespan(&self) -> u32 {

@@ -1,0 +1,393 @@
+//! A record's life checked against the frames after t0+1, where the known
+//! animation departs from the motion its τ extrapolates. A departure from
+//! TRC, named in the parent module's documentation.
+//!
+//! The paper estimates E(t0+1) by reprojection (§4.7) and takes the change
+//! to go on at that rate: K is used while `|τ − 1|(t − t0) ≤ a^t` (Eq. 9–10).
+//! What happens after t0+1 it cannot see. An object at rest at t0 that
+//! starts moving or jumps later, one that stops or turns back, a light
+//! switched on or off later: the records that saw it keep its old light
+//! until their temporal weight or δt_max ends their life (in
+//! `tests/data/scenes/block_jumps.gltf` a block bias 3.5× `ic`'s for the
+//! rest of δt_max: `benches/RESULTS.md`, "Records checked against the
+//! later frames").
+//!
+//! The whole animation is known ahead (the paper's own premise for t0+1:
+//! "the transformation matrix … at time t+1 is known", §5). So at its
+//! creation a record is also reprojected, exactly as for t0+1, to each
+//! later frame of its life where the motion departs from the extrapolated
+//! one by more than its hemisphere resolves, and its life ends before the
+//! first such frame where its reprojected irradiance has changed by more
+//! than `a^t` (Eq. 10's bound on the total change, with the change itself
+//! in place of its extrapolation). A frame departs for a record when
+//! - an object it sees lies more than half a hemisphere cell, as seen
+//!   from the record, from where the object's t0→t0+1 motion, continued
+//!   (translation, turn and scale each at its own rate, as keyframes
+//!   interpolate), would have taken it; or
+//! - the lights have changed since t0 where they stayed from t0 to t0+1
+//!   (lights moving at t0 keep the paper's extrapolation).
+//!
+//! Limits: only what the record's samples hit at t0 is followed (an object
+//! that comes into its view later is not, as for t0+1); shadows that move
+//! over what it sees are not seen (as for t0+1 without `next_direct`); the
+//! gate's half cell is the cells' mean size, and cells near the normal are
+//! narrower in φ; and frames past [`LATER_FRAMES`] after t0 are not
+//! checked (lives that long are the paper's).
+
+use super::estimate::{reproject, rigid_motion, NextFrame};
+use super::Gathered;
+use crate::cache::gather::{HemisphereSamples, Strata};
+use crate::method::ic::dynamic_objects;
+use crate::method::unshadowed::LightsByFrame;
+use crate::method::FrameContext;
+use crate::scene::Scene;
+use glam::{Mat4, Quat, Vec3};
+use std::collections::BTreeMap;
+use std::f32::consts::TAU;
+use std::sync::Arc;
+
+/// Frames after t0 the check looks at, at most (`δt_max` may be up to
+/// 100,000): beyond it a record's life is the paper's.
+pub(super) const LATER_FRAMES: u32 = 64;
+
+/// The frames t0+2 … after frame t0 (the frame whose records are being
+/// made) that depart from the extrapolated motion somewhere.
+pub(super) struct LaterFrames {
+    t0: u32,
+    /// By frame, those where something departs.
+    frames: BTreeMap<u32, LaterFrame>,
+    /// Which objects move.
+    dynamic: Vec<bool>,
+}
+
+/// A frame after t0+1 where the motion departs from the extrapolated one.
+struct LaterFrame {
+    /// The objects' motion from t0 and the lights at t0 and then: the
+    /// reprojection's input.
+    next: NextFrame,
+    /// Per object, how far (world units) its bounding box lies from where
+    /// its t0→t0+1 motion, continued, would have taken it; 0 for an object
+    /// that never moves.
+    departure: Vec<f32>,
+    /// The lights differ from t0's, where they stayed from t0 to t0+1.
+    lights_changed: bool,
+}
+
+impl LaterFrames {
+    /// The frames after `ctx.frame + 1` in a life of `max_life` frames
+    /// from `ctx.frame` (at most [`LATER_FRAMES`]), `next` its view of
+    /// `ctx.frame + 1`; `ahead` keeps the later frames' transforms and
+    /// lights from frame to frame.
+    pub(super) fn new(
+        ctx: &FrameContext,
+        next: &NextFrame,
+        max_life: u32,
+        ahead: &mut Ahead,
+    ) -> Self {
+        let (scene, t0) = (ctx.scene, ctx.frame);
+        let dynamic = dynamic_objects(ctx);
+        let last = t0.saturating_add(max_life.min(LATER_FRAMES).saturating_sub(1));
+        ahead.keep(t0 + 1..=last);
+        let lights_move = lights_may_move(scene);
+        let mut frames = BTreeMap::new();
+        if !lights_move && !dynamic.contains(&true) {
+            return LaterFrames {
+                t0,
+                frames,
+                dynamic,
+            };
+        }
+        let x0 = &ctx.snapshot.object_to_world;
+        let x1 = ahead.placed(ctx, t0 + 1);
+        let extrapolated: Vec<Option<Extrapolated>> = scene
+            .objects
+            .iter()
+            .zip(&dynamic)
+            .enumerate()
+            .map(|(o, (object, &d))| {
+                let corners = corners(&object.mesh.positions).filter(|_| d)?;
+                Some(Extrapolated::new(corners, x0[o], x1[o]))
+            })
+            .collect();
+        for t in t0.saturating_add(2)..=last {
+            let xt = ahead.placed(ctx, t);
+            let departure: Vec<f32> = extrapolated
+                .iter()
+                .zip(xt.iter())
+                .map(|(e, &xt)| e.as_ref().map_or(0.0, |e| e.departure(xt, t - t0)))
+                .collect();
+            // The lights then, also where an object departs: moving
+            // lights move in the reprojection too.
+            let lights = if lights_move {
+                ahead.lights.at(ctx, t)
+            } else {
+                next.lights_now().clone()
+            };
+            let lights_changed = !next.lights_move() && !lights.same_as(next.lights_now());
+            if lights_changed || departure.iter().any(|&d| d > 0.0) {
+                let motion = x0.iter().zip(xt.iter());
+                let frame = LaterFrame {
+                    next: NextFrame::later(
+                        motion.map(|(w0, wt)| rigid_motion(*w0, *wt)).collect(),
+                        (next.lights_now().clone(), lights),
+                    ),
+                    departure,
+                    lights_changed,
+                };
+                frames.insert(t, frame);
+            }
+        }
+        LaterFrames {
+            t0,
+            frames,
+            dynamic,
+        }
+    }
+
+    /// The last frame, up to `last_valid` (Eq. 10–11's), that gather `g`
+    /// (made at t0) may be used in: the frame before the first later frame
+    /// that departs from τ's extrapolation as `g` sees it and where its
+    /// samples, reprojected there, `exceed` the temporal accuracy.
+    pub(super) fn last_valid(
+        &self,
+        ctx: &FrameContext,
+        g: &Gathered,
+        strata: Strata,
+        last_valid: u32,
+        exceed: impl Fn(&HemisphereSamples) -> bool,
+    ) -> u32 {
+        let first = self.t0.saturating_add(2);
+        if last_valid < first || self.frames.is_empty() {
+            return last_valid;
+        }
+        let seen = nearest_hits(&g.samples, &self.dynamic);
+        let cell = resolvable_angle(strata);
+        for (&t, f) in self.frames.range(first..=last_valid) {
+            let departs = f.lights_changed
+                || seen
+                    .iter()
+                    .any(|&(o, nearest)| f.departure[o as usize] > cell * nearest);
+            if departs && exceed(&reproject(ctx, &f.next, g, strata.theta, strata.phi)) {
+                return t - 1;
+            }
+        }
+        last_valid
+    }
+}
+
+/// The frames ahead of the one rendered: each object's transform and the
+/// lights, evaluated once while the frames that look at them come by.
+#[derive(Default)]
+pub(super) struct Ahead {
+    placed: BTreeMap<u32, Arc<Vec<Mat4>>>,
+    lights: LightsByFrame,
+}
+
+impl Ahead {
+    fn keep(&mut self, frames: std::ops::RangeInclusive<u32>) {
+        self.placed.retain(|f, _| frames.contains(f));
+        self.lights.keep(frames);
+    }
+
+    /// Each object's world transform at frame `t`.
+    fn placed(&mut self, ctx: &FrameContext, t: u32) -> Arc<Vec<Mat4>> {
+        self.placed
+            .entry(t)
+            .or_insert_with(|| {
+                let scene = ctx.scene;
+                let world = scene.node_world_transforms(ctx.time_of(t));
+                Arc::new(scene.objects.iter().map(|o| world[o.node]).collect())
+            })
+            .clone()
+    }
+}
+
+/// Whether any light can move or change: a punctual light on an animated
+/// node, or an emissive material on a moving object.
+fn lights_may_move(scene: &Scene) -> bool {
+    scene.lights.iter().any(|l| scene.node_is_dynamic(l.node))
+        || scene.objects.iter().enumerate().any(|(o, object)| {
+            scene.object_is_dynamic(o)
+                && object
+                    .mesh
+                    .materials
+                    .iter()
+                    .any(|&m| scene.materials[m as usize].is_emissive())
+        })
+}
+
+/// Half the angle a cell of the record's hemisphere spans (the side of a
+/// square of its mean solid angle, 2π over the cell count): a
+/// displacement under it mostly leaves a reprojected sample in its cell,
+/// where it keeps its own value (`estimate::HemisphereGrid::keep_own_samples`).
+fn resolvable_angle(strata: Strata) -> f32 {
+    0.5 * (TAU / strata.count().max(1) as f32).sqrt()
+}
+
+/// Each moving object that samples of the hemisphere hit, with the
+/// distance of its nearest hit: an object's displacement `d` moves it by
+/// about `d / nearest` radians, at most, as the record sees it.
+fn nearest_hits(samples: &HemisphereSamples, dynamic: &[bool]) -> Vec<(u32, f32)> {
+    let mut nearest: Vec<(u32, f32)> = Vec::new();
+    for (&object, &distance) in samples.object.iter().zip(&samples.distance) {
+        if !distance.is_finite() || !dynamic.get(object as usize).copied().unwrap_or(false) {
+            continue;
+        }
+        match nearest.iter_mut().find(|(o, _)| *o == object) {
+            Some((_, d)) => *d = d.min(distance),
+            None => nearest.push((object, distance)),
+        }
+    }
+    nearest
+}
+
+/// The corners of the box around `positions` (an object's own frame);
+/// `None` for an object without vertices.
+fn corners(positions: &[Vec3]) -> Option<[Vec3; 8]> {
+    let first = *positions.first()?;
+    let (min, max) = positions
+        .iter()
+        .fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+    Some(std::array::from_fn(|i| {
+        Vec3::new(
+            if i & 1 == 0 { min.x } else { max.x },
+            if i & 2 == 0 { min.y } else { max.y },
+            if i & 4 == 0 { min.z } else { max.z },
+        )
+    }))
+}
+
+/// An object's motion from t0 to t0+1, continued: its translation, turn
+/// and scale each going on at the same rate (what keyframes interpolate,
+/// a steady slide while turning included).
+struct Extrapolated {
+    corners: [Vec3; 8],
+    x0: Mat4,
+    /// `None`: it stays where it was from t0 to t0+1.
+    rates: Option<Rates>,
+}
+
+/// Per frame: the change of scale, the turn (axis, angle) and the shift.
+struct Rates {
+    scale: (Vec3, Vec3),
+    rotation: (Quat, Vec3, f32),
+    translation: (Vec3, Vec3),
+}
+
+impl Extrapolated {
+    fn new(corners: [Vec3; 8], x0: Mat4, x1: Mat4) -> Self {
+        let rates = (x1 != x0).then(|| {
+            let (s0, r0, p0) = x0.to_scale_rotation_translation();
+            let (s1, r1, p1) = x1.to_scale_rotation_translation();
+            let (axis, angle) = (r1 * r0.inverse()).to_axis_angle();
+            Rates {
+                scale: (s0, s1 - s0),
+                rotation: (r0, axis, angle),
+                translation: (p0, p1 - p0),
+            }
+        });
+        Extrapolated { corners, x0, rates }
+    }
+
+    /// Where it would be `k` frames after t0.
+    fn at(&self, k: u32) -> Mat4 {
+        let Some(r) = &self.rates else {
+            return self.x0;
+        };
+        let k = k as f32;
+        let (r0, axis, angle) = r.rotation;
+        Mat4::from_scale_rotation_translation(
+            r.scale.0 + r.scale.1 * k,
+            Quat::from_axis_angle(axis, angle * k) * r0,
+            r.translation.0 + r.translation.1 * k,
+        )
+    }
+
+    /// How far its box placed by `xt`, `k` frames after t0, lies from
+    /// where the motion continued takes it: the largest distance of a
+    /// corner. Infinite where that place is not a transform (an object
+    /// scaled to nothing at t0 cannot be decomposed) and `xt` is not `x0`.
+    fn departure(&self, xt: Mat4, k: u32) -> f32 {
+        let predicted = self.at(k);
+        if !predicted.is_finite() {
+            return if xt == self.x0 { 0.0 } else { f32::INFINITY };
+        }
+        self.corners
+            .iter()
+            .map(|&c| {
+                xt.transform_point3(c)
+                    .distance(predicted.transform_point3(c))
+            })
+            .fold(0.0, f32::max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CUBE: [Vec3; 2] = [Vec3::splat(-0.5), Vec3::splat(0.5)];
+
+    fn at(translation: Vec3, turn: f32) -> Mat4 {
+        Mat4::from_rotation_translation(Quat::from_rotation_y(turn), translation)
+    }
+
+    fn extrapolated(x0: Mat4, x1: Mat4) -> Extrapolated {
+        Extrapolated::new(corners(&CUBE).unwrap(), x0, x1)
+    }
+
+    /// A steady slide while turning and growing is what the continued
+    /// motion follows: no departure, however long the life.
+    #[test]
+    fn steady_motion_does_not_depart() {
+        let place = |f: f32| {
+            Mat4::from_scale_rotation_translation(
+                Vec3::splat(1.0 + 0.01 * f),
+                Quat::from_rotation_y(0.05 * f),
+                Vec3::new(0.1 * f, 0.0, -0.02 * f),
+            )
+        };
+        let e = extrapolated(place(0.0), place(1.0));
+        for k in [2, 10, 19, 64] {
+            let d = e.departure(place(k as f32), k);
+            assert!(d < 1e-4, "k = {k}: {d}");
+        }
+        let still = at(Vec3::ONE, 0.3);
+        assert_eq!(extrapolated(still, still).departure(still, 5), 0.0);
+    }
+
+    /// An object at rest from t0 to t0+1 that then moves, one that jumps,
+    /// one that stops: each departs by how far it is from the
+    /// extrapolated place.
+    #[test]
+    fn starts_jumps_and_stops_depart_by_their_displacement() {
+        let rest = at(Vec3::ZERO, 0.0);
+        let moved = at(Vec3::new(0.0, -2.0, 0.0), 0.0);
+        assert!((extrapolated(rest, rest).departure(moved, 4) - 2.0).abs() < 1e-5);
+        let sliding = |f: f32| at(Vec3::new(0.1 * f, 0.0, 0.0), 0.0);
+        // Extrapolated to x = 0.5 at t0 + 5; it stayed at 0.1.
+        let d = extrapolated(sliding(0.0), sliding(1.0)).departure(sliding(1.0), 5);
+        assert!((d - 0.4).abs() < 1e-5, "{d}");
+        // Scaled to nothing at t0: nothing to extrapolate from.
+        let gone = Mat4::from_scale(Vec3::ZERO);
+        assert_eq!(extrapolated(gone, gone).departure(gone, 3), 0.0);
+        let growing = extrapolated(gone, Mat4::from_scale(Vec3::splat(0.1)));
+        assert_eq!(growing.departure(gone, 3), 0.0, "still where it was");
+        let grown = Mat4::from_scale(Vec3::splat(0.3));
+        assert_eq!(growing.departure(grown, 3), f32::INFINITY);
+    }
+
+    /// The nearest hit of each moving object; misses and static objects
+    /// are left out.
+    #[test]
+    fn nearest_hits_keep_each_moving_objects_nearest() {
+        let samples = HemisphereSamples {
+            direction: vec![Vec3::Z; 5],
+            radiance: vec![Vec3::ONE; 5],
+            distance: vec![3.0, 1.5, f32::INFINITY, 2.0, 0.5],
+            object: vec![1, 1, u32::MAX, 2, 0],
+        };
+        let dynamic = [false, true, true];
+        assert_eq!(nearest_hits(&samples, &dynamic), vec![(1, 1.5), (2, 2.0)]);
+    }
+}
