@@ -6,7 +6,7 @@
 //! to go on at that rate: K is used while `|τ − 1|(t − t0) ≤ a^t` (Eq. 9–10).
 //! What happens after t0+1 it cannot see. An object at rest at t0 that
 //! starts moving or jumps later, one that stops or turns back, a light
-//! switched on or off later: the records that saw it keep its old light
+//! switched off or moved later: the records that saw it keep its old light
 //! until their temporal weight or δt_max ends their life (in
 //! `tests/data/scenes/block_jumps.gltf` a block bias 3.5× `ic`'s for the
 //! rest of δt_max: `benches/RESULTS.md`, "Records checked against the
@@ -25,14 +25,19 @@
 //!   (translation, turn and scale each at its own rate, as keyframes
 //!   interpolate), would have taken it; or
 //! - the lights have changed since t0 where they stayed from t0 to t0+1
-//!   (lights moving at t0 keep the paper's extrapolation).
+//!   (lights moving at t0 keep the paper's extrapolation, but the frames
+//!   an object departs in are reprojected with the lights then).
 //!
 //! Limits: only what the record's samples hit at t0 is followed (an object
 //! that comes into its view later is not, as for t0+1); shadows that move
 //! over what it sees are not seen (as for t0+1 without `next_direct`); the
 //! gate's half cell is the cells' mean size, and cells near the normal are
-//! narrower in φ; and frames past [`LATER_FRAMES`] after t0 are not
-//! checked (lives that long are the paper's).
+//! narrower in φ, and the object's nearest hit is taken at t0 (one that
+//! comes nearer turns by more than its displacement over that distance);
+//! a light switched on where the samples' hits had no direct light at t0
+//! is not seen (the reprojection scales their light by the change of the
+//! direct light, which has no ratio from nothing); and a life longer than
+//! [`LATER_FRAMES`] frames is checked over its first frames only.
 
 use super::estimate::{reproject, rigid_motion, NextFrame};
 use super::Gathered;
@@ -46,8 +51,9 @@ use std::collections::BTreeMap;
 use std::f32::consts::TAU;
 use std::sync::Arc;
 
-/// Frames after t0 the check looks at, at most (`δt_max` may be up to
-/// 100,000): beyond it a record's life is the paper's.
+/// The longest life the check covers (`δt_max` may be up to 100,000): a
+/// longer one is checked over its first `LATER_FRAMES` frames, and is the
+/// paper's beyond.
 pub(super) const LATER_FRAMES: u32 = 64;
 
 /// The frames t0+2 … after frame t0 (the frame whose records are being
@@ -90,7 +96,7 @@ impl LaterFrames {
         ahead.keep(t0 + 1..=last);
         let lights_move = lights_may_move(scene);
         let mut frames = BTreeMap::new();
-        if !lights_move && !dynamic.contains(&true) {
+        if last < t0.saturating_add(2) || (!lights_move && !dynamic.contains(&true)) {
             return LaterFrames {
                 t0,
                 frames,
@@ -99,15 +105,11 @@ impl LaterFrames {
         }
         let x0 = &ctx.snapshot.object_to_world;
         let x1 = ahead.placed(ctx, t0 + 1);
-        let extrapolated: Vec<Option<Extrapolated>> = scene
-            .objects
+        let extrapolated: Vec<Option<Extrapolated>> = ahead
+            .corners(scene, &dynamic)
             .iter()
-            .zip(&dynamic)
             .enumerate()
-            .map(|(o, (object, &d))| {
-                let corners = corners(&object.mesh.positions).filter(|_| d)?;
-                Some(Extrapolated::new(corners, x0[o], x1[o]))
-            })
+            .map(|(o, corners)| Some(Extrapolated::new((*corners)?, x0[o], x1[o])))
             .collect();
         for t in t0.saturating_add(2)..=last {
             let xt = ahead.placed(ctx, t);
@@ -125,10 +127,13 @@ impl LaterFrames {
             };
             let lights_changed = !next.lights_move() && !lights.same_as(next.lights_now());
             if lights_changed || departure.iter().any(|&d| d > 0.0) {
-                let motion = x0.iter().zip(xt.iter());
+                let motion = x0.iter().zip(xt.iter()).zip(&dynamic);
+                let moved = |((w0, wt), &d): ((&Mat4, &Mat4), &bool)| {
+                    d.then(|| rigid_motion(*w0, *wt)).flatten()
+                };
                 let frame = LaterFrame {
                     next: NextFrame::later(
-                        motion.map(|(w0, wt)| rigid_motion(*w0, *wt)).collect(),
+                        motion.map(moved).collect(),
                         (next.lights_now().clone(), lights),
                     ),
                     departure,
@@ -181,12 +186,24 @@ impl LaterFrames {
 pub(super) struct Ahead {
     placed: BTreeMap<u32, Arc<Vec<Mat4>>>,
     lights: LightsByFrame,
+    /// Each moving object's box in its own frame (found once).
+    corners: Option<Vec<Option<[Vec3; 8]>>>,
 }
 
 impl Ahead {
     fn keep(&mut self, frames: std::ops::RangeInclusive<u32>) {
         self.placed.retain(|f, _| frames.contains(f));
         self.lights.keep(frames);
+    }
+
+    /// The corners of each moving object's box in its own frame.
+    fn corners(&mut self, scene: &Scene, dynamic: &[bool]) -> &[Option<[Vec3; 8]>] {
+        self.corners.get_or_insert_with(|| {
+            let objects = scene.objects.iter().zip(dynamic);
+            objects
+                .map(|(o, &d)| corners(&o.mesh.positions).filter(|_| d))
+                .collect()
+        })
     }
 
     /// Each object's world transform at frame `t`.
@@ -226,7 +243,8 @@ fn resolvable_angle(strata: Strata) -> f32 {
 
 /// Each moving object that samples of the hemisphere hit, with the
 /// distance of its nearest hit: an object's displacement `d` moves it by
-/// about `d / nearest` radians, at most, as the record sees it.
+/// about `d / nearest` radians as the record sees it (more if it comes
+/// nearer).
 fn nearest_hits(samples: &HemisphereSamples, dynamic: &[bool]) -> Vec<(u32, f32)> {
     let mut nearest: Vec<(u32, f32)> = Vec::new();
     for (&object, &distance) in samples.object.iter().zip(&samples.distance) {
@@ -257,9 +275,12 @@ fn corners(positions: &[Vec3]) -> Option<[Vec3; 8]> {
     }))
 }
 
-/// An object's motion from t0 to t0+1, continued: its translation, turn
-/// and scale each going on at the same rate (what keyframes interpolate,
-/// a steady slide while turning included).
+/// An object's motion from t0 to t0+1, continued, two ways: its
+/// translation, turn and scale each going on at the same rate (what
+/// keyframes on its own node interpolate, a steady slide while turning
+/// included), and the same rigid step taken again (a steady orbit, where
+/// an animated parent turns it about the parent's pivot). Its departure is
+/// from the nearer of the two places.
 struct Extrapolated {
     corners: [Vec3; 8],
     x0: Mat4,
@@ -267,11 +288,13 @@ struct Extrapolated {
     rates: Option<Rates>,
 }
 
-/// Per frame: the change of scale, the turn (axis, angle) and the shift.
+/// Per frame: the change of scale, the turn (axis, angle) and the shift;
+/// and the whole step, `x1 · x0⁻¹`.
 struct Rates {
     scale: (Vec3, Vec3),
     rotation: (Quat, Vec3, f32),
     translation: (Vec3, Vec3),
+    step: Mat4,
 }
 
 impl Extrapolated {
@@ -284,41 +307,57 @@ impl Extrapolated {
                 scale: (s0, s1 - s0),
                 rotation: (r0, axis, angle),
                 translation: (p0, p1 - p0),
+                step: x1 * x0.inverse(),
             }
         });
         Extrapolated { corners, x0, rates }
     }
 
-    /// Where it would be `k` frames after t0.
-    fn at(&self, k: u32) -> Mat4 {
+    /// Where each way of continuing puts it `k` frames after t0.
+    fn at(&self, k: u32) -> [Mat4; 2] {
         let Some(r) = &self.rates else {
-            return self.x0;
+            return [self.x0; 2];
         };
-        let k = k as f32;
         let (r0, axis, angle) = r.rotation;
-        Mat4::from_scale_rotation_translation(
-            r.scale.0 + r.scale.1 * k,
-            Quat::from_axis_angle(axis, angle * k) * r0,
-            r.translation.0 + r.translation.1 * k,
-        )
+        let f = k as f32;
+        let by_parts = Mat4::from_scale_rotation_translation(
+            r.scale.0 + r.scale.1 * f,
+            Quat::from_axis_angle(axis, angle * f) * r0,
+            r.translation.0 + r.translation.1 * f,
+        );
+        let mut by_steps = self.x0;
+        for _ in 0..k {
+            by_steps = r.step * by_steps;
+        }
+        [by_parts, by_steps]
     }
 
     /// How far its box placed by `xt`, `k` frames after t0, lies from
-    /// where the motion continued takes it: the largest distance of a
-    /// corner. Infinite where that place is not a transform (an object
-    /// scaled to nothing at t0 cannot be decomposed) and `xt` is not `x0`.
+    /// where its motion continued takes it: the largest distance of a
+    /// corner, from the nearer of the two places. Infinite where neither
+    /// place is a transform (an object scaled to nothing at t0) and `xt`
+    /// is not `x0`.
     fn departure(&self, xt: Mat4, k: u32) -> f32 {
-        let predicted = self.at(k);
-        if !predicted.is_finite() {
-            return if xt == self.x0 { 0.0 } else { f32::INFINITY };
+        let from = |predicted: Mat4| {
+            self.corners
+                .iter()
+                .map(|&c| {
+                    xt.transform_point3(c)
+                        .distance(predicted.transform_point3(c))
+                })
+                .fold(0.0, f32::max)
+        };
+        let nearest = self
+            .at(k)
+            .into_iter()
+            .filter(Mat4::is_finite)
+            .map(from)
+            .fold(f32::INFINITY, f32::min);
+        if nearest.is_finite() || xt != self.x0 {
+            nearest
+        } else {
+            0.0
         }
-        self.corners
-            .iter()
-            .map(|&c| {
-                xt.transform_point3(c)
-                    .distance(predicted.transform_point3(c))
-            })
-            .fold(0.0, f32::max)
     }
 }
 
@@ -354,6 +393,18 @@ mod tests {
         }
         let still = at(Vec3::ONE, 0.3);
         assert_eq!(extrapolated(still, still).departure(still, 5), 0.0);
+    }
+
+    /// An object that an animated parent turns about the parent's pivot
+    /// (a steady orbit, turning as it goes) does not depart either.
+    #[test]
+    fn a_steady_orbit_does_not_depart() {
+        let place = |f: f32| Mat4::from_rotation_y(0.05 * f) * at(Vec3::new(1.0, 0.0, 0.0), 0.0);
+        let e = extrapolated(place(0.0), place(1.0));
+        for k in [2, 10, 40] {
+            let d = e.departure(place(k as f32), k);
+            assert!(d < 1e-4, "k = {k}: {d}");
+        }
     }
 
     /// An object at rest from t0 to t0+1 that then moves, one that jumps,
