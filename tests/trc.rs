@@ -547,6 +547,57 @@ fn switched_off_light_leaves_no_indirect() {
     }
 }
 
+/// A light switched on at frame k in a room it alone lights: before k
+/// every record is black. With the constant estimate they stay black
+/// (E = 0 changes by nothing) and frame k has the direct light only. With
+/// reprojection the check of later frames sees the lights change at k,
+/// where the records' hits, dark at t0, gain their reflection of the new
+/// light (`estimate::light_change`): every record ends at k − 1 and frame
+/// k is that of a render that starts there.
+#[test]
+fn switched_on_light_lights_the_records_at_once() {
+    let (k, max_life, fps) = (3u32, 6u32, 24.0);
+    let scene = || {
+        let mut s = lit_room(None, fps);
+        s.animation.channels.push(Channel {
+            node: 1,
+            property: Property::Scale,
+            interpolation: Interpolation::Step,
+            times: vec![0.0, (k as f32 - 0.5) / fps],
+            values: vec![Vec4::ZERO, Vec4::new(1.0, 1.0, 1.0, 0.0)],
+        });
+        s
+    };
+    let mean_at_k = |reprojection, first: u32| -> f64 {
+        let mut r = renderer(scene(), 12, fps, false);
+        let mut trc = TemporalRadianceCaching::new(TrcSettings {
+            ic: small_ic(),
+            max_life,
+            reprojection,
+            ..TrcSettings::default()
+        });
+        let means: Vec<f64> = (first..=k)
+            .map(|f| render_trc(&mut r, &mut trc, f).mean())
+            .collect();
+        if first == 0 {
+            assert_eq!(means[0], 0.0, "the room is dark before k");
+        }
+        means[means.len() - 1]
+    };
+    let fresh = mean_at_k(true, k);
+    let constant = mean_at_k(false, 0);
+    let checked = mean_at_k(true, 0);
+    eprintln!("mean at frame k: fresh {fresh}, constant {constant}, checked {checked}");
+    assert!(
+        constant < 0.9 * fresh,
+        "the constant estimate's records held no darkness: test proves nothing"
+    );
+    assert!(
+        (checked - fresh).abs() < 0.02 * fresh,
+        "reprojection: frame k {checked} against {fresh} rendered afresh"
+    );
+}
+
 /// Over 16 frames of cube-in-box, `trc` computes far fewer records than
 /// `ic` and flickers less against a same-pattern `path` reference.
 #[test]

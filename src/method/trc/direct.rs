@@ -113,7 +113,7 @@ impl DirectChange {
     /// `at`: `D` one light sample's direct light reflected by the hit
     /// towards the record, shadowed in the geometry of its time. `ratio` is
     /// what the caller scaled the whole sample by for moving lights
-    /// (`light_ratio`): the direct part it scaled is replaced by `D(t0+1)`.
+    /// (`estimate::light_change`'s ratio): the direct part it scaled is replaced by `D(t0+1)`.
     pub(super) fn change(
         &self,
         ctx: &FrameContext,

@@ -12,7 +12,7 @@ use crate::method::FrameContext;
 use crate::sampling::Frame;
 use crate::scene::Snapshot;
 use glam::{Mat4, Vec3};
-use std::f32::consts::{PI, TAU};
+use std::f32::consts::{FRAC_1_PI, PI, TAU};
 use std::sync::Arc;
 
 /// What changes from this frame to the next (TRC §5: "the transformation
@@ -106,7 +106,10 @@ pub(super) fn rigid_motion(w0: Mat4, w1: Mat4) -> Option<Mat4> {
 /// scaled by the ratio of unshadowed direct irradiance at its hit point
 /// after and before ("accounting for the rotation and displacement of both
 /// objects and light sources"): shadowing is assumed unchanged and the hit's
-/// own indirect light assumed to scale with its direct light.
+/// own indirect light assumed to scale with its direct light. A hit that
+/// had no direct light and has some (a light switched on, a surface
+/// turned towards one) gains its diffuse reflection of it, unshadowed: no
+/// ratio scales light from nothing.
 pub(super) fn reproject(
     ctx: &FrameContext,
     next: &NextFrame,
@@ -266,7 +269,7 @@ impl HemisphereGrid {
 /// Sample `i` of the gather at t0+1: its cell and what the cell sees, or
 /// `None` where it moved below the record's horizon. Its first hit moves
 /// with its object (static hits and misses stay in their cells), and its
-/// radiance follows moving lights ([`light_ratio`]).
+/// radiance follows moving lights ([`light_change`]).
 fn reproject_sample(
     ctx: &FrameContext,
     next: &NextFrame,
@@ -301,13 +304,21 @@ fn reproject_sample(
     };
     let mut radiance = s.radiance[i];
     if let Some(hit) = g.results.get(i).map(|r| &r.hit).filter(|h| h.is_hit()) {
-        let ratio = if next.lights_move {
+        let change = if next.lights_move {
             let (l0, l1) = &next.lights;
-            light_ratio(ctx.snapshot, hit, dir, hit_point, moved, l0, l1)
+            light_change(ctx.snapshot, hit, dir, hit_point, moved, l0, l1)
         } else {
-            Vec3::ONE
+            LightChange::NONE
         };
+        let ratio = change.ratio;
         radiance *= ratio;
+        if next.direct.is_none() {
+            // Light where there was none (a light switched on, a surface
+            // turned towards one): the hit's diffuse reflection of it,
+            // unshadowed. `direct` evaluates it with its shadow instead.
+            let m = ctx.snapshot.tri_material[hit.triangle as usize] as usize;
+            radiance += ctx.scene.materials[m].diffuse * FRAC_1_PI * change.from_dark;
+        }
         if let Some(direct) = &next.direct {
             let at = FirstHit {
                 sample: i,
@@ -326,9 +337,26 @@ fn reproject_sample(
     Some((cell, sample))
 }
 
-/// Per channel `D(t0+1)/D(t0)` of the unshadowed direct irradiance at a
-/// sample's hit point (moved with its object), 1 where `D(t0)` is zero.
-fn light_ratio(
+/// How the unshadowed direct irradiance `D` at a sample's hit point
+/// (moved with its object) changes from t0 to t0+1, per channel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LightChange {
+    /// `D(t0+1)/D(t0)`; 1 where `D(t0)` is zero.
+    ratio: Vec3,
+    /// `D(t0+1)` where `D(t0)` is zero (no ratio scales light from
+    /// nothing); 0 elsewhere.
+    from_dark: Vec3,
+}
+
+impl LightChange {
+    const NONE: LightChange = LightChange {
+        ratio: Vec3::ONE,
+        from_dark: Vec3::ZERO,
+    };
+}
+
+/// The [`LightChange`] at a sample's hit point.
+fn light_change(
     snapshot: &Snapshot,
     hit: &Hit,
     dir: Vec3,
@@ -336,7 +364,7 @@ fn light_ratio(
     moved: Option<(Mat4, Vec3)>,
     l0: &UnshadowedLights,
     l1: &UnshadowedLights,
-) -> Vec3 {
+) -> LightChange {
     let mut n0 = snapshot.triangles[hit.triangle as usize].geometric_normal();
     if n0.dot(dir) > 0.0 {
         n0 = -n0; // the side the record sees
@@ -346,7 +374,11 @@ fn light_ratio(
         None => (p0, n0),
     };
     let (d0, d1) = (l0.irradiance(p0, n0), l1.irradiance(p1, n1));
-    Vec3::select(d0.cmpgt(Vec3::splat(1e-12)), d1 / d0, Vec3::ONE)
+    let lit = d0.cmpgt(Vec3::splat(1e-12));
+    LightChange {
+        ratio: Vec3::select(lit, d1 / d0, Vec3::ONE),
+        from_dark: Vec3::select(lit, Vec3::ZERO, d1),
+    }
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 //! to go on at that rate: K is used while `|τ − 1|(t − t0) ≤ a^t` (Eq. 9–10).
 //! What happens after t0+1 it cannot see. An object at rest at t0 that
 //! starts moving or jumps later, one that stops or turns back, a light
-//! switched off or moved later: the records that saw it keep its old light
+//! switched on, off or moved later: the records that saw it keep its old light
 //! until their temporal weight or δt_max ends their life (in
 //! `tests/data/scenes/block_jumps.gltf` a block bias 3.5× `ic`'s for the
 //! rest of δt_max: `benches/RESULTS.md`, "Records checked against the
@@ -34,9 +34,7 @@
 //! gate's half cell is the cells' mean size, and cells near the normal are
 //! narrower in φ, and the object's nearest hit is taken at t0 (one that
 //! comes nearer turns by more than its displacement over that distance);
-//! a light switched on where the samples' hits had no direct light at t0
-//! is not seen (the reprojection scales their light by the change of the
-//! direct light, which has no ratio from nothing); and a life longer than
+//! and a life longer than
 //! [`LATER_FRAMES`] frames is checked over its first frames only.
 
 use super::estimate::{reproject, rigid_motion, NextFrame};
