@@ -85,7 +85,12 @@ impl UnshadowedLights {
         UnshadowedLights { emitters }
     }
 
-    /// Whether the two frames' lights are in the same places.
+    /// Whether the two frames' lights are in the same places, to within
+    /// rounding: a light held still by equal animation keys (as exporters
+    /// that sample every frame write them) is interpolated at each frame
+    /// and may round differently, and taking that for a move would make
+    /// `trc` reproject every record at every later frame and `tcg` find
+    /// every sample stale. A move or change of a part in 10⁵ counts.
     pub(crate) fn same_as(&self, other: &Self) -> bool {
         self.emitters.len() == other.emitters.len()
             && self
@@ -106,11 +111,12 @@ impl UnshadowedLights {
                             power: p1,
                             ..
                         },
-                    ) => c0 == c1 && n0 == n1 && p0 == p1,
+                    ) => nearly_equal(*c0, *c1) && nearly_equal(*n0, *n1) && nearly_equal(*p0, *p1),
                     (Emitter::Point(l0), Emitter::Point(l1)) => {
-                        l0.position == l1.position
-                            && l0.direction == l1.direction
-                            && l0.intensity == l1.intensity
+                        nearly_equal(l0.position, l1.position)
+                            && nearly_equal(l0.direction, l1.direction)
+                            && nearly_equal(l0.intensity, l1.intensity)
+                            && l0.spot == l1.spot
                     }
                     _ => false,
                 })
@@ -171,5 +177,46 @@ impl UnshadowedLights {
             }
         }
         e
+    }
+}
+
+/// Whether `a` and `b` differ by at most a part in 10⁵ of the longer
+/// (rounding in the interpolation of equal keys is a few parts in 10⁷).
+fn nearly_equal(a: Vec3, b: Vec3) -> bool {
+    const TOLERANCE: f32 = 1e-5;
+    (a - b).length() <= TOLERANCE * a.length().max(b.length())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::PointLight;
+
+    fn lit_by(position: Vec3, intensity: Vec3) -> UnshadowedLights {
+        UnshadowedLights {
+            emitters: vec![Emitter::Point(PointLight {
+                position,
+                direction: Vec3::NEG_Z,
+                intensity,
+                spot: None,
+            })],
+        }
+    }
+
+    #[test]
+    fn lights_that_differ_by_rounding_are_the_same_and_a_move_is_not() {
+        let p = Vec3::new(3.0, 2.0, -1.5);
+        let i = Vec3::splat(40.0);
+        let here = lit_by(p, i);
+        // What interpolating equal keys at another time can give: an ulp.
+        let rounded = lit_by(
+            Vec3::new(f32::from_bits(3.0f32.to_bits() + 1), 2.0, -1.5),
+            i,
+        );
+        assert!(here.same_as(&rounded));
+        assert!(!here.same_as(&lit_by(p + Vec3::new(0.0, 1e-3, 0.0), i)));
+        assert!(!here.same_as(&lit_by(p, i * 1.001)));
+        assert!(!here.same_as(&lit_by(p, Vec3::ZERO)), "switched off");
+        assert!(lit_by(p, Vec3::ZERO).same_as(&lit_by(p, Vec3::ZERO)));
     }
 }
