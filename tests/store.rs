@@ -780,6 +780,60 @@ fn job_with_other_settings_is_refused_unless_forced() {
     assert!(store.frames_done(done.id).unwrap().is_empty());
 }
 
+#[test]
+fn a_job_started_under_another_algorithm_revision_is_refused_unless_forced() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let trc = JobSpec {
+        method: "trc".into(),
+        ..spec("t")
+    };
+    let now = radcache::method::algorithm_revision("trc");
+    assert!(now > 1, "trc's algorithm has changed since revisions began");
+    let first = {
+        let store = Store::open(&path).unwrap();
+        store.begin_job(&spec("i"), false).unwrap();
+        let first = store.begin_job(&trc, false).unwrap();
+        assert_eq!(store.job_revision("t").unwrap(), now);
+        assert_eq!(store.begin_job(&trc, false).unwrap().id, first.id);
+        first
+    };
+    // Both jobs as a build from before revisions were recorded left them.
+    {
+        let db = sled::open(&path).unwrap();
+        let meta = db.open_tree("meta").unwrap();
+        for name in ["t", "i"] {
+            assert!(meta.remove(keys::meta_revision(name)).unwrap().is_some());
+        }
+        db.flush().unwrap();
+    }
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.job_revision("t").unwrap(), 1);
+    let msg = err_text(store.begin_job(&trc, false));
+    assert!(
+        msg.contains(&format!(
+            "`trc` algorithm revision (stored 1, this build {now}"
+        )) && msg.contains("--force"),
+        "{msg}"
+    );
+    let report = radcache::store::inspect::report(&store, Some("t"), None).unwrap();
+    assert_eq!(report.jobs[0].algorithm_revision, 1);
+    let text = radcache::store::inspect::to_text(&report, false);
+    assert!(
+        text.contains(&format!("algorithm revision 1 (this build's is {now}")),
+        "{text}"
+    );
+    // `ic`'s algorithm is still its first: its old job resumes.
+    store.begin_job(&spec("i"), false).unwrap();
+    let fresh = store.begin_job(&trc, true).unwrap();
+    assert_ne!(fresh.id, first.id);
+    assert_eq!(store.job_revision("t").unwrap(), now);
+    assert_eq!(store.begin_job(&trc, false).unwrap().id, fresh.id);
+    // Deleted with its job: a job of that name starts afresh.
+    store.delete_job("t").unwrap();
+    assert_eq!(store.job_revision("t").unwrap(), 1);
+}
+
 /// `method`'s spec for job `name`, its settings JSON as `render` writes it
 /// less the keys `without` (a job stored before those settings existed).
 fn spec_of(name: &str, method: &MethodSettings, without: &[&str]) -> JobSpec {

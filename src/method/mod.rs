@@ -164,6 +164,23 @@ pub fn mean_lifespan(histogram: &[u64]) -> f64 {
     }
 }
 
+/// The revision of method `method`'s algorithm in this build: raised when
+/// a change makes other frames or records under the same settings (not for
+/// a speed-up that keeps them bit for bit). A store job remembers the
+/// revision it started under and is not resumed under another
+/// ([`crate::store::Store::begin_job`]): the frames it would add, and the
+/// records a temporal method carries, would not match those stored. Jobs
+/// stored before revisions were recorded read as revision 1.
+pub fn algorithm_revision(method: &str) -> u64 {
+    match method {
+        // 2: records checked against the later frames of their life
+        // (`trc::later`) and a light switched on in the dark seen by the
+        // reprojection (2026-11-29).
+        "trc" => 2,
+        _ => 1,
+    }
+}
+
 /// A rendering method. Methods may keep state from frame to frame (the
 /// temporal caches do), so frames are rendered in order through `&mut self`.
 pub trait Method: Send {

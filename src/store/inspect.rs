@@ -54,6 +54,10 @@ pub struct JobReport {
     /// takes and a served job shows (`settings_by_name`).
     #[serde(serialize_with = "settings_by_name")]
     pub settings: String,
+    /// The revision of the method's algorithm the job started under
+    /// ([`crate::method::algorithm_revision`]): a build whose own differs
+    /// does not resume it.
+    pub algorithm_revision: u64,
     pub size: String,
     pub spp: u32,
     pub fps: f32,
@@ -325,6 +329,7 @@ fn radiance_text(st: &StateReport) -> String {
 
 fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobReport, StoreError> {
     let mut r = JobReport::of(j);
+    r.algorithm_revision = store.job_revision(&j.name)?;
     r.state = state_report(store, j)?;
     let mut per_frame = frame_reports(store, j.id, &mut r)?;
     // Records and samples: one streaming pass over the job's frames.
@@ -410,6 +415,7 @@ impl JobReport {
             scene_hash: j.scene_hash.clone(),
             method: j.method.clone(),
             settings: j.settings.clone(),
+            algorithm_revision: 1,
             size: format!("{}x{}", j.width, j.height),
             spp: j.spp,
             fps: j.fps,
@@ -615,6 +621,18 @@ fn job_text(s: &mut String, j: &JobReport) {
         j.last_frame.map_or("-".into(), |f| f.to_string()),
     );
     let _ = writeln!(s, "  settings: {}", settings_text(&j.method, &j.settings));
+    let now = crate::method::algorithm_revision(&j.method);
+    let _ = writeln!(
+        s,
+        "  algorithm revision {}{}",
+        j.algorithm_revision,
+        match j.algorithm_revision == now {
+            true => String::new(),
+            false => format!(
+                " (this build's is {now}: it does not resume the job; --force starts it over)"
+            ),
+        }
+    );
     let _ = writeln!(
         s,
         "  records {}{} ({} B of rkyv values, {} B stored in blocks), samples {}: {} B stored / {} B raw (ratio {})",

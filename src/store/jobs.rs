@@ -4,6 +4,7 @@
 use super::schema::{JobSpec, JobValue};
 use super::v1;
 use super::{encode, keys, now_unix, Store, StoreError};
+use crate::method::algorithm_revision;
 use crate::method::settings::named_settings;
 use crate::render::MethodSettings;
 use std::borrow::Cow;
@@ -62,7 +63,9 @@ impl Store {
     }
 
     /// Starts or resumes job `spec.name`. A job of that name with another
-    /// scene or other settings is refused unless `force`. `force` starts
+    /// scene or other settings, or started by a build whose algorithm for
+    /// its method differs ([`algorithm_revision`]), is refused unless
+    /// `force`. `force` starts
     /// the job over under a new id whatever its settings (the old id's data
     /// is then deleted): also the way out for a job whose stored frames are
     /// damaged.
@@ -70,7 +73,17 @@ impl Store {
         let key = keys::job(&spec.name);
         let now = now_unix();
         if let Some(mut job) = self.job(&spec.name)? {
-            let diffs = job_differences(&job.spec, spec);
+            let mut diffs = job_differences(&job.spec, spec);
+            let (stored, now) = (
+                self.job_revision(&spec.name)?,
+                algorithm_revision(&spec.method),
+            );
+            if job.spec.method == spec.method && stored != now {
+                diffs.push(format!(
+                    "`{}` algorithm revision (stored {stored}, this build {now}: the frames it would add would not match those stored)",
+                    spec.method
+                ));
+            }
             if diffs.is_empty() && !force {
                 // Same job: the new range, and the spec as this build
                 // writes it (a schema-1 job's settings and hash upgraded).
@@ -97,16 +110,41 @@ impl Store {
             self.jobs
                 .insert(&key, encode(&fresh))
                 .map_err(|e| StoreError::sled(&self.path, e))?;
+            // After the job: a kill between the two leaves the new job
+            // with the old revision, refused (not the old job with the new).
+            self.set_job_revision(&spec.name, algorithm_revision(&spec.method))?;
             self.flush()?;
             self.delete_job_data(job.id)?;
             return Ok(fresh);
         }
         let fresh = self.new_job_value(spec, now)?;
+        self.set_job_revision(&spec.name, algorithm_revision(&spec.method))?;
         self.jobs
             .insert(&key, encode(&fresh))
             .map_err(|e| StoreError::sled(&self.path, e))?;
         self.flush()?;
         Ok(fresh)
+    }
+
+    /// The algorithm revision job `name`'s method started under
+    /// ([`algorithm_revision`]); 1 where none is recorded (a job stored
+    /// before revisions were).
+    pub fn job_revision(&self, name: &str) -> Result<u64, StoreError> {
+        let key = keys::meta_revision(name);
+        let revision = super::meta::read_meta_u64(&self.meta, &key)
+            .map_err(|detail| self.corrupt("meta", &key, detail))?;
+        Ok(revision.unwrap_or(1))
+    }
+
+    /// Records the revision job `name` starts under (made durable with the
+    /// job by the next flush). A new job's is written before the job
+    /// itself: a kill between the two leaves a revision no job holds,
+    /// which the job's next start writes again.
+    fn set_job_revision(&self, name: &str, revision: u64) -> Result<(), StoreError> {
+        self.meta
+            .insert(keys::meta_revision(name), &revision.to_be_bytes())
+            .map(drop)
+            .map_err(|e| StoreError::sled(&self.path, e))
     }
 
     fn new_job_value(&self, spec: &JobSpec, now: u64) -> Result<JobValue, StoreError> {
@@ -130,7 +168,7 @@ impl Store {
 
     /// Deletes job `name`, if there is one, and returns it. Its name goes
     /// first, in one write: from then on the job is gone. Then its durable
-    /// cancel mark and every key of its id; a kill meanwhile leaves keys no
+    /// cancel mark, its revision and every key of its id; a kill meanwhile leaves keys no
     /// job owns, which `radcache compact` removes
     /// ([`Self::remove_orphaned_job_data`]). Its bytes in the sample log
     /// stay until `radcache compact`.
@@ -143,6 +181,9 @@ impl Store {
             .map_err(|e| StoreError::sled(&self.path, e))?;
         self.flush()?;
         self.set_job_cancelled(name, false)?;
+        self.meta
+            .remove(keys::meta_revision(name))
+            .map_err(|e| StoreError::sled(&self.path, e))?;
         self.delete_job_data(job.id)?;
         Ok(Some(job))
     }

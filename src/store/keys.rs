@@ -77,6 +77,13 @@ pub const META_MIGRATE_0008_THROUGH: &[u8] = b"migrate_0008_through";
 /// deleted job's number is not given again.
 pub const META_SERVED_JOBS_HIGH: &[u8] = b"served_jobs_high";
 
+/// `meta` key of the algorithm revision of job `name`'s method when it
+/// started ([`crate::method::algorithm_revision`]; u64 big-endian; no
+/// schema change: older builds ignore it). Absent: revision 1.
+pub fn meta_revision(name: &str) -> Vec<u8> {
+    [b"revision:".as_slice(), name.as_bytes()].concat()
+}
+
 /// `meta` key marking job `name` as cancelled by `radcache serve` (value
 /// empty): a restarted server keeps it cancelled instead of resuming it.
 pub fn meta_cancelled(name: &str) -> Vec<u8> {
