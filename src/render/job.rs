@@ -124,7 +124,18 @@ pub fn job_spec_confined(
     settings: &FrameSettings,
     frames: Range<u32>,
 ) -> Result<JobSpec> {
-    let (scene, scene_hash) = scene_identity_confined(source, root)?;
+    let identity = scene_identity_confined(source, root)?;
+    job_spec_of(name, identity, method, settings, frames)
+}
+
+/// [`job_spec`] of a scene whose identity ([`scene_identity`]) is known.
+pub fn job_spec_of(
+    name: &str,
+    (scene, scene_hash): (String, String),
+    method: &MethodSettings,
+    settings: &FrameSettings,
+    frames: Range<u32>,
+) -> Result<JobSpec> {
     Ok(JobSpec {
         name: name.to_string(),
         scene,

@@ -26,7 +26,9 @@ use std::time::{Duration, Instant};
 
 mod job;
 
-pub use job::{job_spec, job_spec_confined, scene_identity, scene_identity_confined, StoreJob};
+pub use job::{
+    job_spec, job_spec_confined, job_spec_of, scene_identity, scene_identity_confined, StoreJob,
+};
 use job::{resume, store_frame};
 
 /// Where a scene comes from.

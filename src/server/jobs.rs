@@ -40,22 +40,27 @@ pub async fn create(
     body: Bytes,
 ) -> Result<(StatusCode, Json<Value>), ApiError> {
     let request = JobRequest::parse(&body, state.options.scenes.as_deref())?;
-    check_scene_loads(&state, &request).await?;
+    let identity = check_scene_loads(&state, &request).await?;
     // Off the async workers and outside the job table's lock, which every
-    // request and the render worker take: the scene's files are read and
-    // hashed and the store flushed. All of it in the blocking task, so that
+    // request and the render worker take: the store is written and
+    // flushed. All of it in the blocking task, so that
     // a client gone meanwhile cannot leave a job stored but not listed.
     let s = state.clone();
-    let id = tokio::task::spawn_blocking(move || add_queued_job(&s, request))
+    let id = tokio::task::spawn_blocking(move || add_queued_job(&s, request, identity))
         .await
         .map_err(ApiError::internal)?
         .map_err(ApiError::internal)?;
     Ok((StatusCode::CREATED, Json(json!({ "id": id }))))
 }
 
-/// Stores `request` as the next `job-N`, queued, lists it and wakes the
-/// worker; its id. Into the store first, so that a restart finds it queued.
-fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<String> {
+/// Stores `request` (its scene's identity, [`check_scene_loads`]'s) as the
+/// next `job-N`, queued, lists it and wakes the worker; its id. Into the
+/// store first, so that a restart finds it queued.
+fn add_queued_job(
+    state: &AppState,
+    request: JobRequest,
+    identity: (String, String),
+) -> anyhow::Result<String> {
     let _creating = state.creating.lock().expect("job creation lock");
     let n = {
         let jobs = state.jobs.lock().expect("job table lock");
@@ -80,15 +85,7 @@ fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<Strin
     let id = format!("job-{n}");
     state.store.set_served_jobs_high(n)?;
     let r = &request;
-    let root = state.scene_root(&r.scene);
-    let spec = crate::render::job_spec_confined(
-        &id,
-        &r.scene,
-        root.as_deref(),
-        &r.method,
-        &r.settings,
-        r.frames.clone(),
-    )?;
+    let spec = crate::render::job_spec_of(&id, identity, &r.method, &r.settings, r.frames.clone())?;
     state.store.begin_job(&spec, false)?;
     state.jobs.lock().expect("job table lock").insert(
         JobKey::Served(n),
@@ -102,17 +99,20 @@ fn add_queued_job(state: &AppState, request: JobRequest) -> anyhow::Result<Strin
 /// will, confined to the scenes directory ([`AppState::scene_root`]), so
 /// that a malformed one, or one whose buffers or images lie outside the
 /// directory, is a 400 now rather than a failed job later (built-in scenes
-/// always load).
-async fn check_scene_loads(state: &AppState, request: &JobRequest) -> Result<(), ApiError> {
-    if matches!(request.scene, SceneSource::Builtin(_)) {
-        return Ok(());
-    }
+/// always load). Its identity (name and hash) as the job stores it: the
+/// worker hashes the file again when it starts, and a file changed since
+/// fails the job, naming the hash.
+async fn check_scene_loads(
+    state: &AppState,
+    request: &JobRequest,
+) -> Result<(String, String), ApiError> {
     let scene = request.scene.clone();
     let root = state.scene_root(&scene);
-    let loaded = tokio::task::spawn_blocking(move || -> anyhow::Result<()> {
-        scene.load_confined(root.as_deref())?;
-        crate::render::scene_identity_confined(&scene, root.as_deref())?;
-        Ok(())
+    let loaded = tokio::task::spawn_blocking(move || -> anyhow::Result<(String, String)> {
+        if !matches!(scene, SceneSource::Builtin(_)) {
+            scene.load_confined(root.as_deref())?;
+        }
+        crate::render::scene_identity_confined(&scene, root.as_deref())
     })
     .await
     .map_err(ApiError::internal)?;
