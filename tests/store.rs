@@ -834,6 +834,24 @@ fn a_job_started_under_another_algorithm_revision_is_refused_unless_forced() {
     assert_eq!(store.job_revision("t").unwrap(), 1);
 }
 
+#[test]
+fn a_new_job_does_not_take_a_former_jobs_cancel_mark() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    store.begin_job(&spec("c"), false).unwrap();
+    store.set_job_cancelled("c", true).unwrap();
+    store.delete_job("c").unwrap();
+    assert!(!store.job_cancelled("c").unwrap());
+    // A cancel that came as the job was deleted leaves its mark behind.
+    store.set_job_cancelled("c", true).unwrap();
+    store.begin_job(&spec("c"), false).unwrap();
+    assert!(!store.job_cancelled("c").unwrap());
+    // A job's own mark stays when it resumes.
+    store.set_job_cancelled("c", true).unwrap();
+    store.begin_job(&spec("c"), false).unwrap();
+    assert!(store.job_cancelled("c").unwrap());
+}
+
 /// `method`'s spec for job `name`, its settings JSON as `render` writes it
 /// less the keys `without` (a job stored before those settings existed).
 fn spec_of(name: &str, method: &MethodSettings, without: &[&str]) -> JobSpec {

@@ -119,6 +119,11 @@ impl Store {
         }
         let fresh = self.new_job_value(spec, now)?;
         self.set_job_revision(&spec.name, algorithm_revision(&spec.method))?;
+        // A cancel mark of a former job of this name (a cancel that came as
+        // it was deleted) is not the new job's.
+        self.meta
+            .remove(keys::meta_cancelled(&spec.name))
+            .map_err(|e| StoreError::sled(&self.path, e))?;
         self.jobs
             .insert(&key, encode(&fresh))
             .map_err(|e| StoreError::sled(&self.path, e))?;
