@@ -1654,6 +1654,53 @@ fn new_jobs_are_numbered_past_stored_jobs_the_server_left_out() {
     wait_done(&server, &id);
 }
 
+/// A served `trc` job stored by a build whose `trc` algorithm was another
+/// (here: before revisions were recorded) is not resumed on restart: it
+/// fails, saying to submit it again (the API has no `--force`).
+#[test]
+fn a_served_job_of_another_algorithm_revision_fails_saying_to_resubmit() {
+    use radcache::render::{self, FrameSettings, MethodSettings, SceneSource};
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let id = {
+        let store = radcache::store::Store::open(&db).unwrap();
+        let method = MethodSettings::Trc(Default::default());
+        let source = SceneSource::Builtin("cube-in-box".into());
+        let frames = FrameSettings {
+            width: 8,
+            height: 8,
+            ..FrameSettings::default()
+        };
+        let spec = render::job_spec("job-1", &source, &method, &frames, 0..2).unwrap();
+        store.begin_job(&spec, false).unwrap().id
+    };
+    {
+        let db = sled::open(&db).unwrap();
+        let meta = db.open_tree("meta").unwrap();
+        let key = radcache::store::keys::meta_revision(id);
+        assert!(meta.remove(key).unwrap().is_some());
+        db.flush().unwrap();
+    }
+    let server = start(&db, &scenes);
+    let start = Instant::now();
+    let job = loop {
+        let job = job_state(&server, "job-1");
+        if job["state"] != "queued" && job["state"] != "running" {
+            break job;
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "{job}");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert_eq!(job["state"], "failed", "{job}");
+    let error = job["error"].as_str().unwrap();
+    assert!(
+        error.contains("algorithm revision (stored 1")
+            && error.contains("delete it and submit it again")
+            && !error.contains("--force"),
+        "{error}"
+    );
+}
+
 /// A job of `radcache render` whose scene file the server cannot find (a
 /// path relative to where the render ran) still lists and serves its
 /// frames; only its records, whose screen positions need the scene's

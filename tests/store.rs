@@ -790,25 +790,25 @@ fn a_job_started_under_another_algorithm_revision_is_refused_unless_forced() {
     };
     let now = radcache::method::algorithm_revision("trc");
     assert!(now > 1, "trc's algorithm has changed since revisions began");
-    let first = {
+    let (first, ic_job) = {
         let store = Store::open(&path).unwrap();
-        store.begin_job(&spec("i"), false).unwrap();
+        let ic_job = store.begin_job(&spec("i"), false).unwrap();
         let first = store.begin_job(&trc, false).unwrap();
-        assert_eq!(store.job_revision("t").unwrap(), now);
+        assert_eq!(store.job_revision(first.id).unwrap(), now);
         assert_eq!(store.begin_job(&trc, false).unwrap().id, first.id);
-        first
+        (first, ic_job)
     };
     // Both jobs as a build from before revisions were recorded left them.
     {
         let db = sled::open(&path).unwrap();
         let meta = db.open_tree("meta").unwrap();
-        for name in ["t", "i"] {
-            assert!(meta.remove(keys::meta_revision(name)).unwrap().is_some());
+        for id in [first.id, ic_job.id] {
+            assert!(meta.remove(keys::meta_revision(id)).unwrap().is_some());
         }
         db.flush().unwrap();
     }
     let store = Store::open(&path).unwrap();
-    assert_eq!(store.job_revision("t").unwrap(), 1);
+    assert_eq!(store.job_revision(first.id).unwrap(), 1);
     let msg = err_text(store.begin_job(&trc, false));
     assert!(
         msg.contains(&format!(
@@ -825,13 +825,53 @@ fn a_job_started_under_another_algorithm_revision_is_refused_unless_forced() {
     );
     // `ic`'s algorithm is still its first: its old job resumes.
     store.begin_job(&spec("i"), false).unwrap();
+    let before = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs();
     let fresh = store.begin_job(&trc, true).unwrap();
     assert_ne!(fresh.id, first.id);
-    assert_eq!(store.job_revision("t").unwrap(), now);
-    assert_eq!(store.begin_job(&trc, false).unwrap().id, fresh.id);
-    // Deleted with its job: a job of that name starts afresh.
+    assert!(fresh.created_unix >= before && fresh.updated_unix >= before);
+    assert_eq!(store.job_revision(fresh.id).unwrap(), now);
+    let resumed = store.begin_job(&trc, false).unwrap();
+    assert_eq!(resumed.id, fresh.id);
+    assert!(resumed.updated_unix >= before);
+    // Deleted with its job.
     store.delete_job("t").unwrap();
-    assert_eq!(store.job_revision("t").unwrap(), 1);
+    assert_eq!(store.job_revision(fresh.id).unwrap(), 1);
+}
+
+#[test]
+fn compact_removes_revisions_no_job_holds() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let (kept, gone) = {
+        let store = Store::open(&path).unwrap();
+        let trc = JobSpec {
+            method: "trc".into(),
+            ..spec("k")
+        };
+        let kept = store.begin_job(&trc, false).unwrap().id;
+        (kept, kept + 1000)
+    };
+    // As a kill between a job's revision and the job itself leaves it,
+    // or an older build that deleted the job.
+    {
+        let db = sled::open(&path).unwrap();
+        let meta = db.open_tree("meta").unwrap();
+        meta.insert(keys::meta_revision(gone), &7u64.to_be_bytes()[..])
+            .unwrap();
+        db.flush().unwrap();
+    }
+    let store = Store::open(&path).unwrap();
+    assert_eq!(store.job_revision(gone).unwrap(), 7);
+    assert_eq!(store.remove_orphaned_job_data().unwrap(), 1);
+    assert_eq!(store.job_revision(gone).unwrap(), 1);
+    assert_eq!(
+        store.job_revision(kept).unwrap(),
+        radcache::method::algorithm_revision("trc")
+    );
+    assert_eq!(store.remove_orphaned_job_data().unwrap(), 0);
 }
 
 #[test]

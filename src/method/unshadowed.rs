@@ -218,5 +218,17 @@ mod tests {
         assert!(!here.same_as(&lit_by(p, i * 1.001)));
         assert!(!here.same_as(&lit_by(p, Vec3::ZERO)), "switched off");
         assert!(lit_by(p, Vec3::ZERO).same_as(&lit_by(p, Vec3::ZERO)));
+        let spot = |outer_cone: f32| {
+            let mut lights = lit_by(p, i);
+            if let Emitter::Point(light) = &mut lights.emitters[0] {
+                light.spot = Some(crate::scene::Spot {
+                    inner_cone: 0.1,
+                    outer_cone,
+                });
+            }
+            lights
+        };
+        assert!(spot(0.5).same_as(&spot(0.5)));
+        assert!(!spot(0.5).same_as(&spot(0.6)), "a spot's cone widened");
     }
 }

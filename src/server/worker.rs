@@ -118,7 +118,15 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
         &request.settings,
         request.frames.clone(),
     )?;
-    let stored = state.store.begin_job(&spec, false)?;
+    let stored = state.store.begin_job(&spec, false).map_err(|e| match e {
+        // The API has no `--force`: a job this build cannot resume (its
+        // scene file changed, or it was stored by a build whose algorithm
+        // differs) is resubmitted.
+        crate::store::StoreError::JobDiffers { differences, .. } => anyhow::anyhow!(
+            "this build cannot resume the job as stored: {differences}; delete it and submit it again"
+        ),
+        e => e.into(),
+    })?;
     let store_id = stored.id;
     let frames = stored_frames(state, store_id);
     state.update(id, |j| j.set_stored(&frames));

@@ -329,7 +329,7 @@ fn radiance_text(st: &StateReport) -> String {
 
 fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobReport, StoreError> {
     let mut r = JobReport::of(j);
-    r.algorithm_revision = store.job_revision(&j.name)?;
+    r.algorithm_revision = store.job_revision(j.id)?;
     r.state = state_report(store, j)?;
     let mut per_frame = frame_reports(store, j.id, &mut r)?;
     // Records and samples: one streaming pass over the job's frames.
@@ -628,9 +628,7 @@ fn job_text(s: &mut String, j: &JobReport) {
         j.algorithm_revision,
         match j.algorithm_revision == now {
             true => String::new(),
-            false => format!(
-                " (this build's is {now}: it does not resume the job; --force starts it over)"
-            ),
+            false => format!(" (this build's is {now}: it does not resume the job)"),
         }
     );
     let _ = writeln!(

@@ -74,13 +74,11 @@ impl Store {
         let now = now_unix();
         if let Some(mut job) = self.job(&spec.name)? {
             let mut diffs = job_differences(&job.spec, spec);
-            let (stored, now) = (
-                self.job_revision(&spec.name)?,
-                algorithm_revision(&spec.method),
-            );
-            if job.spec.method == spec.method && stored != now {
+            let stored_revision = self.job_revision(job.id)?;
+            let build_revision = algorithm_revision(&spec.method);
+            if job.spec.method == spec.method && stored_revision != build_revision {
                 diffs.push(format!(
-                    "`{}` algorithm revision (stored {stored}, this build {now}: the frames it would add would not match those stored)",
+                    "`{}` algorithm revision (stored {stored_revision}, this build {build_revision}: the frames it would add would not match those stored)",
                     spec.method
                 ));
             }
@@ -96,13 +94,10 @@ impl Store {
                 return Ok(job);
             }
             if !force {
-                return Err(StoreError::Job {
+                return Err(StoreError::JobDiffers {
                     path: self.path.clone(),
                     job: spec.name.clone(),
-                    detail: format!(
-                        "exists with other settings: {}; use another --job name, or --force to start it over",
-                        diffs.join(", ")
-                    ),
+                    differences: diffs.join(", "),
                 });
             }
             let fresh = self.new_job_value(spec, now)?;
@@ -110,15 +105,11 @@ impl Store {
             self.jobs
                 .insert(&key, encode(&fresh))
                 .map_err(|e| StoreError::sled(&self.path, e))?;
-            // After the job: a kill between the two leaves the new job
-            // with the old revision, refused (not the old job with the new).
-            self.set_job_revision(&spec.name, algorithm_revision(&spec.method))?;
             self.flush()?;
             self.delete_job_data(job.id)?;
             return Ok(fresh);
         }
         let fresh = self.new_job_value(spec, now)?;
-        self.set_job_revision(&spec.name, algorithm_revision(&spec.method))?;
         // A cancel mark of a former job of this name (a cancel that came as
         // it was deleted) is not the new job's.
         self.meta
@@ -131,27 +122,19 @@ impl Store {
         Ok(fresh)
     }
 
-    /// The algorithm revision job `name`'s method started under
+    /// The algorithm revision the method of job id `job` started under
     /// ([`algorithm_revision`]); 1 where none is recorded (a job stored
     /// before revisions were).
-    pub fn job_revision(&self, name: &str) -> Result<u64, StoreError> {
-        let key = keys::meta_revision(name);
+    pub fn job_revision(&self, job: u64) -> Result<u64, StoreError> {
+        let key = keys::meta_revision(job);
         let revision = super::meta::read_meta_u64(&self.meta, &key)
             .map_err(|detail| self.corrupt("meta", &key, detail))?;
         Ok(revision.unwrap_or(1))
     }
 
-    /// Records the revision job `name` starts under (made durable with the
-    /// job by the next flush). A new job's is written before the job
-    /// itself: a kill between the two leaves a revision no job holds,
-    /// which the job's next start writes again.
-    fn set_job_revision(&self, name: &str, revision: u64) -> Result<(), StoreError> {
-        self.meta
-            .insert(keys::meta_revision(name), &revision.to_be_bytes())
-            .map(drop)
-            .map_err(|e| StoreError::sled(&self.path, e))
-    }
-
+    /// A fresh job of `spec` under a new id, its algorithm revision
+    /// recorded (before the job: a kill between leaves a revision no job
+    /// holds, which `compact` removes).
     fn new_job_value(&self, spec: &JobSpec, now: u64) -> Result<JobValue, StoreError> {
         // Ids are unique over the store's life (sled persists the counter
         // and skips ahead after a crash), so a restarted job never sees
@@ -161,6 +144,12 @@ impl Store {
             .generate_id()
             .map_err(|e| StoreError::sled(&self.path, e))?
             + 1;
+        self.meta
+            .insert(
+                keys::meta_revision(id),
+                &algorithm_revision(&spec.method).to_be_bytes(),
+            )
+            .map_err(|e| StoreError::sled(&self.path, e))?;
         Ok(JobValue {
             id,
             spec: spec.clone(),
@@ -173,7 +162,7 @@ impl Store {
 
     /// Deletes job `name`, if there is one, and returns it. Its name goes
     /// first, in one write: from then on the job is gone. Then its durable
-    /// cancel mark, its revision and every key of its id; a kill meanwhile leaves keys no
+    /// cancel mark and every key of its id (its revision too); a kill meanwhile leaves keys no
     /// job owns, which `radcache compact` removes
     /// ([`Self::remove_orphaned_job_data`]). Its bytes in the sample log
     /// stay until `radcache compact`.
@@ -186,9 +175,6 @@ impl Store {
             .map_err(|e| StoreError::sled(&self.path, e))?;
         self.flush()?;
         self.set_job_cancelled(name, false)?;
-        self.meta
-            .remove(keys::meta_revision(name))
-            .map_err(|e| StoreError::sled(&self.path, e))?;
         self.delete_job_data(job.id)?;
         Ok(Some(job))
     }
@@ -213,6 +199,16 @@ impl Store {
                 from = keys::job_prefix(next);
             }
         }
+        // Revisions of ids no job holds (a kill as a job began, or a job
+        // an older build deleted).
+        for key in self.meta.scan_prefix(keys::META_REVISION_PREFIX).keys() {
+            let key = key.map_err(|e| StoreError::sled(&self.path, e))?;
+            let id = keys::revision_job(&key)
+                .ok_or_else(|| self.corrupt("meta", &key, "malformed revision key"))?;
+            if !live.contains(&id) {
+                orphans.insert(id);
+            }
+        }
         for &id in &orphans {
             self.delete_job_data(id)?;
         }
@@ -226,7 +222,8 @@ impl Store {
             .map(|name| (name, self.tree(name).expect("known tree")))
     }
 
-    /// Deletes every key of job id `job` in the per-job trees.
+    /// Deletes every key of job id `job` in the per-job trees, and its
+    /// algorithm revision.
     fn delete_job_data(&self, job: u64) -> Result<(), StoreError> {
         let prefix = keys::job_prefix(job);
         // Their bytes stay in the log, unreferenced (it is append-only),
@@ -234,6 +231,9 @@ impl Store {
         for (_, tree) in self.per_job_trees() {
             self.remove_prefix(tree, &prefix)?;
         }
+        self.meta
+            .remove(keys::meta_revision(job))
+            .map_err(|e| StoreError::sled(&self.path, e))?;
         self.flush()
     }
 

@@ -77,11 +77,25 @@ pub const META_MIGRATE_0008_THROUGH: &[u8] = b"migrate_0008_through";
 /// deleted job's number is not given again.
 pub const META_SERVED_JOBS_HIGH: &[u8] = b"served_jobs_high";
 
-/// `meta` key of the algorithm revision of job `name`'s method when it
-/// started ([`crate::method::algorithm_revision`]; u64 big-endian; no
-/// schema change: older builds ignore it). Absent: revision 1.
-pub fn meta_revision(name: &str) -> Vec<u8> {
-    [b"revision:".as_slice(), name.as_bytes()].concat()
+/// `meta` key of the algorithm revision job id `job`'s method started
+/// under ([`crate::method::algorithm_revision`]; u64 big-endian; no schema
+/// change: older builds ignore it). Absent: revision 1. By id, not name:
+/// ids are never given twice, so a key an older build left behind (it
+/// deleted the job) belongs to no later job.
+pub fn meta_revision(job: u64) -> Vec<u8> {
+    format!("{META_REVISION_PREFIX}{job}").into_bytes()
+}
+
+/// The text [`meta_revision`] keys start with.
+pub const META_REVISION_PREFIX: &str = "revision:";
+
+/// The job id of a [`meta_revision`] key.
+pub fn revision_job(key: &[u8]) -> Option<u64> {
+    std::str::from_utf8(key)
+        .ok()?
+        .strip_prefix(META_REVISION_PREFIX)?
+        .parse()
+        .ok()
 }
 
 /// `meta` key marking job `name` as cancelled by `radcache serve` (value

@@ -123,6 +123,14 @@ pub enum StoreError {
         from: u32,
         detail: String,
     },
+    /// A job of that name exists with other settings (its
+    /// `differences`, named), so it is not resumed.
+    #[error("store {}: job {job:?}: exists with other settings: {differences}; use another --job name, or --force to start it over", path.display())]
+    JobDiffers {
+        path: PathBuf,
+        job: String,
+        differences: String,
+    },
     #[error("store {}: job {job:?}: {detail}", path.display())]
     Job {
         path: PathBuf,
