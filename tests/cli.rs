@@ -520,6 +520,49 @@ fn ctrl_c_stops_after_a_saved_frame_and_the_same_command_resumes() {
     assert!(out.join("frame_0199.exr").exists());
 }
 
+/// A `trc` job's finished frames that a run over another range renders
+/// again (its cache runs from that range's first frame) are not replaced
+/// without a word.
+#[test]
+fn frames_a_stateful_job_renders_again_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let (db, out) = (dir.path().join("db"), dir.path().join("out"));
+    let run = |frames: &str| {
+        radcache(&[
+            "render",
+            "--backend",
+            "cpu",
+            "--method",
+            "trc",
+            "--frames",
+            frames,
+            "--size",
+            "8x8",
+            "--spp",
+            "1",
+            "--db",
+            db.to_str().unwrap(),
+            "--job",
+            "t",
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ])
+    };
+    let (code, _, stderr) = run("0..3");
+    assert_eq!(code, 0, "{stderr}");
+    assert!(!stderr.contains("rendered again"), "{stderr}");
+    let (code, _, stderr) = run("1..3");
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains("job \"t\": 2 finished frames of 1..3 are rendered again"),
+        "{stderr}"
+    );
+    let (code, _, stderr) = run("1..3");
+    assert_eq!(code, 0, "{stderr}");
+    assert!(!stderr.contains("rendered again"), "{stderr}");
+}
+
 /// A Ctrl-C during the range's last frame stops nothing: the frame is
 /// finished and written, and the render ends as one that was never
 /// interrupted (exit 0, no "interrupted" error). The signal is sent just

@@ -947,6 +947,28 @@ fn a_job_stored_before_a_setting_existed_resumes_under_the_value_it_ran() {
     assert_eq!(resumed.unwrap().id, old.id);
 }
 
+/// A job refused for another spp names it once: it is one of the method's
+/// settings and the job's spp too.
+#[test]
+fn another_spp_is_named_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let ic = |spp| {
+        let method = MethodSettings::Ic(IcSettings {
+            spp,
+            ..IcSettings::default()
+        });
+        JobSpec {
+            spp,
+            ..spec_of("s", &method, &[])
+        }
+    };
+    store.begin_job(&ic(2), false).unwrap();
+    let msg = err_text(store.begin_job(&ic(4), false));
+    assert!(msg.contains("spp: stored 2, given 4"), "{msg}");
+    assert_eq!(msg.matches("spp").count(), 1, "{msg}");
+}
+
 /// `ic` with few strata and one sample per pixel: fixtures and resumes
 /// that stay fast.
 fn small_ic() -> MethodSettings {

@@ -172,6 +172,7 @@ pub(super) fn resume(
         .filter(|frame| frames.contains(frame))
         .collect();
     if renderer.carries_state() {
+        let finished = done.len();
         let prefix = frames.clone().take_while(|f| done.contains(f)).count() as u32;
         let looks_ahead = renderer.looks_ahead();
         if prefix as usize == frames.len() && rendered_as_one_chain(j, frames, looks_ahead)? {
@@ -184,6 +185,18 @@ pub(super) fn resume(
         } else {
             j.store.clear_state(j.job.id)?;
             done.clear();
+        }
+        if done.len() < finished {
+            eprintln!(
+                "warning: job {:?}: {} finished frames of {}..{} are rendered again (and replaced): \
+                 `{}` carries its cache from frame to frame, from the first of the range it \
+                 renders, and they were rendered by another range or lie past frames still to render",
+                j.job.spec.name,
+                finished - done.len(),
+                frames.start,
+                frames.end,
+                renderer.method_name(),
+            );
         }
     }
     for &frame in &done {

@@ -202,6 +202,9 @@ pub struct FrameReport {
     pub records_reused: u64,
     pub records_replaced: u64,
     pub records_dropped: u64,
+    /// 0 where the frame computed no record whose life is set (`null` in
+    /// JSON, `-` in text: [`life_text`]).
+    #[serde(serialize_with = "null_when_unset")]
     pub mean_lifespan: f64,
     pub samples: u64,
     /// Samples the frame shot again for carried records, the bytes the
@@ -531,28 +534,38 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
 }
 
 /// A job's method settings as a reader wants them: `the defaults`, or the
-/// settings that differ from the method's defaults as `path=value`
-/// (dotted into nested settings, e.g. `ic.accuracy=0.3`), read as this
-/// build reads them (a setting added since, at the value the job ran). The
-/// stored JSON as it is where it cannot be read so (an unknown method, a
-/// malformed value).
+/// settings that differ from the method's defaults as `name=value`, by the
+/// names `--methods`, `POST /api/jobs` and a refused resume give them
+/// ([`named_settings`](crate::method::settings::named_settings)), read as
+/// this build reads them (a setting added since, at the value the job
+/// ran). The stored JSON as it is where it cannot be read so (an unknown
+/// method, a malformed value).
 fn settings_text(method: &str, stored: &str) -> String {
-    use crate::method::settings::{method_settings, settings_json, untagged};
+    use crate::method::settings::{method_settings, named_settings};
+    use crate::render::MethodSettings;
     let read_now = super::jobs::settings_as_read_now(stored);
-    let (Ok(defaults), Ok(now)) = (method_settings(method, []), serde_json::from_str(&read_now))
-    else {
+    let (Ok(defaults), Ok(now)) = (
+        method_settings(method, []),
+        serde_json::from_str::<MethodSettings>(&read_now),
+    ) else {
         return stored.to_string();
     };
-    let (mut now_leaves, mut default_leaves) = (BTreeMap::new(), BTreeMap::new());
-    flatten(untagged(now), String::new(), &mut now_leaves);
-    flatten(settings_json(&defaults), String::new(), &mut default_leaves);
-    if now_leaves.keys().ne(default_leaves.keys()) {
-        return stored.to_string(); // not the shape of this method's settings
+    if now.name() != method {
+        return stored.to_string(); // not this method's settings
     }
-    let changed: Vec<String> = now_leaves
-        .iter()
-        .filter(|(k, v)| default_leaves.get(*k) != Some(v))
-        .map(|(k, v)| format!("{k}={v}"))
+    let (now, defaults) = (named_settings(&now), named_settings(&defaults));
+    let names: BTreeSet<&String> = now.keys().chain(defaults.keys()).collect();
+    // A value as `--methods` takes it: text unquoted; a path length left
+    // unbounded has no name, so it shows as none.
+    let text = |v: Option<&serde_json::Value>| match v {
+        None => "none".to_string(),
+        Some(serde_json::Value::String(s)) => s.clone(),
+        Some(v) => v.to_string(),
+    };
+    let changed: Vec<String> = names
+        .into_iter()
+        .filter(|name| now.get(*name) != defaults.get(*name))
+        .map(|name| format!("{name}={}", text(now.get(name))))
         .collect();
     if changed.is_empty() {
         "the defaults".into()
@@ -582,22 +595,12 @@ fn settings_by_name<S: serde::Serializer>(stored: &str, out: S) -> Result<S::Ok,
     }
 }
 
-/// The leaves of `v` by dotted path from `prefix`.
-fn flatten(v: serde_json::Value, prefix: String, out: &mut BTreeMap<String, serde_json::Value>) {
-    match v {
-        serde_json::Value::Object(m) => {
-            for (k, v) in m {
-                let path = if prefix.is_empty() {
-                    k
-                } else {
-                    format!("{prefix}.{k}")
-                };
-                flatten(v, path, out);
-            }
-        }
-        leaf => {
-            out.insert(prefix, leaf);
-        }
+/// A mean lifespan in JSON: `null` where none is set (0), as [`life_text`]
+/// shows `-`.
+fn null_when_unset<S: serde::Serializer>(mean_lifespan: &f64, out: S) -> Result<S::Ok, S::Error> {
+    match *mean_lifespan > 0.0 {
+        true => out.serialize_f64(*mean_lifespan),
+        false => out.serialize_none(),
     }
 }
 
@@ -825,9 +828,14 @@ mod tests {
     }
 
     #[test]
-    fn frames_without_a_set_life_show_a_dash() {
+    fn frames_without_a_set_life_show_a_dash_and_null() {
         assert_eq!(super::life_text(0.0), "-");
         assert_eq!(super::life_text(2.5), "2.50");
+        #[derive(serde::Serialize)]
+        struct Life(#[serde(serialize_with = "super::null_when_unset")] f64);
+        let json = |life| serde_json::to_value(Life(life)).unwrap();
+        assert_eq!(json(0.0), serde_json::Value::Null);
+        assert_eq!(json(2.5), serde_json::json!(2.5));
     }
 
     #[test]
@@ -838,7 +846,17 @@ mod tests {
         let changed = stored("trc", &[("at", "0.1"), ("accuracy", "0.3")]);
         assert_eq!(
             settings_text("trc", &changed),
-            "changed from the defaults: ic.accuracy=0.3, temporal_accuracy=0.1"
+            "changed from the defaults: accuracy=0.3, at=0.1"
+        );
+        let path = stored("path", &[("max_depth", "3")]);
+        assert_eq!(
+            settings_text("path", &path),
+            "changed from the defaults: max_depth=3"
+        );
+        let gradients = stored("trc", &[("gradients", "none")]);
+        assert_eq!(
+            settings_text("trc", &gradients),
+            "changed from the defaults: gradients=none"
         );
         // What cannot be compared is shown as stored.
         let other = stored("ic", &[]);
