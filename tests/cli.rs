@@ -563,6 +563,55 @@ fn frames_a_stateful_job_renders_again_are_warned_of() {
     assert!(!stderr.contains("rendered again"), "{stderr}");
 }
 
+/// A job's scene file is stored by its absolute path: run again from
+/// another directory by another relative name it resumes and the stored
+/// name stays the same file; a changed file is refused for its content
+/// alone, not also for its name.
+#[test]
+fn a_jobs_scene_is_stored_by_its_absolute_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let sc = dir.path().join("sc");
+    std::fs::create_dir(&sc).unwrap();
+    let src =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/scenes/block_jumps.gltf");
+    std::fs::copy(&src, sc.join("s.gltf")).unwrap();
+    let db = dir.path().join("db");
+    let run = |cwd: &std::path::Path, scene: &str| {
+        let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .current_dir(cwd)
+            .args(["render", scene, "--method", "path", "--frames", "0..1"])
+            .args(["--size", "8x8", "--spp", "1", "--backend", "cpu", "-q"])
+            .args(["--job", "j", "--out", "out", "--db"])
+            .arg(&db)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            stderr,
+        )
+    };
+    let (code, _, stderr) = run(dir.path(), "sc/s.gltf");
+    assert_eq!(code, Some(0), "{stderr}");
+    let (code, stdout, stderr) = run(&sc, "./s.gltf");
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(
+        stdout.contains("1 frames resumed from the store"),
+        "{stdout}"
+    );
+    let (_, inspect, _) = radcache(&["inspect", "--db", db.to_str().unwrap(), "j"]);
+    let absolute = sc.join("s.gltf");
+    assert!(inspect.contains(absolute.to_str().unwrap()), "{inspect}");
+    let mut text = std::fs::read_to_string(sc.join("s.gltf")).unwrap();
+    text.push('\n');
+    std::fs::write(sc.join("s.gltf"), text).unwrap();
+    let (code, _, stderr) = run(dir.path(), "sc/s.gltf");
+    assert_ne!(code, Some(0), "{stderr}");
+    assert!(stderr.contains("scene hash"), "{stderr}");
+    assert!(!stderr.contains("scene (stored"), "{stderr}");
+}
+
 /// A Ctrl-C during the range's last frame stops nothing: the frame is
 /// finished and written, and the render ends as one that was never
 /// interrupted (exit 0, no "interrupted" error). The signal is sent just

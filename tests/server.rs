@@ -1701,10 +1701,11 @@ fn a_served_job_of_another_algorithm_revision_fails_saying_to_resubmit() {
     );
 }
 
-/// A job of `radcache render` whose scene file the server cannot find (a
-/// path relative to where the render ran) still lists and serves its
-/// frames; only its records, whose screen positions need the scene's
-/// camera, are a 409 that says why.
+/// A job of `radcache render` stores its scene file by its absolute path,
+/// so the server finds it from its own working directory; one whose file
+/// it cannot find (moved since) still lists and serves its frames; only
+/// its records, whose screen positions need the scene's camera, are a 409
+/// that says why.
 #[test]
 fn a_render_jobs_scene_the_server_cannot_find_is_a_clear_conflict() {
     let (dir, scenes) = workspace();
@@ -1740,6 +1741,12 @@ fn a_render_jobs_scene_the_server_cannot_find_is_a_clear_conflict() {
         .status()
         .unwrap();
     assert!(status.success());
+    {
+        let server = start(&db, &scenes);
+        let (status, body) = http(&server, "GET", "/api/jobs/boxed/records?frame=0", "");
+        assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    }
+    std::fs::rename(work.join("box.glb"), work.join("moved.glb")).unwrap();
     let server = start(&db, &scenes);
     let (status, body) = http(&server, "GET", "/api/jobs/boxed", "");
     assert_eq!(status, 200);

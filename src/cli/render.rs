@@ -329,7 +329,21 @@ fn open_job(
     };
     let db = args.db.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_DB));
     let store = Store::open(&db)?;
-    let spec = render::job_spec(name, source, method, settings, args.frames.clone())?;
+    // A scene file is stored by its absolute path: `inspect` and `serve`
+    // then find it from any directory, and a resume from another directory
+    // names the same path (a changed file is refused for its content, not
+    // also for its name). Symbolic links stay as given: the files a
+    // `.gltf` references lie beside the name it was given by.
+    let source = match source {
+        SceneSource::File(path) => SceneSource::File(std::path::absolute(path).map_err(|e| {
+            anyhow::anyhow!(
+                "cannot make the scene path {} absolute: {e}",
+                path.display()
+            )
+        })?),
+        builtin => builtin.clone(),
+    };
+    let spec = render::job_spec(name, &source, method, settings, args.frames.clone())?;
     let job = store.begin_job(&spec, args.force)?;
     Ok(Some((store, job)))
 }
