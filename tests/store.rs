@@ -875,6 +875,21 @@ fn compact_removes_revisions_no_job_holds() {
 }
 
 #[test]
+fn inspecting_an_unknown_job_lists_the_jobs() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let msg = err_text(radcache::store::inspect::report(&store, Some("b"), None));
+    assert!(
+        msg.contains("no such job in this store (jobs: none)"),
+        "{msg}"
+    );
+    store.begin_job(&spec("a"), false).unwrap();
+    store.begin_job(&spec("c"), false).unwrap();
+    let msg = err_text(radcache::store::inspect::report(&store, Some("b"), None));
+    assert!(msg.contains("(jobs: a, c)"), "{msg}");
+}
+
+#[test]
 fn a_new_job_does_not_take_a_former_jobs_cancel_mark() {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(&dir.path().join("db")).unwrap();

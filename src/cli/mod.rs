@@ -274,15 +274,10 @@ fn run_delete(args: DeleteArgs) -> Result<()> {
     let store = Store::open_existing(&args.db)?;
     for name in &args.jobs {
         if store.job(name)?.is_none() {
-            let known: Vec<String> = store.jobs()?.into_iter().map(|j| j.spec.name).collect();
             bail!(
                 "store {}: no job {name:?} (jobs: {}); nothing deleted",
                 args.db.display(),
-                if known.is_empty() {
-                    "none".to_string()
-                } else {
-                    known.join(", ")
-                }
+                store.job_names()?
             );
         }
     }

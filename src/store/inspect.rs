@@ -244,11 +244,16 @@ pub fn report(
     let logical: u64 = trees.iter().map(|t| t.key_bytes + t.value_bytes).sum();
     let size_on_disk = store.size_on_disk()?;
     let jobs: Vec<JobValue> = match job {
-        Some(name) => vec![store.job(name)?.ok_or_else(|| StoreError::Job {
-            path: store.path().to_owned(),
-            job: name.to_string(),
-            detail: "no such job in this store".into(),
-        })?],
+        Some(name) => match store.job(name)? {
+            Some(job) => vec![job],
+            None => {
+                return Err(StoreError::Job {
+                    path: store.path().to_owned(),
+                    job: name.to_string(),
+                    detail: format!("no such job in this store (jobs: {})", store.job_names()?),
+                })
+            }
+        },
         None => store.jobs()?,
     };
     let mut reports = Vec::new();

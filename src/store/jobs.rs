@@ -24,6 +24,16 @@ impl Store {
         Ok(out)
     }
 
+    /// The names of the store's jobs, `a, b`, or `none`: what an error
+    /// for a job name not found lists.
+    pub fn job_names(&self) -> Result<String, StoreError> {
+        let names: Vec<String> = self.jobs()?.into_iter().map(|j| j.spec.name).collect();
+        Ok(match names.is_empty() {
+            true => "none".to_string(),
+            false => names.join(", "),
+        })
+    }
+
     /// Marks job `name` cancelled (or not) for `radcache serve`, durably
     /// (a `meta` key; no schema change).
     pub fn set_job_cancelled(&self, name: &str, cancelled: bool) -> Result<(), StoreError> {
