@@ -1757,7 +1757,7 @@ fn a_render_jobs_scene_the_server_cannot_find_is_a_clear_conflict() {
     assert_eq!(status, 409);
     let detail = json(&body)["detail"].as_str().unwrap().to_string();
     assert!(
-        detail.contains("box.glb") && detail.contains("working directory"),
+        detail.contains("box.glb") && detail.contains("cannot load"),
         "{detail}"
     );
 }

@@ -725,7 +725,7 @@ fn a_job_resumes_its_scene_file_named_by_another_path() {
         name: "l".into(),
         ..file("old/s.gltf", "cccc+v1")
     };
-    store.begin_job(&legacy, false).unwrap();
+    let legacy_id = store.begin_job(&legacy, false).unwrap().id;
     let moved = JobSpec {
         name: "l".into(),
         ..file("new/s.gltf", "cccc+dddd")
@@ -735,6 +735,14 @@ fn a_job_resumes_its_scene_file_named_by_another_path() {
         msg.contains("scene (stored old/s.gltf, given new/s.gltf)"),
         "{msg}"
     );
+    // `render` gives the absolute path now: the stored relative name, taken
+    // from where the command runs, is that path, and the job resumes.
+    let here = std::path::absolute("old/s.gltf").unwrap();
+    let absolute = JobSpec {
+        name: "l".into(),
+        ..file(here.to_str().unwrap(), "cccc+dddd")
+    };
+    assert_eq!(store.begin_job(&absolute, false).unwrap().id, legacy_id);
 
     store.begin_job(&spec("b"), false).unwrap();
     let builtin = JobSpec {

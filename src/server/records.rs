@@ -69,14 +69,19 @@ pub(super) fn scene(
             return Ok(s.clone());
         }
     }
-    // A job of `radcache render` names its scene file as that command was
-    // given it, relative to where it ran: the server may not find it.
+    // A job of `radcache render` names its scene file by its absolute path
+    // (one stored by an earlier build, relative to where it ran): the
+    // server may not find it.
     let root = state.scene_root(source);
     let scene = Arc::new(source.load_confined(root.as_deref()).map_err(|e| {
+        let relative = matches!(source, crate::render::SceneSource::File(p) if p.is_relative());
         ApiError::conflict(format!(
             "the records' screen positions need the job's scene, which the server \
-             cannot load: {e:#} (a relative path is taken from the server's working \
-             directory)"
+             cannot load: {e:#}{}",
+            match relative {
+                true => " (a relative path is taken from the server's working directory)",
+                false => "",
+            }
         ))
     })?);
     *cache = Some((key.to_string(), scene.clone()));

@@ -558,7 +558,8 @@ fn settings_text(method: &str, stored: &str) -> String {
     if now.name() != method {
         return stored.to_string(); // not this method's settings
     }
-    let (now, defaults) = (named_settings(&now), named_settings(&defaults));
+    let settings = now;
+    let (now, defaults) = (named_settings(&settings), named_settings(&defaults));
     let names: BTreeSet<&String> = now.keys().chain(defaults.keys()).collect();
     // A value as `--methods` takes it: text unquoted; a path length left
     // unbounded has no name, so it shows as none.
@@ -567,15 +568,25 @@ fn settings_text(method: &str, stored: &str) -> String {
         Some(serde_json::Value::String(s)) => s.clone(),
         Some(v) => v.to_string(),
     };
-    let changed: Vec<String> = names
+    let changed: Vec<(&String, String)> = names
         .into_iter()
         .filter(|name| now.get(*name) != defaults.get(*name))
-        .map(|name| format!("{name}={}", text(now.get(name))))
+        .map(|name| (name, text(now.get(name))))
         .collect();
-    if changed.is_empty() {
-        "the defaults".into()
-    } else {
-        format!("changed from the defaults: {}", changed.join(", "))
+    // Settings no name sets (a path length's Russian roulette) differ when
+    // the named changes do not make the job's settings again: then the
+    // stored JSON says them.
+    let named_changes = changed.iter().map(|(n, v)| (n.as_str(), v.as_str()));
+    let unnamed = method_settings(method, named_changes).ok().as_ref() != Some(&settings);
+    let changed: Vec<String> = changed.iter().map(|(n, v)| format!("{n}={v}")).collect();
+    match (changed.is_empty(), unnamed) {
+        (true, false) => "the defaults".into(),
+        (false, false) => format!("changed from the defaults: {}", changed.join(", ")),
+        (_, true) => format!(
+            "changed from the defaults{}{}, and in settings without a name: {read_now}",
+            if changed.is_empty() { "" } else { ": " },
+            changed.join(", ")
+        ),
     }
 }
 
@@ -857,6 +868,18 @@ mod tests {
         assert_eq!(
             settings_text("path", &path),
             "changed from the defaults: max_depth=3"
+        );
+        // A setting no name sets is not hidden.
+        let mut unnamed: serde_json::Value = serde_json::from_str(&stored("trc", &[])).unwrap();
+        let rr_start = unnamed
+            .pointer_mut("/Trc/ic/length/rr_start")
+            .expect("a path length");
+        *rr_start = serde_json::json!(7);
+        let shown = settings_text("trc", &unnamed.to_string());
+        assert!(
+            shown.starts_with("changed from the defaults, and in settings without a name: {")
+                && shown.contains("\"rr_start\":7"),
+            "{shown}"
         );
         let gradients = stored("trc", &[("gradients", "none")]);
         assert_eq!(

@@ -9,6 +9,7 @@ use crate::method::settings::named_settings;
 use crate::render::MethodSettings;
 use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
 
 impl Store {
     pub fn job(&self, name: &str) -> Result<Option<JobValue>, StoreError> {
@@ -303,9 +304,16 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
     // ([`same_scene_hash`]) leaves out the files beside the `.gltf`.
     let same_file =
         is_file_scene(&stored.scene) && is_file_scene(scene) && stored.scene_hash == *scene_hash;
+    // `render` gives a file's absolute path; a job stored by an earlier
+    // build names it as it was given, relative to where it ran: the same
+    // name from here is the same path (a schema-1 hash then still resumes).
+    let same_path = &stored.scene == scene
+        || (is_file_scene(&stored.scene)
+            && Path::new(&stored.scene).is_relative()
+            && std::path::absolute(&stored.scene).is_ok_and(|p| p == Path::new(scene)));
     check(
         "scene",
-        &stored.scene == scene || same_file,
+        same_path || same_file,
         stored.scene.clone(),
         scene.clone(),
     );
