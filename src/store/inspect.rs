@@ -203,7 +203,7 @@ pub struct FrameReport {
     pub records_replaced: u64,
     pub records_dropped: u64,
     /// 0 where the frame computed no record whose life is set (`null` in
-    /// JSON, `-` in text: [`life_text`]).
+    /// JSON, `-` in text).
     #[serde(serialize_with = "null_when_unset")]
     pub mean_lifespan: f64,
     pub samples: u64,
