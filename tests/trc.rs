@@ -547,6 +547,40 @@ fn switched_off_light_leaves_no_indirect() {
     }
 }
 
+/// The same, with the light sliding from frame 0 on: the lights move from
+/// t0 to t0+1, so τ extrapolates their motion, but a light switched off
+/// later is not part of it: the check of later frames sees their power
+/// change at k (`trc::later`), also for records that see only surfaces
+/// the light lit, and every record ends its life at k − 1.
+#[test]
+fn a_moving_light_switched_off_leaves_no_indirect() {
+    let (k, max_life, fps) = (3u32, 6u32, 24.0);
+    let mut scene = lit_room(Some(k), fps);
+    scene.animation.channels.push(Channel {
+        node: 1,
+        property: Property::Translation,
+        interpolation: Interpolation::Linear,
+        times: vec![0.0, 1.0],
+        values: vec![Vec4::ZERO, Vec4::new(0.5, 0.0, 0.0, 0.0)],
+    });
+    let mut r = renderer(scene, 12, fps, false);
+    let mut trc = TemporalRadianceCaching::new(TrcSettings {
+        ic: small_ic(),
+        max_life,
+        ..TrcSettings::default()
+    });
+    let means: Vec<f64> = (0..k + 3)
+        .map(|f| render_trc(&mut r, &mut trc, f).mean())
+        .collect();
+    assert!(means[0] > 0.0);
+    for (f, m) in means.iter().enumerate().skip(k as usize) {
+        assert!(
+            *m == 0.0,
+            "indirect light left at frame {f}: {m} ({means:?})"
+        );
+    }
+}
+
 /// A light switched on at frame k in a room it alone lights: before k
 /// every record is black. With the constant estimate they stay black
 /// (E = 0 changes by nothing) and frame k has the direct light only. With

@@ -122,6 +122,13 @@ impl UnshadowedLights {
                 })
     }
 
+    /// Whether the two frames' lights emit the same power, to within
+    /// rounding (as [`Self::same_as`]): lights that move but are not
+    /// switched on, off or dimmed.
+    pub(crate) fn same_power(&self, other: &Self) -> bool {
+        nearly_equal(self.power(), other.power())
+    }
+
     /// The power the lights emit (W): `π·L_e·A` an area light (each side
     /// that emits), `4π·I` a punctual one (spots taken as points).
     pub(crate) fn power(&self) -> Vec3 {

@@ -24,9 +24,10 @@
 //!   from the record, from where the object's t0→t0+1 motion, continued
 //!   (translation, turn and scale each at its own rate, as keyframes
 //!   interpolate), would have taken it; or
-//! - the lights have changed since t0 where they stayed from t0 to t0+1
-//!   (lights moving at t0 keep the paper's extrapolation, but the frames
-//!   an object departs in are reprojected with the lights then).
+//! - the lights have changed since t0 where they stayed from t0 to t0+1,
+//!   or, where they moved, their power has (switched off, on or dimmed):
+//!   lights moving at t0 keep the paper's extrapolation otherwise, but the
+//!   frames an object departs in are reprojected with the lights then.
 //!
 //! Limits: only what the record's samples hit at t0 is followed (an object
 //! that comes into its view later is not, as for t0+1); shadows that move
@@ -73,7 +74,8 @@ struct LaterFrame {
     /// its t0→t0+1 motion, continued, would have taken it; 0 for an object
     /// that never moves.
     departure: Vec<f32>,
-    /// The lights differ from t0's, where they stayed from t0 to t0+1.
+    /// The lights differ from t0's, where they stayed from t0 to t0+1; or
+    /// their power does, where they moved.
     lights_changed: bool,
 }
 
@@ -123,7 +125,12 @@ impl LaterFrames {
             } else {
                 next.lights_now().clone()
             };
-            let lights_changed = !next.lights_move() && !lights.same_as(next.lights_now());
+            // Lights that moved from t0 to t0+1 move in τ's extrapolation;
+            // one switched off, on or dimmed later does not.
+            let lights_changed = match next.lights_move() {
+                false => !lights.same_as(next.lights_now()),
+                true => !lights.same_power(next.lights_now()),
+            };
             if lights_changed || departure.iter().any(|&d| d > 0.0) {
                 let motion = x0.iter().zip(xt.iter()).zip(&dynamic);
                 let moved = |((w0, wt), &d): ((&Mat4, &Mat4), &bool)| {
