@@ -175,8 +175,9 @@ pub fn algorithm_revision(method: &str) -> u64 {
     match method {
         // 2: records checked against the later frames of their life
         // (`trc::later`) and a light switched on in the dark seen by the
-        // reprojection (2026-11-29).
-        "trc" => 2,
+        // reprojection (2026-11-29). 3: a later change of the lights'
+        // power checked where they move (2026-11-29).
+        "trc" => 3,
         _ => 1,
     }
 }
