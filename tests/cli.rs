@@ -425,6 +425,23 @@ fn inspect_splits_records_between_moving_and_static_objects() {
     assert!(text.contains(&split), "{text}");
     assert!(text.contains("records by object"), "{text}");
 
+    // One frame of the job: a finished one is shown, one not finished is
+    // an error (with or without --json), as a job the store lacks is.
+    let (code, _, stderr) = radcache(&["inspect", "--db", db, "j", "--frame", "2"]);
+    assert_eq!(code, 0, "{stderr}");
+    for json in [false, true] {
+        let mut args = vec!["inspect", "--db", db, "j", "--frame", "7"];
+        if json {
+            args.push("--json");
+        }
+        let (code, out, stderr) = radcache(&args);
+        assert_eq!(code, 1, "{out}");
+        assert!(
+            stderr.contains("frame 7 is not among this job's finished frames (3 of frames 0..3 done, the last 2)"),
+            "{stderr}"
+        );
+    }
+
     std::fs::remove_file(&scene).unwrap();
     let (code, text, stderr) = radcache(&["inspect", "--db", db, "j"]);
     assert_eq!(code, 0, "{stderr}");

@@ -509,11 +509,22 @@ fn garbage_bytes() {
             x as u8
         })
         .collect();
-    for name in ["garbage.glb", "garbage.gltf"] {
-        let path = dir.path().join(name);
-        std::fs::write(&path, &bytes).unwrap();
-        assert_error(&path, "not a valid glTF");
-    }
+    // A .gltf is JSON text: the parser says where it fails. A .glb is
+    // told its first bytes are not the GLB magic.
+    let path = dir.path().join("garbage.gltf");
+    std::fs::write(&path, &bytes).unwrap();
+    assert_error(&path, "not a valid glTF");
+    let path = dir.path().join("garbage.glb");
+    std::fs::write(&path, &bytes).unwrap();
+    let head: Vec<String> = bytes[..4].iter().map(|b| format!("{b:02x}")).collect();
+    assert_error(&path, &format!("not a binary glTF file: a .glb starts with the bytes \"glTF\" (67 6c 54 46), this one with {}", head.join(" ")));
+    std::fs::write(&path, b"").unwrap();
+    assert_error(&path, "this one with nothing (it is empty)");
+    // glTF JSON written under the .glb name still loads.
+    let gltf = write_case(dir.path(), "json", |_| {}, good_bin());
+    let named_glb = dir.path().join("json.glb");
+    std::fs::copy(&gltf, &named_glb).unwrap();
+    Scene::load(&named_glb).unwrap();
     // A GLB header followed by garbage chunks.
     let mut glb = b"glTF".to_vec();
     glb.extend_from_slice(&2u32.to_le_bytes());

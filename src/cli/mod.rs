@@ -231,6 +231,14 @@ fn run_inspect(args: InspectArgs) -> Result<()> {
     for job in &mut report.jobs {
         job.moving_objects = moving_objects(&job.scene, &job.scene_hash);
     }
+    // One job asked for one frame it has not finished is an error (exit
+    // status 1), as a job it does not hold is; across jobs, a job without
+    // the frame is a row of the answer.
+    if let (Some(name), Some(frame), [job]) = (&args.job, args.frame, &report.jobs[..]) {
+        if let Some(missing) = store::inspect::frame_not_done(job, frame) {
+            bail!("job {name:?} in {}: {missing}", args.db.display());
+        }
+    }
     if args.json {
         outln!("{}", serde_json::to_string(&report)?)?;
     } else {

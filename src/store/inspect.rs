@@ -759,21 +759,30 @@ fn objects_text(s: &mut String, j: &JobReport) {
     );
 }
 
+/// Where job `j`'s report was asked for `frame` (`inspect --frame`) and
+/// the job has not finished it, the sentence saying so; `None` where the
+/// frame is shown.
+pub fn frame_not_done(j: &JobReport, frame: u32) -> Option<String> {
+    if j.frame_details.iter().any(|f| f.frame == frame) {
+        return None;
+    }
+    Some(format!(
+        "frame {frame} is not among this job's finished frames ({} of frames {} done{})",
+        j.frames_done,
+        j.frames,
+        match j.last_frame {
+            Some(last) => format!(", the last {last}"),
+            None => String::new(),
+        }
+    ))
+}
+
 /// A job's per-frame rows of [`to_text`]: records written, alive, created,
 /// reused, replaced and dropped, mean lifespan, samples, samples re-shot,
 /// cache bytes, bytes stored, EXR bytes, rays.
 fn frame_table(s: &mut String, j: &JobReport, asked: Option<u32>) {
-    if let (true, Some(frame)) = (j.frame_details.is_empty(), asked) {
-        let _ = writeln!(
-            s,
-            "  frame {frame} is not among this job's finished frames ({} of frames {} done{})",
-            j.frames_done,
-            j.frames,
-            match j.last_frame {
-                Some(last) => format!(", the last {last}"),
-                None => String::new(),
-            }
-        );
+    if let Some(missing) = asked.and_then(|frame| frame_not_done(j, frame)) {
+        let _ = writeln!(s, "  {missing}");
     } else if j.frame_details.is_empty() {
         let _ = writeln!(
             s,

@@ -69,10 +69,27 @@ pub(crate) fn json_chunk(bytes: &[u8]) -> Option<&[u8]> {
     bytes.get(20..20usize.checked_add(length)?)
 }
 
-/// The GLB header states the file length; a mismatch is the clearest sign of
-/// a truncated download, clearer than the chunk error the parser reports.
-pub(super) fn check_glb_length(bytes: &[u8]) -> Res<()> {
+/// A `.glb` file that is neither a GLB (its magic) nor JSON text (some
+/// tools write glTF JSON under either name) is refused naming what it
+/// starts with, rather than with the JSON parser's "expected value at
+/// line 1". The GLB header states the file length; a mismatch is the
+/// clearest sign of a truncated download, clearer than the chunk error the
+/// parser reports.
+pub(super) fn check_glb_header(named_glb: bool, bytes: &[u8]) -> Res<()> {
     if !bytes.starts_with(GLB_MAGIC) {
+        let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
+        if named_glb && first != Some(&b'{') {
+            let head: Vec<String> = bytes.iter().take(4).map(|b| format!("{b:02x}")).collect();
+            return Err(format!(
+                "not a binary glTF file: a .glb starts with the bytes \"glTF\" \
+                 (67 6c 54 46), this one with {}",
+                if head.is_empty() {
+                    "nothing (it is empty)".into()
+                } else {
+                    head.join(" ")
+                }
+            ));
+        }
         return Ok(());
     }
     let Some(declared) = glb_u32(bytes, 8) else {

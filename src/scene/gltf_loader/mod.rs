@@ -46,7 +46,7 @@ pub use files::{confined_file, confined_uri_file, read_regular_file, uri_file};
 use super::{Material, Object, PunctualLight, Scene, SceneError, DEFAULT_FPS};
 use accessors::{load_buffers, Buffers};
 use document::{
-    check_asset_and_nodes, check_extensions, check_glb_length, check_unvalidated_references,
+    check_asset_and_nodes, check_extensions, check_glb_header, check_unvalidated_references,
     parse_error, quietly_catch_panics, validated, warn_of_ignored_features,
     without_channels_lacking_a_node,
 };
@@ -111,7 +111,10 @@ fn check_extension(path: &Path) -> Res<()> {
 }
 
 fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scene> {
-    check_glb_length(bytes)?;
+    let named_glb = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    check_glb_header(named_glb, bytes)?;
     let rewritten = without_channels_lacking_a_node(bytes);
     let bytes = rewritten.as_deref().unwrap_or(bytes);
     let gltf::Gltf { document, blob } =
