@@ -206,6 +206,21 @@ pub fn outward_box(min: Vec3, max: Vec3, material: u32) -> Mesh {
     m
 }
 
+/// Adds `mesh` as an object named `name` on a node of its own that does
+/// not move.
+pub fn add_static_object(s: &mut Scene, name: &str, mesh: Mesh) {
+    s.objects.push(radcache::scene::Object {
+        name: name.into(),
+        node: s.nodes.len(),
+        mesh,
+    });
+    s.nodes.push(radcache::scene::Node {
+        name: name.into(),
+        parent: None,
+        rest: radcache::scene::Trs::default(),
+    });
+}
+
 /// Adds a block (an [`outward_box`] of a new diffuse material `colour`)
 /// on its own node, moved by the translation channel `values` at `times`
 /// with `interpolation`.
@@ -218,16 +233,7 @@ pub fn add_moving_block(
 ) {
     s.materials.push(Material::diffuse("block", colour));
     let block = outward_box(min, max, (s.materials.len() - 1) as u32);
-    s.objects.push(radcache::scene::Object {
-        name: "block".into(),
-        node: s.nodes.len(),
-        mesh: block,
-    });
-    s.nodes.push(radcache::scene::Node {
-        name: "block".into(),
-        parent: None,
-        rest: radcache::scene::Trs::default(),
-    });
+    add_static_object(s, "block", block);
     s.animation.channels.push(Channel {
         node: s.nodes.len() - 1,
         property: Property::Translation,

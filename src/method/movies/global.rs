@@ -19,9 +19,12 @@
 //! is what tracing it again would give, so the solution of a frame does
 //! not depend on the frames before it. The same holds for each vertex's
 //! row of the transport, built again only where its links, or the
-//! open-space flags of the vertices they land by, changed.
+//! open-space flags of the vertices they land by, changed. Each triangle
+//! is solved on one side, as the paper's polygons are: the side the
+//! camera sees into ([`super::sides`]).
 
 use super::direct::{direct_irradiance, Blockers, ShadePoint, StaticShadows};
+use super::sides::SolvedSides;
 use super::FrameContext;
 use crate::backend::{Hit, Ray};
 use crate::integrator::offset_origin;
@@ -69,8 +72,9 @@ pub const CONVERGED: f64 = 1e-3;
 
 /// The finest grid: segments along a triangle's edge.
 pub const MAX_GRID: u32 = 32;
-/// The largest share of a vertex's links that may land on the back of a
-/// surface for the vertex to count as in open space.
+/// The largest share of a vertex's links that may land on the side of a
+/// surface not solved (its back, mostly: [`SolvedSides`]) for the vertex
+/// to count as in open space.
 pub const BURIED_SHARE: f32 = 0.1;
 /// The fewest links a vertex gathers along (unless [`MAX_LINKS`] leaves
 /// fewer).
@@ -260,8 +264,8 @@ struct Link {
     /// which motion must not cross for it to stay valid.
     from: Vec3,
     to: Vec3,
-    /// Whether it landed on the front of a surface (the side the
-    /// solution is for).
+    /// Whether it landed on the side of a surface the solution is for
+    /// ([`SolvedSides`]).
     front: bool,
     /// The vertices it gathers from, where it landed.
     landing: Gouraud,
@@ -271,6 +275,8 @@ struct Link {
 /// solution of the last frame.
 pub struct GlobalPass {
     settings: GlobalSettings,
+    /// The side of each triangle solved: the one its vertices gather on.
+    sides: SolvedSides,
     grids: Vec<Grid>,
     /// The vertex in each slot of the grids.
     vertex_of: Vec<u32>,
@@ -423,6 +429,7 @@ impl GlobalPass {
         let count = vertices.len();
         GlobalPass {
             settings,
+            sides: SolvedSides::new(snapshot),
             grids,
             vertex_of,
             vertices,
@@ -453,9 +460,17 @@ impl GlobalPass {
         self
     }
 
-    /// Whether this pass was built for a snapshot with this many triangles.
-    pub fn fits(&self, triangles: usize) -> bool {
-        self.grids.len() == triangles
+    /// Whether this pass was built for a snapshot with this many triangles
+    /// and solves the sides `snapshot`'s camera sets ([`SolvedSides`]):
+    /// else it is built again.
+    pub fn fits(&self, snapshot: &crate::scene::Snapshot) -> bool {
+        self.grids.len() == snapshot.triangles.len() && self.sides.hold_at(snapshot)
+    }
+
+    /// Whether the pass solves the back side of triangle `id` (its front
+    /// otherwise).
+    pub fn solves_back(&self, id: u32) -> bool {
+        self.sides.back(id)
     }
 
     pub fn vertex_count(&self) -> usize {
@@ -484,7 +499,7 @@ impl GlobalPass {
             .map(|(slot, w)| (self.vertex_of[slot as usize], w))
     }
 
-    /// Indirect irradiance where `g` says (the front side of its
+    /// Indirect irradiance where `g` says (the solved side of its
     /// triangle), from the last solution.
     pub fn indirect_with(&self, g: &Gouraud) -> Vec3 {
         blend(&self.indirect, &self.valid, g)
@@ -511,9 +526,9 @@ impl GlobalPass {
         shadow_rays
     }
 
-    /// Every vertex as a shading point, in the frame of `ctx` (pulled a
-    /// hair towards its triangle's centre, so that a corner vertex does
-    /// not gather from the edge it sits on).
+    /// Every vertex as a shading point on its triangle's solved side, in
+    /// the frame of `ctx` (pulled a hair towards its triangle's centre, so
+    /// that a corner vertex does not gather from the edge it sits on).
     fn points(&self, ctx: &FrameContext) -> Vec<ShadePoint> {
         self.vertices
             .iter()
@@ -522,10 +537,11 @@ impl GlobalPass {
                 let tri = &ctx.snapshot.triangles[v.triangle as usize];
                 let n = self.grids[v.triangle as usize].n as f32;
                 let (u, w) = pulled(v.a as f32 / n, v.b as f32 / n);
+                let side = self.sides.sign(v.triangle);
                 ShadePoint {
                     p: tri.point(u, w),
-                    n: tri.shading_normal(u, w),
-                    ng: tri.geometric_normal(),
+                    n: tri.shading_normal(u, w) * side,
+                    ng: tri.geometric_normal() * side,
                     item: streams::GLOBAL_VERTEX | i as u64,
                 }
             })
@@ -622,6 +638,7 @@ impl GlobalPass {
                 && ctx.snapshot.triangles[hit.triangle as usize]
                     .geometric_normal()
                     .dot(ray.dir())
+                    * self.sides.sign(hit.triangle)
                     < 0.0;
             let landing = if front {
                 self.gouraud(hit.triangle, hit.u, hit.v)
@@ -700,7 +717,7 @@ impl GlobalPass {
     /// Jacobi iteration of `B = ρ/π·(E_direct + E_indirect)`, with
     /// `E_indirect` the mean over a vertex's links of the radiance `B`
     /// interpolated where each lands, times π (cosine-distributed links).
-    /// A link that lands on the back of a surface or on an emitter's
+    /// A link that lands on a side not solved or on an emitter's
     /// emission gathers nothing: emitted light is the direct light,
     /// counted once. `retraced` marks the vertices whose links were traced
     /// again this frame.
@@ -816,7 +833,7 @@ impl GlobalPass {
     }
 
     /// Whether vertex `v` lies in open space: at most [`BURIED_SHARE`] of
-    /// its links land on the back of a surface. A vertex under another
+    /// its links land on a side not solved. A vertex under another
     /// surface (the ceiling above a light hung just below it, the floor
     /// under a block) gathers darkness that no visible point has, and
     /// Gouraud interpolation would spread it to the visible texels next

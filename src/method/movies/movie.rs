@@ -44,7 +44,8 @@ pub struct Movie {
     /// with (a frame whose texels encode the same is not stored again).
     pub(super) stored: Option<(u32, Vec<[u8; 4]>)>,
     /// Per band texel: its index, where it is evaluated, and the global
-    /// pass's vertices it interpolates (fixed for the movie's life).
+    /// pass's vertices it interpolates (found when it is first shaded,
+    /// and again after [`forget_layout`](Self::forget_layout)).
     layout: Vec<(usize, (f32, f32), Gouraud)>,
 }
 
@@ -65,6 +66,13 @@ impl Movie {
             stored: None,
             layout: Vec::new(),
         }
+    }
+
+    /// Drops the texels' places among the global pass's vertices: the
+    /// pass was built again ([`GlobalPass::fits`]), so they are found
+    /// again at the next frame.
+    pub fn forget_layout(&mut self) {
+        self.layout = Vec::new();
     }
 
     /// The band's texels, `(index, i, j)`, in storage order.
@@ -126,13 +134,7 @@ impl Movie {
                 .band()
                 .map(|(index, i, j)| {
                     let (u, v) = self.texel_uv(i, j);
-                    // A back side reads no vertex values (below).
-                    let g = if self.key.back {
-                        [(0, 0.0); 3]
-                    } else {
-                        global.gouraud(self.key.triangle, u, v)
-                    };
-                    (index, (u, v), g)
+                    (index, (u, v), global.gouraud(self.key.triangle, u, v))
                 })
                 .collect();
         }
@@ -146,18 +148,19 @@ impl Movie {
         let r = self.resolution as usize;
         self.texels.clear();
         self.texels.resize(r * r, Vec3::ZERO);
-        // The global pass solves the front sides only (a link landing on a
-        // back gathers nothing: backs neither take nor give light there,
-        // as one-sided radiosity polygons). Its values are the front's
-        // light, so a back side takes none of them: reading them lit the
-        // outside of closed rooms and the dark side of thin walls with the
-        // light of the inside. A back side seen by the camera gets its
-        // direct light only.
+        // The global pass solves one side of each triangle (a link landing
+        // on the other gathers nothing: it neither takes nor gives light
+        // there, as one-sided radiosity polygons). Its values are that
+        // side's light, so the other side takes none of them: reading them
+        // lit the outside of closed rooms and the dark side of thin walls
+        // with the light of the inside. A side not solved that the camera
+        // sees gets its direct light only.
+        let solved = self.key.back == global.solves_back(self.key.triangle);
         for (&(index, _, g), &e) in self.layout.iter().zip(&direct) {
-            let indirect = if self.key.back {
-                Vec3::ZERO
-            } else {
+            let indirect = if solved {
                 global.indirect_with(&g)
+            } else {
+                Vec3::ZERO
             };
             self.texels[index] = e + indirect;
         }

@@ -1,0 +1,294 @@
+//! Which side of each triangle the global pass solves.
+//!
+//! Radiosity polygons are one-sided: the paper's global pass solves the
+//! side a polygon's normal faces, and so does ours ([`super::global`]).
+//! The rest of the renderer is two-sided (`material`), as the reference
+//! renders are, and files do not always face their normals into the
+//! space that is lit and seen: a room modelled as a box whose normals face
+//! out, with the camera and the lights inside, is common. Solving the
+//! front sides there lost most of the room's indirect light (0.14 against
+//! `path`'s 0.47 in a lit room; `tests/movies.rs`).
+//!
+//! Departure, named: the side is chosen per *component* (the triangles of
+//! one object joined by shared corner positions: a wall, a box, a sphere)
+//! by where the camera is. The signed solid angles of a component's
+//! triangles seen from the camera, positive where the camera is behind a
+//! triangle, sum to the component's winding number around it (times 4π):
+//! zero for a closed surface the camera is outside of, one where it
+//! encloses the camera with its normals facing out. Its back sides are
+//! solved where the camera sees at least twice as much of them as of its
+//! fronts: `B ≥ 2F`, the solid angles of the triangles it is behind (`B`)
+//! and in front of (`F`) each summed unsigned. A closed solid seen from
+//! outside shows as much back as front (`B = F`: fronts solved); a room
+//! around the camera or an open box seen into shows backs only (`F = 0`);
+//! a terrain seen from above shows more front than back. Both sides are
+//! not solved, which would double the links within the same budget and
+//! leave the inside of every solid to solve. A component whose triangles
+//! face both ways (a table whose normals face out merged into the mesh of
+//! a room whose normals face out) keeps one side.
+//!
+//! The choice is a function of the frame (its camera and geometry), so a
+//! pass that starts at any frame makes the same one; where it changes (the
+//! camera walks into a room), the pass is built again.
+
+use crate::scene::Snapshot;
+use glam::Vec3;
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// The side the global pass solves of each triangle of a snapshot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SolvedSides {
+    /// Per triangle, its component.
+    component: Vec<u32>,
+    /// Per component, whether its back sides are solved.
+    back: Vec<bool>,
+}
+
+impl SolvedSides {
+    /// The components of `snapshot`'s triangles and the sides its camera
+    /// sets.
+    pub fn new(snapshot: &Snapshot) -> Self {
+        let component = components(snapshot);
+        let count = component.iter().max().map_or(0, |&c| c as usize + 1);
+        let back = backs_solved(snapshot, &component, count);
+        SolvedSides { component, back }
+    }
+
+    /// Whether `snapshot`'s camera and geometry set the same sides (it
+    /// holds the same triangles).
+    pub fn hold_at(&self, snapshot: &Snapshot) -> bool {
+        self.component.len() == snapshot.triangles.len()
+            && backs_solved(snapshot, &self.component, self.back.len()) == self.back
+    }
+
+    /// Whether the back side of triangle `id` is the one solved.
+    pub fn back(&self, id: u32) -> bool {
+        self.back[self.component[id as usize] as usize]
+    }
+
+    /// `1` where the front side of triangle `id` is solved, `−1` where
+    /// its back is: the solved side's normal is the triangle's times this.
+    pub fn sign(&self, id: u32) -> f32 {
+        if self.back(id) {
+            -1.0
+        } else {
+            1.0
+        }
+    }
+}
+
+/// Per triangle, its component: triangles of one object that share a
+/// corner position (bit for bit, as exporters write a shared vertex split
+/// for its normals) are one component. Numbered in the order of their
+/// first triangles.
+fn components(snapshot: &Snapshot) -> Vec<u32> {
+    let count = snapshot.triangles.len();
+    let mut parent: Vec<u32> = (0..count as u32).collect();
+    let mut first_at: HashMap<(u32, [u32; 3]), u32> = HashMap::new();
+    for (id, tri) in snapshot.triangles.iter().enumerate() {
+        let object = snapshot.tri_object[id];
+        for p in tri.p {
+            let key = (object, p.to_array().map(f32::to_bits));
+            let other = *first_at.entry(key).or_insert(id as u32);
+            union(&mut parent, id as u32, other);
+        }
+    }
+    let mut number: HashMap<u32, u32> = HashMap::new();
+    (0..count as u32)
+        .map(|id| {
+            let root = find(&mut parent, id);
+            let next = number.len() as u32;
+            *number.entry(root).or_insert(next)
+        })
+        .collect()
+}
+
+fn find(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        // Path halving.
+        parent[i as usize] = parent[parent[i as usize] as usize];
+        i = parent[i as usize];
+    }
+    i
+}
+
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    // The smaller root stays: roots do not depend on the order of unions.
+    if ra != rb {
+        parent[ra.max(rb) as usize] = ra.min(rb);
+    }
+}
+
+/// Per component, whether its back sides are solved from `snapshot`'s
+/// camera: `B ≥ 2F` (module docs). Each component's sums run in triangle
+/// order, in `f64`, so the choice does not depend on the thread count.
+fn backs_solved(snapshot: &Snapshot, component: &[u32], count: usize) -> Vec<bool> {
+    let eye = snapshot.camera.position;
+    let angles: Vec<f64> = snapshot
+        .triangles
+        .par_iter()
+        .map(|t| signed_solid_angle(eye, t.p))
+        .collect();
+    let mut sums = vec![(0.0f64, 0.0f64); count];
+    for (&c, &omega) in component.iter().zip(&angles) {
+        let (behind, in_front) = &mut sums[c as usize];
+        if omega > 0.0 {
+            *behind += omega;
+        } else {
+            *in_front -= omega;
+        }
+    }
+    sums.into_iter()
+        .map(|(behind, in_front)| behind > 0.0 && behind >= 2.0 * in_front)
+        .collect()
+}
+
+/// The solid angle triangle `p` subtends at `eye`, positive where `eye`
+/// is behind it (its counter-clockwise front faces away), by Van Oosterom
+/// and Strackee's formula (1983): `tan(Ω/2) = a·(b×c) / (|a||b||c| +
+/// (a·b)|c| + (a·c)|b| + (b·c)|a|)`, with `a, b, c` the corners less `eye`.
+fn signed_solid_angle(eye: Vec3, p: [Vec3; 3]) -> f64 {
+    let [a, b, c] = p.map(|q| (q - eye).as_dvec3());
+    let (la, lb, lc) = (a.length(), b.length(), c.length());
+    let numerator = a.dot(b.cross(c));
+    let denominator = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+    let omega = 2.0 * numerator.atan2(denominator);
+    if omega.is_finite() {
+        omega
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// The two triangles of the quad `o + s·u + t·v`, front along `u × v`.
+    fn quad(o: Vec3, u: Vec3, v: Vec3) -> [[Vec3; 3]; 2] {
+        [[o, o + u, o + u + v], [o, o + u + v, o + v]]
+    }
+
+    /// The unit square's two triangles at `z = 0`, front facing +z.
+    fn square() -> [[Vec3; 3]; 2] {
+        quad(Vec3::ZERO, Vec3::X, Vec3::Y)
+    }
+
+    /// The box `[-1, 1]³`, fronts facing out.
+    pub(super) fn outward_cube() -> Vec<[Vec3; 3]> {
+        let (m, x, y, z) = (
+            Vec3::splat(-1.0),
+            2.0 * Vec3::X,
+            2.0 * Vec3::Y,
+            2.0 * Vec3::Z,
+        );
+        [
+            quad(m, x, z),
+            quad(m + y, z, x),
+            quad(m, y, x),
+            quad(m + z, x, y),
+            quad(m, z, y),
+            quad(m + x, y, z),
+        ]
+        .concat()
+    }
+
+    /// A square of side 2s seen along its axis from distance d subtends
+    /// `4·asin(s²/(s² + d²))`, negative from its front; a closed box's
+    /// triangles sum to 4π from inside (fronts facing out) and to 0 from
+    /// outside.
+    #[test]
+    fn solid_angles_have_their_closed_forms() {
+        for d in [100.0f32, 1.0, 1e-3] {
+            let exact = 4.0 * (0.25 / (0.25 + f64::from(d).powi(2))).asin();
+            let seen = |z: f32| -> f64 {
+                let eye = Vec3::new(0.5, 0.5, z);
+                square().iter().map(|&t| signed_solid_angle(eye, t)).sum()
+            };
+            assert!(
+                (seen(-d) - exact).abs() < 1e-9 * exact.max(1.0),
+                "{d}: {}",
+                seen(-d)
+            );
+            assert!(
+                (seen(d) + exact).abs() < 1e-9 * exact.max(1.0),
+                "{d}: {}",
+                seen(d)
+            );
+        }
+        let cube = outward_cube();
+        let total = |eye: Vec3| -> f64 { cube.iter().map(|&t| signed_solid_angle(eye, t)).sum() };
+        assert!((total(Vec3::splat(0.1)) - 4.0 * PI).abs() < 1e-9);
+        assert!(total(Vec3::new(3.0, 0.2, -1.0)).abs() < 1e-9);
+    }
+
+    /// The built-in scenes face their normals into the space the camera
+    /// sees (rooms in, solids out): every front is solved, at the first,
+    /// middle and last frame, as before sides were chosen; the frames of
+    /// `movies` there did not change.
+    #[test]
+    fn built_in_scenes_solve_their_fronts() {
+        for name in crate::scene::builtin::NAMES {
+            let scene = crate::scene::Scene::builtin(name).unwrap();
+            for frame in [0, scene.frame_count / 2, scene.frame_count - 1] {
+                let snapshot = scene.snapshot(frame as f32 / crate::scene::DEFAULT_FPS);
+                let sides = SolvedSides::new(&snapshot);
+                assert!(!sides.back.contains(&true), "{name} frame {frame}");
+                assert!(sides.back.len() > 1, "{name}: one component");
+            }
+        }
+    }
+
+    /// Components: the two triangles of a quad share corners and are one;
+    /// a second quad apart (facing −z) is another, and so is a third at
+    /// the first's place on another object. An outward cube around the camera solves
+    /// its backs; moved away from the camera, its fronts (`hold_at` then
+    /// fails).
+    #[test]
+    fn components_and_their_sides() {
+        let triangles: Vec<[Vec3; 3]> = [
+            square().to_vec(),
+            quad(Vec3::new(5.0, 0.0, 0.0), Vec3::Y, Vec3::X).to_vec(),
+            square().to_vec(),
+            outward_cube(),
+        ]
+        .concat();
+        let objects: Vec<u32> = [[0; 4].to_vec(), vec![1, 1], vec![2; 12]].concat();
+        let mut snapshot = snapshot_of(&triangles, &objects, Vec3::new(0.3, 0.2, -0.5));
+        assert_eq!(
+            components(&snapshot),
+            [[0, 0, 1, 1, 2, 2].to_vec(), vec![3; 12]].concat()
+        );
+        let sides = SolvedSides::new(&snapshot);
+        // The eye is behind the squares facing +z and inside the cube.
+        assert_eq!(sides.back, [true, false, true, true]);
+        assert!(sides.back(5) && sides.back(17) && !sides.back(2));
+        assert!(sides.hold_at(&snapshot));
+        snapshot.camera.position = Vec3::new(0.3, 0.2, 4.0);
+        assert!(!sides.hold_at(&snapshot));
+        // Now in front of the squares facing +z, behind the other.
+        assert_eq!(
+            SolvedSides::new(&snapshot).back,
+            [false, true, false, false]
+        );
+    }
+
+    /// A snapshot of `triangles` on `objects`, its camera at `eye`.
+    fn snapshot_of(triangles: &[[Vec3; 3]], objects: &[u32], eye: Vec3) -> Snapshot {
+        let scene = crate::scene::Scene::builtin("cube-in-box").unwrap();
+        let mut snapshot = scene.snapshot(0.0);
+        snapshot.triangles = triangles
+            .iter()
+            .map(|&p| crate::scene::Triangle {
+                p,
+                n: [Vec3::ZERO; 3],
+            })
+            .collect();
+        snapshot.tri_object = objects.to_vec();
+        snapshot.camera.position = eye;
+        snapshot
+    }
+}
