@@ -10,8 +10,8 @@
 //! `path`'s 0.47 in a lit room; `tests/movies.rs`).
 //!
 //! Departure, named: the side is chosen per *component* (the triangles of
-//! one object joined by shared corner positions: a wall, a box, a sphere)
-//! by where the camera is. The signed solid angles of a component's
+//! one object joined across the edges they share with the same
+//! orientation: a wall, a box, a sphere) by where the camera is. The signed solid angles of a component's
 //! triangles seen from the camera, positive where the camera is behind a
 //! triangle, sum to the component's winding number around it (times 4π):
 //! zero for a closed surface the camera is outside of, one where it
@@ -23,9 +23,8 @@
 //! around the camera or an open box seen into shows backs only (`F = 0`);
 //! a terrain seen from above shows more front than back. Both sides are
 //! not solved, which would double the links within the same budget and
-//! leave the inside of every solid to solve. A component whose triangles
-//! face both ways (a table whose normals face out merged into the mesh of
-//! a room whose normals face out) keeps one side.
+//! leave the inside of every solid to solve. A face turned the other way
+//! from its neighbours is a component of its own.
 //!
 //! The choice is a function of the frame (its camera and geometry), so a
 //! pass that starts at any frame makes the same one; where it changes (the
@@ -78,20 +77,35 @@ impl SolvedSides {
     }
 }
 
-/// Per triangle, its component: triangles of one object that share a
-/// corner position (bit for bit, as exporters write a shared vertex split
-/// for its normals) are one component. Numbered in the order of their
-/// first triangles.
+/// Per triangle, its component: triangles of one object joined across
+/// edges they share with the same orientation, i.e. an edge one runs from
+/// `a` to `b` and the other from `b` to `a` (corner positions compared bit
+/// for bit, as exporters write a shared vertex split for its normals).
+/// A face turned the other way from its neighbours is a component of its
+/// own, so its side is chosen apart from theirs; a surface oriented
+/// throughout (a room and a table sealed to its floor) is one, and one
+/// side of it faces the camera's space everywhere. Numbered in the order
+/// of their first triangles.
 fn components(snapshot: &Snapshot) -> Vec<u32> {
     let count = snapshot.triangles.len();
+    let edge = |id: usize, k: usize| {
+        let p = &snapshot.triangles[id].p;
+        let bits = |q: Vec3| q.to_array().map(f32::to_bits);
+        (snapshot.tri_object[id], bits(p[k]), bits(p[(k + 1) % 3]))
+    };
+    let mut first_along: HashMap<(u32, [u32; 3], [u32; 3]), u32> = HashMap::new();
+    for id in 0..count {
+        for k in 0..3 {
+            first_along.entry(edge(id, k)).or_insert(id as u32);
+        }
+    }
     let mut parent: Vec<u32> = (0..count as u32).collect();
-    let mut first_at: HashMap<(u32, [u32; 3]), u32> = HashMap::new();
-    for (id, tri) in snapshot.triangles.iter().enumerate() {
-        let object = snapshot.tri_object[id];
-        for p in tri.p {
-            let key = (object, p.to_array().map(f32::to_bits));
-            let other = *first_at.entry(key).or_insert(id as u32);
-            union(&mut parent, id as u32, other);
+    for id in 0..count {
+        for k in 0..3 {
+            let (object, a, b) = edge(id, k);
+            if let Some(&other) = first_along.get(&(object, b, a)) {
+                union(&mut parent, id as u32, other);
+            }
         }
     }
     let mut number: HashMap<u32, u32> = HashMap::new();
@@ -242,11 +256,11 @@ mod tests {
         }
     }
 
-    /// Components: the two triangles of a quad share corners and are one;
+    /// Components: the two triangles of a quad share an edge and are one;
     /// a second quad apart (facing −z) is another, and so is a third at
-    /// the first's place on another object. An outward cube around the camera solves
-    /// its backs; moved away from the camera, its fronts (`hold_at` then
-    /// fails).
+    /// the first's place on another object. An outward cube around the
+    /// camera solves its backs; moved away from the camera, its fronts
+    /// (`hold_at` then fails).
     #[test]
     fn components_and_their_sides() {
         let triangles: Vec<[Vec3; 3]> = [
@@ -274,6 +288,32 @@ mod tests {
             SolvedSides::new(&snapshot).back,
             [false, true, false, false]
         );
+    }
+
+    /// A cube with one face turned inward: that face is a component of
+    /// its own (its edges run the way its neighbours' do), and so is a
+    /// quad that touches the cube at a corner only. From inside the cube
+    /// every solved side faces the camera's space: the backs of the faces
+    /// turned out, the front of the face turned in.
+    #[test]
+    fn a_face_turned_the_other_way_is_chosen_apart() {
+        let mut cube = outward_cube();
+        for t in &mut cube[6..8] {
+            t.swap(1, 2);
+        }
+        let corner = quad(Vec3::ONE, Vec3::X, Vec3::Y).to_vec();
+        let triangles = [cube, corner].concat();
+        let snapshot = snapshot_of(&triangles, &[0; 14], Vec3::new(0.3, 0.2, -0.5));
+        let c = components(&snapshot);
+        let expected: Vec<u32> = [[0; 6].to_vec(), vec![1, 1], vec![0; 4], vec![2, 2]].concat();
+        assert_eq!(c, expected);
+        let sides = SolvedSides::new(&snapshot);
+        for (id, t) in triangles.iter().enumerate().take(12) {
+            let solved = (t[1] - t[0]).cross(t[2] - t[0]) * sides.sign(id as u32);
+            let centre = (t[0] + t[1] + t[2]) / 3.0;
+            let towards_eye = snapshot.camera.position - centre;
+            assert!(solved.dot(towards_eye) > 0.0, "triangle {id}");
+        }
     }
 
     /// A snapshot of `triangles` on `objects`, its camera at `eye`.
