@@ -275,7 +275,9 @@ pub struct MovieFramesValue {
     pub global_vertices: u32,
     /// Their indirect irradiance, 4 RGBE bytes each, zstd-compressed (the
     /// "good links": a texel's is the Gouraud interpolation of its
-    /// triangle's grid vertices, `method::movies::global`).
+    /// triangle's grid vertices, `method::movies::global`, on the side of
+    /// the triangle the pass solved, `method::movies::sides`; the other
+    /// side's texels take none).
     pub global_zstd: Vec<u8>,
 }
 

@@ -206,8 +206,7 @@ pub fn outward_box(min: Vec3, max: Vec3, material: u32) -> Mesh {
     m
 }
 
-/// Adds `mesh` as an object named `name` on a node of its own that does
-/// not move.
+/// Adds `mesh` as an object named `name` on a node of its own (at rest).
 pub fn add_static_object(s: &mut Scene, name: &str, mesh: Mesh) {
     s.objects.push(radcache::scene::Object {
         name: name.into(),

@@ -20,8 +20,8 @@
 //! not depend on the frames before it. The same holds for each vertex's
 //! row of the transport, built again only where its links, or the
 //! open-space flags of the vertices they land by, changed. Each triangle
-//! is solved on one side, as the paper's polygons are: the side the
-//! camera sees into ([`super::sides`]).
+//! is solved on one side, as the paper's polygons are: its front, or its
+//! back where its part encloses the camera facing away ([`super::sides`]).
 
 use super::direct::{direct_irradiance, Blockers, ShadePoint, StaticShadows};
 use super::sides::SolvedSides;
@@ -266,7 +266,7 @@ struct Link {
     to: Vec3,
     /// Whether it landed on the side of a surface the solution is for
     /// ([`SolvedSides`]).
-    front: bool,
+    on_solved_side: bool,
     /// The vertices it gathers from, where it landed.
     landing: Gouraud,
 }
@@ -452,7 +452,7 @@ impl GlobalPass {
                 live: false,
                 from: Vec3::ZERO,
                 to: Vec3::ZERO,
-                front: false,
+                on_solved_side: false,
                 landing: [(0, 0.0); 3],
             };
             count
@@ -460,11 +460,9 @@ impl GlobalPass {
         self
     }
 
-    /// Whether this pass was built for a snapshot with this many triangles
-    /// and solves the sides `snapshot`'s camera sets ([`SolvedSides`]):
-    /// else it is built again.
-    pub fn fits(&self, snapshot: &crate::scene::Snapshot) -> bool {
-        self.grids.len() == snapshot.triangles.len() && self.sides.hold_at(snapshot)
+    /// Whether this pass was built for a snapshot with this many triangles.
+    pub fn fits(&self, triangles: usize) -> bool {
+        self.grids.len() == triangles
     }
 
     /// Whether the pass solves the back side of triangle `id` (its front
@@ -505,15 +503,22 @@ impl GlobalPass {
         blend(&self.indirect, &self.valid, g)
     }
 
-    /// The frame of `ctx`: links traced again where motion may have
-    /// changed them, the direct light at the vertices, and the radiosity
-    /// solved. Returns the shadow rays traced.
+    /// The frame of `ctx`: the sides its camera sets, links traced again
+    /// where motion or a side that changed may have changed them, the
+    /// direct light at the vertices, and the radiosity solved. Returns the
+    /// shadow rays traced.
     /// Its working buffers' peak is then [`working_bytes`](Self::working_bytes).
     pub fn update(&mut self, ctx: &FrameContext, blockers: &Blockers, first: bool) -> u64 {
         let mut working = Working::default();
+        let turned = self.sides.update(ctx.snapshot);
+        if turned.contains(&true) {
+            // The vertices that turned gather on the other hemisphere: their
+            // kept static shadows are another point's.
+            self.shadows = StaticShadows::default();
+        }
         let points = self.points(ctx);
         working.hold(&points);
-        let retraced = self.retrace_links(ctx, blockers, &points, first, &mut working);
+        let retraced = self.retrace_links(ctx, blockers, &points, first, &turned, &mut working);
         let moving: Vec<bool> = self
             .vertices
             .iter()
@@ -562,7 +567,9 @@ impl GlobalPass {
     }
 
     /// Traces the links that motion may have changed (all of them the
-    /// first time). Returns, per vertex, whether any of its links was
+    /// first time), and those from or to a component whose solved side
+    /// `turned` (per component): their hemisphere, or the side they land
+    /// on, is another. Returns, per vertex, whether any of its links was
     /// (held in `working` until the frame's end).
     fn retrace_links(
         &mut self,
@@ -570,8 +577,11 @@ impl GlobalPass {
         blockers: &Blockers,
         points: &[ShadePoint],
         first: bool,
+        turned: &[bool],
         working: &mut Working,
     ) -> Vec<bool> {
+        let sides = &self.sides;
+        let turned_triangle = |id: u32| turned[sides.component(id)];
         let far = 2.0 * scene_diagonal(ctx);
         // Which links motion may have changed: only their segments are
         // looked at; only these get their rays drawn again.
@@ -581,12 +591,15 @@ impl GlobalPass {
             .enumerate()
             .flat_map_iter(|(i, v)| {
                 let moving_vertex = blockers.is_moving_triangle(v.triangle);
+                let turned_vertex = turned_triangle(v.triangle);
                 let links = &self.links;
                 (0..v.links).filter_map(move |k| {
                     let index = (v.first_link + k) as usize;
                     let link = &links[index];
                     let stale = first
                         || moving_vertex
+                        || turned_vertex
+                        || (link.hit.is_hit() && turned_triangle(link.hit.triangle))
                         || !link.traced
                         || (link.hit.is_hit() && blockers.is_moving_triangle(link.hit.triangle))
                         || (link.live && blockers.segment_may_hit(link.from, link.to));
@@ -611,7 +624,7 @@ impl GlobalPass {
                 let link = &mut self.links[*index];
                 link.traced = true;
                 link.live = false;
-                link.front = false;
+                link.on_solved_side = false;
                 link.hit = Hit::MISS;
             }
         }
@@ -634,13 +647,13 @@ impl GlobalPass {
         working.release(&rays);
         working.release(&hits);
         for ((index, ray), hit) in indices.iter().zip(&rays).zip(hits) {
-            let front = hit.is_hit()
+            let on_solved_side = hit.is_hit()
                 && ctx.snapshot.triangles[hit.triangle as usize]
                     .geometric_normal()
                     .dot(ray.dir())
                     * self.sides.sign(hit.triangle)
                     < 0.0;
-            let landing = if front {
+            let landing = if on_solved_side {
                 self.gouraud(hit.triangle, hit.u, hit.v)
             } else {
                 [(0, 0.0); 3]
@@ -652,7 +665,7 @@ impl GlobalPass {
                 live: true,
                 from: ray.origin(),
                 to: ray.at(t),
-                front,
+                on_solved_side,
                 landing,
             };
         }
@@ -808,7 +821,9 @@ impl GlobalPass {
                 retraced[i]
                     || (any_flipped
                         && self.links_of(&self.vertices[i]).iter().any(|l| {
-                            l.live && l.front && l.landing.iter().any(|&(j, _)| flipped[j as usize])
+                            l.live
+                                && l.on_solved_side
+                                && l.landing.iter().any(|&(j, _)| flipped[j as usize])
                         }))
             })
             .collect();
@@ -842,11 +857,11 @@ impl GlobalPass {
     fn in_open_space(&self, v: &Vertex) -> bool {
         let links = self.links_of(v);
         let live = links.iter().filter(|l| l.live).count();
-        let back = links
+        let unsolved = links
             .iter()
-            .filter(|l| l.live && l.hit.is_hit() && !l.front)
+            .filter(|l| l.live && l.hit.is_hit() && !l.on_solved_side)
             .count();
-        back as f32 <= BURIED_SHARE * live as f32
+        unsolved as f32 <= BURIED_SHARE * live as f32
     }
 
     /// Vertex `v`'s gather, `E = π·mean(B at each link's landing point)`,
@@ -858,7 +873,7 @@ impl GlobalPass {
         let mut entries: Vec<(u32, f32)> = self
             .links_of(v)
             .iter()
-            .filter(|l| l.live && l.front)
+            .filter(|l| l.live && l.on_solved_side)
             .flat_map(|l| renormalised(&self.valid, &l.landing))
             .collect();
         entries.sort_by_key(|e| e.0);

@@ -32,8 +32,9 @@
 //! whole interval up front, so that no frame waits for a later one, and
 //! the texture of a frame depends only on that frame (a resumed render
 //! equals an uninterrupted one with no state carried); the global pass
-//! solves one side of each triangle, the side the camera sees into
-//! ([`sides`]), and a side the camera sees that it does not solve gets its
+//! solves one side of each triangle, its front or, where its part
+//! encloses the camera facing away from it, its back ([`sides`]), and a
+//! side the camera sees that it does not solve gets its
 //! direct light only ([`movie`]). The paper's disk
 //! cache of movie frames under a memory budget is the store's `movies`
 //! tree: each frame's textures are written with the frame, and only the
@@ -245,12 +246,12 @@ impl Method for TextureMovies {
         let blockers = direct::Blockers::new(ctx);
 
         let start = Instant::now();
-        let fresh = !self.global.as_ref().is_some_and(|g| g.fits(ctx.snapshot));
+        let fresh = !self
+            .global
+            .as_ref()
+            .is_some_and(|g| g.fits(ctx.snapshot.triangles.len()));
         if fresh {
             self.global = Some(GlobalPass::new(ctx, self.settings.global));
-            // Their texels' places among the new pass's vertices are found
-            // again, as a movie opened now finds them.
-            self.movies.values_mut().for_each(Movie::forget_layout);
         }
         let global = self.global.as_mut().expect("built above");
         global.update(ctx, &blockers, fresh);

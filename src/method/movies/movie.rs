@@ -44,8 +44,8 @@ pub struct Movie {
     /// with (a frame whose texels encode the same is not stored again).
     pub(super) stored: Option<(u32, Vec<[u8; 4]>)>,
     /// Per band texel: its index, where it is evaluated, and the global
-    /// pass's vertices it interpolates (found when it is first shaded,
-    /// and again after [`forget_layout`](Self::forget_layout)).
+    /// pass's vertices it interpolates (fixed for the movie's life: the
+    /// vertices are the same whichever side of the triangle is solved).
     layout: Vec<(usize, (f32, f32), Gouraud)>,
 }
 
@@ -66,13 +66,6 @@ impl Movie {
             stored: None,
             layout: Vec::new(),
         }
-    }
-
-    /// Drops the texels' places among the global pass's vertices: the
-    /// pass was built again ([`GlobalPass::fits`]), so they are found
-    /// again at the next frame.
-    pub fn forget_layout(&mut self) {
-        self.layout = Vec::new();
     }
 
     /// The band's texels, `(index, i, j)`, in storage order.
