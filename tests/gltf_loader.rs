@@ -520,11 +520,18 @@ fn garbage_bytes() {
     assert_error(&path, &format!("not a binary glTF file: a .glb starts with the bytes \"glTF\" (67 6c 54 46), this one with {}", head.join(" ")));
     std::fs::write(&path, b"").unwrap();
     assert_error(&path, "this one with nothing (it is empty)");
-    // glTF JSON written under the .glb name still loads.
+    // glTF JSON written under the .glb name still loads, and so does JSON
+    // that opens with a UTF-8 byte order mark, under either name.
     let gltf = write_case(dir.path(), "json", |_| {}, good_bin());
     let named_glb = dir.path().join("json.glb");
     std::fs::copy(&gltf, &named_glb).unwrap();
     Scene::load(&named_glb).unwrap();
+    let with_bom = [b"\xEF\xBB\xBF".as_slice(), &std::fs::read(&gltf).unwrap()].concat();
+    for name in ["json_bom.gltf", "json_bom.glb"] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, &with_bom).unwrap();
+        Scene::load(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+    }
     // A GLB header followed by garbage chunks.
     let mut glb = b"glTF".to_vec();
     glb.extend_from_slice(&2u32.to_le_bytes());

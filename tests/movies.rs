@@ -347,7 +347,7 @@ fn a_room_whose_normals_face_out_is_lit_as_path_lights_it() {
         let mut walls =
             common::outward_box(Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 2.0, 1.0), 0);
         if open_top {
-            // The top quad: its two triangles, four vertices.
+            // The top quad's two triangles (its vertices stay, unused).
             walls.triangles.drain(2..4);
             walls.materials.drain(2..4);
         }
@@ -370,9 +370,11 @@ fn a_room_whose_normals_face_out_is_lit_as_path_lights_it() {
 
 /// The camera walks into a closed room whose normals face out, through
 /// its wall: outside, the pass solves the walls' outsides (a closed box
-/// seen from outside shows as much front as back); inside, their insides.
-/// The pass built again as the camera enters gives each frame that a
-/// fresh instance gives, and inside the frame is lit as `path` lights it.
+/// winds 0 around a point outside it); inside, their insides (it winds
+/// 1). The kept pass, whose links from and to the walls are traced again
+/// as the camera enters, gives each frame that a fresh instance gives
+/// (seen failing without that retrace), and the kept instance's frame
+/// inside, after a frame outside, is lit as `path` lights it.
 #[test]
 fn a_camera_that_walks_into_a_room_whose_normals_face_out() {
     let fps = 24.0;

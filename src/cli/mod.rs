@@ -236,7 +236,12 @@ fn run_inspect(args: InspectArgs) -> Result<()> {
     // the frame is a row of the answer.
     if let (Some(name), Some(frame), [job]) = (&args.job, args.frame, &report.jobs[..]) {
         if let Some(missing) = store::inspect::frame_not_done(job, frame) {
-            bail!("job {name:?} in {}: {missing}", args.db.display());
+            return Err(store::StoreError::Job {
+                path: args.db.clone(),
+                job: name.clone(),
+                detail: missing,
+            }
+            .into());
         }
     }
     if args.json {

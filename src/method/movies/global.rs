@@ -352,6 +352,7 @@ impl GlobalPass {
             + std::mem::size_of_val(&self.indirect[..])
             + std::mem::size_of_val(&self.valid[..])
             + rows_bytes(&self.rows)
+            + self.sides.bytes()
     }
 
     /// The most bytes held at once, beside [`memory_bytes`](Self::memory_bytes),
@@ -429,7 +430,7 @@ impl GlobalPass {
         let count = vertices.len();
         GlobalPass {
             settings,
-            sides: SolvedSides::new(snapshot),
+            sides: SolvedSides::new(ctx.scene, snapshot),
             grids,
             vertex_of,
             vertices,

@@ -24,11 +24,13 @@
 //! a shelf, a panel or a picture keeps its front from wherever it is seen
 //! (choosing by the side the camera sees turned a shelf seen from below
 //! to its dark underside, and the room lost the light its top bounces).
-//! Both sides are not solved, which would double the links within the
+//! Solving both sides is not done: it would double the links within the
 //! same budget and leave the inside of every solid to solve. A room whose
 //! walls are separate objects facing out is not mended (no wall encloses
-//! the camera): its walls' insides get their direct light only. A face
-//! turned the other way from its neighbours is a component of its own.
+//! the camera), nor a box facing out seen from outside through its open
+//! side, nor one whose walls meet at edges whose corners differ in their
+//! bits: their insides get their direct light only. A face turned the
+//! other way from its neighbours is a component of its own.
 //!
 //! The choice is a function of the frame (its camera and geometry), so a
 //! pass that starts at any frame makes the same one. Where a component's
@@ -36,7 +38,7 @@
 //! open side), the global pass traces again the links from its vertices
 //! and those landing on it, and finds its static shadows again.
 
-use crate::scene::Snapshot;
+use crate::scene::{Scene, Snapshot};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -51,13 +53,22 @@ pub struct SolvedSides {
 }
 
 impl SolvedSides {
-    /// The components of `snapshot`'s triangles and the sides its camera
-    /// sets.
-    pub fn new(snapshot: &Snapshot) -> Self {
-        let component = components(snapshot);
+    /// The components of `scene`'s triangles (found in object space, so
+    /// the same whatever frame they are found at, also where an object is
+    /// scaled to nothing) and the sides `snapshot`'s camera sets.
+    pub fn new(scene: &Scene, snapshot: &Snapshot) -> Self {
+        Self::of_components(components(&object_space_triangles(scene)), snapshot)
+    }
+
+    fn of_components(component: Vec<u32>, snapshot: &Snapshot) -> Self {
         let count = component.iter().max().map_or(0, |&c| c as usize + 1);
         let back = backs_solved(snapshot, &component, count);
         SolvedSides { component, back }
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(&self.component[..]) + std::mem::size_of_val(&self.back[..])
     }
 
     /// Takes the sides `snapshot`'s camera sets (it holds the same
@@ -90,34 +101,63 @@ impl SolvedSides {
     }
 }
 
-/// Per triangle, its component: triangles of one object joined across
-/// edges they share with the same orientation, i.e. an edge one runs from
-/// `a` to `b` and the other from `b` to `a` (corner positions compared bit
-/// for bit, as exporters write a shared vertex split for its normals).
-/// A face turned the other way from its neighbours is a component of its
-/// own, so its side is chosen apart from theirs; a surface oriented
-/// throughout (a room and a table sealed to its floor) is one, and one
-/// side of it faces the camera's space everywhere. Numbered in the order
-/// of their first triangles.
-fn components(snapshot: &Snapshot) -> Vec<u32> {
-    let count = snapshot.triangles.len();
-    let edge = |id: usize, k: usize| {
-        let p = &snapshot.triangles[id].p;
-        let bits = |q: Vec3| q.to_array().map(f32::to_bits);
-        (snapshot.tri_object[id], bits(p[k]), bits(p[(k + 1) % 3]))
+/// Every triangle of `scene` in snapshot order (the order of
+/// [`Scene::object_order`]), with its object and its corners in the
+/// object's own space.
+fn object_space_triangles(scene: &Scene) -> Vec<(u32, [Vec3; 3])> {
+    let mut out = Vec::new();
+    for object in scene.object_order() {
+        let mesh = &scene.objects[object].mesh;
+        out.extend(mesh.triangles.iter().map(|t| {
+            // A corner the mesh lacks is a malformed mesh's; the loader
+            // refuses those, so it only keeps this from panicking.
+            let corner = |i: u32| mesh.positions.get(i as usize).copied().unwrap_or(Vec3::NAN);
+            (object as u32, t.map(corner))
+        }));
+    }
+    out
+}
+
+/// An edge of an object's triangle, from corner to corner (their bits).
+type DirectedEdge = (u32, [u32; 3], [u32; 3]);
+
+/// Per triangle (`(object, corners)`), its component: triangles of one
+/// object joined across edges they share with the same orientation, i.e.
+/// an edge one runs from `a` to `b` and the other from `b` to `a` (corner
+/// positions compared bit for bit, `-0` as `0`, as exporters write a
+/// shared vertex split for its normals). A face turned the other way from
+/// its neighbours is a component of its own, so its side is chosen apart
+/// from theirs; a surface oriented throughout (a room and a table sealed
+/// to its floor) is one. Only an edge that one triangle runs each way
+/// joins: where more meet (two boxes sharing an edge) or a triangle is
+/// degenerate (two corners the same, or no area: it would run an edge
+/// both ways), nothing is joined across it. Numbered in the order of
+/// their first triangles.
+fn components(triangles: &[(u32, [Vec3; 3])]) -> Vec<u32> {
+    let count = triangles.len();
+    let bits = |q: Vec3| (q + Vec3::ZERO).to_array().map(f32::to_bits);
+    let degenerate = |p: &[Vec3; 3]| (p[1] - p[0]).cross(p[2] - p[0]).length_squared() == 0.0;
+    let edges = |id: usize| {
+        let (object, p) = &triangles[id];
+        (0..3).map(move |k| (*object, bits(p[k]), bits(p[(k + 1) % 3])))
     };
-    let mut first_along: HashMap<(u32, [u32; 3], [u32; 3]), u32> = HashMap::new();
-    for id in 0..count {
-        for k in 0..3 {
-            first_along.entry(edge(id, k)).or_insert(id as u32);
+    // Per directed edge, its first triangle and how many run it.
+    let mut along: HashMap<DirectedEdge, (u32, u32)> = HashMap::new();
+    let whole: Vec<usize> = (0..count)
+        .filter(|&id| !degenerate(&triangles[id].1))
+        .collect();
+    for &id in &whole {
+        for edge in edges(id) {
+            along.entry(edge).or_insert((id as u32, 0)).1 += 1;
         }
     }
     let mut parent: Vec<u32> = (0..count as u32).collect();
-    for id in 0..count {
-        for k in 0..3 {
-            let (object, a, b) = edge(id, k);
-            if let Some(&other) = first_along.get(&(object, b, a)) {
-                union(&mut parent, id as u32, other);
+    for &id in &whole {
+        for edge in edges(id) {
+            let (object, a, b) = edge;
+            match (along.get(&edge), along.get(&(object, b, a))) {
+                (Some(&(_, 1)), Some(&(other, 1))) => union(&mut parent, id as u32, other),
+                _ => continue,
             }
         }
     }
@@ -201,7 +241,7 @@ mod tests {
     }
 
     /// The box `[-1, 1]³`, fronts facing out.
-    pub(super) fn outward_cube() -> Vec<[Vec3; 3]> {
+    fn outward_cube() -> Vec<[Vec3; 3]> {
         let (m, x, y, z) = (
             Vec3::splat(-1.0),
             2.0 * Vec3::X,
@@ -265,7 +305,7 @@ mod tests {
             let scene = crate::scene::Scene::builtin(name).unwrap();
             for frame in [0, scene.frame_count / 2, scene.frame_count - 1] {
                 let snapshot = scene.snapshot(frame as f32 / crate::scene::DEFAULT_FPS);
-                let sides = SolvedSides::new(&snapshot);
+                let sides = SolvedSides::new(&scene, &snapshot);
                 assert!(!sides.back.contains(&true), "{name} frame {frame}");
                 assert!(sides.back.len() > 1, "{name}: one component");
             }
@@ -289,10 +329,10 @@ mod tests {
         let objects: Vec<u32> = [[0; 4].to_vec(), vec![1, 1], vec![2; 12]].concat();
         let mut snapshot = snapshot_of(&triangles, &objects, Vec3::new(0.3, 0.2, -0.5));
         assert_eq!(
-            components(&snapshot),
+            components(&tagged(&triangles, &objects)),
             [[0, 0, 1, 1, 2, 2].to_vec(), vec![3; 12]].concat()
         );
-        let sides = SolvedSides::new(&snapshot);
+        let sides = sides_of(&triangles, &objects, &snapshot);
         // The eye is just behind the first and third squares, in front of
         // the second, and inside the cube.
         assert_eq!(sides.back, [false, false, false, true]);
@@ -302,7 +342,7 @@ mod tests {
         snapshot.camera.position = Vec3::new(0.3, 0.2, 4.0);
         assert_eq!(updated.update(&snapshot), [false, false, false, true]);
         assert_eq!(updated.back, [false; 4]);
-        assert_eq!(updated, SolvedSides::new(&snapshot));
+        assert_eq!(updated, sides_of(&triangles, &objects, &snapshot));
     }
 
     /// The cube without its top, fronts out: around a camera inside it
@@ -314,7 +354,8 @@ mod tests {
         let mut open = outward_cube();
         open.drain(2..4); // the top, +y
         let objects = vec![0; open.len()];
-        let back_at = |eye: Vec3| SolvedSides::new(&snapshot_of(&open, &objects, eye)).back;
+        let back_at =
+            |eye: Vec3| sides_of(&open, &objects, &snapshot_of(&open, &objects, eye)).back;
         assert_eq!(back_at(Vec3::new(0.2, -0.3, 0.1)), [true]);
         assert_eq!(back_at(Vec3::new(0.2, 0.7, 0.1)), [true]);
         for eye in [
@@ -340,16 +381,46 @@ mod tests {
         let corner = quad(Vec3::ONE, Vec3::X, Vec3::Y).to_vec();
         let triangles = [cube, corner].concat();
         let snapshot = snapshot_of(&triangles, &[0; 14], Vec3::new(0.3, 0.2, -0.5));
-        let c = components(&snapshot);
+        let c = components(&tagged(&triangles, &[0; 14]));
         let expected: Vec<u32> = [[0; 6].to_vec(), vec![1, 1], vec![0; 4], vec![2, 2]].concat();
         assert_eq!(c, expected);
-        let sides = SolvedSides::new(&snapshot);
+        let sides = sides_of(&triangles, &[0; 14], &snapshot);
         for (id, t) in triangles.iter().enumerate().take(12) {
             let solved = (t[1] - t[0]).cross(t[2] - t[0]) * sides.sign(id as u32);
             let centre = (t[0] + t[1] + t[2]) / 3.0;
             let towards_eye = snapshot.camera.position - centre;
             assert!(solved.dot(towards_eye) > 0.0, "triangle {id}");
         }
+    }
+
+    /// Two quads sharing an edge the same way round are one component; a
+    /// degenerate triangle along that edge (it runs it both ways) is one
+    /// of its own and joins nothing; a third quad on the edge (three meet
+    /// there) leaves all three apart.
+    #[test]
+    fn only_an_edge_run_once_each_way_joins() {
+        let (x, xy) = (Vec3::X, Vec3::new(1.0, 1.0, 0.0));
+        let second = quad(Vec3::X, Vec3::X, Vec3::Y).to_vec();
+        let sliver = vec![[x, xy, xy]];
+        let joined = [square().to_vec(), second.clone(), sliver.clone()].concat();
+        assert_eq!(components(&tagged(&joined, &[0; 5])), [0, 0, 0, 0, 1]);
+        let fin = quad(Vec3::X, Vec3::Z, Vec3::Y).to_vec();
+        let three = [square().to_vec(), second, fin].concat();
+        assert_eq!(components(&tagged(&three, &[0; 6])), [0, 0, 1, 1, 2, 2]);
+    }
+
+    /// `triangles` on `objects`, as [`components`] takes them.
+    fn tagged(triangles: &[[Vec3; 3]], objects: &[u32]) -> Vec<(u32, [Vec3; 3])> {
+        objects
+            .iter()
+            .copied()
+            .zip(triangles.iter().copied())
+            .collect()
+    }
+
+    /// The sides of `triangles` on `objects` from `snapshot`'s camera.
+    fn sides_of(triangles: &[[Vec3; 3]], objects: &[u32], snapshot: &Snapshot) -> SolvedSides {
+        SolvedSides::of_components(components(&tagged(triangles, objects)), snapshot)
     }
 
     /// A snapshot of `triangles` on `objects`, its camera at `eye`.

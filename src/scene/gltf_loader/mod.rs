@@ -111,6 +111,12 @@ fn check_extension(path: &Path) -> Res<()> {
 }
 
 fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scene> {
+    // glTF JSON is UTF-8 without a byte order mark (the spec's "JSON
+    // Encoding"), but an editor may write one; the JSON parser refuses
+    // it, so it is skipped.
+    let bytes = bytes
+        .strip_prefix(b"\xEF\xBB\xBF".as_slice())
+        .unwrap_or(bytes);
     let named_glb = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
