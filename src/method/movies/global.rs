@@ -239,6 +239,85 @@ fn row_start(n: u32, b: u32) -> u32 {
     b * (n + 1) - b * (b.max(1) - 1) / 2
 }
 
+/// The pass's vertices over the grids of a snapshot's triangles.
+struct PassMesh {
+    /// Per triangle, its grid.
+    grids: Vec<Grid>,
+    /// The vertex in each slot of the grids.
+    vertex_of: Vec<u32>,
+    vertices: Vec<Vertex>,
+    /// The links of all vertices: at most `MAX_LINKS`, or three a
+    /// triangle, so within `u32`.
+    link_count: u32,
+}
+
+impl PassMesh {
+    fn new(snapshot: &crate::scene::Snapshot, meshing: &Meshing) -> Self {
+        let mut grids = Vec::with_capacity(snapshot.triangles.len());
+        let mut vertex_of = Vec::new();
+        let mut vertices = Vec::new();
+        let mut link_count = 0u32;
+        // Mesh vertices: a triangle corner at the same point of the same
+        // object with the same shading normal is one vertex, so that the
+        // Gouraud shading is continuous across the mesh and a finely
+        // tessellated object (a sphere) has a vertex per mesh vertex, not
+        // three per triangle. Keyed by object, not by component
+        // ([`SolvedSides`]): parts of one object that touch only at corners
+        // (a chair's leg flush with its seat) share those vertices, which
+        // keying by component would split (`chairs-room`: 780 corner
+        // vertices instead of 732). Where such parts have their sides
+        // solved apart, a shared corner gathers on the side of the part
+        // that made it first.
+        let mut corners: HashMap<(u32, [u32; 3], [u32; 3]), u32> = HashMap::new();
+        for (id, tri) in snapshot.triangles.iter().enumerate() {
+            let (n, links) = meshing.grid(tri);
+            grids.push(Grid {
+                n,
+                first: vertex_of.len() as u32,
+            });
+            let object = snapshot.tri_object[id];
+            for b in 0..=n {
+                for a in 0..=n - b {
+                    let mut new_vertex = || {
+                        vertices.push(Vertex {
+                            triangle: id as u32,
+                            a,
+                            b,
+                            links,
+                            first_link: link_count,
+                        });
+                        link_count += links;
+                        vertices.len() as u32 - 1
+                    };
+                    let corner = match (a, b) {
+                        (0, 0) => Some(0),
+                        (a, 0) if a == n => Some(1),
+                        (0, b) if b == n => Some(2),
+                        _ => None,
+                    };
+                    let vertex = match corner {
+                        Some(k) => *corners
+                            .entry((
+                                object,
+                                tri.p[k].to_array().map(f32::to_bits),
+                                tri.n[k].to_array().map(f32::to_bits),
+                            ))
+                            .or_insert_with(new_vertex),
+                        None => new_vertex(),
+                    };
+                    vertex_of.push(vertex);
+                }
+            }
+        }
+        PassMesh {
+            grids,
+            vertex_of,
+            vertices,
+            link_count,
+        }
+    }
+}
+
 /// Where a vertex of the pass lies: a triangle and its grid position (for
 /// a vertex shared by several triangles, the first of them).
 #[derive(Clone, Copy, Debug)]
@@ -376,57 +455,12 @@ impl GlobalPass {
     pub fn new(ctx: &FrameContext, settings: GlobalSettings) -> Self {
         let snapshot = ctx.snapshot;
         let meshing = Meshing::fitting(&snapshot.triangles, &settings, static_diagonal(ctx));
-        let mut grids = Vec::with_capacity(snapshot.triangles.len());
-        let mut vertex_of = Vec::new();
-        let mut vertices = Vec::new();
-        // At most MAX_LINKS, or three a triangle: within u32.
-        let mut link_count = 0u32;
-        // Mesh vertices: a triangle corner at the same point of the same
-        // object with the same shading normal is one vertex, so that the
-        // Gouraud shading is continuous across the mesh and a finely
-        // tessellated object (a sphere) has a vertex per mesh vertex, not
-        // three per triangle.
-        let mut corners: HashMap<(u32, [u32; 3], [u32; 3]), u32> = HashMap::new();
-        for (id, tri) in snapshot.triangles.iter().enumerate() {
-            let (n, links) = meshing.grid(tri);
-            grids.push(Grid {
-                n,
-                first: vertex_of.len() as u32,
-            });
-            let object = snapshot.tri_object[id];
-            for b in 0..=n {
-                for a in 0..=n - b {
-                    let mut new_vertex = || {
-                        vertices.push(Vertex {
-                            triangle: id as u32,
-                            a,
-                            b,
-                            links,
-                            first_link: link_count,
-                        });
-                        link_count += links;
-                        vertices.len() as u32 - 1
-                    };
-                    let corner = match (a, b) {
-                        (0, 0) => Some(0),
-                        (a, 0) if a == n => Some(1),
-                        (0, b) if b == n => Some(2),
-                        _ => None,
-                    };
-                    let vertex = match corner {
-                        Some(k) => *corners
-                            .entry((
-                                object,
-                                tri.p[k].to_array().map(f32::to_bits),
-                                tri.n[k].to_array().map(f32::to_bits),
-                            ))
-                            .or_insert_with(new_vertex),
-                        None => new_vertex(),
-                    };
-                    vertex_of.push(vertex);
-                }
-            }
-        }
+        let PassMesh {
+            grids,
+            vertex_of,
+            vertices,
+            link_count,
+        } = PassMesh::new(snapshot, &meshing);
         let count = vertices.len();
         GlobalPass {
             settings,
@@ -581,33 +615,7 @@ impl GlobalPass {
         turned: &[bool],
         working: &mut Working,
     ) -> Vec<bool> {
-        let sides = &self.sides;
-        let turned_triangle = |id: u32| turned[sides.component(id)];
-        let far = 2.0 * scene_diagonal(ctx);
-        // Which links motion may have changed: only their segments are
-        // looked at; only these get their rays drawn again.
-        let stale: Vec<(usize, u32, u32)> = self
-            .vertices
-            .par_iter()
-            .enumerate()
-            .flat_map_iter(|(i, v)| {
-                let moving_vertex = blockers.is_moving_triangle(v.triangle);
-                let turned_vertex = turned_triangle(v.triangle);
-                let links = &self.links;
-                (0..v.links).filter_map(move |k| {
-                    let index = (v.first_link + k) as usize;
-                    let link = &links[index];
-                    let stale = first
-                        || moving_vertex
-                        || turned_vertex
-                        || (link.hit.is_hit() && turned_triangle(link.hit.triangle))
-                        || !link.traced
-                        || (link.hit.is_hit() && blockers.is_moving_triangle(link.hit.triangle))
-                        || (link.live && blockers.segment_may_hit(link.from, link.to));
-                    stale.then_some((index, i as u32, k))
-                })
-            })
-            .collect();
+        let stale = self.stale_links(blockers, first, turned);
         working.hold(&stale);
         let mut retraced = vec![false; self.vertices.len()];
         working.hold(&retraced);
@@ -647,7 +655,52 @@ impl GlobalPass {
         working.release(&indices);
         working.release(&rays);
         working.release(&hits);
-        for ((index, ray), hit) in indices.iter().zip(&rays).zip(hits) {
+        self.land_links(ctx, &indices, &rays, hits);
+        self.traced_links = rays.len() as u64;
+        retraced
+    }
+
+    /// The links to trace again (index, vertex, link of the vertex): all
+    /// the first time; those from or to a moving triangle or a component
+    /// that `turned`; those not traced yet; and those whose segment a
+    /// moving object's box may cross. Only their segments are looked at.
+    fn stale_links(
+        &self,
+        blockers: &Blockers,
+        first: bool,
+        turned: &[bool],
+    ) -> Vec<(usize, u32, u32)> {
+        let sides = &self.sides;
+        let turned_triangle = |id: u32| turned[sides.component(id)];
+        self.vertices
+            .par_iter()
+            .enumerate()
+            .flat_map_iter(|(i, v)| {
+                let moving_vertex = blockers.is_moving_triangle(v.triangle);
+                let turned_vertex = turned_triangle(v.triangle);
+                let links = &self.links;
+                (0..v.links).filter_map(move |k| {
+                    let index = (v.first_link + k) as usize;
+                    let link = &links[index];
+                    let stale = first
+                        || moving_vertex
+                        || turned_vertex
+                        || (link.hit.is_hit() && turned_triangle(link.hit.triangle))
+                        || !link.traced
+                        || (link.hit.is_hit() && blockers.is_moving_triangle(link.hit.triangle))
+                        || (link.live && blockers.segment_may_hit(link.from, link.to));
+                    stale.then_some((index, i as u32, k))
+                })
+            })
+            .collect()
+    }
+
+    /// Stores what each traced link `indices[i]` found along `rays[i]`:
+    /// where it landed on a solved side, the vertices it gathers from
+    /// there; its segment, to the hit or far out where it hit nothing.
+    fn land_links(&mut self, ctx: &FrameContext, indices: &[usize], rays: &[Ray], hits: Vec<Hit>) {
+        let far = 2.0 * scene_diagonal(ctx);
+        for ((index, ray), hit) in indices.iter().zip(rays).zip(hits) {
             let on_solved_side = hit.is_hit()
                 && ctx.snapshot.triangles[hit.triangle as usize]
                     .geometric_normal()
@@ -670,8 +723,6 @@ impl GlobalPass {
                 landing,
             };
         }
-        self.traced_links = rays.len() as u64;
-        retraced
     }
 
     /// Direct irradiance at every vertex (static shadows kept for the
