@@ -41,23 +41,7 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         same_pattern: args.same_pattern,
         ..FrameSettings::default()
     };
-    if let Some(rate) = key_rate_other_than(&scene, args.fps) {
-        eprintln!(
-            "note: the animation's keys fall on frames of 1/{rate} s, not of 1/{} s (--fps): \
-             exporters key every frame, so the scene may have been made at --fps {rate}",
-            args.fps
-        );
-    }
-    if let Some(file) = scene.camera.aspect_ratio {
-        let (w, h) = args.size;
-        let image = w as f32 / h as f32;
-        if (image / file - 1.0).abs() > 0.01 {
-            eprintln!(
-                "note: the camera's aspectRatio is {file:.3} and the image's {image:.3}: the \
-                 vertical field of view is kept, so the image shows more or less at its sides"
-            );
-        }
-    }
+    note_where_the_scene_and_flags_differ(&scene, &args);
     if !args.quiet {
         let (w, h) = args.size;
         eprintln!(
@@ -122,6 +106,29 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         args.frames.len(),
         args.out.display()
     );
+}
+
+/// Notes (not warnings: the render is right for what was asked) where
+/// the scene seems made for other flags: its animation keyed at another
+/// frame rate than `--fps`, its camera for another aspect than `--size`.
+fn note_where_the_scene_and_flags_differ(scene: &crate::scene::Scene, args: &RenderArgs) {
+    if let Some(rate) = key_rate_other_than(scene, args.fps) {
+        eprintln!(
+            "note: the animation's keys fall on frames of 1/{rate} s, not of 1/{} s (--fps): \
+             exporters key every frame, so the scene may have been made at --fps {rate}",
+            args.fps
+        );
+    }
+    if let Some(file) = scene.camera.aspect_ratio {
+        let (w, h) = args.size;
+        let image = w as f32 / h as f32;
+        if (image / file - 1.0).abs() > 0.01 {
+            eprintln!(
+                "note: the camera's aspectRatio is {file:.3} and the image's {image:.3}: the \
+                 vertical field of view is kept, so the image shows more or less at its sides"
+            );
+        }
+    }
 }
 
 /// Stops a render at the first Ctrl-C once the frame in progress is
