@@ -798,19 +798,25 @@ fn a_job_started_under_another_algorithm_revision_is_refused_unless_forced() {
     };
     let now = radcache::method::algorithm_revision("trc");
     assert!(now > 1, "trc's algorithm has changed since revisions began");
-    let (first, ic_job) = {
+    // `path`'s algorithm is still its first.
+    let path_spec = JobSpec {
+        method: "path".into(),
+        ..spec("i")
+    };
+    assert_eq!(radcache::method::algorithm_revision("path"), 1);
+    let (first, path_job) = {
         let store = Store::open(&path).unwrap();
-        let ic_job = store.begin_job(&spec("i"), false).unwrap();
+        let path_job = store.begin_job(&path_spec, false).unwrap();
         let first = store.begin_job(&trc, false).unwrap();
         assert_eq!(store.job_revision(first.id).unwrap(), now);
         assert_eq!(store.begin_job(&trc, false).unwrap().id, first.id);
-        (first, ic_job)
+        (first, path_job)
     };
     // Both jobs as a build from before revisions were recorded left them.
     {
         let db = sled::open(&path).unwrap();
         let meta = db.open_tree("meta").unwrap();
-        for id in [first.id, ic_job.id] {
+        for id in [first.id, path_job.id] {
             assert!(meta.remove(keys::meta_revision(id)).unwrap().is_some());
         }
         db.flush().unwrap();
@@ -831,8 +837,8 @@ fn a_job_started_under_another_algorithm_revision_is_refused_unless_forced() {
         text.contains(&format!("algorithm revision 1 (this build's is {now}")),
         "{text}"
     );
-    // `ic`'s algorithm is still its first: its old job resumes.
-    store.begin_job(&spec("i"), false).unwrap();
+    // The old `path` job resumes: its algorithm is the same.
+    store.begin_job(&path_spec, false).unwrap();
     let before = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
@@ -1817,6 +1823,25 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
     assert_eq!(report.jobs[0].samples as usize, v1_records * 48);
     assert_eq!(report.jobs[0].frames_done, 2);
 
+    // A real schema-1 store was written by a build of `ic`'s first
+    // revision, which this build does not resume (its frames would differ:
+    // `a_job_started_under_another_algorithm_revision_is_refused_unless_forced`).
+    let refused = store.begin_job(&spec, false).unwrap_err().to_string();
+    assert!(
+        refused.contains("`ic` algorithm revision (stored 1"),
+        "{refused}"
+    );
+    // This fixture's frames and records are this build's renderer's,
+    // written in schema 1's layout: marked as such, the job resumes.
+    drop(store);
+    {
+        let db = sled::open(&path).unwrap();
+        let revision = radcache::method::algorithm_revision("ic").to_be_bytes();
+        let meta = db.open_tree("meta").unwrap();
+        meta.insert(keys::meta_revision(7), &revision[..]).unwrap();
+        db.flush().unwrap();
+    }
+    let store = Store::open(&path).unwrap();
     // The job resumes: frames 2..3 only, equal to an uninterrupted run.
     let out = dir.path().join("out");
     let mut sj = StoreJob {

@@ -148,6 +148,16 @@ pub struct GatheredIrradiance {
     pub harmonic_distance: f32,
 }
 
+/// The least hit distance [`irradiance_and_gradients`] divides by. A
+/// gather ray can hit at exactly 0: from a record on the edge where two
+/// surfaces meet (a pixel centre that lands on a room's corner line), a
+/// ray into the other surface starts on it. Divided by 0, a gradient term
+/// is ±∞, or 0·∞ = NaN where the two cells' radiance is equal, and a NaN
+/// gradient made the record add nothing wherever it was used (Eq. 4 clamps
+/// `E + NaN` to 0). A huge but finite term is then bounded by the gradient
+/// limit as any near hit's is (`ic::limit_gradient`).
+const MIN_HIT_DISTANCE: f32 = 1e-6;
+
 /// Ward & Heckbert 1992 estimates from stratified samples (in the notation
 /// of Křivánek et al., "Practical Global Illumination with Irradiance
 /// Caching", SIGGRAPH 2008 course, §2.3):
@@ -215,11 +225,11 @@ pub fn irradiance_and_gradients_in(
             let lj = l[cell(j, k)];
             add_scaled(&mut rotation, v_k, lj * rings.rotation[j]);
             if j >= 1 {
-                let rmin = r[cell(j, k)].min(r[cell(j - 1, k)]);
+                let rmin = r[cell(j, k)].min(r[cell(j - 1, k)]).max(MIN_HIT_DISTANCE);
                 let coef = rings.lower_wall[j] / rmin;
                 add_scaled(&mut translation, u_k, (lj - l[cell(j - 1, k)]) * coef);
             }
-            let rmin = r[cell(j, k)].min(r[cell(j, k_prev)]);
+            let rmin = r[cell(j, k)].min(r[cell(j, k_prev)]).max(MIN_HIT_DISTANCE);
             let coef = rings.sin_span[j] / rmin;
             add_scaled(
                 &mut translation,
@@ -228,7 +238,7 @@ pub fn irradiance_and_gradients_in(
             );
         }
     }
-    let inverse_sum: f32 = r.iter().map(|d| 1.0 / d.max(1e-6)).sum();
+    let inverse_sum: f32 = r.iter().map(|d| 1.0 / d.max(MIN_HIT_DISTANCE)).sum();
     GatheredIrradiance {
         irradiance,
         grad_translation: translation,
@@ -291,5 +301,32 @@ impl RingTerms {
 fn add_scaled(grad: &mut [Vec3; 3], dir: Vec3, value: Vec3) {
     for (g, v) in grad.iter_mut().zip(value.to_array()) {
         *g += dir * v;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Cells whose rays hit at t = 0 (`-0` too, as a ray from the plane of
+    /// the surface it hits measures it) next to cells of the same radiance,
+    /// where a term was 0·∞ = NaN, and of another radiance, where it was
+    /// ±∞: the gradients stay finite, and the harmonic mean distance is
+    /// that of hits at [`MIN_HIT_DISTANCE`].
+    #[test]
+    fn hits_at_zero_distance_leave_the_gradients_finite() {
+        let strata = Strata { theta: 4, phi: 8 };
+        let mut l = vec![Vec3::splat(0.5); 32];
+        let mut r = vec![1.0; 32];
+        r[9] = 0.0;
+        r[10] = -0.0;
+        r[20] = 0.0;
+        l[20] = Vec3::new(2.0, 0.0, 1.0);
+        let g = irradiance_and_gradients_in(&l, &r, &Frame::new(Vec3::Z), strata);
+        let gradients = g.grad_translation.iter().chain(&g.grad_rotation);
+        assert!(gradients.clone().all(|v| v.is_finite()), "{g:?}");
+        assert!(g.irradiance.is_finite());
+        let expected = 32.0 / (29.0 + 3.0 / MIN_HIT_DISTANCE);
+        assert!((g.harmonic_distance / expected - 1.0).abs() < 1e-4, "{g:?}");
     }
 }

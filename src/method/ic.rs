@@ -73,6 +73,14 @@ fn default_eas_tau() -> f32 {
     eas::DEFAULT_TAU
 }
 
+impl IcSettings {
+    /// The least radius `R` a record may have where a pixel's footprint is
+    /// `footprint`: records at least `min_spacing_px` pixels apart.
+    pub(crate) fn min_radius(&self, footprint: f32) -> f32 {
+        self.min_spacing_px * footprint / self.accuracy
+    }
+}
+
 /// Where the indirect light of glossy lobes comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum GlossyLobe {
@@ -291,7 +299,7 @@ impl IrradianceCaching {
     /// clustered along the first scanlines; a record is created wherever no
     /// existing record is usable.
     pub fn fill(&self, ctx: &FrameContext, cache: &mut IrradianceCache) {
-        let candidates = primary_candidates(ctx, self.settings.glossy);
+        let candidates = primary_candidates(ctx, &self.settings);
         self.fill_from(ctx, cache, &candidates, None, |_, _| (), &mut Vec::new());
     }
 
@@ -550,7 +558,7 @@ impl IrradianceCaching {
         if slope > 0.0 {
             r = r.min(luminance(g.irradiance) / slope);
         }
-        let r_min = self.settings.min_spacing_px * footprint / a;
+        let r_min = self.settings.min_radius(footprint);
         let r_max = self.settings.max_spacing_px * footprint / a;
         let r = r.clamp(r_min, r_max.max(r_min));
         (r, limit_gradient(g.grad_translation, g.irradiance, r))
@@ -560,7 +568,11 @@ impl IrradianceCaching {
 /// The surface point seen through each pixel centre that wants a record
 /// (a surface with a diffuse part, or with [`GlossyLobe::Eas`] a glossy
 /// one), or `None`.
-pub(crate) fn primary_candidates(ctx: &FrameContext, glossy: GlossyLobe) -> Vec<Option<Candidate>> {
+pub(crate) fn primary_candidates(
+    ctx: &FrameContext,
+    settings: &IcSettings,
+) -> Vec<Option<Candidate>> {
+    let glossy = settings.glossy;
     let camera = &ctx.snapshot.camera;
     let n_pixels = (ctx.width * ctx.height) as usize;
     let rays: Vec<Ray> = (0..n_pixels as u32)
@@ -586,16 +598,44 @@ pub(crate) fn primary_candidates(ctx: &FrameContext, glossy: GlossyLobe) -> Vec<
             let surface = Surface::at(ctx, ray, hit)?;
             let radiance = glossy == GlossyLobe::Eas && surface.bsdf.has_specular();
             let diffuse = surface.bsdf.diffuse_albedo().max_element() > 0.0;
+            let footprint = hit.t * ray.dir().length() * pixel_angle;
             (diffuse || radiance).then(|| Candidate {
                 pixel: pixel as u32,
                 stream: first_stream(ctx, pixel as u32),
-                point: surface.gather_point(),
+                point: off_the_edge(surface.gather_point(), ray, settings.min_radius(footprint)),
                 object: hit.object,
-                footprint: hit.t * ray.dir().length() * pixel_angle,
+                footprint,
                 glossy: radiance.then(|| ctx.snapshot.tri_material[hit.triangle as usize]),
             })
         })
         .collect()
+}
+
+/// Share of the least radius a record may have by which [`off_the_edge`]
+/// steps a pixel centre's hit towards the camera: a tenth of the share of
+/// `R` the in-front test tolerates ([`IrradianceRecord::is_in_front_of`]),
+/// so a record stays usable on its own surface.
+const EDGE_STEP: f32 = 1e-3;
+
+/// `point`, the hit of the camera ray `ray` through a pixel centre,
+/// stepped back along the ray by [`EDGE_STEP`] of `r_min`, the least radius
+/// a record there may have (a hundredth of the pixel's footprint at the
+/// default spacing and accuracy).
+///
+/// Why: a camera centred in a box room renders its edges along a square
+/// image's diagonals, and there the pixel centres hit exactly the line
+/// where two walls meet (`x = 1, y = 2` on `cube-in-box`: 24 records' points
+/// at 32 × 32, 208 at 256 × 256). The gather rays of a record there,
+/// pushed off its own surface along the normal, started on the other one:
+/// those towards it escaped through it and the others hit its back at
+/// t = 0, so the record saw light in half its hemisphere or less, and a 0
+/// hit distance made its gradient NaN. The camera saw the point from open
+/// space, so the step leads into it. A hundredth of a pixel is still some
+/// ulps of the point's coordinates at 16k pixels across; a wall seen at a
+/// grazing angle is left by less, as the step is along the camera ray.
+fn off_the_edge(mut point: GatherPoint, ray: &Ray, r_min: f32) -> GatherPoint {
+    point.position -= ray.dir().normalize() * (EDGE_STEP * r_min);
+    point
 }
 
 /// Each candidate's lookup point with its clearance, in one ray batch for
@@ -730,6 +770,55 @@ mod tests {
         });
         assert!(gathered[0].record.eas.is_none());
         assert!(gathered[1].record.eas.is_some());
+    }
+
+    /// `cube-in-box`'s camera is centred in the room, so a square image's
+    /// diagonals run along the room's edges and the pixel centres there
+    /// hit exactly the line where two walls meet. The records gathered at
+    /// those pixels must see what a record a millimetre into the room
+    /// sees (with the same random streams): before [`off_the_edge`], half
+    /// their gather rays started on the other wall and saw nothing.
+    #[test]
+    fn records_at_pixels_on_a_rooms_edge_gather_the_rooms_light() {
+        let mut renderer = crate::render::test_renderer("cube-in-box", 32);
+        let ic = IrradianceCaching::new(IcSettings::default());
+        let (on_edge, inside): (Vec<Gathered>, Vec<Gathered>) =
+            renderer.with_frame_context(0, |ctx| {
+                // Near the edges where the ceiling (y = 2) meets the side walls
+                // (x = ±1): the pixels there lie a pixel's footprint apart.
+                let on_edge: Vec<Candidate> = primary_candidates(ctx, &ic.settings)
+                    .into_iter()
+                    .flatten()
+                    .filter(|c| {
+                        let p = c.point.position;
+                        (p.x.abs() - 1.0).abs() < 5e-3 && (p.y - 2.0).abs() < 5e-3
+                    })
+                    .collect();
+                let inside: Vec<Candidate> = on_edge
+                    .iter()
+                    .map(|c| {
+                        let mut c = *c;
+                        let p = c.point.position;
+                        c.point.position = glam::Vec3::new(p.x.signum() * 0.999, 1.999, p.z);
+                        c
+                    })
+                    .collect();
+                (
+                    ic.gather_parallel(ctx, &on_edge).collect(),
+                    ic.gather_parallel(ctx, &inside).collect(),
+                )
+            });
+        assert!(on_edge.len() >= 8, "{} pixels on the edges", on_edge.len());
+        for (edge, inside) in on_edge.iter().zip(&inside) {
+            let (e, i) = (&edge.record, &inside.record);
+            let gradients = e.grad_translation.iter().chain(&e.grad_rotation);
+            assert!(gradients.clone().all(|v| v.is_finite()), "{e:?}");
+            let ratio = luminance(e.irradiance) / luminance(i.irradiance);
+            assert!(
+                (0.95..1.05).contains(&ratio),
+                "{ratio}: {e:?} against {i:?}"
+            );
+        }
     }
 
     /// A hemisphere lit from one side, gathered next to a wall: one cell's

@@ -176,8 +176,12 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // 2: records checked against the later frames of their life
         // (`trc::later`) and a light switched on in the dark seen by the
         // reprojection (2026-11-29). 3: a later change of the lights'
-        // power checked where they move (2026-11-29).
-        "trc" => 3,
+        // power checked where they move (2026-11-29). 4: records' points
+        // stepped off the edges where surfaces meet, and gradients finite
+        // at hits at distance 0 (`ic::off_the_edge`, 2026-11-29).
+        "trc" => 4,
+        // 2: as `trc`'s 4, the records all three gather.
+        "ic" | "tcg" => 2,
         _ => 1,
     }
 }

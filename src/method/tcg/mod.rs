@@ -547,7 +547,7 @@ impl Method for TemporallyCoherentGathering {
         self.ic.fill_from(
             ctx,
             &mut cache,
-            &primary_candidates(ctx, self.settings.ic.glossy),
+            &primary_candidates(ctx, &self.settings.ic),
             None,
             |g, _| TcgRecord::gathered(ctx, g, &dynamic),
             &mut records,

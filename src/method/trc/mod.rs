@@ -506,7 +506,7 @@ impl TemporalRadianceCaching {
     /// its E(t0+1) estimate.
     fn fill(&self, making: &RecordMaking, cache: &mut IrradianceCache, aged: &mut Aged) {
         let ctx = making.ctx;
-        let pixels = primary_candidates(ctx, self.settings.ic.glossy);
+        let pixels = primary_candidates(ctx, &self.settings.ic);
         let mut created = Vec::new();
         let track = |c: &Candidate| making.motion.tracks(c);
         self.ic.fill_from(
