@@ -424,6 +424,10 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
         r#"{"spp_":2}"#,
         r#"{"strata":"512x512"}"#,
         r#"[1]"#,
+        // A boolean is for on/off settings only (it ran as a life of 1).
+        r#"{"max_life":true}"#,
+        r#"{"at":false}"#,
+        r#"{"gradients":true}"#,
     ] {
         check("POST", "/api/jobs", &with_settings(bad), 400);
     }
@@ -525,8 +529,13 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
         assert_eq!(&head, b"HTTP/1.1 413");
     }
     check("DELETE", "/api/jobs", "", 405);
-    let (_, head, _) = http_full(&server.addr, "PUT", "/api/jobs/job-1/cancel", "");
+    let (_, head, body) = http_full(&server.addr, "PUT", "/api/jobs/job-1/cancel", "");
     assert!(head.to_ascii_lowercase().contains("allow: post"), "{head}");
+    let detail = json(&body)["detail"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    assert!(detail.contains("this route takes POST"), "{detail}");
     // Still serving.
     let (status, body) = http(&server, "GET", "/api/jobs", "");
     assert_eq!(status, 200);
@@ -1118,14 +1127,27 @@ fn killed_server_resumes_its_job_and_frames_equal_an_uninterrupted_run() {
     );
     assert_frames_equal_cli(&server, &id, frames, &out);
     assert_eq!(job["settings"]["max_life"], 5, "{job}");
-    // The cancelled job resumes on request.
-    let (status, _) = http(
-        &server,
-        "POST",
-        &format!("/api/jobs/{cancelled}/resume"),
-        "",
+    // The cancelled job resumes on request, once however many ask at once
+    // (a double click): the others are 409s, decided on the state as it
+    // is, not as it was when they came. Queued again once the worker had
+    // started it, a running job showed as queued, and a cancel then let it
+    // run on.
+    let resume = format!("/api/jobs/{cancelled}/resume");
+    let statuses: Vec<u16> = std::thread::scope(|s| {
+        let asks: Vec<_> = (0..8)
+            .map(|_| s.spawn(|| http(&server, "POST", &resume, "").0))
+            .collect();
+        asks.into_iter().map(|a| a.join().unwrap()).collect()
+    });
+    assert_eq!(
+        statuses.iter().filter(|&&s| s == 200).count(),
+        1,
+        "{statuses:?}"
     );
-    assert_eq!(status, 200);
+    assert!(
+        statuses.iter().all(|&s| s == 200 || s == 409),
+        "{statuses:?}"
+    );
     assert_eq!(wait_done(&server, &cancelled)["frames_done"], frames);
 }
 

@@ -7,7 +7,7 @@
 use super::pixels::{
     self, CameraSampler, EmitterEdges, FirstLightSampler, PixelSample, PixelStreams,
 };
-use super::{FrameContext, Method};
+use super::{FrameContext, FrameStats, Method};
 use crate::backend::{Hit, Ray};
 use crate::film::Film;
 use crate::integrator::{trace_radiance, FirstHitEmission, PathLength, RadianceQuery};
@@ -33,11 +33,22 @@ impl Default for PathSettings {
 
 pub struct PathTracer {
     pub settings: PathSettings,
+    /// Wall time of the last frame ([`TRACE_PHASE`]).
+    last_seconds: f64,
 }
+
+/// The name of `path`'s one phase in [`FrameStats::phase_seconds`]: a
+/// frame's time, which `render` and `serve` report per frame. Not the
+/// render pass of the caching methods ([`super::RENDER_PHASE`]), which
+/// `bench` sets apart from their work on records.
+pub const TRACE_PHASE: &str = "trace";
 
 impl PathTracer {
     pub fn new(settings: PathSettings) -> Self {
-        PathTracer { settings }
+        PathTracer {
+            settings,
+            last_seconds: 0.0,
+        }
     }
 }
 
@@ -75,6 +86,7 @@ impl Method for PathTracer {
     }
 
     fn render_frame(&mut self, ctx: &FrameContext) -> Film {
+        let start = std::time::Instant::now();
         let mut film = Film::new(ctx.width, ctx.height);
         let spp = self.settings.spp.max(1);
         // Tiles of whole pixels, about one backend batch of paths each.
@@ -103,6 +115,14 @@ impl Method for PathTracer {
                 let radiance: Vec<Vec3> = results.iter().map(|r| r.radiance).collect();
                 edges.resolve(&samples, &radiance, first, out);
             });
+        self.last_seconds = start.elapsed().as_secs_f64();
         film
+    }
+
+    fn last_frame_stats(&self) -> FrameStats {
+        FrameStats {
+            phase_seconds: vec![(TRACE_PHASE.into(), self.last_seconds)],
+            ..FrameStats::default()
+        }
     }
 }

@@ -99,7 +99,9 @@ pub fn frame_stats_json(state: &AppState, sid: u64, frame: u32) -> Result<Option
         "lookups": s.lookups,
         "rays": s.rays,
         "phase_seconds": phases,
-        "seconds": s.phase_seconds.iter().map(|p| p.1).sum::<f64>(),
+        // Folded from 0, not summed: an empty f64 sum is -0 (a `path` frame
+        // stored before `path` timed its frames has no phases).
+        "seconds": s.phase_seconds.iter().fold(0.0, |sum, p| sum + p.1),
         "exr_bytes": exr_bytes,
         "samples_raw_bytes": s.samples_raw_bytes,
         "stored_bytes": s.stored_bytes,

@@ -263,23 +263,21 @@ pub async fn delete(
     Ok(Json(json!({ "id": id, "deleted": true })))
 }
 
+/// The 409 of a resume of a job in state `s`.
+fn not_resumable(id: &str, s: JobState) -> ApiError {
+    ApiError::conflict(format!(
+        "job {id} is {}; only cancelled or failed jobs can be resumed",
+        s.as_str()
+    ))
+}
+
 pub async fn resume(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
     let job = state.job(&id)?;
-    if matches!(job.state, JobState::Cancelled | JobState::Failed) {
-        state
-            .store
-            .set_job_cancelled(&id, false)
-            .map_err(ApiError::internal)?;
-    }
     match job.state {
-        JobState::Cancelled | JobState::Failed => state.update(&id, |j| {
-            j.state = JobState::Queued;
-            j.cancel = false;
-            j.error = None;
-        }),
+        JobState::Cancelled | JobState::Failed => {}
         JobState::Stopped => {
             return Err(ApiError::conflict(format!(
                 "job {id} was rendered by `radcache render --job {id}` and stopped after {} of {} \
@@ -288,12 +286,28 @@ pub async fn resume(
                 job.request.frames_total()
             )))
         }
-        s => {
-            return Err(ApiError::conflict(format!(
-                "job {id} is {}; only cancelled or failed jobs can be resumed",
-                s.as_str()
-            )))
+        s => return Err(not_resumable(&id, s)),
+    }
+    // Durable first: a restart queues the job again.
+    state
+        .store
+        .set_job_cancelled(&id, false)
+        .map_err(ApiError::internal)?;
+    // Decided again on the state under the table's lock, not on the copy
+    // above: another resume may have queued the job meanwhile, and the
+    // worker started it. Queued again, a running job showed as queued, a
+    // cancel then left it running, and a delete let it write on.
+    let mut now = None;
+    state.update(&id, |j| match j.state {
+        JobState::Cancelled | JobState::Failed => {
+            j.state = JobState::Queued;
+            j.cancel = false;
+            j.error = None;
         }
+        s => now = Some(s),
+    });
+    if let Some(s) = now {
+        return Err(not_resumable(&id, s));
     }
     state.wake.notify_one();
     Ok(Json(job_json(&state, &state.job(&id)?)))

@@ -413,7 +413,7 @@ pub fn parse_job_id(id: &str) -> Option<u64> {
 
 /// The API router over `state`.
 pub fn router(state: Arc<AppState>) -> Router {
-    Router::new()
+    let routes = Router::new()
         .route("/", get(web::index))
         .route("/web/{file}", get(web::file))
         .route("/web/charts/{file}", get(web::chart))
@@ -434,8 +434,13 @@ pub fn router(state: Arc<AppState>) -> Router {
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
         .layer(middleware::from_fn_with_state(state.clone(), read_bodies))
         .layer(middleware::from_fn_with_state(state.clone(), check_token))
+        .with_state(state);
+    // Around the whole router, not layered on each route as `layer` does:
+    // a route's 405 gets its Allow header outside the route's layers, and
+    // `json_errors` names the methods from it.
+    Router::new()
+        .fallback_service(routes)
         .layer(middleware::map_response(json_errors))
-        .with_state(state)
 }
 
 /// The errors axum answers by itself (a wrong method: 405 with no body; a

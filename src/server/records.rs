@@ -77,7 +77,8 @@ pub(super) fn scene(
         let relative = matches!(source, crate::render::SceneSource::File(p) if p.is_relative());
         ApiError::conflict(format!(
             "the records' screen positions need the job's scene, which the server \
-             cannot load: {e:#}{}",
+             cannot load: {}{}",
+            state.without_scenes_dir(&format!("{e:#}")),
             match relative {
                 true => " (a relative path is taken from the server's working directory)",
                 false => "",

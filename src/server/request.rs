@@ -213,12 +213,14 @@ fn gather_strata(method: &MethodSettings) -> Option<crate::cache::gather::Strata
 }
 
 /// A setting's JSON value as the text the bench's `KEY=VALUE` would give:
-/// numbers and strings as written, `true`/`false` as `1`/`0`.
+/// numbers and strings as written, booleans as `true`/`false`, which only
+/// on/off settings take (as `1`/`0` a boolean passed for a number: `"max_life":
+/// true` ran with a life of 1 frame).
 fn setting_text(key: &str, value: &serde_json::Value) -> Result<String, ApiError> {
     match value {
         serde_json::Value::String(s) => Ok(s.clone()),
         serde_json::Value::Number(n) => Ok(n.to_string()),
-        serde_json::Value::Bool(b) => Ok(if *b { "1" } else { "0" }.into()),
+        serde_json::Value::Bool(b) => Ok(b.to_string()),
         other => Err(ApiError::bad_request(format!(
             "setting {key:?}: expected a number, a string or a boolean, not {other}"
         ))),
