@@ -150,40 +150,47 @@ pub async fn cancel(
             job.state.as_str()
         )));
     }
-    // Durable first: a restart keeps the job cancelled.
-    state
-        .store
-        .set_job_cancelled(&id, true)
-        .map_err(ApiError::internal)?;
-    let mut changes = state.subscribe(&id)?;
-    // Decided on the state as it is under the table's lock, not on the copy
-    // above: the worker may have started the job in between, and a running
-    // job must be stopped by the worker, not only shown cancelled.
-    let mut running = false;
-    let mut ended = None;
-    state.update(&id, |j| match j.state {
-        JobState::Queued => j.state = JobState::Cancelled,
-        JobState::Running => {
-            j.cancel = true;
-            running = true;
+    let (mut changes, running) = {
+        // Held from the cancel mark to the table's state, as `resume` holds
+        // it: the store's mark and the table agree however cancels and
+        // resumes interleave.
+        let _control = state.controlling.lock().expect("job control lock");
+        // Durable first: a restart keeps the job cancelled.
+        state
+            .store
+            .set_job_cancelled(&id, true)
+            .map_err(ApiError::internal)?;
+        let changes = state.subscribe(&id)?;
+        // Decided on the state as it is under the table's lock, not on the copy
+        // above: the worker may have started the job in between, and a running
+        // job must be stopped by the worker, not only shown cancelled.
+        let mut running = false;
+        let mut ended = None;
+        state.update(&id, |j| match j.state {
+            JobState::Queued => j.state = JobState::Cancelled,
+            JobState::Running => {
+                j.cancel = true;
+                running = true;
+            }
+            s => ended = Some(s),
+        });
+        if let Some(s) = ended {
+            // It ended meanwhile (done, failed, or cancelled by another
+            // request): unless cancelled, not marked so, and a failed job is
+            // queued again on the next start as before.
+            if s != JobState::Cancelled {
+                state
+                    .store
+                    .set_job_cancelled(&id, false)
+                    .map_err(ApiError::internal)?;
+            }
+            return Err(ApiError::conflict(format!(
+                "job {id} is {}; only queued or running jobs can be cancelled",
+                s.as_str()
+            )));
         }
-        s => ended = Some(s),
-    });
-    if let Some(s) = ended {
-        // It ended meanwhile (done, failed, or cancelled by another
-        // request): unless cancelled, not marked so, and a failed job is
-        // queued again on the next start as before.
-        if s != JobState::Cancelled {
-            state
-                .store
-                .set_job_cancelled(&id, false)
-                .map_err(ApiError::internal)?;
-        }
-        return Err(ApiError::conflict(format!(
-            "job {id} is {}; only queued or running jobs can be cancelled",
-            s.as_str()
-        )));
-    }
+        (changes, running)
+    };
     if running {
         state.abandon_frame(Some(&id));
         wait_while_running(&state, &id, &mut changes).await;
@@ -288,27 +295,28 @@ pub async fn resume(
         }
         s => return Err(not_resumable(&id, s)),
     }
+    // The cancel mark and the table's state change together, under the
+    // control lock (as `cancel`'s), and on the state as it is then, not on
+    // the copy above: another resume may have queued the job meanwhile and
+    // the worker started it. Queued again, a running job showed as queued,
+    // a cancel then left it running, and a delete let it write on. (The
+    // worker never moves a job out of cancelled or failed.)
+    let _control = state.controlling.lock().expect("job control lock");
+    match state.job(&id)?.state {
+        JobState::Cancelled | JobState::Failed => {}
+        s => return Err(not_resumable(&id, s)),
+    }
     // Durable first: a restart queues the job again.
     state
         .store
         .set_job_cancelled(&id, false)
         .map_err(ApiError::internal)?;
-    // Decided again on the state under the table's lock, not on the copy
-    // above: another resume may have queued the job meanwhile, and the
-    // worker started it. Queued again, a running job showed as queued, a
-    // cancel then left it running, and a delete let it write on.
-    let mut now = None;
-    state.update(&id, |j| match j.state {
-        JobState::Cancelled | JobState::Failed => {
-            j.state = JobState::Queued;
-            j.cancel = false;
-            j.error = None;
-        }
-        s => now = Some(s),
+    state.update(&id, |j| {
+        j.state = JobState::Queued;
+        j.cancel = false;
+        j.error = None;
     });
-    if let Some(s) = now {
-        return Err(not_resumable(&id, s));
-    }
+    drop(_control);
     state.wake.notify_one();
     Ok(Json(job_json(&state, &state.job(&id)?)))
 }

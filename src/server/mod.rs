@@ -232,6 +232,10 @@ pub struct AppState {
     /// `jobs`, so that two creations never choose the same id while the
     /// table's own lock is free during the creation's file and store work.
     pub creating: Mutex<()>,
+    /// Held by `cancel` and `resume` from writing a job's cancel mark in
+    /// the store to setting its state in `jobs`, so that the two agree
+    /// however those requests interleave.
+    pub controlling: Mutex<()>,
     /// Wakes the worker when a job is queued.
     pub wake: Notify,
     /// Ctrl-C / SIGTERM: stop now, abandoning the frame in progress (it is
@@ -608,6 +612,7 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         options: options.clone(),
         jobs: Mutex::new(BTreeMap::new()),
         creating: Mutex::new(()),
+        controlling: Mutex::new(()),
         wake: Notify::new(),
         shutdown: AtomicBool::new(false),
         running_frame: Mutex::new(None),
