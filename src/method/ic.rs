@@ -79,6 +79,12 @@ impl IcSettings {
     pub(crate) fn min_radius(&self, footprint: f32) -> f32 {
         self.min_spacing_px * footprint / self.accuracy
     }
+
+    /// The largest radius `R` a record may have there: records at most
+    /// `max_spacing_px` pixels apart.
+    pub(crate) fn max_radius(&self, footprint: f32) -> f32 {
+        self.max_spacing_px * footprint / self.accuracy
+    }
 }
 
 /// Where the indirect light of glossy lobes comes from.
@@ -552,14 +558,13 @@ impl IrradianceCaching {
     /// clamped up. (Křivánek et al. 2006 limit `R` by the gradient; this is
     /// the same bound applied the other way round.)
     pub(crate) fn limit_radius(&self, g: &GatheredIrradiance, footprint: f32) -> (f32, [Vec3; 3]) {
-        let a = self.settings.accuracy;
         let slope = luminance_gradient(&g.grad_translation).length();
         let mut r = g.harmonic_distance;
         if slope > 0.0 {
             r = r.min(luminance(g.irradiance) / slope);
         }
         let r_min = self.settings.min_radius(footprint);
-        let r_max = self.settings.max_spacing_px * footprint / a;
+        let r_max = self.settings.max_radius(footprint);
         let r = r.clamp(r_min, r_max.max(r_min));
         (r, limit_gradient(g.grad_translation, g.irradiance, r))
     }
@@ -651,8 +656,8 @@ const EDGE_STEP_OF_PIXEL: f32 = 1e-2;
 /// a pixel. Where the step is shorter than the rays' own offset
 /// ([`crate::integrator::RAY_OFFSET`], scaled by the coordinates: at
 /// 128 pixels across and more on `cube-in-box`), a record on an edge
-/// comes out a few percent dark still (0.915 of one a millimetre in, at
-/// 3e-5 from both walls), rather than 11–20 %.
+/// comes out a few percent dark still (a throwaway run), rather than
+/// 11–20 %.
 fn off_the_edge(mut point: GatherPoint, ray: &Ray, r_min: f32, footprint: f32) -> GatherPoint {
     let step = (EDGE_STEP_OF_RADIUS * r_min).min(EDGE_STEP_OF_PIXEL * footprint);
     point.position -= ray.dir().normalize() * step;
