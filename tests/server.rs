@@ -884,6 +884,12 @@ fn records_match_the_store_and_inspect() {
         "bbox=0,0,0,1,1,1",
         "frame=1&limit=0",
         "frame=0&frame=1",
+        // One spelling of a frame, as its file name has; a misspelt
+        // parameter is not quietly ignored.
+        "frame=01",
+        "frame=+1",
+        "frame=1&limit=03",
+        "frame=1&limt=3",
     ] {
         let (status, err) = get(bad);
         assert_eq!(status, 400, "{bad}: {err}");

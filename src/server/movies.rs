@@ -25,7 +25,7 @@ pub async fn movies(
 ) -> Result<Json<Value>, ApiError> {
     // An unknown job is a 404 whatever its query.
     let job = state.job(&id)?;
-    let q = query_params(query)?;
+    let q = query_params(query, &["frame"])?;
     let frame = frame_param(&q)?;
     let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();

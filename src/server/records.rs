@@ -12,6 +12,7 @@
 //! too many to send with every overlay the dashboard draws.
 
 use super::{ApiError, AppState};
+use crate::decimal::parse_canonical_u64;
 use crate::scene::Scene;
 use crate::store::schema::{RecordValue, SourceValue};
 use axum::extract::rejection::QueryRejection;
@@ -100,13 +101,23 @@ struct RecordsQuery {
 }
 
 /// A query's parameters by name, each given once (`frame=0&frame=1` is a
-/// 400, not one of them quietly taken).
+/// 400, not one of them quietly taken) and each one of the route's `known`
+/// names or `token` (the API token, which [`super::check_token`] reads):
+/// a misspelt parameter (`limt=5`) is a 400 naming the route's
+/// parameters, not a default quietly used.
 pub(super) fn query_params(
     query: Result<Query<Vec<(String, String)>>, QueryRejection>,
+    known: &[&str],
 ) -> Result<HashMap<String, String>, ApiError> {
     let Query(pairs) = query.map_err(|e| ApiError::bad_request(e.body_text()))?;
     let mut params = HashMap::with_capacity(pairs.len());
     for (key, value) in pairs {
+        if key != "token" && !known.contains(&key.as_str()) {
+            return Err(ApiError::bad_request(format!(
+                "unknown query parameter {key:?}; this route takes {}",
+                known.join(", ")
+            )));
+        }
         if params.contains_key(&key) {
             return Err(ApiError::bad_request(format!("{key}= is given twice")));
         }
@@ -115,12 +126,20 @@ pub(super) fn query_params(
     Ok(params)
 }
 
-/// The `frame=N` of a query (required).
+/// The `frame=N` of a query (required), in the one spelling a frame's
+/// file name takes too (`frame=01` and `frame=+1` are refused as
+/// `/frames/01.png` is): one frame, one URL.
 pub(super) fn frame_param(q: &HashMap<String, String>) -> Result<u32, ApiError> {
-    q.get("frame")
-        .ok_or_else(|| ApiError::bad_request("missing frame=N".into()))?
-        .parse()
-        .map_err(|_| ApiError::bad_request(format!("frame {:?} is not a frame number", q["frame"])))
+    let text = q
+        .get("frame")
+        .ok_or_else(|| ApiError::bad_request("missing frame=N".into()))?;
+    parse_canonical_u64(text)
+        .and_then(|n| u32::try_from(n).ok())
+        .ok_or_else(|| {
+            ApiError::bad_request(format!(
+                "frame {text:?} is not a frame number (decimal digits, no sign or leading zero)"
+            ))
+        })
 }
 
 /// Job `id`'s key in the store, where its frame `frame` is done (404
@@ -139,14 +158,16 @@ pub(super) fn stored_frame(state: &AppState, id: &str, frame: u32) -> Result<u64
 }
 
 impl RecordsQuery {
+    /// The parameters the route takes.
+    const NAMES: &'static [&'static str] = &["frame", "bbox", "limit", "sources"];
+
     fn parse(q: &HashMap<String, String>) -> Result<Self, ApiError> {
         let frame = frame_param(q)?;
         let bbox = q.get("bbox").map(|b| parse_bbox(b)).transpose()?;
         let limit = match q.get("limit") {
             None => DEFAULT_LIMIT,
-            Some(l) => l
-                .parse::<usize>()
-                .ok()
+            Some(l) => parse_canonical_u64(l)
+                .and_then(|l| usize::try_from(l).ok())
                 .filter(|l| (1..=MAX_LIMIT).contains(l))
                 .ok_or_else(|| {
                     ApiError::bad_request(format!("limit {l:?}: expected 1..={MAX_LIMIT}"))
@@ -246,7 +267,7 @@ pub async fn records(
 ) -> Result<Json<Value>, ApiError> {
     // An unknown job is a 404 whatever its query.
     let job = state.job(&id)?;
-    let q = query_params(query)?;
+    let q = query_params(query, RecordsQuery::NAMES)?;
     let RecordsQuery {
         frame,
         bbox,
@@ -305,4 +326,38 @@ pub async fn records(
     })
     .await
     .map_err(ApiError::internal)?
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params(pairs: &[(&str, &str)], known: &[&str]) -> Result<HashMap<String, String>, String> {
+        let pairs = pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+        query_params(Ok(Query(pairs)), known).map_err(|e| e.detail)
+    }
+
+    /// The dashboard adds `token=` to every request when the server has
+    /// one; any other name a route does not take is refused by name.
+    #[test]
+    fn a_query_takes_the_routes_parameters_and_the_token_only() {
+        let q = params(&[("frame", "3"), ("token", "t")], &["frame"]).unwrap();
+        assert_eq!(frame_param(&q).unwrap(), 3);
+        let err = params(&[("frame", "3"), ("limt", "5")], RecordsQuery::NAMES).unwrap_err();
+        assert!(err.contains("\"limt\"") && err.contains("limit"), "{err}");
+        assert!(params(&[("frame", "3"), ("frame", "4")], &["frame"]).is_err());
+    }
+
+    #[test]
+    fn a_frame_has_one_spelling() {
+        let frame = |text: &str| frame_param(&HashMap::from([("frame".into(), text.into())]));
+        assert_eq!(frame("0").unwrap(), 0);
+        assert_eq!(frame("4294967295").unwrap(), u32::MAX);
+        for bad in ["01", "+1", "-1", " 1", "1.0", "", "4294967296"] {
+            assert!(frame(bad).is_err(), "{bad:?}");
+        }
+    }
 }

@@ -255,7 +255,8 @@ fn parse_scene(s: &str, scenes: Option<&Path>) -> Result<SceneSource, ApiError> 
     let rel = Path::new(s);
     if s.is_empty() || !rel.components().all(|c| matches!(c, Component::Normal(_))) {
         return Err(ApiError::bad_request(format!(
-            "scene path {s:?} must be relative to the scenes directory, without '..'"
+            "scene path {s:?} must name a file by its names in the scenes directory \
+             (e.g. \"sub/room.glb\"): no leading '/', and no '.' or '..' part"
         )));
     }
     let dir = scenes.ok_or_else(|| {
