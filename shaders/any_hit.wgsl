@@ -14,7 +14,7 @@ fn any_hit(@builtin(global_invocation_id) id: vec3<u32>) {
     let ray = rays[i];
     let r = trace_ray(ray);
     // Dynamic parts are usually small: test them first (as the CPU does).
-    var best = Hit(ray.tmax, NONE, NONE, 0.0, 0.0);
+    var best = Hit(ray.tmax + NEAR_SHIFT, NONE, NONE, 0.0, 0.0);
     let hit = traverse(params.dynamic_root, r, &best, true)
         || traverse(params.static_root, r, &best, true);
     occluded[i] = select(0u, 1u, hit);

@@ -41,7 +41,7 @@ struct Node {
 
 fn trace_ray(ray: Ray) -> TraceRay {
     let inv = vec3<f32>(safe_inverse(ray.dir.x), safe_inverse(ray.dir.y), safe_inverse(ray.dir.z));
-    return TraceRay(ray.origin, ray.dir, inv, ray.tmin);
+    return TraceRay(shifted_origin(ray, ray.dir), ray.dir, inv, ray.tmin + NEAR_SHIFT);
 }
 
 /// obvhs `Aabb::intersect_ray`: entry distance of the ray into the box, or

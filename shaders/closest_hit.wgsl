@@ -13,12 +13,15 @@ fn closest_hit(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let ray = rays[i];
     let r = trace_ray(ray);
-    // `best.t` is the shrinking tmax shared by both BVHs, as on the CPU.
-    var best = Hit(ray.tmax, NONE, NONE, 0.0, 0.0);
+    // `best.t` is the shrinking tmax shared by both BVHs, as on the CPU,
+    // in the traversal's `t` (NEAR_SHIFT added) until the end.
+    var best = Hit(ray.tmax + NEAR_SHIFT, NONE, NONE, 0.0, 0.0);
     traverse(params.static_root, r, &best, false);
     traverse(params.dynamic_root, r, &best, false);
     if best.triangle == NONE {
         best = Hit(infinity(), NONE, NONE, 0.0, 0.0);
+    } else {
+        best.t -= NEAR_SHIFT;
     }
     hits[i] = best;
 }

@@ -21,7 +21,9 @@ const STACK_SIZE: u32 = 32u;
 
 /// obvhs `cwbvh::node::EPSILON`: the CPU culls every child box the ray
 /// leaves before this distance (`tmin.max(EPSILON)` in `intersect_ray`).
-/// Mirrored so that the GPU misses exactly the hits the CPU misses.
+/// Mirrored so that the GPU visits exactly the boxes the CPU visits; rays
+/// start NEAR_SHIFT behind their origin on both, so it culls none they
+/// meet in their range.
 const NEAR_CULL: f32 = 0.0001;
 
 /// Relative widening of the child intervals: 2γ₃ (pbrt-v4 §6.8.2). A
@@ -55,11 +57,12 @@ struct Node {
 @group(0) @binding(2) var<storage, read> nodes: array<Node>;
 
 /// As the CPU's `to_obvhs_ray`: −0 direction components become +0 (the
-/// CPU adds 0.0), so that the octant, the slab order and 1/dir agree.
+/// CPU adds 0.0), so that the octant, the slab order and 1/dir agree; the
+/// origin moved back by NEAR_SHIFT.
 fn trace_ray(ray: Ray) -> TraceRay {
     let dir = select(ray.dir, vec3<f32>(0.0), ray.dir == vec3<f32>(0.0));
     let inv = vec3<f32>(safe_inverse(dir.x), safe_inverse(dir.y), safe_inverse(dir.z));
-    return TraceRay(ray.origin, dir, inv, ray.tmin);
+    return TraceRay(shifted_origin(ray, dir), dir, inv, ray.tmin + NEAR_SHIFT);
 }
 
 /// obvhs `ray_get_octant_inv4`: 7 − octant of the direction, in every byte.

@@ -80,6 +80,20 @@ struct TraceRay {
     tmin: f32,
 }
 
+/// `accel::NEAR_SHIFT`: traversal starts a ray this far (in its `t` units)
+/// behind its origin, with `tmin` and `tmax` moved along, and a hit's `t`
+/// is given back less it. Why: obvhs's CWBVH culls every box a ray leaves
+/// before t = 1e-4 (`NEAR_CULL` in `cwbvh_traverse.wgsl` mirrors it), which
+/// missed walls met nearer than that; both GPU layouts shift as the CPU
+/// does, so that they find the CPU's hits.
+const NEAR_SHIFT: f32 = 2e-4;
+
+/// `ray`'s origin moved back by NEAR_SHIFT along `dir` (its direction as
+/// the traversal takes it), as `accel::to_obvhs_ray` computes it.
+fn shifted_origin(ray: Ray, dir: vec3<f32>) -> vec3<f32> {
+    return ray.origin - dir * NEAR_SHIFT;
+}
+
 /// obvhs `safe_inverse`: 1/x, or ±1/EPSILON (sign of x, −0 counts as
 /// negative like Rust's `signum`) when |x| ≤ EPSILON.
 fn safe_inverse(x: f32) -> f32 {

@@ -40,16 +40,36 @@ fn to_obvhs(tri: &crate::scene::Triangle) -> ObTriangle {
     }
 }
 
+/// How far back along a ray, in its `t` units, traversal starts it: `t`
+/// inside the BVHs is the ray's own `t` plus this ([`to_obvhs_ray`]).
+///
+/// Why: obvhs 0.4's CWBVH culls every child box a ray leaves before
+/// `t = 1e-4` whatever the ray's `tmin` (`cwbvh::node::EPSILON`, applied in
+/// `CwBvhNode::intersect_ray`), so a triangle nearer than that was missed
+/// wherever its leaf's box ends there too: a flat wall met within 1e-4.
+/// Gather rays of records on a room's edge (`ic::off_the_edge`: at
+/// 256 × 256 on `cube-in-box`, 4e-5 off the other wall) passed through it,
+/// and those records came out 4–14 % dark. Started twice that cut behind
+/// the ray's origin, with `tmin` and `tmax` moved along, every box the ray
+/// meets in its own `[tmin, tmax]` is left at `t ≥ 2e-4` and kept, and what
+/// lies behind its origin is still out of range. The GPU's traversals
+/// shift their rays alike (`shaders/ray_common.wgsl`), so both backends
+/// keep finding the same hits.
+pub const NEAR_SHIFT: f32 = 2e-4;
+
+/// `ray` as obvhs traverses it: its origin moved back by [`NEAR_SHIFT`]
+/// (in units of its direction) and its range moved along.
 fn to_obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
     // `+ 0.0` turns −0.0 components into +0.0. obvhs 0.4 takes the slab
     // order from `direction < 0.0` (false for −0.0) but the inverse from
     // `signum` (−1 for −0.0): with a −0.0 component the two disagree and the
     // ray misses every box, e.g. `-n` for an axis-aligned normal `n`.
+    let dir = Vec3A::from_array(ray.dir) + Vec3A::ZERO;
     obvhs::ray::Ray::new(
-        Vec3A::from_array(ray.origin),
-        Vec3A::from_array(ray.dir) + Vec3A::ZERO,
-        ray.tmin,
-        ray.tmax,
+        Vec3A::from_array(ray.origin) - dir * NEAR_SHIFT,
+        dir,
+        ray.tmin + NEAR_SHIFT,
+        ray.tmax + NEAR_SHIFT,
     )
 }
 
@@ -81,7 +101,7 @@ pub fn intersect_triangle(tri: &ObTriangle, ray: &obvhs::ray::Ray) -> Option<(f3
 /// a hit found here and the one [`SceneBvh::closest_hit`] finds on the same
 /// triangle have the same `t` to the bit.
 pub fn ray_hits_triangle(tri: &crate::scene::Triangle, ray: &Ray) -> Option<f32> {
-    intersect_triangle(&to_obvhs(tri), &to_obvhs_ray(ray)).map(|(t, _, _)| t)
+    intersect_triangle(&to_obvhs(tri), &to_obvhs_ray(ray)).map(|(t, _, _)| t - NEAR_SHIFT)
 }
 
 impl TriangleBvh {
@@ -226,12 +246,16 @@ impl SceneBvh {
 
     pub fn closest_hit(&self, ray: &Ray) -> Hit {
         let r = to_obvhs_ray(ray);
+        // `hit.t` is the traversal's (shifted) `t` until the end.
         let mut hit = Hit::MISS;
         if let Some(part) = &self.static_part {
             part.closest_hit(&r, &mut hit);
         }
         if let Some(part) = &self.dynamic_part {
             part.closest_hit(&r, &mut hit);
+        }
+        if hit.is_hit() {
+            hit.t -= NEAR_SHIFT;
         }
         hit
     }

@@ -754,3 +754,53 @@ fn axis_aligned_rays_with_signed_zeros() {
     stats.assert_no_failures();
     assert_eq!(stats.edge_excused, 0);
 }
+
+/// obvhs 0.4's CWBVH culls every box a ray leaves before t = 1e-4, so a
+/// wall met nearer than that was missed (`accel::NEAR_SHIFT`): a gather
+/// ray of a record on a room's edge, 4e-5 off the other wall, went through
+/// it. Rays and shadow segments leaving the line where a room's ceiling
+/// meets a wall, 1e-7 to 1e-3 off that wall and heading into it, hit it
+/// where the plane is, closest and any hit.
+#[test]
+fn walls_met_nearer_than_the_traversals_cut_are_hit() {
+    let room = common::inward_box(Vec3::new(-1.0, 0.0, -1.0), Vec3::new(1.0, 2.0, 1.0), 0);
+    let block = common::outward_box(Vec3::splat(-0.2), Vec3::splat(0.2), 0);
+    let scene = scene_of(vec![room, block], &[]);
+    let mut backend = CpuBackend::new();
+    backend.set_geometry(&scene.snapshot(0.0));
+    let mut rng = Rng::from_seed(21, 1);
+    let mut rays = Vec::new();
+    let mut expected = Vec::new();
+    for delta in [1e-7f32, 1e-6, 1e-5, 4e-5, 1e-4, 3e-4, 1e-3] {
+        for _ in 0..100 {
+            let origin = Vec3::new(-1.0 + delta, 2.0 - 3e-4, rand_in(&mut rng, -0.9, 0.9));
+            let dir = Vec3::new(
+                -rand_in(&mut rng, 0.05, 1.0),
+                -rand_in(&mut rng, 0.05, 1.0),
+                rand_in(&mut rng, -1.0, 1.0),
+            )
+            .normalize();
+            // The plane x = −1, in f64 from the origin as rounded.
+            let t = (f64::from(origin.x) + 1.0) / -f64::from(dir.x);
+            rays.push(Ray::new(origin, dir, 0.0, f32::INFINITY));
+            expected.push(t);
+            rays.push(Ray::segment(origin, origin + dir * (2.0 * t as f32 + 1e-2)));
+            expected.push(t / (2.0 * t + 1e-2));
+        }
+    }
+    let (hits, occluded) = trace(&backend, &rays);
+    let mut missed = Vec::new();
+    for ((ray, hit), (&t, &occ)) in rays.iter().zip(&hits).zip(expected.iter().zip(&occluded)) {
+        let tolerance = 1e-4 * t + 1e-6 / f64::from(ray.dir().x.abs());
+        if !hit.is_hit() || (f64::from(hit.t) - t).abs() > tolerance || !occ {
+            missed.push(format!("{ray:?}: {hit:?}, occluded {occ}, t {t}"));
+        }
+    }
+    assert!(
+        missed.is_empty(),
+        "{} of {} rays:\n{}",
+        missed.len(),
+        rays.len(),
+        missed[..missed.len().min(5)].join("\n")
+    );
+}

@@ -653,11 +653,10 @@ const EDGE_STEP_OF_PIXEL: f32 = 1e-2;
 /// share of `r_min` alone grows as `1/a` and left records unusable at
 /// their own pixels at low accuracies (every sample path-traced at
 /// `a = 0.005`); a hundredth of a pixel adds little to distances of about
-/// a pixel. Where the step is shorter than the rays' own offset
-/// ([`crate::integrator::RAY_OFFSET`], scaled by the coordinates: at
-/// 128 pixels across and more on `cube-in-box`), a record on an edge
-/// comes out a few percent dark still (a throwaway run), rather than
-/// 11–20 %.
+/// a pixel. So the step is short (4e-5 on `cube-in-box` at 256 × 256):
+/// the gather rays towards the other wall meet it nearer than 1e-4, which
+/// the BVH traversal culled until `accel::NEAR_SHIFT` (such records were
+/// then still 4–14 % dark at 256 × 256; `tests` checks 32 and 256).
 fn off_the_edge(mut point: GatherPoint, ray: &Ray, r_min: f32, footprint: f32) -> GatherPoint {
     let step = (EDGE_STEP_OF_RADIUS * r_min).min(EDGE_STEP_OF_PIXEL * footprint);
     point.position -= ray.dir().normalize() * step;
@@ -803,10 +802,18 @@ mod tests {
     /// hit exactly the line where two walls meet. The records gathered at
     /// those pixels must see what a record a millimetre into the room
     /// sees (with the same random streams): before [`off_the_edge`], half
-    /// their gather rays started on the other wall and saw nothing.
+    /// their gather rays started on the other wall and saw nothing. At
+    /// 256 × 256 the step is 4e-5, and until the traversal saw walls that
+    /// near (`accel::NEAR_SHIFT`) such records were still 4–14 % dark.
     #[test]
     fn records_at_pixels_on_a_rooms_edge_gather_the_rooms_light() {
-        let mut renderer = crate::render::test_renderer("cube-in-box", 32);
+        for size in [32, 256] {
+            records_on_the_edges_against_records_inside(size);
+        }
+    }
+
+    fn records_on_the_edges_against_records_inside(size: u32) {
+        let mut renderer = crate::render::test_renderer("cube-in-box", size);
         let ic = IrradianceCaching::new(IcSettings::default());
         let (on_edge, inside): (Vec<Gathered>, Vec<Gathered>) =
             renderer.with_frame_context(0, |ctx| {
@@ -834,7 +841,11 @@ mod tests {
                     ic.gather_parallel(ctx, &inside).collect(),
                 )
             });
-        assert!(on_edge.len() >= 8, "{} pixels on the edges", on_edge.len());
+        assert!(
+            on_edge.len() >= 8,
+            "{size}: {} pixels on the edges",
+            on_edge.len()
+        );
         for (edge, inside) in on_edge.iter().zip(&inside) {
             let (e, i) = (&edge.record, &inside.record);
             let gradients = e.grad_translation.iter().chain(&e.grad_rotation);
@@ -842,7 +853,7 @@ mod tests {
             let ratio = luminance(e.irradiance) / luminance(i.irradiance);
             assert!(
                 (0.95..1.05).contains(&ratio),
-                "{ratio}: {e:?} against {i:?}"
+                "{size}: {ratio}: {e:?} against {i:?}"
             );
         }
     }

@@ -178,11 +178,15 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // reprojection (2026-11-29). 3: a later change of the lights'
         // power checked where they move (2026-11-29). 4: records' points
         // stepped off the edges where surfaces meet, and gradients finite
-        // at hits at distance 0 (`ic::off_the_edge`, 2026-11-29).
-        "trc" => 4,
-        // 2: as `trc`'s 4, the records all three gather.
-        "ic" | "tcg" => 2,
-        _ => 1,
+        // at hits at distance 0 (`ic::off_the_edge`, 2026-11-29). 5: as
+        // every method's next.
+        "trc" => 5,
+        // 2: as `trc`'s 4, the records all three gather. 3: as below.
+        "ic" | "tcg" => 3,
+        // 2 (all methods): rays find the surfaces they meet nearer than
+        // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
+        // 2026-11-30).
+        _ => 2,
     }
 }
 

@@ -40,8 +40,9 @@
 //! al. 2017), the CPU backend's own tree, 80-byte nodes with 8 quantised
 //! child boxes each, traversed in the CPU's exact order; and BVH2, a short
 //! stack loop over 48-byte nodes. obvhs ships no GPU traversal; both are
-//! ours and both return the CPU's hits (CWBVH bit for bit, near cut and
-//! ties included). CWBVH is the default: `cargo bench --bench gpu_rays`
+//! ours and both return the CPU's hits (CWBVH bit for bit, ties included;
+//! both start rays [`crate::accel::NEAR_SHIFT`] behind their origin as the
+//! CPU does). CWBVH is the default: `cargo bench --bench gpu_rays`
 //! measured it about 2× faster than BVH2 for closest hit and 2.5× for any
 //! hit (README, `--backend`). That was on lavapipe, which runs the shaders
 //! on the CPU: the ratio is lavapipe's, a real GPU's is not measured yet.
