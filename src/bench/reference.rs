@@ -38,6 +38,11 @@ struct ReferenceInfo {
     /// pixels were post-stratified, which are rendered again).
     #[serde(default)]
     edge_coverage_factor: u32,
+    /// `path`'s algorithm revision ([`crate::method::algorithm_revision`]):
+    /// a reference an earlier `path` rendered (one without this field was)
+    /// is rendered again, as its frames are no longer what `path` makes.
+    #[serde(default)]
+    path_revision: u64,
 }
 
 /// Renders the reference of `scene` into `dir` unless a matching one is
@@ -57,6 +62,7 @@ pub(super) fn ensure_reference(opts: &BenchOptions, scene: &BenchScene, dir: &Pa
         same_pattern: true,
         light_masks: true,
         edge_coverage_factor: frame_settings(opts, true).edge_coverage_factor,
+        path_revision: crate::method::algorithm_revision("path"),
     };
     let json = dir.join("reference.json");
     let have = std::fs::read_to_string(&json)
