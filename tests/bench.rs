@@ -295,7 +295,11 @@ fn tiny_end_to_end_run() {
     // One an earlier `path` rendered (no revision recorded) is rendered
     // again: only a render writes reference.json.
     let mut old: serde_json::Value = serde_json::from_str(&info).unwrap();
-    assert!(old.as_object_mut().unwrap().remove("path_revision").is_some());
+    assert!(old
+        .as_object_mut()
+        .unwrap()
+        .remove("path_revision")
+        .is_some());
     std::fs::write(&json, serde_json::to_string_pretty(&old).unwrap()).unwrap();
     bench::run(&other).unwrap();
     let info = std::fs::read_to_string(&json).unwrap();
