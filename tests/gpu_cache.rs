@@ -18,9 +18,10 @@
 //! - whole frames, GPU rays with CPU vs GPU interpolation: the same rays,
 //!   so pixels differ only by that summation order: [`PIXEL_REL_SAME_RAYS`].
 //! - whole frames, `--backend cpu` vs `--backend gpu` with the GPU's BVH2
-//!   layout: the rays differ for records on an edge of the room (the CPU
-//!   culls hits nearer than 1e-4, the GPU's BVH2 does not), which changes
-//!   those records' irradiance and the pixels they cover, with either
+//!   layout: the rays differ for records on an edge of the room (their
+//!   gather rays start on the line two walls meet, where two triangles are
+//!   hit at the same t and the two layouts break the tie differently),
+//!   which changes those records' irradiance and the pixels they cover, with either
 //!   interpolation; the other pixels ([`SAME_PIXEL_SHARE`] at least) agree
 //!   within [`PIXEL_REL_SAME_RAYS`] and the frame means within
 //!   [`MEAN_REL_BACKENDS`]. With the default CWBVH layout the rays are the
@@ -55,8 +56,9 @@ const MAX_AMBIGUOUS_SHARE: f64 = 0.01;
 /// Per-pixel relative tolerance, same rays, CPU vs GPU interpolation.
 const PIXEL_REL_SAME_RAYS: f32 = 1e-4;
 /// Least share of the pixels within [`PIXEL_REL_SAME_RAYS`], CPU vs GPU
-/// backend (the others are covered by a record whose gather rays differ).
-const SAME_PIXEL_SHARE: f64 = 0.6;
+/// backend (the others are covered by a record whose gather rays differ):
+/// 85.6–86.3 % on lavapipe.
+const SAME_PIXEL_SHARE: f64 = 0.8;
 /// Relative tolerance on the frame mean, CPU vs GPU backend.
 const MEAN_REL_BACKENDS: f64 = 1e-2;
 
@@ -72,7 +74,7 @@ fn gpu() -> GpuBackend {
 }
 
 /// The GPU backend with the BVH2 layout, whose rays differ from the CPU's
-/// for hits nearer than 1e-4 (`tests/gpu_backend.rs`).
+/// where two triangles are hit at the same t (`tests/gpu_backend.rs`).
 fn gpu_bvh2() -> GpuBackend {
     GpuBackend::with_layout(AdapterPolicy::AllowSoftware, GpuLayout::Bvh2)
         .expect("a wgpu adapter (see gpu())")
@@ -476,8 +478,9 @@ fn radiance_record_frames_with_gpu_interpolation_equal_cpu_interpolation() {
 /// scene.
 /// The two backends' rays differ
 /// where a record sits on an edge of the room: its gather rays start at
-/// the corner, where the CPU's traversal culls hits nearer than 1e-4 that
-/// the GPU's BVH2 finds (`tests/gpu_backend.rs`, README `--backend`), so such a
+/// the corner, where two walls' triangles are hit at the same t and the
+/// CPU's CWBVH and the GPU's BVH2 take either (`tests/gpu_backend.rs`,
+/// README `--backend`), so such a
 /// record's irradiance differs by tens of percent whichever way the cache
 /// is interpolated (cube-in-box frame 0: 134 records on the CPU, 137 on the
 /// GPU, half of them identical), and so do the pixels it covers. (At
@@ -517,8 +520,9 @@ fn gpu_backend_frames_agree_with_cpu_backend_frames() {
 
 /// `ic` at its default strata and 64×64, where records sit right on the
 /// room's edges and some GPU gather rays (BVH2 layout) hit the other face
-/// at t ≈ 0 (which the CPU's traversal culls): before the translation gradient was bounded
-/// by the record's radius, such a record doubled the GPU frame's mean.
+/// at t ≈ 0 (which the CPU's traversal then culled, before
+/// `accel::NEAR_SHIFT`): before the translation gradient was bounded by
+/// the record's radius, such a record doubled the GPU frame's mean.
 #[test]
 fn edge_records_gathered_on_the_gpu_keep_the_frame_mean() {
     let method = || {

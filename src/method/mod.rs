@@ -185,7 +185,8 @@ pub fn algorithm_revision(method: &str) -> u64 {
         "ic" | "tcg" => 3,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
-        // 2026-11-30).
+        // 2026-11-30); so `trc` and the render pass keep paths with
+        // segments under 1e-3 too.
         _ => 2,
     }
 }

@@ -109,23 +109,6 @@ impl Blockers {
     }
 }
 
-/// Segments shorter than this (relative to the size of their origin's
-/// coordinates) keep a path from being kept: the CPU traversal (obvhs's
-/// CWBVH) drops hits nearer than 1e-4 depending on how its nodes group the
-/// triangles, so such a hit may not be found again in another frame's BVH.
-const NEAR_HIT: f32 = 1e-3;
-
-/// Whether a traced path may be kept for another frame as far as its own
-/// segments go: none is shorter than `NEAR_HIT`, 1e-3 (see there). Kept paths
-/// (`trc::paths`, the render pass's kept queries) check it once, when a
-/// path is first kept.
-pub fn path_long_enough(segments: &[[Vec3; 2]]) -> bool {
-    segments.iter().all(|&[a, b]| {
-        let near = NEAR_HIT * (1.0 + a.abs().max_element());
-        (b - a).length_squared() >= near * near
-    })
-}
-
 /// A BVH (obvhs's) over the moving objects' boxes, for the segment tests
 /// that every kept link and shadow sample takes each frame: with many
 /// moving objects (`spheres`' 66 balls) testing each box in turn was an

@@ -14,7 +14,7 @@
 //! (`render_pass::StillSamples`). The film is the one traced afresh.
 
 use crate::integrator::{trace_radiance_tracked, PathLength, RadianceQuery};
-use crate::method::motion::{path_long_enough, Blockers};
+use crate::method::motion::Blockers;
 use crate::method::FrameContext;
 use glam::Vec3;
 
@@ -103,9 +103,7 @@ impl KeptQueries {
                 None => {
                     let (path, result) = traced.next().expect("one result per query traced");
                     let segments = tracks.segments(path);
-                    let keep = !tracks.hit_moving(path)
-                        && path_long_enough(segments)
-                        && blockers.path_clear(segments);
+                    let keep = !tracks.hit_moving(path) && blockers.path_clear(segments);
                     (result.radiance, keep.then_some(segments))
                 }
             };

@@ -13,7 +13,7 @@ use super::still_tile::{KeptShadow, KeptTile, TileKept, TileStill};
 use crate::backend::{Hit, Ray};
 use crate::cache::LookupPoint;
 use crate::integrator::offset_origin;
-use crate::method::motion::{self, Blockers};
+use crate::method::motion::Blockers;
 use crate::method::FrameContext;
 use crate::sampling::mix64;
 use glam::Vec3;
@@ -318,9 +318,8 @@ impl StillPass {
 
     /// Whether no moving box of this frame lies on lookup `at`'s clearance
     /// ray ([`measure_clearance`](crate::method::lookups::measure_clearance)'s, to its hit or, where it hit nothing,
-    /// past every box) nor holds its hit, and the ray is not so short that
-    /// another BVH might miss its hit ([`motion::path_long_enough`]): then
-    /// what it hit, if anything, was static.
+    /// past every box) nor holds its hit: then what it hit, if anything,
+    /// was static.
     pub(super) fn clearance_clear(&self, at: &LookupPoint, camera: Vec3) -> bool {
         let origin = offset_origin(at.position, at.normal, at.normal);
         let length = if at.clearance == LookupPoint::OPEN {
@@ -333,8 +332,7 @@ impl StillPass {
         // a rounding error short of the box's face: the end is tested with
         // a margin.
         let margin = Vec3::splat(1e-4 * (1.0 + end.abs().max_element()));
-        motion::path_long_enough(&[[origin, end]])
-            && !self.blockers.segment_may_hit(origin, end)
+        !self.blockers.segment_may_hit(origin, end)
             && !self.blockers.box_may_hit((end - margin, end + margin))
     }
 }

@@ -20,12 +20,13 @@
 //!
 //! Caveat shared with the kept samples: two static triangles hit at exactly
 //! the same t may be told apart in another order by a BVH rebuilt around
-//! moved objects. A path with a segment nearer than 1e-3 is not kept
-//! either ([`path_long_enough`]).
+//! moved objects. (Until the traversal found hits nearer than 1e-4,
+//! `accel::NEAR_SHIFT`, a path with a segment under 1e-3 was not kept
+//! either: another frame's BVH might have missed its hit.)
 
 use crate::integrator::RadianceResult;
 use crate::method::ic::GatherTracks;
-use crate::method::motion::{path_long_enough, Blockers};
+use crate::method::motion::Blockers;
 use glam::Vec3;
 
 /// Bytes of kept paths `trc` holds at most over all its records: past
@@ -86,8 +87,7 @@ impl KeptPaths {
                 let segments = tracks.tracks.segments(path);
                 let moving = tracks.tracks.hit_moving(path);
                 path += 1;
-                (!moving && path_long_enough(segments) && blockers.path_clear(segments))
-                    .then_some(segments)
+                (!moving && blockers.path_clear(segments)).then_some(segments)
             } else {
                 // Taken: nothing moving met it then or now.
                 taken_from.and_then(|old| old.segments_of(i))
