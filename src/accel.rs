@@ -41,7 +41,7 @@ fn to_obvhs(tri: &crate::scene::Triangle) -> ObTriangle {
 }
 
 /// How far back along a ray, in its `t` units, traversal starts it: `t`
-/// inside the BVHs is the ray's own `t` plus this ([`to_obvhs_ray`]).
+/// inside the BVHs is the ray's own `t` plus this (`to_obvhs_ray`).
 ///
 /// Why: obvhs 0.4's CWBVH culls every child box a ray leaves before
 /// `t = 1e-4` whatever the ray's `tmin` (`cwbvh::node::EPSILON`, applied in
