@@ -22,7 +22,7 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::ray::RayHit;
 use obvhs::triangle::Triangle as ObTriangle;
 use obvhs::BvhBuildParams;
-use radcache::accel::intersect_triangle;
+use radcache::accel::{intersect_triangle, NEAR_SHIFT};
 use radcache::backend::cpu::CpuBackend;
 use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::sampling::Rng;
@@ -300,12 +300,17 @@ fn refit(bvh: &mut Bvh2, tris: &[ObTriangle]) -> Vec<ObTriangle> {
     ordered
 }
 
+/// `ray` as the renderer's traversal takes it (`accel::to_obvhs_ray`): −0
+/// direction components made +0, and the origin moved back by
+/// [`NEAR_SHIFT`], so that the CWBVH's near cut drops no hit the BVH2
+/// finds and their hit counts compare.
 fn ob_ray(ray: &Ray) -> obvhs::ray::Ray {
+    let dir = Vec3A::from_array(ray.dir) + Vec3A::ZERO;
     obvhs::ray::Ray::new(
-        Vec3A::from_array(ray.origin),
-        Vec3A::from_array(ray.dir),
-        ray.tmin,
-        ray.tmax,
+        Vec3A::from_array(ray.origin) - dir * NEAR_SHIFT,
+        dir,
+        ray.tmin + NEAR_SHIFT,
+        ray.tmax + NEAR_SHIFT,
     )
 }
 
