@@ -21,9 +21,9 @@ const STACK_SIZE: u32 = 32u;
 
 /// obvhs `cwbvh::node::EPSILON`: the CPU culls every child box the ray
 /// leaves before this distance (`tmin.max(EPSILON)` in `intersect_ray`).
-/// Mirrored so that the GPU visits exactly the boxes the CPU visits; rays
-/// start NEAR_SHIFT behind their origin on both, so it culls none they
-/// meet in their range.
+/// Mirrored so that the GPU visits every box the CPU visits (and, with
+/// BOX_SLACK, a few more); rays start NEAR_SHIFT behind their origin on
+/// both, so it culls none they meet in their range.
 const NEAR_CULL: f32 = 0.0001;
 
 /// Relative widening of the child intervals: 2γ₃ (pbrt-v4 §6.8.2). A
