@@ -10,7 +10,7 @@ use crate::cache::gather::HemisphereSamples;
 use crate::method::unshadowed::UnshadowedLights;
 use crate::method::FrameContext;
 use crate::sampling::Frame;
-use crate::scene::Snapshot;
+use crate::scene::{Snapshot, Triangle};
 use glam::{Mat4, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI, TAU};
 use std::sync::Arc;
@@ -326,7 +326,11 @@ fn reproject_sample(
                 point: hit_point,
                 moved,
             };
-            radiance += direct.change(ctx, g, &at, ratio);
+            // The change subtracts D(t0) estimated with a light sample of
+            // its own, not the path's: where a shadow arrives it can take
+            // more than the sample held. Radiance is never negative (a
+            // negative E(t0+1) made |τ − 1| > 1 and the gradients overshoot).
+            radiance = (radiance + direct.change(ctx, g, &at, ratio)).max(Vec3::ZERO);
         }
     }
     let sample = CellSample {
@@ -365,12 +369,13 @@ fn light_change(
     l0: &UnshadowedLights,
     l1: &UnshadowedLights,
 ) -> LightChange {
-    let mut n0 = snapshot.triangles[hit.triangle as usize].geometric_normal();
+    let triangle = &snapshot.triangles[hit.triangle as usize];
+    let mut n0 = triangle.geometric_normal();
     if n0.dot(dir) > 0.0 {
         n0 = -n0; // the side the record sees
     }
     let (p1, n1) = match moved {
-        Some((mat, p1)) => (p1, mat.transform_vector3(n0).normalize_or_zero()),
+        Some((mat, p1)) => (p1, moved_normal(triangle, mat, n0)),
         None => (p0, n0),
     };
     let (d0, d1) = (l0.irradiance(p0, n0), l1.irradiance(p1, n1));
@@ -378,6 +383,21 @@ fn light_change(
     LightChange {
         ratio: Vec3::select(lit, d1 / d0, Vec3::ONE),
         from_dark: Vec3::select(lit, Vec3::ZERO, d1),
+    }
+}
+
+/// The normal of `triangle` moved by `mat`, on the side of `n0` (one of
+/// its normals before the move). Under a non-uniform scale a normal does
+/// not move as a vector does (it takes the inverse transpose), so it is
+/// the moved triangle's own; the moved vector still points to its side
+/// (`A·n · A⁻ᵀ·n = n·n > 0`).
+fn moved_normal(triangle: &Triangle, mat: Mat4, n0: Vec3) -> Vec3 {
+    let [a, b, c] = triangle.p.map(|p| mat.transform_point3(p));
+    let n = (b - a).cross(c - a).normalize_or_zero();
+    if n.dot(mat.transform_vector3(n0)) < 0.0 {
+        -n
+    } else {
+        n
     }
 }
 
@@ -390,6 +410,32 @@ mod tests {
             depth,
             radiance: Vec3::splat(depth),
             object,
+        }
+    }
+
+    /// A moved normal is the inverse transpose's (the closed form), on the
+    /// side it faced, under a turn, a non-uniform scale and a mirror.
+    #[test]
+    fn moved_normals_take_the_inverse_transpose() {
+        let triangle = Triangle {
+            p: [
+                Vec3::ZERO,
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(0.0, 1.0, 1.0),
+            ],
+            n: [Vec3::ZERO; 3],
+        };
+        let n0 = -triangle.geometric_normal();
+        for mat in [
+            Mat4::from_rotation_x(0.7) * Mat4::from_translation(Vec3::ONE),
+            Mat4::from_scale(Vec3::new(1.0, 4.0, 0.5)),
+            Mat4::from_scale(Vec3::new(-1.0, 3.0, 1.0)) * Mat4::from_rotation_z(0.3),
+        ] {
+            let want = mat.inverse().transpose().transform_vector3(n0).normalize();
+            let got = moved_normal(&triangle, mat, n0);
+            assert!(got.abs_diff_eq(want, 1e-5), "{got} {want}");
+            let naive = mat.transform_vector3(n0).normalize();
+            assert!(naive.dot(want) > 0.0);
         }
     }
 

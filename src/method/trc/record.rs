@@ -226,7 +226,11 @@ pub(super) fn relative_change(e0: Vec3, e1: Vec3) -> f32 {
 /// any source (each channel as in [`relative_change`]), given each
 /// source's change `d_eas` to the next frame; 0 for an irradiance record.
 /// The record's irradiance keeps its own Eq. 7 besides: the diffuse part
-/// of a glossy surface interpolates it.
+/// of a glossy surface interpolates it. Eq. 21 takes the largest ratio
+/// `λ₁/λ₀`, which a source that dims never sets: taken literally, a
+/// light turning away from the surface would leave its record valid for
+/// `δt_max` frames. The temporal weight (Eq. 9) measures change either
+/// way through `|τ − 1|`, so the largest `|τ − 1|` is what is taken here.
 pub(super) fn sources_change(record: &IrradianceRecord, d_eas: Option<&[Vec3]>) -> f32 {
     let (Some(sources), Some(d)) = (&record.eas, d_eas) else {
         return 0.0;
