@@ -179,8 +179,12 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // power checked where they move (2026-11-29). 4: records' points
         // stepped off the edges where surfaces meet, and gradients finite
         // at hits at distance 0 (`ic::off_the_edge`, 2026-11-29). 5: as
-        // every method's next.
-        "trc" => 5,
+        // every method's next. 6: interpolated gradients' first pass runs
+        // through the frame the records are replaced in, so the records
+        // it replaces last know their successors; moved normals from the
+        // moved triangle (`estimate::moved_normal`), and `next_direct`'s
+        // estimate kept from going negative (2026-11-30).
+        "trc" => 6,
         // 2: as `trc`'s 4, the records all three gather. 3: as below.
         "ic" | "tcg" => 3,
         // 2 (all methods): rays find the surfaces they meet nearer than
