@@ -921,6 +921,50 @@ fn hierarchy_cycle() {
     assert_error(&path, "not a tree");
 }
 
+/// A hierarchy deeper than any thread's stack would hold if world
+/// transforms were resolved by recursion renders: the triangle at the
+/// bottom of a chain of 200,000 nodes, the camera under the triangle. The
+/// chain runs from the last node to the first, so that no parent is
+/// resolved before its child asks for it (with recursion the process
+/// aborted, with the main thread's 8 MiB stack as with 2 MiB, a server's
+/// blocking threads').
+#[test]
+fn a_node_chain_deeper_than_a_stack_renders() {
+    const DEPTH: usize = 200_000;
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "deep",
+        |d| {
+            let mut nodes = vec![json!({"name": "tri", "mesh": 0, "children": [DEPTH + 1]})];
+            nodes.extend((1..=DEPTH).map(|i| json!({"children": [i - 1]})));
+            nodes.push(json!({"name": "cam", "camera": 0, "translation": [0.0, 0.0, 3.0]}));
+            d["nodes"] = Value::Array(nodes);
+            d["scenes"][0]["nodes"] = json!([DEPTH]);
+        },
+        good_bin(),
+    );
+    let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["render", "--method", "path", "--spp", "1", "--size", "4x4"])
+        .args(["--frames", "0..1", "-q"])
+        .arg(&path)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{:?}: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let film = radcache::film::read_exr(&dir.path().join("out/frame_0000.exr")).unwrap();
+    assert!(
+        film.pixels.iter().any(|p| p.max_element() > 0.0),
+        "the triangle is seen"
+    );
+}
+
 #[test]
 fn bad_animation_keys() {
     let dir = tempfile::tempdir().unwrap();
@@ -1175,6 +1219,43 @@ fn transforms_that_break_tracing_are_errors() {
         )),
     );
     assert_error(&far, "node 'tri' places a vertex");
+    // A light under parents whose scales compound to infinity (1e40):
+    // its samples, and every pixel it lit, were NaN.
+    let far_lamp = write_case(
+        dir.path(),
+        "farlamp",
+        |d| {
+            d["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+            d["extensions"] =
+                json!({"KHR_lights_punctual": {"lights": [{"type": "point", "intensity": 1.0}]}});
+            let nodes = d["nodes"].as_array_mut().unwrap();
+            for i in 2..7 {
+                nodes.push(json!({"scale": [1e8, 1e8, 1e8], "children": [i + 1]}));
+            }
+            nodes.push(json!({"name": "lamp", "translation": [1.0, 0.0, 0.0],
+                "extensions": {"KHR_lights_punctual": {"light": 0}}}));
+            d["scenes"][0]["nodes"] = json!([0, 1, 2]);
+        },
+        good_bin(),
+    );
+    assert_error(
+        &far_lamp,
+        "light 'lamp' is placed at a coordinate past 1e17",
+    );
+    // Keys near f32's limit: a cubic spline's span between them was
+    // infinite, and every sample of the channel NaN.
+    let far_keys = rotation_keys_case(dir.path(), "farkeys", [0.0, 1.0, 0.0, 0.0], "CUBICSPLINE");
+    let bin = dir.path().join("farkeys.bin");
+    let mut bytes = std::fs::read(&bin).unwrap();
+    for (i, t) in [-3e38f32, 3e38].iter().enumerate() {
+        bytes[48 + 4 * i..52 + 4 * i].copy_from_slice(&t.to_le_bytes());
+    }
+    std::fs::write(&bin, bytes).unwrap();
+    let mut doc: Value = serde_json::from_slice(&std::fs::read(&far_keys).unwrap()).unwrap();
+    doc["accessors"][2]["min"] = json!([-3e38f32]);
+    doc["accessors"][2]["max"] = json!([3e38f32]);
+    std::fs::write(&far_keys, serde_json::to_vec(&doc).unwrap()).unwrap();
+    assert_error(&far_keys, "a key at t = -3e38 s, beyond ±1e8 s");
 }
 
 /// Scenes that would render black without a word: no triangle with any
@@ -1577,4 +1658,40 @@ fn an_accessor_without_a_buffer_view_holds_zeros() {
         good_bin(),
     );
     assert_error(&path, "the scene has no triangle with any area");
+}
+
+/// A small file whose primitives all name one large accessor of zeros (or
+/// whose mesh many nodes instance) is refused from the accessors' declared
+/// counts, before anything is decoded: 64 primitives of a 256 MiB
+/// accessor asked for over 30 GiB, 21 instances of one such mesh 12 GiB.
+#[test]
+fn a_small_file_that_decodes_to_too_much_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let huge = |primitives: usize| {
+        move |d: &mut Value| {
+            d["accessors"].as_array_mut().unwrap().push(
+                json!({"componentType": 5126, "count": 22_369_621, "type": "VEC3", "min": [0.0, 0.0, 0.0], "max": [0.0, 0.0, 0.0]}),
+            );
+            let prim = json!({"attributes": {"POSITION": 2}});
+            let mut all = vec![d["meshes"][0]["primitives"][0].clone()];
+            all.extend(std::iter::repeat_n(prim, primitives));
+            d["meshes"][0]["primitives"] = Value::Array(all);
+        }
+    };
+    let many = write_case(dir.path(), "many", huge(64), good_bin());
+    assert!(std::fs::metadata(&many).unwrap().len() < 10_000);
+    assert_error(&many, "over the 4 GiB a scene may take");
+    let instanced = write_case(
+        dir.path(),
+        "instanced",
+        |d| {
+            huge(1)(d);
+            let nodes = d["nodes"].as_array_mut().unwrap();
+            let copies = 20;
+            nodes.extend((0..copies).map(|_| json!({"mesh": 0})));
+            d["scenes"][0]["nodes"] = json!((0..copies + 2).collect::<Vec<_>>());
+        },
+        good_bin(),
+    );
+    assert_error(&instanced, "over the 4 GiB a scene may take");
 }

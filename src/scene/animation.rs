@@ -31,6 +31,13 @@ pub enum Interpolation {
     CubicSpline,
 }
 
+/// The largest key time a channel may have, in seconds (either sign;
+/// about three years). A cubic spline scales its tangents (up to
+/// [`crate::scene::gltf_loader::MAX_COORDINATE`]) by the span between two
+/// keys: keys near `f32`'s limit made that span infinite and every sample
+/// of the channel NaN.
+pub const MAX_KEY_TIME: f32 = 1e8;
+
 /// One animated property of one node. Values are stored as `Vec4`
 /// (xyz for translation and scale, xyzw for rotation quaternions). For
 /// `CubicSpline`, `values` holds three entries per key, as glTF does:
@@ -52,6 +59,11 @@ impl Channel {
         }
         if self.times.iter().any(|t| !t.is_finite()) {
             return Err("animation channel has a non-finite key time".into());
+        }
+        if let Some(t) = self.times.iter().find(|t| t.abs() > MAX_KEY_TIME) {
+            return Err(format!(
+                "animation channel has a key at t = {t:e} s, beyond ±{MAX_KEY_TIME:e} s"
+            ));
         }
         if self.times.windows(2).any(|w| w[1] < w[0]) {
             return Err("animation key times are not increasing".into());

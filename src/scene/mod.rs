@@ -475,17 +475,17 @@ impl Scene {
         camera
     }
 
-    /// The product of the rotations of `node` and its ancestors at `t`.
+    /// The product of the rotations of `node` and its ancestors at `t`,
+    /// root first, normalised at each step.
     fn chain_rotation(&self, node: usize, t: f32) -> Quat {
-        let local = self
-            .animation
-            .local_trs(node, self.nodes[node].rest, t)
-            .rotation;
-        match self.nodes[node].parent {
-            Some(parent) => self.chain_rotation(parent, t) * local,
-            None => local,
+        let mut chain = vec![node];
+        while let Some(parent) = self.nodes[chain[chain.len() - 1]].parent {
+            chain.push(parent);
         }
-        .normalize()
+        chain.iter().rev().fold(Quat::IDENTITY, |above, &n| {
+            let local = self.animation.local_trs(n, self.nodes[n].rest, t).rotation;
+            (above * local).normalize()
+        })
     }
 
     /// World transforms of all nodes at time `t`.
@@ -500,21 +500,30 @@ impl Scene {
             .collect()
     }
 
-    fn resolve_world(&self, node: usize, t: f32, world: &mut [Option<Mat4>]) -> Mat4 {
-        if let Some(m) = world[node] {
-            return m;
+    /// Resolves the world transform of `node` and of its ancestors not
+    /// resolved yet. A loop, not recursion: a file may chain its nodes
+    /// deeper than a thread's stack would hold.
+    fn resolve_world(&self, node: usize, t: f32, world: &mut [Option<Mat4>]) {
+        // Up to the first resolved ancestor (loaders guarantee the
+        // hierarchy is a forest, so the walk ends at a root)...
+        let mut unresolved = Vec::new();
+        let mut next = Some(node);
+        let mut above = None;
+        while let Some(n) = next {
+            if let Some(m) = world[n] {
+                above = Some(m);
+                break;
+            }
+            unresolved.push(n);
+            next = self.nodes[n].parent;
         }
-        let local = self
-            .animation
-            .local_trs(node, self.nodes[node].rest, t)
-            .to_mat4();
-        let m = match self.nodes[node].parent {
-            // Loaders guarantee the hierarchy is a forest (no cycles).
-            Some(parent) => self.resolve_world(parent, t, world) * local,
-            None => local,
-        };
-        world[node] = Some(m);
-        m
+        // ...then down, each node's transform its parent's times its own.
+        for &n in unresolved.iter().rev() {
+            let local = self.animation.local_trs(n, self.nodes[n].rest, t).to_mat4();
+            let m = above.map_or(local, |parent| parent * local);
+            world[n] = Some(m);
+            above = Some(m);
+        }
     }
 
     /// Rigid motion of an object from time `t0` to `t1`: the matrix taking a
@@ -550,10 +559,15 @@ impl Scene {
                 .iter()
                 .map(|l| {
                     let m = world[l.node];
+                    let position = m.transform_point3(Vec3::ZERO);
+                    // Carried past what can be traced (as triangles are
+                    // collapsed, below), a light sends nothing: its
+                    // position would make NaN light samples.
+                    let traceable = within_world(position);
                     PointLight {
-                        position: m.transform_point3(Vec3::ZERO),
+                        position: if traceable { position } else { Vec3::ZERO },
                         direction: m.transform_vector3(-Vec3::Z).normalize_or_zero(),
-                        intensity: l.intensity,
+                        intensity: if traceable { l.intensity } else { Vec3::ZERO },
                         spot: l.spot,
                     }
                 })
@@ -654,6 +668,49 @@ impl Snapshot {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A light its animation carries past what can be traced sends nothing
+    /// from then on (its samples would be NaN), as such triangles are
+    /// collapsed; before, it shines from where it is.
+    #[test]
+    fn a_light_carried_past_the_world_goes_dark() {
+        let mut scene = Scene::builtin("cube-in-box").unwrap();
+        let parent = scene.nodes.len();
+        scene.nodes.push(Node {
+            name: "big".into(),
+            parent: None,
+            rest: Trs {
+                scale: Vec3::splat(1e8),
+                ..Trs::default()
+            },
+        });
+        scene.nodes.push(Node {
+            name: "lamp".into(),
+            parent: Some(parent),
+            rest: Trs::default(),
+        });
+        scene.lights.push(PunctualLight {
+            name: "lamp".into(),
+            node: parent + 1,
+            intensity: Vec3::ONE,
+            spot: None,
+        });
+        scene.animation.channels.push(animation::Channel {
+            node: parent + 1,
+            property: Property::Translation,
+            interpolation: Interpolation::Linear,
+            times: vec![0.0, 1.0],
+            values: vec![glam::Vec4::ZERO, glam::Vec4::new(1e10, 0.0, 0.0, 0.0)],
+        });
+        let at = |t: f32| *scene.snapshot(t).lights.last().unwrap();
+        let near = at(1e-9);
+        assert!(near.position.x > 0.0 && near.intensity == Vec3::ONE);
+        let far = at(1.0);
+        assert!(
+            far.position.is_finite() && far.intensity == Vec3::ZERO,
+            "{far:?}"
+        );
+    }
 
     #[test]
     fn project_inverts_direction() {

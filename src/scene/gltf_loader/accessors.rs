@@ -14,6 +14,50 @@ use std::path::Path;
 /// their `count` is the only thing bounding the allocation: cap it.
 const MAX_VIEWLESS_BYTES: usize = 1 << 28;
 
+/// The most the scene's meshes (every node's instance) and animation
+/// channels may decode to, in bytes. Each accessor is bounded by its file
+/// bytes, or by [`MAX_VIEWLESS_BYTES`], but one accessor may be named by
+/// many primitives, meshes by many nodes: a 3 KB file naming a 256 MiB
+/// accessor of zeros from 64 primitives asked for 32 GiB.
+const MAX_DECODED_BYTES: u64 = 1 << 32;
+
+/// Refuses a file whose meshes and animations would decode to more than
+/// [`MAX_DECODED_BYTES`], from the accessors' declared counts, before any
+/// is decoded: positions, normals (or those computed) and indices of each
+/// primitive of each node's mesh, and each channel's keys.
+pub(super) fn check_decoded_bytes(gnodes: &[gltf::Node], document: &gltf::Document) -> Res<()> {
+    let bytes = |acc: gltf::Accessor, per: u64| (acc.count() as u64).saturating_mul(per);
+    let mut total = 0u64;
+    for mesh in gnodes.iter().filter_map(|n| n.mesh()) {
+        for prim in mesh.primitives() {
+            let positions = prim.get(&gltf::mesh::Semantic::Positions);
+            let n = positions.map_or(0, |a| a.count() as u64);
+            // Positions and normals as Vec3; indices (or 0..n) as u32.
+            let indices = prim.indices().map_or(n, |a| a.count() as u64);
+            total = total
+                .saturating_add(n.saturating_mul(2 * 12))
+                .saturating_add(indices.saturating_mul(4));
+        }
+    }
+    for animation in document.animations() {
+        for channel in animation.channels() {
+            let sampler = channel.sampler();
+            total = total
+                .saturating_add(bytes(sampler.input(), 4))
+                .saturating_add(bytes(sampler.output(), 16));
+        }
+    }
+    if total > MAX_DECODED_BYTES {
+        return Err(format!(
+            "the meshes (each node's instance) and animations would decode to {:.1} GiB, \
+             over the {} GiB a scene may take",
+            total as f64 / (1u64 << 30) as f64,
+            MAX_DECODED_BYTES >> 30
+        ));
+    }
+    Ok(())
+}
+
 /// Buffer contents, indexed like the document's buffers; the files their
 /// URIs name are read inside `root` only, when given.
 pub(super) fn load_buffers(

@@ -153,6 +153,7 @@ fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scen
         .map(|&g| node_at(&document, g))
         .collect();
 
+    accessors::check_decoded_bytes(&gnodes, &document)?;
     let nodes = build_nodes(&gnodes, &hierarchy)?;
     let mut materials = materials::build_materials(&document, path)?;
     let objects = mesh::build_objects(&gnodes, &hierarchy, &buffers, &mut materials)?;
@@ -202,6 +203,15 @@ fn check_first_frame(scene: &Scene) -> Res<()> {
                 crate::scene::MAX_WORLD_COORDINATE
             ));
         }
+    }
+    if let Some(light) = (scene.lights.iter())
+        .find(|l| !crate::scene::within_world(world[l.node].transform_point3(Vec3::ZERO)))
+    {
+        return Err(format!(
+            "light '{}' is placed at a coordinate past {:e} (or NaN) at t = 0, past what can be traced",
+            light.name,
+            crate::scene::MAX_WORLD_COORDINATE
+        ));
     }
     let snapshot = scene.snapshot(0.0);
     let camera = &snapshot.camera;
