@@ -360,7 +360,10 @@ fn job_report(store: &Store, j: &JobValue, only: Option<u32>) -> Result<JobRepor
     let mut latest: BTreeMap<(u32, u64), (u32, u32, u32)> = BTreeMap::new();
     store.for_each_record(j.id, u32::MAX, |frame, rec| {
         r.record_versions += 1;
-        let lifespan = rec.last_frame.saturating_sub(rec.created_frame) + 1;
+        let lifespan = rec
+            .last_frame
+            .saturating_sub(rec.created_frame)
+            .saturating_add(1);
         let entry = latest
             .entry((rec.created_frame, rec.id))
             .or_insert((frame, lifespan, rec.object));
@@ -463,7 +466,7 @@ fn frame_reports(
     for frame in store.frames_done(job)? {
         let v = store.frame(job, frame)?.expect("listed frame exists");
         r.exr_stored_bytes += u64::from(v.exr_stored_len);
-        r.exr_raw_bytes += v.exr_len;
+        r.exr_raw_bytes = r.exr_raw_bytes.saturating_add(v.exr_len);
         let stats = store.frame_stats(job, frame)?.unwrap_or_default();
         per_frame.insert(
             frame,

@@ -196,6 +196,19 @@ pub(crate) fn compress(bytes: &[u8]) -> Vec<u8> {
 
 /// Decompresses exactly `len` bytes.
 pub(crate) fn decompress(bytes: &[u8], len: usize) -> Result<Vec<u8>, String> {
+    // `len` comes from the store, and zstd reserves it before reading a
+    // byte: a damaged length (a flipped high bit) would ask for terabytes
+    // and abort the process. The frame states its own size ([`compress`]
+    // writes whole frames), so the two must agree first.
+    match zstd::zstd_safe::get_frame_content_size(bytes) {
+        Ok(Some(n)) if n == len as u64 => {}
+        Ok(Some(n)) => return Err(format!("zstd: expected {len} bytes, the frame holds {n}")),
+        Ok(None) | Err(_) => {
+            return Err(format!(
+                "zstd: not a frame that states its size (expected {len} bytes)"
+            ))
+        }
+    }
     let out = zstd::bulk::decompress(bytes, len).map_err(|e| format!("zstd: {e}"))?;
     if out.len() != len {
         return Err(format!(
@@ -255,9 +268,18 @@ impl SampleLog {
                     .write_all_at(MAGIC, 0)
                     .and_then(|()| log.file.sync_all())
                     .map_err(|e| e.to_string())?;
+                // The file's name too: the first frame committed will
+                // reference it.
+                sync_dir(dir)?;
                 log.committed = MAGIC.len() as u64;
             }
             Some(c) => {
+                if c < MAGIC.len() as u64 {
+                    // Appends at `c` would overwrite the header.
+                    return Err(format!(
+                        "the store references {c} bytes of it, less than its own header (damaged meta)"
+                    ));
+                }
                 if actual < c {
                     return Err(format!(
                         "it is {actual} bytes, shorter than the {c} bytes the store's records reference (truncated or replaced?)"
@@ -343,6 +365,34 @@ impl SampleLog {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A damaged stored length is an error, not an allocation of that
+    /// many bytes (2⁶⁰ aborted the process, or panicked with "capacity
+    /// overflow"); the right one decompresses.
+    #[test]
+    fn a_stored_length_the_frame_does_not_hold_is_an_error() {
+        let data: Vec<u8> = (0..1000u32).map(|i| (i % 7) as u8).collect();
+        let z = compress(&data);
+        assert_eq!(decompress(&z, data.len()).unwrap(), data);
+        for len in [999, 1001, 1 << 40, 1 << 60, usize::MAX] {
+            let err = decompress(&z, len).unwrap_err();
+            assert!(err.contains(&format!("expected {len} bytes")), "{err}");
+        }
+        let err = decompress(&[0x28, 0xb5, 0x2f], 10).unwrap_err();
+        assert!(err.contains("not a frame"), "{err}");
+    }
+
+    /// A committed length shorter than the header is refused: appends at
+    /// it overwrote the header, and the store was unreadable from then on.
+    #[test]
+    fn a_committed_length_inside_the_header_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        drop(SampleLog::open(dir.path(), 0, None).unwrap());
+        let err = SampleLog::open(dir.path(), 0, Some(3)).err().unwrap();
+        assert!(err.contains("less than its own header"), "{err}");
+        let log = SampleLog::open(dir.path(), 0, Some(MAGIC.len() as u64)).unwrap();
+        assert_eq!(log.committed(), MAGIC.len() as u64);
+    }
 
     #[test]
     fn log_file_names_round_trip_and_nothing_else_parses() {
