@@ -1708,6 +1708,44 @@ fn trc_frames_done_by_another_chain_are_rendered_again() {
     }
 }
 
+/// A `trc` job done for 0..10, rendered again for 5..10 and stopped after
+/// frame 6, resumes that chain after frame 6 (frames 7..9 are still the
+/// first chain's, and are rendered again) rather than starting 5..10
+/// over each time; its frames equal an uninterrupted 5..10 render.
+#[test]
+fn trc_range_rendered_again_and_stopped_resumes_where_it_stopped() {
+    let mut trc = TrcSettings::default();
+    trc.ic.strata = Strata { theta: 4, phi: 12 };
+    trc.ic.spp = 1;
+    let method = MethodSettings::Trc(trc);
+    let dir = tempfile::tempdir().unwrap();
+    let plain = dir.path().join("plain");
+    render::render_to_dir(&mut renderer(&method), 5..10, &plain, true).unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let out = dir.path().join("out");
+    let run = |frames: std::ops::Range<u32>, stop_after: u32| {
+        let settings = renderer(&method).settings;
+        let spec = render::job_spec("j", &source, &method, &settings, frames.clone()).unwrap();
+        let mut sj = StoreJob {
+            store: &store,
+            job: store.begin_job(&spec, false).unwrap(),
+        };
+        let mut r = renderer(&method);
+        let s =
+            render::render_job_to_dir_with(&mut r, frames, &out, true, Some(&mut sj), &mut |f| {
+                f < stop_after
+            })
+            .unwrap();
+        (s.resumed, s.frames)
+    };
+    assert_eq!(run(0..10, u32::MAX), (0, 10));
+    assert_eq!(run(5..10, 6), (0, 2), "frames 5 and 6 of a new chain");
+    assert_eq!(run(5..10, u32::MAX), (2, 3), "resumed after frame 6");
+    assert_eq!(exr_files(&plain, 5..10), exr_files(&out, 5..10));
+    assert_eq!(run(5..10, u32::MAX), (5, 0), "done");
+}
+
 #[test]
 fn trc_resumes_mid_window_from_stored_state_without_replay() {
     trc_resumes_from_stored_state(TemporalGradients::Extrapolated);
@@ -1920,6 +1958,16 @@ fn scene_hash_covers_external_buffers_and_images() {
         main,
         radcache::hash::content_hash(&std::fs::read(&gltf).unwrap())
     );
+    // The external part as stores already hold it: the hash of every
+    // file's URI, NUL, length (u64 LE) and bytes, one after the other.
+    let mut all = Vec::new();
+    for (uri, bytes) in [("a%20b.bin", &b"\x01\x02\x03\x04"[..]), ("tex.png", b"png")] {
+        all.extend_from_slice(uri.as_bytes());
+        all.push(0);
+        all.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+        all.extend_from_slice(bytes);
+    }
+    assert_eq!(ext, radcache::hash::content_hash(&all));
     std::fs::write(dir.path().join("a b.bin"), [1u8, 2, 3, 5]).unwrap();
     let (_, h2) = render::scene_identity(&source).unwrap();
     assert_ne!(h1, h2, "a changed .bin changes the hash");

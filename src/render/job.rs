@@ -57,7 +57,10 @@ pub fn scene_identity_confined(
                 main
             } else {
                 let dir = path.parent().unwrap_or(Path::new("."));
-                let mut all = Vec::new();
+                // The FNV-1a of every file's URI, length and bytes one
+                // after the other, fed as each is read: memory for one
+                // file at a time, however many URIs name a large one.
+                let mut all = crate::hash::Fnv1a::default();
                 for (uri, declared) in uris {
                     let cannot = |what: String| {
                         anyhow::anyhow!("{what} (referenced by scene {})", path.display())
@@ -65,12 +68,12 @@ pub fn scene_identity_confined(
                     let file = gltf_loader::confined_uri_file(dir, &uri, root).map_err(cannot)?;
                     let content = gltf_loader::read_regular_file(&file, declared)
                         .map_err(|e| cannot(format!("cannot read {}: {e}", file.display())))?;
-                    all.extend_from_slice(uri.as_bytes());
-                    all.push(0);
-                    all.extend_from_slice(&(content.len() as u64).to_le_bytes());
-                    all.extend_from_slice(&content);
+                    all.write(uri.as_bytes());
+                    all.write(&[0]);
+                    all.write(&(content.len() as u64).to_le_bytes());
+                    all.write(&content);
                 }
-                format!("{main}+{}", crate::hash::content_hash(&all))
+                format!("{main}+{:016x}", all.finish())
             }
         }
     };
@@ -177,11 +180,11 @@ pub(super) fn resume(
         let looks_ahead = renderer.looks_ahead();
         if prefix as usize == frames.len() && rendered_as_one_chain(j, frames, looks_ahead)? {
             // Every frame done by this range's chain: nothing to render.
-        } else if let Some(state) = resumable_state(j, frames, prefix, looks_ahead)? {
+        } else if let Some((state, resumed)) = resumable_state(j, frames, prefix, looks_ahead)? {
             renderer
                 .restore_state(state)
                 .map_err(|e| j.store.state_error(j.job.id, e))?;
-            done.retain(|&f| f < frames.start + prefix);
+            done.retain(|&f| f < frames.start + resumed);
         } else {
             j.store.clear_state(j.job.id)?;
             done.clear();
@@ -277,28 +280,30 @@ fn rendered_as_one_chain(job: &StoreJob, frames: &Range<u32>, looks_ahead: bool)
         && head.frame + 1 >= frames.end)
 }
 
-/// The stored state to continue a stateful method after the finished
-/// `prefix` of `frames`, if the job holds the state of exactly that frame of
-/// the same chain.
+/// The stored state to continue a stateful method within the finished
+/// `prefix` of `frames`, and how many of its frames that state covers, if
+/// the job holds the state of one of them from this range's chain. A chain
+/// commits its frames in order, so every frame of the range up to its
+/// head is the chain's own; the finished frames after the head (a range
+/// rendered again over another chain's frames, stopped part way) are the
+/// other chain's, and are rendered again.
 fn resumable_state(
     job: &StoreJob,
     frames: &Range<u32>,
     prefix: u32,
     looks_ahead: bool,
-) -> Result<Option<crate::method::MethodState>> {
-    if prefix == 0 {
-        return Ok(None);
-    }
+) -> Result<Option<(crate::method::MethodState, u32)>> {
     let Some(head) = job.store.state_head(job.job.id)? else {
         return Ok(None);
     };
     let same_chain = head.chain_start == frames.start
         && head.chain_end == looks_ahead.then_some(frames.end)
-        && head.frame == frames.start + prefix - 1;
+        && (frames.start..frames.start + prefix).contains(&head.frame);
     if !same_chain {
         return Ok(None);
     }
-    Ok(job.store.load_state(job.job.id)?)
+    let covered = head.frame + 1 - frames.start;
+    Ok(job.store.load_state(job.job.id)?.map(|s| (s, covered)))
 }
 
 /// Writes a finished frame's files from the store if `out_dir` lacks its
