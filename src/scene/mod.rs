@@ -19,13 +19,16 @@ pub use animation::{Animation, Channel, Interpolation, Property};
 
 /// Below this size (world units across) the floor of the ray offset
 /// ([`crate::integrator::RAY_OFFSET`], 1e-4 units) is over 1 % of the
-/// scene, and light is lost or leaks. Seen with `path` on a closed room
-/// scaled down (its bounding box's diagonal): 3.6e-3 units, mean right but
-/// 16×16 blocks up to 5 % off; 1.1e-3, 6 % of the light lost; 3.6e-4,
-/// 34 %; 1.1e-4, black. At 0.03 units (`tests/scene_scale.rs`, ×0.01)
-/// the images still agree. (Those losses were measured while the BVH
-/// traversal also missed every surface nearer than 1e-4, before
-/// [`crate::accel::NEAR_SHIFT`]; the offset's floor remains.)
+/// scene, and light leaks or is lost. Seen with `path` (64 spp, 32×32,
+/// frame 0) on `cube-in-box` scaled down to a bounding-box diagonal of
+/// (against the metre-scale frame: mean, worst 8×8 block): 1e-2 units,
+/// +0.6 %, 3.8 % (as far as paths that diverge at an offset move a block
+/// of this noise); 3.6e-3, +1.1 %, 7 %; 1.1e-3, +1.6 %, 12 %; 3.6e-4,
+/// +2.8 %, 20 %; 1.1e-4, 45 % of the light lost (a throwaway sweep at
+/// 4d913f1, after [`crate::accel::NEAR_SHIFT`]; before it the traversal
+/// also missed surfaces nearer than 1e-4, and the same sizes lost 6 % and
+/// 34 % at 1.1e-3 and 3.6e-4). At 0.03 units (`tests/scene_scale.rs`,
+/// ×0.01) the images still agree.
 pub const SMALLEST_SCENE: f32 = 0.01;
 
 /// Frames per second used when the command line does not say (DESIGN.md).
