@@ -267,6 +267,49 @@ fn corrupt_value_is_an_error_naming_tree_and_key() {
     assert_eq!(store.frame_records(id, 0).unwrap().len(), 3);
 }
 
+/// A byte damaged anywhere in the sample log past its header makes the
+/// frames and samples it holds an error naming the log, or leaves them as
+/// they were: never other bytes (zstd's checksum of each block).
+#[test]
+fn a_damaged_sample_log_never_reads_as_other_bytes() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let store = Store::open(&path).unwrap();
+    commit_frames(&store, "j", 0..2);
+    let id = store.job("j").unwrap().unwrap().id;
+    let read = |store: &Store| {
+        (
+            store.frame_exr(id, 1).map_err(|e| e.to_string()),
+            store.record_samples(id, 1, 2).map_err(|e| e.to_string()),
+        )
+    };
+    let (exr, samples) = read(&store);
+    let (exr, samples) = (exr.unwrap().unwrap(), samples.unwrap());
+    let log_path = path.join("samples.log");
+    let log = std::fs::read(&log_path).unwrap();
+    let magic = radcache::store::samples::MAGIC.len();
+    let (mut errors, mut wrong) = (0, 0);
+    for i in magic..log.len() {
+        let mut damaged = log.clone();
+        damaged[i] ^= 0x10;
+        std::fs::write(&log_path, &damaged).unwrap();
+        let (e, s) = read(&store);
+        for outcome in [e.map(|e| e.unwrap() == exr), s.map(|s| s == samples)] {
+            match outcome {
+                Ok(same) => wrong += u32::from(!same),
+                Err(msg) => {
+                    assert!(msg.contains("samples.log"), "{msg}");
+                    errors += 1;
+                }
+            }
+        }
+    }
+    std::fs::write(&log_path, &log).unwrap();
+    assert_eq!(wrong, 0, "{wrong} damaged bytes read as other values");
+    assert!(errors > 0);
+    assert_eq!(read(&store).0.unwrap().unwrap(), exr);
+}
+
 #[test]
 fn newer_schema_is_refused_and_left_as_it_was() {
     let dir = tempfile::tempdir().unwrap();

@@ -323,10 +323,17 @@ fn restore_frame_files(job: &StoreJob, frame: u32, out_dir: &Path) -> Result<()>
         ".frame_{frame:04}.exr.restore-{}",
         std::process::id()
     ));
+    let film = film::decode_exr(&bytes).with_context(|| {
+        format!(
+            "store {}: the stored EXR of frame {frame} of job {:?} is damaged \
+             (`--force` renders the job again)",
+            job.store.path().display(),
+            job.job.spec.name
+        )
+    })?;
     std::fs::write(&temp, &bytes)
         .and_then(|()| std::fs::File::open(&temp)?.sync_all())
         .with_context(|| format!("cannot write {}", temp.display()))?;
-    let film = film::read_exr(&temp)?;
     film::write_png(&film, &film::frame_path(out_dir, frame, "png"))?;
     std::fs::rename(&temp, &exr_path)
         .with_context(|| format!("cannot write {}", exr_path.display()))?;

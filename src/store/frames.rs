@@ -235,9 +235,17 @@ impl Store {
         match &result {
             // The transaction references the appends, flushed or not.
             Ok(_) => log.commit(),
-            // No transaction references them: cut them off now (a crash
-            // before this is handled on the next open).
-            Err(_) => log.rollback().map_err(|e| self.log_error(e))?,
+            // No transaction references them: cut them off now. If that
+            // fails too, the commit's own error is the one to report: the
+            // next open cuts the tail off as after a crash.
+            Err(_) => {
+                if let Err(e) = log.rollback() {
+                    eprintln!(
+                        "warning: {} (left for the next open to cut off)",
+                        self.log_error(e)
+                    );
+                }
+            }
         }
         let progressed = result?;
         self.flush()?;

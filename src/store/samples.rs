@@ -190,8 +190,18 @@ fn from_planar(raw: &[u8], n: usize) -> Vec<PackedSample> {
         .collect()
 }
 
+/// One zstd frame of `bytes`, stating its size and carrying the checksum
+/// of its content: a damaged block is an error on reading, never other
+/// bytes of the right length (blocks written before the checksum read as
+/// they did).
 pub(crate) fn compress(bytes: &[u8]) -> Vec<u8> {
-    zstd::bulk::compress(bytes, ZSTD_LEVEL).expect("zstd compression to memory cannot fail")
+    let mut compressor = zstd::bulk::Compressor::new(ZSTD_LEVEL).expect("zstd level 3 exists");
+    compressor
+        .set_parameter(zstd::zstd_safe::CParameter::ChecksumFlag(true))
+        .expect("zstd takes the checksum flag");
+    compressor
+        .compress(bytes)
+        .expect("zstd compression to memory cannot fail")
 }
 
 /// Decompresses exactly `len` bytes.
@@ -380,6 +390,25 @@ mod tests {
         }
         let err = decompress(&[0x28, 0xb5, 0x2f], 10).unwrap_err();
         assert!(err.contains("not a frame"), "{err}");
+    }
+
+    /// A damaged block is an error, never other bytes of the right length
+    /// (a wrong radiance, a broken EXR): each bit flipped in turn.
+    #[test]
+    fn a_damaged_block_never_decompresses_to_other_bytes() {
+        let data: Vec<u8> = (0..2000u32).map(|i| (i * 7919 % 251) as u8).collect();
+        let z = compress(&data);
+        let mut wrong = 0;
+        for i in 0..z.len() {
+            for bit in 0..8 {
+                let mut damaged = z.clone();
+                damaged[i] ^= 1 << bit;
+                if decompress(&damaged, data.len()).is_ok_and(|out| out != data) {
+                    wrong += 1;
+                }
+            }
+        }
+        assert_eq!(wrong, 0, "{wrong} damaged blocks gave other bytes");
     }
 
     /// A committed length shorter than the header is refused: appends at
