@@ -503,11 +503,12 @@ fn check_directory(path: &Path, create: bool) -> Result<bool, StoreError> {
                 })
             }
         }
-        Err(e) => Err(not_a_store(e.to_string())),
+        // Not a verdict on what is there (permission denied, say).
+        Err(e) => Err(StoreError::sled(path, sled::Error::Io(e))),
         Ok(m) if !m.is_dir() => Err(not_a_store("not a directory".into())),
         Ok(_) => {
             let entries: Vec<String> = std::fs::read_dir(path)
-                .map_err(|e| not_a_store(e.to_string()))?
+                .map_err(|e| StoreError::sled(path, sled::Error::Io(e)))?
                 .filter_map(|e| e.ok())
                 .map(|e| e.file_name().to_string_lossy().into_owned())
                 .collect();
@@ -620,10 +621,10 @@ fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
                 path: path.to_owned(),
             })
         }
-        Ok(Err(sled::Error::Corruption { .. })) | Ok(Err(sled::Error::Unsupported(_))) => {
+        Ok(Err(e @ (sled::Error::Corruption { .. } | sled::Error::Unsupported(_)))) => {
             Err(StoreError::NotAStore {
                 path: path.to_owned(),
-                detail: "sled reports a corrupt or unsupported database".into(),
+                detail: format!("sled reports a corrupt or unsupported database: {e}"),
             })
         }
         Ok(Err(e)) => Err(StoreError::sled(path, e)),
