@@ -17,7 +17,7 @@ use radcache::store::schema::FrameSourcesValue;
 use radcache::store::{
     keys, v1, FrameCommit, JobSpec, PackedSample, RecordCommit, SampleBlock, Store, StoreError,
 };
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 mod store_fixtures;
 use store_fixtures::{record, samples, spec};
@@ -216,13 +216,20 @@ fn a_store_whose_creation_was_cut_off_is_made_anew() {
     }
 }
 
-#[test]
-fn corrupt_value_is_an_error_naming_tree_and_key() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("db");
+/// A new store in `dir/db` holding frames 0 and 1 of job "j"
+/// ([`commit_frames`]): its path, the store and the job's id.
+fn store_of_two_frames(dir: &Path) -> (PathBuf, Store, u64) {
+    let path = dir.join("db");
     let store = Store::open(&path).unwrap();
     commit_frames(&store, "j", 0..2);
     let id = store.job("j").unwrap().unwrap().id;
+    (path, store, id)
+}
+
+#[test]
+fn corrupt_value_is_an_error_naming_tree_and_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, store, id) = store_of_two_frames(dir.path());
     for garbage in [&b"garbage"[..], &[0xff; 64][..], &[][..]] {
         store
             .raw_insert("records", &keys::frame(id, 1), garbage)
@@ -273,10 +280,7 @@ fn corrupt_value_is_an_error_naming_tree_and_key() {
 #[test]
 fn a_damaged_sample_log_never_reads_as_other_bytes() {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("db");
-    let store = Store::open(&path).unwrap();
-    commit_frames(&store, "j", 0..2);
-    let id = store.job("j").unwrap().unwrap().id;
+    let (path, store, id) = store_of_two_frames(dir.path());
     let read = |store: &Store| {
         (
             store.frame_exr(id, 1).map_err(|e| e.to_string()),
@@ -1718,20 +1722,8 @@ fn trc_frames_done_by_another_chain_are_rendered_again() {
         let plain = dir.path().join("plain");
         render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
         let store = Store::open(&dir.path().join("db")).unwrap();
-        let source = SceneSource::Builtin("cube-in-box".into());
         let out = dir.path().join("out");
-        let run = |frames: std::ops::Range<u32>| {
-            let settings = renderer(&method).settings;
-            let spec = render::job_spec("j", &source, &method, &settings, frames.clone()).unwrap();
-            let mut sj = StoreJob {
-                store: &store,
-                job: store.begin_job(&spec, false).unwrap(),
-            };
-            let mut r = renderer(&method);
-            render::render_job_to_dir(&mut r, frames, &out, true, Some(&mut sj))
-                .unwrap()
-                .frames
-        };
+        let run = |frames| render_job_j(&store, &method, frames, &out, u32::MAX).frames;
         assert_eq!(run(0..3), 3);
         assert_eq!(run(3..6), 3);
         assert_eq!(
@@ -1751,6 +1743,29 @@ fn trc_frames_done_by_another_chain_are_rendered_again() {
     }
 }
 
+/// Renders `frames` of job "j" of `store` (the built-in cube-in-box at
+/// [`renderer`]'s settings) into `out`, stopping after frame `stop_after`.
+fn render_job_j(
+    store: &Store,
+    method: &MethodSettings,
+    frames: std::ops::Range<u32>,
+    out: &Path,
+    stop_after: u32,
+) -> render::RenderSummary {
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let settings = renderer(method).settings;
+    let spec = render::job_spec("j", &source, method, &settings, frames.clone()).unwrap();
+    let mut sj = StoreJob {
+        store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    let mut r = renderer(method);
+    render::render_job_to_dir_with(&mut r, frames, out, true, Some(&mut sj), &mut |f| {
+        f < stop_after
+    })
+    .unwrap()
+}
+
 /// A `trc` job done for 0..10, rendered again for 5..10 and stopped after
 /// frame 6, resumes that chain after frame 6 (frames 7..9 are still the
 /// first chain's, and are rendered again) rather than starting 5..10
@@ -1765,21 +1780,9 @@ fn trc_range_rendered_again_and_stopped_resumes_where_it_stopped() {
     let plain = dir.path().join("plain");
     render::render_to_dir(&mut renderer(&method), 5..10, &plain, true).unwrap();
     let store = Store::open(&dir.path().join("db")).unwrap();
-    let source = SceneSource::Builtin("cube-in-box".into());
     let out = dir.path().join("out");
-    let run = |frames: std::ops::Range<u32>, stop_after: u32| {
-        let settings = renderer(&method).settings;
-        let spec = render::job_spec("j", &source, &method, &settings, frames.clone()).unwrap();
-        let mut sj = StoreJob {
-            store: &store,
-            job: store.begin_job(&spec, false).unwrap(),
-        };
-        let mut r = renderer(&method);
-        let s =
-            render::render_job_to_dir_with(&mut r, frames, &out, true, Some(&mut sj), &mut |f| {
-                f < stop_after
-            })
-            .unwrap();
+    let run = |frames, stop_after| {
+        let s = render_job_j(&store, &method, frames, &out, stop_after);
         (s.resumed, s.frames)
     };
     assert_eq!(run(0..10, u32::MAX), (0, 10));
