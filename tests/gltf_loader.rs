@@ -1664,6 +1664,7 @@ fn an_accessor_without_a_buffer_view_holds_zeros() {
 /// whose mesh many nodes instance) is refused from the accessors' declared
 /// counts, before anything is decoded: 64 primitives of a 256 MiB
 /// accessor asked for over 30 GiB, 21 instances of one such mesh 12 GiB.
+/// Primitives the loader skips (points) do not count.
 #[test]
 fn a_small_file_that_decodes_to_too_much_is_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -1681,6 +1682,19 @@ fn a_small_file_that_decodes_to_too_much_is_refused() {
     let many = write_case(dir.path(), "many", huge(64), good_bin());
     assert!(std::fs::metadata(&many).unwrap().len() < 10_000);
     assert_error(&many, "over the 4 GiB a scene may take");
+    // As points, which the loader skips, they cost nothing and load.
+    let points = write_case(
+        dir.path(),
+        "points",
+        |d| {
+            huge(64)(d);
+            for prim in d["meshes"][0]["primitives"].as_array_mut().unwrap()[1..].iter_mut() {
+                prim["mode"] = json!(0);
+            }
+        },
+        good_bin(),
+    );
+    Scene::load(&points).unwrap();
     let instanced = write_case(
         dir.path(),
         "instanced",

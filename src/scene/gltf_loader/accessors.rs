@@ -23,28 +23,44 @@ const MAX_DECODED_BYTES: u64 = 1 << 32;
 
 /// Refuses a file whose meshes and animations would decode to more than
 /// [`MAX_DECODED_BYTES`], from the accessors' declared counts, before any
-/// is decoded: positions, normals (or those computed) and indices of each
-/// primitive of each node's mesh, and each channel's keys.
-pub(super) fn check_decoded_bytes(gnodes: &[gltf::Node], document: &gltf::Document) -> Res<()> {
-    let bytes = |acc: gltf::Accessor, per: u64| (acc.count() as u64).saturating_mul(per);
+/// is decoded: for each triangle primitive of each node's mesh, its
+/// positions and normals (given or computed, `Vec3`), its indices (or
+/// `0..n`, `u32`) and its triangles (three `u32` corners and a material
+/// id); for each channel of a scene node the loader reads, its keys.
+/// Points, lines and morph-target weights, which the loader skips, do not
+/// count.
+pub(super) fn check_decoded_bytes(
+    gnodes: &[gltf::Node],
+    document: &gltf::Document,
+    in_scene: impl Fn(usize) -> bool,
+) -> Res<()> {
+    use gltf::mesh::Mode;
     let mut total = 0u64;
+    let mut add = |count: u64, per: u64| total = total.saturating_add(count.saturating_mul(per));
     for mesh in gnodes.iter().filter_map(|n| n.mesh()) {
         for prim in mesh.primitives() {
-            let positions = prim.get(&gltf::mesh::Semantic::Positions);
-            let n = positions.map_or(0, |a| a.count() as u64);
-            // Positions and normals as Vec3; indices (or 0..n) as u32.
+            let n = (prim.get(&gltf::mesh::Semantic::Positions)).map_or(0, |a| a.count() as u64);
             let indices = prim.indices().map_or(n, |a| a.count() as u64);
-            total = total
-                .saturating_add(n.saturating_mul(2 * 12))
-                .saturating_add(indices.saturating_mul(4));
+            let triangles = match prim.mode() {
+                Mode::Triangles => indices / 3,
+                Mode::TriangleStrip | Mode::TriangleFan => indices.saturating_sub(2),
+                _ => continue,
+            };
+            add(n, 2 * 12);
+            add(indices, 4);
+            add(triangles, 16);
         }
     }
     for animation in document.animations() {
         for channel in animation.channels() {
+            let target = channel.target();
+            let weights = target.property() == gltf::animation::Property::MorphTargetWeights;
+            if weights || !in_scene(target.node().index()) {
+                continue;
+            }
             let sampler = channel.sampler();
-            total = total
-                .saturating_add(bytes(sampler.input(), 4))
-                .saturating_add(bytes(sampler.output(), 16));
+            add(sampler.input().count() as u64, 4);
+            add(sampler.output().count() as u64, 16);
         }
     }
     if total > MAX_DECODED_BYTES {

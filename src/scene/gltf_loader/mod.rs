@@ -153,7 +153,7 @@ fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scen
         .map(|&g| node_at(&document, g))
         .collect();
 
-    accessors::check_decoded_bytes(&gnodes, &document)?;
+    accessors::check_decoded_bytes(&gnodes, &document, |g| hierarchy.ours.contains_key(&g))?;
     let nodes = build_nodes(&gnodes, &hierarchy)?;
     let mut materials = materials::build_materials(&document, path)?;
     let objects = mesh::build_objects(&gnodes, &hierarchy, &buffers, &mut materials)?;
