@@ -108,6 +108,55 @@ fn scaled_scenes_render_the_same_images() {
     }
 }
 
+/// `SMALLEST_SCENE` ([`radcache::scene::SMALLEST_SCENE`]): a scene that
+/// size across renders as in metres (`path`, 64 spp, 32×32, frame 0 of
+/// `cube-in-box` scaled to that diagonal: the frame's mean within 2 %,
+/// each 8×8 block within 6 %), and one a hundredth of it does not (the ray
+/// offset's floor loses light). Measured at 4d913f1 (mean, worst block
+/// against metres): 1e-2 across +0.6 %, 3.8 %; 3.6e-3 +1.1 %, 7 %; 1.1e-3
+/// +1.6 %, 12 %; 3.6e-4 +2.8 %, 20 %; 1e-4 45 % of the light lost.
+#[test]
+fn the_smallest_scene_renders_as_in_metres_and_a_smaller_one_does_not() {
+    let frame = |k: f32| {
+        let mut method = PathTracer::new(PathSettings {
+            spp: 64,
+            ..PathSettings::default()
+        });
+        let mut r = Renderer::new(
+            cube_in_box_scaled(k),
+            Box::new(PathTracer::new(PathSettings::default())),
+            Box::new(CpuBackend::new()),
+            FrameSettings {
+                width: 32,
+                height: 32,
+                ..FrameSettings::default()
+            },
+        );
+        r.with_frame_context(0, |ctx| method.render_frame(ctx))
+    };
+    let metres = frame(1.0);
+    let diagonal = cube_in_box_scaled(1.0).diagonal_at(0.0);
+    // (mean ratio − 1, worst relative difference of an 8×8 block's sum).
+    let against_metres = |film: &Film| {
+        let block = |f: &Film, bx: usize, by: usize| {
+            let rows = (by * 8..by * 8 + 8).flat_map(|y| (bx * 8..bx * 8 + 8).map(move |x| (x, y)));
+            rows.map(|(x, y)| f.pixels[y * 32 + x].element_sum())
+                .sum::<f32>()
+        };
+        let blocks = (0..16).map(|b| (b % 4, b / 4));
+        let worst = blocks
+            .map(|(bx, by)| (block(film, bx, by) / block(&metres, bx, by) - 1.0).abs())
+            .fold(0.0f32, f32::max);
+        let sum = |f: &Film| f.pixels.iter().map(|p| p.element_sum()).sum::<f32>();
+        (sum(film) / sum(&metres) - 1.0, worst)
+    };
+    let smallest = against_metres(&frame(radcache::scene::SMALLEST_SCENE / diagonal));
+    let smaller = against_metres(&frame(radcache::scene::SMALLEST_SCENE / 100.0 / diagonal));
+    eprintln!("against metres (mean, worst block): smallest {smallest:?}, a hundredth {smaller:?}");
+    assert!(smallest.0.abs() < 0.02 && smallest.1 < 0.06, "{smallest:?}");
+    assert!(smaller.0 < -0.2, "{smaller:?}");
+}
+
 /// Below `SMALLEST_SCENE` across the ray offset's floor matters, and a
 /// scene file that small is loaded with a warning that says why (a scene
 /// in millimetres written as metres, say); one at the limit's scale up is

@@ -24,11 +24,12 @@ pub use animation::{Animation, Channel, Interpolation, Property};
 /// (against the metre-scale frame: mean, worst 8×8 block): 1e-2 units,
 /// +0.6 %, 3.8 % (as far as paths that diverge at an offset move a block
 /// of this noise); 3.6e-3, +1.1 %, 7 %; 1.1e-3, +1.6 %, 12 %; 3.6e-4,
-/// +2.8 %, 20 %; 1.1e-4, 45 % of the light lost (a throwaway sweep at
-/// 4d913f1, after [`crate::accel::NEAR_SHIFT`]; before it the traversal
-/// also missed surfaces nearer than 1e-4, and the same sizes lost 6 % and
-/// 34 % at 1.1e-3 and 3.6e-4). At 0.03 units (`tests/scene_scale.rs`,
-/// ×0.01) the images still agree.
+/// +2.8 %, 20 %; 1.1e-4, 45 % of the light lost (at 4d913f1, after
+/// [`crate::accel::NEAR_SHIFT`]; before it the traversal also missed
+/// surfaces nearer than 1e-4, and the same sizes lost 6 % and 34 % at
+/// 1.1e-3 and 3.6e-4). `tests/scene_scale.rs` holds this size and a
+/// hundredth of it to those bounds; at 0.03 units (×0.01) every method's
+/// images still agree.
 pub const SMALLEST_SCENE: f32 = 0.01;
 
 /// Frames per second used when the command line does not say (DESIGN.md).
