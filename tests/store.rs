@@ -1769,13 +1769,23 @@ fn render_job_j(
 /// A `trc` job done for 0..10, rendered again for 5..10 and stopped after
 /// frame 6, resumes that chain after frame 6 (frames 7..9 are still the
 /// first chain's, and are rendered again) rather than starting 5..10
-/// over each time; its frames equal an uninterrupted 5..10 render.
+/// over each time; its frames equal an uninterrupted 5..10 render. With
+/// either gradients: interpolated ones end the chain at the range's end.
 #[test]
 fn trc_range_rendered_again_and_stopped_resumes_where_it_stopped() {
-    let mut trc = TrcSettings::default();
-    trc.ic.strata = Strata { theta: 4, phi: 12 };
-    trc.ic.spp = 1;
-    let method = MethodSettings::Trc(trc);
+    for gradients in [
+        TemporalGradients::Extrapolated,
+        TemporalGradients::Interpolated,
+    ] {
+        let mut trc = TrcSettings::default();
+        trc.ic.strata = Strata { theta: 4, phi: 12 };
+        trc.ic.spp = 1;
+        trc.gradients = gradients;
+        range_rendered_again_and_stopped(MethodSettings::Trc(trc));
+    }
+}
+
+fn range_rendered_again_and_stopped(method: MethodSettings) {
     let dir = tempfile::tempdir().unwrap();
     let plain = dir.path().join("plain");
     render::render_to_dir(&mut renderer(&method), 5..10, &plain, true).unwrap();
