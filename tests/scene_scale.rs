@@ -44,6 +44,20 @@ fn cube_in_box_scaled(k: f32) -> Scene {
     s
 }
 
+/// A 32×32 renderer of `cube-in-box` scaled by `k` on the CPU.
+fn renderer_32x32(k: f32) -> Renderer {
+    Renderer::new(
+        cube_in_box_scaled(k),
+        Box::new(PathTracer::new(PathSettings::default())),
+        Box::new(CpuBackend::new()),
+        FrameSettings {
+            width: 32,
+            height: 32,
+            ..FrameSettings::default()
+        },
+    )
+}
+
 /// Frame `FRAMES - 1` of `path`, `ic` and `trc` (each run over frames
 /// `0..FRAMES`, so `trc` reuses records) on the scene scaled by `k`.
 fn last_frames(k: f32) -> [Film; 3] {
@@ -65,16 +79,7 @@ fn last_frames(k: f32) -> [Film; 3] {
         })),
     ];
     methods.map(|mut method| {
-        let mut r = Renderer::new(
-            cube_in_box_scaled(k),
-            Box::new(PathTracer::new(PathSettings::default())),
-            Box::new(CpuBackend::new()),
-            FrameSettings {
-                width: 32,
-                height: 32,
-                ..FrameSettings::default()
-            },
-        );
+        let mut r = renderer_32x32(k);
         let mut last = None;
         for f in 0..FRAMES {
             last = Some(r.with_frame_context(f, |ctx| method.render_frame(ctx)));
@@ -122,17 +127,7 @@ fn the_smallest_scene_renders_as_in_metres_and_a_smaller_one_does_not() {
             spp: 64,
             ..PathSettings::default()
         });
-        let mut r = Renderer::new(
-            cube_in_box_scaled(k),
-            Box::new(PathTracer::new(PathSettings::default())),
-            Box::new(CpuBackend::new()),
-            FrameSettings {
-                width: 32,
-                height: 32,
-                ..FrameSettings::default()
-            },
-        );
-        r.with_frame_context(0, |ctx| method.render_frame(ctx))
+        renderer_32x32(k).with_frame_context(0, |ctx| method.render_frame(ctx))
     };
     let metres = frame(1.0);
     let diagonal = cube_in_box_scaled(1.0).diagonal_at(0.0);

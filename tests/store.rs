@@ -1713,11 +1713,7 @@ fn trc_frames_done_by_another_chain_are_rendered_again() {
         TemporalGradients::Extrapolated,
         TemporalGradients::Interpolated,
     ] {
-        let mut trc = TrcSettings::default();
-        trc.ic.strata = Strata { theta: 4, phi: 12 };
-        trc.ic.spp = 1;
-        trc.gradients = gradients;
-        let method = MethodSettings::Trc(trc);
+        let method = quick_trc(gradients);
         let dir = tempfile::tempdir().unwrap();
         let plain = dir.path().join("plain");
         render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
@@ -1777,12 +1773,17 @@ fn trc_range_rendered_again_and_stopped_resumes_where_it_stopped() {
         TemporalGradients::Extrapolated,
         TemporalGradients::Interpolated,
     ] {
-        let mut trc = TrcSettings::default();
-        trc.ic.strata = Strata { theta: 4, phi: 12 };
-        trc.ic.spp = 1;
-        trc.gradients = gradients;
-        range_rendered_again_and_stopped(MethodSettings::Trc(trc));
+        range_rendered_again_and_stopped(quick_trc(gradients));
     }
+}
+
+/// `trc` with `gradients`, gathering 4 × 12 cells at 1 spp: quick.
+fn quick_trc(gradients: TemporalGradients) -> MethodSettings {
+    let mut trc = TrcSettings::default();
+    trc.ic.strata = Strata { theta: 4, phi: 12 };
+    trc.ic.spp = 1;
+    trc.gradients = gradients;
+    MethodSettings::Trc(trc)
 }
 
 fn range_rendered_again_and_stopped(method: MethodSettings) {
