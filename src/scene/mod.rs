@@ -495,8 +495,10 @@ impl Scene {
     /// World transforms of all nodes at time `t`.
     pub fn node_world_transforms(&self, t: f32) -> Vec<Mat4> {
         let mut world: Vec<Option<Mat4>> = vec![None; self.nodes.len()];
+        // One walk's buffer for all nodes: this runs several times a frame.
+        let mut unresolved = Vec::new();
         for i in 0..self.nodes.len() {
-            self.resolve_world(i, t, &mut world);
+            self.resolve_world(i, t, &mut world, &mut unresolved);
         }
         world
             .into_iter()
@@ -507,10 +509,16 @@ impl Scene {
     /// Resolves the world transform of `node` and of its ancestors not
     /// resolved yet. A loop, not recursion: a file may chain its nodes
     /// deeper than a thread's stack would hold.
-    fn resolve_world(&self, node: usize, t: f32, world: &mut [Option<Mat4>]) {
+    fn resolve_world(
+        &self,
+        node: usize,
+        t: f32,
+        world: &mut [Option<Mat4>],
+        unresolved: &mut Vec<usize>,
+    ) {
         // Up to the first resolved ancestor (loaders guarantee the
         // hierarchy is a forest, so the walk ends at a root)...
-        let mut unresolved = Vec::new();
+        unresolved.clear();
         let mut next = Some(node);
         let mut above = None;
         while let Some(n) = next {
