@@ -25,6 +25,14 @@ pub const MAX_GATHER_RAYS: usize = limits::MAX_GATHER_RAYS as usize;
 /// grows past what a shared server should give one job; `radcache render`
 /// has no such limit.
 pub const MAX_FRAME_SAMPLES: u64 = 1 << 28;
+/// Most gather cells a frame may ask for (pixels × a record's strata):
+/// a cached method may make a record at every pixel (a small `accuracy`
+/// nearly does), each gathering and keeping a sample of 8 bytes a cell
+/// (`tcg` holds them in memory across frames), so this bounds one frame's
+/// gather at 16 GiB of samples and 2^31 rays: 1920×1080 at the default
+/// 16×48 cells, 2048² at 16×32, 4096² at 8×16. Without it 4096² at the
+/// largest hemisphere asked for 8 TiB.
+pub const MAX_FRAME_GATHER_CELLS: u64 = 1 << 31;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -100,6 +108,7 @@ impl JobRequest {
         let (width, height) = parse_size(&b.size)?;
         let method = parse_method(&b.method, b.settings.as_ref(), b.spp)?;
         check_frame_samples(width, height, method.spp())?;
+        check_frame_gather(width, height, &method)?;
         let settings = FrameSettings {
             width,
             height,
@@ -196,6 +205,24 @@ fn check_frame_samples(width: u32, height: u32, spp: u32) -> Result<(), ApiError
         return Err(ApiError::bad_request(format!(
             "size {width}x{height} at {spp} spp is {samples} pixel samples a frame; \
              at most {MAX_FRAME_SAMPLES} (e.g. 4096x4096 at 16 spp, 1024x1024 at 256)"
+        )));
+    }
+    Ok(())
+}
+
+/// A frame's gather cells, were every pixel a record, within
+/// [`MAX_FRAME_GATHER_CELLS`].
+fn check_frame_gather(width: u32, height: u32, method: &MethodSettings) -> Result<(), ApiError> {
+    let Some(strata) = gather_strata(method) else {
+        return Ok(());
+    };
+    let cells = u64::from(width) * u64::from(height) * strata.count() as u64;
+    if cells > MAX_FRAME_GATHER_CELLS {
+        return Err(ApiError::bad_request(format!(
+            "size {width}x{height} with {}x{} strata is {cells} gather cells a frame, \
+             were every pixel a record; at most {MAX_FRAME_GATHER_CELLS} \
+             (e.g. 1920x1080 at 16x48, 4096x4096 at 8x16)",
+            strata.theta, strata.phi
         )));
     }
     Ok(())
@@ -308,6 +335,33 @@ mod tests {
             ..Default::default()
         };
         serde_json::to_string(&MethodSettings::Ic(ic)).unwrap()
+    }
+
+    /// A cached method's frame is refused where every pixel a record would
+    /// gather more than [`MAX_FRAME_GATHER_CELLS`] cells, whatever the
+    /// pixel samples; `path` at that size has no gather to bound.
+    #[test]
+    fn a_frame_whose_records_could_gather_too_much_is_refused() {
+        let parse = |method: &str, size: &str, strata: Option<&str>| {
+            let settings = strata.map_or(String::new(), |s| {
+                format!(r#","settings":{{"strata":"{s}"}}"#)
+            });
+            let body = format!(
+                r#"{{"scene":"builtin:cube-in-box","method":"{method}","frames":"0..1","size":"{size}"{settings}}}"#
+            );
+            JobRequest::parse(body.as_bytes(), None).map_err(|e| e.detail)
+        };
+        for method in ["ic", "trc", "tcg"] {
+            assert!(parse(method, "1920x1080", None).is_ok(), "{method}");
+            assert!(parse(method, "4096x4096", Some("8x16")).is_ok(), "{method}");
+            assert!(parse(method, "2048x2048", Some("16x32")).is_ok(), "{method}");
+            let err = parse(method, "4096x4096", None).unwrap_err();
+            assert!(err.contains("gather cells a frame"), "{method}: {err}");
+            let err = parse(method, "1024x1024", Some("256x256")).unwrap_err();
+            assert!(err.contains("1024x1024 with 256x256 strata"), "{method}: {err}");
+            assert!(parse(method, "2048x2049", Some("16x32")).is_err(), "{method}");
+        }
+        assert!(parse("path", "4096x4096", None).is_ok());
     }
 
     /// Stored settings come back as they were; a gather no job can have
