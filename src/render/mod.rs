@@ -743,17 +743,19 @@ pub fn render_job_to_dir_with(
         let stats = renderer.last_frame_stats();
         let kept = renderer.take_frame_records();
         if let Some(j) = job.as_deref_mut() {
-            // An EXR in `out_dir` says the frame's files are complete: one
-            // left from an earlier render of this frame goes before the
-            // store takes the new one, so that a crash between the two
-            // leaves it missing (written back from the store on resume),
-            // not stale.
-            let old = film::frame_path(out_dir, frame, "exr");
-            match std::fs::remove_file(&old) {
-                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                    return Err(e).with_context(|| format!("cannot replace {}", old.display()));
+            // An EXR in `out_dir` says the frame's files are complete: the
+            // files of an earlier render of this frame go (EXR first)
+            // before the store takes the new one, so that a crash between
+            // the two leaves them missing (written back from the store on
+            // resume), not stale.
+            for ext in ["exr", "png"] {
+                let old = film::frame_path(out_dir, frame, ext);
+                match std::fs::remove_file(&old) {
+                    Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                        return Err(e).with_context(|| format!("cannot replace {}", old.display()));
+                    }
+                    _ => {}
                 }
-                _ => {}
             }
             let chain = (frames.start, chain_end);
             store_frame(renderer, j, &film, frame, &stats, kept, chain)?;

@@ -354,12 +354,21 @@ mod tests {
         for method in ["ic", "trc", "tcg"] {
             assert!(parse(method, "1920x1080", None).is_ok(), "{method}");
             assert!(parse(method, "4096x4096", Some("8x16")).is_ok(), "{method}");
-            assert!(parse(method, "2048x2048", Some("16x32")).is_ok(), "{method}");
+            assert!(
+                parse(method, "2048x2048", Some("16x32")).is_ok(),
+                "{method}"
+            );
             let err = parse(method, "4096x4096", None).unwrap_err();
             assert!(err.contains("gather cells a frame"), "{method}: {err}");
             let err = parse(method, "1024x1024", Some("256x256")).unwrap_err();
-            assert!(err.contains("1024x1024 with 256x256 strata"), "{method}: {err}");
-            assert!(parse(method, "2048x2049", Some("16x32")).is_err(), "{method}");
+            assert!(
+                err.contains("1024x1024 with 256x256 strata"),
+                "{method}: {err}"
+            );
+            assert!(
+                parse(method, "2048x2049", Some("16x32")).is_err(),
+                "{method}"
+            );
         }
         assert!(parse("path", "4096x4096", None).is_ok());
     }
