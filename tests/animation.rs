@@ -359,3 +359,76 @@ fn object_motion_maps_points_between_times() {
     // The static object does not move.
     assert!(close_mat(scene.object_motion(0, t0, t1), Mat4::IDENTITY));
 }
+
+/// A forest of 60 nodes (parents listed in any order, some nodes driven by
+/// two channels of the same property, the later winning as glTF's merged
+/// animations do): world transforms and dynamic flags, as the scene
+/// computes them for all nodes at once, equal the node-by-node definition
+/// (each node's own channels on its rest pose, times its parent's world
+/// transform, recursively).
+#[test]
+fn all_nodes_at_once_equal_the_node_by_node_definition() {
+    let mut scene = hierarchy_scene();
+    let count = 60;
+    // A fixed shuffle of parents: node i's parent is a node placed before
+    // it in `order`, so the hierarchy is a forest in no index order.
+    let order: Vec<usize> = (0..count).map(|i| (i * 37 + 11) % count).collect();
+    let first = scene.nodes.len();
+    scene.nodes.extend((0..count).map(|i| Node {
+        name: format!("n{i}"),
+        parent: None,
+        rest: Trs {
+            translation: Vec3::new(i as f32 * 0.1, 0.5, -0.2 * i as f32),
+            rotation: Quat::from_rotation_x(0.1 * i as f32),
+            scale: Vec3::splat(1.0 + 0.01 * i as f32),
+        },
+    }));
+    for k in 1..count {
+        if k % 7 != 0 {
+            let parent = order[(k * 13) % k];
+            scene.nodes[first + order[k]].parent = Some(first + parent);
+        }
+    }
+    for i in (0..count).filter(|i| i % 4 == 1) {
+        let node = first + i;
+        let to = Vec3::new(1.0, i as f32 * 0.05, 0.0);
+        scene.animation.channels.extend([
+            linear_translation(node, &[(0.0, Vec3::ZERO), (2.0, to)]),
+            linear_rotation(node, &[(0.0, Quat::IDENTITY), (2.0, Quat::from_rotation_z(1.0))]),
+        ]);
+        if i % 8 == 1 {
+            // A second translation channel of the same node: it wins.
+            scene
+                .animation
+                .channels
+                .push(linear_translation(node, &[(0.0, -to), (2.0, to * 3.0)]));
+        }
+    }
+    fn world_of(scene: &Scene, node: usize, t: f32) -> Mat4 {
+        let local = scene
+            .animation
+            .local_trs(node, scene.nodes[node].rest, t)
+            .to_mat4();
+        match scene.nodes[node].parent {
+            Some(p) => world_of(scene, p, t) * local,
+            None => local,
+        }
+    }
+    let dynamic = scene.dynamic_nodes();
+    let mut moving = 0;
+    for n in 0..scene.nodes.len() {
+        assert_eq!(dynamic[n], scene.node_is_dynamic(n), "node {n}");
+        moving += usize::from(dynamic[n]);
+    }
+    assert!(moving > count / 4 && moving < count, "{moving} of {count} move");
+    for t in [0.0, 0.6, 1.7, 2.5] {
+        let world = scene.node_world_transforms(t);
+        for (n, m) in world.iter().enumerate() {
+            assert!(close_mat(*m, world_of(&scene, n, t)), "node {n} at {t}");
+        }
+    }
+    let objects = scene.dynamic_objects();
+    for (o, object) in scene.objects.iter().enumerate() {
+        assert_eq!(objects[o], scene.node_is_dynamic(object.node));
+    }
+}

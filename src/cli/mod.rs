@@ -268,7 +268,8 @@ fn moving_objects(scene: &str, hash: &str) -> Option<std::collections::BTreeSet<
         return None;
     }
     let scene = source.load().ok()?;
-    let moving = (0..scene.objects.len()).filter(|&o| scene.object_is_dynamic(o));
+    let dynamic = scene.dynamic_objects();
+    let moving = (0..dynamic.len()).filter(|&o| dynamic[o]);
     Some(moving.map(|o| o as u32).collect())
 }
 

@@ -266,14 +266,6 @@ impl IrradianceCaching {
     }
 }
 
-/// `dynamic[object]`: whether the object is animated (the hit-dynamic flag
-/// of stored samples).
-pub(crate) fn dynamic_objects(ctx: &FrameContext) -> Vec<bool> {
-    (0..ctx.scene.objects.len())
-        .map(|o| ctx.scene.object_is_dynamic(o))
-        .collect()
-}
-
 pub(crate) fn scene_bounds(ctx: &FrameContext) -> (Vec3, Vec3) {
     let mut min = Vec3::splat(f32::INFINITY);
     let mut max = Vec3::splat(f32::NEG_INFINITY);
@@ -492,7 +484,7 @@ impl IrradianceCaching {
             queries.extend(gather_queries(&c.point, strata, key));
         }
         let (results, traced) = trace(&queries);
-        let dynamic = self.keep_records.then(|| dynamic_objects(ctx));
+        let dynamic = self.keep_records.then(|| ctx.scene.dynamic_objects());
         let gathered = chunk
             .iter()
             .enumerate()

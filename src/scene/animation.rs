@@ -191,14 +191,46 @@ impl Animation {
     pub fn local_trs(&self, node: usize, rest: Trs, t: f32) -> Trs {
         let mut trs = rest;
         for channel in self.channels.iter().filter(|c| c.node == node) {
-            let v = channel.sample(t);
-            match channel.property {
-                Property::Translation => trs.translation = v.truncate(),
-                Property::Scale => trs.scale = v.truncate(),
-                Property::Rotation => trs.rotation = Quat::from_vec4(v).normalize(),
-            }
+            channel.apply(&mut trs, t);
         }
         trs
+    }
+
+    /// Local transforms of all nodes at time `t`, from their `rests`, in
+    /// one pass over the channels: [`Self::local_trs`] of every node
+    /// would scan every channel once per node, which a scene of many
+    /// animated nodes pays several times a frame.
+    pub fn local_transforms(&self, rests: impl Iterator<Item = Trs>, t: f32) -> Vec<Trs> {
+        let mut locals: Vec<Trs> = rests.collect();
+        for channel in &self.channels {
+            if let Some(trs) = locals.get_mut(channel.node) {
+                channel.apply(trs, t);
+            }
+        }
+        locals
+    }
+
+    /// Per node of `count`, whether a channel targets it.
+    pub fn animated_nodes(&self, count: usize) -> Vec<bool> {
+        let mut animated = vec![false; count];
+        for channel in &self.channels {
+            if let Some(a) = animated.get_mut(channel.node) {
+                *a = true;
+            }
+        }
+        animated
+    }
+}
+
+impl Channel {
+    /// Sets the property this channel animates in `trs` to its value at `t`.
+    fn apply(&self, trs: &mut Trs, t: f32) {
+        let v = self.sample(t);
+        match self.property {
+            Property::Translation => trs.translation = v.truncate(),
+            Property::Scale => trs.scale = v.truncate(),
+            Property::Rotation => trs.rotation = Quat::from_vec4(v).normalize(),
+        }
     }
 }
 

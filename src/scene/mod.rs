@@ -461,6 +461,41 @@ impl Scene {
         self.node_is_dynamic(self.objects[object].node)
     }
 
+    /// [`Self::node_is_dynamic`] of every node, in time linear in nodes
+    /// and channels (asking node by node scans every channel for each of
+    /// a node's ancestors).
+    pub fn dynamic_nodes(&self) -> Vec<bool> {
+        let animated = self.animation.animated_nodes(self.nodes.len());
+        // Resolved top-down as world transforms are: a node's answer is
+        // its own or its nearest resolved ancestor's.
+        let mut dynamic: Vec<Option<bool>> = vec![None; self.nodes.len()];
+        let mut unresolved = Vec::new();
+        for node in 0..self.nodes.len() {
+            unresolved.clear();
+            let mut next = Some(node);
+            let mut above = false;
+            while let Some(n) = next {
+                if let Some(d) = dynamic[n] {
+                    above = d;
+                    break;
+                }
+                unresolved.push(n);
+                next = self.nodes[n].parent;
+            }
+            for &n in unresolved.iter().rev() {
+                above |= animated[n];
+                dynamic[n] = Some(above);
+            }
+        }
+        dynamic.into_iter().map(|d| d.unwrap_or(false)).collect()
+    }
+
+    /// [`Self::object_is_dynamic`] of every object.
+    pub fn dynamic_objects(&self) -> Vec<bool> {
+        let nodes = self.dynamic_nodes();
+        self.objects.iter().map(|o| nodes[o.node]).collect()
+    }
+
     /// The camera at time `t` (as [`Scene::snapshot`] evaluates it).
     pub fn camera_at(&self, t: f32) -> Camera {
         let world = self.node_world_transforms(t);
@@ -494,11 +529,14 @@ impl Scene {
 
     /// World transforms of all nodes at time `t`.
     pub fn node_world_transforms(&self, t: f32) -> Vec<Mat4> {
+        let locals = self
+            .animation
+            .local_transforms(self.nodes.iter().map(|n| n.rest), t);
         let mut world: Vec<Option<Mat4>> = vec![None; self.nodes.len()];
         // One walk's buffer for all nodes: this runs several times a frame.
         let mut unresolved = Vec::new();
         for i in 0..self.nodes.len() {
-            self.resolve_world(i, t, &mut world, &mut unresolved);
+            self.resolve_world(i, &locals, &mut world, &mut unresolved);
         }
         world
             .into_iter()
@@ -512,7 +550,7 @@ impl Scene {
     fn resolve_world(
         &self,
         node: usize,
-        t: f32,
+        locals: &[Trs],
         world: &mut [Option<Mat4>],
         unresolved: &mut Vec<usize>,
     ) {
@@ -531,7 +569,7 @@ impl Scene {
         }
         // ...then down, each node's transform its parent's times its own.
         for &n in unresolved.iter().rev() {
-            let local = self.animation.local_trs(n, self.nodes[n].rest, t).to_mat4();
+            let local = locals[n].to_mat4();
             let m = above.map_or(local, |parent| parent * local);
             world[n] = Some(m);
             above = Some(m);
@@ -550,10 +588,7 @@ impl Scene {
     /// Objects ordered static first, then dynamic (the triangle order of
     /// every snapshot).
     pub fn object_order(&self) -> Vec<usize> {
-        let (mut order, dynamic): (Vec<usize>, Vec<usize>) =
-            (0..self.objects.len()).partition(|&o| !self.object_is_dynamic(o));
-        order.extend(dynamic);
-        order
+        static_first(&self.dynamic_objects())
     }
 
     /// Evaluates the scene at time `t`.
@@ -586,8 +621,9 @@ impl Scene {
                 .collect(),
             camera: self.camera_in(&world, t),
         };
-        for object in self.object_order() {
-            if !self.object_is_dynamic(object) {
+        let dynamic = self.dynamic_objects();
+        for object in static_first(&dynamic) {
+            if !dynamic[object] {
                 snap.static_count =
                     snap.triangles.len() + self.objects[object].mesh.triangles.len();
             }
@@ -600,6 +636,15 @@ impl Scene {
         }
         snap
     }
+}
+
+/// Indices of `dynamic` (per object) with the static objects first, each
+/// part in index order.
+fn static_first(dynamic: &[bool]) -> Vec<usize> {
+    let (mut order, moving): (Vec<usize>, Vec<usize>) =
+        (0..dynamic.len()).partition(|&o| !dynamic[o]);
+    order.extend(moving);
+    order
 }
 
 fn camera_at(m: &Mat4, yfov: f32) -> Camera {

@@ -59,8 +59,7 @@ pub use state::{downgrade_to_schema_6_record, is_radiance_record, upgrade_schema
 
 use super::carried;
 use super::ic::{
-    dynamic_objects, primary_candidates, scene_bounds, Candidate, Gathered, IcSettings,
-    IrradianceCaching,
+    primary_candidates, scene_bounds, Candidate, Gathered, IcSettings, IrradianceCaching,
 };
 use super::render_pass::{render_pass, PixelStreams, StillSamples};
 use super::{
@@ -530,7 +529,7 @@ impl Method for TemporallyCoherentGathering {
         let mut removed = Vec::new();
         let start = Instant::now();
         let alive = self.survivors(ctx, &mut stats, &mut removed);
-        let dynamic = dynamic_objects(ctx);
+        let dynamic = ctx.scene.dynamic_objects();
         let mut records = self.update(ctx, alive, &dynamic, &mut stats);
         stats.records_reused = records.len() as u64;
         stats

@@ -41,7 +41,6 @@
 use super::estimate::{reproject, rigid_motion, NextFrame};
 use super::Gathered;
 use crate::cache::gather::{HemisphereSamples, Strata};
-use crate::method::ic::dynamic_objects;
 use crate::method::unshadowed::LightsByFrame;
 use crate::method::FrameContext;
 use crate::scene::Scene;
@@ -91,7 +90,7 @@ impl LaterFrames {
         ahead: &mut Ahead,
     ) -> Self {
         let (scene, t0) = (ctx.scene, ctx.frame);
-        let dynamic = dynamic_objects(ctx);
+        let dynamic = ctx.scene.dynamic_objects();
         let last = t0.saturating_add(max_life.min(LATER_FRAMES).saturating_sub(1));
         ahead.keep(t0 + 1..=last);
         let lights_move = lights_may_move(scene);
@@ -227,9 +226,10 @@ impl Ahead {
 /// Whether any light can move or change: a punctual light on an animated
 /// node, or an emissive material on a moving object.
 fn lights_may_move(scene: &Scene) -> bool {
-    scene.lights.iter().any(|l| scene.node_is_dynamic(l.node))
-        || scene.objects.iter().enumerate().any(|(o, object)| {
-            scene.object_is_dynamic(o)
+    let dynamic = scene.dynamic_nodes();
+    scene.lights.iter().any(|l| dynamic[l.node])
+        || scene.objects.iter().any(|object| {
+            dynamic[object.node]
                 && object
                     .mesh
                     .materials

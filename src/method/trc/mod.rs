@@ -90,8 +90,8 @@ pub use state::{downgrade_to_schema_6_record, sources_in, upgrade_schema_6_recor
 use super::carried;
 use super::ic::IrradianceCaching;
 use super::ic::{
-    dynamic_objects, limit_gradient, primary_candidates, scene_bounds, Candidate, GatherTracks,
-    Gathered, IcSettings, TrackPaths,
+    limit_gradient, primary_candidates, scene_bounds, Candidate, GatherTracks, Gathered,
+    IcSettings, TrackPaths,
 };
 use super::motion::Blockers;
 use super::render_pass::{lights_fingerprint, mark_used, render_pass, PixelStreams, StillSamples};
@@ -391,7 +391,7 @@ impl TemporalRadianceCaching {
                 lights: lights_fingerprint(ctx),
                 track: self.settings.keep_paths
                     && self.paths_pay.track(ctx.frame, self.settings.max_life),
-                moving: dynamic_objects(ctx),
+                moving: ctx.scene.dynamic_objects(),
             },
         };
         let (min, max) = scene_bounds(ctx);
