@@ -394,7 +394,10 @@ fn all_nodes_at_once_equal_the_node_by_node_definition() {
         let to = Vec3::new(1.0, i as f32 * 0.05, 0.0);
         scene.animation.channels.extend([
             linear_translation(node, &[(0.0, Vec3::ZERO), (2.0, to)]),
-            linear_rotation(node, &[(0.0, Quat::IDENTITY), (2.0, Quat::from_rotation_z(1.0))]),
+            linear_rotation(
+                node,
+                &[(0.0, Quat::IDENTITY), (2.0, Quat::from_rotation_z(1.0))],
+            ),
         ]);
         if i % 8 == 1 {
             // A second translation channel of the same node: it wins.
@@ -416,11 +419,15 @@ fn all_nodes_at_once_equal_the_node_by_node_definition() {
     }
     let dynamic = scene.dynamic_nodes();
     let mut moving = 0;
-    for n in 0..scene.nodes.len() {
-        assert_eq!(dynamic[n], scene.node_is_dynamic(n), "node {n}");
-        moving += usize::from(dynamic[n]);
+    assert_eq!(dynamic.len(), scene.nodes.len());
+    for (n, &d) in dynamic.iter().enumerate() {
+        assert_eq!(d, scene.node_is_dynamic(n), "node {n}");
+        moving += usize::from(d);
     }
-    assert!(moving > count / 4 && moving < count, "{moving} of {count} move");
+    assert!(
+        moving > count / 4 && moving < count,
+        "{moving} of {count} move"
+    );
     for t in [0.0, 0.6, 1.7, 2.5] {
         let world = scene.node_world_transforms(t);
         for (n, m) in world.iter().enumerate() {
