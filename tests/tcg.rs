@@ -106,7 +106,7 @@ fn records_shoot_again_the_share_of_equation_2_oldest_first() {
                 assert_eq!(fresh, want, "frame {f} record {}", rec.record.id);
                 reshot += want as u64;
                 for (new, old) in rec.samples.iter().zip(old) {
-                    let aged = new.age() == (old.age() + 1).min(15);
+                    let aged = new.age() == old.age() + 1;
                     assert!(new.age() == 0 || aged, "{new:?} after {old:?}");
                 }
                 checked += 1;
@@ -117,11 +117,15 @@ fn records_shoot_again_the_share_of_equation_2_oldest_first() {
         }
         assert!(checked > 0);
         if is_static {
-            // Ages count frames since each sample was shot: none is older
-            // than the frames it took to go round once.
+            // Ages count frames since each sample was shot (above, frame
+            // by frame, past 15 too): none is much older than the frames
+            // it takes to go round once (the paper's Fig. 6: at most 14
+            // frames where 10 go round). Ages that stopped at 15 left up
+            // to twice that.
             let oldest = oldest_sample(&tcg);
             let round = (1.0 / settings.tau_min).ceil() as u32;
-            assert!(oldest <= round, "a sample {oldest} frames old");
+            assert!(oldest <= round * 3 / 2, "a sample {oldest} frames old");
+            eprintln!("oldest sample: {oldest} frames (a round is {round})");
         }
     }
 }

@@ -186,7 +186,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // estimate kept from going negative (2026-11-30).
         "trc" => 6,
         // 2: as `trc`'s 4, the records all three gather. 3: as below.
-        "ic" | "tcg" => 3,
+        "ic" => 3,
+        // `tcg` 4: samples' ages count past 15 frames (to 1038), so the
+        // `2^age` draw tells the oldest apart (2026-11-30).
+        "tcg" => 4,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with

@@ -59,20 +59,46 @@ fn exp2i(k: i32) -> f32 {
 }
 
 /// Bits of [`PackedSample::flags`].
+///
+/// The age takes 14 bits: bits 0–3 hold it below 15 and 15 from there on,
+/// when bits 6–15 hold what it is past 15 (saturating at [`MAX_AGE`]).
+/// Samples written before 2026-11-30 kept it in bits 0–3 alone,
+/// saturating at 15, and the low bits of the hit object's index in bits
+/// 6–15: they read the same below 15, and at 15 as 15 or more (which they
+/// were). Four bits were too few: at `tcg`'s default `τ_min = 0.05` a
+/// sample waits about 20 frames to be shot again, so the `2^age` draw
+/// (Tawara et al. 2004, §3.2) could not tell the oldest samples apart.
 pub mod flags {
-    /// Bits 0–3: age of the sample in frames since it was computed,
-    /// saturating at 15 (the 2004 paper's `2^age` replacement weight).
-    pub const AGE_MASK: u16 = 0x000f;
+    /// Bits 0–3: the age where below 15, else 15.
+    pub const AGE_LOW_MASK: u16 = 0x000f;
     /// Bit 4: the sample's ray hit an animated object.
     pub const HIT_DYNAMIC: u16 = 1 << 4;
     /// Bit 5: the ray left the scene (distance is +∞, no object).
     pub const MISS: u16 = 1 << 5;
-    /// Bits 6–15: the low 10 bits of the hit object's index (0 on a miss).
-    /// Enough to tell objects apart in scenes of up to 1024 objects; beyond
-    /// that ids alias (the flag is a hint, the geometry is authoritative).
-    pub const OBJECT_SHIFT: u16 = 6;
-    pub const OBJECT_BITS: u16 = 10;
-    pub const MAX_AGE: u16 = AGE_MASK;
+    /// Bits 6–15: the age past 15, where bits 0–3 are 15.
+    pub const AGE_HIGH_SHIFT: u16 = 6;
+    /// The largest age the flags hold: 15 + 1023 frames.
+    pub const MAX_AGE: u32 = AGE_LOW_MASK as u32 + (u16::MAX >> AGE_HIGH_SHIFT) as u32;
+
+    /// The age bits of `age` (saturating at [`MAX_AGE`]).
+    pub(crate) fn age_bits(age: u32) -> u16 {
+        let low = u32::from(AGE_LOW_MASK);
+        match age.min(MAX_AGE) {
+            a if a < low => a as u16,
+            a => AGE_LOW_MASK | (((a - low) as u16) << AGE_HIGH_SHIFT),
+        }
+    }
+
+    /// The age `flags` hold.
+    pub(crate) fn age(flags: u16) -> u32 {
+        match flags & AGE_LOW_MASK {
+            low if low < AGE_LOW_MASK => u32::from(low),
+            low => u32::from(low) + u32::from(flags >> AGE_HIGH_SHIFT),
+        }
+    }
+
+    /// All the bits of the age.
+    pub(crate) const AGE_BITS: u16 = AGE_LOW_MASK | (u16::MAX << AGE_HIGH_SHIFT);
 }
 
 /// One incoming-radiance sample of a record in 8 bytes (2004 paper §3.1):
@@ -92,18 +118,15 @@ pub struct PackedSample {
 impl PackedSample {
     pub const BYTES: usize = 8;
 
-    /// Packs one sample. `object` is `u32::MAX` on a miss.
+    /// Packs one sample. `object` is `u32::MAX` on a miss (only whether
+    /// it is one is kept).
     pub fn pack(radiance: Vec3, distance: f32, object: u32, hit_dynamic: bool, age: u32) -> Self {
         let miss = object == u32::MAX || !distance.is_finite();
-        let mut f = (age.min(u32::from(flags::MAX_AGE))) as u16;
+        let mut f = flags::age_bits(age);
         if miss {
             f |= flags::MISS;
-        } else {
-            if hit_dynamic {
-                f |= flags::HIT_DYNAMIC;
-            }
-            let obj = (object & ((1 << flags::OBJECT_BITS) - 1)) as u16;
-            f |= obj << flags::OBJECT_SHIFT;
+        } else if hit_dynamic {
+            f |= flags::HIT_DYNAMIC;
         }
         let d = if miss { f32::INFINITY } else { distance };
         PackedSample {
@@ -122,15 +145,14 @@ impl PackedSample {
     }
 
     pub fn age(&self) -> u32 {
-        u32::from(self.flags & flags::AGE_MASK)
+        flags::age(self.flags)
     }
 
     /// The sample one frame older (its age saturates at
     /// [`flags::MAX_AGE`]).
     pub fn older(self) -> Self {
-        let age = (self.age() + 1).min(u32::from(flags::MAX_AGE)) as u16;
         PackedSample {
-            flags: (self.flags & !flags::AGE_MASK) | age,
+            flags: (self.flags & !flags::AGE_BITS) | flags::age_bits(self.age() + 1),
             ..self
         }
     }
@@ -141,11 +163,6 @@ impl PackedSample {
 
     pub fn hit_dynamic(&self) -> bool {
         self.flags & flags::HIT_DYNAMIC != 0
-    }
-
-    /// Low 10 bits of the hit object's index, `None` on a miss.
-    pub fn object_bits(&self) -> Option<u32> {
-        (!self.is_miss()).then_some(u32::from(self.flags >> flags::OBJECT_SHIFT))
     }
 
     /// Little-endian: `r g b e`, distance (2), flags (2).
@@ -232,7 +249,6 @@ mod tests {
         assert_eq!(p.age(), 3);
         assert!(p.hit_dynamic());
         assert!(!p.is_miss());
-        assert_eq!(p.object_bits(), Some(1234 & 0x3ff));
         assert!((p.distance() - 5.4321).abs() < 5.4321 / 1024.0);
         assert!(
             (p.radiance() - Vec3::new(0.5, 0.25, 2.0))
@@ -244,9 +260,40 @@ mod tests {
         let miss = PackedSample::pack(Vec3::ONE, f32::INFINITY, u32::MAX, true, 99);
         assert!(miss.is_miss());
         assert!(!miss.hit_dynamic());
-        assert_eq!(miss.object_bits(), None);
         assert_eq!(miss.distance(), f32::INFINITY);
-        assert_eq!(miss.age(), 15);
+        assert_eq!(miss.age(), 99);
         assert_eq!(std::mem::size_of::<PackedSample>(), PackedSample::BYTES);
+    }
+
+    /// Every age up to [`flags::MAX_AGE`] reads back as packed and as
+    /// reached one frame at a time, and then saturates, the other flags
+    /// untouched; flags written before ages took 14 bits (an object's
+    /// low bits in 6–15) read the same below 15, and 15 or more at 15.
+    #[test]
+    fn ages_count_to_their_maximum_and_keep_the_other_flags() {
+        let mut aged = PackedSample::pack(Vec3::ONE, 2.0, 7, true, 0);
+        for age in 0..=flags::MAX_AGE + 3 {
+            let want = age.min(flags::MAX_AGE);
+            let packed = PackedSample::pack(Vec3::ONE, 2.0, 7, true, age);
+            assert_eq!((packed.age(), aged.age()), (want, want), "age {age}");
+            assert_eq!(packed, aged, "age {age}");
+            assert!(aged.hit_dynamic() && !aged.is_miss());
+            aged = aged.older();
+        }
+        assert_eq!(flags::MAX_AGE, 1038);
+        for object in [0u16, 1, 0x155, 0x3ff] {
+            for old_age in 0..=15u16 {
+                let old = PackedSample {
+                    flags: old_age | flags::HIT_DYNAMIC | (object << 6),
+                    ..aged
+                };
+                if old_age < 15 {
+                    assert_eq!(old.age(), u32::from(old_age));
+                } else {
+                    assert!(old.age() >= 15);
+                }
+                assert!(old.hit_dynamic() && !old.is_miss());
+            }
+        }
     }
 }

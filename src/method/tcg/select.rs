@@ -36,7 +36,9 @@ pub(super) fn cells_to_update(
 /// from its own uniform `u` and the `count` largest keys win (Efraimidis &
 /// Spirakis 2006, "Weighted random sampling with a reservoir"): the same
 /// distribution of draws without repetition, in `O(N)`. The unit test
-/// checks it against the sequential draw's exact probabilities.
+/// checks it against the sequential draw's exact probabilities. The key
+/// is ranked by its logarithm, `age·ln 2 − ln(−ln u)` (the same order),
+/// since `2^age` leaves `f32` past an age of 127.
 ///
 /// The `first` cells (those moving lights left stale, [`super::stale`]:
 /// counted in Eq. 2's `x` to be shot again) are drawn before the others,
@@ -57,10 +59,10 @@ pub(super) fn pick_cells(
         .iter()
         .zip(0u32..)
         .map(|(s, cell)| {
-            // u ∈ (0, 1]: ln(u) is finite.
+            // u ∈ (0, 1]: −ln(u) ∈ [0, ∞), and u = 1 ranks first (+∞).
             let u = 1.0 - rng.next_f32();
-            let weight = (1u32 << s.age()) as f32;
-            (first(cell as usize), u.ln() / weight, cell)
+            let key = s.age() as f32 * std::f32::consts::LN_2 - (-u.ln()).ln();
+            (first(cell as usize), key, cell)
         })
         .collect();
     // `first` cells, then the largest key; equal keys by cell, so the draw
@@ -152,6 +154,41 @@ mod tests {
             let three = pick_cells(&samples, 3, &mut rng(i), stale);
             assert!(three.contains(&1) && three.contains(&4), "{three:?}");
         }
+    }
+
+    /// Over 400 frames of a still record (the default `τ_min = 5 %` of 192
+    /// cells: 10 a frame, a round in about 20 frames), every sample is
+    /// shot again within 1.5 rounds, its age counting every frame: the
+    /// paper's Fig. 6 saw at most 14 frames where 10 go round. With ages
+    /// that stopped at 15, the draw could not tell the oldest apart and
+    /// some waited over 40 frames.
+    #[test]
+    fn the_oldest_samples_are_shot_again_within_a_round_and_a_half() {
+        let settings = TcgSettings::default();
+        let mut samples = aged(&[0; 192], &[false; 192]);
+        let mut ages = [0u32; 192];
+        let mut oldest = 0;
+        for frame in 0..400 {
+            let count = cells_to_update(&settings, &samples, |_| false);
+            assert_eq!(count, 10);
+            let cells = pick_cells(&samples, count, &mut rng(frame), |_| false);
+            for (cell, s) in samples.iter_mut().enumerate() {
+                let shot = cells.binary_search(&(cell as u32)).is_ok();
+                *s = if shot {
+                    PackedSample { flags: 0, ..*s }
+                } else {
+                    s.older()
+                };
+                ages[cell] = if shot { 0 } else { ages[cell] + 1 };
+                assert_eq!(s.age(), ages[cell], "frame {frame} cell {cell}");
+            }
+            oldest = oldest.max(*ages.iter().max().unwrap());
+        }
+        assert!(oldest <= 30, "a sample waited {oldest} frames");
+        assert!(
+            oldest >= 20,
+            "{oldest}: 10 of 192 a frame cannot go round sooner"
+        );
     }
 
     /// Against the paper's draw (one cell at a time from the c.d.f. of

@@ -22,7 +22,7 @@ use crate::cache::gather::{cell_direction, GatherPoint, Strata};
 use crate::method::unshadowed::{LightsByFrame, UnshadowedLights};
 use crate::method::FrameContext;
 use crate::sampling::Frame;
-use crate::store::rgbe::{flags, PackedSample};
+use crate::store::rgbe::PackedSample;
 use glam::{Vec2, Vec3};
 
 /// The relative change of a sample's unshadowed direct light (any colour
@@ -30,10 +30,13 @@ use glam::{Vec2, Vec3};
 /// TRC's temporal accuracy `a_t`.
 pub(super) const STALE_LIGHT: f32 = 0.05;
 
-/// Frames a sample's age can reach back: one shot in frame `f` has age 0
-/// when frame `f + 1` picks its cells, and ages saturate at
-/// [`flags::MAX_AGE`].
-const WINDOW: u32 = flags::MAX_AGE as u32 + 1;
+/// Frames of lights kept for the test: one shot in frame `f` has age 0
+/// when frame `f + 1` picks its cells, so a sample of age `a < WINDOW` is
+/// tested against the lights of its own frame `t − 1 − a`; an older one
+/// (past a default `τ_min`'s refresh cycle of about 20 frames) against
+/// those of `t − WINDOW`, the oldest kept, which moved lights change as
+/// well.
+const WINDOW: u32 = 32;
 
 /// The lights of the last frames (by frame number, so a resumed render
 /// finds the same ones: they are computed again from the scene).
@@ -109,7 +112,8 @@ impl Staleness<'_> {
         cell: usize,
         s: &PackedSample,
     ) -> bool {
-        let Some(Some(then)) = self.then.get(s.age() as usize) else {
+        let age = s.age().min(WINDOW - 1);
+        let Some(Some(then)) = self.then.get(age as usize) else {
             return false;
         };
         if then.power_changed {
