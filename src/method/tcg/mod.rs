@@ -169,8 +169,13 @@ impl TcgRecord {
     fn pose(&self, snapshot: &Snapshot) -> (GatherPoint, Frame) {
         let point = self.candidate.point;
         let frame = Frame::new(point.normal);
-        let motion =
-            object_transform(snapshot, self.candidate.object) * self.object_to_world.inverse();
+        let now = object_transform(snapshot, self.candidate.object);
+        // Exactly where it was made first: `now · then⁻¹` of a still
+        // object far from the origin misses the identity by rounding.
+        if now == self.object_to_world {
+            return (point, frame);
+        }
+        let motion = now * self.object_to_world.inverse();
         if motion.abs_diff_eq(Mat4::IDENTITY, 1e-7) {
             return (point, frame);
         }
@@ -623,6 +628,52 @@ mod tests {
 
     fn record(id: u64, x: f32) -> IrradianceRecord {
         IrradianceRecord::flat(id, Vec3::new(x, 0.0, 0.0), Vec3::ONE)
+    }
+
+    /// A record on an object that turns about the record's normal and
+    /// moves (§4.1): its point moves with the object, its normal stays,
+    /// and its cells' tangent turns by the same angle; on an object where
+    /// it was made, far from the origin, it is exactly as made.
+    #[test]
+    fn a_record_turns_its_cells_with_its_object() {
+        let mut snapshot = crate::scene::Scene::builtin("cube-in-box")
+            .unwrap()
+            .snapshot(0.0);
+        let point = GatherPoint {
+            position: Vec3::new(1.0, 2.0, 3.0),
+            normal: Vec3::Y,
+            geometric_normal: Vec3::Y,
+        };
+        let made = Mat4::from_translation(Vec3::new(1e4, -3e3, 7e3)) * Mat4::from_rotation_x(0.3);
+        let record = TcgRecord {
+            record: record(0, 0.0),
+            candidate: Candidate {
+                pixel: 0,
+                stream: 0,
+                point,
+                object: 0,
+                footprint: 0.01,
+                glossy: None,
+            },
+            object_to_world: made,
+            samples: Vec::new(),
+            used: false,
+        };
+        snapshot.object_to_world[0] = made;
+        let (still, still_frame) = record.pose(&snapshot);
+        assert_eq!(still.position, point.position);
+        assert_eq!(still_frame.t, Frame::new(Vec3::Y).t);
+        let angle = 0.7;
+        let turn = Mat4::from_translation(Vec3::new(0.5, 0.0, -2.0)) * Mat4::from_rotation_y(angle);
+        snapshot.object_to_world[0] = turn * made;
+        let (moved, frame) = record.pose(&snapshot);
+        let want = turn.transform_point3(point.position);
+        assert!(moved.position.abs_diff_eq(want, 1e-2), "{}", moved.position);
+        assert!(moved.normal.abs_diff_eq(Vec3::Y, 1e-5));
+        let t0 = Frame::new(Vec3::Y).t;
+        let turned = glam::Quat::from_rotation_y(angle) * t0;
+        assert!(frame.t.abs_diff_eq(turned, 1e-4), "{} vs {turned}", frame.t);
+        assert!(frame.b.abs_diff_eq(Vec3::Y.cross(turned), 1e-4));
     }
 
     /// 15 records on one point (each usable at the others) and one far
