@@ -2208,3 +2208,55 @@ fn clients_that_stop_reading_or_half_close_are_served_as_they_should() {
     s.read_exact(&mut head).unwrap();
     assert_eq!(&head, b"HTTP/1.1 431");
 }
+
+/// Clients asking at once for a frame that no one asked for before share
+/// one decoding and PNG encoding of it (`radcache_frame_encodes_total`)
+/// and get the same PNG; asked again, it comes from the cache. So the
+/// followers of a job, all woken by its new frame, encode it once.
+#[test]
+fn concurrent_requests_for_a_frame_share_one_encoding() {
+    let (dir, scenes) = workspace();
+    let server = start(&dir.path().join("db"), &scenes);
+    // Large enough that encoding it takes a while for the requests to
+    // meet in.
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"512x512","spp":1,"settings":{"max_depth":1}}"#,
+    );
+    wait_done(&server, &id);
+    let encodes = || {
+        let (status, metrics) = http(&server, "GET", "/metrics", "");
+        assert_eq!(status, 200);
+        gauge(&metrics, "radcache_frame_encodes_total")
+    };
+    assert_eq!(encodes(), 0);
+    const CLIENTS: usize = 24;
+    let start = std::sync::Barrier::new(CLIENTS);
+    let path = format!("/api/jobs/{id}/frames/0.png");
+    let pngs: Vec<(u16, Vec<u8>)> = std::thread::scope(|s| {
+        let clients: Vec<_> = (0..CLIENTS)
+            .map(|_| {
+                s.spawn(|| {
+                    start.wait();
+                    http(&server, "GET", &path, "")
+                })
+            })
+            .collect();
+        clients.into_iter().map(|c| c.join().unwrap()).collect()
+    });
+    for (status, png) in &pngs {
+        assert_eq!(*status, 200);
+        assert!(*png == pngs[0].1, "the clients got different PNGs");
+    }
+    let img = image::load_from_memory(&pngs[0].1).unwrap();
+    assert_eq!((img.width(), img.height()), (512, 512));
+    assert_eq!(encodes(), 1);
+    let (status, again) = http(&server, "GET", &path, "");
+    assert_eq!(status, 200);
+    assert!(again == pngs[0].1);
+    assert_eq!(encodes(), 1);
+    // The EXR is read as it was stored, in a decode slot too.
+    let (status, exr) = http(&server, "GET", &format!("/api/jobs/{id}/frames/0.exr"), "");
+    assert_eq!(status, 200);
+    assert!(exr.starts_with(&[0x76, 0x2f, 0x31, 0x01]), "not an EXR");
+}

@@ -40,10 +40,11 @@ pub async fn frame(
     let missing = || ApiError::not_found(format!("job {id} has no frame {n} (yet)"));
     let sid = state.store_id(&id)?.ok_or_else(missing)?;
     if ext == "exr" {
+        // Read (and decompressed) in a decode slot, as frames are encoded.
+        let s = state.clone();
         let exr = state
-            .store
-            .frame_exr(sid, n)
-            .map_err(ApiError::internal)?
+            .decoding(move || s.store.frame_exr(sid, n).map_err(ApiError::internal))
+            .await?
             .ok_or_else(missing)?;
         return Ok(([(header::CONTENT_TYPE, "image/x-exr")], Bytes::from(exr)));
     }
@@ -141,6 +142,11 @@ pub async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         out,
         "# HELP radcache_http_connections Client connections being served (this one among them).\n# TYPE radcache_http_connections gauge\nradcache_http_connections {}",
         state.open_connections.load(Ordering::Relaxed)
+    );
+    let _ = writeln!(
+        out,
+        "# HELP radcache_frame_encodes_total Frames decoded from the store and encoded as PNG (once a frame, however many clients ask, until evicted from the PNG cache).\n# TYPE radcache_frame_encodes_total counter\nradcache_frame_encodes_total {}",
+        state.frame_encodes.load(Ordering::Relaxed)
     );
     let database = state.store.size_on_disk().unwrap_or(0);
     let log = state.store.sample_log_bytes();

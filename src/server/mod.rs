@@ -36,7 +36,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
-use tokio::sync::{watch, Notify};
+use tokio::sync::{watch, Notify, Semaphore};
 
 /// Largest accepted request body (a job request is a few hundred bytes).
 pub const MAX_BODY_BYTES: usize = 16 * 1024;
@@ -251,13 +251,74 @@ pub struct AppState {
     pub pngs: Mutex<PngCache>,
     /// The scene of the last `/records` query (its camera projects records).
     pub scene_cache: Mutex<Option<(String, Arc<crate::scene::Scene>)>>,
+    /// The PNG encodings in progress, by (store job id, frame): a request
+    /// for a frame being encoded awaits that encoding rather than starting
+    /// its own (a hundred followers woken by one new frame encode it once).
+    pub encoding: Mutex<HashMap<(u64, u32), PngFlight>>,
+    /// Bounds the frame decodings (PNG encodings, EXR reads) run at once:
+    /// each holds a whole frame's pixels, EXR and PNG (a 4096² frame: some
+    /// 200 MB).
+    pub decode_slots: Semaphore,
+    /// Bounds the `/records` queries run at once: each reads every record
+    /// block of the frames up to the one asked.
+    pub records_slots: Semaphore,
+    /// Frames decoded from the store and PNG-encoded (`/metrics`).
+    pub frame_encodes: AtomicU64,
     /// The job the worker renders and its renderer's
     /// [`crate::render::Renderer::abandon_flag`]: a cancel or a shutdown
     /// abandons the frame in progress rather than waiting for it.
     pub running_frame: Mutex<Option<(JobKey, Arc<AtomicBool>)>>,
 }
 
+/// An encoding of a frame to PNG in progress: its result, once there
+/// (`None` until then).
+pub type PngFlight = watch::Receiver<Option<Result<Option<Bytes>, ApiError>>>;
+
+/// Removes an encoding from [`AppState::encoding`] when it ends, however
+/// it ends (its waiters then see its sender dropped, if it sent nothing).
+struct FlightGuard<'a> {
+    state: &'a AppState,
+    key: (u64, u32),
+}
+
+impl Drop for FlightGuard<'_> {
+    fn drop(&mut self) {
+        if let Ok(mut encoding) = self.state.encoding.lock() {
+            encoding.remove(&self.key);
+        }
+    }
+}
+
+/// Work the server's CPU-bound requests may run at once: one a core.
+fn cores() -> usize {
+    std::thread::available_parallelism().map_or(4, |n| n.get())
+}
+
 impl AppState {
+    /// The state of a server over `store`, with no jobs loaded yet.
+    pub fn new(store: Store, options: ServeOptions) -> AppState {
+        AppState {
+            store,
+            options,
+            jobs: Mutex::new(BTreeMap::new()),
+            creating: Mutex::new(()),
+            controlling: Mutex::new(()),
+            wake: Notify::new(),
+            shutdown: AtomicBool::new(false),
+            running_frame: Mutex::new(None),
+            frames_rendered: AtomicU64::new(0),
+            render_micros: AtomicU64::new(0),
+            open_connections: AtomicU64::new(0),
+            watchers: Mutex::new(HashMap::new()),
+            pngs: Mutex::new(PngCache::default()),
+            scene_cache: Mutex::new(None),
+            encoding: Mutex::new(HashMap::new()),
+            decode_slots: Semaphore::new(cores()),
+            records_slots: Semaphore::new(cores().min(4)),
+            frame_encodes: AtomicU64::new(0),
+        }
+    }
+
     pub fn job(&self, id: &str) -> Result<Job, ApiError> {
         self.jobs
             .lock()
@@ -374,18 +435,59 @@ impl AppState {
     }
 
     /// Frame `frame` of store job `sid` as PNG (tone-mapped), encoded once
-    /// and cached; `None` if the frame is not stored.
+    /// and cached; `None` if the frame is not stored. Requests for a frame
+    /// being encoded await that encoding, and at most
+    /// [`AppState::decode_slots`] frames are decoded at once.
     pub async fn frame_png(
         self: &Arc<Self>,
         sid: u64,
         frame: u32,
     ) -> Result<Option<Bytes>, ApiError> {
-        let cached = self.pngs.lock().expect("png cache lock").get((sid, frame));
-        if cached.is_some() {
-            return Ok(cached);
-        }
+        let key = (sid, frame);
+        let mut flight = {
+            // The cache is read under the lock of the encodings, which an
+            // encoding leaves only once it has cached its PNG: a frame is
+            // either cached or being encoded, or no one encodes it.
+            let mut encoding = self.encoding.lock().expect("encoding lock");
+            if let Some(png) = self.pngs.lock().expect("png cache lock").get(key) {
+                return Ok(Some(png));
+            }
+            match encoding.get(&key) {
+                Some(flight) => flight.clone(),
+                None => {
+                    let (tx, rx) = watch::channel(None);
+                    encoding.insert(key, rx.clone());
+                    // Its own task: a client that goes away leaves it to
+                    // finish for the others (and for the cache).
+                    let state = self.clone();
+                    tokio::spawn(async move {
+                        let _flight = FlightGuard { state: &state, key };
+                        let png = state.encode_png(sid, frame).await;
+                        if let Ok(Some(png)) = &png {
+                            state
+                                .pngs
+                                .lock()
+                                .expect("png cache lock")
+                                .insert(key, png.clone());
+                        }
+                        tx.send_replace(Some(png));
+                    });
+                    rx
+                }
+            }
+        };
+        let done = flight
+            .wait_for(Option::is_some)
+            .await
+            .map_err(|_| ApiError::internal(format!("encoding frame {frame} as PNG stopped")))?;
+        done.clone().expect("waited for")
+    }
+
+    /// Decodes frame `frame` of store job `sid` and encodes it as PNG
+    /// (`None`: the frame is not stored), in one of the decode slots.
+    async fn encode_png(self: &Arc<Self>, sid: u64, frame: u32) -> Result<Option<Bytes>, ApiError> {
         let state = self.clone();
-        let png = tokio::task::spawn_blocking(move || -> Result<Option<Bytes>, ApiError> {
+        self.decoding(move || {
             let Some(exr) = state
                 .store
                 .frame_exr(sid, frame)
@@ -393,20 +495,34 @@ impl AppState {
             else {
                 return Ok(None);
             };
+            state.frame_encodes.fetch_add(1, Ordering::Relaxed);
             let film = crate::film::decode_exr(&exr).map_err(ApiError::internal)?;
             let png = crate::film::encode_png(&film).map_err(ApiError::internal)?;
             Ok(Some(Bytes::from(png)))
         })
         .await
-        .map_err(ApiError::internal)??;
-        if let Some(png) = &png {
-            self.pngs
-                .lock()
-                .expect("png cache lock")
-                .insert((sid, frame), png.clone());
-        }
-        Ok(png)
     }
+
+    /// Runs `decode` (blocking: reads, decodes or encodes a frame) once one
+    /// of the [`AppState::decode_slots`] is free.
+    pub async fn decoding<T: Send + 'static>(
+        &self,
+        decode: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
+    ) -> Result<T, ApiError> {
+        blocking_in_slot(&self.decode_slots, decode).await
+    }
+}
+
+/// Runs `work` (blocking) on the blocking pool once one of `slots` is
+/// free, holding it until `work` is done.
+pub async fn blocking_in_slot<T: Send + 'static>(
+    slots: &Semaphore,
+    work: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
+) -> Result<T, ApiError> {
+    let _slot = slots.acquire().await.map_err(ApiError::internal)?;
+    tokio::task::spawn_blocking(work)
+        .await
+        .map_err(ApiError::internal)?
 }
 
 /// `job-N` → N, spelled as the server spells it (not `job-01` or
@@ -607,22 +723,7 @@ pub fn serve(options: ServeOptions) -> Result<()> {
         .block_on(tokio::net::TcpListener::bind(options.addr))
         .with_context(|| format!("cannot listen on {}", options.addr))?;
     let store = Store::open(&options.db)?;
-    let state = Arc::new(AppState {
-        store,
-        options: options.clone(),
-        jobs: Mutex::new(BTreeMap::new()),
-        creating: Mutex::new(()),
-        controlling: Mutex::new(()),
-        wake: Notify::new(),
-        shutdown: AtomicBool::new(false),
-        running_frame: Mutex::new(None),
-        frames_rendered: AtomicU64::new(0),
-        render_micros: AtomicU64::new(0),
-        open_connections: AtomicU64::new(0),
-        watchers: Mutex::new(HashMap::new()),
-        pngs: Mutex::new(PngCache::default()),
-        scene_cache: Mutex::new(None),
-    });
+    let state = Arc::new(AppState::new(store, options.clone()));
     worker::load_jobs(&state)?;
     let served = runtime.block_on(async move {
         let local = listener.local_addr()?;
@@ -663,5 +764,83 @@ pub(super) async fn shutdown_signal() {
     tokio::select! {
         _ = ctrl_c => {},
         _ = term => {},
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod testing {
+    use super::*;
+
+    /// A server state over a new store in `dir`, with no jobs.
+    pub fn state(dir: &std::path::Path) -> Arc<AppState> {
+        let store = Store::open(&dir.join("db")).unwrap();
+        Arc::new(AppState::new(
+            store,
+            ServeOptions {
+                db: dir.join("db"),
+                addr: "127.0.0.1:0".parse().unwrap(),
+                scenes: None,
+                token: None,
+                backend: BackendChoice::Cpu,
+                out: dir.join("out"),
+                bench: None,
+                client_timeout: Duration::from_secs(30),
+            },
+        ))
+    }
+
+    /// Adds job `id` (a small `path` job over frames 0..2) to the table,
+    /// `state`, with frames `stored` stored.
+    pub fn add_job(state: &AppState, id: &str, job_state: JobState, stored: &[u32]) {
+        let request = JobRequest::parse(
+            br#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"16x16","spp":1}"#,
+            None,
+        )
+        .unwrap();
+        state.jobs.lock().unwrap().insert(
+            JobKey::of(id),
+            Job::new(id.to_string(), request, job_state, stored),
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::AtomicUsize;
+
+    /// No more blocking work runs at once than there are slots, however
+    /// many requests ask.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+    async fn blocking_work_runs_in_its_slots_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        let slots = state.decode_slots.available_permits();
+        assert_eq!(slots, cores());
+        let running = Arc::new(AtomicUsize::new(0));
+        let most = Arc::new(AtomicUsize::new(0));
+        let tasks: Vec<_> = (0..slots * 3 + 2)
+            .map(|_| {
+                let (state, running, most) = (state.clone(), running.clone(), most.clone());
+                tokio::spawn(async move {
+                    state
+                        .decoding(move || {
+                            let now = running.fetch_add(1, Ordering::SeqCst) + 1;
+                            most.fetch_max(now, Ordering::SeqCst);
+                            std::thread::sleep(Duration::from_millis(30));
+                            running.fetch_sub(1, Ordering::SeqCst);
+                            Ok(())
+                        })
+                        .await
+                })
+            })
+            .collect();
+        for t in tasks {
+            t.await.unwrap().unwrap();
+        }
+        let most = most.load(Ordering::SeqCst);
+        assert!(most <= slots, "{most} at once in {slots} slots");
+        assert!(most > 1 || slots == 1, "the slots were not used at once");
+        assert_eq!(state.decode_slots.available_permits(), slots);
     }
 }

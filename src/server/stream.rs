@@ -50,6 +50,9 @@ struct Follower {
     /// Last (state, frames done) reported by `Changed`.
     seen: Option<(super::JobState, u32)>,
     ended: bool,
+    /// Why the follower ended before the job did, when not for a shutdown
+    /// (the store failed).
+    failure: Option<String>,
 }
 
 impl Follower {
@@ -64,6 +67,7 @@ impl Follower {
             sid: None,
             seen: None,
             ended: false,
+            failure: None,
         })
     }
 
@@ -123,12 +127,13 @@ fn next_to_report(stored: &[Range<u32>], range: &Range<u32>, next: u32, over: bo
 
 /// A `state` event: `final` when the job has ended (done, failed,
 /// cancelled); a stream that closes while the job has not (the server
-/// stops) says so in `closing`, and the client reconnects later.
-fn state_event(job: &Job, closing: bool) -> Event {
+/// stops, or the store failed: `failure`) says why in `closing`, and the
+/// client reconnects later.
+fn state_event(job: &Job, closing: bool, failure: Option<&str>) -> Event {
     let ended = job.state.is_final();
     let mut s = serde_json::json!({ "id": job.id, "state": job.state.as_str(), "final": ended });
     if closing && !ended {
-        s["closing"] = "the server is stopping".into();
+        s["closing"] = failure.unwrap_or("the server is stopping").into();
     }
     Event::default().event("state").data(s.to_string())
 }
@@ -209,7 +214,14 @@ pub async fn events(
                 }
                 let step = match f.step().await {
                     Ok(s) => s,
-                    Err(_) => Step::End(f.state.job(&f.id).ok()?),
+                    // The job vanished or the store failed: end the stream
+                    // (after its `progress` and `state` events), or the
+                    // failing step would be taken again and again.
+                    Err(e) => {
+                        f.ended = true;
+                        f.failure = Some(format!("reading the job failed: {}", e.detail));
+                        Step::End(f.state.job(&f.id).ok()?)
+                    }
                 };
                 let job = match step {
                     Step::Frame(frame) => {
@@ -229,7 +241,7 @@ pub async fn events(
                 );
                 if last_state != Some(job.state) || f.ended {
                     last_state = Some(job.state);
-                    queue.push_back(state_event(&job, f.ended));
+                    queue.push_back(state_event(&job, f.ended, f.failure.as_deref()));
                 }
             }
         },
@@ -240,6 +252,37 @@ pub async fn events(
 #[cfg(test)]
 mod tests {
     use super::next_to_report;
+    use crate::server::testing;
+    use crate::server::JobState;
+    use axum::extract::{Path, State};
+    use axum::response::IntoResponse;
+
+    /// A job whose store entry cannot be read (its store id fails) ends
+    /// its event stream with a `state` event saying why, rather than
+    /// sending `progress` events for ever.
+    #[tokio::test]
+    async fn events_end_when_the_store_fails() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        testing::add_job(&state, "job-1", JobState::Running, &[0]);
+        state
+            .store
+            .raw_insert("jobs", b"job-1", b"not a job")
+            .unwrap();
+        assert!(state.store_id("job-1").is_err());
+        let response = super::events(State(state), Path("job-1".to_string()))
+            .await
+            .unwrap()
+            .into_response();
+        // Without an end, the body would run past any limit.
+        let body = axum::body::to_bytes(response.into_body(), 1 << 20)
+            .await
+            .expect("the event stream ends");
+        let text = String::from_utf8(body.to_vec()).unwrap();
+        assert_eq!(text.matches("event: progress").count(), 1, "{text}");
+        assert_eq!(text.matches("event: state").count(), 1, "{text}");
+        assert!(text.contains("reading the job failed"), "{text}");
+    }
 
     #[test]
     fn frames_are_reported_in_order_over_all_stored_ranges() {
