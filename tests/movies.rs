@@ -21,6 +21,8 @@ use radcache::render::Renderer;
 use radcache::scene::Scene;
 use radcache::scene::{Channel, Interpolation, Property};
 use std::f32::consts::{FRAC_PI_2, PI};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
 fn renderer(scene: Scene, size: u32) -> Renderer {
     common::cpu_renderer(
@@ -171,6 +173,16 @@ fn a_still_scene_traces_only_camera_rays_after_its_first_frame() {
     }
 }
 
+/// The largest difference between two films' pixels, relative to the
+/// larger (or to 1e-3 where both are darker), worst colour channel.
+fn worst_difference(a: &Film, b: &Film) -> f32 {
+    a.pixels
+        .iter()
+        .zip(&b.pixels)
+        .map(|(a, b)| ((*a - *b).abs() / a.abs().max(b.abs()).max(Vec3::splat(1e-3))).max_element())
+        .fold(0.0f32, f32::max)
+}
+
 /// Renders frames `frames` of `scene` with one `movies` instance kept
 /// across them and, for each frame after the first, with a fresh instance
 /// opening every movie at that frame; asserts the two give the same
@@ -199,14 +211,7 @@ fn kept_against_fresh(
         // an edge two triangles share lands on either one as the BVH
         // breaks the tie; Gouraud interpolation on the shared edge agrees
         // between them only up to rounding (2e-5 at most seen).
-        let worst = film
-            .pixels
-            .iter()
-            .zip(&fresh_film.pixels)
-            .map(|(a, b)| {
-                ((*a - *b).abs() / a.abs().max(b.abs()).max(Vec3::splat(1e-3))).max_element()
-            })
-            .fold(0.0f32, f32::max);
+        let worst = worst_difference(&film, &fresh_film);
         assert!(
             worst < 1e-4,
             "frame {frame}: kept and fresh movies differ by {worst} (mean {} against {})",
@@ -235,6 +240,81 @@ fn kept_movies_equal_movies_opened_at_the_frame() {
         );
     }
     assert!(frames.last().is_some_and(|f| f.1 > 0));
+}
+
+/// A lamp under a table lights the table's underside only; a block stands
+/// on the table, its bottom 4 µm above the table's top, and jumps away at
+/// frame 2; a ceiling above, seen from under it, is dark throughout. The
+/// static shadows of the ceiling's texels, found while the block stood
+/// there, must hold the table: stepping past each moving surface by a
+/// hundred-thousandth of the segment (15 µm here), their walk stepped over
+/// the table too and kept the samples as open, so that the kept movies
+/// lit the ceiling through the table once the block was gone, where
+/// movies opened then were dark.
+#[test]
+fn a_static_blocker_touching_a_moving_one_stays_a_blocker() {
+    let (fps, k) = (24.0, 2);
+    let scene = || {
+        let mut ceiling = radcache::scene::Mesh::default();
+        common::push_quad(
+            &mut ceiling,
+            Vec3::new(-1.0, 2.0, -1.0),
+            Vec3::X * 2.0,
+            Vec3::Z * 2.0,
+            0,
+        );
+        let mut table = radcache::scene::Mesh::default();
+        common::push_quad(
+            &mut table,
+            Vec3::new(-2.0, 1.0, -2.0),
+            Vec3::Z * 4.0,
+            Vec3::X * 4.0,
+            0,
+        );
+        let mut lamp = radcache::scene::Mesh::default();
+        common::push_quad(
+            &mut lamp,
+            Vec3::new(-0.1, 0.5, -0.1),
+            Vec3::Z * 0.2,
+            Vec3::X * 0.2,
+            1,
+        );
+        let mut s = scene(
+            vec![ceiling, table, lamp],
+            vec![
+                radcache::scene::Material::diffuse("white", Vec3::splat(0.7)),
+                radcache::scene::Material::emitter("lamp", Vec3::splat(20.0)),
+            ],
+            vec![],
+            Vec3::new(0.0, 1.5, 0.0),
+            Vec3::Y,
+            1.2,
+            vec![],
+        );
+        common::add_moving_block(
+            &mut s,
+            (Vec3::new(-0.3, 1.0 + 4e-6, -0.3), Vec3::new(0.3, 1.3, 0.3)),
+            Vec3::splat(0.7),
+            Interpolation::Step,
+            (
+                vec![0.0, (k as f32 - 0.5) / fps],
+                vec![glam::Vec4::ZERO, glam::Vec4::new(0.0, -20.0, 0.0, 0.0)],
+            ),
+        );
+        s.frame_count = 8;
+        s
+    };
+    kept_against_fresh(scene, 16, 0..k + 2);
+    let mut movies = TextureMovies::new(MoviesSettings::default());
+    let mut r = renderer(scene(), 16);
+    for frame in 0..k + 2 {
+        let (film, stats, _) = render(&mut r, &mut movies, frame);
+        assert!(
+            stats.records_alive > 0,
+            "frame {frame}: the ceiling has movies"
+        );
+        assert_eq!(film.mean(), 0.0, "frame {frame}: the ceiling is lit");
+    }
 }
 
 /// The same under a one-sided panel light that turns over: at frame 0 it
@@ -405,4 +485,112 @@ fn a_camera_that_walks_into_a_room_whose_normals_face_out() {
         (mean / expected - 1.0).abs() < 0.03,
         "inside: mean {mean}, path {expected}"
     );
+}
+
+/// The CPU backend, abandoning the frame in progress (setting the
+/// renderer's abandon flag, as a cancel or a shutdown does) at the first
+/// any-hit batch that does not leave the camera once a batch of camera
+/// rays was traced: the first shadow rays of the movies' shading, after
+/// the global pass and the item buffer.
+struct AbandonWhileShading {
+    inner: radcache::backend::cpu::CpuBackend,
+    eye: Vec3,
+    trigger: Arc<Trigger>,
+}
+
+/// When [`AbandonWhileShading`] sets which flag: once, after it is armed.
+#[derive(Default)]
+struct Trigger {
+    camera_traced: AtomicBool,
+    /// The renderer's abandon flag, while armed.
+    armed: Mutex<Option<Arc<AtomicBool>>>,
+}
+
+impl radcache::backend::RayBackend for AbandonWhileShading {
+    fn name(&self) -> String {
+        "abandons while shading".into()
+    }
+
+    fn set_geometry(&mut self, snapshot: &radcache::scene::Snapshot) {
+        self.eye = snapshot.camera.position;
+        self.inner.set_geometry(snapshot);
+    }
+
+    fn closest_hit(&self, rays: &[radcache::backend::Ray], hits: &mut [radcache::backend::Hit]) {
+        if !rays.is_empty() && rays.iter().all(|r| r.origin() == self.eye) {
+            self.trigger.camera_traced.store(true, Ordering::SeqCst);
+        }
+        self.inner.closest_hit(rays, hits);
+    }
+
+    fn any_hit(&self, rays: &[radcache::backend::Ray], occluded: &mut [bool]) {
+        let shading = rays.first().is_some_and(|r| r.origin() != self.eye);
+        if shading && self.trigger.camera_traced.load(Ordering::SeqCst) {
+            if let Some(flag) = self.trigger.armed.lock().unwrap().take() {
+                flag.store(true, Ordering::SeqCst);
+            }
+        }
+        self.inner.any_hit(rays, occluded);
+    }
+
+    fn ray_counts(&self) -> radcache::backend::RayCounts {
+        self.inner.ray_counts()
+    }
+
+    fn preferred_batch(&self) -> usize {
+        self.inner.preferred_batch()
+    }
+}
+
+/// A cancel or a shutdown while the movies are shaded (the renderer's
+/// abandon flag set between two movies): the frame ends without rendering
+/// from the movies it left unshaded (a movie opened in the frame has no
+/// texels, and the lookup into them panicked, so that a cancelled job was
+/// recorded as failed), and keeps none of them: the same instance then
+/// renders every frame as an uninterrupted one does. One thread, so that
+/// the movies after the one shaded when the flag is set are skipped.
+#[test]
+fn a_frame_abandoned_while_its_movies_are_shaded_ends_and_keeps_none() {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        let (k, size) = (2, 16);
+        let trigger = Arc::new(Trigger::default());
+        let backend = AbandonWhileShading {
+            inner: radcache::backend::cpu::CpuBackend::new(),
+            eye: Vec3::NAN,
+            trigger: trigger.clone(),
+        };
+        let settings = radcache::render::FrameSettings {
+            width: size,
+            height: size,
+            ..radcache::render::FrameSettings::default()
+        };
+        let method = Box::new(TextureMovies::new(MoviesSettings::default()));
+        let mut r = Renderer::new(
+            jumping_block_room(k, 24.0),
+            method,
+            Box::new(backend),
+            settings,
+        );
+        let flag = r.abandon_flag();
+        *trigger.armed.lock().unwrap() = Some(flag.clone());
+        let abandoned = r.try_render_frame(0).expect("no backend failure");
+        assert!(r.abandoned(), "the frame was not abandoned");
+        assert!(trigger.armed.lock().unwrap().is_none());
+        assert_eq!(abandoned.mean(), 0.0, "an abandoned frame renders nothing");
+        flag.store(false, Ordering::SeqCst);
+        let mut uninterrupted = renderer(jumping_block_room(k, 24.0), size);
+        for frame in 0..k + 2 {
+            let film = r.try_render_frame(frame).unwrap();
+            let reference = uninterrupted.try_render_frame(frame).unwrap();
+            let worst = worst_difference(&film, &reference);
+            assert!(
+                worst < 1e-4,
+                "frame {frame}: after the abandoned frame, off by {worst}"
+            );
+        }
+    });
 }

@@ -12,19 +12,54 @@ use sled::transaction::{ConflictableTransactionError, TransactionError};
 use sled::Transactional;
 use std::collections::hash_map::{Entry, HashMap};
 
-/// The most texels one frame's movies may hold: 4096 movies at 1024 texels
-/// along an edge (more than any setting allows) would not reach it.
+/// The most texels one frame's movies may store, and the most vertices
+/// of its global pass: 2^28 (a GiB of RGBE), which a reader may allocate
+/// before decompressing. A movie stores its band, about R²/2 texels
+/// (526,845 at R = 1024, the finest `--movies-max-resolution`), so some
+/// 509 movies at R = 1024 fill it (4096 would hold 2.16 G texels): the
+/// writer refuses a frame past it ([`MovieFramesValue::check_storable`])
+/// rather than store one that its reader calls corrupt.
 const MAX_STORED_TEXELS: usize = 1 << 28;
 
+/// Whether `texels` texels (of `movies` movies) are within
+/// [`MAX_STORED_TEXELS`].
+fn texels_within_limit(texels: u64, movies: usize) -> Result<(), String> {
+    if texels > MAX_STORED_TEXELS as u64 {
+        return Err(format!(
+            "{texels} texels in one frame's {movies} movies, more than {MAX_STORED_TEXELS}"
+        ));
+    }
+    Ok(())
+}
+
+/// Whether `vertices` global-pass vertices are within [`MAX_STORED_TEXELS`].
+fn vertices_within_limit(vertices: u64) -> Result<(), String> {
+    if vertices > MAX_STORED_TEXELS as u64 {
+        return Err(format!(
+            "{vertices} global-pass vertices, more than {MAX_STORED_TEXELS}"
+        ));
+    }
+    Ok(())
+}
+
 impl MovieFramesValue {
+    /// Whether its counts are within what [`Self::texels`] and
+    /// [`Self::global`] read back ([`MAX_STORED_TEXELS`]): the writer's
+    /// check before it commits the frame.
+    pub fn check_storable(&self) -> Result<(), String> {
+        texels_within_limit(self.stored_texels(), self.movies.len())?;
+        vertices_within_limit(u64::from(self.global_vertices))
+    }
+
+    /// The texels the movies say it stores.
+    fn stored_texels(&self) -> u64 {
+        self.movies.iter().map(|m| u64::from(m.texels)).sum()
+    }
+
     /// The global pass's indirect irradiance per vertex (RGBE decoded).
     pub fn global(&self) -> Result<Vec<glam::Vec3>, String> {
+        vertices_within_limit(u64::from(self.global_vertices))?;
         let n = self.global_vertices as usize;
-        if n > MAX_STORED_TEXELS {
-            return Err(format!(
-                "{n} global-pass vertices, more than {MAX_STORED_TEXELS}"
-            ));
-        }
         let raw = decompress(&self.global_zstd, n * 4)?;
         Ok(raw
             .chunks_exact(4)
@@ -34,14 +69,10 @@ impl MovieFramesValue {
 
     /// Each movie's stored texels (RGBE decoded), in movie order.
     pub fn texels(&self) -> Result<Vec<Vec<glam::Vec3>>, String> {
-        let total: usize = self.movies.iter().map(|m| m.texels as usize).sum();
         // A damaged count must not make the decompression allocate it.
-        if total > MAX_STORED_TEXELS {
-            return Err(format!(
-                "{total} texels in one frame's movies, more than {MAX_STORED_TEXELS}"
-            ));
-        }
-        let raw = decompress(&self.texels_zstd, total * 4)?;
+        let total = self.stored_texels();
+        texels_within_limit(total, self.movies.len())?;
+        let raw = decompress(&self.texels_zstd, total as usize * 4)?;
         let mut rgbe = raw
             .chunks_exact(4)
             .map(|c| super::rgbe::decode([c[0], c[1], c[2], c[3]]));
@@ -230,6 +261,19 @@ impl Store {
     /// when this returns `Ok` is the frame acknowledged; `job` is updated
     /// to the stored progress.
     pub fn commit_frame(&self, job: &mut JobValue, c: FrameCommit) -> Result<(), StoreError> {
+        // Refused before anything is written: what its reader would call
+        // corrupt.
+        if let Some(movies) = c.movies {
+            movies.check_storable().map_err(|detail| StoreError::Job {
+                path: self.path.clone(),
+                job: job.name.clone(),
+                detail: format!(
+                    "frame {}: its texture movies are too large to store: {detail} \
+                         (lower --movies-max-resolution or --movies-texels-per-pixel)",
+                    c.frame
+                ),
+            })?;
+        }
         let mut log = self.lock_log();
         let result = self.commit_frame_locked(&mut log, job, c);
         match &result {
@@ -574,5 +618,121 @@ impl RecordCommit {
             },
             samples,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::method::FrameStats;
+    use crate::store::JobSpec;
+
+    /// A frame's movies: `movies` movies storing `texels` texels each
+    /// (nothing compressed: only the counts are looked at).
+    fn movies(movies: u32, texels: u32) -> MovieFramesValue {
+        MovieFramesValue {
+            movies: (0..movies)
+                .map(|triangle| MovieValue {
+                    triangle,
+                    back: false,
+                    patch: 1,
+                    resolution: 1024,
+                    start: 0,
+                    texels,
+                    stored_at: 0,
+                })
+                .collect(),
+            texels_zstd: Vec::new(),
+            global_vertices: 0,
+            global_zstd: Vec::new(),
+        }
+    }
+
+    /// The texels a movie at 1024 texels along an edge stores (its band:
+    /// texel `(i, j)` where `i + j ≤ R + 1`).
+    const BAND_1024: u32 = 526_845;
+
+    #[test]
+    fn a_band_at_1024_is_as_counted() {
+        let r = 1024u32;
+        let band: u32 = (0..r)
+            .map(|j| (0..r).filter(|i| i + j <= r + 1).count() as u32)
+            .sum();
+        assert_eq!(band, BAND_1024);
+    }
+
+    /// The writer's limit is the reader's: 509 movies at R = 1024 fit,
+    /// 510 do not, and neither does a global pass past it; the reader
+    /// refuses what the writer refuses before it decompresses anything.
+    #[test]
+    fn the_writer_refuses_what_the_reader_would_call_corrupt() {
+        assert!(movies(509, BAND_1024).check_storable().is_ok());
+        let over = movies(510, BAND_1024);
+        let e = over.check_storable().unwrap_err();
+        assert!(
+            e.contains("268690950 texels") && e.contains("510 movies"),
+            "{e}"
+        );
+        assert_eq!(over.texels().unwrap_err(), e);
+        // 4096 movies at 1024: counted without overflow.
+        let e = movies(4096, BAND_1024).check_storable().unwrap_err();
+        assert!(e.contains("2157957120 texels"), "{e}");
+        let mut global = movies(1, 16);
+        global.global_vertices = (MAX_STORED_TEXELS + 1) as u32;
+        let e = global.check_storable().unwrap_err();
+        assert_eq!(global.global().unwrap_err(), e);
+        global.global_vertices = MAX_STORED_TEXELS as u32;
+        assert!(global.check_storable().is_ok());
+    }
+
+    /// A frame whose movies are past the limit is refused with an error
+    /// naming the frame and the count, and nothing of it is stored.
+    #[test]
+    fn a_frame_whose_movies_are_past_the_limit_is_not_committed() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Store::open(&dir.path().join("db")).unwrap();
+        let spec = JobSpec {
+            name: "j".into(),
+            scene: "builtin:cube-in-box".into(),
+            scene_hash: "0123456789abcdef".into(),
+            method: "movies".into(),
+            settings: "Movies(..)".into(),
+            width: 16,
+            height: 16,
+            spp: 4,
+            fps: 24.0,
+            seed: 0,
+            same_pattern: false,
+            frame_start: 0,
+            frame_end: 10,
+        };
+        let mut job = store.begin_job(&spec, false).unwrap();
+        let before = job.clone();
+        let over = movies(510, BAND_1024);
+        let stats = FrameStats::default();
+        let e = store
+            .commit_frame(
+                &mut job,
+                FrameCommit {
+                    frame: 3,
+                    width: 16,
+                    height: 16,
+                    exr: &[1, 2, 3],
+                    records: Vec::new(),
+                    stats: &stats,
+                    state: None,
+                    movies: Some(&over),
+                    sources: None,
+                },
+            )
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("frame 3") && e.contains("268690950 texels"),
+            "{e}"
+        );
+        assert!(!store.frame_done(job.id, 3).unwrap());
+        assert_eq!(job, before);
+        assert_eq!(store.frame_movies(job.id, 3).unwrap(), None);
     }
 }

@@ -16,14 +16,74 @@
 //! checks it).
 
 use super::super::FrameContext;
-use crate::backend::{Hit, Ray, SHADOW_EPSILON};
+use crate::accel::TriangleBvh;
+use crate::backend::{Ray, SHADOW_EPSILON};
 use crate::integrator::offset_origin;
 use crate::light::{LightSource, PointLights, TriangleSampling};
 use crate::sampling::{Rng, SampleKey, Stratified2d};
+use crate::scene::Snapshot;
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 pub use super::super::motion::{segment_hits_box, Aabb, Blockers};
+
+/// The static triangles' BVH, built once a render (while the static
+/// part's fingerprint holds) and shared by the frames' [`ShadowBlockers`].
+#[derive(Default)]
+pub struct StaticGeometry {
+    fingerprint: Option<u64>,
+    bvh: Option<Arc<TriangleBvh>>,
+}
+
+impl StaticGeometry {
+    /// The BVH of `snapshot`'s static triangles (`None`: there are none).
+    fn of(&mut self, snapshot: &Snapshot) -> Option<Arc<TriangleBvh>> {
+        let fingerprint = snapshot.static_fingerprint();
+        if self.fingerprint != Some(fingerprint) {
+            self.bvh = TriangleBvh::build(snapshot, 0..snapshot.static_count).map(Arc::new);
+            self.fingerprint = Some(fingerprint);
+        }
+        self.bvh.clone()
+    }
+}
+
+/// What may stop a shadow sample in one frame: the moving objects' boxes
+/// and which lights stand still ([`Blockers`], which it derefs to) and,
+/// where anything moves, the static triangles on their own: the static
+/// blockers of a segment that crosses a moving object.
+pub struct ShadowBlockers {
+    moving: Blockers,
+    /// `None` where nothing moves (no segment crosses a moving box) or
+    /// nothing stands still.
+    statics: Option<Arc<TriangleBvh>>,
+}
+
+impl ShadowBlockers {
+    pub fn new(ctx: &FrameContext, statics: &mut StaticGeometry) -> Self {
+        let moving = Blockers::new(ctx);
+        let statics = if moving.boxes.is_empty() {
+            None
+        } else {
+            statics.of(ctx.snapshot)
+        };
+        ShadowBlockers { moving, statics }
+    }
+
+    /// Whether a static triangle lies on `ray` (the same intersection
+    /// test, on the same shifted ray, as the backend's own traversal).
+    fn static_blocks(&self, ray: &Ray) -> bool {
+        self.statics.as_ref().is_some_and(|b| b.occludes(ray))
+    }
+}
+
+impl std::ops::Deref for ShadowBlockers {
+    type Target = Blockers;
+
+    fn deref(&self) -> &Blockers {
+        &self.moving
+    }
+}
 
 /// The most shadow samples a point may take (one bit each in a `u64`).
 pub const MAX_SHADOW_SAMPLES: u32 = 64;
@@ -85,7 +145,7 @@ impl OpenSample {
 }
 
 impl StaticShadows {
-    fn valid_for(&self, blockers: &Blockers, points: usize) -> bool {
+    fn valid_for(&self, blockers: &ShadowBlockers, points: usize) -> bool {
         self.fingerprint == blockers.pick_fingerprint && self.points.len() == points
     }
 
@@ -187,7 +247,7 @@ fn key(seed: u64, item: u64, sample: u32) -> SampleKey {
 /// used where still valid and found again where not.
 pub fn direct_irradiance(
     ctx: &FrameContext,
-    blockers: &Blockers,
+    blockers: &ShadowBlockers,
     points: &[ShadePoint],
     samples: u32,
     kept: Option<&mut StaticShadows>,
@@ -309,7 +369,7 @@ fn moving_points(
 /// drawn and traced again.
 fn kept_points(
     ctx: &FrameContext,
-    blockers: &Blockers,
+    blockers: &ShadowBlockers,
     points: &[ShadePoint],
     samples: u32,
     shadows: &[PointShadows],
@@ -363,7 +423,7 @@ fn kept_points(
 /// irradiance with every blocker.
 fn first_static_points(
     ctx: &FrameContext,
-    blockers: &Blockers,
+    blockers: &ShadowBlockers,
     points: &[ShadePoint],
     samples: u32,
 ) -> (Vec<Vec3>, ShadowCounts, Vec<PointShadows>) {
@@ -423,93 +483,37 @@ fn first_static_points(
 }
 
 /// For each segment: whether a static blocker stops it, and whether any
-/// blocker does. Segments clear of every moving object's box take one
-/// any-hit ray (the two answers are the same); the others are walked hit
-/// by hit past the moving objects they meet.
+/// blocker does. One any-hit ray each answers the second, and the first
+/// too where the segment is clear of every moving object's box; a segment
+/// that crosses one is traced again against the static triangles alone,
+/// so that a static surface just behind a moving one, or touching it (a
+/// box standing on a table), is found however near it lies. (Stepping
+/// from hit to hit past the moving surfaces skipped a static one within
+/// the step, and gave up after a number of steps calling the segment
+/// clear: such a sample was kept as open, and once the moving object was
+/// gone a kept movie took its light through the static blocker, where a
+/// movie opened then did not.)
 fn static_and_any_blocked(
     ctx: &FrameContext,
-    blockers: &Blockers,
+    blockers: &ShadowBlockers,
     rays: &[Ray],
 ) -> (Vec<bool>, Vec<bool>) {
-    let crossing: Vec<bool> = rays
+    let mut by_any = vec![false; rays.len()];
+    ctx.backend.any_hit(rays, &mut by_any);
+    let by_static = rays
         .iter()
-        .map(|r| blockers.segment_may_hit(r.origin(), r.at(r.tmax)))
-        .collect();
-    let clear: Vec<Ray> = rays
-        .iter()
-        .zip(&crossing)
-        .filter(|(_, &c)| !c)
-        .map(|(r, _)| *r)
-        .collect();
-    let mut clear_blocked = vec![false; clear.len()];
-    ctx.backend.any_hit(&clear, &mut clear_blocked);
-    let mut walk: Vec<Ray> = rays
-        .iter()
-        .zip(&crossing)
-        .filter(|(_, &c)| c)
-        .map(|(r, _)| *r)
-        .collect();
-    let (walk_static, walk_any) = walk_past_moving(ctx, blockers, &mut walk);
-    let (mut by_static, mut by_any) = (Vec::with_capacity(rays.len()), Vec::new());
-    let (mut clear_it, mut walk_it) = (
-        clear_blocked.into_iter(),
-        walk_static.into_iter().zip(walk_any),
-    );
-    for &c in &crossing {
-        if c {
-            let (s, a) = walk_it.next().expect("one walk per crossing segment");
-            by_static.push(s);
-            by_any.push(a);
-        } else {
-            let b = clear_it.next().expect("one ray per clear segment");
-            by_static.push(b);
-            by_any.push(b);
-        }
-    }
-    (by_static, by_any)
-}
-
-/// The most moving surfaces a static-shadow walk steps past before it
-/// gives up (and calls the segment clear of static blockers).
-const MAX_WALK: usize = 64;
-
-/// Closest hits along each segment, stepping past hits on moving
-/// objects: whether a static surface stops it, and whether anything does.
-fn walk_past_moving(
-    ctx: &FrameContext,
-    blockers: &Blockers,
-    rays: &mut [Ray],
-) -> (Vec<bool>, Vec<bool>) {
-    let n = rays.len();
-    let (mut by_static, mut by_any) = (vec![false; n], vec![false; n]);
-    let mut active: Vec<usize> = (0..n).collect();
-    for step in 0..MAX_WALK {
-        if active.is_empty() {
-            break;
-        }
-        let batch: Vec<Ray> = active.iter().map(|&i| rays[i]).collect();
-        let mut hits = vec![Hit::MISS; batch.len()];
-        ctx.backend.closest_hit(&batch, &mut hits);
-        let mut next = Vec::new();
-        for (&i, hit) in active.iter().zip(&hits) {
-            if !hit.is_hit() {
-                continue;
+        .zip(&mut by_any)
+        .map(|(ray, any)| {
+            if !blockers.segment_may_hit(ray.origin(), ray.at(ray.tmax)) {
+                return *any;
             }
-            if step == 0 {
-                by_any[i] = true;
-            }
-            if blockers.is_moving_triangle(hit.triangle) {
-                // On past this surface (t is in units of the segment).
-                rays[i].tmin = hit.t + 1e-5;
-                if rays[i].tmin < rays[i].tmax {
-                    next.push(i);
-                }
-            } else {
-                by_static[i] = true;
-            }
-        }
-        active = next;
-    }
+            let stopped = blockers.static_blocks(ray);
+            // A static blocker stops it whatever moves: so it is in every
+            // later frame's kept answer, and so it is in this one's.
+            *any |= stopped;
+            stopped
+        })
+        .collect();
     (by_static, by_any)
 }
 

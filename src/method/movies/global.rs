@@ -23,7 +23,7 @@
 //! is solved on one side, as the paper's polygons are: its front, or its
 //! back where its part encloses the camera facing away ([`super::sides`]).
 
-use super::direct::{direct_irradiance, Blockers, ShadePoint, StaticShadows};
+use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, StaticShadows};
 use super::sides::SolvedSides;
 use super::FrameContext;
 use crate::backend::{Hit, Ray};
@@ -543,7 +543,7 @@ impl GlobalPass {
     /// direct light at the vertices, and the radiosity solved. Returns the
     /// shadow rays traced.
     /// Its working buffers' peak is then [`working_bytes`](Self::working_bytes).
-    pub fn update(&mut self, ctx: &FrameContext, blockers: &Blockers, first: bool) -> u64 {
+    pub fn update(&mut self, ctx: &FrameContext, blockers: &ShadowBlockers, first: bool) -> u64 {
         let mut working = Working::default();
         let turned = self.sides.update(ctx.snapshot);
         if turned.contains(&true) {
@@ -609,7 +609,7 @@ impl GlobalPass {
     fn retrace_links(
         &mut self,
         ctx: &FrameContext,
-        blockers: &Blockers,
+        blockers: &ShadowBlockers,
         points: &[ShadePoint],
         first: bool,
         turned: &[bool],
@@ -666,7 +666,7 @@ impl GlobalPass {
     /// moving object's box may cross. Only their segments are looked at.
     fn stale_links(
         &self,
-        blockers: &Blockers,
+        blockers: &ShadowBlockers,
         first: bool,
         turned: &[bool],
     ) -> Vec<(usize, u32, u32)> {
@@ -731,7 +731,7 @@ impl GlobalPass {
     fn direct(
         &mut self,
         ctx: &FrameContext,
-        blockers: &Blockers,
+        blockers: &ShadowBlockers,
         points: &[ShadePoint],
         moving: &[bool],
         working: &mut Working,
@@ -1051,7 +1051,11 @@ mod tests {
             let mut pass = GlobalPass::new(ctx, settings);
             let links = pass.links.len() as u64;
             assert!(links > MAX_LINKS / 4 && links <= MAX_LINKS, "{links}");
-            pass.update(ctx, &Blockers::new(ctx), true);
+            pass.update(
+                ctx,
+                &ShadowBlockers::new(ctx, &mut Default::default()),
+                true,
+            );
             assert!(pass.indirect.iter().all(|e| e.is_finite()));
         });
     }
@@ -1071,7 +1075,7 @@ mod tests {
             renderer.with_frame_context(frame * 3, |ctx| {
                 let pass = pass.get_or_insert_with(|| GlobalPass::new(ctx, settings));
                 let valid_before = pass.valid.clone();
-                let blockers = Blockers::new(ctx);
+                let blockers = ShadowBlockers::new(ctx, &mut Default::default());
                 pass.update(ctx, &blockers, frame == 0);
                 let built: Vec<_> = pass.vertices.iter().map(|v| pass.row(v)).collect();
                 assert_eq!(pass.rows, built, "frame {}", frame * 3);

@@ -122,6 +122,9 @@ pub struct TextureMovies {
     pub settings: MoviesSettings,
     global: Option<GlobalPass>,
     movies: BTreeMap<MovieKey, Movie>,
+    /// The static triangles alone, for the static shadows of segments
+    /// that cross a moving object ([`direct::ShadowBlockers`]).
+    statics: direct::StaticGeometry,
     stats: FrameStats,
     /// The movies' shadow samples of the last frame.
     shadows: ShadowCounts,
@@ -136,6 +139,7 @@ impl TextureMovies {
             settings,
             global: None,
             movies: BTreeMap::new(),
+            statics: direct::StaticGeometry::default(),
             stats: FrameStats::default(),
             shadows: ShadowCounts::default(),
             keep: false,
@@ -243,7 +247,7 @@ impl Method for TextureMovies {
             frame: ctx.frame,
             ..FrameStats::default()
         };
-        let blockers = direct::Blockers::new(ctx);
+        let blockers = direct::ShadowBlockers::new(ctx, &mut self.statics);
 
         let start = Instant::now();
         let fresh = !self
@@ -263,7 +267,7 @@ impl Method for TextureMovies {
         let tiles = self.trace_tiles(ctx);
         if ctx.abandoned() {
             // Thrown away (`FrameContext::abandoned`): the tiles are partial.
-            return Film::new(ctx.width, ctx.height);
+            return self.abandon_frame(ctx);
         }
         let wanted = self.wanted_movies(ctx, &tiles);
         self.apply_events(ctx, wanted, &blockers, &mut stats);
@@ -277,6 +281,12 @@ impl Method for TextureMovies {
                 false => m.shade(ctx, &blockers, global, samples),
             })
             .collect();
+        if ctx.abandoned() {
+            // The movies the loop skipped are half built: one opened this
+            // frame has no texels (a lookup would index nothing), a kept one
+            // the last frame's. None may be rendered or kept.
+            return self.abandon_frame(ctx);
+        }
         self.shadows = ShadowCounts::default();
         counts.into_iter().for_each(|c| self.shadows += c);
         self.keep_within_budget();
@@ -286,6 +296,11 @@ impl Method for TextureMovies {
 
         let start = Instant::now();
         let film = self.render(ctx, tiles, &mut stats);
+        if ctx.abandoned() {
+            // Its glossy paths were cut short; and its movies' texels must
+            // not be marked stored with a frame the store never gets.
+            return self.abandon_frame(ctx);
+        }
         stats
             .phase_seconds
             .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
@@ -322,6 +337,22 @@ impl Method for TextureMovies {
 }
 
 impl TextureMovies {
+    /// The end of an abandoned frame ([`FrameContext::abandoned`]), which
+    /// the renderer throws away: an empty film, no frame records, and no
+    /// movie left, so that nothing half built is rendered, kept or stored
+    /// (a later frame opens its movies again, as a fresh instance would).
+    /// The global pass, which runs to its end before any check, stays.
+    fn abandon_frame(&mut self, ctx: &FrameContext) -> Film {
+        self.movies.clear();
+        self.shadows = ShadowCounts::default();
+        self.kept = None;
+        self.stats = FrameStats {
+            frame: ctx.frame,
+            ..FrameStats::default()
+        };
+        Film::new(ctx.width, ctx.height)
+    }
+
     fn tile_pixels(&self, ctx: &FrameContext) -> u32 {
         let pixels = (ctx.width * ctx.height) as usize;
         let spp = self.settings.spp.max(1) as usize;
@@ -415,7 +446,7 @@ impl TextureMovies {
         &mut self,
         ctx: &FrameContext,
         wanted: BTreeMap<MovieKey, u32>,
-        blockers: &direct::Blockers,
+        blockers: &direct::ShadowBlockers,
         stats: &mut FrameStats,
     ) {
         let mut closed_lengths = Vec::new();

@@ -5,7 +5,7 @@
 //! reach). Its resolution is fixed for its life: a triangle whose needed
 //! resolution changes gets a new movie (§4.1).
 
-use super::direct::{direct_irradiance, Blockers, ShadePoint, ShadowCounts, StaticShadows};
+use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, ShadowCounts, StaticShadows};
 use super::global::{GlobalPass, Gouraud};
 use super::patch::Patch;
 use super::FrameContext;
@@ -117,7 +117,7 @@ impl Movie {
     pub fn shade(
         &mut self,
         ctx: &FrameContext,
-        blockers: &Blockers,
+        blockers: &ShadowBlockers,
         global: &GlobalPass,
         samples: u32,
     ) -> ShadowCounts {
