@@ -78,12 +78,15 @@ function jobUrl(id, rest = '') {
 
 const view = {
   id: null,        // selected job id
+  generation: 0,   // bumped by every selection: answers to an older one are dropped
   job: null,       // its last known state (GET /api/jobs/ID)
   stats: new Map(),// frame -> statistics row
-  events: null,    // EventSource
+  events: null,    // EventSource (the only one open)
   follow: true,    // show the live stream and the newest frame's records
+  liveStreams: 0,  // live streams opened for the job (each gets its own URL)
+  liveBroken: false,// the live image's stream failed
   overlayFrame: null,
-  overlayBusy: false,
+  overlayLoop: null,// the overlay requests in flight (a promise), if any
   overlayWanted: null,
 };
 
@@ -155,28 +158,49 @@ function showProgress(job) {
   if (job.error) $('eta').textContent += ` — ${job.error}`;
 }
 
+// Shows job `id` and follows it. Another selection made while this one
+// waits for an answer ends this one there: what it got belongs to a job no
+// longer shown. A failed request is reported and the rest goes on: the job
+// is followed whatever failed on the way.
 async function selectJob(id) {
-  if (view.events) view.events.close();
-  Object.assign(view, { id, job: null, stats: new Map(), events: null, follow: true, overlayFrame: null, overlayWanted: null });
+  const generation = ++view.generation;
+  const current = () => view.generation === generation;
+  stopFollowing();
+  Object.assign(view, { id, job: null, stats: new Map(), follow: true, liveStreams: 0, liveBroken: false, overlayFrame: null, overlayWanted: null });
   $('follow').checked = true;
   history.replaceState(null, '', withToken(`/?job=${encodeURIComponent(id)}`));
   for (const tr of $('jobs').tBodies[0].rows) tr.classList.toggle('selected', tr.dataset.id === id);
   $('job-panel').hidden = false;
   $('overlay').replaceChildren();
+  $('overlay-info').textContent = '';
   $('record-details').textContent = 'click a record for its details';
-  const job = await api(jobUrl(id));
-  showProgress(job);
-  const [start, end] = frameRange(job);
-  $('frame-slider').min = start;
-  $('frame-slider').max = Math.max(start, end - 1);
-  const stats = await api(jobUrl(id, '/stats'));
-  for (const row of stats.frames) view.stats.set(row.frame, row);
   drawCharts();
-  showLive();
-  const last = lastFrame();
-  if (last != null) {
-    $('frame-slider').value = last;
-    await loadOverlay(last);
+  try {
+    const job = await api(jobUrl(id));
+    if (!current()) return;
+    showProgress(job);
+    const [start, end] = frameRange(job);
+    $('frame-slider').min = start;
+    $('frame-slider').max = Math.max(start, end - 1);
+    try {
+      const stats = await api(jobUrl(id, '/stats'));
+      if (!current()) return;
+      for (const row of stats.frames) view.stats.set(row.frame, row);
+    } catch (err) {
+      if (!current()) return;
+      reportError(err);
+    }
+    drawCharts();
+    showLive();
+    const last = lastFrame();
+    if (last != null) {
+      $('frame-slider').value = last;
+      await requestOverlay(last);
+      if (!current()) return;
+    }
+  } catch (err) {
+    if (!current()) return;
+    reportError(err);
   }
   follow(id);
 }
@@ -187,20 +211,30 @@ function lastFrame() {
   return last;
 }
 
+function stopFollowing() {
+  if (view.events) view.events.close();
+  view.events = null;
+}
+
+// Follows job `id`'s events, the only EventSource open.
 function follow(id) {
+  stopFollowing();
   const es = new EventSource(withToken(jobUrl(id, '/events')));
   view.events = es;
+  const mine = () => view.events === es;
   es.addEventListener('progress', (e) => {
-    if (view.id !== id) return;
+    if (!mine()) return;
     showProgress(JSON.parse(e.data));
   });
   es.addEventListener('frame', (e) => {
-    if (view.id !== id) return;
+    if (!mine()) return;
     const row = JSON.parse(e.data);
     const fresh = !view.stats.has(row.frame);
     view.stats.set(row.frame, row);
     if (fresh) scheduleCharts();
     if (view.follow) {
+      // A stream that failed shows no newer frame: a new one shows this.
+      if (view.liveBroken) showLive();
       $('frame-slider').value = row.frame;
       $('frame-label').textContent = `frame ${row.frame}`;
       requestOverlay(row.frame);
@@ -210,19 +244,32 @@ function follow(id) {
     const s = JSON.parse(e.data);
     if (s.final) {
       es.close();
-      if (view.events === es) view.events = null;
+      if (mine()) view.events = null;
     }
     refreshJobs().catch(reportError);
   });
   // The server closes the stream after the final state; anything else is a
-  // lost connection, which EventSource retries by itself.
-  es.addEventListener('error', () => {});
+  // lost connection (the server stopped), which EventSource retries by
+  // itself. The live image's stream ended with it: once the events are
+  // back, so is the server, and a new stream shows the frames to come.
+  let lost = false;
+  es.addEventListener('error', () => { lost = true; });
+  es.addEventListener('open', () => {
+    if (lost && mine() && view.follow) showLive();
+    lost = false;
+  });
 }
 
+// The live stream of the selected job, when following. Each stream opened
+// for a job after the first has its own URL (a query the server ignores):
+// the same URL again may be answered from the page's list of available
+// images, with the last frame of a stream that ended.
 function showLive() {
   const img = $('live');
   if (view.follow) {
-    img.src = withToken(jobUrl(view.id, '/stream'));
+    const n = view.liveStreams++;
+    img.src = withToken(jobUrl(view.id, n ? `/stream?n=${n}` : '/stream'));
+    view.liveBroken = false;
     const last = lastFrame();
     $('frame-label').textContent = last == null ? 'waiting for the first frame' : `frame ${last}`;
   }
@@ -237,9 +284,11 @@ function showFrame(frame) {
 // ---------------------------------------------------------------- overlay
 
 // At most one records request in flight; the newest wanted frame wins.
+// The promise settles (never rejects) once no frame is wanted any more.
 function requestOverlay(frame) {
   view.overlayWanted = frame;
-  if (!view.overlayBusy) loadOverlay(frame).catch(reportError);
+  if (!view.overlayLoop) view.overlayLoop = loadOverlays();
+  return view.overlayLoop;
 }
 
 // Fig. 11 of the TRC paper: red = short lifespan, green = long.
@@ -247,25 +296,26 @@ function lifespanColour(t) {
   return `hsl(${Math.round(120 * Math.min(1, Math.max(0, t)))}, 90%, 45%)`;
 }
 
-async function loadOverlay(frame) {
-  view.overlayBusy = true;
-  view.overlayWanted = null;
-  const id = view.id;
+// Loads the wanted frames' overlays one at a time until none is wanted. An
+// answer for a job no longer selected is dropped (what the new selection
+// wants is loaded next); a failed request is reported.
+async function loadOverlays() {
   try {
-    if (view.job && view.job.method === 'movies') {
-      const r = await api(jobUrl(id, `/movies?frame=${frame}`));
-      if (view.id !== id) return;
-      drawMovies(r);
-    } else {
-      const r = await api(jobUrl(id, `/records?frame=${frame}&limit=20000`));
-      if (view.id !== id) return;
-      drawOverlay(r);
+    while (view.overlayWanted != null) {
+      const frame = view.overlayWanted;
+      view.overlayWanted = null;
+      const { generation, id } = view;
+      const movies = view.job != null && view.job.method === 'movies';
+      try {
+        const r = await api(jobUrl(id, movies ? `/movies?frame=${frame}` : `/records?frame=${frame}&limit=20000`));
+        if (view.generation !== generation) continue;
+        if (movies) drawMovies(r); else drawOverlay(r);
+      } catch (err) {
+        if (view.generation === generation) reportError(err);
+      }
     }
   } finally {
-    view.overlayBusy = false;
-  }
-  if (view.overlayWanted != null && view.overlayWanted !== frame) {
-    await loadOverlay(view.overlayWanted);
+    view.overlayLoop = null;
   }
 }
 
@@ -485,10 +535,29 @@ $('new-job').addEventListener('submit', async (e) => {
   }
 });
 
+// The stored frame nearest `frame`: the newest at or before it, else the
+// first after it; null while none is.
+function storedFrameNear(frame) {
+  let before = null, after = null;
+  for (const f of view.stats.keys()) {
+    if (f <= frame) { if (before == null || f > before) before = f; }
+    else if (after == null || f < after) after = f;
+  }
+  return before ?? after;
+}
+
+// The slider spans the job's frames, rendered or not: one not rendered yet
+// has no image or records, and the slider stops at the nearest one that is.
 $('frame-slider').addEventListener('input', (e) => {
+  const frame = storedFrameNear(Number(e.target.value));
+  if (frame == null) {
+    e.target.value = e.target.min;
+    return;
+  }
+  e.target.value = frame;
   view.follow = false;
   $('follow').checked = false;
-  showFrame(Number(e.target.value));
+  showFrame(frame);
 });
 
 $('follow').addEventListener('change', (e) => {
@@ -505,34 +574,56 @@ $('follow').addEventListener('change', (e) => {
 $('live').addEventListener('load', (e) => {
   e.target.dataset.loaded = `${e.target.naturalWidth}x${e.target.naturalHeight}`;
 });
+// A stream cut off (the server stopped) is opened again on the next frame.
+$('live').addEventListener('error', () => {
+  if (view.follow) view.liveBroken = true;
+});
 
 $('show-overlay').addEventListener('change', (e) => {
   $('overlay').style.display = e.target.checked ? '' : 'none';
 });
 
-$('cancel').addEventListener('click', () =>
-  api(jobUrl(view.id, '/cancel'), { method: 'POST' }).then(showProgress).then(refreshJobs).catch(reportError));
+// The answers below are for the job clicked, which may no longer be shown.
+$('cancel').addEventListener('click', () => {
+  const id = view.id;
+  api(jobUrl(id, '/cancel'), { method: 'POST' }).then((job) => {
+    if (view.id === id) showProgress(job);
+  }).then(refreshJobs).catch(reportError);
+});
 $('delete').addEventListener('click', () => {
   const id = view.id;
   if (!window.confirm(`Delete job ${id} with its frames and records?`)) return;
   api(jobUrl(id), { method: 'DELETE' }).then(() => {
-    if (view.events) view.events.close();
-    Object.assign(view, { id: null, job: null, events: null });
+    if (view.id !== id) return;
+    view.generation += 1;
+    stopFollowing();
+    Object.assign(view, { id: null, job: null });
     $('job-panel').hidden = true;
     history.replaceState(null, '', withToken('/'));
   }).then(refreshJobs).catch(reportError);
 });
-$('resume').addEventListener('click', () =>
-  api(jobUrl(view.id, '/resume'), { method: 'POST' }).then(() => selectJob(view.id)).then(refreshJobs).catch(reportError));
+$('resume').addEventListener('click', () => {
+  const id = view.id;
+  api(jobUrl(id, '/resume'), { method: 'POST' }).then(() => {
+    if (view.id === id) return selectJob(id);
+  }).then(refreshJobs).catch(reportError);
+});
 
+// A failed request is reported; it stops neither the page getting ready
+// nor the refreshes.
 async function main() {
-  const jobs = await refreshJobs();
-  const wanted = new URLSearchParams(location.search).get('job');
-  const pick = jobs.find((j) => j.id === wanted) || jobs[jobs.length - 1];
-  await Promise.all([loadBench(), pick ? selectJob(pick.id) : null]);
-  document.body.dataset.ready = '1';
   // The job list changes when jobs are created elsewhere; refresh it now and then.
   setInterval(() => refreshJobs().catch(reportError), 5000);
+  let jobs = [];
+  try {
+    jobs = await refreshJobs();
+  } catch (err) {
+    reportError(err);
+  }
+  const wanted = new URLSearchParams(location.search).get('job');
+  const pick = jobs.find((j) => j.id === wanted) || jobs[jobs.length - 1];
+  await Promise.all([loadBench().catch(reportError), pick ? selectJob(pick.id).catch(reportError) : null]);
+  document.body.dataset.ready = '1';
 }
 
 main().catch(reportError);
