@@ -1998,6 +1998,87 @@ fn wait_for_connections(server: &Server, want: impl Fn(u64) -> bool, after: &str
     }
 }
 
+/// One client address may hold 64 connections at once (the server's
+/// `MAX_CONNECTIONS_PER_PEER`): one more from it is closed unanswered,
+/// while another address is still served, and so is the first once one of
+/// its connections closes. Before, one address without the token could
+/// hold all 512 of the server's connections, and no one else was served.
+#[test]
+fn one_address_cannot_take_all_the_connections() {
+    use std::io::Write;
+    const PER_PEER: usize = 64;
+    let (dir, scenes) = workspace();
+    let server = start(&dir.path().join("db"), &scenes);
+    let ask = |s: &mut std::net::TcpStream, path: &str| {
+        write!(s, "GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+        read_one_answer(s)
+    };
+    // Each answered, so each is served before the next connects.
+    let mut held: Vec<_> = (0..PER_PEER)
+        .map(|_| {
+            let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
+            ask(&mut s, "/api/jobs");
+            s
+        })
+        .collect();
+    let mut over = std::net::TcpStream::connect(&server.addr).unwrap();
+    // The server may have closed it already (then this write fails).
+    let _ = write!(over, "GET /api/jobs HTTP/1.1\r\nHost: x\r\n\r\n");
+    let (got, waited) = read_until_closed(&mut over, Duration::from_secs(10));
+    assert!(
+        got.is_empty(),
+        "a connection over the cap was answered: {:?}",
+        String::from_utf8_lossy(&got)
+    );
+    assert!(waited < Duration::from_secs(5), "closed after {waited:?}");
+    let metrics = ask(&mut held[0], "/metrics");
+    assert_eq!(
+        gauge(&metrics, "radcache_http_connections"),
+        PER_PEER as u64
+    );
+    assert_eq!(
+        gauge(&metrics, "radcache_http_connections_refused_total"),
+        1
+    );
+    // Another address (on Linux all of 127.0.0.0/8 is the loopback) is
+    // served meanwhile.
+    #[cfg(target_os = "linux")]
+    {
+        let to: std::net::SocketAddr = server.addr.parse().unwrap();
+        let socket =
+            socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).unwrap();
+        let from: std::net::SocketAddr = "127.0.0.2:0".parse().unwrap();
+        socket.bind(&from.into()).unwrap();
+        socket.connect(&to.into()).unwrap();
+        let mut other: std::net::TcpStream = socket.into();
+        let metrics = ask(&mut other, "/metrics");
+        assert_eq!(
+            gauge(&metrics, "radcache_http_connections"),
+            PER_PEER as u64 + 1
+        );
+    }
+    drop(held.pop());
+    // Once the server has seen that one close, the first address is
+    // served again.
+    let waited = Instant::now();
+    loop {
+        let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
+        let _ = write!(
+            s,
+            "GET /api/jobs HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+        );
+        let (got, _) = read_until_closed(&mut s, Duration::from_secs(10));
+        if got.starts_with(b"HTTP/1.1 200") {
+            break;
+        }
+        assert!(
+            waited.elapsed() < Duration::from_secs(10),
+            "not served again 10 s after one of its connections closed"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 /// Reads one answer with a `Content-Length` from a kept-alive connection.
 fn read_one_answer(s: &mut std::net::TcpStream) -> Vec<u8> {
     use std::io::Read;
@@ -2259,4 +2340,40 @@ fn concurrent_requests_for_a_frame_share_one_encoding() {
     let (status, exr) = http(&server, "GET", &format!("/api/jobs/{id}/frames/0.exr"), "");
     assert_eq!(status, 200);
     assert!(exr.starts_with(&[0x76, 0x2f, 0x31, 0x01]), "not an EXR");
+}
+
+/// `--connections-per-peer` sets one address's share (a reverse proxy on
+/// the same host needs more than the default): at 2, a third connection
+/// is closed unanswered; out of its range the flag is refused.
+#[test]
+fn the_connections_of_one_address_follow_the_flag() {
+    use std::io::Write;
+    let (dir, scenes) = workspace();
+    let server = start_with(
+        &dir.path().join("db"),
+        &scenes,
+        &["--connections-per-peer", "2"],
+    );
+    let held: Vec<_> = (0..2)
+        .map(|_| {
+            let mut s = std::net::TcpStream::connect(&server.addr).unwrap();
+            write!(s, "GET /api/jobs HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+            read_one_answer(&mut s);
+            s
+        })
+        .collect();
+    let mut over = std::net::TcpStream::connect(&server.addr).unwrap();
+    let _ = write!(over, "GET /api/jobs HTTP/1.1\r\nHost: x\r\n\r\n");
+    let (got, _) = read_until_closed(&mut over, Duration::from_secs(10));
+    assert!(got.is_empty(), "{:?}", String::from_utf8_lossy(&got));
+    drop(held);
+    for bad in ["0", "513", "many"] {
+        let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args(["serve", "--connections-per-peer", bad])
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{bad}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("from 1 to 512"), "{bad}: {err}");
+    }
 }

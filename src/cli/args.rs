@@ -63,6 +63,22 @@ pub struct ServeArgs {
     /// idle kept-alive connection is closed after as long.
     #[arg(long, default_value_t = 30.0, value_parser = client_timeout)]
     pub client_timeout: f64,
+    /// Connections one client address (an IPv4 address, an IPv6 /64) may
+    /// hold open at once, of the server's 512; a reverse proxy on the same
+    /// host is one address for all its clients.
+    #[arg(long, default_value_t = crate::server::MAX_CONNECTIONS_PER_PEER,
+          value_parser = connections_per_peer)]
+    pub connections_per_peer: usize,
+}
+
+/// `--connections-per-peer`: 1 to 512 (the server's connections).
+fn connections_per_peer(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n @ 1..=512) => Ok(n),
+        _ => Err(format!(
+            "`{s}` is not a number of connections from 1 to 512"
+        )),
+    }
 }
 
 /// `--client-timeout`: a number of seconds in [0.1, 86400].

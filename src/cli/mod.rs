@@ -214,6 +214,7 @@ fn run_serve(args: ServeArgs) -> Result<()> {
         out,
         bench: args.bench,
         client_timeout: std::time::Duration::from_secs_f64(args.client_timeout),
+        connections_per_peer: args.connections_per_peer,
     })
 }
 

@@ -1,4 +1,5 @@
-//! The server's connections: accepted under a cap, each served by hyper's
+//! The server's connections: accepted under a cap, and one for each peer,
+//! each served by hyper's
 //! HTTP/1 with limits on how long a client may take (to send its request,
 //! to read its answer, to stay on after it has gone) and how large a
 //! request head may be, and all closed within a grace period at shutdown.
@@ -10,12 +11,14 @@ use axum::body::{Body, Bytes};
 use axum::Router;
 use hyper::body::{Frame, SizeHint};
 use hyper::service::Service;
+use std::collections::HashMap;
 use std::convert::Infallible;
 use std::future::Future;
 use std::io;
+use std::net::{IpAddr, Ipv6Addr, SocketAddr};
 use std::pin::Pin;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
@@ -26,6 +29,22 @@ use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 /// listen queue until one closes (a client opening connections without
 /// end would otherwise run the process out of file descriptors).
 const MAX_CONNECTIONS: usize = 512;
+
+/// The default of the most connections served at once to one peer
+/// (`--connections-per-peer`; [`peer_of`]: an IPv4 address, or an IPv6
+/// /64); past it, a new one from that peer is closed as soon as it is
+/// accepted. Without it, one client that never sent a
+/// request (the token is checked only on requests) could hold all of
+/// [`MAX_CONNECTIONS`], reopening them as `--client-timeout` closes them,
+/// and no one else would be served. 64 is some ten times what one browser
+/// opens to a server (6 at once over HTTP/1.1, the dashboard's event and
+/// frame streams among them), so a few people behind one NAT, or a script
+/// with a few dozen clients, are not turned away, while one address holds
+/// an eighth of the server's connections at most. It does not stop a
+/// client with many addresses: eight of them fill the server again. A
+/// reverse proxy on the same host is one peer for all its clients: it
+/// needs a larger share.
+pub const MAX_CONNECTIONS_PER_PEER: usize = 64;
 
 /// How long a shutdown waits for the requests under way to finish before
 /// it closes their connections (the event and frame streams end at once;
@@ -47,16 +66,23 @@ const MAX_HEAD_BYTES: usize = 64 * 1024;
 pub(super) async fn serve(listener: TcpListener, app: Router, state: &Arc<AppState>) {
     let graceful = hyper_util::server::graceful::GracefulShutdown::new();
     let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+    let peers = Arc::new(Peers::new(state.options.connections_per_peer));
     let mut connections = tokio::task::JoinSet::new();
     let limit = state.options.client_timeout;
     let signal = shutdown_signal();
     tokio::pin!(signal);
     loop {
-        let (stream, slot) = tokio::select! {
+        let (stream, peer, slot) = tokio::select! {
             accepted = accept(&listener, &slots) => accepted,
             // Reaps the finished ones, which the set keeps until joined.
             Some(_) = connections.join_next(), if !connections.is_empty() => continue,
             _ = &mut signal => break,
+        };
+        let Some(peer_slot) = peers.take(peer_of(peer)) else {
+            // Over its peer's share: closed unread, its slot given back.
+            state.refused_connections.fetch_add(1, Ordering::Relaxed);
+            drop((stream, slot));
+            continue;
         };
         let answering = Arc::new(AtomicUsize::new(0));
         let service = counting_answers(&app, &answering);
@@ -66,7 +92,7 @@ pub(super) async fn serve(listener: TcpListener, app: Router, state: &Arc<AppSta
             .max_header_size(MAX_HEAD_BYTES);
         let io = hyper_util::rt::TokioIo::new(ClientIo::new(stream, limit, answering));
         let connection = graceful.watch(http.serve_connection(io, service));
-        let open = OpenConnection::new(state.clone(), slot);
+        let open = OpenConnection::new(state.clone(), slot, peer_slot);
         connections.spawn(async move {
             // A client that went away or sent garbage: nothing to report.
             let _ = connection.await;
@@ -163,17 +189,23 @@ impl hyper::body::Body for Answered {
     }
 }
 
-/// A served connection: holds its slot of [`MAX_CONNECTIONS`] and counts
-/// in [`AppState::open_connections`] (`/metrics`) until dropped.
+/// A served connection: holds its slot of [`MAX_CONNECTIONS`] and of its
+/// peer's [`MAX_CONNECTIONS_PER_PEER`], and counts in
+/// [`AppState::open_connections`] (`/metrics`) until dropped.
 struct OpenConnection {
     state: Arc<AppState>,
     _slot: OwnedSemaphorePermit,
+    _peer_slot: PeerSlot,
 }
 
 impl OpenConnection {
-    fn new(state: Arc<AppState>, slot: OwnedSemaphorePermit) -> Self {
+    fn new(state: Arc<AppState>, slot: OwnedSemaphorePermit, peer_slot: PeerSlot) -> Self {
         state.open_connections.fetch_add(1, Ordering::Relaxed);
-        OpenConnection { state, _slot: slot }
+        OpenConnection {
+            state,
+            _slot: slot,
+            _peer_slot: peer_slot,
+        }
     }
 }
 
@@ -183,13 +215,84 @@ impl Drop for OpenConnection {
     }
 }
 
+/// Where a connection comes from, as [`MAX_CONNECTIONS_PER_PEER`] counts
+/// them: its IPv4 address (also when it reaches an IPv6 socket, as
+/// `::ffff:a.b.c.d`), or the /64 its IPv6 address lies in, as one host
+/// commonly holds a whole /64 and could otherwise take a new address for
+/// each connection.
+fn peer_of(addr: SocketAddr) -> IpAddr {
+    match addr.ip().to_canonical() {
+        IpAddr::V6(v6) => {
+            let prefix = u128::from(v6) & !(u128::from(u64::MAX));
+            IpAddr::V6(Ipv6Addr::from(prefix))
+        }
+        v4 => v4,
+    }
+}
+
+/// The connections open to each peer ([`peer_of`]); a peer with none is
+/// not kept.
+struct Peers {
+    open: Mutex<HashMap<IpAddr, usize>>,
+    /// Connections one peer may have open.
+    limit: usize,
+}
+
+impl Peers {
+    fn new(limit: usize) -> Self {
+        Peers {
+            open: Mutex::new(HashMap::new()),
+            limit,
+        }
+    }
+
+    /// A slot for one more connection of `peer`, unless it has its limit
+    /// open.
+    fn take(self: &Arc<Self>, peer: IpAddr) -> Option<PeerSlot> {
+        let mut open = self.lock();
+        let n = open.entry(peer).or_insert(0);
+        if *n >= self.limit {
+            return None;
+        }
+        *n += 1;
+        Some(PeerSlot {
+            peers: self.clone(),
+            peer,
+        })
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<IpAddr, usize>> {
+        // Counts only: a panic while holding it leaves them right.
+        self.open.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// One connection of a peer, counted in [`Peers`] until dropped.
+struct PeerSlot {
+    peers: Arc<Peers>,
+    peer: IpAddr,
+}
+
+impl Drop for PeerSlot {
+    fn drop(&mut self) {
+        let mut open = self.peers.lock();
+        if let Some(n) = open.get_mut(&self.peer) {
+            *n -= 1;
+            if *n == 0 {
+                open.remove(&self.peer);
+            }
+        }
+    }
+}
+
 /// The next connection, once fewer than [`MAX_CONNECTIONS`] are open, with
-/// its slot. Accept errors (out of file descriptors, a connection reset
-/// before it was accepted) are waited out, as `axum::serve` does.
+/// its peer's address and its slot. Accept errors (out of file
+/// descriptors, a connection reset before it was accepted) are waited
+/// out, as `axum::serve` does.
 async fn accept(
     listener: &TcpListener,
     slots: &Arc<Semaphore>,
-) -> (TcpStream, OwnedSemaphorePermit) {
+) -> (TcpStream, SocketAddr, OwnedSemaphorePermit) {
     let slot = slots
         .clone()
         .acquire_owned()
@@ -197,7 +300,7 @@ async fn accept(
         .expect("the connection semaphore is never closed");
     loop {
         match listener.accept().await {
-            Ok((stream, _)) => {
+            Ok((stream, peer)) => {
                 // Frames and events are small writes that should leave at once.
                 stream.set_nodelay(true).ok();
                 // A client that vanished without a FIN or reset (its machine
@@ -209,7 +312,7 @@ async fn accept(
                 socket2::SockRef::from(&stream)
                     .set_tcp_keepalive(&probes)
                     .ok();
-                return (stream, slot);
+                return (stream, peer, slot);
             }
             Err(_) => tokio::time::sleep(Duration::from_millis(50)).await,
         }
@@ -342,5 +445,44 @@ impl AsyncWrite for ClientIo {
 
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
         Pin::new(&mut self.stream).poll_shutdown(cx)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A peer gets [`MAX_CONNECTIONS_PER_PEER`] slots and no more, another
+    /// peer its own, and a slot dropped is free again (a peer with none
+    /// left is forgotten).
+    #[test]
+    fn each_peer_has_its_share_of_the_connections() {
+        let peers = Arc::new(Peers::new(MAX_CONNECTIONS_PER_PEER));
+        let a: IpAddr = "192.0.2.1".parse().unwrap();
+        let b: IpAddr = "192.0.2.2".parse().unwrap();
+        let mut held: Vec<_> = (0..MAX_CONNECTIONS_PER_PEER)
+            .map(|_| peers.take(a).expect("under the cap"))
+            .collect();
+        assert!(peers.take(a).is_none(), "one over the cap");
+        let other = peers.take(b).expect("another peer");
+        held.pop();
+        let again = peers.take(a).expect("a slot was freed");
+        assert!(peers.take(a).is_none());
+        drop((held, again, other));
+        assert!(peers.lock().is_empty(), "{:?}", peers.lock());
+    }
+
+    /// IPv4 is counted by address, also mapped into IPv6; IPv6 by /64.
+    #[test]
+    fn peers_are_ipv4_addresses_and_ipv6_prefixes() {
+        let peer = |s: &str| peer_of(SocketAddr::new(s.parse().unwrap(), 1234));
+        assert_eq!(peer("192.0.2.1"), peer("::ffff:192.0.2.1"));
+        assert_ne!(peer("192.0.2.1"), peer("192.0.2.2"));
+        assert_eq!(peer("2001:db8:1:2::1"), peer("2001:db8:1:2:ffff::9"));
+        assert_eq!(
+            peer("2001:db8:1:2::1"),
+            "2001:db8:1:2::".parse::<IpAddr>().unwrap()
+        );
+        assert_ne!(peer("2001:db8:1:2::1"), peer("2001:db8:1:3::1"));
     }
 }

@@ -56,16 +56,22 @@ pub async fn stats(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
-    let Some(sid) = state.store_id(&id)? else {
-        return Ok(Json(json!({ "id": id, "frames": [] })));
-    };
-    let mut frames = Vec::new();
-    for frame in state.store.frames_done(sid).map_err(ApiError::internal)? {
-        if let Some(row) = frame_stats_json(&state, sid, frame)? {
-            frames.push(row);
+    // Store reads, one a frame: on the blocking pool, not an async worker.
+    tokio::task::spawn_blocking(move || {
+        let Some(sid) = state.store_id(&id)? else {
+            return Ok(json!({ "id": id, "frames": [] }));
+        };
+        let mut frames = Vec::new();
+        for frame in state.store.frames_done(sid).map_err(ApiError::internal)? {
+            if let Some(row) = frame_stats_json(&state, sid, frame)? {
+                frames.push(row);
+            }
         }
-    }
-    Ok(Json(json!({ "id": id, "frames": frames })))
+        Ok(json!({ "id": id, "frames": frames }))
+    })
+    .await
+    .map_err(ApiError::internal)?
+    .map(Json)
 }
 
 /// One frame's statistics row (`/stats`, and the `frame` event).
@@ -110,7 +116,18 @@ pub fn frame_stats_json(state: &AppState, sid: u64, frame: u32) -> Result<Option
 }
 
 /// Prometheus text format.
-pub async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
+pub async fn metrics(State(state): State<Arc<AppState>>) -> Result<impl IntoResponse, ApiError> {
+    // The store's size on disk (sled's files) and its sample log's length
+    // (whose lock a frame being stored holds): off the async workers.
+    let s = state.clone();
+    let (database, log) = tokio::task::spawn_blocking(move || {
+        (
+            s.store.size_on_disk().unwrap_or(0),
+            s.store.sample_log_bytes(),
+        )
+    })
+    .await
+    .map_err(ApiError::internal)?;
     let mut out = String::new();
     let counts = {
         let jobs = state.jobs.lock().expect("job table lock");
@@ -145,11 +162,14 @@ pub async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
     );
     let _ = writeln!(
         out,
+        "# HELP radcache_http_connections_refused_total Connections closed as soon as accepted, their client's address having as many open as one address may.\n# TYPE radcache_http_connections_refused_total counter\nradcache_http_connections_refused_total {}",
+        state.refused_connections.load(Ordering::Relaxed)
+    );
+    let _ = writeln!(
+        out,
         "# HELP radcache_frame_encodes_total Frames decoded from the store and encoded as PNG (once a frame, however many clients ask, until evicted from the PNG cache).\n# TYPE radcache_frame_encodes_total counter\nradcache_frame_encodes_total {}",
         state.frame_encodes.load(Ordering::Relaxed)
     );
-    let database = state.store.size_on_disk().unwrap_or(0);
-    let log = state.store.sample_log_bytes();
     let _ = writeln!(
         out,
         "# HELP radcache_store_bytes Bytes of the store on disk: its database and its sample log.\n# TYPE radcache_store_bytes gauge\nradcache_store_bytes {}",
@@ -159,5 +179,5 @@ pub async fn metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
         out,
         "# HELP radcache_store_sample_log_bytes Committed bytes of the store's sample log (of radcache_store_bytes).\n# TYPE radcache_store_sample_log_bytes gauge\nradcache_store_sample_log_bytes {log}"
     );
-    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out)
+    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out))
 }

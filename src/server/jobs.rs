@@ -13,13 +13,19 @@ use std::time::Duration;
 use tokio::sync::watch;
 
 pub fn job_json(state: &AppState, job: &Job) -> Value {
+    job_json_under(state.scenes_root().as_deref(), job)
+}
+
+/// [`job_json`] with the `--scenes` directory, `root`, known (finding it
+/// reads the file system).
+fn job_json_under(root: Option<&std::path::Path>, job: &Job) -> Value {
     json!({
         "id": job.id,
         "state": job.state.as_str(),
         "origin": job.origin(),
         "frames_done": job.frames_done,
         "frames_total": job.request.frames_total(),
-        "scene": state.scene_name(&job.request.scene),
+        "scene": super::scene_name_under(root, &job.request.scene),
         "method": job.request.method.name(),
         "frames": format!("{}..{}", job.request.frames.start, job.request.frames.end),
         "frames_stored": job.frames_stored(),
@@ -28,7 +34,7 @@ pub fn job_json(state: &AppState, job: &Job) -> Value {
         "spp": job.request.method.spp(),
         "seed": job.request.settings.seed,
         "settings": crate::method::settings::named_settings(&job.request.method),
-        "error": job.error.as_deref().map(|e| state.without_scenes_dir(e)),
+        "error": job.error.as_deref().map(|e| super::without_dir(root, e)),
         "seconds_per_frame": (job.run_frames > 0).then(|| job.run_seconds / job.run_frames as f64),
         "eta_seconds": job.eta_seconds(),
         "cancelling": job.cancel,
@@ -126,9 +132,21 @@ async fn check_scene_loads(
 }
 
 pub async fn list(State(state): State<Arc<AppState>>) -> Json<Value> {
-    let jobs = state.jobs.lock().expect("job table lock");
+    // Copied out of the table, whose lock every request and the worker
+    // take: naming the jobs' scenes reads the file system (the `--scenes`
+    // directory, once for all of them).
+    let jobs: Vec<Job> = state
+        .jobs
+        .lock()
+        .expect("job table lock")
+        .values()
+        .cloned()
+        .collect();
+    let root = state.scenes_root();
     Json(Value::Array(
-        jobs.values().map(|j| job_json(&state, j)).collect(),
+        jobs.iter()
+            .map(|j| job_json_under(root.as_deref(), j))
+            .collect(),
     ))
 }
 

@@ -17,6 +17,7 @@ mod worker;
 
 pub use web::OPENAPI;
 
+pub use connection::MAX_CONNECTIONS_PER_PEER;
 pub use error::ApiError;
 pub use request::{JobRequest, MAX_FRAMES};
 
@@ -59,6 +60,9 @@ pub struct ServeOptions {
     /// body, and to take some of an answer being written; an idle
     /// kept-alive connection is closed after it too.
     pub client_timeout: Duration,
+    /// Connections one peer may have open at once
+    /// ([`connection::MAX_CONNECTIONS_PER_PEER`] by default).
+    pub connections_per_peer: usize,
 }
 
 /// A job's lifecycle state.
@@ -245,6 +249,9 @@ pub struct AppState {
     pub render_micros: AtomicU64,
     /// Client connections being served (`/metrics`).
     pub open_connections: AtomicU64,
+    /// Connections closed unserved, their peer having its share of them
+    /// open already (`/metrics`).
+    pub refused_connections: AtomicU64,
     /// One watch channel per followed job (stream, events), bumped on every
     /// change of the job: followers wake on changes, never poll.
     pub watchers: Mutex<HashMap<JobKey, watch::Sender<u64>>>,
@@ -309,6 +316,7 @@ impl AppState {
             frames_rendered: AtomicU64::new(0),
             render_micros: AtomicU64::new(0),
             open_connections: AtomicU64::new(0),
+            refused_connections: AtomicU64::new(0),
             watchers: Mutex::new(HashMap::new()),
             pngs: Mutex::new(PngCache::default()),
             scene_cache: Mutex::new(None),
@@ -355,22 +363,13 @@ impl AppState {
     /// there (the server's own directories are none of a client's
     /// business), others as they are.
     pub fn scene_name(&self, scene: &SceneSource) -> String {
-        match (scene, self.scenes_root()) {
-            (SceneSource::File(path), Some(root)) => match path.strip_prefix(&root) {
-                Ok(rel) => rel.display().to_string(),
-                Err(_) => scene.to_string(),
-            },
-            _ => scene.to_string(),
-        }
+        scene_name_under(self.scenes_root().as_deref(), scene)
     }
 
     /// `text` (an error message) with the `--scenes` directory's path left
     /// out of the paths it names.
     pub fn without_scenes_dir(&self, text: &str) -> String {
-        match self.scenes_root() {
-            Some(root) => text.replace(&format!("{}/", root.display()), ""),
-            None => text.to_string(),
-        }
+        without_dir(self.scenes_root().as_deref(), text)
     }
 
     /// The directory a job's scene must read its files in: the `--scenes`
@@ -387,8 +386,9 @@ impl AppState {
         }
     }
 
-    /// The `--scenes` directory as job requests resolve it (canonical).
-    fn scenes_root(&self) -> Option<PathBuf> {
+    /// The `--scenes` directory as job requests resolve it (canonical: it
+    /// reads the file system).
+    pub fn scenes_root(&self) -> Option<PathBuf> {
         self.options.scenes.as_ref()?.canonicalize().ok()
     }
 
@@ -525,6 +525,26 @@ pub async fn blocking_in_slot<T: Send + 'static>(
         .map_err(ApiError::internal)?
 }
 
+/// [`AppState::scene_name`] with the `--scenes` directory, `root`, known.
+pub fn scene_name_under(root: Option<&std::path::Path>, scene: &SceneSource) -> String {
+    match (scene, root) {
+        (SceneSource::File(path), Some(root)) => match path.strip_prefix(root) {
+            Ok(rel) => rel.display().to_string(),
+            Err(_) => scene.to_string(),
+        },
+        _ => scene.to_string(),
+    }
+}
+
+/// [`AppState::without_scenes_dir`] with the `--scenes` directory, `root`,
+/// known.
+pub fn without_dir(root: Option<&std::path::Path>, text: &str) -> String {
+    match root {
+        Some(root) => text.replace(&format!("{}/", root.display()), ""),
+        None => text.to_string(),
+    }
+}
+
 /// `job-N` → N, spelled as the server spells it (not `job-01` or
 /// `job-+1`), so that one job has one id.
 pub fn parse_job_id(id: &str) -> Option<u64> {
@@ -624,7 +644,10 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
             (Some(t), None) => crate::uri::query_decode(t),
             _ => None,
         };
-        if bearer != Some(token.as_str()) && query.as_deref() != Some(token.as_str()) {
+        let given = |t: Option<&str>| t.is_some_and(|t| same_secret(t, token));
+        // Both compared, with no short cut from one to the other.
+        let (by_header, by_query) = (given(bearer), given(query.as_deref()));
+        if !(by_header | by_query) {
             let mut response = ApiError::new(
                 axum::http::StatusCode::UNAUTHORIZED,
                 "unauthorized",
@@ -639,6 +662,25 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
         }
     }
     next.run(req).await
+}
+
+/// Whether `given` is the secret `token`, in a time that depends on their
+/// lengths only, not on where they first differ (`==` stops at the first
+/// byte that differs, which a client timing many guesses could measure to
+/// find the token a byte at a time). The length is no secret worth the
+/// trouble.
+fn same_secret(given: &str, token: &str) -> bool {
+    let (given, token) = (given.as_bytes(), token.as_bytes());
+    if given.len() != token.len() {
+        return false;
+    }
+    // Each step kept opaque, so that the optimiser does not turn the loop
+    // back into one that stops at a difference.
+    let differ = given
+        .iter()
+        .zip(token)
+        .fold(0u8, |acc, (a, b)| std::hint::black_box(acc | (a ^ b)));
+    differ == 0
 }
 
 /// A request's body, read whole before the handler runs: one announced
@@ -785,6 +827,7 @@ pub(crate) mod testing {
                 out: dir.join("out"),
                 bench: None,
                 client_timeout: Duration::from_secs(30),
+                connections_per_peer: connection::MAX_CONNECTIONS_PER_PEER,
             },
         ))
     }
@@ -808,6 +851,21 @@ pub(crate) mod testing {
 mod tests {
     use super::*;
     use std::sync::atomic::AtomicUsize;
+
+    /// Tokens compare equal when they are, byte for byte, and only then.
+    #[test]
+    fn tokens_compare_equal_only_when_equal() {
+        assert!(same_secret("s3cret", "s3cret"));
+        assert!(same_secret("", ""));
+        assert!(!same_secret("s3cret", "s3creT"));
+        assert!(!same_secret("X3cret", "s3cret"));
+        assert!(!same_secret("s3cre", "s3cret"));
+        assert!(!same_secret("s3cret", "s3cre"));
+        assert!(!same_secret("s3cret\0", "s3cret"));
+        assert!(!same_secret("", "s3cret"));
+        assert!(same_secret("é", "é"));
+        assert!(!same_secret("é", "e\u{301}"));
+    }
 
     /// No more blocking work runs at once than there are slots, however
     /// many requests ask.
