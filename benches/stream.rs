@@ -70,6 +70,8 @@ fn main() {
     let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
         .args(["serve", "--addr", "127.0.0.1:0", "--backend", "cpu", "--db"])
         .arg(dir.join("db"))
+        // All the clients come from one address.
+        .args(["--connections-per-peer", "512"])
         .stdout(Stdio::piped())
         .spawn()
         .expect("start radcache serve");
