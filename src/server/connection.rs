@@ -31,11 +31,11 @@ use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 const MAX_CONNECTIONS: usize = 512;
 
 /// The default of the most connections served at once to one peer
-/// (`--connections-per-peer`; [`peer_of`]: an IPv4 address, or an IPv6
+/// (`--connections-per-peer`; `peer_of`: an IPv4 address, or an IPv6
 /// /64); past it, a new one from that peer is closed as soon as it is
 /// accepted. Without it, one client that never sent a
 /// request (the token is checked only on requests) could hold all of
-/// [`MAX_CONNECTIONS`], reopening them as `--client-timeout` closes them,
+/// the server's 512 connections, reopening them as `--client-timeout` closes them,
 /// and no one else would be served. 64 is some ten times what one browser
 /// opens to a server (6 at once over HTTP/1.1, the dashboard's event and
 /// frame streams among them), so a few people behind one NAT, or a script

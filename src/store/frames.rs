@@ -44,7 +44,7 @@ fn vertices_within_limit(vertices: u64) -> Result<(), String> {
 
 impl MovieFramesValue {
     /// Whether its counts are within what [`Self::texels`] and
-    /// [`Self::global`] read back ([`MAX_STORED_TEXELS`]): the writer's
+    /// [`Self::global`] read back (`MAX_STORED_TEXELS`): the writer's
     /// check before it commits the frame.
     pub fn check_storable(&self) -> Result<(), String> {
         texels_within_limit(self.stored_texels(), self.movies.len())?;

@@ -61,7 +61,7 @@ fn exp2i(k: i32) -> f32 {
 /// Bits of [`PackedSample::flags`].
 ///
 /// The age takes 14 bits: bits 0–3 hold it below 15 and 15 from there on,
-/// when bits 6–15 hold what it is past 15 (saturating at [`MAX_AGE`]).
+/// when bits 6–15 hold what it is past 15 (saturating at [`flags::MAX_AGE`]).
 /// Samples written before 2026-11-30 kept it in bits 0–3 alone,
 /// saturating at 15, and the low bits of the hit object's index in bits
 /// 6–15: they read the same below 15, and at 15 as 15 or more (which they
