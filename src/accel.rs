@@ -19,6 +19,7 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::ray::RayHit;
 use obvhs::triangle::Triangle as ObTriangle;
 use obvhs::BvhBuildParams;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// One BVH over a subset of the snapshot's triangles, with the triangles
@@ -273,5 +274,27 @@ impl SceneBvh {
         // Dynamic parts are usually small: test them first.
         self.dynamic_part.as_ref().is_some_and(|p| p.occluded(&r))
             || self.static_part.as_ref().is_some_and(|p| p.occluded(&r))
+    }
+}
+
+/// The BVH of a render's static triangles, built once (while the static
+/// part's fingerprint holds) for the methods that test segments against
+/// the static geometry alone (`trc`'s direct light at t0+1, `movies`'
+/// static blockers behind moving ones).
+#[derive(Default)]
+pub struct StaticGeometry {
+    fingerprint: Option<u64>,
+    bvh: Option<Arc<TriangleBvh>>,
+}
+
+impl StaticGeometry {
+    /// The BVH of `snapshot`'s static triangles (`None`: there are none).
+    pub fn of(&mut self, snapshot: &Snapshot) -> Option<Arc<TriangleBvh>> {
+        let fingerprint = snapshot.static_fingerprint();
+        if self.fingerprint != Some(fingerprint) {
+            self.bvh = TriangleBvh::build(snapshot, 0..snapshot.static_count).map(Arc::new);
+            self.fingerprint = Some(fingerprint);
+        }
+        self.bvh.clone()
     }
 }

@@ -21,32 +21,15 @@ use crate::backend::{Ray, SHADOW_EPSILON};
 use crate::integrator::offset_origin;
 use crate::light::{LightSource, PointLights, TriangleSampling};
 use crate::sampling::{Rng, SampleKey, Stratified2d};
-use crate::scene::Snapshot;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::Arc;
 
 pub use super::super::motion::{segment_hits_box, Aabb, Blockers};
 
-/// The static triangles' BVH, built once a render (while the static
-/// part's fingerprint holds) and shared by the frames' [`ShadowBlockers`].
-#[derive(Default)]
-pub struct StaticGeometry {
-    fingerprint: Option<u64>,
-    bvh: Option<Arc<TriangleBvh>>,
-}
-
-impl StaticGeometry {
-    /// The BVH of `snapshot`'s static triangles (`None`: there are none).
-    fn of(&mut self, snapshot: &Snapshot) -> Option<Arc<TriangleBvh>> {
-        let fingerprint = snapshot.static_fingerprint();
-        if self.fingerprint != Some(fingerprint) {
-            self.bvh = TriangleBvh::build(snapshot, 0..snapshot.static_count).map(Arc::new);
-            self.fingerprint = Some(fingerprint);
-        }
-        self.bvh.clone()
-    }
-}
+/// The static triangles' BVH, built once a render and shared by the
+/// frames' [`ShadowBlockers`].
+pub use crate::accel::StaticGeometry;
 
 /// What may stop a shadow sample in one frame: the moving objects' boxes
 /// and which lights stand still ([`Blockers`], which it derefs to) and,

@@ -34,25 +34,9 @@ use crate::scene::Snapshot;
 use glam::{Mat4, Vec3};
 use std::sync::Arc;
 
-/// The static triangles' BVH, built once a render (while the static part's
-/// fingerprint holds) and shared by every frame's [`DirectChange`].
-#[derive(Default)]
-pub(super) struct StaticGeometry {
-    fingerprint: Option<u64>,
-    bvh: Option<Arc<TriangleBvh>>,
-}
-
-impl StaticGeometry {
-    /// The BVH of `snapshot`'s static triangles (`None`: there are none).
-    fn of(&mut self, snapshot: &Snapshot) -> Option<Arc<TriangleBvh>> {
-        let fingerprint = snapshot.static_fingerprint();
-        if self.fingerprint != Some(fingerprint) {
-            self.bvh = TriangleBvh::build(snapshot, 0..snapshot.static_count).map(Arc::new);
-            self.fingerprint = Some(fingerprint);
-        }
-        self.bvh.clone()
-    }
-}
+/// The static triangles' BVH, built once a render and shared by every
+/// frame's [`DirectChange`].
+pub(super) use crate::accel::StaticGeometry;
 
 /// The geometry and lights of t0 and t0+1 that the direct light at a
 /// sample's first hit depends on.
