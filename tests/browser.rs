@@ -9,7 +9,7 @@
 
 mod serve_client;
 
-use serve_client::{request, start_server, Server};
+use serve_client::{request, start_server, start_server_at, Server};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
@@ -41,20 +41,27 @@ fn chromium() -> PathBuf {
     path
 }
 
+/// Headless Chromium as every test runs it: no GPU, sandbox, first-run
+/// page, extensions or background traffic, and a window the whole
+/// dashboard fits.
+const CHROMIUM_FLAGS: [&str; 9] = [
+    "--headless=new",
+    "--disable-gpu",
+    "--no-sandbox",
+    "--no-first-run",
+    "--disable-extensions",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--window-size=1300,1500",
+];
+
 /// Runs headless Chromium on `url` with `action` (`--dump-dom` or
 /// `--screenshot=…`); returns (stdout, stderr).
 fn run_chromium(url: &str, action: &str, profile: &Path) -> (String, String) {
     let out = Command::new(chromium())
+        .args(CHROMIUM_FLAGS)
         .args([
-            "--headless=new",
-            "--disable-gpu",
-            "--no-sandbox",
-            "--no-first-run",
-            "--disable-extensions",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--window-size=1300,1500",
             "--virtual-time-budget=15000",
             "--enable-logging=stderr",
             "--v=0",
@@ -441,18 +448,8 @@ impl Page {
             .arg("-c")
             .arg(r#"exec "$0" "$@" 3<&0 4>&1 </dev/null >/dev/null"#)
             .arg(chromium())
-            .args([
-                "--headless=new",
-                "--disable-gpu",
-                "--no-sandbox",
-                "--no-first-run",
-                "--disable-extensions",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--window-size=1300,1500",
-                "--remote-debugging-pipe",
-            ])
+            .args(CHROMIUM_FLAGS)
+            .arg("--remote-debugging-pipe")
             .arg(format!("--user-data-dir={}", profile.path().display()))
             .arg("about:blank")
             .stdin(Stdio::piped())
@@ -615,25 +612,13 @@ impl Drop for Page {
 /// on one rendering thread (the endless frame below must not starve the
 /// other tests).
 fn serve_at(db: &Path, addr: &str) -> Server {
-    use std::io::BufRead;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
-        .args(["serve", "--backend", "cpu", "--addr", addr, "--db"])
-        .arg(db)
-        .env_remove("RADCACHE_TOKEN")
-        .env("RAYON_NUM_THREADS", "1")
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .expect("start radcache serve");
-    let mut line = String::new();
-    std::io::BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line
-        .trim()
-        .strip_prefix("listening on http://")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_string();
-    Server { child, addr }
+    let args = [
+        std::ffi::OsStr::new("--backend"),
+        "cpu".as_ref(),
+        "--db".as_ref(),
+        db.as_os_str(),
+    ];
+    start_server_at(addr, &args, &[("RAYON_NUM_THREADS", "1")])
 }
 
 /// Creates the job of request `body`; returns its id.

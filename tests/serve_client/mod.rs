@@ -25,9 +25,15 @@ impl Drop for Server {
 /// Starts `radcache serve --addr 127.0.0.1:0 ARGS…` (no token from the
 /// environment) and waits for its "listening on" line.
 pub fn start_server<S: AsRef<OsStr>>(args: &[S]) -> Server {
+    start_server_at("127.0.0.1:0", args, &[])
+}
+
+/// [`start_server`] on `addr` (a port of 0: any), with `env` set.
+pub fn start_server_at<S: AsRef<OsStr>>(addr: &str, args: &[S], env: &[(&str, &str)]) -> Server {
     let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
-        .args(["serve", "--addr", "127.0.0.1:0"])
+        .args(["serve", "--addr", addr])
         .args(args)
+        .envs(env.iter().copied())
         .env_remove("RADCACHE_TOKEN")
         .stdout(Stdio::piped())
         .spawn()
