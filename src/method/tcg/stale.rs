@@ -104,7 +104,11 @@ pub(super) struct Staleness<'a> {
 
 impl Staleness<'_> {
     /// Whether sample `cell` of a record at `point`, its cells laid out in
-    /// `frame`, is stale.
+    /// `frame`, is stale. `point` and `frame` are the record's pose in
+    /// this frame: on a moving object the hit is placed from where the
+    /// record is now, not from where it was when the sample was shot (not
+    /// kept), which differs only where a light and the record's object
+    /// both move.
     pub(super) fn is_stale(
         &self,
         (point, frame): (&GatherPoint, &Frame),
