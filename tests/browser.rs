@@ -726,26 +726,7 @@ fn dashboard_drops_what_an_earlier_selection_loads_late() {
 fn dashboard_reports_a_failed_request_and_goes_on() {
     chromium();
     let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("db");
-    let work = dir.path().join("work");
-    std::fs::create_dir(&work).unwrap();
-    std::fs::copy(
-        concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/data/scenes/cube_in_box.glb"
-        ),
-        work.join("box.glb"),
-    )
-    .unwrap();
-    let ok = Command::new(env!("CARGO_BIN_EXE_radcache"))
-        .current_dir(&work)
-        .args(["render", "box.glb", "--method", "ic", "--size", "8x8"])
-        .args(["--frames", "0..1", "--spp", "1", "--backend", "cpu", "-q"])
-        .args(["--job", "boxed", "--out", "out", "--db"])
-        .arg(&db)
-        .status()
-        .unwrap();
-    assert!(ok.success());
+    let (db, work) = serve_client::store_with_a_render_job(dir.path());
     std::fs::rename(work.join("box.glb"), work.join("moved.glb")).unwrap();
     let server = serve_at(&db, "127.0.0.1:0");
     let addr = server.addr.clone();

@@ -1737,38 +1737,7 @@ fn a_served_job_of_another_algorithm_revision_fails_saying_to_resubmit() {
 #[test]
 fn a_render_jobs_scene_the_server_cannot_find_is_a_clear_conflict() {
     let (dir, scenes) = workspace();
-    let db = dir.path().join("db");
-    let work = dir.path().join("work");
-    std::fs::create_dir(&work).unwrap();
-    std::fs::copy(
-        concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/data/scenes/cube_in_box.glb"
-        ),
-        work.join("box.glb"),
-    )
-    .unwrap();
-    let status = Command::new(env!("CARGO_BIN_EXE_radcache"))
-        .current_dir(&work)
-        .args([
-            "render", "box.glb", "--method", "ic", "--size", "8x8", "--frames", "0..1",
-        ])
-        .args([
-            "--spp",
-            "1",
-            "--backend",
-            "cpu",
-            "-q",
-            "--job",
-            "boxed",
-            "--out",
-            "out",
-            "--db",
-        ])
-        .arg(&db)
-        .status()
-        .unwrap();
-    assert!(status.success());
+    let (db, work) = serve_client::store_with_a_render_job(dir.path());
     {
         let server = start(&db, &scenes);
         let (status, body) = http(&server, "GET", "/api/jobs/boxed/records?frame=0", "");

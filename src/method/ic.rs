@@ -175,6 +175,21 @@ pub(crate) struct Candidate {
     pub(crate) glossy: Option<u32>,
 }
 
+#[cfg(test)]
+impl Candidate {
+    /// A candidate at `point` of object 0, pixel 0, for unit tests.
+    pub(crate) fn at(point: GatherPoint) -> Self {
+        Candidate {
+            pixel: 0,
+            stream: 0,
+            point,
+            object: 0,
+            footprint: 0.01,
+            glossy: None,
+        }
+    }
+}
+
 /// A record just gathered, with the hemisphere samples and first hits it
 /// was computed from (`trc` reprojects them, TRC §4.7).
 pub(crate) struct Gathered {

@@ -625,7 +625,6 @@ impl RecordCommit {
 mod tests {
     use super::*;
     use crate::method::FrameStats;
-    use crate::store::JobSpec;
 
     /// A frame's movies: `movies` movies storing `texels` texels each
     /// (nothing compressed: only the counts are looked at).
@@ -691,21 +690,7 @@ mod tests {
     fn a_frame_whose_movies_are_past_the_limit_is_not_committed() {
         let dir = tempfile::tempdir().unwrap();
         let store = Store::open(&dir.path().join("db")).unwrap();
-        let spec = JobSpec {
-            name: "j".into(),
-            scene: "builtin:cube-in-box".into(),
-            scene_hash: "0123456789abcdef".into(),
-            method: "movies".into(),
-            settings: "Movies(..)".into(),
-            width: 16,
-            height: 16,
-            spp: 4,
-            fps: 24.0,
-            seed: 0,
-            same_pattern: false,
-            frame_start: 0,
-            frame_end: 10,
-        };
+        let spec = crate::store::schema::JobValue::for_test("movies", "Movies(..)".into()).spec;
         let mut job = store.begin_job(&spec, false).unwrap();
         let before = job.clone();
         let over = movies(510, BAND_1024);
@@ -714,9 +699,9 @@ mod tests {
             .commit_frame(
                 &mut job,
                 FrameCommit {
-                    frame: 3,
-                    width: 16,
-                    height: 16,
+                    frame: 1,
+                    width: 8,
+                    height: 8,
                     exr: &[1, 2, 3],
                     records: Vec::new(),
                     stats: &stats,
@@ -728,11 +713,11 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("frame 3") && e.contains("268690950 texels"),
+            e.contains("frame 1") && e.contains("268690950 texels"),
             "{e}"
         );
-        assert!(!store.frame_done(job.id, 3).unwrap());
+        assert!(!store.frame_done(job.id, 1).unwrap());
         assert_eq!(job, before);
-        assert_eq!(store.frame_movies(job.id, 3).unwrap(), None);
+        assert_eq!(store.frame_movies(job.id, 1).unwrap(), None);
     }
 }

@@ -104,3 +104,30 @@ fn dechunk(mut b: &[u8]) -> Vec<u8> {
         b = &b[nl + 4 + len..];
     }
 }
+
+/// A store in `dir/db` holding job `boxed`, which `radcache render`
+/// rendered (`ic`, frame 0 at 8×8) from `box.glb` in `dir/work`, its
+/// working directory; returns (store, working directory).
+pub fn store_with_a_render_job(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let db = dir.join("db");
+    let work = dir.join("work");
+    std::fs::create_dir(&work).unwrap();
+    std::fs::copy(
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/data/scenes/cube_in_box.glb"
+        ),
+        work.join("box.glb"),
+    )
+    .unwrap();
+    let status = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .current_dir(&work)
+        .args(["render", "box.glb", "--method", "ic", "--size", "8x8"])
+        .args(["--frames", "0..1", "--spp", "1", "--backend", "cpu", "-q"])
+        .args(["--job", "boxed", "--out", "out", "--db"])
+        .arg(&db)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    (db, work)
+}

@@ -647,14 +647,7 @@ mod tests {
         let made = Mat4::from_translation(Vec3::new(1e4, -3e3, 7e3)) * Mat4::from_rotation_x(0.3);
         let record = TcgRecord {
             record: record(0, 0.0),
-            candidate: Candidate {
-                pixel: 0,
-                stream: 0,
-                point,
-                object: 0,
-                footprint: 0.01,
-                glossy: None,
-            },
+            candidate: Candidate::at(point),
             object_to_world: made,
             samples: Vec::new(),
             used: false,

@@ -182,14 +182,7 @@ impl TemporalRecord {
         };
         TemporalRecord {
             record: crate::cache::IrradianceRecord::flat(0, Vec3::ZERO, e0),
-            candidate: crate::method::ic::Candidate {
-                pixel: 0,
-                stream: 0,
-                point,
-                object: 0,
-                footprint: 0.01,
-                glossy: None,
-            },
+            candidate: crate::method::ic::Candidate::at(point),
             next_irradiance: e0 * (1.0 + change),
             change,
             last_valid: 0,
