@@ -265,10 +265,10 @@ pub struct AppState {
     /// Bounds the frame decodings (PNG encodings, EXR reads) run at once:
     /// each holds a whole frame's pixels, EXR and PNG (a 4096² frame: some
     /// 200 MB).
-    pub decode_slots: Semaphore,
+    pub decode_slots: Arc<Semaphore>,
     /// Bounds the `/records` queries run at once: each reads every record
     /// block of the frames up to the one asked.
-    pub records_slots: Semaphore,
+    pub records_slots: Arc<Semaphore>,
     /// Frames decoded from the store and PNG-encoded (`/metrics`).
     pub frame_encodes: AtomicU64,
     /// The job the worker renders and its renderer's
@@ -321,8 +321,8 @@ impl AppState {
             pngs: Mutex::new(PngCache::default()),
             scene_cache: Mutex::new(None),
             encoding: Mutex::new(HashMap::new()),
-            decode_slots: Semaphore::new(cores()),
-            records_slots: Semaphore::new(cores().min(4)),
+            decode_slots: Arc::new(Semaphore::new(cores())),
+            records_slots: Arc::new(Semaphore::new(cores().min(4))),
             frame_encodes: AtomicU64::new(0),
         }
     }
@@ -514,15 +514,25 @@ impl AppState {
 }
 
 /// Runs `work` (blocking) on the blocking pool once one of `slots` is
-/// free, holding it until `work` is done.
+/// free. The work holds its slot until it is done, also when the request
+/// that asked is dropped meanwhile (its client gone, or timed out): a
+/// client that asks and hangs up at once cannot pile up work past the
+/// slots.
 pub async fn blocking_in_slot<T: Send + 'static>(
-    slots: &Semaphore,
+    slots: &Arc<Semaphore>,
     work: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
 ) -> Result<T, ApiError> {
-    let _slot = slots.acquire().await.map_err(ApiError::internal)?;
-    tokio::task::spawn_blocking(work)
+    let slot = slots
+        .clone()
+        .acquire_owned()
         .await
-        .map_err(ApiError::internal)?
+        .map_err(ApiError::internal)?;
+    tokio::task::spawn_blocking(move || {
+        let _slot = slot;
+        work()
+    })
+    .await
+    .map_err(ApiError::internal)?
 }
 
 /// [`AppState::scene_name`] with the `--scenes` directory, `root`, known.
@@ -865,6 +875,39 @@ mod tests {
         assert!(!same_secret("", "s3cret"));
         assert!(same_secret("é", "é"));
         assert!(!same_secret("é", "e\u{301}"));
+    }
+
+    /// Work whose request was dropped while it ran keeps its slot until
+    /// it ends: the next work waits for it.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dropped_requests_leave_their_work_its_slot() {
+        let slots = Arc::new(Semaphore::new(1));
+        let (started_tx, started) = std::sync::mpsc::channel();
+        let (finish, finish_rx) = std::sync::mpsc::channel::<()>();
+        let first = {
+            let slots = slots.clone();
+            tokio::spawn(async move {
+                blocking_in_slot(&slots, move || {
+                    started_tx.send(()).unwrap();
+                    finish_rx.recv().unwrap();
+                    Ok(())
+                })
+                .await
+            })
+        };
+        tokio::task::spawn_blocking(move || started.recv().unwrap())
+            .await
+            .unwrap();
+        first.abort(); // The request goes; its work runs on.
+        let _ = first.await;
+        assert_eq!(slots.available_permits(), 0, "the running work's slot");
+        finish.send(()).unwrap();
+        let second = blocking_in_slot(&slots, || Ok(()));
+        tokio::time::timeout(Duration::from_secs(10), second)
+            .await
+            .expect("the slot comes back when the work ends")
+            .unwrap();
+        assert_eq!(slots.available_permits(), 1);
     }
 
     /// No more blocking work runs at once than there are slots, however
