@@ -43,12 +43,9 @@ impl Blockers {
                 *hi = hi.max(p);
             }
         }
-        let static_point_light: Vec<bool> = ctx
-            .scene
-            .lights
-            .iter()
-            .map(|l| !ctx.scene.node_is_dynamic(l.node))
-            .collect();
+        let dynamic = ctx.scene.dynamic_nodes();
+        let static_point_light: Vec<bool> =
+            ctx.scene.lights.iter().map(|l| !dynamic[l.node]).collect();
         let mut static_lights: Option<Aabb> = None;
         let mut grow = |p: Vec3| {
             let (lo, hi) = static_lights.get_or_insert((p, p));

@@ -269,7 +269,8 @@ impl Store {
                 job: job.name.clone(),
                 detail: format!(
                     "frame {}: its texture movies are too large to store: {detail} \
-                         (lower --movies-max-resolution or --movies-texels-per-pixel)",
+                         (lower --movies-max-resolution or --movies-texels-per-pixel; \
+                         a server job's `max_resolution` or `texels_per_pixel`)",
                     c.frame
                 ),
             })?;

@@ -64,8 +64,10 @@ fn exp2i(k: i32) -> f32 {
 /// when bits 6–15 hold what it is past 15 (saturating at [`flags::MAX_AGE`]).
 /// Samples written before 2026-11-30 kept it in bits 0–3 alone,
 /// saturating at 15, and the low bits of the hit object's index in bits
-/// 6–15: they read the same below 15, and at 15 as 15 or more (which they
-/// were). Four bits were too few: at `tcg`'s default `τ_min = 0.05` a
+/// 6–15: they read the same below 15, and at 15 as 15 plus those object
+/// bits, an age of 15 to 1038 where the true one is 15 or more. Only `tcg`
+/// reads ages, and it resumes no job stored before (its algorithm
+/// revision 4 refuses them). Four bits were too few: at `tcg`'s default `τ_min = 0.05` a
 /// sample waits about 20 frames to be shot again, so the `2^age` draw
 /// (Tawara et al. 2004, §3.2) could not tell the oldest samples apart.
 pub mod flags {
