@@ -19,7 +19,7 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::ray::RayHit;
 use obvhs::triangle::Triangle as ObTriangle;
 use obvhs::BvhBuildParams;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
 /// One BVH over a subset of the snapshot's triangles, with the triangles
@@ -172,6 +172,21 @@ impl TriangleBvh {
         }
     }
 
+    /// Whether this BVH was built over exactly snapshot triangles `range`:
+    /// the same vertices to the bit, with the same objects.
+    fn holds(&self, snapshot: &Snapshot, range: std::ops::Range<usize>) -> bool {
+        let bits = |t: &ObTriangle| [t.v0, t.v1, t.v2].map(|v| v.to_array().map(f32::to_bits));
+        let same = |((&id, tri), &object): ((&u32, &ObTriangle), &u32)| {
+            let id = id as usize;
+            range.contains(&id)
+                && snapshot.tri_object[id] == object
+                && bits(tri) == bits(&to_obvhs(&snapshot.triangles[id]))
+        };
+        // `ids` is a permutation of the range the BVH was built over.
+        self.ids.len() == range.len()
+            && self.ids.iter().zip(&self.triangles).zip(&self.objects).all(same)
+    }
+
     /// Whether some triangle of this BVH lies on `ray` (an any-hit query
     /// outside a backend: `trc`'s estimate of the next frame's shadows).
     pub fn occludes(&self, ray: &Ray) -> bool {
@@ -225,7 +240,8 @@ pub fn static_part_fingerprint(snapshot: &Snapshot) -> Option<u64> {
 /// [`static_part_len`]) and of the rest (rebuilt every frame).
 #[derive(Default)]
 pub struct SceneBvh {
-    static_part: Option<TriangleBvh>,
+    /// Shared with the render's [`StaticGeometry`] ([`shared_static_bvh`]).
+    static_part: Option<Arc<TriangleBvh>>,
     /// [`static_part_fingerprint`] of the triangles `static_part` holds.
     static_fingerprint: Option<u64>,
     dynamic_part: Option<TriangleBvh>,
@@ -243,7 +259,10 @@ impl SceneBvh {
         let fp = static_part_fingerprint(snapshot);
         if self.static_fingerprint != fp {
             let start = Instant::now();
-            self.static_part = TriangleBvh::build(snapshot, 0..static_len);
+            // The part is all the static triangles or none of them.
+            self.static_part = (static_len > 0)
+                .then(|| shared_static_bvh(snapshot))
+                .flatten();
             self.static_fingerprint = fp;
             times.static_build = Some(start.elapsed());
         }
@@ -280,7 +299,8 @@ impl SceneBvh {
 /// The BVH of a render's static triangles, built once (while the static
 /// part's fingerprint holds) for the methods that test segments against
 /// the static geometry alone (`trc`'s direct light at t0+1, `movies`'
-/// static blockers behind moving ones).
+/// static blockers behind moving ones); the CPU backend's own static part
+/// where it has one ([`shared_static_bvh`]).
 #[derive(Default)]
 pub struct StaticGeometry {
     fingerprint: Option<u64>,
@@ -292,9 +312,107 @@ impl StaticGeometry {
     pub fn of(&mut self, snapshot: &Snapshot) -> Option<Arc<TriangleBvh>> {
         let fingerprint = snapshot.static_fingerprint();
         if self.fingerprint != Some(fingerprint) {
-            self.bvh = TriangleBvh::build(snapshot, 0..snapshot.static_count).map(Arc::new);
+            self.bvh = shared_static_bvh(snapshot);
             self.fingerprint = Some(fingerprint);
         }
         self.bvh.clone()
+    }
+}
+
+/// The BVHs over all of a snapshot's static triangles that some holder
+/// still keeps, by [`Snapshot::static_fingerprint`].
+static SHARED_STATIC: Mutex<Vec<(u64, Weak<TriangleBvh>)>> = Mutex::new(Vec::new());
+
+/// The BVH of `snapshot`'s static triangles (`None`: there are none), one
+/// build for every holder alive at once. Why: the CPU backend's static
+/// part ([`SceneBvh`]) and a method's [`StaticGeometry`] are the same
+/// triangles wherever the backend splits them off (past
+/// [`MERGE_STATIC_TRIANGLES`] or in a still scene), and each built its own:
+/// twice the build time and memory for the largest part of a scene. A
+/// kept BVH is taken only if it holds exactly these triangles (checked, not
+/// trusted to the fingerprint), so sharing never changes a hit.
+fn shared_static_bvh(snapshot: &Snapshot) -> Option<Arc<TriangleBvh>> {
+    let fingerprint = snapshot.static_fingerprint();
+    let statics = 0..snapshot.static_count;
+    let kept = || {
+        let mut shared = SHARED_STATIC.lock().unwrap_or_else(PoisonError::into_inner);
+        shared.retain(|(_, bvh)| bvh.strong_count() > 0);
+        shared
+            .iter()
+            .filter(|(fp, _)| *fp == fingerprint)
+            .filter_map(|(_, bvh)| bvh.upgrade())
+            .find(|bvh| bvh.holds(snapshot, statics.clone()))
+    };
+    if let Some(bvh) = kept() {
+        return Some(bvh);
+    }
+    // Built outside the lock: a render building a large part does not hold
+    // up another's. Two renders of one scene starting together may both
+    // build it; each then keeps its own.
+    let bvh = Arc::new(TriangleBvh::build(snapshot, statics)?);
+    let mut shared = SHARED_STATIC.lock().unwrap_or_else(PoisonError::into_inner);
+    shared.push((fingerprint, Arc::downgrade(&bvh)));
+    Some(bvh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::Scene;
+
+    /// `cube-in-box` with every triangle static and its walls moved by
+    /// `offset`, so that its static part is split off (a still scene).
+    fn still_snapshot(offset: f32) -> Snapshot {
+        let mut snap = Scene::builtin("cube-in-box").unwrap().snapshot(0.0);
+        snap.static_count = snap.triangles.len();
+        for tri in &mut snap.triangles {
+            tri.p = tri.p.map(|p| p + glam::Vec3::splat(offset));
+        }
+        snap
+    }
+
+    fn static_part(bvh: &SceneBvh) -> &Arc<TriangleBvh> {
+        bvh.static_part.as_ref().expect("a static part")
+    }
+
+    /// The backend's static part and a method's static geometry of one
+    /// scene are one BVH; another scene's, or the same scene's once it is
+    /// let go, are built anew.
+    #[test]
+    fn the_backend_and_a_method_share_one_static_bvh() {
+        let snap = still_snapshot(0.0);
+        let mut backend = SceneBvh::new();
+        backend.update(&snap);
+        let mut method = StaticGeometry::default();
+        let of_method = method.of(&snap).expect("static triangles");
+        assert!(Arc::ptr_eq(static_part(&backend), &of_method));
+
+        let mut other = SceneBvh::new();
+        other.update(&still_snapshot(1.0));
+        assert!(!Arc::ptr_eq(static_part(&other), &of_method));
+
+        drop((backend, method, of_method));
+        assert!(SHARED_STATIC
+            .lock()
+            .unwrap()
+            .iter()
+            .all(|(fp, bvh)| *fp != snap.static_fingerprint() || bvh.strong_count() == 0));
+    }
+
+    /// A kept BVH whose fingerprint matches another scene's (forced here)
+    /// is not taken for it: its triangles are compared.
+    #[test]
+    fn a_kept_bvh_is_taken_only_for_its_own_triangles() {
+        let snap = still_snapshot(2.0);
+        let bvh = TriangleBvh::build(&snap, 0..snap.static_count).unwrap();
+        assert!(bvh.holds(&snap, 0..snap.static_count));
+        let moved = still_snapshot(3.0);
+        assert!(!bvh.holds(&moved, 0..moved.static_count));
+        let mut fewer = snap.clone();
+        fewer.static_count -= 1;
+        assert!(!bvh.holds(&fewer, 0..fewer.static_count));
+        let mut reassigned = snap.clone();
+        reassigned.tri_object[0] += 1;
+        assert!(!bvh.holds(&reassigned, 0..reassigned.static_count));
     }
 }
