@@ -188,8 +188,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // 2: as `trc`'s 4, the records all three gather. 3: as below.
         "ic" => 3,
         // `tcg` 4: samples' ages count past 15 frames (to 1038), so the
-        // `2^age` draw tells the oldest apart (2026-11-30).
-        "tcg" => 4,
+        // `2^age` draw tells the oldest apart (2026-11-30). 5: a moving
+        // record's samples are tested for stale light from where the
+        // record was when they were shot (`tcg::stale`, 2026-11-30).
+        "tcg" => 5,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with

@@ -85,6 +85,19 @@ impl UnshadowedLights {
         UnshadowedLights { emitters }
     }
 
+    /// One point light of `intensity` at `position`, for unit tests.
+    #[cfg(test)]
+    pub(crate) fn point(position: Vec3, intensity: Vec3) -> Self {
+        UnshadowedLights {
+            emitters: vec![Emitter::Point(crate::scene::PointLight {
+                position,
+                direction: Vec3::NEG_Z,
+                intensity,
+                spot: None,
+            })],
+        }
+    }
+
     /// Whether the two frames' lights are in the same places, to within
     /// rounding: a light held still by equal animation keys (as exporters
     /// that sample every frame write them) is interpolated at each frame
@@ -197,17 +210,9 @@ fn nearly_equal(a: Vec3, b: Vec3) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::PointLight;
 
     fn lit_by(position: Vec3, intensity: Vec3) -> UnshadowedLights {
-        UnshadowedLights {
-            emitters: vec![Emitter::Point(PointLight {
-                position,
-                direction: Vec3::NEG_Z,
-                intensity,
-                spot: None,
-            })],
-        }
+        UnshadowedLights::point(position, intensity)
     }
 
     #[test]

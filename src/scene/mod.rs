@@ -593,6 +593,17 @@ impl Scene {
     }
 
     /// Evaluates the scene at time `t`.
+    /// Every object's world transform at time `t` (as a snapshot has them,
+    /// without its triangles).
+    pub fn object_transforms(&self, t: f32) -> Vec<Mat4> {
+        self.objects_in(&self.node_world_transforms(t))
+    }
+
+    /// Every object's world transform, given every node's.
+    fn objects_in(&self, world: &[Mat4]) -> Vec<Mat4> {
+        self.objects.iter().map(|o| world[o.node]).collect()
+    }
+
     pub fn snapshot(&self, t: f32) -> Snapshot {
         let world = self.node_world_transforms(t);
         let mut snap = Snapshot {
@@ -601,7 +612,7 @@ impl Scene {
             tri_object: Vec::new(),
             tri_material: Vec::new(),
             static_count: 0,
-            object_to_world: self.objects.iter().map(|o| world[o.node]).collect(),
+            object_to_world: self.objects_in(&world),
             lights: self
                 .lights
                 .iter()

@@ -75,7 +75,6 @@ use crate::film::Film;
 use crate::integrator::trace_radiance_parallel;
 use crate::material::Bsdf;
 use crate::sampling::{streams, Frame, Rng, SampleKey};
-use crate::scene::Snapshot;
 use crate::store::rgbe::PackedSample;
 use crate::store::samples::{pack_samples, SampleBlock};
 use glam::{Mat3, Mat4, Vec3};
@@ -157,19 +156,19 @@ impl TcgRecord {
         TcgRecord {
             record: g.record.clone(),
             candidate: g.candidate,
-            object_to_world: object_transform(ctx.snapshot, g.candidate.object),
+            object_to_world: object_transform(&ctx.snapshot.object_to_world, g.candidate.object),
             samples: pack_samples(&g.samples, dynamic),
             used: false,
         }
     }
 
-    /// Its point and the frame its cells are laid out in, in the frame of
-    /// `snapshot` (§4.1): its creation point and cells moved with its
-    /// object since.
-    fn pose(&self, snapshot: &Snapshot) -> (GatherPoint, Frame) {
+    /// Its point and the frame its cells are laid out in, in a frame whose
+    /// objects' world transforms are `objects` (§4.1): its creation point
+    /// and cells moved with its object since.
+    fn pose(&self, objects: &[Mat4]) -> (GatherPoint, Frame) {
         let point = self.candidate.point;
         let frame = Frame::new(point.normal);
-        let now = object_transform(snapshot, self.candidate.object);
+        let now = object_transform(objects, self.candidate.object);
         // Exactly where it was made first: `now · then⁻¹` of a still
         // object far from the origin misses the identity by rounding.
         if now == self.object_to_world {
@@ -201,11 +200,10 @@ impl TcgRecord {
     }
 }
 
-/// `object`'s world transform in `snapshot` (the identity for an object
-/// it does not have, which a damaged state could name).
-fn object_transform(snapshot: &Snapshot, object: u32) -> Mat4 {
-    snapshot
-        .object_to_world
+/// `object`'s world transform among `objects` (the identity for an
+/// object not there, which a damaged state could name).
+fn object_transform(objects: &[Mat4], object: u32) -> Mat4 {
+    objects
         .get(object as usize)
         .copied()
         .unwrap_or(Mat4::IDENTITY)
@@ -323,7 +321,7 @@ impl TemporallyCoherentGathering {
                 removed.push(r.record.id);
                 continue;
             }
-            let pose = r.pose(ctx.snapshot);
+            let pose = r.pose(&ctx.snapshot.object_to_world);
             r.record.position = pose.0.position;
             r.record.normal = pose.0.normal;
             alive.push((r, pose));
@@ -365,11 +363,9 @@ impl TemporallyCoherentGathering {
         };
         let picks: Vec<Vec<u32>> = alive
             .par_iter()
-            .map(|(r, (point, frame))| {
+            .map(|(r, _)| {
                 let stale: Vec<bool> = match &staleness {
-                    Some(l) => (r.samples.iter().enumerate())
-                        .map(|(cell, s)| l.is_stale((point, frame), strata, cell, s))
-                        .collect(),
+                    Some(l) => l.stale_cells(r, strata),
                     None => Vec::new(),
                 };
                 let is_stale = |cell: usize| stale.get(cell).copied().unwrap_or(false);
@@ -653,13 +649,13 @@ mod tests {
             used: false,
         };
         snapshot.object_to_world[0] = made;
-        let (still, still_frame) = record.pose(&snapshot);
+        let (still, still_frame) = record.pose(&snapshot.object_to_world);
         assert_eq!(still.position, point.position);
         assert_eq!(still_frame.t, Frame::new(Vec3::Y).t);
         let angle = 0.7;
         let turn = Mat4::from_translation(Vec3::new(0.5, 0.0, -2.0)) * Mat4::from_rotation_y(angle);
         snapshot.object_to_world[0] = turn * made;
-        let (moved, frame) = record.pose(&snapshot);
+        let (moved, frame) = record.pose(&snapshot.object_to_world);
         let want = turn.transform_point3(point.position);
         assert!(moved.position.abs_diff_eq(want, 1e-2), "{}", moved.position);
         assert!(moved.normal.abs_diff_eq(Vec3::Y, 1e-5));

@@ -9,21 +9,24 @@
 //! the samples it shoots again see the lights as they are. Here a sample
 //! also counts in Eq. 2's `x` where the unshadowed direct light at its hit
 //! point (the record's point plus its cell's centre direction times its
-//! stored distance) has changed by more than [`STALE_LIGHT`] since the
-//! frame it was shot in, which its age gives, and every sample where the
-//! lights' power has (a light switched off). Stale samples are drawn
+//! stored distance, the record posed as it was in the frame the sample
+//! was shot in, which its age gives) has changed by more than
+//! [`STALE_LIGHT`] since that frame, and every sample where the lights'
+//! power has (a light switched off). Stale samples are drawn
 //! before the others (`select::pick_cells`). A hit that no light reaches
 //! directly (a ceiling above a panel facing down) shows indirect light
 //! only, which the moving light changes too: such samples are still shot
 //! again only at Eq. 2's `τ_min` share. Where no light moves over the
 //! frames the ages span, nothing is computed and `tcg` is the paper's.
 
+use super::TcgRecord;
 use crate::cache::gather::{cell_direction, GatherPoint, Strata};
 use crate::method::unshadowed::{LightsByFrame, UnshadowedLights};
 use crate::method::FrameContext;
 use crate::sampling::Frame;
 use crate::store::rgbe::PackedSample;
-use glam::{Vec2, Vec3};
+use glam::{Mat4, Vec2, Vec3};
+use std::collections::BTreeMap;
 
 /// The relative change of a sample's unshadowed direct light (any colour
 /// channel) past which it is stale: the 5 % of Eq. 2's `τ_min` and of
@@ -38,11 +41,13 @@ pub(super) const STALE_LIGHT: f32 = 0.05;
 /// well.
 const WINDOW: u32 = 32;
 
-/// The lights of the last frames (by frame number, so a resumed render
-/// finds the same ones: they are computed again from the scene).
+/// The lights and objects' world transforms of the last frames (by frame
+/// number, so a resumed render finds the same ones: they are computed
+/// again from the scene).
 #[derive(Default)]
 pub(super) struct LightHistory {
     frames: LightsByFrame,
+    objects: BTreeMap<u32, Vec<Mat4>>,
 }
 
 impl LightHistory {
@@ -52,8 +57,16 @@ impl LightHistory {
         let t = ctx.frame;
         let first = t.saturating_sub(WINDOW);
         self.frames.keep(first..=t);
+        self.objects.retain(|f, _| (first..=t).contains(f));
         for f in first..=t {
             self.frames.at(ctx, f);
+            self.objects.entry(f).or_insert_with(|| {
+                if f == t {
+                    ctx.snapshot.object_to_world.clone()
+                } else {
+                    ctx.scene.object_transforms(ctx.time_of(f))
+                }
+            });
         }
     }
 
@@ -74,6 +87,7 @@ impl LightHistory {
                 let lights = at(t.saturating_sub(1 + a));
                 (!lights.same_as(now)).then(|| Then {
                     lights,
+                    objects: &self.objects[&t.saturating_sub(1 + a)],
                     power_changed: relative_change(lights.power(), power) > STALE_LIGHT,
                 })
             })
@@ -87,6 +101,8 @@ impl LightHistory {
 /// The lights a sample of some age was shot under.
 struct Then<'a> {
     lights: &'a UnshadowedLights,
+    /// The objects' world transforms of that frame: where its records were.
+    objects: &'a [Mat4],
     /// Whether their power differs from this frame's by more than
     /// [`STALE_LIGHT`]: then every sample of that age is stale, those
     /// whose hit no light reaches directly too (a ceiling lit only by the
@@ -103,23 +119,34 @@ pub(super) struct Staleness<'a> {
 }
 
 impl Staleness<'_> {
-    /// Whether sample `cell` of a record at `point`, its cells laid out in
-    /// `frame`, is stale. `point` and `frame` are the record's pose in
-    /// this frame: on a moving object the hit is placed from where the
-    /// record is now, not from where it was when the sample was shot (not
-    /// kept), which differs only where a light and the record's object
-    /// both move.
-    pub(super) fn is_stale(
+    /// Whether each of record `r`'s samples, in cell order, is stale.
+    pub(super) fn stale_cells(&self, r: &TcgRecord, strata: Strata) -> Vec<bool> {
+        // The record's pose by age, found once for all its samples of it.
+        let mut poses: Vec<Option<(GatherPoint, Frame)>> = vec![None; self.then.len()];
+        let mut stale = |(cell, s): (usize, &PackedSample)| {
+            let age = s.age().min(WINDOW - 1) as usize;
+            let Some(Some(then)) = self.then.get(age) else {
+                return false;
+            };
+            let pose = poses[age].get_or_insert_with(|| r.pose(then.objects));
+            self.is_stale(then, pose, strata, cell, s)
+        };
+        r.samples.iter().enumerate().map(&mut stale).collect()
+    }
+
+    /// Whether sample `cell`, shot under `then` by a record then at
+    /// `point` with its cells laid out in `frame`, is stale. Its hit is
+    /// placed from where the record was when it was shot, not from where
+    /// it is now (they differ on a moving object), and both lights are
+    /// measured there: a hit on a still surface is where it was.
+    fn is_stale(
         &self,
-        (point, frame): (&GatherPoint, &Frame),
+        then: &Then,
+        (point, frame): &(GatherPoint, Frame),
         strata: Strata,
         cell: usize,
         s: &PackedSample,
     ) -> bool {
-        let age = s.age().min(WINDOW - 1);
-        let Some(Some(then)) = self.then.get(age as usize) else {
-            return false;
-        };
         if then.power_changed {
             return true;
         }
@@ -145,6 +172,50 @@ fn relative_change(a: Vec3, b: Vec3) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A record made at the origin on an object that has since moved by
+    /// `Δ` = (0.5, 0, 0), one sample of age 0 hitting 1 away along its
+    /// first cell, and a light that has moved from 1 on one side of where
+    /// that hit would be now to 1 on the other. The hit was made from
+    /// where the record was (0.5 nearer the old light's side), so its
+    /// light changed from 1/1.5² to 1/0.5²: stale. Placed from where the
+    /// record is now (as before this test), both lights read the same.
+    #[test]
+    fn a_moving_records_hit_is_placed_where_the_record_was() {
+        let strata = Strata::default();
+        let point = GatherPoint {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            geometric_normal: Vec3::Y,
+        };
+        let record = TcgRecord {
+            record: crate::cache::IrradianceRecord::flat(0, Vec3::ZERO, Vec3::ONE),
+            candidate: crate::method::ic::Candidate::at(point),
+            object_to_world: Mat4::IDENTITY,
+            samples: vec![PackedSample::pack(Vec3::ONE, 1.0, 1, false, 0)],
+            used: true,
+        };
+        let delta = Vec3::new(0.5, 0.0, 0.0);
+        let dir = cell_direction(&Frame::new(Vec3::Y), strata, 0, Vec2::splat(0.5));
+        let hit_now = dir + delta;
+        let (lights_then, lights_now) = (
+            UnshadowedLights::point(hit_now + Vec3::X, Vec3::ONE),
+            UnshadowedLights::point(hit_now - Vec3::X, Vec3::ONE),
+        );
+        let stale = |objects_then: &[Mat4]| {
+            let staleness = Staleness {
+                now: &lights_now,
+                then: vec![Some(Then {
+                    lights: &lights_then,
+                    objects: objects_then,
+                    power_changed: false,
+                })],
+            };
+            staleness.stale_cells(&record, strata)
+        };
+        assert_eq!(stale(&[Mat4::IDENTITY]), [true]);
+        assert_eq!(stale(&[Mat4::from_translation(delta)]), [false]);
+    }
 
     #[test]
     fn relative_change_takes_the_worst_channel_and_ignores_darkness() {
