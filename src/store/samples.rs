@@ -19,8 +19,10 @@
 //! - `meta.samples_log_len` (u64 big-endian) is the log's committed length,
 //!   written in each frame's sled transaction after the frame's EXR and
 //!   blocks (samples, then records) were appended and synced. Bytes beyond it belong to a frame that was never
-//!   acknowledged (a crash between the append and the transaction): opening
-//!   the store truncates them. A log shorter than its committed length has
+//!   acknowledged (a crash between the append and the transaction): the
+//!   store's first append cuts them off, opening it leaves them (so that
+//!   `inspect` of a store whose sled database lost commits, which looks the
+//!   same, destroys nothing). A log shorter than its committed length has
 //!   lost acknowledged data: opening the store fails, naming the file.
 //! - Schema 5 (`migrations/0005_log_generations.md`): `radcache compact`
 //!   ([`super::compact`]) rewrites the log without its unreferenced bytes
@@ -240,14 +242,18 @@ pub struct SampleLog {
     committed: u64,
     /// Length including appends not committed yet.
     end: u64,
+    /// Whether the file holds bytes past `committed` that no write of this
+    /// process made: cut off by the first append.
+    foreign_tail: bool,
 }
 
 impl SampleLog {
     /// Opens (or creates) the log of generation `generation` ([`file_name`])
     /// in store directory `dir`, whose `meta` says `committed` bytes are
     /// referenced (`None`: nothing ever was: the file is created, or
-    /// emptied). A tail beyond `committed` is truncated; a file shorter
-    /// than `committed`, or without the header, is an error.
+    /// emptied). A tail beyond `committed` is kept until the first append
+    /// ([`Self::append`]); a file shorter than `committed`, or without the
+    /// header, is an error.
     pub fn open(dir: &Path, generation: u64, committed: Option<u64>) -> Result<SampleLog, String> {
         let path = dir.join(file_name(generation));
         let file = OpenOptions::new()
@@ -268,6 +274,7 @@ impl SampleLog {
             file,
             committed: 0,
             end: 0,
+            foreign_tail: false,
         };
         match committed {
             None => {
@@ -302,13 +309,11 @@ impl SampleLog {
                 if &head != MAGIC {
                     return Err("not a radcache sample log (bad header)".into());
                 }
-                if actual > c {
-                    // The tail of a frame that was never acknowledged.
-                    log.file
-                        .set_len(c)
-                        .and_then(|()| log.file.sync_all())
-                        .map_err(|e| format!("cannot truncate its uncommitted tail: {e}"))?;
-                }
+                // The tail of a frame that was never acknowledged, or of
+                // frames whose commits sled lost (a damaged database it
+                // recovered in part): only a write cuts it, so that a store
+                // opened to be read changes nothing.
+                log.foreign_tail = actual > c;
                 log.committed = c;
             }
         }
@@ -332,6 +337,10 @@ impl SampleLog {
 
     /// Appends `bytes` (not yet synced nor committed); returns their offset.
     pub fn append(&mut self, bytes: &[u8]) -> std::io::Result<u64> {
+        if self.foreign_tail {
+            self.file.set_len(self.end)?;
+            self.foreign_tail = false;
+        }
         let offset = self.end;
         self.file.write_all_at(bytes, offset)?;
         self.end += bytes.len() as u64;
