@@ -192,6 +192,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // record's samples are tested for stale light from where the
         // record was when they were shot (`tcg::stale`, 2026-11-30).
         "tcg" => 5,
+        // `movies` 3: a kept link that missed everything covers its whole
+        // ray, so an object that later moves far into it is seen
+        // (`global::LinkReach`, 2026-11-30).
+        "movies" => 3,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with

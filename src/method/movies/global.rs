@@ -23,7 +23,7 @@
 //! is solved on one side, as the paper's polygons are: its front, or its
 //! back where its part encloses the camera facing away ([`super::sides`]).
 
-use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, StaticShadows};
+use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, StaticShadows, Statics};
 use super::sides::SolvedSides;
 use super::FrameContext;
 use crate::backend::{Hit, Ray};
@@ -339,8 +339,10 @@ struct Link {
     /// Whether it was traced at all (a direction below the geometric
     /// surface gathers nothing).
     live: bool,
-    /// The segment it covers, from its origin to its hit (or far out),
-    /// which motion must not cross for it to stay valid.
+    /// What it covers, which motion must not cross for it to stay valid:
+    /// the segment from `from`, its origin, to `to`, its hit; where it hit
+    /// nothing, the whole ray, `to` then a point on it a unit out
+    /// ([`LinkReach`]).
     from: Vec3,
     to: Vec3,
     /// Whether it landed on the side of a surface the solution is for
@@ -672,6 +674,7 @@ impl GlobalPass {
     ) -> Vec<(usize, u32, u32)> {
         let sides = &self.sides;
         let turned_triangle = |id: u32| turned[sides.component(id)];
+        let reach = &LinkReach::new(blockers);
         self.vertices
             .par_iter()
             .enumerate()
@@ -688,7 +691,7 @@ impl GlobalPass {
                         || (link.hit.is_hit() && turned_triangle(link.hit.triangle))
                         || !link.traced
                         || (link.hit.is_hit() && blockers.is_moving_triangle(link.hit.triangle))
-                        || (link.live && blockers.segment_may_hit(link.from, link.to));
+                        || (link.live && reach.may_cross(blockers, link));
                     stale.then_some((index, i as u32, k))
                 })
             })
@@ -697,9 +700,8 @@ impl GlobalPass {
 
     /// Stores what each traced link `indices[i]` found along `rays[i]`:
     /// where it landed on a solved side, the vertices it gathers from
-    /// there; its segment, to the hit or far out where it hit nothing.
+    /// there; its segment, to the hit, or its ray where it hit nothing.
     fn land_links(&mut self, ctx: &FrameContext, indices: &[usize], rays: &[Ray], hits: Vec<Hit>) {
-        let far = 2.0 * scene_diagonal(ctx);
         for ((index, ray), hit) in indices.iter().zip(rays).zip(hits) {
             let on_solved_side = hit.is_hit()
                 && ctx.snapshot.triangles[hit.triangle as usize]
@@ -712,7 +714,7 @@ impl GlobalPass {
             } else {
                 [(0, 0.0); 3]
             };
-            let t = if hit.is_hit() { hit.t } else { far };
+            let t = if hit.is_hit() { hit.t } else { 1.0 };
             self.links[*index] = Link {
                 hit,
                 traced: true,
@@ -752,13 +754,14 @@ impl GlobalPass {
             blockers,
             &still_points,
             samples,
-            Some(&mut self.shadows),
+            Statics::Kept(&mut self.shadows),
         );
         working.hold(&e_still);
         working.release(&still_points);
         drop(still_points);
         let moved_points = pick(&moved, working);
-        let (e_moved, c_moved) = direct_irradiance(ctx, blockers, &moved_points, samples, None);
+        let (e_moved, c_moved) =
+            direct_irradiance(ctx, blockers, &moved_points, samples, Statics::Moving);
         working.hold(&e_moved);
         working.release(&moved_points);
         drop(moved_points);
@@ -942,6 +945,47 @@ impl GlobalPass {
     }
 }
 
+/// How far along its ray a link that hit nothing must be followed, in one
+/// frame, for the moving objects' boxes it may cross: to the farthest
+/// point of the box around them all, whose every point lies within the
+/// distance from the ray's origin to the box's centre plus half its
+/// diagonal. (A link that hit nothing kept a segment of twice the scene's
+/// diagonal in the frame it was traced: an object that later moved
+/// beyond that, into the link's ray, was not seen to cross it, and the
+/// kept link missed where one traced again hit.)
+struct LinkReach {
+    /// The centre and half the diagonal of the moving objects' box;
+    /// `None` where nothing moves.
+    around: Option<(Vec3, f32)>,
+}
+
+impl LinkReach {
+    fn new(blockers: &ShadowBlockers) -> Self {
+        let around = blockers
+            .boxes
+            .iter()
+            .copied()
+            .reduce(|(lo, hi), (l, h)| (lo.min(l), hi.max(h)))
+            .map(|(lo, hi)| ((lo + hi) / 2.0, (hi - lo).length() / 2.0));
+        LinkReach { around }
+    }
+
+    /// Whether a moving object's box may cross what `link` covers.
+    fn may_cross(&self, blockers: &ShadowBlockers, link: &Link) -> bool {
+        if link.hit.is_hit() {
+            return blockers.segment_may_hit(link.from, link.to);
+        }
+        let Some((centre, radius)) = self.around else {
+            return false;
+        };
+        // Past the box's far side by a part in a thousand, for the
+        // rounding of the slab test at the end point.
+        let t = ((link.from - centre).length() + radius) * 1.001;
+        let dir = (link.to - link.from).normalize_or_zero();
+        blockers.segment_may_hit(link.from, link.from + dir * t)
+    }
+}
+
 /// Barycentrics `(u, v)` moved a thousandth of the way to the centroid.
 fn pulled(u: f32, v: f32) -> (f32, f32) {
     let k = 1e-3;
@@ -970,10 +1014,6 @@ fn converged(before: &[Vec3], after: &[Vec3]) -> bool {
         total += f64::from(b.abs().element_sum());
     }
     change <= CONVERGED * total
-}
-
-fn scene_diagonal(ctx: &FrameContext) -> f32 {
-    diagonal(ctx.snapshot.triangles.iter().flat_map(|t| t.p))
 }
 
 fn diagonal(points: impl Iterator<Item = Vec3>) -> f32 {

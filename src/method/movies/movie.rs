@@ -5,7 +5,10 @@
 //! reach). Its resolution is fixed for its life: a triangle whose needed
 //! resolution changes gets a new movie (§4.1).
 
-use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, ShadowCounts, StaticShadows};
+use super::direct::{
+    chunk_points, direct_irradiance, ShadePoint, ShadowBlockers, ShadowCounts, StaticShadows,
+    Statics,
+};
 use super::global::{GlobalPass, Gouraud};
 use super::patch::Patch;
 use super::FrameContext;
@@ -34,6 +37,9 @@ pub struct Movie {
     /// Shadows of static blockers at its texels (kept only for triangles
     /// that do not move: §5, "static occluders are computed once per movie").
     shadows: Option<StaticShadows>,
+    /// Whether the memory budget gives it room to keep them this frame
+    /// ([`Movie::make_room`]); none until it is given.
+    room: bool,
     /// Irradiance per texel (`j·R + i`; zero outside the band).
     pub texels: Vec<Vec3>,
     /// Its direct part alone, per band texel in storage order (the "bad
@@ -61,6 +67,7 @@ impl Movie {
             resolution,
             start,
             shadows: (!moving).then(StaticShadows::default),
+            room: false,
             texels: Vec::new(),
             direct: Vec::new(),
             stored: None,
@@ -136,8 +143,12 @@ impl Movie {
             .iter()
             .map(|&(index, uv, _)| self.texel_point(tri, index, uv))
             .collect();
-        let (direct, counts) =
-            direct_irradiance(ctx, blockers, &points, samples, self.shadows.as_mut());
+        let statics = match &mut self.shadows {
+            None => Statics::Moving,
+            Some(kept) if self.room => Statics::Kept(kept),
+            Some(_) => Statics::Unkept,
+        };
+        let (direct, counts) = direct_irradiance(ctx, blockers, &points, samples, statics);
         let r = self.resolution as usize;
         self.texels.clear();
         self.texels.resize(r * r, Vec3::ZERO);
@@ -197,10 +208,43 @@ impl Movie {
         self.shadows.as_ref().map_or(0, StaticShadows::bytes)
     }
 
-    /// Gives up the kept static shadows: the next frame finds them again.
-    pub fn forget_shadows(&mut self) {
-        if let Some(s) = &mut self.shadows {
-            *s = StaticShadows::default();
+    /// Its texels in the band: the points it shades.
+    fn band_len(&self) -> usize {
+        let r = self.resolution as usize;
+        // Row j holds the texels i < R with i + j ≤ R + 1.
+        (0..r).map(|j| r.min(r + 2 - j)).sum()
+    }
+
+    /// Whether it keeps static shadows valid for the frame of `blockers`
+    /// (`None`: it keeps none, its triangle moves).
+    pub fn holds_valid_shadows(
+        &self,
+        ctx: &FrameContext,
+        blockers: &ShadowBlockers,
+        samples: u32,
+    ) -> Option<bool> {
+        let kept = self.shadows.as_ref()?;
+        Some(kept.valid_for(blockers, self.band_len(), chunk_points(ctx, samples)))
+    }
+
+    /// The most bytes its static shadows can hold once found (0 where its
+    /// triangle moves).
+    pub fn shadow_bound(&self, ctx: &FrameContext, samples: u32) -> usize {
+        match self.shadows {
+            None => 0,
+            Some(_) => StaticShadows::bound(self.band_len(), samples, chunk_points(ctx, samples)),
+        }
+    }
+
+    /// Gives it room to keep its static shadows this frame, or none: then
+    /// it lets go of those it holds and finds them, in its frames to come,
+    /// as a movie opened then would, until it is given room.
+    pub fn make_room(&mut self, room: bool) {
+        self.room = room;
+        if !room {
+            if let Some(s) = &mut self.shadows {
+                *s = StaticShadows::default();
+            }
         }
     }
 }
@@ -282,6 +326,15 @@ mod tests {
             (got - Vec3::new(2.5, 1.25, 1.0)).abs().max_element() < 1e-5,
             "{got}"
         );
+    }
+
+    /// The band's length in closed form is the band counted texel by texel.
+    #[test]
+    fn band_len_counts_the_band() {
+        for r in 1u32..40 {
+            let movie = Movie::open(key(), r, 0, false);
+            assert_eq!(movie.band_len(), movie.band().count(), "R {r}");
+        }
     }
 
     #[test]
