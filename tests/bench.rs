@@ -649,3 +649,87 @@ fn store_size_is_the_runs_own_store() {
         .join("runs/cube-in-box/ic-spp=1/store")
         .exists());
 }
+
+/// Where no `ic` run is labelled `default`, a temporal run is set against
+/// the `ic` run whose settings are `ic`'s defaults, whatever its label
+/// says (`spp=16`, as in the default sweep `ic:spp=16,64`), never against
+/// another `ic` run.
+#[test]
+fn temporal_runs_find_ic_at_its_defaults_under_another_label() {
+    let rows = vec![
+        row("ic", "spp=64", 4.0, 0.1),
+        row("ic", "spp=16", 2.0, 0.1),
+        row("trc", "max_life=5", 1.0, 0.1),
+    ];
+    let pairs: Vec<(&str, &str)> = temporal_pairs(&rows)
+        .iter()
+        .map(|(ic, trc)| (ic.settings.as_str(), trc.settings.as_str()))
+        .collect();
+    assert_eq!(pairs, [("spp=16", "max_life=5")]);
+    // No ic run at the defaults: nothing to set the temporal run against.
+    let rows = vec![
+        row("ic", "spp=64", 4.0, 0.1),
+        row("trc", "default", 1.0, 0.1),
+    ];
+    assert!(temporal_pairs(&rows).is_empty());
+}
+
+/// `radcache bench` with its default methods prints the temporal methods
+/// against per-frame `ic` (README, "Benchmarks"): its `ic` sweep holds
+/// `ic` at its defaults.
+#[test]
+fn default_bench_sets_temporal_methods_against_ic() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["bench", "--size", "8x8", "--frames", "0..2"])
+        .args(["--reference-spp", "2", "-q", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("temporal methods against per-frame ic"),
+        "{stdout}"
+    );
+    for run in [
+        "trc max_life=5",
+        "tcg tau_min=0.05",
+        "movies shadow_samples=16",
+    ] {
+        assert!(
+            stdout.contains(&format!("cube-in-box {run} against ic spp=16:")),
+            "{run}: {stdout}"
+        );
+    }
+}
+
+/// `--backends cpu,gpu` where no GPU adapter is found (Vulkan pointed at a
+/// driver list that does not exist) fails before anything renders: no
+/// reference, no run, and the message names the flag and the way out.
+#[test]
+fn a_missing_gpu_backend_fails_before_the_reference_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .env("VK_ICD_FILENAMES", "/nonexistent/radcache-icd.json")
+        .env("WGPU_BACKEND", "vulkan")
+        .args(["bench", "--size", "8x8", "--frames", "0..2"])
+        .args(["--reference-spp", "2", "--methods", "path:spp=1"])
+        .args(["--backends", "cpu,gpu", "-q", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("--backends cpu,gpu: the gpu backend is unavailable")
+            && stderr.contains("nothing was rendered"),
+        "{stderr}"
+    );
+    assert!(
+        !dir.path().join("reference").exists(),
+        "a reference was rendered"
+    );
+    assert!(!dir.path().join("runs").exists(), "a run was rendered");
+}

@@ -168,7 +168,19 @@ fn bad_input_is_a_clear_error() {
                 "--ic-max-spacing",
                 "2",
             ],
-            "min_spacing 100 is over max_spacing 2",
+            "--ic-min-spacing 100 is over --ic-max-spacing 2",
+        ),
+        (
+            &[
+                "render",
+                "--method",
+                "tcg",
+                "--tcg-tau-min",
+                "0.5",
+                "--tcg-tau-max",
+                "0.1",
+            ],
+            "--tcg-tau-min 0.5 is over --tcg-tau-max 0.1",
         ),
         (
             &["bench", "--methods", "tcg:tau_min=0.5:tau_max=0.1"],
@@ -961,4 +973,233 @@ fn material_factors_out_of_range_are_warned_of() {
             .all(|l| l.starts_with("warning: ") && l.contains(file.to_str().unwrap())),
         "{stderr}"
     );
+}
+
+/// A store whose sled files were damaged (a bit flipped in `db`) is called
+/// damaged, not "not a radcache store": the message names the store, says
+/// what to do and holds none of sled's debug text. Both ways sled fails
+/// on it: with a snapshot beside `db` (a store opened again after its
+/// render) sled reports corrupt data; without one it recovers nothing,
+/// though the sample log holds samples.
+#[test]
+fn a_damaged_store_is_called_damaged_and_told_what_to_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db");
+    let (code, _, stderr) = radcache(&[
+        "render",
+        "--db",
+        db.to_str().unwrap(),
+        "--job",
+        "j1",
+        "--method",
+        "ic",
+        "--frames",
+        "0..2",
+        "--size",
+        "8x8",
+        "--spp",
+        "1",
+        "--out",
+        dir.path().join("out").to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    for reopened in [false, true] {
+        let copy = dir.path().join(format!("copy-{reopened}"));
+        std::fs::create_dir_all(copy.join("blobs")).unwrap();
+        for name in ["conf", "db", "samples.log"] {
+            std::fs::copy(db.join(name), copy.join(name)).unwrap();
+        }
+        let copy_arg = copy.to_str().unwrap();
+        if reopened {
+            let (code, _, stderr) = radcache(&["inspect", "--db", copy_arg]);
+            assert_eq!(code, 0, "{stderr}");
+        }
+        let mut bytes = std::fs::read(copy.join("db")).unwrap();
+        bytes[100] ^= 0x10;
+        std::fs::write(copy.join("db"), &bytes).unwrap();
+        let (code, _, stderr) = radcache(&["inspect", "--db", copy_arg]);
+        assert_eq!(code, 1, "{stderr}");
+        assert!(
+            stderr.contains(&format!("store {copy_arg}: damaged: ")),
+            "reopened {reopened}: {stderr}"
+        );
+        assert!(
+            stderr.contains("restore the directory from a copy, or remove it to start over"),
+            "{stderr}"
+        );
+        for noise in ["not a radcache store", "backtrace", "offset None"] {
+            assert!(!stderr.contains(noise), "{noise}: {stderr}");
+        }
+    }
+}
+
+/// A store path whose directory cannot be made (under /proc) is one
+/// error naming the path, the OS's reason said once.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_store_directory_that_cannot_be_made_is_said_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let (code, _, stderr) = radcache(&[
+        "render",
+        "--db",
+        "/proc/radcache-no-such/db",
+        "--job",
+        "j",
+        "--frames",
+        "0..1",
+        "--size",
+        "8x8",
+        "--spp",
+        "1",
+        "--out",
+        dir.path().to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains("store /proc/radcache-no-such/db: cannot open or create"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.matches("os error").count(), 1, "{stderr}");
+}
+
+/// A negative number given to a number flag reaches the flag's parser,
+/// which says the value is out of its range, rather than clap taking it
+/// for a flag (`unexpected argument '-1'`, or `'-2'` of `-24`).
+#[test]
+fn negative_numbers_are_out_of_range_not_flags() {
+    let cases: &[(&[&str], &str)] = &[
+        (
+            &["render", "--spp", "-1"],
+            "invalid value '-1' for '--spp <SPP>': expected 1 to 1000000",
+        ),
+        (
+            &["render", "--fps", "-24"],
+            "invalid value '-24' for '--fps <FPS>': fps must lie in 0.001..=100000",
+        ),
+        (
+            &["render", "--method", "trc", "--trc-max-life", "-5"],
+            "invalid value '-5' for '--trc-max-life <TRC_MAX_LIFE>': expected 1 to 100000",
+        ),
+        (
+            &["render", "--method", "ic", "--ic-accuracy", "-0.2"],
+            "invalid value '-0.2' for '--ic-accuracy <IC_ACCURACY>': expected 0.001 to 2",
+        ),
+        (
+            &["render", "--max-depth", "-3"],
+            "invalid value '-3' for '--max-depth <MAX_DEPTH>': expected 0 to 10000",
+        ),
+        (
+            &["render", "--seed", "-1"],
+            "invalid value '-1' for '--seed <SEED>': expected a whole number from 0 to",
+        ),
+        (
+            &["render", "--threads", "-2"],
+            "invalid value '-2' for '--threads <THREADS>'",
+        ),
+        (
+            &["bench", "--reference-spp", "-16"],
+            "invalid value '-16' for '--reference-spp <REFERENCE_SPP>'",
+        ),
+        (
+            &["bench", "--fps", "-1"],
+            "invalid value '-1' for '--fps <FPS>'",
+        ),
+        (
+            &["inspect", "--frame", "-1"],
+            "invalid value '-1' for '--frame <FRAME>': expected a frame number",
+        ),
+        (
+            &["serve", "--client-timeout", "-5"],
+            "invalid value '-5' for '--client-timeout <CLIENT_TIMEOUT>'",
+        ),
+    ];
+    for (args, expected) in cases {
+        let (code, _, stderr) = radcache(args);
+        assert_eq!(code, 2, "{args:?}: {stderr}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(
+            !stderr.contains("unexpected argument"),
+            "{args:?}: {stderr}"
+        );
+    }
+}
+
+/// `render --job` says when it makes a new store (a mistyped --db), and,
+/// before anything renders, how many of the range's frames the job has
+/// finished in the store: a resume that then fails still said it.
+#[test]
+fn render_says_it_made_a_store_and_what_it_resumes_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("typo");
+    let out = dir.path().join("out");
+    let args = |frames: &'static str, out: &std::path::Path| {
+        let mut v = vec![
+            "render", "--method", "ic", "--frames", frames, "--size", "8x8",
+        ];
+        v.extend(["--spp", "1", "--job", "j", "-q"]);
+        v.extend(["--db", db.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+        v.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let run = |argv: Vec<String>| {
+        let argv: Vec<&str> = argv.iter().map(String::as_str).collect();
+        radcache(&argv)
+    };
+    let (code, _, stderr) = run(args("0..2", &out));
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "note: no store at {}: a new, empty one is made there",
+            db.display()
+        )),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("resuming"), "{stderr}");
+    // Resumed into an --out that is a file: the render fails before its
+    // first frame, having said what it resumes; no new store is made.
+    let file = dir.path().join("file");
+    std::fs::write(&file, b"x").unwrap();
+    let (code, _, stderr) = run(args("0..3", &file));
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "job \"j\" in {}: resuming: 2 of the 3 frames of 0..3 are finished in the store",
+            db.display()
+        )),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("no store at"), "{stderr}");
+}
+
+/// `serve --db PATH` where no store is says that it makes a new one there;
+/// on an existing store it says nothing of the kind.
+#[test]
+fn serve_says_it_makes_a_new_store() {
+    use std::io::BufRead;
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("typo");
+    for new in [true, false] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args(["serve", "--addr", "127.0.0.1:0", "--db"])
+            .arg(&db)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        assert!(line.starts_with("listening on"), "{line}");
+        child.kill().unwrap();
+        let output = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let note = format!(
+            "note: no store at {}: a new, empty one is made",
+            db.display()
+        );
+        assert_eq!(stderr.contains(&note), new, "new {new}: {stderr}");
+        assert!(db.join("db").is_file(), "the store was made");
+    }
 }

@@ -376,23 +376,50 @@ const TEMPORAL_METHODS: [&str; 3] = ["trc", "tcg", "movies"];
 /// Pairs of a temporal method's run (`trc`, `tcg`, `movies`) and the `ic` run it is
 /// measured against (issue 5, DESIGN "How we measure"): on the same scene
 /// and backend, the `ic` run with the same settings label where there is
-/// one (`ic:strata=64x64` for `trc:strata=64x64`), else `ic` at its
-/// defaults; in row order.
+/// one (`ic:strata=64x64` for `trc:strata=64x64`), else the `ic` run whose
+/// settings are `ic`'s defaults, labelled `default` or naming them
+/// (`spp=16`, as the default sweep `ic:spp=16,64` does); in row order.
 pub fn temporal_pairs(rows: &[BenchRow]) -> Vec<(&BenchRow, &BenchRow)> {
+    let same_place =
+        |r: &BenchRow, run: &BenchRow| (&r.scene, &r.backend) == (&run.scene, &run.backend);
     let ic_with = |run: &BenchRow, settings: &str| {
-        rows.iter().find(|r| {
-            r.method == "ic"
-                && r.settings == settings
-                && (&r.scene, &r.backend) == (&run.scene, &run.backend)
+        rows.iter()
+            .find(|r| r.method == "ic" && r.settings == settings && same_place(r, run))
+    };
+    let ic_at_defaults = |run: &BenchRow| {
+        ic_with(run, "default").or_else(|| {
+            rows.iter().find(|r| {
+                r.method == "ic" && same_place(r, run) && label_is_defaults("ic", &r.settings)
+            })
         })
     };
     rows.iter()
         .filter(|r| TEMPORAL_METHODS.contains(&r.method.as_str()))
         .filter_map(|run| {
-            let ic = ic_with(run, &run.settings).or_else(|| ic_with(run, "default"))?;
+            let ic = ic_with(run, &run.settings).or_else(|| ic_at_defaults(run))?;
             Some((ic, run))
         })
         .collect()
+}
+
+/// Whether a run label ([`super::RunSpec::label`]: `default`, or
+/// `key=value` pairs separated by spaces) gives `method` the settings it
+/// has by default (`spp=16` for `ic`); a label that does not parse does
+/// not.
+fn label_is_defaults(method: &str, label: &str) -> bool {
+    if label == "default" {
+        return true;
+    }
+    let Some(pairs) = label
+        .split_whitespace()
+        .map(|pair| pair.split_once('='))
+        .collect::<Option<Vec<_>>>()
+    else {
+        return false;
+    };
+    let defaults = super::method_settings(method, std::iter::empty());
+    let these = super::method_settings(method, pairs);
+    matches!((defaults, these), (Ok(d), Ok(t)) if d == t)
 }
 
 /// "2.00× faster" for a speed ratio `x` (the other's time over this

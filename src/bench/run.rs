@@ -4,6 +4,7 @@
 use super::charts::plot_scene;
 use super::reference::ensure_reference;
 use super::{sanitize, scene_label, to_csv, BenchOptions, BenchRow, MethodSweep, RunSpec};
+use crate::backend::gpu::{AdapterPolicy, GpuBackend};
 use crate::method::trc::estimate_error::{EstimateError, EstimateErrorTally};
 use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::Method;
@@ -70,6 +71,23 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     for (i, b) in opts.backends.iter().enumerate() {
         if opts.backends[..i].contains(b) {
             bail!("backend '{}' is named twice", b.name());
+        }
+    }
+    // A backend that cannot be made (`gpu` with no adapter) fails the
+    // bench before the reference, the longest render of all, is made.
+    // `cpu` always can be, and `auto` falls back to it.
+    // (The GPU backend as `render::make_backend` makes it for `gpu`.)
+    if opts.backends.contains(&BackendChoice::Gpu) {
+        if let Err(e) = GpuBackend::new(AdapterPolicy::AllowSoftware) {
+            bail!(
+                "--backends {}: the gpu backend is unavailable: {e}; nothing was rendered \
+                 (leave gpu out of --backends)",
+                opts.backends
+                    .iter()
+                    .map(|b| b.name())
+                    .collect::<Vec<_>>()
+                    .join(",")
+            );
         }
     }
     let mut folders: Vec<String> = Vec::new();

@@ -6,7 +6,7 @@
 
 use crate::bench;
 use crate::cache::gather::Strata;
-use crate::method::settings::{limits, parse_strata};
+use crate::method::settings::{limits, parse_strata, Limits};
 use crate::render::{self, SceneSource};
 use clap::{Args, ValueEnum};
 use std::ops::Range;
@@ -61,13 +61,13 @@ pub struct ServeArgs {
     /// body (a slower one is disconnected, or answered 408), and, while an
     /// answer is written, to take some of it (else it is disconnected); an
     /// idle kept-alive connection is closed after as long.
-    #[arg(long, default_value_t = 30.0, value_parser = client_timeout)]
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true, value_parser = client_timeout)]
     pub client_timeout: f64,
     /// Connections one client address (an IPv4 address, an IPv6 /64) may
     /// hold open at once, of the server's 512; a reverse proxy on the same
     /// host is one address for all its clients.
     #[arg(long, default_value_t = crate::server::MAX_CONNECTIONS_PER_PEER,
-          value_parser = connections_per_peer)]
+          allow_negative_numbers = true, value_parser = connections_per_peer)]
     pub connections_per_peer: usize,
 }
 
@@ -105,7 +105,7 @@ pub struct InspectArgs {
     #[arg(long, default_value = DEFAULT_DB)]
     pub db: PathBuf,
     /// Per-frame details of this frame only (default: every frame when a JOB is given).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true, value_parser = parse_frame_number)]
     pub frame: Option<u32>,
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -152,13 +152,13 @@ pub struct RenderArgs {
     #[arg(long, default_value = "256x256", value_parser = parse_size)]
     pub size: (u32, u32),
     /// Samples per pixel [default: 16; for ic the samples of direct light and anti-aliasing].
-    #[arg(long, value_parser = limits::SPP.parser())]
+    #[arg(long, allow_negative_numbers = true, value_parser = ranged(limits::SPP))]
     pub spp: Option<u32>,
     /// Frames per second: frame f is rendered at t = f / fps.
-    #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, value_parser = parse_fps)]
+    #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, allow_negative_numbers = true, value_parser = parse_fps)]
     pub fps: f32,
     /// Random seed; the same seed gives the same frames.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = parse_seed)]
     pub seed: u64,
     /// Use the same random sequence in every frame (reference sequences for the flicker figure).
     #[arg(long)]
@@ -170,7 +170,7 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
     /// Hard limit on path length in bounces, 0 to 10000 (default: unbounded, Russian roulette).
-    #[arg(long, value_parser = limits::PATH_DEPTH.parser())]
+    #[arg(long, allow_negative_numbers = true, value_parser = ranged(limits::PATH_DEPTH))]
     pub max_depth: Option<u32>,
     #[command(flatten)]
     pub ic: IcArgs,
@@ -199,16 +199,16 @@ pub struct RenderArgs {
 #[derive(Args, Debug)]
 pub struct IcArgs {
     /// Accuracy a: records are used where their weight w ≥ 1/a (Ward 1988 recommends 0.1–0.3).
-    #[arg(long, default_value_t = 0.2, value_parser = limits::ACCURACY.parser())]
+    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true, value_parser = ranged(limits::ACCURACY))]
     pub ic_accuracy: f32,
     /// Hemisphere cells per record, MxN (θ × φ; Ward & Heckbert 1992 use N ≈ πM), at most 65536.
     #[arg(long, default_value = "16x48", value_parser = parse_strata)]
     pub ic_strata: Strata,
     /// Smallest record spacing in pixels (screen-space clamp of the record radius).
-    #[arg(long, default_value_t = 2.0, value_parser = limits::SPACING_PX.parser())]
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true, value_parser = ranged(limits::SPACING_PX))]
     pub ic_min_spacing: f32,
     /// Largest record influence radius in pixels.
-    #[arg(long, default_value_t = 64.0, value_parser = limits::SPACING_PX.parser())]
+    #[arg(long, default_value_t = 64.0, allow_negative_numbers = true, value_parser = ranged(limits::SPACING_PX))]
     pub ic_max_spacing: f32,
     /// Interpolate without the translation and rotation gradients.
     #[arg(long)]
@@ -217,7 +217,7 @@ pub struct IcArgs {
     #[arg(long, value_enum, default_value = "path")]
     pub ic_glossy: GlossyArg,
     /// EAS precision criterion τ: a record's sources are refined until their reflected radiance is within τ of the finer level's (Eq. 13; the paper uses 0.02).
-    #[arg(long, default_value_t = crate::cache::eas::DEFAULT_TAU, value_parser = limits::EAS_TAU.parser())]
+    #[arg(long, default_value_t = crate::cache::eas::DEFAULT_TAU, allow_negative_numbers = true, value_parser = ranged(limits::EAS_TAU))]
     pub ic_eas_tau: f32,
 }
 
@@ -225,10 +225,10 @@ pub struct IcArgs {
 #[derive(Args, Debug)]
 pub struct TrcArgs {
     /// Temporal accuracy a_t: a record is used while w_t = 1/(|τ−1|(t−t0)) ≥ 1/a_t (TRC Eq. 9–10; the paper uses 0.05).
-    #[arg(long, default_value_t = 0.05, value_parser = limits::TEMPORAL_ACCURACY.parser())]
+    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true, value_parser = ranged(limits::TEMPORAL_ACCURACY))]
     pub trc_at: f32,
     /// δt_max: longest life of a record in frames, t − t0 < δt_max (TRC Eq. 11; the paper uses 20 on Cube in a Box, 5 on Spheres).
-    #[arg(long, default_value_t = 20, value_parser = limits::MAX_LIFE.parser())]
+    #[arg(long, default_value_t = 20, allow_negative_numbers = true, value_parser = ranged(limits::MAX_LIFE))]
     pub trc_max_life: u32,
     /// Temporal gradients (TRC §4.5): none, extrapolated from the estimate of E(t0+1) (Eq. 15–17, one pass), or interpolated towards the record's replacement (Eq. 18–20, two passes: frames come out up to δt_max frames of first pass late).
     #[arg(long, value_enum, default_value = "extrapolated")]
@@ -248,13 +248,13 @@ pub struct TrcArgs {
 #[derive(Args, Debug)]
 pub struct TcgArgs {
     /// τ_min of Eq. 2: the share of a record's samples shot again every frame (Tawara et al. 2004; their results use 0.05).
-    #[arg(long, default_value_t = 0.05, value_parser = limits::SHARE.parser())]
+    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true, value_parser = ranged(limits::SHARE))]
     pub tcg_tau_min: f32,
     /// τ_max of Eq. 2: the share shot again of the samples that hit moving objects (their results use 1.0).
-    #[arg(long, default_value_t = 1.0, value_parser = limits::SHARE.parser())]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = ranged(limits::SHARE))]
     pub tcg_tau_max: f32,
     /// §4.2: a record with more usable neighbours than this is removed as redundant (their example: 10).
-    #[arg(long, default_value_t = 10, value_parser = limits::MAX_NEIGHBOURS.parser())]
+    #[arg(long, default_value_t = 10, allow_negative_numbers = true, value_parser = ranged(limits::MAX_NEIGHBOURS))]
     pub tcg_max_neighbours: u32,
     /// Samples whose light moving lights changed by more than 5 % since they were shot are shot again as those that hit moving objects are (not in the paper, whose Eq. 2 counts only the latter; off, a moving light's indirect light lags by up to 1/τ_min frames).
     #[arg(long, value_enum, default_value = "on")]
@@ -265,25 +265,25 @@ pub struct TcgArgs {
 #[derive(Args, Debug)]
 pub struct MoviesArgs {
     /// Shadow samples per texel: sample points on the lights (the paper's N, §3.1), at most 64.
-    #[arg(long, default_value_t = 16, value_parser = limits::SHADOW_SAMPLES.parser())]
+    #[arg(long, default_value_t = 16, allow_negative_numbers = true, value_parser = ranged(limits::SHADOW_SAMPLES))]
     pub movies_shadow_samples: u32,
     /// Texels across a pixel's footprint (§3.1: at least one texel covers one pixel), 0.01 to 16.
-    #[arg(long, default_value_t = 1.0, value_parser = limits::TEXELS_PER_PIXEL.parser())]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = ranged(limits::TEXELS_PER_PIXEL))]
     pub movies_texels_per_pixel: f32,
     /// Finest texture, texels along a triangle's edge, at most 1024.
-    #[arg(long, default_value_t = 256, value_parser = limits::MAX_RESOLUTION.parser())]
+    #[arg(long, default_value_t = 256, allow_negative_numbers = true, value_parser = ranged(limits::MAX_RESOLUTION))]
     pub movies_max_resolution: u32,
     /// Memory for the movies' kept static shadows, in MiB (past it the largest give theirs up and find them again).
-    #[arg(long, default_value_t = 512, value_parser = limits::MEMORY_MIB.parser())]
+    #[arg(long, default_value_t = 512, allow_negative_numbers = true, value_parser = ranged(limits::MEMORY_MIB))]
     pub movies_memory_mib: u32,
     /// Global pass: grid spacing as a fraction of the static scene's diagonal, 0.001 to 1.
-    #[arg(long, default_value_t = 1.0 / 32.0, value_parser = limits::GRID_SPACING.parser())]
+    #[arg(long, default_value_t = 1.0 / 32.0, allow_negative_numbers = true, value_parser = ranged(limits::GRID_SPACING))]
     pub movies_spacing: f32,
     /// Global pass: links (gather rays) of a grid vertex, at most 1024.
-    #[arg(long, default_value_t = 128, value_parser = limits::LINKS.parser())]
+    #[arg(long, default_value_t = 128, allow_negative_numbers = true, value_parser = ranged(limits::LINKS))]
     pub movies_links: u32,
     /// Global pass: most bounces of indirect light (Jacobi iterations, at most 64; it stops sooner once they change it by under 0.1 %).
-    #[arg(long, default_value_t = 64, value_parser = limits::BOUNCES.parser())]
+    #[arg(long, default_value_t = 64, allow_negative_numbers = true, value_parser = ranged(limits::BOUNCES))]
     pub movies_bounces: u32,
 }
 
@@ -334,13 +334,14 @@ pub struct BenchArgs {
     #[arg(long, default_value = "64x64", value_parser = parse_size)]
     pub size: (u32, u32),
     /// Samples per pixel of the converged path reference.
-    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    #[arg(long, default_value_t = 1024, allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     pub reference_spp: u32,
     /// Frames per second: frame f is rendered at t = f / fps.
-    #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, value_parser = parse_fps)]
+    #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, allow_negative_numbers = true, value_parser = parse_fps)]
     pub fps: f32,
     /// Random seed of the runs and the reference.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = parse_seed)]
     pub seed: u64,
     /// Output directory: bench.csv, charts, reference/ and runs/.
     #[arg(long, default_value = "bench-out")]
@@ -404,6 +405,51 @@ fn parse_job_name(s: &str) -> Result<String, String> {
         ));
     }
     Ok(s.to_string())
+}
+
+/// A number flag's parser with the range of its setting ([`limits`]): as
+/// [`Limits::parser`], and a number of the wrong kind that is out of the
+/// range anyway (`--spp -1`, `--trc-max-life 1e12`) is said to be out of
+/// it rather than not to be a number. The flags that take them allow
+/// negative numbers, so that clap hands `-1` here rather than taking it
+/// for a flag.
+fn ranged<T>(
+    limits: Limits<T>,
+) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync + 'static
+where
+    T: std::str::FromStr
+        + PartialOrd
+        + std::fmt::Display
+        + Copy
+        + Into<f64>
+        + Send
+        + Sync
+        + 'static,
+{
+    move |text: &str| {
+        limits
+            .parse(text)
+            .map_err(|problem| match text.trim().parse::<f64>() {
+                Ok(v) if v < limits.min.into() || v > limits.max.into() => {
+                    format!("expected {} to {}", limits.min, limits.max)
+                }
+                _ => problem,
+            })
+    }
+}
+
+/// `--seed`: any whole number from 0 to 2⁶⁴ − 1.
+fn parse_seed(s: &str) -> Result<u64, String> {
+    s.trim()
+        .parse()
+        .map_err(|_| format!("expected a whole number from 0 to {}", u64::MAX))
+}
+
+/// `inspect --frame`: a frame number, 0 to 2³² − 1.
+fn parse_frame_number(s: &str) -> Result<u32, String> {
+    s.trim()
+        .parse()
+        .map_err(|_| format!("expected a frame number from 0 to {}", u32::MAX))
 }
 
 fn parse_fps(s: &str) -> Result<f32, String> {

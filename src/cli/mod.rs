@@ -33,7 +33,8 @@ pub struct Cli {
     /// Worker threads that render, trace and shade, 1 to 1024 [default: one
     /// per CPU core, or RAYON_NUM_THREADS]. Frames are the same, bit for
     /// bit, for any count.
-    #[arg(long, global = true, value_parser = clap::value_parser!(u16).range(1..=MAX_THREADS as i64))]
+    #[arg(long, global = true, allow_negative_numbers = true,
+          value_parser = clap::value_parser!(u16).range(1..=MAX_THREADS as i64))]
     pub threads: Option<u16>,
     #[command(subcommand)]
     pub command: Command,
@@ -205,6 +206,12 @@ fn run_serve(args: ServeArgs) -> Result<()> {
         p.push(".frames");
         PathBuf::from(p)
     });
+    // `serve` makes the store where there is none (a mistyped --db
+    // included): said, so that an empty dashboard is not a mystery. The
+    // server makes it once it listens.
+    if no_store_at(&args.db) {
+        eprintln!("{}", new_store_note(&args.db));
+    }
     crate::server::serve(crate::server::ServeOptions {
         db: args.db,
         addr: args.addr,
@@ -216,6 +223,26 @@ fn run_serve(args: ServeArgs) -> Result<()> {
         client_timeout: std::time::Duration::from_secs_f64(args.client_timeout),
         connections_per_peer: args.connections_per_peer,
     })
+}
+
+/// Whether opening a store at `path` makes a new one: nothing there, or an
+/// empty directory. (A directory a killed creation left is also made anew,
+/// unannounced: it was meant to be a store.)
+fn no_store_at(path: &std::path::Path) -> bool {
+    match std::fs::read_dir(path) {
+        Ok(mut entries) => entries.next().is_none(),
+        Err(e) => e.kind() == std::io::ErrorKind::NotFound,
+    }
+}
+
+/// The line that says a new store is made at `path` (`render --job` says
+/// it once the store is made; `serve` before it listens, which it must do
+/// before it makes the store).
+fn new_store_note(path: &std::path::Path) -> String {
+    format!(
+        "note: no store at {}: a new, empty one is made there (to use an existing store, give its path as --db)",
+        path.display()
+    )
 }
 
 fn backend_choice(b: BackendArg) -> BackendChoice {

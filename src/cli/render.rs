@@ -54,6 +54,9 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         );
     }
     let store_and_job = open_job(&args, &source, &method, &settings)?;
+    if let Some((store, job)) = &store_and_job {
+        note_the_frames_to_resume(store, job, &args.frames)?;
+    }
     let mut renderer = Renderer::new(scene, method.instantiate(), backend, settings);
     let mut store_job = store_and_job.as_ref().map(|(store, job)| render::StoreJob {
         store,
@@ -256,6 +259,29 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
             length,
         }),
     };
+    // The flags that contradict each other, by their names (the settings'
+    // names, which `check_consistent` gives, are for `bench --methods`
+    // and the API).
+    if matches!(
+        args.method,
+        MethodName::Ic | MethodName::Trc | MethodName::Tcg
+    ) && args.ic.ic_min_spacing > args.ic.ic_max_spacing
+    {
+        bail!(
+            "--ic-min-spacing {} is over --ic-max-spacing {}; give a --ic-min-spacing no larger \
+             than --ic-max-spacing",
+            args.ic.ic_min_spacing,
+            args.ic.ic_max_spacing
+        );
+    }
+    if args.method == MethodName::Tcg && args.tcg.tcg_tau_min > args.tcg.tcg_tau_max {
+        bail!(
+            "--tcg-tau-min {} is over --tcg-tau-max {}; give a --tcg-tau-min no larger than \
+             --tcg-tau-max",
+            args.tcg.tcg_tau_min,
+            args.tcg.tcg_tau_max
+        );
+    }
     crate::method::settings::check_consistent(&method)?;
     Ok(method)
 }
@@ -335,7 +361,11 @@ fn open_job(
         return Ok(None);
     };
     let db = args.db.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_DB));
+    let new = super::no_store_at(&db);
     let store = Store::open(&db)?;
+    if new {
+        eprintln!("{}", super::new_store_note(&db));
+    }
     // A scene file is stored by its absolute path: `inspect` and `serve`
     // then find it from any directory, and a resume from another directory
     // names the same path (a changed file is refused for its content, not
@@ -353,6 +383,33 @@ fn open_job(
     let spec = render::job_spec(name, &source, method, settings, args.frames.clone())?;
     let job = store.begin_job(&spec, args.force)?;
     Ok(Some((store, job)))
+}
+
+/// Says, before anything renders, how many of the range's frames job
+/// `job` has finished in the store, which the render then skips (a method
+/// that carries its cache from frame to frame may render some again, and
+/// warns of it). The summary after the render counts those it skipped.
+fn note_the_frames_to_resume(
+    store: &Store,
+    job: &store::schema::JobValue,
+    frames: &std::ops::Range<u32>,
+) -> Result<()> {
+    let stored = store
+        .frames_done(job.id)?
+        .into_iter()
+        .filter(|f| frames.contains(f))
+        .count();
+    if stored > 0 {
+        eprintln!(
+            "job {:?} in {}: resuming: {stored} of the {} frames of {}..{} are finished in the store",
+            job.spec.name,
+            store.path().display(),
+            frames.len(),
+            frames.start,
+            frames.end
+        );
+    }
+    Ok(())
 }
 
 /// Prints what `render` did: frames, speed, where the frames went (from

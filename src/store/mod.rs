@@ -104,6 +104,14 @@ pub enum StoreError {
     Locked { path: PathBuf },
     #[error("store {}: not a radcache store: {detail}", path.display())]
     NotAStore { path: PathBuf, detail: String },
+    /// A radcache store whose database files sled cannot read: damaged
+    /// (bits flipped, a file cut short), not merely another program's.
+    #[error("store {}: damaged: {detail}; restore the directory from a copy, or remove it to start over (its jobs are lost)", path.display())]
+    Damaged { path: PathBuf, detail: String },
+    /// The store's directory could not be opened or made (a parent that
+    /// cannot be created, no permission).
+    #[error("store {}: cannot open or create the store directory: {detail}; check the path given as the store (--db)", path.display())]
+    Open { path: PathBuf, detail: String },
     #[error("store {}: schema version {found} is newer than this radcache supports (version {supported}); use a newer radcache", path.display())]
     NewerSchema {
         path: PathBuf,
@@ -143,15 +151,28 @@ pub enum StoreError {
         file: PathBuf,
         detail: String,
     },
-    #[error("store {}: {source}", path.display())]
-    Sled { path: PathBuf, source: sled::Error },
+    /// Any other error of sled's. Not marked as the error's source: the
+    /// message holds its text, which a chain of causes would print twice.
+    #[error("store {}: {}", path.display(), sled_text(error))]
+    Sled { path: PathBuf, error: sled::Error },
+}
+
+/// sled's error as text for people: an I/O error as the OS words it
+/// (without sled's "IO error: " prefix), corruption without sled's
+/// debug text (`file offset None backtrace ()`).
+fn sled_text(error: &sled::Error) -> String {
+    match error {
+        sled::Error::Io(e) => format!("I/O error: {e}"),
+        sled::Error::Corruption { .. } => "sled found corrupt data in the database".into(),
+        other => other.to_string(),
+    }
 }
 
 impl StoreError {
     fn sled(path: &Path, source: sled::Error) -> Self {
         StoreError::Sled {
             path: path.to_owned(),
-            source,
+            error: source,
         }
     }
 }
@@ -424,6 +445,16 @@ fn check_unversioned(path: &Path, db: &sled::Db, create: bool) -> Result<(), Sto
         })
     };
     if !create {
+        if let Some((name, len)) = sample_log_with_samples(path) {
+            return Err(StoreError::Damaged {
+                path: path.to_owned(),
+                detail: format!(
+                    "the sled database holds no schema version, but its sample log {name} \
+                     holds {len} bytes (sled recovered nothing from the database); nothing \
+                     was changed"
+                ),
+            });
+        }
         return refuse(
             "the sled database holds no schema version (damaged, or not radcache's); \
              nothing was changed"
@@ -440,22 +471,35 @@ fn check_unversioned(path: &Path, db: &sled::Db, create: bool) -> Result<(), Sto
             ));
         }
     }
-    let entries = std::fs::read_dir(path).map_err(|e| StoreError::NotAStore {
-        path: path.to_owned(),
-        detail: e.to_string(),
-    })?;
-    for entry in entries.filter_map(Result::ok) {
-        let name = entry.file_name().to_string_lossy().into_owned();
-        let len = entry.metadata().map_or(0, |m| m.len());
-        if samples::parse_file_name(&name).is_some() && len > samples::MAGIC.len() as u64 {
-            return refuse(format!(
+    if let Err(e) = std::fs::read_dir(path) {
+        return refuse(e.to_string());
+    }
+    if let Some((name, len)) = sample_log_with_samples(path) {
+        return Err(StoreError::Damaged {
+            path: path.to_owned(),
+            detail: format!(
                 "the sled database holds no schema version and no records, but its \
-                 sample log {name} holds {len} bytes: the database is damaged (sled \
-                 recovered nothing from it); nothing was changed"
-            ));
-        }
+                 sample log {name} holds {len} bytes (sled recovered nothing from the \
+                 database); nothing was changed"
+            ),
+        });
     }
     Ok(())
+}
+
+/// A sample log in the directory `path` that holds samples (more than its
+/// header): its file name and length.
+fn sample_log_with_samples(path: &Path) -> Option<(String, u64)> {
+    std::fs::read_dir(path)
+        .ok()?
+        .filter_map(Result::ok)
+        .find_map(|entry| {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let len = entry.metadata().map_or(0, |m| m.len());
+            let samples =
+                samples::parse_file_name(&name).is_some() && len > samples::MAGIC.len() as u64;
+            samples.then_some((name, len))
+        })
 }
 
 /// The sample log of the store at `path` as `meta` describes it (its
@@ -504,11 +548,17 @@ fn check_directory(path: &Path, create: bool) -> Result<bool, StoreError> {
             }
         }
         // Not a verdict on what is there (permission denied, say).
-        Err(e) => Err(StoreError::sled(path, sled::Error::Io(e))),
+        Err(e) => Err(StoreError::Open {
+            path: path.to_owned(),
+            detail: e.to_string(),
+        }),
         Ok(m) if !m.is_dir() => Err(not_a_store("not a directory".into())),
         Ok(_) => {
             let entries: Vec<String> = std::fs::read_dir(path)
-                .map_err(|e| StoreError::sled(path, sled::Error::Io(e)))?
+                .map_err(|e| StoreError::Open {
+                    path: path.to_owned(),
+                    detail: e.to_string(),
+                })?
                 .filter_map(|e| e.ok())
                 .map(|e| e.file_name().to_string_lossy().into_owned())
                 .collect();
@@ -578,7 +628,9 @@ fn open_sled(path: &Path) -> Result<sled::Db, StoreError> {
             Err(StoreError::Locked { .. }) if start.elapsed() < LOCK_WAIT => {
                 std::thread::sleep(std::time::Duration::from_millis(20));
             }
-            Err(StoreError::NotAStore { .. }) if !cleaned && remove_unfinished_snapshots(path) => {
+            Err(StoreError::NotAStore { .. } | StoreError::Damaged { .. })
+                if !cleaned && remove_unfinished_snapshots(path) =>
+            {
                 cleaned = true;
             }
             other => return other,
@@ -621,16 +673,27 @@ fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
                 path: path.to_owned(),
             })
         }
-        Ok(Err(e @ (sled::Error::Corruption { .. } | sled::Error::Unsupported(_)))) => {
-            Err(StoreError::NotAStore {
-                path: path.to_owned(),
-                detail: format!("sled reports a corrupt or unsupported database: {e}"),
-            })
-        }
-        Ok(Err(e)) => Err(StoreError::sled(path, e)),
-        Err(_) => Err(StoreError::NotAStore {
+        // sled's text of it is debug output (`file offset None backtrace
+        // ()`); where it found the damage says nothing to act on.
+        Ok(Err(sled::Error::Corruption { .. })) => Err(StoreError::Damaged {
             path: path.to_owned(),
-            detail: "sled could not read the database (damaged files)".into(),
+            detail: "sled found corrupt data in its database files (`db`, `conf` or a \
+                     `snap.*` snapshot)"
+                .into(),
+        }),
+        Ok(Err(sled::Error::Unsupported(e))) => Err(StoreError::NotAStore {
+            path: path.to_owned(),
+            detail: format!("sled cannot open the database (damaged, or not radcache's): {e}"),
+        }),
+        // The directory (or a parent of it) could not be made or opened.
+        Ok(Err(sled::Error::Io(e))) => Err(StoreError::Open {
+            path: path.to_owned(),
+            detail: e.to_string(),
+        }),
+        Ok(Err(e)) => Err(StoreError::sled(path, e)),
+        Err(_) => Err(StoreError::Damaged {
+            path: path.to_owned(),
+            detail: "sled could not read its database files".into(),
         }),
     }
 }
