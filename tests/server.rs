@@ -1014,6 +1014,66 @@ fn records_match_the_store_and_inspect() {
     }
 }
 
+/// `/records` keeps the records alive at some frames of a job between
+/// queries and starts each query from the nearest: over 40 frames of a
+/// `trc` job (records rewritten, living a few frames) and a `tcg` job
+/// (records living for ever, written again every frame), queries in any
+/// order give as many records as each frame's statistics say are alive,
+/// and the same answers as a restarted server, which keeps none yet, gives
+/// them in another order.
+#[test]
+fn records_are_the_same_in_any_order_of_queries() {
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let server = start(&db, &scenes);
+    let frames = 40u32;
+    let jobs: Vec<String> = ["trc", "tcg"]
+        .iter()
+        .map(|method| {
+            create_job(
+                &server,
+                &format!(
+                    r#"{{"scene":"builtin:cube-in-box","method":"{method}","frames":"0..{frames}","size":"8x8","spp":1}}"#
+                ),
+            )
+        })
+        .collect();
+    let records = |server: &Server, id: &str, f: u32| {
+        let path = format!("/api/jobs/{id}/records?frame={f}");
+        let (status, body) = http(server, "GET", &path, "");
+        assert_eq!(status, 200, "{path}");
+        json(&body)
+    };
+    // Late frames first, then back and forth.
+    let scrambled: Vec<u32> = (0..frames)
+        .map(|i| (frames - 1 + 17 * i) % frames)
+        .collect();
+    let mut answers = Vec::new();
+    for id in &jobs {
+        wait_done(&server, id);
+        let (_, stats) = http(&server, "GET", &format!("/api/jobs/{id}/stats"), "");
+        let rows = json(&stats)["frames"].clone();
+        let mut by_frame = std::collections::BTreeMap::new();
+        for &f in &scrambled {
+            let r = records(&server, id, f);
+            assert_eq!(
+                r["count"], rows[f as usize]["records_alive"],
+                "{id} frame {f}"
+            );
+            by_frame.insert(f, r);
+        }
+        assert!(by_frame[&(frames - 1)]["count"].as_u64().unwrap() > 0);
+        answers.push(by_frame);
+    }
+    drop(server);
+    let server = start(&db, &scenes);
+    for (id, by_frame) in jobs.iter().zip(&answers) {
+        for f in 0..frames {
+            assert!(records(&server, id, f) == by_frame[&f], "{id} frame {f}");
+        }
+    }
+}
+
 /// An `ic` job with radiance records: `/records?sources=true` gives each
 /// radiance record its stored sources (their irradiance sums to the
 /// record's) and each irradiance record `null`; without it, only how many

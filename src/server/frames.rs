@@ -56,22 +56,26 @@ pub async fn stats(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
 ) -> Result<Json<Value>, ApiError> {
-    // Store reads, one a frame: on the blocking pool, not an async worker.
-    tokio::task::spawn_blocking(move || {
-        let Some(sid) = state.store_id(&id)? else {
-            return Ok(json!({ "id": id, "frames": [] }));
-        };
-        let mut frames = Vec::new();
-        for frame in state.store.frames_done(sid).map_err(ApiError::internal)? {
-            if let Some(row) = frame_stats_json(&state, sid, frame)? {
-                frames.push(row);
+    // Store reads, one a frame: on the blocking pool, not an async worker,
+    // and in a stats slot, held until the reads end even if the client
+    // has gone: many requests, or clients that ask and hang up, cannot
+    // pile up reads past the slots.
+    let s = state.clone();
+    state
+        .reading_stats(move || {
+            let Some(sid) = s.store_id(&id)? else {
+                return Ok(json!({ "id": id, "frames": [] }));
+            };
+            let mut frames = Vec::new();
+            for frame in s.store.frames_done(sid).map_err(ApiError::internal)? {
+                if let Some(row) = frame_stats_json(&s, sid, frame)? {
+                    frames.push(row);
+                }
             }
-        }
-        Ok(json!({ "id": id, "frames": frames }))
-    })
-    .await
-    .map_err(ApiError::internal)?
-    .map(Json)
+            Ok(json!({ "id": id, "frames": frames }))
+        })
+        .await
+        .map(Json)
 }
 
 /// One frame's statistics row (`/stats`, and the `frame` event).
@@ -180,4 +184,28 @@ pub async fn metrics(State(state): State<Arc<AppState>>) -> Result<impl IntoResp
         "# HELP radcache_store_sample_log_bytes Committed bytes of the store's sample log (of radcache_store_bytes).\n# TYPE radcache_store_sample_log_bytes gauge\nradcache_store_sample_log_bytes {log}"
     );
     Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out))
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::server::{testing, JobState};
+    use axum::extract::{Path, State};
+
+    /// `/stats` reads the store in one of the stats slots (so that many
+    /// requests, or clients that ask and hang up, cannot pile up reads
+    /// past them; a slot is held until its work ends, however the request
+    /// ends: `blocking_in_slot`): with no slot to be had, it reads nothing
+    /// and answers 500, and with one, it answers.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn stats_are_read_in_a_stats_slot() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        testing::add_job(&state, "job-1", JobState::Done, &[]);
+        let ask = || super::stats(State(state.clone()), Path("job-1".to_string()));
+        let answer = ask().await.unwrap();
+        assert_eq!(answer.0["frames"], serde_json::json!([]));
+        state.stats_slots.close();
+        let e = ask().await.unwrap_err();
+        assert_eq!(e.status, axum::http::StatusCode::INTERNAL_SERVER_ERROR);
+    }
 }

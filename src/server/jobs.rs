@@ -263,10 +263,18 @@ pub async fn delete(
         .await
         .map_err(ApiError::internal)
         .and_then(|r| r.map_err(ApiError::internal));
-    if let Err(e) = deleted {
-        // Still in the store: listed again, as a restart would list it.
-        state.jobs.lock().expect("job table lock").insert(key, job);
-        return Err(e);
+    let deleted = match deleted {
+        Ok(deleted) => deleted,
+        Err(e) => {
+            // Still in the store: listed again, as a restart would list it.
+            state.jobs.lock().expect("job table lock").insert(key, job);
+            return Err(e);
+        }
+    };
+    if let Some(stored) = deleted {
+        // Its records' kept sets: no query asks for them any more.
+        let mut sets = state.alive_sets.lock().expect("alive sets lock");
+        sets.forget(stored.id);
     }
     // Gone from the store: its followers end whatever happens to its files.
     state.forget(&key);

@@ -4,6 +4,7 @@
 //! ([`crate::render::render_job_to_dir_with`]). Handlers are thin: parse,
 //! call the library or the job table, map errors to a status.
 
+mod alive;
 mod connection;
 mod error;
 mod frames;
@@ -266,9 +267,18 @@ pub struct AppState {
     /// each holds a whole frame's pixels, EXR and PNG (a 4096² frame: some
     /// 200 MB).
     pub decode_slots: Arc<Semaphore>,
-    /// Bounds the `/records` queries run at once: each reads every record
-    /// block of the frames up to the one asked.
+    /// Bounds the `/records` queries run at once: each reads the record
+    /// blocks of the frames after the nearest kept set (all of them up to
+    /// the one asked, the first time).
     pub records_slots: Arc<Semaphore>,
+    /// Bounds the reads of frame statistics and job entries from the store
+    /// run at once: `/stats` (one row a frame) and the event streams'
+    /// `frame` rows and store ids.
+    pub stats_slots: Arc<Semaphore>,
+    /// The records alive at some frames of jobs, kept for the `/records`
+    /// queries that follow (`server::alive`); the worker says which frames it
+    /// writes.
+    pub alive_sets: Mutex<alive::AliveSets>,
     /// Frames decoded from the store and PNG-encoded (`/metrics`).
     pub frame_encodes: AtomicU64,
     /// The job the worker renders and its renderer's
@@ -323,6 +333,8 @@ impl AppState {
             encoding: Mutex::new(HashMap::new()),
             decode_slots: Arc::new(Semaphore::new(cores())),
             records_slots: Arc::new(Semaphore::new(cores().min(4))),
+            stats_slots: Arc::new(Semaphore::new(cores().min(4))),
+            alive_sets: Mutex::new(alive::AliveSets::default()),
             frame_encodes: AtomicU64::new(0),
         }
     }
@@ -510,6 +522,15 @@ impl AppState {
         decode: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
     ) -> Result<T, ApiError> {
         blocking_in_slot(&self.decode_slots, decode).await
+    }
+
+    /// Runs `read` (blocking: reads frame statistics or job entries from
+    /// the store) once one of the [`AppState::stats_slots`] is free.
+    pub async fn reading_stats<T: Send + 'static>(
+        &self,
+        read: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
+    ) -> Result<T, ApiError> {
+        blocking_in_slot(&self.stats_slots, read).await
     }
 }
 

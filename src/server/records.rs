@@ -20,7 +20,7 @@ use axum::extract::{Path, Query, State};
 use axum::Json;
 use serde_json::{json, Value};
 use std::collections::hash_map::Entry;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::HashMap;
 use std::sync::Arc;
 
 /// Records returned when no `limit` is given, and the most a `limit` may ask.
@@ -276,14 +276,14 @@ pub async fn records(
     } = RecordsQuery::parse(&q)?;
     let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();
-    // In one of the records slots: a query reads every record block of the
-    // frames up to `frame`.
+    // In one of the records slots: a query reads the record blocks of the
+    // frames after the nearest kept set (`super::alive`), all of them up to
+    // `frame` the first time.
     super::blocking_in_slot(&state.records_slots, move || {
-        let mut alive = AliveAt::new(frame);
-        s.store
-            .for_each_record(sid, frame, |written, r| alive.take(written, r))
-            .map_err(ApiError::internal)?;
-        let latest = alive.records;
+        let alive = super::alive::alive_at(&s.alive_sets, sid, frame, &mut |frames, f| {
+            s.store.for_each_record_block(sid, frames, f)
+        })
+        .map_err(ApiError::internal)?;
         let mut sources = StoredSources {
             store: &s.store,
             sid,
@@ -295,7 +295,7 @@ pub async fn records(
         let (w, h) = (settings.width as f32, settings.height as f32);
         let mut out = Vec::new();
         let mut count = 0usize;
-        for (written, r) in latest.values() {
+        for (written, r) in alive.alive() {
             if bbox.as_ref().is_some_and(|b| !inside(&r.position, b)) {
                 continue;
             }
@@ -323,37 +323,6 @@ pub async fn records(
     .await
 }
 
-/// The records alive at frame `frame` (their latest version written at or
-/// before it, with `created_frame ≤ frame ≤ last_frame`), by id, each with
-/// the frame that wrote that version, from their versions taken in frame
-/// order. A record whose latest version so far is dead at `frame` is not
-/// kept (a later version that is alive takes it again), so that a query
-/// holds the records alive at `frame`, not every record the job wrote
-/// before it.
-struct AliveAt {
-    frame: u32,
-    records: BTreeMap<u64, (u32, RecordValue)>,
-}
-
-impl AliveAt {
-    fn new(frame: u32) -> Self {
-        AliveAt {
-            frame,
-            records: BTreeMap::new(),
-        }
-    }
-
-    /// Takes record version `r`, written in frame `written` (at or after
-    /// those taken before).
-    fn take(&mut self, written: u32, r: RecordValue) {
-        if r.created_frame <= self.frame && self.frame <= r.last_frame {
-            self.records.insert(r.id, (written, r));
-        } else {
-            self.records.remove(&r.id);
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -375,70 +344,6 @@ mod tests {
         let err = params(&[("frame", "3"), ("limt", "5")], RecordsQuery::NAMES).unwrap_err();
         assert!(err.contains("\"limt\"") && err.contains("limit"), "{err}");
         assert!(params(&[("frame", "3"), ("frame", "4")], &["frame"]).is_err());
-    }
-
-    fn version(id: u64, written: u32, last_frame: u32) -> RecordValue {
-        RecordValue {
-            id,
-            created_frame: written,
-            last_frame,
-            position: [0.0; 3],
-            normal: [0.0, 0.0, 1.0],
-            irradiance: [0.0; 3],
-            grad_translation: [[0.0; 3]; 3],
-            grad_rotation: [[0.0; 3]; 3],
-            radius: 1.0,
-            object: 0,
-            strata_theta: 0,
-            strata_phi: 0,
-            samples_count: 0,
-            samples_offset: 0,
-            samples_len: 0,
-        }
-    }
-
-    /// A query at a late frame of a long job holds the records alive
-    /// there, not every record the job wrote: over 1000 frames of 100 new
-    /// records living 3 frames each, and one record written again every
-    /// frame, at most the records alive at the frame asked (and the one
-    /// written again) are held, and those are the ones kept in the end.
-    #[test]
-    fn a_query_holds_the_records_alive_at_its_frame_only() {
-        let frame = 999;
-        let mut alive = AliveAt::new(frame);
-        let mut most = 0;
-        let mut next_id = 1;
-        for written in 0..=frame {
-            // Record 0, written again each frame, alive in that frame only.
-            alive.take(written, version(0, written, written));
-            for _ in 0..100 {
-                alive.take(written, version(next_id, written, written + 2));
-                next_id += 1;
-            }
-            most = most.max(alive.records.len());
-        }
-        // Written in frames 997..=999, and record 0 as frame 999 wrote it.
-        assert_eq!(alive.records.len(), 301);
-        assert!(alive
-            .records
-            .values()
-            .all(|(w, r)| r.created_frame <= frame && frame <= r.last_frame && *w >= 997));
-        assert_eq!(alive.records[&0].0, 999);
-        assert!(most <= 301, "{most} records held at once");
-        // A record whose later version is dead at the frame is dropped; a
-        // still later live version takes it again.
-        let mut alive = AliveAt::new(10);
-        alive.take(0, version(7, 0, 20));
-        alive.take(
-            5,
-            RecordValue {
-                created_frame: 0,
-                ..version(7, 5, 8)
-            },
-        );
-        assert!(alive.records.is_empty());
-        alive.take(9, version(7, 9, 12));
-        assert_eq!(alive.records[&7].0, 9);
     }
 
     #[test]

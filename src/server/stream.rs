@@ -79,7 +79,12 @@ impl Follower {
             let over = job.state.is_final() || self.state.shutdown.load(Ordering::SeqCst);
             if let Some(frame) = next_to_report(&job.stored, &job.request.frames, self.next, over) {
                 if self.sid.is_none() {
-                    self.sid = self.state.store_id(&self.id)?;
+                    // A store read: off the async threads.
+                    let (state, id) = (self.state.clone(), self.id.clone());
+                    self.sid = self
+                        .state
+                        .reading_stats(move || state.store_id(&id))
+                        .await?;
                 }
                 self.next = frame + 1;
                 return Ok(Step::Frame(frame));
@@ -99,6 +104,37 @@ impl Follower {
             }
         }
     }
+
+    /// Ends the follower on a failed read, saying why.
+    fn fail(&mut self, e: &ApiError) {
+        self.ended = true;
+        self.failure = Some(format!("reading the job failed: {}", e.detail));
+    }
+}
+
+/// The `frame` event of stored frame `frame`: its statistics row (the
+/// frame number alone where none can be read), read from the store off the
+/// async threads, in a stats slot, as `/stats` reads it.
+async fn frame_event(f: &Follower, frame: u32) -> Result<Event, ApiError> {
+    let (state, sid) = (f.state.clone(), f.sid);
+    let row = f
+        .state
+        .reading_stats(move || {
+            Ok(sid.and_then(|sid| frame_stats_json(&state, sid, frame).ok().flatten()))
+        })
+        .await?
+        .unwrap_or_else(|| serde_json::json!({ "frame": frame }));
+    Ok(Event::default().event("frame").data(row.to_string()))
+}
+
+/// The `progress` event of `job`: naming its scene reads the file system
+/// (the `--scenes` directory), off the async threads too.
+async fn progress_event(state: &Arc<AppState>, job: &Job) -> Result<Event, ApiError> {
+    let (s, job) = (state.clone(), job.clone());
+    let data = state
+        .reading_stats(move || Ok(job_json(&s, &job).to_string()))
+        .await?;
+    Ok(Event::default().event("progress").data(data))
 }
 
 /// The next frame to report of a job whose stored frames are the runs
@@ -218,27 +254,27 @@ pub async fn events(
                     // (after its `progress` and `state` events), or the
                     // failing step would be taken again and again.
                     Err(e) => {
-                        f.ended = true;
-                        f.failure = Some(format!("reading the job failed: {}", e.detail));
+                        f.fail(&e);
                         Step::End(f.state.job(&f.id).ok()?)
                     }
                 };
                 let job = match step {
-                    Step::Frame(frame) => {
-                        let row = f
-                            .sid
-                            .and_then(|sid| frame_stats_json(&f.state, sid, frame).ok().flatten())
-                            .unwrap_or_else(|| serde_json::json!({ "frame": frame }));
-                        queue.push_back(Event::default().event("frame").data(row.to_string()));
-                        continue;
-                    }
+                    Step::Frame(frame) => match frame_event(&f, frame).await {
+                        Ok(event) => {
+                            queue.push_back(event);
+                            continue;
+                        }
+                        Err(e) => {
+                            f.fail(&e);
+                            f.state.job(&f.id).ok()?
+                        }
+                    },
                     Step::Changed(job) | Step::End(job) => job,
                 };
-                queue.push_back(
-                    Event::default()
-                        .event("progress")
-                        .data(job_json(&f.state, &job).to_string()),
-                );
+                match progress_event(&f.state, &job).await {
+                    Ok(event) => queue.push_back(event),
+                    Err(e) => f.fail(&e),
+                }
                 if last_state != Some(job.state) || f.ended {
                     last_state = Some(job.state);
                     queue.push_back(state_event(&job, f.ended, f.failure.as_deref()));
@@ -282,6 +318,98 @@ mod tests {
         assert_eq!(text.matches("event: progress").count(), 1, "{text}");
         assert_eq!(text.matches("event: state").count(), 1, "{text}");
         assert!(text.contains("reading the job failed"), "{text}");
+    }
+
+    /// Frames `frames` of job `id` stored, each with `records_alive` its
+    /// number plus 10.
+    fn store_frames(state: &crate::server::AppState, id: &str, frames: &[u32]) {
+        let mut spec = crate::store::schema::JobValue::for_test("ic", "Ic(..)".into()).spec;
+        spec.name = id.into();
+        let mut job = state.store.begin_job(&spec, false).unwrap();
+        for &frame in frames {
+            let stats = crate::method::FrameStats {
+                frame,
+                records_alive: 10 + u64::from(frame),
+                ..Default::default()
+            };
+            let commit = crate::store::FrameCommit {
+                frame,
+                width: 8,
+                height: 8,
+                exr: &[1, 2, 3],
+                records: Vec::new(),
+                stats: &stats,
+                state: None,
+                movies: None,
+                sources: None,
+            };
+            state.store.commit_frame(&mut job, commit).unwrap();
+        }
+    }
+
+    /// The whole event stream of job `id`, as (event, data) pairs.
+    async fn events_of(
+        state: std::sync::Arc<crate::server::AppState>,
+        id: &str,
+    ) -> Vec<(String, serde_json::Value)> {
+        let response = super::events(State(state), Path(id.to_string()))
+            .await
+            .unwrap()
+            .into_response();
+        let body = tokio::time::timeout(
+            std::time::Duration::from_secs(30),
+            axum::body::to_bytes(response.into_body(), 1 << 20),
+        )
+        .await
+        .expect("the event stream ends")
+        .unwrap();
+        let text = String::from_utf8(body.to_vec()).unwrap();
+        text.split("\n\n")
+            .filter_map(|block| {
+                let event = block.lines().find_map(|l| l.strip_prefix("event: "))?;
+                let data = block.lines().find_map(|l| l.strip_prefix("data: "))?;
+                Some((event.to_string(), serde_json::from_str(data).unwrap()))
+            })
+            .collect()
+    }
+
+    /// A finished job's events: each stored frame's statistics row as the
+    /// store holds it, in frame order, then the job's progress and its
+    /// final state.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn events_come_in_order_with_the_stored_rows() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        store_frames(&state, "job-1", &[0, 1]);
+        testing::add_job(&state, "job-1", JobState::Done, &[0, 1]);
+        let events = events_of(state, "job-1").await;
+        let kinds: Vec<&str> = events.iter().map(|(e, _)| e.as_str()).collect();
+        assert_eq!(kinds, ["frame", "frame", "progress", "state"], "{events:?}");
+        for (f, (_, row)) in events[..2].iter().enumerate() {
+            assert_eq!(row["frame"], f, "{row}");
+            assert_eq!(row["records_alive"], 10 + f, "{row}");
+        }
+        assert_eq!(events[2].1["frames_done"], 2);
+        assert_eq!(events[3].1["state"], "done");
+        assert_eq!(events[3].1["final"], true);
+    }
+
+    /// The event streams read the store in the stats slots (on blocking
+    /// threads, as `/stats` does), not on the async threads: with no slot
+    /// to be had, a running job's stream ends at its first read, saying
+    /// why, and sends no row (it read none).
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn events_read_the_store_in_the_stats_slots() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        store_frames(&state, "job-1", &[0]);
+        testing::add_job(&state, "job-1", JobState::Running, &[0]);
+        state.stats_slots.close();
+        let events = events_of(state, "job-1").await;
+        let kinds: Vec<&str> = events.iter().map(|(e, _)| e.as_str()).collect();
+        assert_eq!(kinds, ["state"], "{events:?}");
+        let closing = events[0].1["closing"].as_str().unwrap_or_default();
+        assert!(closing.contains("reading the job failed"), "{events:?}");
     }
 
     #[test]

@@ -143,7 +143,13 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
     };
     let out = state.options.out.join(id);
     let mut last = Instant::now();
-    let mut after_frame = |_frame: u32| {
+    let mut written = FramesWritten {
+        state,
+        sid: store_id,
+        next: request.frames.start,
+    };
+    let mut after_frame = |frame: u32| {
+        written.acknowledged(frame);
         let micros = last.elapsed().as_micros() as u64;
         last = Instant::now();
         state.frames_rendered.fetch_add(1, Ordering::Relaxed);
@@ -169,6 +175,36 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
     Ok(())
 }
 
+/// Tells the kept alive sets of `/records` ([`AppState::alive_sets`]) of
+/// each frame a run writes, once it is stored, and, when the run ends, of
+/// the frames from the one after the last acknowledged: a frame stored
+/// whose files could not be written ends the run unacknowledged, and a
+/// set that read the block it replaced would be served on.
+struct FramesWritten<'a> {
+    state: &'a AppState,
+    sid: u64,
+    /// The frame after the last acknowledged (the run's first, before).
+    next: u32,
+}
+
+impl FramesWritten<'_> {
+    fn acknowledged(&mut self, frame: u32) {
+        self.tell(frame);
+        self.next = frame.saturating_add(1);
+    }
+
+    fn tell(&self, frame: u32) {
+        let mut sets = self.state.alive_sets.lock().expect("alive sets lock");
+        sets.written(self.sid, frame);
+    }
+}
+
+impl Drop for FramesWritten<'_> {
+    fn drop(&mut self) {
+        self.tell(self.next);
+    }
+}
+
 /// Registers the worker's renderer as [`AppState::running_frame`] while it
 /// renders a job; a cancel or shutdown that came before it did abandons
 /// the first frame at once.
@@ -190,5 +226,75 @@ impl<'a> RunningFrame<'a> {
 impl Drop for RunningFrame<'_> {
     fn drop(&mut self) {
         *self.state.running_frame.lock().expect("running frame lock") = None;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::server::{alive, testing};
+    use crate::store::schema::RecordValue;
+    use std::cell::Cell;
+
+    /// Blocks of `/records` read for frame `frame` of store job 1, whose
+    /// every frame wrote one record.
+    fn blocks_read(state: &AppState, frame: u32) -> usize {
+        let read = Cell::new(0);
+        let mut blocks = |frames: std::ops::RangeInclusive<u32>,
+                          f: &mut dyn FnMut(u32, Vec<RecordValue>)| {
+            for written in frames {
+                read.set(read.get() + 1);
+                f(written, vec![record(written)]);
+            }
+            Ok(())
+        };
+        alive::alive_at(&state.alive_sets, 1, frame, &mut blocks).unwrap();
+        read.get()
+    }
+
+    fn record(frame: u32) -> RecordValue {
+        RecordValue {
+            id: u64::from(frame),
+            created_frame: frame,
+            last_frame: frame,
+            position: [0.0; 3],
+            normal: [0.0, 0.0, 1.0],
+            irradiance: [0.0; 3],
+            grad_translation: [[0.0; 3]; 3],
+            grad_rotation: [[0.0; 3]; 3],
+            radius: 1.0,
+            object: 0,
+            strata_theta: 0,
+            strata_phi: 0,
+            samples_count: 0,
+            samples_offset: 0,
+            samples_len: 0,
+        }
+    }
+
+    /// A run tells the kept sets of `/records` of each frame it writes and,
+    /// as it ends, of those from the one after its last acknowledged (one
+    /// stored whose files failed to be written): the sets from there on
+    /// are read again.
+    #[test]
+    fn a_run_tells_the_kept_sets_of_the_frames_it_writes() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        assert_eq!(blocks_read(&state, 39), 40);
+        assert_eq!(blocks_read(&state, 39), 0, "kept");
+        let mut run = FramesWritten {
+            state: &state,
+            sid: 1,
+            next: 0,
+        };
+        run.acknowledged(36);
+        // From the set kept at frame 32.
+        assert_eq!(blocks_read(&state, 39), 7);
+        assert_eq!(blocks_read(&state, 39), 0, "kept again");
+        run.acknowledged(37);
+        assert_eq!(blocks_read(&state, 39), 7);
+        // Frame 38 may have been stored, unacknowledged.
+        drop(run);
+        assert_eq!(blocks_read(&state, 39), 7);
     }
 }

@@ -123,17 +123,34 @@ impl Store {
         through: u32,
         mut f: impl FnMut(u32, RecordValue),
     ) -> Result<(), StoreError> {
+        self.for_each_record_block(job, 0..=through, |frame, block| {
+            block.into_iter().for_each(|r| f(frame, r))
+        })
+    }
+
+    /// The record blocks of `job` written in `frames`, in frame order, each
+    /// with its frame through `f` (its records in id order; a frame that
+    /// wrote none has no block): one block read at a time, and none
+    /// outside `frames`.
+    pub fn for_each_record_block(
+        &self,
+        job: u64,
+        frames: std::ops::RangeInclusive<u32>,
+        mut f: impl FnMut(u32, Vec<RecordValue>),
+    ) -> Result<(), StoreError> {
+        let (first, last) = frames.into_inner();
+        if first > last {
+            return Ok(());
+        }
         for item in self
             .records
-            .range(keys::frame(job, 0)..=keys::frame(job, through))
+            .range(keys::frame(job, first)..=keys::frame(job, last))
         {
             let (k, v) = item.map_err(|e| StoreError::sled(&self.path, e))?;
             let (_, frame) = keys::parse_frame(&k)
                 .ok_or_else(|| self.corrupt("records", &k, "malformed key"))?;
             let value: FrameRecordsValue = self.decode("records", &k, &v)?;
-            for r in self.record_block(&k, &value)? {
-                f(frame, r);
-            }
+            f(frame, self.record_block(&k, &value)?);
         }
         Ok(())
     }
