@@ -184,7 +184,12 @@ impl TriangleBvh {
         };
         // `ids` is a permutation of the range the BVH was built over.
         self.ids.len() == range.len()
-            && self.ids.iter().zip(&self.triangles).zip(&self.objects).all(same)
+            && self
+                .ids
+                .iter()
+                .zip(&self.triangles)
+                .zip(&self.objects)
+                .all(same)
     }
 
     /// Whether some triangle of this BVH lies on `ray` (an any-hit query
@@ -300,7 +305,7 @@ impl SceneBvh {
 /// part's fingerprint holds) for the methods that test segments against
 /// the static geometry alone (`trc`'s direct light at t0+1, `movies`'
 /// static blockers behind moving ones); the CPU backend's own static part
-/// where it has one ([`shared_static_bvh`]).
+/// where it has one (`shared_static_bvh`).
 #[derive(Default)]
 pub struct StaticGeometry {
     fingerprint: Option<u64>,

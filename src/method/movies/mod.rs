@@ -98,7 +98,7 @@ pub struct MoviesSettings {
     pub max_resolution: u32,
     /// Memory for the movies' kept static shadows, in MiB (the paper's
     /// user-set texture memory, §5), held at every moment of a frame
-    /// ([`TextureMovies::make_room_for_shadows`]): a movie given no room
+    /// (`TextureMovies::make_room_for_shadows`): a movie given no room
     /// finds its static shadows each frame and lets them go, as a new
     /// movie would (same texels, more rays). It bounds neither the
     /// texels, nor the global pass (its own static shadows included), nor
