@@ -310,14 +310,16 @@ impl AliveSets {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use std::cell::Cell;
 
     /// A job's blocks by frame, each in id order.
     type History = BTreeMap<u32, Vec<RecordValue>>;
 
-    fn version(id: u64, created: u32, last_frame: u32) -> RecordValue {
+    /// A record version with nothing but its id and life (the worker's
+    /// tests take it too).
+    pub(crate) fn version(id: u64, created: u32, last_frame: u32) -> RecordValue {
         RecordValue {
             id,
             created_frame: created,

@@ -253,23 +253,7 @@ mod tests {
     }
 
     fn record(frame: u32) -> RecordValue {
-        RecordValue {
-            id: u64::from(frame),
-            created_frame: frame,
-            last_frame: frame,
-            position: [0.0; 3],
-            normal: [0.0, 0.0, 1.0],
-            irradiance: [0.0; 3],
-            grad_translation: [[0.0; 3]; 3],
-            grad_rotation: [[0.0; 3]; 3],
-            radius: 1.0,
-            object: 0,
-            strata_theta: 0,
-            strata_phi: 0,
-            samples_count: 0,
-            samples_offset: 0,
-            samples_len: 0,
-        }
+        alive::tests::version(u64::from(frame), frame, frame)
     }
 
     /// A run tells the kept sets of `/records` of each frame it writes and,
