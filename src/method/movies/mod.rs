@@ -632,6 +632,16 @@ mod tests {
     use direct::ShadePoint;
     use std::mem::size_of;
 
+    /// A coarse global pass, cheap enough for a unit test's frames.
+    fn coarse_global() -> GlobalSettings {
+        GlobalSettings {
+            spacing: 1.0 / 8.0,
+            links: 16,
+            bounces: 2,
+            shadow_samples: 1,
+        }
+    }
+
     /// The memory a frame reports holds the global pass's working buffers
     /// as well as what it keeps: on a first frame (every link traced) at
     /// least the buffers held at once while the links are drawn (a shading
@@ -645,12 +655,7 @@ mod tests {
         let mut movies = TextureMovies::new(MoviesSettings {
             spp: 1,
             shadow_samples: 1,
-            global: GlobalSettings {
-                spacing: 1.0 / 8.0,
-                links: 16,
-                bounces: 2,
-                shadow_samples: 1,
-            },
+            global: coarse_global(),
             ..MoviesSettings::default()
         });
         renderer.with_frame_context(0, |ctx| movies.render_frame(ctx));
@@ -687,12 +692,7 @@ mod tests {
             let mut movies = TextureMovies::new(MoviesSettings {
                 spp: 1,
                 memory_mib: mib,
-                global: GlobalSettings {
-                    spacing: 1.0 / 8.0,
-                    links: 16,
-                    bounces: 2,
-                    shadow_samples: 1,
-                },
+                global: coarse_global(),
                 ..MoviesSettings::default()
             });
             (0..4)
