@@ -1898,6 +1898,56 @@ fn a_cancel_or_a_sigterm_abandons_a_long_frame_at_once() {
     assert_eq!(again["frames_done"], 0);
 }
 
+/// A server that dies twice while rendering a job, with no frame stored in
+/// between (a job too large for the machine: an aborted allocation, the
+/// OOM killer), does not start it a third time, which under a supervisor
+/// that restarts it would crash it for ever: the job fails saying why, the
+/// job behind it runs, and a resume starts it again.
+#[test]
+fn a_job_the_server_died_in_twice_is_not_started_a_third_time() {
+    let (dir, scenes) = workspace();
+    let db = dir.path().join("db");
+    let mut server = start(&db, &scenes);
+    let small =
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"8x8","spp":1}"#;
+    let long = create_job(&server, ENDLESS_FRAME);
+    let after = create_job(&server, small);
+    // The render makes the job's frame folder once its start is marked in
+    // the store: made, the server dies as a render killed it would.
+    let frames_dir = dir.path().join("db.frames").join(&long);
+    for death in 0..2 {
+        let start_time = Instant::now();
+        while !frames_dir.is_dir() {
+            assert!(start_time.elapsed() < Duration::from_secs(60), "never ran");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        server.child.kill().unwrap(); // SIGKILL
+        server.child.wait().unwrap();
+        std::fs::remove_dir_all(&frames_dir).unwrap();
+        server = start(&db, &scenes);
+        if death == 0 {
+            // Once is no crash loop (a power cut): the job runs again.
+            let again = job_state(&server, &long);
+            assert!(
+                matches!(again["state"].as_str(), Some("queued" | "running")),
+                "{again}"
+            );
+        }
+    }
+    let failed = job_state(&server, &long);
+    assert_eq!(failed["state"], "failed", "{failed}");
+    let error = failed["error"].as_str().unwrap();
+    assert!(
+        error.contains("stopped twice") && error.contains(&format!("/api/jobs/{long}/resume")),
+        "{error}"
+    );
+    assert_eq!(wait_done(&server, &after)["frames_done"], 1);
+    assert!(!frames_dir.exists(), "started a third time");
+    let (status, _) = http(&server, "POST", &format!("/api/jobs/{long}/resume"), "");
+    assert_eq!(status, 200);
+    wait_running(&server, &long);
+}
+
 /// Bytes read from `s` until the server closes it, and how long that took;
 /// panics if it stays open past `limit`.
 fn read_until_closed(s: &mut std::net::TcpStream, limit: Duration) -> (Vec<u8>, Duration) {

@@ -332,10 +332,16 @@ pub async fn resume(
         JobState::Cancelled | JobState::Failed => {}
         s => return Err(not_resumable(&id, s)),
     }
-    // Durable first: a restart queues the job again.
+    // Durable first: a restart queues the job again. With its attempt
+    // mark gone, it gets two fresh attempts however often the server died
+    // in it before (`worker::crash_loop`).
     state
         .store
         .set_job_cancelled(&id, false)
+        .map_err(ApiError::internal)?;
+    state
+        .store
+        .clear_job_attempts(&id)
         .map_err(ApiError::internal)?;
     state.update(&id, |j| {
         j.state = JobState::Queued;

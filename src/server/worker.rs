@@ -4,15 +4,18 @@
 
 use super::{AppState, Job, JobKey, JobRequest, JobState};
 use crate::render::{self, Renderer, StoreJob};
-use anyhow::Result;
+use crate::store::schema::JobValue;
+use anyhow::{Context, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
 /// Fills the job table from the store's jobs. Of the server's own (`job-N`)
 /// finished ones are done, cancelled ones stay cancelled, other unfinished
-/// ones (interrupted by a stop or a crash) are queued again. Those of
-/// `radcache render --job NAME` are done or stopped ([`JobKey`]).
+/// ones (interrupted by a stop or a crash) are queued again, but for one
+/// the server died in twice with no frame stored in between
+/// ([`crash_loop`]), which fails. Those of `radcache render --job NAME`
+/// are done or stopped ([`JobKey`]).
 pub fn load_jobs(state: &AppState) -> Result<()> {
     let mut jobs = state.jobs.lock().expect("job table lock");
     for stored in state.store.jobs()? {
@@ -25,25 +28,68 @@ pub fn load_jobs(state: &AppState) -> Result<()> {
         };
         let key = JobKey::of(&stored.name);
         let frames = stored_frames(state, stored.id);
-        let job = Job::new(stored.name.clone(), request, JobState::Queued, &frames);
-        let job_state = if job.frames_done == job.request.frames_total() {
+        let mut job = Job::new(stored.name.clone(), request, JobState::Queued, &frames);
+        job.state = if job.frames_done == job.request.frames_total() {
             JobState::Done
         } else if matches!(key, JobKey::Rendered(_)) {
             JobState::Stopped
         } else if state.store.job_cancelled(&stored.name)? {
             JobState::Cancelled
+        } else if let Some(error) = crash_loop(state, &job)? {
+            job.error = Some(error);
+            JobState::Failed
         } else {
             JobState::Queued
         };
-        jobs.insert(
-            key,
-            Job {
-                state: job_state,
-                ..job
-            },
-        );
+        jobs.insert(key, job);
     }
     Ok(())
+}
+
+/// How often the server may die while rendering a job, with no frame
+/// stored in between, before a start no longer runs it. One death (a
+/// power cut, a kill) resumes by itself; a second on the same frame says
+/// the job itself kills it (an allocation that aborts the process, the
+/// OOM killer), and a third start would make a crash loop of a
+/// supervisor that restarts the server.
+const DEATHS_BEFORE_FAILING: u32 = 2;
+
+/// Why unfinished job `job` is not started again: the server died while
+/// rendering it [`DEATHS_BEFORE_FAILING`] times with no frame stored in
+/// between ([`crate::store::JobAttempt`]). Says so on standard error, as
+/// it does for a single death.
+fn crash_loop(state: &AppState, job: &Job) -> Result<Option<String>> {
+    let Some(attempt) = state.store.job_attempt(&job.id)? else {
+        return Ok(None);
+    };
+    let deaths = attempt.died_without_progress(job.frames_stored());
+    let at_frame = first_frame_not_stored(job).map_or(String::new(), |f| format!(" at frame {f}"));
+    if deaths < DEATHS_BEFORE_FAILING {
+        eprintln!(
+            "note: job {}: the server stopped while rendering it{at_frame} (no orderly end); \
+             rendering it again",
+            job.id
+        );
+        return Ok(None);
+    }
+    let times = match deaths {
+        2 => "twice".to_string(),
+        n => format!("{n} times"),
+    };
+    let error = format!(
+        "the server stopped {times} while rendering this job{at_frame}, with no frame stored in \
+         between (perhaps it needs more memory than this machine has); it was not started \
+         again: POST /api/jobs/{}/resume to try again",
+        job.id
+    );
+    eprintln!("warning: job {}: {error}", job.id);
+    Ok(Some(error))
+}
+
+/// The frame of `job`'s range a render starts with: the first not stored.
+fn first_frame_not_stored(job: &Job) -> Option<u32> {
+    let stored = |f: &u32| job.stored.iter().any(|r| r.contains(f));
+    job.request.frames.clone().find(|f| !stored(f))
 }
 
 /// The frames store job `store_id` holds (none if the store cannot say:
@@ -110,10 +156,29 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
     let root = state.scene_root(&request.scene);
     let scene = request.scene.load_confined(root.as_deref())?;
     let backend = render::make_backend(state.options.backend)?;
+    let (stored, _attempt) = start_attempt(state, id, &request, root.as_deref())?;
+    let renderer = Renderer::new(
+        scene,
+        request.method.instantiate(),
+        backend,
+        request.settings.clone(),
+    );
+    render_frames(state, id, &request, renderer, stored)
+}
+
+/// Begins (or resumes) store job `id` for `request`, shows its stored
+/// frames and marks the attempt in the store, before anything of the
+/// render itself is allocated ([`Attempt`]).
+fn start_attempt<'a>(
+    state: &'a AppState,
+    id: &'a str,
+    request: &JobRequest,
+    root: Option<&std::path::Path>,
+) -> Result<(JobValue, Attempt<'a>)> {
     let spec = render::job_spec_confined(
         id,
         &request.scene,
-        root.as_deref(),
+        root,
         &request.method,
         &request.settings,
         request.frames.clone(),
@@ -127,15 +192,22 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
         ),
         e => e.into(),
     })?;
-    let store_id = stored.id;
-    let frames = stored_frames(state, store_id);
+    let frames = stored_frames(state, stored.id);
     state.update(id, |j| j.set_stored(&frames));
-    let mut renderer = Renderer::new(
-        scene,
-        request.method.instantiate(),
-        backend,
-        request.settings.clone(),
-    );
+    let attempt = Attempt::begin(state, id, frames.len() as u32)?;
+    Ok((stored, attempt))
+}
+
+/// Renders the frames of `request` that store job `stored` lacks with
+/// `renderer`, until done, cancelled or the server stops.
+fn render_frames(
+    state: &AppState,
+    id: &str,
+    request: &JobRequest,
+    mut renderer: Renderer,
+    stored: JobValue,
+) -> Result<()> {
+    let store_id = stored.id;
     let _running = RunningFrame::new(state, id, renderer.abandon_flag());
     let mut job = StoreJob {
         store: &state.store,
@@ -173,6 +245,40 @@ fn render_job(state: &AppState, id: &str) -> Result<()> {
         &mut after_frame,
     )?;
     Ok(())
+}
+
+/// The store's mark of the worker's render of a job
+/// ([`crate::store::Store::begin_job_attempt`]), removed when the render
+/// ends in any orderly way: done, cancelled, failed, stopped by a shutdown
+/// or panicked (unwinding drops it). Only a death of the process leaves
+/// it, for the next start to count ([`crash_loop`]).
+struct Attempt<'a> {
+    state: &'a AppState,
+    id: &'a str,
+}
+
+impl<'a> Attempt<'a> {
+    /// Marks the attempt, job `id` having `frames_stored` frames stored.
+    fn begin(state: &'a AppState, id: &'a str, frames_stored: u32) -> Result<Self> {
+        state
+            .store
+            .begin_job_attempt(id, frames_stored)
+            .context("cannot mark the start of the job's render in the store")?;
+        Ok(Attempt { state, id })
+    }
+}
+
+impl Drop for Attempt<'_> {
+    fn drop(&mut self) {
+        if let Err(e) = self.state.store.clear_job_attempts(self.id) {
+            // The next start then counts this render as one the server
+            // died in; at worst the job fails there, and a resume clears it.
+            eprintln!(
+                "warning: job {}: the mark of its render could not be removed from the store: {e}",
+                self.id
+            );
+        }
+    }
 }
 
 /// Tells the kept alive sets of `/records` ([`AppState::alive_sets`]) of
@@ -232,9 +338,112 @@ impl Drop for RunningFrame<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::server::{alive, testing};
+    use crate::render::BackendChoice;
+    use crate::server::{alive, jobs, testing};
     use crate::store::schema::RecordValue;
     use std::cell::Cell;
+
+    /// What a death of the server as it renders job `id` leaves: the
+    /// worker's start of the render, and no orderly end.
+    fn die_rendering(state: &AppState, id: &str) {
+        let request = state.job(id).unwrap().request;
+        let (_, attempt) = start_attempt(state, id, &request, None).unwrap();
+        std::mem::forget(attempt);
+    }
+
+    /// Job `id` as the next start of the server over the same store finds
+    /// it.
+    fn restarted(state: &AppState, id: &str) -> Job {
+        state.jobs.lock().unwrap().clear();
+        load_jobs(state).unwrap();
+        state.job(id).unwrap()
+    }
+
+    /// A server that died once while rendering a job renders it again on
+    /// its next start; one that died twice on it with no frame stored in
+    /// between fails it, saying why, on every start until a resume, which
+    /// gives it two fresh attempts.
+    #[tokio::test]
+    async fn a_job_the_server_died_in_twice_is_not_started_again_until_resumed() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        testing::add_job(&state, "job-1", JobState::Queued, &[]);
+        die_rendering(&state, "job-1");
+        let job = restarted(&state, "job-1");
+        assert_eq!((job.state, job.error), (JobState::Queued, None));
+        die_rendering(&state, "job-1");
+        for _ in 0..2 {
+            let job = restarted(&state, "job-1");
+            assert_eq!(job.state, JobState::Failed);
+            let error = job.error.unwrap();
+            assert!(
+                error.starts_with("the server stopped twice while rendering this job at frame 0, with no frame stored in between")
+                    && error.ends_with("POST /api/jobs/job-1/resume to try again"),
+                "{error}"
+            );
+        }
+        let path = axum::extract::Path("job-1".to_string());
+        let resumed = jobs::resume(axum::extract::State(state.clone()), path).await;
+        assert_eq!(resumed.unwrap()["state"], "queued");
+        assert_eq!(state.store.job_attempt("job-1").unwrap(), None);
+        assert_eq!(restarted(&state, "job-1").state, JobState::Queued);
+        die_rendering(&state, "job-1");
+        assert_eq!(restarted(&state, "job-1").state, JobState::Queued);
+        die_rendering(&state, "job-1");
+        assert_eq!(restarted(&state, "job-1").state, JobState::Failed);
+    }
+
+    /// Deaths with a frame stored in between are no crash loop: the job
+    /// moves on, and is started again until the server dies twice on one
+    /// frame.
+    #[test]
+    fn deaths_with_a_frame_stored_in_between_do_not_fail_the_job() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        testing::add_job(&state, "job-1", JobState::Queued, &[]);
+        die_rendering(&state, "job-1");
+        // The second attempt stores frame 0, then the server dies.
+        let mut request = state.job("job-1").unwrap().request;
+        let (stored, attempt) = start_attempt(&state, "job-1", &request, None).unwrap();
+        let scene = request.scene.load_confined(None).unwrap();
+        let backend = render::make_backend(BackendChoice::Cpu).unwrap();
+        let method = request.method.instantiate();
+        let renderer = Renderer::new(scene, method, backend, request.settings.clone());
+        request.frames = 0..1;
+        render_frames(&state, "job-1", &request, renderer, stored).unwrap();
+        std::mem::forget(attempt);
+        assert_eq!(restarted(&state, "job-1").state, JobState::Queued);
+        die_rendering(&state, "job-1");
+        assert_eq!(restarted(&state, "job-1").state, JobState::Queued);
+        die_rendering(&state, "job-1");
+        let job = restarted(&state, "job-1");
+        assert_eq!(job.state, JobState::Failed);
+        assert!(job.error.unwrap().contains(" at frame 1,"));
+    }
+
+    /// A render that ends in any orderly way (done, failed, stopped by a
+    /// shutdown) leaves no mark for the next start to count.
+    #[test]
+    fn renders_that_end_in_order_leave_no_attempt_mark() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        for id in ["job-1", "job-2", "job-3"] {
+            testing::add_job(&state, id, JobState::Running, &[]);
+        }
+        render_job(&state, "job-1").unwrap();
+        assert_eq!(state.job("job-1").unwrap().frames_done, 2, "done");
+        state.shutdown.store(true, Ordering::SeqCst);
+        render_job(&state, "job-2").unwrap();
+        assert_eq!(state.job("job-2").unwrap().frames_done, 0, "stopped");
+        state.shutdown.store(false, Ordering::SeqCst);
+        // Its frames cannot be written.
+        std::fs::write(state.options.out.join("job-3"), "").unwrap();
+        assert!(render_job(&state, "job-3").is_err(), "failed");
+        for id in ["job-1", "job-2", "job-3"] {
+            assert!(state.store.job(id).unwrap().is_some(), "{id} began");
+            assert_eq!(state.store.job_attempt(id).unwrap(), None, "{id}");
+        }
+    }
 
     /// Blocks of `/records` read for frame `frame` of store job 1, whose
     /// every frame wrote one record.

@@ -11,6 +11,42 @@ use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
+/// The attempt mark of a job of `radcache serve` ([`Store::begin_job_attempt`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct JobAttempt {
+    /// The frames the job had stored (in all its ranges) as the attempt
+    /// began.
+    pub frames_stored_at_start: u32,
+    /// This attempt and the ones before it that the server died in, in a
+    /// row, with no frame stored in between.
+    pub unfinished_attempts: u32,
+}
+
+impl JobAttempt {
+    /// The attempts the server died in with no frame stored since
+    /// `frames_stored_at_start`, the job now holding `frames_stored`
+    /// frames: none once a frame was stored (the job moves on).
+    pub fn died_without_progress(&self, frames_stored: u32) -> u32 {
+        match self.frames_stored_at_start == frames_stored {
+            true => self.unfinished_attempts,
+            false => 0,
+        }
+    }
+
+    /// As stored: the frames in the high half, the attempts in the low
+    /// ([`keys::meta_attempt`]).
+    fn to_u64(self) -> u64 {
+        (u64::from(self.frames_stored_at_start) << 32) | u64::from(self.unfinished_attempts)
+    }
+
+    fn from_u64(value: u64) -> JobAttempt {
+        JobAttempt {
+            frames_stored_at_start: (value >> 32) as u32,
+            unfinished_attempts: value as u32,
+        }
+    }
+}
+
 impl Store {
     pub fn job(&self, name: &str) -> Result<Option<JobValue>, StoreError> {
         self.get("jobs", &keys::job(name))
@@ -53,6 +89,48 @@ impl Store {
         self.meta
             .contains_key(keys::meta_cancelled(name))
             .map_err(|e| StoreError::sled(&self.path, e))
+    }
+
+    /// Marks that `radcache serve` starts rendering job `name` with
+    /// `frames_stored` frames stored, durably (a `meta` key,
+    /// [`keys::meta_attempt`]; no schema change), and returns the mark: a
+    /// mark still there is an attempt the server died in, and counts
+    /// towards this one unless a frame was stored since
+    /// ([`JobAttempt::died_without_progress`]).
+    pub fn begin_job_attempt(
+        &self,
+        name: &str,
+        frames_stored: u32,
+    ) -> Result<JobAttempt, StoreError> {
+        let died = self
+            .job_attempt(name)?
+            .map_or(0, |a| a.died_without_progress(frames_stored));
+        let attempt = JobAttempt {
+            frames_stored_at_start: frames_stored,
+            unfinished_attempts: died.saturating_add(1),
+        };
+        self.meta
+            .insert(keys::meta_attempt(name), &attempt.to_u64().to_be_bytes())
+            .map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()?;
+        Ok(attempt)
+    }
+
+    /// The attempt mark of job `name` ([`Self::begin_job_attempt`]), if any.
+    pub fn job_attempt(&self, name: &str) -> Result<Option<JobAttempt>, StoreError> {
+        let key = keys::meta_attempt(name);
+        let value = super::meta::read_meta_u64(&self.meta, &key)
+            .map_err(|detail| self.corrupt("meta", &key, detail))?;
+        Ok(value.map(JobAttempt::from_u64))
+    }
+
+    /// Removes the attempt mark of job `name`, durably: its render ended
+    /// in order, or a resume gives it fresh attempts.
+    pub fn clear_job_attempts(&self, name: &str) -> Result<(), StoreError> {
+        self.meta
+            .remove(keys::meta_attempt(name))
+            .map_err(|e| StoreError::sled(&self.path, e))?;
+        self.flush()
     }
 
     /// The highest `job-N` number `radcache serve` has given
@@ -121,11 +199,17 @@ impl Store {
             return Ok(fresh);
         }
         let fresh = self.new_job_value(spec, now)?;
-        // A cancel mark of a former job of this name (a cancel that came as
-        // it was deleted) is not the new job's.
-        self.meta
-            .remove(keys::meta_cancelled(&spec.name))
-            .map_err(|e| StoreError::sled(&self.path, e))?;
+        // A cancel or attempt mark of a former job of this name (a cancel
+        // that came as it was deleted, a kill during its deletion) is not
+        // the new job's.
+        for mark in [
+            keys::meta_cancelled(&spec.name),
+            keys::meta_attempt(&spec.name),
+        ] {
+            self.meta
+                .remove(mark)
+                .map_err(|e| StoreError::sled(&self.path, e))?;
+        }
         self.jobs
             .insert(&key, encode(&fresh))
             .map_err(|e| StoreError::sled(&self.path, e))?;
@@ -173,8 +257,9 @@ impl Store {
 
     /// Deletes job `name`, if there is one, and returns it. Its name goes
     /// first, in one write: from then on the job is gone. Then its durable
-    /// cancel mark and every key of its id (its revision too); a kill meanwhile leaves keys no
-    /// job owns, which `radcache compact` removes
+    /// cancel and attempt marks and every key of its id (its revision
+    /// too); a kill meanwhile leaves keys no job owns, which `radcache
+    /// compact` removes
     /// ([`Self::remove_orphaned_job_data`]). Its bytes in the sample log
     /// stay until `radcache compact`.
     pub fn delete_job(&self, name: &str) -> Result<Option<JobValue>, StoreError> {
@@ -186,6 +271,7 @@ impl Store {
             .map_err(|e| StoreError::sled(&self.path, e))?;
         self.flush()?;
         self.set_job_cancelled(name, false)?;
+        self.clear_job_attempts(name)?;
         self.delete_job_data(job.id)?;
         Ok(Some(job))
     }
@@ -477,7 +563,56 @@ fn same_scene_hash(stored: &str, given: &str) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::Store;
+    use super::{JobAttempt, Store};
+    use crate::store::schema::JobValue;
+
+    fn attempt(frames_stored_at_start: u32, unfinished_attempts: u32) -> JobAttempt {
+        JobAttempt {
+            frames_stored_at_start,
+            unfinished_attempts,
+        }
+    }
+
+    /// Each start counts the attempts before it that left their mark with
+    /// no frame stored since, and starts over at 1 once one was; the mark
+    /// is durable, and goes when cleared, when its job is deleted and when
+    /// a new job of that name begins.
+    #[test]
+    fn attempt_marks_count_the_starts_without_progress() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("db");
+        let store = Store::open(&path).unwrap();
+        assert_eq!(store.job_attempt("j").unwrap(), None);
+        assert_eq!(store.begin_job_attempt("j", 0).unwrap(), attempt(0, 1));
+        assert_eq!(store.begin_job_attempt("j", 0).unwrap(), attempt(0, 2));
+        assert_eq!(store.job_attempt("other").unwrap(), None, "one job's");
+        drop(store);
+        let store = Store::open(&path).unwrap();
+        assert_eq!(store.job_attempt("j").unwrap(), Some(attempt(0, 2)));
+        assert_eq!(attempt(0, 2).died_without_progress(0), 2);
+        assert_eq!(attempt(0, 2).died_without_progress(1), 0);
+        // A frame stored since: the count starts over.
+        assert_eq!(store.begin_job_attempt("j", 3).unwrap(), attempt(3, 1));
+        let far = attempt(u32::MAX - 1, 7);
+        assert_eq!(JobAttempt::from_u64(far.to_u64()), far);
+        store.clear_job_attempts("j").unwrap();
+        assert_eq!(store.job_attempt("j").unwrap(), None);
+        assert_eq!(store.begin_job_attempt("j", 3).unwrap(), attempt(3, 1));
+
+        let spec = JobValue::for_test("path", "{}".into()).spec;
+        store.begin_job(&spec, false).unwrap();
+        store.begin_job_attempt(&spec.name, 0).unwrap();
+        store.delete_job(&spec.name).unwrap();
+        assert_eq!(store.job_attempt(&spec.name).unwrap(), None, "deleted");
+        // One a kill during a deletion left: not the new job's.
+        store.begin_job_attempt(&spec.name, 0).unwrap();
+        store.begin_job(&spec, false).unwrap();
+        assert_eq!(store.job_attempt(&spec.name).unwrap(), None, "new job");
+        // The same job begun again (each start of the worker) keeps it.
+        store.begin_job_attempt(&spec.name, 0).unwrap();
+        store.begin_job(&spec, false).unwrap();
+        assert_eq!(store.job_attempt(&spec.name).unwrap(), Some(attempt(0, 1)));
+    }
 
     /// Every key under the prefix goes, over several batches; a key of
     /// another job that sorts right after them stays.

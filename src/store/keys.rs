@@ -104,6 +104,19 @@ pub fn meta_cancelled(name: &str) -> Vec<u8> {
     [b"cancelled:".as_slice(), name.as_bytes()].concat()
 }
 
+/// `meta` key of the attempt mark of job `name` (`radcache serve`): set
+/// durably as the server starts rendering the job and removed when that
+/// render ends in any orderly way, so that one found on a start is a
+/// render the server died in (`store::JobAttempt`). Value: the frames the
+/// job had stored as the attempt began, then the attempts in a row the
+/// server died in with no frame stored since, two u32 big-endian (8
+/// bytes, read as one u64). No schema change, as the cancel mark: older
+/// builds read only the `meta` keys they know and leave others as they
+/// are (migrations too), so they ignore it and resume the job as before.
+pub fn meta_attempt(name: &str) -> Vec<u8> {
+    [b"attempt:".as_slice(), name.as_bytes()].concat()
+}
+
 pub fn job(name: &str) -> Vec<u8> {
     name.as_bytes().to_vec()
 }

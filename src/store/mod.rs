@@ -74,6 +74,7 @@ use schema::{FrameRecordsValue, RecordBlock};
 use std::path::{Path, PathBuf};
 
 pub use frames::{FrameCommit, RecordCommit, StateCommit};
+pub use jobs::JobAttempt;
 pub use rgbe::PackedSample;
 pub use samples::SampleBlock;
 pub use schema::JobSpec;
