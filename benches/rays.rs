@@ -22,7 +22,7 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::ray::RayHit;
 use obvhs::triangle::Triangle as ObTriangle;
 use obvhs::BvhBuildParams;
-use radcache::accel::{intersect_triangle, NEAR_SHIFT};
+use radcache::accel::NEAR_SHIFT;
 use radcache::backend::cpu::CpuBackend;
 use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::sampling::Rng;
@@ -190,25 +190,43 @@ fn ms(d: Duration) -> f64 {
     d.as_secs_f64() * 1e3
 }
 
+/// The renderer's traversal (`CpuBackend`: the watertight triangle test
+/// and widened boxes) and, for its cost, obvhs's own: `CwBvh::ray_traverse`
+/// over the same tree shape with obvhs's Möller–Trumbore test.
 fn throughput(name: &str, scene: &Scene, rays: &[Ray]) {
     let snap = scene.snapshot(0.0);
     let mut backend = CpuBackend::new();
     backend.set_geometry(&snap);
+    let tris: Vec<ObTriangle> = snap.triangles.iter().map(|t| to_ob(t.p)).collect();
+    let obvhs_tree = build_cwbvh_from_tris(
+        &tris,
+        BvhBuildParams::medium_build(),
+        &mut Duration::default(),
+    );
+    let tree_tris: Vec<ObTriangle> = obvhs_tree
+        .primitive_indices
+        .iter()
+        .map(|&i| tris[i as usize])
+        .collect();
     let mut hits = vec![Hit::MISS; rays.len()];
     let mut occ = vec![false; rays.len()];
     for threads in [1, 2] {
         let p = pool(threads);
         let closest = best_of_3(|| p.install(|| backend.closest_hit(rays, &mut hits)));
         let any = best_of_3(|| p.install(|| backend.any_hit(rays, &mut occ)));
+        let obvhs = best_of_3(|| {
+            p.install(|| trace_cwbvh(&obvhs_tree, &tree_tris, rays));
+        });
         let hit_frac = hits.iter().filter(|h| h.is_hit()).count() as f64 / rays.len() as f64;
         let occ_frac = occ.iter().filter(|&&o| o).count() as f64 / rays.len() as f64;
         println!(
-            "| {name:<8} | {:>7} | {threads} | {:>13.2} | {:>9.2} | {:>5.1}% / {:>5.1}% |",
+            "| {name:<8} | {:>7} | {threads} | {:>13.2} | {:>9.2} | {:>5.1}% / {:>5.1}% | {:>11.2} |",
             snap.triangles.len(),
             mrays(rays.len(), closest),
             mrays(rays.len(), any),
             100.0 * hit_frac,
             100.0 * occ_frac,
+            mrays(rays.len(), obvhs),
         );
     }
 }
@@ -321,9 +339,7 @@ fn trace_bvh2(bvh: &Bvh2, tris: &[ObTriangle], rays: &[Ray]) -> (Duration, usize
         .with_min_len(256)
         .filter(|ray| {
             let mut hit = RayHit::none();
-            bvh.ray_traverse(ob_ray(ray), &mut hit, |r, i| {
-                intersect_triangle(&tris[i], r).map_or(f32::INFINITY, |h| h.0)
-            })
+            bvh.ray_traverse(ob_ray(ray), &mut hit, |r, i| tris[i].intersect(r))
         })
         .count();
     (start.elapsed(), hits)
@@ -336,9 +352,7 @@ fn trace_cwbvh(bvh: &CwBvh, tris: &[ObTriangle], rays: &[Ray]) -> (Duration, usi
         .with_min_len(256)
         .filter(|ray| {
             let mut hit = RayHit::none();
-            bvh.ray_traverse(ob_ray(ray), &mut hit, |r, i| {
-                intersect_triangle(&tris[i], r).map_or(f32::INFINITY, |h| h.0)
-            })
+            bvh.ray_traverse(ob_ray(ray), &mut hit, |r, i| tris[i].intersect(r))
         })
         .count();
     (start.elapsed(), hits)
@@ -446,8 +460,12 @@ fn main() {
     let rays = random_rays(RAYS, 1);
 
     println!("\n## Ray throughput, CpuBackend, {RAYS} incoherent rays (Mrays/s, best of 3)\n");
-    println!("| scene    | tris    | T | closest (Mr/s) | any (Mr/s) | hit / occluded  |");
-    println!("|----------|---------|---|---------------:|-----------:|-----------------|");
+    println!(
+        "| scene    | tris    | T | closest (Mr/s) | any (Mr/s) | hit / occluded  | obvhs's own closest (Mr/s) |"
+    );
+    println!(
+        "|----------|---------|---|---------------:|-----------:|-----------------|------------:|"
+    );
     throughput("spheres", &spheres, &rays);
     throughput("soup", &soup, &rays);
 

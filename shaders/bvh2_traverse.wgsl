@@ -6,8 +6,9 @@
 // It mirrors, step for step, what the CPU backend does (`src/accel.rs` and
 // obvhs 0.4 `Bvh2::ray_traverse_dynamic`) so that both find the same hits:
 // the same ray-box slab test on `safe_inverse(dir)`, the nearer child first,
-// the same Möller–Trumbore formulation, the same strict `t < tmax` rules,
-// the static BVH before the dynamic one with one shrinking `tmax`.
+// the same watertight triangle test, the same strict `t < tmax` rules (a
+// tie going to the lower triangle id), the static BVH before the dynamic
+// one with one shrinking `tmax`.
 
 /// Entries of the per-ray traversal stack. Must match `STACK_SIZE` in
 /// `src/backend/gpu_bvh.rs`, which refuses BVHs deeper than this (a BVH2 of
@@ -41,7 +42,7 @@ struct Node {
 
 fn trace_ray(ray: Ray) -> TraceRay {
     let inv = vec3<f32>(safe_inverse(ray.dir.x), safe_inverse(ray.dir.y), safe_inverse(ray.dir.z));
-    return TraceRay(shifted_origin(ray, ray.dir), ray.dir, inv, ray.tmin + NEAR_SHIFT);
+    return prepare_ray(shifted_origin(ray, ray.dir), ray.dir, inv, ray.tmin + NEAR_SHIFT);
 }
 
 /// obvhs `Aabb::intersect_ray`: entry distance of the ray into the box, or
@@ -61,7 +62,8 @@ fn intersect_box(node: Node, ray: TraceRay) -> f32 {
     return infinity();
 }
 
-/// Triangles of the leaf hit closer than `best.t` (strictly, as the CPU):
+/// Triangles of the leaf hit closer than `best.t` (strictly, as the CPU;
+/// as near and of a lower id also, `is_better`):
 /// updates `best` with the nearest. With `any`, stops at the first one.
 /// Returns whether there was one.
 fn leaf_hits(node: Node, ray: TraceRay, best: ptr<function, Hit>, any: bool) -> bool {
@@ -69,7 +71,7 @@ fn leaf_hits(node: Node, ray: TraceRay, best: ptr<function, Hit>, any: bool) -> 
     for (var i = node.first_index; i < node.first_index + node.prim_count; i++) {
         let tri = triangles[i];
         let h = intersect_triangle(tri, ray, (*best).t);
-        if h.x < (*best).t {
+        if is_better(h, tri.id, *best) {
             *best = Hit(h.x, tri.id, tri.object, h.y, h.z);
             found = true;
             if any {

@@ -9,9 +9,10 @@
 // for step, obvhs's CPU loop (`CwBvh::ray_traverse` / `ray_traverse_miss`,
 // `traverse!` and `CwBvhNode::intersect_ray`): the same node groups and
 // triangle groups as hit masks, the same octant-ordered children, the same
-// quantised slab test with its 1e-4 near cut, the same Möller–Trumbore and
-// strict `t < tmax` rules; so it visits triangles in the CPU's order and
-// finds the same hits, ties included.
+// quantised slab test with its 1e-4 near cut, the same watertight triangle
+// test and strict `t < tmax` rules (a tie going to the lower triangle id);
+// so it visits triangles in the CPU's order and finds the same hits, ties
+// included.
 
 /// Entries of the per-ray stack of node groups. Must match
 /// `CWBVH_STACK_SIZE` in `src/backend/gpu_bvh.rs`, which refuses deeper
@@ -62,7 +63,7 @@ struct Node {
 fn trace_ray(ray: Ray) -> TraceRay {
     let dir = select(ray.dir, vec3<f32>(0.0), ray.dir == vec3<f32>(0.0));
     let inv = vec3<f32>(safe_inverse(dir.x), safe_inverse(dir.y), safe_inverse(dir.z));
-    return TraceRay(shifted_origin(ray, dir), dir, inv, ray.tmin + NEAR_SHIFT);
+    return prepare_ray(shifted_origin(ray, dir), dir, inv, ray.tmin + NEAR_SHIFT);
 }
 
 /// obvhs `ray_get_octant_inv4`: 7 − octant of the direction, in every byte.
@@ -148,7 +149,7 @@ fn traverse(root: u32, ray: TraceRay, best: ptr<function, Hit>, any: bool) -> bo
             tri_group.y &= ~(1u << bit);
             let tri = triangles[tri_group.x + bit];
             let h = intersect_triangle(tri, ray, (*best).t);
-            if h.x < (*best).t {
+            if is_better(h, tri.id, *best) {
                 *best = Hit(h.x, tri.id, tri.object, h.y, h.z);
                 found = true;
                 if any {

@@ -6,8 +6,9 @@
 // as WGSL has no includes. Each traversal declares binding 2 (its nodes),
 // `trace_ray` and `traverse(root, ray, best, any)`.
 //
-// The triangle test and the strict `t < tmax` rules are those of the CPU
-// backend (`src/accel.rs`), so that both find the same hits.
+// The triangle test, the strict `t < tmax` rules and the tie rule are
+// those of the CPU backend (`src/accel.rs`), so that both find the same
+// hits.
 
 /// Work items per workgroup. Must match `WORKGROUP_SIZE` in
 /// `src/backend/gpu.rs`. 64 fills a warp/wavefront twice over on real GPUs
@@ -72,12 +73,38 @@ struct Hit {
 // Binding 2 (the nodes) is declared by each traversal, binding 4 (the
 // results) by each stage.
 
-/// A ray prepared for traversal, as obvhs `Ray::new` prepares it.
+/// A ray prepared for traversal, as obvhs `Ray::new` prepares it, and for
+/// the watertight triangle test as `accel::ShearedRay` prepares it.
 struct TraceRay {
     origin: vec3<f32>,
     dir: vec3<f32>,
     inv_dir: vec3<f32>,
     tmin: f32,
+    /// kx, ky, kz: the axes of the ray's space (kz: the largest component).
+    axes: vec3<u32>,
+    /// Sx, Sy, Sz of the shear.
+    shear: vec3<f32>,
+}
+
+/// A TraceRay from its origin, direction and tmin, with the shear of
+/// `accel::ShearedRay::new`: the same axes on ties, the same divisions.
+fn prepare_ray(origin: vec3<f32>, dir: vec3<f32>, inv_dir: vec3<f32>, tmin: f32) -> TraceRay {
+    let a = abs(dir);
+    var kz = 2u;
+    if a.x >= a.y && a.x >= a.z {
+        kz = 0u;
+    } else if a.y >= a.z {
+        kz = 1u;
+    }
+    var kx = (kz + 1u) % 3u;
+    var ky = (kz + 2u) % 3u;
+    if dir[kz] < 0.0 {
+        let k = kx;
+        kx = ky;
+        ky = k;
+    }
+    let shear = vec3<f32>(dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]);
+    return TraceRay(origin, dir, inv_dir, tmin, vec3<u32>(kx, ky, kz), shear);
 }
 
 /// `accel::NEAR_SHIFT`: traversal starts a ray this far (in its `t` units)
@@ -109,32 +136,47 @@ fn infinity() -> f32 {
     return bitcast<f32>(0x7f800000u);
 }
 
-/// Möller–Trumbore in the formulation of `intersect_triangle` in
-/// `src/accel.rs`: returns (t, u, v) with the hit at
-/// `v0·(1−u−v) + v1·u + v2·v`, or t = +∞ when the ray misses the triangle or
-/// t falls outside [tmin, tmax]. Rays in the triangle's plane never hit.
+/// `(x, y, z)` of vertex `v` in the ray's space: moved to the ray's
+/// origin, its axes permuted and sheared (`accel::ShearedRay::intersect`).
+fn to_ray_space(v: vec3<f32>, ray: TraceRay) -> vec3<f32> {
+    let p = v - ray.origin;
+    let pz = p[ray.axes.z];
+    return vec3<f32>(p[ray.axes.x] - ray.shear.x * pz, p[ray.axes.y] - ray.shear.y * pz, ray.shear.z * pz);
+}
+
+/// The watertight test of Woop, Benthin & Wald (JCGT 2013) as
+/// `accel::ShearedRay::intersect` computes it: returns (t, u, v) with the
+/// hit at `v0·(1−u−v) + v1·u + v2·v`, or t = +∞ when the ray misses the
+/// triangle or t falls outside [tmin, tmax]. Rays in the triangle's plane
+/// never hit.
 fn intersect_triangle(tri: Triangle, ray: TraceRay, tmax: f32) -> vec3<f32> {
     let miss = vec3<f32>(infinity(), 0.0, 0.0);
-    let e1 = tri.v0 - tri.v1;
-    let e2 = tri.v2 - tri.v0;
-    let n = cross(e1, e2);
-    let c = tri.v0 - ray.origin;
-    let r = cross(ray.dir, c);
-    let det = dot(n, ray.dir);
+    let a = to_ray_space(tri.v0, ray);
+    let b = to_ray_space(tri.v1, ray);
+    let c = to_ray_space(tri.v2, ray);
+    let u = c.x * b.y - c.y * b.x;
+    let v = a.x * c.y - a.y * c.x;
+    let w = b.x * a.y - b.y * a.x;
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return miss;
+    }
+    let det = u + v + w;
     if det == 0.0 {
         return miss;
     }
     let inv_det = 1.0 / det;
-    let u = dot(r, e2) * inv_det;
-    let v = dot(r, e1) * inv_det;
-    if u < 0.0 || v < 0.0 || u + v > 1.0 {
-        return miss;
-    }
-    let t = dot(n, c) * inv_det;
+    let t = (u * a.z + v * b.z + w * c.z) * inv_det;
     if t >= ray.tmin && t <= tmax {
-        return vec3<f32>(t, u, v);
+        return vec3<f32>(t, v * inv_det, w * inv_det);
     }
     return miss;
+}
+
+/// Whether hit `h` (t, u, v) on triangle `id` takes the place of `best`:
+/// nearer, or as near and of a lower triangle id (a ray through an edge
+/// hits both triangles; the CPU keeps the lower id too).
+fn is_better(h: vec3<f32>, id: u32, best: Hit) -> bool {
+    return h.x < best.t || (h.x == best.t && best.triangle != NONE && id < best.triangle);
 }
 
 /// Index of the ray this work item traces in a 2D dispatch, or NONE past

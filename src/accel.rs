@@ -13,10 +13,9 @@
 
 use crate::backend::{Hit, Ray};
 use crate::scene::Snapshot;
-use glam::Vec3A;
+use glam::{UVec2, Vec3A, Vec4};
 use obvhs::cwbvh::builder::build_cwbvh_from_tris;
 use obvhs::cwbvh::CwBvh;
-use obvhs::ray::RayHit;
 use obvhs::triangle::Triangle as ObTriangle;
 use obvhs::BvhBuildParams;
 use std::sync::{Arc, Mutex, PoisonError, Weak};
@@ -82,28 +81,94 @@ fn to_obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
     )
 }
 
-/// Möller–Trumbore in the formulation obvhs uses, returning `(t, u, v)`
-/// with the hit at `v0·(1−u−v) + v1·u + v2·v`, or `None` outside
-/// `[tmin, tmax]`. Rays along the plane of the triangle never hit.
-#[inline(always)]
+/// A ray prepared for the watertight ray/triangle test of Woop, Benthin &
+/// Wald ("Watertight Ray/Triangle Intersection", JCGT 2013, §3): the
+/// triangle is moved into a space where the ray starts at the origin and
+/// runs along +z, and the ray crosses it where the 2D edge functions `U`,
+/// `V`, `W` of its projected vertices agree in sign.
+///
+/// Why not Möller–Trumbore: its edge tests are computed from each
+/// triangle's own edge vectors, so a ray through an edge two triangles
+/// share can fail both (at 128 × 128, two camera rays of `cube-in-box`
+/// passed between a wall's two triangles and left the closed room). Here
+/// the edge function of a shared edge is the same products of the same
+/// projected vertices in both triangles, so its two values are exact
+/// negatives of each other: the ray is inside one triangle or the other,
+/// or on the edge and inside both (§3.2). The paper's fallback to double
+/// precision where an edge function rounds to 0 only sharpens that edge
+/// case (it does not make the test watertight), and WGSL has no `f64`: we
+/// leave it out on both backends, so that they compute the same bits.
+#[derive(Clone, Copy, Debug)]
+pub struct ShearedRay {
+    origin: Vec3A,
+    /// The axes `kx`, `ky`, `kz` of the ray's space (`kz`: the direction's
+    /// largest component).
+    axes: [usize; 3],
+    /// `Sx`, `Sy`, `Sz` of the paper's shear (Eq. 3).
+    shear: [f32; 3],
+}
+
+impl ShearedRay {
+    pub fn new(ray: &obvhs::ray::Ray) -> ShearedRay {
+        let d = ray.direction.to_array();
+        let a = d.map(f32::abs);
+        // The largest component, lower axis first on a tie (the GPU's rule).
+        let kz = if a[0] >= a[1] && a[0] >= a[2] {
+            0
+        } else if a[1] >= a[2] {
+            1
+        } else {
+            2
+        };
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        // Keeps the triangles' winding in the ray's space (§3.1).
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        ShearedRay {
+            origin: ray.origin,
+            axes: [kx, ky, kz],
+            shear: [d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]],
+        }
+    }
+
+    /// Where the ray crosses `tri`: `(t, u, v)` with the hit at
+    /// `v0·(1−u−v) + v1·u + v2·v`, or `None` outside `[tmin, tmax]`. Rays
+    /// along the plane of the triangle never hit. The paper's Eq. 4–8
+    /// without back-face culling.
+    #[inline(always)]
+    pub fn intersect(&self, tri: &ObTriangle, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let [kx, ky, kz] = self.axes;
+        let [sx, sy, sz] = self.shear;
+        let project = |v: Vec3A| {
+            let p = (v - self.origin).to_array();
+            (p[kx] - sx * p[kz], p[ky] - sy * p[kz], sz * p[kz])
+        };
+        let (ax, ay, az) = project(tri.v0);
+        let (bx, by, bz) = project(tri.v1);
+        let (cx, cy, cz) = project(tri.v2);
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let inv_det = 1.0 / det;
+        let t = (u * az + v * bz + w * cz) * inv_det;
+        // `U` weighs `v0`, `V` `v1` and `W` `v2`.
+        (t >= tmin && t <= tmax).then_some((t, v * inv_det, w * inv_det))
+    }
+}
+
+/// [`ShearedRay::intersect`] for one triangle: `(t, u, v)` with the hit at
+/// `v0·(1−u−v) + v1·u + v2·v`, or `None` outside `[tmin, tmax]`. Traversals
+/// prepare their ray once instead.
 pub fn intersect_triangle(tri: &ObTriangle, ray: &obvhs::ray::Ray) -> Option<(f32, f32, f32)> {
-    let e1 = tri.v0 - tri.v1;
-    let e2 = tri.v2 - tri.v0;
-    let n = e1.cross(e2);
-    let c = tri.v0 - ray.origin;
-    let r = ray.direction.cross(c);
-    let det = n.dot(ray.direction);
-    if det == 0.0 {
-        return None;
-    }
-    let inv_det = 1.0 / det;
-    let u = r.dot(e2) * inv_det;
-    let v = r.dot(e1) * inv_det;
-    if u < 0.0 || v < 0.0 || u + v > 1.0 {
-        return None;
-    }
-    let t = n.dot(c) * inv_det;
-    (t >= ray.tmin && t <= ray.tmax).then_some((t, u, v))
+    ShearedRay::new(ray).intersect(tri, ray.tmin, ray.tmax)
 }
 
 /// Where `ray` hits `tri` (`t`), computed as the BVHs compute it, so that
@@ -111,6 +176,72 @@ pub fn intersect_triangle(tri: &ObTriangle, ray: &obvhs::ray::Ray) -> Option<(f3
 /// triangle have the same `t` to the bit.
 pub fn ray_hits_triangle(tri: &crate::scene::Triangle, ray: &Ray) -> Option<f32> {
     intersect_triangle(&to_obvhs(tri), &to_obvhs_ray(ray)).map(|(t, _, _)| t - NEAR_SHIFT)
+}
+
+/// Relative widening of every child box's interval in [`children_crossed`]:
+/// 2γ₃ (γₙ = nε/(1−nε), ε = 2⁻²⁴; pbrt-v4 §6.8.2), as the GPU's
+/// `BOX_SLACK`. Why: a ray through a shared vertex or edge on a box's face
+/// could round out of the box and lose the triangle it meets (the
+/// triangle test is watertight; obvhs's box test is not). Visiting a box
+/// more never changes a hit.
+const BOX_SLACK: f32 = 3.58e-7;
+
+/// obvhs's `CwBvhNode::intersect_ray` with its near cut and each child's
+/// interval widened by [`BOX_SLACK`]: the hit mask of the children whose
+/// box the ray crosses in `[1e-4, tmax]`, four children at a time (glam's
+/// `Vec4` is SSE on x86). The GPU's `intersect_children` computes the
+/// same, in the same order, so both visit the same boxes.
+#[inline(always)]
+fn children_crossed(
+    node: &obvhs::cwbvh::node::CwBvhNode,
+    ray: &obvhs::ray::Ray,
+    oct_inv4: u32,
+    tmax: f32,
+) -> u32 {
+    /// obvhs's `cwbvh::node::EPSILON` (private there): the near cut.
+    const NEAR_CULL: f32 = 1e-4;
+    let adj_inv = node.compute_extent() * ray.inv_direction;
+    let adj_origin = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
+    let negative = ray.direction.cmplt(Vec3A::ZERO);
+    let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+    let quad = |q: &[u8; 8], i: usize| {
+        Vec4::new(
+            q[i * 4] as f32,
+            q[i * 4 + 1] as f32,
+            q[i * 4 + 2] as f32,
+            q[i * 4 + 3] as f32,
+        )
+    };
+    let mut hit_mask = 0u32;
+    for i in 0..2 {
+        let slab = |lo: &[u8; 8], hi: &[u8; 8], axis: usize| {
+            let (lo, hi) = (quad(lo, i), quad(hi, i));
+            let (near, far) = if negative.test(axis) {
+                (hi, lo)
+            } else {
+                (lo, hi)
+            };
+            let (scale, offset) = (adj_inv[axis], adj_origin[axis]);
+            (near * scale + offset, far * scale + offset)
+        };
+        let (near_x, far_x) = slab(&node.child_min_x, &node.child_max_x, 0);
+        let (near_y, far_y) = slab(&node.child_min_y, &node.child_max_y, 1);
+        let (near_z, far_z) = slab(&node.child_min_z, &node.child_max_z, 2);
+        let near = near_x.max(near_y.max(near_z));
+        let far = far_x.min(far_y.min(far_z));
+        let near = (near - near.abs() * BOX_SLACK).max(Vec4::splat(NEAR_CULL));
+        let far = (far + far.abs() * BOX_SLACK).min(Vec4::splat(tmax));
+        let crossed = near.cmple(far).bitmask();
+        for j in 0..4 {
+            if crossed & (1 << j) != 0 {
+                let child = i * 4 + j;
+                let bits = obvhs::cwbvh::node::extract_byte64(child_bits8, child);
+                let index = obvhs::cwbvh::node::extract_byte64(bit_index8, child);
+                hit_mask |= bits << index;
+            }
+        }
+    }
+    hit_mask
 }
 
 impl TriangleBvh {
@@ -145,22 +276,35 @@ impl TriangleBvh {
         })
     }
 
-    /// Nearest hit along `ray` closer than `best.t`; updates `best`.
+    /// Nearest hit along `ray` closer than `best.t`; updates `best`. Of
+    /// hits at the same `t` (a ray through an edge hits both triangles)
+    /// the lower triangle id wins, whichever the traversal meets first: the
+    /// GPU's traversals keep the same one.
     #[inline]
-    fn closest_hit(&self, ray: &obvhs::ray::Ray, best: &mut Hit) {
-        let mut ray = *ray;
-        ray.tmax = ray.tmax.min(best.t);
+    fn closest_hit(&self, ray: &obvhs::ray::Ray, sheared: &ShearedRay, best: &mut Hit) {
+        let mut tmax = ray.tmax.min(best.t);
+        let mut nearest = best.is_hit().then_some((best.t, best.triangle));
         let mut found: Option<(usize, f32, f32, f32)> = None;
-        let mut rayhit = RayHit::none();
-        self.bvh.ray_traverse(ray, &mut rayhit, |r, i| {
-            match intersect_triangle(&self.triangles[i], r) {
-                Some((t, u, v)) if t < r.tmax => {
-                    found = Some((i, t, u, v));
-                    t
+        let mut state = self.bvh.new_traversal(ray.direction);
+        let mut node;
+        obvhs::traverse!(
+            self.bvh,
+            node,
+            state,
+            children_crossed(node, ray, state.oct_inv4, tmax),
+            {
+                let i = state.primitive_id as usize;
+                if let Some((t, u, v)) = sheared.intersect(&self.triangles[i], ray.tmin, tmax) {
+                    let id = self.ids[i];
+                    let tie_won = nearest.is_some_and(|(bt, bid)| t == bt && id < bid);
+                    if t < tmax || tie_won {
+                        nearest = Some((t, id));
+                        found = Some((i, t, u, v));
+                        tmax = t;
+                    }
                 }
-                _ => f32::INFINITY,
             }
-        });
+        );
         if let Some((i, t, u, v)) = found {
             *best = Hit {
                 t,
@@ -195,14 +339,34 @@ impl TriangleBvh {
     /// Whether some triangle of this BVH lies on `ray` (an any-hit query
     /// outside a backend: `trc`'s estimate of the next frame's shadows).
     pub fn occludes(&self, ray: &Ray) -> bool {
-        self.occluded(&to_obvhs_ray(ray))
+        let r = to_obvhs_ray(ray);
+        self.occluded(&r, &ShearedRay::new(&r))
     }
 
     #[inline]
-    fn occluded(&self, ray: &obvhs::ray::Ray) -> bool {
-        !self.bvh.ray_traverse_miss(*ray, |r, i| {
-            intersect_triangle(&self.triangles[i], r).map_or(f32::INFINITY, |h| h.0)
-        })
+    fn occluded(&self, ray: &obvhs::ray::Ray, sheared: &ShearedRay) -> bool {
+        let mut state = self.bvh.new_traversal(ray.direction);
+        let mut node;
+        let mut occluded = false;
+        'traversal: {
+            obvhs::traverse!(
+                self.bvh,
+                node,
+                state,
+                children_crossed(node, ray, state.oct_inv4, ray.tmax),
+                {
+                    let tri = &self.triangles[state.primitive_id as usize];
+                    if sheared
+                        .intersect(tri, ray.tmin, ray.tmax)
+                        .is_some_and(|h| h.0 < ray.tmax)
+                    {
+                        occluded = true;
+                        break 'traversal;
+                    }
+                }
+            );
+        }
+        occluded
     }
 }
 
@@ -280,12 +444,13 @@ impl SceneBvh {
     pub fn closest_hit(&self, ray: &Ray) -> Hit {
         let r = to_obvhs_ray(ray);
         // `hit.t` is the traversal's (shifted) `t` until the end.
+        let sheared = ShearedRay::new(&r);
         let mut hit = Hit::MISS;
         if let Some(part) = &self.static_part {
-            part.closest_hit(&r, &mut hit);
+            part.closest_hit(&r, &sheared, &mut hit);
         }
         if let Some(part) = &self.dynamic_part {
-            part.closest_hit(&r, &mut hit);
+            part.closest_hit(&r, &sheared, &mut hit);
         }
         if hit.is_hit() {
             hit.t -= NEAR_SHIFT;
@@ -295,9 +460,15 @@ impl SceneBvh {
 
     pub fn occluded(&self, ray: &Ray) -> bool {
         let r = to_obvhs_ray(ray);
+        let sheared = ShearedRay::new(&r);
         // Dynamic parts are usually small: test them first.
-        self.dynamic_part.as_ref().is_some_and(|p| p.occluded(&r))
-            || self.static_part.as_ref().is_some_and(|p| p.occluded(&r))
+        self.dynamic_part
+            .as_ref()
+            .is_some_and(|p| p.occluded(&r, &sheared))
+            || self
+                .static_part
+                .as_ref()
+                .is_some_and(|p| p.occluded(&r, &sheared))
     }
 }
 

@@ -17,16 +17,17 @@
 //!   rounding differ.
 //! - whole frames, GPU rays with CPU vs GPU interpolation: the same rays,
 //!   so pixels differ only by that summation order: [`PIXEL_REL_SAME_RAYS`].
-//! - whole frames, `--backend cpu` vs `--backend gpu` with the GPU's BVH2
-//!   layout: the rays differ for records on an edge of the room (their
-//!   gather rays start on the line two walls meet, where two triangles are
-//!   hit at the same t and the two layouts break the tie differently),
-//!   which changes those records' irradiance and the pixels they cover, with either
-//!   interpolation; the other pixels ([`SAME_PIXEL_SHARE`] at least) agree
-//!   within [`PIXEL_REL_SAME_RAYS`] and the frame means within
-//!   [`MEAN_REL_BACKENDS`]. With the default CWBVH layout the rays are the
-//!   CPU's (on lavapipe), so every pixel agrees within
-//!   [`PIXEL_REL_SAME_RAYS`].
+//! - whole frames, `--backend cpu` vs `--backend gpu`: on lavapipe the
+//!   GPU's rays are the CPU's to the bit in both layouts (records on an
+//!   edge of the room start their gather rays on the line two walls meet,
+//!   where two triangles are hit at the same t: both backends keep the
+//!   lower triangle id), so every pixel agrees within
+//!   [`PIXEL_REL_SAME_RAYS`]. A real GPU may fuse multiply-adds, move a t
+//!   by an ulp and so resolve such a tie the other way, which changes an
+//!   edge record's irradiance and the pixels it covers: there the BVH2
+//!   test asks only [`SAME_PIXEL_SHARE`] of the pixels within
+//!   [`PIXEL_REL_SAME_RAYS`] and the frame means within
+//!   [`MEAN_REL_BACKENDS`].
 
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
@@ -56,8 +57,9 @@ const MAX_AMBIGUOUS_SHARE: f64 = 0.01;
 /// Per-pixel relative tolerance, same rays, CPU vs GPU interpolation.
 const PIXEL_REL_SAME_RAYS: f32 = 1e-4;
 /// Least share of the pixels within [`PIXEL_REL_SAME_RAYS`], CPU vs GPU
-/// backend (the others are covered by a record whose gather rays differ):
-/// 85.6–86.3 % on lavapipe.
+/// backend on a real GPU (the others are covered by a record whose gather
+/// rays differ): 85.6–86.3 % on lavapipe when the two layouts broke ties
+/// differently, which they no longer do.
 const SAME_PIXEL_SHARE: f64 = 0.8;
 /// Relative tolerance on the frame mean, CPU vs GPU backend.
 const MEAN_REL_BACKENDS: f64 = 1e-2;
@@ -73,8 +75,8 @@ fn gpu() -> GpuBackend {
     }
 }
 
-/// The GPU backend with the BVH2 layout, whose rays differ from the CPU's
-/// where two triangles are hit at the same t (`tests/gpu_backend.rs`).
+/// The GPU backend with the BVH2 layout: another tree than the CPU's, the
+/// same hits (`tests/gpu_backend.rs`).
 fn gpu_bvh2() -> GpuBackend {
     GpuBackend::with_layout(AdapterPolicy::AllowSoftware, GpuLayout::Bvh2)
         .expect("a wgpu adapter (see gpu())")
@@ -475,25 +477,30 @@ fn radiance_record_frames_with_gpu_interpolation_equal_cpu_interpolation() {
 
 /// `--backend cpu` against `--backend gpu` (GPU rays and GPU interpolation)
 /// with the GPU's BVH2 layout, `ic`, `trc` and `tcg` frames of a built-in
-/// scene.
-/// The two backends' rays differ
-/// where a record sits on an edge of the room: its gather rays start at
-/// the corner, where two walls' triangles are hit at the same t and the
-/// CPU's CWBVH and the GPU's BVH2 take either (`tests/gpu_backend.rs`,
-/// README `--backend`), so such a
-/// record's irradiance differs by tens of percent whichever way the cache
-/// is interpolated (cube-in-box frame 0: 134 records on the CPU, 137 on the
-/// GPU, half of them identical), and so do the pixels it covers. (At
-/// 64×64 with `ic`'s default strata such hits at t ≈ 0 used to blow up a
-/// record's translation gradient and double the frame mean; see
-/// [`edge_records_gathered_on_the_gpu_keep_the_frame_mean`].) Hence:
+/// scene. Records on an edge of the room start their gather rays at the
+/// corner, where two walls' triangles are hit at the same t; both
+/// backends keep the lower id (`tests/gpu_backend.rs`), so on lavapipe,
+/// whose rounding is the CPU's, every pixel agrees. On a real GPU a fused
+/// multiply-add may move a t by an ulp and take the other triangle, and
+/// such a record's irradiance differs by tens of percent (cube-in-box
+/// frame 0, when the layouts broke ties differently: 134 records on the
+/// CPU, 137 on the GPU, half of them identical), and so do the pixels it
+/// covers. (At 64×64 with `ic`'s default strata such hits at t ≈ 0 used
+/// to blow up a record's translation gradient and double the frame mean;
+/// see [`edge_records_gathered_on_the_gpu_keep_the_frame_mean`].) There:
 /// at least [`SAME_PIXEL_SHARE`] of the pixels within
 /// [`PIXEL_REL_SAME_RAYS`], and the frame means within [`MEAN_REL_BACKENDS`].
 #[test]
 fn gpu_backend_frames_agree_with_cpu_backend_frames() {
     for (name, method) in methods() {
         let cpu = render("cube-in-box", method(), Box::new(CpuBackend::new()), 3);
-        let gpu = render("cube-in-box", method(), Box::new(gpu_bvh2()), 3);
+        let bvh2 = gpu_bvh2();
+        let least_share = if bvh2.is_software() {
+            1.0
+        } else {
+            SAME_PIXEL_SHARE
+        };
+        let gpu = render("cube-in-box", method(), Box::new(bvh2), 3);
         for (f, (c, g)) in cpu.iter().zip(&gpu).enumerate() {
             let d = pixel_differences(c, g);
             let same =
@@ -507,7 +514,7 @@ fn gpu_backend_frames_agree_with_cpu_backend_frames() {
                 (gm - cm) / cm
             );
             assert!(
-                same >= SAME_PIXEL_SHARE,
+                same >= least_share,
                 "{name} frame {f}: {same} of the pixels agree"
             );
             assert!(

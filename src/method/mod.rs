@@ -183,24 +183,30 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // through the frame the records are replaced in, so the records
         // it replaces last know their successors; moved normals from the
         // moved triangle (`estimate::moved_normal`), and `next_direct`'s
-        // estimate kept from going negative (2026-11-30).
-        "trc" => 6,
-        // 2: as `trc`'s 4, the records all three gather. 3: as below.
-        "ic" => 3,
+        // estimate kept from going negative (2026-11-30). 7: as every
+        // method's next.
+        "trc" => 7,
+        // 2: as `trc`'s 4, the records all three gather. 3, 4: as below.
+        "ic" => 4,
         // `tcg` 4: samples' ages count past 15 frames (to 1038), so the
         // `2^age` draw tells the oldest apart (2026-11-30). 5: a moving
         // record's samples are tested for stale light from where the
-        // record was when they were shot (`tcg::stale`, 2026-11-30).
-        "tcg" => 5,
+        // record was when they were shot (`tcg::stale`, 2026-11-30). 6: as
+        // every method's next.
+        "tcg" => 6,
         // `movies` 3: a kept link that missed everything covers its whole
         // ray, so an object that later moves far into it is seen
-        // (`global::LinkReach`, 2026-11-30).
-        "movies" => 3,
+        // (`global::LinkReach`, 2026-11-30). 4: as every method's next.
+        "movies" => 4,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with
-        // segments under 1e-3 too.
-        _ => 2,
+        // segments under 1e-3 too. 3 (all methods): rays through an edge
+        // two triangles share hit one of them (the watertight triangle
+        // test, `accel::ShearedRay`, and widened boxes), and of two hits at
+        // the same t the lower triangle id wins on both backends; every
+        // hit's t, u and v are computed anew (2026-11-30).
+        _ => 3,
     }
 }
 

@@ -362,3 +362,107 @@ pub fn tri_bin(positions: [[f32; 3]; 3], indices: [u32; 3]) -> Vec<u8> {
 }
 
 pub const TRI: [[f32; 3]; 3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+
+/// A closed, lumpy icosphere: the 20 faces split `subdivisions` times,
+/// every vertex at `radius` ± 10 % (drawn from `seed`), triangles sharing
+/// their vertices by index. No edge is axis-aligned, and every edge is
+/// shared by two triangles: a ray from inside that leaves is a leak.
+pub fn closed_lumpy_sphere(subdivisions: u32, radius: f32, seed: u64) -> Mesh {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut positions: Vec<Vec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut faces: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdivisions {
+        let mut midpoints = std::collections::HashMap::new();
+        let mut midpoint = |a: u32, b: u32, positions: &mut Vec<Vec3>| {
+            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                let m = (positions[a as usize] + positions[b as usize]).normalize();
+                positions.push(m);
+                positions.len() as u32 - 1
+            })
+        };
+        faces = faces
+            .iter()
+            .flat_map(|&[a, b, c]| {
+                let ab = midpoint(a, b, &mut positions);
+                let bc = midpoint(b, c, &mut positions);
+                let ca = midpoint(c, a, &mut positions);
+                [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+            })
+            .collect();
+    }
+    let mut rng = radcache::sampling::Rng::from_seed(seed, 0);
+    let mut mesh = Mesh::default();
+    for p in positions {
+        let lump = 0.9 + 0.2 * rng.next_f32();
+        mesh.positions.push(p * radius * lump);
+        mesh.normals.push(-p);
+    }
+    mesh.materials = vec![0; faces.len()];
+    mesh.triangles = faces;
+    mesh
+}
+
+/// Rays from `origins` points drawn inside radius `inner` at every vertex
+/// and at a random point of every edge of `snapshot`'s triangles, the
+/// points computed in `f32` from the triangles' own vertices: rays that
+/// pass within rounding of shared edges and vertices.
+pub fn rays_at_edges(
+    snapshot: &radcache::scene::Snapshot,
+    origins: usize,
+    inner: f32,
+    seed: u64,
+) -> Vec<radcache::backend::Ray> {
+    let mut rng = radcache::sampling::Rng::from_seed(seed, 1);
+    let mut rays = Vec::new();
+    for _ in 0..origins {
+        let mut r = || (rng.next_f32() * 2.0 - 1.0) * inner / 3f32.sqrt();
+        let origin = Vec3::new(r(), r(), r());
+        for tri in &snapshot.triangles {
+            for k in 0..3 {
+                let (a, b) = (tri.p[k], tri.p[(k + 1) % 3]);
+                for target in [a, a + (b - a) * rng.next_f32()] {
+                    let dir = (target - origin).normalize();
+                    rays.push(radcache::backend::Ray::new(origin, dir, 0.0, f32::INFINITY));
+                }
+            }
+        }
+    }
+    rays
+}

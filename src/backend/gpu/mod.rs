@@ -32,16 +32,16 @@
 //! merged BVH would be rebuilt and re-uploaded in full every frame. Up to
 //! [`crate::accel::MERGE_STATIC_TRIANGLES`] static triangles the static part
 //! is empty and one BVH holds them all, rebuilt every frame. The split is
-//! exactly the CPU backend's (`src/accel.rs`), which keeps the tie-breaking
-//! between equally near hits identical.
+//! exactly the CPU backend's (`src/accel.rs`); of equally near hits both
+//! keep the lower triangle id, in either BVH.
 //!
 //! Two layouts, chosen at construction ([`GpuBackend::with_layout`], or
 //! `RADCACHE_GPU_BVH=cwbvh|bvh2` for [`GpuBackend::new`]): CWBVH (Ylitie et
 //! al. 2017), the CPU backend's own tree, 80-byte nodes with 8 quantised
 //! child boxes each, traversed in the CPU's exact order; and BVH2, a short
 //! stack loop over 48-byte nodes. obvhs ships no GPU traversal; both are
-//! ours and both return the CPU's hits (CWBVH bit for bit, ties included;
-//! both start rays [`crate::accel::NEAR_SHIFT`] behind their origin as the
+//! ours and both return the CPU's hits (bit for bit where the GPU rounds as
+//! the CPU does, as lavapipe does, ties included; both start rays [`crate::accel::NEAR_SHIFT`] behind their origin as the
 //! CPU does). CWBVH is the default: `cargo bench --bench gpu_rays`
 //! measured it about 2× faster than BVH2 for closest hit and 2.5× for any
 //! hit (README, `--backend`). That was on lavapipe, which runs the shaders
