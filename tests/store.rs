@@ -236,7 +236,11 @@ fn corrupt_value_is_an_error_naming_tree_and_key() {
             .unwrap();
         let msg = err_text(store.frame_records(id, 1));
         assert!(msg.contains("tree `records`"), "{msg}");
-        assert!(msg.contains(&format!("job {id} frame 1")), "{msg}");
+        // The job by the name its user gave it, and its store id.
+        assert!(
+            msg.contains(&format!("job \"j\" (id {id}) frame 1")),
+            "{msg}"
+        );
         assert!(msg.contains(&path.display().to_string()), "{msg}");
         let msg = err_text(store.record_samples(id, 1, 2));
         assert!(msg.contains("tree `records`"), "{msg}");
@@ -246,7 +250,7 @@ fn corrupt_value_is_an_error_naming_tree_and_key() {
         .unwrap();
     let msg = err_text(store.frame_exr(id, 0));
     assert!(
-        msg.contains("tree `frames`") && msg.contains(&format!("job {id} frame 0")),
+        msg.contains("tree `frames`") && msg.contains(&format!("job \"j\" (id {id}) frame 0")),
         "{msg}"
     );
     store
@@ -267,6 +271,7 @@ fn corrupt_value_is_an_error_naming_tree_and_key() {
     assert!(msg.contains("tree `stats`"), "{msg}");
     let msg = err_text(store.frame_sources(id, 0));
     assert!(
+        // The job's own value is damaged above: it is named by its id.
         msg.contains("tree `sources`") && msg.contains(&format!("job {id} frame 0")),
         "{msg}"
     );
@@ -303,6 +308,12 @@ fn a_damaged_sample_log_never_reads_as_other_bytes() {
                 Ok(same) => wrong += u32::from(!same),
                 Err(msg) => {
                     assert!(msg.contains("samples.log"), "{msg}");
+                    if msg.contains("EXR of") {
+                        assert!(
+                            msg.contains(&format!("EXR of job \"j\" (id {id}) frame 1")),
+                            "{msg}"
+                        );
+                    }
                     errors += 1;
                 }
             }
@@ -1627,7 +1638,7 @@ fn trc_resumes_from_stored_state(gradients: TemporalGradients) {
             .unwrap_err()
             .to_string();
     assert!(
-        msg.contains("tree `state`") && msg.contains(&format!("job {id} record {bad_id}")),
+        msg.contains("tree `state`") && msg.contains(&format!("(id {id}) record {bad_id}")),
         "{msg}"
     );
     store.raw_insert("state", &key, &good).unwrap();

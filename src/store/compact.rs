@@ -278,7 +278,7 @@ fn usage(store: &Store, blocks: &[Block]) -> Result<LogUsage, StoreError> {
             return Err(store.log_error(format!(
                 "bytes {}..{stop} of {} {problem}",
                 b.offset,
-                keys::describe(b.owner.key())
+                store.describe_key(b.owner.key())
             )));
         }
         u.unreferenced_ranges += u64::from(b.offset > covered);
@@ -376,7 +376,7 @@ fn copy_raw(store: &Store, b: &Block, new: &mut SampleLog) -> Result<u64, StoreE
     let bytes = store
         .lock_log()
         .read(b.offset, b.len)
-        .map_err(|e| store.log_error(format!("{}: {e}", keys::describe(b.owner.key()))))?;
+        .map_err(|e| store.log_error(format!("{}: {e}", store.describe_key(b.owner.key()))))?;
     new.append(&bytes)
         .map_err(|e| store.log_error(format!("cannot write the new log: {e}")))
 }

@@ -570,7 +570,7 @@ impl Store {
         let in_log = |d: String| {
             self.log_error(format!(
                 "EXR of {} at offset {}: {d}",
-                keys::describe(&key),
+                self.describe_key(&key),
                 v.exr_offset
             ))
         };

@@ -191,18 +191,28 @@ pub fn parse_record(key: &[u8]) -> Option<(u64, u32, u64)> {
 /// A key as text for error messages: UTF-8 names as they are, binary keys
 /// decoded, anything else in hex.
 pub fn describe(key: &[u8]) -> String {
-    if let Some((job, frame, id)) = parse_record(key) {
-        return format!("job {job} frame {frame} record {id}");
+    describe_named(key, |_| None)
+}
+
+/// [`describe`], naming the job of a key by `name_of` its store id where
+/// that knows it (`job "walk" (id 3) frame 14`): users know their jobs by
+/// name, the store keys them by id.
+pub fn describe_named(key: &[u8], name_of: impl Fn(u64) -> Option<String>) -> String {
+    let job = |id: u64| {
+        name_of(id).map_or_else(|| format!("job {id}"), |n| format!("job {n:?} (id {id})"))
+    };
+    if let Some((j, frame, id)) = parse_record(key) {
+        return format!("{} frame {frame} record {id}", job(j));
     }
-    if let Some((job, frame)) = parse_frame(key) {
-        return format!("job {job} frame {frame}");
+    if let Some((j, frame)) = parse_frame(key) {
+        return format!("{} frame {frame}", job(j));
     }
-    if let Some((job, id)) = parse_state_record(key) {
-        return format!("job {job} record {id}");
+    if let Some((j, id)) = parse_state_record(key) {
+        return format!("{} record {id}", job(j));
     }
     match std::str::from_utf8(key) {
         Ok(s) if s.chars().all(|c| !c.is_control()) => format!("{s:?}"),
-        _ if key.len() == 8 => format!("job {}", u64::from_be_bytes(key.try_into().unwrap())),
+        _ if key.len() == 8 => job(u64::from_be_bytes(key.try_into().unwrap())),
         _ => key.iter().map(|b| format!("{b:02x}")).collect(),
     }
 }
@@ -226,5 +236,12 @@ mod tests {
         assert!(state_record(7, u64::MAX)[..] < state_head(8)[..]);
         assert_eq!(describe(&state_record(3, 5)), "job 3 record 5");
         assert_eq!(describe(&state_head(3)), "job 3");
+        let walk = |id: u64| (id == 3).then(|| "walk".to_string());
+        assert_eq!(
+            describe_named(&frame(3, 5), walk),
+            "job \"walk\" (id 3) frame 5"
+        );
+        assert_eq!(describe_named(&state_head(3), walk), "job \"walk\" (id 3)");
+        assert_eq!(describe_named(&frame(4, 5), walk), "job 4 frame 5");
     }
 }

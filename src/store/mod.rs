@@ -70,7 +70,7 @@ use rkyv::rancor;
 use rkyv::ser::allocator::ArenaHandle;
 use rkyv::util::AlignedVec;
 use samples::{compress, SampleLog};
-use schema::{FrameRecordsValue, RecordBlock};
+use schema::{FrameRecordsValue, JobValue, RecordBlock};
 use std::path::{Path, PathBuf};
 
 pub use frames::{FrameCommit, RecordCommit, StateCommit};
@@ -399,11 +399,26 @@ impl Store {
         decode_value(bytes).map_err(|e| self.corrupt(tree, key, e))
     }
 
+    /// `key` as an error names it, its job by name ([`keys::describe_named`]).
+    pub(crate) fn describe_key(&self, key: &[u8]) -> String {
+        keys::describe_named(key, |id| self.job_name_of(id))
+    }
+
+    /// The name of the job of store id `id`, for an error message: read
+    /// leniently, passing over a job value that does not decode (which
+    /// the error being described may be about).
+    fn job_name_of(&self, id: u64) -> Option<String> {
+        self.jobs.iter().flatten().find_map(|(_, v)| {
+            let job: JobValue = decode_value(&v).ok()?;
+            (job.id == id).then(|| job.name.clone())
+        })
+    }
+
     fn corrupt(&self, tree: &'static str, key: &[u8], detail: impl ToString) -> StoreError {
         StoreError::Corrupt {
             path: self.path.clone(),
             tree,
-            key: keys::describe(key),
+            key: self.describe_key(key),
             detail: detail.to_string(),
         }
     }
