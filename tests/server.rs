@@ -192,6 +192,52 @@ fn job_renders_and_frames_match_the_cli() {
     assert!(text.contains("radcache_jobs{state=\"done\"} 1"), "{text}");
 }
 
+/// A job's `fps` and `same_pattern` are the CLI's `--fps` and
+/// `--same-pattern` (a scene keyed at another rate than 24 fps, reference
+/// sequences for flicker), and the job shows them.
+#[test]
+fn a_jobs_frame_rate_and_same_pattern_are_the_clis_flags() {
+    let (dir, scenes) = workspace();
+    let server = start(&dir.path().join("db"), &scenes);
+    let id = create_job(
+        &server,
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"16x16","spp":1,
+            "fps":12,"same_pattern":true}"#,
+    );
+    let job = wait_done(&server, &id);
+    assert_eq!(
+        (&job["fps"], &job["same_pattern"]),
+        (&12.0.into(), &true.into()),
+        "{job}"
+    );
+    let out = dir.path().join("cli");
+    render_with_cli(
+        &[
+            "--method",
+            "path",
+            "--frames",
+            "0..2",
+            "--fps",
+            "12",
+            "--same-pattern",
+        ],
+        &["--size", "16x16", "--spp", "1"],
+        &out,
+    );
+    assert_frames_equal_cli(&server, &id, 2, &out);
+    for fps in ["0", "-1", "1e9"] {
+        let body = format!(
+            r#"{{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"8x8","fps":{fps}}}"#
+        );
+        let (status, err) = http(&server, "POST", "/api/jobs", &body);
+        assert_eq!(status, 400, "fps {fps}");
+        assert!(
+            json(&err)["detail"].to_string().contains("fps"),
+            "fps {fps}"
+        );
+    }
+}
+
 /// A job's `settings` are the method's settings by the bench's names: the
 /// frames are those of the CLI given the same settings as flags, and the
 /// job shows them.
@@ -366,6 +412,18 @@ fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
     check("GET", "/api/jobs/job-1/frames/0.png", "", 404);
     check("POST", "/api/jobs/job-7/cancel", "", 404);
     check("POST", "/api/jobs", "{not json", 400);
+    // Routes that take no query parameters refuse them, as `/records`
+    // refuses unknown ones, rather than quietly answer something else.
+    for path in [
+        "/api/jobs?state=done",
+        "/api/jobs/job-1/stats?from=3",
+        "/api/jobs/job-1/events?since=2",
+        "/metrics?job=job-1",
+    ] {
+        check("GET", path, "", 400);
+        let detail = json(&http(&server, "GET", path, "").1)["detail"].to_string();
+        assert!(detail.contains("this route takes none"), "{path}: {detail}");
+    }
     let job = |scene: &str, frames: &str| {
         format!(
             r#"{{"scene":"{scene}","method":"path","frames":"{frames}","size":"16x16","spp":1}}"#

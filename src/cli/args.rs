@@ -190,6 +190,9 @@ pub struct RenderArgs {
     /// With --job: start the job over, dropping its stored frames: needed when its scene or settings changed (else an error), and the way out for a job whose stored frames are damaged.
     #[arg(long, requires = "job")]
     pub force: bool,
+    /// Render even where the frame's estimated peak memory (a lower bound: what every pixel and sample takes, whatever the scene) is over the memory available, which is otherwise refused before anything renders.
+    #[arg(long)]
+    pub no_memory_check: bool,
     /// No progress bar.
     #[arg(long, short)]
     pub quiet: bool,
@@ -369,6 +372,9 @@ pub struct BenchArgs {
     /// (`cpu,gpu` compares them in one invocation; the reference uses auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "auto")]
     pub backends: Vec<BackendArg>,
+    /// Run even where a run's estimated peak memory at --size (a lower bound, as for `render`) is over the memory available, which is otherwise refused before anything renders.
+    #[arg(long)]
+    pub no_memory_check: bool,
 }
 
 fn parse_bench_scene(s: &str) -> Result<SceneSource, String> {
@@ -454,8 +460,7 @@ fn parse_frame_number(s: &str) -> Result<u32, String> {
 
 fn parse_fps(s: &str) -> Result<f32, String> {
     let fps: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
-    // Frame f is at t = f / fps: past these, t overflows or stops moving.
-    if !(0.001..=100_000.0).contains(&fps) {
+    if !crate::render::FPS_RANGE.contains(&fps) {
         return Err(format!("fps must lie in 0.001..=100000, got {s}"));
     }
     Ok(fps)

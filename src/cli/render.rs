@@ -14,7 +14,7 @@ use crate::method::movies::MoviesSettings;
 use crate::method::path::PathSettings;
 use crate::method::tcg::TcgSettings;
 use crate::method::trc::{TemporalGradients, TrcSettings};
-use crate::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource};
+use crate::render::{self, memory, FrameSettings, MethodSettings, Renderer, SceneSource};
 use crate::store::{self, Store};
 use anyhow::{bail, Result};
 use std::path::PathBuf;
@@ -32,6 +32,9 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
     };
     let scene = source.load()?;
     let method = render_method(&args)?;
+    if !args.no_memory_check {
+        check_memory(&args, &method, &scene)?;
+    }
     let backend = render::make_backend(backend_choice(args.backend))?;
     let settings = FrameSettings {
         width: args.size.0,
@@ -109,6 +112,24 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         args.frames.len(),
         args.out.display()
     );
+}
+
+/// Refuses, before anything renders, a render whose estimated peak memory
+/// is over what this process may take: it would end in an abort or the
+/// OOM killer, maybe hours in.
+fn check_memory(
+    args: &RenderArgs,
+    method: &MethodSettings,
+    scene: &crate::scene::Scene,
+) -> Result<()> {
+    let triangles = scene.objects.iter().map(|o| o.mesh.triangles.len() as u64);
+    let available = memory::available_bytes();
+    memory::check_fits(method, args.size, triangles.sum(), available).map_err(|too_large| {
+        anyhow::anyhow!(
+            "{too_large}; render a smaller --size or fewer --spp, or pass --no-memory-check \
+             to try anyway"
+        )
+    })
 }
 
 /// Notes (not warnings: the render is right for what was asked) where

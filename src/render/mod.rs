@@ -25,6 +25,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 mod job;
+pub mod memory;
 
 pub use job::{
     job_spec, job_spec_confined, job_spec_of, scene_identity, scene_identity_confined, StoreJob,
@@ -161,6 +162,10 @@ pub fn make_backend(choice: BackendChoice) -> Result<Box<dyn RayBackend>> {
         },
     }
 }
+
+/// The frame rates a render takes (`--fps`, a job's `fps`): frame f is at
+/// t = f / fps, and past these t overflows or stops moving.
+pub const FPS_RANGE: std::ops::RangeInclusive<f32> = 0.001..=100_000.0;
 
 /// Settings of a render that do not depend on the method.
 #[derive(Clone, Debug, PartialEq)]

@@ -33,6 +33,8 @@ fn job_json_under(root: Option<&std::path::Path>, job: &Job) -> Value {
         "size": format!("{}x{}", job.request.settings.width, job.request.settings.height),
         "spp": job.request.method.spp(),
         "seed": job.request.settings.seed,
+        "fps": job.request.settings.fps,
+        "same_pattern": job.request.settings.same_pattern,
         "settings": crate::method::settings::named_settings(&job.request.method),
         "error": job.error.as_deref().map(|e| super::without_dir(root, e)),
         "seconds_per_frame": (job.run_frames > 0).then(|| job.run_seconds / job.run_frames as f64),

@@ -584,10 +584,11 @@ pub fn parse_job_id(id: &str) -> Option<u64> {
 
 /// The API router over `state`.
 pub fn router(state: Arc<AppState>) -> Router {
-    let routes = Router::new()
-        .route("/", get(web::index))
-        .route("/web/{file}", get(web::file))
-        .route("/web/charts/{file}", get(web::chart))
+    // The API's routes that take no query parameters refuse them (but the
+    // token), as those that take some refuse unknown ones
+    // (`records::query_params`): `/stats?from=10` is a 400, not all of
+    // the statistics quietly sent.
+    let without_query = Router::new()
         .route("/api/charts", get(web::charts))
         .route("/api/openapi.json", get(web::openapi))
         .route("/api/jobs", post(jobs::create).get(jobs::list))
@@ -596,11 +597,22 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/api/jobs/{id}/resume", post(jobs::resume))
         .route("/api/jobs/{id}/frames/{file}", get(frames::frame))
         .route("/api/jobs/{id}/stats", get(frames::stats))
-        .route("/api/jobs/{id}/stream", get(stream::frames))
         .route("/api/jobs/{id}/events", get(stream::events))
+        .route("/metrics", get(frames::metrics))
+        .route_layer(middleware::from_fn(refuse_query_params));
+    // `n`: a query the dashboard adds to tell a stream's URL from an
+    // earlier one's, which a browser may answer with the image it has.
+    let stream = Router::new()
+        .route("/api/jobs/{id}/stream", get(stream::frames))
+        .route_layer(middleware::from_fn(stream_query_params));
+    let routes = Router::new()
+        .route("/", get(web::index))
+        .route("/web/{file}", get(web::file))
+        .route("/web/charts/{file}", get(web::chart))
         .route("/api/jobs/{id}/records", get(records::records))
         .route("/api/jobs/{id}/movies", get(movies::movies))
-        .route("/metrics", get(frames::metrics))
+        .merge(without_query)
+        .merge(stream)
         .fallback(|| async { ApiError::not_found("no such route".into()) })
         .layer(DefaultBodyLimit::max(MAX_BODY_BYTES))
         .layer(middleware::from_fn_with_state(state.clone(), read_bodies))
@@ -651,6 +663,28 @@ async fn json_errors(response: Response) -> Response {
         response.headers_mut().insert(ALLOW, allow);
     }
     response
+}
+
+/// A 400 for a request to a route that takes no query parameters that
+/// carries one other than `token`.
+async fn refuse_query_params(req: Request, next: Next) -> Response {
+    only_query_params(&[], req, next).await
+}
+
+/// A 400 for a request to `/stream` with a query parameter other than `n`
+/// (ignored) and `token`.
+async fn stream_query_params(req: Request, next: Next) -> Response {
+    only_query_params(&["n"], req, next).await
+}
+
+/// Runs `req` if its query parameters are among `known` (and `token`),
+/// each given once ([`records::query_params`]); a 400 otherwise.
+async fn only_query_params(known: &[&str], req: Request, next: Next) -> Response {
+    let query = axum::extract::Query::try_from_uri(req.uri());
+    match records::query_params(query, known) {
+        Ok(_) => next.run(req).await,
+        Err(e) => e.into_response(),
+    }
 }
 
 /// With a token configured, every request must carry it as

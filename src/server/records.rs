@@ -113,9 +113,12 @@ pub(super) fn query_params(
     let mut params = HashMap::with_capacity(pairs.len());
     for (key, value) in pairs {
         if key != "token" && !known.contains(&key.as_str()) {
+            let takes = match known {
+                [] => "none".to_string(),
+                names => names.join(", "),
+            };
             return Err(ApiError::bad_request(format!(
-                "unknown query parameter {key:?}; this route takes {}",
-                known.join(", ")
+                "unknown query parameter {key:?}; this route takes {takes}"
             )));
         }
         if params.contains_key(&key) {

@@ -3,7 +3,7 @@
 
 use super::ApiError;
 use crate::method::settings::{limits, method_settings};
-use crate::render::{self, FrameSettings, MethodSettings, SceneSource};
+use crate::render::{self, memory, FrameSettings, MethodSettings, SceneSource};
 use crate::store::schema::JobValue;
 use serde::Deserialize;
 use std::ops::Range;
@@ -43,6 +43,10 @@ struct Body {
     size: String,
     spp: Option<u32>,
     seed: Option<u64>,
+    /// Frames per second (`radcache render --fps`).
+    fps: Option<f32>,
+    /// Every frame draws the same pixel streams (`--same-pattern`).
+    same_pattern: Option<bool>,
     /// The method's settings by the names `radcache bench --methods`
     /// takes (`{"max_life": 5, "at": 0.02}`); the rest keep their defaults.
     settings: Option<SettingsObject>,
@@ -90,8 +94,20 @@ pub struct JobRequest {
 }
 
 impl JobRequest {
-    /// Parses and checks a request body; scene files must lie under `scenes`.
+    /// Parses and checks a request body; scene files must lie under
+    /// `scenes`. A job whose frames need more memory than the server's
+    /// next job may take (`memory_for_the_next_job`) is refused.
     pub fn parse(body: &[u8], scenes: Option<&Path>) -> Result<JobRequest, ApiError> {
+        Self::parse_within(body, scenes, memory_for_the_next_job())
+    }
+
+    /// [`Self::parse`] with `available` bytes of memory for the job
+    /// (`None`: unknown, not checked).
+    pub fn parse_within(
+        body: &[u8],
+        scenes: Option<&Path>,
+        available: Option<u64>,
+    ) -> Result<JobRequest, ApiError> {
         let malformed = |e: String| ApiError::bad_request(format!("malformed job request: {e}"));
         let value: serde_json::Value =
             serde_json::from_slice(body).map_err(|e| malformed(e.to_string()))?;
@@ -109,10 +125,13 @@ impl JobRequest {
         let method = parse_method(&b.method, b.settings.as_ref(), b.spp)?;
         check_frame_samples(width, height, method.spp())?;
         check_frame_gather(width, height, &method)?;
+        check_frame_memory(width, height, &method, available)?;
         let settings = FrameSettings {
             width,
             height,
+            fps: parse_fps(b.fps)?,
             seed: b.seed.unwrap_or(0),
+            same_pattern: b.same_pattern.unwrap_or(false),
             ..FrameSettings::default()
         };
         Ok(JobRequest {
@@ -151,6 +170,22 @@ impl JobRequest {
     pub fn frames_total(&self) -> u32 {
         self.frames.len() as u32
     }
+}
+
+/// A request's `fps` within [`crate::render::FPS_RANGE`], or the default.
+fn parse_fps(fps: Option<f32>) -> Result<f32, ApiError> {
+    let Some(fps) = fps else {
+        return Ok(crate::scene::DEFAULT_FPS);
+    };
+    let range = crate::render::FPS_RANGE;
+    if !range.contains(&fps) {
+        return Err(ApiError::bad_request(format!(
+            "fps {fps} is out of range ({}..={})",
+            range.start(),
+            range.end()
+        )));
+    }
+    Ok(fps)
 }
 
 /// The method named `name` with `settings` (name-value pairs, as the
@@ -226,6 +261,32 @@ fn check_frame_gather(width: u32, height: u32, method: &MethodSettings) -> Resul
         )));
     }
     Ok(())
+}
+
+/// A frame's estimated peak memory ([`memory::peak_bytes`]; the scene's
+/// triangles uncounted, as it is loaded after) within `available` bytes:
+/// beyond them the render would end in an abort or the OOM killer, and
+/// take the server, and every job it serves, down with it.
+fn check_frame_memory(
+    width: u32,
+    height: u32,
+    method: &MethodSettings,
+    available: Option<u64>,
+) -> Result<(), ApiError> {
+    memory::check_fits(method, (width, height), 0, available).map_err(|too_large| {
+        ApiError::bad_request(format!(
+            "{too_large} to this server; ask for a smaller size or fewer spp"
+        ))
+    })
+}
+
+/// The memory a job submitted now may take when it renders: what this
+/// process may still take ([`memory::available_bytes`]) and what it holds
+/// now, as jobs render one at a time and the one rendering now, most of
+/// what it holds, lets go of it before the next starts.
+fn memory_for_the_next_job() -> Option<u64> {
+    let held = memory::resident_bytes().unwrap_or(0);
+    memory::available_bytes().map(|available| available.saturating_add(held))
 }
 
 /// The gather hemisphere of a method's records (`None` for `path`).
@@ -349,7 +410,7 @@ mod tests {
             let body = format!(
                 r#"{{"scene":"builtin:cube-in-box","method":"{method}","frames":"0..1","size":"{size}"{settings}}}"#
             );
-            JobRequest::parse(body.as_bytes(), None).map_err(|e| e.detail)
+            JobRequest::parse_within(body.as_bytes(), None, None).map_err(|e| e.detail)
         };
         for method in ["ic", "trc", "tcg"] {
             assert!(parse(method, "1920x1080", None).is_ok(), "{method}");
@@ -371,6 +432,40 @@ mod tests {
             );
         }
         assert!(parse("path", "4096x4096", None).is_ok());
+    }
+
+    /// A job whose frame would need more memory than the server has for
+    /// it is refused as a bad request that says how much each; one that
+    /// fits, or where the memory is unknown, is taken.
+    #[test]
+    fn a_job_over_the_memory_available_is_refused() {
+        let parse = |method: &str, size: &str, available: Option<u64>| {
+            let body = format!(
+                r#"{{"scene":"builtin:cube-in-box","method":"{method}","frames":"0..1","size":"{size}"}}"#
+            );
+            JobRequest::parse_within(body.as_bytes(), None, available)
+        };
+        let gib = 1u64 << 30;
+        let err = parse("trc", "1920x1080", Some(gib)).unwrap_err();
+        assert_eq!(err.status, axum::http::StatusCode::BAD_REQUEST);
+        let trc = parse("trc", "8x8", None).unwrap().method;
+        let need = memory::peak_bytes(&trc, 1920, 1080, 0);
+        assert_eq!(
+            err.detail,
+            format!(
+                "a 1920x1080 trc render at 16 spp needs at least {} of memory at its peak \
+                 (estimated), and 1.0 GiB is available to this server; ask for a smaller size \
+                 or fewer spp",
+                memory::bytes_text(need)
+            )
+        );
+        for method in ["ic", "tcg", "movies"] {
+            assert!(parse(method, "1920x1080", Some(gib)).is_err(), "{method}");
+        }
+        assert!(parse("trc", "1920x1080", Some(64 * gib)).is_ok());
+        assert!(parse("trc", "1920x1080", None).is_ok());
+        assert!(parse("path", "1920x1080", Some(gib)).is_ok());
+        assert!(parse("trc", "256x256", Some(gib)).is_ok());
     }
 
     /// Stored settings come back as they were; a gather no job can have

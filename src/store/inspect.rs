@@ -62,6 +62,9 @@ pub struct JobReport {
     pub spp: u32,
     pub fps: f32,
     pub seed: u64,
+    /// Whether every frame draws its pixel samples from the same streams
+    /// (`--same-pattern`): a resume checks it, as the other settings.
+    pub same_pattern: bool,
     /// Frame range of the last render, `START..END`.
     pub frames: String,
     pub frames_done: u32,
@@ -431,6 +434,7 @@ impl JobReport {
             spp: j.spp,
             fps: j.fps,
             seed: j.seed,
+            same_pattern: j.same_pattern,
             frames: format!("{}..{}", j.frame_start, j.frame_end),
             frames_done: j.frames_done,
             last_frame: j.last_frame,
@@ -628,7 +632,7 @@ fn null_when_unset<S: serde::Serializer>(mean_lifespan: &f64, out: S) -> Result<
 fn job_text(s: &mut String, j: &JobReport) {
     let _ = writeln!(
         s,
-        "\njob {:?} (id {}): {} [{}], {} {} spp {}, fps {}, seed {}, frames {} — {} done, last {}",
+        "\njob {:?} (id {}): {} [{}], {} {} spp {}, fps {}, seed {}{}, frames {} — {} done, last {}",
         j.name,
         j.id,
         j.scene,
@@ -638,6 +642,7 @@ fn job_text(s: &mut String, j: &JobReport) {
         j.spp,
         j.fps,
         j.seed,
+        if j.same_pattern { ", same pattern" } else { "" },
         j.frames,
         j.frames_done,
         j.last_frame.map_or("-".into(), |f| f.to_string()),
