@@ -34,8 +34,9 @@ fn assert_refused(code: i32, stderr: &str, flag_hint: &str) {
     assert!(!stderr.contains("memory allocation"), "{stderr}");
 }
 
-/// 16384² `trc` at 65536 spp needs hundreds of TiB by the estimate: it is
-/// refused at once, whatever the machine, and nothing is written.
+/// 16384² `movies` at 65536 spp needs a petabyte by the estimate (its
+/// item buffer holds every camera sample of the frame): it is refused at
+/// once, whatever the machine, and nothing is written.
 #[cfg(target_os = "linux")]
 #[test]
 fn a_render_past_the_memory_available_is_refused_before_it_starts() {
@@ -45,7 +46,7 @@ fn a_render_past_the_memory_available_is_refused_before_it_starts() {
     let (code, stderr) = run(&mut radcache(&[
         "render",
         "--method",
-        "trc",
+        "movies",
         "--size",
         "16384x16384",
         "--spp",
@@ -62,7 +63,7 @@ fn a_render_past_the_memory_available_is_refused_before_it_starts() {
         "render a smaller --size or fewer --spp, or pass --no-memory-check",
     );
     assert!(
-        stderr.contains("a 16384x16384 trc render at 65536 spp needs at least"),
+        stderr.contains("a 16384x16384 movies render at 65536 spp needs at least"),
         "{stderr}"
     );
     assert!(started.elapsed() < Duration::from_secs(60));
@@ -70,7 +71,7 @@ fn a_render_past_the_memory_available_is_refused_before_it_starts() {
 }
 
 /// Under `ulimit -v` the room left in the address space is what is
-/// available: a 2048² `ic` frame (3.3 GiB by the estimate) is refused
+/// available: an 8192² `ic` frame (7.3 GiB by the estimate) is refused
 /// under 2 GB, where it would otherwise end in an allocation failure.
 #[cfg(target_os = "linux")]
 #[test]
@@ -85,7 +86,7 @@ fn a_render_past_the_address_space_limit_is_refused() {
         "--method",
         "ic",
         "--size",
-        "2048x2048",
+        "8192x8192",
         "--frames",
         "0..1",
         "--backend",
@@ -158,7 +159,7 @@ fn a_bench_run_past_the_memory_available_is_refused_before_it_starts() {
         "16384x16384",
         "--methods",
         "path",
-        "trc:spp=65536",
+        "movies:spp=65536",
         "--frames",
         "0..1",
         "-q",
@@ -171,7 +172,7 @@ fn a_bench_run_past_the_memory_available_is_refused_before_it_starts() {
         "bench a smaller --size, or pass --no-memory-check",
     );
     assert!(
-        stderr.contains("16384x16384 trc render at 65536 spp"),
+        stderr.contains("16384x16384 movies render at 65536 spp"),
         "{stderr}"
     );
     assert!(!out.exists(), "nothing is written");

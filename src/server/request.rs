@@ -446,7 +446,8 @@ mod tests {
             JobRequest::parse_within(body.as_bytes(), None, available)
         };
         let gib = 1u64 << 30;
-        let err = parse("trc", "1920x1080", Some(gib)).unwrap_err();
+        let small = 128u64 << 20;
+        let err = parse("trc", "1920x1080", Some(small)).unwrap_err();
         assert_eq!(err.status, axum::http::StatusCode::BAD_REQUEST);
         let trc = parse("trc", "8x8", None).unwrap().method;
         let need = memory::peak_bytes(&trc, 1920, 1080, 0);
@@ -454,18 +455,18 @@ mod tests {
             err.detail,
             format!(
                 "a 1920x1080 trc render at 16 spp needs at least {} of memory at its peak \
-                 (estimated), and 1.0 GiB is available to this server; ask for a smaller size \
+                 (estimated), and 128 MiB is available to this server; ask for a smaller size \
                  or fewer spp",
                 memory::bytes_text(need)
             )
         );
         for method in ["ic", "tcg", "movies"] {
-            assert!(parse(method, "1920x1080", Some(gib)).is_err(), "{method}");
+            assert!(parse(method, "1920x1080", Some(small)).is_err(), "{method}");
         }
         assert!(parse("trc", "1920x1080", Some(64 * gib)).is_ok());
         assert!(parse("trc", "1920x1080", None).is_ok());
-        assert!(parse("path", "1920x1080", Some(gib)).is_ok());
-        assert!(parse("trc", "256x256", Some(gib)).is_ok());
+        assert!(parse("path", "1920x1080", Some(small)).is_ok());
+        assert!(parse("trc", "64x64", Some(small)).is_ok());
     }
 
     /// Stored settings come back as they were; a gather no job can have

@@ -307,9 +307,13 @@ impl TileKept {
         let PrimarySamples {
             mut rays, mut hits, ..
         } = primary;
-        rays.truncate(n);
-        hits.truncate(n);
-        shadows.truncate(n);
+        // Shrunk, not only truncated: a tile's rays and hits stay until the
+        // pass ends, and where none of them are kept (`ic`, a tile where
+        // something moved) their capacity held 52 bytes a sample for
+        // nothing: most of `ic`'s peak (at 1024 × 1024 and 16 spp, 830 MiB).
+        keep_first(&mut rays, n);
+        keep_first(&mut hits, n);
+        keep_first(&mut shadows, n);
         let mut lookup_of = lookup_of.unwrap_or_else(|| vec![NO_LOOKUP; n]);
         lookup_of.truncate(n);
         let coverage = if n > 0 {
@@ -333,4 +337,10 @@ impl TileKept {
             queries_taken: 0,
         }
     }
+}
+
+/// `v` cut to its first `n` elements, its spare capacity freed.
+fn keep_first<T>(v: &mut Vec<T>, n: usize) {
+    v.truncate(n);
+    v.shrink_to_fit();
 }
