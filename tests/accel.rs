@@ -820,17 +820,7 @@ fn walls_met_nearer_than_the_traversals_cut_are_hit() {
 /// box's face lost their leaf.
 #[test]
 fn rays_through_shared_edges_never_leave_a_closed_mesh() {
-    let mesh = common::closed_lumpy_sphere(3, 5.0, 11);
-    let scene = common::scene(
-        vec![mesh],
-        vec![Material::diffuse("grey", Vec3::splat(0.5))],
-        vec![],
-        Vec3::ZERO,
-        -Vec3::Z,
-        1.0,
-        vec![],
-    );
-    let snap = scene.snapshot(0.0);
+    let snap = common::closed_lumpy_sphere_snapshot();
     let rays = common::rays_at_edges(&snap, 4, 2.0, 5);
     let mut backend = CpuBackend::new();
     backend.set_geometry(&snap);

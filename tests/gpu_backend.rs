@@ -453,17 +453,7 @@ fn gpu_cwbvh_matches_cpu_on_every_builtin_scene() {
 /// adapter finds the CPU's hits to the bit, ties included, in both layouts.
 #[test]
 fn gpu_rays_through_shared_edges_never_leave_a_closed_mesh() {
-    let mesh = common::closed_lumpy_sphere(3, 5.0, 11);
-    let s = scene(
-        vec![mesh],
-        vec![Material::diffuse("grey", Vec3::splat(0.5))],
-        vec![],
-        Vec3::ZERO,
-        -Vec3::Z,
-        1.0,
-        vec![],
-    );
-    let snap = s.snapshot(0.0);
+    let snap = common::closed_lumpy_sphere_snapshot();
     let rays = common::rays_at_edges(&snap, 2, 2.0, 6);
     let mut cpu = CpuBackend::new();
     cpu.set_geometry(&snap);

@@ -439,6 +439,21 @@ pub fn closed_lumpy_sphere(subdivisions: u32, radius: f32, seed: u64) -> Mesh {
     mesh
 }
 
+/// The one frame of a scene of [`closed_lumpy_sphere`] (3 subdivisions,
+/// radius 5, 1,280 triangles) around the origin.
+pub fn closed_lumpy_sphere_snapshot() -> radcache::scene::Snapshot {
+    let scene = scene(
+        vec![closed_lumpy_sphere(3, 5.0, 11)],
+        vec![Material::diffuse("grey", Vec3::splat(0.5))],
+        vec![],
+        Vec3::ZERO,
+        -Vec3::Z,
+        1.0,
+        vec![],
+    );
+    scene.snapshot(0.0)
+}
+
 /// Rays from `origins` points drawn inside radius `inner` at every vertex
 /// and at a random point of every edge of `snapshot`'s triangles, the
 /// points computed in `f32` from the triangles' own vertices: rays that
