@@ -469,6 +469,17 @@ fn interrupt_once_written(
     file: &std::path::Path,
     settle: std::time::Duration,
 ) -> std::process::Output {
+    interrupt_once_written_times(args, file, settle, 1)
+}
+
+/// [`interrupt_once_written`] with `times` SIGINTs, 200 ms apart.
+#[cfg(unix)]
+fn interrupt_once_written_times(
+    args: &[&str],
+    file: &std::path::Path,
+    settle: std::time::Duration,
+    times: u32,
+) -> std::process::Output {
     use std::time::{Duration, Instant};
     let child = Command::new(env!("CARGO_BIN_EXE_radcache"))
         .args(args)
@@ -486,9 +497,52 @@ fn interrupt_once_written(
     }
     std::thread::sleep(settle);
     let pid = child.id().to_string();
-    let kill = Command::new("kill").args(["-INT", &pid]).status().unwrap();
-    assert!(kill.success());
+    for k in 0..times {
+        if k > 0 {
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        let kill = Command::new("kill").args(["-INT", &pid]).status().unwrap();
+        assert!(kill.success());
+    }
     child.wait_with_output().unwrap()
+}
+
+/// A second Ctrl-C stops a render at once (status 130) and says what it
+/// leaves: the frame in progress is lost, those written are kept.
+#[cfg(unix)]
+#[test]
+fn a_second_ctrl_c_stops_at_once_and_says_so() {
+    use std::time::Duration;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    // Frames of a second or more each: the second Ctrl-C comes while one
+    // is in progress.
+    let args = [
+        "render",
+        "--backend",
+        "cpu",
+        "--method",
+        "path",
+        "--frames",
+        "0..50",
+        "--size",
+        "256x256",
+        "--spp",
+        "64",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ];
+    let output =
+        interrupt_once_written_times(&args, &out.join("frame_0000.exr"), Duration::ZERO, 2);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("Ctrl-C again to stop now"), "{stderr}");
+    assert!(
+        stderr.contains("stopped at once: the frame in progress is lost"),
+        "{stderr}"
+    );
+    assert!(out.join("frame_0000.exr").exists());
 }
 
 /// Ctrl-C (SIGINT) stops a render once the frame in progress is written

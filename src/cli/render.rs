@@ -191,6 +191,9 @@ fn stop_on_ctrl_c() -> Arc<AtomicBool> {
                 "\nstopping once the frame in progress is written (Ctrl-C again to stop now)"
             );
             ctrl_c.recv().await;
+            eprintln!(
+                "stopped at once: the frame in progress is lost; frames already written are kept"
+            );
             std::process::exit(130);
         })
     };
