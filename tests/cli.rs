@@ -1168,6 +1168,14 @@ fn negative_numbers_are_out_of_range_not_flags() {
             &["serve", "--client-timeout", "-5"],
             "invalid value '-5' for '--client-timeout <CLIENT_TIMEOUT>'",
         ),
+        (
+            &["render", "--frames", "-1..5"],
+            "invalid value '-1..5' for '--frames <FRAMES>': frame range '-1..5': '-1' is not a frame number",
+        ),
+        (
+            &["bench", "--frames", "-3..-1"],
+            "invalid value '-3..-1' for '--frames <FRAMES>'",
+        ),
     ];
     for (args, expected) in cases {
         let (code, _, stderr) = radcache(args);

@@ -146,7 +146,7 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value = "trc")]
     pub method: MethodName,
     /// Half-open frame range START..END (0..24 is frames 0 to 23).
-    #[arg(long, default_value = "0..24", value_parser = parse_frames)]
+    #[arg(long, default_value = "0..24", allow_hyphen_values = true, value_parser = parse_frames)]
     pub frames: Range<u32>,
     /// Image size WxH.
     #[arg(long, default_value = "256x256", value_parser = parse_size)]
@@ -331,7 +331,7 @@ pub struct BenchArgs {
     #[arg(long, num_args = 1.., default_values = bench::DEFAULT_METHODS, value_parser = parse_bench_method)]
     pub methods: Vec<bench::MethodSweep>,
     /// Half-open frame range START..END.
-    #[arg(long, default_value = "0..24", value_parser = parse_frames)]
+    #[arg(long, default_value = "0..24", allow_hyphen_values = true, value_parser = parse_frames)]
     pub frames: Range<u32>,
     /// Image size WxH.
     #[arg(long, default_value = "64x64", value_parser = parse_size)]
