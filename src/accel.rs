@@ -104,7 +104,7 @@ pub struct ShearedRay {
     /// The axes `kx`, `ky`, `kz` of the ray's space (`kz`: the direction's
     /// largest component).
     axes: [usize; 3],
-    /// `Sx`, `Sy`, `Sz` of the paper's shear (Eq. 3).
+    /// `Sx`, `Sy`, `Sz` of the paper's shear.
     shear: [f32; 3],
 }
 
@@ -134,7 +134,7 @@ impl ShearedRay {
 
     /// Where the ray crosses `tri`: `(t, u, v)` with the hit at
     /// `v0·(1−u−v) + v1·u + v2·v`, or `None` outside `[tmin, tmax]`. Rays
-    /// along the plane of the triangle never hit. The paper's Eq. 4–8
+    /// along the plane of the triangle never hit. The paper's test (§3)
     /// without back-face culling.
     #[inline(always)]
     pub fn intersect(&self, tri: &ObTriangle, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
