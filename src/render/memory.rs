@@ -212,10 +212,14 @@ pub fn check_fits(
     })
 }
 
-/// `21.3 GiB`, `512 MiB`.
+/// `21.3 GiB`, `512 MiB`, `1.3 TiB`.
 pub fn bytes_text(bytes: u64) -> String {
     const GIB: f64 = (1u64 << 30) as f64;
-    if bytes >= 1 << 30 {
+    const TIB: f64 = (1u64 << 40) as f64;
+    if bytes >= 1 << 40 {
+        // A frame no machine holds: TiB reads better than a million GiB.
+        format!("{:.1} TiB", bytes as f64 / TIB)
+    } else if bytes >= 1 << 30 {
         format!("{:.1} GiB", bytes as f64 / GIB)
     } else {
         format!("{} MiB", bytes.div_ceil(1 << 20))
@@ -420,6 +424,9 @@ mod tests {
         assert_eq!(bytes_text((1 << 30) - 1), "1024 MiB");
         assert_eq!(bytes_text(1 << 30), "1.0 GiB");
         assert_eq!(bytes_text(190 << 30), "190.0 GiB");
+        assert_eq!(bytes_text((1 << 40) - (1 << 20)), "1024.0 GiB");
+        assert_eq!(bytes_text(1 << 40), "1.0 TiB");
+        assert_eq!(bytes_text(u64::MAX), "16777216.0 TiB");
     }
 
     const MEMINFO: &str = "MemTotal:       24523716 kB\nMemFree:        22103416 kB\n\
