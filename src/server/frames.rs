@@ -122,16 +122,17 @@ pub fn frame_stats_json(state: &AppState, sid: u64, frame: u32) -> Result<Option
 /// Prometheus text format.
 pub async fn metrics(State(state): State<Arc<AppState>>) -> Result<impl IntoResponse, ApiError> {
     // The store's size on disk (sled's files) and its sample log's length
-    // (whose lock a frame being stored holds): off the async workers.
+    // (whose lock a frame being stored holds): off the async workers, in
+    // a stats slot, so that a scraper gone wild cannot pile up reads.
     let s = state.clone();
-    let (database, log) = tokio::task::spawn_blocking(move || {
-        (
-            s.store.size_on_disk().unwrap_or(0),
-            s.store.sample_log_bytes(),
-        )
-    })
-    .await
-    .map_err(ApiError::internal)?;
+    let (database, log) = state
+        .reading_stats(move || {
+            Ok((
+                s.store.size_on_disk().unwrap_or(0),
+                s.store.sample_log_bytes(),
+            ))
+        })
+        .await?;
     let mut out = String::new();
     let counts = {
         let jobs = state.jobs.lock().expect("job table lock");
@@ -173,6 +174,11 @@ pub async fn metrics(State(state): State<Arc<AppState>>) -> Result<impl IntoResp
         out,
         "# HELP radcache_frame_encodes_total Frames decoded from the store and encoded as PNG (once a frame, however many clients ask, until evicted from the PNG cache).\n# TYPE radcache_frame_encodes_total counter\nradcache_frame_encodes_total {}",
         state.frame_encodes.load(Ordering::Relaxed)
+    );
+    let _ = writeln!(
+        out,
+        "# HELP radcache_records_queries_total Record queries answered from the store (a query asked again while it runs shares its answer).\n# TYPE radcache_records_queries_total counter\nradcache_records_queries_total {}",
+        state.records_reads.load(Ordering::Relaxed)
     );
     let _ = writeln!(
         out,

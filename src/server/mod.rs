@@ -7,6 +7,7 @@
 mod alive;
 mod connection;
 mod error;
+mod flight;
 mod frames;
 mod jobs;
 mod movies;
@@ -32,6 +33,7 @@ use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::Router;
+use flight::Flights;
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -262,7 +264,10 @@ pub struct AppState {
     /// The PNG encodings in progress, by (store job id, frame): a request
     /// for a frame being encoded awaits that encoding rather than starting
     /// its own (a hundred followers woken by one new frame encode it once).
-    pub encoding: Mutex<HashMap<(u64, u32), PngFlight>>,
+    pub encoding: Arc<Flights<(u64, u32), PngResult>>,
+    /// The `/records` queries in progress: the same query asked again
+    /// while it runs awaits its answer (`records::RecordsKey`).
+    pub records_queries: Arc<Flights<records::RecordsKey, Result<Bytes, ApiError>>>,
     /// Bounds the frame decodings (PNG encodings, EXR reads) run at once:
     /// each holds a whole frame's pixels, EXR and PNG (a 4096² frame: some
     /// 200 MB).
@@ -281,30 +286,17 @@ pub struct AppState {
     pub alive_sets: Mutex<alive::AliveSets>,
     /// Frames decoded from the store and PNG-encoded (`/metrics`).
     pub frame_encodes: AtomicU64,
+    /// `/records` queries answered from the store, not from another
+    /// request's answer (`/metrics`).
+    pub records_reads: AtomicU64,
     /// The job the worker renders and its renderer's
     /// [`crate::render::Renderer::abandon_flag`]: a cancel or a shutdown
     /// abandons the frame in progress rather than waiting for it.
     pub running_frame: Mutex<Option<(JobKey, Arc<AtomicBool>)>>,
 }
 
-/// An encoding of a frame to PNG in progress: its result, once there
-/// (`None` until then).
-pub type PngFlight = watch::Receiver<Option<Result<Option<Bytes>, ApiError>>>;
-
-/// Removes an encoding from [`AppState::encoding`] when it ends, however
-/// it ends (its waiters then see its sender dropped, if it sent nothing).
-struct FlightGuard<'a> {
-    state: &'a AppState,
-    key: (u64, u32),
-}
-
-impl Drop for FlightGuard<'_> {
-    fn drop(&mut self) {
-        if let Ok(mut encoding) = self.state.encoding.lock() {
-            encoding.remove(&self.key);
-        }
-    }
-}
+/// A frame encoded as PNG (`None`: the frame is not stored).
+pub type PngResult = Result<Option<Bytes>, ApiError>;
 
 /// Work the server's CPU-bound requests may run at once: one a core.
 fn cores() -> usize {
@@ -330,12 +322,14 @@ impl AppState {
             watchers: Mutex::new(HashMap::new()),
             pngs: Mutex::new(PngCache::default()),
             scene_cache: Mutex::new(None),
-            encoding: Mutex::new(HashMap::new()),
+            encoding: Arc::default(),
+            records_queries: Arc::default(),
             decode_slots: Arc::new(Semaphore::new(cores())),
             records_slots: Arc::new(Semaphore::new(cores().min(4))),
             stats_slots: Arc::new(Semaphore::new(cores().min(4))),
             alive_sets: Mutex::new(alive::AliveSets::default()),
             frame_encodes: AtomicU64::new(0),
+            records_reads: AtomicU64::new(0),
         }
     }
 
@@ -455,44 +449,24 @@ impl AppState {
         sid: u64,
         frame: u32,
     ) -> Result<Option<Bytes>, ApiError> {
-        let key = (sid, frame);
-        let mut flight = {
-            // The cache is read under the lock of the encodings, which an
-            // encoding leaves only once it has cached its PNG: a frame is
-            // either cached or being encoded, or no one encodes it.
-            let mut encoding = self.encoding.lock().expect("encoding lock");
-            if let Some(png) = self.pngs.lock().expect("png cache lock").get(key) {
-                return Ok(Some(png));
-            }
-            match encoding.get(&key) {
-                Some(flight) => flight.clone(),
-                None => {
-                    let (tx, rx) = watch::channel(None);
-                    encoding.insert(key, rx.clone());
-                    // Its own task: a client that goes away leaves it to
-                    // finish for the others (and for the cache).
-                    let state = self.clone();
-                    tokio::spawn(async move {
-                        let _flight = FlightGuard { state: &state, key };
-                        let png = state.encode_png(sid, frame).await;
-                        if let Ok(Some(png)) = &png {
-                            state
-                                .pngs
-                                .lock()
-                                .expect("png cache lock")
-                                .insert(key, png.clone());
-                        }
-                        tx.send_replace(Some(png));
-                    });
-                    rx
-                }
-            }
+        let cached = || {
+            let png = self.pngs.lock().expect("png cache lock").get((sid, frame));
+            png.map(|png| Ok(Some(png)))
         };
-        let done = flight
-            .wait_for(Option::is_some)
+        let state = self.clone();
+        let encode = || async move {
+            let png = state.encode_png(sid, frame).await;
+            if let Ok(Some(png)) = &png {
+                let mut pngs = state.pngs.lock().expect("png cache lock");
+                pngs.insert((sid, frame), png.clone());
+            }
+            png
+        };
+        let flights = self.encoding.clone();
+        flights
+            .get((sid, frame), cached, encode)
             .await
-            .map_err(|_| ApiError::internal(format!("encoding frame {frame} as PNG stopped")))?;
-        done.clone().expect("waited for")
+            .map_err(|_| ApiError::internal(format!("encoding frame {frame} as PNG stopped")))?
     }
 
     /// Decodes frame `frame` of store job `sid` and encodes it as PNG
@@ -895,6 +869,33 @@ pub(crate) mod testing {
                 connections_per_peer: connection::MAX_CONNECTIONS_PER_PEER,
             },
         ))
+    }
+
+    /// Frames `frames` of job `id` stored, each with `records_alive` its
+    /// number plus 10.
+    pub fn store_frames(state: &AppState, id: &str, frames: &[u32]) {
+        let mut spec = crate::store::schema::JobValue::for_test("ic", "Ic(..)".into()).spec;
+        spec.name = id.into();
+        let mut job = state.store.begin_job(&spec, false).unwrap();
+        for &frame in frames {
+            let stats = crate::method::FrameStats {
+                frame,
+                records_alive: 10 + u64::from(frame),
+                ..Default::default()
+            };
+            let commit = crate::store::FrameCommit {
+                frame,
+                width: 8,
+                height: 8,
+                exr: &[1, 2, 3],
+                records: Vec::new(),
+                stats: &stats,
+                state: None,
+                movies: None,
+                sources: None,
+            };
+            state.store.commit_frame(&mut job, commit).unwrap();
+        }
     }
 
     /// Adds job `id` (a small `path` job over frames 0..2) to the table,

@@ -29,7 +29,9 @@ pub async fn movies(
     let frame = frame_param(&q)?;
     let sid = stored_frame(&state, &id, frame)?;
     let s = state.clone();
-    tokio::task::spawn_blocking(move || {
+    // In a records slot: like a records query, it reads a frame's bulk
+    // values and projects them with the job's scene.
+    super::blocking_in_slot(&state.records_slots, move || {
         let global_vertices = s
             .store
             .frame_movies(sid, frame)
@@ -82,7 +84,6 @@ pub async fn movies(
         })))
     })
     .await
-    .map_err(ApiError::internal)?
 }
 
 /// The centre of patch `code` of `triangle` in `snapshot` (`None` for a

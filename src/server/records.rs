@@ -11,16 +11,19 @@
 //! and, with `sources=true`, the sources themselves: up to 64 a record,
 //! too many to send with every overlay the dashboard draws.
 
-use super::{ApiError, AppState};
+use super::{ApiError, AppState, Job};
 use crate::decimal::parse_canonical_u64;
 use crate::scene::Scene;
 use crate::store::schema::{RecordValue, SourceValue};
+use axum::body::Bytes;
 use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, State};
-use axum::Json;
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
 use serde_json::{json, Value};
 use std::collections::hash_map::Entry;
 use std::collections::HashMap;
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 /// Records returned when no `limit` is given, and the most a `limit` may ask.
@@ -267,63 +270,110 @@ pub async fn records(
     State(state): State<Arc<AppState>>,
     Path(id): Path<String>,
     query: Result<Query<Vec<(String, String)>>, QueryRejection>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Response, ApiError> {
     // An unknown job is a 404 whatever its query.
     let job = state.job(&id)?;
     let q = query_params(query, RecordsQuery::NAMES)?;
-    let RecordsQuery {
-        frame,
-        bbox,
-        limit,
-        list_sources,
-    } = RecordsQuery::parse(&q)?;
-    let sid = stored_frame(&state, &id, frame)?;
+    let query = RecordsQuery::parse(&q)?;
+    let sid = stored_frame(&state, &id, query.frame)?;
+    let key = RecordsKey::of(&id, sid, &query);
     let s = state.clone();
     // In one of the records slots: a query reads the record blocks of the
     // frames after the nearest kept set (`super::alive`), all of them up to
-    // `frame` the first time.
-    super::blocking_in_slot(&state.records_slots, move || {
-        let alive = super::alive::alive_at(&s.alive_sets, sid, frame, &mut |frames, f| {
-            s.store.for_each_record_block(sid, frames, f)
-        })
-        .map_err(ApiError::internal)?;
-        let mut sources = StoredSources {
-            store: &s.store,
+    // `frame` the first time. Asked again while it runs, it is not run
+    // again: a frame's records never change once stored.
+    let run = || async move {
+        let slots = s.records_slots.clone();
+        super::blocking_in_slot(&slots, move || answer(&s, &job, &id, sid, &query)).await
+    };
+    let body = state
+        .records_queries
+        .get(key, || None, run)
+        .await
+        .map_err(|_| ApiError::internal("the records query stopped"))??;
+    Ok(([(header::CONTENT_TYPE, "application/json")], body).into_response())
+}
+
+/// What makes two `/records` queries the same: the job (its API id, which
+/// the answer names, and its store id) and the query's values.
+#[derive(Clone, PartialEq, Eq, Hash)]
+pub struct RecordsKey {
+    id: String,
+    sid: u64,
+    frame: u32,
+    /// The box's corners' bits (two spellings of a number, one box).
+    bbox: Option<[u32; 6]>,
+    limit: usize,
+    list_sources: bool,
+}
+
+impl RecordsKey {
+    fn of(id: &str, sid: u64, q: &RecordsQuery) -> Self {
+        RecordsKey {
+            id: id.to_string(),
             sid,
-            by_frame: HashMap::new(),
-        };
-        let scene = scene(&s, &job.request.scene.to_string(), &job.request.scene)?;
-        let settings = &job.request.settings;
-        let camera = scene.camera_at(frame as f32 / settings.fps);
-        let (w, h) = (settings.width as f32, settings.height as f32);
-        let mut out = Vec::new();
-        let mut count = 0usize;
-        for (written, r) in alive.alive() {
-            if bbox.as_ref().is_some_and(|b| !inside(&r.position, b)) {
-                continue;
-            }
-            count += 1;
-            if out.len() >= limit {
-                continue;
-            }
-            let screen = camera
-                .project(glam::Vec3::from_array(r.position), w / h)
-                .map(|(sx, sy)| [sx * w, sy * h]);
-            let sources = sources.of(*written, r.id)?;
-            out.push(record_json(r, frame, screen, sources, list_sources));
+            frame: q.frame,
+            bbox: q.bbox.map(|(min, max)| {
+                [min[0], min[1], min[2], max[0], max[1], max[2]].map(f32::to_bits)
+            }),
+            limit: q.limit,
+            list_sources: q.list_sources,
         }
-        Ok(Json(json!({
-            "id": id,
-            "frame": frame,
-            "bbox": bbox.map(|(a, b)| [a[0], a[1], a[2], b[0], b[1], b[2]]),
-            "width": settings.width,
-            "height": settings.height,
-            "count": count,
-            "truncated": count > out.len(),
-            "records": out,
-        })))
+    }
+}
+
+/// The answer to query `q` on job `id` (store job `sid`), as JSON.
+fn answer(
+    state: &AppState,
+    job: &Job,
+    id: &str,
+    sid: u64,
+    q: &RecordsQuery,
+) -> Result<Bytes, ApiError> {
+    state.records_reads.fetch_add(1, Ordering::Relaxed);
+    let frame = q.frame;
+    let alive = super::alive::alive_at(&state.alive_sets, sid, frame, &mut |frames, f| {
+        state.store.for_each_record_block(sid, frames, f)
     })
-    .await
+    .map_err(ApiError::internal)?;
+    let mut sources = StoredSources {
+        store: &state.store,
+        sid,
+        by_frame: HashMap::new(),
+    };
+    let scene = scene(state, &job.request.scene.to_string(), &job.request.scene)?;
+    let settings = &job.request.settings;
+    let camera = scene.camera_at(frame as f32 / settings.fps);
+    let (w, h) = (settings.width as f32, settings.height as f32);
+    let mut out = Vec::new();
+    let mut count = 0usize;
+    for (written, r) in alive.alive() {
+        if q.bbox.as_ref().is_some_and(|b| !inside(&r.position, b)) {
+            continue;
+        }
+        count += 1;
+        if out.len() >= q.limit {
+            continue;
+        }
+        let screen = camera
+            .project(glam::Vec3::from_array(r.position), w / h)
+            .map(|(sx, sy)| [sx * w, sy * h]);
+        let sources = sources.of(*written, r.id)?;
+        out.push(record_json(r, frame, screen, sources, q.list_sources));
+    }
+    let body = json!({
+        "id": id,
+        "frame": frame,
+        "bbox": q.bbox.map(|(a, b)| [a[0], a[1], a[2], b[0], b[1], b[2]]),
+        "width": settings.width,
+        "height": settings.height,
+        "count": count,
+        "truncated": count > out.len(),
+        "records": out,
+    });
+    serde_json::to_vec(&body)
+        .map(Bytes::from)
+        .map_err(ApiError::internal)
 }
 
 #[cfg(test)]
@@ -357,5 +407,53 @@ mod tests {
         for bad in ["01", "+1", "-1", " 1", "1.0", "", "4294967296"] {
             assert!(frame(bad).is_err(), "{bad:?}");
         }
+    }
+
+    /// Queries asked while the same query runs (here: while every records
+    /// slot is taken, so that they meet) share its answer and read the
+    /// store once; another query reads it for itself, and the same query
+    /// asked later reads it again (nothing is cached).
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn the_same_query_asked_at_once_reads_the_store_once() {
+        use crate::server::{testing, JobState};
+        use futures_util::future::{join, join_all};
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        testing::add_job(&state, "job-1", JobState::Done, &[0]);
+        testing::store_frames(&state, "job-1", &[0]);
+        let ask = |q: &[(&str, &str)]| {
+            let q = q.iter().map(|(k, v)| (k.to_string(), v.to_string()));
+            records(
+                State(state.clone()),
+                Path("job-1".to_string()),
+                Ok(Query(q.collect())),
+            )
+        };
+        let reads = || state.records_reads.load(Ordering::Relaxed);
+        let body = |answer: Result<Response, ApiError>| async {
+            let response = answer.map_err(|e| e.detail).unwrap();
+            axum::body::to_bytes(response.into_body(), 1 << 20)
+                .await
+                .unwrap()
+        };
+        let slots = state.records_slots.available_permits() as u32;
+        let held = state.records_slots.clone().acquire_many_owned(slots).await;
+        let same = (0..8).map(|_| ask(&[("frame", "0")]));
+        let other = ask(&[("frame", "0"), ("limit", "5")]);
+        let asks = join_all(same.chain([other]));
+        let (answers, ()) = join(asks, async move { drop(held) }).await;
+        let mut bodies = Vec::new();
+        for answer in answers {
+            bodies.push(body(answer).await);
+        }
+        assert_eq!(reads(), 2, "eight queries alike and one other");
+        assert!(bodies[..8].iter().all(|b| *b == bodies[0]));
+        let json: Value = serde_json::from_slice(&bodies[0]).unwrap();
+        assert_eq!(
+            (json["id"].as_str(), json["frame"].as_u64()),
+            (Some("job-1"), Some(0))
+        );
+        assert_eq!(body(ask(&[("frame", "0")]).await).await, bodies[0]);
+        assert_eq!(reads(), 3);
     }
 }

@@ -320,33 +320,6 @@ mod tests {
         assert!(text.contains("reading the job failed"), "{text}");
     }
 
-    /// Frames `frames` of job `id` stored, each with `records_alive` its
-    /// number plus 10.
-    fn store_frames(state: &crate::server::AppState, id: &str, frames: &[u32]) {
-        let mut spec = crate::store::schema::JobValue::for_test("ic", "Ic(..)".into()).spec;
-        spec.name = id.into();
-        let mut job = state.store.begin_job(&spec, false).unwrap();
-        for &frame in frames {
-            let stats = crate::method::FrameStats {
-                frame,
-                records_alive: 10 + u64::from(frame),
-                ..Default::default()
-            };
-            let commit = crate::store::FrameCommit {
-                frame,
-                width: 8,
-                height: 8,
-                exr: &[1, 2, 3],
-                records: Vec::new(),
-                stats: &stats,
-                state: None,
-                movies: None,
-                sources: None,
-            };
-            state.store.commit_frame(&mut job, commit).unwrap();
-        }
-    }
-
     /// The whole event stream of job `id`, as (event, data) pairs.
     async fn events_of(
         state: std::sync::Arc<crate::server::AppState>,
@@ -380,7 +353,7 @@ mod tests {
     async fn events_come_in_order_with_the_stored_rows() {
         let dir = tempfile::tempdir().unwrap();
         let state = testing::state(dir.path());
-        store_frames(&state, "job-1", &[0, 1]);
+        testing::store_frames(&state, "job-1", &[0, 1]);
         testing::add_job(&state, "job-1", JobState::Done, &[0, 1]);
         let events = events_of(state, "job-1").await;
         let kinds: Vec<&str> = events.iter().map(|(e, _)| e.as_str()).collect();
@@ -402,7 +375,7 @@ mod tests {
     async fn events_read_the_store_in_the_stats_slots() {
         let dir = tempfile::tempdir().unwrap();
         let state = testing::state(dir.path());
-        store_frames(&state, "job-1", &[0]);
+        testing::store_frames(&state, "job-1", &[0]);
         testing::add_job(&state, "job-1", JobState::Running, &[0]);
         state.stats_slots.close();
         let events = events_of(state, "job-1").await;

@@ -137,9 +137,10 @@ pub async fn chart(
         Ok(m) if m.file_type().is_file() => std::fs::read(&path).ok(),
         _ => None,
     };
-    let body = tokio::task::spawn_blocking(read)
-        .await
-        .map_err(ApiError::internal)?
+    // In a decode slot: a chart is a file of any size the bench wrote.
+    let body = state
+        .decoding(move || Ok(read()))
+        .await?
         .ok_or_else(missing)?;
     Ok((
         [
