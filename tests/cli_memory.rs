@@ -147,7 +147,8 @@ fn no_memory_check_is_taken_and_a_render_that_fits_renders() {
 }
 
 /// `bench` refuses the same way, before its reference renders, naming
-/// its run; `--no-memory-check` is its flag too.
+/// its run and the scene whose triangles it counted; `--no-memory-check`
+/// is its flag too.
 #[cfg(target_os = "linux")]
 #[test]
 fn a_bench_run_past_the_memory_available_is_refused_before_it_starts() {
@@ -173,6 +174,17 @@ fn a_bench_run_past_the_memory_available_is_refused_before_it_starts() {
     );
     assert!(
         stderr.contains("16384x16384 movies render at 65536 spp"),
+        "{stderr}"
+    );
+    let triangles = radcache::render::memory::scene_triangles(
+        &radcache::scene::Scene::builtin("cube-in-box").unwrap(),
+    );
+    assert!(triangles > 0);
+    assert!(
+        stderr.contains(&format!(
+            "is available; for movies spp=65536 on scene cube-in-box ({triangles} triangles), \
+             bench a smaller --size"
+        )),
         "{stderr}"
     );
     assert!(!out.exists(), "nothing is written");

@@ -92,6 +92,11 @@ pub struct BenchOptions {
     /// (`--backends cpu,gpu`: GPU against CPU in one invocation, the
     /// ratio read off one table). The reference is rendered with `auto`.
     pub backends: Vec<BackendChoice>,
+    /// Refuse, before anything renders, a bench one of whose runs has an
+    /// estimated peak memory (`render::memory::peak_bytes`, on its scene's
+    /// triangles) over what this process may take (`radcache bench`
+    /// without `--no-memory-check`).
+    pub check_memory: bool,
 }
 
 /// The methods of the default run: every method, each as a sweep so that
@@ -133,6 +138,7 @@ impl Default for BenchOptions {
             estimate_error: false,
             store_size: false,
             backends: vec![BackendChoice::Auto],
+            check_memory: true,
         }
     }
 }

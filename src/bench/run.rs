@@ -9,7 +9,9 @@ use crate::method::trc::estimate_error::{EstimateError, EstimateErrorTally};
 use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::Method;
 use crate::metrics;
-use crate::render::{self, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource};
+use crate::render::{
+    self, memory, BackendChoice, FrameSettings, MethodSettings, Renderer, SceneSource,
+};
 use crate::scene::Scene;
 use crate::store::Store;
 use anyhow::{bail, Context, Result};
@@ -109,11 +111,14 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         }
     }
     // Every scene loads before any is benched: a bad one named last must
-    // not cost the minutes the others take. Each is loaded again when its
-    // turn comes rather than kept, so that a run's peak memory holds only
-    // its own scene.
-    for source in &opts.scenes {
-        source.load()?;
+    // not cost the minutes the others take, nor one whose runs would not
+    // fit in memory on its triangles. Each is loaded again when its turn
+    // comes rather than kept, so that a run's peak memory holds only its
+    // own scene.
+    let available = opts.check_memory.then(memory::available_bytes).flatten();
+    for (source, label) in opts.scenes.iter().zip(&labels) {
+        let triangles = memory::scene_triangles(&source.load()?);
+        check_scene_memory(opts, label, triangles, available)?;
     }
     std::fs::create_dir_all(&opts.out)
         .with_context(|| format!("cannot create output directory {}", opts.out.display()))?;
@@ -139,6 +144,33 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         charts,
         peak_mem_per_run: per_run,
     })
+}
+
+/// Refuses the bench where one of its runs on scene `label`, of
+/// `triangles` triangles, has an estimated peak memory over `available`
+/// bytes (`None`: unknown, or not checked). The scene's reference, a `path`
+/// render of the same size, needs no more than any run.
+fn check_scene_memory(
+    opts: &BenchOptions,
+    label: &str,
+    triangles: u64,
+    available: Option<u64>,
+) -> Result<()> {
+    if available.is_none() {
+        return Ok(());
+    }
+    for spec in opts.methods.iter().flat_map(MethodSweep::runs) {
+        let size = (opts.width, opts.height);
+        memory::check_fits(&spec.settings()?, size, triangles, available).map_err(|too_large| {
+            anyhow::anyhow!(
+                "{too_large}; for {} {} on scene {label} ({triangles} triangles), bench a \
+                 smaller --size, or pass --no-memory-check to try anyway",
+                spec.method,
+                spec.label()
+            )
+        })?;
+    }
+    Ok(())
 }
 
 pub(super) fn frame_settings(opts: &BenchOptions, same_pattern: bool) -> FrameSettings {
@@ -493,5 +525,39 @@ mod tests {
         let s = "Name:\tx\nVmPeak:\t  2000 kB\nVmHWM:\t   1536 kB\n";
         assert_eq!(status_kb(s, "VmHWM:"), Some(1536));
         assert_eq!(status_kb(s, "VmRSS:"), None);
+    }
+
+    /// A run is checked on its scene's triangles: one that fits on an
+    /// empty scene is refused, naming the run and the scene, on a scene of
+    /// a million triangles; nothing is refused where the memory is unknown.
+    #[test]
+    fn a_run_is_refused_on_its_scene_triangles() {
+        let opts = BenchOptions {
+            methods: vec![MethodSweep::parse("path:spp=1,4").unwrap()],
+            width: 64,
+            height: 64,
+            ..BenchOptions::default()
+        };
+        let path = opts.methods[0].runs()[1].settings().unwrap();
+        let empty = memory::peak_bytes(&path, 64, 64, 0);
+        let million = memory::peak_bytes(&path, 64, 64, 1_000_000);
+        assert!(million > empty + (100 << 20), "{empty} {million}");
+        check_scene_memory(&opts, "big", 0, Some(empty)).unwrap();
+        let err = check_scene_memory(&opts, "big", 1_000_000, Some(empty))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.starts_with("a 64x64 path render at 1 spp needs at least"),
+            "{err}"
+        );
+        assert!(
+            err.ends_with(
+                "is available; for path spp=1 on scene big (1000000 triangles), bench a \
+                 smaller --size, or pass --no-memory-check to try anyway"
+            ),
+            "{err}"
+        );
+        check_scene_memory(&opts, "big", 1_000_000, Some(million)).unwrap();
+        check_scene_memory(&opts, "big", u64::MAX, None).unwrap();
     }
 }

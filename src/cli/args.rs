@@ -190,7 +190,7 @@ pub struct RenderArgs {
     /// With --job: start the job over, dropping its stored frames: needed when its scene or settings changed (else an error), and the way out for a job whose stored frames are damaged.
     #[arg(long, requires = "job")]
     pub force: bool,
-    /// Render even where the frame's estimated peak memory (a lower bound: what every pixel and sample takes, whatever the scene) is over the memory available, which is otherwise refused before anything renders.
+    /// Render even where the frame's estimated peak memory (a lower bound: what every pixel, sample and scene triangle takes) is over the memory available, which is otherwise refused before anything renders.
     #[arg(long)]
     pub no_memory_check: bool,
     /// No progress bar.
@@ -372,7 +372,7 @@ pub struct BenchArgs {
     /// (`cpu,gpu` compares them in one invocation; the reference uses auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "auto")]
     pub backends: Vec<BackendArg>,
-    /// Run even where a run's estimated peak memory at --size (a lower bound, as for `render`) is over the memory available, which is otherwise refused before anything renders.
+    /// Run even where a run's estimated peak memory at --size on its scene (a lower bound, as for `render`) is over the memory available, which is otherwise refused before anything renders.
     #[arg(long)]
     pub no_memory_check: bool,
 }

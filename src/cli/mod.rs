@@ -9,7 +9,7 @@ mod render;
 
 use crate::bench;
 use crate::metrics;
-use crate::render::{memory, BackendChoice, SceneSource};
+use crate::render::{BackendChoice, SceneSource};
 use crate::store::{self, Store};
 use anyhow::{bail, Context, Result};
 pub use args::{
@@ -153,15 +153,12 @@ fn bench_options(args: BenchArgs) -> bench::BenchOptions {
         estimate_error: args.estimate_error,
         store_size: args.store_size,
         backends: args.backends.into_iter().map(backend_choice).collect(),
+        check_memory: !args.no_memory_check,
     }
 }
 
 fn run_bench(args: BenchArgs) -> Result<()> {
-    let check_memory = !args.no_memory_check;
     let opts = bench_options(args);
-    if check_memory {
-        check_bench_memory(&opts)?;
-    }
     let report = bench::run(&opts)?;
     out!("{}", bench::to_table(&report.rows))?;
     for (measure, what) in [
@@ -201,26 +198,6 @@ fn run_bench(args: BenchArgs) -> Result<()> {
     outln!("\nwrote {}", report.csv.display())?;
     for chart in &report.charts {
         outln!("wrote {}", chart.display())?;
-    }
-    Ok(())
-}
-
-/// Refuses, before anything renders, a bench one of whose runs has an
-/// estimated peak memory over what this process may take (its scenes'
-/// triangles uncounted: they are loaded as the bench reaches them).
-fn check_bench_memory(opts: &bench::BenchOptions) -> Result<()> {
-    let available = memory::available_bytes();
-    for sweep in &opts.methods {
-        for run in sweep.runs() {
-            memory::check_fits(&run.settings()?, (opts.width, opts.height), 0, available).map_err(
-                |too_large| {
-                    anyhow::anyhow!(
-                        "{too_large}; bench a smaller --size, or pass --no-memory-check to try \
-                         anyway"
-                    )
-                },
-            )?;
-        }
     }
     Ok(())
 }

@@ -157,6 +157,13 @@ pub fn peak_bytes(method: &MethodSettings, width: u32, height: u32, triangles: u
         .saturating_add(frame)
 }
 
+/// The triangles of `scene`, every object's, as [`peak_bytes`] counts
+/// them.
+pub fn scene_triangles(scene: &crate::scene::Scene) -> u64 {
+    let objects = scene.objects.iter();
+    objects.map(|o| o.mesh.triangles.len() as u64).sum()
+}
+
 /// A render whose estimated peak is over the memory available.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TooLarge {

@@ -1,7 +1,7 @@
 //! `/api/jobs`: create, list, show, cancel, resume.
 
 use super::{ApiError, AppState, Job, JobKey, JobRequest, JobState};
-use crate::render::SceneSource;
+use crate::render::memory;
 use anyhow::Context;
 use axum::body::Bytes;
 use axum::extract::{Path, State};
@@ -47,8 +47,22 @@ pub async fn create(
     State(state): State<Arc<AppState>>,
     body: Bytes,
 ) -> Result<(StatusCode, Json<Value>), ApiError> {
-    let request = JobRequest::parse(&body, state.options.scenes.as_deref())?;
-    let identity = check_scene_loads(&state, &request).await?;
+    create_checked(state, &body, JobRequest::check_memory).await
+}
+
+/// [`create`], the request's memory checked by `check_memory` on its
+/// scene's triangles ([`JobRequest::check_memory`]: against the memory the
+/// server's next job may take) once the scene has loaded, before the job
+/// is stored.
+async fn create_checked(
+    state: Arc<AppState>,
+    body: &[u8],
+    check_memory: impl FnOnce(&JobRequest, u64) -> Result<(), ApiError>,
+) -> Result<(StatusCode, Json<Value>), ApiError> {
+    let request = JobRequest::parse(body, state.options.scenes.as_deref())?;
+    let loaded = check_scene_loads(&state, &request).await?;
+    check_memory(&request, loaded.triangles)?;
+    let identity = loaded.identity;
     // Off the async workers and outside the job table's lock, which every
     // request and the render worker take: the store is written and
     // flushed. All of it in the blocking task, so that
@@ -103,24 +117,37 @@ fn add_queued_job(
     Ok(id)
 }
 
-/// A scene file is loaded and hashed once at submission, as the worker
-/// will, confined to the scenes directory ([`AppState::scene_root`]), so
-/// that a malformed one, or one whose buffers or images lie outside the
-/// directory, is a 400 now rather than a failed job later (built-in scenes
-/// always load). Its identity (name and hash) as the job stores it: the
-/// worker hashes the file again when it starts, and a file changed since
-/// fails the job, naming the hash.
+/// A job's scene as [`check_scene_loads`] found it.
+struct LoadedScene {
+    /// Its name and hash, as the job stores them.
+    identity: (String, String),
+    /// Its triangles ([`memory::scene_triangles`]), which the job's memory
+    /// check counts.
+    triangles: u64,
+}
+
+/// A scene is loaded (a built-in one built) and hashed once at submission,
+/// as the worker will, a file confined to the scenes directory
+/// ([`AppState::scene_root`]), so that a malformed one, or one whose
+/// buffers or images lie outside the directory, is a 400 now rather than a
+/// failed job later (built-in scenes always load). Its identity (name and
+/// hash) as the job stores it: the worker hashes the file again when it
+/// starts, and a file changed since fails the job, naming the hash. And
+/// its triangles, for the job's memory check.
 async fn check_scene_loads(
     state: &AppState,
     request: &JobRequest,
-) -> Result<(String, String), ApiError> {
+) -> Result<LoadedScene, ApiError> {
     let scene = request.scene.clone();
     let root = state.scene_root(&scene);
-    let loaded = tokio::task::spawn_blocking(move || -> anyhow::Result<(String, String)> {
-        if !matches!(scene, SceneSource::Builtin(_)) {
-            scene.load_confined(root.as_deref())?;
-        }
-        crate::render::scene_identity_confined(&scene, root.as_deref())
+    let loaded = tokio::task::spawn_blocking(move || -> anyhow::Result<LoadedScene> {
+        // Dropped before the memory check reads what the server holds.
+        let triangles = memory::scene_triangles(&scene.load_confined(root.as_deref())?);
+        let identity = crate::render::scene_identity_confined(&scene, root.as_deref())?;
+        Ok(LoadedScene {
+            identity,
+            triangles,
+        })
     })
     .await
     .map_err(ApiError::internal)?;
@@ -353,4 +380,46 @@ pub async fn resume(
     drop(_control);
     state.wake.notify_one();
     Ok(Json(job_json(&state, &state.job(&id)?)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::server::testing;
+
+    /// A job's memory is checked on its scene's triangles, a built-in
+    /// scene's too: a `spheres` job that would fit on an empty scene is a
+    /// 400 that counts them, and nothing is queued; with their memory
+    /// available it is created.
+    #[tokio::test]
+    async fn a_job_is_checked_on_its_scene_triangles() {
+        let dir = tempfile::tempdir().unwrap();
+        let state = testing::state(dir.path());
+        let body = br#"{"scene":"builtin:spheres","method":"path","frames":"0..1","size":"32x32","spp":1}"#;
+        let triangles = memory::scene_triangles(&crate::scene::Scene::builtin("spheres").unwrap());
+        assert!(triangles > 10_000, "{triangles}");
+        let fits_empty = |r: &JobRequest, t: u64| {
+            r.check_memory_within(t, Some(memory::peak_bytes(&r.method, 32, 32, 0)))
+        };
+        let err = create_checked(state.clone(), body, fits_empty)
+            .await
+            .unwrap_err();
+        assert_eq!(err.status, StatusCode::BAD_REQUEST);
+        assert!(
+            err.detail
+                .contains(&format!("(its scene has {triangles} triangles)")),
+            "{}",
+            err.detail
+        );
+        assert!(state.jobs.lock().unwrap().is_empty());
+        let fits_scene = |r: &JobRequest, t: u64| {
+            let need = memory::peak_bytes(&r.method, 32, 32, triangles);
+            r.check_memory_within(t, Some(need))
+        };
+        let (status, _) = create_checked(state.clone(), body, fits_scene)
+            .await
+            .unwrap();
+        assert_eq!(status, StatusCode::CREATED);
+        assert_eq!(state.jobs.lock().unwrap().len(), 1);
+    }
 }

@@ -95,19 +95,9 @@ pub struct JobRequest {
 
 impl JobRequest {
     /// Parses and checks a request body; scene files must lie under
-    /// `scenes`. A job whose frames need more memory than the server's
-    /// next job may take (`memory_for_the_next_job`) is refused.
+    /// `scenes`. Its frames' memory is checked once its scene is loaded
+    /// ([`Self::check_memory`]), as its triangles count.
     pub fn parse(body: &[u8], scenes: Option<&Path>) -> Result<JobRequest, ApiError> {
-        Self::parse_within(body, scenes, memory_for_the_next_job())
-    }
-
-    /// [`Self::parse`] with `available` bytes of memory for the job
-    /// (`None`: unknown, not checked).
-    pub fn parse_within(
-        body: &[u8],
-        scenes: Option<&Path>,
-        available: Option<u64>,
-    ) -> Result<JobRequest, ApiError> {
         let malformed = |e: String| ApiError::bad_request(format!("malformed job request: {e}"));
         let value: serde_json::Value =
             serde_json::from_slice(body).map_err(|e| malformed(e.to_string()))?;
@@ -125,7 +115,6 @@ impl JobRequest {
         let method = parse_method(&b.method, b.settings.as_ref(), b.spp)?;
         check_frame_samples(width, height, method.spp())?;
         check_frame_gather(width, height, &method)?;
-        check_frame_memory(width, height, &method, available)?;
         let settings = FrameSettings {
             width,
             height,
@@ -169,6 +158,25 @@ impl JobRequest {
 
     pub fn frames_total(&self) -> u32 {
         self.frames.len() as u32
+    }
+
+    /// Refuses a job whose frame, on its scene of `triangles` triangles,
+    /// needs more memory than the server's next job may take
+    /// ([`memory_for_the_next_job`], read now: after the scene's load,
+    /// which the job's render loads again).
+    pub fn check_memory(&self, triangles: u64) -> Result<(), ApiError> {
+        self.check_memory_within(triangles, memory_for_the_next_job())
+    }
+
+    /// [`Self::check_memory`] with `available` bytes of memory for the job
+    /// (`None`: unknown, not checked).
+    pub fn check_memory_within(
+        &self,
+        triangles: u64,
+        available: Option<u64>,
+    ) -> Result<(), ApiError> {
+        let (width, height) = (self.settings.width, self.settings.height);
+        check_frame_memory(width, height, &self.method, triangles, available)
     }
 }
 
@@ -263,19 +271,21 @@ fn check_frame_gather(width: u32, height: u32, method: &MethodSettings) -> Resul
     Ok(())
 }
 
-/// A frame's estimated peak memory ([`memory::peak_bytes`]; the scene's
-/// triangles uncounted, as it is loaded after) within `available` bytes:
-/// beyond them the render would end in an abort or the OOM killer, and
-/// take the server, and every job it serves, down with it.
+/// A frame's estimated peak memory ([`memory::peak_bytes`], on a scene of
+/// `triangles` triangles) within `available` bytes: beyond them the render
+/// would end in an abort or the OOM killer, and take the server, and every
+/// job it serves, down with it.
 fn check_frame_memory(
     width: u32,
     height: u32,
     method: &MethodSettings,
+    triangles: u64,
     available: Option<u64>,
 ) -> Result<(), ApiError> {
-    memory::check_fits(method, (width, height), 0, available).map_err(|too_large| {
+    memory::check_fits(method, (width, height), triangles, available).map_err(|too_large| {
         ApiError::bad_request(format!(
-            "{too_large} to this server; ask for a smaller size or fewer spp"
+            "{too_large} to this server (its scene has {triangles} triangles); ask for a \
+             smaller size, fewer spp or a smaller scene"
         ))
     })
 }
@@ -336,8 +346,12 @@ fn stored_method(job: &JobValue) -> Option<MethodSettings> {
 /// no absolute path).
 fn parse_scene(s: &str, scenes: Option<&Path>) -> Result<SceneSource, ApiError> {
     if let Some(name) = s.strip_prefix("builtin:") {
-        crate::scene::Scene::builtin(name)
-            .map_err(|e| ApiError::bad_request(format!("scene {s:?}: {e}")))?;
+        // By name: the scene is built once, with the job's memory check
+        // (`jobs::check_scene_loads`).
+        if !crate::scene::builtin::NAMES.contains(&name) {
+            let unknown = crate::scene::SceneError::UnknownBuiltin(name.to_string());
+            return Err(ApiError::bad_request(format!("scene {s:?}: {unknown}")));
+        }
         return Ok(SceneSource::Builtin(name.to_string()));
     }
     let rel = Path::new(s);
@@ -410,7 +424,7 @@ mod tests {
             let body = format!(
                 r#"{{"scene":"builtin:cube-in-box","method":"{method}","frames":"0..1","size":"{size}"{settings}}}"#
             );
-            JobRequest::parse_within(body.as_bytes(), None, None).map_err(|e| e.detail)
+            JobRequest::parse(body.as_bytes(), None).map_err(|e| e.detail)
         };
         for method in ["ic", "trc", "tcg"] {
             assert!(parse(method, "1920x1080", None).is_ok(), "{method}");
@@ -435,38 +449,76 @@ mod tests {
     }
 
     /// A job whose frame would need more memory than the server has for
-    /// it is refused as a bad request that says how much each; one that
-    /// fits, or where the memory is unknown, is taken.
+    /// it is refused as a bad request that says how much each, and its
+    /// scene's triangles; one that fits, or where the memory is unknown, is
+    /// taken.
     #[test]
     fn a_job_over_the_memory_available_is_refused() {
-        let parse = |method: &str, size: &str, available: Option<u64>| {
+        let check = |method: &str, size: &str, triangles: u64, available: Option<u64>| {
             let body = format!(
                 r#"{{"scene":"builtin:cube-in-box","method":"{method}","frames":"0..1","size":"{size}"}}"#
             );
-            JobRequest::parse_within(body.as_bytes(), None, available)
+            let request = JobRequest::parse(body.as_bytes(), None).unwrap();
+            request.check_memory_within(triangles, available)
         };
         let gib = 1u64 << 30;
         let small = 128u64 << 20;
-        let err = parse("trc", "1920x1080", Some(small)).unwrap_err();
+        let err = check("trc", "1920x1080", 12, Some(small)).unwrap_err();
         assert_eq!(err.status, axum::http::StatusCode::BAD_REQUEST);
-        let trc = parse("trc", "8x8", None).unwrap().method;
-        let need = memory::peak_bytes(&trc, 1920, 1080, 0);
+        let trc = JobRequest::parse(
+            br#"{"scene":"builtin:cube-in-box","method":"trc","frames":"0..1","size":"8x8"}"#,
+            None,
+        )
+        .unwrap()
+        .method;
+        let need = memory::peak_bytes(&trc, 1920, 1080, 12);
         assert_eq!(
             err.detail,
             format!(
                 "a 1920x1080 trc render at 16 spp needs at least {} of memory at its peak \
-                 (estimated), and 128 MiB is available to this server; ask for a smaller size \
-                 or fewer spp",
+                 (estimated), and 128 MiB is available to this server (its scene has 12 \
+                 triangles); ask for a smaller size, fewer spp or a smaller scene",
                 memory::bytes_text(need)
             )
         );
         for method in ["ic", "tcg", "movies"] {
-            assert!(parse(method, "1920x1080", Some(small)).is_err(), "{method}");
+            assert!(
+                check(method, "1920x1080", 0, Some(small)).is_err(),
+                "{method}"
+            );
         }
-        assert!(parse("trc", "1920x1080", Some(64 * gib)).is_ok());
-        assert!(parse("trc", "1920x1080", None).is_ok());
-        assert!(parse("path", "1920x1080", Some(small)).is_ok());
-        assert!(parse("trc", "64x64", Some(small)).is_ok());
+        assert!(check("trc", "1920x1080", 12, Some(64 * gib)).is_ok());
+        assert!(check("trc", "1920x1080", u64::MAX, None).is_ok());
+        assert!(check("path", "1920x1080", 0, Some(small)).is_ok());
+        assert!(check("trc", "64x64", 0, Some(small)).is_ok());
+    }
+
+    /// The scene's triangles count: a job that fits on an empty scene is
+    /// refused on one of a million triangles (152 bytes each by the
+    /// estimate), and taken again with their memory added.
+    #[test]
+    fn a_job_is_refused_on_its_scene_triangles() {
+        let request = JobRequest::parse(
+            br#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..1","size":"64x64"}"#,
+            None,
+        )
+        .unwrap();
+        let empty = memory::peak_bytes(&request.method, 64, 64, 0);
+        let million = memory::peak_bytes(&request.method, 64, 64, 1_000_000);
+        assert!(million > empty + (100 << 20), "{empty} {million}");
+        assert!(request.check_memory_within(0, Some(empty)).is_ok());
+        let err = request
+            .check_memory_within(1_000_000, Some(empty))
+            .unwrap_err();
+        assert_eq!(err.status, axum::http::StatusCode::BAD_REQUEST);
+        assert!(
+            err.detail.contains("(its scene has 1000000 triangles)"),
+            "{}",
+            err.detail
+        );
+        assert!(request
+            .check_memory_within(1_000_000, Some(million))
+            .is_ok());
     }
 
     /// Stored settings come back as they were; a gather no job can have
