@@ -197,7 +197,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // `movies` 3: a kept link that missed everything covers its whole
         // ray, so an object that later moves far into it is seen
         // (`global::LinkReach`, 2026-11-30). 4: as every method's next.
-        "movies" => 4,
+        // 5: the global pass is meshed from the scene at time 0, not at
+        // the frame it starts at, so a render resumed while an object
+        // scales equals the uninterrupted one (`global::MESHED_AT`).
+        "movies" => 5,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with

@@ -39,7 +39,8 @@ use std::f32::consts::FRAC_1_PI;
 pub struct GlobalSettings {
     /// Grid spacing as a fraction of the static scene's diagonal: a
     /// triangle's grid has `⌈longest edge / spacing⌉` segments an edge
-    /// (at most [`MAX_GRID`]).
+    /// (at most [`MAX_GRID`]), its edges as they are at time 0
+    /// ([`MESHED_AT`]).
     pub spacing: f32,
     /// Links of a vertex on a triangle whose grid cells are at least a
     /// spacing across; smaller cells get fewer, in proportion to their
@@ -450,23 +451,22 @@ impl GlobalPass {
         self.working_bytes
     }
 
-    /// The mesh of the snapshot of `ctx`. Grid sizes come from the static
-    /// scene's size, each triangle's own and the link budget (triangles'
-    /// sizes again), so they are the same whatever frame the pass starts
-    /// at (for triangles that move rigidly).
+    /// The pass over the scene of `ctx`, meshed as the scene stands at
+    /// time 0 ([`MESHED_AT`]) and with the sides `ctx`'s camera sets.
     pub fn new(ctx: &FrameContext, settings: GlobalSettings) -> Self {
-        let snapshot = ctx.snapshot;
-        let meshing = Meshing::fitting(&snapshot.triangles, &settings, static_diagonal(ctx));
+        let at_zero = (ctx.snapshot.time != MESHED_AT).then(|| ctx.scene.snapshot(MESHED_AT));
+        let meshed = at_zero.as_ref().unwrap_or(ctx.snapshot);
+        let meshing = Meshing::fitting(&meshed.triangles, &settings, static_diagonal(meshed));
         let PassMesh {
             grids,
             vertex_of,
             vertices,
             link_count,
-        } = PassMesh::new(snapshot, &meshing);
+        } = PassMesh::new(meshed, &meshing);
         let count = vertices.len();
         GlobalPass {
             settings,
-            sides: SolvedSides::new(ctx.scene, snapshot),
+            sides: SolvedSides::new(ctx.scene, ctx.snapshot),
             grids,
             vertex_of,
             vertices,
@@ -992,10 +992,28 @@ fn pulled(u: f32, v: f32) -> (f32, f32) {
     (u + (1.0 / 3.0 - u) * k, v + (1.0 / 3.0 - v) * k)
 }
 
-/// The diagonal of the static triangles' box (of all triangles where none
-/// is static).
-fn static_diagonal(ctx: &FrameContext) -> f32 {
-    let snapshot = ctx.snapshot;
+/// The time the global pass is meshed at, whatever frame it starts at.
+///
+/// The mesh (each triangle's grid, its vertices' links, the link budget,
+/// the spacing, and the corners shared) is sized from triangles' sizes,
+/// which change over the animation wherever an object scales (or nothing
+/// is static, so the spacing's box moves). Sized at the frame the pass
+/// starts at, a render resumed at frame k meshed the scene otherwise than
+/// the uninterrupted one that started at 0, and its frames differed (a
+/// resumed render must equal the uninterrupted one). The pass cannot
+/// know the job's first frame, but time 0 is the same for every job and
+/// every resume of it, and is frame 0's own snapshot, so a render that
+/// starts at frame 0 is meshed as before. The largest size of each
+/// triangle over the animation would grid a growing object more finely,
+/// but costs a snapshot of every frame before the first is rendered. The
+/// price of time 0: an object that grows later is meshed as it was at 0
+/// (coarser than `spacing` asks; one cell a triangle, and its corners
+/// made one vertex, where it was scaled to nothing).
+const MESHED_AT: f32 = 0.0;
+
+/// The diagonal of `snapshot`'s static triangles' box (of all triangles
+/// where none is static).
+fn static_diagonal(snapshot: &crate::scene::Snapshot) -> f32 {
     let tris = if snapshot.static_count > 0 {
         &snapshot.triangles[..snapshot.static_count]
     } else {
