@@ -214,6 +214,10 @@ fn bad_input_is_a_clear_error() {
             &["serve", "--addr", "0.0.0.0:1", "--token", ""],
             "--token (or RADCACHE_TOKEN) is empty",
         ),
+        (
+            &["serve", "--out", garbage],
+            "is a file; the server writes each job's frames in a directory there",
+        ),
         // Past the range `POST /api/jobs` takes too: each flag has the
         // range of its name, and says it.
         (
@@ -250,6 +254,25 @@ fn bad_input_is_a_clear_error() {
             "{args:?}: expected '{expected}' in: {stderr}"
         );
     }
+}
+
+/// A server that refuses its options makes no store and does not say it
+/// makes one (it said "a new, empty one is made there", then refused).
+#[test]
+fn a_refused_serve_makes_no_store_and_says_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db");
+    let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["serve", "--addr", "0.0.0.0:0", "--db"])
+        .arg(&db)
+        .env_remove("RADCACHE_TOKEN")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("requires --token"), "{stderr}");
+    assert!(!stderr.contains("new, empty one"), "{stderr}");
+    assert!(!db.exists());
 }
 
 /// `RAYON_NUM_THREADS`, which stands for `--threads` where that is not

@@ -1459,8 +1459,9 @@ fn a_token_is_required_on_every_request_and_the_dashboard_carries_it() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--token"));
 
-    let token = "s3cret/+ &x";
-    let encoded = "s3cret%2F%2B%20%26x";
+    // Non-ASCII too: a header carries it as its UTF-8 bytes.
+    let token = "s3cret/+ &xü";
+    let encoded = "s3cret%2F%2B%20%26x%C3%BC";
     let server = start_with(&dir.path().join("db"), &scenes, &["--token", token]);
     let addr = server.addr.clone();
     let (status, head, body) = request(&addr, "GET", "/api/jobs", "", "");

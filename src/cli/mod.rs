@@ -208,13 +208,7 @@ fn run_serve(args: ServeArgs) -> Result<()> {
         p.push(".frames");
         PathBuf::from(p)
     });
-    // `serve` makes the store where there is none (a mistyped --db
-    // included): said, so that an empty dashboard is not a mystery. The
-    // server makes it once it listens.
-    if no_store_at(&args.db) {
-        eprintln!("{}", new_store_note(&args.db));
-    }
-    crate::server::serve(crate::server::ServeOptions {
+    let options = crate::server::ServeOptions {
         db: args.db,
         addr: args.addr,
         scenes: args.scenes,
@@ -224,7 +218,16 @@ fn run_serve(args: ServeArgs) -> Result<()> {
         bench: args.bench,
         client_timeout: std::time::Duration::from_secs_f64(args.client_timeout),
         connections_per_peer: args.connections_per_peer,
-    })
+    };
+    // `serve` makes the store where there is none (a mistyped --db
+    // included): said, so that an empty dashboard is not a mystery, once
+    // the options are known good (a server that refuses to start makes
+    // none). The server makes it once it listens.
+    options.check()?;
+    if no_store_at(&options.db) {
+        eprintln!("{}", new_store_note(&options.db));
+    }
+    crate::server::serve(options)
 }
 
 /// Whether opening a store at `path` makes a new one: nothing there, or an

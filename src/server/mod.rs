@@ -669,9 +669,7 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
         let bearer = req
             .headers()
             .get(axum::http::header::AUTHORIZATION)
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.split_once(' '))
-            .and_then(|(scheme, t)| scheme.eq_ignore_ascii_case("bearer").then_some(t.trim()));
+            .and_then(|v| bearer_token(v.as_bytes()));
         // One `token=` only: of several, none is taken.
         let mut tokens = req
             .uri()
@@ -683,9 +681,9 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
             (Some(t), None) => crate::uri::query_decode(t),
             _ => None,
         };
-        let given = |t: Option<&str>| t.is_some_and(|t| same_secret(t, token));
+        let given = |t: Option<&[u8]>| t.is_some_and(|t| same_secret(t, token));
         // Both compared, with no short cut from one to the other.
-        let (by_header, by_query) = (given(bearer), given(query.as_deref()));
+        let (by_header, by_query) = (given(bearer), given(query.as_deref().map(str::as_bytes)));
         if !(by_header | by_query) {
             let mut response = ApiError::new(
                 axum::http::StatusCode::UNAUTHORIZED,
@@ -703,13 +701,25 @@ async fn check_token(State(state): State<Arc<AppState>>, req: Request, next: Nex
     next.run(req).await
 }
 
+/// The token of an `Authorization: Bearer TOKEN` header's value (the
+/// scheme in any case, RFC 7235), as bytes: a header carries a token of
+/// non-ASCII characters as their UTF-8 bytes, which a `str` view of the
+/// value refuses.
+fn bearer_token(value: &[u8]) -> Option<&[u8]> {
+    let space = value.iter().position(|&b| b == b' ')?;
+    let (scheme, token) = value.split_at(space);
+    scheme
+        .eq_ignore_ascii_case(b"bearer")
+        .then(|| token.trim_ascii())
+}
+
 /// Whether `given` is the secret `token`, in a time that depends on their
 /// lengths only, not on where they first differ (`==` stops at the first
 /// byte that differs, which a client timing many guesses could measure to
 /// find the token a byte at a time). The length is no secret worth the
 /// trouble.
-fn same_secret(given: &str, token: &str) -> bool {
-    let (given, token) = (given.as_bytes(), token.as_bytes());
+fn same_secret(given: impl AsRef<[u8]>, token: impl AsRef<[u8]>) -> bool {
+    let (given, token) = (given.as_ref(), token.as_ref());
     if given.len() != token.len() {
         return false;
     }
@@ -780,24 +790,42 @@ async fn read_body(body: axum::body::Body) -> Result<Vec<u8>, ApiError> {
     Ok(bytes)
 }
 
+impl ServeOptions {
+    /// Refuses, before anything listens or is made, options the server
+    /// could start with but not serve by: an empty token, none on an
+    /// address others reach, a `--scenes` or `--bench` that is no
+    /// directory, an `--out` that is a file (every job would fail making
+    /// its directory there).
+    pub fn check(&self) -> Result<()> {
+        if self.token.as_deref() == Some("") {
+            bail!("--token (or RADCACHE_TOKEN) is empty; give a secret, or no token on a loopback address");
+        }
+        if !self.addr.ip().is_loopback() && self.token.is_none() {
+            bail!(
+                "binding to non-loopback address {} requires --token (or RADCACHE_TOKEN)",
+                self.addr
+            );
+        }
+        for (flag, dir) in [("--scenes", &self.scenes), ("--bench", &self.bench)] {
+            if let Some(dir) = dir.as_ref().filter(|d| !d.is_dir()) {
+                bail!("{flag} {}: no such directory", dir.display());
+            }
+        }
+        if self.out.exists() && !self.out.is_dir() {
+            bail!(
+                "--out {} is a file; the server writes each job's frames in a directory there",
+                self.out.display()
+            );
+        }
+        Ok(())
+    }
+}
+
 /// Runs the server until Ctrl-C or SIGTERM; the job being rendered stops
 /// at once, its frame in progress abandoned (and rendered again on the next
 /// start).
 pub fn serve(options: ServeOptions) -> Result<()> {
-    if options.token.as_deref() == Some("") {
-        bail!("--token (or RADCACHE_TOKEN) is empty; give a secret, or no token on a loopback address");
-    }
-    if !options.addr.ip().is_loopback() && options.token.is_none() {
-        bail!(
-            "binding to non-loopback address {} requires --token (or RADCACHE_TOKEN)",
-            options.addr
-        );
-    }
-    for (flag, dir) in [("--scenes", &options.scenes), ("--bench", &options.bench)] {
-        if let Some(dir) = dir.as_ref().filter(|d| !d.is_dir()) {
-            bail!("{flag} {}: no such directory", dir.display());
-        }
-    }
+    options.check()?;
     let runtime = tokio::runtime::Runtime::new().context("cannot start the tokio runtime")?;
     // Listening first: a taken address leaves no new store behind.
     let listener = runtime

@@ -101,7 +101,7 @@ const MAX_BLOCK_RECORDS: u32 = 1 << 24;
 pub enum StoreError {
     #[error("store {}: no store here (create one with `radcache render --db PATH --job NAME`)", path.display())]
     Missing { path: PathBuf },
-    #[error("store {}: locked by another process (is a render or inspect still running? A store serves one process at a time: to watch a render's cache while it runs, run it under `radcache serve` and read its /stats and /records)", path.display())]
+    #[error("store {}: locked by another process (is a render, inspect, compact or `radcache serve` on it still running? A store serves one process at a time: to watch a render's cache while it runs, run it under `radcache serve` and read its /stats and /records; to work on a store a server holds, use its HTTP API or stop it)", path.display())]
     Locked { path: PathBuf },
     #[error("store {}: not a radcache store: {detail}", path.display())]
     NotAStore { path: PathBuf, detail: String },
