@@ -569,6 +569,75 @@ fn index_out_of_range() {
     assert_error(&path, "vertex index 7 is out of range");
 }
 
+/// glTF gives every attribute of a primitive POSITION's count (§3.7.2.1):
+/// a NORMAL accessor with fewer or more elements is an error naming both
+/// counts, not normals silently dropped and recomputed.
+#[test]
+fn an_attribute_count_unlike_positions_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = tri_bin(TRI, [0, 1, 2]);
+    for _ in 0..4 {
+        for v in [0.0f32, 0.0, 1.0] {
+            bin.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let len = bin.len();
+    for count in [2, 4, 3] {
+        let path = write_case(
+            dir.path(),
+            &format!("normals{count}"),
+            |d| {
+                d["buffers"][0]["byteLength"] = json!(len);
+                (d["bufferViews"].as_array_mut().unwrap())
+                    .push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 48}));
+                (d["accessors"].as_array_mut().unwrap()).push(
+                    json!({"bufferView": 2, "componentType": 5126, "count": count, "type": "VEC3"}),
+                );
+                d["meshes"][0]["primitives"][0]["attributes"]["NORMAL"] = json!(2);
+            },
+            Some(bin.clone()),
+        );
+        if count == 3 {
+            Scene::load(&path).unwrap();
+        } else {
+            assert_error(
+                &path,
+                &format!(
+                    "mesh of node 'tri': primitive 0: accessor 2 (NORMAL) has {count} elements \
+                     but accessor 0 (POSITION) has 3"
+                ),
+            );
+        }
+    }
+}
+
+/// Without `indices` a primitive's vertices are its corners: a count that
+/// is no multiple of 3 speaks of vertices, not of indices it does not have.
+#[test]
+fn triangles_without_indices_count_vertices() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = tri_bin(TRI, [0, 1, 2]);
+    bin.truncate(36);
+    for v in [1.0f32, 1.0, 0.0] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let path = write_case(
+        dir.path(),
+        "noindices",
+        |d| {
+            d["bufferViews"][0]["byteLength"] = json!(48);
+            d["accessors"][0]["count"] = json!(4);
+            d["accessors"][0]["max"] = json!([1.0, 1.0, 0.0]);
+            (d["meshes"][0]["primitives"][0].as_object_mut().unwrap()).remove("indices");
+        },
+        Some(bin),
+    );
+    assert_error(
+        &path,
+        "primitive 0: 4 vertices for TRIANGLES without indices, not a multiple of 3",
+    );
+}
+
 #[test]
 fn accessor_past_buffer_view() {
     let dir = tempfile::tempdir().unwrap();
@@ -1219,6 +1288,39 @@ fn transforms_that_break_tracing_are_errors() {
         )),
     );
     assert_error(&far, "node 'tri' places a vertex");
+    // Scales that compound past f32's range: the world transform overflows
+    // (infinite, and NaN where infinity meets a zero), which the error says
+    // rather than reporting "a coordinate of magnitude NaN". 20 parents
+    // scaled by 100 overflow the transform; 19 leave it finite (1e38) and
+    // carry a vertex at 1e8 to infinity.
+    for (parents, x) in [(20, 1.0), (19, 1e8)] {
+        let path = write_case(
+            dir.path(),
+            &format!("chain{parents}"),
+            |d| {
+                let nodes = d["nodes"].as_array_mut().unwrap();
+                for i in 0..parents {
+                    let child = if i == 0 { 0 } else { i + 1 };
+                    nodes.push(json!({"scale": [100.0, 100.0, 100.0], "children": [child]}));
+                }
+                d["scenes"][0]["nodes"] = json!([parents + 1, 1]);
+            },
+            Some(tri_bin(
+                [[0.0; 3], [x, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                [0, 1, 2],
+            )),
+        );
+        let err = Scene::load(&path).unwrap_err().to_string();
+        assert!(!err.contains("NaN"), "{err}");
+        assert_error(
+            &path,
+            if parents == 20 {
+                "node 'tri' has a world transform at t = 0 that is not finite"
+            } else {
+                "node 'tri' places a vertex at a non-finite coordinate at t = 0"
+            },
+        );
+    }
     // A light under parents whose scales compound to infinity (1e40):
     // its samples, and every pixel it lit, were NaN.
     let far_lamp = write_case(

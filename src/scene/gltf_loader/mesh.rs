@@ -164,6 +164,10 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
         .get(&Semantic::Positions)
         .ok_or("no POSITION attribute")?;
     buffers.check_vertex_type(&pos_acc, "POSITION")?;
+    let normal_acc = prim.get(&Semantic::Normals);
+    if let Some(acc) = &normal_acc {
+        check_attribute_count(acc, "NORMAL", &pos_acc)?;
+    }
     let positions = buffers.vec3s(&pos_acc, "POSITION")?;
     if positions.iter().any(|p| !p.is_finite()) {
         return Err("NaN or infinite vertex position".into());
@@ -172,6 +176,7 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
         check_coordinates(p, "vertex position")?;
     }
     let n = positions.len();
+    let indexed = prim.indices().is_some();
     let indices = match prim.indices() {
         Some(acc) => buffers.indices(&acc, "indices")?,
         None => (0..n as u32).collect(),
@@ -182,10 +187,12 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
         ));
     }
     if prim.mode() == Mode::Triangles && indices.len() % 3 != 0 {
-        return Err(format!(
-            "{} indices for TRIANGLES, not a multiple of 3",
-            indices.len()
-        ));
+        let what = if indexed {
+            "indices for TRIANGLES"
+        } else {
+            "vertices for TRIANGLES without indices"
+        };
+        return Err(format!("{} {what}, not a multiple of 3", indices.len()));
     }
     // Triangles without area (an index repeated, or corners on one line)
     // are never hit, and shape is kept by rigid motion; but a BVH cannot
@@ -198,15 +205,16 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
             (b - a).cross(c - a) != Vec3::ZERO
         })
         .collect();
-    let given = match prim.get(&Semantic::Normals) {
+    let given = match normal_acc {
         Some(acc) => {
             buffers.check_vertex_type(&acc, "NORMAL")?;
             Some(buffers.vec3s(&acc, "NORMAL")?)
         }
         None => None,
     };
-    // Unusable normals (missing, wrong count, NaN, zero) are recomputed
-    // rather than rejected: they only affect shading.
+    // Unusable normals (missing, NaN, zero) are recomputed rather than
+    // rejected: they only affect shading. (A count unlike POSITION's is
+    // refused above: the file is malformed, not merely unshaded.)
     let normals = match given {
         Some(normals) if normals.len() == n && normals.iter().all(|v| v.is_finite()) => {
             let mut normals: Vec<Vec3> = normals.into_iter().map(Vec3::normalize_or_zero).collect();
@@ -223,6 +231,23 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
         _ => vertex_normals(&positions, &triangles),
     };
     Ok((positions, normals, triangles))
+}
+
+/// glTF gives every attribute of a primitive POSITION's count
+/// (§3.7.2.1); checked for each attribute the loader reads (POSITION and
+/// NORMAL: texture coordinates, colours, joints and weights are not read).
+fn check_attribute_count(acc: &gltf::Accessor, what: &str, positions: &gltf::Accessor) -> Res<()> {
+    if acc.count() == positions.count() {
+        return Ok(());
+    }
+    Err(format!(
+        "accessor {} ({what}) has {} elements but accessor {} (POSITION) has {}; \
+         glTF gives every attribute of a primitive the same count",
+        acc.index(),
+        acc.count(),
+        positions.index(),
+        positions.count()
+    ))
 }
 
 /// Triangle list from glTF index order (spec §3.7.2.1 for strips and fans).

@@ -190,18 +190,37 @@ fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scen
 fn check_first_frame(scene: &Scene) -> Res<()> {
     let world = scene.node_world_transforms(0.0);
     for object in &scene.objects {
+        let name = &scene.nodes[object.node].name;
+        let transform = world[object.node];
+        // Each rest transform and key is finite: a world transform that is
+        // not has overflowed (scales compounding to infinity, and NaN where
+        // infinity meets a zero), and has no magnitude worth printing.
+        if !transform.is_finite() {
+            return Err(format!(
+                "node '{name}' has a world transform at t = 0 that is not finite: the transforms \
+                 of the node and its ancestors compound past f32's range (about 3.4e38), \
+                 past what can be traced"
+            ));
+        }
         let far = object.mesh.positions.iter().find_map(|&p| {
-            let w = world[object.node].transform_point3(p);
+            let w = transform.transform_point3(p);
             (!crate::scene::within_world(w)).then_some(w)
         });
         if let Some(w) = far {
-            return Err(format!(
-                "node '{}' places a vertex at a coordinate of magnitude {:e} at t = 0, \
-                 beyond {:e}, past what can be traced",
-                scene.nodes[object.node].name,
-                w.abs().max_element(),
-                crate::scene::MAX_WORLD_COORDINATE
-            ));
+            let largest = w.abs().max_element();
+            return Err(if w.is_finite() {
+                format!(
+                    "node '{name}' places a vertex at a coordinate of magnitude {largest:e} \
+                     at t = 0, beyond {:e}, past what can be traced",
+                    crate::scene::MAX_WORLD_COORDINATE
+                )
+            } else {
+                format!(
+                    "node '{name}' places a vertex at a non-finite coordinate at t = 0 (its \
+                     world transform carries it past f32's range, about 3.4e38), \
+                     past what can be traced"
+                )
+            });
         }
     }
     if let Some(light) = (scene.lights.iter())
