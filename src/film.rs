@@ -59,8 +59,11 @@ pub fn frame_path(dir: &Path, frame: u32, ext: &str) -> PathBuf {
 pub enum FilmError {
     #[error("{}: file not found", path.display())]
     NotFound { path: PathBuf },
-    #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: io::Error },
+    /// The OS error is part of the message, not a `source` (named `error`,
+    /// not `source`, so thiserror does not chain it): `{:#}` of an
+    /// `anyhow` error would otherwise print it twice.
+    #[error("{}: {error}", path.display())]
+    Io { path: PathBuf, error: io::Error },
     #[error("{}: not an OpenEXR file (no EXR magic number)", path.display())]
     NotExr { path: PathBuf },
     #[error("{}: no R, G, B channels in the first layer (found: {found})", path.display())]
@@ -80,7 +83,7 @@ impl FilmError {
         } else {
             FilmError::Io {
                 path: path.to_owned(),
-                source,
+                error: source,
             }
         }
     }
@@ -281,6 +284,30 @@ pub fn write_frame(film: &Film, dir: &Path, frame: u32) -> Result<(), FilmError>
     fs::create_dir_all(dir).map_err(|e| FilmError::io(dir, e))?;
     write_png(film, &frame_path(dir, frame, "png"))?;
     write_exr(film, &frame_path(dir, frame, "exr"))
+}
+
+/// The frame files (`frame_NNNN.exr`, `frame_NNNN.png`) in `dir` that are
+/// directories, with their frame numbers, in frame order: [`write_frame`]
+/// cannot rename a file over them. Nothing when `dir` cannot be read.
+pub fn frame_paths_taken_by_directories(dir: &Path) -> Vec<(u32, PathBuf)> {
+    let Ok(entries) = fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut taken: Vec<(u32, PathBuf)> = entries
+        .flatten()
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+        .filter_map(|e| {
+            let name = e.file_name();
+            let (number, ext) = name.to_str()?.strip_prefix("frame_")?.split_once('.')?;
+            let frame: u32 = number.parse().ok()?;
+            // Only the names `frame_path` makes (no sign, four digits or more).
+            let path = frame_path(dir, frame, ext);
+            (matches!(ext, "exr" | "png") && path.file_name() == Some(&name))
+                .then_some((frame, path))
+        })
+        .collect();
+    taken.sort();
+    taken
 }
 
 /// Distinguishes temporary files of concurrent writers in one process.
@@ -615,6 +642,41 @@ mod tests {
             .collect();
         names.sort();
         assert_eq!(names, ["frame_0007.exr", "frame_0007.png"]);
+    }
+
+    /// The OS's reason is in the message and not also its source:
+    /// `{:#}` of an `anyhow` error (how the CLI prints errors) says it once.
+    #[test]
+    fn write_error_says_the_os_error_once() {
+        let dir = tempfile::tempdir().unwrap();
+        fs::create_dir_all(frame_path(dir.path(), 0, "exr").join("x")).unwrap();
+        let err = write_frame(&Film::new(2, 2), dir.path(), 0).unwrap_err();
+        let said = format!("{:#}", anyhow::Error::from(err));
+        assert_eq!(said.matches("os error").count(), 1, "{said}");
+        assert!(said.contains("frame_0000.exr"), "{said}");
+    }
+
+    #[test]
+    fn directories_in_the_way_of_frame_files_are_found() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["frame_0012.png", "frame_0003.exr", "frame_12345.exr"] {
+            fs::create_dir(dir.path().join(name)).unwrap();
+        }
+        // Not frame files, or files rather than directories.
+        for name in ["frame_03.exr", "frame_0004.jpg", "frame_+004.exr", "other"] {
+            fs::create_dir(dir.path().join(name)).unwrap();
+        }
+        fs::write(dir.path().join("frame_0005.exr"), "").unwrap();
+        let taken = frame_paths_taken_by_directories(dir.path());
+        assert_eq!(
+            taken,
+            [
+                (3, frame_path(dir.path(), 3, "exr")),
+                (12, frame_path(dir.path(), 12, "png")),
+                (12345, frame_path(dir.path(), 12345, "exr")),
+            ]
+        );
+        assert!(frame_paths_taken_by_directories(&dir.path().join("none")).is_empty());
     }
 
     #[test]

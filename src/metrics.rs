@@ -23,10 +23,12 @@ pub const BLOCK: u32 = 16;
 /// Errors of [`compare_dirs`]; each names the folder or files involved.
 #[derive(Debug, thiserror::Error)]
 pub enum MetricsError {
-    #[error("cannot read folder {}: {source}", path.display())]
+    // `error`, not `source`: thiserror makes a field named `source` the
+    // cause, and `{:#}` printed the OS error twice.
+    #[error("cannot read folder {}: {error}", path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("no frame_NNNN.exr files in reference folder {}", dir.display())]
     NoFrames { dir: PathBuf },
@@ -291,9 +293,9 @@ pub struct CompareReport {
 /// `frame_NNNN.exr` files of `dir` as (frame number, path), sorted by number.
 /// Other files (`frame_NNNN.png`, `seed1_frame_0000.exr`, …) are ignored.
 pub fn list_frames(dir: &Path) -> Result<Vec<(u32, PathBuf)>, MetricsError> {
-    let io_err = |source| MetricsError::Io {
+    let io_err = |error| MetricsError::Io {
         path: dir.to_owned(),
-        source,
+        error,
     };
     let mut frames = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(io_err)? {

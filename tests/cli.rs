@@ -1296,3 +1296,60 @@ fn serve_says_it_makes_a_new_store() {
         assert!(db.join("db").is_file(), "the store was made");
     }
 }
+
+/// A directory where a frame file goes is refused before the frame renders
+/// (no file of it is written), naming the path and saying why once.
+#[test]
+fn a_directory_in_the_way_of_a_frame_file_is_said_once_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("dd");
+    std::fs::create_dir_all(out.join("frame_0000.exr").join("x")).unwrap();
+    let (code, _, stderr) = radcache(&[
+        "render",
+        "--method",
+        "path",
+        "--size",
+        "8x8",
+        "--spp",
+        "1",
+        "--frames",
+        "0..2",
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.contains("frame_0000.exr"), "{stderr}");
+    let said = stderr.to_lowercase();
+    assert_eq!(said.matches("is a directory").count(), 1, "{stderr}");
+    assert!(said.matches("os error").count() <= 1, "{stderr}");
+    assert!(!out.join("frame_0000.png").exists(), "frame 0 was rendered");
+}
+
+/// Where stderr is not a terminal (a log, `nohup`, CI; these tests pipe
+/// it) a render says each finished frame on a line of its own, which the
+/// bar would not; `-q` says none.
+#[test]
+fn render_progress_is_a_line_per_frame_off_a_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let args = [
+        "render", "--method", "path", "--size", "8x8", "--spp", "1", "--frames", "3..5", "--out",
+        out,
+    ];
+    let (code, _, stderr) = radcache(&args);
+    assert_eq!(code, 0, "{stderr}");
+    let lines: Vec<&str> = stderr.lines().filter(|l| l.contains(" done (")).collect();
+    assert_eq!(lines.len(), 2, "{stderr}");
+    assert!(lines[0].starts_with("frame 3 done (1/2) in "), "{stderr}");
+    assert!(lines[0].contains(", eta "), "{stderr}");
+    assert!(lines[1].starts_with("frame 4 done (2/2) in "), "{stderr}");
+    assert!(
+        !lines[1].contains("eta"),
+        "the last frame has no ETA: {stderr}"
+    );
+    let (code, _, stderr) = radcache(&[&args[..], &["-q"]].concat());
+    assert_eq!(code, 0, "{stderr}");
+    assert!(!stderr.contains(" done ("), "{stderr}");
+}

@@ -657,8 +657,9 @@ impl RenderSummary {
     }
 }
 
-/// Renders `frames` into `out_dir` as `frame_NNNN.exr` and `.png`, with a
-/// progress bar on stderr unless `quiet`.
+/// Renders `frames` into `out_dir` as `frame_NNNN.exr` and `.png`, with
+/// progress on stderr unless `quiet` (a bar on a terminal, else a line per
+/// frame).
 pub fn render_to_dir(
     renderer: &mut Renderer,
     frames: Range<u32>,
@@ -718,10 +719,18 @@ pub fn render_job_to_dir_with(
         Some(j) => resume(renderer, j, &frames, out_dir)?,
         None => BTreeSet::new(),
     };
+    // Before any frame renders (rather than failing at its write).
+    if let Some((frame, path)) = film::frame_paths_taken_by_directories(out_dir)
+        .into_iter()
+        .find(|(f, _)| frames.contains(f) && !done.contains(f))
+    {
+        bail!(
+            "cannot write frame {frame}: {} is a directory",
+            path.display()
+        );
+    }
     renderer.keep_frame_records(job.is_some());
-    let progress = progress_bar(frames.len() as u64, quiet);
-    progress.set_position(done.len() as u64);
-    progress.reset_eta();
+    let mut progress = FrameProgress::new(frames.len() as u64, done.len() as u64, quiet);
     let start = Instant::now();
     let counts_before = renderer.backend().ray_counts();
     let mut frame_stats = Vec::new();
@@ -731,7 +740,7 @@ pub fn render_job_to_dir_with(
         if done.contains(&frame) {
             continue;
         }
-        progress.set_message(format!("frame {frame}"));
+        progress.start_frame(frame);
         let film = renderer.try_render_frame(frame).map_err(|e| {
             progress.abandon();
             match job {
@@ -767,7 +776,7 @@ pub fn render_job_to_dir_with(
         }
         film::write_frame(&film, out_dir, frame)?;
         frame_stats.push(stats);
-        progress.inc(1);
+        progress.finish_frame(frame);
         if !after_frame(frame) {
             break;
         }
@@ -783,6 +792,107 @@ pub fn render_job_to_dir_with(
         out_dir: out_dir.to_path_buf(),
         cache_unit: renderer.cache_unit(),
     })
+}
+
+/// The progress of [`render_job_to_dir_with`] on stderr: a bar on a
+/// terminal; elsewhere (a log, `nohup`, CI) one line per finished frame,
+/// which a bar would not leave there; nothing when `quiet`.
+enum FrameProgress {
+    Bar(indicatif::ProgressBar),
+    Lines {
+        len: u64,
+        position: u64,
+        /// Frames finished by this run, and the time since it started
+        /// rendering: the ETA is their mean time per frame.
+        finished: u64,
+        start: Instant,
+        frame_start: Instant,
+    },
+    Quiet,
+}
+
+impl FrameProgress {
+    /// Over `len` frames of which `done` are already finished.
+    fn new(len: u64, done: u64, quiet: bool) -> Self {
+        use std::io::IsTerminal;
+        if quiet {
+            return Self::Quiet;
+        }
+        if !std::io::stderr().is_terminal() {
+            let now = Instant::now();
+            return Self::Lines {
+                len,
+                position: done,
+                finished: 0,
+                start: now,
+                frame_start: now,
+            };
+        }
+        let bar = progress_bar(len, false);
+        bar.set_position(done);
+        bar.reset_eta();
+        Self::Bar(bar)
+    }
+
+    fn start_frame(&mut self, frame: u32) {
+        match self {
+            Self::Bar(bar) => bar.set_message(format!("frame {frame}")),
+            Self::Lines { frame_start, .. } => *frame_start = Instant::now(),
+            Self::Quiet => {}
+        }
+    }
+
+    fn finish_frame(&mut self, frame: u32) {
+        match self {
+            Self::Bar(bar) => bar.inc(1),
+            Self::Lines {
+                len,
+                position,
+                finished,
+                start,
+                frame_start,
+            } => {
+                *position += 1;
+                *finished += 1;
+                let mut line = format!(
+                    "frame {frame} done ({position}/{len}) in {:.2} s",
+                    frame_start.elapsed().as_secs_f64()
+                );
+                let left = len.saturating_sub(*position);
+                if left > 0 {
+                    let per_frame = start.elapsed().as_secs_f64() / *finished as f64;
+                    line.push_str(&format!(", eta {}", eta_words(per_frame * left as f64)));
+                }
+                // Progress is not worth failing (or panicking) over a closed stderr.
+                use std::io::Write;
+                let _ = writeln!(std::io::stderr(), "{line}");
+            }
+            Self::Quiet => {}
+        }
+    }
+
+    /// Leaves the bar where it stopped (a frame failed).
+    fn abandon(&self) {
+        if let Self::Bar(bar) = self {
+            bar.abandon();
+        }
+    }
+
+    fn finish_and_clear(&self) {
+        if let Self::Bar(bar) = self {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+/// `seconds` rounded for an ETA: `8 s`, `3 min 20 s`, `2 h 05 min`.
+fn eta_words(seconds: f64) -> String {
+    let s = seconds.round() as u64;
+    match s {
+        0..60 => format!("{s} s"),
+        60..3600 => format!("{} min {} s", s / 60, s % 60),
+        _ => format!("{} h {:02} min", s / 3600, s % 3600 / 60),
+    }
 }
 
 /// A progress bar over `len` frames (hidden when `quiet`).
@@ -839,6 +949,14 @@ mod tests {
             cache_unit: "records",
             out_dir: PathBuf::from("out"),
         }
+    }
+
+    #[test]
+    fn etas_are_rounded_to_what_matters() {
+        assert_eq!(eta_words(0.4), "0 s");
+        assert_eq!(eta_words(59.4), "59 s");
+        assert_eq!(eta_words(200.0), "3 min 20 s");
+        assert_eq!(eta_words(7500.0), "2 h 05 min");
     }
 
     #[test]
