@@ -391,11 +391,14 @@ fn store_size(
         render::make_backend(backend)?,
         frame_settings,
     );
+    // A bar on a terminal, as the bench's other steps show; elsewhere
+    // nothing, as they show (not the per-frame lines of `render`).
+    let quiet = opts.quiet || !std::io::IsTerminal::is_terminal(&std::io::stderr());
     render::render_job_to_dir(
         &mut renderer,
         opts.frames.clone(),
         dir,
-        opts.quiet,
+        quiet,
         Some(&mut job),
     )
     .with_context(|| format!("{what}: rendering into the store {}", path.display()))?;
