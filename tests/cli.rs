@@ -337,7 +337,8 @@ fn a_closed_or_full_standard_output_is_no_panic() {
 }
 
 /// `serve` on an address another program holds fails before it makes a
-/// store, so no empty store is left where `--db` pointed.
+/// store, so no empty store is left where `--db` pointed, nor said to be
+/// made.
 #[test]
 fn serve_on_a_taken_address_leaves_no_store() {
     let dir = tempfile::tempdir().unwrap();
@@ -351,6 +352,7 @@ fn serve_on_a_taken_address_leaves_no_store() {
         "{stderr}"
     );
     assert!(!db.exists(), "a store was made at {}", db.display());
+    assert!(!stderr.contains("new, empty one"), "{stderr}");
 }
 
 /// A bench whose last scene does not load fails before it benches the

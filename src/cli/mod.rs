@@ -219,35 +219,7 @@ fn run_serve(args: ServeArgs) -> Result<()> {
         client_timeout: std::time::Duration::from_secs_f64(args.client_timeout),
         connections_per_peer: args.connections_per_peer,
     };
-    // `serve` makes the store where there is none (a mistyped --db
-    // included): said, so that an empty dashboard is not a mystery, once
-    // the options are known good (a server that refuses to start makes
-    // none). The server makes it once it listens.
-    options.check()?;
-    if no_store_at(&options.db) {
-        eprintln!("{}", new_store_note(&options.db));
-    }
     crate::server::serve(options)
-}
-
-/// Whether opening a store at `path` makes a new one: nothing there, or an
-/// empty directory. (A directory a killed creation left is also made anew,
-/// unannounced: it was meant to be a store.)
-fn no_store_at(path: &std::path::Path) -> bool {
-    match std::fs::read_dir(path) {
-        Ok(mut entries) => entries.next().is_none(),
-        Err(e) => e.kind() == std::io::ErrorKind::NotFound,
-    }
-}
-
-/// The line that says a new store is made at `path` (`render --job` says
-/// it once the store is made; `serve` before it listens, which it must do
-/// before it makes the store).
-fn new_store_note(path: &std::path::Path) -> String {
-    format!(
-        "note: no store at {}: a new, empty one is made there (to use an existing store, give its path as --db)",
-        path.display()
-    )
 }
 
 fn backend_choice(b: BackendArg) -> BackendChoice {

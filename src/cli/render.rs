@@ -385,10 +385,10 @@ fn open_job(
         return Ok(None);
     };
     let db = args.db.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_DB));
-    let new = super::no_store_at(&db);
+    let new = crate::store::no_store_at(&db);
     let store = Store::open(&db)?;
     if new {
-        eprintln!("{}", super::new_store_note(&db));
+        eprintln!("{}", crate::store::new_store_note(&db));
     }
     // A scene file is stored by its absolute path: `inspect` and `serve`
     // then find it from any directory, and a resume from another directory

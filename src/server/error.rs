@@ -28,6 +28,15 @@ impl ApiError {
     pub fn conflict(detail: String) -> Self {
         Self::new(StatusCode::CONFLICT, "conflict", detail)
     }
+    /// The answer of work that every client that asked for has left
+    /// (`flight::Wanted::still`): it reaches no one.
+    pub fn abandoned() -> Self {
+        Self::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "abandoned",
+            "every client that asked for this has gone".into(),
+        )
+    }
     pub fn internal(err: impl std::fmt::Display) -> Self {
         Self::new(
             StatusCode::INTERNAL_SERVER_ERROR,

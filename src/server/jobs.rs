@@ -57,9 +57,12 @@ pub async fn create(
 async fn create_checked(
     state: Arc<AppState>,
     body: &[u8],
-    check_memory: impl FnOnce(&JobRequest, u64) -> Result<(), ApiError>,
+    check_memory: impl Fn(&JobRequest, u64) -> Result<(), ApiError>,
 ) -> Result<(StatusCode, Json<Value>), ApiError> {
     let request = JobRequest::parse(body, state.options.scenes.as_deref())?;
+    // Its pixels and samples alone first: a job too large whatever its
+    // scene is refused before the scene is read.
+    check_memory(&request, 0)?;
     let loaded = check_scene_loads(&state, &request).await?;
     check_memory(&request, loaded.triangles)?;
     let identity = loaded.identity;

@@ -454,8 +454,8 @@ impl AppState {
             png.map(|png| Ok(Some(png)))
         };
         let state = self.clone();
-        let encode = || async move {
-            let png = state.encode_png(sid, frame).await;
+        let encode = |wanted: flight::Wanted<_, _>| async move {
+            let png = state.encode_png(sid, frame, wanted).await;
             if let Ok(Some(png)) = &png {
                 let mut pngs = state.pngs.lock().expect("png cache lock");
                 pngs.insert((sid, frame), png.clone());
@@ -471,9 +471,17 @@ impl AppState {
 
     /// Decodes frame `frame` of store job `sid` and encodes it as PNG
     /// (`None`: the frame is not stored), in one of the decode slots.
-    async fn encode_png(self: &Arc<Self>, sid: u64, frame: u32) -> Result<Option<Bytes>, ApiError> {
+    async fn encode_png(
+        self: &Arc<Self>,
+        sid: u64,
+        frame: u32,
+        wanted: flight::Wanted<(u64, u32), PngResult>,
+    ) -> PngResult {
         let state = self.clone();
         self.decoding(move || {
+            if !wanted.still() {
+                return Err(ApiError::abandoned());
+            }
             let Some(exr) = state
                 .store
                 .frame_exr(sid, frame)
@@ -831,6 +839,12 @@ pub fn serve(options: ServeOptions) -> Result<()> {
     let listener = runtime
         .block_on(tokio::net::TcpListener::bind(options.addr))
         .with_context(|| format!("cannot listen on {}", options.addr))?;
+    // Said, so that an empty dashboard is not a mystery (a mistyped --db
+    // makes a new store too); only now, as a server that does not start
+    // makes none.
+    if crate::store::no_store_at(&options.db) {
+        eprintln!("{}", crate::store::new_store_note(&options.db));
+    }
     let store = Store::open(&options.db)?;
     let state = Arc::new(AppState::new(store, options.clone()));
     worker::load_jobs(&state)?;

@@ -281,10 +281,15 @@ pub async fn records(
     // In one of the records slots: a query reads the record blocks of the
     // frames after the nearest kept set (`super::alive`), all of them up to
     // `frame` the first time. Asked again while it runs, it is not run
-    // again: a frame's records never change once stored.
-    let run = || async move {
+    // again: a frame's records never change once stored. Asked and left
+    // (its clients gone before it had a slot), it is not run at all.
+    let run = |wanted: super::flight::Wanted<_, _>| async move {
         let slots = s.records_slots.clone();
-        super::blocking_in_slot(&slots, move || answer(&s, &job, &id, sid, &query)).await
+        super::blocking_in_slot(&slots, move || match wanted.still() {
+            true => answer(&s, &job, &id, sid, &query),
+            false => Err(ApiError::abandoned()),
+        })
+        .await
     };
     let body = state
         .records_queries
@@ -455,5 +460,19 @@ mod tests {
         );
         assert_eq!(body(ask(&[("frame", "0")]).await).await, bodies[0]);
         assert_eq!(reads(), 3);
+        // Asked and left before a slot was free (the client gone): never
+        // read.
+        let held = state.records_slots.clone().acquire_many_owned(slots).await;
+        let gone = tokio::spawn(ask(&[("frame", "0")]));
+        while state.records_queries.in_progress() == 0 {
+            tokio::task::yield_now().await;
+        }
+        gone.abort();
+        assert!(gone.await.unwrap_err().is_cancelled());
+        drop(held);
+        while state.records_queries.in_progress() > 0 {
+            tokio::task::yield_now().await;
+        }
+        assert_eq!(reads(), 3, "a query no one waits for was read");
     }
 }

@@ -252,6 +252,26 @@ where
         .into_vec()
 }
 
+/// Whether opening a store at `path` makes a new one: nothing there, or an
+/// empty directory. (A directory a killed creation left is also made anew,
+/// unannounced: it was meant to be a store.)
+pub fn no_store_at(path: &std::path::Path) -> bool {
+    match std::fs::read_dir(path) {
+        Ok(mut entries) => entries.next().is_none(),
+        Err(e) => e.kind() == std::io::ErrorKind::NotFound,
+    }
+}
+
+/// The line that says a new store is made at `path` (`render --job` says
+/// it once the store is made; `serve` once it listens, before it makes
+/// the store).
+pub fn new_store_note(path: &std::path::Path) -> String {
+    format!(
+        "note: no store at {}: a new, empty one is made there (to use an existing store, give its path as --db)",
+        path.display()
+    )
+}
+
 impl Store {
     /// Opens the store at `path`, creating it if the directory does not
     /// exist (or is empty). Runs pending migrations.
