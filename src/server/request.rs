@@ -162,7 +162,7 @@ impl JobRequest {
 
     /// Refuses a job whose frame, on its scene of `triangles` triangles,
     /// needs more memory than the server's next job may take
-    /// ([`memory_for_the_next_job`], read now: after the scene's load,
+    /// (`memory_for_the_next_job`, read now: after the scene's load,
     /// which the job's render loads again).
     pub fn check_memory(&self, triangles: u64) -> Result<(), ApiError> {
         self.check_memory_within(triangles, memory_for_the_next_job())

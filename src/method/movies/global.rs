@@ -1009,7 +1009,7 @@ fn pulled(u: f32, v: f32) -> (f32, f32) {
 /// price of time 0: an object that grows later is meshed as it was at 0
 /// (coarser than `spacing` asks; one cell a triangle, and its corners
 /// made one vertex, where it was scaled to nothing).
-const MESHED_AT: f32 = 0.0;
+pub const MESHED_AT: f32 = 0.0;
 
 /// The diagonal of `snapshot`'s static triangles' box (of all triangles
 /// where none is static).
