@@ -382,6 +382,51 @@ fn bench_checks_every_scene_before_it_starts() {
     assert!(!out.join("reference").exists(), "a reference was rendered");
 }
 
+/// Off a terminal a bench says each run as it ends (its bars are drawn on
+/// terminals only); with `-q` it says nothing.
+#[test]
+fn bench_progress_is_a_line_per_run_off_a_terminal() {
+    let dir = tempfile::tempdir().unwrap();
+    for quiet in [false, true] {
+        let out = dir.path().join(format!("bench-{quiet}"));
+        let mut args = vec![
+            "bench",
+            "--scenes",
+            "cube-in-box",
+            "--size",
+            "8x8",
+            "--frames",
+            "0..2",
+            "--reference-spp",
+            "2",
+            "--methods",
+            "path:spp=1,2",
+            "--backends",
+            "cpu",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        if quiet {
+            args.push("-q");
+        }
+        let (code, _, stderr) = radcache(&args);
+        assert_eq!(code, 0, "{stderr}");
+        let lines: Vec<&str> = stderr
+            .lines()
+            .filter(|l| l.starts_with("bench: "))
+            .collect();
+        let expected = if quiet { 0 } else { 2 };
+        assert_eq!(lines.len(), expected, "{stderr}");
+        for (line, spp) in lines.iter().zip(["spp=1", "spp=2"]) {
+            assert!(line.starts_with("bench: cube-in-box path "), "{line}");
+            assert!(
+                line.contains(spp) && line.contains("relative RMSE"),
+                "{line}"
+            );
+        }
+    }
+}
+
 /// `inspect` lists a job's records by object and, where the job's scene
 /// still loads as it was rendered, splits them between the objects that
 /// move and those that do not (here against the scene's own animation);

@@ -269,6 +269,7 @@ fn bench_run(
     let cmp = metrics::compare_dirs(&ref_dir, &dir)
         .with_context(|| format!("comparing {} with {}", dir.display(), ref_dir.display()))?;
     let (next_error, store_bytes) = untimed_measures(opts, scene, run, &settings, &dir, &what)?;
+    say_run_done(opts, &what, stats.render_time.as_secs_f64(), cmp.rel_rmse);
     Ok(BenchRow {
         scene: label.into(),
         method: spec.method.clone(),
@@ -288,6 +289,20 @@ fn bench_run(
         flicker_surfaces: cmp.flicker_surfaces,
         next_error,
     })
+}
+
+/// Off a terminal (a log, `nohup`, CI), where the bars are not drawn, a
+/// line a finished run, so that a bench of hours is seen to go on (as
+/// `render` says each frame); on a terminal its bar shows it, and `quiet`
+/// says nothing.
+fn say_run_done(opts: &BenchOptions, what: &str, seconds: f64, rel_rmse: f64) {
+    use std::io::{IsTerminal, Write};
+    if opts.quiet || std::io::stderr().is_terminal() {
+        return;
+    }
+    let line = format!("bench: {what}: {seconds:.3} s, relative RMSE {rel_rmse:.5}");
+    // Progress is not worth failing (or panicking) over a closed stderr.
+    let _ = writeln!(std::io::stderr(), "{line}");
 }
 
 /// What the options ask to measure in untimed passes after a run:
