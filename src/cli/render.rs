@@ -122,9 +122,9 @@ fn check_memory(
     method: &MethodSettings,
     scene: &crate::scene::Scene,
 ) -> Result<()> {
-    let triangles = scene.objects.iter().map(|o| o.mesh.triangles.len() as u64);
+    let triangles = memory::scene_triangles(scene);
     let available = memory::available_bytes();
-    memory::check_fits(method, args.size, triangles.sum(), available).map_err(|too_large| {
+    memory::check_fits(method, args.size, triangles, available).map_err(|too_large| {
         anyhow::anyhow!(
             "{too_large}; render a smaller --size or fewer --spp, or pass --no-memory-check \
              to try anyway"
