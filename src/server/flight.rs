@@ -293,12 +293,17 @@ mod tests {
         let flights = Arc::new(Flights::<u32, bool>::default());
         let gate = Arc::new(Semaphore::new(0));
         let g = gate.clone();
+        // What the first work found: 0 not yet asked, 1 wanted, 2 not.
+        let found = Arc::new(AtomicUsize::new(0));
+        let f = found.clone();
         let first = {
             let flights = flights.clone();
             tokio::spawn(async move {
                 let work = |wanted: Wanted<u32, bool>| async move {
                     let _permit = g.acquire().await.unwrap();
-                    wanted.still()
+                    let still = wanted.still();
+                    f.store(if still { 1 } else { 2 }, Ordering::SeqCst);
+                    still
                 };
                 flights.get(1, || None, work).await
             })
@@ -309,9 +314,15 @@ mod tests {
         first.abort();
         assert!(first.await.unwrap_err().is_cancelled());
         gate.add_permits(1);
-        while flights.in_progress() > 0 {
+        while found.load(Ordering::SeqCst) == 0 {
             tokio::task::yield_now().await;
         }
+        assert_eq!(
+            found.load(Ordering::SeqCst),
+            2,
+            "no one waited, yet it was wanted"
+        );
+        assert_eq!(flights.in_progress(), 0, "left on finding itself unwanted");
         // Left unwanted: a new request computes, and is wanted.
         let again = flights.get(1, || None, |wanted| async move { wanted.still() });
         assert!(again.await.unwrap());
