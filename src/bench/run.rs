@@ -352,6 +352,8 @@ fn estimate_error(
         tally: EstimateErrorTally::new(settings.temporal_accuracy, settings.max_life),
     };
     let bar = render::progress_bar(opts.frames.len() as u64, opts.quiet);
+    let heartbeat = render::Heartbeat::for_logs(opts.quiet);
+    heartbeat.begin(format!("bench: {what}: E(t0+1) estimates still running"));
     let end = opts.frames.end;
     for frame in opts.frames.clone() {
         bar.set_message(format!("{what}: E(t0+1) estimates, frame {frame}"));
@@ -490,8 +492,9 @@ pub(super) struct RunStats {
     records: u64,
 }
 
-/// Renders `frames` into `dir` with a progress bar; the time counts
-/// rendering only, not writing files.
+/// Renders `frames` into `dir` with a progress bar (off a terminal, a
+/// line every half minute the run lasts); the time counts rendering
+/// only, not writing files.
 pub(super) fn render_frames(
     renderer: &mut Renderer,
     frames: Range<u32>,
@@ -500,6 +503,8 @@ pub(super) fn render_frames(
     quiet: bool,
 ) -> Result<RunStats> {
     let bar = render::progress_bar(frames.len() as u64, quiet);
+    let heartbeat = render::Heartbeat::for_logs(quiet);
+    heartbeat.begin(format!("bench: {what} still running"));
     let rays_before = renderer.backend().ray_counts().total();
     let mut render_time = Duration::ZERO;
     let mut render_pass_seconds = None;

@@ -26,11 +26,14 @@ use std::time::{Duration, Instant};
 
 mod job;
 pub mod memory;
+mod progress;
 
 pub use job::{
     job_spec, job_spec_confined, job_spec_of, scene_identity, scene_identity_confined, StoreJob,
 };
 use job::{resume, store_frame};
+use progress::FrameProgress;
+pub(crate) use progress::{progress_bar, Heartbeat};
 
 /// Where a scene comes from.
 #[derive(Clone, Debug, PartialEq)]
@@ -794,122 +797,6 @@ pub fn render_job_to_dir_with(
     })
 }
 
-/// The progress of [`render_job_to_dir_with`] on stderr: a bar on a
-/// terminal; elsewhere (a log, `nohup`, CI) one line per finished frame,
-/// which a bar would not leave there; nothing when `quiet`.
-enum FrameProgress {
-    Bar(indicatif::ProgressBar),
-    Lines {
-        len: u64,
-        position: u64,
-        /// Frames finished by this run, and the time since it started
-        /// rendering: the ETA is their mean time per frame.
-        finished: u64,
-        start: Instant,
-        frame_start: Instant,
-    },
-    Quiet,
-}
-
-impl FrameProgress {
-    /// Over `len` frames of which `done` are already finished.
-    fn new(len: u64, done: u64, quiet: bool) -> Self {
-        use std::io::IsTerminal;
-        if quiet {
-            return Self::Quiet;
-        }
-        if !std::io::stderr().is_terminal() {
-            let now = Instant::now();
-            return Self::Lines {
-                len,
-                position: done,
-                finished: 0,
-                start: now,
-                frame_start: now,
-            };
-        }
-        let bar = progress_bar(len, false);
-        bar.set_position(done);
-        bar.reset_eta();
-        Self::Bar(bar)
-    }
-
-    fn start_frame(&mut self, frame: u32) {
-        match self {
-            Self::Bar(bar) => bar.set_message(format!("frame {frame}")),
-            Self::Lines { frame_start, .. } => *frame_start = Instant::now(),
-            Self::Quiet => {}
-        }
-    }
-
-    fn finish_frame(&mut self, frame: u32) {
-        match self {
-            Self::Bar(bar) => bar.inc(1),
-            Self::Lines {
-                len,
-                position,
-                finished,
-                start,
-                frame_start,
-            } => {
-                *position += 1;
-                *finished += 1;
-                let mut line = format!(
-                    "frame {frame} done ({position}/{len}) in {:.2} s",
-                    frame_start.elapsed().as_secs_f64()
-                );
-                let left = len.saturating_sub(*position);
-                if left > 0 {
-                    let per_frame = start.elapsed().as_secs_f64() / *finished as f64;
-                    line.push_str(&format!(", eta {}", eta_words(per_frame * left as f64)));
-                }
-                // Progress is not worth failing (or panicking) over a closed stderr.
-                use std::io::Write;
-                let _ = writeln!(std::io::stderr(), "{line}");
-            }
-            Self::Quiet => {}
-        }
-    }
-
-    /// Leaves the bar where it stopped (a frame failed).
-    fn abandon(&self) {
-        if let Self::Bar(bar) = self {
-            bar.abandon();
-        }
-    }
-
-    fn finish_and_clear(&self) {
-        if let Self::Bar(bar) = self {
-            bar.finish_and_clear();
-        }
-    }
-}
-
-/// `seconds` rounded for an ETA: `8 s`, `3 min 20 s`, `2 h 05 min`.
-fn eta_words(seconds: f64) -> String {
-    let s = seconds.round() as u64;
-    match s {
-        0..60 => format!("{s} s"),
-        60..3600 => format!("{} min {} s", s / 60, s % 60),
-        _ => format!("{} h {:02} min", s / 3600, s % 3600 / 60),
-    }
-}
-
-/// A progress bar over `len` frames (hidden when `quiet`).
-pub(crate) fn progress_bar(len: u64, quiet: bool) -> indicatif::ProgressBar {
-    if quiet {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {bar:40} {pos}/{len} frames, eta {eta} {msg}",
-        )
-        .expect("static progress template is valid"),
-    );
-    bar
-}
-
 /// A CPU renderer of built-in `scene` at `size × size`, for unit tests
 /// that need a frame context (its own method is never run).
 #[cfg(test)]
@@ -949,14 +836,6 @@ mod tests {
             cache_unit: "records",
             out_dir: PathBuf::from("out"),
         }
-    }
-
-    #[test]
-    fn etas_are_rounded_to_what_matters() {
-        assert_eq!(eta_words(0.4), "0 s");
-        assert_eq!(eta_words(59.4), "59 s");
-        assert_eq!(eta_words(200.0), "3 min 20 s");
-        assert_eq!(eta_words(7500.0), "2 h 05 min");
     }
 
     #[test]
