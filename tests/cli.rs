@@ -130,10 +130,6 @@ fn bad_input_is_a_clear_error() {
         ),
         (&["render", "--method", "teleport"], "invalid value"),
         (
-            &["render", "--method", "path", "--ic-glossy", "eas"],
-            "record-caching methods",
-        ),
-        (
             &["bench", "--methods", "ic:glossy=mirror"],
             "expected path or eas",
         ),
@@ -1052,6 +1048,38 @@ fn flags_of_another_method_are_warned_of() {
         path.contains("warning: --tcg-tau-min applies to --method tcg only"),
         "{path}"
     );
+    // Glossy records asked of a method that keeps none: warned of, not
+    // also refused (as it once was, after the warning had said "ignores").
+    let path_eas = one_tiny_frame_with(
+        &["--method", "path", "--ic-glossy", "eas"],
+        &dir.path().join("path_eas"),
+    );
+    assert!(
+        path_eas.contains(
+            "warning: --ic-glossy applies to --method ic, trc or tcg; --method path ignores it"
+        ),
+        "{path_eas}"
+    );
+    let tau = one_tiny_frame_with(
+        &["--method", "ic", "--ic-eas-tau", "0.5"],
+        &dir.path().join("tau"),
+    );
+    assert!(
+        tau.contains("warning: --ic-eas-tau applies with --ic-glossy eas only"),
+        "{tau}"
+    );
+    let tau_eas = one_tiny_frame_with(
+        &[
+            "--method",
+            "ic",
+            "--ic-glossy",
+            "eas",
+            "--ic-eas-tau",
+            "0.5",
+        ],
+        &dir.path().join("tau_eas"),
+    );
+    assert!(!tau_eas.contains("warning"), "{tau_eas}");
     for method in ["trc", "tcg"] {
         let said = one_tiny_frame_with(
             &[

@@ -212,17 +212,6 @@ fn stop_on_ctrl_c() -> Arc<AtomicBool> {
 /// The method `render`'s flags ask for, with the papers' defaults for
 /// what they leave out.
 fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
-    if args.ic.ic_glossy == GlossyArg::Eas
-        && !matches!(
-            args.method,
-            MethodName::Ic | MethodName::Trc | MethodName::Tcg
-        )
-    {
-        bail!(
-            "--ic-glossy eas is for the record-caching methods (ic, trc, tcg) only: {} keeps no records",
-            format!("{:?}", args.method).to_lowercase()
-        );
-    }
     let length = PathLength {
         max_depth: args.max_depth,
         ..PathLength::default()
@@ -330,15 +319,14 @@ fn method_flag_groups() -> [(clap::Command, &'static [MethodName]); 4] {
 
 /// The flags `given` on the command line that `method` does not read, each
 /// said with the methods that do: "--trc-at applies to --method trc only;
-/// --method ic ignores it".
+/// --method ic ignores it"; and `--ic-eas-tau` without `--ic-glossy eas`.
 ///
 /// A warning, not an error: `render`'s flags are not tied to the method
 /// they set (where `bench --methods trc:at=0.1` gives a setting to a
 /// method by name, and a name that method lacks is an error), a script may
 /// render a scene with each method in turn under the same flags, and the
-/// frames are still what `--method` asks for. A flag that asks for what
-/// the method cannot do (`--ic-glossy eas` with `path`) is an error, in
-/// [`render_method`].
+/// frames are still what `--method` asks for. So is `--ic-glossy eas` with
+/// `path` or `movies`, which keep no records to make glossy.
 pub(super) fn flags_of_other_methods(given: &clap::ArgMatches, method: MethodName) -> Vec<String> {
     let name = |m: MethodName| {
         use clap::ValueEnum;
@@ -370,7 +358,21 @@ pub(super) fn flags_of_other_methods(given: &clap::ArgMatches, method: MethodNam
             ));
         }
     }
+    warnings.extend(eas_tau_unread(given, method));
     warnings
+}
+
+/// `--ic-eas-tau` given where the records are made without `--ic-glossy
+/// eas`, which alone reads it (a method that makes no records is warned
+/// of by [`flags_of_other_methods`] already).
+fn eas_tau_unread(given: &clap::ArgMatches, method: MethodName) -> Option<String> {
+    let records = matches!(method, MethodName::Ic | MethodName::Trc | MethodName::Tcg);
+    let tau_given =
+        given.value_source("ic_eas_tau") == Some(clap::parser::ValueSource::CommandLine);
+    let eas = given.get_one::<GlossyArg>("ic_glossy") == Some(&GlossyArg::Eas);
+    (records && tau_given && !eas).then(|| {
+        "--ic-eas-tau applies with --ic-glossy eas only; --ic-glossy path ignores it".into()
+    })
 }
 
 /// With `--job`, the store (`--db`, or the default) and the job begun or
