@@ -122,8 +122,10 @@ pub struct FrameStats {
     /// 0 when none was computed, and for `tcg`, whose records have no set
     /// life: they live while pixels use them).
     pub mean_lifespan: f64,
-    /// Records computed in the frame by lifespan: `[n]` records may be used
-    /// in `n` frames (`trc`; empty for the others).
+    /// Records by lifespan: `[n]` records may be used in `n` frames. `trc`
+    /// counts the records computed in the frame, `movies` the texture
+    /// movies that ended in it ([`Method::lifespans_counted`]); empty for
+    /// the others.
     pub lifespan_histogram: Vec<u64>,
     /// Hemisphere samples traced again for records carried from earlier
     /// frames: `tcg`'s re-shot cells (Tawara et al. §3.2), `trc`'s
@@ -223,6 +225,14 @@ pub trait Method: Send {
     /// names them: records, or `movies`' texture movies.
     fn cache_unit(&self) -> &'static str {
         "records"
+    }
+
+    /// Which of its records [`FrameStats::lifespan_histogram`] counts, as a
+    /// render's summary says it: those `computed` in the frame (`trc` sets
+    /// a record's life when it makes it), or `movies`' texture movies `that
+    /// ended` in it (a movie has no set life; it lasts while it is seen).
+    fn lifespans_counted(&self) -> &'static str {
+        "computed"
     }
 
     /// Renders one frame into a linear-radiance image.

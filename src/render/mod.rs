@@ -330,6 +330,11 @@ impl Renderer {
         self.method.cache_unit()
     }
 
+    /// Which records its lifespans count ([`Method::lifespans_counted`]).
+    pub fn lifespans_counted(&self) -> &'static str {
+        self.method.lifespans_counted()
+    }
+
     pub fn method_name(&self) -> &'static str {
         self.method.name()
     }
@@ -531,6 +536,8 @@ pub struct RenderSummary {
     pub out_dir: PathBuf,
     /// What the frames' record statistics count ([`Method::cache_unit`]).
     pub cache_unit: &'static str,
+    /// Which records the lifespans count ([`Method::lifespans_counted`]).
+    pub lifespans_counted: &'static str,
 }
 
 impl RenderSummary {
@@ -622,8 +629,9 @@ impl RenderSummary {
     }
 
     /// For temporal methods (records with lifespans): records reused,
-    /// replaced and dropped, the mean lifespan of the records computed, and
-    /// their lifespan histogram, one line per lifespan in frames.
+    /// replaced and dropped, the mean lifespan of the records counted
+    /// ([`Self::lifespans_counted`]), and their lifespan histogram, one
+    /// line per lifespan in frames.
     pub fn lifespan_report(&self) -> Option<String> {
         let mut histogram: Vec<u64> = Vec::new();
         for s in &self.frame_stats {
@@ -634,19 +642,20 @@ impl RenderSummary {
                 *h += n;
             }
         }
-        let computed: u64 = histogram.iter().sum();
-        if computed == 0 {
+        let counted: u64 = histogram.iter().sum();
+        if counted == 0 {
             return None;
         }
         let sum = |f: fn(&FrameStats) -> u64| self.frame_stats.iter().map(f).sum::<u64>();
         let widest = histogram.iter().copied().max().unwrap_or(1).max(1);
         let unit = self.cache_unit;
         let mut out = format!(
-            "{unit} reused {} times, replaced {}, dropped {}; mean lifespan {:.2} frames over {computed} {unit} computed\nlifespan histogram (frames: {unit}):",
+            "{unit} reused {} times, replaced {}, dropped {}; mean lifespan {:.2} frames over {counted} {unit} {}\nlifespan histogram (frames: {unit}):",
             sum(|s| s.records_reused),
             sum(|s| s.records_replaced),
             sum(|s| s.records_dropped),
             crate::method::mean_lifespan(&histogram),
+            self.lifespans_counted,
         );
         for (life, &n) in histogram.iter().enumerate().filter(|(_, n)| **n > 0) {
             let bar = "#".repeat(((n * 40).div_ceil(widest)) as usize);
@@ -794,6 +803,7 @@ pub fn render_job_to_dir_with(
         ray_calls: renderer.backend().ray_counts().calls - counts_before.calls,
         out_dir: out_dir.to_path_buf(),
         cache_unit: renderer.cache_unit(),
+        lifespans_counted: renderer.lifespans_counted(),
     })
 }
 
@@ -834,6 +844,7 @@ mod tests {
             rays: 0,
             ray_calls: 0,
             cache_unit: "records",
+            lifespans_counted: "computed",
             out_dir: PathBuf::from("out"),
         }
     }
@@ -918,6 +929,25 @@ mod tests {
         let movies = s.cache_report().unwrap();
         assert!(
             movies.starts_with("texture movies created 6 (3/frame), lookups 20; fill"),
+            "{movies}"
+        );
+    }
+
+    #[test]
+    fn lifespan_report_says_which_records_its_lifespans_count() {
+        let mut s = summary(&[0.1, 0.1]);
+        assert_eq!(s.lifespan_report(), None, "no lifespans, nothing to say");
+        s.frame_stats[0].lifespan_histogram = vec![0, 1, 0, 1];
+        s.frame_stats[1].lifespan_histogram = vec![0, 0, 1];
+        let records = s.lifespan_report().unwrap();
+        assert!(
+            records.contains("mean lifespan 2.00 frames over 3 records computed"),
+            "{records}"
+        );
+        (s.cache_unit, s.lifespans_counted) = ("texture movies", "that ended");
+        let movies = s.lifespan_report().unwrap();
+        assert!(
+            movies.contains("over 3 texture movies that ended\n"),
             "{movies}"
         );
     }

@@ -292,6 +292,10 @@ impl Method for TextureMovies {
         "texture movies"
     }
 
+    fn lifespans_counted(&self) -> &'static str {
+        "that ended"
+    }
+
     fn render_frame(&mut self, ctx: &FrameContext) -> Film {
         let mut stats = FrameStats {
             frame: ctx.frame,
