@@ -15,6 +15,7 @@
 //! crash never leaves a half-written frame behind.
 
 use crate::material::luminance;
+use crate::render::memory::{self, bytes_text};
 use glam::Vec3;
 use std::fs;
 use std::io::{self, Cursor, Write};
@@ -42,9 +43,10 @@ impl Film {
         self.pixels[(y * self.width + x) as usize]
     }
 
-    /// Mean over pixels and channels.
+    /// Mean over pixels and channels, summed in f64 (three channels of
+    /// 3·10³⁸ would overflow f32).
     pub fn mean(&self) -> f64 {
-        let sum: f64 = self.pixels.iter().map(|p| (p.x + p.y + p.z) as f64).sum();
+        let sum: f64 = self.pixels.iter().map(|p| p.as_dvec3().element_sum()).sum();
         sum / (3.0 * self.pixels.len().max(1) as f64)
     }
 }
@@ -59,6 +61,9 @@ pub fn frame_path(dir: &Path, frame: u32, ext: &str) -> PathBuf {
 pub enum FilmError {
     #[error("{}: file not found", path.display())]
     NotFound { path: PathBuf },
+    /// A directory, FIFO, device or socket where a frame file should be.
+    #[error("{}: not a regular file (it is {kind})", path.display())]
+    NotRegular { path: PathBuf, kind: &'static str },
     /// The OS error is part of the message, not a `source` (named `error`,
     /// not `source`, so thiserror does not chain it): `{:#}` of an
     /// `anyhow` error would otherwise print it twice.
@@ -70,6 +75,12 @@ pub enum FilmError {
     MissingChannels { path: PathBuf, found: String },
     #[error("{}: invalid or unsupported EXR: {message}", path.display())]
     Exr { path: PathBuf, message: String },
+    /// The header declares more than the file holds or memory can take.
+    #[error("{}: {problem}", path.display())]
+    Declared {
+        path: PathBuf,
+        problem: DeclaredSizeError,
+    },
     #[error("{}: cannot encode PNG: {message}", path.display())]
     Png { path: PathBuf, message: String },
 }
@@ -97,6 +108,35 @@ impl FilmError {
             },
         }
     }
+}
+
+/// An EXR header that declares an image the file cannot hold or memory
+/// cannot take ([`check_header`]): refused before any pixel is decoded.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum DeclaredSizeError {
+    #[error(
+        "declares {width}×{height} pixels in {chunks} chunks, which need at least {need} bytes \
+         (an 8-byte offset and a chunk header each), but the file has {len}: it is truncated \
+         or its header is wrong"
+    )]
+    Truncated {
+        width: usize,
+        height: usize,
+        chunks: usize,
+        need: u64,
+        len: u64,
+    },
+    #[error(
+        "declares {width}×{height} pixels, {} decoded, more than the {} of memory available",
+        bytes_text(*need),
+        bytes_text(*available)
+    )]
+    TooLarge {
+        width: usize,
+        height: usize,
+        need: u64,
+        available: u64,
+    },
 }
 
 // ---------------------------------------------------------------- EXR
@@ -131,21 +171,78 @@ pub fn encode_exr(film: &Film) -> Result<Vec<u8>, exr::error::Error> {
     Ok(buffer.into_inner())
 }
 
-/// Reads the R, G, B channels of the first layer of an EXR as f32.
+/// Reads the R, G, B channels of the first layer of an EXR as f32. Only a
+/// regular file is read ([`read_regular_file`]), and its header is checked
+/// ([`check_header`]) before any pixel is decoded.
 pub fn read_exr(path: &Path) -> Result<Film, FilmError> {
-    let bytes = fs::read(path).map_err(|e| FilmError::io(path, e))?;
+    let bytes = read_regular_file(path)?;
     if !bytes.starts_with(&EXR_MAGIC) {
         return Err(FilmError::NotExr {
             path: path.to_owned(),
         });
     }
-    check_rgb_channels(path, &bytes)?;
+    check_header(&bytes, memory::available_bytes()).map_err(|e| e.at(path))?;
     decode_rgb(&bytes).map_err(|e| FilmError::exr(path, e))
 }
 
-/// Decodes EXR file bytes (as [`encode_exr`] writes and the store keeps).
+/// Decodes EXR file bytes (as [`encode_exr`] writes and the store keeps),
+/// after the same header checks as [`read_exr`].
 pub fn decode_exr(bytes: &[u8]) -> Result<Film, exr::error::Error> {
+    check_header(bytes, memory::available_bytes()).map_err(HeaderError::into_exr)?;
     decode_rgb(bytes)
+}
+
+/// The bytes of the regular file at `path`; a directory, FIFO, device (a
+/// link to `/dev/zero`) or socket is refused, as reading it would fail,
+/// block or never end. Asked of the path before it is opened (opening a
+/// FIFO blocks) and of the file opened (the path may have changed
+/// between), as `scene::gltf_loader::files::read_regular_file` does.
+fn read_regular_file(path: &Path) -> Result<Vec<u8>, FilmError> {
+    use std::io::Read;
+    let io = |e| FilmError::io(path, e);
+    let regular = |m: fs::Metadata| {
+        if m.is_file() {
+            Ok(())
+        } else {
+            Err(FilmError::NotRegular {
+                path: path.to_owned(),
+                kind: file_kind(&m.file_type()),
+            })
+        }
+    };
+    regular(fs::metadata(path).map_err(io)?)?;
+    let mut file = fs::File::open(path).map_err(io)?;
+    let metadata = file.metadata().map_err(io)?;
+    let len = metadata.len();
+    regular(metadata)?;
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
+    file.read_to_end(&mut bytes).map_err(io)?;
+    Ok(bytes)
+}
+
+/// What a file that is not a regular one is, for messages.
+fn file_kind(kind: &fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if kind.is_fifo() {
+            return "a FIFO";
+        }
+        if kind.is_char_device() {
+            return "a character device";
+        }
+        if kind.is_block_device() {
+            return "a block device";
+        }
+        if kind.is_socket() {
+            return "a socket";
+        }
+    }
+    if kind.is_dir() {
+        "a directory"
+    } else {
+        "neither a file nor a directory"
+    }
 }
 
 /// The tone-mapped sRGB preview of `film` as PNG file bytes.
@@ -155,25 +252,105 @@ pub fn encode_png(film: &Film) -> Result<Vec<u8>, image::ImageError> {
     Ok(buffer.into_inner())
 }
 
-/// Checks the header first so that a file without colour channels gets a
-/// clear error listing what it has, rather than exr's generic "no layer
-/// matched your requirements".
-fn check_rgb_channels(path: &Path, bytes: &[u8]) -> Result<(), FilmError> {
-    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
-        .map_err(|e| FilmError::exr(path, e))?;
-    let names: Vec<String> = meta
-        .headers
-        .first()
-        .map(|h| h.channels.list.iter().map(|c| c.name.to_string()).collect())
-        .unwrap_or_default();
+/// Why [`check_header`] refused a file, before a path is put to it.
+#[derive(Debug)]
+enum HeaderError {
+    Exr(exr::error::Error),
+    MissingChannels { found: String },
+    Declared(DeclaredSizeError),
+}
+
+impl HeaderError {
+    fn at(self, path: &Path) -> FilmError {
+        match self {
+            HeaderError::Exr(e) => FilmError::exr(path, e),
+            HeaderError::MissingChannels { found } => FilmError::MissingChannels {
+                path: path.to_owned(),
+                found,
+            },
+            HeaderError::Declared(problem) => FilmError::Declared {
+                path: path.to_owned(),
+                problem,
+            },
+        }
+    }
+
+    fn into_exr(self) -> exr::error::Error {
+        match self {
+            HeaderError::Exr(e) => e,
+            HeaderError::MissingChannels { found } => exr::error::Error::Invalid(
+                format!("no R, G, B channels in the first layer (found: {found})").into(),
+            ),
+            HeaderError::Declared(problem) => {
+                exr::error::Error::Invalid(problem.to_string().into())
+            }
+        }
+    }
+}
+
+/// Reads and validates the header of EXR file `bytes` (once) and checks,
+/// before any pixel is decoded (which allocates the declared size):
+/// - that the first layer has R, G, B channels, so that a file without
+///   them gets a clear error listing what it has, rather than exr's
+///   generic "no layer matched your requirements";
+/// - that the file can hold what it declares: every chunk needs at least
+///   its 8-byte offset-table entry and an 8-byte chunk header (scanline
+///   index and size; tiles and multi-part files need more), so a file
+///   shorter than 16 bytes × the chunk count is truncated or lying (a
+///   600-byte file declaring 60000×60000 pixels made `compare` allocate
+///   43 GB and abort);
+/// - that the decoded [`Film`] (12 bytes a pixel) fits in `available`
+///   bytes ([`memory::available_bytes`]; `None`: not checked).
+fn check_header(bytes: &[u8], available: Option<u64>) -> Result<(), HeaderError> {
+    use exr::meta::MetaData;
+    let meta = MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(HeaderError::Exr)?;
+    MetaData::validate(&meta.headers, false).map_err(HeaderError::Exr)?;
+    let Some(first) = meta.headers.first() else {
+        return Err(HeaderError::Exr(exr::error::Error::Invalid(
+            "no layer".into(),
+        )));
+    };
+    let names: Vec<String> = first
+        .channels
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
     let has = |n: &str| names.iter().any(|c| c == n);
-    if has("R") && has("G") && has("B") {
-        Ok(())
-    } else {
-        Err(FilmError::MissingChannels {
-            path: path.to_owned(),
+    if !(has("R") && has("G") && has("B")) {
+        return Err(HeaderError::MissingChannels {
             found: names.join(", "),
-        })
+        });
+    }
+    let (width, height) = (first.layer_size.width(), first.layer_size.height());
+    let chunks = meta
+        .headers
+        .iter()
+        .fold(0_usize, |n, h| n.saturating_add(h.chunk_count));
+    let need = (chunks as u64).saturating_mul(16);
+    let len = bytes.len() as u64;
+    if len < need {
+        return Err(HeaderError::Declared(DeclaredSizeError::Truncated {
+            width,
+            height,
+            chunks,
+            need,
+            len,
+        }));
+    }
+    let decoded = (width as u64)
+        .saturating_mul(height as u64)
+        .saturating_mul(std::mem::size_of::<Vec3>() as u64);
+    match available {
+        Some(available) if decoded > available => {
+            Err(HeaderError::Declared(DeclaredSizeError::TooLarge {
+                width,
+                height,
+                need: decoded,
+                available,
+            }))
+        }
+        _ => Ok(()),
     }
 }
 
@@ -557,6 +734,51 @@ mod tests {
         fs::write(&truncated, &whole[..whole.len() / 2]).unwrap();
         let err = read_exr(&truncated).unwrap_err();
         assert!(err.to_string().contains("truncated.exr"), "{err}");
+    }
+
+    /// The header's claims are checked against the file's length and the
+    /// memory available, before decoding; a whole file passes both.
+    #[test]
+    fn declared_size_is_checked_against_the_file_and_memory() {
+        let at = |e: HeaderError| e.at(Path::new("x.exr"));
+        // ZIP: 250 chunks of 16 lines, so at least 4000 bytes.
+        let bytes = encode_exr(&Film::new(4, 4000)).unwrap();
+        let decoded = 4 * 4000 * 12;
+        check_header(&bytes, Some(decoded)).map_err(at).unwrap();
+        let err = at(check_header(&bytes, Some(decoded - 1)).unwrap_err());
+        assert!(
+            matches!(
+                &err,
+                FilmError::Declared {
+                    problem: DeclaredSizeError::TooLarge {
+                        width: 4,
+                        height: 4000,
+                        need: 192_000,
+                        ..
+                    },
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(
+            err.to_string().contains("x.exr: declares 4×4000 pixels"),
+            "{err}"
+        );
+        let err = at(check_header(&bytes[..1000], None).unwrap_err());
+        let FilmError::Declared { problem, .. } = &err else {
+            panic!("{err}");
+        };
+        assert_eq!(
+            *problem,
+            DeclaredSizeError::Truncated {
+                width: 4,
+                height: 4000,
+                chunks: 250,
+                need: 4000,
+                len: 1000
+            }
+        );
     }
 
     #[test]

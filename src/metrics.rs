@@ -4,14 +4,15 @@
 //!
 //! All figures are over linear radiance and all three channels: a pixel
 //! contributes three values. "Mean radiance" is [`Film::mean`], the mean over
-//! pixels and channels. Sums are accumulated in f64 so that a 4K sequence does
-//! not lose the small differences being measured.
+//! pixels and channels. Differences and sums are taken in f64 so that a 4K
+//! sequence does not lose the small differences being measured, and so that
+//! huge (finite) values do not overflow to infinity.
 //!
 //! The per-image functions take two films of the same size and panic
 //! otherwise; [`compare_dirs`] checks sizes first and reports the files.
 
 use crate::film::{read_exr, Film, FilmError};
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -51,6 +52,14 @@ pub enum MetricsError {
         y: u32,
         value: String,
     },
+    #[error("{}: pixel ({x}, {y}) has {channel} = {value}: radiance cannot be negative", path.display())]
+    Negative {
+        path: PathBuf,
+        x: u32,
+        y: u32,
+        channel: char,
+        value: f32,
+    },
     #[error("{}: not a light mask of {}×{} pixels: {detail}", path.display(), size.0, size.1)]
     Mask {
         path: PathBuf,
@@ -71,8 +80,10 @@ fn assert_same_size(test: &Film, reference: &Film) {
     );
 }
 
-fn sum_sq(v: Vec3) -> f64 {
-    let d = v.as_dvec3();
+/// Sum of the squares of the channels of `a − b`, in f64: the difference
+/// of two finite f32 values may not be one.
+fn sum_sq_diff(a: Vec3, b: Vec3) -> f64 {
+    let d = a.as_dvec3() - b.as_dvec3();
     d.dot(d)
 }
 
@@ -83,7 +94,7 @@ pub fn mse(test: &Film, reference: &Film) -> f64 {
         .pixels
         .iter()
         .zip(&reference.pixels)
-        .map(|(i, r)| sum_sq(*i - *r))
+        .map(|(i, r)| sum_sq_diff(*i, *r))
         .sum();
     sum / (3 * test.pixels.len()).max(1) as f64
 }
@@ -123,7 +134,7 @@ impl MaskedSums {
         let mut sums = MaskedSums::default();
         for k in (0..keep.len()).filter(|&k| keep[k]) {
             let r = reference.pixels[k].as_dvec3();
-            sums.sq_err += sum_sq(test.pixels[k] - reference.pixels[k]);
+            sums.sq_err += sum_sq_diff(test.pixels[k], reference.pixels[k]);
             sums.ref_sum += r.x + r.y + r.z;
             sums.values += 3;
         }
@@ -214,7 +225,9 @@ fn flicker_sum_over(
     }
     let (mut sum, mut values) = (0.0, 0);
     for k in (0..i0.pixels.len()).filter(|&k| keep(k)) {
-        sum += sum_sq((i1.pixels[k] - i0.pixels[k]) - (r1.pixels[k] - r0.pixels[k]));
+        let d = |f: &Film| f.pixels[k].as_dvec3();
+        let e: DVec3 = (d(i1) - d(i0)) - (d(r1) - d(r0));
+        sum += e.dot(e);
         values += 3;
     }
     (sum, values)
@@ -343,14 +356,18 @@ pub fn write_light_mask(
 /// Reads the light mask at `path` for an image of `size`; `Ok(None)` when
 /// there is no such file.
 pub fn read_light_mask(path: &Path, size: (u32, u32)) -> Result<Option<Vec<bool>>, MetricsError> {
-    if !path.is_file() {
-        return Ok(None);
-    }
     let bad = |detail: String| MetricsError::Mask {
         path: path.to_owned(),
         size,
         detail,
     };
+    // Asked before the file is opened: opening a FIFO blocks.
+    match std::fs::metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(bad(e.to_string())),
+        Ok(m) if !m.is_file() => return Err(bad("not a regular file".to_string())),
+        Ok(_) => {}
+    }
     let image = image::open(path)
         .map_err(|e| bad(e.to_string()))?
         .to_luma8();
@@ -394,38 +411,65 @@ struct FramePair {
     reference: Film,
     /// Pixels to keep for the surface error (`None`: no light mask).
     surfaces: Option<Vec<bool>>,
+    /// Where the light mask of the reference frame is, or would be.
+    mask_path: PathBuf,
 }
 
-/// The first pixel of `film` with a NaN or infinite channel is an error
-/// naming the file and the pixel: one would make every metric NaN (or
-/// infinite) without saying where it came from.
-fn check_finite(path: &Path, film: &Film) -> Result<(), MetricsError> {
-    match film.pixels.iter().position(|p| !p.is_finite()) {
-        None => Ok(()),
-        Some(i) => Err(MetricsError::NonFinite {
+/// The first pixel of `film` with a NaN, infinite or negative channel is an
+/// error naming the file and the pixel: a NaN or infinity would make every
+/// metric NaN (or infinite) without saying where it came from, and a
+/// negative value is no radiance (a negative reference made the relative
+/// figures negative). −0.0 is not negative.
+fn check_pixels(path: &Path, film: &Film) -> Result<(), MetricsError> {
+    let bad = |p: &Vec3| !p.is_finite() || p.cmplt(Vec3::ZERO).any();
+    let Some(i) = film.pixels.iter().position(bad) else {
+        return Ok(());
+    };
+    let (x, y) = (i as u32 % film.width, i as u32 / film.width);
+    let p = film.pixels[i];
+    if !p.is_finite() {
+        return Err(MetricsError::NonFinite {
             path: path.to_path_buf(),
-            x: i as u32 % film.width,
-            y: i as u32 / film.width,
-            value: film.pixels[i].to_string(),
-        }),
+            x,
+            y,
+            value: p.to_string(),
+        });
     }
+    let (channel, value) = ['R', 'G', 'B']
+        .into_iter()
+        .zip(p.to_array())
+        .find(|&(_, v)| v < 0.0)
+        .expect("a negative channel");
+    Err(MetricsError::Negative {
+        path: path.to_path_buf(),
+        x,
+        y,
+        channel,
+        value,
+    })
 }
 
 fn read_pair(number: u32, ref_path: PathBuf, test_dir: &Path) -> Result<FramePair, MetricsError> {
     let test_path = test_dir.join(ref_path.file_name().expect("listed files have names"));
-    if !test_path.is_file() {
-        return Err(MetricsError::MissingFrame {
-            path: test_path,
-            reference: ref_path,
-        });
+    // Only a path that is not there is missing; one that is there but is no
+    // regular file (a directory, FIFO, link to a device) is [`read_exr`]'s
+    // error, which says so without opening it.
+    if let Err(e) = std::fs::metadata(&test_path) {
+        if e.kind() == std::io::ErrorKind::NotFound {
+            return Err(MetricsError::MissingFrame {
+                path: test_path,
+                reference: ref_path,
+            });
+        }
     }
     let reference = read_exr(&ref_path)?;
     let test = read_exr(&test_path)?;
     check_size(&test_path, &test, &ref_path, &reference)?;
-    check_finite(&ref_path, &reference)?;
-    check_finite(&test_path, &test)?;
+    check_pixels(&ref_path, &reference)?;
+    check_pixels(&test_path, &test)?;
     let dir = ref_path.parent().unwrap_or(Path::new("."));
-    let lights = read_light_mask(&light_mask_path(dir, number), size(&reference))?;
+    let mask_path = light_mask_path(dir, number);
+    let lights = read_light_mask(&mask_path, size(&reference))?;
     let surfaces = lights.map(|m| m.into_iter().map(|light| !light).collect());
     Ok(FramePair {
         number,
@@ -433,6 +477,7 @@ fn read_pair(number: u32, ref_path: PathBuf, test_dir: &Path) -> Result<FramePai
         test,
         reference,
         surfaces,
+        mask_path,
     })
 }
 
@@ -449,6 +494,11 @@ struct Totals {
     /// Sums over the pixels that see no light; `None` once a frame has no
     /// light mask.
     surfaces: Option<MaskedSums>,
+    /// Whether any reference frame has a light mask, and the mask path of
+    /// the first that has none: where some have one, [`Self::mask_note`]
+    /// says why the `_surfaces` figures are missing.
+    any_mask: bool,
+    first_without_mask: Option<PathBuf>,
     per_frame: Vec<FrameReport>,
 }
 
@@ -460,6 +510,11 @@ impl Totals {
         );
         let mean = f.reference.mean();
         let first = self.per_frame.is_empty();
+        if f.surfaces.is_some() {
+            self.any_mask = true;
+        } else if self.first_without_mask.is_none() {
+            self.first_without_mask = Some(f.mask_path.clone());
+        }
         self.surfaces = match (&f.surfaces, self.surfaces) {
             (Some(keep), Some(mut sums)) => {
                 sums.add(MaskedSums::of(&f.test, &f.reference, keep));
@@ -510,6 +565,18 @@ impl Totals {
         Ok(())
     }
 
+    /// The note for stderr when some reference frames have a light mask
+    /// and others not: the `_surfaces` figures need one for every frame,
+    /// and would otherwise be `null` without a word.
+    fn mask_note(&self) -> Option<String> {
+        let missing = self.first_without_mask.as_ref().filter(|_| self.any_mask)?;
+        Some(format!(
+            "note: {} is missing: rel_rmse_surfaces and flicker_surfaces need a light mask \
+             (seen_lights_NNNN.png) for every reference frame, so they are left out",
+            missing.display()
+        ))
+    }
+
     fn report(self) -> CompareReport {
         let frames = self.per_frame.len();
         let mean = self.ref_sum / self.ref_values.max(1) as f64;
@@ -533,8 +600,10 @@ impl Totals {
 /// Compares every `frame_NNNN.exr` of `reference_dir` with the file of the
 /// same name in `test_dir` (`radcache compare REF_DIR TEST_DIR`). Frames only
 /// in `test_dir` are ignored; a reference frame missing from `test_dir`, or
-/// of another size, is an error. Flicker uses the pairs whose numbers differ
-/// by one.
+/// of another size, or a NaN, infinite or negative pixel, is an error.
+/// Flicker uses the pairs whose numbers differ by one. Where only some
+/// reference frames have light masks, a note on stderr names the first
+/// frame's mask that is missing.
 pub fn compare_dirs(reference_dir: &Path, test_dir: &Path) -> Result<CompareReport, MetricsError> {
     let frames = list_frames(reference_dir)?;
     if frames.is_empty() {
@@ -551,6 +620,10 @@ pub fn compare_dirs(reference_dir: &Path, test_dir: &Path) -> Result<CompareRepo
             totals.add_pair(prev, &pair)?;
         }
         prev = Some(pair);
+    }
+    if let Some(note) = totals.mask_note() {
+        // stderr: stdout may be `--json`.
+        eprintln!("{note}");
     }
     Ok(totals.report())
 }
@@ -724,6 +797,24 @@ mod tests {
         let mean = (1.0 + 1.25 + 1.5 + 1.75 + 2.0) / 5.0;
         let got = flicker(&tests, &refs).unwrap();
         assert!(close(got, 2.0 * f64::from(e) / mean), "{got}");
+    }
+
+    /// (I₁ − I₀) − (R₁ − R₀) of finite values can exceed f32: the
+    /// differences are taken in f64. One channel only, so that the
+    /// reference's mean stays within f32 too.
+    #[test]
+    fn flicker_of_opposite_huge_changes_is_finite() {
+        let one = |v: f32| Film {
+            width: 2,
+            height: 2,
+            pixels: vec![Vec3::new(v, 0.0, 0.0); 4],
+        };
+        let refs = [one(3e38), one(0.0)];
+        let tests = [one(0.0), one(3e38)];
+        // Each pixel is off by 2·3e38 in one of three channels; the
+        // reference's mean over both frames is 3e38 / 6.
+        let got = flicker(&tests, &refs).unwrap();
+        assert!(close(got, 12.0 / 3f64.sqrt()), "{got}");
     }
 
     #[test]

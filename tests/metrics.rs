@@ -2,7 +2,7 @@
 //! `tests/data/reference/` (see its SOURCE.md) and small synthetic sequences.
 
 use glam::Vec3;
-use radcache::film::{frame_path, write_exr, Film};
+use radcache::film::{decode_exr, frame_path, read_exr, write_exr, Film};
 use radcache::metrics::{compare_dirs, light_mask_path, write_light_mask, MetricsError};
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -267,4 +267,251 @@ fn light_masks_leave_their_pixels_out_of_the_surface_error() {
     let e = compare_dirs(&r, &t).unwrap_err();
     assert!(matches!(e, MetricsError::Mask { .. }), "{e}");
     assert!(e.to_string().contains("seen_lights_0001.png"), "{e}");
+}
+
+/// The bytes of an EXR whose header declares `width`×`height` pixels of R,
+/// G, B f32 scanlines compressed with `compression` (OpenEXR's code: 0 none,
+/// 3 ZIP), followed by `padding` zero bytes where the offset table and the
+/// pixels should be — a file that may not hold what it declares.
+fn declared_exr(width: i32, height: i32, compression: u8, padding: usize) -> Vec<u8> {
+    fn attribute(out: &mut Vec<u8>, name: &str, kind: &str, data: &[u8]) {
+        for text in [name, kind] {
+            out.extend(text.as_bytes());
+            out.push(0);
+        }
+        out.extend((data.len() as i32).to_le_bytes());
+        out.extend(data);
+    }
+    let mut channels = Vec::new();
+    for name in ["B", "G", "R"] {
+        channels.extend(name.as_bytes());
+        channels.push(0);
+        // f32, not linear, 3 reserved bytes, sampling 1×1.
+        channels.extend(2_i32.to_le_bytes());
+        channels.extend([0_u8; 4]);
+        channels.extend(1_i32.to_le_bytes());
+        channels.extend(1_i32.to_le_bytes());
+    }
+    channels.push(0);
+    let window: Vec<u8> = [0, 0, width - 1, height - 1]
+        .iter()
+        .flat_map(|v: &i32| v.to_le_bytes())
+        .collect();
+    let mut out = vec![0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0];
+    attribute(&mut out, "channels", "chlist", &channels);
+    attribute(&mut out, "compression", "compression", &[compression]);
+    attribute(&mut out, "dataWindow", "box2i", &window);
+    attribute(&mut out, "displayWindow", "box2i", &window);
+    attribute(&mut out, "lineOrder", "lineOrder", &[0]);
+    attribute(&mut out, "pixelAspectRatio", "float", &1_f32.to_le_bytes());
+    attribute(&mut out, "screenWindowCenter", "v2f", &[0; 8]);
+    attribute(&mut out, "screenWindowWidth", "float", &1_f32.to_le_bytes());
+    out.push(0);
+    out.resize(out.len() + padding, 0);
+    out
+}
+
+/// A 600-byte file that declares 60000×60000 uncompressed pixels (60000
+/// chunks, so at least 960000 bytes) is refused from its header, naming
+/// the file and the size, before a 43 GB image is allocated.
+#[test]
+fn a_file_shorter_than_its_declared_chunks_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("huge");
+    fs::create_dir_all(&dir).unwrap();
+    let path = frame_path(&dir, 0, "exr");
+    fs::write(&path, declared_exr(60000, 60000, 0, 64)).unwrap();
+    let err = read_exr(&path).unwrap_err();
+    let message = err.to_string();
+    for needle in ["huge/frame_0000.exr", "60000×60000", "960000 bytes"] {
+        assert!(message.contains(needle), "{needle} not in {message}");
+    }
+    let err = compare_dirs(&dir, &dir).unwrap_err();
+    assert!(err.to_string().contains("60000×60000"), "{err}");
+}
+
+/// A file that holds every chunk its header needs, but whose declared size
+/// (10⁹×1024 pixels: 12 TB decoded) no machine's memory holds, is refused
+/// before anything of that size is allocated, naming both sizes.
+#[test]
+fn a_declared_size_beyond_memory_is_refused() {
+    if radcache::render::memory::available_bytes().is_none() {
+        return; // nothing to check against (not Linux)
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("wide.exr");
+    // ZIP: 16 lines a chunk, so 64 chunks of at least 16 bytes each.
+    fs::write(&path, declared_exr(1_000_000_000, 1024, 3, 2048)).unwrap();
+    let err = read_exr(&path).unwrap_err();
+    let message = err.to_string();
+    for needle in ["wide.exr", "1000000000×1024", "11.2 TiB", "available"] {
+        assert!(message.contains(needle), "{needle} not in {message}");
+    }
+    // The store's bytes are checked alike.
+    let err = decode_exr(&fs::read(&path).unwrap()).unwrap_err();
+    assert!(err.to_string().contains("1000000000×1024"), "{err}");
+}
+
+/// Radiance is never negative: a negative channel is an error naming the
+/// file, the pixel and the channel (before, the relative figures came out
+/// negative). −0.0 is not negative.
+#[test]
+fn a_negative_pixel_names_the_file_the_pixel_and_the_channel() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let mut reference = constant(4, 3, 0.5);
+    reference.pixels[4 + 2] = Vec3::new(0.5, -1.0, 0.5);
+    write_seq(&r, &[(0, reference)]);
+    write_seq(&t, &[(0, constant(4, 3, 0.5))]);
+    let err = compare_dirs(&r, &t).unwrap_err();
+    let message = err.to_string();
+    for needle in ["ref/frame_0000.exr", "pixel (2, 1)", "G", "-1", "negative"] {
+        assert!(message.contains(needle), "{needle} not in {message}");
+    }
+
+    let mut zero = constant(4, 3, 0.5);
+    zero.pixels[0] = Vec3::new(-0.0, 0.5, 0.5);
+    write_seq(&t, &[(0, zero)]);
+    write_seq(&r, &[(0, constant(4, 3, 0.5))]);
+    compare_dirs(&r, &t).unwrap();
+    compare_dirs(&t, &r).unwrap();
+}
+
+/// A reference of 3·10³⁸ everywhere: its mean overflowed f32 (three
+/// channels summed), which made every relative figure 0.
+#[test]
+fn huge_references_give_the_right_relative_figures() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let huge = constant(5, 4, 3e38);
+    write_seq(&r, &[(0, huge.clone()), (1, huge.clone())]);
+    write_seq(&t, &[(0, constant(5, 4, 0.5)), (1, huge)]);
+    let report = compare_dirs(&r, &t).unwrap();
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-6;
+    // Frame 0 is off by (all of) the reference, frame 1 exact.
+    assert!(close(report.per_frame[0].rel_rmse, 1.0), "{report:?}");
+    assert!(close(report.per_frame[0].block_bias, 1.0), "{report:?}");
+    assert!(close(report.rel_rmse, 0.5_f64.sqrt()), "{report:?}");
+    assert!(close(report.block_bias, 0.5_f64.sqrt()), "{report:?}");
+    // The test changes by the reference's value, the reference not at all.
+    assert!(close(report.flicker.unwrap(), 1.0), "{report:?}");
+}
+
+/// Runs `f` on another thread and gives its result, failing (rather than
+/// hanging) if it takes longer than `seconds`: reading a FIFO blocks.
+fn within<T: Send + 'static>(seconds: u64, f: impl FnOnce() -> T + Send + 'static) -> T {
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = send.send(f());
+    });
+    receive
+        .recv_timeout(std::time::Duration::from_secs(seconds))
+        .expect("still blocked: a FIFO was opened")
+}
+
+/// A frame that is a directory, a FIFO or a link to a device is said to be
+/// no regular file (it was "missing"), and a FIFO is not opened (which
+/// would block); a light mask likewise.
+#[cfg(unix)]
+#[test]
+fn a_frame_that_is_not_a_regular_file_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    write_seq(&r, &[(0, constant(4, 4, 1.0)), (1, constant(4, 4, 1.0))]);
+    write_seq(&t, &[(1, constant(4, 4, 1.0))]);
+    let frame = frame_path(&t, 0, "exr");
+    let fifo = |path: &Path| {
+        let made = std::process::Command::new("mkfifo").arg(path).status();
+        assert!(made.unwrap().success());
+    };
+    for what in ["directory", "link to /dev/zero", "FIFO"] {
+        match what {
+            "directory" => fs::create_dir(&frame).unwrap(),
+            "FIFO" => fifo(&frame),
+            _ => std::os::unix::fs::symlink("/dev/zero", &frame).unwrap(),
+        }
+        let (r2, t2) = (r.clone(), t.clone());
+        let err = within(20, move || compare_dirs(&r2, &t2).unwrap_err());
+        let message = err.to_string();
+        assert!(
+            message.contains("test/frame_0000.exr") && message.contains("not a regular file"),
+            "{what}: {message}"
+        );
+        assert!(!message.contains("missing"), "{what}: {message}");
+        // The same as a reference frame.
+        let (r2, t2) = (r.clone(), t.clone());
+        let err = within(20, move || compare_dirs(&t2, &r2).unwrap_err());
+        assert!(
+            err.to_string().contains("not a regular file"),
+            "{what}: {err}"
+        );
+        if frame.is_dir() {
+            fs::remove_dir(&frame).unwrap();
+        } else {
+            fs::remove_file(&frame).unwrap();
+        }
+    }
+
+    // A light mask that is a FIFO is not opened either.
+    write_seq(&t, &[(0, constant(4, 4, 1.0))]);
+    let mask = light_mask_path(&r, 0);
+    fifo(&mask);
+    let (r2, t2) = (r.clone(), t.clone());
+    let err = within(20, move || compare_dirs(&r2, &t2).unwrap_err());
+    let message = err.to_string();
+    assert!(
+        message.contains("seen_lights_0000.png") && message.contains("not a regular file"),
+        "{message}"
+    );
+}
+
+/// `radcache compare REF TEST --json` where some reference frames have no
+/// light mask: the `_surfaces` figures are null, stdout stays JSON, and a
+/// note on stderr names the first frame whose mask is missing.
+#[test]
+fn a_missing_light_mask_is_noted_on_stderr() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let frames: Vec<(u32, Film)> = (0..3).map(|k| (k, constant(4, 4, 1.0))).collect();
+    write_seq(&r, &frames);
+    write_seq(&t, &frames);
+    let compare = || {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .arg("compare")
+            .args([&r, &t])
+            .arg("--json")
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{out:?}");
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (json, String::from_utf8(out.stderr).unwrap())
+    };
+    // No masks at all: nothing to note.
+    let (json, stderr) = compare();
+    assert!(json["rel_rmse_surfaces"].is_null());
+    assert!(!stderr.contains("note"), "{stderr}");
+
+    let lights = [false; 16];
+    for frame in [0, 2] {
+        write_light_mask(&light_mask_path(&r, frame), 4, 4, &lights).unwrap();
+    }
+    let (json, stderr) = compare();
+    assert!(json["rel_rmse_surfaces"].is_null() && json["flicker_surfaces"].is_null());
+    assert!(
+        stderr.contains("note:") && stderr.contains("seen_lights_0001.png"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("seen_lights_0002.png"), "{stderr}");
+
+    // The first frame's missing.
+    write_light_mask(&light_mask_path(&r, 1), 4, 4, &lights).unwrap();
+    fs::remove_file(light_mask_path(&r, 0)).unwrap();
+    let (_, stderr) = compare();
+    assert!(stderr.contains("seen_lights_0000.png"), "{stderr}");
+
+    // Every frame has one: no note.
+    write_light_mask(&light_mask_path(&r, 0), 4, 4, &lights).unwrap();
+    let (json, stderr) = compare();
+    assert!(json["rel_rmse_surfaces"].is_number(), "{json}");
+    assert!(!stderr.contains("note"), "{stderr}");
 }
