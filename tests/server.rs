@@ -2515,3 +2515,76 @@ fn the_connections_of_one_address_follow_the_flag() {
         assert!(err.contains("from 1 to 512"), "{bad}: {err}");
     }
 }
+
+/// `tests/data/scenes/cube_in_box.glb` written into `scenes` as glTF JSON
+/// `name`, its buffer in `box.bin` beside it, naming the image `image` (a
+/// texture the renderer ignores).
+fn box_scene_naming_an_image(scenes: &std::path::Path, name: &str, image: &str) {
+    let glb = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/scenes/cube_in_box.glb"
+    ))
+    .unwrap();
+    let glb = gltf::binary::Glb::from_slice(&glb).unwrap();
+    std::fs::write(scenes.join("box.bin"), glb.bin.as_deref().unwrap()).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_slice(&glb.json).unwrap();
+    doc["buffers"][0]["uri"] = serde_json::json!("box.bin");
+    doc["images"] = serde_json::json!([{ "uri": image }]);
+    doc["textures"] = serde_json::json!([{ "source": 0 }]);
+    std::fs::write(scenes.join(name), serde_json::to_vec(&doc).unwrap()).unwrap();
+}
+
+/// A scene whose image is missing is accepted and rendered, as `radcache
+/// render` renders it (the renderer ignores textures; the job's hash counts
+/// the image as missing). An image outside `--scenes` is still refused
+/// (`scene_files_are_read_only_inside_the_scenes_directory`).
+#[test]
+fn a_scene_whose_ignored_image_is_missing_is_accepted_and_rendered() {
+    let (dir, scenes) = workspace();
+    box_scene_naming_an_image(&scenes, "s.gltf", "missing.png");
+    let server = start(&dir.path().join("db"), &scenes);
+    let id = create_job(
+        &server,
+        r#"{"scene":"s.gltf","method":"path","frames":"0..1","size":"8x8","spp":1}"#,
+    );
+    assert_eq!(wait_done(&server, &id)["frames_done"], 1);
+}
+
+/// A queued job whose scene file changed after it was submitted fails
+/// saying so, naming the scene as the API does (not the build), and to
+/// submit it again.
+#[test]
+fn a_served_job_whose_scene_changed_since_it_was_submitted_says_so() {
+    use radcache::render::{self, FrameSettings, MethodSettings, SceneSource};
+    let (dir, scenes) = workspace();
+    box_scene_naming_an_image(&scenes, "s.gltf", "tex.png");
+    std::fs::write(scenes.join("tex.png"), b"png").unwrap();
+    let db = dir.path().join("db");
+    {
+        // Stored as `POST /api/jobs` stores it (the scene by its canonical
+        // path), not yet run.
+        let store = radcache::store::Store::open(&db).unwrap();
+        let source = SceneSource::File(scenes.join("s.gltf").canonicalize().unwrap());
+        let frames = FrameSettings {
+            width: 8,
+            height: 8,
+            ..FrameSettings::default()
+        };
+        let method = MethodSettings::Path(Default::default());
+        let spec = render::job_spec("job-1", &source, &method, &frames, 0..1).unwrap();
+        store.begin_job(&spec, false).unwrap();
+    }
+    std::fs::write(scenes.join("tex.png"), b"PNG").unwrap();
+    let server = start(&db, &scenes);
+    let job = wait_ended(&server, "job-1");
+    assert_eq!(job["state"], "failed", "{job}");
+    let error = job["error"].as_str().unwrap();
+    assert!(
+        error.starts_with(
+            "its scene changed since the job was submitted: s.gltf (the file, or a file it \
+             references) is not as it was (scene hash stored "
+        ) && error.ends_with("; delete it and submit it again"),
+        "{error}"
+    );
+    assert!(!error.contains("this build"), "{error}");
+}

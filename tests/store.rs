@@ -2048,10 +2048,36 @@ fn scene_hash_covers_external_buffers_and_images() {
     std::fs::write(dir.path().join("a b.bin"), [1u8, 2, 3, 5, 9, 9]).unwrap();
     let (_, longer) = render::scene_identity(&source).unwrap();
     assert_eq!(longer, h3, "bytes past byteLength are not the scene's");
-    // A missing external file is a clear error.
+    // A missing image (which the renderer ignores) hashes as missing: its
+    // URI, NUL, then a length no file has and `missing`; it is another
+    // scene than with the image there.
     std::fs::remove_file(dir.path().join("tex.png")).unwrap();
+    let (_, gone) = render::scene_identity(&source).unwrap();
+    let mut all = Vec::new();
+    for (uri, bytes) in [("a%20b.bin", &b"\x01\x02\x03\x05"[..]), ("tex.png", b"")] {
+        all.extend_from_slice(uri.as_bytes());
+        all.push(0);
+        match bytes.is_empty() {
+            false => {
+                all.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+                all.extend_from_slice(bytes);
+            }
+            true => all.extend_from_slice(b"\xff\xff\xff\xff\xff\xff\xff\xffmissing"),
+        }
+    }
+    assert_eq!(
+        gone,
+        format!("{main}+{}", radcache::hash::content_hash(&all))
+    );
+    assert_ne!(gone, h3);
+    // A missing buffer, which the loader needs, is a clear error.
+    std::fs::rename(dir.path().join("a b.bin"), dir.path().join("moved.bin")).unwrap();
     let msg = render::scene_identity(&source).unwrap_err().to_string();
-    assert!(msg.contains("tex.png") && msg.contains("a.gltf"), "{msg}");
+    assert!(
+        msg.contains("a b.bin: file not found") && msg.contains("a.gltf"),
+        "{msg}"
+    );
+    std::fs::rename(dir.path().join("moved.bin"), dir.path().join("a b.bin")).unwrap();
 
     // A schema-1 job of this file (hash of the .gltf alone, marked `+v1`
     // by the migration) resumes with the full hash, which it then keeps.
@@ -2825,5 +2851,162 @@ fn assert_resumed_rays(resumed: &[FrameStats], uninterrupted: &[FrameStats]) {
     assert!(
         resumed[0] >= uninterrupted[0],
         "{resumed:?} against {uninterrupted:?}"
+    );
+}
+
+/// `tests/data/scenes/cube_in_box.glb` written into `dir` as glTF JSON
+/// `name`, its buffer in `box.bin` beside it, naming the image `image` (a
+/// texture the renderer ignores).
+fn box_scene_naming_an_image(dir: &Path, name: &str, image: &str) -> PathBuf {
+    let glb = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/scenes/cube_in_box.glb"
+    ))
+    .unwrap();
+    let glb = gltf::binary::Glb::from_slice(&glb).unwrap();
+    std::fs::write(dir.join("box.bin"), glb.bin.as_deref().unwrap()).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_slice(&glb.json).unwrap();
+    doc["buffers"][0]["uri"] = serde_json::json!("box.bin");
+    doc["images"] = serde_json::json!([{ "uri": image }]);
+    doc["textures"] = serde_json::json!([{ "source": 0 }]);
+    let path = dir.join(name);
+    std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+    path
+}
+
+/// `radcache render SCENE` as a tiny job `j` of store `db`: (success,
+/// stdout, stderr).
+fn render_tiny_job(scene: &Path, db: &Path, extra: &[&str]) -> (bool, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .arg("render")
+        .arg(scene)
+        .args(["--method", "path", "--size", "8x8", "--frames", "0..1"])
+        .args([
+            "--spp",
+            "1",
+            "--backend",
+            "cpu",
+            "-q",
+            "--job",
+            "j",
+            "--out",
+        ])
+        .arg(db.with_extension("out"))
+        .arg("--db")
+        .arg(db)
+        .args(extra)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A scene whose image is missing renders as a job, as without `--job`
+/// (the renderer ignores textures): the image is hashed as missing, so the
+/// job resumes while it stays so, and is refused once the image appears,
+/// saying that the scene changed.
+#[test]
+fn a_job_renders_a_scene_whose_ignored_image_is_missing() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = box_scene_naming_an_image(dir.path(), "s.gltf", "missing.png");
+    let db = dir.path().join("db");
+    let (ok, _, stderr) = render_tiny_job(&scene, &db, &[]);
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("1 texture(s) ignored"), "{stderr}");
+    let (ok, stdout, stderr) = render_tiny_job(&scene, &db, &[]);
+    assert!(ok, "{stderr}");
+    assert!(stdout.contains("1 frames resumed"), "{stdout}");
+    std::fs::write(dir.path().join("missing.png"), b"png").unwrap();
+    let (ok, _, stderr) = render_tiny_job(&scene, &db, &[]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("its scene changed since the job was stored"),
+        "{stderr}"
+    );
+}
+
+/// A scene file changed between two renders under the same `--job` is
+/// refused saying so plainly: the scene, named, changed since the job was
+/// stored, and what to do; not "other settings". `--force` starts it
+/// over. Another setting given as well is named beside it.
+#[test]
+fn a_job_whose_scene_file_changed_says_the_scene_changed() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = box_scene_naming_an_image(dir.path(), "s.gltf", "tex.png");
+    std::fs::write(dir.path().join("tex.png"), b"png").unwrap();
+    let db = dir.path().join("db");
+    let (ok, _, stderr) = render_tiny_job(&scene, &db, &[]);
+    assert!(ok, "{stderr}");
+    let mut text = std::fs::read_to_string(&scene).unwrap();
+    text.push('\n');
+    std::fs::write(&scene, text).unwrap();
+    let (ok, _, stderr) = render_tiny_job(&scene, &db, &[]);
+    assert!(!ok);
+    let named = format!(
+        "job \"j\": its scene changed since the job was stored: {} (the file, or a file it \
+         references) is not as it was (scene hash stored ",
+        scene.display()
+    );
+    assert!(stderr.contains(&named), "{stderr}");
+    assert!(
+        stderr.contains("; use another --job name, or --force to start it over"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("other settings"), "{stderr}");
+    let (ok, _, stderr) = render_tiny_job(&scene, &db, &["--seed", "7"]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("is not as it was")
+            && stderr.contains("and it exists with other settings: seed (stored 0, given 7)"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = render_tiny_job(&scene, &db, &["--force"]);
+    assert!(ok, "{stderr}");
+}
+
+/// This process's peak resident memory (`VmHWM`), in KiB.
+#[cfg(target_os = "linux")]
+fn peak_rss_kib() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let line = status.lines().find(|l| l.starts_with("VmHWM:")).unwrap();
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
+/// A scene's image is hashed a chunk at a time: a 256 MiB one (sparse)
+/// does not raise the peak memory by its size. Measured in a process of
+/// its own (this test run again alone), as the peak is the process's.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_huge_image_is_hashed_without_holding_it() {
+    const CHILD: &str = "RADCACHE_TEST_HASH_MEMORY_CHILD";
+    const IMAGE: u64 = 256 << 20;
+    if std::env::var_os(CHILD).is_none() {
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args(["--exact", "a_huge_image_is_hashed_without_holding_it"])
+            .args(["--nocapture", "--test-threads", "1"])
+            .env(CHILD, "1")
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&out.stdout).into_owned()
+            + &String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{text}");
+        assert!(text.contains("1 passed"), "{text}");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = box_scene_naming_an_image(dir.path(), "s.gltf", "huge.png");
+    let image = std::fs::File::create(dir.path().join("huge.png")).unwrap();
+    image.set_len(IMAGE).unwrap();
+    drop(image);
+    let before = peak_rss_kib();
+    let (_, hash) = render::scene_identity(&SceneSource::File(scene)).unwrap();
+    let grown = peak_rss_kib().saturating_sub(before);
+    assert!(hash.contains('+'), "{hash}");
+    assert!(
+        grown < IMAGE / 1024 / 8,
+        "the peak memory grew by {grown} KiB hashing a {IMAGE}-byte image"
     );
 }

@@ -27,7 +27,11 @@ pub struct StoreJob<'a> {
 /// bytes, followed by `+` and the hash of the external files it references
 /// (the `uri`s of glTF `buffers` and `images` other than `data:` URIs, in
 /// file order, each with its URI) when it references any, so that editing a
-/// `.bin` or a texture next to a `.gltf` changes the hash too.
+/// `.bin` or a texture next to a `.gltf` changes the hash too. The files
+/// are hashed a chunk at a time (a huge image is never held); an image not
+/// there is hashed as missing (the renderer ignores images, so the job
+/// renders, and the image appearing later changes the hash), a buffer not
+/// there is an error (the loader needs it).
 pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
     scene_identity_confined(source, None)
 }
@@ -58,20 +62,31 @@ pub fn scene_identity_confined(
             } else {
                 let dir = path.parent().unwrap_or(Path::new("."));
                 // The FNV-1a of every file's URI, length and bytes one
-                // after the other, fed as each is read: memory for one
-                // file at a time, however many URIs name a large one.
+                // after the other, fed a chunk at a time as each is read:
+                // memory for one chunk, however large the files.
                 let mut all = crate::hash::Fnv1a::default();
-                for (uri, declared) in uris {
+                for (uri, kind) in uris {
                     let cannot = |what: String| {
                         anyhow::anyhow!("{what} (referenced by scene {})", path.display())
                     };
                     let file = gltf_loader::confined_uri_file(dir, &uri, root).map_err(cannot)?;
-                    let content = gltf_loader::read_regular_file(&file, declared)
+                    let found = hash_external_file(&mut all, &uri, &file, kind.limit())
                         .map_err(|e| cannot(format!("cannot read {}: {e}", file.display())))?;
-                    all.write(uri.as_bytes());
-                    all.write(&[0]);
-                    all.write(&(content.len() as u64).to_le_bytes());
-                    all.write(&content);
+                    // A missing image is hashed as such ([`MISSING`]), as
+                    // the renderer ignores images: the job renders, and
+                    // one whose image appears later is another scene. The
+                    // loader needs its buffers.
+                    if !found {
+                        match kind {
+                            External::Image => all.write(MISSING),
+                            External::Buffer { .. } => {
+                                return Err(cannot(format!(
+                                    "cannot read {}: file not found",
+                                    file.display()
+                                )))
+                            }
+                        }
+                    }
                 }
                 format!("{main}+{:016x}", all.finish())
             }
@@ -80,12 +95,77 @@ pub fn scene_identity_confined(
     Ok((source.to_string(), hash))
 }
 
+/// What the hash of a scene's external files holds for an image that is
+/// not there, after its URI and NUL: a length no file has (`u64::MAX`),
+/// then `missing`.
+const MISSING: &[u8] = b"\xff\xff\xff\xff\xff\xff\xff\xffmissing";
+
+/// Feeds `uri`, NUL, the length (u64 LE) and the bytes of `file` (at most
+/// `limit` of them) to `hash`, the bytes a chunk at a time, never the
+/// whole file in memory: the same hash as of all of them in one piece, as
+/// earlier builds hashed them. `Ok(false)`, and only `uri` and NUL fed,
+/// when there is no file; a FIFO or a device is refused, as
+/// [`gltf_loader::read_regular_file`] refuses it.
+fn hash_external_file(
+    hash: &mut crate::hash::Fnv1a,
+    uri: &str,
+    file: &Path,
+    limit: Option<u64>,
+) -> Result<bool, String> {
+    use std::io::Read;
+    let opened = gltf_loader::open_regular_file(file, limit)?;
+    hash.write(uri.as_bytes());
+    hash.write(&[0]);
+    let Some((mut reader, len)) = opened else {
+        return Ok(false);
+    };
+    hash.write(&len.to_le_bytes());
+    let mut chunk = vec![0u8; 1 << 16];
+    let mut read = 0u64;
+    loop {
+        match reader.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => {
+                hash.write(&chunk[..n]);
+                read += n as u64;
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(format!("cannot read file: {e}")),
+        }
+    }
+    if read != len {
+        return Err(format!(
+            "the file changed while it was read ({read} bytes of the {len} it held)"
+        ));
+    }
+    Ok(true)
+}
+
+/// An external file of a glTF, as its scene's hash reads it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum External {
+    /// A buffer, of the length the loader reads of it (its `byteLength`).
+    Buffer { byte_length: Option<u64> },
+    /// An image, which the renderer ignores (it may be missing).
+    Image,
+}
+
+impl External {
+    /// How much of the file is the scene's: of a buffer, what the loader
+    /// reads (a 12-byte buffer naming a huge file is not read whole).
+    fn limit(self) -> Option<u64> {
+        match self {
+            External::Buffer { byte_length } => byte_length,
+            External::Image => None,
+        }
+    }
+}
+
 /// The external file URIs of a glTF (`.gltf` JSON, or the JSON chunk of a
 /// `.glb`): `buffers[].uri` then `images[].uri`, `data:` URIs left out,
-/// each with the length the loader reads of it (a buffer's `byteLength`:
-/// a 12-byte buffer naming a huge file is not read whole here either).
+/// each with what it is (a buffer's with its `byteLength`).
 /// Anything unreadable gives none (the scene loader reports it).
-fn external_uris(bytes: &[u8]) -> Vec<(String, Option<u64>)> {
+fn external_uris(bytes: &[u8]) -> Vec<(String, External)> {
     let Some(json) = gltf_loader::json_chunk(bytes) else {
         return Vec::new();
     };
@@ -97,7 +177,13 @@ fn external_uris(bytes: &[u8]) -> Vec<(String, Option<u64>)> {
         for item in doc[list].as_array().into_iter().flatten() {
             if let Some(uri) = item["uri"].as_str() {
                 if !uri.starts_with("data:") {
-                    out.push((uri.to_string(), item["byteLength"].as_u64()));
+                    let kind = match list {
+                        "buffers" => External::Buffer {
+                            byte_length: item["byteLength"].as_u64(),
+                        },
+                        _ => External::Image,
+                    };
+                    out.push((uri.to_string(), kind));
                 }
             }
         }
@@ -338,4 +424,86 @@ fn restore_frame_files(job: &StoreJob, frame: u32, out_dir: &Path) -> Result<()>
     std::fs::rename(&temp, &exr_path)
         .with_context(|| format!("cannot write {}", exr_path.display()))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The hash of an external file as earlier builds computed it: the whole
+    /// file (at most `limit` bytes) read into memory, then its URI, NUL,
+    /// length and bytes hashed in one piece.
+    fn whole_buffer_hash(uri: &str, file: &Path, limit: Option<u64>) -> u64 {
+        let content = gltf_loader::read_regular_file(file, limit).unwrap();
+        let mut h = crate::hash::Fnv1a::default();
+        h.write(uri.as_bytes());
+        h.write(&[0]);
+        h.write(&(content.len() as u64).to_le_bytes());
+        h.write(&content);
+        h.finish()
+    }
+
+    /// Streamed a chunk at a time, a file hashes as it did whole (several
+    /// chunks and a part, an empty file, a limit inside the file and past
+    /// it), so that stored jobs still resume; a missing file feeds only its
+    /// URI and NUL, and a FIFO is refused without blocking.
+    #[test]
+    fn a_streamed_file_hashes_as_the_whole_buffer_did() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("tex.png");
+        let bytes: Vec<u8> = (0..(3 << 16) + 1234u32)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+            .collect();
+        for content in [&bytes[..], &[][..], &b"png"[..]] {
+            std::fs::write(&file, content).unwrap();
+            for limit in [None, Some(0), Some(70_000), Some(1 << 30)] {
+                let mut streamed = crate::hash::Fnv1a::default();
+                assert!(hash_external_file(&mut streamed, "tex.png", &file, limit).unwrap());
+                assert_eq!(
+                    streamed.finish(),
+                    whole_buffer_hash("tex.png", &file, limit),
+                    "{} bytes, limit {limit:?}",
+                    content.len()
+                );
+            }
+        }
+        let mut missing = crate::hash::Fnv1a::default();
+        let none = dir.path().join("none.png");
+        assert!(!hash_external_file(&mut missing, "none.png", &none, None).unwrap());
+        assert_eq!(missing.finish(), crate::hash::fnv1a(b"none.png\0"));
+        let fifo = dir.path().join("fifo.png");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            let mut h = crate::hash::Fnv1a::default();
+            let err = hash_external_file(&mut h, "fifo.png", &fifo, None).unwrap_err();
+            assert_eq!(err, "not a regular file");
+        }
+    }
+
+    /// A scene whose image is missing hashes (the renderer ignores images)
+    /// as another than with the image there; one whose buffer is missing is
+    /// an error naming the file and the scene.
+    #[test]
+    fn a_missing_image_is_hashed_as_missing_and_a_missing_buffer_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let gltf = dir.path().join("s.gltf");
+        std::fs::write(
+            &gltf,
+            br#"{"asset":{"version":"2.0"},"buffers":[{"uri":"b.bin","byteLength":4}],"images":[{"uri":"t.png"}]}"#,
+        )
+        .unwrap();
+        std::fs::write(dir.path().join("b.bin"), [1u8, 2, 3, 4]).unwrap();
+        let source = SceneSource::File(gltf.clone());
+        let (_, without) = scene_identity(&source).unwrap();
+        assert_eq!(scene_identity(&source).unwrap().1, without, "stable");
+        std::fs::write(dir.path().join("t.png"), b"").unwrap();
+        let (_, with) = scene_identity(&source).unwrap();
+        assert_ne!(with, without, "an image that appears changes the hash");
+        std::fs::remove_file(dir.path().join("b.bin")).unwrap();
+        let msg = scene_identity(&source).unwrap_err().to_string();
+        assert!(
+            msg.contains("b.bin: file not found") && msg.contains("s.gltf"),
+            "{msg}"
+        );
+    }
 }

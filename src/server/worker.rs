@@ -184,11 +184,16 @@ fn start_attempt<'a>(
         request.frames.clone(),
     )?;
     let stored = state.store.begin_job(&spec, false).map_err(|e| match e {
-        // The API has no `--force`: a job this build cannot resume (its
-        // scene file changed, or it was stored by a build whose algorithm
-        // differs) is resubmitted.
-        crate::store::StoreError::JobDiffers { differences, .. } => anyhow::anyhow!(
-            "this build cannot resume the job as stored: {differences}; delete it and submit it again"
+        // The API has no `--force`: a job whose scene file changed since
+        // it was submitted, or that this build cannot resume (stored by a
+        // build whose algorithm differs), is resubmitted.
+        crate::store::StoreError::JobDiffers {
+            scene_changed,
+            differences,
+            ..
+        } => anyhow::anyhow!(
+            "{}",
+            job_differs_text(scene_changed.as_deref(), &differences)
         ),
         e => e.into(),
     })?;
@@ -196,6 +201,21 @@ fn start_attempt<'a>(
     state.update(id, |j| j.set_stored(&frames));
     let attempt = Attempt::begin(state, id, frames.len() as u32)?;
     Ok((stored, attempt))
+}
+
+/// Why a served job is not resumed, and what to do: its scene changed
+/// since it was submitted, or this build cannot resume it as stored.
+fn job_differs_text(
+    scene_changed: Option<&crate::store::SceneChanged>,
+    differences: &str,
+) -> String {
+    let build = format!("this build cannot resume the job as stored: {differences}");
+    let why = match (scene_changed, differences.is_empty()) {
+        (Some(changed), true) => changed.describe("submitted"),
+        (Some(changed), false) => format!("{}, and {build}", changed.describe("submitted")),
+        (None, _) => build,
+    };
+    format!("{why}; delete it and submit it again")
 }
 
 /// Renders the frames of `request` that store job `stored` lacks with

@@ -162,7 +162,7 @@ impl Store {
         let key = keys::job(&spec.name);
         let now = now_unix();
         if let Some(mut job) = self.job(&spec.name)? {
-            let mut diffs = job_differences(&job.spec, spec);
+            let (scene_changed, mut diffs) = job_differences(&job.spec, spec);
             let stored_revision = self.job_revision(job.id)?;
             let build_revision = algorithm_revision(&spec.method);
             if job.spec.method == spec.method && stored_revision != build_revision {
@@ -171,7 +171,7 @@ impl Store {
                     spec.method
                 ));
             }
-            if diffs.is_empty() && !force {
+            if scene_changed.is_none() && diffs.is_empty() && !force {
                 // Same job: the new range, and the spec as this build
                 // writes it (a schema-1 job's settings and hash upgraded).
                 job.spec = spec.clone();
@@ -186,6 +186,7 @@ impl Store {
                 return Err(StoreError::JobDiffers {
                     path: self.path.clone(),
                     job: spec.name.clone(),
+                    scene_changed: scene_changed.map(Box::new),
                     differences: diffs.join(", "),
                 });
             }
@@ -352,10 +353,46 @@ impl Store {
     }
 }
 
+/// A job's scene, named as before, whose content is not as it was when the
+/// job was stored: the scene file, or a file it references (a `.bin`, an
+/// image), was changed since.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SceneChanged {
+    /// The scene as given now (a file's absolute path).
+    pub scene: String,
+    /// Its hash as the job stored it.
+    pub stored_hash: String,
+    /// Its hash now.
+    pub given_hash: String,
+}
+
+impl SceneChanged {
+    /// Says so, the job having been `stored` (or "submitted") before.
+    pub fn describe(&self, stored: &str) -> String {
+        format!(
+            "its scene changed since the job was {stored}: {} (the file, or a file it \
+             references) is not as it was (scene hash stored {}, given {})",
+            self.scene, self.stored_hash, self.given_hash
+        )
+    }
+}
+
+/// How [`StoreError::JobDiffers`] says what differs: the scene that
+/// changed, and the settings that differ ("exists with other settings").
+pub(super) fn job_differs_text(scene_changed: Option<&SceneChanged>, differences: &str) -> String {
+    let settings = format!("exists with other settings: {differences}");
+    match (scene_changed, differences.is_empty()) {
+        (Some(changed), true) => changed.describe("stored"),
+        (Some(changed), false) => format!("{}, and it {settings}", changed.describe("stored")),
+        (None, _) => settings,
+    }
+}
+
 /// Fields of `spec` that differ from the stored job's (name and frame range
-/// aside). Every field is named, so a field added to [`JobSpec`] does not
-/// compile until it is compared here.
-fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
+/// aside): its scene's content if it is the same scene changed since
+/// ([`SceneChanged`]), and the others, named. Every field is named, so a
+/// field added to [`JobSpec`] does not compile until it is compared here.
+fn job_differences(stored: &JobSpec, spec: &JobSpec) -> (Option<SceneChanged>, Vec<String>) {
     let JobSpec {
         name: _,
         scene,
@@ -403,9 +440,17 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
         stored.scene.clone(),
         scene.clone(),
     );
+    // The same scene, changed since: said as such. Another scene's hash
+    // differs as well, named beside it.
+    let same_hash = same_scene_hash(&stored.scene_hash, scene_hash);
+    let scene_changed = (same_path && !same_hash).then(|| SceneChanged {
+        scene: scene.clone(),
+        stored_hash: stored.scene_hash.clone(),
+        given_hash: scene_hash.clone(),
+    });
     check(
         "scene hash",
-        same_scene_hash(&stored.scene_hash, scene_hash),
+        same_hash || scene_changed.is_some(),
         stored.scene_hash.clone(),
         scene_hash.clone(),
     );
@@ -445,7 +490,7 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> Vec<String> {
         stored.same_pattern.to_string(),
         same_pattern.to_string(),
     );
-    d
+    (scene_changed, d)
 }
 
 /// A stored job's settings as this build reads and writes them. A setting

@@ -74,7 +74,7 @@ use schema::{FrameRecordsValue, JobValue, RecordBlock};
 use std::path::{Path, PathBuf};
 
 pub use frames::{FrameCommit, RecordCommit, StateCommit};
-pub use jobs::JobAttempt;
+pub use jobs::{JobAttempt, SceneChanged};
 pub use rgbe::PackedSample;
 pub use samples::SampleBlock;
 pub use schema::JobSpec;
@@ -132,12 +132,16 @@ pub enum StoreError {
         from: u32,
         detail: String,
     },
-    /// A job of that name exists with other settings (its
-    /// `differences`, named), so it is not resumed.
-    #[error("store {}: job {job:?}: exists with other settings: {differences}; use another --job name, or --force to start it over", path.display())]
+    /// A job of that name exists with another scene content (its scene
+    /// file, or one it references, changed since: `scene_changed`) or other
+    /// settings (its `differences`, named), so it is not resumed.
+    #[error("store {}: job {job:?}: {}; use another --job name, or --force to start it over", path.display(), jobs::job_differs_text(scene_changed.as_deref(), differences))]
     JobDiffers {
         path: PathBuf,
         job: String,
+        scene_changed: Option<Box<SceneChanged>>,
+        /// The settings that differ, named (empty when only the scene's
+        /// content does).
         differences: String,
     },
     #[error("store {}: job {job:?}: {detail}", path.display())]

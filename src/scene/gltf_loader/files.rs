@@ -13,27 +13,52 @@ use std::path::{Path, PathBuf};
 /// limit keeps a file far longer than needed out of memory.
 pub fn read_regular_file(path: &Path, limit: Option<u64>) -> Res<Vec<u8>> {
     use std::io::Read;
+    let (file, _) = open_checked(path)?;
+    let mut bytes = Vec::new();
+    file.take(limit.unwrap_or(u64::MAX))
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot read file: {e}"))?;
+    Ok(bytes)
+}
+
+/// `path` opened to be read a piece at a time (a huge image hashed, never
+/// held whole), refused as [`read_regular_file`] refuses it, with the
+/// number of bytes it holds as it is opened, at most `limit`: the reader
+/// ends there, and whoever reads it can check that it got that many.
+/// `None` when nothing is at `path` (nor at the end of a link there).
+pub fn open_regular_file(
+    path: &Path,
+    limit: Option<u64>,
+) -> Res<Option<(std::io::Take<std::fs::File>, u64)>> {
+    use std::io::Read;
+    if std::fs::metadata(path).is_err_and(|e| e.kind() == std::io::ErrorKind::NotFound) {
+        return Ok(None);
+    }
+    let (file, meta) = open_checked(path)?;
+    let len = meta.len().min(limit.unwrap_or(u64::MAX));
+    Ok(Some((file.take(len), len)))
+}
+
+/// `path` opened, and its metadata, if it is a regular file.
+fn open_checked(path: &Path) -> Res<(std::fs::File, std::fs::Metadata)> {
     let cannot = |e: std::io::Error| match e.kind() {
         std::io::ErrorKind::NotFound => "file not found".to_string(),
         _ => format!("cannot read file: {e}"),
     };
     // Asked of the path before it is opened (opening a FIFO blocks), and
     // of the file opened (the path may have changed between).
-    let regular = |m: std::fs::Metadata| {
+    let regular = |m: &std::fs::Metadata| {
         if m.is_file() {
             Ok(())
         } else {
             Err("not a regular file".to_string())
         }
     };
-    regular(std::fs::metadata(path).map_err(cannot)?)?;
+    regular(&std::fs::metadata(path).map_err(cannot)?)?;
     let file = std::fs::File::open(path).map_err(cannot)?;
-    regular(file.metadata().map_err(cannot)?)?;
-    let mut bytes = Vec::new();
-    file.take(limit.unwrap_or(u64::MAX))
-        .read_to_end(&mut bytes)
-        .map_err(|e| format!("cannot read file: {e}"))?;
-    Ok(bytes)
+    let meta = file.metadata().map_err(cannot)?;
+    regular(&meta)?;
+    Ok((file, meta))
 }
 
 /// The file that a glTF `uri` other than a `data:` URI names, relative to

@@ -41,7 +41,7 @@ mod mesh;
 mod nodes;
 
 pub(crate) use document::json_chunk;
-pub use files::{confined_file, confined_uri_file, read_regular_file, uri_file};
+pub use files::{confined_file, confined_uri_file, open_regular_file, read_regular_file, uri_file};
 
 use super::{Material, Object, PunctualLight, Scene, SceneError, DEFAULT_FPS};
 use accessors::{load_buffers, Buffers};
