@@ -111,7 +111,7 @@ impl FilmError {
 }
 
 /// An EXR header that declares an image the file cannot hold or memory
-/// cannot take ([`check_header`]): refused before any pixel is decoded.
+/// cannot take: refused before any pixel is decoded.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum DeclaredSizeError {
     #[error(
@@ -172,8 +172,9 @@ pub fn encode_exr(film: &Film) -> Result<Vec<u8>, exr::error::Error> {
 }
 
 /// Reads the R, G, B channels of the first layer of an EXR as f32. Only a
-/// regular file is read ([`read_regular_file`]), and its header is checked
-/// ([`check_header`]) before any pixel is decoded.
+/// regular file is read (a FIFO or a device is refused unopened), and its
+/// header is checked (channels, and the size it declares against the
+/// file's length and the memory available) before any pixel is decoded.
 pub fn read_exr(path: &Path) -> Result<Film, FilmError> {
     let bytes = read_regular_file(path)?;
     if !bytes.starts_with(&EXR_MAGIC) {
