@@ -194,56 +194,25 @@ pub fn decode_exr(bytes: &[u8]) -> Result<Film, exr::error::Error> {
 }
 
 /// The bytes of the regular file at `path`; a directory, FIFO, device (a
-/// link to `/dev/zero`) or socket is refused, as reading it would fail,
-/// block or never end. Asked of the path before it is opened (opening a
-/// FIFO blocks) and of the file opened (the path may have changed
-/// between), as `scene::gltf_loader::files::read_regular_file` does.
+/// link to `/dev/zero`) or socket is refused ([`crate::regular_file`]), as
+/// reading it would fail, block or never end.
 fn read_regular_file(path: &Path) -> Result<Vec<u8>, FilmError> {
+    use crate::regular_file::OpenError;
     use std::io::Read;
-    let io = |e| FilmError::io(path, e);
-    let regular = |m: fs::Metadata| {
-        if m.is_file() {
-            Ok(())
-        } else {
-            Err(FilmError::NotRegular {
-                path: path.to_owned(),
-                kind: file_kind(&m.file_type()),
-            })
-        }
-    };
-    regular(fs::metadata(path).map_err(io)?)?;
-    let mut file = fs::File::open(path).map_err(io)?;
-    let metadata = file.metadata().map_err(io)?;
-    let len = metadata.len();
-    regular(metadata)?;
-    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
-    file.read_to_end(&mut bytes).map_err(io)?;
+    let (mut file, metadata) = crate::regular_file::open(path).map_err(|e| match e {
+        OpenError::NotFound => FilmError::NotFound {
+            path: path.to_owned(),
+        },
+        OpenError::NotRegular { kind } => FilmError::NotRegular {
+            path: path.to_owned(),
+            kind,
+        },
+        OpenError::Io(e) => FilmError::io(path, e),
+    })?;
+    let mut bytes = Vec::with_capacity(usize::try_from(metadata.len()).unwrap_or(0));
+    file.read_to_end(&mut bytes)
+        .map_err(|e| FilmError::io(path, e))?;
     Ok(bytes)
-}
-
-/// What a file that is not a regular one is, for messages.
-fn file_kind(kind: &fs::FileType) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if kind.is_fifo() {
-            return "a FIFO";
-        }
-        if kind.is_char_device() {
-            return "a character device";
-        }
-        if kind.is_block_device() {
-            return "a block device";
-        }
-        if kind.is_socket() {
-            return "a socket";
-        }
-    }
-    if kind.is_dir() {
-        "a directory"
-    } else {
-        "neither a file nor a directory"
-    }
 }
 
 /// The tone-mapped sRGB preview of `film` as PNG file bytes.

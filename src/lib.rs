@@ -25,6 +25,7 @@
 //! | [`store`]   | the persistent space-time store (sled + rkyv + zstd), jobs, resume |
 //! | [`decimal`] | numbers in names read back only in the spelling they are written |
 //! | [`uri`]     | percent-encoding of glTF URIs and query strings                |
+//! | [`regular_file`] | opening files that must be regular ones (not a FIFO or a device) |
 
 pub mod accel;
 pub mod backend;
@@ -39,6 +40,7 @@ pub mod light;
 pub mod material;
 pub mod method;
 pub mod metrics;
+pub mod regular_file;
 pub mod render;
 pub mod sampling;
 pub mod scene;

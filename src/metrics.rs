@@ -365,8 +365,7 @@ pub fn read_light_mask(path: &Path, size: (u32, u32)) -> Result<Option<Vec<bool>
     match std::fs::metadata(path) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
         Err(e) => return Err(bad(e.to_string())),
-        Ok(m) if !m.is_file() => return Err(bad("not a regular file".to_string())),
-        Ok(_) => {}
+        Ok(m) => crate::regular_file::check(&m).map_err(|e| bad(e.to_string()))?,
     }
     let image = image::open(path)
         .map_err(|e| bad(e.to_string()))?

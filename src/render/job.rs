@@ -476,7 +476,7 @@ mod tests {
         if made.is_ok_and(|s| s.success()) {
             let mut h = crate::hash::Fnv1a::default();
             let err = hash_external_file(&mut h, "fifo.png", &fifo, None).unwrap_err();
-            assert_eq!(err, "not a regular file");
+            assert_eq!(err, "not a regular file (it is a FIFO)");
         }
     }
 

@@ -39,26 +39,10 @@ pub fn open_regular_file(
     Ok(Some((file.take(len), len)))
 }
 
-/// `path` opened, and its metadata, if it is a regular file.
+/// `path` opened, and its metadata, if it is a regular file
+/// ([`crate::regular_file`]).
 fn open_checked(path: &Path) -> Res<(std::fs::File, std::fs::Metadata)> {
-    let cannot = |e: std::io::Error| match e.kind() {
-        std::io::ErrorKind::NotFound => "file not found".to_string(),
-        _ => format!("cannot read file: {e}"),
-    };
-    // Asked of the path before it is opened (opening a FIFO blocks), and
-    // of the file opened (the path may have changed between).
-    let regular = |m: &std::fs::Metadata| {
-        if m.is_file() {
-            Ok(())
-        } else {
-            Err("not a regular file".to_string())
-        }
-    };
-    regular(&std::fs::metadata(path).map_err(cannot)?)?;
-    let file = std::fs::File::open(path).map_err(cannot)?;
-    let meta = file.metadata().map_err(cannot)?;
-    regular(&meta)?;
-    Ok((file, meta))
+    crate::regular_file::open(path).map_err(|e| e.to_string())
 }
 
 /// The file that a glTF `uri` other than a `data:` URI names, relative to
