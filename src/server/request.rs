@@ -214,12 +214,17 @@ fn parse_method(
     }
     let spp = spp.map(|n| n.to_string());
     if let Some(spp) = &spp {
-        if changes.iter().any(|(key, _)| *key == "spp") {
-            return Err(ApiError::bad_request(
-                "spp is given twice, on its own and in settings".into(),
-            ));
+        // A job as the API shows it has spp in both places, the same: it
+        // may be posted again as it is. Two values are refused.
+        match changes.iter().find(|(key, _)| *key == "spp") {
+            Some((_, other)) if other != spp => {
+                return Err(ApiError::bad_request(format!(
+                    "spp is given twice with two values: {spp} on its own and {other} in settings"
+                )));
+            }
+            Some(_) => {}
+            None => changes.push(("spp", spp.clone())),
         }
-        changes.push(("spp", spp.clone()));
     }
     let method = method_settings(name, changes.iter().map(|(k, v)| (*k, v.as_str())))
         .map_err(|e| ApiError::bad_request(e.to_string()))?;
@@ -283,10 +288,16 @@ fn check_frame_memory(
     available: Option<u64>,
 ) -> Result<(), ApiError> {
     memory::check_fits(method, (width, height), triangles, available).map_err(|too_large| {
-        ApiError::bad_request(format!(
-            "{too_large} to this server (its scene has {triangles} triangles); ask for a \
-             smaller size, fewer spp or a smaller scene"
-        ))
+        // Checked before the scene is read with 0 triangles: too large
+        // whatever its scene, which is then not named.
+        let scene = match triangles {
+            0 => "(whatever its scene); ask for a smaller size or fewer spp".to_string(),
+            n => format!(
+                "(its scene has {n} triangles); ask for a smaller size, fewer spp or a \
+                 smaller scene"
+            ),
+        };
+        ApiError::bad_request(format!("{too_large} to this server {scene}"))
     })
 }
 
@@ -482,15 +493,40 @@ mod tests {
             )
         );
         for method in ["ic", "tcg", "movies"] {
+            let err = check(method, "1920x1080", 0, Some(small)).unwrap_err();
+            // Refused before its scene is read: no triangles named.
             assert!(
-                check(method, "1920x1080", 0, Some(small)).is_err(),
-                "{method}"
+                err.detail.ends_with(
+                    "to this server (whatever its scene); ask for a smaller size or fewer spp"
+                ),
+                "{method}: {}",
+                err.detail
             );
         }
         assert!(check("trc", "1920x1080", 12, Some(64 * gib)).is_ok());
         assert!(check("trc", "1920x1080", u64::MAX, None).is_ok());
         assert!(check("path", "1920x1080", 0, Some(small)).is_ok());
         assert!(check("trc", "64x64", 0, Some(small)).is_ok());
+    }
+
+    /// A job posted again as the API shows it, with spp on its own and in
+    /// its settings alike, is taken; two values are refused.
+    #[test]
+    fn spp_given_twice_alike_is_taken_and_unlike_refused() {
+        let parse = |body: &str| JobRequest::parse(body.as_bytes(), None);
+        let body = |settings_spp: u32| {
+            format!(
+                r#"{{"scene":"builtin:cube-in-box","method":"trc","frames":"0..1","size":"8x8",
+                    "spp":16,"settings":{{"spp":{settings_spp},"at":0.05}}}}"#
+            )
+        };
+        assert_eq!(parse(&body(16)).unwrap().method.spp(), 16);
+        let err = parse(&body(8)).unwrap_err();
+        assert_eq!(err.status, axum::http::StatusCode::BAD_REQUEST);
+        assert_eq!(
+            err.detail,
+            "spp is given twice with two values: 16 on its own and 8 in settings"
+        );
     }
 
     /// The scene's triangles count: a job that fits on an empty scene is
