@@ -163,24 +163,38 @@ pub enum StoreError {
 }
 
 /// sled's error as text for people: an I/O error as the OS words it
-/// (without sled's "IO error: " prefix), corruption without sled's
-/// debug text (`file offset None backtrace ()`).
+/// (without sled's "IO error: " prefix). (Corruption is
+/// [`StoreError::Damaged`].)
 fn sled_text(error: &sled::Error) -> String {
     match error {
         sled::Error::Io(e) => format!("I/O error: {e}"),
-        sled::Error::Corruption { .. } => "sled found corrupt data in the database".into(),
         other => other.to_string(),
     }
 }
 
 impl StoreError {
+    /// sled's `source` met at `path`. Corruption is found where a read
+    /// reaches it, not only as the store opens: it is [`Self::Damaged`]
+    /// wherever, with what to do about it.
     fn sled(path: &Path, source: sled::Error) -> Self {
-        StoreError::Sled {
-            path: path.to_owned(),
-            error: source,
+        match source {
+            sled::Error::Corruption { .. } => StoreError::Damaged {
+                path: path.to_owned(),
+                detail: CORRUPT_FILES.into(),
+            },
+            error => StoreError::Sled {
+                path: path.to_owned(),
+                error,
+            },
         }
     }
 }
+
+/// What [`StoreError::Damaged`] says of data sled found corrupt (its own
+/// text of it is debug output, `file offset None backtrace ()`, and where
+/// it found the damage says nothing to act on).
+const CORRUPT_FILES: &str =
+    "sled found corrupt data in its database files (`db`, `conf` or a `snap.*` snapshot)";
 
 /// An open store. Only one process (and one `Store` per process) can hold
 /// a store directory at a time: sled locks it.
@@ -713,14 +727,7 @@ fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
                 path: path.to_owned(),
             })
         }
-        // sled's text of it is debug output (`file offset None backtrace
-        // ()`); where it found the damage says nothing to act on.
-        Ok(Err(sled::Error::Corruption { .. })) => Err(StoreError::Damaged {
-            path: path.to_owned(),
-            detail: "sled found corrupt data in its database files (`db`, `conf` or a \
-                     `snap.*` snapshot)"
-                .into(),
-        }),
+        Ok(Err(e @ sled::Error::Corruption { .. })) => Err(StoreError::sled(path, e)),
         Ok(Err(sled::Error::Unsupported(e))) => Err(StoreError::NotAStore {
             path: path.to_owned(),
             detail: format!("sled cannot open the database (damaged, or not radcache's): {e}"),
@@ -735,5 +742,29 @@ fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
             path: path.to_owned(),
             detail: "sled could not read its database files".into(),
         }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Corruption sled finds in a read after the store opened (bits
+    /// flipped in `db` where opening does not look) says the store is
+    /// damaged and what to do, as it does when opening finds it.
+    #[test]
+    fn corruption_found_after_opening_is_damage() {
+        let corrupt = sled::Error::Corruption { at: None, bt: () };
+        let error = StoreError::sled(Path::new("st"), corrupt);
+        assert!(matches!(error, StoreError::Damaged { .. }), "{error:?}");
+        assert_eq!(
+            error.to_string(),
+            format!(
+                "store st: damaged: {CORRUPT_FILES}; restore the directory from a copy, or \
+                 remove it to start over (its jobs are lost)"
+            )
+        );
+        let other = StoreError::sled(Path::new("st"), sled::Error::ReportableBug("x".into()));
+        assert!(matches!(other, StoreError::Sled { .. }), "{other:?}");
     }
 }
