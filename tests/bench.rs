@@ -586,6 +586,21 @@ fn temporal_runs_are_set_against_ic_with_the_same_settings_or_the_defaults() {
         movies.contains("ic default: 2.00× slower, 40.00× fewer records"),
         "{movies}"
     );
+    // On two backends each pair names its own.
+    let on = |r: &BenchRow, backend: &str| BenchRow {
+        backend: backend.into(),
+        ..r.clone()
+    };
+    let two = [
+        on(&rows[0], "cpu"),
+        on(&rows[2], "cpu"),
+        on(&rows[0], "gpu"),
+        on(&rows[2], "gpu"),
+    ];
+    let lines: Vec<String> = temporal_text(&two).lines().map(str::to_owned).collect();
+    assert_eq!(lines.len(), 2, "{lines:?}");
+    assert!(lines[0].starts_with("s trc default against ic default on cpu: 4.00× faster"));
+    assert!(lines[1].starts_with("s trc default against ic default on gpu: 4.00× faster"));
     // A trc run with no ic run on its scene is set against nothing.
     let mut alone = rows[2].clone();
     alone.scene = "third".into();

@@ -441,20 +441,28 @@ fn ratio_of(a: Option<f64>, b: Option<f64>) -> String {
     }
 }
 
-/// Lines for people: one per [`temporal_pairs`] pair, with the ratios the
+/// Lines for people: one per [`temporal_pairs`] pair (naming its backend
+/// where the rows have several), with the ratios the
 /// temporal method's targets are stated in: `ic`'s time over the temporal
 /// run's, `ic`'s records over its records, and its error and flicker (all
 /// pixels, and without the pixels at directly seen lights) over `ic`'s.
 pub fn temporal_text(rows: &[BenchRow]) -> String {
+    // With several backends (`--backends cpu,gpu`) a pair is on one of
+    // them, which the line names.
+    let several = rows.iter().any(|r| r.backend != rows[0].backend);
     let mut out = String::new();
     for (ic, trc) in temporal_pairs(rows) {
         let _ = writeln!(
             out,
-            "{} {} {} against ic {}: {}, {} fewer records; error {} ({} lit surfaces), flicker {} ({} lit surfaces)",
+            "{} {} {} against ic {}{}: {}, {} fewer records; error {} ({} lit surfaces), flicker {} ({} lit surfaces)",
             trc.scene,
             trc.method,
             trc.settings,
             ic.settings,
+            match several {
+                true => format!(" on {}", trc.backend),
+                false => String::new(),
+            },
             match trc.seconds > 0.0 {
                 true => faster_or_slower(ic.seconds / trc.seconds),
                 false => "- faster".into(),
