@@ -423,9 +423,9 @@ function drawCharts() {
     series('dropped', '#c62828', (r) => r.records_dropped),
   ], (v) => String(Math.round(v)));
   lineChart($('chart-reshot'), [series('samples re-shot', '#ef6c00', (r) => r.samples_reshot || 0)], (v) => String(Math.round(v)));
-  // A frame that computed no record has no mean lifespan (the stats say 0):
-  // a gap in the line, not a fall to zero.
-  lineChart($('chart-lifespan'), [series('mean lifespan', '#2e7d32', (r) => r.mean_lifespan || null)], (v) => v.toFixed(1));
+  // A frame that computed no record has no mean lifespan (the stats say
+  // null): a gap in the line, not a fall to zero.
+  lineChart($('chart-lifespan'), [series('mean lifespan', '#2e7d32', (r) => r.mean_lifespan)], (v) => v.toFixed(1));
   lineChart($('chart-time'), [series('seconds', '#6a1b9a', (r) => r.seconds)], (v) => `${v.toPrecision(2)} s`);
   lineChart($('chart-bytes'), [
     series('cache (memory)', '#1565c0', (r) => r.cache_bytes || 0),

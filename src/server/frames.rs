@@ -104,7 +104,9 @@ pub fn frame_stats_json(state: &AppState, sid: u64, frame: u32) -> Result<Option
         "records_reused": s.records_reused,
         "records_replaced": s.records_replaced,
         "records_dropped": s.records_dropped,
-        "mean_lifespan": s.mean_lifespan,
+        // `null` where the frame computed no record whose life is set, as
+        // `inspect --json` says it.
+        "mean_lifespan": (s.mean_lifespan > 0.0).then_some(s.mean_lifespan),
         "samples_reshot": s.samples_reshot,
         "cache_bytes": s.cache_bytes,
         "lookups": s.lookups,
