@@ -712,7 +712,9 @@ fn frames_a_stateful_job_renders_again_are_warned_of() {
     let (code, _, stderr) = run("1..3");
     assert_eq!(code, 0, "{stderr}");
     assert!(
-        stderr.contains("job \"t\": 2 finished frames of 1..3 are rendered again"),
+        stderr.contains(
+            "job \"t\": 2 of the 2 finished frames of 1..3 are rendered again (and replaced), 0 skipped"
+        ),
         "{stderr}"
     );
     let (code, _, stderr) = run("1..3");

@@ -277,13 +277,15 @@ pub(super) fn resume(
         }
         if done.len() < finished {
             eprintln!(
-                "warning: job {:?}: {} finished frames of {}..{} are rendered again (and replaced): \
-                 `{}` carries its cache from frame to frame, from the first of the range it \
-                 renders, and they were rendered by another range or lie past frames still to render",
+                "warning: job {:?}: {} of the {finished} finished frames of {}..{} are rendered \
+                 again (and replaced), {} skipped: `{}` carries its cache from frame to frame, \
+                 from the first of the range it renders, and they were rendered by another range \
+                 or lie past frames still to render",
                 j.job.spec.name,
                 finished - done.len(),
                 frames.start,
                 frames.end,
+                done.len(),
                 renderer.method_name(),
             );
         }
