@@ -15,7 +15,7 @@
 //! crash never leaves a half-written frame behind.
 
 use crate::material::luminance;
-use crate::render::memory::{self, bytes_text};
+use crate::system_memory::{self, bytes_text};
 use glam::Vec3;
 use std::fs;
 use std::io::{self, Cursor, Write};
@@ -182,14 +182,14 @@ pub fn read_exr(path: &Path) -> Result<Film, FilmError> {
             path: path.to_owned(),
         });
     }
-    check_header(&bytes, memory::available_bytes()).map_err(|e| e.at(path))?;
+    check_header(&bytes, system_memory::available_bytes()).map_err(|e| e.at(path))?;
     decode_rgb(&bytes).map_err(|e| FilmError::exr(path, e))
 }
 
 /// Decodes EXR file bytes (as [`encode_exr`] writes and the store keeps),
 /// after the same header checks as [`read_exr`].
 pub fn decode_exr(bytes: &[u8]) -> Result<Film, exr::error::Error> {
-    check_header(bytes, memory::available_bytes()).map_err(HeaderError::into_exr)?;
+    check_header(bytes, system_memory::available_bytes()).map_err(HeaderError::into_exr)?;
     decode_rgb(bytes)
 }
 
@@ -270,7 +270,7 @@ impl HeaderError {
 ///   600-byte file declaring 60000×60000 pixels made `compare` allocate
 ///   43 GB and abort);
 /// - that the decoded [`Film`] (12 bytes a pixel) fits in `available`
-///   bytes ([`memory::available_bytes`]; `None`: not checked).
+///   bytes ([`system_memory::available_bytes`]; `None`: not checked).
 fn check_header(bytes: &[u8], available: Option<u64>) -> Result<(), HeaderError> {
     use exr::meta::MetaData;
     let meta = MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(HeaderError::Exr)?;

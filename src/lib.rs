@@ -26,6 +26,7 @@
 //! | [`decimal`] | numbers in names read back only in the spelling they are written |
 //! | [`uri`]     | percent-encoding of glTF URIs and query strings                |
 //! | [`regular_file`] | opening files that must be regular ones (not a FIFO or a device) |
+//! | [`system_memory`] | the memory this process may still take (/proc, cgroups, `ulimit -v`) |
 
 pub mod accel;
 pub mod backend;
@@ -46,4 +47,5 @@ pub mod sampling;
 pub mod scene;
 pub mod server;
 pub mod store;
+pub mod system_memory;
 pub mod uri;

@@ -335,7 +335,7 @@ fn a_file_shorter_than_its_declared_chunks_is_refused() {
 /// before anything of that size is allocated, naming both sizes.
 #[test]
 fn a_declared_size_beyond_memory_is_refused() {
-    if radcache::render::memory::available_bytes().is_none() {
+    if radcache::system_memory::available_bytes().is_none() {
         return; // nothing to check against (not Linux)
     }
     let tmp = tempfile::tempdir().unwrap();

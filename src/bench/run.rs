@@ -14,6 +14,7 @@ use crate::render::{
 };
 use crate::scene::Scene;
 use crate::store::Store;
+use crate::system_memory;
 use anyhow::{bail, Context, Result};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -115,7 +116,10 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     // fit in memory on its triangles. Each is loaded again when its turn
     // comes rather than kept, so that a run's peak memory holds only its
     // own scene.
-    let available = opts.check_memory.then(memory::available_bytes).flatten();
+    let available = opts
+        .check_memory
+        .then(system_memory::available_bytes)
+        .flatten();
     for (source, label) in opts.scenes.iter().zip(&labels) {
         let triangles = memory::scene_triangles(&source.load()?);
         check_scene_memory(opts, label, triangles, available)?;

@@ -16,6 +16,7 @@ use crate::method::tcg::TcgSettings;
 use crate::method::trc::{TemporalGradients, TrcSettings};
 use crate::render::{self, memory, FrameSettings, MethodSettings, Renderer, SceneSource};
 use crate::store::{self, Store};
+use crate::system_memory;
 use anyhow::{bail, Result};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -123,7 +124,7 @@ fn check_memory(
     scene: &crate::scene::Scene,
 ) -> Result<()> {
     let triangles = memory::scene_triangles(scene);
-    let available = memory::available_bytes();
+    let available = system_memory::available_bytes();
     memory::check_fits(method, args.size, triangles, available).map_err(|too_large| {
         anyhow::anyhow!(
             "{too_large}; render a smaller --size or fewer --spp, or pass --no-memory-check \

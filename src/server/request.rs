@@ -5,6 +5,7 @@ use super::ApiError;
 use crate::method::settings::{limits, method_settings};
 use crate::render::{self, memory, FrameSettings, MethodSettings, SceneSource};
 use crate::store::schema::JobValue;
+use crate::system_memory;
 use serde::Deserialize;
 use std::ops::Range;
 use std::path::{Component, Path};
@@ -302,12 +303,12 @@ fn check_frame_memory(
 }
 
 /// The memory a job submitted now may take when it renders: what this
-/// process may still take ([`memory::available_bytes`]) and what it holds
+/// process may still take ([`system_memory::available_bytes`]) and what it holds
 /// now, as jobs render one at a time and the one rendering now, most of
 /// what it holds, lets go of it before the next starts.
 fn memory_for_the_next_job() -> Option<u64> {
-    let held = memory::resident_bytes().unwrap_or(0);
-    memory::available_bytes().map(|available| available.saturating_add(held))
+    let held = system_memory::resident_bytes().unwrap_or(0);
+    system_memory::available_bytes().map(|available| available.saturating_add(held))
 }
 
 /// The gather hemisphere of a method's records (`None` for `path`).
@@ -489,7 +490,7 @@ mod tests {
                 "a 1920x1080 trc render at 16 spp needs at least {} of memory at its peak \
                  (estimated), and 128 MiB is available to this server (its scene has 12 \
                  triangles); ask for a smaller size, fewer spp or a smaller scene",
-                memory::bytes_text(need)
+                system_memory::bytes_text(need)
             )
         );
         for method in ["ic", "tcg", "movies"] {
