@@ -433,12 +433,22 @@ impl ArvoMap {
     }
 }
 
-/// Power heuristic with β = 2 (Veach 1997, Eq. 9.13).
+/// Power heuristic with β = 2 (Veach 1997, Eq. 9.13). Squared in f64:
+/// a solid-angle pdf of an f32 squares past f32's range from 1.8e19 (a
+/// small emitter seen edge-on from a surface a million metres away), and
+/// `inf / inf` would be a NaN pixel. An infinite pdf (past even f32) takes
+/// all the weight from a finite one.
 #[inline]
 pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
-    let (a, b) = (pdf_a * pdf_a, pdf_b * pdf_b);
+    match (pdf_a.is_infinite(), pdf_b.is_infinite()) {
+        (true, true) => return 0.5,
+        (true, false) => return 1.0,
+        (false, true) => return 0.0,
+        (false, false) => {}
+    }
+    let (a, b) = (f64::from(pdf_a).powi(2), f64::from(pdf_b).powi(2));
     if a + b > 0.0 {
-        a / (a + b)
+        (a / (a + b)) as f32
     } else {
         0.0
     }
@@ -716,5 +726,29 @@ pub(crate) mod tests {
             sampled += 1;
         }
         assert!(sampled > 15_000, "only {sampled} samples");
+    }
+
+    /// The weights of two strategies sum to one, also where the pdfs'
+    /// squares overflow f32 (a small emitter seen from very far) or a pdf
+    /// is infinite; they are never NaN.
+    #[test]
+    fn power_heuristic_weights_sum_to_one_past_f32s_squares() {
+        let pairs = [
+            (1.0, 1.0),
+            (2.0, 1.0),
+            (4e19, 1.0),
+            (4e19, 8e19),
+            (3e38, 1e-3),
+            (f32::INFINITY, 5.0),
+            (f32::INFINITY, f32::INFINITY),
+        ];
+        for (a, b) in pairs {
+            let (wa, wb) = (power_heuristic(a, b), power_heuristic(b, a));
+            assert!(wa.is_finite() && wb.is_finite(), "{a} {b}: {wa} {wb}");
+            assert!((wa + wb - 1.0).abs() < 1e-6, "{a} {b}: {wa} + {wb}");
+        }
+        assert_eq!(power_heuristic(2.0, 1.0), 0.8);
+        assert!((power_heuristic(4e19, 8e19) - 0.2).abs() < 1e-6);
+        assert_eq!(power_heuristic(0.0, 0.0), 0.0);
     }
 }

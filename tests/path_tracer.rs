@@ -186,6 +186,28 @@ fn two_rectangular_lights_over_plane_match_the_form_factor() {
     }
 }
 
+/// `cube_in_box.glb` with its room scaled a million times (its 0.5 m lamp
+/// and the cube left as they are): from the far floor both the lamp and
+/// the floor are edge-on, the lamp's solid-angle pdf (about 6e19) squares
+/// past f32's range in the MIS weight, and a fifth of the pixels were NaN.
+/// Every pixel is finite, and the cube is lit.
+#[test]
+fn a_small_lamp_in_a_vast_room_gives_no_nan() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/scenes/cube_in_box.glb");
+    let mut s = radcache::scene::Scene::load(&path).unwrap();
+    let room = s
+        .nodes
+        .iter()
+        .position(|n| n.name == "room")
+        .expect("a room node");
+    s.nodes[room].rest.scale = Vec3::splat(1e6);
+    let film = renderer(s, 4, 32).render_frame(0);
+    let bad = film.pixels.iter().filter(|p| !p.is_finite()).count();
+    assert_eq!(bad, 0, "{bad} of {} pixels not finite", film.pixels.len());
+    assert!(film.mean() > 0.0);
+}
+
 /// The same frame rendered twice (and after another frame) is identical:
 /// sampling is keyed by (seed, frame, pixel, sample) only.
 #[test]

@@ -766,6 +766,16 @@ pub fn render_job_to_dir_with(
         if renderer.abandoned() {
             break; // Half rendered: neither stored nor written.
         }
+        // Never expected; but a NaN spreads through every later use of the
+        // frame (compare's sums, a tone-mapped preview), so it is said.
+        let not_finite = film.pixels.iter().filter(|p| !p.is_finite()).count();
+        if not_finite > 0 {
+            progress.warn(&format!(
+                "warning: frame {frame}: {not_finite} of {} pixels are NaN or infinite \
+                 (a defect of the renderer: please report it with the scene and the command)",
+                film.pixels.len()
+            ));
+        }
         let stats = renderer.last_frame_stats();
         let kept = renderer.take_frame_records();
         if let Some(j) = job.as_deref_mut() {

@@ -101,6 +101,14 @@ impl FrameProgress {
         }
     }
 
+    /// Prints a warning, also when quiet, above the bar where there is one.
+    pub(super) fn warn(&self, line: &str) {
+        match self {
+            Self::Bar(bar) => bar.suspend(|| say(&mut std::io::stderr(), line)),
+            Self::Lines { .. } | Self::Quiet => say(&mut std::io::stderr(), line),
+        }
+    }
+
     /// Leaves the bar where it stopped (a frame failed).
     pub(super) fn abandon(&self) {
         match self {
