@@ -1811,3 +1811,358 @@ fn a_small_file_that_decodes_to_too_much_is_refused() {
     );
     assert_error(&instanced, "over the 4 GiB a scene may take");
 }
+
+/// `radcache render` of one tiny frame of `path`, which must succeed: its
+/// standard error, where the loader's warnings are.
+fn render_warnings(path: &Path) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["render", "--method", "path", "--spp", "1", "--size", "4x4"])
+        .args(["--frames", "0..1", "-q"])
+        .arg(path)
+        .arg("--out")
+        .arg(path.with_extension("out"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{}: {stderr}", path.display());
+    stderr
+}
+
+/// A skin's joints after the first carry nothing, so its first inverse
+/// bind matrix alone is read, once for the skin: 200 nodes of a skin whose
+/// 4,194,304 matrices are zeros but the first (an accessor without a
+/// buffer view, the first set by a sparse value) decoded all 256 MiB of
+/// them for each node, for over a minute.
+#[test]
+fn only_a_skins_first_inverse_bind_matrix_is_read() {
+    const NODES: usize = 200;
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = good_bin().unwrap();
+    bin.extend_from_slice(&0u32.to_le_bytes());
+    // The inverse of the joint's rest pose (at x = 1).
+    for x in Mat4::from_translation(-Vec3::X).to_cols_array() {
+        bin.extend_from_slice(&x.to_le_bytes());
+    }
+    let len = bin.len();
+    let path = write_case(
+        dir.path(),
+        "skinned_many",
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(len);
+            let views = d["bufferViews"].as_array_mut().unwrap();
+            views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 4}));
+            views.push(json!({"buffer": 0, "byteOffset": 52, "byteLength": 64}));
+            d["accessors"].as_array_mut().unwrap().push(json!({
+                "componentType": 5126, "count": 4_194_304, "type": "MAT4",
+                "sparse": {"count": 1, "indices": {"bufferView": 2, "componentType": 5125},
+                           "values": {"bufferView": 3}}
+            }));
+            d["skins"] = json!([{"joints": [2], "inverseBindMatrices": 2}]);
+            let nodes = d["nodes"].as_array_mut().unwrap();
+            nodes.push(json!({"name": "joint", "translation": [1.0, 0.0, 0.0]}));
+            nodes.extend((0..NODES).map(|_| json!({"mesh": 0, "skin": 0})));
+            d["scenes"][0]["nodes"] = json!((0..NODES + 3).collect::<Vec<_>>());
+        },
+        Some(bin),
+    );
+    let scene = load_within_20s(&path).unwrap();
+    assert_eq!(scene.objects.len(), NODES + 1);
+    assert!(scene.objects[1..]
+        .iter()
+        .all(|o| scene.nodes[o.node].name == "joint"));
+    // At the bind pose, each lies where the file put it.
+    for triangle in scene.snapshot(0.0).triangles {
+        for (c, want) in triangle.p.iter().zip(TRI) {
+            assert!(close(*c, Vec3::from(want), 1e-6), "{c} vs {want:?}");
+        }
+    }
+}
+
+/// A primitive whose POSITION or indices accessor has no buffer view (nor
+/// sparse values) holds zeros, and none of its triangles has any area: it
+/// is skipped, with a warning, before it is decoded (a 256 MiB accessor of
+/// zeros took gigabytes, to draw nothing). A mesh left without a triangle
+/// with any area is named, once however many nodes it has: it vanished
+/// from the render without a word.
+#[test]
+fn meshes_that_draw_nothing_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = good_bin().unwrap();
+    for i in [0u32, 1, 1] {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let len = bin.len();
+    let path = write_case(
+        dir.path(),
+        "nothing",
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(len);
+            (d["bufferViews"].as_array_mut().unwrap())
+                .push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 12}));
+            d["accessors"].as_array_mut().unwrap().extend([
+                json!({"componentType": 5126, "count": 3, "type": "VEC3",
+                       "min": [0.0, 0.0, 0.0], "max": [0.0, 0.0, 0.0]}),
+                json!({"componentType": 5125, "count": 3, "type": "SCALAR"}),
+                json!({"bufferView": 2, "componentType": 5125, "count": 3, "type": "SCALAR"}),
+            ]);
+            d["meshes"].as_array_mut().unwrap().extend([
+                json!({"name": "zeros", "primitives": [
+                    {"attributes": {"POSITION": 2}},
+                    {"attributes": {"POSITION": 0}, "indices": 3}
+                ]}),
+                json!({"name": "flat", "primitives": [{"attributes": {"POSITION": 0}, "indices": 4}]}),
+            ]);
+            let nodes = d["nodes"].as_array_mut().unwrap();
+            nodes.extend([json!({"mesh": 1}), json!({"mesh": 1}), json!({"mesh": 2})]);
+            d["scenes"][0]["nodes"] = json!([0, 1, 2, 3, 4]);
+        },
+        Some(bin),
+    );
+    let scene = Scene::load(&path).unwrap();
+    let triangles: Vec<usize> = (scene.objects.iter())
+        .map(|o| o.mesh.triangles.len())
+        .collect();
+    assert_eq!(triangles, [1, 0, 0, 0]);
+    let stderr = render_warnings(&path);
+    for said in [
+        "mesh 1 'zeros', primitive 0: its POSITION accessor 2 has no buffer view and no sparse \
+         values, so every vertex is at the origin and no triangle has any area; skipped",
+        "mesh 1 'zeros', primitive 1: its indices accessor 3 has no buffer view and no sparse \
+         values, so every index is 0 and no triangle has any area; skipped",
+        "mesh 1 'zeros': not drawn: none of its triangles has any area",
+        "mesh 2 'flat': not drawn: none of its triangles has any area",
+    ] {
+        let lines: Vec<&str> = stderr.lines().filter(|l| l.contains(said)).collect();
+        assert_eq!(lines.len(), 1, "expected {said:?} once in: {stderr}");
+        let file = path.display().to_string();
+        assert!(
+            lines[0].starts_with(&format!("warning: {file}: ")),
+            "{stderr}"
+        );
+    }
+}
+
+/// glTF allows a node only a matrix that decomposes into translation,
+/// rotation and scale (§5.25), and a joint only an affine inverse bind
+/// matrix: a sheared or projective one was read as another without a word
+/// (the shear, or the last row, dropped). A writer's rounding (a rotation
+/// and scales far apart, computed in f32) is no shear.
+#[test]
+fn matrices_that_are_not_translation_rotation_scale_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let with_matrix = |name: &str, node: usize, matrix: [f32; 16]| {
+        write_case(
+            dir.path(),
+            name,
+            |d| {
+                let node = d["nodes"][node].as_object_mut().unwrap();
+                node.remove("translation");
+                node.insert("matrix".into(), json!(matrix));
+            },
+            good_bin(),
+        )
+    };
+    #[rustfmt::skip]
+    let cases = [
+        ("shear", 0, [1.0, 0.0, 0.0, 0.0, 1.5, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+         "node 'tri': its matrix is sheared (its x and y axes are 33.690° apart, not 90°)"),
+        ("projective", 0, [1.0, 0.0, 0.0, 0.5, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0],
+         "node 'tri': its matrix has the last row (0.5, 0, 0, 1), not (0, 0, 0, 1): it is projective"),
+        ("w_zero", 1, [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 3.0, 0.0],
+         "node 'cam': its matrix has the last row (0, 0, 0, 0), not (0, 0, 0, 1)"),
+    ];
+    for (name, node, matrix, phrase) in cases {
+        assert_error(&with_matrix(name, node, matrix), phrase);
+    }
+    let rotation = Quat::from_euler(glam::EulerRot::XYZ, 0.3, 1.1, -2.0);
+    let scale = Vec3::new(1e3, 2e-3, 1.0);
+    let translation = Vec3::new(1e6, -2.5, 0.125);
+    let matrix = Mat4::from_scale_rotation_translation(scale, rotation, translation);
+    let rounded = Scene::load(&with_matrix("rounded", 0, matrix.to_cols_array())).unwrap();
+    let rest = rounded.nodes[0].rest;
+    assert!(close(rest.scale, scale, 1e-3) && rest.translation == translation);
+    assert!(rest.rotation.dot(rotation).abs() > 1.0 - 1e-6);
+    // A skin's inverse bind matrix that is projective.
+    let mut bin = good_bin().unwrap();
+    let projective = [
+        1.0f32, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.5, 0.0, 0.0, 0.0, 1.0,
+    ];
+    for x in projective {
+        bin.extend_from_slice(&x.to_le_bytes());
+    }
+    let path = write_case(
+        dir.path(),
+        "projective_joint",
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(112);
+            (d["bufferViews"].as_array_mut().unwrap())
+                .push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 64}));
+            (d["accessors"].as_array_mut().unwrap())
+                .push(json!({"bufferView": 2, "componentType": 5126, "count": 1, "type": "MAT4"}));
+            d["skins"] = json!([{"joints": [1], "inverseBindMatrices": 2}]);
+            d["nodes"][0]["skin"] = json!(0);
+        },
+        Some(bin),
+    );
+    assert_error(
+        &path,
+        "skin of node 'tri': the first joint's inverse bind matrix has the last row (0, 0, 0.5, 1)",
+    );
+}
+
+/// The attributes the loader does not read (texture coordinates,
+/// tangents, colours, joints, weights) are not decoded, but what is wrong
+/// with them is said, naming the mesh, the primitive and the attribute:
+/// a count unlike POSITION's, a type glTF does not give them, elements
+/// past their buffer view, a stride smaller than an element. They were
+/// never looked at; the scene still loads, as it renders the same.
+#[test]
+fn malformed_attributes_that_are_not_read_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = good_bin().unwrap();
+    bin.extend_from_slice(&[0; 32]);
+    let path = write_case(
+        dir.path(),
+        "attributes",
+        |d| {
+            d["buffers"][0]["byteLength"] = json!(80);
+            let views = d["bufferViews"].as_array_mut().unwrap();
+            views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 32}));
+            views.push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 32, "byteStride": 4}));
+            d["accessors"].as_array_mut().unwrap().extend([
+                json!({"bufferView": 2, "componentType": 5126, "count": 2, "type": "VEC2"}),
+                json!({"bufferView": 2, "componentType": 5126, "count": 3, "type": "VEC3"}),
+                json!({"bufferView": 2, "componentType": 5126, "count": 3, "type": "VEC4"}),
+                json!({"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC2"}),
+                json!({"componentType": 5126, "count": 2_147_483_647u32, "type": "VEC4"}),
+            ]);
+            d["meshes"][0]["primitives"][0]["attributes"] = json!({
+                "POSITION": 0, "TEXCOORD_0": 2, "TEXCOORD_1": 3, "TANGENT": 4,
+                "TEXCOORD_2": 5, "COLOR_0": 6
+            });
+        },
+        Some(bin),
+    );
+    let stderr = render_warnings(&path);
+    for said in [
+        "accessor 2 (TEXCOORD_0) has 2 elements but accessor 0 (POSITION) has 3; glTF gives \
+         every attribute of a primitive the same count; TEXCOORD_0 is ignored",
+        "accessor 3 (TEXCOORD_1) has type Vec3; glTF gives TEXCOORD_1 type Vec2; TEXCOORD_1 is \
+         ignored",
+        "accessor 4 (TANGENT) is out of range of its buffer view; TANGENT is ignored",
+        "accessor 5 (TEXCOORD_2): byte stride 4 is smaller than an element (8 bytes); \
+         TEXCOORD_2 is ignored",
+        "accessor 6 (COLOR_0) has 2147483647 elements but accessor 0 (POSITION) has 3",
+    ] {
+        let line = stderr.lines().find(|l| l.contains(said));
+        let line = line.unwrap_or_else(|| panic!("expected {said:?} in: {stderr}"));
+        assert!(
+            line.starts_with("warning: ")
+                && line.contains("mesh 0, primitive 0: ")
+                && line.ends_with("is ignored: radcache does not read it"),
+            "{line}"
+        );
+    }
+}
+
+/// What is wrong with a GLB's container is said plainly, not in the words
+/// of the parser ("unknown chunk type", "could not completely read the
+/// object", "failed to fill whole buffer", "truncated or corrupt GLB:
+/// unsupported version"), and so is a second buffer without a URI (only
+/// the first may be the binary chunk; it was called missing) and a `data:`
+/// URI that is not base64.
+#[test]
+fn a_broken_glb_container_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut doc = tri_json("unused.bin");
+    doc["buffers"][0].as_object_mut().unwrap().remove("uri");
+    let glb = |doc: &Value| {
+        gltf::binary::Glb {
+            header: gltf::binary::Header {
+                magic: *b"glTF",
+                version: 2,
+                length: 0,
+            },
+            json: serde_json::to_vec(doc).unwrap().into(),
+            bin: Some(tri_bin(TRI, [0, 1, 2]).into()),
+        }
+        .to_vec()
+        .unwrap()
+    };
+    let write = |name: &str, bytes: &[u8]| {
+        let path = dir.path().join(format!("{name}.glb"));
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let good = glb(&doc);
+    Scene::load(&write("good", &good)).unwrap();
+    let edited = |at: usize, value: u32| {
+        let mut bytes = good.clone();
+        bytes[at..at + 4].copy_from_slice(&value.to_le_bytes());
+        bytes
+    };
+    let json_length = u32::from_le_bytes(good[12..16].try_into().unwrap());
+    assert_eq!(json_length % 4, 0);
+    let mut header_only = good[..12].to_vec();
+    header_only[8..12].copy_from_slice(&12u32.to_le_bytes());
+    let mut two_buffers = doc.clone();
+    (two_buffers["buffers"].as_array_mut().unwrap()).push(json!({"byteLength": 16}));
+    let mut bad_base64 = doc.clone();
+    bad_base64["buffers"][0]["uri"] = json!("data:application/octet-stream;base64,@@@");
+    for (name, bytes, phrase) in [
+        (
+            "unaligned",
+            edited(12, json_length - 1),
+            format!(
+                "the JSON chunk's length, {} bytes, is not a multiple of 4",
+                json_length - 1
+            ),
+        ),
+        (
+            "length_zero",
+            edited(8, 0),
+            "corrupt GLB header: it declares a file length of 0 bytes, shorter than the 12-byte \
+             header itself"
+                .into(),
+        ),
+        (
+            "header_only",
+            header_only,
+            "the GLB has no JSON chunk: the file ends after its 12-byte header".into(),
+        ),
+        (
+            "version1",
+            edited(4, 1),
+            "GLB version 1 is not supported: radcache reads GLB version 2".into(),
+        ),
+        (
+            "version3",
+            edited(4, 3),
+            "GLB version 3 is not supported".into(),
+        ),
+        (
+            "two_buffers",
+            glb(&two_buffers),
+            "buffer 1 has no URI: only the first buffer (buffer 0) may be the GLB binary chunk"
+                .into(),
+        ),
+        (
+            "bad_base64",
+            glb(&bad_base64),
+            "buffer 0: its data: URI is not valid base64".into(),
+        ),
+    ] {
+        let path = write(name, &bytes);
+        assert_error(&path, &phrase);
+        let err = Scene::load(&path).map(drop).unwrap_err().to_string();
+        for parser_said in [
+            "truncated",
+            "unknown chunk",
+            "could not",
+            "fill whole",
+            "missing",
+        ] {
+            assert!(!err.contains(parser_said), "{name}: {err}");
+        }
+    }
+}

@@ -29,9 +29,10 @@ pub struct StoreJob<'a> {
 /// file order, each with its URI) when it references any, so that editing a
 /// `.bin` or a texture next to a `.gltf` changes the hash too. The files
 /// are hashed a chunk at a time (a huge image is never held); an image not
-/// there is hashed as missing (the renderer ignores images, so the job
-/// renders, and the image appearing later changes the hash), a buffer not
-/// there is an error (the loader needs it).
+/// there, or not readable as a regular file, is hashed as such (the
+/// renderer ignores images, so the job renders, and the image appearing
+/// later changes the hash), a buffer not there is an error (the loader
+/// needs it): see `hash_reference`.
 pub fn scene_identity(source: &SceneSource) -> Result<(String, String)> {
     scene_identity_confined(source, None)
 }
@@ -66,27 +67,9 @@ pub fn scene_identity_confined(
                 // memory for one chunk, however large the files.
                 let mut all = crate::hash::Fnv1a::default();
                 for (uri, kind) in uris {
-                    let cannot = |what: String| {
-                        anyhow::anyhow!("{what} (referenced by scene {})", path.display())
-                    };
-                    let file = gltf_loader::confined_uri_file(dir, &uri, root).map_err(cannot)?;
-                    let found = hash_external_file(&mut all, &uri, &file, kind.limit())
-                        .map_err(|e| cannot(format!("cannot read {}: {e}", file.display())))?;
-                    // A missing image is hashed as such ([`MISSING`]), as
-                    // the renderer ignores images: the job renders, and
-                    // one whose image appears later is another scene. The
-                    // loader needs its buffers.
-                    if !found {
-                        match kind {
-                            External::Image => all.write(MISSING),
-                            External::Buffer { .. } => {
-                                return Err(cannot(format!(
-                                    "cannot read {}: file not found",
-                                    file.display()
-                                )))
-                            }
-                        }
-                    }
+                    hash_reference(&mut all, dir, &uri, kind, root, path).map_err(|e| {
+                        anyhow::anyhow!("{e} (referenced by scene {})", path.display())
+                    })?;
                 }
                 format!("{main}+{:016x}", all.finish())
             }
@@ -99,6 +82,59 @@ pub fn scene_identity_confined(
 /// not there, after its URI and NUL: a length no file has (`u64::MAX`),
 /// then `missing`.
 const MISSING: &[u8] = b"\xff\xff\xff\xff\xff\xff\xff\xffmissing";
+
+/// What it holds for an image that cannot be read as a regular file, after
+/// its URI and NUL: as [`MISSING`], then `unreadable: ` and why.
+const UNREADABLE: &[u8] = b"\xff\xff\xff\xff\xff\xff\xff\xffunreadable: ";
+
+/// Feeds the external file that `uri` (of `scene`, in `dir`) names to
+/// `all` ([`hash_external_file`]). The renderer ignores images: one that
+/// is missing ([`MISSING`]), or that cannot be read as a regular file (a
+/// URI of another scheme or with a malformed escape, a FIFO, a device, a
+/// directory, a read error: [`UNREADABLE`], with a warning) is hashed as
+/// such, so that the job renders as the scene does without `--job`, and
+/// one whose image appears or changes later is another scene. The loader
+/// needs its buffers: for them each is an error. So is an image outside
+/// the directory a load is confined to (nothing outside is looked at).
+fn hash_reference(
+    all: &mut crate::hash::Fnv1a,
+    dir: &Path,
+    uri: &str,
+    kind: External,
+    root: Option<&Path>,
+    scene: &Path,
+) -> Result<(), String> {
+    let image = kind == External::Image;
+    let unreadable = |all: &mut crate::hash::Fnv1a, why: &str| {
+        eprintln!(
+            "warning: {}: image '{uri}' cannot be read ({why}); as the renderer ignores \
+             images, the job's scene hash records it as unreadable",
+            scene.display()
+        );
+        all.write(uri.as_bytes());
+        all.write(&[0]);
+        all.write(UNREADABLE);
+        all.write(why.as_bytes());
+    };
+    if let (true, Err(why)) = (image, gltf_loader::uri_file(dir, uri)) {
+        unreadable(all, &why);
+        return Ok(());
+    }
+    let file = gltf_loader::confined_uri_file(dir, uri, root)?;
+    // What a file that fails part way fed is taken back.
+    let before = *all;
+    match hash_external_file(all, uri, &file, kind.limit()) {
+        Ok(true) => {}
+        Ok(false) if image => all.write(MISSING),
+        Ok(false) => return Err(format!("cannot read {}: file not found", file.display())),
+        Err(why) if image => {
+            *all = before;
+            unreadable(all, &why);
+        }
+        Err(e) => return Err(format!("cannot read {}: {e}", file.display())),
+    }
+    Ok(())
+}
 
 /// Feeds `uri`, NUL, the length (u64 LE) and the bytes of `file` (at most
 /// `limit` of them) to `hash`, the bytes a chunk at a time, never the
@@ -505,6 +541,56 @@ mod tests {
         let msg = scene_identity(&source).unwrap_err().to_string();
         assert!(
             msg.contains("b.bin: file not found") && msg.contains("s.gltf"),
+            "{msg}"
+        );
+    }
+
+    /// An image that cannot be read as a regular file (a URI of another
+    /// scheme or with a malformed escape, a directory, a FIFO) is hashed
+    /// as unreadable, as a missing one is hashed as missing: the job
+    /// renders as the scene does without `--job` (the renderer ignores
+    /// images; the job was refused). The hash is stable, and changes when
+    /// the image becomes readable. A buffer that cannot be read is still
+    /// an error naming it and the scene.
+    #[test]
+    fn an_unreadable_image_is_hashed_as_such_and_an_unreadable_buffer_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("b.bin"), [1u8, 2, 3, 4]).unwrap();
+        std::fs::create_dir(dir.path().join("sub.png")).unwrap();
+        let fifo = dir.path().join("fifo.png");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        let gltf = dir.path().join("s.gltf");
+        let scene = |buffer: &str, image: &str| {
+            let doc = serde_json::json!({"asset": {"version": "2.0"},
+                "buffers": [{"uri": buffer, "byteLength": 4}], "images": [{"uri": image}]});
+            std::fs::write(&gltf, serde_json::to_vec(&doc).unwrap()).unwrap();
+            scene_identity(&SceneSource::File(gltf.clone()))
+        };
+        let mut images = vec!["http://example.com/t.png", "%zz.png", "sub.png"];
+        if made.is_ok_and(|s| s.success()) {
+            images.push("fifo.png");
+        }
+        for image in images {
+            let (_, hash) = scene("b.bin", image).unwrap_or_else(|e| panic!("{image}: {e}"));
+            assert_eq!(scene("b.bin", image).unwrap().1, hash, "{image}: stable");
+        }
+        let (_, unreadable) = scene("b.bin", "sub.png").unwrap();
+        std::fs::remove_dir(dir.path().join("sub.png")).unwrap();
+        std::fs::write(dir.path().join("sub.png"), b"").unwrap();
+        let (_, readable) = scene("b.bin", "sub.png").unwrap();
+        assert_ne!(readable, unreadable);
+        let msg = scene("http://example.com/b.bin", "t.png")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            msg.contains("only files are read, not 'http:' URIs") && msg.contains("s.gltf"),
+            "{msg}"
+        );
+        std::fs::create_dir(dir.path().join("dir.bin")).unwrap();
+        let msg = scene("dir.bin", "t.png").unwrap_err().to_string();
+        assert!(
+            msg.contains("dir.bin: not a regular file (it is a directory)")
+                && msg.contains("s.gltf"),
             "{msg}"
         );
     }

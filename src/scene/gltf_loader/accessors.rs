@@ -28,7 +28,8 @@ const MAX_DECODED_BYTES: u64 = 1 << 32;
 /// `0..n`, `u32`) and its triangles (three `u32` corners and a material
 /// id); for each channel of a scene node the loader reads, its keys.
 /// Points, lines and morph-target weights, which the loader skips, do not
-/// count.
+/// count, nor do skins' inverse bind matrices: one is read for each skin
+/// (`mesh::first_inverse_bind`), however many its accessor holds.
 pub(super) fn check_decoded_bytes(
     gnodes: &[gltf::Node],
     document: &gltf::Document,
@@ -91,8 +92,8 @@ pub(super) fn load_buffers(
             // and it reads whatever the URI names to its end (a device, a
             // FIFO).
             gltf::buffer::Source::Uri(uri) if !uri.starts_with("data:") => {
-                let file = confined_uri_file(base, uri, root)
-                    .map_err(|e| format!("buffer {i}: {e}"))?;
+                let file =
+                    confined_uri_file(base, uri, root).map_err(|e| format!("buffer {i}: {e}"))?;
                 read_regular_file(&file, Some(buffer.length() as u64)).map_err(|e| {
                     let e = if e == "file not found" {
                         "missing buffer file".into()
@@ -103,11 +104,21 @@ pub(super) fn load_buffers(
                 })?
             }
             _ => {
+                // glTF §4.4.3.2: the binary chunk is buffer 0's alone.
+                if i > 0 && matches!(source, gltf::buffer::Source::Bin) {
+                    return Err(format!(
+                        "buffer {i} has no URI: only the first buffer (buffer 0) may be the GLB \
+                         binary chunk, and every other buffer needs a URI"
+                    ));
+                }
                 gltf::buffer::Data::from_source_and_blob(source, Some(base), &mut blob)
                     .map_err(|e| match e {
                         gltf::Error::MissingBlob => format!(
                             "buffer {i} refers to the GLB binary chunk, which is missing (truncated GLB?)"
                         ),
+                        gltf::Error::Base64(e) => {
+                            format!("buffer {i}: its data: URI is not valid base64 ({e})")
+                        }
                         e => format!("cannot load buffer {i}: {e}"),
                     })?
                     .0
@@ -153,45 +164,73 @@ impl Buffers {
             })
     }
 
-    /// The accessor's elements packed tightly (`count × element size`
-    /// bytes), with sparse substitutions applied.
-    fn elements(&self, acc: &gltf::Accessor, what: &str) -> Res<Vec<u8>> {
+    /// Where the accessor's elements lie, once checked to fit: its buffer
+    /// view's bytes and their stride (`None`: it has no buffer view, and
+    /// holds zeros). Nothing is decoded.
+    fn located(&self, acc: &gltf::Accessor, what: &str) -> Res<Option<(&[u8], usize)>> {
         let i = acc.index();
         let out_of_range = || format!("accessor {i} ({what}) is out of range of its buffer view");
         let count = acc.count();
-        let elem = acc.data_type().size() * acc.dimensions().multiplicity();
+        let elem = element_size(acc);
         if count == 0 {
             return Err(format!("accessor {i} ({what}) is empty"));
         }
-        let total = count.checked_mul(elem).ok_or_else(out_of_range)?;
-        let mut out = match acc.view() {
-            Some(view) => {
-                let bytes = self.view_bytes(&view)?;
-                let stride = view.stride().unwrap_or(elem);
-                if stride < elem {
-                    return Err(format!(
-                        "accessor {i} ({what}): byte stride {stride} is smaller than an element ({elem} bytes)"
-                    ));
-                }
-                let last = stride
-                    .checked_mul(count - 1)
-                    .and_then(|x| x.checked_add(acc.offset()))
-                    .ok_or_else(out_of_range)?;
-                if last.checked_add(elem).is_none_or(|end| end > bytes.len()) {
-                    return Err(out_of_range());
-                }
-                let mut out = Vec::with_capacity(total);
-                for k in 0..count {
+        count.checked_mul(elem).ok_or_else(out_of_range)?;
+        let Some(view) = acc.view() else {
+            return Ok(None);
+        };
+        let bytes = self.view_bytes(&view)?;
+        let stride = view.stride().unwrap_or(elem);
+        if stride < elem {
+            return Err(format!(
+                "accessor {i} ({what}): byte stride {stride} is smaller than an element ({elem} bytes)"
+            ));
+        }
+        let last = stride
+            .checked_mul(count - 1)
+            .and_then(|x| x.checked_add(acc.offset()))
+            .ok_or_else(out_of_range)?;
+        if last.checked_add(elem).is_none_or(|end| end > bytes.len()) {
+            return Err(out_of_range());
+        }
+        Ok(Some((bytes, stride)))
+    }
+
+    /// Checks that the accessor's elements lie inside its buffer view, as
+    /// decoding it would, without decoding it: for attributes the loader
+    /// does not read.
+    pub(super) fn check_layout(&self, acc: &gltf::Accessor, what: &str) -> Res<()> {
+        self.located(acc, what).map(drop)
+    }
+
+    /// The accessor's elements packed tightly (`count × element size`
+    /// bytes), with sparse substitutions applied.
+    fn elements(&self, acc: &gltf::Accessor, what: &str) -> Res<Vec<u8>> {
+        self.leading_elements(acc, what, acc.count())
+    }
+
+    /// The first `take` (at most `count`) of the accessor's elements, as
+    /// [`Self::elements`] gives them all: a reader that uses one element of
+    /// a large accessor decodes only that one.
+    fn leading_elements(&self, acc: &gltf::Accessor, what: &str, take: usize) -> Res<Vec<u8>> {
+        let i = acc.index();
+        let located = self.located(acc, what)?;
+        let elem = element_size(acc);
+        let take = take.min(acc.count());
+        let mut out = match located {
+            Some((bytes, stride)) => {
+                let mut out = Vec::with_capacity(take * elem);
+                for k in 0..take {
                     let start = acc.offset() + k * stride;
                     out.extend_from_slice(&bytes[start..start + elem]);
                 }
                 out
             }
-            None if total <= MAX_VIEWLESS_BYTES => vec![0; total],
+            None if take * elem <= MAX_VIEWLESS_BYTES => vec![0; take * elem],
             None => return Err(format!("accessor {i} ({what}) is too large")),
         };
         if let Some(sparse) = acc.sparse() {
-            self.apply_sparse(&sparse, &mut out, count, elem)
+            self.apply_sparse(&sparse, &mut out, acc.count(), elem)
                 .map_err(|e| format!("accessor {i} ({what}): sparse {e}"))?;
         }
         Ok(out)
@@ -227,8 +266,10 @@ impl Buffers {
             if target >= count {
                 return Err(format!("index {target} is out of range ({count} elements)"));
             }
-            out[target * elem..(target + 1) * elem]
-                .copy_from_slice(&value_bytes[k * elem..(k + 1) * elem]);
+            // `out` may hold only the leading elements.
+            if let Some(element) = out.get_mut(target * elem..(target + 1) * elem) {
+                element.copy_from_slice(&value_bytes[k * elem..(k + 1) * elem]);
+            }
         }
         Ok(())
     }
@@ -241,6 +282,26 @@ impl Buffers {
         dims: Dimensions,
         what: &str,
     ) -> Res<Vec<f32>> {
+        self.leading_floats(acc, dims, what, acc.count())
+    }
+
+    /// [`Self::floats`] of the accessor's first element only.
+    pub(super) fn first_floats(
+        &self,
+        acc: &gltf::Accessor,
+        dims: Dimensions,
+        what: &str,
+    ) -> Res<Vec<f32>> {
+        self.leading_floats(acc, dims, what, 1)
+    }
+
+    fn leading_floats(
+        &self,
+        acc: &gltf::Accessor,
+        dims: Dimensions,
+        what: &str,
+        take: usize,
+    ) -> Res<Vec<f32>> {
         if acc.dimensions() != dims {
             return Err(format!(
                 "accessor {} ({what}) has type {:?}, expected {dims:?}",
@@ -249,7 +310,7 @@ impl Buffers {
             ));
         }
         let ty = acc.data_type();
-        let bytes = self.elements(acc, what)?;
+        let bytes = self.leading_elements(acc, what, take)?;
         Ok(bytes
             .chunks_exact(ty.size())
             .map(|c| component(c, ty, acc.normalized()))
@@ -297,6 +358,11 @@ impl Buffers {
         let bytes = self.elements(acc, what)?;
         Ok(bytes.chunks_exact(ty.size()).map(read_uint).collect())
     }
+}
+
+/// Bytes of one element of `acc`.
+fn element_size(acc: &gltf::Accessor) -> usize {
+    acc.data_type().size() * acc.dimensions().multiplicity()
 }
 
 /// Little-endian unsigned integer of 1, 2 or 4 bytes.

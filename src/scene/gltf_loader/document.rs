@@ -72,9 +72,11 @@ pub(crate) fn json_chunk(bytes: &[u8]) -> Option<&[u8]> {
 /// A `.glb` file that is neither a GLB (its magic) nor JSON text (some
 /// tools write glTF JSON under either name) is refused naming what it
 /// starts with, rather than with the JSON parser's "expected value at
-/// line 1". The GLB header states the file length; a mismatch is the
-/// clearest sign of a truncated download, clearer than the chunk error the
-/// parser reports.
+/// line 1". A GLB's header and its JSON chunk's are checked before the
+/// `gltf` crate reads them, as its errors do not say what is wrong ("could
+/// not completely read the object", "unknown chunk type"): the file length
+/// the header states (a mismatch is the clearest sign of a truncated
+/// download), its version, and the chunk that must follow it.
 pub(super) fn check_glb_header(named_glb: bool, bytes: &[u8]) -> Res<()> {
     if !bytes.starts_with(GLB_MAGIC) {
         let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
@@ -92,17 +94,63 @@ pub(super) fn check_glb_header(named_glb: bool, bytes: &[u8]) -> Res<()> {
         }
         return Ok(());
     }
-    let Some(declared) = glb_u32(bytes, 8) else {
+    let (Some(version), Some(declared)) = (glb_u32(bytes, 4), glb_u32(bytes, 8)) else {
         return Err(format!(
             "truncated GLB: only {} bytes, shorter than the 12-byte header",
             bytes.len()
         ));
     };
+    if version != 2 {
+        return Err(format!(
+            "GLB version {version} is not supported: radcache reads GLB version 2 (glTF 2.0)"
+        ));
+    }
     let declared = declared as usize;
     if bytes.len() < declared {
         return Err(format!(
             "truncated GLB: the header declares {declared} bytes but the file has {}",
             bytes.len()
+        ));
+    }
+    if declared < GLB_HEADER_BYTES {
+        return Err(format!(
+            "corrupt GLB header: it declares a file length of {declared} bytes, shorter than \
+             the 12-byte header itself (the file has {})",
+            bytes.len()
+        ));
+    }
+    check_json_chunk_header(bytes)
+}
+
+/// Bytes of a GLB's header, and of each chunk's header (its length and
+/// type).
+const GLB_HEADER_BYTES: usize = 12;
+const CHUNK_HEADER_BYTES: usize = 8;
+
+/// The JSON chunk that must follow a GLB's header is there, and, when
+/// something follows it, ends where the next chunk can be found: GLB
+/// chunks are padded to 4 bytes, and a JSON chunk whose length is not a
+/// multiple of 4 leaves the next one's header out of place, unless its
+/// writer left the padding out too.
+fn check_json_chunk_header(bytes: &[u8]) -> Res<()> {
+    let start = GLB_HEADER_BYTES + CHUNK_HEADER_BYTES;
+    if bytes.len() == GLB_HEADER_BYTES {
+        return Err("the GLB has no JSON chunk: the file ends after its 12-byte header".into());
+    }
+    let Some(length) = glb_u32(bytes, GLB_HEADER_BYTES).filter(|_| bytes.len() >= start) else {
+        return Err(format!(
+            "truncated GLB: the file ends within the header of its JSON chunk ({} bytes)",
+            bytes.len()
+        ));
+    };
+    let end = start.saturating_add(length as usize);
+    let next_type = end
+        .checked_add(CHUNK_HEADER_BYTES)
+        .and_then(|type_end| bytes.get(type_end - 4..type_end));
+    if length % 4 != 0 && end < bytes.len() && next_type != Some(b"BIN\0".as_slice()) {
+        return Err(format!(
+            "corrupt GLB: the JSON chunk's length, {length} bytes, is not a multiple of 4 \
+             (GLB chunks are padded to 4 bytes), and no chunk follows where it ends"
         ));
     }
     Ok(())

@@ -1,34 +1,50 @@
 //! Mesh objects: each mesh node's triangle primitives merged into one
 //! [`Mesh`] (strips and fans triangulated, triangles without area and
 //! repeated triangles dropped, missing normals computed), and a skinned
-//! mesh carried rigidly by its first joint.
+//! mesh carried rigidly by its first joint. What would make a mesh render
+//! otherwise than its file says without an error (a primitive or a whole
+//! mesh without any triangle with area, an attribute that is not read and
+//! is malformed) is warned of, naming the mesh.
 
 use super::accessors::Buffers;
-use super::nodes::{node_name, Hierarchy};
+use super::nodes::{check_affine, node_name, Hierarchy};
 use super::{check_coordinates, Res};
 use crate::scene::{Material, Mesh, Object};
 use glam::{Mat4, Vec3};
 use gltf::accessor::Dimensions;
 use gltf::mesh::{Mode, Semantic};
+use std::collections::hash_map::{Entry, HashMap};
+use std::collections::HashSet;
+use std::path::Path;
 
 /// Albedo of the material given to primitives that have none.
 const DEFAULT_ALBEDO: f32 = 0.8;
 
+/// One object for each mesh node; the meshes' warnings are printed naming
+/// `file`, once for each mesh however many nodes it has.
 pub(super) fn build_objects(
     gnodes: &[gltf::Node],
     hierarchy: &Hierarchy,
     buffers: &Buffers,
     materials: &mut Vec<Material>,
+    file: &Path,
 ) -> Res<Vec<Object>> {
     let mut default_material = None;
+    let mut warned = HashSet::new();
+    let mut inverse_binds = HashMap::new();
     let mut objects = Vec::new();
     for (node, gnode) in gnodes.iter().enumerate() {
-        let Some(mesh) = gnode.mesh() else { continue };
+        let Some(gmesh) = gnode.mesh() else { continue };
         let name = node_name(gnode);
-        let mut mesh = build_mesh(&mesh, buffers, materials, &mut default_material)
+        let (mut mesh, warnings) = build_mesh(&gmesh, buffers, materials, &mut default_material)
             .map_err(|e| format!("mesh of node '{name}': {e}"))?;
+        if warned.insert(gmesh.index()) {
+            for warning in warnings {
+                eprintln!("warning: {}: {warning}", file.display());
+            }
+        }
         let node = match gnode.skin() {
-            Some(skin) => rigid_skin(&skin, hierarchy, buffers, &mut mesh)
+            Some(skin) => rigid_skin(&skin, hierarchy, buffers, &mut inverse_binds, &mut mesh)
                 .map_err(|e| format!("skin of node '{name}': {e}"))?
                 .unwrap_or(node),
             None => node,
@@ -45,11 +61,13 @@ pub(super) fn build_objects(
 /// pose they lie where the file put them, and the mesh then follows the
 /// joint's animation. Returns that joint's node (`None`: the joint is not
 /// in the scene, and the mesh stays on its own node). A mirrored joint
-/// keeps the mesh's front faces.
+/// keeps the mesh's front faces. `inverse_binds` keeps each skin's matrix,
+/// read once however many nodes the skin has.
 fn rigid_skin(
     skin: &gltf::Skin,
     hierarchy: &Hierarchy,
     buffers: &Buffers,
+    inverse_binds: &mut HashMap<usize, Mat4>,
     mesh: &mut Mesh,
 ) -> Res<Option<usize>> {
     let Some(joint) = skin.joints().next() else {
@@ -58,17 +76,11 @@ fn rigid_skin(
     let Some(&node) = hierarchy.ours.get(&joint.index()) else {
         return Ok(None);
     };
-    let inverse_bind = match skin.inverse_bind_matrices() {
-        Some(acc) => {
-            let m = buffers.floats(&acc, Dimensions::Mat4, "inverseBindMatrices")?;
-            Mat4::from_cols_slice(&m[..16])
-        }
-        None => Mat4::IDENTITY,
+    let inverse_bind = match inverse_binds.entry(skin.index()) {
+        Entry::Occupied(known) => *known.get(),
+        Entry::Vacant(entry) => *entry.insert(first_inverse_bind(skin, buffers)?),
     };
     let normals = glam::Mat3::from_mat4(inverse_bind).inverse().transpose();
-    if !inverse_bind.is_finite() || !normals.is_finite() {
-        return Err("the first joint's inverse bind matrix is not invertible".into());
-    }
     for p in &mut mesh.positions {
         *p = inverse_bind.transform_point3(*p);
         check_coordinates(*p, "vertex position")?;
@@ -87,15 +99,41 @@ fn rigid_skin(
     Ok(Some(node))
 }
 
-/// Merges the triangle primitives of `mesh`; primitives without a material
-/// get a shared default white diffuse appended to `materials` on first use.
+/// The inverse bind matrix of the skin's first joint (the identity when
+/// the skin gives none), checked to be invertible and affine (applied as
+/// an affine map, a projective one would silently lose its last row). It
+/// alone is read: the other joints carry nothing, and their matrices may
+/// be millions of zeros (an accessor without a buffer view).
+fn first_inverse_bind(skin: &gltf::Skin, buffers: &Buffers) -> Res<Mat4> {
+    let Some(acc) = skin.inverse_bind_matrices() else {
+        return Ok(Mat4::IDENTITY);
+    };
+    let m = buffers.first_floats(&acc, Dimensions::Mat4, "inverseBindMatrices")?;
+    let inverse_bind = Mat4::from_cols_slice(&m);
+    let normals = glam::Mat3::from_mat4(inverse_bind).inverse().transpose();
+    if !inverse_bind.is_finite() || !normals.is_finite() {
+        return Err("the first joint's inverse bind matrix is not invertible".into());
+    }
+    check_affine(&inverse_bind, "the first joint's inverse bind matrix")?;
+    Ok(inverse_bind)
+}
+
+/// Merges the triangle primitives of `mesh`, with what its warnings say of
+/// it; primitives without a material get a shared default white diffuse
+/// appended to `materials` on first use.
 fn build_mesh(
     mesh: &gltf::Mesh,
     buffers: &Buffers,
     materials: &mut Vec<Material>,
     default_material: &mut Option<u32>,
-) -> Res<Mesh> {
+) -> Res<(Mesh, Vec<String>)> {
+    let label = match mesh.name() {
+        Some(name) => format!("mesh {} '{name}'", mesh.index()),
+        None => format!("mesh {}", mesh.index()),
+    };
     let mut out = Mesh::default();
+    let mut warnings = Vec::new();
+    let mut surfaces = 0;
     for prim in mesh.primitives() {
         if !matches!(
             prim.mode(),
@@ -103,7 +141,17 @@ fn build_mesh(
         ) {
             continue; // points and lines carry no surface
         }
+        surfaces += 1;
         let what = format!("primitive {}", prim.index());
+        if let Some(why) = all_zeros(&prim) {
+            warnings.push(format!("{label}, {what}: {why}; skipped"));
+            continue;
+        }
+        warnings.extend(
+            ignored_attribute_problems(&prim, buffers)
+                .into_iter()
+                .map(|problem| format!("{label}, {what}: {problem}")),
+        );
         let material = match prim.material().index() {
             Some(m) => m as u32,
             None => *default_material.get_or_insert_with(|| {
@@ -123,12 +171,89 @@ fn build_mesh(
     }
     let copies = drop_repeated_triangles(&mut out);
     if copies > 0 {
-        eprintln!(
-            "warning: mesh {}: {copies} triangle(s) dropped that repeat another's corners (a surface twice over only flickers between the two)",
-            mesh.name().map_or_else(|| mesh.index().to_string(), |n| format!("'{n}'"))
-        );
+        warnings.push(format!(
+            "{label}: {copies} triangle(s) dropped that repeat another's corners (a surface twice over only flickers between the two)"
+        ));
     }
-    Ok(out)
+    // Each primitive's triangles without area are dropped (`read_primitive`);
+    // a mesh left without any would vanish from the render unsaid.
+    if surfaces > 0 && out.triangles.is_empty() {
+        warnings.push(format!(
+            "{label}: not drawn: none of its triangles has any area (their corners lie on one \
+             line or at one point)"
+        ));
+    }
+    Ok((out, warnings))
+}
+
+/// Why every triangle of `prim` is without area, as its accessors declare
+/// before any is decoded: one without a buffer view or sparse values holds
+/// zeros (glTF §3.6.2.1), so POSITION's puts every vertex at the origin,
+/// and the indices' make every triangle vertex 0 three times. Decoded,
+/// such an accessor was gigabytes of zeros that drew nothing.
+fn all_zeros(prim: &gltf::Primitive) -> Option<String> {
+    let zeros = |acc: &gltf::Accessor| acc.view().is_none() && acc.sparse().is_none();
+    if let Some(acc) = prim.get(&Semantic::Positions).filter(zeros) {
+        return Some(format!(
+            "its POSITION accessor {} has no buffer view and no sparse values, so every vertex \
+             is at the origin and no triangle has any area",
+            acc.index()
+        ));
+    }
+    let acc = prim.indices().filter(zeros)?;
+    Some(format!(
+        "its indices accessor {} has no buffer view and no sparse values, so every index is 0 \
+         and no triangle has any area",
+        acc.index()
+    ))
+}
+
+/// What is wrong with each attribute of `prim` that the loader does not
+/// read (all but POSITION and NORMAL: texture coordinates, tangents,
+/// colours, joints, weights): a count unlike POSITION's, a type glTF does
+/// not give it, elements outside its buffer view. Said, not refused: the
+/// render does not depend on them, but the file is malformed, and other
+/// tools may read it otherwise. Nothing is decoded.
+fn ignored_attribute_problems(prim: &gltf::Primitive, buffers: &Buffers) -> Vec<String> {
+    let Some(positions) = prim.get(&Semantic::Positions) else {
+        return Vec::new();
+    };
+    let ignored = |(semantic, _): &(Semantic, gltf::Accessor)| {
+        !matches!(semantic, Semantic::Positions | Semantic::Normals)
+    };
+    (prim.attributes().filter(ignored))
+        .filter_map(|(semantic, acc)| {
+            let name = semantic.to_string();
+            check_attribute_count(&acc, &name, &positions)
+                .and_then(|()| check_attribute_type(&semantic, &acc, &name))
+                .and_then(|()| buffers.check_layout(&acc, &name))
+                .err()
+                .map(|e| format!("{e}; {name} is ignored: radcache does not read it"))
+        })
+        .collect()
+}
+
+/// glTF's types for each vertex attribute (§3.7.2.1); an application's own
+/// (`_NAME`) may have any.
+fn check_attribute_type(semantic: &Semantic, acc: &gltf::Accessor, what: &str) -> Res<()> {
+    use Dimensions as D;
+    let allowed: &[Dimensions] = match semantic {
+        Semantic::Positions | Semantic::Normals => &[D::Vec3],
+        Semantic::Tangents | Semantic::Joints(_) | Semantic::Weights(_) => &[D::Vec4],
+        Semantic::TexCoords(_) => &[D::Vec2],
+        Semantic::Colors(_) => &[D::Vec3, D::Vec4],
+        Semantic::Extras(_) => return Ok(()),
+    };
+    if allowed.contains(&acc.dimensions()) {
+        return Ok(());
+    }
+    let names: Vec<String> = allowed.iter().map(|d| format!("{d:?}")).collect();
+    Err(format!(
+        "accessor {} ({what}) has type {:?}; glTF gives {what} type {}",
+        acc.index(),
+        acc.dimensions(),
+        names.join(" or ")
+    ))
 }
 
 /// Drops the triangles of `mesh` whose corners, in the same winding, are
@@ -234,8 +359,8 @@ fn read_primitive(prim: &gltf::Primitive, buffers: &Buffers) -> Res<PrimitiveDat
 }
 
 /// glTF gives every attribute of a primitive POSITION's count
-/// (§3.7.2.1); checked for each attribute the loader reads (POSITION and
-/// NORMAL: texture coordinates, colours, joints and weights are not read).
+/// (§3.7.2.1): an error for NORMAL, which the loader reads, a warning for
+/// the attributes it does not read (`ignored_attribute_problems`).
 fn check_attribute_count(acc: &gltf::Accessor, what: &str, positions: &gltf::Accessor) -> Res<()> {
     if acc.count() == positions.count() {
         return Ok(());

@@ -156,7 +156,7 @@ fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scen
     accessors::check_decoded_bytes(&gnodes, &document, |g| hierarchy.ours.contains_key(&g))?;
     let nodes = build_nodes(&gnodes, &hierarchy)?;
     let mut materials = materials::build_materials(&document, path)?;
-    let objects = mesh::build_objects(&gnodes, &hierarchy, &buffers, &mut materials)?;
+    let objects = mesh::build_objects(&gnodes, &hierarchy, &buffers, &mut materials, path)?;
     let lights = lights::build_lights(&gnodes)?;
     let camera = find_camera(&gnodes)?;
     let animation = animation::build_animation(&document, &buffers, &hierarchy)?;

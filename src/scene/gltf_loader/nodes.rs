@@ -84,12 +84,14 @@ fn rest_trs(node: &gltf::Node) -> Res<Trs> {
             if !all_finite(matrix.as_flattened()) {
                 return Err(NON_FINITE.into());
             }
-            let (scale, rotation, translation) =
-                Mat4::from_cols_array_2d(&matrix).to_scale_rotation_translation();
+            let matrix = Mat4::from_cols_array_2d(&matrix);
+            check_affine(&matrix, "its matrix")?;
+            let (scale, rotation, translation) = matrix.to_scale_rotation_translation();
             // A singular matrix decomposes into NaN rotations.
             if !(scale.is_finite() && rotation.is_finite() && translation.is_finite()) {
                 return Err("transform matrix cannot be decomposed into TRS (singular?)".into());
             }
+            check_unsheared(&matrix)?;
             check_coordinates(translation, "translation")?;
             check_coordinates(scale, "scale")?;
             Ok(Trs {
@@ -119,6 +121,55 @@ fn rest_trs(node: &gltf::Node) -> Res<Trs> {
             })
         }
     }
+}
+
+/// How far a matrix's last row may be from (0, 0, 0, 1): rounding in a
+/// file's writer, not a projection.
+const AFFINE_TOLERANCE: f32 = 1e-5;
+
+/// How far from a right angle (its cosine) a matrix's axes may be: f32
+/// rounding leaves about 1e-7, a writer that prints four significant
+/// digits up to about 1e-4 (both harmless, the decomposition drops them);
+/// 1e-3 is 0.06°, and a shear worth the name is far more.
+const SHEAR_TOLERANCE: f32 = 1e-3;
+
+/// A transform matrix glTF allows (a node's, §5.25; a joint's inverse
+/// bind matrix) is affine: its last row (0, 0, 0, 1). Read as one, a
+/// projective matrix silently lost that row.
+pub(super) fn check_affine(matrix: &Mat4, what: &str) -> Res<()> {
+    let row = matrix.row(3);
+    if (row - glam::Vec4::W).abs().max_element() <= AFFINE_TOLERANCE {
+        return Ok(());
+    }
+    Err(format!(
+        "{what} has the last row ({}, {}, {}, {}), not (0, 0, 0, 1): it is projective, and \
+         glTF allows only affine transforms",
+        row.x, row.y, row.z, row.w
+    ))
+}
+
+/// A node's matrix must decompose into translation, rotation and scale
+/// (glTF §5.25): its axes (the columns of its 3×3 part) at right angles,
+/// else the decomposition silently loses the shear. Compared as the
+/// cosines of the angles between them, the check does not depend on the
+/// axes' lengths (a shear of a short axis is one too).
+fn check_unsheared(matrix: &Mat4) -> Res<()> {
+    let axes =
+        [matrix.x_axis, matrix.y_axis, matrix.z_axis].map(|a| a.truncate().normalize_or_zero());
+    for (a, b) in [(0, 1), (0, 2), (1, 2)] {
+        let cosine = axes[a].dot(axes[b]);
+        if cosine.abs() > SHEAR_TOLERANCE {
+            let names = ["x", "y", "z"];
+            return Err(format!(
+                "its matrix is sheared (its {} and {} axes are {:.3}° apart, not 90°): glTF \
+                 allows only a matrix that decomposes into translation, rotation and scale",
+                names[a],
+                names[b],
+                cosine.clamp(-1.0, 1.0).acos().to_degrees()
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The first scene node (document order) with a perspective camera.
