@@ -217,6 +217,50 @@ pub struct Store {
     log: std::sync::Mutex<SampleLog>,
 }
 
+/// How long dropping a [`Store`] waits for sled's last flush.
+const LAST_FLUSH_WAIT: std::time::Duration = std::time::Duration::from_secs(10);
+
+impl Drop for Store {
+    /// sled flushes when its last handle drops, and after a write of its own
+    /// failed (a full disk) that flush waits for ever: the process hung,
+    /// its error unprinted, the store locked. So the flush is tried here
+    /// in a thread of its own, for [`LAST_FLUSH_WAIT`]; if it fails or does
+    /// not end, the handles are leaked rather than dropped (the process is
+    /// ending, or the store's owner gave it up). Nothing committed is lost:
+    /// every write of the store flushes before it returns.
+    fn drop(&mut self) {
+        let db = self.db.clone();
+        let (done, flushed) = std::sync::mpsc::channel();
+        let spawned = std::thread::Builder::new()
+            .name("store-last-flush".into())
+            .spawn(move || {
+                let _ = done.send(db.flush().is_ok());
+            });
+        if spawned.is_ok() && flushed.recv_timeout(LAST_FLUSH_WAIT) == Ok(true) {
+            return;
+        }
+        eprintln!(
+            "warning: store {}: its last flush failed or did not end within {} s \
+             (is the disk full?); what it committed was flushed already",
+            self.path.display(),
+            LAST_FLUSH_WAIT.as_secs()
+        );
+        std::mem::forget(self.db.clone());
+        for tree in [
+            &self.meta,
+            &self.jobs,
+            &self.frames,
+            &self.stats,
+            &self.records,
+            &self.sources,
+            &self.state,
+            &self.movies,
+        ] {
+            std::mem::forget(tree.clone());
+        }
+    }
+}
+
 /// Appends a frame's records to the sample log as one zstd block (schema
 /// 4) and returns the frame's `records` value, which says where it is.
 fn append_record_block(
