@@ -632,7 +632,7 @@ fn null_when_unset<S: serde::Serializer>(mean_lifespan: &f64, out: S) -> Result<
 fn job_text(s: &mut String, j: &JobReport) {
     let _ = writeln!(
         s,
-        "\njob {:?} (id {}): {} [{}], {} {} spp {}, fps {}, seed {}{}, frames {} — {} done, last {}",
+        "\njob {:?} (id {}): {} [{}], {} {} spp {}, fps {}, seed {}{}, frames {} last asked — {} frames done in all, the last finished {}",
         j.name,
         j.id,
         j.scene,
