@@ -492,3 +492,25 @@ fn compacting_a_locked_missing_foreign_or_newer_store_is_a_clear_error() {
     expect_error(&path, "schema version 99 is newer");
     assert_eq!(std::fs::read(path.join("samples.log")).unwrap(), log);
 }
+
+/// A compaction that cannot write its new log (here, one whose name
+/// leads to /dev/full, which takes no bytes) fails, and leaves no partial
+/// new log behind until the next open; the store is as it was, and
+/// compacts once it can write.
+#[test]
+fn a_compaction_that_fails_removes_its_partial_new_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, _) = fixture(dir.path());
+    let mut store = Store::open_existing(&path).unwrap();
+    let before = content(&store);
+    let new_log = path.join("samples.1.log");
+    std::os::unix::fs::symlink("/dev/full", &new_log).unwrap();
+    let err = compact::compact(&mut store, &hidden())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("samples.1.log"), "{err}");
+    assert!(std::fs::symlink_metadata(&new_log).is_err(), "left: {err}");
+    assert!(content(&store) == before);
+    compact::compact(&mut store, &hidden()).unwrap();
+    assert_eq!(log_files(&path), vec!["samples.1.log".to_string()]);
+}

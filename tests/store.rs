@@ -3010,3 +3010,41 @@ fn a_huge_image_is_hashed_without_holding_it() {
         "the peak memory grew by {grown} KiB hashing a {IMAGE}-byte image"
     );
 }
+
+/// Several jobs deleted together go in one write: a name not found deletes
+/// none of them (even the ones found before it), and then all go, their
+/// keys with them.
+#[test]
+fn deleting_several_jobs_is_all_or_none() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    commit_frames(&store, "a", 0..2);
+    commit_frames(&store, "b", 0..1);
+    store.set_job_cancelled("b", true).unwrap();
+    let names = |store: &Store| -> Vec<String> {
+        store
+            .jobs()
+            .unwrap()
+            .into_iter()
+            .map(|j| j.spec.name)
+            .collect()
+    };
+    let err = err_text(store.delete_jobs(&["b", "a", "nope"]));
+    assert!(
+        err.contains("job \"nope\": not found; nothing deleted"),
+        "{err}"
+    );
+    assert_eq!(names(&store), ["a", "b"]);
+    assert!(store.job_cancelled("b").unwrap(), "its mark stays too");
+    let deleted = store.delete_jobs(&["b", "a", "b"]).unwrap();
+    let deleted: Vec<_> = deleted
+        .iter()
+        .map(|j| (j.spec.name.as_str(), j.frames_done))
+        .collect();
+    assert_eq!(deleted, [("b", 1), ("a", 2)]);
+    assert!(names(&store).is_empty());
+    assert!(!store.job_cancelled("b").unwrap());
+    for tree in ["frames", "records", "stats"] {
+        assert_eq!(store.tree(tree).unwrap().len(), 0, "{tree}");
+    }
+}

@@ -300,10 +300,9 @@ fn run_delete(args: DeleteArgs) -> Result<()> {
             );
         }
     }
-    for name in &args.jobs {
-        if let Some(job) = store.delete_job(name)? {
-            outln!("deleted job {name} ({} frames)", job.frames_done)?;
-        }
+    // One write for all of them: a kill deletes all or none.
+    for job in store.delete_jobs(&args.jobs)? {
+        outln!("deleted job {} ({} frames)", job.spec.name, job.frames_done)?;
     }
     outln!(
         "their bytes in the sample log are unreferenced now; `radcache compact --db {}` reclaims them",

@@ -51,7 +51,7 @@ use serde::Serialize;
 use sled::transaction::{ConflictableTransactionError, TransactionError};
 use sled::Transactional;
 use std::collections::hash_map::{Entry, HashMap};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// How the committed bytes of a store's sample log are used.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
@@ -179,10 +179,15 @@ pub fn compact_with(
         detail,
     };
     // Created empty (a leftover of the same name was removed on open).
-    let mut new = SampleLog::open(&path, generation, None).map_err(new_error)?;
+    // Until the switch, nothing references it: a failure removes it.
+    let new_file = path.join(samples::file_name(generation));
+    let unwritten = |e: StoreError| remove_unswitched(&new_file, e);
+    let mut new = SampleLog::open(&path, generation, None)
+        .map_err(new_error)
+        .map_err(unwritten)?;
     report.new_file = new.path().to_owned();
     progress.set_length(before.referenced);
-    let values = copy_blocks(store, &blocks, &mut new, progress)?;
+    let values = copy_blocks(store, &blocks, &mut new, progress).map_err(unwritten)?;
     report.bytes_after = new.end();
     let stop = |step: Step, mut report: CompactReport| {
         report.stopped_after = Some(step);
@@ -192,11 +197,17 @@ pub fn compact_with(
         return stop(Step::Copied, report);
     }
     new.sync()
-        .map_err(|e| new_error(format!("cannot sync it: {e}")))?;
-    samples::sync_dir(&path).map_err(new_error)?;
+        .map_err(|e| new_error(format!("cannot sync it: {e}")))
+        .map_err(unwritten)?;
+    samples::sync_dir(&path)
+        .map_err(new_error)
+        .map_err(unwritten)?;
     if stop_after == Some(Step::Synced) {
         return stop(Step::Synced, report);
     }
+    // Kept if the switch fails: sled may have applied it before failing,
+    // and then the store references the new log (the next open removes
+    // whichever log is the leftover).
     switch(store, &values, generation, new.end())?;
     if stop_after == Some(Step::Switched) {
         return stop(Step::Switched, report);
@@ -212,6 +223,15 @@ pub fn compact_with(
     // for the next open to remove).
     samples::remove_stale_logs(&path, generation).map_err(new_error)?;
     Ok(report)
+}
+
+/// `error`, having removed `file`, the new log of a compaction that failed
+/// before the store switched to it: no value references it, and a disk
+/// that filled up should not stay full until the store is next opened
+/// (which removes it too, should removing it fail here).
+fn remove_unswitched(file: &Path, error: StoreError) -> StoreError {
+    let _ = std::fs::remove_file(file);
+    error
 }
 
 /// Every block of the log some value references, in log order.

@@ -7,6 +7,8 @@ use super::{encode, keys, now_unix, Store, StoreError};
 use crate::method::algorithm_revision;
 use crate::method::settings::named_settings;
 use crate::render::MethodSettings;
+use sled::transaction::{ConflictableTransactionError, TransactionError};
+use sled::Transactional;
 use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -256,25 +258,60 @@ impl Store {
         })
     }
 
-    /// Deletes job `name`, if there is one, and returns it. Its name goes
-    /// first, in one write: from then on the job is gone. Then its durable
-    /// cancel and attempt marks and every key of its id (its revision
-    /// too); a kill meanwhile leaves keys no job owns, which `radcache
-    /// compact` removes
-    /// ([`Self::remove_orphaned_job_data`]). Its bytes in the sample log
-    /// stay until `radcache compact`.
+    /// Deletes job `name`, if there is one, and returns it
+    /// ([`Self::delete_jobs`]).
     pub fn delete_job(&self, name: &str) -> Result<Option<JobValue>, StoreError> {
-        let Some(job) = self.job(name)? else {
+        if self.job(name)?.is_none() {
             return Ok(None);
-        };
-        self.jobs
-            .remove(keys::job(name))
-            .map_err(|e| StoreError::sled(&self.path, e))?;
+        }
+        Ok(self.delete_jobs(&[name])?.pop())
+    }
+
+    /// Deletes jobs `names`, all or none, and returns them. Their names,
+    /// with their durable cancel and attempt marks, go in one transaction
+    /// and one flush: a kill leaves every job or none, and a name not
+    /// found ([`StoreError::Job`]) deletes none. Then every key of their
+    /// ids (their revisions too); a kill meanwhile leaves keys no job
+    /// owns, which `radcache compact` removes
+    /// ([`Self::remove_orphaned_job_data`]). Their bytes in the sample log
+    /// stay until `radcache compact`.
+    pub fn delete_jobs(&self, names: &[impl AsRef<str>]) -> Result<Vec<JobValue>, StoreError> {
+        let mut seen = BTreeSet::new();
+        let names: Vec<&str> = names
+            .iter()
+            .map(AsRef::as_ref)
+            .filter(|n| seen.insert(*n))
+            .collect();
+        let result: Result<Vec<JobValue>, TransactionError<StoreError>> = (&self.jobs, &self.meta)
+            .transaction(|(jobs, meta)| {
+                let mut deleted = Vec::new();
+                for &name in &names {
+                    let key = keys::job(name);
+                    let Some(value) = jobs.remove(key.as_slice())? else {
+                        return Err(ConflictableTransactionError::Abort(StoreError::Job {
+                            path: self.path.clone(),
+                            job: name.to_string(),
+                            detail: "not found; nothing deleted".into(),
+                        }));
+                    };
+                    let job = self
+                        .decode("jobs", &key, &value)
+                        .map_err(ConflictableTransactionError::Abort)?;
+                    meta.remove(keys::meta_cancelled(name))?;
+                    meta.remove(keys::meta_attempt(name))?;
+                    deleted.push(job);
+                }
+                Ok(deleted)
+            });
+        let deleted = result.map_err(|e| match e {
+            TransactionError::Abort(e) => e,
+            TransactionError::Storage(e) => StoreError::sled(&self.path, e),
+        })?;
         self.flush()?;
-        self.set_job_cancelled(name, false)?;
-        self.clear_job_attempts(name)?;
-        self.delete_job_data(job.id)?;
-        Ok(Some(job))
+        for job in &deleted {
+            self.delete_job_data(job.id)?;
+        }
+        Ok(deleted)
     }
 
     /// Deletes the keys of every job id that no job holds: those a kill

@@ -113,6 +113,10 @@ pub enum StoreError {
     /// cannot be created, no permission).
     #[error("store {}: cannot open or create the store directory: {detail}; check the path given as the store (--db)", path.display())]
     Open { path: PathBuf, detail: String },
+    /// The store could not be opened for want of room: sled writes as it
+    /// opens a store (its files, a recovery), so the path is not at fault.
+    #[error("store {}: the disk is full: {detail}; sled needs room to open a store (even to read it): free some space, or raise the quota, and run it again", path.display())]
+    DiskFull { path: PathBuf, detail: String },
     #[error("store {}: schema version {found} is newer than this radcache supports (version {supported}); use a newer radcache", path.display())]
     NewerSchema {
         path: PathBuf,
@@ -167,9 +171,43 @@ pub enum StoreError {
 /// [`StoreError::Damaged`].)
 fn sled_text(error: &sled::Error) -> String {
     match error {
-        sled::Error::Io(e) => format!("I/O error: {e}"),
+        sled::Error::Io(e) => format!("I/O error: {}", io_text(e)),
         other => other.to_string(),
     }
+}
+
+/// An I/O error as the OS words it: "No space left on device (os error
+/// 28)". sled hands on copies of its I/O errors (its `Clone`) whose text
+/// is the original's Debug form, `Os { code: 28, kind: StorageFull, … }`:
+/// such an error is worded from its code, or its kind.
+fn io_text(e: &std::io::Error) -> String {
+    let debug = e.get_ref().map(ToString::to_string).unwrap_or_default();
+    match os_code(e) {
+        Some(code) => std::io::Error::from_raw_os_error(code).to_string(),
+        None if debug.starts_with("Kind(") => std::io::Error::from(e.kind()).to_string(),
+        None => e.to_string(),
+    }
+}
+
+/// The OS error code of `e`, or of the original whose Debug form is its
+/// text ([`io_text`]).
+fn os_code(e: &std::io::Error) -> Option<i32> {
+    e.raw_os_error().or_else(|| {
+        let debug = e.get_ref()?.to_string();
+        debug
+            .strip_prefix("Os { code: ")?
+            .split(',')
+            .next()?
+            .parse()
+            .ok()
+    })
+}
+
+/// Whether `e` says the disk (or the user's quota on it) is full.
+fn is_disk_full(e: &std::io::Error) -> bool {
+    use std::io::ErrorKind::{QuotaExceeded, StorageFull};
+    let kind = os_code(e).map_or(e.kind(), |c| std::io::Error::from_raw_os_error(c).kind());
+    matches!(kind, StorageFull | QuotaExceeded)
 }
 
 impl StoreError {
@@ -224,7 +262,7 @@ impl Drop for Store {
     /// sled flushes when its last handle drops, and after a write of its own
     /// failed (a full disk) that flush waits for ever: the process hung,
     /// its error unprinted, the store locked. So the flush is tried here
-    /// in a thread of its own, for [`LAST_FLUSH_WAIT`]; if it fails or does
+    /// in a thread of its own, for `LAST_FLUSH_WAIT` (10 s); if it fails or does
     /// not end, the handles are leaked rather than dropped (the process is
     /// ending, or the store's owner gave it up). Nothing committed is lost:
     /// every write of the store flushes before it returns.
@@ -234,7 +272,12 @@ impl Drop for Store {
         let spawned = std::thread::Builder::new()
             .name("store-last-flush".into())
             .spawn(move || {
-                let _ = done.send(db.flush().is_ok());
+                let flushed = db.flush().is_ok();
+                // Before it says so: the store's own handles, dropped once
+                // it has, must be the last, so that sled's lock goes with
+                // them (a store opened again at once would find it held).
+                drop(db);
+                let _ = done.send(flushed);
             });
         if spawned.is_ok() && flushed.recv_timeout(LAST_FLUSH_WAIT) == Ok(true) {
             return;
@@ -776,11 +819,7 @@ fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
             path: path.to_owned(),
             detail: format!("sled cannot open the database (damaged, or not radcache's): {e}"),
         }),
-        // The directory (or a parent of it) could not be made or opened.
-        Ok(Err(sled::Error::Io(e))) => Err(StoreError::Open {
-            path: path.to_owned(),
-            detail: e.to_string(),
-        }),
+        Ok(Err(sled::Error::Io(e))) => Err(open_io_error(path, &e)),
         Ok(Err(e)) => Err(StoreError::sled(path, e)),
         Err(_) => Err(StoreError::Damaged {
             path: path.to_owned(),
@@ -789,9 +828,59 @@ fn open_sled_once(path: &Path) -> Result<sled::Db, StoreError> {
     }
 }
 
+/// An I/O error of sled's as it opened the store at `path`: the directory
+/// (or a parent of it) could not be made or opened, or there is no room
+/// for what sled writes as it opens (the path is then fine).
+fn open_io_error(path: &Path, e: &std::io::Error) -> StoreError {
+    let (path, detail) = (path.to_owned(), io_text(e));
+    match is_disk_full(e) {
+        true => StoreError::DiskFull { path, detail },
+        false => StoreError::Open { path, detail },
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A full disk, however sled hands the error on (the OS's, or its
+    /// copy whose text is the Debug form), reads as the OS words it, and
+    /// opening on it says the disk is full, not to check the path.
+    #[test]
+    fn disk_full_reads_as_the_os_words_it() {
+        let full = || std::io::Error::from_raw_os_error(28);
+        let copied = sled::Error::Io(full()).clone();
+        for error in [sled::Error::Io(full()), copied] {
+            let text = StoreError::sled(Path::new("st"), error).to_string();
+            assert_eq!(
+                text,
+                "store st: I/O error: No space left on device (os error 28)"
+            );
+        }
+        let sled::Error::Io(copied) = sled::Error::Io(full()).clone() else {
+            unreachable!()
+        };
+        assert_eq!(io_text(&copied), "No space left on device (os error 28)");
+        let kind_only = sled::Error::Io(std::io::ErrorKind::NotFound.into()).clone();
+        let sled::Error::Io(kind_only) = kind_only else {
+            unreachable!()
+        };
+        assert_eq!(io_text(&kind_only), "entity not found");
+        let other = std::io::Error::other("could not acquire lock");
+        assert_eq!(io_text(&other), "could not acquire lock");
+        for e in [full(), copied, std::io::Error::from_raw_os_error(122)] {
+            let text = open_io_error(Path::new("st"), &e).to_string();
+            assert!(text.contains(": the disk is full: "), "{text}");
+            assert!(text.contains("sled needs room to open a store"), "{text}");
+            assert!(!text.contains("check the path"), "{text}");
+        }
+        let denied = std::io::Error::from_raw_os_error(13);
+        let text = open_io_error(Path::new("st"), &denied).to_string();
+        assert!(
+            text.contains("Permission denied (os error 13); check the path"),
+            "{text}"
+        );
+    }
 
     /// Corruption sled finds in a read after the store opened (bits
     /// flipped in `db` where opening does not look) says the store is
