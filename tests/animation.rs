@@ -439,3 +439,66 @@ fn all_nodes_at_once_equal_the_node_by_node_definition() {
         assert_eq!(objects[o], scene.node_is_dynamic(object.node));
     }
 }
+
+/// A camera that its ancestors' animated scales carry past f32's range at
+/// t > 0 has no position: its frames were black, without a word. The
+/// frame is refused, naming the camera's node and the frame, before it
+/// renders; the frame before it renders.
+#[test]
+fn a_camera_carried_past_f32_fails_its_frame() {
+    use radcache::backend::cpu::CpuBackend;
+    use radcache::method::path::{PathSettings, PathTracer};
+    use radcache::render::{FrameSettings, Renderer};
+    let mut scene = hierarchy_scene();
+    // Two parents above the camera, each scaled from 1 to 1e30 over 1 s:
+    // 1.7e57 at frame 1 (t = 1/24 s), past f32's range.
+    for name in ["big", "bigger"] {
+        let node = scene.nodes.len();
+        scene.nodes.push(Node {
+            name: name.into(),
+            parent: None,
+            rest: Trs::default(),
+        });
+        let camera = scene.camera.node;
+        let top = std::iter::successors(Some(camera), |&n| scene.nodes[n].parent)
+            .last()
+            .unwrap();
+        scene.nodes[top].parent = Some(node);
+        scene.animation.channels.push(Channel {
+            node,
+            property: Property::Scale,
+            interpolation: Interpolation::Linear,
+            times: vec![0.0, 1.0],
+            values: vec![Vec4::new(1.0, 1.0, 1.0, 0.0), Vec4::splat(1e30)],
+        });
+    }
+    assert!(scene.check_camera(0.0, "t = 0").is_ok());
+    let err = scene.check_camera(1.0 / 24.0, "frame 1").unwrap_err();
+    assert!(
+        err.contains("camera node 'cam' is carried to a non-finite position at frame 1"),
+        "{err}"
+    );
+    let settings = FrameSettings {
+        width: 4,
+        height: 4,
+        ..FrameSettings::default()
+    };
+    let method = PathTracer::new(PathSettings {
+        spp: 1,
+        ..PathSettings::default()
+    });
+    let mut r = Renderer::new(
+        scene,
+        Box::new(method),
+        Box::new(CpuBackend::new()),
+        settings,
+    );
+    assert!(r.try_render_frame(0).is_ok());
+    let failed = r.try_render_frame(1).expect_err("frame 1 has no camera");
+    assert_eq!(failed.frame, 1);
+    let message = failed.to_string();
+    assert!(
+        message.starts_with("frame 1: camera node 'cam' is carried to a non-finite position at t = 0.0417 s (frame 1)"),
+        "{message}"
+    );
+}

@@ -2166,3 +2166,88 @@ fn a_broken_glb_container_is_named() {
         }
     }
 }
+
+/// Nodes that place the same mesh at the same spot are drawn once, with a
+/// warning (the BVH builders are quadratic in coincident triangles: 5,000
+/// copies took 44 s for two frames at 16×16); copies elsewhere are kept.
+#[test]
+fn coincident_copies_of_a_mesh_are_drawn_once() {
+    const COPIES: usize = 30;
+    let dir = tempfile::tempdir().unwrap();
+    let copies = |spread: f32| {
+        move |d: &mut Value| {
+            let nodes = d["nodes"].as_array_mut().unwrap();
+            nodes[0]["translation"] = json!([0.25, 0.5, -1.0]);
+            for i in 1..COPIES {
+                let x = 0.25 + spread * i as f32;
+                nodes.push(json!({"name": format!("copy{i}"), "mesh": 0,
+                                  "translation": [x, 0.5, -1.0]}));
+            }
+            d["scenes"][0]["nodes"] = json!((0..COPIES + 1).collect::<Vec<_>>());
+        }
+    };
+    let same = write_case(dir.path(), "same", copies(0.0), good_bin());
+    let scene = Scene::load(&same).unwrap();
+    assert_eq!(scene.objects.len(), 1);
+    assert_eq!(scene.objects[0].name, "tri");
+    let warnings = render_warnings(&same);
+    assert!(
+        warnings.contains(&format!(
+            "{} mesh node(s) place the same mesh exactly where another node does \
+             (e.g. node 'copy1' repeats node 'tri')",
+            COPIES - 1
+        )),
+        "{warnings}"
+    );
+    let spread = write_case(dir.path(), "spread", copies(0.5), good_bin());
+    assert_eq!(Scene::load(&spread).unwrap().objects.len(), COPIES);
+    assert!(!render_warnings(&spread).contains("same mesh"));
+}
+
+/// An animation that carries the camera past what can be traced at t > 0
+/// (five parents each scaled from 1 to 1e8) is refused at load, naming the
+/// camera's node and the frame: its frames rendered black, without a word.
+#[test]
+fn a_camera_animated_past_the_world_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "camfar",
+        |d| {
+            let times = [0.0f32, 1.0];
+            let scales = [1.0f32, 1.0, 1.0, 1e8, 1e8, 1e8];
+            let mut bin = tri_bin(TRI, [0, 1, 2]);
+            for v in times.iter().chain(&scales) {
+                bin.extend_from_slice(&v.to_le_bytes());
+            }
+            d["buffers"][0]["byteLength"] = json!(bin.len());
+            d["bufferViews"].as_array_mut().unwrap().extend([
+                json!({"buffer": 0, "byteOffset": 48, "byteLength": 8}),
+                json!({"buffer": 0, "byteOffset": 56, "byteLength": 24}),
+            ]);
+            d["accessors"].as_array_mut().unwrap().extend([
+                json!({"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR",
+                       "min": [0.0], "max": [1.0]}),
+                json!({"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"}),
+            ]);
+            // Nodes 2..=6, each the parent of the one before; 2 of the camera.
+            let nodes = d["nodes"].as_array_mut().unwrap();
+            for i in 2..=6 {
+                let child = if i == 2 { 1 } else { i - 1 };
+                nodes.push(json!({"name": format!("scaler{i}"), "children": [child]}));
+            }
+            d["scenes"][0]["nodes"] = json!([0, 6]);
+            let channels: Vec<Value> = (2..=6)
+                .map(|n| json!({"sampler": 0, "target": {"node": n, "path": "scale"}}))
+                .collect();
+            d["animations"] = json!([{
+                "channels": channels,
+                "samplers": [{"input": 2, "output": 3}]
+            }]);
+            std::fs::write(dir.path().join("camfar.bin"), bin).unwrap();
+        },
+        None,
+    );
+    assert_error(&path, "camera node 'cam' is carried to a");
+    assert_error(&path, "at t = 0.0417 s (frame 1)");
+}

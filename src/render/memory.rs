@@ -173,7 +173,7 @@ pub struct TooLarge {
     pub spp: u32,
     /// [`peak_bytes`].
     pub need: u64,
-    /// [`available_bytes`] when it was checked.
+    /// [`available_bytes`](crate::system_memory::available_bytes) when it was checked.
     pub available: u64,
 }
 

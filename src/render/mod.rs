@@ -420,6 +420,17 @@ impl Renderer {
         if let Some(e) = failed(self) {
             return Err(e);
         }
+        // A camera carried past what can be traced (found by the loader
+        // at key and frame times, but not between keys at another rate).
+        let t = frame as f32 / self.settings.fps;
+        if let Err(message) = (self.scene).check_camera(t, &format!("t = {t:.4} s (frame {frame})"))
+        {
+            return Err(BackendFailed {
+                frame,
+                backend: String::new(),
+                message,
+            });
+        }
         let rays_before = self.backend.ray_counts().total();
         let film = self.render_frame_uncounted(frame);
         if let Some(e) = failed(self) {
@@ -479,13 +490,17 @@ impl Renderer {
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct BackendFailed {
     pub frame: u32,
-    /// [`RayBackend::name`].
+    /// [`RayBackend::name`]; empty when the scene cannot be rendered at
+    /// the frame's time (its camera carried past what can be traced).
     pub backend: String,
     pub message: String,
 }
 
 impl std::fmt::Display for BackendFailed {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.backend.is_empty() {
+            return write!(f, "frame {}: {}", self.frame, self.message);
+        }
         write!(
             f,
             "frame {}: the {} backend failed: {}",
@@ -756,6 +771,9 @@ pub fn render_job_to_dir_with(
         let film = renderer.try_render_frame(frame).map_err(|e| {
             progress.abandon();
             match job {
+                Some(_) if e.backend.is_empty() => {
+                    anyhow::anyhow!("{e}\nevery frame before it is saved in the store")
+                }
                 Some(_) => anyhow::anyhow!(
                     "{e}\nevery frame before it is saved in the store: running the job \
                      again resumes there (with --backend cpu if the GPU keeps failing)"
@@ -794,9 +812,25 @@ pub fn render_job_to_dir_with(
                 }
             }
             let chain = (frames.start, chain_end);
-            store_frame(renderer, j, &film, frame, &stats, kept, chain)?;
+            store_frame(renderer, j, &film, frame, &stats, kept, chain).map_err(|e| {
+                progress.abandon();
+                anyhow::anyhow!(
+                    "{e:#}\nframe {frame} was not saved, the frames finished before it were: \
+                     running the job again (once the cause is fixed, e.g. space freed) \
+                     resumes at frame {frame}"
+                )
+            })?;
         }
-        film::write_frame(&film, out_dir, frame)?;
+        film::write_frame(&film, out_dir, frame).map_err(|e| {
+            progress.abandon();
+            match job {
+                Some(_) => anyhow::anyhow!(
+                    "{e:#}\nframe {frame} is saved in the store: running the job again \
+                     writes its files from there and resumes after it"
+                ),
+                None => anyhow::Error::new(e),
+            }
+        })?;
         frame_stats.push(stats);
         progress.finish_frame(frame);
         if !after_frame(frame) {

@@ -224,7 +224,7 @@ impl Animation {
 
 impl Channel {
     /// Sets the property this channel animates in `trs` to its value at `t`.
-    fn apply(&self, trs: &mut Trs, t: f32) {
+    pub(crate) fn apply(&self, trs: &mut Trs, t: f32) {
         let v = self.sample(t);
         match self.property {
             Property::Translation => trs.translation = v.truncate(),

@@ -508,11 +508,90 @@ impl Scene {
     /// 0) has no orientation in its matrix; it keeps the one its nodes'
     /// rotations give (its frames were black).
     fn camera_in(&self, world: &[Mat4], t: f32) -> Camera {
-        let mut camera = camera_at(&world[self.camera.node], self.camera.yfov);
+        self.camera_placed(&world[self.camera.node], t)
+    }
+
+    /// The camera at time `t` given its node's world transform `m` then.
+    fn camera_placed(&self, m: &Mat4, t: f32) -> Camera {
+        let mut camera = camera_at(m, self.camera.yfov);
         if !camera.basis.is_finite() {
             camera.basis = Mat3::from_quat(self.chain_rotation(self.camera.node, t));
         }
         camera
+    }
+
+    /// Checks that the camera can be rendered from at time `t`: a
+    /// position within [`MAX_WORLD_COORDINATE`] and a finite orientation.
+    /// Geometry and lights carried past the world are collapsed or
+    /// darkened ([`Self::snapshot`]); a camera has no such fallback, and
+    /// its frames were black. `when` names the time in the error (e.g.
+    /// "t = 0.0417 s (frame 1)"), which names the camera's node.
+    pub fn check_camera(&self, t: f32, when: &str) -> Result<(), String> {
+        self.check_camera_at([t], |_| when.to_string())
+    }
+
+    /// [`Self::check_camera`] at each of `times` in turn, the first fault
+    /// named with `when(t)`. Only the camera's node chain is evaluated,
+    /// with its own channels picked once: cheap for many times in a large
+    /// scene.
+    pub fn check_camera_at(
+        &self,
+        times: impl IntoIterator<Item = f32>,
+        when: impl Fn(f32) -> String,
+    ) -> Result<(), String> {
+        let mut chain = vec![self.camera.node];
+        while let Some(parent) = self.nodes[chain[chain.len() - 1]].parent {
+            chain.push(parent);
+        }
+        chain.reverse();
+        let channels: Vec<Vec<&Channel>> = (chain.iter())
+            .map(|&n| {
+                self.animation
+                    .channels
+                    .iter()
+                    .filter(|c| c.node == n)
+                    .collect()
+            })
+            .collect();
+        for t in times {
+            // As `node_world_transforms` composes it: root first, each
+            // node's transform its parent's times its own.
+            let world = chain.iter().zip(&channels).fold(None, |above, (&n, chs)| {
+                let mut local = self.nodes[n].rest;
+                for c in chs {
+                    c.apply(&mut local, t);
+                }
+                let local = local.to_mat4();
+                Some(above.map_or(local, |parent: Mat4| parent * local))
+            });
+            let camera = self.camera_placed(&world.unwrap_or(Mat4::IDENTITY), t);
+            let name = &self.nodes[self.camera.node].name;
+            let p = camera.position;
+            if !p.is_finite() {
+                return Err(format!(
+                    "camera node '{name}' is carried to a non-finite position at {}: the \
+                     transforms of the node and its ancestors compound past f32's range \
+                     (about 3.4e38), and no image can be rendered from there",
+                    when(t)
+                ));
+            }
+            if !within_world(p) {
+                return Err(format!(
+                    "camera node '{name}' is carried to a coordinate of magnitude {:e} at {}, \
+                     beyond {MAX_WORLD_COORDINATE:e}, past what can be traced",
+                    p.abs().max_element(),
+                    when(t)
+                ));
+            }
+            if !camera.basis.is_finite() {
+                return Err(format!(
+                    "camera node '{name}' has no orientation at {} (its transform is not \
+                     finite: scaled to zero, or past f32's range?)",
+                    when(t)
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The product of the rotations of `node` and its ancestors at `t`,

@@ -52,6 +52,7 @@ use document::{
 };
 use glam::Vec3;
 use nodes::{build_nodes, find_camera, node_at, Hierarchy};
+use std::collections::HashMap;
 use std::path::Path;
 
 /// Internal results carry only the problem; [`load`] prefixes the file path.
@@ -162,7 +163,7 @@ fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scen
     let animation = animation::build_animation(&document, &buffers, &hierarchy)?;
     check_renderable(&objects, &materials, &lights)?;
 
-    let scene = Scene {
+    let mut scene = Scene {
         name: path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
@@ -175,8 +176,60 @@ fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scen
         camera,
         animation,
     };
+    drop_coincident_objects(&mut scene, &gnodes);
     check_first_frame(&scene)?;
+    check_camera_over_time(&scene)?;
     Ok(scene)
+}
+
+/// Drops the objects that repeat an earlier one exactly: the same glTF
+/// mesh placed by the same world transform at every time (the same bits
+/// at t = 0, on a node that no channel moves, nor any of its ancestors),
+/// with one warning. Such copies add nothing to an image, but the BVH
+/// builders are quadratic in coincident triangles (as
+/// `mesh::drop_repeated_triangles` says within one mesh): 5,000 copies
+/// took 44 s to render two frames at 16×16. Animated copies are kept, and
+/// so are skinned ones (placed by a joint, not their node) and meshes
+/// without triangles (which cost nothing).
+fn drop_coincident_objects(scene: &mut Scene, gnodes: &[gltf::Node]) {
+    // `mesh::build_objects` makes one object per mesh node, in order.
+    let meshes: Vec<Option<usize>> = (gnodes.iter())
+        .filter_map(|n| Some((n.skin().is_none()).then_some(n.mesh()?.index())))
+        .collect();
+    if meshes.len() != scene.objects.len() || meshes.len() < 2 {
+        return;
+    }
+    let dynamic = scene.dynamic_nodes();
+    let world = scene.node_world_transforms(0.0);
+    let mut first: HashMap<(usize, [u32; 16]), usize> = HashMap::new();
+    let mut keep = Vec::with_capacity(meshes.len());
+    let mut example = None;
+    for (i, (object, &mesh)) in scene.objects.iter().zip(&meshes).enumerate() {
+        let Some(mesh) =
+            mesh.filter(|_| !(dynamic[object.node] || object.mesh.triangles.is_empty()))
+        else {
+            keep.push(true);
+            continue;
+        };
+        let key = (mesh, world[object.node].to_cols_array().map(f32::to_bits));
+        let repeats = *first.entry(key).or_insert(i) != i;
+        if repeats && example.is_none() {
+            example = Some((object.name.clone(), scene.objects[first[&key]].name.clone()));
+        }
+        keep.push(!repeats);
+    }
+    let Some((copy, original)) = example else {
+        return;
+    };
+    let dropped = keep.iter().filter(|k| !**k).count();
+    let mut keep = keep.into_iter();
+    scene.objects.retain(|_| keep.next().unwrap_or(true));
+    eprintln!(
+        "warning: {dropped} mesh node(s) place the same mesh exactly where another node does \
+         (e.g. node '{copy}' repeats node '{original}'), and are drawn once: coincident \
+         copies add nothing to an image but make building the ray tracing hierarchy \
+         quadratically slow"
+    );
 }
 
 /// What only the placed scene shows, checked at t = 0: a vertex that its
@@ -232,20 +285,55 @@ fn check_first_frame(scene: &Scene) -> Res<()> {
             crate::scene::MAX_WORLD_COORDINATE
         ));
     }
+    scene.check_camera(0.0, "t = 0")?;
     let snapshot = scene.snapshot(0.0);
-    let camera = &snapshot.camera;
-    if !(camera.position.is_finite() && camera.basis.is_finite()) {
-        return Err(format!(
-            "camera node '{}' has no orientation at t = 0 (scaled to zero?)",
-            scene.nodes[scene.camera.node].name
-        ));
-    }
     let has_area =
         |t: &crate::scene::Triangle| (t.p[1] - t.p[0]).cross(t.p[2] - t.p[0]) != Vec3::ZERO;
     if !snapshot.triangles.iter().any(has_area) {
         return Err("no triangle has any area at t = 0 (degenerate, or scaled to zero)".into());
     }
     Ok(())
+}
+
+/// Most frames whose camera [`check_camera_over_time`] checks at load (at
+/// the default rate; later ones are checked as they render).
+const CAMERA_FRAMES_CHECKED: u32 = 100_000;
+
+/// The camera at every key time of its node chain's channels and at the
+/// frames' times (the first [`CAMERA_FRAMES_CHECKED`], at the default
+/// rate), as [`Scene::check_camera`] checks it: an animation that carries
+/// it past what can be traced is refused before any frame renders, not
+/// found at its frame (whose image was black, without a word).
+fn check_camera_over_time(scene: &Scene) -> Res<()> {
+    let mut chain = vec![scene.camera.node];
+    while let Some(parent) = scene.nodes[chain[chain.len() - 1]].parent {
+        chain.push(parent);
+    }
+    let animated = scene.animation.animated_nodes(scene.nodes.len());
+    if !chain.iter().any(|&n| animated[n]) {
+        return Ok(()); // As at t = 0, checked already.
+    }
+    let fps = DEFAULT_FPS;
+    let mut times: Vec<f32> = (scene.animation.channels.iter())
+        .filter(|c| chain.contains(&c.node))
+        .flat_map(|c| c.times.iter().copied())
+        .filter(|&t| t >= 0.0)
+        .chain((0..scene.frame_count.min(CAMERA_FRAMES_CHECKED)).map(|f| f as f32 / fps))
+        .collect();
+    times.sort_by(f32::total_cmp);
+    times.dedup();
+    scene.check_camera_at(times, |t| {
+        let f = t * fps;
+        if (f - f.round()).abs() <= 1e-3 {
+            format!("t = {t:.4} s (frame {})", f.round())
+        } else {
+            format!(
+                "t = {t:.4} s (a key time, between frames {} and {})",
+                f.floor(),
+                f.ceil()
+            )
+        }
+    })
 }
 
 /// Frames covering `t = 0..=duration` at the default rate; the small
