@@ -1683,22 +1683,7 @@ fn a_camera_scaled_to_nothing_keeps_its_orientation() {
         "shrinking",
         |d| {
             turned(d);
-            let times = [0.0f32, 1.0];
-            let scales = [1.0f32, 1.0, 1.0, 0.0, 0.0, 0.0];
-            let mut bin = tri_bin(TRI, [0, 1, 2]);
-            for v in times.iter().chain(&scales) {
-                bin.extend_from_slice(&v.to_le_bytes());
-            }
-            d["buffers"][0]["byteLength"] = json!(bin.len());
-            d["bufferViews"].as_array_mut().unwrap().extend([
-                json!({"buffer": 0, "byteOffset": 48, "byteLength": 8}),
-                json!({"buffer": 0, "byteOffset": 56, "byteLength": 24}),
-            ]);
-            d["accessors"].as_array_mut().unwrap().extend([
-                json!({"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR",
-                       "min": [0.0], "max": [1.0]}),
-                json!({"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"}),
-            ]);
+            let bin = scale_keys(d, [1.0, 1.0, 1.0, 0.0, 0.0, 0.0]);
             d["animations"] = json!([{
                 "channels": [{"sampler": 0, "target": {"node": 1, "path": "scale"}}],
                 "samplers": [{"input": 2, "output": 3}]
@@ -2214,22 +2199,7 @@ fn a_camera_animated_past_the_world_is_an_error() {
         dir.path(),
         "camfar",
         |d| {
-            let times = [0.0f32, 1.0];
-            let scales = [1.0f32, 1.0, 1.0, 1e8, 1e8, 1e8];
-            let mut bin = tri_bin(TRI, [0, 1, 2]);
-            for v in times.iter().chain(&scales) {
-                bin.extend_from_slice(&v.to_le_bytes());
-            }
-            d["buffers"][0]["byteLength"] = json!(bin.len());
-            d["bufferViews"].as_array_mut().unwrap().extend([
-                json!({"buffer": 0, "byteOffset": 48, "byteLength": 8}),
-                json!({"buffer": 0, "byteOffset": 56, "byteLength": 24}),
-            ]);
-            d["accessors"].as_array_mut().unwrap().extend([
-                json!({"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR",
-                       "min": [0.0], "max": [1.0]}),
-                json!({"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"}),
-            ]);
+            let bin = scale_keys(d, [1.0, 1.0, 1.0, 1e8, 1e8, 1e8]);
             // Nodes 2..=6, each the parent of the one before; 2 of the camera.
             let nodes = d["nodes"].as_array_mut().unwrap();
             for i in 2..=6 {
@@ -2250,4 +2220,25 @@ fn a_camera_animated_past_the_world_is_an_error() {
     );
     assert_error(&path, "camera node 'cam' is carried to a");
     assert_error(&path, "at t = 0.0417 s (frame 1)");
+}
+
+/// Appends to `d` (a [`tri_json`] document over [`TRI`]) two scale keys,
+/// at t = 0 and 1 s, of `scales` (two VEC3s): accessor 2 their times,
+/// accessor 3 their values. Returns the buffer that holds them.
+fn scale_keys(d: &mut Value, scales: [f32; 6]) -> Vec<u8> {
+    let mut bin = tri_bin(TRI, [0, 1, 2]);
+    for v in [0.0f32, 1.0].iter().chain(&scales) {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    d["buffers"][0]["byteLength"] = json!(bin.len());
+    d["bufferViews"].as_array_mut().unwrap().extend([
+        json!({"buffer": 0, "byteOffset": 48, "byteLength": 8}),
+        json!({"buffer": 0, "byteOffset": 56, "byteLength": 24}),
+    ]);
+    d["accessors"].as_array_mut().unwrap().extend([
+        json!({"bufferView": 2, "componentType": 5126, "count": 2, "type": "SCALAR",
+               "min": [0.0], "max": [1.0]}),
+        json!({"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"}),
+    ]);
+    bin
 }
