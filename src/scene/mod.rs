@@ -446,6 +446,11 @@ impl Scene {
         builtin::build(name)
     }
 
+    /// `node` and its ancestors, from it up to its root.
+    pub fn ancestry(&self, node: usize) -> Vec<usize> {
+        std::iter::successors(Some(node), |&n| self.nodes[n].parent).collect()
+    }
+
     /// Whether a node moves: it or one of its ancestors is animated.
     pub fn node_is_dynamic(&self, node: usize) -> bool {
         let mut current = Some(node);
@@ -539,10 +544,7 @@ impl Scene {
         times: impl IntoIterator<Item = f32>,
         when: impl Fn(f32) -> String,
     ) -> Result<(), String> {
-        let mut chain = vec![self.camera.node];
-        while let Some(parent) = self.nodes[chain[chain.len() - 1]].parent {
-            chain.push(parent);
-        }
+        let mut chain = self.ancestry(self.camera.node);
         chain.reverse();
         let channels: Vec<Vec<&Channel>> = (chain.iter())
             .map(|&n| {
@@ -597,14 +599,13 @@ impl Scene {
     /// The product of the rotations of `node` and its ancestors at `t`,
     /// root first, normalised at each step.
     fn chain_rotation(&self, node: usize, t: f32) -> Quat {
-        let mut chain = vec![node];
-        while let Some(parent) = self.nodes[chain[chain.len() - 1]].parent {
-            chain.push(parent);
-        }
-        chain.iter().rev().fold(Quat::IDENTITY, |above, &n| {
-            let local = self.animation.local_trs(n, self.nodes[n].rest, t).rotation;
-            (above * local).normalize()
-        })
+        self.ancestry(node)
+            .iter()
+            .rev()
+            .fold(Quat::IDENTITY, |above, &n| {
+                let local = self.animation.local_trs(n, self.nodes[n].rest, t).rotation;
+                (above * local).normalize()
+            })
     }
 
     /// World transforms of all nodes at time `t`.

@@ -305,14 +305,10 @@ const CAMERA_FRAMES_CHECKED: u32 = 100_000;
 /// it past what can be traced is refused before any frame renders, not
 /// found at its frame (whose image was black, without a word).
 fn check_camera_over_time(scene: &Scene) -> Res<()> {
-    let mut chain = vec![scene.camera.node];
-    while let Some(parent) = scene.nodes[chain[chain.len() - 1]].parent {
-        chain.push(parent);
-    }
-    let animated = scene.animation.animated_nodes(scene.nodes.len());
-    if !chain.iter().any(|&n| animated[n]) {
+    if !scene.node_is_dynamic(scene.camera.node) {
         return Ok(()); // As at t = 0, checked already.
     }
+    let chain = scene.ancestry(scene.camera.node);
     let fps = DEFAULT_FPS;
     let mut times: Vec<f32> = (scene.animation.channels.iter())
         .filter(|c| chain.contains(&c.node))
