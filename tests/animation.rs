@@ -4,6 +4,11 @@
 //! `Scene::object_motion` maps a point on an object from one time to another.
 
 use glam::{Mat4, Quat, Vec3, Vec4};
+use radcache::backend::cpu::CpuBackend;
+use radcache::film::Film;
+use radcache::method::path::{PathSettings, PathTracer};
+use radcache::method::{FrameContext, Method};
+use radcache::render::{FrameFailed, FrameSettings, Renderer};
 use radcache::scene::animation::{linear_rotation, linear_translation};
 use radcache::scene::{
     Animation, CameraDef, Channel, Interpolation, Material, Mesh, Node, Object, Property, Scene,
@@ -440,18 +445,10 @@ fn all_nodes_at_once_equal_the_node_by_node_definition() {
     }
 }
 
-/// A camera that its ancestors' animated scales carry past f32's range at
-/// t > 0 has no position: its frames were black, without a word. The
-/// frame is refused, naming the camera's node and the frame, before it
-/// renders; the frame before it renders.
-#[test]
-fn a_camera_carried_past_f32_fails_its_frame() {
-    use radcache::backend::cpu::CpuBackend;
-    use radcache::method::path::{PathSettings, PathTracer};
-    use radcache::render::{FrameSettings, Renderer};
+/// [`hierarchy_scene`] with two parents above the camera, each scaled from
+/// 1 to 1e30 over 1 s: 1.7e57 at frame 1 (t = 1/24 s), past f32's range.
+fn scene_whose_camera_leaves_f32_at_frame_1() -> Scene {
     let mut scene = hierarchy_scene();
-    // Two parents above the camera, each scaled from 1 to 1e30 over 1 s:
-    // 1.7e57 at frame 1 (t = 1/24 s), past f32's range.
     for name in ["big", "bigger"] {
         let node = scene.nodes.len();
         scene.nodes.push(Node {
@@ -472,33 +469,93 @@ fn a_camera_carried_past_f32_fails_its_frame() {
             values: vec![Vec4::new(1.0, 1.0, 1.0, 0.0), Vec4::splat(1e30)],
         });
     }
+    scene
+}
+
+fn tiny_renderer(scene: Scene, method: Box<dyn Method>) -> Renderer {
+    let settings = FrameSettings {
+        width: 4,
+        height: 4,
+        ..FrameSettings::default()
+    };
+    Renderer::new(scene, method, Box::new(CpuBackend::new()), settings)
+}
+
+/// A camera that its ancestors' animated scales carry past f32's range at
+/// t > 0 has no position: its frames were black, without a word. The
+/// frame is refused, naming the camera's node and the frame, before it
+/// renders; the frame before it renders.
+#[test]
+fn a_camera_carried_past_f32_fails_its_frame() {
+    let scene = scene_whose_camera_leaves_f32_at_frame_1();
     assert!(scene.check_camera(0.0, "t = 0").is_ok());
     let err = scene.check_camera(1.0 / 24.0, "frame 1").unwrap_err();
     assert!(
         err.contains("camera node 'cam' is carried to a non-finite position at frame 1"),
         "{err}"
     );
-    let settings = FrameSettings {
-        width: 4,
-        height: 4,
-        ..FrameSettings::default()
-    };
     let method = PathTracer::new(PathSettings {
         spp: 1,
         ..PathSettings::default()
     });
-    let mut r = Renderer::new(
-        scene,
-        Box::new(method),
-        Box::new(CpuBackend::new()),
-        settings,
-    );
+    let mut r = tiny_renderer(scene, Box::new(method));
     assert!(r.try_render_frame(0).is_ok());
     let failed = r.try_render_frame(1).expect_err("frame 1 has no camera");
-    assert_eq!(failed.frame, 1);
+    assert!(
+        matches!(failed, FrameFailed::Camera { frame: 1, .. }),
+        "{failed:?}"
+    );
     let message = failed.to_string();
     assert!(
         message.starts_with("frame 1: camera node 'cam' is carried to a non-finite position at t = 0.0417 s (frame 1)"),
         "{message}"
     );
+}
+
+/// A two-pass method that prepares the next frame before it renders one,
+/// counting what it prepares.
+struct PreparesNextFrame {
+    prepared: Vec<u32>,
+}
+
+impl Method for PreparesNextFrame {
+    fn name(&self) -> &'static str {
+        "prepares-next"
+    }
+
+    fn next_frame_to_prepare(&self, frame: u32, end: u32) -> Option<u32> {
+        (frame + 1..end.min(frame + 2)).find(|f| !self.prepared.contains(f))
+    }
+
+    fn prepare_frame(&mut self, ctx: &FrameContext) {
+        self.prepared.push(ctx.frame);
+    }
+
+    fn render_frame(&mut self, ctx: &FrameContext) -> Film {
+        Film::new(ctx.width, ctx.height)
+    }
+}
+
+/// A frame prepared ahead (a two-pass method's first pass) is checked too:
+/// the frame that needs it fails, naming both, and nothing is prepared from
+/// a camera out of reach. Ending the range before it renders the frame.
+#[test]
+fn a_camera_out_of_reach_in_a_frame_prepared_ahead_fails_the_frame_that_needs_it() {
+    let method = Box::new(PreparesNextFrame {
+        prepared: Vec::new(),
+    });
+    let mut r = tiny_renderer(scene_whose_camera_leaves_f32_at_frame_1(), method);
+    let failed = r.try_render_frame(0).expect_err("frame 0 needs frame 1");
+    assert!(
+        matches!(failed, FrameFailed::Camera { frame: 0, .. }),
+        "{failed:?}"
+    );
+    let message = failed.to_string();
+    assert!(
+        message.starts_with("frame 0: camera node 'cam' is carried to a non-finite position at t = 0.0417 s (frame 1, which the method prepares ahead)"),
+        "{message}"
+    );
+    assert_eq!(r.method_calls().prepared, 0);
+    r.set_frame_end(Some(1));
+    assert!(r.try_render_frame(0).is_ok());
 }

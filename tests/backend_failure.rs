@@ -10,7 +10,9 @@ use radcache::cache::gather::Strata;
 use radcache::film;
 use radcache::method::ic::IcSettings;
 use radcache::method::trc::TrcSettings;
-use radcache::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob};
+use radcache::render::{
+    self, FrameFailed, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob,
+};
 use radcache::scene::Snapshot;
 use radcache::store::Store;
 use std::path::Path;
@@ -178,8 +180,16 @@ fn a_failed_backend_refuses_every_later_frame() {
     let mut r = renderer(&trc(), Box::new(FailingBackend::new(1)));
     assert!(r.try_render_frame(0).is_ok());
     let first = r.try_render_frame(1).expect_err("fails in frame 1");
-    assert_eq!((first.frame, first.backend.as_str()), (1, "test"));
+    let FrameFailed::Backend {
+        frame: 1,
+        backend,
+        message,
+    } = &first
+    else {
+        panic!("{first:?}");
+    };
+    assert_eq!(backend, "test");
     let later = r.try_render_frame(2).expect_err("stays failed");
-    assert_eq!(later.frame, 2);
-    assert_eq!(later.message, first.message);
+    assert_eq!(later.frame(), 2);
+    assert_eq!(later.message(), message);
 }

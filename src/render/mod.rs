@@ -404,55 +404,68 @@ impl Renderer {
             .unwrap_or_else(|e| panic!("{e}"))
     }
 
-    /// [`Self::render_frame`], or the error that stopped the backend
-    /// ([`RayBackend::failure`]). The frame is then discarded, and so is
-    /// every later one: the method's carried state may hold the failed
-    /// frame's garbage, so only a fresh renderer (a resume from the store)
-    /// goes on.
-    pub fn try_render_frame(&mut self, frame: u32) -> Result<Film, BackendFailed> {
-        let failed = |r: &Self| {
-            r.backend.failure().map(|message| BackendFailed {
-                frame,
-                backend: r.backend.name(),
-                message,
-            })
-        };
-        if let Some(e) = failed(self) {
-            return Err(e);
-        }
-        // A camera carried past what can be traced (found by the loader
-        // at key and frame times, but not between keys at another rate).
-        let t = frame as f32 / self.settings.fps;
-        if let Err(message) = (self.scene).check_camera(t, &format!("t = {t:.4} s (frame {frame})"))
-        {
-            return Err(BackendFailed {
-                frame,
-                backend: String::new(),
-                message,
-            });
-        }
+    /// [`Self::render_frame`], or why it cannot be rendered: the error
+    /// that stopped the backend ([`RayBackend::failure`]; the frame is then
+    /// discarded, and so is every later one: the method's carried state
+    /// may hold the failed frame's garbage, so only a fresh renderer (a
+    /// resume from the store) goes on), or a camera carried out of reach
+    /// at this frame or at one a two-pass method prepares for it.
+    pub fn try_render_frame(&mut self, frame: u32) -> Result<Film, FrameFailed> {
+        self.check_backend(frame)?;
+        self.check_camera(frame, frame)?;
         let rays_before = self.backend.ray_counts().total();
-        let film = self.render_frame_uncounted(frame);
-        if let Some(e) = failed(self) {
-            return Err(e);
-        }
+        let film = self.render_frame_uncounted(frame)?;
+        self.check_backend(frame)?;
         self.last_frame_rays = self.backend.ray_counts().total() - rays_before;
         self.last_frame = Some(frame);
         Ok(film)
     }
 
-    fn render_frame_uncounted(&mut self, frame: u32) -> Film {
+    fn check_backend(&self, frame: u32) -> Result<(), FrameFailed> {
+        match self.backend.failure() {
+            Some(message) => Err(FrameFailed::Backend {
+                frame,
+                backend: self.backend.name(),
+                message,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// The camera at frame `at` (rendered, or prepared for `frame`) is
+    /// checked here because the loader checks it only at key times and at
+    /// the first frames at 24 fps: another rate reaches other times.
+    fn check_camera(&self, frame: u32, at: u32) -> Result<(), FrameFailed> {
+        let t = at as f32 / self.settings.fps;
+        let when = if at == frame {
+            format!("t = {t:.4} s (frame {at})")
+        } else {
+            format!("t = {t:.4} s (frame {at}, which the method prepares ahead)")
+        };
+        (self.scene.check_camera(t, &when))
+            .map_err(|message| FrameFailed::Camera { frame, message })
+    }
+
+    fn render_frame_uncounted(&mut self, frame: u32) -> Result<Film, FrameFailed> {
         let mut method = std::mem::replace(&mut self.method, Box::new(NoMethod));
         let end = self
             .frame_end
             .unwrap_or(self.scene.frame_count)
             .max(frame + 1);
+        let mut prepared = Ok(());
         while let Some(f) = method.next_frame_to_prepare(frame, end) {
+            prepared = self.check_camera(frame, f);
+            if prepared.is_err() {
+                break;
+            }
             self.with_frame_context(f, |ctx| method.prepare_frame(ctx));
             self.counts.prepared += 1;
         }
-        let film = self.with_frame_context(frame, |ctx| method.render_frame(ctx));
-        self.counts.rendered += 1;
+        let film = prepared.map(|()| {
+            let film = self.with_frame_context(frame, |ctx| method.render_frame(ctx));
+            self.counts.rendered += 1;
+            film
+        });
         self.method = method;
         film
     }
@@ -486,30 +499,53 @@ impl Renderer {
     }
 }
 
-/// The ray backend stopped working while a frame was rendered.
+/// Why a frame was not rendered.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct BackendFailed {
-    pub frame: u32,
-    /// [`RayBackend::name`]; empty when the scene cannot be rendered at
-    /// the frame's time (its camera carried past what can be traced).
-    pub backend: String,
-    pub message: String,
+pub enum FrameFailed {
+    /// The ray backend stopped working; it stays failed for every later
+    /// frame of this renderer.
+    Backend {
+        frame: u32,
+        /// [`RayBackend::name`].
+        backend: String,
+        message: String,
+    },
+    /// The scene cannot be rendered at the frame's time, or at a frame a
+    /// two-pass method prepares for it: its camera is carried past what can
+    /// be traced ([`Scene::check_camera`]).
+    Camera { frame: u32, message: String },
 }
 
-impl std::fmt::Display for BackendFailed {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        if self.backend.is_empty() {
-            return write!(f, "frame {}: {}", self.frame, self.message);
+impl FrameFailed {
+    /// The frame that was not rendered.
+    pub fn frame(&self) -> u32 {
+        match self {
+            Self::Backend { frame, .. } | Self::Camera { frame, .. } => *frame,
         }
-        write!(
-            f,
-            "frame {}: the {} backend failed: {}",
-            self.frame, self.backend, self.message
-        )
+    }
+
+    /// What went wrong, without the frame.
+    pub fn message(&self) -> &str {
+        match self {
+            Self::Backend { message, .. } | Self::Camera { message, .. } => message,
+        }
     }
 }
 
-impl std::error::Error for BackendFailed {}
+impl std::fmt::Display for FrameFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Backend {
+                frame,
+                backend,
+                message,
+            } => write!(f, "frame {frame}: the {backend} backend failed: {message}"),
+            Self::Camera { frame, message } => write!(f, "frame {frame}: {message}"),
+        }
+    }
+}
+
+impl std::error::Error for FrameFailed {}
 
 /// Calls of a method's passes by one [`Renderer`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -770,15 +806,15 @@ pub fn render_job_to_dir_with(
         progress.start_frame(frame);
         let film = renderer.try_render_frame(frame).map_err(|e| {
             progress.abandon();
-            match job {
-                Some(_) if e.backend.is_empty() => {
+            match (job.is_some(), &e) {
+                (true, FrameFailed::Camera { .. }) => {
                     anyhow::anyhow!("{e}\nevery frame before it is saved in the store")
                 }
-                Some(_) => anyhow::anyhow!(
+                (true, FrameFailed::Backend { .. }) => anyhow::anyhow!(
                     "{e}\nevery frame before it is saved in the store: running the job \
                      again resumes there (with --backend cpu if the GPU keeps failing)"
                 ),
-                None => anyhow::anyhow!("{e}"),
+                (false, _) => anyhow::anyhow!("{e}"),
             }
         })?;
         if renderer.abandoned() {
