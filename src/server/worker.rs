@@ -191,31 +191,21 @@ fn start_attempt<'a>(
             scene_changed,
             differences,
             ..
-        } => anyhow::anyhow!(
-            "{}",
-            job_differs_text(scene_changed.as_deref(), &differences)
-        ),
+        } => {
+            let why = crate::store::job_differs_text(
+                scene_changed.as_deref(),
+                &differences,
+                "submitted",
+                |d| format!("this build cannot resume the job as stored: {d}"),
+            );
+            anyhow::anyhow!("{why}; delete it and submit it again")
+        }
         e => e.into(),
     })?;
     let frames = stored_frames(state, stored.id);
     state.update(id, |j| j.set_stored(&frames));
     let attempt = Attempt::begin(state, id, frames.len() as u32)?;
     Ok((stored, attempt))
-}
-
-/// Why a served job is not resumed, and what to do: its scene changed
-/// since it was submitted, or this build cannot resume it as stored.
-fn job_differs_text(
-    scene_changed: Option<&crate::store::SceneChanged>,
-    differences: &str,
-) -> String {
-    let build = format!("this build cannot resume the job as stored: {differences}");
-    let why = match (scene_changed, differences.is_empty()) {
-        (Some(changed), true) => changed.describe("submitted"),
-        (Some(changed), false) => format!("{}, and {build}", changed.describe("submitted")),
-        (None, _) => build,
-    };
-    format!("{why}; delete it and submit it again")
 }
 
 /// Renders the frames of `request` that store job `stored` lacks with

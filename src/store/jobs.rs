@@ -414,14 +414,22 @@ impl SceneChanged {
     }
 }
 
-/// How [`StoreError::JobDiffers`] says what differs: the scene that
-/// changed, and the settings that differ ("exists with other settings").
-pub(super) fn job_differs_text(scene_changed: Option<&SceneChanged>, differences: &str) -> String {
-    let settings = format!("exists with other settings: {differences}");
+/// How a job that cannot be resumed says why: its scene changed since
+/// the job was `when` ("stored", "submitted"), and, where `differences`
+/// (the settings that differ) is not empty, `settings(differences)`, a
+/// clause saying what that means to the reader.
+pub fn job_differs_text(
+    scene_changed: Option<&SceneChanged>,
+    differences: &str,
+    when: &str,
+    settings: impl Fn(&str) -> String,
+) -> String {
     match (scene_changed, differences.is_empty()) {
-        (Some(changed), true) => changed.describe("stored"),
-        (Some(changed), false) => format!("{}, and it {settings}", changed.describe("stored")),
-        (None, _) => settings,
+        (Some(changed), true) => changed.describe(when),
+        (Some(changed), false) => {
+            format!("{}, and {}", changed.describe(when), settings(differences))
+        }
+        (None, _) => settings(differences),
     }
 }
 

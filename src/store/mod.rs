@@ -74,7 +74,7 @@ use schema::{FrameRecordsValue, JobValue, RecordBlock};
 use std::path::{Path, PathBuf};
 
 pub use frames::{FrameCommit, RecordCommit, StateCommit};
-pub use jobs::{JobAttempt, SceneChanged};
+pub use jobs::{job_differs_text, JobAttempt, SceneChanged};
 pub use rgbe::PackedSample;
 pub use samples::SampleBlock;
 pub use schema::JobSpec;
@@ -139,7 +139,7 @@ pub enum StoreError {
     /// A job of that name exists with another scene content (its scene
     /// file, or one it references, changed since: `scene_changed`) or other
     /// settings (its `differences`, named), so it is not resumed.
-    #[error("store {}: job {job:?}: {}; use another --job name, or --force to start it over", path.display(), jobs::job_differs_text(scene_changed.as_deref(), differences))]
+    #[error("store {}: job {job:?}: {}; use another --job name, or --force to start it over", path.display(), jobs::job_differs_text(scene_changed.as_deref(), differences, "stored", |d| format!("it exists with other settings: {d}")))]
     JobDiffers {
         path: PathBuf,
         job: String,
