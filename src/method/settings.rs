@@ -318,6 +318,26 @@ where
         })
 }
 
+/// Parses the path length `max_depth`: a number of bounces, or
+/// [`UNBOUNDED`] (Russian roulette alone ends paths, the default).
+fn depth(method: &str, key: &str, v: &str) -> Result<Option<u32>, MethodError> {
+    match v.trim() {
+        UNBOUNDED => Ok(None),
+        v => limits::PATH_DEPTH
+            .parse(v)
+            .map(Some)
+            .map_err(|problem| MethodError::BadValue {
+                method: method.into(),
+                key: key.into(),
+                value: v.into(),
+                problem: format!("{problem}, or {UNBOUNDED} (unbounded)"),
+            }),
+    }
+}
+
+/// The value of `max_depth` that leaves paths unbounded.
+pub const UNBOUNDED: &str = "none";
+
 /// Parses the on/off setting `key` of `method`: `1`, `on` or `true`, or
 /// `0`, `off` or `false` (as the CLI's flags and JSON's booleans give it).
 fn flag(method: &str, key: &str, v: &str) -> Result<bool, MethodError> {
@@ -351,7 +371,7 @@ fn ic_setting(method: &str, key: &str, v: &str, s: &mut IcSettings) -> Result<bo
         "max_spacing" => s.max_spacing_px = value(method, key, v, limits::SPACING_PX)?,
         "gradients" => s.gradients = flag(method, key, v)?,
         // The pixel paths' (`render --max-depth`), not the gathers'.
-        "max_depth" => s.length.max_depth = Some(value(method, key, v, limits::PATH_DEPTH)?),
+        "max_depth" => s.length.max_depth = depth(method, key, v)?,
         _ => return Ok(false),
     }
     Ok(true)
@@ -430,7 +450,7 @@ pub fn settings_json(settings: &MethodSettings) -> serde_json::Value {
 /// [`method_settings`] and `POST /api/jobs` take them), with its value:
 /// numbers as numbers, flags as booleans, the rest as their text. Given
 /// back to [`method_settings`] they make the same settings. A path length
-/// left unbounded (`max_depth` none) has no name and is left out.
+/// left unbounded is `max_depth` "none" ([`UNBOUNDED`]).
 pub fn named_settings(settings: &MethodSettings) -> serde_json::Map<String, serde_json::Value> {
     let mut out = NamedSettings::default();
     match settings {
@@ -499,8 +519,9 @@ impl NamedSettings {
     }
 
     fn depth(&mut self, max_depth: Option<u32>) {
-        if let Some(d) = max_depth {
-            self.number("max_depth", d);
+        match max_depth {
+            Some(d) => self.number("max_depth", d),
+            None => self.text("max_depth", UNBOUNDED),
         }
     }
 
@@ -568,7 +589,7 @@ fn path_setting(
 ) -> Result<bool, MethodError> {
     match key {
         "spp" => s.spp = value(method, key, v, limits::SPP)?,
-        "max_depth" => s.length.max_depth = Some(value(method, key, v, limits::PATH_DEPTH)?),
+        "max_depth" => s.length.max_depth = depth(method, key, v)?,
         "rr_start" => s.length.rr_start = value(method, key, v, limits::PATH_DEPTH)?,
         _ => return Ok(false),
     }
@@ -673,7 +694,7 @@ fn movies_setting(
         "spacing" => s.global.spacing = value(method, key, v, limits::GRID_SPACING)?,
         "links" => s.global.links = value(method, key, v, limits::LINKS)?,
         "bounces" => s.global.bounces = value(method, key, v, limits::BOUNCES)?,
-        "max_depth" => s.length.max_depth = Some(value(method, key, v, limits::PATH_DEPTH)?),
+        "max_depth" => s.length.max_depth = depth(method, key, v)?,
         _ => return Ok(false),
     }
     Ok(true)
@@ -686,7 +707,7 @@ mod tests {
     /// What [`named_settings`] shows, given back by name (as a client
     /// posts a job's settings again), makes the same settings: for every
     /// method's defaults and each listed key at its example value. It names
-    /// only listed keys, and all of them once a path length is bounded.
+    /// every listed key, and only those.
     #[test]
     fn named_settings_make_the_same_settings_again() {
         let as_text = |v: &serde_json::Value| match v {
@@ -707,20 +728,35 @@ mod tests {
                     "{} {change:?}: {named:?}",
                     m.name
                 );
-                let listed: Vec<&str> = m.keys.iter().map(|(k, _)| *k).collect();
-                assert!(
-                    named.keys().all(|k| listed.contains(&k.as_str())),
-                    "{named:?}"
-                );
-                if change.is_some_and(|(k, _)| *k == "max_depth") {
-                    assert_eq!(named.len(), listed.len(), "{} {named:?}", m.name);
-                }
+                let mut listed: Vec<&str> = m.keys.iter().map(|(k, _)| *k).collect();
+                let mut names: Vec<&str> = named.keys().map(|k| k.as_str()).collect();
+                listed.sort_unstable();
+                names.sort_unstable();
+                assert_eq!(names, listed, "{}", m.name);
             }
         }
         let trc = named_settings(&method_settings("trc", [("keep_paths", "on")]).unwrap());
         assert_eq!(trc["keep_paths"], serde_json::Value::Bool(true));
         assert_eq!(trc["at"].to_string(), "0.05");
         assert_eq!(trc["gradients"], "extrapolated");
+    }
+
+    /// `max_depth` "none" leaves paths unbounded, as by default, for every
+    /// method with pixel paths; a bad value says "none" is taken too.
+    #[test]
+    fn max_depth_none_is_unbounded() {
+        for m in METHODS
+            .iter()
+            .filter(|m| m.keys.iter().any(|(k, _)| *k == "max_depth"))
+        {
+            let bounded = method_settings(m.name, [("max_depth", "8")]).unwrap();
+            let unbounded = method_settings(m.name, [("max_depth", "8"), ("max_depth", " none")]);
+            assert_eq!(unbounded, method_settings(m.name, []), "{}", m.name);
+            assert_ne!(unbounded.unwrap(), bounded, "{}", m.name);
+            assert_eq!(named_settings(&bounded)["max_depth"], 8, "{}", m.name);
+        }
+        let err = method_settings("path", [("max_depth", "deep")]).unwrap_err();
+        assert!(err.to_string().contains("or none (unbounded)"), "{err}");
     }
 
     /// On/off settings take what the CLI's flags and JSON's booleans give;
