@@ -582,7 +582,7 @@ fn a_second_ctrl_c_stops_at_once_and_says_so() {
     let dir = tempfile::tempdir().unwrap();
     // Frames long enough that the second Ctrl-C, 200 ms after the first,
     // comes while one is in progress; where a machine finishes the frame
-    // first (status 1, stopped after it), larger frames are tried.
+    // first (stopped after it), larger frames are tried.
     for size in ["256x256", "512x512", "1024x1024"] {
         let out = dir.path().join(size);
         let args = [
@@ -605,7 +605,7 @@ fn a_second_ctrl_c_stops_at_once_and_says_so() {
             interrupt_once_written_times(&args, &out.join("frame_0000.exr"), Duration::ZERO, 2);
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert!(stderr.contains("Ctrl-C again to stop now"), "{stderr}");
-        if output.status.code() == Some(1) && stderr.contains("interrupted after frame") {
+        if stderr.contains("interrupted after frame") {
             continue;
         }
         assert_eq!(output.status.code(), Some(130), "{stderr}");
@@ -648,9 +648,15 @@ fn ctrl_c_stops_after_a_saved_frame_and_the_same_command_resumes() {
     ];
     let output = interrupt_once_written(&args, &out.join("frame_0001.exr"), Duration::ZERO);
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
-    assert!(stderr.contains("interrupted after frame"), "{stderr}");
+    // Said as what it is, not as an error.
+    assert!(
+        stderr
+            .lines()
+            .any(|l| l.starts_with("interrupted after frame")),
+        "{stderr}"
+    );
     assert!(
         stderr.contains("the same command renders the rest"),
         "{stderr}"

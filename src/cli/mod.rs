@@ -75,6 +75,10 @@ pub fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) if err.is::<output::StdoutClosed>() => ExitCode::SUCCESS,
+        Err(err) if err.is::<render::Interrupted>() => {
+            eprintln!("{err:#}");
+            ExitCode::from(130)
+        }
         Err(err) => {
             eprintln!("error: {err:#}");
             ExitCode::FAILURE

@@ -108,12 +108,20 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         ),
         None => "without --job, running it again renders every frame again".into(),
     };
-    bail!(
+    Err(Interrupted(format!(
         "interrupted after frame {last}: {done} of {} frames are in {}; {rest}",
         args.frames.len(),
         args.out.display()
-    );
+    ))
+    .into())
 }
+
+/// A render stopped by Ctrl-C once its frame in progress was written: the
+/// process exits with status 130 (128 + SIGINT), as a shell reports a
+/// command that SIGINT stopped, so a script running it stops too.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct Interrupted(String);
 
 /// Refuses, before anything renders, a render whose estimated peak memory
 /// is over what this process may take: it would end in an abort or the
