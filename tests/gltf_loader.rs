@@ -1917,13 +1917,7 @@ fn meshes_that_draw_nothing_are_warned_of() {
         "mesh 1 'zeros': not drawn: none of its triangles has any area",
         "mesh 2 'flat': not drawn: none of its triangles has any area",
     ] {
-        let lines: Vec<&str> = stderr.lines().filter(|l| l.contains(said)).collect();
-        assert_eq!(lines.len(), 1, "expected {said:?} once in: {stderr}");
-        let file = path.display().to_string();
-        assert!(
-            lines[0].starts_with(&format!("warning: {file}: ")),
-            "{stderr}"
-        );
+        assert_warned(&stderr, &path, said);
     }
 }
 
@@ -2050,6 +2044,21 @@ fn malformed_attributes_that_are_not_read_are_warned_of() {
     }
 }
 
+/// A GLB of `doc` and the binary chunk `bin`, as the `gltf` crate writes it.
+fn glb_of(doc: &Value, bin: Option<Vec<u8>>) -> Vec<u8> {
+    gltf::binary::Glb {
+        header: gltf::binary::Header {
+            magic: *b"glTF",
+            version: 2,
+            length: 0,
+        },
+        json: serde_json::to_vec(doc).unwrap().into(),
+        bin: bin.map(Into::into),
+    }
+    .to_vec()
+    .unwrap()
+}
+
 /// What is wrong with a GLB's container is said plainly, not in the words
 /// of the parser ("unknown chunk type", "could not completely read the
 /// object", "failed to fill whole buffer", "truncated or corrupt GLB:
@@ -2061,19 +2070,7 @@ fn a_broken_glb_container_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let mut doc = tri_json("unused.bin");
     doc["buffers"][0].as_object_mut().unwrap().remove("uri");
-    let glb = |doc: &Value| {
-        gltf::binary::Glb {
-            header: gltf::binary::Header {
-                magic: *b"glTF",
-                version: 2,
-                length: 0,
-            },
-            json: serde_json::to_vec(doc).unwrap().into(),
-            bin: Some(tri_bin(TRI, [0, 1, 2]).into()),
-        }
-        .to_vec()
-        .unwrap()
-    };
+    let glb = |doc: &Value| glb_of(doc, good_bin());
     let write = |name: &str, bytes: &[u8]| {
         let path = dir.path().join(format!("{name}.glb"));
         std::fs::write(&path, bytes).unwrap();
@@ -2226,8 +2223,13 @@ fn a_camera_animated_past_the_world_is_an_error() {
 /// at t = 0 and 1 s, of `scales` (two VEC3s): accessor 2 their times,
 /// accessor 3 their values. Returns the buffer that holds them.
 fn scale_keys(d: &mut Value, scales: [f32; 6]) -> Vec<u8> {
+    keys_at(d, [0.0, 1.0], scales)
+}
+
+/// [`scale_keys`] at the key times `times`.
+fn keys_at(d: &mut Value, times: [f32; 2], scales: [f32; 6]) -> Vec<u8> {
     let mut bin = tri_bin(TRI, [0, 1, 2]);
-    for v in [0.0f32, 1.0].iter().chain(&scales) {
+    for v in times.iter().chain(&scales) {
         bin.extend_from_slice(&v.to_le_bytes());
     }
     d["buffers"][0]["byteLength"] = json!(bin.len());
@@ -2241,4 +2243,329 @@ fn scale_keys(d: &mut Value, scales: [f32; 6]) -> Vec<u8> {
         json!({"bufferView": 3, "componentType": 5126, "count": 2, "type": "VEC3"}),
     ]);
     bin
+}
+
+/// Asserts that `stderr` holds `said` once, on a warning that names `path`.
+fn assert_warned(stderr: &str, path: &Path, said: &str) {
+    let lines: Vec<&str> = stderr.lines().filter(|l| l.contains(said)).collect();
+    assert_eq!(lines.len(), 1, "expected {said:?} once in: {stderr}");
+    let file = path.display().to_string();
+    assert!(
+        lines[0].starts_with(&format!("warning: {file}: ")),
+        "{stderr}"
+    );
+}
+
+/// What radcache reads of a camera is its yfov (out of (0, π) it is
+/// refused); the rest of a camera that glTF forbids (znear not positive,
+/// zfar not beyond it, aspectRatio not positive; an orthographic
+/// camera's zero xmag or ymag) changes nothing in the render and was
+/// passed over without a word: it is warned of, once for each camera.
+#[test]
+fn camera_values_gltf_forbids_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "cameras",
+        |d| {
+            d["cameras"] = json!([
+                {"type": "perspective",
+                 "perspective": {"yfov": 0.8, "znear": 0.0, "zfar": 0.0, "aspectRatio": 0.0}},
+                {"type": "orthographic",
+                 "orthographic": {"xmag": 0.0, "ymag": 1.0, "znear": 1.0, "zfar": 1.0}}
+            ]);
+            let nodes = d["nodes"].as_array_mut().unwrap();
+            nodes.push(json!({"name": "ortho", "camera": 1}));
+            nodes.push(json!({"name": "ortho2", "camera": 1}));
+            d["scenes"][0]["nodes"] = json!([0, 1, 2, 3]);
+        },
+        good_bin(),
+    );
+    let scene = Scene::load(&path).unwrap();
+    assert_eq!(scene.camera.aspect_ratio, None);
+    let stderr = render_warnings(&path);
+    for said in [
+        "camera 0: znear 0 is not positive, as glTF requires; ignored: rays are not clipped \
+         at znear or zfar",
+        "camera 0: zfar 0 is not beyond znear 0, as glTF requires; ignored: rays are not \
+         clipped at znear or zfar",
+        "camera 0: aspectRatio 0 is not positive, as glTF requires; ignored: frames take the \
+         image's own width-to-height ratio",
+        "camera 1: xmag 0 is zero or not finite, which glTF forbids; ignored: radcache renders \
+         through perspective cameras only",
+        "camera 1: zfar 1 is not beyond znear 1, as glTF requires; ignored: radcache renders \
+         through perspective cameras only",
+    ] {
+        assert_warned(&stderr, &path, said);
+    }
+    for (yfov, name) in [(0.0, "narrow"), (3.2, "wide")] {
+        let path = write_case(
+            dir.path(),
+            name,
+            |d| d["cameras"][0]["perspective"]["yfov"] = json!(yfov),
+            good_bin(),
+        );
+        assert_error(
+            &path,
+            &format!("camera of node 'cam' has yfov {yfov} out of range"),
+        );
+    }
+}
+
+/// `KHR_lights_punctual` asks of a spot light an outer cone of π/2 at
+/// most (past it, as likely as not an angle in degrees) and an inner one
+/// of 0 or more, and of every light an intensity of 0 or more: past π/2
+/// and below 0 intensity are refused, a negative inner cone read as 0.
+/// A light's `range` is not read: the light is not cut off there, and a
+/// warning says so. All of these loaded without a word.
+#[test]
+fn lights_gltf_forbids_or_radcache_ignores_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let with_lights = |name: &str, lights: Value| {
+        write_case(
+            dir.path(),
+            name,
+            |d| {
+                let count = lights.as_array().unwrap().len();
+                d["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+                d["extensions"] = json!({"KHR_lights_punctual": {"lights": lights}});
+                let nodes = d["nodes"].as_array_mut().unwrap();
+                nodes.extend((0..count).map(|light| {
+                    json!({"name": format!("lamp{light}"),
+                           "extensions": {"KHR_lights_punctual": {"light": light}}})
+                }));
+                d["scenes"][0]["nodes"] = json!((0..count + 2).collect::<Vec<_>>());
+            },
+            good_bin(),
+        )
+    };
+    let wide = with_lights(
+        "wide",
+        json!([{"type": "spot", "spot": {"outerConeAngle": 45.0}}]),
+    );
+    assert_error(
+        &wide,
+        "spot light 'lamp0': outerConeAngle 45 is past π/2 (1.5708), the widest glTF allows",
+    );
+    // π/2 written with four digits is past f32's π/2, and allowed.
+    let rounded = with_lights(
+        "rounded",
+        json!([{"type": "spot", "spot": {"innerConeAngle": 1.5708, "outerConeAngle": 1.5708}}]),
+    );
+    let spot = Scene::load(&rounded).unwrap().lights[0].spot.unwrap();
+    assert_eq!(
+        (spot.inner_cone, spot.outer_cone),
+        (std::f32::consts::FRAC_PI_2, std::f32::consts::FRAC_PI_2)
+    );
+    let negative = with_lights(
+        "negative",
+        json!([{"type": "point", "color": [0.0, 0.0, 0.0], "intensity": -1.0}]),
+    );
+    assert_error(
+        &negative,
+        "light 'lamp0' has a negative intensity, -1; glTF requires 0 or more",
+    );
+    let ignored = with_lights(
+        "ignored",
+        json!([
+            {"type": "point", "range": 5.0},
+            {"type": "spot", "spot": {"innerConeAngle": -0.25, "outerConeAngle": 0.5}}
+        ]),
+    );
+    let scene = Scene::load(&ignored).unwrap();
+    assert_eq!(scene.lights[1].spot.unwrap().inner_cone, 0.0);
+    let stderr = render_warnings(&ignored);
+    assert_warned(
+        &stderr,
+        &ignored,
+        "light 'lamp0' has a range of 5 m, which radcache does not read: the light is not cut \
+         off there",
+    );
+    assert_warned(
+        &stderr,
+        &ignored,
+        "spot light 'lamp1': innerConeAngle -0.25 is negative, which glTF forbids; read as 0",
+    );
+}
+
+/// glTF requires an animation sampler's key times to be 0 or more and
+/// strictly increasing, and a sparse accessor to substitute at least one
+/// element: repeated or negative times (which earlier builds read
+/// without a word) and a sparse count of 0 are refused, naming the
+/// animation and the channel.
+#[test]
+fn key_times_gltf_forbids_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let case = |name: &str, times: [f32; 2], sparse: Option<Value>| {
+        write_case(
+            dir.path(),
+            name,
+            |d| {
+                let bin = keys_at(d, times, [1.0; 6]);
+                if let Some(sparse) = sparse {
+                    d["accessors"][2]["sparse"] = sparse;
+                }
+                d["animations"] = json!([{"name": "grow",
+                    "channels": [{"sampler": 0, "target": {"node": 0, "path": "scale"}}],
+                    "samplers": [{"input": 2, "output": 3}]}]);
+                std::fs::write(dir.path().join(format!("{name}.bin")), bin).unwrap();
+            },
+            None,
+        )
+    };
+    let at = "animation 'grow', channel 0 (node 'tri'): ";
+    assert_error(
+        &case("repeated", [0.5, 0.5], None),
+        &format!(
+            "{at}key 1 is at t = 0.5 s, as key 0 is: glTF requires strictly increasing key times"
+        ),
+    );
+    assert_error(
+        &case("negative", [-1.0, 1.0], None),
+        &format!("{at}key 0 is at t = -1 s, before 0: glTF requires key times of 0 or more"),
+    );
+    let empty = json!({"count": 0, "indices": {"bufferView": 2, "componentType": 5125},
+                       "values": {"bufferView": 2}});
+    assert_error(
+        &case("sparse", [0.0, 1.0], Some(empty)),
+        &format!("{at}accessor 2 (key times): its sparse count is 0; glTF requires 1 or more"),
+    );
+    Scene::load(&case("fine", [0.0, 1.0], None)).unwrap();
+}
+
+/// glTF requires a skin's inverseBindMatrices to hold a matrix for each
+/// joint: fewer is refused, from the accessor's count (only the first
+/// matrix is read).
+#[test]
+fn a_skin_with_fewer_inverse_bind_matrices_than_joints_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = good_bin().unwrap();
+    for x in Mat4::IDENTITY.to_cols_array() {
+        bin.extend_from_slice(&x.to_le_bytes());
+    }
+    let skinned = |name: &str, joints: Value| {
+        write_case(
+            dir.path(),
+            name,
+            |d| {
+                d["buffers"][0]["byteLength"] = json!(112);
+                (d["bufferViews"].as_array_mut().unwrap())
+                    .push(json!({"buffer": 0, "byteOffset": 48, "byteLength": 64}));
+                (d["accessors"].as_array_mut().unwrap()).push(
+                    json!({"bufferView": 2, "componentType": 5126, "count": 1, "type": "MAT4"}),
+                );
+                d["skins"] = json!([{"joints": joints, "inverseBindMatrices": 2}]);
+                d["nodes"][0]["skin"] = json!(0);
+            },
+            Some(bin.clone()),
+        )
+    };
+    assert_error(
+        &skinned("short", json!([1, 0])),
+        "skin of node 'tri': its inverseBindMatrices accessor 2 has a count of 1, for 2 \
+         joints; glTF requires a matrix for each joint",
+    );
+    Scene::load(&skinned("one", json!([1]))).unwrap();
+}
+
+/// A morph-target weights channel on a node whose mesh has no morph
+/// targets (glTF requires them) animates nothing: it is warned of,
+/// naming the animation and the channel.
+#[test]
+fn weights_animated_without_morph_targets_are_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "weights",
+        |d| {
+            let bin = scale_keys(d, [1.0; 6]);
+            d["accessors"][3] =
+                json!({"bufferView": 3, "componentType": 5126, "count": 2, "type": "SCALAR"});
+            d["animations"] = json!([{"name": "morph",
+                "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+                "samplers": [{"input": 2, "output": 3}]}]);
+            std::fs::write(dir.path().join("weights.bin"), bin).unwrap();
+        },
+        None,
+    );
+    let stderr = render_warnings(&path);
+    assert_warned(
+        &stderr,
+        &path,
+        "animation 'morph', channel 0 (node 'tri'): it animates morph target weights, but the \
+         node's mesh has none; ignored",
+    );
+}
+
+/// A GLB header's length is the whole file's (glTF §4.4.2): one shorter
+/// than the chunks it holds is refused (the parser read the chunks past
+/// it without a word), and bytes after the length it gives are ignored,
+/// with a warning (after a GLB without a binary chunk, they were read as
+/// a broken one).
+#[test]
+fn a_glb_length_unlike_the_files_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, bytes: &[u8]| {
+        let path = dir.path().join(format!("{name}.glb"));
+        std::fs::write(&path, bytes).unwrap();
+        path
+    };
+    let mut doc = tri_json("unused.bin");
+    doc["buffers"][0].as_object_mut().unwrap().remove("uri");
+    let good = glb_of(&doc, good_bin());
+    let mut short = good.clone();
+    short[8..12].copy_from_slice(&(good.len() as u32 - 4).to_le_bytes());
+    short.extend_from_slice(&[0; 4]);
+    assert_error(
+        &write("short", &short),
+        &format!(
+            "corrupt GLB header: it declares a file length of {} bytes, but its chunks end at \
+             byte {}",
+            good.len() - 4,
+            good.len()
+        ),
+    );
+    let mut trailing = good.clone();
+    trailing.extend_from_slice(b"trailing");
+    let mut json_only = tri_json("unused.bin");
+    json_only["buffers"][0]["uri"] = json!(format!(
+        "data:application/octet-stream;base64,{}",
+        base64_like::encode(&good_bin().unwrap())
+    ));
+    let mut json_only = glb_of(&json_only, None);
+    let json_only_len = json_only.len();
+    json_only.extend_from_slice(b"trailing");
+    for (name, bytes, declared) in [
+        ("trailing", trailing, good.len()),
+        ("json_only", json_only, json_only_len),
+    ] {
+        let path = write(name, &bytes);
+        Scene::load(&path).unwrap();
+        assert_warned(
+            &render_warnings(&path),
+            &path,
+            &format!(
+                "8 bytes follow the {declared} bytes the GLB header declares as the file's \
+                 length; ignored"
+            ),
+        );
+    }
+}
+
+/// glTF forbids a byteStride on the buffer view of indices: refused,
+/// naming the accessor (it loaded, as a stride of one index reads alike).
+#[test]
+fn indices_with_a_byte_stride_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_case(
+        dir.path(),
+        "strided",
+        |d| d["bufferViews"][1]["byteStride"] = json!(4),
+        good_bin(),
+    );
+    assert_error(
+        &path,
+        "accessor 1 (indices): its buffer view 1 has a byteStride (4), which glTF forbids for \
+         indices",
+    );
 }

@@ -175,6 +175,13 @@ impl Buffers {
         if count == 0 {
             return Err(format!("accessor {i} ({what}) is empty"));
         }
+        // glTF's `sparse.count` is 1 or more: a sparse object that
+        // substitutes nothing is malformed, not a choice of its writer.
+        if acc.sparse().is_some_and(|s| s.count() == 0) {
+            return Err(format!(
+                "accessor {i} ({what}): its sparse count is 0; glTF requires 1 or more"
+            ));
+        }
         count.checked_mul(elem).ok_or_else(out_of_range)?;
         let Some(view) = acc.view() else {
             return Ok(None);
@@ -352,6 +359,16 @@ impl Buffers {
         {
             return Err(format!(
                 "accessor {} ({what}) must be unsigned integer scalars for indices",
+                acc.index()
+            ));
+        }
+        // glTF lets only vertex attributes' buffer views have a stride
+        // (other data "MUST NOT define byteStride"): other tools read
+        // such indices packed, or refuse them.
+        if let Some((view, stride)) = acc.view().and_then(|v| Some((v.index(), v.stride()?))) {
+            return Err(format!(
+                "accessor {} ({what}): its buffer view {view} has a byteStride ({stride}), which \
+                 glTF forbids for indices",
                 acc.index()
             ));
         }

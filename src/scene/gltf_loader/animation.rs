@@ -1,5 +1,8 @@
 //! Animation: every TRS channel of every animation, merged into one
-//! [`Animation`] that plays from t = 0, its keys decoded and validated.
+//! [`Animation`] that plays from t = 0, its keys decoded and validated
+//! (their times as glTF requires them: 0 or more, strictly increasing).
+//! Morph-target weights channels are not read; one on a node whose mesh
+//! has no morph targets is warned of.
 
 use super::accessors::Buffers;
 use super::nodes::{node_name, Hierarchy};
@@ -8,13 +11,16 @@ use crate::scene::animation::{Animation, Channel, Interpolation, Property};
 use glam::{Vec3, Vec4};
 use gltf::accessor::Dimensions;
 use std::collections::HashMap;
+use std::path::Path;
 
 /// All channels of all animations, merged (they all play from t = 0).
-/// Channels on nodes outside the scene and morph-target weights are dropped.
+/// Channels on nodes outside the scene and morph-target weights are
+/// dropped; warnings name `file`.
 pub(super) fn build_animation(
     document: &gltf::Document,
     buffers: &Buffers,
     hierarchy: &Hierarchy,
+    file: &Path,
 ) -> Res<Animation> {
     let mut channels = Vec::new();
     // The animation that drives each (node, property), to name a second.
@@ -29,18 +35,28 @@ pub(super) fn build_animation(
             let Some(&node) = hierarchy.ours.get(&target.node().index()) else {
                 continue;
             };
-            let property = match target.property() {
-                gltf::animation::Property::Translation => Property::Translation,
-                gltf::animation::Property::Rotation => Property::Rotation,
-                gltf::animation::Property::Scale => Property::Scale,
-                gltf::animation::Property::MorphTargetWeights => continue,
-            };
             let where_ = || {
                 format!(
                     "animation '{anim_name}', channel {} (node '{}')",
                     ch.index(),
                     node_name(&target.node())
                 )
+            };
+            let property = match target.property() {
+                gltf::animation::Property::Translation => Property::Translation,
+                gltf::animation::Property::Rotation => Property::Rotation,
+                gltf::animation::Property::Scale => Property::Scale,
+                gltf::animation::Property::MorphTargetWeights => {
+                    if !has_morph_targets(&target.node()) {
+                        eprintln!(
+                            "warning: {}: {}: it animates morph target weights, but the \
+                             node's mesh has none; ignored",
+                            file.display(),
+                            where_()
+                        );
+                    }
+                    continue;
+                }
             };
             let channel = read_channel(&ch, node, property, buffers)
                 .map_err(|e| format!("{}: {e}", where_()))?;
@@ -99,5 +115,35 @@ fn read_channel(
         values,
     };
     channel.validate()?;
+    check_key_times(&channel.times)?;
     Ok(channel)
+}
+
+/// What glTF requires of key times and [`Channel::validate`] lets pass (it
+/// refuses non-finite and decreasing ones): a repeated time (some readers
+/// take it for a jump, which glTF keys with `STEP`) and a negative one (a
+/// key before the animation starts). Other tools refuse both, or read
+/// them otherwise than radcache does.
+fn check_key_times(times: &[f32]) -> Res<()> {
+    // Validated as not decreasing: the first is the earliest.
+    if let Some(&t) = times.first().filter(|&&t| t < 0.0) {
+        return Err(format!(
+            "key 0 is at t = {t} s, before 0: glTF requires key times of 0 or more"
+        ));
+    }
+    match times.windows(2).position(|w| w[1] == w[0]) {
+        Some(k) => Err(format!(
+            "key {} is at t = {} s, as key {k} is: glTF requires strictly increasing key times",
+            k + 1,
+            times[k]
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Whether `node` has a mesh with morph targets, which glTF requires of
+/// the node a weights channel animates.
+fn has_morph_targets(node: &gltf::Node) -> bool {
+    node.mesh()
+        .is_some_and(|m| m.primitives().any(|p| p.morph_targets().next().is_some()))
 }

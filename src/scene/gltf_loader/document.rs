@@ -8,6 +8,7 @@
 use super::Res;
 use std::cell::Cell;
 use std::panic::{self, AssertUnwindSafe};
+use std::path::Path;
 use std::sync::Once;
 
 thread_local! {
@@ -76,8 +77,10 @@ pub(crate) fn json_chunk(bytes: &[u8]) -> Option<&[u8]> {
 /// `gltf` crate reads them, as its errors do not say what is wrong ("could
 /// not completely read the object", "unknown chunk type"): the file length
 /// the header states (a mismatch is the clearest sign of a truncated
-/// download), its version, and the chunk that must follow it.
-pub(super) fn check_glb_header(named_glb: bool, bytes: &[u8]) -> Res<()> {
+/// download), its version, and the chunk that must follow it. Returns the
+/// bytes to parse: the file, or a GLB as far as its declared length
+/// ([`within_declared_length`]; a warning names `file`).
+pub(super) fn check_glb_header<'a>(named_glb: bool, bytes: &'a [u8], file: &Path) -> Res<&'a [u8]> {
     if !bytes.starts_with(GLB_MAGIC) {
         let first = bytes.iter().find(|b| !b.is_ascii_whitespace());
         if named_glb && first != Some(&b'{') {
@@ -92,7 +95,7 @@ pub(super) fn check_glb_header(named_glb: bool, bytes: &[u8]) -> Res<()> {
                 }
             ));
         }
-        return Ok(());
+        return Ok(bytes);
     }
     let (Some(version), Some(declared)) = (glb_u32(bytes, 4), glb_u32(bytes, 8)) else {
         return Err(format!(
@@ -119,7 +122,50 @@ pub(super) fn check_glb_header(named_glb: bool, bytes: &[u8]) -> Res<()> {
             bytes.len()
         ));
     }
-    check_json_chunk_header(bytes)
+    let within = within_declared_length(bytes, declared, file)?;
+    check_json_chunk_header(within)?;
+    Ok(within)
+}
+
+/// A GLB's bytes as far as the length its header declares, the whole
+/// file's (glTF's GLB header): the parser reads to the file's end
+/// whatever that length says, so chunks that end past it were read
+/// without a word (they are refused), and bytes after it read as a
+/// broken chunk where no binary chunk came before them (they are left
+/// out, with a warning naming `file`).
+fn within_declared_length<'a>(bytes: &'a [u8], declared: usize, file: &Path) -> Res<&'a [u8]> {
+    if bytes.len() == declared {
+        return Ok(bytes);
+    }
+    let end = chunks_end(bytes);
+    if end > declared {
+        return Err(format!(
+            "corrupt GLB header: it declares a file length of {declared} bytes, but its chunks \
+             end at byte {end} (the file has {})",
+            bytes.len()
+        ));
+    }
+    eprintln!(
+        "warning: {}: {} bytes follow the {declared} bytes the GLB header declares as the \
+         file's length; ignored",
+        file.display(),
+        bytes.len() - declared
+    );
+    Ok(&bytes[..declared])
+}
+
+/// Where a GLB's chunks end: its JSON chunk's end, or its binary chunk's
+/// when a chunk header of that type follows the JSON (where
+/// [`check_json_chunk_header`] finds it).
+fn chunks_end(bytes: &[u8]) -> usize {
+    let json_length = glb_u32(bytes, GLB_HEADER_BYTES).unwrap_or(0) as usize;
+    let json_end = (GLB_HEADER_BYTES + CHUNK_HEADER_BYTES).saturating_add(json_length);
+    let bin_type = (json_end.checked_add(CHUNK_HEADER_BYTES))
+        .and_then(|type_end| bytes.get(type_end - 4..type_end));
+    match glb_u32(bytes, json_end).filter(|_| bin_type == Some(b"BIN\0".as_slice())) {
+        Some(bin_length) => (json_end + CHUNK_HEADER_BYTES).saturating_add(bin_length as usize),
+        None => json_end,
+    }
 }
 
 /// Bytes of a GLB's header, and of each chunk's header (its length and

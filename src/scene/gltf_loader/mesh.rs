@@ -70,6 +70,7 @@ fn rigid_skin(
     inverse_binds: &mut HashMap<usize, Mat4>,
     mesh: &mut Mesh,
 ) -> Res<Option<usize>> {
+    check_inverse_bind_count(skin)?;
     let Some(joint) = skin.joints().next() else {
         return Ok(None);
     };
@@ -97,6 +98,26 @@ fn rigid_skin(
         }
     }
     Ok(Some(node))
+}
+
+/// glTF requires a skin's inverse bind matrices to hold one for each of its
+/// joints: fewer leave joints without one, a file other tools refuse or
+/// skin otherwise. Judged from the accessor's count, as only the first
+/// matrix is read ([`first_inverse_bind`]).
+fn check_inverse_bind_count(skin: &gltf::Skin) -> Res<()> {
+    let Some(acc) = skin.inverse_bind_matrices() else {
+        return Ok(());
+    };
+    let joints = skin.joints().count();
+    if acc.count() >= joints {
+        return Ok(());
+    }
+    Err(format!(
+        "its inverseBindMatrices accessor {} has a count of {}, for {joints} joints; glTF \
+         requires a matrix for each joint",
+        acc.index(),
+        acc.count()
+    ))
 }
 
 /// The inverse bind matrix of the skin's first joint (the identity when

@@ -51,7 +51,7 @@ use document::{
     without_channels_lacking_a_node,
 };
 use glam::Vec3;
-use nodes::{build_nodes, find_camera, node_at, Hierarchy};
+use nodes::{build_nodes, find_camera, node_at, warn_of_camera_values, Hierarchy};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -121,7 +121,7 @@ fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scen
     let named_glb = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
-    check_glb_header(named_glb, bytes)?;
+    let bytes = check_glb_header(named_glb, bytes, path)?;
     let rewritten = without_channels_lacking_a_node(bytes);
     let bytes = rewritten.as_deref().unwrap_or(bytes);
     let gltf::Gltf { document, blob } =
@@ -158,9 +158,10 @@ fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scen
     let nodes = build_nodes(&gnodes, &hierarchy)?;
     let mut materials = materials::build_materials(&document, path)?;
     let objects = mesh::build_objects(&gnodes, &hierarchy, &buffers, &mut materials, path)?;
-    let lights = lights::build_lights(&gnodes)?;
+    let lights = lights::build_lights(&gnodes, path)?;
     let camera = find_camera(&gnodes)?;
-    let animation = animation::build_animation(&document, &buffers, &hierarchy)?;
+    warn_of_camera_values(&gnodes, path);
+    let animation = animation::build_animation(&document, &buffers, &hierarchy, path)?;
     check_renderable(&objects, &materials, &lights)?;
 
     let mut scene = Scene {

@@ -1,10 +1,12 @@
 //! The scene's nodes: the hierarchy reachable from the default scene
-//! (proven a forest), each node's rest transform, and the camera node.
+//! (proven a forest), each node's rest transform, and the camera node
+//! (with warnings of the camera values glTF forbids that are not read).
 
 use super::{all_finite, check_coordinates, Res};
 use crate::scene::{CameraDef, Node, Trs};
 use glam::{Mat4, Quat, Vec3};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::path::Path;
 
 pub(super) fn node_at<'a>(document: &'a gltf::Document, index: usize) -> gltf::Node<'a> {
     // Indices come from the document's own node list, so this is in range.
@@ -211,4 +213,74 @@ pub(super) fn find_camera(gnodes: &[gltf::Node]) -> Res<CameraDef> {
     } else {
         "no camera in the scene".into()
     })
+}
+
+/// Warns, naming `file`, of what glTF forbids in the values of the
+/// scene's cameras that radcache does not read (all but the yfov of the
+/// camera it renders through, which [`find_camera`] refuses out of
+/// range), once for each camera. Said, not refused: the render does not
+/// depend on them, but the file is malformed, and other tools may read it
+/// otherwise.
+pub(super) fn warn_of_camera_values(gnodes: &[gltf::Node], file: &Path) {
+    let mut warned = HashSet::new();
+    for camera in gnodes.iter().filter_map(gltf::Node::camera) {
+        if !warned.insert(camera.index()) {
+            continue;
+        }
+        let label = match camera.name() {
+            Some(name) => format!("camera {} '{name}'", camera.index()),
+            None => format!("camera {}", camera.index()),
+        };
+        for problem in camera_problems(&camera) {
+            eprintln!("warning: {}: {label}: {problem}", file.display());
+        }
+    }
+}
+
+/// What glTF forbids in `camera`'s values radcache does not read, each
+/// with why it changes nothing: rays start at the camera and are not
+/// clipped, frames take the image's own ratio, and orthographic cameras
+/// are not rendered through.
+fn camera_problems(camera: &gltf::Camera) -> Vec<String> {
+    use gltf::camera::Projection;
+    match camera.projection() {
+        Projection::Perspective(p) => {
+            let aspect = (p.aspect_ratio().filter(|&a| !(a > 0.0 && a.is_finite()))).map(|a| {
+                format!(
+                    "aspectRatio {a} is not positive, as glTF requires; ignored: frames take the \
+                     image's own width-to-height ratio"
+                )
+            });
+            (clipping_problems(p.znear(), p.zfar(), true).into_iter())
+                .map(|e| format!("{e}; ignored: rays are not clipped at znear or zfar"))
+                .chain(aspect)
+                .collect()
+        }
+        Projection::Orthographic(o) => {
+            let magnifications = [("xmag", o.xmag()), ("ymag", o.ymag())]
+                .into_iter()
+                .filter(|&(_, m)| m == 0.0 || !m.is_finite())
+                .map(|(name, m)| format!("{name} {m} is zero or not finite, which glTF forbids"));
+            magnifications
+                .chain(clipping_problems(o.znear(), Some(o.zfar()), false))
+                .map(|e| format!("{e}; ignored: radcache renders through perspective cameras only"))
+                .collect()
+        }
+    }
+}
+
+/// What glTF forbids in a camera's clipping planes: a perspective
+/// camera's znear not positive (an orthographic one's negative), a zfar
+/// (when given) not beyond znear.
+fn clipping_problems(znear: f32, zfar: Option<f32>, perspective: bool) -> Vec<String> {
+    let (near_ok, rule) = if perspective {
+        (znear > 0.0, "positive")
+    } else {
+        (znear >= 0.0, "0 or more")
+    };
+    let near = (!(near_ok && znear.is_finite()))
+        .then(|| format!("znear {znear} is not {rule}, as glTF requires"));
+    let far = (zfar.filter(|f| f.partial_cmp(&znear) != Some(std::cmp::Ordering::Greater)))
+        .map(|f| format!("zfar {f} is not beyond znear {znear}, as glTF requires"));
+    near.into_iter().chain(far).collect()
 }
