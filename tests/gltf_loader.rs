@@ -2350,7 +2350,11 @@ fn lights_gltf_forbids_or_radcache_ignores_are_named() {
     // π/2 written with four digits is past f32's π/2, and allowed.
     let rounded = with_lights(
         "rounded",
-        json!([{"type": "spot", "spot": {"innerConeAngle": 1.5708, "outerConeAngle": 1.5708}}]),
+        // As a file holds it (a literal here would be taken for π/2's).
+        serde_json::from_str(
+            r#"[{"type": "spot", "spot": {"innerConeAngle": 1.5708, "outerConeAngle": 1.5708}}]"#,
+        )
+        .unwrap(),
     );
     let spot = Scene::load(&rounded).unwrap().lights[0].spot.unwrap();
     assert_eq!(
