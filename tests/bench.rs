@@ -396,10 +396,30 @@ fn each_run_is_rendered_on_each_backend() {
     assert!(svg.contains("trc (spp) on gpu") && svg.contains("trc (spp) on cpu"));
     let twice = BenchOptions {
         backends: vec![BackendChoice::Cpu, BackendChoice::Cpu],
-        ..opts
+        ..opts.clone()
     };
     let e = bench::run(&twice).unwrap_err().to_string();
     assert!(e.contains("'cpu' is named twice"), "{e}");
+    // `auto` is `cpu` where no hardware GPU is (CI, with Mesa's software
+    // driver only): then the two are one backend, benched twice before.
+    let auto = radcache::render::make_backend(BackendChoice::Auto)
+        .unwrap()
+        .name();
+    if auto
+        == radcache::render::make_backend(BackendChoice::Cpu)
+            .unwrap()
+            .name()
+    {
+        let same = BenchOptions {
+            backends: vec![BackendChoice::Cpu, BackendChoice::Auto],
+            ..opts
+        };
+        let e = bench::run(&same).unwrap_err().to_string();
+        assert!(
+            e.contains("cpu and auto are the same backend on this machine"),
+            "{e}"
+        );
+    }
 }
 
 /// `--estimate-error`: every `trc` run also gets the error of its records'
@@ -445,12 +465,12 @@ fn trc_runs_measure_their_next_frame_estimates() {
     };
     let e = bench::run(&no_trc).unwrap_err().to_string();
     assert!(e.contains("no method is trc"), "{e}");
-    // A run named twice (here once alone, once in a sweep) would write one
-    // folder twice: refused before anything renders.
+    // A run named twice (here once alone, once in a sweep) would render
+    // twice: refused before anything renders.
     let twice = tiny_bench(dir.path(), &["trc:max_life=5", "ic", "trc:max_life=2,5"]);
     let e = bench::run(&twice).unwrap_err().to_string();
     assert!(
-        e.contains("gives the run trc max_life=5 twice") && e.contains("trc-max_life=5"),
+        e.contains("gives the run trc max_life=5 twice (as max_life=5 too"),
         "{e}"
     );
     let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
@@ -747,4 +767,65 @@ fn a_missing_gpu_backend_fails_before_the_reference_renders() {
         "a reference was rendered"
     );
     assert!(!dir.path().join("runs").exists(), "a run was rendered");
+}
+
+/// A file the bench cannot write (here a folder where `bench.csv` goes)
+/// loses no measurement: the table is printed, the error names the file,
+/// and the exit status says it failed. Before, the error came alone once
+/// every run had rendered.
+#[test]
+fn a_file_that_cannot_be_written_keeps_the_table() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("bench.csv")).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .args(["bench", "--size", "8x8", "--frames", "0..2", "--methods"])
+        .args(["path:spp=1", "--reference-spp", "2", "-q", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stdout.contains("spp=1"), "no table: {stdout}");
+    assert!(
+        !stdout.contains("wrote") || !stdout.contains("bench.csv"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("cube-in-box_error_vs_time.svg"), "{stdout}");
+    assert!(
+        stderr.contains("not every file was written") && stderr.contains("bench.csv"),
+        "{stderr}"
+    );
+}
+
+/// A reused reference whose frame no longer reads (a truncated copy) is
+/// rendered again, rather than failing the bench once every run has
+/// rendered.
+#[test]
+fn a_damaged_reference_is_rendered_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = tiny_bench(dir.path(), &["path:spp=1"]);
+    bench::run(&opts).unwrap();
+    let frame = dir.path().join("reference/cube-in-box/frame_0001.exr");
+    let whole = std::fs::read(&frame).unwrap();
+    std::fs::write(&frame, &whole[..100]).unwrap();
+    let again = bench::run(&opts).expect("the reference is rendered again");
+    assert_eq!(std::fs::read(&frame).unwrap(), whole);
+    assert_eq!(again.rows.len(), 1);
+}
+
+/// One run spelled twice (`spp=2,02`, or a setting at its default beside
+/// the default run) is refused: it would render twice as identical rows.
+#[test]
+fn a_run_spelled_twice_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    for methods in [&["path:spp=2,02"][..], &["trc", "trc:at=0.05"]] {
+        let err = bench::run(&tiny_bench(dir.path(), methods)).unwrap_err();
+        assert!(
+            err.to_string().contains("twice") && err.to_string().contains("the same settings"),
+            "{methods:?}: {err}"
+        );
+    }
 }

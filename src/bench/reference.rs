@@ -68,15 +68,19 @@ pub(super) fn ensure_reference(opts: &BenchOptions, scene: &BenchScene, dir: &Pa
     let have = std::fs::read_to_string(&json)
         .ok()
         .and_then(|s| serde_json::from_str::<ReferenceInfo>(&s).ok());
-    let complete = opts
-        .frames
-        .clone()
-        .all(|f| crate::film::frame_path(dir, f, "exr").is_file());
-    if have.as_ref() == Some(&info) && complete {
-        if !opts.quiet {
-            eprintln!("reference {}: reusing {}", source, dir.display());
+    if have.as_ref() == Some(&info) {
+        if readable(opts, dir) {
+            if !opts.quiet {
+                eprintln!("reference {}: reusing {}", source, dir.display());
+            }
+            return Ok(());
         }
-        return Ok(());
+        eprintln!(
+            "note: reference {}: a frame or light mask in {} does not read whole; it is \
+             rendered again",
+            source,
+            dir.display()
+        );
     }
     // Stale or partial: start again, so no frame of another reference stays.
     let _ = std::fs::remove_file(&json);
@@ -118,6 +122,19 @@ pub(super) fn ensure_reference(opts: &BenchOptions, scene: &BenchScene, dir: &Pa
     std::fs::write(&json, serde_json::to_string_pretty(&info)?)
         .with_context(|| format!("cannot write {}", json.display()))?;
     Ok(())
+}
+
+/// Whether every frame of the reference in `dir`, and its light mask,
+/// reads whole at the bench's size: a damaged file (a truncated copy)
+/// renders the reference again rather than failing the bench once every
+/// run has rendered. Reading the files costs little beside one run.
+fn readable(opts: &BenchOptions, dir: &Path) -> bool {
+    let size = (opts.width, opts.height);
+    opts.frames.clone().all(|f| {
+        let frame = crate::film::read_exr(&crate::film::frame_path(dir, f, "exr"));
+        let mask = metrics::read_light_mask(&metrics::light_mask_path(dir, f), size);
+        frame.is_ok_and(|film| (film.width, film.height) == size) && matches!(mask, Ok(Some(_)))
+    })
 }
 
 /// Which pixels of the frame see a light source directly or border a pixel

@@ -92,14 +92,14 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{:.4},{},{},{},{},{:.6},{},{:.6},{},{},{},{}",
+            "{},{},{},{},{},{:.6},{},{},{},{},{:.6},{},{:.6},{},{},{},{}",
             csv_field(&r.scene),
             csv_field(&r.method),
             csv_field(&r.settings),
             csv_field(&r.backend),
             r.frames,
             r.seconds,
-            opt(r.render_pass_seconds, 4),
+            opt(r.render_pass_seconds, 6),
             r.rays,
             r.records,
             opt(r.peak_mem_mb, 1),

@@ -44,8 +44,13 @@ pub fn reset_peak_memory() -> bool {
 #[derive(Clone, Debug)]
 pub struct BenchReport {
     pub rows: Vec<BenchRow>,
-    pub csv: PathBuf,
+    /// `DIR/bench.csv`, where it was written.
+    pub csv: Option<PathBuf>,
+    /// The charts written.
     pub charts: Vec<PathBuf>,
+    /// Why each file that could not be written was not: the CSV or a
+    /// scene's charts. The rows are whole all the same.
+    pub unwritten: Vec<String>,
     /// Whether peak memory is per run (true) or the process peak so far.
     pub peak_mem_per_run: bool,
 }
@@ -93,18 +98,8 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
             );
         }
     }
-    let mut folders: Vec<String> = Vec::new();
-    for spec in opts.methods.iter().flat_map(MethodSweep::runs) {
-        let folder = Run::folder_of(&spec, None);
-        if folders.contains(&folder) {
-            bail!(
-                "--methods gives the run {} {} twice (both would write runs/<scene>/{folder}); name each run once",
-                spec.method,
-                spec.label()
-            );
-        }
-        folders.push(folder);
-    }
+    check_backends_differ(&opts.backends)?;
+    check_runs_differ(opts)?;
     let labels: Vec<String> = opts.scenes.iter().map(scene_label).collect();
     for (i, l) in labels.iter().enumerate() {
         if labels[..i].contains(l) {
@@ -129,6 +124,9 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
     let per_run = reset_peak_memory();
     let mut rows = Vec::new();
     let mut charts = Vec::new();
+    // A file that cannot be written (a full disk, a folder in its place)
+    // does not lose the measurements: they are still printed.
+    let mut unwritten = Vec::new();
     for (source, label) in opts.scenes.iter().zip(&labels) {
         let scene = BenchScene {
             source,
@@ -136,18 +134,72 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
             scene: source.load()?,
         };
         let scene_rows = bench_scene(opts, &scene, per_run)?;
-        charts.extend(plot_scene(&opts.out, label, &scene_rows)?);
+        match plot_scene(&opts.out, label, &scene_rows) {
+            Ok(written) => charts.extend(written),
+            Err(e) => unwritten.push(format!("{e:#}")),
+        }
         rows.extend(scene_rows);
     }
     let csv = opts.out.join("bench.csv");
-    std::fs::write(&csv, to_csv(&rows))
-        .with_context(|| format!("cannot write {}", csv.display()))?;
+    let csv = match std::fs::write(&csv, to_csv(&rows)) {
+        Ok(()) => Some(csv),
+        Err(e) => {
+            unwritten.push(format!("cannot write {}: {e}", csv.display()));
+            None
+        }
+    };
     Ok(BenchReport {
         rows,
         csv,
         charts,
+        unwritten,
         peak_mem_per_run: per_run,
     })
+}
+
+/// Refuses two backends that are one here: `auto` picks `cpu` where no
+/// GPU is, and `gpu` where one is, and the two would be benched twice
+/// under one name. (`cpu,cpu` is refused before.)
+fn check_backends_differ(backends: &[BackendChoice]) -> Result<()> {
+    if backends.len() < 2 || !backends.contains(&BackendChoice::Auto) {
+        return Ok(());
+    }
+    let names = (backends.iter())
+        .map(|&b| Ok((b, render::make_backend(b)?.name())))
+        .collect::<Result<Vec<_>>>()?;
+    for (i, (b, name)) in names.iter().enumerate() {
+        if let Some((twin, _)) = names[..i].iter().find(|(_, n)| n == name) {
+            bail!(
+                "--backends: {} and {} are the same backend on this machine ({name}); name it once",
+                twin.name(),
+                b.name()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Refuses a run that `--methods` gives twice, by its settings, not their
+/// spelling (`spp=2,02` is one run twice): it would be rendered twice
+/// and shown as two identical rows.
+fn check_runs_differ(opts: &BenchOptions) -> Result<()> {
+    let mut seen: Vec<(String, MethodSettings, String)> = Vec::new();
+    for spec in opts.methods.iter().flat_map(MethodSweep::runs) {
+        let settings = spec.settings()?;
+        let label = spec.label();
+        if let Some((_, _, first)) = seen
+            .iter()
+            .find(|(method, s, _)| *method == spec.method && *s == settings)
+        {
+            bail!(
+                "--methods gives the run {} {label} twice (as {first} too: the same settings); \
+                 name each run once",
+                spec.method
+            );
+        }
+        seen.push((spec.method.clone(), settings, label));
+    }
+    Ok(())
 }
 
 /// Refuses the bench where one of its runs on scene `label`, of
