@@ -33,6 +33,11 @@ pub enum MetricsError {
     },
     #[error("no frame_NNNN.exr files in reference folder {}", dir.display())]
     NoFrames { dir: PathBuf },
+    #[error(
+        "{} and {} both name frame {frame}: remove or rename one of them",
+        a.display(), b.display()
+    )]
+    AmbiguousFrame { frame: u32, a: PathBuf, b: PathBuf },
     #[error("{} is missing (the reference has {})", path.display(), reference.display())]
     MissingFrame { path: PathBuf, reference: PathBuf },
     #[error(
@@ -281,7 +286,8 @@ pub struct FrameReport {
 /// to `{"frames":N,"rmse":…,"rel_rmse":…,"block_bias":…,"flicker":…,
 /// "rel_rmse_surfaces":…,"flicker_surfaces":…,"per_frame":[…]}`; `flicker`
 /// is `null` without consecutive frames, the `_surfaces` figures without
-/// light masks.
+/// light masks, and every relative figure (an infinite or NaN `f64`) where
+/// the reference's mean radiance it divides by is 0 (all black).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CompareReport {
     pub frames: usize,
@@ -305,6 +311,10 @@ pub struct CompareReport {
 
 /// `frame_NNNN.exr` files of `dir` as (frame number, path), sorted by number.
 /// Other files (`frame_NNNN.png`, `seed1_frame_0000.exr`, …) are ignored.
+/// The number may have any count of digits (the renderer writes at least
+/// four: `frame_0012.exr`, `frame_12345.exr`), but two files that name the
+/// same frame (`frame_0001.exr` and `frame_00001.exr`) are an error naming
+/// both: which of them is the frame is anyone's guess.
 pub fn list_frames(dir: &Path) -> Result<Vec<(u32, PathBuf)>, MetricsError> {
     let io_err = |error| MetricsError::Io {
         path: dir.to_owned(),
@@ -318,6 +328,13 @@ pub fn list_frames(dir: &Path) -> Result<Vec<(u32, PathBuf)>, MetricsError> {
         }
     }
     frames.sort();
+    if let Some(pair) = frames.windows(2).find(|pair| pair[0].0 == pair[1].0) {
+        return Err(MetricsError::AmbiguousFrame {
+            frame: pair[0].0,
+            a: pair[0].1.clone(),
+            b: pair[1].1.clone(),
+        });
+    }
     Ok(frames)
 }
 
@@ -448,19 +465,24 @@ fn check_pixels(path: &Path, film: &Film) -> Result<(), MetricsError> {
     })
 }
 
-fn read_pair(number: u32, ref_path: PathBuf, test_dir: &Path) -> Result<FramePair, MetricsError> {
-    let test_path = test_dir.join(ref_path.file_name().expect("listed files have names"));
-    // Only a path that is not there is missing; one that is there but is no
-    // regular file (a directory, FIFO, link to a device) is [`read_exr`]'s
-    // error, which says so without opening it.
-    if let Err(e) = std::fs::metadata(&test_path) {
-        if e.kind() == std::io::ErrorKind::NotFound {
-            return Err(MetricsError::MissingFrame {
-                path: test_path,
-                reference: ref_path,
-            });
-        }
-    }
+/// Reads frame `number` of the reference (`ref_path`) and of the test
+/// folder (`test_path`, the file of `test_dir` that [`list_frames`] gave
+/// that number; `None`: there is none).
+fn read_pair(
+    number: u32,
+    ref_path: PathBuf,
+    test_path: Option<PathBuf>,
+    test_dir: &Path,
+) -> Result<FramePair, MetricsError> {
+    // Only a frame that is not listed is missing; one that is there but is
+    // no regular file (a directory, FIFO, link to a device) is
+    // [`read_exr`]'s error, which says so without opening it.
+    let Some(test_path) = test_path else {
+        return Err(MetricsError::MissingFrame {
+            path: test_dir.join(ref_path.file_name().expect("listed files have names")),
+            reference: ref_path,
+        });
+    };
     let reference = read_exr(&ref_path)?;
     let test = read_exr(&test_path)?;
     check_size(&test_path, &test, &ref_path, &reference)?;
@@ -498,6 +520,9 @@ struct Totals {
     /// says why the `_surfaces` figures are missing.
     any_mask: bool,
     first_without_mask: Option<PathBuf>,
+    /// The reference frames whose mean radiance is 0 (all black): their
+    /// relative figures are undefined, and [`Self::black_warning`] says so.
+    black_frames: Vec<u32>,
     per_frame: Vec<FrameReport>,
 }
 
@@ -508,6 +533,9 @@ impl Totals {
             block_mse(&f.test, &f.reference, BLOCK),
         );
         let mean = f.reference.mean();
+        if mean == 0.0 {
+            self.black_frames.push(f.number);
+        }
         let first = self.per_frame.is_empty();
         if f.surfaces.is_some() {
             self.any_mask = true;
@@ -576,6 +604,54 @@ impl Totals {
         ))
     }
 
+    /// The warning for stderr where the reference has a mean radiance of 0
+    /// (all black; pixels are never negative): the relative figures divide
+    /// by it, so they are undefined (`inf` or `NaN` in the table, `null` in
+    /// JSON) rather than large. Where only some frames are black, the
+    /// figures over all frames stand and the warning names those frames;
+    /// where the reference is black only outside its seen lights, it names
+    /// the `_surfaces` figures.
+    fn black_warning(&self) -> Option<String> {
+        const UNDEFINED: &str = "undefined (inf or NaN in the table, null in --json)";
+        let black = &self.black_frames;
+        if !black.is_empty() && black.len() == self.per_frame.len() {
+            let surfaces = match self.surfaces {
+                Some(_) => ", rel_rmse_surfaces, flicker_surfaces",
+                None => "",
+            };
+            return Some(format!(
+                "warning: the reference's mean radiance is 0 (all black): relative figures \
+                 (rel_rmse, block_bias, flicker{surfaces}) are {UNDEFINED}; rmse is absolute"
+            ));
+        }
+        if let Some(&first) = black.first() {
+            const SHOWN: usize = 5;
+            let named = black[..black.len().min(SHOWN)]
+                .iter()
+                .map(|n| format!("{n:04}"))
+                .collect::<Vec<_>>();
+            let frames = match (black.len(), &named[..]) {
+                (1, _) => format!("frame {first:04} has"),
+                (n, [most @ .., last]) if n <= SHOWN => {
+                    format!("frames {} and {last} have", most.join(", "))
+                }
+                (n, _) => format!("frames {} and {} more have", named.join(", "), n - SHOWN),
+            };
+            let its = if black.len() == 1 { "its" } else { "their" };
+            return Some(format!(
+                "warning: reference {frames} mean radiance 0 (all black): {its} rel_rmse and \
+                 block_bias are {UNDEFINED}; the figures over all frames are not"
+            ));
+        }
+        let surfaces = self.surfaces.filter(|s| s.values > 0)?;
+        (surfaces.ref_sum == 0.0).then(|| {
+            format!(
+                "warning: the reference's mean radiance outside its directly seen lights is 0 \
+                 (black): rel_rmse_surfaces and flicker_surfaces are {UNDEFINED}"
+            )
+        })
+    }
+
     fn report(self) -> CompareReport {
         let frames = self.per_frame.len();
         let mean = self.ref_sum / self.ref_values.max(1) as f64;
@@ -596,13 +672,16 @@ impl Totals {
     }
 }
 
-/// Compares every `frame_NNNN.exr` of `reference_dir` with the file of the
-/// same name in `test_dir` (`radcache compare REF_DIR TEST_DIR`). Frames only
-/// in `test_dir` are ignored; a reference frame missing from `test_dir`, or
-/// of another size, or a NaN, infinite or negative pixel, is an error.
-/// Flicker uses the pairs whose numbers differ by one. Where only some
-/// reference frames have light masks, a note on stderr names the first
-/// frame's mask that is missing.
+/// Compares every `frame_NNNN.exr` of `reference_dir` with the file of
+/// `test_dir` of the same frame number (`radcache compare REF_DIR
+/// TEST_DIR`). Frames only in `test_dir` are ignored; a reference frame
+/// missing from `test_dir`, or of another size, or a NaN, infinite or
+/// negative pixel, or two files of one folder that name the same frame
+/// ([`list_frames`]), is an error. Flicker uses the pairs whose numbers
+/// differ by one. Where only some reference frames have light masks, a
+/// note on stderr names the first frame's mask that is missing; where the
+/// reference is black, a warning says which relative figures are undefined
+/// (`inf` or `NaN`, `null` in JSON).
 pub fn compare_dirs(reference_dir: &Path, test_dir: &Path) -> Result<CompareReport, MetricsError> {
     let frames = list_frames(reference_dir)?;
     if frames.is_empty() {
@@ -610,18 +689,23 @@ pub fn compare_dirs(reference_dir: &Path, test_dir: &Path) -> Result<CompareRepo
             dir: reference_dir.to_owned(),
         });
     }
+    let mut tests: std::collections::BTreeMap<u32, PathBuf> =
+        list_frames(test_dir)?.into_iter().collect();
     let mut totals = Totals::default();
     let mut prev: Option<FramePair> = None;
     for (number, ref_path) in frames {
-        let pair = read_pair(number, ref_path, test_dir)?;
+        let pair = read_pair(number, ref_path, tests.remove(&number), test_dir)?;
         totals.add_frame(&pair);
         if let Some(prev) = &prev {
             totals.add_pair(prev, &pair)?;
         }
         prev = Some(pair);
     }
-    if let Some(note) = totals.mask_note() {
-        // stderr: stdout may be `--json`.
+    // stderr: stdout may be `--json`.
+    for note in [totals.black_warning(), totals.mask_note()]
+        .into_iter()
+        .flatten()
+    {
         eprintln!("{note}");
     }
     Ok(totals.report())
@@ -833,6 +917,67 @@ mod tests {
         assert_eq!(frame_number("seed1_frame_0000.exr"), None);
         assert_eq!(frame_number("frame_.exr"), None);
         assert_eq!(frame_number("frame_-1.exr"), None);
+    }
+
+    /// [`Totals::black_warning`] of `frames` (number, reference) compared
+    /// with a test of 0.5 everywhere, with `lights` as every frame's mask.
+    fn black_warning_of(frames: &[(u32, Film)], lights: Option<&[bool]>) -> Option<String> {
+        let mut totals = Totals::default();
+        for (number, reference) in frames {
+            let pair = FramePair {
+                number: *number,
+                ref_path: PathBuf::from(format!("frame_{number:04}.exr")),
+                test: constant(reference.width, reference.height, 0.5),
+                reference: reference.clone(),
+                surfaces: lights.map(|l| l.iter().map(|light| !light).collect()),
+                mask_path: PathBuf::new(),
+            };
+            totals.add_frame(&pair);
+        }
+        totals.black_warning()
+    }
+
+    #[test]
+    fn black_reference_frames_are_named() {
+        let lit = constant(2, 2, 1.0);
+        let black = constant(2, 2, 0.0);
+        assert_eq!(black_warning_of(&[(0, lit.clone())], None), None);
+        let all = black_warning_of(&[(0, black.clone()), (1, black.clone())], None).unwrap();
+        assert!(
+            all.contains("mean radiance is 0 (all black)") && !all.contains("surfaces"),
+            "{all}"
+        );
+        let all = black_warning_of(&[(3, black.clone())], Some(&[false; 4])).unwrap();
+        assert!(
+            all.contains("flicker, rel_rmse_surfaces, flicker_surfaces)"),
+            "{all}"
+        );
+
+        let one = black_warning_of(&[(0, lit.clone()), (7, black.clone())], None).unwrap();
+        assert!(
+            one.contains("reference frame 0007 has mean radiance 0"),
+            "{one}"
+        );
+        assert!(one.contains(": its rel_rmse"), "{one}");
+        let mut many: Vec<(u32, Film)> = (10..18).map(|n| (n, black.clone())).collect();
+        many.push((18, lit.clone()));
+        let many = black_warning_of(&many, None).unwrap();
+        assert!(
+            many.contains("frames 0010, 0011, 0012, 0013, 0014 and 3 more have"),
+            "{many}"
+        );
+
+        // Lit only at its seen lights: the surface figures divide by 0.
+        let mut light = black.clone();
+        light.pixels[0] = Vec3::ONE;
+        let mask = [true, false, false, false];
+        let surfaces = black_warning_of(&[(0, light.clone())], Some(&mask)).unwrap();
+        assert!(
+            surfaces.contains("outside its directly seen lights is 0")
+                && surfaces.contains("rel_rmse_surfaces and flicker_surfaces are undefined"),
+            "{surfaces}"
+        );
+        assert_eq!(black_warning_of(&[(0, light)], None), None);
     }
 
     #[test]

@@ -118,7 +118,7 @@ fn bad_input_is_a_clear_error() {
                 "--movies-texels-per-pixel",
                 "1e9",
             ],
-            "expected 0.01 to 16",
+            "expected a number from 0.01 to 16",
         ),
         (
             &["render", "--method", "ic", "--ic-accuracy", "0"],
@@ -226,7 +226,7 @@ fn bad_input_is_a_clear_error() {
                 "--out",
                 garbage,
             ],
-            "invalid value '2' for '--movies-spacing <MOVIES_SPACING>': expected 0.001 to 1",
+            "invalid value '2' for '--movies-spacing <MOVIES_SPACING>': expected a number from 0.001 to 1",
         ),
         (
             &[
@@ -238,7 +238,7 @@ fn bad_input_is_a_clear_error() {
                 "--out",
                 garbage,
             ],
-            "invalid value '20000' for '--max-depth <MAX_DEPTH>': expected 0 to 10000",
+            "invalid value '20000' for '--max-depth <MAX_DEPTH>': expected a number from 0 to 10000",
         ),
     ];
     for (args, expected) in cases {
@@ -1240,7 +1240,7 @@ fn negative_numbers_are_out_of_range_not_flags() {
     let cases: &[(&[&str], &str)] = &[
         (
             &["render", "--spp", "-1"],
-            "invalid value '-1' for '--spp <SPP>': expected 1 to 1000000",
+            "invalid value '-1' for '--spp <SPP>': expected a number from 1 to 1000000",
         ),
         (
             &["render", "--fps", "-24"],
@@ -1248,15 +1248,15 @@ fn negative_numbers_are_out_of_range_not_flags() {
         ),
         (
             &["render", "--method", "trc", "--trc-max-life", "-5"],
-            "invalid value '-5' for '--trc-max-life <TRC_MAX_LIFE>': expected 1 to 100000",
+            "invalid value '-5' for '--trc-max-life <TRC_MAX_LIFE>': expected a number from 1 to 100000",
         ),
         (
             &["render", "--method", "ic", "--ic-accuracy", "-0.2"],
-            "invalid value '-0.2' for '--ic-accuracy <IC_ACCURACY>': expected 0.001 to 2",
+            "invalid value '-0.2' for '--ic-accuracy <IC_ACCURACY>': expected a number from 0.001 to 2",
         ),
         (
             &["render", "--max-depth", "-3"],
-            "invalid value '-3' for '--max-depth <MAX_DEPTH>': expected 0 to 10000",
+            "invalid value '-3' for '--max-depth <MAX_DEPTH>': expected a number from 0 to 10000",
         ),
         (
             &["render", "--seed", "-1"],
@@ -1435,4 +1435,24 @@ fn render_progress_is_a_line_per_frame_off_a_terminal() {
     let (code, _, stderr) = radcache(&[&args[..], &["-q"]].concat());
     assert_eq!(code, 0, "{stderr}");
     assert!(!stderr.contains(" done ("), "{stderr}");
+}
+
+/// `--threads` is one flag of every command: its help says which commands
+/// render on the worker threads, not only `render`'s ("Worker threads
+/// that render, trace and shade" in `compare --help`).
+#[test]
+fn threads_help_fits_every_command() {
+    for command in [
+        "render", "compare", "bench", "inspect", "serve", "compact", "delete",
+    ] {
+        let (code, stdout, stderr) = radcache(&[command, "--help"]);
+        assert_eq!(code, 0, "{command}: {stderr}");
+        let help = stdout.split_whitespace().collect::<Vec<_>>().join(" ");
+        let threads = &help[help.find("--threads").expect("--threads is listed")..];
+        assert!(
+            threads.contains("(render, bench, serve)") && threads.contains("1 to 1024"),
+            "{command}: {threads}"
+        );
+        assert!(!help.contains("threads that render"), "{command}: {help}");
+    }
 }

@@ -515,3 +515,119 @@ fn a_missing_light_mask_is_noted_on_stderr() {
     assert!(json["rel_rmse_surfaces"].is_number(), "{json}");
     assert!(!stderr.contains("note"), "{stderr}");
 }
+
+/// `radcache compare REF TEST` with `extra` arguments: (status, stdout,
+/// stderr).
+fn run_compare(r: &Path, t: &Path, extra: &[&str]) -> (bool, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .arg("compare")
+        .args([r, t])
+        .args(extra)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+/// An all-black reference has a mean radiance of 0, so the relative
+/// figures are undefined: `null` in `--json`, and a warning on stderr says
+/// why (they were `inf` and `null` without a word). A reference with only
+/// some black frames has overall figures; the warning names those frames,
+/// whose own relative figures are undefined.
+#[test]
+fn a_black_reference_is_warned_about() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let black: Vec<(u32, Film)> = (0..3).map(|k| (k, constant(4, 4, 0.0))).collect();
+    let tests: Vec<(u32, Film)> = black.iter().map(|(k, f)| (*k, offset(f, 0.5))).collect();
+    write_seq(&r, &black);
+    write_seq(&t, &tests);
+    let (ok, stdout, stderr) = run_compare(&r, &t, &["--json"]);
+    assert!(ok, "{stderr}");
+    let json: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    for key in ["rel_rmse", "block_bias", "flicker"] {
+        assert!(json[key].is_null(), "{key}: {json}");
+    }
+    assert!(
+        (json["rmse"].as_f64().unwrap() - 0.5).abs() < 1e-6,
+        "{json}"
+    );
+    assert!(
+        stderr.contains("warning:")
+            && stderr.contains("mean radiance is 0 (all black)")
+            && stderr.contains("rel_rmse, block_bias, flicker")
+            && stderr.contains("rmse is absolute"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
+    // The table too.
+    let (ok, _, table_stderr) = run_compare(&r, &t, &[]);
+    assert!(ok && table_stderr == stderr, "{table_stderr}");
+
+    // Frames 0 and 2 black, frame 1 not: the overall figures stand.
+    write_seq(&r, &[(1, constant(4, 4, 1.0))]);
+    let (ok, stdout, stderr) = run_compare(&r, &t, &["--json"]);
+    assert!(ok, "{stderr}");
+    let json: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert!(
+        json["rel_rmse"].is_number() && json["flicker"].is_number(),
+        "{json}"
+    );
+    assert!(json["per_frame"][0]["rel_rmse"].is_null(), "{json}");
+    assert!(json["per_frame"][1]["rel_rmse"].is_number(), "{json}");
+    assert!(
+        stderr.contains("warning:")
+            && stderr.contains("frames 0000 and 0002")
+            && stderr.contains("mean radiance 0 (all black)"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("0001"), "{stderr}");
+
+    // No black frame: no warning.
+    write_seq(&r, &[(0, constant(4, 4, 1.0)), (2, constant(4, 4, 1.0))]);
+    let (ok, _, stderr) = run_compare(&r, &t, &["--json"]);
+    assert!(ok && stderr.is_empty(), "{stderr}");
+}
+
+/// Two files of one folder that name the same frame (`frame_0001.exr` and
+/// `frame_00001.exr`) are refused, naming both, whichever folder it is:
+/// the frame was counted twice, or its other file said to be missing.
+#[test]
+fn two_files_of_one_frame_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let frames: Vec<(u32, Film)> = (0..3).map(|k| (k, constant(4, 4, 1.0))).collect();
+    write_seq(&r, &frames);
+    write_seq(&t, &frames);
+    fs::copy(r.join("frame_0001.exr"), r.join("frame_00001.exr")).unwrap();
+    for (a, b) in [(&r, &t), (&t, &r)] {
+        let err = compare_dirs(a, b).unwrap_err();
+        let message = err.to_string();
+        for needle in ["ref/frame_0001.exr", "ref/frame_00001.exr", "frame 1"] {
+            assert!(message.contains(needle), "{needle} not in {message}");
+        }
+    }
+    let err = radcache::metrics::list_frames(&r).unwrap_err();
+    assert!(err.to_string().contains("frame_00001.exr"), "{err}");
+
+    // Not ambiguous: what the renderer writes past frame 9999, and a
+    // number written with fewer digits, each alone.
+    fs::remove_file(r.join("frame_00001.exr")).unwrap();
+    fs::rename(r.join("frame_0002.exr"), r.join("frame_2.exr")).unwrap();
+    write_seq(
+        &r,
+        &[(9999, constant(4, 4, 1.0)), (10000, constant(4, 4, 2.0))],
+    );
+    write_seq(
+        &t,
+        &[(9999, constant(4, 4, 1.0)), (10000, constant(4, 4, 2.0))],
+    );
+    assert!(frame_path(&r, 10000, "exr").ends_with("frame_10000.exr"));
+    let report = compare_dirs(&r, &t).unwrap();
+    let numbers: Vec<u32> = report.per_frame.iter().map(|f| f.frame).collect();
+    assert_eq!(numbers, [0, 1, 2, 9999, 10000]);
+    assert_eq!(report.rmse, 0.0);
+}

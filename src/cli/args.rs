@@ -413,35 +413,19 @@ fn parse_job_name(s: &str) -> Result<String, String> {
     Ok(s.to_string())
 }
 
-/// A number flag's parser with the range of its setting ([`limits`]): as
-/// [`Limits::parser`], and a number of the wrong kind that is out of the
-/// range anyway (`--spp -1`, `--trc-max-life 1e12`) is said to be out of
-/// it rather than not to be a number. The flags that take them allow
-/// negative numbers, so that clap hands `-1` here rather than taking it
-/// for a flag.
+/// A number flag's parser with the range of its setting ([`limits`]):
+/// [`Limits::parser`], whose error is the same "expected a number from MIN
+/// to MAX" for a value out of the range (`--spp 0`), of the wrong kind
+/// (`--spp -1`, `--trc-max-life 1e12`) or no number at all. The flags that
+/// take them allow negative numbers, so that clap hands `-1` here rather
+/// than taking it for a flag.
 fn ranged<T>(
     limits: Limits<T>,
 ) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync + 'static
 where
-    T: std::str::FromStr
-        + PartialOrd
-        + std::fmt::Display
-        + Copy
-        + Into<f64>
-        + Send
-        + Sync
-        + 'static,
+    T: std::str::FromStr + PartialOrd + std::fmt::Display + Copy + Send + Sync + 'static,
 {
-    move |text: &str| {
-        limits
-            .parse(text)
-            .map_err(|problem| match text.trim().parse::<f64>() {
-                Ok(v) if v < limits.min.into() || v > limits.max.into() => {
-                    format!("expected {} to {}", limits.min, limits.max)
-                }
-                _ => problem,
-            })
-    }
+    limits.parser()
 }
 
 /// `--seed`: any whole number from 0 to 2⁶⁴ − 1.

@@ -30,9 +30,10 @@ use std::process::ExitCode;
     about = "Global illumination for animations, reusing lighting work across frames"
 )]
 pub struct Cli {
-    /// Worker threads that render, trace and shade, 1 to 1024 [default: one
-    /// per CPU core, or RAYON_NUM_THREADS]. Frames are the same, bit for
-    /// bit, for any count.
+    /// Worker threads for rendering (render, bench, serve), 1 to 1024
+    /// [default: one per CPU core, or RAYON_NUM_THREADS]; the other commands
+    /// take the flag and render nothing. Frames are the same, bit for bit,
+    /// for any count.
     #[arg(long, global = true, allow_negative_numbers = true,
           value_parser = clap::value_parser!(u16).range(1..=MAX_THREADS as i64))]
     pub threads: Option<u16>,
@@ -199,9 +200,15 @@ fn run_bench(args: BenchArgs) -> Result<()> {
     if !report.peak_mem_per_run {
         outln!("(peak memory is the process peak so far, not per run)")?;
     }
-    outln!("\nwrote {}", report.csv.display())?;
-    for chart in &report.charts {
-        outln!("wrote {}", chart.display())?;
+    outln!()?;
+    for written in report.csv.iter().chain(&report.charts) {
+        outln!("wrote {}", written.display())?;
+    }
+    if !report.unwritten.is_empty() {
+        bail!(
+            "the measurements above are whole, but not every file was written:\n  {}",
+            report.unwritten.join("\n  ")
+        );
     }
     Ok(())
 }

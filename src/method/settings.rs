@@ -24,16 +24,17 @@ pub struct Limits<T> {
 
 impl<T: FromStr + PartialOrd + Display + Copy> Limits<T> {
     /// `text` as a `T` within the limits; else what was expected
-    /// ("expected 1 to 64"), for the caller to say whose value it was.
+    /// ("expected a number from 1 to 64", the same words whether `text` is
+    /// out of the range or no number of the kind), for the caller to say
+    /// whose value it was.
     pub fn parse(&self, text: &str) -> Result<T, String> {
-        let v: T = text
-            .parse()
-            .map_err(|_| format!("expected a number from {} to {}", self.min, self.max))?;
+        let expected = || format!("expected a number from {} to {}", self.min, self.max);
+        let v: T = text.parse().map_err(|_| expected())?;
         // Written so that NaN is outside.
         if self.min <= v && v <= self.max {
             Ok(v)
         } else {
-            Err(format!("expected {} to {}", self.min, self.max))
+            Err(expected())
         }
     }
 
@@ -703,6 +704,26 @@ fn movies_setting(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A value outside the range and one that is no number of the
+    /// setting's kind are refused in the same words (`spp=0` said
+    /// "expected 1 to 1000000", `spp=-1` "expected a number from 1 to
+    /// 1000000").
+    #[test]
+    fn every_refused_value_says_the_same() {
+        let want = Err("expected a number from 1 to 1000000".to_string());
+        for text in ["0", "-1", "1000001", "lots", "1.5", ""] {
+            assert_eq!(limits::SPP.parse(text), want, "{text:?}");
+        }
+        assert_eq!(limits::SPP.parse("16"), Ok(16));
+        for text in ["0", "-0.2", "2.5", "NaN", "x"] {
+            assert_eq!(
+                limits::ACCURACY.parse(text),
+                Err("expected a number from 0.001 to 2".to_string()),
+                "{text:?}"
+            );
+        }
+    }
 
     /// What [`named_settings`] shows, given back by name (as a client
     /// posts a job's settings again), makes the same settings: for every
