@@ -829,3 +829,26 @@ fn a_run_spelled_twice_is_refused() {
         );
     }
 }
+
+/// A run at exactly 0 (no flicker) has no place on a log axis: the chart
+/// names it rather than leaving it out without a word, and a chart with no
+/// point says why.
+#[test]
+fn charts_name_runs_at_zero_and_say_why_they_are_empty() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut still = row("trc", "default", 1.0, 0.1);
+    still.flicker = Some(0.0);
+    let mut moving = row("ic", "default", 2.0, 0.1);
+    moving.flicker = Some(0.02);
+    let charts = bench::plot_scene(dir.path(), "s", &[still, moving]).unwrap();
+    let svg = |name: &str| std::fs::read_to_string(dir.path().join(name)).unwrap();
+    assert!(charts.contains(&dir.path().join("s_flicker_vs_time.svg")));
+    assert!(
+        svg("s_flicker_vs_time.svg").contains("not drawn, at 0 (a log axis has none): trc default"),
+        "{}",
+        svg("s_flicker_vs_time.svg")
+    );
+    assert!(!svg("s_error_vs_time.svg").contains("not drawn"));
+    assert!(svg("s_surface_flicker_vs_time.svg")
+        .contains("no data: flicker needs two frames or more, and light masks in the reference"));
+}

@@ -115,46 +115,77 @@ pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<Path
     let surfaces = out.join(format!("{scene}_surface_error_vs_time.svg"));
     let flicker = out.join(format!("{scene}_flicker_vs_time.svg"));
     let surface_flicker = out.join(format!("{scene}_surface_flicker_vs_time.svg"));
+    let chart = |title: &str, y_desc: &str, empty: &'static str| Chart {
+        title: format!("{scene}: {title}"),
+        y_desc: y_desc.into(),
+        empty,
+    };
+    const NO_RUN: &str = "no run has a finite, positive time and value";
+    const ONE_FRAME: &str = "flicker needs two frames or more";
     plot(
         &error,
-        &format!("{scene}: error against time"),
-        "relative RMSE against the reference",
+        &chart(
+            "error against time",
+            "relative RMSE against the reference",
+            NO_RUN,
+        ),
         rows,
         |r| Some(r.rel_rmse),
     )?;
     plot(
         &surfaces,
-        &format!("{scene}: error of lit surfaces against time"),
-        "relative RMSE without the pixels at seen lights",
+        &chart(
+            "error of lit surfaces against time",
+            "relative RMSE without the pixels at seen lights",
+            "the reference has no light masks",
+        ),
         rows,
         |r| r.rel_rmse_surfaces,
     )?;
     plot(
         &flicker,
-        &format!("{scene}: flicker against time"),
-        "flicker (RMS of frame-difference error / mean radiance)",
+        &chart(
+            "flicker against time",
+            "flicker (RMS of frame-difference error / mean radiance)",
+            ONE_FRAME,
+        ),
         rows,
         |r| r.flicker,
     )?;
     plot(
         &surface_flicker,
-        &format!("{scene}: flicker of lit surfaces against time"),
-        "flicker without the pixels at seen lights",
+        &chart(
+            "flicker of lit surfaces against time",
+            "flicker without the pixels at seen lights",
+            "flicker needs two frames or more, and light masks in the reference",
+        ),
         rows,
         |r| r.flicker_surfaces,
     )?;
     Ok(vec![error, surfaces, flicker, surface_flicker])
 }
 
+/// What one chart shows: its caption, its value's name, and why it can be
+/// empty.
+struct Chart {
+    title: String,
+    y_desc: String,
+    empty: &'static str,
+}
+
 /// A chart of `y_of` against time on log axes, one line per method sweep
 /// ([`series`]), written as SVG to `path`.
 fn plot(
     path: &Path,
-    title: &str,
-    y_desc: &str,
+    chart: &Chart,
     rows: &[BenchRow],
     y_of: impl Fn(&BenchRow) -> Option<f64>,
 ) -> Result<()> {
+    let Chart {
+        title,
+        y_desc,
+        empty,
+    } = chart;
     use plotters::prelude::*;
     let draw_err = |e: &dyn std::fmt::Display| anyhow::anyhow!("drawing {}: {e}", path.display());
     let usable = |r: &&BenchRow| {
@@ -211,11 +242,25 @@ fn plot(
             .map_err(|e| draw_err(&e))?;
     } else {
         root.draw(&Text::new(
-            "no data (flicker needs two frames; the surface error, light masks)",
-            (260, 290),
+            format!("no data: {empty}"),
+            (200, 290),
             ("sans-serif", 16),
         ))
         .map_err(|e| draw_err(&e))?;
+    }
+    // A run at exactly 0 (no flicker in a static scene) has no place on a
+    // log axis: named, rather than missing without a word.
+    let at_zero: Vec<String> = (rows.iter())
+        .filter(|r| r.seconds > 0.0 && y_of(r) == Some(0.0))
+        .map(|r| format!("{} {}", r.method, r.settings))
+        .collect();
+    if !at_zero.is_empty() {
+        let text = format!(
+            "not drawn, at 0 (a log axis has none): {}",
+            at_zero.join(", ")
+        );
+        root.draw(&Text::new(text, (90, 40), ("sans-serif", 13)))
+            .map_err(|e| draw_err(&e))?;
     }
     root.present().map_err(|e| draw_err(&e))?;
     Ok(())
