@@ -6,7 +6,11 @@
 
 use crate::bench;
 use crate::cache::gather::Strata;
-use crate::method::settings::{limits, parse_strata, Limits};
+// Number flags parse with their setting's range (`limits::X.parser()`:
+// "expected a number from MIN to MAX" for any value refused) and allow
+// negative numbers, so that clap hands `-1` to the parser rather than
+// taking it for a flag.
+use crate::method::settings::{limits, parse_strata};
 use crate::render::{self, SceneSource};
 use clap::{Args, ValueEnum};
 use std::ops::Range;
@@ -152,7 +156,7 @@ pub struct RenderArgs {
     #[arg(long, default_value = "256x256", value_parser = parse_size)]
     pub size: (u32, u32),
     /// Samples per pixel [default: 16; for ic the samples of direct light and anti-aliasing].
-    #[arg(long, allow_negative_numbers = true, value_parser = ranged(limits::SPP))]
+    #[arg(long, allow_negative_numbers = true, value_parser = limits::SPP.parser())]
     pub spp: Option<u32>,
     /// Frames per second: frame f is rendered at t = f / fps.
     #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, allow_negative_numbers = true, value_parser = parse_fps)]
@@ -170,7 +174,7 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value = "auto")]
     pub backend: BackendArg,
     /// Hard limit on path length in bounces, 0 to 10000 (default: unbounded, Russian roulette).
-    #[arg(long, allow_negative_numbers = true, value_parser = ranged(limits::PATH_DEPTH))]
+    #[arg(long, allow_negative_numbers = true, value_parser = limits::PATH_DEPTH.parser())]
     pub max_depth: Option<u32>,
     #[command(flatten)]
     pub ic: IcArgs,
@@ -202,16 +206,16 @@ pub struct RenderArgs {
 #[derive(Args, Debug)]
 pub struct IcArgs {
     /// Accuracy a: records are used where their weight w ≥ 1/a (Ward 1988 recommends 0.1–0.3).
-    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true, value_parser = ranged(limits::ACCURACY))]
+    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true, value_parser = limits::ACCURACY.parser())]
     pub ic_accuracy: f32,
     /// Hemisphere cells per record, MxN (θ × φ; Ward & Heckbert 1992 use N ≈ πM), at most 65536.
     #[arg(long, default_value = "16x48", value_parser = parse_strata)]
     pub ic_strata: Strata,
     /// Smallest record spacing in pixels (screen-space clamp of the record radius).
-    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true, value_parser = ranged(limits::SPACING_PX))]
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true, value_parser = limits::SPACING_PX.parser())]
     pub ic_min_spacing: f32,
     /// Largest record influence radius in pixels.
-    #[arg(long, default_value_t = 64.0, allow_negative_numbers = true, value_parser = ranged(limits::SPACING_PX))]
+    #[arg(long, default_value_t = 64.0, allow_negative_numbers = true, value_parser = limits::SPACING_PX.parser())]
     pub ic_max_spacing: f32,
     /// Interpolate without the translation and rotation gradients.
     #[arg(long)]
@@ -220,7 +224,7 @@ pub struct IcArgs {
     #[arg(long, value_enum, default_value = "path")]
     pub ic_glossy: GlossyArg,
     /// EAS precision criterion τ: a record's sources are refined until their reflected radiance is within τ of the finer level's (Eq. 13; the paper uses 0.02).
-    #[arg(long, default_value_t = crate::cache::eas::DEFAULT_TAU, allow_negative_numbers = true, value_parser = ranged(limits::EAS_TAU))]
+    #[arg(long, default_value_t = crate::cache::eas::DEFAULT_TAU, allow_negative_numbers = true, value_parser = limits::EAS_TAU.parser())]
     pub ic_eas_tau: f32,
 }
 
@@ -228,10 +232,10 @@ pub struct IcArgs {
 #[derive(Args, Debug)]
 pub struct TrcArgs {
     /// Temporal accuracy a_t: a record is used while w_t = 1/(|τ−1|(t−t0)) ≥ 1/a_t (TRC Eq. 9–10; the paper uses 0.05).
-    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true, value_parser = ranged(limits::TEMPORAL_ACCURACY))]
+    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true, value_parser = limits::TEMPORAL_ACCURACY.parser())]
     pub trc_at: f32,
     /// δt_max: longest life of a record in frames, t − t0 < δt_max (TRC Eq. 11; the paper uses 20 on Cube in a Box, 5 on Spheres).
-    #[arg(long, default_value_t = 20, allow_negative_numbers = true, value_parser = ranged(limits::MAX_LIFE))]
+    #[arg(long, default_value_t = 20, allow_negative_numbers = true, value_parser = limits::MAX_LIFE.parser())]
     pub trc_max_life: u32,
     /// Temporal gradients (TRC §4.5): none, extrapolated from the estimate of E(t0+1) (Eq. 15–17, one pass), or interpolated towards the record's replacement (Eq. 18–20, two passes: frames come out up to δt_max frames of first pass late).
     #[arg(long, value_enum, default_value = "extrapolated")]
@@ -251,13 +255,13 @@ pub struct TrcArgs {
 #[derive(Args, Debug)]
 pub struct TcgArgs {
     /// τ_min of Eq. 2: the share of a record's samples shot again every frame (Tawara et al. 2004; their results use 0.05).
-    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true, value_parser = ranged(limits::SHARE))]
+    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true, value_parser = limits::SHARE.parser())]
     pub tcg_tau_min: f32,
     /// τ_max of Eq. 2: the share shot again of the samples that hit moving objects (their results use 1.0).
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = ranged(limits::SHARE))]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = limits::SHARE.parser())]
     pub tcg_tau_max: f32,
     /// §4.2: a record with more usable neighbours than this is removed as redundant (their example: 10).
-    #[arg(long, default_value_t = 10, allow_negative_numbers = true, value_parser = ranged(limits::MAX_NEIGHBOURS))]
+    #[arg(long, default_value_t = 10, allow_negative_numbers = true, value_parser = limits::MAX_NEIGHBOURS.parser())]
     pub tcg_max_neighbours: u32,
     /// Samples whose light moving lights changed by more than 5 % since they were shot are shot again as those that hit moving objects are (not in the paper, whose Eq. 2 counts only the latter; off, a moving light's indirect light lags by up to 1/τ_min frames).
     #[arg(long, value_enum, default_value = "on")]
@@ -268,25 +272,25 @@ pub struct TcgArgs {
 #[derive(Args, Debug)]
 pub struct MoviesArgs {
     /// Shadow samples per texel: sample points on the lights (the paper's N, §3.1), at most 64.
-    #[arg(long, default_value_t = 16, allow_negative_numbers = true, value_parser = ranged(limits::SHADOW_SAMPLES))]
+    #[arg(long, default_value_t = 16, allow_negative_numbers = true, value_parser = limits::SHADOW_SAMPLES.parser())]
     pub movies_shadow_samples: u32,
     /// Texels across a pixel's footprint (§3.1: at least one texel covers one pixel), 0.01 to 16.
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = ranged(limits::TEXELS_PER_PIXEL))]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true, value_parser = limits::TEXELS_PER_PIXEL.parser())]
     pub movies_texels_per_pixel: f32,
     /// Finest texture, texels along a triangle's edge, at most 1024.
-    #[arg(long, default_value_t = 256, allow_negative_numbers = true, value_parser = ranged(limits::MAX_RESOLUTION))]
+    #[arg(long, default_value_t = 256, allow_negative_numbers = true, value_parser = limits::MAX_RESOLUTION.parser())]
     pub movies_max_resolution: u32,
     /// Memory for the movies' kept static shadows, in MiB (past it the largest give theirs up and find them again).
-    #[arg(long, default_value_t = 512, allow_negative_numbers = true, value_parser = ranged(limits::MEMORY_MIB))]
+    #[arg(long, default_value_t = 512, allow_negative_numbers = true, value_parser = limits::MEMORY_MIB.parser())]
     pub movies_memory_mib: u32,
     /// Global pass: grid spacing as a fraction of the static scene's diagonal, 0.001 to 1.
-    #[arg(long, default_value_t = 1.0 / 32.0, allow_negative_numbers = true, value_parser = ranged(limits::GRID_SPACING))]
+    #[arg(long, default_value_t = 1.0 / 32.0, allow_negative_numbers = true, value_parser = limits::GRID_SPACING.parser())]
     pub movies_spacing: f32,
     /// Global pass: links (gather rays) of a grid vertex, at most 1024.
-    #[arg(long, default_value_t = 128, allow_negative_numbers = true, value_parser = ranged(limits::LINKS))]
+    #[arg(long, default_value_t = 128, allow_negative_numbers = true, value_parser = limits::LINKS.parser())]
     pub movies_links: u32,
     /// Global pass: most bounces of indirect light (Jacobi iterations, at most 64; it stops sooner once they change it by under 0.1 %).
-    #[arg(long, default_value_t = 64, allow_negative_numbers = true, value_parser = ranged(limits::BOUNCES))]
+    #[arg(long, default_value_t = 64, allow_negative_numbers = true, value_parser = limits::BOUNCES.parser())]
     pub movies_bounces: u32,
 }
 
@@ -411,21 +415,6 @@ fn parse_job_name(s: &str) -> Result<String, String> {
         ));
     }
     Ok(s.to_string())
-}
-
-/// A number flag's parser with the range of its setting ([`limits`]):
-/// [`Limits::parser`], whose error is the same "expected a number from MIN
-/// to MAX" for a value out of the range (`--spp 0`), of the wrong kind
-/// (`--spp -1`, `--trc-max-life 1e12`) or no number at all. The flags that
-/// take them allow negative numbers, so that clap hands `-1` here rather
-/// than taking it for a flag.
-fn ranged<T>(
-    limits: Limits<T>,
-) -> impl Fn(&str) -> Result<T, String> + Clone + Send + Sync + 'static
-where
-    T: std::str::FromStr + PartialOrd + std::fmt::Display + Copy + Send + Sync + 'static,
-{
-    limits.parser()
 }
 
 /// `--seed`: any whole number from 0 to 2⁶⁴ − 1.
