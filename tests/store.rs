@@ -1002,28 +1002,42 @@ fn spec_of(name: &str, method: &MethodSettings, without: &[&str]) -> JobSpec {
 
 /// A job stored before a setting existed resumes under the value it ran
 /// with, the setting's serde default, and is refused, naming the setting,
-/// under another: `tcg` before its light rule ran the paper's rule (off),
-/// `trc` before kept paths traced them again (its frames are the same
-/// with them on, so on is the default it resumes with).
+/// under another: `tcg` before its light and occlusion rules ran the
+/// paper's rule (off), `trc` before kept paths traced them again (its
+/// frames are the same with them on, so on is the default it resumes
+/// with).
 #[test]
 fn a_job_stored_before_a_setting_existed_resumes_under_the_value_it_ran() {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(&dir.path().join("db")).unwrap();
-    let tcg = |light_refresh| {
+    let tcg = |light_refresh, occlusion_refresh| {
         MethodSettings::Tcg(TcgSettings {
             light_refresh,
+            occlusion_refresh,
             ..TcgSettings::default()
         })
     };
     let old = store
-        .begin_job(&spec_of("t", &tcg(false), &["light_refresh"]), false)
+        .begin_job(
+            &spec_of(
+                "t",
+                &tcg(false, false),
+                &["light_refresh", "occlusion_refresh"],
+            ),
+            false,
+        )
         .unwrap();
-    let msg = err_text(store.begin_job(&spec_of("t", &tcg(true), &[]), false));
+    let msg = err_text(store.begin_job(&spec_of("t", &tcg(true, false), &[]), false));
     assert!(
         msg.contains("light_refresh: stored false, given true"),
         "{msg}"
     );
-    let resumed = store.begin_job(&spec_of("t", &tcg(false), &[]), false);
+    let msg = err_text(store.begin_job(&spec_of("t", &tcg(false, true), &[]), false));
+    assert!(
+        msg.contains("occlusion_refresh: stored false, given true"),
+        "{msg}"
+    );
+    let resumed = store.begin_job(&spec_of("t", &tcg(false, false), &[]), false);
     assert_eq!(resumed.unwrap().id, old.id);
 
     let trc = MethodSettings::Trc(TrcSettings::default());

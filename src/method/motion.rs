@@ -13,12 +13,11 @@ use glam::Vec3;
 /// An axis-aligned box.
 pub type Aabb = (Vec3, Vec3);
 
-/// What moves in one frame: the bounding boxes of the moving objects, and
-/// which lights do not move (their shadow samples may be kept).
+/// What moves in one frame: the bounding boxes of the moving objects
+/// ([`ObjectBoxes`], which it derefs to), and which lights do not move
+/// (their shadow samples may be kept).
 pub struct Blockers {
-    pub boxes: Vec<Aabb>,
-    /// A BVH over `boxes` where they are many ([`BoxIndex`]).
-    index: Option<BoxIndex>,
+    moving: ObjectBoxes,
     /// Bounding box of the lights that do not move (`None`: there are none).
     pub static_lights: Option<Aabb>,
     static_count: usize,
@@ -29,20 +28,6 @@ pub struct Blockers {
 impl Blockers {
     pub fn new(ctx: &FrameContext) -> Self {
         let snapshot = ctx.snapshot;
-        let mut boxes: Vec<Option<Aabb>> = vec![None; ctx.scene.objects.len()];
-        for (i, tri) in snapshot
-            .triangles
-            .iter()
-            .enumerate()
-            .skip(snapshot.static_count)
-        {
-            let b = &mut boxes[snapshot.tri_object[i] as usize];
-            for p in tri.p {
-                let (lo, hi) = b.get_or_insert((p, p));
-                *lo = lo.min(p);
-                *hi = hi.max(p);
-            }
-        }
         let dynamic = ctx.scene.dynamic_nodes();
         let static_point_light: Vec<bool> =
             ctx.scene.lights.iter().map(|l| !dynamic[l.node]).collect();
@@ -62,10 +47,8 @@ impl Blockers {
                 grow(light.position);
             }
         }
-        let boxes: Vec<Aabb> = boxes.into_iter().flatten().collect();
         Blockers {
-            index: BoxIndex::over(&boxes),
-            boxes,
+            moving: ObjectBoxes::new(ctx, |_| true),
             static_lights,
             static_count: snapshot.static_count,
             static_point_light,
@@ -80,17 +63,120 @@ impl Blockers {
         }
     }
 
-    /// Whether segment `a → b` may pass through a moving object.
-    pub fn segment_may_hit(&self, a: Vec3, b: Vec3) -> bool {
-        match &self.index {
-            Some(index) => index.segment_hits(&self.boxes, a, b),
-            None => self.boxes.iter().any(|&bx| segment_hits_box(a, b, bx)),
-        }
-    }
-
     /// Whether no moving box meets any of a path's `segments`.
     pub fn path_clear(&self, segments: &[[Vec3; 2]]) -> bool {
         segments.iter().all(|&[a, b]| !self.segment_may_hit(a, b))
+    }
+
+    /// Whether triangle `id` belongs to an object that moves.
+    pub fn is_moving_triangle(&self, id: u32) -> bool {
+        id as usize >= self.static_count
+    }
+}
+
+impl std::ops::Deref for Blockers {
+    type Target = ObjectBoxes;
+
+    fn deref(&self) -> &ObjectBoxes {
+        &self.moving
+    }
+}
+
+/// The bounding boxes of some moving objects in one frame (from the
+/// frame's triangles), each with its object, for the segment tests of
+/// work kept from earlier frames.
+pub struct ObjectBoxes {
+    pub boxes: Vec<Aabb>,
+    /// The object of each box.
+    objects: Vec<u32>,
+    /// A BVH over `boxes` where they are many ([`BoxIndex`]).
+    index: Option<BoxIndex>,
+    /// The centre and half the diagonal of the box around them all;
+    /// `None` where there is no box.
+    around: Option<(Vec3, f32)>,
+}
+
+impl ObjectBoxes {
+    /// The boxes of the moving objects that `include` takes (by object).
+    pub fn new(ctx: &FrameContext, include: impl Fn(u32) -> bool) -> Self {
+        let snapshot = ctx.snapshot;
+        let mut boxes: Vec<Option<Aabb>> = vec![None; ctx.scene.objects.len()];
+        for (tri, &object) in
+            (snapshot.triangles.iter().zip(&snapshot.tri_object)).skip(snapshot.static_count)
+        {
+            if !include(object) {
+                continue;
+            }
+            let b = &mut boxes[object as usize];
+            for p in tri.p {
+                let (lo, hi) = b.get_or_insert((p, p));
+                *lo = lo.min(p);
+                *hi = hi.max(p);
+            }
+        }
+        ObjectBoxes::of(
+            (0u32..)
+                .zip(boxes)
+                .filter_map(|(object, b)| Some((object, b?))),
+        )
+    }
+
+    /// The boxes `boxes`, each with its object.
+    pub fn of(boxes: impl IntoIterator<Item = (u32, Aabb)>) -> Self {
+        let (objects, boxes): (Vec<u32>, Vec<Aabb>) = boxes.into_iter().unzip();
+        let around = boxes
+            .iter()
+            .copied()
+            .reduce(|(lo, hi), (l, h)| (lo.min(l), hi.max(h)))
+            .map(|(lo, hi)| ((lo + hi) / 2.0, (hi - lo).length() / 2.0));
+        ObjectBoxes {
+            index: BoxIndex::over(&boxes),
+            boxes,
+            objects,
+            around,
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.boxes.is_empty()
+    }
+
+    /// Whether segment `a → b` may pass through a moving object.
+    pub fn segment_may_hit(&self, a: Vec3, b: Vec3) -> bool {
+        self.segment_may_hit_other_than(a, b, None)
+    }
+
+    /// Whether segment `a → b` may pass through a moving object other
+    /// than `skip` (the one a segment starts on, whose box holds its
+    /// start).
+    pub fn segment_may_hit_other_than(&self, a: Vec3, b: Vec3, skip: Option<u32>) -> bool {
+        let counts = |i: usize| Some(self.objects[i]) != skip;
+        match &self.index {
+            Some(index) => index.segment_hits(&self.boxes, a, b, counts),
+            None => (self.boxes.iter().enumerate())
+                .any(|(i, &bx)| counts(i) && segment_hits_box(a, b, bx)),
+        }
+    }
+
+    /// Whether the ray from `origin` along unit `dir` may pass through a
+    /// moving object other than `skip` before distance `t`; `t = ∞` (a ray
+    /// that hit nothing) is followed to the farthest point of the box
+    /// around them all, whose every point lies within the distance from
+    /// `origin` to its centre plus half its diagonal, and a part in a
+    /// thousand past it, for the rounding of the slab test at the end.
+    pub fn ray_may_hit(&self, origin: Vec3, dir: Vec3, t: f32, skip: Option<u32>) -> bool {
+        let Some((centre, radius)) = self.around else {
+            return false;
+        };
+        let reach = ((origin - centre).length() + radius) * 1.001;
+        self.segment_may_hit_other_than(origin, origin + dir * t.min(reach), skip)
+    }
+
+    /// Whether point `p` lies in the box of a moving object other than
+    /// `skip`.
+    pub fn contains(&self, p: Vec3, skip: Option<u32>) -> bool {
+        (self.boxes.iter().zip(&self.objects))
+            .any(|(&(lo, hi), &o)| Some(o) != skip && lo.cmple(p).all() && p.cmple(hi).all())
     }
 
     /// Whether any moving object's box meets box `b`.
@@ -98,11 +184,6 @@ impl Blockers {
         self.boxes
             .iter()
             .any(|&(lo, hi)| lo.cmple(b.1).all() && b.0.cmple(hi).all())
-    }
-
-    /// Whether triangle `id` belongs to an object that moves.
-    pub fn is_moving_triangle(&self, id: u32) -> bool {
-        id as usize >= self.static_count
     }
 }
 
@@ -145,18 +226,27 @@ impl BoxIndex {
         Some(BoxIndex { bvh })
     }
 
-    /// Whether segment `a → b` meets one of `boxes` (the ones indexed).
-    fn segment_hits(&self, boxes: &[Aabb], a: Vec3, b: Vec3) -> bool {
+    /// Whether segment `a → b` meets one of `boxes` (the ones indexed)
+    /// that `counts` (by index).
+    fn segment_hits(
+        &self,
+        boxes: &[Aabb],
+        a: Vec3,
+        b: Vec3,
+        counts: impl Fn(usize) -> bool,
+    ) -> bool {
         let d = b - a;
         if !(a.is_finite() && d.is_finite() && d != Vec3::ZERO) {
-            return boxes.iter().any(|&bx| segment_hits_box(a, b, bx));
+            return (boxes.iter().enumerate())
+                .any(|(i, &bx)| counts(i) && segment_hits_box(a, b, bx));
         }
         // `+ 0.0`: obvhs misreads −0.0 components (`accel::to_obvhs_ray`).
         let ray =
             obvhs::ray::Ray::new(a.into(), glam::Vec3A::from(d) + glam::Vec3A::ZERO, 0.0, 1.0);
         let indices = &self.bvh.primitive_indices;
         !self.bvh.ray_traverse_miss(ray, |_, i| {
-            if segment_hits_box(a, b, boxes[indices[i] as usize]) {
+            let i = indices[i] as usize;
+            if counts(i) && segment_hits_box(a, b, boxes[i]) {
                 0.0
             } else {
                 f32::INFINITY
@@ -237,7 +327,11 @@ mod tests {
         let (mut hits, mut misses) = (0, 0);
         for (a, b) in segments {
             let plain = boxes.iter().any(|&bx| segment_hits_box(a, b, bx));
-            assert_eq!(index.segment_hits(&boxes, a, b), plain, "{a} → {b}");
+            assert_eq!(
+                index.segment_hits(&boxes, a, b, |_| true),
+                plain,
+                "{a} → {b}"
+            );
             if plain {
                 hits += 1;
             } else {

@@ -231,6 +231,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("tau_max", "1"),
             ("max_neighbours", "10"),
             ("light_refresh", "0"),
+            ("occlusion_refresh", "1"),
             ("spp", "4"),
             ("accuracy", "0.2"),
             ("strata", "16x48"),
@@ -480,6 +481,7 @@ pub fn named_settings(settings: &MethodSettings) -> serde_json::Map<String, serd
             out.number("tau_max", s.tau_max);
             out.number("max_neighbours", s.max_neighbours);
             out.flag("light_refresh", s.light_refresh);
+            out.flag("occlusion_refresh", s.occlusion_refresh);
             out.ic(&s.ic);
             out.flag("gradients", s.ic.gradients);
         }
@@ -670,6 +672,7 @@ fn tcg_setting(method: &str, key: &str, v: &str, s: &mut TcgSettings) -> Result<
         "tau_max" => s.tau_max = value(method, key, v, limits::SHARE)?,
         "max_neighbours" => s.max_neighbours = value(method, key, v, limits::MAX_NEIGHBOURS)?,
         "light_refresh" => s.light_refresh = flag(method, key, v)?,
+        "occlusion_refresh" => s.occlusion_refresh = flag(method, key, v)?,
         _ => {
             return Ok(ic_setting(method, key, v, &mut s.ic)?
                 || glossy_setting(method, key, v, &mut s.ic)?)

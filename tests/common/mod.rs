@@ -247,16 +247,25 @@ pub fn add_moving_block(
 /// translation key. Before `k` the block bleeds red onto the back and left
 /// walls and the floor and shadows their indirect light.
 pub fn jumping_block_room(k: u32, fps: f32) -> Scene {
+    block_room_jumping(k, fps, [Vec4::ZERO, Vec4::new(0.0, -20.0, 0.0, 0.0)])
+}
+
+/// [`jumping_block_room`] the other way: the block jumps into the corner
+/// from under the floor at frame `k`.
+pub fn arriving_block_room(k: u32, fps: f32) -> Scene {
+    block_room_jumping(k, fps, [Vec4::new(0.0, -20.0, 0.0, 0.0), Vec4::ZERO])
+}
+
+/// The lit room with the red block of [`jumping_block_room`] translated by
+/// `before` until frame `k` and by `after` from it.
+fn block_room_jumping(k: u32, fps: f32, [before, after]: [Vec4; 2]) -> Scene {
     let mut s = lit_room(None, fps);
     add_moving_block(
         &mut s,
         (Vec3::new(-0.95, 0.0, -0.95), Vec3::new(-0.2, 1.0, -0.2)),
         Vec3::new(0.9, 0.1, 0.1),
         Interpolation::Step,
-        (
-            vec![0.0, (k as f32 - 0.5) / fps],
-            vec![Vec4::ZERO, Vec4::new(0.0, -20.0, 0.0, 0.0)],
-        ),
+        (vec![0.0, (k as f32 - 0.5) / fps], vec![before, after]),
     );
     s
 }

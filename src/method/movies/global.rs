@@ -343,7 +343,7 @@ struct Link {
     /// What it covers, which motion must not cross for it to stay valid:
     /// the segment from `from`, its origin, to `to`, its hit; where it hit
     /// nothing, the whole ray, `to` then a point on it a unit out
-    /// ([`LinkReach`]).
+    /// ([`may_cross`]).
     from: Vec3,
     to: Vec3,
     /// Whether it landed on the side of a surface the solution is for
@@ -674,7 +674,6 @@ impl GlobalPass {
     ) -> Vec<(usize, u32, u32)> {
         let sides = &self.sides;
         let turned_triangle = |id: u32| turned[sides.component(id)];
-        let reach = &LinkReach::new(blockers);
         self.vertices
             .par_iter()
             .enumerate()
@@ -691,7 +690,7 @@ impl GlobalPass {
                         || (link.hit.is_hit() && turned_triangle(link.hit.triangle))
                         || !link.traced
                         || (link.hit.is_hit() && blockers.is_moving_triangle(link.hit.triangle))
-                        || (link.live && reach.may_cross(blockers, link));
+                        || (link.live && may_cross(blockers, link));
                     stale.then_some((index, i as u32, k))
                 })
             })
@@ -945,45 +944,18 @@ impl GlobalPass {
     }
 }
 
-/// How far along its ray a link that hit nothing must be followed, in one
-/// frame, for the moving objects' boxes it may cross: to the farthest
-/// point of the box around them all, whose every point lies within the
-/// distance from the ray's origin to the box's centre plus half its
-/// diagonal. (A link that hit nothing kept a segment of twice the scene's
-/// diagonal in the frame it was traced: an object that later moved
-/// beyond that, into the link's ray, was not seen to cross it, and the
-/// kept link missed where one traced again hit.)
-struct LinkReach {
-    /// The centre and half the diagonal of the moving objects' box;
-    /// `None` where nothing moves.
-    around: Option<(Vec3, f32)>,
-}
-
-impl LinkReach {
-    fn new(blockers: &ShadowBlockers) -> Self {
-        let around = blockers
-            .boxes
-            .iter()
-            .copied()
-            .reduce(|(lo, hi), (l, h)| (lo.min(l), hi.max(h)))
-            .map(|(lo, hi)| ((lo + hi) / 2.0, (hi - lo).length() / 2.0));
-        LinkReach { around }
+/// Whether a moving object's box may cross what `link` covers. A link
+/// that hit nothing is followed as far as any box reaches
+/// ([`ray_may_hit`](crate::method::motion::ObjectBoxes::ray_may_hit)).
+/// (It kept a segment of twice the scene's diagonal once: an object that
+/// later moved beyond that, into the link's ray, was not seen to cross
+/// it, and the kept link missed where one traced again hit.)
+fn may_cross(blockers: &ShadowBlockers, link: &Link) -> bool {
+    if link.hit.is_hit() {
+        return blockers.segment_may_hit(link.from, link.to);
     }
-
-    /// Whether a moving object's box may cross what `link` covers.
-    fn may_cross(&self, blockers: &ShadowBlockers, link: &Link) -> bool {
-        if link.hit.is_hit() {
-            return blockers.segment_may_hit(link.from, link.to);
-        }
-        let Some((centre, radius)) = self.around else {
-            return false;
-        };
-        // Past the box's far side by a part in a thousand, for the
-        // rounding of the slab test at the end point.
-        let t = ((link.from - centre).length() + radius) * 1.001;
-        let dir = (link.to - link.from).normalize_or_zero();
-        blockers.segment_may_hit(link.from, link.from + dir * t)
-    }
+    let dir = (link.to - link.from).normalize_or_zero();
+    blockers.ray_may_hit(link.from, dir, f32::INFINITY, None)
 }
 
 /// Barycentrics `(u, v)` moved a thousandth of the way to the centroid.

@@ -19,7 +19,9 @@
 //!    is removed, and hidden from the counts of the records after it;
 //! 2. *update* (§3.2–3.3): each record shoots again `N_update` cells
 //!    (Eq. 2, `select::cells_to_update`; departure: its `x` also counts
-//!    the samples whose light moving lights changed, `stale`), drawn
+//!    the samples whose light moving lights changed, `stale`, and, with
+//!    `occlusion_refresh` on, those whose path an object moved into,
+//!    `crossed`), drawn
 //!    without repetition with
 //!    probability ∝ `2^age` (`select::pick_cells`), each with a new
 //!    jittered direction in its cell; its other samples age by a frame.
@@ -51,6 +53,7 @@
 //! whose light changed (`benches/RESULTS.md`, "`tcg` against `ic` and
 //! `trc`").
 
+mod crossed;
 mod select;
 mod stale;
 mod state;
@@ -105,6 +108,12 @@ pub struct TcgSettings {
     /// (departure, on by default: the module `stale`); off, `tcg` is the paper's.
     #[serde(default = "light_refresh_default")]
     pub light_refresh: bool,
+    /// Whether the samples whose path an object moved into count in Eq.
+    /// 2's `x` as those that hit moving objects do, and records a moved
+    /// object buried are dropped (departure, off by default: the module
+    /// `crossed`, which says what it costs); off, as the paper has it.
+    #[serde(default = "occlusion_refresh_default")]
+    pub occlusion_refresh: bool,
 }
 
 /// [`TcgSettings::light_refresh`] for settings stored before it existed:
@@ -112,6 +121,12 @@ pub struct TcgSettings {
 /// frames it would have made (given `--tcg-light-refresh off`), and is
 /// refused with the rule on.
 fn light_refresh_default() -> bool {
+    false
+}
+
+/// [`TcgSettings::occlusion_refresh`] for settings stored before it
+/// existed: off, for the reason of [`light_refresh_default`].
+fn occlusion_refresh_default() -> bool {
     false
 }
 
@@ -123,8 +138,27 @@ impl Default for TcgSettings {
             tau_max: 1.0,
             max_neighbours: 10,
             light_refresh: true,
+            occlusion_refresh: false,
         }
     }
+}
+
+/// `alive` without the records `marked`, whose ids are added to
+/// `removed`.
+fn without_marked(
+    alive: Vec<(TcgRecord, (GatherPoint, Frame))>,
+    marked: Vec<bool>,
+    removed: &mut Vec<RecordId>,
+) -> Vec<(TcgRecord, (GatherPoint, Frame))> {
+    let mut kept = Vec::with_capacity(alive.len());
+    for (r, is_marked) in alive.into_iter().zip(marked) {
+        if is_marked {
+            removed.push(r.0.record.id);
+        } else {
+            kept.push(r);
+        }
+    }
+    kept
 }
 
 /// A record with its samples (§3.1).
@@ -306,10 +340,12 @@ impl TemporallyCoherentGathering {
 
     /// Step 1 of the module documentation: the records that go on into
     /// frame `ctx.frame`, moved to it, each with its pose there. The ids
-    /// of those that do not are added to `removed`.
+    /// of those that do not are added to `removed`: unused, buried by a
+    /// `moved` object (`crossed`) or redundant.
     fn survivors(
         &mut self,
         ctx: &FrameContext,
+        moved: Option<&crossed::MovedObjects>,
         stats: &mut FrameStats,
         removed: &mut Vec<RecordId>,
     ) -> Vec<(TcgRecord, (GatherPoint, Frame))> {
@@ -326,6 +362,10 @@ impl TemporallyCoherentGathering {
             r.record.normal = pose.0.normal;
             alive.push((r, pose));
         }
+        if let Some(moved) = moved {
+            let buried = moved.buried(ctx, alive.iter().map(|(r, (point, _))| (r, point)));
+            alive = without_marked(alive, buried, removed);
+        }
         let points: Vec<&IrradianceRecord> = alive.iter().map(|(r, _)| &r.record).collect();
         let redundant = redundant(
             &points,
@@ -333,14 +373,7 @@ impl TemporallyCoherentGathering {
             self.settings.max_neighbours,
             scene_bounds(ctx),
         );
-        let mut kept = Vec::with_capacity(alive.len());
-        for (r, is_redundant) in alive.into_iter().zip(redundant) {
-            if is_redundant {
-                removed.push(r.0.record.id);
-            } else {
-                kept.push(r);
-            }
-        }
+        let kept = without_marked(alive, redundant, removed);
         stats.records_dropped = removed.len() as u64;
         kept
     }
@@ -351,6 +384,7 @@ impl TemporallyCoherentGathering {
         &mut self,
         ctx: &FrameContext,
         alive: Vec<(TcgRecord, (GatherPoint, Frame))>,
+        moved: Option<&crossed::MovedObjects>,
         dynamic: &[bool],
         stats: &mut FrameStats,
     ) -> Vec<TcgRecord> {
@@ -363,11 +397,14 @@ impl TemporallyCoherentGathering {
         };
         let picks: Vec<Vec<u32>> = alive
             .par_iter()
-            .map(|(r, _)| {
-                let stale: Vec<bool> = match &staleness {
+            .map(|(r, pose)| {
+                let mut stale: Vec<bool> = match &staleness {
                     Some(l) => l.stale_cells(r, strata),
                     None => Vec::new(),
                 };
+                if let Some(moved) = moved {
+                    moved.mark(r, pose, strata, &mut stale);
+                }
                 let is_stale = |cell: usize| stale.get(cell).copied().unwrap_or(false);
                 let count = select::cells_to_update(&self.settings, &r.samples, is_stale);
                 let mut rng = Rng::new(self.key(ctx, streams::RECORD_PICK, r, 0));
@@ -529,9 +566,12 @@ impl Method for TemporallyCoherentGathering {
         };
         let mut removed = Vec::new();
         let start = Instant::now();
-        let alive = self.survivors(ctx, &mut stats, &mut removed);
+        let moved = (self.settings.occlusion_refresh)
+            .then(|| crossed::MovedObjects::of(ctx))
+            .flatten();
+        let alive = self.survivors(ctx, moved.as_ref(), &mut stats, &mut removed);
         let dynamic = ctx.scene.dynamic_objects();
-        let mut records = self.update(ctx, alive, &dynamic, &mut stats);
+        let mut records = self.update(ctx, alive, moved.as_ref(), &dynamic, &mut stats);
         stats.records_reused = records.len() as u64;
         stats
             .phase_seconds

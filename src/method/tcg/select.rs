@@ -7,8 +7,9 @@ use crate::sampling::Rng;
 use crate::store::rgbe::PackedSample;
 
 /// Eq. 2: `N_update(x) = (τ_max − τ_min)·x + τ_min·N`, `x` the samples that
-/// hit moving objects or whose light moving lights changed (`stale`, by
-/// cell; a departure: see [`super::stale`]), `N` all of them; rounded up
+/// hit moving objects, or whose light moving lights changed or whose path
+/// an object moved into (`stale`, by cell; departures: see [`super::stale`]
+/// and [`super::crossed`]), `N` all of them; rounded up
 /// (so that any `τ_min > 0` refreshes every sample in time) and at most
 /// `N`.
 pub(super) fn cells_to_update(
@@ -40,8 +41,9 @@ pub(super) fn cells_to_update(
 /// is ranked by its logarithm, `age·ln 2 − ln(−ln u)` (the same order),
 /// since `2^age` leaves `f32` past an age of 127.
 ///
-/// The `first` cells (those moving lights left stale, [`super::stale`]:
-/// counted in Eq. 2's `x` to be shot again) are drawn before the others,
+/// The `first` cells (those moving lights or objects left stale,
+/// [`super::stale`], [`super::crossed`]: counted in Eq. 2's `x` to be shot
+/// again) are drawn before the others,
 /// by age among themselves; the rest of the count by age among the others.
 pub(super) fn pick_cells(
     samples: &[PackedSample],
