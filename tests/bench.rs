@@ -852,3 +852,212 @@ fn charts_name_runs_at_zero_and_say_why_they_are_empty() {
     assert!(svg("s_surface_flicker_vs_time.svg")
         .contains("no data: flicker needs two frames or more, and light masks in the reference"));
 }
+
+/// A bench stopped between two runs (its stop flag set as the first run
+/// finishes, as Ctrl-C sets it) writes `bench.csv` and the charts of the
+/// runs it finished, names the others in order, and starts none of them.
+/// The `bench.csv` and charts an earlier bench left are gone, also those
+/// of the scene it reached no run of.
+#[test]
+fn a_stopped_bench_writes_the_runs_it_finished_and_names_the_others() {
+    use std::sync::atomic::Ordering;
+    let dir = tempfile::tempdir().unwrap();
+    let earlier = ["bench.csv", "spheres_error_vs_time.svg"];
+    for file in earlier {
+        std::fs::write(dir.path().join(file), "an earlier bench's").unwrap();
+    }
+    let opts = BenchOptions {
+        scenes: vec![
+            SceneSource::Builtin("cube-in-box".into()),
+            SceneSource::Builtin("spheres".into()),
+        ],
+        ..tiny_bench(dir.path(), &["path:spp=1,2"])
+    };
+    let mut finished = Vec::new();
+    let report = bench::run_with(&opts, &mut |row| {
+        finished.push(row.settings.clone());
+        opts.stop.store(true, Ordering::Relaxed);
+    })
+    .unwrap();
+    assert_eq!(finished, ["spp=1"]);
+    assert_eq!(report.rows.len(), 1);
+    assert_eq!(
+        report.unfinished,
+        [
+            "cube-in-box path spp=2",
+            "spheres path spp=1",
+            "spheres path spp=2"
+        ]
+    );
+    let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 2, "{csv}");
+    assert_eq!(lines[0], CSV_HEADER);
+    assert!(lines[1].starts_with("cube-in-box,path,spp=1,"), "{csv}");
+    assert_eq!(report.charts.len(), 4, "{:?}", report.charts);
+    assert!(report.charts.iter().all(|c| c.is_file()));
+    assert!(!dir.path().join("spheres_error_vs_time.svg").exists());
+    // Neither the next run nor the next scene's reference was started.
+    assert!(!dir.path().join("runs/cube-in-box/path-spp=2").exists());
+    assert!(!dir.path().join("reference/spheres").exists());
+}
+
+/// A bench stopped before it starts renders nothing and writes a
+/// `bench.csv` of no run in place of an earlier bench's.
+#[test]
+fn a_bench_stopped_before_it_starts_renders_nothing() {
+    use std::sync::atomic::Ordering;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("bench.csv"), "an earlier bench's").unwrap();
+    let opts = tiny_bench(dir.path(), &["path:spp=1"]);
+    opts.stop.store(true, Ordering::Relaxed);
+    let report = bench::run(&opts).unwrap();
+    assert!(report.rows.is_empty() && report.charts.is_empty());
+    assert_eq!(report.unfinished, ["cube-in-box path spp=1"]);
+    let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
+    assert_eq!(csv.trim_end(), CSV_HEADER);
+    assert!(!dir.path().join("reference").exists());
+}
+
+/// Runs `radcache bench ARGS --out OUT -q`, sends it one SIGINT (Ctrl-C)
+/// once `started` exists under OUT, and returns how it ended and how long
+/// it took after the signal.
+#[cfg(unix)]
+fn interrupt_bench(args: &[&str], out: &std::path::Path, started: &str) -> Interrupted {
+    use std::time::{Duration, Instant};
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .arg("bench")
+        .args(args)
+        .args(["-q", "--out"])
+        .arg(out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !out.join(started).exists() {
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no {started} under {out:?}"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let pid = child.id().to_string();
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &pid])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let signalled = Instant::now();
+    let output = child.wait_with_output().unwrap();
+    Interrupted {
+        status: output.status.code(),
+        stdout: String::from_utf8_lossy(&output.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&output.stderr).into_owned(),
+        after: signalled.elapsed(),
+    }
+}
+
+/// How a bench that [`interrupt_bench`] stopped ended: its exit status,
+/// its output, and how long after the signal it stopped.
+#[cfg(unix)]
+struct Interrupted {
+    status: Option<i32>,
+    stdout: String,
+    stderr: String,
+    after: std::time::Duration,
+}
+
+/// Ctrl-C during a run abandons it in the middle of its frame (one frame
+/// of it takes about a minute on 2 cores), prints the table of the run
+/// finished before and writes it to `bench.csv` in place of an earlier
+/// bench's, says how many finished and which did not, not as an error,
+/// and exits with status 130.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_during_a_run_keeps_the_runs_finished() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("bench.csv"), "an earlier bench's").unwrap();
+    let args = [
+        "--size",
+        "16x16",
+        "--frames",
+        "0..2",
+        "--reference-spp",
+        "2",
+        "--backends",
+        "cpu",
+        "--methods",
+        "path:spp=1,100000",
+    ];
+    // The second run's folder is made once the first run is measured.
+    let Interrupted {
+        status,
+        stdout,
+        stderr,
+        after,
+    } = interrupt_bench(&args, dir.path(), "runs/cube-in-box/path-spp=100000");
+    assert_eq!(status, Some(130), "{stderr}");
+    assert!(!stderr.contains("error:"), "{stderr}");
+    assert!(stderr.contains("Ctrl-C again to stop now"), "{stderr}");
+    assert!(
+        stderr.lines().any(|l| l
+            .starts_with("interrupted: 1 of 2 runs finished (measured above and in")
+            && l.ends_with("; not finished: cube-in-box path spp=100000")),
+        "{stderr}"
+    );
+    assert!(after.as_secs() < 30, "stopped {after:?} after Ctrl-C");
+    assert!(
+        stdout.contains("spp=1 ") && !stdout.contains("spp=100000"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("bench.csv"), "{stdout}");
+    let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 2, "{csv}");
+    assert!(lines[1].starts_with("cube-in-box,path,spp=1,"), "{csv}");
+    // The frame abandoned is not written.
+    assert!(!dir
+        .path()
+        .join("runs/cube-in-box/path-spp=100000/frame_0000.exr")
+        .exists());
+}
+
+/// Ctrl-C during the reference abandons it, leaving no `reference.json`
+/// (the next bench renders it again), and the bench ends with no run
+/// finished: status 130, no table, a `bench.csv` of no run.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_during_the_reference_finishes_no_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "--size",
+        "16x16",
+        "--frames",
+        "0..2",
+        "--reference-spp",
+        "100000",
+        "--methods",
+        "path:spp=1",
+    ];
+    let Interrupted {
+        status,
+        stdout,
+        stderr,
+        after,
+    } = interrupt_bench(&args, dir.path(), "reference/cube-in-box");
+    assert_eq!(status, Some(130), "{stderr}");
+    assert!(
+        stderr.contains("interrupted: 0 of 1 runs finished")
+            && stderr.contains("not finished: cube-in-box path spp=1"),
+        "{stderr}"
+    );
+    assert!(after.as_secs() < 30, "stopped {after:?} after Ctrl-C");
+    assert!(!stdout.contains("rel_rmse"), "{stdout}");
+    let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
+    assert_eq!(csv.trim_end(), CSV_HEADER);
+    let reference = dir.path().join("reference/cube-in-box");
+    assert!(!reference.join("reference.json").exists());
+    assert!(!reference.join("frame_0000.exr").exists());
+    assert!(!dir.path().join("runs").exists());
+}

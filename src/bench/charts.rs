@@ -109,12 +109,16 @@ fn sweep_of(settings: &str) -> (&str, &str) {
     settings.rsplit_once('=').unwrap_or(("", ""))
 }
 
+/// The paths of the four charts of `scene` in `out`: error, surface
+/// error, flicker, surface flicker.
+pub(super) fn chart_paths(out: &Path, scene: &str) -> [PathBuf; 4] {
+    ["error", "surface_error", "flicker", "surface_flicker"]
+        .map(|what| out.join(format!("{scene}_{what}_vs_time.svg")))
+}
+
 /// Writes the four charts of one scene; returns their paths.
 pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<PathBuf>> {
-    let error = out.join(format!("{scene}_error_vs_time.svg"));
-    let surfaces = out.join(format!("{scene}_surface_error_vs_time.svg"));
-    let flicker = out.join(format!("{scene}_flicker_vs_time.svg"));
-    let surface_flicker = out.join(format!("{scene}_surface_flicker_vs_time.svg"));
+    let [error, surfaces, flicker, surface_flicker] = chart_paths(out, scene);
     let chart = |title: &str, y_desc: &str, empty: &'static str| Chart {
         title: format!("{scene}: {title}"),
         y_desc: y_desc.into(),

@@ -24,6 +24,11 @@
 //! `DIR/<scene>_surface_error_vs_time.svg` and
 //! `DIR/<scene>_surface_flicker_vs_time.svg` chart them.
 //!
+//! A bench begins by removing the `bench.csv` and charts an earlier bench
+//! left in `DIR`, so that none describes runs this one did not make; one
+//! stopped early ([`BenchOptions::stop`]) writes them for the runs it
+//! finished.
+//!
 //! # Parts
 //! - `methods`: the methods and settings `--methods` accepts;
 //! - `reference`: a scene's converged reference and its light masks;
@@ -51,12 +56,14 @@ pub use report::{
     interpolate_time_at_error, temporal_pairs, temporal_text, to_csv, to_table, BenchRow,
     EqualError, ErrorMeasure, CSV_HEADER,
 };
-pub use run::{peak_memory_mb, reset_peak_memory, run, BenchReport};
+pub use run::{peak_memory_mb, reset_peak_memory, run, run_with, BenchReport};
 
 use crate::render::{BackendChoice, SceneSource};
 use anyhow::{bail, Result};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 
 // ---------------------------------------------------------------- options
 
@@ -97,6 +104,11 @@ pub struct BenchOptions {
     /// triangles) over what this process may take (`radcache bench`
     /// without `--no-memory-check`).
     pub check_memory: bool,
+    /// Set (from any thread: Ctrl-C in `radcache bench`) to stop the bench
+    /// early: the run or reference in progress is abandoned mid-frame, and
+    /// [`run()`] returns the runs finished before, with their CSV and charts,
+    /// naming the others ([`BenchReport::unfinished`]).
+    pub stop: Arc<AtomicBool>,
 }
 
 /// The methods of the default run: every method, each as a sweep so that
@@ -139,6 +151,7 @@ impl Default for BenchOptions {
             store_size: false,
             backends: vec![BackendChoice::Auto],
             check_memory: true,
+            stop: Arc::default(),
         }
     }
 }

@@ -107,6 +107,8 @@ pub(super) fn ensure_reference(opts: &BenchOptions, scene: &BenchScene, dir: &Pa
         render::make_backend(BackendChoice::Auto)?,
         frame_settings(opts, true),
     );
+    // Stopped, it leaves no reference.json: the next bench renders it again.
+    renderer.set_abandon_flag(opts.stop.clone());
     let what = format!("reference {}", scene.label);
     render_frames(&mut renderer, opts.frames.clone(), dir, &what, opts.quiet)?;
     for frame in opts.frames.clone() {

@@ -1,7 +1,7 @@
 //! Running a bench: each scene's reference, then every run on every
 //! backend, measured against it.
 
-use super::charts::plot_scene;
+use super::charts::{chart_paths, plot_scene};
 use super::reference::ensure_reference;
 use super::{sanitize, scene_label, to_csv, BenchOptions, BenchRow, MethodSweep, RunSpec};
 use crate::backend::gpu::{AdapterPolicy, GpuBackend};
@@ -18,6 +18,7 @@ use crate::system_memory;
 use anyhow::{bail, Context, Result};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 /// Peak resident set size of this process in MB (`VmHWM` of
@@ -53,10 +54,79 @@ pub struct BenchReport {
     pub unwritten: Vec<String>,
     /// Whether peak memory is per run (true) or the process peak so far.
     pub peak_mem_per_run: bool,
+    /// The runs not finished, in the order they would have rendered, when
+    /// [`BenchOptions::stop`] stopped the bench (the first may have been
+    /// abandoned half rendered): `<scene> <method> <settings>`, with ` on
+    /// <backend>` when the bench has several. Empty when it ran them all.
+    pub unfinished: Vec<String>,
 }
 
 /// Runs the whole bench: references, runs, CSV, charts.
 pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
+    run_with(opts, &mut |_| {})
+}
+
+/// [`run`], calling `after_run` with each run's row as the run finishes
+/// (before the next starts: setting [`BenchOptions::stop`] there stops the
+/// bench between two runs).
+pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Result<BenchReport> {
+    let labels = check_bench(opts)?;
+    std::fs::create_dir_all(&opts.out)
+        .with_context(|| format!("cannot create output directory {}", opts.out.display()))?;
+    remove_earlier_outputs(&opts.out, &labels)?;
+    let per_run = reset_peak_memory();
+    let mut rows = Vec::new();
+    let mut charts = Vec::new();
+    // A file that cannot be written (a full disk, a folder in its place)
+    // does not lose the measurements: they are still printed.
+    let mut unwritten = Vec::new();
+    for (source, label) in opts.scenes.iter().zip(&labels) {
+        let scene = BenchScene {
+            source,
+            label,
+            scene: source.load()?,
+        };
+        let first = rows.len();
+        let stopped = match bench_scene(opts, &scene, per_run, &mut rows, after_run) {
+            Ok(()) => false,
+            Err(e) if e.is::<Stopped>() => true,
+            Err(e) => return Err(e),
+        };
+        // Charts of the runs finished only: none for a scene with none.
+        if rows.len() > first {
+            match plot_scene(&opts.out, label, &rows[first..]) {
+                Ok(written) => charts.extend(written),
+                Err(e) => unwritten.push(format!("{e:#}")),
+            }
+        }
+        if stopped {
+            break;
+        }
+    }
+    let csv = opts.out.join("bench.csv");
+    let csv = match std::fs::write(&csv, to_csv(&rows)) {
+        Ok(()) => Some(csv),
+        Err(e) => {
+            unwritten.push(format!("cannot write {}: {e}", csv.display()));
+            None
+        }
+    };
+    // Rows come in the order of the runs, so those after them are the
+    // ones a stop left unfinished.
+    let unfinished = run_names(opts, &labels).split_off(rows.len());
+    Ok(BenchReport {
+        rows,
+        csv,
+        charts,
+        unwritten,
+        peak_mem_per_run: per_run,
+        unfinished,
+    })
+}
+
+/// Refuses, before anything renders, a bench that cannot run or would
+/// fail on the way; returns the scenes' labels.
+fn check_bench(opts: &BenchOptions) -> Result<Vec<String>> {
     if opts.scenes.is_empty() {
         bail!("no scenes to bench");
     }
@@ -119,42 +189,73 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
         let triangles = memory::scene_triangles(&source.load()?);
         check_scene_memory(opts, label, triangles, available)?;
     }
-    std::fs::create_dir_all(&opts.out)
-        .with_context(|| format!("cannot create output directory {}", opts.out.display()))?;
-    let per_run = reset_peak_memory();
-    let mut rows = Vec::new();
-    let mut charts = Vec::new();
-    // A file that cannot be written (a full disk, a folder in its place)
-    // does not lose the measurements: they are still printed.
-    let mut unwritten = Vec::new();
-    for (source, label) in opts.scenes.iter().zip(&labels) {
-        let scene = BenchScene {
-            source,
-            label,
-            scene: source.load()?,
-        };
-        let scene_rows = bench_scene(opts, &scene, per_run)?;
-        match plot_scene(&opts.out, label, &scene_rows) {
-            Ok(written) => charts.extend(written),
-            Err(e) => unwritten.push(format!("{e:#}")),
+    Ok(labels)
+}
+
+/// Removes the `bench.csv` in `out`, and the charts of the scenes
+/// `labels`, that an earlier bench wrote: beside this bench's runs they
+/// would describe runs it did not make, if it is stopped before writing
+/// its own (a second Ctrl-C), or, for a scene it finishes no run of, at
+/// all. A folder in a file's place is left, to fail when written.
+fn remove_earlier_outputs(out: &Path, labels: &[String]) -> Result<()> {
+    let charts = labels.iter().flat_map(|l| chart_paths(out, l));
+    for path in std::iter::once(out.join("bench.csv")).chain(charts) {
+        let is_dir = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir());
+        match std::fs::remove_file(&path) {
+            Err(e) if !is_dir && e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(e).with_context(|| {
+                    format!(
+                        "cannot remove {}, which an earlier bench wrote; nothing was rendered",
+                        path.display()
+                    )
+                });
+            }
+            _ => {}
         }
-        rows.extend(scene_rows);
     }
-    let csv = opts.out.join("bench.csv");
-    let csv = match std::fs::write(&csv, to_csv(&rows)) {
-        Ok(()) => Some(csv),
-        Err(e) => {
-            unwritten.push(format!("cannot write {}: {e}", csv.display()));
-            None
-        }
+    Ok(())
+}
+
+/// What [`BenchOptions::stop`] abandoned: not a failure; [`run_with`]
+/// reports the runs finished before it.
+#[derive(Debug, thiserror::Error)]
+#[error("the bench was stopped")]
+struct Stopped;
+
+/// [`Stopped`] if [`BenchOptions::stop`] is set.
+fn check_stop(opts: &BenchOptions) -> Result<()> {
+    match opts.stop.load(Ordering::Relaxed) {
+        true => Err(Stopped.into()),
+        false => Ok(()),
+    }
+}
+
+/// The runs of each scene in the order they render: every run of every
+/// sweep, on every backend.
+fn scene_runs(opts: &BenchOptions) -> Vec<(RunSpec, BackendChoice)> {
+    let specs = opts.methods.iter().flat_map(|sweep| sweep.runs());
+    specs
+        .flat_map(|spec| opts.backends.iter().map(move |&b| (spec.clone(), b)))
+        .collect()
+}
+
+/// Every run of the bench, in the order they render, named as in
+/// [`BenchReport::unfinished`].
+fn run_names(opts: &BenchOptions, labels: &[String]) -> Vec<String> {
+    let runs = scene_runs(opts);
+    let several = opts.backends.len() > 1;
+    let name = |label: &String, (spec, backend): &(RunSpec, BackendChoice)| {
+        let on = several.then(|| format!(" on {}", backend.name()));
+        format!(
+            "{label} {} {}{}",
+            spec.method,
+            spec.label(),
+            on.unwrap_or_default()
+        )
     };
-    Ok(BenchReport {
-        rows,
-        csv,
-        charts,
-        unwritten,
-        peak_mem_per_run: per_run,
-    })
+    (labels.iter())
+        .flat_map(|label| runs.iter().map(move |run| name(label, run)))
+        .collect()
 }
 
 /// Refuses two backends that are one here: `auto` picks `cpu` where no
@@ -249,25 +350,33 @@ pub(super) struct BenchScene<'a> {
     pub scene: Scene,
 }
 
-fn bench_scene(opts: &BenchOptions, scene: &BenchScene, per_run: bool) -> Result<Vec<BenchRow>> {
+/// Benches `scene`: its reference, then its runs, each row pushed onto
+/// `rows` as its run finishes; [`Stopped`] where [`BenchOptions::stop`]
+/// stopped it.
+fn bench_scene(
+    opts: &BenchOptions,
+    scene: &BenchScene,
+    per_run: bool,
+    rows: &mut Vec<BenchRow>,
+    after_run: &mut dyn FnMut(&BenchRow),
+) -> Result<()> {
+    check_stop(opts)?;
     let ref_dir = opts.out.join("reference").join(scene.label);
     ensure_reference(opts, scene, &ref_dir)?;
-    let mut rows = Vec::new();
-    for sweep in &opts.methods {
-        for spec in sweep.runs() {
-            for &backend in &opts.backends {
-                let run = Run {
-                    spec: &spec,
-                    backend,
-                    // One folder per backend only when there are several,
-                    // so a one-backend bench keeps its folder names.
-                    backend_in_dir: opts.backends.len() > 1,
-                };
-                rows.push(bench_run(opts, scene, &run, per_run)?);
-            }
-        }
+    for (spec, backend) in scene_runs(opts) {
+        check_stop(opts)?;
+        let run = Run {
+            spec: &spec,
+            backend,
+            // One folder per backend only when there are several,
+            // so a one-backend bench keeps its folder names.
+            backend_in_dir: opts.backends.len() > 1,
+        };
+        let row = bench_run(opts, scene, &run, per_run)?;
+        after_run(&row);
+        rows.push(row);
     }
-    Ok(rows)
+    Ok(())
 }
 
 /// One run of a bench: a method's settings on one backend.
@@ -314,6 +423,7 @@ fn bench_run(
         render::make_backend(run.backend)?,
         frame_settings(opts, opts.same_pattern),
     );
+    renderer.set_abandon_flag(opts.stop.clone());
     let backend = renderer.backend().name();
     if per_run {
         reset_peak_memory();
@@ -402,6 +512,7 @@ fn estimate_error(
         render::make_backend(backend)?,
         frame_settings(opts, opts.same_pattern),
     );
+    renderer.set_abandon_flag(opts.stop.clone());
     let mut trc = TemporalRadianceCaching::new(settings.clone());
     let mut measured = NextFrameMeasure {
         seen: Default::default(),
@@ -418,6 +529,10 @@ fn estimate_error(
             measured.add_new(&mut renderer, &trc);
         }
         renderer.with_frame_context(frame, |ctx| trc.render_frame(ctx));
+        if renderer.abandoned() {
+            bar.finish_and_clear();
+            return Err(Stopped.into()); // Half measured: no figure.
+        }
         measured.add_new(&mut renderer, &trc);
         if let Some(message) = renderer.backend().failure() {
             bail!("{what}: E(t0+1) estimates, frame {frame}: the backend failed: {message}");
@@ -464,6 +579,7 @@ fn store_size(
         render::make_backend(backend)?,
         frame_settings,
     );
+    renderer.set_abandon_flag(opts.stop.clone());
     // A bar on a terminal, as the bench's other steps show; elsewhere
     // nothing, as they show (not the per-frame lines of `render`).
     let quiet = opts.quiet || !std::io::IsTerminal::is_terminal(&std::io::stderr());
@@ -475,6 +591,9 @@ fn store_size(
         Some(&mut job),
     )
     .with_context(|| format!("{what}: rendering into the store {}", path.display()))?;
+    if renderer.abandoned() {
+        return Err(Stopped.into()); // Frames missing: no size.
+    }
     // Measured closed: sled sizes its files as it flushes and reopens.
     drop(job);
     drop(store);
@@ -550,7 +669,8 @@ pub(super) struct RunStats {
 
 /// Renders `frames` into `dir` with a progress bar (off a terminal, a
 /// line every half minute the run lasts); the time counts rendering
-/// only, not writing files.
+/// only, not writing files. [`Stopped`] where the renderer's abandon flag
+/// ([`BenchOptions::stop`]) abandoned a frame, which is not written.
 pub(super) fn render_frames(
     renderer: &mut Renderer,
     frames: Range<u32>,
@@ -572,6 +692,10 @@ pub(super) fn render_frames(
         let film = renderer
             .try_render_frame(frame)
             .map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
+        if renderer.abandoned() {
+            bar.finish_and_clear();
+            return Err(Stopped.into()); // Half rendered: not written.
+        }
         render_time += start.elapsed();
         let stats = renderer.last_frame_stats();
         // Records computed: new ones and replacements at the same point (trc).

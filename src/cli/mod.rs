@@ -4,6 +4,7 @@
 //! in `args`, the `render` verb in `render`, the others here.
 
 mod args;
+mod interrupt;
 mod output;
 mod render;
 
@@ -76,7 +77,7 @@ pub fn main() -> ExitCode {
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) if err.is::<output::StdoutClosed>() => ExitCode::SUCCESS,
-        Err(err) if err.is::<render::Interrupted>() => {
+        Err(err) if err.is::<interrupt::Interrupted>() => {
             eprintln!("{err:#}");
             ExitCode::from(130)
         }
@@ -159,12 +160,75 @@ fn bench_options(args: BenchArgs) -> bench::BenchOptions {
         store_size: args.store_size,
         backends: args.backends.into_iter().map(backend_choice).collect(),
         check_memory: !args.no_memory_check,
+        stop: Default::default(),
     }
 }
 
+/// Runs the bench, prints its tables and the files it wrote, and fails
+/// with [`interrupt::Interrupted`] where a Ctrl-C stopped it before its
+/// last run.
 fn run_bench(args: BenchArgs) -> Result<()> {
-    let opts = bench_options(args);
+    let mut opts = bench_options(args);
+    opts.stop = interrupt::stop_on_ctrl_c(interrupt::CtrlCWords {
+        first: "stopping: the run in progress is abandoned; the runs finished are printed \
+                and written",
+        second: "the tables, bench.csv and charts not yet written are lost; the frames \
+                 rendered are kept",
+    });
     let report = bench::run(&opts)?;
+    let printed = print_bench(&report);
+    // An interrupted bench says so whatever became of its tables (a Ctrl-C
+    // in `radcache bench | tee log` also ends `tee`).
+    if !report.unfinished.is_empty() {
+        return Err(bench_interrupted(&report).into());
+    }
+    printed?;
+    if !report.unwritten.is_empty() {
+        bail!(
+            "the measurements above are whole, but not every file was written:\n  {}",
+            report.unwritten.join("\n  ")
+        );
+    }
+    Ok(())
+}
+
+/// What an interrupted bench says: how many runs finished, where they
+/// are, which did not, and any file not written.
+fn bench_interrupted(report: &bench::BenchReport) -> interrupt::Interrupted {
+    let finished = report.rows.len();
+    let total = finished + report.unfinished.len();
+    let written = match &report.csv {
+        Some(csv) if finished > 0 => format!(" (measured above and in {})", csv.display()),
+        _ => String::new(),
+    };
+    let mut text = format!(
+        "interrupted: {finished} of {total} runs finished{written}; not finished: {}",
+        report.unfinished.join(", ")
+    );
+    if !report.unwritten.is_empty() {
+        text += &format!(
+            "\nnot every file was written:\n  {}",
+            report.unwritten.join("\n  ")
+        );
+    }
+    interrupt::Interrupted(text)
+}
+
+/// Prints the bench's tables (none without a finished run) and the files
+/// it wrote.
+fn print_bench(report: &bench::BenchReport) -> Result<()> {
+    if !report.rows.is_empty() {
+        print_bench_tables(report)?;
+        outln!()?;
+    }
+    for written in report.csv.iter().chain(&report.charts) {
+        outln!("wrote {}", written.display())?;
+    }
+    Ok(())
+}
+
+/// The table of the runs, and the comparisons between them it holds.
+fn print_bench_tables(report: &bench::BenchReport) -> Result<()> {
     out!("{}", bench::to_table(&report.rows))?;
     for (measure, what) in [
         (bench::ErrorMeasure::AllPixels, "all pixels"),
@@ -199,16 +263,6 @@ fn run_bench(args: BenchArgs) -> Result<()> {
     }
     if !report.peak_mem_per_run {
         outln!("(peak memory is the process peak so far, not per run)")?;
-    }
-    outln!()?;
-    for written in report.csv.iter().chain(&report.charts) {
-        outln!("wrote {}", written.display())?;
-    }
-    if !report.unwritten.is_empty() {
-        bail!(
-            "the measurements above are whole, but not every file was written:\n  {}",
-            report.unwritten.join("\n  ")
-        );
     }
     Ok(())
 }

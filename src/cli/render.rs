@@ -2,6 +2,7 @@
 //! to a store job when `--db`/`--job` are given, and stops cleanly on
 //! Ctrl-C once the frame in progress is written.
 
+use super::interrupt::{stop_on_ctrl_c, CtrlCWords, Interrupted};
 use super::output::outln;
 use super::{
     backend_choice, GlossyArg, IcArgs, MethodName, MoviesArgs, OnOff, RenderArgs, TcgArgs, TrcArgs,
@@ -19,8 +20,7 @@ use crate::store::{self, Store};
 use crate::system_memory;
 use anyhow::{bail, Result};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::Ordering;
 
 /// Renders the frames `args` name, prints the summary, and fails with an
 /// "interrupted after frame N" error when a Ctrl-C stopped it before the
@@ -66,7 +66,12 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         store,
         job: job.clone(),
     });
-    let stop = stop_on_ctrl_c();
+    // A second Ctrl-C stops at once: a job still resumes from its last
+    // saved frame, as each frame is saved in one atomic batch.
+    let stop = stop_on_ctrl_c(CtrlCWords {
+        first: "stopping once the frame in progress is written",
+        second: "the frame in progress is lost; frames already written are kept",
+    });
     let summary = render::render_job_to_dir_with(
         &mut renderer,
         args.frames.clone(),
@@ -116,13 +121,6 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
     .into())
 }
 
-/// A render stopped by Ctrl-C once its frame in progress was written: the
-/// process exits with status 130 (128 + SIGINT), as a shell reports a
-/// command that SIGINT stopped, so a script running it stops too.
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct Interrupted(String);
-
 /// Refuses, before anything renders, a render whose estimated peak memory
 /// is over what this process may take: it would end in an abort or the
 /// OOM killer, maybe hours in.
@@ -162,60 +160,6 @@ fn note_where_the_scene_and_flags_differ(scene: &crate::scene::Scene, args: &Ren
             );
         }
     }
-}
-
-/// Stops a render at the first Ctrl-C once the frame in progress is
-/// written (and saved, with a job), so a long render ends with a message
-/// saying where it stopped; a second Ctrl-C stops the process at once (a
-/// job still resumes from its last saved frame: each frame is saved in one
-/// atomic batch). Returns the flag the first Ctrl-C sets.
-fn stop_on_ctrl_c() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    let (ready, wait_ready) = std::sync::mpsc::channel();
-    let watch = move || {
-        let Ok(runtime) = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-        else {
-            let _ = ready.send(());
-            return; // Ctrl-C keeps its default: the process stops at once.
-        };
-        let registered = {
-            let _runtime = runtime.enter();
-            #[cfg(unix)]
-            let signal = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt());
-            #[cfg(windows)]
-            let signal = tokio::signal::windows::ctrl_c();
-            signal
-        };
-        let _ = ready.send(());
-        let Ok(mut ctrl_c) = registered else {
-            return;
-        };
-        runtime.block_on(async {
-            ctrl_c.recv().await;
-            flag.store(true, Ordering::Relaxed);
-            eprintln!(
-                "\nstopping once the frame in progress is written (Ctrl-C again to stop now)"
-            );
-            ctrl_c.recv().await;
-            eprintln!(
-                "stopped at once: the frame in progress is lost; frames already written are kept"
-            );
-            std::process::exit(130);
-        })
-    };
-    // The render starts once the watcher listens, so that no Ctrl-C falls
-    // between the two; without a watcher Ctrl-C keeps its default.
-    if std::thread::Builder::new()
-        .name("ctrl-c".into())
-        .spawn(watch)
-        .is_ok()
-    {
-        let _ = wait_ready.recv();
-    }
-    stop
 }
 
 /// The method `render`'s flags ask for, with the papers' defaults for

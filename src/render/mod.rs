@@ -316,6 +316,13 @@ impl Renderer {
         self.abandon.clone()
     }
 
+    /// Makes `flag` this renderer's [`Self::abandon_flag`], so that one
+    /// flag abandons the frame in progress of whichever renderer holds it
+    /// (a bench stopped by Ctrl-C, which makes a renderer per run).
+    pub fn set_abandon_flag(&mut self, flag: Arc<AtomicBool>) {
+        self.abandon = flag;
+    }
+
     /// Whether [`Self::abandon_flag`] is set.
     pub fn abandoned(&self) -> bool {
         self.abandon.load(Ordering::Relaxed)
