@@ -309,11 +309,13 @@ pub struct CompareReport {
     pub per_frame: Vec<FrameReport>,
 }
 
-/// `frame_NNNN.exr` files of `dir` as (frame number, path), sorted by number.
-/// Other files (`frame_NNNN.png`, `seed1_frame_0000.exr`, …) are ignored.
+/// `frame_NNNN.exr` files of `dir` as (frame number, path), sorted by number;
+/// the name in any case (`Frame_0002.EXR`, as a copy from a system whose
+/// names ignore case may spell it). Other files (`frame_NNNN.png`,
+/// `seed1_frame_0000.exr`, …) are ignored.
 /// The number may have any count of digits (the renderer writes at least
 /// four: `frame_0012.exr`, `frame_12345.exr`), but two files that name the
-/// same frame (`frame_0001.exr` and `frame_00001.exr`) are an error naming
+/// same frame (`frame_0001.exr` and `frame_00001.exr`, or `FRAME_0001.EXR`) are an error naming
 /// both: which of them is the frame is anyone's guess.
 pub fn list_frames(dir: &Path) -> Result<Vec<(u32, PathBuf)>, MetricsError> {
     let io_err = |error| MetricsError::Io {
@@ -394,8 +396,9 @@ pub fn read_light_mask(path: &Path, size: (u32, u32)) -> Result<Option<Vec<bool>
     Ok(Some(image.pixels().map(|p| p.0[0] >= 128).collect()))
 }
 
-/// `frame_0012.exr` → 12.
+/// `frame_0012.exr` (in any case) → 12.
 fn frame_number(name: &str) -> Option<u32> {
+    let name = name.to_ascii_lowercase();
     let digits = name.strip_prefix("frame_")?.strip_suffix(".exr")?;
     if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
         return None;
@@ -913,6 +916,7 @@ mod tests {
     fn frame_numbers() {
         assert_eq!(frame_number("frame_0012.exr"), Some(12));
         assert_eq!(frame_number("frame_12345.exr"), Some(12345));
+        assert_eq!(frame_number("Frame_0002.EXR"), Some(2));
         assert_eq!(frame_number("frame_0012.png"), None);
         assert_eq!(frame_number("seed1_frame_0000.exr"), None);
         assert_eq!(frame_number("frame_.exr"), None);

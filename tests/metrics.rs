@@ -613,10 +613,11 @@ fn two_files_of_one_frame_are_refused() {
     let err = radcache::metrics::list_frames(&r).unwrap_err();
     assert!(err.to_string().contains("frame_00001.exr"), "{err}");
 
-    // Not ambiguous: what the renderer writes past frame 9999, and a
-    // number written with fewer digits, each alone.
+    // Not ambiguous: what the renderer writes past frame 9999, a number
+    // written with fewer digits and a name in capitals, each alone.
     fs::remove_file(r.join("frame_00001.exr")).unwrap();
     fs::rename(r.join("frame_0002.exr"), r.join("frame_2.exr")).unwrap();
+    fs::rename(t.join("frame_0001.exr"), t.join("FRAME_0001.EXR")).unwrap();
     write_seq(
         &r,
         &[(9999, constant(4, 4, 1.0)), (10000, constant(4, 4, 2.0))],
