@@ -266,7 +266,7 @@ pub struct TcgArgs {
     /// Samples whose light moving lights changed by more than 5 % since they were shot are shot again as those that hit moving objects are (not in the paper, whose Eq. 2 counts only the latter; off, a moving light's indirect light lags by up to 1/τ_min frames).
     #[arg(long, value_enum, default_value = "on")]
     pub tcg_light_refresh: OnOff,
-    /// Samples whose path an object moved into since the last frame (a ray-box test along their cell's centre) are shot again as those that hit moving objects are, and records a moved object buried are dropped (not in the paper). For objects that jump or appear: off, their indirect shadow comes in over some 1/τ_min frames; on, it costs 1.3× the time on cube-in-box and 1.9× on spheres (benches/RESULTS.md).
+    /// Samples whose path an object moved into since the last frame (a ray-box test along their cell's centre) are shot again as those that hit moving objects are, and records a moved object buried are dropped (not in the paper). For objects that jump or appear: off, their indirect shadow comes in over some 1/τ_min frames; on, it costs 1.3× the time on cube-in-box and 1.6× on spheres (benches/RESULTS.md).
     #[arg(long, value_enum, default_value = "off")]
     pub tcg_occlusion_refresh: OnOff,
 }

@@ -19,9 +19,9 @@
 //!
 //! Off by default (`TcgSettings::occlusion_refresh`): it mends objects
 //! that jump or appear (`tests/tcg.rs`), but under steady motion it cost
-//! 1.26× the time on cube-in-box at the same error and 1.93× on
+//! 1.32× the time on cube-in-box at the same error and 1.62× on
 //! `spheres`, whose 66 balls cross many samples' paths every frame, with
-//! a higher block bias (`benches/RESULTS.md`).
+//! a block bias 1.05× higher (`benches/RESULTS.md`).
 //!
 //! With it, a record a moved object now covers is dropped
 //! ([`MovedObjects::buried`]): its samples shot again would see the
@@ -92,7 +92,8 @@ impl MovedObjects {
 
     /// Marks in `stale` (by cell; grown to all of them) each of record
     /// `r`'s samples whose path a moved object's box crosses, from the
-    /// record's `point` of this frame with its cells laid out in `frame`.
+    /// record's `point` of this frame with its cells laid out in `frame`,
+    /// and each that hit a moving object.
     pub(super) fn mark(
         &self,
         r: &TcgRecord,
@@ -103,7 +104,13 @@ impl MovedObjects {
         stale.resize(r.samples.len(), false);
         let own = Some(r.candidate.object);
         for ((cell, s), stale) in (0u32..).zip(&r.samples).zip(stale.iter_mut()) {
-            if *stale {
+            // Those that hit a moving object are in `x` already; marked,
+            // they are drawn first too (`select::pick_cells`): else the
+            // samples the paths test adds would take their draws, and an
+            // object that moved away would linger in them (on `spheres`
+            // the block bias rose from 0.0057 to 0.0083; 0.0060 so).
+            if *stale || s.hit_dynamic() {
+                *stale = true;
                 continue;
             }
             let dir = cell_direction(frame, strata, cell, Vec2::splat(0.5));
@@ -149,7 +156,8 @@ mod tests {
     /// A small box of object `object` on cell `cell`'s centre direction, 2
     /// away: the samples that reach past it are stale, those that stop
     /// short of it or lie in other cells are not, and a box of the
-    /// record's own object counts for none.
+    /// record's own object counts for none; a sample that hit a moving
+    /// object is marked wherever the box is.
     #[test]
     fn a_sample_is_stale_where_a_moved_box_crosses_its_path() {
         let strata = Strata { theta: 4, phi: 8 };
@@ -159,8 +167,12 @@ mod tests {
         let boxed = |object: u32| MovedObjects {
             boxes: ObjectBoxes::of([(object, (c - Vec3::splat(0.05), c + Vec3::splat(0.05)))]),
         };
-        let stale = |object: u32, distance: f32| {
-            let (r, pose) = record(strata, distance);
+        // Record `r`'s marks under a moved box of `object`, its samples
+        // `distance` away, the first of them on a moving object if
+        // `dynamic`.
+        let marks = |object: u32, distance: f32, dynamic: bool| {
+            let (mut r, pose) = record(strata, distance);
+            r.samples[0] = PackedSample::pack(Vec3::ONE, distance, 1, dynamic, 3);
             let mut stale = Vec::new();
             boxed(object).mark(&r, &pose, strata, &mut stale);
             stale
@@ -170,9 +182,10 @@ mod tests {
                 .map(|i| i == c)
                 .collect::<Vec<_>>()
         };
-        assert_eq!(stale(1, 3.0), only(cell));
-        assert_eq!(stale(1, f32::INFINITY), only(cell));
-        assert_eq!(stale(1, 1.5), only(u32::MAX));
-        assert_eq!(stale(0, 3.0), only(u32::MAX));
+        assert_eq!(marks(1, 3.0, false), only(cell));
+        assert_eq!(marks(1, f32::INFINITY, false), only(cell));
+        assert_eq!(marks(1, 1.5, false), only(u32::MAX));
+        assert_eq!(marks(0, 3.0, false), only(u32::MAX));
+        assert_eq!(marks(1, 1.5, true), only(0));
     }
 }
