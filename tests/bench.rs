@@ -853,6 +853,25 @@ fn charts_name_runs_at_zero_and_say_why_they_are_empty() {
         .contains("no data: flicker needs two frames or more, and light masks in the reference"));
 }
 
+/// A sweep's points are labelled with their swept values; a default run's
+/// point has no label, and no empty text element stands for one.
+#[test]
+fn a_default_runs_point_has_no_empty_label() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = [
+        row("ic", "default", 2.0, 0.1),
+        row("path", "spp=4", 1.0, 0.2),
+        row("path", "spp=16", 3.0, 0.1),
+    ];
+    bench::plot_scene(dir.path(), "s", &rows).unwrap();
+    let svg = std::fs::read_to_string(dir.path().join("s_error_vs_time.svg")).unwrap();
+    let texts: Vec<&str> = (svg.split("<text").skip(1))
+        .filter_map(|t| Some(t.split_once('>')?.1.split_once("</text>")?.0.trim()))
+        .collect();
+    assert!(texts.contains(&"4") && texts.contains(&"16"), "{texts:?}");
+    assert!(!texts.contains(&""), "{texts:?}");
+}
+
 /// A bench stopped between two runs (its stop flag set as the first run
 /// finishes, as Ctrl-C sets it) writes `bench.csv` and the charts of the
 /// runs it finished, names the others in order, and starts none of them.

@@ -332,10 +332,11 @@ fn draw_sweep(
                 + PathElement::new(vec![(0, 0), (22, 0)], color.stroke_width(2))
                 + Circle::new((11, 0), 4, color.filled())
         });
-    chart.draw_series(points.iter().map(|(x, y, label)| {
-        EmptyElement::at((*x, *y))
-            + Circle::new((0, 0), 4, color.filled())
-            + Text::new(label.clone(), (6, -16), ("sans-serif", 13))
+    chart.draw_series((points.iter()).map(|&(x, y, _)| Circle::new((x, y), 4, color.filled())))?;
+    // A default run's point has no label: no empty text element for it.
+    let labelled = points.iter().filter(|p| !p.2.is_empty());
+    chart.draw_series(labelled.map(|(x, y, label)| {
+        EmptyElement::at((*x, *y)) + Text::new(label.clone(), (6, -16), ("sans-serif", 13))
     }))?;
     Ok(())
 }
