@@ -3,9 +3,11 @@
 //! moving objects: a sample that saw the floor past the place a box now
 //! stands was shot before the box came, so it is not among them, and the
 //! box's indirect shadow reaches the records only as Eq. 2's `τ_min`
-//! share of their samples is shot again each frame (a box moving across a
-//! room lagged 2–6 % behind the reference on its first frames: README,
-//! "Accuracy and speed of `path`"). The paper's §3.3 asks for more rays
+//! share of their samples is shot again each frame (a block that jumps
+//! into a room's corner: `tests/tcg.rs`). It does not mend the lag of a
+//! box that changes the light of the samples' hits (README, "Accuracy and
+//! speed of `path`": penumbrae and bounced light, which no test as cheap
+//! as this sees). The paper's §3.3 asks for more rays
 //! "when and where lighting quickly changes"; here a sample also counts
 //! in `x` where, from the record's point of this frame along its cell's
 //! centre direction, its path up to its stored hit (however far, for a
