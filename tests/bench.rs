@@ -939,8 +939,8 @@ fn a_bench_stopped_before_it_starts_renders_nothing() {
 }
 
 /// Runs `radcache bench ARGS --out OUT -q`, sends it one SIGINT (Ctrl-C)
-/// once `started` exists under OUT, and returns how it ended and how long
-/// it took after the signal.
+/// once `started` exists under OUT, checks that it exits with status 130
+/// and returns its output and how long it took after the signal.
 #[cfg(unix)]
 fn interrupt_bench(args: &[&str], out: &std::path::Path, started: &str) -> Interrupted {
     use std::time::{Duration, Instant};
@@ -969,19 +969,19 @@ fn interrupt_bench(args: &[&str], out: &std::path::Path, started: &str) -> Inter
     assert!(kill.success());
     let signalled = Instant::now();
     let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
     Interrupted {
-        status: output.status.code(),
         stdout: String::from_utf8_lossy(&output.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&output.stderr).into_owned(),
+        stderr,
         after: signalled.elapsed(),
     }
 }
 
-/// How a bench that [`interrupt_bench`] stopped ended: its exit status,
+/// How a bench that [`interrupt_bench`] stopped (with status 130) ended:
 /// its output, and how long after the signal it stopped.
 #[cfg(unix)]
 struct Interrupted {
-    status: Option<i32>,
     stdout: String,
     stderr: String,
     after: std::time::Duration,
@@ -1011,12 +1011,10 @@ fn ctrl_c_during_a_run_keeps_the_runs_finished() {
     ];
     // The second run's folder is made once the first run is measured.
     let Interrupted {
-        status,
         stdout,
         stderr,
         after,
     } = interrupt_bench(&args, dir.path(), "runs/cube-in-box/path-spp=100000");
-    assert_eq!(status, Some(130), "{stderr}");
     assert!(!stderr.contains("error:"), "{stderr}");
     assert!(stderr.contains("Ctrl-C again to stop now"), "{stderr}");
     assert!(
@@ -1060,12 +1058,10 @@ fn ctrl_c_during_the_reference_finishes_no_run() {
         "path:spp=1",
     ];
     let Interrupted {
-        status,
         stdout,
         stderr,
         after,
     } = interrupt_bench(&args, dir.path(), "reference/cube-in-box");
-    assert_eq!(status, Some(130), "{stderr}");
     assert!(
         stderr.contains("interrupted: 0 of 1 runs finished")
             && stderr.contains("not finished: cube-in-box path spp=1"),

@@ -54,6 +54,17 @@ fn render(r: &mut Renderer, tcg: &mut TemporallyCoherentGathering, frame: u32) -
     r.with_frame_context(frame, |ctx| tcg.render_frame(ctx))
 }
 
+/// `tcg` with `settings` over `scene`'s frames `0..against.len()` at
+/// `size`, each frame's [`region_error`] against `against`'s.
+fn region_errors(scene: Scene, size: u32, settings: TcgSettings, against: &[Film]) -> Vec<f64> {
+    let mut r = renderer(scene, size, true);
+    let mut tcg = TemporallyCoherentGathering::new(settings);
+    (0u32..)
+        .zip(against)
+        .map(|(f, film)| region_error(&render(&mut r, &mut tcg, f), film))
+        .collect()
+}
+
 /// The age of the oldest sample of `tcg`'s records, in frames.
 fn oldest_sample(tcg: &TemporallyCoherentGathering) -> u32 {
     tcg.records()
@@ -406,14 +417,7 @@ fn a_block_that_jumps_away_leaves_no_ghost() {
         .clone()
         .map(|f| reference.with_frame_context(f, |ctx| ic.render_frame(ctx)))
         .collect();
-    let errors = |settings: TcgSettings| -> Vec<f64> {
-        let mut r = renderer(jumping_block_room(k, fps), size, true);
-        let mut tcg = TemporallyCoherentGathering::new(settings);
-        frames
-            .clone()
-            .map(|f| region_error(&render(&mut r, &mut tcg, f), &ic_films[f as usize]))
-            .collect()
-    };
+    let errors = |settings| region_errors(jumping_block_room(k, fps), size, settings, &ic_films);
     let adaptive = errors(small(2));
     let uniform = errors(TcgSettings {
         tau_max: 0.05,
@@ -467,14 +471,7 @@ fn a_block_that_jumps_in_casts_its_indirect_light_at_once() {
             )
         })
         .collect();
-    let errors = |settings: TcgSettings| -> Vec<f64> {
-        let mut r = renderer(arriving_block_room(k, fps), size, true);
-        let mut tcg = TemporallyCoherentGathering::new(settings);
-        frames
-            .clone()
-            .map(|f| region_error(&render(&mut r, &mut tcg, f), &reference[f as usize]))
-            .collect()
-    };
+    let errors = |settings| region_errors(arriving_block_room(k, fps), size, settings, &reference);
     let refreshed = errors(TcgSettings {
         occlusion_refresh: true,
         ..small(2)

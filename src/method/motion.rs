@@ -160,16 +160,32 @@ impl ObjectBoxes {
 
     /// Whether the ray from `origin` along unit `dir` may pass through a
     /// moving object other than `skip` before distance `t`; `t = ∞` (a ray
-    /// that hit nothing) is followed to the farthest point of the box
-    /// around them all, whose every point lies within the distance from
-    /// `origin` to its centre plus half its diagonal, and a part in a
-    /// thousand past it, for the rounding of the slab test at the end.
+    /// that hit nothing) is followed as far as [`Self::reach`].
     pub fn ray_may_hit(&self, origin: Vec3, dir: Vec3, t: f32, skip: Option<u32>) -> bool {
-        let Some((centre, radius)) = self.around else {
-            return false;
-        };
-        let reach = ((origin - centre).length() + radius) * 1.001;
-        self.segment_may_hit_other_than(origin, origin + dir * t.min(reach), skip)
+        self.reach(origin)
+            .is_some_and(|far| self.ray_within_reach_may_hit(origin, dir, t.min(far), skip))
+    }
+
+    /// How far from `origin` a ray must be followed to pass every box: to
+    /// the farthest point of the box around them all, whose every point
+    /// lies within the distance from `origin` to its centre plus half its
+    /// diagonal, and a part in a thousand past it, for the rounding of the
+    /// slab test at the end. `None` where there is no box.
+    pub fn reach(&self, origin: Vec3) -> Option<f32> {
+        let (centre, radius) = self.around?;
+        Some(((origin - centre).length() + radius) * 1.001)
+    }
+
+    /// [`Self::ray_may_hit`] for a `t` no farther than [`Self::reach`] of
+    /// `origin`, which many rays from one origin find once.
+    pub fn ray_within_reach_may_hit(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t: f32,
+        skip: Option<u32>,
+    ) -> bool {
+        self.segment_may_hit_other_than(origin, origin + dir * t, skip)
     }
 
     /// Whether point `p` lies in the box of a moving object other than

@@ -105,6 +105,9 @@ impl MovedObjects {
     ) {
         stale.resize(r.samples.len(), false);
         let own = Some(r.candidate.object);
+        // Every cell's ray starts at the record's point: how far it need
+        // go is found once (`MovedObjects` always holds a box).
+        let far = self.boxes.reach(point.position).unwrap_or(0.0);
         for ((cell, s), stale) in (0u32..).zip(&r.samples).zip(stale.iter_mut()) {
             // Those that hit a moving object are in `x` already; marked,
             // they are drawn first too (`select::pick_cells`): else the
@@ -116,12 +119,13 @@ impl MovedObjects {
                 continue;
             }
             let dir = cell_direction(frame, strata, cell, Vec2::splat(0.5));
-            let reach = if s.is_miss() {
+            let to_hit = if s.is_miss() {
                 f32::INFINITY
             } else {
                 s.distance()
             };
-            *stale = self.boxes.ray_may_hit(point.position, dir, reach, own);
+            *stale =
+                (self.boxes).ray_within_reach_may_hit(point.position, dir, to_hit.min(far), own);
         }
     }
 }
