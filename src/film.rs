@@ -412,8 +412,13 @@ pub fn tonemap_srgb(film: &Film) -> image::RgbImage {
 
 /// Writes the tone-mapped sRGB preview as an 8-bit RGB PNG (atomically).
 pub fn write_png(film: &Film, path: &Path) -> Result<(), FilmError> {
+    write_rgb_png(&tonemap_srgb(film), path)
+}
+
+/// Writes an 8-bit sRGB image as a PNG (atomically).
+pub fn write_rgb_png(image: &image::RgbImage, path: &Path) -> Result<(), FilmError> {
     let mut buffer = Cursor::new(Vec::new());
-    tonemap_srgb(film)
+    image
         .write_to(&mut buffer, image::ImageFormat::Png)
         .map_err(|e| FilmError::Png {
             path: path.to_owned(),

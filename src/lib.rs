@@ -17,7 +17,7 @@
 //! | [`integrator`] | path tracing of ray batches, shared by all methods        |
 //! | [`film`]    | RGB f32 images, EXR and PNG input/output                        |
 //! | [`hash`]    | FNV-1a 64, the content hash of scenes and their files          |
-//! | [`metrics`] | RMSE, relative RMSE, block bias and flicker; `compare`         |
+//! | [`metrics`] | RMSE, relative RMSE, block bias and flicker, error maps; `compare` |
 //! | [`render`]  | the frame loop: animation → geometry → method → files         |
 //! | [`bench`](mod@bench) | `radcache bench`: methods against a reference, CSV and charts |
 //! | [`cli`]     | the `radcache` command line                                    |

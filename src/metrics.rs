@@ -11,7 +11,11 @@
 //! The per-image functions take two films of the same size and panic
 //! otherwise; [`compare_dirs`] checks sizes first and reports the files.
 
-use crate::film::{read_exr, Film, FilmError};
+mod error_map;
+
+pub use error_map::{error_map, DARK_FLOOR, FULL_SCALE};
+
+use crate::film::{read_exr, write_rgb_png, Film, FilmError};
 use glam::{DVec3, Vec3};
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -71,8 +75,19 @@ pub enum MetricsError {
         size: (u32, u32),
         detail: String,
     },
+    #[error("cannot make the error maps' folder {}: {error}", path.display())]
+    MapFolder {
+        path: PathBuf,
+        error: std::io::Error,
+    },
     #[error(transparent)]
     Film(#[from] FilmError),
+}
+
+/// `DIR/error_NNNN.png`, where [`compare_dirs_with`] writes frame
+/// `frame`'s [`error_map()`].
+pub fn error_map_path(dir: &Path, frame: u32) -> PathBuf {
+    dir.join(format!("error_{frame:04}.png"))
 }
 
 // ---------------------------------------------------------------- per image
@@ -686,6 +701,23 @@ impl Totals {
 /// reference is black, a warning says which relative figures are undefined
 /// (`inf` or `NaN`, `null` in JSON).
 pub fn compare_dirs(reference_dir: &Path, test_dir: &Path) -> Result<CompareReport, MetricsError> {
+    compare_dirs_with(reference_dir, test_dir, None)
+}
+
+/// [`compare_dirs`], writing with `error_maps` the [`error_map()`] of each
+/// frame to `DIR/error_NNNN.png` (the folder made if need be) as the
+/// frame is compared.
+pub fn compare_dirs_with(
+    reference_dir: &Path,
+    test_dir: &Path,
+    error_maps: Option<&Path>,
+) -> Result<CompareReport, MetricsError> {
+    if let Some(dir) = error_maps {
+        std::fs::create_dir_all(dir).map_err(|error| MetricsError::MapFolder {
+            path: dir.to_owned(),
+            error,
+        })?;
+    }
     let frames = list_frames(reference_dir)?;
     if frames.is_empty() {
         return Err(MetricsError::NoFrames {
@@ -699,6 +731,10 @@ pub fn compare_dirs(reference_dir: &Path, test_dir: &Path) -> Result<CompareRepo
     for (number, ref_path) in frames {
         let pair = read_pair(number, ref_path, tests.remove(&number), test_dir)?;
         totals.add_frame(&pair);
+        if let Some(dir) = error_maps {
+            let path = error_map_path(dir, number);
+            write_rgb_png(&error_map(&pair.test, &pair.reference), &path)?;
+        }
         if let Some(prev) = &prev {
             totals.add_pair(prev, &pair)?;
         }

@@ -207,6 +207,10 @@ fn bad_input_is_a_clear_error() {
             "broken.glb is a file; expected a directory",
         ),
         (
+            &["compare", "/", "/", "--error-maps", garbage],
+            "cannot make the error maps' folder",
+        ),
+        (
             &["serve", "--addr", "0.0.0.0:1", "--token", ""],
             "--token (or RADCACHE_TOKEN) is empty",
         ),

@@ -3,7 +3,10 @@
 
 use glam::Vec3;
 use radcache::film::{decode_exr, frame_path, read_exr, write_exr, Film};
-use radcache::metrics::{compare_dirs, light_mask_path, write_light_mask, MetricsError};
+use radcache::metrics::{
+    compare_dirs, compare_dirs_with, error_map_path, light_mask_path, write_light_mask,
+    MetricsError,
+};
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -68,6 +71,43 @@ fn seed0_against_seed1_matches_source_md() {
         report.block_bias
     );
     assert_eq!(report.flicker, None);
+}
+
+/// `--error-maps`: one PNG a frame, in a folder made for them, red where
+/// that frame's test is brighter, blue where darker, grey where equal;
+/// the figures are those of a compare without maps.
+#[test]
+fn error_maps_show_where_each_frame_is_off() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (a, b) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let reference = constant(8, 4, 0.5);
+    let mut left_brighter = reference.clone();
+    for (i, p) in left_brighter.pixels.iter_mut().enumerate() {
+        if i % 8 < 4 {
+            *p *= 1.3;
+        }
+    }
+    let darker = constant(8, 4, 0.35);
+    write_seq(&a, &[(0, reference.clone()), (1, reference)]);
+    write_seq(&b, &[(0, left_brighter), (1, darker)]);
+    let maps = tmp.path().join("maps/nested");
+    let report = compare_dirs_with(&a, &b, Some(&maps)).unwrap();
+    assert_eq!(
+        serde_json::to_string(&report).unwrap(),
+        serde_json::to_string(&compare_dirs(&a, &b).unwrap()).unwrap()
+    );
+    let read = |frame| image::open(error_map_path(&maps, frame)).unwrap().to_rgb8();
+    let first = read(0);
+    assert_eq!(first.dimensions(), (8, 4));
+    for (x, _, p) in first.enumerate_pixels() {
+        let [r, g, b] = p.0;
+        if x < 4 {
+            assert_eq!([r, g, b], [255, 0, 0], "+30 % at x = {x}");
+        } else {
+            assert!(r == g && g == b && r > 0, "equal at x = {x}: {:?}", p.0);
+        }
+    }
+    assert!(read(1).pixels().all(|p| p.0 == [0, 0, 255]), "−30 %");
 }
 
 #[test]

@@ -325,6 +325,12 @@ pub struct CompareArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Also write DIR/error_NNNN.png for each frame: red where the test is
+    /// brighter than the reference, blue where darker, in full colour from
+    /// ±25 % of the reference pixel's luminance (pixels darker than 5 % of
+    /// the frame's mean are judged against that), over the reference in grey.
+    #[arg(long, value_name = "DIR")]
+    pub error_maps: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]

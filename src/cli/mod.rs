@@ -388,13 +388,15 @@ fn run_compare(args: CompareArgs) -> Result<()> {
             bail!("{what} directory {} does not exist", dir.display());
         }
     }
-    let report = metrics::compare_dirs(&args.reference, &args.test).with_context(|| {
-        format!(
-            "comparing {} with {}",
-            args.test.display(),
-            args.reference.display()
-        )
-    })?;
+    let maps = args.error_maps.as_deref();
+    let report =
+        metrics::compare_dirs_with(&args.reference, &args.test, maps).with_context(|| {
+            format!(
+                "comparing {} with {}",
+                args.test.display(),
+                args.reference.display()
+            )
+        })?;
     if args.json {
         outln!("{}", serde_json::to_string(&report)?)?;
     } else {
