@@ -21,7 +21,9 @@
 //! row of the transport, built again only where its links, or the
 //! open-space flags of the vertices they land by, changed. Each triangle
 //! is solved on one side, as the paper's polygons are: its front, or its
-//! back where its part encloses the camera facing away ([`super::sides`]).
+//! back where its part encloses the camera facing away; a flat part with
+//! scene on both sides of it, on both, each with a grid of its own
+//! ([`super::sides`]).
 
 use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, StaticShadows, Statics};
 use super::sides::SolvedSides;
@@ -102,9 +104,11 @@ struct Meshing {
 
 impl Meshing {
     /// The settings' meshing, coarsened until
-    /// [`links_needed`](Self::links_needed) is at most [`MAX_LINKS`].
+    /// [`links_needed`](Self::links_needed) is at most [`MAX_LINKS`]
+    /// (`both[i]`: triangle `i` has a grid on each side; missing: one).
     fn fitting(
         triangles: &[crate::scene::Triangle],
+        both: &[bool],
         settings: &GlobalSettings,
         diagonal: f32,
     ) -> Self {
@@ -114,7 +118,7 @@ impl Meshing {
             min_links: MIN_LINKS.min(settings.links).max(1),
         };
         for _ in 0..64 {
-            let needed = m.links_needed(triangles);
+            let needed = m.links_needed(triangles, both);
             if needed <= MAX_LINKS {
                 break;
             }
@@ -133,13 +137,16 @@ impl Meshing {
     }
 
     /// The links `triangles` need, counting each triangle's corners as its
-    /// own (shared corners are one vertex in the pass: an upper bound).
-    fn links_needed(&self, triangles: &[crate::scene::Triangle]) -> u64 {
+    /// own (shared corners are one vertex in the pass: an upper bound),
+    /// twice for a triangle `both` says has a grid on each side.
+    fn links_needed(&self, triangles: &[crate::scene::Triangle], both: &[bool]) -> u64 {
         triangles
             .iter()
-            .map(|t| {
+            .enumerate()
+            .map(|(i, t)| {
                 let (n, links) = self.grid(t);
-                u64::from((n + 1) * (n + 2) / 2) * u64::from(links)
+                let sides = 1 + u64::from(both.get(i).copied().unwrap_or(false));
+                u64::from((n + 1) * (n + 2) / 2) * u64::from(links) * sides
             })
             .sum()
     }
@@ -244,6 +251,9 @@ fn row_start(n: u32, b: u32) -> u32 {
 struct PassMesh {
     /// Per triangle, its grid.
     grids: Vec<Grid>,
+    /// Per triangle solved on both sides, the grid of the side opposite
+    /// its first grid's.
+    reverse_grids: Vec<Option<Grid>>,
     /// The vertex in each slot of the grids.
     vertex_of: Vec<u32>,
     vertices: Vec<Vertex>,
@@ -253,71 +263,96 @@ struct PassMesh {
 }
 
 impl PassMesh {
-    fn new(snapshot: &crate::scene::Snapshot, meshing: &Meshing) -> Self {
-        let mut grids = Vec::with_capacity(snapshot.triangles.len());
-        let mut vertex_of = Vec::new();
-        let mut vertices = Vec::new();
-        let mut link_count = 0u32;
+    /// The grids of `snapshot`'s triangles, a second one on the triangles
+    /// `both` names.
+    fn new(snapshot: &crate::scene::Snapshot, meshing: &Meshing, both: &[bool]) -> Self {
+        let mut mesh = PassMesh {
+            grids: Vec::with_capacity(snapshot.triangles.len()),
+            reverse_grids: Vec::with_capacity(snapshot.triangles.len()),
+            vertex_of: Vec::new(),
+            vertices: Vec::new(),
+            link_count: 0,
+        };
         // Mesh vertices: a triangle corner at the same point of the same
-        // object with the same shading normal is one vertex, so that the
-        // Gouraud shading is continuous across the mesh and a finely
-        // tessellated object (a sphere) has a vertex per mesh vertex, not
-        // three per triangle. Keyed by object, not by component
-        // ([`SolvedSides`]): parts of one object that touch only at corners
-        // (a chair's leg flush with its seat) share those vertices, which
-        // keying by component would split (`chairs-room`: 780 corner
-        // vertices instead of 732). Where such parts have their sides
-        // solved apart, a shared corner gathers on the side of the part
-        // that made it first.
-        let mut corners: HashMap<(u32, [u32; 3], [u32; 3]), u32> = HashMap::new();
-        for (id, tri) in snapshot.triangles.iter().enumerate() {
-            let (n, links) = meshing.grid(tri);
-            grids.push(Grid {
-                n,
-                first: vertex_of.len() as u32,
-            });
-            let object = snapshot.tri_object[id];
-            for b in 0..=n {
-                for a in 0..=n - b {
-                    let mut new_vertex = || {
-                        vertices.push(Vertex {
-                            triangle: id as u32,
-                            a,
-                            b,
-                            links,
-                            first_link: link_count,
-                        });
-                        link_count += links;
-                        vertices.len() as u32 - 1
-                    };
-                    let corner = match (a, b) {
-                        (0, 0) => Some(0),
-                        (a, 0) if a == n => Some(1),
-                        (0, b) if b == n => Some(2),
-                        _ => None,
-                    };
-                    let vertex = match corner {
-                        Some(k) => *corners
-                            .entry((
-                                object,
-                                tri.p[k].to_array().map(f32::to_bits),
-                                tri.n[k].to_array().map(f32::to_bits),
-                            ))
-                            .or_insert_with(new_vertex),
-                        None => new_vertex(),
-                    };
-                    vertex_of.push(vertex);
-                }
+        // object with the same shading normal (on the same side) is one
+        // vertex, so that the Gouraud shading is continuous across the
+        // mesh and a finely tessellated object (a sphere) has a vertex per
+        // mesh vertex, not three per triangle. Keyed by object, not by
+        // component ([`SolvedSides`]): parts of one object that touch only
+        // at corners (a chair's leg flush with its seat) share those
+        // vertices, which keying by component would split (`chairs-room`:
+        // 780 corner vertices instead of 732). Where such parts have their
+        // sides solved apart, a shared corner gathers on the side of the
+        // part that made it first.
+        let mut corners: HashMap<CornerKey, u32> = HashMap::new();
+        for id in 0..snapshot.triangles.len() {
+            let grid = mesh.add_grid(snapshot, meshing, &mut corners, id, false);
+            mesh.grids.push(grid);
+            let reverse = both.get(id).copied().unwrap_or(false);
+            let reverse = reverse.then(|| mesh.add_grid(snapshot, meshing, &mut corners, id, true));
+            mesh.reverse_grids.push(reverse);
+        }
+        mesh
+    }
+
+    /// Adds the grid of triangle `id` on its first side, or with `reverse`
+    /// on the other: its slots, and the vertices they do not share.
+    fn add_grid(
+        &mut self,
+        snapshot: &crate::scene::Snapshot,
+        meshing: &Meshing,
+        corners: &mut HashMap<CornerKey, u32>,
+        id: usize,
+        reverse: bool,
+    ) -> Grid {
+        let tri = &snapshot.triangles[id];
+        let (n, links) = meshing.grid(tri);
+        let grid = Grid {
+            n,
+            first: self.vertex_of.len() as u32,
+        };
+        let object = snapshot.tri_object[id];
+        for b in 0..=n {
+            for a in 0..=n - b {
+                let mut new_vertex = || {
+                    self.vertices.push(Vertex {
+                        triangle: id as u32,
+                        a,
+                        b,
+                        reverse,
+                        links,
+                        first_link: self.link_count,
+                    });
+                    self.link_count += links;
+                    self.vertices.len() as u32 - 1
+                };
+                let corner = match (a, b) {
+                    (0, 0) => Some(0),
+                    (a, 0) if a == n => Some(1),
+                    (0, b) if b == n => Some(2),
+                    _ => None,
+                };
+                let vertex = match corner {
+                    Some(k) => *corners
+                        .entry((
+                            object,
+                            tri.p[k].to_array().map(f32::to_bits),
+                            tri.n[k].to_array().map(f32::to_bits),
+                            reverse,
+                        ))
+                        .or_insert_with(new_vertex),
+                    None => new_vertex(),
+                };
+                self.vertex_of.push(vertex);
             }
         }
-        PassMesh {
-            grids,
-            vertex_of,
-            vertices,
-            link_count,
-        }
+        grid
     }
 }
+
+/// A mesh vertex: object, position and shading normal (their bits), and
+/// whether it lies on the reverse side.
+type CornerKey = (u32, [u32; 3], [u32; 3], bool);
 
 /// Where a vertex of the pass lies: a triangle and its grid position (for
 /// a vertex shared by several triangles, the first of them).
@@ -326,6 +361,9 @@ struct Vertex {
     triangle: u32,
     a: u32,
     b: u32,
+    /// On the side opposite its triangle's first grid's (a triangle
+    /// solved on both sides).
+    reverse: bool,
     links: u32,
     /// Index of its first link.
     first_link: u32,
@@ -360,6 +398,8 @@ pub struct GlobalPass {
     /// The side of each triangle solved: the one its vertices gather on.
     sides: SolvedSides,
     grids: Vec<Grid>,
+    /// Per triangle solved on both sides, its second grid.
+    reverse_grids: Vec<Option<Grid>>,
     /// The vertex in each slot of the grids.
     vertex_of: Vec<u32>,
     vertices: Vec<Vertex>,
@@ -427,6 +467,7 @@ impl GlobalPass {
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + std::mem::size_of_val(&self.grids[..])
+            + std::mem::size_of_val(&self.reverse_grids[..])
             + std::mem::size_of_val(&self.vertex_of[..])
             + std::mem::size_of_val(&self.vertices[..])
             + std::mem::size_of_val(&self.links[..])
@@ -456,18 +497,25 @@ impl GlobalPass {
     pub fn new(ctx: &FrameContext, settings: GlobalSettings) -> Self {
         let at_zero = (ctx.snapshot.time != MESHED_AT).then(|| ctx.scene.snapshot(MESHED_AT));
         let meshed = at_zero.as_ref().unwrap_or(ctx.snapshot);
-        let meshing = Meshing::fitting(&meshed.triangles, &settings, static_diagonal(meshed));
+        let sides = SolvedSides::new(ctx.scene, ctx.snapshot, meshed);
+        let both: Vec<bool> = (0..meshed.triangles.len() as u32)
+            .map(|id| sides.both(id))
+            .collect();
+        let diagonal = static_diagonal(meshed);
+        let meshing = Meshing::fitting(&meshed.triangles, &both, &settings, diagonal);
         let PassMesh {
             grids,
+            reverse_grids,
             vertex_of,
             vertices,
             link_count,
-        } = PassMesh::new(meshed, &meshing);
+        } = PassMesh::new(meshed, &meshing, &both);
         let count = vertices.len();
         GlobalPass {
             settings,
-            sides: SolvedSides::new(ctx.scene, ctx.snapshot),
+            sides,
             grids,
+            reverse_grids,
             vertex_of,
             vertices,
             links: Vec::new(),
@@ -502,10 +550,10 @@ impl GlobalPass {
         self.grids.len() == triangles
     }
 
-    /// Whether the pass solves the back side of triangle `id` (its front
-    /// otherwise).
-    pub fn solves_back(&self, id: u32) -> bool {
-        self.sides.back(id)
+    /// Whether the pass solves the side of triangle `id` that `back`
+    /// names.
+    pub fn solves(&self, id: u32, back: bool) -> bool {
+        self.sides.solves(id, back)
     }
 
     pub fn vertex_count(&self) -> usize {
@@ -521,15 +569,20 @@ impl GlobalPass {
         &self.indirect
     }
 
-    /// The grid of triangle `id`.
-    pub fn grid(&self, id: u32) -> Grid {
-        self.grids[id as usize]
+    /// The grid of the side of triangle `id` that `back` names: its second
+    /// grid where it has one on that side, else its first.
+    pub fn grid(&self, id: u32, back: bool) -> Grid {
+        match self.reverse_grids[id as usize] {
+            Some(reverse) if back != self.sides.back(id) => reverse,
+            _ => self.grids[id as usize],
+        }
     }
 
-    /// The vertices that interpolate at barycentrics `(u, v)` of triangle
-    /// `id`, and their weights.
-    pub fn gouraud(&self, id: u32, u: f32, v: f32) -> Gouraud {
-        self.grid(id)
+    /// The vertices that interpolate at barycentrics `(u, v)` of the side
+    /// of triangle `id` that `back` names ([`Self::grid`]), and their
+    /// weights.
+    pub fn gouraud(&self, id: u32, back: bool, u: f32, v: f32) -> Gouraud {
+        self.grid(id, back)
             .weights(u, v)
             .map(|(slot, w)| (self.vertex_of[slot as usize], w))
     }
@@ -579,7 +632,7 @@ impl GlobalPass {
                 let tri = &ctx.snapshot.triangles[v.triangle as usize];
                 let n = self.grids[v.triangle as usize].n as f32;
                 let (u, w) = pulled(v.a as f32 / n, v.b as f32 / n);
-                let side = self.sides.sign(v.triangle);
+                let side = self.sides.sign(v.triangle) * if v.reverse { -1.0 } else { 1.0 };
                 ShadePoint {
                     p: tri.point(u, w),
                     n: tri.shading_normal(u, w) * side,
@@ -702,14 +755,17 @@ impl GlobalPass {
     /// there; its segment, to the hit, or its ray where it hit nothing.
     fn land_links(&mut self, ctx: &FrameContext, indices: &[usize], rays: &[Ray], hits: Vec<Hit>) {
         for ((index, ray), hit) in indices.iter().zip(rays).zip(hits) {
-            let on_solved_side = hit.is_hit()
-                && ctx.snapshot.triangles[hit.triangle as usize]
-                    .geometric_normal()
-                    .dot(ray.dir())
-                    * self.sides.sign(hit.triangle)
-                    < 0.0;
-            let landing = if on_solved_side {
-                self.gouraud(hit.triangle, hit.u, hit.v)
+            // The side hit is the one the ray meets: its back where it
+            // runs along the triangle's geometric normal (neither where it
+            // grazes it).
+            let landed = hit.is_hit().then(|| {
+                let tri = &ctx.snapshot.triangles[hit.triangle as usize];
+                tri.geometric_normal().dot(ray.dir())
+            });
+            let back = landed.filter(|&d| d != 0.0).map(|d| d > 0.0);
+            let on_solved_side = back.is_some_and(|back| self.sides.solves(hit.triangle, back));
+            let landing = if let Some(back) = back.filter(|_| on_solved_side) {
+                self.gouraud(hit.triangle, back, hit.u, hit.v)
             } else {
                 [(0, 0.0); 3]
             };
@@ -1038,26 +1094,33 @@ mod tests {
             n: [Vec3::Z; 3],
         };
         let room: Vec<_> = (0..100).map(|i| quad(i as f32, 1.0)).collect();
-        let m = Meshing::fitting(&room, &settings, 10.0);
+        let m = Meshing::fitting(&room, &[], &settings, 10.0);
         assert_eq!(
             (m.spacing, m.links, m.min_links),
             (10.0 / 32.0, 128, MIN_LINKS)
         );
-        let tiny_static = Meshing::fitting(&room, &settings, 0.01);
-        assert!(tiny_static.links_needed(&room) <= MAX_LINKS);
+        // A triangle solved on both sides needs its links twice.
+        let one_side = m.links_needed(&room, &[]);
+        let half: Vec<bool> = (0..100).map(|i| i % 2 == 0).collect();
+        assert_eq!(m.links_needed(&room, &half), one_side * 3 / 2);
+        let tiny_static = Meshing::fitting(&room, &[], &settings, 0.01);
+        assert!(tiny_static.links_needed(&room, &[]) <= MAX_LINKS);
+        let both = vec![true; room.len()];
+        let tiny_both = Meshing::fitting(&room, &both, &settings, 0.01);
+        assert!(tiny_both.links_needed(&room, &both) <= MAX_LINKS);
         assert!(
             Meshing {
                 spacing: 0.01 / 32.0,
                 ..m
             }
-            .links_needed(&room)
+            .links_needed(&room, &[])
                 > MAX_LINKS
         );
         let many: Vec<_> = (0..1_000_000)
             .map(|i| quad(i as f32 * 1e-3, 1e-3))
             .collect();
-        let thinned = Meshing::fitting(&many, &settings, 1000.0);
-        assert!(thinned.links_needed(&many) <= MAX_LINKS, "{thinned:?}");
+        let thinned = Meshing::fitting(&many, &[], &settings, 1000.0);
+        assert!(thinned.links_needed(&many, &[]) <= MAX_LINKS, "{thinned:?}");
         assert!(thinned.links >= 1 && thinned.min_links >= 1);
     }
 

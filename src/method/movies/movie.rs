@@ -134,7 +134,8 @@ impl Movie {
                 .band()
                 .map(|(index, i, j)| {
                     let (u, v) = self.texel_uv(i, j);
-                    (index, (u, v), global.gouraud(self.key.triangle, u, v))
+                    let g = global.gouraud(self.key.triangle, self.key.back, u, v);
+                    (index, (u, v), g)
                 })
                 .collect();
         }
@@ -152,14 +153,14 @@ impl Movie {
         let r = self.resolution as usize;
         self.texels.clear();
         self.texels.resize(r * r, Vec3::ZERO);
-        // The global pass solves one side of each triangle (a link landing
-        // on the other gathers nothing: it neither takes nor gives light
-        // there, as one-sided radiosity polygons). Its values are that
-        // side's light, so the other side takes none of them: reading them
-        // lit the outside of closed rooms and the dark side of thin walls
-        // with the light of the inside. A side not solved that the camera
-        // sees gets its direct light only.
-        let solved = self.key.back == global.solves_back(self.key.triangle);
+        // The global pass solves one side of most triangles (a link
+        // landing on the other gathers nothing: it neither takes nor gives
+        // light there, as one-sided radiosity polygons), both of a flat
+        // part with scene on either side. A side's values are its own
+        // light, so a side not solved takes none of them: reading them lit
+        // the outside of closed rooms with the light of the inside. A side
+        // not solved that the camera sees gets its direct light only.
+        let solved = global.solves(self.key.triangle, self.key.back);
         for (&(index, _, g), &e) in self.layout.iter().zip(&direct) {
             let indirect = if solved {
                 global.indirect_with(&g)
