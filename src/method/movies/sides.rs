@@ -280,6 +280,10 @@ fn gap_behind(bvh: &crate::accel::SceneBvh, meshed: &Snapshot, ids: &[usize]) ->
         .map(|&id| {
             let tri = &meshed.triangles[id];
             let back = -tri.geometric_normal();
+            if back == Vec3::ZERO {
+                // Scaled to nothing at time 0: no side to look out of.
+                return 0.0;
+            }
             let centre = tri.point(1.0 / 3.0, 1.0 / 3.0);
             let origin = crate::integrator::offset_origin(centre, back, back);
             let hit = bvh.closest_hit(&crate::backend::Ray::new(origin, back, 0.0, f32::INFINITY));
