@@ -33,11 +33,12 @@
 //! without the light of the partition's other side and its bounce. A flat
 //! part has no inside to waste links on; a room's outer wall, with
 //! nothing behind it, and a light hung just under a ceiling keep one
-//! side. Not mended: a box facing out seen from outside through its open
-//! side, and one of several flat faces whose walls meet at edges whose
-//! corners differ in their bits: their insides get their direct light
-//! only. A face turned the other way from its neighbours is a component
-//! of its own.
+//! side. Not mended: a box facing out, all one part, seen from outside
+//! through its open side: its inside gets its direct light only (a box
+//! whose walls do not join, their corners differing in their bits, is
+//! flat walls with the box's inside behind them, solved on both sides).
+//! A face turned the other way from its neighbours is a component of its
+//! own.
 //!
 //! The choice is a function of the frame (its camera and geometry), so a
 //! pass that starts at any frame makes the same one. Where a component's
