@@ -13,9 +13,11 @@
 
 mod error_map;
 
-pub use error_map::{error_map, DARK_FLOOR, FULL_SCALE};
+pub use error_map::{
+    error_map, error_map_path, mean_error_map_path, MapWriter, DARK_FLOOR, FULL_SCALE,
+};
 
-use crate::film::{read_exr, write_rgb_png, Film, FilmError};
+use crate::film::{read_exr, Film, FilmError};
 use glam::{DVec3, Vec3};
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -82,12 +84,6 @@ pub enum MetricsError {
     },
     #[error(transparent)]
     Film(#[from] FilmError),
-}
-
-/// `DIR/error_NNNN.png`, where [`compare_dirs_with`] writes frame
-/// `frame`'s [`error_map()`].
-pub fn error_map_path(dir: &Path, frame: u32) -> PathBuf {
-    dir.join(format!("error_{frame:04}.png"))
 }
 
 // ---------------------------------------------------------------- per image
@@ -706,18 +702,14 @@ pub fn compare_dirs(reference_dir: &Path, test_dir: &Path) -> Result<CompareRepo
 
 /// [`compare_dirs`], writing with `error_maps` the [`error_map()`] of each
 /// frame to `DIR/error_NNNN.png` (the folder made if need be) as the
-/// frame is compared.
+/// frame is compared, and that of the frames' means to
+/// `DIR/error_mean.png` ([`MapWriter`]).
 pub fn compare_dirs_with(
     reference_dir: &Path,
     test_dir: &Path,
     error_maps: Option<&Path>,
 ) -> Result<CompareReport, MetricsError> {
-    if let Some(dir) = error_maps {
-        std::fs::create_dir_all(dir).map_err(|error| MetricsError::MapFolder {
-            path: dir.to_owned(),
-            error,
-        })?;
-    }
+    let mut maps = error_maps.map(MapWriter::create).transpose()?;
     let frames = list_frames(reference_dir)?;
     if frames.is_empty() {
         return Err(MetricsError::NoFrames {
@@ -731,14 +723,16 @@ pub fn compare_dirs_with(
     for (number, ref_path) in frames {
         let pair = read_pair(number, ref_path, tests.remove(&number), test_dir)?;
         totals.add_frame(&pair);
-        if let Some(dir) = error_maps {
-            let path = error_map_path(dir, number);
-            write_rgb_png(&error_map(&pair.test, &pair.reference), &path)?;
+        if let Some(maps) = &mut maps {
+            maps.add(number, &pair.test, &pair.reference)?;
         }
         if let Some(prev) = &prev {
             totals.add_pair(prev, &pair)?;
         }
         prev = Some(pair);
+    }
+    if let Some(maps) = maps {
+        maps.finish()?;
     }
     // stderr: stdout may be `--json`.
     for note in [totals.black_warning(), totals.mask_note()]

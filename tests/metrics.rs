@@ -4,8 +4,8 @@
 use glam::Vec3;
 use radcache::film::{decode_exr, frame_path, read_exr, write_exr, Film};
 use radcache::metrics::{
-    compare_dirs, compare_dirs_with, error_map_path, light_mask_path, write_light_mask,
-    MetricsError,
+    compare_dirs, compare_dirs_with, error_map_path, light_mask_path, mean_error_map_path,
+    write_light_mask, MetricsError,
 };
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -108,6 +108,17 @@ fn error_maps_show_where_each_frame_is_off() {
         }
     }
     assert!(read(1).pixels().all(|p| p.0 == [0, 0, 255]), "−30 %");
+    // The means: the left half +30 % then −30 % is the reference's mean
+    // (grey), the right half equal then −30 % is −15 % (blue, not full).
+    let mean = image::open(mean_error_map_path(&maps)).unwrap().to_rgb8();
+    for (x, _, p) in mean.enumerate_pixels() {
+        let [r, g, b] = p.0;
+        if x < 4 {
+            assert!(r == g && g == b && r > 0, "mean at x = {x}: {:?}", p.0);
+        } else {
+            assert!(b > r && r == g && b < 255, "mean at x = {x}: {:?}", p.0);
+        }
+    }
 }
 
 #[test]

@@ -328,7 +328,8 @@ pub struct CompareArgs {
     /// Also write DIR/error_NNNN.png for each frame: red where the test is
     /// brighter than the reference, blue where darker, in full colour from
     /// ±25 % of the reference pixel's luminance (pixels darker than 5 % of
-    /// the frame's mean are judged against that), over the reference in grey.
+    /// the frame's mean are judged against that), over the reference in grey;
+    /// and DIR/error_mean.png, the same of the frames' means (their bias).
     #[arg(long, value_name = "DIR")]
     pub error_maps: Option<PathBuf>,
 }

@@ -1,5 +1,8 @@
 //! Pictures of where a frame is off (`radcache compare --error-maps DIR`):
 //! the figures of [`super::compare_dirs`] say how much, these say where.
+//! One a frame, and one of the frames' means ([`MapWriter`]): where the
+//! frames' noise is independent the mean's is lower by the square root of
+//! the frames, and what stays in it is the method's bias.
 //!
 //! Each pixel shows the signed relative error of its luminance,
 //! `e = (L_test − L_ref) / max(L_ref, DARK_FLOOR · mean L_ref)`: red where
@@ -11,8 +14,11 @@
 //! black, or nearly, would make any difference infinite; below a twentieth
 //! of the frame's mean a pixel is judged against that.
 
-use crate::film::{encode_srgb8, tone_curve, Film};
+use super::MetricsError;
+use crate::film::{encode_srgb8, tone_curve, write_rgb_png, Film};
 use crate::material::luminance;
+use glam::DVec3;
+use std::path::{Path, PathBuf};
 
 /// The relative error shown in full colour (±25 %); smaller ones are
 /// blended towards grey in proportion.
@@ -71,6 +77,105 @@ fn map_pixel(error: f32, reference: f32) -> [u8; 3] {
     [towards(red), towards(0.0), towards(blue)]
 }
 
+/// `DIR/error_NNNN.png`: frame `frame`'s [`error_map`].
+pub fn error_map_path(dir: &Path, frame: u32) -> PathBuf {
+    dir.join(format!("error_{frame:04}.png"))
+}
+
+/// `DIR/error_mean.png`: the [`error_map`] of the test frames' mean
+/// against the reference frames' mean.
+pub fn mean_error_map_path(dir: &Path) -> PathBuf {
+    dir.join("error_mean.png")
+}
+
+/// Writes the error maps of a comparison into a folder as its frames come,
+/// and the map of their means at the end.
+pub struct MapWriter {
+    dir: PathBuf,
+    /// `None` once frames of two sizes came.
+    sums: Option<Sums>,
+    frames: u32,
+}
+
+/// Per pixel, the sums of the test's and the reference's radiance over
+/// the frames so far (f64: hundreds of frames lose nothing), and the size
+/// of the frames.
+struct Sums {
+    test: Vec<DVec3>,
+    reference: Vec<DVec3>,
+    size: (u32, u32),
+}
+
+impl Sums {
+    fn add(sums: &mut [DVec3], film: &Film) {
+        for (sum, p) in sums.iter_mut().zip(&film.pixels) {
+            *sum += p.as_dvec3();
+        }
+    }
+
+    /// The mean film of `sums` over `frames` frames.
+    fn mean(&self, sums: &[DVec3], frames: u32) -> Film {
+        let n = f64::from(frames);
+        Film {
+            width: self.size.0,
+            height: self.size.1,
+            pixels: sums.iter().map(|s| (*s / n).as_vec3()).collect(),
+        }
+    }
+}
+
+impl MapWriter {
+    /// A writer into `dir`, made if need be.
+    pub fn create(dir: &Path) -> Result<Self, MetricsError> {
+        std::fs::create_dir_all(dir).map_err(|error| MetricsError::MapFolder {
+            path: dir.to_owned(),
+            error,
+        })?;
+        Ok(MapWriter {
+            dir: dir.to_owned(),
+            sums: None,
+            frames: 0,
+        })
+    }
+
+    /// Writes frame `number`'s map and adds it to the means.
+    pub fn add(&mut self, number: u32, test: &Film, reference: &Film) -> Result<(), MetricsError> {
+        let path = error_map_path(&self.dir, number);
+        write_rgb_png(&error_map(test, reference), &path)?;
+        let size = (reference.width, reference.height);
+        if self.frames == 0 {
+            let zeros = vec![DVec3::ZERO; reference.pixels.len()];
+            self.sums = Some(Sums {
+                test: zeros.clone(),
+                reference: zeros,
+                size,
+            });
+        }
+        self.frames += 1;
+        if self.sums.as_ref().is_some_and(|s| s.size != size) {
+            self.sums = None;
+        }
+        if let Some(sums) = &mut self.sums {
+            Sums::add(&mut sums.test, test);
+            Sums::add(&mut sums.reference, reference);
+        }
+        Ok(())
+    }
+
+    /// Writes the map of the means, where more than one frame came and
+    /// all were of one size; returns its path then.
+    pub fn finish(self) -> Result<Option<PathBuf>, MetricsError> {
+        let Some(sums) = self.sums.filter(|_| self.frames > 1) else {
+            return Ok(None);
+        };
+        let test = sums.mean(&sums.test, self.frames);
+        let reference = sums.mean(&sums.reference, self.frames);
+        let path = mean_error_map_path(&self.dir);
+        write_rgb_png(&error_map(&test, &reference), &path)?;
+        Ok(Some(path))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -118,6 +223,27 @@ mod tests {
         // share of full red, 0.2 · 255.
         assert_eq!((g, b), (0, 0));
         assert!((r as f32 - 0.2 * 255.0).abs() <= 1.0, "{r}");
+    }
+
+    /// The map of the means is written for two frames or more of one
+    /// size, not for one frame, nor where the sizes differ.
+    #[test]
+    fn a_mean_map_needs_frames_of_one_size() {
+        let dir = tempfile::tempdir().unwrap();
+        let finish = |sizes: &[u32]| {
+            let mut maps = MapWriter::create(dir.path()).unwrap();
+            for (n, &w) in (0..).zip(sizes) {
+                let f = Film::new(w, 1);
+                maps.add(n, &f, &f).unwrap();
+            }
+            maps.finish().unwrap()
+        };
+        assert_eq!(finish(&[4]), None);
+        assert_eq!(finish(&[4, 2]), None);
+        assert_eq!(finish(&[4, 4, 2]), None);
+        assert_eq!(finish(&[4, 4]), Some(mean_error_map_path(dir.path())));
+        let mean = image::open(mean_error_map_path(dir.path())).unwrap();
+        assert_eq!((mean.width(), mean.height()), (4, 1));
     }
 
     /// A black reference frame has no scale: its map is its grey (black),
