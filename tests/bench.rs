@@ -921,6 +921,43 @@ fn a_stopped_bench_writes_the_runs_it_finished_and_names_the_others() {
     assert!(!dir.path().join("reference/spheres").exists());
 }
 
+/// A run stopped mid-way (its stop flag set once its first frame is
+/// written, as Ctrl-C sets it) is named unfinished and leaves none of its
+/// frames: a run's folder holds a whole run or nothing.
+#[test]
+fn a_run_stopped_mid_way_leaves_no_frames() {
+    use std::sync::atomic::Ordering;
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        frames: 0..40,
+        ..tiny_bench(dir.path(), &["path:spp=256"])
+    };
+    let run = dir.path().join("runs/cube-in-box/path-spp=256");
+    let (first, stop) = (run.join("frame_0000.exr"), opts.stop.clone());
+    let watcher = std::thread::spawn(move || {
+        let start = std::time::Instant::now();
+        while !first.exists() && start.elapsed().as_secs() < 120 {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        stop.store(true, Ordering::Relaxed);
+    });
+    let report = bench::run(&opts).unwrap();
+    watcher.join().unwrap();
+    assert!(report.rows.is_empty(), "the run finished before the stop");
+    assert_eq!(report.unfinished, ["cube-in-box path spp=256"]);
+    let left: Vec<_> = std::fs::read_dir(&run)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .filter(|n| n.to_string_lossy().starts_with("frame_"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+    // The reference, finished before the run began, is whole.
+    assert!(dir
+        .path()
+        .join("reference/cube-in-box/reference.json")
+        .is_file());
+}
+
 /// A bench stopped before it starts renders nothing and writes a
 /// `bench.csv` of no run in place of an earlier bench's.
 #[test]

@@ -670,7 +670,9 @@ pub(super) struct RunStats {
 /// Renders `frames` into `dir` with a progress bar (off a terminal, a
 /// line every half minute the run lasts); the time counts rendering
 /// only, not writing files. [`Stopped`] where the renderer's abandon flag
-/// ([`BenchOptions::stop`]) abandoned a frame, which is not written.
+/// ([`BenchOptions::stop`]) abandoned a frame, which is not written, and
+/// the frames written before it are removed: a folder holds a whole run
+/// (or reference) or none of it, never a start that looks like one.
 pub(super) fn render_frames(
     renderer: &mut Renderer,
     frames: Range<u32>,
@@ -694,7 +696,8 @@ pub(super) fn render_frames(
             .map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
         if renderer.abandoned() {
             bar.finish_and_clear();
-            return Err(Stopped.into()); // Half rendered: not written.
+            clear_frames(dir)?;
+            return Err(Stopped.into());
         }
         render_time += start.elapsed();
         let stats = renderer.last_frame_stats();
