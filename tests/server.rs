@@ -1,6 +1,7 @@
 //! `radcache serve` against a real server on a loopback port.
 
 mod serve_client;
+mod store_fixtures;
 
 use serve_client::{request, start_server, Server};
 use std::process::Command;
@@ -1822,7 +1823,8 @@ fn a_served_job_of_another_algorithm_revision_fails_saying_to_resubmit() {
         store.begin_job(&spec, false).unwrap().id
     };
     {
-        let db = sled::open(&db).unwrap();
+        // The store just closed: its lock is released a moment later.
+        let db = store_fixtures::open_raw(&db);
         let meta = db.open_tree("meta").unwrap();
         let key = radcache::store::keys::meta_revision(id);
         assert!(meta.remove(key).unwrap().is_some());

@@ -20,7 +20,7 @@ use radcache::store::{
 use std::path::{Path, PathBuf};
 
 mod store_fixtures;
-use store_fixtures::{record, samples, spec};
+use store_fixtures::{open_raw, record, samples, spec};
 
 fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
     let mut job = store.begin_job(&spec(name), false).unwrap();
@@ -740,13 +740,13 @@ fn damaged_or_foreign_directories_are_refused_untouched() {
     // Another program's sled database: refused, nothing written into it.
     let other = dir.path().join("other");
     {
-        let db = sled::open(&other).unwrap();
+        let db = open_raw(&other);
         db.open_tree("theirs").unwrap().insert("k", "v").unwrap();
         db.flush().unwrap();
     }
     let msg = err_text(Store::open(&other));
     assert!(msg.contains("`theirs`"), "{msg}");
-    let db = sled::open(&other).unwrap();
+    let db = open_raw(&other);
     assert!(db.open_tree("meta").unwrap().is_empty(), "meta written");
     assert!(!other.join("samples.log").exists(), "a sample log made");
 }
@@ -871,7 +871,7 @@ fn a_job_started_under_another_algorithm_revision_is_refused_unless_forced() {
     };
     // The `trc` job as a build from before revisions were recorded left it.
     {
-        let db = sled::open(&path).unwrap();
+        let db = open_raw(&path);
         let meta = db.open_tree("meta").unwrap();
         assert!(meta
             .remove(keys::meta_revision(first.id))
@@ -929,7 +929,7 @@ fn compact_removes_revisions_no_job_holds() {
     // As a kill between a job's revision and the job itself leaves it,
     // or an older build that deleted the job.
     {
-        let db = sled::open(&path).unwrap();
+        let db = open_raw(&path);
         let meta = db.open_tree("meta").unwrap();
         meta.insert(keys::meta_revision(gone), &7u64.to_be_bytes()[..])
             .unwrap();
@@ -1955,7 +1955,7 @@ fn version_1_store_is_migrated_and_its_job_inspects_and_resumes() {
     // written in schema 1's layout: marked as such, the job resumes.
     drop(store);
     {
-        let db = sled::open(&path).unwrap();
+        let db = open_raw(&path);
         let revision = radcache::method::algorithm_revision("ic").to_be_bytes();
         let meta = db.open_tree("meta").unwrap();
         meta.insert(keys::meta_revision(7), &revision[..]).unwrap();
@@ -2135,18 +2135,6 @@ fn settings_are_compared_as_json_values() {
         "{msg}"
     );
     assert!(!msg.contains("theta"), "{msg}");
-}
-
-/// The sled database under a store, opened directly (retrying while the
-/// lock of a store just closed is released).
-fn open_raw(path: &Path) -> sled::Db {
-    for _ in 0..100 {
-        if let Ok(db) = sled::open(path) {
-            return db;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    sled::open(path).unwrap()
 }
 
 #[test]

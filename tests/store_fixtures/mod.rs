@@ -63,3 +63,17 @@ pub fn samples(n: usize, seed: u32) -> HemisphereSamples {
     }
     s
 }
+
+/// The sled database under a store, opened directly, retrying while the
+/// lock of a store just closed is released: sled lets go of it from
+/// background threads a moment after the store is dropped (a plain
+/// `sled::open` there failed now and then with "could not acquire lock").
+pub fn open_raw(path: &std::path::Path) -> sled::Db {
+    for _ in 0..100 {
+        if let Ok(db) = sled::open(path) {
+            return db;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    sled::open(path).unwrap()
+}
