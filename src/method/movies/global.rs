@@ -1062,7 +1062,9 @@ fn converged(before: &[Vec3], after: &[Vec3]) -> bool {
     change <= CONVERGED * total
 }
 
-fn diagonal(points: impl Iterator<Item = Vec3>) -> f32 {
+/// The diagonal of the box around `points` (1 where it is empty, flat to a
+/// point or not finite).
+pub(super) fn diagonal(points: impl Iterator<Item = Vec3>) -> f32 {
     let (lo, hi) = points.fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(p), hi.max(p)),

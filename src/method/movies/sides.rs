@@ -270,10 +270,7 @@ fn both_sides(triangles: &[(u32, [Vec3; 3])], component: &[u32], meshed: &Snapsh
 /// How far the median gap behind the flat part of triangles `ids` reaches
 /// past [`GAP_SHARE`] of the part's size (positive: both sides solved).
 fn gap_behind(bvh: &crate::accel::SceneBvh, meshed: &Snapshot, ids: &[usize]) -> f32 {
-    let corners = ids.iter().flat_map(|&id| meshed.triangles[id].p);
-    let (lo, hi) = corners.fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), q| {
-        (lo.min(q), hi.max(q))
-    });
+    let size = super::global::diagonal(ids.iter().flat_map(|&id| meshed.triangles[id].p));
     let step = ids.len().div_ceil(GAP_RAYS);
     let mut gaps: Vec<f32> = ids
         .iter()
@@ -296,7 +293,7 @@ fn gap_behind(bvh: &crate::accel::SceneBvh, meshed: &Snapshot, ids: &[usize]) ->
         })
         .collect();
     gaps.sort_by(f32::total_cmp);
-    gaps[gaps.len() / 2] - GAP_SHARE * (hi - lo).length()
+    gaps[gaps.len() / 2] - GAP_SHARE * size
 }
 
 /// Per component, whether its triangles share one plane and one
