@@ -485,6 +485,8 @@ fn the_room_behind_a_thin_partition_is_lit_as_path_lights_it() {
 fn check_partition_room(s: Scene, size: u32, reference: &Film, walls_out: bool) {
     let mut movies = TextureMovies::new(MoviesSettings::default());
     let (film, _, _) = render(&mut renderer(s, size), &mut movies, 0);
+    let bias = radcache::metrics::block_bias(&film, reference, radcache::metrics::BLOCK);
+    println!("thin partition, walls out {walls_out}: block bias {bias:.4}");
     // The columns right of the partition's (the middle one) and left of it.
     let half_mean = |f: &Film, columns: std::ops::Range<u32>| {
         let sum: f64 = (0..size)
