@@ -80,6 +80,19 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         store_job.as_mut(),
         &mut |_| !stop.load(Ordering::Relaxed),
     )?;
+    report_render(&args, method.spp(), &summary, store_job.as_ref(), &stop)
+}
+
+/// Prints what `run_render` did (the job's resumed and rendered frames,
+/// then the summary), and fails with an "interrupted after frame N" error
+/// when `stop` (Ctrl-C) ended the range early.
+fn report_render(
+    args: &RenderArgs,
+    spp: u32,
+    summary: &render::RenderSummary,
+    store_job: Option<&render::StoreJob>,
+    stop: &std::sync::atomic::AtomicBool,
+) -> Result<()> {
     // A Ctrl-C during the range's last frame stops nothing.
     let done = summary.resumed + summary.frames;
     let interrupted = stop.load(Ordering::Relaxed) && (done as usize) < args.frames.len();
@@ -89,7 +102,6 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
         _ => args.frames.end - 1,
     };
     let printed = store_job
-        .as_ref()
         .map_or(Ok(()), |j| {
             outln!(
                 "job {:?} in {}: {} frames resumed from the store, {} rendered, {} done in all",
@@ -100,13 +112,13 @@ pub(super) fn run_render(args: RenderArgs) -> Result<()> {
                 j.job.frames_done
             )
         })
-        .and_then(|()| print_render_summary(&args, method.spp(), &summary, last));
+        .and_then(|()| print_render_summary(args, spp, summary, last));
     // An interrupted render says so whatever became of its summary (a
     // Ctrl-C in `radcache render | tee log` also ends `tee`).
     if !interrupted {
         return printed;
     }
-    let rest = match &store_job {
+    let rest = match store_job {
         Some(j) => format!(
             "they are saved in job {:?}: the same command renders the rest",
             j.job.name
@@ -169,21 +181,7 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
         max_depth: args.max_depth,
         ..PathLength::default()
     };
-    let ic_settings = IcSettings {
-        accuracy: args.ic.ic_accuracy,
-        strata: args.ic.ic_strata,
-        spp: args.spp.unwrap_or(IcSettings::default().spp),
-        min_spacing_px: args.ic.ic_min_spacing,
-        max_spacing_px: args.ic.ic_max_spacing,
-        gradients: !args.ic.ic_no_gradients,
-        length,
-        glossy: match args.ic.ic_glossy {
-            GlossyArg::Path => GlossyLobe::Path,
-            GlossyArg::Eas => GlossyLobe::Eas,
-        },
-        eas_tau: args.ic.ic_eas_tau,
-        ..IcSettings::default()
-    };
+    let ic_settings = ic_settings(args, length);
     let method = match args.method {
         MethodName::Path => MethodSettings::Path(PathSettings {
             spp: args.spp.unwrap_or(PathSettings::default().spp),
@@ -226,9 +224,35 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
             length,
         }),
     };
-    // The flags that contradict each other, by their names (the settings'
-    // names, which `check_consistent` gives, are for `bench --methods`
-    // and the API).
+    check_flags_agree(args)?;
+    crate::method::settings::check_consistent(&method)?;
+    Ok(method)
+}
+
+/// The records' settings (`ic`'s, and those `trc` and `tcg` build on) the
+/// `--ic-*` flags, `--spp` and `length` ask for.
+fn ic_settings(args: &RenderArgs, length: PathLength) -> IcSettings {
+    IcSettings {
+        accuracy: args.ic.ic_accuracy,
+        strata: args.ic.ic_strata,
+        spp: args.spp.unwrap_or(IcSettings::default().spp),
+        min_spacing_px: args.ic.ic_min_spacing,
+        max_spacing_px: args.ic.ic_max_spacing,
+        gradients: !args.ic.ic_no_gradients,
+        length,
+        glossy: match args.ic.ic_glossy {
+            GlossyArg::Path => GlossyLobe::Path,
+            GlossyArg::Eas => GlossyLobe::Eas,
+        },
+        eas_tau: args.ic.ic_eas_tau,
+        ..IcSettings::default()
+    }
+}
+
+/// The flags that contradict each other, by their names (the settings'
+/// names, which `check_consistent` gives, are for `bench --methods` and
+/// the API).
+fn check_flags_agree(args: &RenderArgs) -> Result<()> {
     if matches!(
         args.method,
         MethodName::Ic | MethodName::Trc | MethodName::Tcg
@@ -249,8 +273,7 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
             args.tcg.tcg_tau_max
         );
     }
-    crate::method::settings::check_consistent(&method)?;
-    Ok(method)
+    Ok(())
 }
 
 /// The groups of `render`'s method flags (an `Args` struct each, as

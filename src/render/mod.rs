@@ -779,82 +779,33 @@ pub fn render_job_to_dir_with(
     mut job: Option<&mut StoreJob>,
     after_frame: &mut dyn FnMut(u32) -> bool,
 ) -> Result<RenderSummary> {
-    if out_dir.exists() && !out_dir.is_dir() {
-        bail!("output directory {} is a file", out_dir.display());
-    }
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("cannot create output directory {}", out_dir.display()))?;
-    film::remove_stale_temporaries(out_dir);
+    prepare_out_dir(out_dir)?;
     let done = match job.as_deref() {
         Some(j) => resume(renderer, j, &frames, out_dir)?,
         None => BTreeSet::new(),
     };
-    // Before any frame renders (rather than failing at its write).
-    if let Some((frame, path)) = film::frame_paths_taken_by_directories(out_dir)
-        .into_iter()
-        .find(|(f, _)| frames.contains(f) && !done.contains(f))
-    {
-        bail!(
-            "cannot write frame {frame}: {} is a directory",
-            path.display()
-        );
-    }
+    check_frame_files_writable(out_dir, &frames, &done)?;
     renderer.keep_frame_records(job.is_some());
     let mut progress = FrameProgress::new(frames.len() as u64, done.len() as u64, quiet);
     let start = Instant::now();
     let counts_before = renderer.backend().ray_counts();
     let mut frame_stats = Vec::new();
     renderer.set_frame_end(Some(frames.end));
-    let chain_end = renderer.looks_ahead().then_some(frames.end);
-    for frame in frames.clone() {
-        if done.contains(&frame) {
-            continue;
-        }
+    let chain = (frames.start, renderer.looks_ahead().then_some(frames.end));
+    for frame in frames.clone().filter(|f| !done.contains(f)) {
         progress.start_frame(frame);
         let film = renderer.try_render_frame(frame).map_err(|e| {
             progress.abandon();
-            match (job.is_some(), &e) {
-                (true, FrameFailed::Camera { .. }) => {
-                    anyhow::anyhow!("{e}\nevery frame before it is saved in the store")
-                }
-                (true, FrameFailed::Backend { .. }) => anyhow::anyhow!(
-                    "{e}\nevery frame before it is saved in the store: running the job \
-                     again resumes there (with --backend cpu if the GPU keeps failing)"
-                ),
-                (false, _) => anyhow::anyhow!("{e}"),
-            }
+            frame_failed_error(&e, job.is_some())
         })?;
         if renderer.abandoned() {
             break; // Half rendered: neither stored nor written.
         }
-        // Never expected; but a NaN spreads through every later use of the
-        // frame (compare's sums, a tone-mapped preview), so it is said.
-        let not_finite = film.pixels.iter().filter(|p| !p.is_finite()).count();
-        if not_finite > 0 {
-            progress.warn(&format!(
-                "warning: frame {frame}: {not_finite} of {} pixels are NaN or infinite \
-                 (a defect of the renderer: please report it with the scene and the command)",
-                film.pixels.len()
-            ));
-        }
+        warn_if_not_finite(&progress, frame, &film);
         let stats = renderer.last_frame_stats();
         let kept = renderer.take_frame_records();
         if let Some(j) = job.as_deref_mut() {
-            // An EXR in `out_dir` says the frame's files are complete: the
-            // files of an earlier render of this frame go (EXR first)
-            // before the store takes the new one, so that a crash between
-            // the two leaves them missing (written back from the store on
-            // resume), not stale.
-            for ext in ["exr", "png"] {
-                let old = film::frame_path(out_dir, frame, ext);
-                match std::fs::remove_file(&old) {
-                    Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                        return Err(e).with_context(|| format!("cannot replace {}", old.display()));
-                    }
-                    _ => {}
-                }
-            }
-            let chain = (frames.start, chain_end);
+            remove_frame_files(out_dir, frame)?;
             store_frame(renderer, j, &film, frame, &stats, kept, chain).map_err(|e| {
                 progress.abandon();
                 anyhow::anyhow!(
@@ -881,17 +832,94 @@ pub fn render_job_to_dir_with(
         }
     }
     progress.finish_and_clear();
+    let counts = renderer.backend().ray_counts();
     Ok(RenderSummary {
         frames: frame_stats.len() as u32,
         resumed: done.len() as u32,
         frame_stats,
         elapsed: start.elapsed(),
-        rays: renderer.backend().ray_counts().total() - counts_before.total(),
-        ray_calls: renderer.backend().ray_counts().calls - counts_before.calls,
+        rays: counts.total() - counts_before.total(),
+        ray_calls: counts.calls - counts_before.calls,
         out_dir: out_dir.to_path_buf(),
         cache_unit: renderer.cache_unit(),
         lifespans_counted: renderer.lifespans_counted(),
     })
+}
+
+/// Makes `out_dir` (a file there is an error) and clears the temporaries
+/// an interrupted write left in it.
+fn prepare_out_dir(out_dir: &Path) -> Result<()> {
+    if out_dir.exists() && !out_dir.is_dir() {
+        bail!("output directory {} is a file", out_dir.display());
+    }
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create output directory {}", out_dir.display()))?;
+    film::remove_stale_temporaries(out_dir);
+    Ok(())
+}
+
+/// A directory in the place of a frame file still to be written is an
+/// error before any frame renders, rather than at that frame's write.
+fn check_frame_files_writable(
+    out_dir: &Path,
+    frames: &Range<u32>,
+    done: &BTreeSet<u32>,
+) -> Result<()> {
+    match film::frame_paths_taken_by_directories(out_dir)
+        .into_iter()
+        .find(|(f, _)| frames.contains(f) && !done.contains(f))
+    {
+        Some((frame, path)) => bail!(
+            "cannot write frame {frame}: {} is a directory",
+            path.display()
+        ),
+        None => Ok(()),
+    }
+}
+
+/// A frame that failed to render, saying for a store job (`in_job`) that
+/// the frames before it are kept and how to go on.
+fn frame_failed_error(e: &FrameFailed, in_job: bool) -> anyhow::Error {
+    match (in_job, e) {
+        (true, FrameFailed::Camera { .. }) => {
+            anyhow::anyhow!("{e}\nevery frame before it is saved in the store")
+        }
+        (true, FrameFailed::Backend { .. }) => anyhow::anyhow!(
+            "{e}\nevery frame before it is saved in the store: running the job \
+             again resumes there (with --backend cpu if the GPU keeps failing)"
+        ),
+        (false, _) => anyhow::anyhow!("{e}"),
+    }
+}
+
+/// Never expected; but a NaN spreads through every later use of the frame
+/// (compare's sums, a tone-mapped preview), so it is said.
+fn warn_if_not_finite(progress: &FrameProgress, frame: u32, film: &Film) {
+    let not_finite = film.pixels.iter().filter(|p| !p.is_finite()).count();
+    if not_finite > 0 {
+        progress.warn(&format!(
+            "warning: frame {frame}: {not_finite} of {} pixels are NaN or infinite \
+             (a defect of the renderer: please report it with the scene and the command)",
+            film.pixels.len()
+        ));
+    }
+}
+
+/// Removes the files of an earlier render of `frame`, EXR first, before
+/// the store takes the new one: an EXR in `out_dir` says the frame's files
+/// are complete, so a crash between the two leaves them missing (written
+/// back from the store on resume), not stale.
+fn remove_frame_files(out_dir: &Path, frame: u32) -> Result<()> {
+    for ext in ["exr", "png"] {
+        let old = film::frame_path(out_dir, frame, ext);
+        match std::fs::remove_file(&old) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(e).with_context(|| format!("cannot replace {}", old.display()));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// A CPU renderer of built-in `scene` at `size × size`, for unit tests

@@ -466,36 +466,16 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> (Option<SceneChanged>, V
             d.push(format!("{name} (stored {stored}, given {given})"));
         }
     };
-    // The scene is its content: the same file named by another path
-    // (`./s.gltf`, an absolute path, a run from another directory) resumes.
-    // Only by a hash of everything the scene reads: a schema-1 hash
-    // ([`same_scene_hash`]) leaves out the files beside the `.gltf`.
-    let same_file =
-        is_file_scene(&stored.scene) && is_file_scene(scene) && stored.scene_hash == *scene_hash;
-    // `render` gives a file's absolute path; a job stored by an earlier
-    // build names it as it was given, relative to where it ran: the same
-    // name from here is the same path (a schema-1 hash then still resumes).
-    let same_path = &stored.scene == scene
-        || (is_file_scene(&stored.scene)
-            && Path::new(&stored.scene).is_relative()
-            && std::path::absolute(&stored.scene).is_ok_and(|p| p == Path::new(scene)));
+    let scene_match = match_scene(stored, scene, scene_hash);
     check(
         "scene",
-        same_path || same_file,
+        scene_match.same_scene,
         stored.scene.clone(),
         scene.clone(),
     );
-    // The same scene, changed since: said as such. Another scene's hash
-    // differs as well, named beside it.
-    let same_hash = same_scene_hash(&stored.scene_hash, scene_hash);
-    let scene_changed = (same_path && !same_hash).then(|| SceneChanged {
-        scene: scene.clone(),
-        stored_hash: stored.scene_hash.clone(),
-        given_hash: scene_hash.clone(),
-    });
     check(
         "scene hash",
-        same_hash || scene_changed.is_some(),
+        scene_match.same_hash || scene_match.changed.is_some(),
         stored.scene_hash.clone(),
         scene_hash.clone(),
     );
@@ -535,7 +515,46 @@ fn job_differences(stored: &JobSpec, spec: &JobSpec) -> (Option<SceneChanged>, V
         stored.same_pattern.to_string(),
         same_pattern.to_string(),
     );
-    (scene_changed, d)
+    (scene_match.changed, d)
+}
+
+/// How a job's scene compares with a stored job's.
+struct SceneMatch {
+    /// The same scene: the same name, or the same file by another path.
+    same_scene: bool,
+    /// The same content ([`same_scene_hash`]).
+    same_hash: bool,
+    /// The same scene, changed since it was stored.
+    changed: Option<SceneChanged>,
+}
+
+/// Compares `scene` (with its content's `scene_hash`) with `stored`'s.
+fn match_scene(stored: &JobSpec, scene: &str, scene_hash: &str) -> SceneMatch {
+    // The scene is its content: the same file named by another path
+    // (`./s.gltf`, an absolute path, a run from another directory) resumes.
+    // Only by a hash of everything the scene reads: a schema-1 hash
+    // ([`same_scene_hash`]) leaves out the files beside the `.gltf`.
+    let same_file =
+        is_file_scene(&stored.scene) && is_file_scene(scene) && stored.scene_hash == scene_hash;
+    // `render` gives a file's absolute path; a job stored by an earlier
+    // build names it as it was given, relative to where it ran: the same
+    // name from here is the same path (a schema-1 hash then still resumes).
+    let same_path = stored.scene == scene
+        || (is_file_scene(&stored.scene)
+            && Path::new(&stored.scene).is_relative()
+            && std::path::absolute(&stored.scene).is_ok_and(|p| p == Path::new(scene)));
+    // The same scene, changed since: said as such. Another scene's hash
+    // differs as well, named beside it.
+    let same_hash = same_scene_hash(&stored.scene_hash, scene_hash);
+    SceneMatch {
+        same_scene: same_path || same_file,
+        same_hash,
+        changed: (same_path && !same_hash).then(|| SceneChanged {
+            scene: scene.to_string(),
+            stored_hash: stored.scene_hash.clone(),
+            given_hash: scene_hash.to_string(),
+        }),
+    }
 }
 
 /// A stored job's settings as this build reads and writes them. A setting
