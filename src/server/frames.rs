@@ -152,44 +152,60 @@ pub async fn metrics(State(state): State<Arc<AppState>>) -> Result<impl IntoResp
     for (s, n) in counts {
         let _ = writeln!(out, "radcache_jobs{{state=\"{}\"}} {n}", s.as_str());
     }
-    let _ = writeln!(
-        out,
-        "# HELP radcache_frames_rendered_total Frames rendered by this server.\n# TYPE radcache_frames_rendered_total counter\nradcache_frames_rendered_total {}",
-        state.frames_rendered.load(Ordering::Relaxed)
+    let count = |c: &std::sync::atomic::AtomicU64| c.load(Ordering::Relaxed);
+    let mut metric = |name: &str, kind: &str, help: &str, value: &dyn std::fmt::Display| {
+        let _ = writeln!(
+            out,
+            "# HELP {name} {help}\n# TYPE {name} {kind}\n{name} {value}"
+        );
+    };
+    metric(
+        "radcache_frames_rendered_total",
+        "counter",
+        "Frames rendered by this server.",
+        &count(&state.frames_rendered),
     );
-    let _ = writeln!(
-        out,
-        "# HELP radcache_render_seconds_total Seconds spent rendering frames.\n# TYPE radcache_render_seconds_total counter\nradcache_render_seconds_total {}",
-        state.render_micros.load(Ordering::Relaxed) as f64 / 1e6
+    metric(
+        "radcache_render_seconds_total",
+        "counter",
+        "Seconds spent rendering frames.",
+        &(count(&state.render_micros) as f64 / 1e6),
     );
-    let _ = writeln!(
-        out,
-        "# HELP radcache_http_connections Client connections being served (this one among them).\n# TYPE radcache_http_connections gauge\nradcache_http_connections {}",
-        state.open_connections.load(Ordering::Relaxed)
+    metric(
+        "radcache_http_connections",
+        "gauge",
+        "Client connections being served (this one among them).",
+        &count(&state.open_connections),
     );
-    let _ = writeln!(
-        out,
-        "# HELP radcache_http_connections_refused_total Connections closed as soon as accepted, their client's address having as many open as one address may.\n# TYPE radcache_http_connections_refused_total counter\nradcache_http_connections_refused_total {}",
-        state.refused_connections.load(Ordering::Relaxed)
+    metric(
+        "radcache_http_connections_refused_total",
+        "counter",
+        "Connections closed as soon as accepted, their client's address having as many open as one address may.",
+        &count(&state.refused_connections),
     );
-    let _ = writeln!(
-        out,
-        "# HELP radcache_frame_encodes_total Frames decoded from the store and encoded as PNG (once a frame, however many clients ask, until evicted from the PNG cache).\n# TYPE radcache_frame_encodes_total counter\nradcache_frame_encodes_total {}",
-        state.frame_encodes.load(Ordering::Relaxed)
+    metric(
+        "radcache_frame_encodes_total",
+        "counter",
+        "Frames decoded from the store and encoded as PNG (once a frame, however many clients ask, until evicted from the PNG cache).",
+        &count(&state.frame_encodes),
     );
-    let _ = writeln!(
-        out,
-        "# HELP radcache_records_queries_total Record queries answered from the store (a query asked again while it runs shares its answer).\n# TYPE radcache_records_queries_total counter\nradcache_records_queries_total {}",
-        state.records_reads.load(Ordering::Relaxed)
+    metric(
+        "radcache_records_queries_total",
+        "counter",
+        "Record queries answered from the store (a query asked again while it runs shares its answer).",
+        &count(&state.records_reads),
     );
-    let _ = writeln!(
-        out,
-        "# HELP radcache_store_bytes Bytes of the store on disk: its database and its sample log.\n# TYPE radcache_store_bytes gauge\nradcache_store_bytes {}",
-        database + log
+    metric(
+        "radcache_store_bytes",
+        "gauge",
+        "Bytes of the store on disk: its database and its sample log.",
+        &(database + log),
     );
-    let _ = writeln!(
-        out,
-        "# HELP radcache_store_sample_log_bytes Committed bytes of the store's sample log (of radcache_store_bytes).\n# TYPE radcache_store_sample_log_bytes gauge\nradcache_store_sample_log_bytes {log}"
+    metric(
+        "radcache_store_sample_log_bytes",
+        "gauge",
+        "Committed bytes of the store's sample log (of radcache_store_bytes).",
+        &log,
     );
     Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], out))
 }
