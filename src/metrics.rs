@@ -291,6 +291,13 @@ pub struct FrameReport {
     pub rmse: f64,
     pub rel_rmse: f64,
     pub block_bias: f64,
+    /// [`flicker`] of the one pair from the frame before to this one, ÷
+    /// the reference's mean over all frames as the sequence's figure is
+    /// (the sequence's squared flicker is the mean of its pairs' when the
+    /// frames are of one size): where a method changes the whole image at
+    /// once (records expiring together, a ghost leaving) it stands out.
+    /// `None` for a frame whose number − 1 is not among those compared.
+    pub flicker: Option<f64>,
 }
 
 /// The result of comparing a test folder with a reference folder. Serialises
@@ -538,6 +545,9 @@ struct Totals {
     /// relative figures are undefined, and [`Self::black_warning`] says so.
     black_frames: Vec<u32>,
     per_frame: Vec<FrameReport>,
+    /// For each of `per_frame`, the [`flicker_sum`] of the pair that ends
+    /// at it, where the frame before it was compared.
+    pair_flicker: Vec<Option<(f64, usize)>>,
 }
 
 impl Totals {
@@ -573,7 +583,9 @@ impl Totals {
             rmse: mse.sqrt(),
             rel_rmse: mse.sqrt() / mean,
             block_bias: block_mse.sqrt() / mean,
+            flicker: None, // Known once the sequence's mean is ([`Self::report`]).
         });
+        self.pair_flicker.push(None);
     }
 
     /// Counts the pair only when the frame numbers are consecutive: the
@@ -591,6 +603,10 @@ impl Totals {
         let (s, n) = flicker_sum(&prev.test, &next.test, &prev.reference, &next.reference);
         self.flicker_sum += s;
         self.flicker_values += n;
+        // `next` is the frame added last.
+        if let Some(last) = self.pair_flicker.last_mut() {
+            *last = Some((s, n));
+        }
         if let (Some(sums), Some(a), Some(b)) = (&mut self.surfaces, &prev.surfaces, &next.surfaces)
         {
             let (s, n) = flicker_sum_over(
@@ -666,9 +682,12 @@ impl Totals {
         })
     }
 
-    fn report(self) -> CompareReport {
+    fn report(mut self) -> CompareReport {
         let frames = self.per_frame.len();
         let mean = self.ref_sum / self.ref_values.max(1) as f64;
+        for (f, pair) in self.per_frame.iter_mut().zip(&self.pair_flicker) {
+            f.flicker = pair.map(|(s, n)| (s / n.max(1) as f64).sqrt() / mean);
+        }
         let rmse = (self.mse / frames as f64).sqrt();
         let block = (self.block_mse / frames as f64).sqrt();
         let flicker = (self.flicker_values > 0)
@@ -745,8 +764,9 @@ pub fn compare_dirs_with(
 }
 
 impl CompareReport {
-    /// A table for people: one line per frame, then the overall line with
-    /// the flicker (`-` when there are no consecutive frames).
+    /// A table for people: one line per frame, with the flicker of the pair
+    /// that ends at it, then the overall line with the sequence's flicker
+    /// (`-` when there are no consecutive frames).
     pub fn to_text(&self) -> String {
         let mut out = format!(
             "{:>6} {:>12} {:>12} {:>12} {:>12}\n",
@@ -760,7 +780,7 @@ impl CompareReport {
                 f.rmse,
                 f.rel_rmse,
                 f.block_bias,
-                ""
+                f.flicker.map_or(String::new(), |v| format!("{v:.6}"))
             );
         }
         let flicker = self.flicker.map_or("-".to_string(), |v| format!("{v:.6}"));
@@ -1030,12 +1050,14 @@ mod tests {
                     rmse: 0.5,
                     rel_rmse: 0.25,
                     block_bias: 0.125,
+                    flicker: None,
                 },
                 FrameReport {
                     frame: 4,
                     rmse: 0.5,
                     rel_rmse: 0.25,
                     block_bias: 0.125,
+                    flicker: Some(0.0625),
                 },
             ],
         };
@@ -1043,6 +1065,9 @@ mod tests {
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(lines.len(), 4, "{text}");
         assert!(lines[1].trim_start().starts_with("0003"), "{text}");
+        // A frame's flicker is that of the pair ending at it; the first has none.
+        assert_eq!(lines[1].split_whitespace().count(), 4, "{text}");
+        assert!(lines[2].trim_end().ends_with("0.062500"), "{text}");
         assert!(
             lines[3].trim_start().starts_with("all") && lines[3].contains('-'),
             "{text}"

@@ -173,9 +173,49 @@ fn json_has_the_specified_keys() {
     let first = json["per_frame"][0].as_object().unwrap();
     let mut frame_keys: Vec<&str> = first.keys().map(String::as_str).collect();
     frame_keys.sort();
-    assert_eq!(frame_keys, ["block_bias", "frame", "rel_rmse", "rmse"]);
+    assert_eq!(
+        frame_keys,
+        ["block_bias", "flicker", "frame", "rel_rmse", "rmse"]
+    );
+    // Frame 0 has no frame before it.
+    assert!(json["per_frame"][0]["flicker"].is_null());
+    assert_eq!(json["per_frame"][1]["flicker"].as_f64().unwrap(), 0.0);
     // The text table: header, three frames, overall.
     assert_eq!(report.to_text().lines().count(), 5);
+}
+
+#[test]
+fn a_frame_that_jumps_shows_in_the_flicker_of_the_pairs_around_it() {
+    // Frames 0..5 with I = R, but frame 2 brighter by e everywhere (a pop,
+    // as of records all replaced at once): the pairs (1,2) and (2,3) change
+    // by ±e more than the reference, the others not at all. The sequence's
+    // squared flicker is the mean of the pairs'.
+    let tmp = tempfile::tempdir().unwrap();
+    let (r, t) = (tmp.path().join("ref"), tmp.path().join("test"));
+    let (e, mean) = (0.25, 2.0);
+    let refs: Vec<(u32, Film)> = (0..5).map(|k| (k, constant(6, 4, mean))).collect();
+    let tests: Vec<(u32, Film)> = refs
+        .iter()
+        .map(|(k, f)| (*k, offset(f, if *k == 2 { e } else { 0.0 })))
+        .collect();
+    write_seq(&r, &refs);
+    write_seq(&t, &tests);
+    let report = compare_dirs(&r, &t).unwrap();
+    let per_frame: Vec<Option<f64>> = report.per_frame.iter().map(|f| f.flicker).collect();
+    let jump = f64::from(e / mean);
+    assert_eq!(per_frame[0], None);
+    for (k, want) in [(1, 0.0), (2, jump), (3, jump), (4, 0.0)] {
+        let got = per_frame[k].unwrap();
+        assert!((got - want).abs() < 1e-9, "frame {k}: {got}, want {want}");
+    }
+    let pairs_mean_sq = (2.0 * jump * jump) / 4.0;
+    let flicker = report.flicker.unwrap();
+    assert!((flicker - pairs_mean_sq.sqrt()).abs() < 1e-9, "{flicker}");
+    // The text table shows them in the flicker column.
+    let text = report.to_text();
+    let row = |k: usize| text.lines().nth(1 + k).unwrap().to_string();
+    assert_eq!(row(0).split_whitespace().count(), 4, "{text}");
+    assert!(row(2).trim_end().ends_with(&format!("{jump:.6}")), "{text}");
 }
 
 #[test]
@@ -195,8 +235,11 @@ fn flicker_uses_only_consecutive_frames() {
         .collect();
     write_seq(&r, &refs);
     write_seq(&t, &tests);
-    let flicker = compare_dirs(&r, &t).unwrap().flicker.unwrap();
+    let report = compare_dirs(&r, &t).unwrap();
+    let flicker = report.flicker.unwrap();
     assert!((flicker - 2.0 * f64::from(e)).abs() < 1e-9, "{flicker}");
+    // Frame 3's frame before it, 2, is not among them.
+    assert_eq!(report.per_frame[2].flicker, None);
 }
 
 #[test]
