@@ -127,7 +127,39 @@ fn equal_error_ratio_for_non_path_runs() {
     assert!((table[0].path_seconds.unwrap() - 16.0).abs() < 1e-9);
     assert!((table[0].speedup().unwrap() - 8.0).abs() < 1e-9);
     assert_eq!(table[1].path_seconds, None);
-    assert!(bench::equal_error_text(&table).contains("does not bracket"));
+    // Below path's lowest error (0.1 in 64 s): path would need more than
+    // 64 s, so the 2-s run is at least 32× faster.
+    let bound = table[1].path_bound.as_ref().unwrap();
+    assert!(bound.more_accurate);
+    assert_eq!((bound.settings.as_str(), bound.seconds), ("spp=64", 64.0));
+    let text = bench::equal_error_text(&table);
+    assert!(
+        text.contains(
+            "more accurate than path's most accurate run (spp=64: 0.10000 in 64.000 s) \
+             → at least 32.00× faster than path"
+        ),
+        "{text}"
+    );
+    assert!(table[0].path_bound.is_none());
+
+    // Above path's highest error (0.8 in 1 s): path needs less than 1 s,
+    // so a 4-s run is at least 4× slower; a 0.5-s one at most 2× faster.
+    let worse = vec![
+        row("path", "spp=1", 1.0, 0.8),
+        row("path", "spp=64", 64.0, 0.1),
+        row("other", "slow", 4.0, 0.9),
+        row("other", "quick", 0.5, 0.9),
+    ];
+    let table = equal_error_table(&worse, ErrorMeasure::AllPixels);
+    assert!(table
+        .iter()
+        .all(|e| e.path_bound.as_ref().is_some_and(|b| !b.more_accurate)));
+    let text = bench::equal_error_text(&table);
+    assert!(
+        text.contains("less accurate than path's least accurate run (spp=1: 0.80000 in 1.000 s) → at least 4.00× slower than path"),
+        "{text}"
+    );
+    assert!(text.contains("→ at most 2.00× faster than path"), "{text}");
 
     // The surface error (half the all-pixel one in `row`) follows the same
     // path curve, halved: "other" at 0.1 is path's surface error at t = 16.

@@ -54,7 +54,7 @@ pub use methods::{method_settings, MethodError, MethodInfo, MethodSweep, RunSpec
 pub use report::{
     backend_pairs, backend_text, equal_error_table, equal_error_text, estimate_error_text,
     interpolate_time_at_error, temporal_pairs, temporal_text, to_csv, to_table, BenchRow,
-    EqualError, ErrorMeasure, CSV_HEADER,
+    EqualError, ErrorMeasure, PathBound, CSV_HEADER,
 };
 pub use run::{peak_memory_mb, reset_peak_memory, run, run_with, BenchReport};
 

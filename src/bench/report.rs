@@ -259,11 +259,72 @@ pub struct EqualError {
     pub seconds: f64,
     /// `None` where the path sweep does not bracket the error.
     pub path_seconds: Option<f64>,
+    /// Where the error lies beyond the path sweep, the run at its nearer
+    /// end, whose time bounds `path`'s.
+    pub path_bound: Option<PathBound>,
 }
 
 impl EqualError {
     pub fn speedup(&self) -> Option<f64> {
         self.path_seconds.map(|p| p / self.seconds)
+    }
+}
+
+/// A run's error beyond every `path` run's: the `path` run at the nearer
+/// end of the sweep, whose time bounds what `path` would need for that
+/// error, as `path`'s error falls as its time grows (more samples). A
+/// sweep that stops at 256 spp still says that a method more accurate
+/// than its last run is at least so much faster.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PathBound {
+    /// The `path` run's settings, time and error.
+    pub settings: String,
+    pub seconds: f64,
+    pub error: f64,
+    /// Whether the run is more accurate than every `path` run (`path`
+    /// needs more than `seconds`), or less accurate than all (less).
+    pub more_accurate: bool,
+}
+
+impl PathBound {
+    /// The `path` run at the end of `path` (time, error, run) that `error`
+    /// lies beyond; `None` within the sweep.
+    fn of(path: &[(f64, f64, &BenchRow)], error: f64) -> Option<PathBound> {
+        let by_error = |a: &&(f64, f64, &BenchRow), b: &&(f64, f64, &BenchRow)| a.1.total_cmp(&b.1);
+        let usable = || {
+            path.iter()
+                .filter(|(t, e, _)| t.is_finite() && *t > 0.0 && e.is_finite() && *e > 0.0)
+        };
+        let best = usable().min_by(by_error)?;
+        let worst = usable().max_by(by_error)?;
+        let (end, more_accurate) = if error < best.1 {
+            (best, true)
+        } else if error > worst.1 {
+            (worst, false)
+        } else {
+            return None;
+        };
+        Some(PathBound {
+            settings: end.2.settings.clone(),
+            seconds: end.0,
+            error: end.1,
+            more_accurate,
+        })
+    }
+
+    /// What the bound says of a run that took `seconds`: "at least 4.00×
+    /// faster than path", "at most 2.00× slower than path", ….
+    fn ratio_text(&self, seconds: f64) -> String {
+        let x = self.seconds / seconds;
+        // More accurate: path needs more time, so the run is faster than x.
+        let (faster, slower) = match self.more_accurate {
+            true => ("at least", "at most"),
+            false => ("at most", "at least"),
+        };
+        match x >= 1.0 {
+            true => format!("{faster} {x:.2}× faster than path"),
+            false => format!("{slower} {:.2}× slower than path", 1.0 / x),
+        }
     }
 }
 
@@ -273,7 +334,7 @@ impl EqualError {
 /// all those `path` runs when there are none such. Runs without `path` runs
 /// of their scene and backend have no rows.
 pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualError> {
-    let path_curve = |of: &BenchRow| -> Vec<(f64, f64)> {
+    let path_curve = |of: &BenchRow| -> Vec<(f64, f64, &BenchRow)> {
         let runs: Vec<&BenchRow> = rows
             .iter()
             .filter(|p| p.method == "path" && p.scene == of.scene && p.backend == of.backend)
@@ -285,8 +346,8 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
             .collect();
         let chosen = if spp.is_empty() { runs } else { spp };
         chosen
-            .iter()
-            .filter_map(|p| Some((p.seconds, measure.of(p)?)))
+            .into_iter()
+            .filter_map(|p| Some((p.seconds, measure.of(p)?, p)))
             .collect()
     };
     rows.iter()
@@ -297,6 +358,8 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
             if path.is_empty() {
                 return None; // Nothing to compare with on this scene.
             }
+            let points: Vec<(f64, f64)> = path.iter().map(|&(t, e, _)| (t, e)).collect();
+            let path_seconds = interpolate_time_at_error(&points, error);
             Some(EqualError {
                 scene: r.scene.clone(),
                 method: r.method.clone(),
@@ -305,7 +368,11 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
                 measure,
                 error,
                 seconds: r.seconds,
-                path_seconds: interpolate_time_at_error(&path, error),
+                path_seconds,
+                path_bound: path_seconds
+                    .is_none()
+                    .then(|| PathBound::of(&path, error))
+                    .flatten(),
             })
         })
         .collect()
@@ -330,11 +397,21 @@ pub fn equal_error_text(table: &[EqualError]) -> String {
             e.error,
             e.seconds
         );
-        let _ = match (e.path_seconds, e.speedup()) {
-            (Some(p), Some(x)) => writeln!(
+        let _ = match (e.path_seconds, e.speedup(), &e.path_bound) {
+            (Some(p), Some(x), _) => writeln!(
                 out,
                 "{what}; path needs {p:.3} s for it → {} than path",
                 faster_or_slower(x)
+            ),
+            (_, _, Some(b)) => writeln!(
+                out,
+                "{what}; {} accurate than path's {} accurate run ({}: {:.5} in {:.3} s) → {}",
+                if b.more_accurate { "more" } else { "less" },
+                if b.more_accurate { "most" } else { "least" },
+                b.settings,
+                b.error,
+                b.seconds,
+                b.ratio_text(e.seconds)
             ),
             _ => writeln!(
                 out,
