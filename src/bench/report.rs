@@ -287,13 +287,14 @@ pub struct PathBound {
 }
 
 impl PathBound {
-    /// The `path` run at the end of `path` (time, error, run) that `error`
-    /// lies beyond; `None` within the sweep.
-    fn of(path: &[(f64, f64, &BenchRow)], error: f64) -> Option<PathBound> {
-        let by_error = |a: &&(f64, f64, &BenchRow), b: &&(f64, f64, &BenchRow)| a.1.total_cmp(&b.1);
+    /// The run at the end of the `path` sweep (each run with its error)
+    /// that `error` lies beyond; `None` within the sweep.
+    fn of(path: &[(&BenchRow, f64)], error: f64) -> Option<PathBound> {
+        let by_error = |a: &&(&BenchRow, f64), b: &&(&BenchRow, f64)| a.1.total_cmp(&b.1);
         let usable = || {
-            path.iter()
-                .filter(|(t, e, _)| t.is_finite() && *t > 0.0 && e.is_finite() && *e > 0.0)
+            path.iter().filter(|(p, e)| {
+                p.seconds.is_finite() && p.seconds > 0.0 && e.is_finite() && *e > 0.0
+            })
         };
         let best = usable().min_by(by_error)?;
         let worst = usable().max_by(by_error)?;
@@ -305,8 +306,8 @@ impl PathBound {
             return None;
         };
         Some(PathBound {
-            settings: end.2.settings.clone(),
-            seconds: end.0,
+            settings: end.0.settings.clone(),
+            seconds: end.0.seconds,
             error: end.1,
             more_accurate,
         })
@@ -334,7 +335,7 @@ impl PathBound {
 /// all those `path` runs when there are none such. Runs without `path` runs
 /// of their scene and backend have no rows.
 pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualError> {
-    let path_curve = |of: &BenchRow| -> Vec<(f64, f64, &BenchRow)> {
+    let path_curve = |of: &BenchRow| -> Vec<(&BenchRow, f64)> {
         let runs: Vec<&BenchRow> = rows
             .iter()
             .filter(|p| p.method == "path" && p.scene == of.scene && p.backend == of.backend)
@@ -347,7 +348,7 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
         let chosen = if spp.is_empty() { runs } else { spp };
         chosen
             .into_iter()
-            .filter_map(|p| Some((p.seconds, measure.of(p)?, p)))
+            .filter_map(|p| Some((p, measure.of(p)?)))
             .collect()
     };
     rows.iter()
@@ -358,7 +359,7 @@ pub fn equal_error_table(rows: &[BenchRow], measure: ErrorMeasure) -> Vec<EqualE
             if path.is_empty() {
                 return None; // Nothing to compare with on this scene.
             }
-            let points: Vec<(f64, f64)> = path.iter().map(|&(t, e, _)| (t, e)).collect();
+            let points: Vec<(f64, f64)> = path.iter().map(|(p, e)| (p.seconds, *e)).collect();
             let path_seconds = interpolate_time_at_error(&points, error);
             Some(EqualError {
                 scene: r.scene.clone(),
