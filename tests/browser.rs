@@ -184,6 +184,12 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
     let paths = dom.matches("class=\"series\"").count();
     assert!(paths >= 12, "{paths} chart paths:\n{dom}");
     assert!(has("samples re-shot"), "{dom}");
+    // A `trc` job's charts count records, and its carried records' samples.
+    assert!(
+        has("<figcaption id=\"caption-records\">records per frame"),
+        "{dom}"
+    );
+    assert!(has("<figure id=\"figure-reshot\">"), "{dom}");
     // The mean lifespan: a point for each frame that computed records,
     // none (a gap, not a zero) for the others.
     let get_json = |path: &str| -> serde_json::Value {
@@ -291,6 +297,15 @@ fn dashboard_draws_the_texture_movies_of_a_movies_job() {
     let squares = dom.matches("class=\"movie\"").count();
     assert_eq!(squares, in_view, "overlay squares vs movies in view");
     assert!(dom.contains("movies open"), "{dom}");
+    // Its charts count texture movies, and it carries no record samples.
+    assert!(
+        dom.contains("<figcaption id=\"caption-records\">texture movies per frame"),
+        "{dom}"
+    );
+    assert!(
+        dom.contains("<figure id=\"figure-reshot\" hidden=\"\">"),
+        "{dom}"
+    );
 }
 
 /// A job with radiance records (`--ic-glossy eas`): the overlay rings

@@ -142,8 +142,24 @@ function keySettings(job) {
   return parts.map((p) => `, ${p}`).join('');
 }
 
+// What the job's charts count follows its method: `movies` counts
+// texture movies (opened, kept, closed, and the frames a closed one
+// lasted), `path` keeps no cache, and only `trc` and `tcg` shoot the
+// samples of records carried from frame to frame again.
+function labelCharts(method) {
+  const movies = method === 'movies';
+  $('caption-records').textContent = movies ? 'texture movies per frame' : 'records per frame';
+  $('caption-lifespan').textContent = movies
+    ? 'mean length of the movies that ended, frames'
+    : 'mean lifespan of the records computed, frames';
+  $('figure-records').hidden = method === 'path';
+  $('figure-lifespan').hidden = method === 'path';
+  $('figure-reshot').hidden = !(method === 'trc' || method === 'tcg');
+}
+
 function showProgress(job) {
   view.job = job;
+  labelCharts(job.method);
   $('job-title').textContent = `${job.id}: ${job.scene}, ${job.method}, ${job.size}, ${job.spp} spp${keySettings(job)}, frames ${job.frames} — ${job.state}`;
   $('progress').max = job.frames_total;
   $('progress').value = job.frames_done;
