@@ -308,6 +308,30 @@ fn dashboard_draws_the_texture_movies_of_a_movies_job() {
     );
 }
 
+/// A `path` job keeps no cache: its dashboard shows no record charts,
+/// legend or overlay, only time and bytes.
+#[test]
+fn dashboard_of_a_path_job_shows_no_records() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_server, _id, dom) = dashboard_for_job(
+        dir.path(),
+        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"8x8","spp":1}"#,
+    );
+    for hidden in [
+        "<figure id=\"figure-records\" hidden=\"\">",
+        "<figure id=\"figure-lifespan\" hidden=\"\">",
+        "<figure id=\"figure-reshot\" hidden=\"\">",
+        "<div id=\"legend\" hidden=\"\">",
+    ] {
+        assert!(dom.contains(hidden), "{hidden} not hidden:\n{dom}");
+    }
+    assert!(!dom.contains("records alive"), "{dom}");
+    assert!(
+        dom.contains("<figure><figcaption>seconds per frame"),
+        "{dom}"
+    );
+}
+
 /// A job with radiance records (`--ic-glossy eas`): the overlay rings
 /// each radiance record in view, and only those.
 #[test]

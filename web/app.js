@@ -155,6 +155,9 @@ function labelCharts(method) {
   $('figure-records').hidden = method === 'path';
   $('figure-lifespan').hidden = method === 'path';
   $('figure-reshot').hidden = !(method === 'trc' || method === 'tcg');
+  // Nor has `path` records to lay over the frame.
+  $('legend').hidden = method === 'path';
+  $('show-overlay').parentElement.hidden = method === 'path';
 }
 
 function showProgress(job) {
@@ -322,6 +325,12 @@ async function loadOverlays() {
       view.overlayWanted = null;
       const { generation, id } = view;
       const movies = view.job != null && view.job.method === 'movies';
+      if (view.job != null && view.job.method === 'path') {
+        // No records to show.
+        $('overlay').replaceChildren();
+        $('overlay-info').textContent = '';
+        continue;
+      }
       try {
         const r = await api(jobUrl(id, movies ? `/movies?frame=${frame}` : `/records?frame=${frame}&limit=20000`));
         if (view.generation !== generation) continue;
