@@ -332,6 +332,23 @@ fn dashboard_of_a_path_job_shows_no_records() {
     );
 }
 
+/// A `tcg` job's records have no set life: no lifespan chart (it would
+/// say "no frames yet" for ever), but the samples it shoots again.
+#[test]
+fn dashboard_of_a_tcg_job_shows_reshot_samples_not_lifespans() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_server, _id, dom) = dashboard_for_job(
+        dir.path(),
+        r#"{"scene":"builtin:cube-in-box","method":"tcg","frames":"0..2","size":"8x8","spp":1}"#,
+    );
+    assert!(
+        dom.contains("<figure id=\"figure-lifespan\" hidden=\"\">"),
+        "{dom}"
+    );
+    assert!(dom.contains("<figure id=\"figure-reshot\">"), "{dom}");
+    assert!(dom.contains("records alive"), "{dom}");
+}
+
 /// A job with radiance records (`--ic-glossy eas`): the overlay rings
 /// each radiance record in view, and only those.
 #[test]

@@ -153,7 +153,9 @@ function labelCharts(method) {
     ? 'mean length of the movies that ended, frames'
     : 'mean lifespan of the records computed, frames';
   $('figure-records').hidden = method === 'path';
-  $('figure-lifespan').hidden = method === 'path';
+  // `tcg`'s records have no set life: they age, a share of their samples
+  // shot again each frame (the re-shot chart).
+  $('figure-lifespan').hidden = method === 'path' || method === 'tcg';
   $('figure-reshot').hidden = !(method === 'trc' || method === 'tcg');
   // Nor has `path` records to lay over the frame.
   $('legend').hidden = method === 'path';
