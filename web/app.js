@@ -157,7 +157,7 @@ function labelCharts(method) {
   // shot again each frame (the re-shot chart).
   $('figure-lifespan').hidden = method === 'path' || method === 'tcg';
   $('figure-reshot').hidden = !(method === 'trc' || method === 'tcg');
-  // Nor has `path` records to lay over the frame.
+  // `path` has no records to lay over the frame.
   $('legend').hidden = method === 'path';
   $('show-overlay').parentElement.hidden = method === 'path';
 }
