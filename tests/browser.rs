@@ -189,7 +189,7 @@ fn check_dashboard(token: Option<&str>, screenshot: bool) {
         has("<figcaption id=\"caption-records\">records per frame"),
         "{dom}"
     );
-    assert!(has("<figure id=\"figure-reshot\">"), "{dom}");
+    assert!(shown(&dom, "figure-reshot"), "{dom}");
     // The mean lifespan: a point for each frame that computed records,
     // none (a gap, not a zero) for the others.
     let get_json = |path: &str| -> serde_json::Value {
@@ -302,51 +302,48 @@ fn dashboard_draws_the_texture_movies_of_a_movies_job() {
         dom.contains("<figcaption id=\"caption-records\">texture movies per frame"),
         "{dom}"
     );
-    assert!(
-        dom.contains("<figure id=\"figure-reshot\" hidden=\"\">"),
-        "{dom}"
-    );
+    assert!(!shown(&dom, "figure-reshot"), "{dom}");
 }
 
-/// A `path` job keeps no cache: its dashboard shows no record charts,
-/// legend or overlay, only time and bytes.
+/// Whether element `id` of a dumped DOM is shown: its tag has no `hidden`
+/// attribute.
+fn shown(dom: &str, id: &str) -> bool {
+    let at = dom
+        .find(&format!(" id=\"{id}\""))
+        .unwrap_or_else(|| panic!("no element #{id}:\n{dom}"));
+    let tag = &dom[at..at + dom[at..].find('>').unwrap()];
+    !tag.contains(" hidden")
+}
+
+/// What a job's dashboard charts follows its method: `path` keeps no
+/// cache (no record charts, legend or overlay); `tcg`'s records have no
+/// set life (no lifespan chart, which would say "no frames yet" for ever)
+/// but have samples shot again; `ic` the reverse. (`trc` and `movies`:
+/// the tests above.)
 #[test]
-fn dashboard_of_a_path_job_shows_no_records() {
-    let dir = tempfile::tempdir().unwrap();
-    let (_server, _id, dom) = dashboard_for_job(
-        dir.path(),
-        r#"{"scene":"builtin:cube-in-box","method":"path","frames":"0..2","size":"8x8","spp":1}"#,
-    );
-    for hidden in [
-        "<figure id=\"figure-records\" hidden=\"\">",
-        "<figure id=\"figure-lifespan\" hidden=\"\">",
-        "<figure id=\"figure-reshot\" hidden=\"\">",
-        "<div id=\"legend\" hidden=\"\">",
+fn dashboard_charts_follow_the_jobs_method() {
+    let ids = [
+        "figure-records",
+        "figure-lifespan",
+        "figure-reshot",
+        "legend",
+    ];
+    for (method, want) in [
+        ("path", [false, false, false, false]),
+        ("tcg", [true, false, true, true]),
+        ("ic", [true, true, false, true]),
     ] {
-        assert!(dom.contains(hidden), "{hidden} not hidden:\n{dom}");
+        let dir = tempfile::tempdir().unwrap();
+        let (_server, _id, dom) = dashboard_for_job(
+            dir.path(),
+            &format!(
+                r#"{{"scene":"builtin:cube-in-box","method":"{method}","frames":"0..2","size":"8x8","spp":1}}"#
+            ),
+        );
+        assert_eq!(ids.map(|id| shown(&dom, id)), want, "{method}:\n{dom}");
+        assert!(shown(&dom, "chart-time"), "{method}:\n{dom}");
+        assert_eq!(dom.contains("records alive"), method != "path", "{dom}");
     }
-    assert!(!dom.contains("records alive"), "{dom}");
-    assert!(
-        dom.contains("<figure><figcaption>seconds per frame"),
-        "{dom}"
-    );
-}
-
-/// A `tcg` job's records have no set life: no lifespan chart (it would
-/// say "no frames yet" for ever), but the samples it shoots again.
-#[test]
-fn dashboard_of_a_tcg_job_shows_reshot_samples_not_lifespans() {
-    let dir = tempfile::tempdir().unwrap();
-    let (_server, _id, dom) = dashboard_for_job(
-        dir.path(),
-        r#"{"scene":"builtin:cube-in-box","method":"tcg","frames":"0..2","size":"8x8","spp":1}"#,
-    );
-    assert!(
-        dom.contains("<figure id=\"figure-lifespan\" hidden=\"\">"),
-        "{dom}"
-    );
-    assert!(dom.contains("<figure id=\"figure-reshot\">"), "{dom}");
-    assert!(dom.contains("records alive"), "{dom}");
 }
 
 /// A job with radiance records (`--ic-glossy eas`): the overlay rings
