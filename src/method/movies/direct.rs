@@ -86,6 +86,31 @@ pub struct ShadePoint {
     pub item: u64,
 }
 
+impl ShadePoint {
+    /// The point at barycentrics `(u, v)` of `tri`, on the side of it that
+    /// `side` names (`1`: the side its normal faces, `−1`: its back). The
+    /// shading normal is turned to that side, as `material::Bsdf::new`
+    /// turns it to the viewer's: a mesh whose vertex normals disagree with
+    /// its winding (a ball exported inside out) has them point the other
+    /// way, and the side would take the irradiance of its back, in a
+    /// closed ball none.
+    pub fn on_side(
+        tri: &crate::scene::Triangle,
+        (u, v): (f32, f32),
+        side: f32,
+        item: u64,
+    ) -> ShadePoint {
+        let ng = tri.geometric_normal() * side;
+        let n = tri.shading_normal(u, v);
+        ShadePoint {
+            p: tri.point(u, v),
+            n: if n.dot(ng) < 0.0 { -n } else { n },
+            ng,
+            item,
+        }
+    }
+}
+
 /// The shadows static blockers cast on a set of points, kept while the
 /// points and the lights that do not move stay where they are.
 #[derive(Clone, Debug, Default)]
@@ -671,6 +696,23 @@ pub fn paper_merge(ts: f32, td: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A point's shading normal is turned to its side: a triangle whose
+    /// vertex normals face against its winding gives, on either side, the
+    /// normal of that side; one whose vertex normals agree keeps them.
+    #[test]
+    fn a_shade_point_turns_its_normal_to_its_side() {
+        let p = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        for normal in [Vec3::Z, -Vec3::Z, Vec3::new(0.6, 0.0, 0.8)] {
+            let tri = crate::scene::Triangle { p, n: [normal; 3] };
+            for side in [1.0, -1.0] {
+                let point = ShadePoint::on_side(&tri, (0.25, 0.25), side, 0);
+                assert_eq!(point.ng, Vec3::Z * side);
+                assert!(point.n.dot(point.ng) > 0.0, "{normal} on side {side}");
+                assert!((point.n.dot(normal).abs() - 1.0).abs() < 1e-6);
+            }
+        }
+    }
 
     /// The renderer's merge and sum ([`merge_stopped`], [`lit_mean`])
     /// against visibility computed apart, per sample, as the product of

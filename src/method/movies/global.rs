@@ -633,12 +633,7 @@ impl GlobalPass {
                 let n = self.grids[v.triangle as usize].n as f32;
                 let (u, w) = pulled(v.a as f32 / n, v.b as f32 / n);
                 let side = self.sides.sign(v.triangle) * if v.reverse { -1.0 } else { 1.0 };
-                ShadePoint {
-                    p: tri.point(u, w),
-                    n: tri.shading_normal(u, w) * side,
-                    ng: tri.geometric_normal() * side,
-                    item: streams::GLOBAL_VERTEX | i as u64,
-                }
+                ShadePoint::on_side(tri, (u, w), side, streams::GLOBAL_VERTEX | i as u64)
             })
             .collect()
     }

@@ -107,16 +107,12 @@ impl Movie {
 
     fn texel_point(&self, tri: &Triangle, index: usize, (u, v): (f32, f32)) -> ShadePoint {
         let side = if self.key.back { -1.0 } else { 1.0 };
-        ShadePoint {
-            p: tri.point(u, v),
-            n: tri.shading_normal(u, v) * side,
-            ng: tri.geometric_normal() * side,
-            item: streams::MOVIE_TEXEL
-                | u64::from(self.key.triangle) << 28
-                | u64::from(self.key.back) << 27
-                | u64::from(self.key.patch.code()) << 20
-                | index as u64,
-        }
+        let item = streams::MOVIE_TEXEL
+            | u64::from(self.key.triangle) << 28
+            | u64::from(self.key.back) << 27
+            | u64::from(self.key.patch.code()) << 20
+            | index as u64;
+        ShadePoint::on_side(tri, (u, v), side, item)
     }
 
     /// The movie's frame of `ctx`: direct light per texel (static shadows

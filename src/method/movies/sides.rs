@@ -20,7 +20,13 @@
 //! the share of the sphere of directions it wraps. Where the winding
 //! number is at least ½, the component encloses the camera with its
 //! normals facing away from it, and its back sides are solved; elsewhere
-//! its fronts, as before. A flat part never winds ½ around any point, so
+//! its fronts, as before, but for a *closed* component (every edge joined)
+//! that the camera is outside of (winding number between −½ and ½) with
+//! its normals facing in (negative signed volume, the sum of the cones
+//! from the camera to its triangles: a sphere or a box whose winding is
+//! turned inside out, as files exported with flipped normals have): its
+//! backs, the outside the camera sees. Solving its fronts there left such
+//! a ball black. A flat part never winds ½ around any point, so
 //! a shelf, a panel or a picture keeps its front from wherever it is seen
 //! (choosing by the side the camera sees turned a shelf seen from below
 //! to its dark underside, and the room lost the light its top bounces).
@@ -56,6 +62,9 @@ use std::collections::HashMap;
 pub struct SolvedSides {
     /// Per triangle, its component.
     component: Vec<u32>,
+    /// Per component, whether every edge of its triangles is joined to
+    /// another of them ([`parts`]).
+    closed: Vec<bool>,
     /// Per component, whether its back sides are solved.
     back: Vec<bool>,
     /// Per component, whether both its sides are solved ([`both_sides`]);
@@ -71,27 +80,30 @@ impl SolvedSides {
     /// meshed at) places them.
     pub fn new(scene: &Scene, snapshot: &Snapshot, meshed: &Snapshot) -> Self {
         let triangles = object_space_triangles(scene);
-        let component = components(&triangles);
-        let both = both_sides(&triangles, &component, meshed);
+        let parts = parts(&triangles);
+        let both = both_sides(&triangles, &parts.component, meshed);
         SolvedSides {
             both,
-            ..Self::of_components(component, snapshot)
+            ..Self::of_parts(parts, snapshot)
         }
     }
 
-    fn of_components(component: Vec<u32>, snapshot: &Snapshot) -> Self {
-        let count = component.iter().max().map_or(0, |&c| c as usize + 1);
-        let back = backs_solved(snapshot, &component, count);
+    /// The sides of `parts` from `snapshot`'s camera; no part solved on
+    /// both sides.
+    fn of_parts(Parts { component, closed }: Parts, snapshot: &Snapshot) -> Self {
+        let back = backs_solved(snapshot, &component, &closed);
         SolvedSides {
+            both: vec![false; closed.len()],
             component,
+            closed,
             back,
-            both: vec![false; count],
         }
     }
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
         std::mem::size_of_val(&self.component[..])
+            + std::mem::size_of_val(&self.closed[..])
             + std::mem::size_of_val(&self.back[..])
             + std::mem::size_of_val(&self.both[..])
     }
@@ -109,7 +121,7 @@ impl SolvedSides {
     /// Takes the sides `snapshot`'s camera sets (it holds the same
     /// triangles); returns, per component, whether its side changed.
     pub fn update(&mut self, snapshot: &Snapshot) -> Vec<bool> {
-        let back = backs_solved(snapshot, &self.component, self.back.len());
+        let back = backs_solved(snapshot, &self.component, &self.closed);
         let changed = back.iter().zip(&self.back).map(|(a, b)| a != b).collect();
         self.back = back;
         changed
@@ -156,6 +168,53 @@ fn object_space_triangles(scene: &Scene) -> Vec<(u32, [Vec3; 3])> {
 /// An edge of an object's triangle, from corner to corner (their bits).
 type DirectedEdge = (u32, [u32; 3], [u32; 3]);
 
+/// The edges of triangle `(object, corners)`, each from a corner to the
+/// next, corners as bits (`-0` as `0`).
+fn directed_edges((object, p): &(u32, [Vec3; 3])) -> [DirectedEdge; 3] {
+    let bits = |q: Vec3| (q + Vec3::ZERO).to_array().map(f32::to_bits);
+    [0, 1, 2].map(|k| (*object, bits(p[k]), bits(p[(k + 1) % 3])))
+}
+
+/// Whether triangle `p` has no area (two corners the same, or in a line):
+/// it would run an edge both ways, so it joins nothing.
+fn degenerate(p: &[Vec3; 3]) -> bool {
+    (p[1] - p[0]).cross(p[2] - p[0]).length_squared() == 0.0
+}
+
+/// Per directed edge of the triangles with area, its first triangle and
+/// how many run it.
+type EdgeRuns = HashMap<DirectedEdge, (u32, u32)>;
+
+fn edge_runs(triangles: &[(u32, [Vec3; 3])]) -> EdgeRuns {
+    let mut along = EdgeRuns::new();
+    for (id, triangle) in triangles.iter().enumerate() {
+        if !degenerate(&triangle.1) {
+            for edge in directed_edges(triangle) {
+                along.entry(edge).or_insert((id as u32, 0)).1 += 1;
+            }
+        }
+    }
+    along
+}
+
+/// The triangle joined to another across `edge`: the one that runs it
+/// back, where one triangle runs it each way.
+fn joined_across(along: &EdgeRuns, edge: DirectedEdge) -> Option<u32> {
+    let (object, a, b) = edge;
+    match (along.get(&edge), along.get(&(object, b, a))) {
+        (Some(&(_, 1)), Some(&(other, 1))) => Some(other),
+        _ => None,
+    }
+}
+
+/// The triangles of a scene joined into components ([`parts`]).
+struct Parts {
+    /// Per triangle, its component.
+    component: Vec<u32>,
+    /// Per component, whether it is closed.
+    closed: Vec<bool>,
+}
+
 /// Per triangle (`(object, corners)`), its component: triangles of one
 /// object joined across edges they share with the same orientation, i.e.
 /// an edge one runs from `a` to `b` and the other from `b` to `a` (corner
@@ -168,42 +227,43 @@ type DirectedEdge = (u32, [u32; 3], [u32; 3]);
 /// degenerate (two corners the same, or no area: it would run an edge
 /// both ways), nothing is joined across it. Numbered in the order of
 /// their first triangles.
-fn components(triangles: &[(u32, [Vec3; 3])]) -> Vec<u32> {
+///
+/// And per component, whether it is closed: none of its triangles is
+/// degenerate and every edge of each is joined, so it bounds a volume
+/// whose sign says which way its normals face. A sphere exported with its
+/// seam split stays closed where the split corners have the same bits; a
+/// box without its lid, or one whose corners differ in their bits, is not.
+fn parts(triangles: &[(u32, [Vec3; 3])]) -> Parts {
     let count = triangles.len();
-    let bits = |q: Vec3| (q + Vec3::ZERO).to_array().map(f32::to_bits);
-    let degenerate = |p: &[Vec3; 3]| (p[1] - p[0]).cross(p[2] - p[0]).length_squared() == 0.0;
-    let edges = |id: usize| {
-        let (object, p) = &triangles[id];
-        (0..3).map(move |k| (*object, bits(p[k]), bits(p[(k + 1) % 3])))
-    };
-    // Per directed edge, its first triangle and how many run it.
-    let mut along: HashMap<DirectedEdge, (u32, u32)> = HashMap::new();
-    let whole: Vec<usize> = (0..count)
-        .filter(|&id| !degenerate(&triangles[id].1))
-        .collect();
-    for &id in &whole {
-        for edge in edges(id) {
-            along.entry(edge).or_insert((id as u32, 0)).1 += 1;
-        }
-    }
+    let along = edge_runs(triangles);
     let mut parent: Vec<u32> = (0..count as u32).collect();
-    for &id in &whole {
-        for edge in edges(id) {
-            let (object, a, b) = edge;
-            match (along.get(&edge), along.get(&(object, b, a))) {
-                (Some(&(_, 1)), Some(&(other, 1))) => union(&mut parent, id as u32, other),
-                _ => continue,
+    // Per triangle, whether each of its edges is joined.
+    let mut sealed = vec![false; count];
+    for (id, triangle) in triangles.iter().enumerate() {
+        if degenerate(&triangle.1) {
+            continue;
+        }
+        sealed[id] = true;
+        for edge in directed_edges(triangle) {
+            match joined_across(&along, edge) {
+                Some(other) => union(&mut parent, id as u32, other),
+                None => sealed[id] = false,
             }
         }
     }
     let mut number: HashMap<u32, u32> = HashMap::new();
-    (0..count as u32)
+    let component: Vec<u32> = (0..count as u32)
         .map(|id| {
             let root = find(&mut parent, id);
             let next = number.len() as u32;
             *number.entry(root).or_insert(next)
         })
-        .collect()
+        .collect();
+    let mut closed = vec![true; number.len()];
+    for (&c, &sealed) in component.iter().zip(&sealed) {
+        closed[c as usize] &= sealed;
+    }
+    Parts { component, closed }
 }
 
 fn find(parent: &mut [u32], mut i: u32) -> u32 {
@@ -329,21 +389,39 @@ fn flat_components(triangles: &[(u32, [Vec3; 3])], component: &[u32], count: usi
 }
 
 /// Per component, whether its back sides are solved from `snapshot`'s
-/// camera: where its winding number around the camera is at least ½
-/// (module docs). Each component's sum runs in triangle order, in `f64`,
-/// so the choice does not depend on the thread count.
-fn backs_solved(snapshot: &Snapshot, component: &[u32], count: usize) -> Vec<bool> {
+/// camera: where its winding number around the camera is at least ½, or
+/// where it is closed (`closed`), the camera outside it and its normals
+/// facing in (module docs). Each component's sums run in triangle order,
+/// in `f64`, so the choice does not depend on the thread count.
+fn backs_solved(snapshot: &Snapshot, component: &[u32], closed: &[bool]) -> Vec<bool> {
     let eye = snapshot.camera.position.as_dvec3();
-    let angles: Vec<f64> = snapshot
+    let seen: Vec<(f64, f64)> = snapshot
         .triangles
         .par_iter()
-        .map(|t| signed_solid_angle(eye, t.p))
+        .map(|t| (signed_solid_angle(eye, t.p), cone_volume(eye, t.p)))
         .collect();
-    let mut winding = vec![0.0f64; count];
-    for (&c, &omega) in component.iter().zip(&angles) {
+    let mut winding = vec![0.0f64; closed.len()];
+    let mut volume = vec![0.0f64; closed.len()];
+    for (&c, &(omega, cone)) in component.iter().zip(&seen) {
         winding[c as usize] += omega / (4.0 * std::f64::consts::PI);
+        volume[c as usize] += cone;
     }
-    winding.into_iter().map(|w| w >= 0.5).collect()
+    (0..closed.len())
+        .map(|c| {
+            let around_camera = winding[c] >= 0.5;
+            let outside = winding[c].abs() < 0.5;
+            around_camera || (closed[c] && outside && volume[c] < 0.0)
+        })
+        .collect()
+}
+
+/// The signed volume of the cone from `eye` to triangle `p`, positive
+/// where `eye` is behind it (the sign of its solid angle). Summed over a
+/// closed surface it is the volume the surface bounds, wherever `eye` is:
+/// positive where its normals face out, negative where they face in.
+fn cone_volume(eye: glam::DVec3, p: [Vec3; 3]) -> f64 {
+    let [a, b, c] = p.map(|q| q.as_dvec3() - eye);
+    a.dot(b.cross(c)) / 6.0
 }
 
 /// The solid angle triangle `p` subtends at `eye`, positive where `eye`
@@ -472,7 +550,7 @@ mod tests {
         let objects: Vec<u32> = [[0; 4].to_vec(), vec![1, 1], vec![2; 12]].concat();
         let mut snapshot = snapshot_of(&triangles, &objects, Vec3::new(0.3, 0.2, -0.5));
         assert_eq!(
-            components(&tagged(&triangles, &objects)),
+            parts(&tagged(&triangles, &objects)).component,
             [[0, 0, 1, 1, 2, 2].to_vec(), vec![3; 12]].concat()
         );
         let sides = sides_of(&triangles, &objects, &snapshot);
@@ -510,6 +588,35 @@ mod tests {
         }
     }
 
+    /// Closed parts: the cube, either way round; not the cube without its
+    /// top, or a square. Around the camera the cube solves the side facing
+    /// in; seen from outside, the side facing out, also where its fronts
+    /// face in (an inside-out ball or block). The open box facing in, seen
+    /// from outside, keeps its fronts (the inside seen through its top).
+    #[test]
+    fn a_closed_part_solves_the_side_the_camera_space_faces() {
+        let outward = outward_cube();
+        let inward: Vec<[Vec3; 3]> = outward.iter().map(|t| [t[0], t[2], t[1]]).collect();
+        let mut open = inward.clone();
+        open.drain(2..4);
+        let triangles = [outward.clone(), inward.clone(), open, square().to_vec()].concat();
+        let objects: Vec<u32> = [vec![0; 12], vec![1; 12], vec![2; 10], vec![3; 2]].concat();
+        let tagged = tagged(&triangles, &objects);
+        assert_eq!(parts(&tagged).closed, [true, true, false, false]);
+        let back_at = |cube: &[[Vec3; 3]], eye: Vec3| {
+            let objects = vec![0; cube.len()];
+            sides_of(cube, &objects, &snapshot_of(cube, &objects, eye)).back
+        };
+        let (inside, outside) = (Vec3::new(0.2, -0.3, 0.1), Vec3::new(0.5, 0.3, 4.0));
+        assert_eq!(back_at(&outward, inside), [true]);
+        assert_eq!(back_at(&outward, outside), [false]);
+        assert_eq!(back_at(&inward, inside), [false]);
+        assert_eq!(back_at(&inward, outside), [true]);
+        let mut open = inward;
+        open.drain(2..4);
+        assert_eq!(back_at(&open, Vec3::new(0.2, 3.0, 0.1)), [false]);
+    }
+
     /// A cube with one face turned inward: that face is a component of
     /// its own (its edges run the way its neighbours' do), and so is a
     /// quad that touches the cube at a corner only. From inside the cube
@@ -524,7 +631,7 @@ mod tests {
         let corner = quad(Vec3::ONE, Vec3::X, Vec3::Y).to_vec();
         let triangles = [cube, corner].concat();
         let snapshot = snapshot_of(&triangles, &[0; 14], Vec3::new(0.3, 0.2, -0.5));
-        let c = components(&tagged(&triangles, &[0; 14]));
+        let c = parts(&tagged(&triangles, &[0; 14])).component;
         let expected: Vec<u32> = [[0; 6].to_vec(), vec![1, 1], vec![0; 4], vec![2, 2]].concat();
         assert_eq!(c, expected);
         let sides = sides_of(&triangles, &[0; 14], &snapshot);
@@ -546,10 +653,13 @@ mod tests {
         let second = quad(Vec3::X, Vec3::X, Vec3::Y).to_vec();
         let sliver = vec![[x, xy, xy]];
         let joined = [square().to_vec(), second.clone(), sliver.clone()].concat();
-        assert_eq!(components(&tagged(&joined, &[0; 5])), [0, 0, 0, 0, 1]);
+        assert_eq!(parts(&tagged(&joined, &[0; 5])).component, [0, 0, 0, 0, 1]);
         let fin = quad(Vec3::X, Vec3::Z, Vec3::Y).to_vec();
         let three = [square().to_vec(), second, fin].concat();
-        assert_eq!(components(&tagged(&three, &[0; 6])), [0, 0, 1, 1, 2, 2]);
+        assert_eq!(
+            parts(&tagged(&three, &[0; 6])).component,
+            [0, 0, 1, 1, 2, 2]
+        );
     }
 
     /// `triangles` on `objects`, as [`components`] takes them.
@@ -563,7 +673,8 @@ mod tests {
 
     /// The sides of `triangles` on `objects` from `snapshot`'s camera.
     fn sides_of(triangles: &[[Vec3; 3]], objects: &[u32], snapshot: &Snapshot) -> SolvedSides {
-        SolvedSides::of_components(components(&tagged(triangles, objects)), snapshot)
+        let tagged = tagged(triangles, objects);
+        SolvedSides::of_parts(parts(&tagged), snapshot)
     }
 
     /// A snapshot of `triangles` on `objects`, its camera at `eye`.
@@ -630,7 +741,7 @@ mod tests {
         .concat();
         let objects: Vec<u32> = [vec![0; 12], vec![1; 2], vec![2; 2], vec![3; 2]].concat();
         let tagged = tagged(&triangles, &objects);
-        let component = components(&tagged);
+        let component = parts(&tagged).component;
         let snapshot = snapshot_of(&triangles, &objects, Vec3::new(0.5, 0.0, 0.5));
         assert_eq!(
             both_sides(&tagged, &component, &snapshot),
