@@ -19,7 +19,7 @@ pub(crate) struct UnshadowedLights {
 }
 
 /// The lights of the frames around the one rendered, each evaluated once
-/// (other frames need a snapshot of the whole scene) and found again by
+/// (from a snapshot of the frame's emitters) and found again by
 /// frame number, so that a resumed render computes the same ones.
 #[derive(Default)]
 pub(crate) struct LightsByFrame {
@@ -40,7 +40,7 @@ impl LightsByFrame {
                 Arc::new(if f == ctx.frame {
                     UnshadowedLights::of(ctx, ctx.snapshot)
                 } else {
-                    UnshadowedLights::of(ctx, &ctx.scene.snapshot(ctx.time_of(f)))
+                    UnshadowedLights::of(ctx, &ctx.scene.emitters_snapshot(ctx.time_of(f)))
                 })
             })
             .clone()

@@ -15,7 +15,7 @@ use crate::method::path::{PathSettings, PathTracer};
 use crate::method::tcg::{TcgSettings, TemporallyCoherentGathering};
 use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::{FrameContext, FrameRecords, FrameStats, Method};
-use crate::scene::{Scene, SceneError};
+use crate::scene::{Scene, SceneError, Snapshot};
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeSet;
 use std::ops::Range;
@@ -283,6 +283,10 @@ pub struct Renderer {
     frame_end: Option<u32>,
     /// [`Self::abandon_flag`].
     abandon: Arc<AtomicBool>,
+    /// The last frame's snapshot, whose static triangles the next frame
+    /// takes ([`Scene::snapshot_from`]): `scene` must not change between
+    /// frames.
+    last_snapshot: Option<Snapshot>,
 }
 
 impl Renderer {
@@ -302,6 +306,7 @@ impl Renderer {
             counts: MethodCalls::default(),
             frame_end: None,
             abandon: Arc::default(),
+            last_snapshot: None,
         }
     }
 
@@ -482,7 +487,10 @@ impl Renderer {
     /// stages directly.
     pub fn with_frame_context<R>(&mut self, frame: u32, f: impl FnOnce(&FrameContext) -> R) -> R {
         let t = frame as f32 / self.settings.fps;
-        let snapshot = self.scene.snapshot(t);
+        let snapshot = match self.last_snapshot.take() {
+            Some(earlier) => self.scene.snapshot_from(t, earlier),
+            None => self.scene.snapshot(t),
+        };
         self.backend.set_geometry(&snapshot);
         let lights = LightSampler::new(&snapshot, &self.scene.materials);
         let mut ctx = FrameContext {
@@ -502,7 +510,10 @@ impl Renderer {
         };
         ctx.emitters_in_view =
             crate::method::pixels::emitters_in_view(&snapshot, &lights, ctx.aspect());
-        f(&ctx)
+        let result = f(&ctx);
+        drop(ctx);
+        self.last_snapshot = Some(snapshot);
+        result
     }
 }
 

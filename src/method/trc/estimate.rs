@@ -37,7 +37,13 @@ impl NextFrame {
     /// the static triangles' BVH from frame to frame.
     pub(super) fn new(ctx: &FrameContext, next_direct: bool, statics: &mut StaticGeometry) -> Self {
         let now = ctx.snapshot;
-        let later = ctx.scene.snapshot(ctx.time_of(ctx.frame + 1));
+        // The next frame's geometry only where its direct light is
+        // evaluated: otherwise its lights and the objects' motion.
+        let t = ctx.time_of(ctx.frame + 1);
+        let later = match next_direct {
+            true => ctx.scene.snapshot(t),
+            false => ctx.scene.emitters_snapshot(t),
+        };
         let motion: Vec<Option<Mat4>> = now
             .object_to_world
             .iter()
