@@ -51,8 +51,8 @@ impl NextFrame {
             .map(|(w0, w1)| rigid_motion(*w0, *w1))
             .collect();
         let (l0, l1) = (
-            Arc::new(UnshadowedLights::of(ctx, now)),
-            Arc::new(UnshadowedLights::of(ctx, &later)),
+            Arc::new(UnshadowedLights::of(&ctx.scene.materials, now)),
+            Arc::new(UnshadowedLights::of(&ctx.scene.materials, &later)),
         );
         let lights_move = !l0.same_as(&l1);
         let objects_move = motion.iter().any(Option::is_some);
