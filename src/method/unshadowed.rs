@@ -68,14 +68,15 @@ enum Emitter {
 }
 
 impl UnshadowedLights {
-    /// The lights of `snapshot` (a frame of `ctx`'s scene): each emitting
-    /// triangle a point at its centroid, but for the emitting triangles of
-    /// an object and material that are more than [`CLUSTERED_OVER`]: those
-    /// are merged into at most 48 points ([`Clusters`]). Why: every sample
-    /// `trc` reprojects under moving lights, and every sample `tcg` checks
-    /// for moving lights' change, sums over these points; a moving
-    /// emitting ball of 6,240 triangles took `trc` 16 s for the first
-    /// frame of a 48 × 48 render (`ic` 0.19 s) and `tcg` 12.7 s a frame.
+    /// The lights of `snapshot` (a frame of the scene whose `materials`
+    /// these are): each emitting triangle a point at its centroid, but for
+    /// the emitting triangles of an object and material that are more than
+    /// [`CLUSTERED_OVER`]: those are merged into at most 48 points
+    /// ([`Clusters`]). Why: every sample `trc` reprojects under moving
+    /// lights, and every sample `tcg` checks for moving lights' change,
+    /// sums over these points; with a point a triangle, a moving emitting
+    /// ball of 6,240 triangles took `trc` 31.76 s and `tcg` 44.57 s for 6
+    /// frames at 48 × 48, where `ic` takes 1.04 s (`benches/HISTORY.md`).
     pub(crate) fn of(materials: &[Material], snapshot: &Snapshot) -> Self {
         Self::merging_over(materials, snapshot, CLUSTERED_OVER)
     }
