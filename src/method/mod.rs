@@ -186,23 +186,29 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // it replaces last know their successors; moved normals from the
         // moved triangle (`estimate::moved_normal`), and `next_direct`'s
         // estimate kept from going negative (2026-11-30). 7: as every
-        // method's next.
-        "trc" => 7,
+        // method's next. 8: under moving lights, a light of more than 48
+        // triangles is taken as at most 48 points (`unshadowed::Clusters`,
+        // 2026-12-01).
+        "trc" => 8,
         // 2: as `trc`'s 4, the records all three gather. 3, 4: as below.
         "ic" => 4,
         // `tcg` 4: samples' ages count past 15 frames (to 1038), so the
         // `2^age` draw tells the oldest apart (2026-11-30). 5: a moving
         // record's samples are tested for stale light from where the
         // record was when they were shot (`tcg::stale`, 2026-11-30). 6: as
-        // every method's next.
-        "tcg" => 6,
+        // every method's next. 7: as `trc`'s 8, for the light refresh.
+        "tcg" => 7,
         // `movies` 3: a kept link that missed everything covers its whole
         // ray, so an object that later moves far into it is seen
         // (`global::LinkReach`, 2026-11-30). 4: as every method's next.
         // 5: the global pass is meshed from the scene at time 0, not at
         // the frame it starts at, so a render resumed while an object
-        // scales equals the uninterrupted one (`global::MESHED_AT`).
-        "movies" => 5,
+        // scales equals the uninterrupted one (`global::MESHED_AT`). 6: a
+        // closed part turned inside out is solved on its outside, a side's
+        // shading normal is turned to that side (`sides`, `direct`), and
+        // the corners of an object scaled to nothing at time 0 are told
+        // apart in its own space (`global::PassMesh`, 2026-12-01).
+        "movies" => 6,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with

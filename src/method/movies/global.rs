@@ -263,9 +263,15 @@ struct PassMesh {
 }
 
 impl PassMesh {
-    /// The grids of `snapshot`'s triangles, a second one on the triangles
-    /// `both` names.
-    fn new(snapshot: &crate::scene::Snapshot, meshing: &Meshing, both: &[bool]) -> Self {
+    /// The grids of `snapshot`'s triangles (`corners`: their corners in
+    /// their objects' own space), a second one on the triangles `both`
+    /// names.
+    fn new(
+        snapshot: &crate::scene::Snapshot,
+        corners_in_object: &[[(Vec3, Vec3); 3]],
+        meshing: &Meshing,
+        both: &[bool],
+    ) -> Self {
         let mut mesh = PassMesh {
             grids: Vec::with_capacity(snapshot.triangles.len()),
             reverse_grids: Vec::with_capacity(snapshot.triangles.len()),
@@ -283,23 +289,34 @@ impl PassMesh {
         // vertices, which keying by component would split (`chairs-room`:
         // 780 corner vertices instead of 732). Where such parts have their
         // sides solved apart, a shared corner gathers on the side of the
-        // part that made it first.
+        // part that made it first. Where an animation scales an object to
+        // nothing (in some direction) at time 0, its corners are compared
+        // in its own space: placed, they are all at one point then, with
+        // no normal, and made one vertex for all its faces (a box grown
+        // from nothing, once grown, was 76 % off `path` in its corner of
+        // the frame, now 4.4 %: `tests/movies.rs`).
         let mut corners: HashMap<CornerKey, u32> = HashMap::new();
+        let mut add = |mesh: &mut PassMesh, id: usize, reverse: bool| {
+            let at = &corners_in_object[id];
+            mesh.add_grid(snapshot, at, meshing, &mut corners, id, reverse)
+        };
         for id in 0..snapshot.triangles.len() {
-            let grid = mesh.add_grid(snapshot, meshing, &mut corners, id, false);
+            let grid = add(&mut mesh, id, false);
             mesh.grids.push(grid);
             let reverse = both.get(id).copied().unwrap_or(false);
-            let reverse = reverse.then(|| mesh.add_grid(snapshot, meshing, &mut corners, id, true));
+            let reverse = reverse.then(|| add(&mut mesh, id, true));
             mesh.reverse_grids.push(reverse);
         }
         mesh
     }
 
-    /// Adds the grid of triangle `id` on its first side, or with `reverse`
-    /// on the other: its slots, and the vertices they do not share.
+    /// Adds the grid of triangle `id` (its corners `at` in its object's
+    /// space) on its first side, or with `reverse` on the other: its slots,
+    /// and the vertices they do not share.
     fn add_grid(
         &mut self,
         snapshot: &crate::scene::Snapshot,
+        at: &[(Vec3, Vec3); 3],
         meshing: &Meshing,
         corners: &mut HashMap<CornerKey, u32>,
         id: usize,
@@ -312,6 +329,8 @@ impl PassMesh {
             first: self.vertex_of.len() as u32,
         };
         let object = snapshot.tri_object[id];
+        let placing = snapshot.object_to_world[object as usize].determinant();
+        let collapsed = placing == 0.0 || !placing.is_finite();
         for b in 0..=n {
             for a in 0..=n - b {
                 let mut new_vertex = || {
@@ -333,14 +352,17 @@ impl PassMesh {
                     _ => None,
                 };
                 let vertex = match corner {
-                    Some(k) => *corners
-                        .entry((
-                            object,
-                            tri.p[k].to_array().map(f32::to_bits),
-                            tri.n[k].to_array().map(f32::to_bits),
-                            reverse,
-                        ))
-                        .or_insert_with(new_vertex),
+                    Some(k) => {
+                        let (p, n) = if collapsed {
+                            at[k]
+                        } else {
+                            (tri.p[k], tri.n[k])
+                        };
+                        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                        *corners
+                            .entry((object, bits(p), bits(n), reverse, collapsed))
+                            .or_insert_with(new_vertex)
+                    }
                     None => new_vertex(),
                 };
                 self.vertex_of.push(vertex);
@@ -352,7 +374,10 @@ impl PassMesh {
 
 /// A mesh vertex: object, position and shading normal (their bits), and
 /// whether it lies on the reverse side.
-type CornerKey = (u32, [u32; 3], [u32; 3], bool);
+/// A mesh vertex of the pass: object, position and normal (their bits),
+/// the side, and whether the position and normal are in the object's own
+/// space (its transform is singular at time 0) rather than placed.
+type CornerKey = (u32, [u32; 3], [u32; 3], bool, bool);
 
 /// Where a vertex of the pass lies: a triangle and its grid position (for
 /// a vertex shared by several triangles, the first of them).
@@ -509,7 +534,12 @@ impl GlobalPass {
             vertex_of,
             vertices,
             link_count,
-        } = PassMesh::new(meshed, &meshing, &both);
+        } = PassMesh::new(
+            meshed,
+            &object_space_corners(ctx.scene, meshed),
+            &meshing,
+            &both,
+        );
         let count = vertices.len();
         GlobalPass {
             settings,
@@ -1030,9 +1060,36 @@ fn pulled(u: f32, v: f32) -> (f32, f32) {
 /// triangle over the animation would grid a growing object more finely,
 /// but costs a snapshot of every frame before the first is rendered. The
 /// price of time 0: an object that grows later is meshed as it was at 0
-/// (coarser than `spacing` asks; one cell a triangle, and its corners
-/// made one vertex, where it was scaled to nothing).
+/// (coarser than `spacing` asks; one cell a triangle where it was scaled
+/// to nothing, its corners told apart in its own space: `PassMesh::new`).
 pub const MESHED_AT: f32 = 0.0;
+
+/// Per triangle of `snapshot` (of `scene`), the positions and normals of
+/// its corners in its object's own space, in the snapshot's corner order
+/// (turned as `Scene::snapshot` turns a mirrored object's triangles).
+fn object_space_corners(
+    scene: &crate::scene::Scene,
+    snapshot: &crate::scene::Snapshot,
+) -> Vec<[(Vec3, Vec3); 3]> {
+    let mut out = Vec::with_capacity(snapshot.triangles.len());
+    for object in scene.object_order() {
+        let mesh = &scene.objects[object].mesh;
+        let flip = snapshot.object_to_world[object].determinant() < 0.0;
+        for tri in &mesh.triangles {
+            let mut idx = tri.map(|i| i as usize);
+            if flip {
+                idx.swap(1, 2);
+            }
+            // A corner the mesh lacks is a malformed mesh's; the loader
+            // refuses those, so it only keeps this from panicking.
+            out.push(idx.map(|i| {
+                let p = mesh.positions.get(i).copied().unwrap_or(Vec3::NAN);
+                (p, mesh.normals.get(i).copied().unwrap_or(Vec3::ZERO))
+            }));
+        }
+    }
+    out
+}
 
 /// The diagonal of `snapshot`'s static triangles' box (of all triangles
 /// where none is static).
