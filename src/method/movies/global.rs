@@ -263,9 +263,9 @@ struct PassMesh {
 }
 
 impl PassMesh {
-    /// The grids of `snapshot`'s triangles (`corners`: their corners in
-    /// their objects' own space), a second one on the triangles `both`
-    /// names.
+    /// The grids of `snapshot`'s triangles (`corners_in_object`: their
+    /// corners in their objects' own space), a second one on the triangles
+    /// `both` names.
     fn new(
         snapshot: &crate::scene::Snapshot,
         corners_in_object: &[[(Vec3, Vec3); 3]],
@@ -372,8 +372,6 @@ impl PassMesh {
     }
 }
 
-/// A mesh vertex: object, position and shading normal (their bits), and
-/// whether it lies on the reverse side.
 /// A mesh vertex of the pass: object, position and normal (their bits),
 /// the side, and whether the position and normal are in the object's own
 /// space (its transform is singular at time 0) rather than placed.
