@@ -26,7 +26,7 @@
 //! ([`super::sides`]).
 
 use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, StaticShadows, Statics};
-use super::sides::SolvedSides;
+use super::sides::{object_space_corners, ObjectCorners, SolvedSides};
 use super::FrameContext;
 use crate::backend::{Hit, Ray};
 use crate::integrator::offset_origin;
@@ -268,7 +268,7 @@ impl PassMesh {
     /// `both` names.
     fn new(
         snapshot: &crate::scene::Snapshot,
-        corners_in_object: &[[(Vec3, Vec3); 3]],
+        corners_in_object: &[ObjectCorners],
         meshing: &Meshing,
         both: &[bool],
     ) -> Self {
@@ -297,7 +297,7 @@ impl PassMesh {
         // the frame, now 4.4 %: `tests/movies.rs`).
         let mut corners: HashMap<CornerKey, u32> = HashMap::new();
         let mut add = |mesh: &mut PassMesh, id: usize, reverse: bool| {
-            let at = &corners_in_object[id];
+            let at = &corners_in_object[id].1;
             mesh.add_grid(snapshot, at, meshing, &mut corners, id, reverse)
         };
         for id in 0..snapshot.triangles.len() {
@@ -520,7 +520,8 @@ impl GlobalPass {
     pub fn new(ctx: &FrameContext, settings: GlobalSettings) -> Self {
         let at_zero = (ctx.snapshot.time != MESHED_AT).then(|| ctx.scene.snapshot(MESHED_AT));
         let meshed = at_zero.as_ref().unwrap_or(ctx.snapshot);
-        let sides = SolvedSides::new(ctx.scene, ctx.snapshot, meshed);
+        let corners = object_space_corners(ctx.scene, meshed);
+        let sides = SolvedSides::new(&corners, ctx.snapshot, meshed);
         let both: Vec<bool> = (0..meshed.triangles.len() as u32)
             .map(|id| sides.both(id))
             .collect();
@@ -532,12 +533,7 @@ impl GlobalPass {
             vertex_of,
             vertices,
             link_count,
-        } = PassMesh::new(
-            meshed,
-            &object_space_corners(ctx.scene, meshed),
-            &meshing,
-            &both,
-        );
+        } = PassMesh::new(meshed, &corners, &meshing, &both);
         let count = vertices.len();
         GlobalPass {
             settings,
@@ -1061,33 +1057,6 @@ fn pulled(u: f32, v: f32) -> (f32, f32) {
 /// (coarser than `spacing` asks; one cell a triangle where it was scaled
 /// to nothing, its corners told apart in its own space: `PassMesh::new`).
 pub const MESHED_AT: f32 = 0.0;
-
-/// Per triangle of `snapshot` (of `scene`), the positions and normals of
-/// its corners in its object's own space, in the snapshot's corner order
-/// (turned as `Scene::snapshot` turns a mirrored object's triangles).
-fn object_space_corners(
-    scene: &crate::scene::Scene,
-    snapshot: &crate::scene::Snapshot,
-) -> Vec<[(Vec3, Vec3); 3]> {
-    let mut out = Vec::with_capacity(snapshot.triangles.len());
-    for object in scene.object_order() {
-        let mesh = &scene.objects[object].mesh;
-        let flip = snapshot.object_to_world[object].determinant() < 0.0;
-        for tri in &mesh.triangles {
-            let mut idx = tri.map(|i| i as usize);
-            if flip {
-                idx.swap(1, 2);
-            }
-            // A corner the mesh lacks is a malformed mesh's; the loader
-            // refuses those, so it only keeps this from panicking.
-            out.push(idx.map(|i| {
-                let p = mesh.positions.get(i).copied().unwrap_or(Vec3::NAN);
-                (p, mesh.normals.get(i).copied().unwrap_or(Vec3::ZERO))
-            }));
-        }
-    }
-    out
-}
 
 /// The diagonal of `snapshot`'s static triangles' box (of all triangles
 /// where none is static).

@@ -73,13 +73,16 @@ pub struct SolvedSides {
 }
 
 impl SolvedSides {
-    /// The components of `scene`'s triangles (found in object space, so
-    /// the same whatever frame they are found at, also where an object is
-    /// scaled to nothing), the sides `snapshot`'s camera sets, and the
-    /// parts solved on both sides as `meshed` (the snapshot the pass is
-    /// meshed at) places them.
-    pub fn new(scene: &Scene, snapshot: &Snapshot, meshed: &Snapshot) -> Self {
-        let triangles = object_space_triangles(scene);
+    /// The components of the triangles of `corners` (their corners in
+    /// their objects' own space, [`object_space_corners`]: the same
+    /// whatever frame they are found at, also where an object is scaled to
+    /// nothing), the sides `snapshot`'s camera sets, and the parts solved
+    /// on both sides as `meshed` (the snapshot the pass is meshed at)
+    /// places them.
+    pub fn new(corners: &[ObjectCorners], snapshot: &Snapshot, meshed: &Snapshot) -> Self {
+        let triangles: Vec<(u32, [Vec3; 3])> = (corners.iter())
+            .map(|(object, c)| (*object, c.map(|(p, _)| p)))
+            .collect();
         let parts = parts(&triangles);
         let both = both_sides(&triangles, &parts.component, meshed);
         SolvedSides {
@@ -148,19 +151,32 @@ impl SolvedSides {
     }
 }
 
+/// A triangle's object and the positions and normals of its corners in
+/// the object's own space ([`object_space_corners`]).
+pub type ObjectCorners = (u32, [(Vec3, Vec3); 3]);
+
 /// Every triangle of `scene` in snapshot order (the order of
-/// [`Scene::object_order`]), with its object and its corners in the
-/// object's own space.
-fn object_space_triangles(scene: &Scene) -> Vec<(u32, [Vec3; 3])> {
-    let mut out = Vec::new();
+/// [`Scene::object_order`]), with its object and its corners' positions
+/// and normals in the object's own space, in the corner order of `placed`
+/// (a snapshot of `scene`, which turns a mirrored object's triangles).
+pub fn object_space_corners(scene: &Scene, placed: &Snapshot) -> Vec<ObjectCorners> {
+    let mut out = Vec::with_capacity(placed.triangles.len());
     for object in scene.object_order() {
         let mesh = &scene.objects[object].mesh;
-        out.extend(mesh.triangles.iter().map(|t| {
+        let flip = placed.object_to_world[object].determinant() < 0.0;
+        for tri in &mesh.triangles {
+            let mut idx = tri.map(|i| i as usize);
+            if flip {
+                idx.swap(1, 2);
+            }
             // A corner the mesh lacks is a malformed mesh's; the loader
             // refuses those, so it only keeps this from panicking.
-            let corner = |i: u32| mesh.positions.get(i as usize).copied().unwrap_or(Vec3::NAN);
-            (object as u32, t.map(corner))
-        }));
+            let corner = |i: usize| {
+                let p = mesh.positions.get(i).copied().unwrap_or(Vec3::NAN);
+                (p, mesh.normals.get(i).copied().unwrap_or(Vec3::ZERO))
+            };
+            out.push((object as u32, idx.map(corner)));
+        }
     }
     out
 }
@@ -398,7 +414,7 @@ fn backs_solved(snapshot: &Snapshot, component: &[u32], closed: &[bool]) -> Vec<
     let seen: Vec<(f64, f64)> = snapshot
         .triangles
         .par_iter()
-        .map(|t| (signed_solid_angle(eye, t.p), cone_volume(eye, t.p)))
+        .map(|t| seen_from(eye, t.p))
         .collect();
     let mut winding = vec![0.0f64; closed.len()];
     let mut volume = vec![0.0f64; closed.len()];
@@ -415,32 +431,29 @@ fn backs_solved(snapshot: &Snapshot, component: &[u32], closed: &[bool]) -> Vec<
         .collect()
 }
 
-/// The signed volume of the cone from `eye` to triangle `p`, positive
-/// where `eye` is behind it (the sign of its solid angle). Summed over a
-/// closed surface it is the volume the surface bounds, wherever `eye` is:
-/// positive where its normals face out, negative where they face in.
-fn cone_volume(eye: glam::DVec3, p: [Vec3; 3]) -> f64 {
-    let [a, b, c] = p.map(|q| q.as_dvec3() - eye);
-    a.dot(b.cross(c)) / 6.0
-}
-
-/// The solid angle triangle `p` subtends at `eye`, positive where `eye`
-/// is behind it (its counter-clockwise front faces away), by Van Oosterom
-/// and Strackee's formula (1983): `tan(Ω/2) = a·(b×c) / (|a||b||c| +
-/// (a·b)|c| + (a·c)|b| + (b·c)|a|)`, with `a, b, c` the corners less `eye`.
-/// Zero where `eye` lies in the triangle's plane (seen edge on; on the
-/// triangle itself the formula's ±2π would hang on the sign of a zero).
-fn signed_solid_angle(eye: glam::DVec3, p: [Vec3; 3]) -> f64 {
+/// Triangle `p` seen from `eye`: the solid angle it subtends and the
+/// signed volume of the cone from `eye` to it, both positive where `eye`
+/// is behind it (its counter-clockwise front faces away).
+///
+/// The solid angle by Van Oosterom and Strackee's formula (1983):
+/// `tan(Ω/2) = a·(b×c) / (|a||b||c| + (a·b)|c| + (a·c)|b| + (b·c)|a|)`,
+/// with `a, b, c` the corners less `eye`; zero where `eye` lies in the
+/// triangle's plane (seen edge on; on the triangle itself the formula's
+/// ±2π would hang on the sign of a zero). The volume is `a·(b×c)/6`:
+/// summed over a closed surface it is the volume the surface bounds,
+/// wherever `eye` is, positive where its normals face out.
+fn seen_from(eye: glam::DVec3, p: [Vec3; 3]) -> (f64, f64) {
     let [a, b, c] = p.map(|q| q.as_dvec3() - eye);
     let (la, lb, lc) = (a.length(), b.length(), c.length());
     let numerator = a.dot(b.cross(c));
     let denominator = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
     let omega = 2.0 * numerator.atan2(denominator);
-    if numerator != 0.0 && omega.is_finite() {
+    let omega = if numerator != 0.0 && omega.is_finite() {
         omega
     } else {
         0.0
-    }
+    };
+    (omega, numerator / 6.0)
 }
 
 #[cfg(test)]
@@ -489,7 +502,7 @@ mod tests {
                 let eye = Vec3::new(0.5, 0.5, z);
                 square()
                     .iter()
-                    .map(|&t| signed_solid_angle(eye.as_dvec3(), t))
+                    .map(|&t| seen_from(eye.as_dvec3(), t).0)
                     .sum()
             };
             assert!(
@@ -504,11 +517,8 @@ mod tests {
             );
         }
         let cube = outward_cube();
-        let total = |eye: Vec3| -> f64 {
-            cube.iter()
-                .map(|&t| signed_solid_angle(eye.as_dvec3(), t))
-                .sum()
-        };
+        let total =
+            |eye: Vec3| -> f64 { cube.iter().map(|&t| seen_from(eye.as_dvec3(), t).0).sum() };
         assert!((total(Vec3::splat(0.1)) - 4.0 * PI).abs() < 1e-9);
         assert!(total(Vec3::new(3.0, 0.2, -1.0)).abs() < 1e-9);
     }
@@ -525,7 +535,8 @@ mod tests {
             let meshed = scene.snapshot(0.0);
             for frame in [0, scene.frame_count / 2, scene.frame_count - 1] {
                 let snapshot = scene.snapshot(frame as f32 / crate::scene::DEFAULT_FPS);
-                let sides = SolvedSides::new(&scene, &snapshot, &meshed);
+                let corners = object_space_corners(&scene, &meshed);
+                let sides = SolvedSides::new(&corners, &snapshot, &meshed);
                 assert!(!sides.back.contains(&true), "{name} frame {frame}");
                 assert!(!sides.both.contains(&true), "{name}: both sides of a part");
                 assert!(sides.back.len() > 1, "{name}: one component");
