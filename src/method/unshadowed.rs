@@ -84,17 +84,24 @@ impl UnshadowedLights {
     /// [`Self::of`], merging the triangles of the lights with more than
     /// `clustered_over` of them.
     fn merging_over(materials: &[Material], snapshot: &Snapshot, clustered_over: usize) -> Self {
-        let emitting = |id: usize| {
-            let m = &materials[snapshot.tri_material[id] as usize];
-            (m.is_emissive() && snapshot.triangles[id].area() > 0.0).then_some(m)
-        };
-        let mut clusters = Clusters::of_large_lights(snapshot, emitting, clustered_over);
+        // The emitting triangles, found once: the passes below run over
+        // them, not over every triangle of the frame.
+        let emitting: Vec<usize> = (0..snapshot.triangles.len())
+            .filter(|&id| {
+                let m = &materials[snapshot.tri_material[id] as usize];
+                m.is_emissive() && snapshot.triangles[id].area() > 0.0
+            })
+            .collect();
+        let mut clusters = Clusters::of_large_lights(snapshot, &emitting, clustered_over);
         let mut emitters = Vec::new();
-        for (id, tri) in snapshot.triangles.iter().enumerate() {
-            let Some(m) = emitting(id) else { continue };
+        for &id in &emitting {
             if clusters.take(snapshot, id) {
                 continue;
             }
+            let (tri, m) = (
+                &snapshot.triangles[id],
+                &materials[snapshot.tri_material[id] as usize],
+            );
             emitters.push(Emitter::Area {
                 center: (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0,
                 normal: tri.geometric_normal(),
@@ -264,25 +271,19 @@ struct Part {
 }
 
 impl Clusters {
-    /// The lights among the triangles of `snapshot` that `emitting` names
-    /// with more than `clustered_over` triangles, nothing merged yet.
-    fn of_large_lights<'m>(
-        snapshot: &Snapshot,
-        emitting: impl Fn(usize) -> Option<&'m Material>,
-        clustered_over: usize,
-    ) -> Self {
+    /// The lights among the triangles `emitting` of `snapshot` with more
+    /// than `clustered_over` triangles, nothing merged yet.
+    fn of_large_lights(snapshot: &Snapshot, emitting: &[usize], clustered_over: usize) -> Self {
         let mut counts: HashMap<(u32, u32), (usize, Vec3, Vec3)> = HashMap::new();
-        for (id, tri) in snapshot.triangles.iter().enumerate() {
-            if emitting(id).is_some() {
-                let key = (snapshot.tri_object[id], snapshot.tri_material[id]);
-                let (n, lo, hi) = counts
-                    .entry(key)
-                    .or_insert((0, Vec3::INFINITY, -Vec3::INFINITY));
-                *n += 1;
-                for p in tri.p {
-                    *lo = lo.min(p);
-                    *hi = hi.max(p);
-                }
+        for &id in emitting {
+            let key = (snapshot.tri_object[id], snapshot.tri_material[id]);
+            let (n, lo, hi) = counts
+                .entry(key)
+                .or_insert((0, Vec3::INFINITY, -Vec3::INFINITY));
+            *n += 1;
+            for p in snapshot.triangles[id].p {
+                *lo = lo.min(p);
+                *hi = hi.max(p);
             }
         }
         let mut large: Vec<((u32, u32), Vec3)> = counts
