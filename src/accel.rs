@@ -60,9 +60,11 @@ fn to_obvhs(tri: &crate::scene::Triangle) -> ObTriangle {
 /// `2e-4 · |dir|` as well as of the origin. Gather and camera rays have
 /// unit directions, and a shadow segment is as long as the way to its light, so
 /// that rounding stays far below the rays' offset from their surface
-/// ([`crate::integrator::RAY_OFFSET`] of the coordinates); only a light
-/// some 1e7 times farther than the point's own coordinates could see its
-/// shadow rays start behind the surface they leave.
+/// ([`crate::integrator::RayOffset`]: 1e-4 of the coordinates and of the
+/// scene's size up to a unit) in a scene over
+/// [`crate::scene::SMALLEST_SCENE`] across; only a light some 1e7 times
+/// farther than the point's own coordinates could see its shadow rays
+/// start behind the surface they leave.
 pub const NEAR_SHIFT: f32 = 2e-4;
 
 /// `ray` as obvhs traverses it: its origin moved back by [`NEAR_SHIFT`]

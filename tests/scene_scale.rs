@@ -1,5 +1,5 @@
 //! A scene's unit does not matter: the same scene modelled in metres, in
-//! centimetres or in hundredths of a metre renders the same image with
+//! centimetres or in tenths of a millimetre renders the same image with
 //! every method. Radiance does not change when a scene is scaled (an
 //! emitting triangle keeps its radiance, every solid angle is the same),
 //! so with the same random streams only the ray offsets against
@@ -89,24 +89,24 @@ fn last_frames(k: f32) -> [Film; 3] {
 }
 
 /// Measured (32×32, frame 5): against the metre-scale renders, ×100 differs
-/// by 0.0018 / 0.0025 / 0.0014 (`path` / `ic` / `trc`) and ×0.01 by 0.0134
-/// / 0.0209 / 0.0167: paths that diverge at a ray offset now and then (the
-/// offset has a floor of 0.1 mm, 0.5 % of the centimetre room), not a bias.
-/// With a floor ten times as large (1 mm) `path` at ×0.01 differs by 0.0370.
-/// `ic` and `trc` differ more than `path` at any scale that is not a power
-/// of two, because one record placed elsewhere changes the noise of its
-/// whole neighbourhood: the scene scaled by 1.000001 already differs by
-/// 0.0161 (`ic`) and 0.0133 (`trc`) while `path` does not differ at all.
+/// by 0.0018 / 0.0042 / 0.0030 (`path` / `ic` / `trc`), ×0.01 by 0.0034 /
+/// 0.0045 / 0.0035 and ×0.0001 (a room 0.36 mm across) by 0.0034 / 0.0054
+/// / 0.0041: rounding that differs between scales, as the ray offset is
+/// the same share of the room at each (`RayOffset`). While the offset had
+/// a floor of 1e-4 units whatever the scene's size, ×0.01 differed by
+/// 0.0134 / 0.0209 / 0.0167 (`path` 0.0122 with that floor put back now),
+/// the floor 0.5 % of the centimetre room; at ×0.0001 it was 28 % of the
+/// room (`SMALLEST_SCENE` has what that lost).
 #[test]
 fn scaled_scenes_render_the_same_images() {
     let metres = last_frames(1.0);
-    for k in [100.0, 0.01] {
+    for k in [100.0, 0.01, 0.0001] {
         let scaled = last_frames(k);
         for ((name, a), b) in ["path", "ic", "trc"].iter().zip(&scaled).zip(&metres) {
             let difference = rel_rmse(a, b);
             eprintln!("×{k} {name}: relative RMSE {difference:.4} against metres");
             assert!(
-                difference < 0.03,
+                difference < 0.01,
                 "×{k}: {name} differs from the metre-scale render by {difference}"
             );
         }
@@ -115,11 +115,10 @@ fn scaled_scenes_render_the_same_images() {
 
 /// `SMALLEST_SCENE` ([`radcache::scene::SMALLEST_SCENE`]): a scene that
 /// size across renders as in metres (`path`, 64 spp, 32×32, frame 0 of
-/// `cube-in-box` scaled to that diagonal: the frame's mean within 2 %,
-/// each 8×8 block within 6 %), and one a hundredth of it does not (the ray
-/// offset's floor loses light). Measured at 4d913f1 (mean, worst block
-/// against metres): 1e-2 across +0.6 %, 3.8 %; 3.6e-3 +1.1 %, 7 %; 1.1e-3
-/// +1.6 %, 12 %; 3.6e-4 +2.8 %, 20 %; 1e-4 45 % of the light lost.
+/// `cube-in-box` scaled to that diagonal: the frame's mean within 0.5 %,
+/// each 8×8 block within 1 %), and one a hundredth of it does not (the
+/// traversal's absolute near shift loses light). Measured (mean, worst
+/// block against metres): 1e-5 across +0.01 %, 0.11 %; 1e-7, −9 %, 39 %.
 #[test]
 fn the_smallest_scene_renders_as_in_metres_and_a_smaller_one_does_not() {
     let frame = |k: f32| {
@@ -148,16 +147,19 @@ fn the_smallest_scene_renders_as_in_metres_and_a_smaller_one_does_not() {
     let smallest = against_metres(&frame(radcache::scene::SMALLEST_SCENE / diagonal));
     let smaller = against_metres(&frame(radcache::scene::SMALLEST_SCENE / 100.0 / diagonal));
     eprintln!("against metres (mean, worst block): smallest {smallest:?}, a hundredth {smaller:?}");
-    assert!(smallest.0.abs() < 0.02 && smallest.1 < 0.06, "{smallest:?}");
-    assert!(smaller.0 < -0.2, "{smaller:?}");
+    assert!(
+        smallest.0.abs() < 0.005 && smallest.1 < 0.01,
+        "{smallest:?}"
+    );
+    assert!(smaller.0 < -0.05, "{smaller:?}");
 }
 
-/// Below `SMALLEST_SCENE` across the ray offset's floor matters, and a
+/// Below `SMALLEST_SCENE` across the traversal's rounding matters, and a
 /// scene file that small is loaded with a warning that says why (a scene
-/// in millimetres written as metres, say); one at the limit's scale up is
+/// in micrometres written as metres, say); one ten times the limit is
 /// not.
 #[test]
-fn a_scene_too_small_for_the_ray_offsets_is_loaded_with_a_warning() {
+fn a_scene_too_small_for_the_ray_traversal_is_loaded_with_a_warning() {
     let dir = tempfile::tempdir().unwrap();
     let render = |k: f32| {
         let tri = TRI.map(|p| p.map(|c| c * k));
@@ -187,13 +189,13 @@ fn a_scene_too_small_for_the_ray_offsets_is_loaded_with_a_warning() {
             String::from_utf8_lossy(&out.stderr).into_owned(),
         )
     };
-    let (size, stderr) = render(1e-3);
-    assert!((size - 2f32.sqrt() * 1e-3).abs() < 1e-8, "{size}");
+    let (size, stderr) = render(1e-6);
+    assert!((size - 2f32.sqrt() * 1e-6).abs() < 1e-11, "{size}");
     assert!(
         stderr.contains("units across") && stderr.contains("scale the scene up"),
         "{stderr}"
     );
-    let (size, stderr) = render(0.1);
+    let (size, stderr) = render(1e-4);
     assert!(size > radcache::scene::SMALLEST_SCENE);
     assert!(!stderr.contains("units across"), "{stderr}");
 }

@@ -11,7 +11,7 @@
 //! next-event estimation, the cache holds the indirect part only.
 
 use crate::backend::Ray;
-use crate::integrator::{offset_origin, FirstHitEmission, RadianceQuery, RadianceResult};
+use crate::integrator::{FirstHitEmission, RadianceQuery, RadianceResult, RayOffset};
 use crate::sampling::{Frame, Rng, SampleKey};
 use glam::Vec3;
 use std::f32::consts::{PI, TAU};
@@ -66,10 +66,16 @@ pub struct GatherPoint {
     pub geometric_normal: Vec3,
 }
 
-/// The `M·N` radiance queries of a record, cell by cell. `key` identifies
-/// the record's random stream; its `sample` field is replaced by the cell
-/// index so that every cell has its own stream.
-pub fn gather_queries(point: &GatherPoint, strata: Strata, key: SampleKey) -> Vec<RadianceQuery> {
+/// The `M·N` radiance queries of a record, cell by cell, leaving `point`
+/// by `offset`. `key` identifies the record's random stream; its `sample`
+/// field is replaced by the cell index so that every cell has its own
+/// stream.
+pub fn gather_queries(
+    point: &GatherPoint,
+    offset: RayOffset,
+    strata: Strata,
+    key: SampleKey,
+) -> Vec<RadianceQuery> {
     let frame = Frame::new(point.normal);
     (0..strata.count() as u32)
         .map(|cell| {
@@ -77,25 +83,27 @@ pub fn gather_queries(point: &GatherPoint, strata: Strata, key: SampleKey) -> Ve
                 sample: cell,
                 ..key
             });
-            cell_query(point, &frame, strata, cell, rng)
+            cell_query(point, offset, &frame, strata, cell, rng)
         })
         .collect()
 }
 
 /// The radiance query of cell `cell` (`j·N + k`) of a record at `point`
-/// whose hemisphere is laid out in `frame` (its normal is `frame.n`): a
+/// whose hemisphere is laid out in `frame` (its normal is `frame.n`),
+/// leaving it by `offset`: a
 /// direction jittered within the cell by `rng`'s first two numbers, the
 /// rest of `rng` for the path. `tcg` re-shoots single cells with it, in
 /// the frame its record carries along with its object.
 pub fn cell_query(
     point: &GatherPoint,
+    offset: RayOffset,
     frame: &Frame,
     strata: Strata,
     cell: u32,
     mut rng: Rng,
 ) -> RadianceQuery {
     let dir = cell_direction(frame, strata, cell, rng.next_2d());
-    let origin = offset_origin(point.position, point.geometric_normal, dir);
+    let origin = offset.origin(point.position, point.geometric_normal, dir);
     RadianceQuery {
         ray: Ray::new(origin, dir, 0.0, f32::INFINITY),
         first_light: None,

@@ -496,7 +496,7 @@ impl IrradianceCaching {
                 item: streams::RECORD | c.stream,
                 sample: 0,
             };
-            queries.extend(gather_queries(&c.point, strata, key));
+            queries.extend(gather_queries(&c.point, ctx.ray_offset, strata, key));
         }
         let (results, traced) = trace(&queries);
         let dynamic = self.keep_records.then(|| ctx.scene.dynamic_objects());

@@ -15,7 +15,6 @@ use super::FrameContext;
 use crate::backend::gpu::cache_splat::{CacheSplat, GpuLookup, PreparedCache};
 use crate::backend::{Hit, Ray};
 use crate::cache::{Interpolated, IrradianceCache, LookupPoint};
-use crate::integrator::offset_origin;
 use glam::Vec3;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -29,7 +28,7 @@ pub(crate) type ShadingPoint = (Vec3, Vec3);
 pub(crate) fn measure_clearance(ctx: &FrameContext, points: &[ShadingPoint]) -> Vec<LookupPoint> {
     let rays: Vec<Ray> = points
         .iter()
-        .map(|&(p, n)| Ray::new(offset_origin(p, n, n), n, 0.0, f32::INFINITY))
+        .map(|&(p, n)| Ray::new(ctx.ray_offset.origin(p, n, n), n, 0.0, f32::INFINITY))
         .collect();
     let mut hits = vec![Hit::MISS; rays.len()];
     ctx.backend.closest_hit(&rays, &mut hits);

@@ -18,6 +18,7 @@ mod unshadowed;
 
 use crate::backend::RayBackend;
 use crate::film::Film;
+use crate::integrator::RayOffset;
 use crate::light::LightSampler;
 use crate::sampling::SampleKey;
 use crate::scene::{Scene, Snapshot};
@@ -48,6 +49,8 @@ pub struct FrameContext<'a> {
     /// Set from another thread to abandon the frame in progress
     /// ([`crate::render::Renderer::abandon_flag`]).
     pub abandon: &'a AtomicBool,
+    /// How far rays leaving a surface start off it, for this scene's size.
+    pub ray_offset: RayOffset,
 }
 
 impl FrameContext<'_> {
@@ -188,16 +191,17 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // estimate kept from going negative (2026-11-30). 7: as every
         // method's next. 8: under moving lights, a light of more than 48
         // triangles is taken as at most 48 points (`unshadowed::Clusters`,
-        // 2026-12-01).
-        "trc" => 8,
-        // 2: as `trc`'s 4, the records all three gather. 3, 4: as below.
-        "ic" => 4,
+        // 2026-12-01). 9: as every method's next.
+        "trc" => 9,
+        // 2: as `trc`'s 4, the records all three gather. 3, 4, 5: as below.
+        "ic" => 5,
         // `tcg` 4: samples' ages count past 15 frames (to 1038), so the
         // `2^age` draw tells the oldest apart (2026-11-30). 5: a moving
         // record's samples are tested for stale light from where the
         // record was when they were shot (`tcg::stale`, 2026-11-30). 6: as
-        // every method's next. 7: as `trc`'s 8, for the light refresh.
-        "tcg" => 7,
+        // every method's next. 7: as `trc`'s 8, for the light refresh. 8:
+        // as every method's next.
+        "tcg" => 8,
         // `movies` 3: a kept link that missed everything covers its whole
         // ray, so an object that later moves far into it is seen
         // (`global::LinkReach`, 2026-11-30). 4: as every method's next.
@@ -207,8 +211,9 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // closed part turned inside out is solved on its outside, a side's
         // shading normal is turned to that side (`sides`, `direct`), and
         // the corners of an object scaled to nothing at time 0 are told
-        // apart in its own space (`global::PassMesh`, 2026-12-01).
-        "movies" => 6,
+        // apart in its own space (`global::PassMesh`, 2026-12-01). 7: as
+        // every method's next.
+        "movies" => 7,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with
@@ -216,8 +221,12 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // two triangles share hit one of them (the watertight triangle
         // test, `accel::ShearedRay`, and widened boxes), and of two hits at
         // the same t the lower triangle id wins on both backends; every
-        // hit's t, u and v are computed anew (2026-11-30).
-        _ => 3,
+        // hit's t, u and v are computed anew (2026-11-30). 4 (all
+        // methods): in a scene under a unit across, rays leave surfaces by
+        // 1e-4 of the scene's size rather than of a unit
+        // (`integrator::RayOffset`, 2026-12-01); larger scenes keep their
+        // frames.
+        _ => 4,
     }
 }
 

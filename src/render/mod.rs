@@ -8,6 +8,7 @@ use crate::backend::cpu::CpuBackend;
 use crate::backend::gpu::{AdapterPolicy, GpuBackend, GpuError};
 use crate::backend::RayBackend;
 use crate::film::{self, Film};
+use crate::integrator::RayOffset;
 use crate::light::LightSampler;
 use crate::method::ic::{IcSettings, IrradianceCaching};
 use crate::method::movies::{MoviesSettings, TextureMovies};
@@ -17,6 +18,7 @@ use crate::method::trc::{TemporalRadianceCaching, TrcSettings};
 use crate::method::{FrameContext, FrameRecords, FrameStats, Method};
 use crate::scene::{Scene, SceneError, Snapshot};
 use anyhow::{bail, Context, Result};
+use glam::Vec3;
 use std::collections::BTreeSet;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -287,6 +289,10 @@ pub struct Renderer {
     /// takes ([`Scene::snapshot_from`]): `scene` must not change between
     /// frames.
     last_snapshot: Option<Snapshot>,
+    /// The box around the scene's vertices at time 0, which with each
+    /// frame's camera sizes its [`RayOffset`] (found once: a large mesh
+    /// takes milliseconds to bound).
+    scene_bounds: Option<(Vec3, Vec3)>,
 }
 
 impl Renderer {
@@ -297,7 +303,6 @@ impl Renderer {
         settings: FrameSettings,
     ) -> Self {
         Renderer {
-            scene,
             settings,
             method,
             backend,
@@ -307,6 +312,8 @@ impl Renderer {
             frame_end: None,
             abandon: Arc::default(),
             last_snapshot: None,
+            scene_bounds: scene.bounds_at(0.0),
+            scene,
         }
     }
 
@@ -507,6 +514,7 @@ impl Renderer {
             edge_coverage_factor: self.settings.edge_coverage_factor,
             emitters_in_view: Vec::new(),
             abandon: &self.abandon,
+            ray_offset: RayOffset::around(self.scene_bounds, snapshot.camera.position),
         };
         ctx.emitters_in_view =
             crate::method::pixels::emitters_in_view(&snapshot, &lights, ctx.aspect());

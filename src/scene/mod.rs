@@ -17,21 +17,22 @@ use std::path::Path;
 
 pub use animation::{Animation, Channel, Interpolation, Property};
 
-/// Below this size (world units across) the floor of the ray offset
-/// ([`crate::integrator::RAY_OFFSET`], 1e-4 units) is over 1 % of the
-/// scene, and light leaks or is lost. Seen with `path` (64 spp, 32×32,
-/// frame 0) on `cube-in-box` scaled down to a bounding-box diagonal of
-/// (against the metre-scale frame: mean, worst 8×8 block): 1e-2 units,
-/// +0.6 %, 3.8 % (as far as paths that diverge at an offset move a block
-/// of this noise); 3.6e-3, +1.1 %, 7 %; 1.1e-3, +1.6 %, 12 %; 3.6e-4,
-/// +2.8 %, 20 %; 1.1e-4, 45 % of the light lost (at 4d913f1, after
-/// [`crate::accel::NEAR_SHIFT`]; before it the traversal also missed
-/// surfaces nearer than 1e-4, and the same sizes lost 6 % and 34 % at
-/// 1.1e-3 and 3.6e-4). `tests/scene_scale.rs` holds this size within
-/// those bounds (mean 2 %, blocks 6 %) and a hundredth of it to a loss of
-/// more than 20 %; at 0.03 units (×0.01) `path`, `ic` and `trc` still
-/// render the metre-scale images (relative RMSE under 0.03).
-pub const SMALLEST_SCENE: f32 = 0.01;
+/// Below this size (world units across) light is lost: the ray offset
+/// scales with the scene ([`crate::integrator::RayOffset`]), but the BVH
+/// traversal's near cut and the shift that keeps hits past it
+/// ([`crate::accel::NEAR_SHIFT`]) are absolute, and round the rays of a
+/// scene a micrometre across. Seen with `path` (64 spp, 32×32, frame 0) on
+/// `cube-in-box` scaled down to a bounding-box diagonal of (against the
+/// metre-scale frame: mean, worst 8×8 block) 1e-2 down to 1e-6 units:
+/// +0.01 to +0.03 %, 0.1–0.16 %; 3e-7, −0.9 %, 3.7 %; 1e-7, −9 %, 39 %;
+/// 1e-10, −92 %.
+///
+/// Until the ray offset's floor scaled with the scene (a fixed 1e-4 units
+/// then), the error began in centimetres: 1e-2 units +0.6 %, 3.8 %; 1.1e-3,
+/// +1.6 %, 12 %; 1.1e-4, 45 % of the light lost. `tests/scene_scale.rs`
+/// holds this size within 0.5 % (blocks 1 %) and a hundredth of it to a
+/// loss of more than 5 %.
+pub const SMALLEST_SCENE: f32 = 1e-5;
 
 /// Frames per second used when the command line does not say (DESIGN.md).
 pub const DEFAULT_FPS: f32 = 24.0;
@@ -394,16 +395,16 @@ impl Scene {
         Scene::load_confined(path, None)
     }
 
-    /// Warns of a scene too small for the ray offsets ([`SMALLEST_SCENE`]).
+    /// Warns of a scene too small for the ray traversal ([`SMALLEST_SCENE`]).
     fn warn_if_tiny(&self, path: &Path) {
         let size = self.diagonal_at(0.0);
         if size < SMALLEST_SCENE {
             eprintln!(
                 "warning: {}: the scene is {size:.2e} units across (its bounding box at time 0); \
-                 rays leave surfaces by at least {} units, so under {SMALLEST_SCENE} units \
-                 light is lost or leaks (glTF lengths are metres: scale the scene up)",
+                 rays are traversed from {} units behind their start, whose rounding loses \
+                 light under {SMALLEST_SCENE} units (glTF lengths are metres: scale the scene up)",
                 path.display(),
-                crate::integrator::RAY_OFFSET
+                crate::accel::NEAR_SHIFT
             );
         }
     }
@@ -411,6 +412,19 @@ impl Scene {
     /// The diagonal of the bounding box of every mesh's vertices at time
     /// `t`, in world units; 0 for a scene without vertices.
     pub fn diagonal_at(&self, t: f32) -> f32 {
+        self.bounds_at(t).map_or(0.0, |(lo, hi)| {
+            let d = (hi - lo).length();
+            if d.is_finite() {
+                d
+            } else {
+                0.0
+            }
+        })
+    }
+
+    /// The bounding box (least and greatest corner) of every mesh's
+    /// vertices at time `t`; `None` for a scene without vertices.
+    pub fn bounds_at(&self, t: f32) -> Option<(Vec3, Vec3)> {
         let world = self.node_world_transforms(t);
         let (lo, hi) = self
             .objects
@@ -424,12 +438,7 @@ impl Scene {
             .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
                 (lo.min(p), hi.max(p))
             });
-        let d = (hi - lo).length();
-        if d.is_finite() {
-            d
-        } else {
-            0.0
-        }
+        lo.cmple(hi).all().then_some((lo, hi))
     }
 
     /// Loads a scene from a `.gltf`/`.glb` file that, with every file its

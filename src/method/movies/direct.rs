@@ -19,7 +19,7 @@
 use super::super::FrameContext;
 use crate::accel::TriangleBvh;
 use crate::backend::{Ray, SHADOW_EPSILON};
-use crate::integrator::offset_origin;
+use crate::integrator::RayOffset;
 use crate::light::{LightSource, PointLights, TriangleSampling};
 use crate::sampling::{Rng, SampleKey, Stratified2d};
 use glam::Vec3;
@@ -172,9 +172,10 @@ struct OpenSample {
 
 impl OpenSample {
     /// The shadow segment from `point`: the origin pushed off the surface
-    /// as [`offset_origin`] pushes it towards any light above it.
-    fn ray(&self, point: &ShadePoint) -> Ray {
-        let origin = offset_origin(point.p, point.ng, point.ng);
+    /// by `offset`, as [`RayOffset::origin`] pushes it towards any light
+    /// above it.
+    fn ray(&self, point: &ShadePoint, offset: RayOffset) -> Ray {
+        let origin = offset.origin(point.p, point.ng, point.ng);
         Ray::new(origin, self.dir, 0.0, 1.0 - SHADOW_EPSILON)
     }
 }
@@ -267,7 +268,8 @@ impl<'a> PointSampler<'a> {
             let cos = point.n.dot(ls.wi);
             // Written so that a NaN (a degenerate triangle's normal) fails too.
             (cos > 0.0 && point.ng.dot(ls.wi) > 0.0).then(|| {
-                let shadow = Ray::segment(offset_origin(point.p, point.ng, ls.wi), ls.position);
+                let shadow =
+                    Ray::segment(ctx.ray_offset.origin(point.p, point.ng, ls.wi), ls.position);
                 (ls.radiance * (cos / ls.pdf), shadow)
             })
         });
@@ -531,7 +533,7 @@ fn kept_points(
             let slot = i * per + o.sample as usize;
             by_static[i] &= !(1 << o.sample);
             slots[slot] = o.c;
-            let ray = o.ray(point);
+            let ray = o.ray(point, ctx.ray_offset);
             if blockers.segment_may_hit(ray.origin(), ray.at(ray.tmax)) {
                 pending.push(ray, slot);
             } else {
@@ -620,7 +622,7 @@ fn first_static_points(
                 c: slots[slot],
                 dir: ray.dir(),
             };
-            debug_assert_eq!(sample.ray(&points[i]), ray);
+            debug_assert_eq!(sample.ray(&points[i], ctx.ray_offset), ray);
             open.push(sample);
         }
         if probe_any[k] {

@@ -29,7 +29,6 @@ use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, StaticShadows
 use super::sides::{object_space_corners, ObjectCorners, SolvedSides};
 use super::FrameContext;
 use crate::backend::{Hit, Ray};
-use crate::integrator::offset_origin;
 use crate::sampling::{cosine_hemisphere, streams, Frame, Rng, SampleKey};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -521,7 +520,7 @@ impl GlobalPass {
         let at_zero = (ctx.snapshot.time != MESHED_AT).then(|| ctx.scene.snapshot(MESHED_AT));
         let meshed = at_zero.as_ref().unwrap_or(ctx.snapshot);
         let corners = object_space_corners(ctx.scene, meshed);
-        let sides = SolvedSides::new(&corners, ctx.snapshot, meshed);
+        let sides = SolvedSides::new(&corners, ctx.snapshot, meshed, ctx.ray_offset);
         let both: Vec<bool> = (0..meshed.triangles.len() as u32)
             .map(|id| sides.both(id))
             .collect();
@@ -671,8 +670,14 @@ impl GlobalPass {
             sample: link,
         });
         let wi = Frame::new(point.n).to_world(cosine_hemisphere(rng.next_2d()));
-        (wi.dot(point.ng) > 0.0)
-            .then(|| Ray::new(offset_origin(point.p, point.ng, wi), wi, 0.0, f32::INFINITY))
+        (wi.dot(point.ng) > 0.0).then(|| {
+            Ray::new(
+                ctx.ray_offset.origin(point.p, point.ng, wi),
+                wi,
+                0.0,
+                f32::INFINITY,
+            )
+        })
     }
 
     /// Traces the links that motion may have changed (all of them the

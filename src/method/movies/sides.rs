@@ -52,6 +52,7 @@
 //! open side), the global pass traces again the links from its vertices
 //! and those landing on it, and finds its static shadows again.
 
+use crate::integrator::RayOffset;
 use crate::scene::{Scene, Snapshot};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -78,13 +79,18 @@ impl SolvedSides {
     /// whatever frame they are found at, also where an object is scaled to
     /// nothing), the sides `snapshot`'s camera sets, and the parts solved
     /// on both sides as `meshed` (the snapshot the pass is meshed at)
-    /// places them.
-    pub fn new(corners: &[ObjectCorners], snapshot: &Snapshot, meshed: &Snapshot) -> Self {
+    /// places them, its rays leaving them by `offset`.
+    pub fn new(
+        corners: &[ObjectCorners],
+        snapshot: &Snapshot,
+        meshed: &Snapshot,
+        offset: RayOffset,
+    ) -> Self {
         let triangles: Vec<(u32, [Vec3; 3])> = (corners.iter())
             .map(|(object, c)| (*object, c.map(|(p, _)| p)))
             .collect();
         let parts = parts(&triangles);
-        let both = both_sides(&triangles, &parts.component, meshed);
+        let both = both_sides(&triangles, &parts.component, meshed, offset);
         SolvedSides {
             both,
             ..Self::of_parts(parts, snapshot)
@@ -321,9 +327,14 @@ const GAP_RAYS: usize = 16;
 /// every frame), and behind it, as `meshed` places it, lies a surface
 /// farther than [`GAP_SHARE`] of its size: the median of the distances
 /// along its back normal from up to [`GAP_RAYS`] of its triangles'
-/// centres (a miss counts as no gap: nothing there to light or be lit
-/// by, as behind a room's outer wall).
-fn both_sides(triangles: &[(u32, [Vec3; 3])], component: &[u32], meshed: &Snapshot) -> Vec<bool> {
+/// centres, leaving them by `offset` (a miss counts as no gap: nothing
+/// there to light or be lit by, as behind a room's outer wall).
+fn both_sides(
+    triangles: &[(u32, [Vec3; 3])],
+    component: &[u32],
+    meshed: &Snapshot,
+    offset: RayOffset,
+) -> Vec<bool> {
     let count = component.iter().max().map_or(0, |&c| c as usize + 1);
     let flat = flat_components(triangles, component, count);
     if !flat.contains(&true) || meshed.triangles.len() != triangles.len() {
@@ -339,13 +350,18 @@ fn both_sides(triangles: &[(u32, [Vec3; 3])], component: &[u32], meshed: &Snapsh
     bvh.update(meshed);
     members
         .par_iter()
-        .map(|ids| !ids.is_empty() && gap_behind(&bvh, meshed, ids) > 0.0)
+        .map(|ids| !ids.is_empty() && gap_behind(&bvh, meshed, offset, ids) > 0.0)
         .collect()
 }
 
 /// How far the median gap behind the flat part of triangles `ids` reaches
 /// past [`GAP_SHARE`] of the part's size (positive: both sides solved).
-fn gap_behind(bvh: &crate::accel::SceneBvh, meshed: &Snapshot, ids: &[usize]) -> f32 {
+fn gap_behind(
+    bvh: &crate::accel::SceneBvh,
+    meshed: &Snapshot,
+    offset: RayOffset,
+    ids: &[usize],
+) -> f32 {
     let size = super::global::diagonal(ids.iter().flat_map(|&id| meshed.triangles[id].p));
     let step = ids.len().div_ceil(GAP_RAYS);
     let mut gaps: Vec<f32> = ids
@@ -359,7 +375,7 @@ fn gap_behind(bvh: &crate::accel::SceneBvh, meshed: &Snapshot, ids: &[usize]) ->
                 return 0.0;
             }
             let centre = tri.point(1.0 / 3.0, 1.0 / 3.0);
-            let origin = crate::integrator::offset_origin(centre, back, back);
+            let origin = offset.origin(centre, back, back);
             let hit = bvh.closest_hit(&crate::backend::Ray::new(origin, back, 0.0, f32::INFINITY));
             if hit.is_hit() {
                 hit.t
@@ -536,7 +552,7 @@ mod tests {
             for frame in [0, scene.frame_count / 2, scene.frame_count - 1] {
                 let snapshot = scene.snapshot(frame as f32 / crate::scene::DEFAULT_FPS);
                 let corners = object_space_corners(&scene, &meshed);
-                let sides = SolvedSides::new(&corners, &snapshot, &meshed);
+                let sides = SolvedSides::new(&corners, &snapshot, &meshed, RayOffset::UNIT_FLOOR);
                 assert!(!sides.back.contains(&true), "{name} frame {frame}");
                 assert!(!sides.both.contains(&true), "{name}: both sides of a part");
                 assert!(sides.back.len() > 1, "{name}: one component");
@@ -755,7 +771,7 @@ mod tests {
         let component = parts(&tagged).component;
         let snapshot = snapshot_of(&triangles, &objects, Vec3::new(0.5, 0.0, 0.5));
         assert_eq!(
-            both_sides(&tagged, &component, &snapshot),
+            both_sides(&tagged, &component, &snapshot, RayOffset::UNIT_FLOOR),
             [false, true, false, false]
         );
     }

@@ -45,9 +45,7 @@ use crate::backend::{Hit, Ray};
 use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceCache;
 use crate::film::Film;
-use crate::integrator::{
-    offset_origin, trace_radiance, FirstHitEmission, PathLength, RadianceQuery,
-};
+use crate::integrator::{trace_radiance, FirstHitEmission, PathLength, RadianceQuery, RayOffset};
 use crate::material::Bsdf;
 use crate::sampling::{cosine_hemisphere, Rng};
 use glam::Vec3;
@@ -66,6 +64,8 @@ use tile_lookups::{pixel_lookups, TileLookups};
 pub(crate) struct Surface<'a> {
     p: Vec3,
     ng: Vec3,
+    /// How rays leave it (the frame's).
+    offset: RayOffset,
     pub(crate) wo: Vec3,
     pub(crate) bsdf: Bsdf,
     pub(crate) material: &'a crate::scene::Material,
@@ -83,6 +83,7 @@ impl<'a> Surface<'a> {
         Some(Surface {
             p: ray.at(hit.t),
             ng: triangle.geometric_normal(),
+            offset: ctx.ray_offset,
             wo,
             bsdf: Bsdf::new(material, triangle.shading_normal(hit.u, hit.v), wo),
             material,
@@ -98,6 +99,11 @@ impl<'a> Surface<'a> {
             let m = material_of(ctx, hit);
             !m.is_emissive() && !m.is_glossy()
         }
+    }
+
+    /// The origin of a ray leaving the surface towards `w`.
+    pub(crate) fn origin_towards(&self, w: Vec3) -> Vec3 {
+        self.offset.origin(self.p, self.ng, w)
     }
 
     pub(crate) fn gather_point(&self) -> GatherPoint {
@@ -583,7 +589,7 @@ fn diffuse_indirect_query(s: &Surface, rng: &mut Rng) -> RadianceQuery {
     let frame = s.bsdf.frame;
     let wi = frame.to_world(cosine_hemisphere(rng.next_2d()));
     RadianceQuery {
-        ray: Ray::new(offset_origin(s.p, s.ng, wi), wi, 0.0, f32::INFINITY),
+        ray: Ray::new(s.origin_towards(wi), wi, 0.0, f32::INFINITY),
         first_light: None,
         rng: rng.split(),
         weight: s.bsdf.diffuse_albedo(),

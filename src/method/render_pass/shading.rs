@@ -10,7 +10,7 @@ use super::tile_lookups::TileLookups;
 use super::{material_of, Deferred, PixelStreams, PrimarySamples, Surface, TilePass};
 use crate::backend::Ray;
 use crate::cache::{eas, Interpolated};
-use crate::integrator::{offset_origin, FirstHitEmission, RadianceQuery};
+use crate::integrator::{FirstHitEmission, RadianceQuery};
 use crate::light::{emitting_cosine, TriangleSampling};
 use crate::method::ic::GlossyLobe;
 use crate::method::pixels::FirstLightSampler;
@@ -299,7 +299,7 @@ pub(crate) fn direct_light(
     if f.max_element() <= 0.0 {
         return None;
     }
-    let shadow = Ray::segment(offset_origin(s.p, s.ng, ls.wi), ls.position);
+    let shadow = Ray::segment(s.origin_towards(ls.wi), ls.position);
     Some((shadow, f * ls.radiance * (cos / ls.pdf)))
 }
 
@@ -312,12 +312,7 @@ pub(crate) fn glossy_query(s: &Surface, rng: &mut Rng) -> Option<RadianceQuery> 
     let sample = s.bsdf.sample_specular(s.wo, rng.next_2d())?;
     let cos = s.bsdf.normal().dot(sample.wi);
     Some(RadianceQuery {
-        ray: Ray::new(
-            offset_origin(s.p, s.ng, sample.wi),
-            sample.wi,
-            0.0,
-            f32::INFINITY,
-        ),
+        ray: Ray::new(s.origin_towards(sample.wi), sample.wi, 0.0, f32::INFINITY),
         first_light: None,
         rng: rng.split(),
         weight: sample.f * (cos / sample.pdf),

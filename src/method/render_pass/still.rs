@@ -12,7 +12,7 @@
 use super::still_tile::{KeptShadow, KeptTile, TileKept, TileStill};
 use crate::backend::{Hit, Ray};
 use crate::cache::LookupPoint;
-use crate::integrator::offset_origin;
+use crate::integrator::RayOffset;
 use crate::method::motion::Blockers;
 use crate::method::FrameContext;
 use crate::sampling::mix64;
@@ -156,6 +156,8 @@ pub(super) struct StillPass {
     /// A distance from the camera past every moving box: a camera ray that
     /// hit nothing is tested as a segment that long.
     far: f32,
+    /// How rays leave surfaces this frame ([`measure_clearance`](crate::method::lookups::measure_clearance)'s).
+    offset: RayOffset,
     /// Bytes each tile's kept lookups and queries
     /// ([`KeptQueries`](super::kept_queries::KeptQueries)) may take, the
     /// lookups first.
@@ -225,6 +227,7 @@ impl StillPass {
             width: ctx.width,
             last,
             far,
+            offset: ctx.ray_offset,
             tile_budget,
             kept_tiles,
         })
@@ -321,7 +324,7 @@ impl StillPass {
     /// past every box) nor holds its hit: then what it hit, if anything,
     /// was static.
     pub(super) fn clearance_clear(&self, at: &LookupPoint, camera: Vec3) -> bool {
-        let origin = offset_origin(at.position, at.normal, at.normal);
+        let origin = self.offset.origin(at.position, at.normal, at.normal);
         let length = if at.clearance == LookupPoint::OPEN {
             self.far + (at.position - camera).length()
         } else {
@@ -330,8 +333,8 @@ impl StillPass {
         let end = origin + at.normal * length;
         // A hit on a moving object lies in its box, but the segment may stop
         // a rounding error short of the box's face: the end is tested with
-        // a margin.
-        let margin = Vec3::splat(1e-4 * (1.0 + end.abs().max_element()));
+        // a margin, a ray offset's.
+        let margin = Vec3::splat(self.offset.distance(end));
         !self.blockers.segment_may_hit(origin, end)
             && !self.blockers.box_may_hit((end - margin, end + margin))
     }

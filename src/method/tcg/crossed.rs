@@ -32,7 +32,6 @@
 use super::TcgRecord;
 use crate::backend::{Hit, Ray};
 use crate::cache::gather::{cell_direction, GatherPoint, Strata};
-use crate::integrator::offset_origin;
 use crate::method::motion::ObjectBoxes;
 use crate::method::FrameContext;
 use crate::sampling::Frame;
@@ -78,7 +77,9 @@ impl MovedObjects {
                 .contains(point.position, Some(r.candidate.object))
             {
                 let n = point.normal;
-                let origin = offset_origin(point.position, point.geometric_normal, n);
+                let origin = ctx
+                    .ray_offset
+                    .origin(point.position, point.geometric_normal, n);
                 rays.push(Ray::new(origin, n, 0.0, f32::INFINITY));
                 tested.push(i);
             }

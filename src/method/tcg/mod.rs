@@ -417,7 +417,7 @@ impl TemporallyCoherentGathering {
             let start = queries.len();
             for &cell in cells {
                 let rng = Rng::new(self.key(ctx, streams::RECORD, r, cell));
-                queries.push(cell_query(point, frame, strata, cell, rng));
+                queries.push(cell_query(point, ctx.ray_offset, frame, strata, cell, rng));
             }
             ranges.push(start..queries.len());
         }

@@ -24,7 +24,7 @@
 use super::Gathered;
 use crate::accel::TriangleBvh;
 use crate::backend::{Hit, Ray};
-use crate::integrator::offset_origin;
+use crate::integrator::RayOffset;
 use crate::light::{LightSampler, TriangleSampling};
 use crate::material::Bsdf;
 use crate::method::FrameContext;
@@ -110,10 +110,10 @@ impl DirectChange {
             return self.shadow_change(ctx, g, at, choice);
         }
         let before = shading(ctx, ctx.snapshot, at.hit, at.point, g.record.position)
-            .and_then(|s| unoccluded(ctx.snapshot, ctx.lights, &s, choice));
+            .and_then(|s| unoccluded(ctx.snapshot, ctx.lights, ctx.ray_offset, &s, choice));
         let p1 = at.moved.map_or(at.point, |(_, p)| p);
         let after = shading(ctx, &self.later, at.hit, p1, g.record.position)
-            .and_then(|s| unoccluded(&self.later, &self.later_lights, &s, choice));
+            .and_then(|s| unoccluded(&self.later, &self.later_lights, ctx.ray_offset, &s, choice));
         let lit = |sample: Option<(Ray, Vec3)>, t: usize| {
             sample.map_or(Vec3::ZERO, |(ray, d)| {
                 if self.occluded(&ray, t) {
@@ -146,14 +146,14 @@ impl DirectChange {
             return Vec3::ZERO;
         };
         let sign = self.visibility_change(&Ray::segment(
-            offset_origin(at.point, ng, ls.wi),
+            ctx.ray_offset.origin(at.point, ng, ls.wi),
             ls.position,
         ));
         if sign == 0.0 {
             return Vec3::ZERO;
         }
         shading(ctx, snapshot, at.hit, at.point, g.record.position)
-            .and_then(|s| unoccluded(snapshot, ctx.lights, &s, choice))
+            .and_then(|s| unoccluded(snapshot, ctx.lights, ctx.ray_offset, &s, choice))
             .map_or(Vec3::ZERO, |(_, d)| sign * d)
     }
 
@@ -216,11 +216,12 @@ fn shading(
 }
 
 /// One light sample's direct light at `s` towards the record, unshadowed,
-/// and its shadow ray. Points on area lights are drawn by area, as at the
+/// and its shadow ray, leaving `s` by `offset`. Points on area lights are drawn by area, as at the
 /// vertices of the gather's paths.
 fn unoccluded(
     snapshot: &Snapshot,
     lights: &LightSampler,
+    offset: RayOffset,
     s: &Shading,
     choice: LightChoice,
 ) -> Option<(Ray, Vec3)> {
@@ -230,6 +231,6 @@ fn unoccluded(
     if cos <= 0.0 || f.max_element() <= 0.0 {
         return None;
     }
-    let ray = Ray::segment(offset_origin(s.p, s.ng, ls.wi), ls.position);
+    let ray = Ray::segment(offset.origin(s.p, s.ng, ls.wi), ls.position);
     Some((ray, f * ls.radiance * (cos / ls.pdf)))
 }
