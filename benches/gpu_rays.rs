@@ -109,6 +109,7 @@ fn scene() -> Scene {
         },
         animation: Animation { channels: vec![] },
         frame_count: 1,
+        moved_by: Vec3::ZERO,
     }
 }
 

@@ -301,6 +301,7 @@ fn hierarchy_scene() -> Scene {
             ],
         },
         frame_count: 49,
+        moved_by: Vec3::ZERO,
     }
 }
 

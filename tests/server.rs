@@ -2590,3 +2590,66 @@ fn a_served_job_whose_scene_changed_since_it_was_submitted_says_so() {
     );
     assert!(!error.contains("this build"), "{error}");
 }
+
+/// A scene far from the origin is rendered moved to it
+/// (`Scene::move_to_origin`), but its records are given, and picked by
+/// `bbox`, in the file's coordinates; their places on the image are where
+/// they show.
+#[test]
+fn records_of_a_scene_far_from_the_origin_are_in_the_file_coordinates() {
+    let (dir, scenes) = workspace();
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/scenes/cube_in_box.glb"
+    );
+    let (lo, hi) = radcache::scene::Scene::load(std::path::Path::new(path))
+        .unwrap()
+        .bounds_at(0.0)
+        .unwrap();
+    let glb = std::fs::read(path).unwrap();
+    let glb = gltf::binary::Glb::from_slice(&glb).unwrap();
+    std::fs::write(scenes.join("box.bin"), glb.bin.as_deref().unwrap()).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_slice(&glb.json).unwrap();
+    doc["buffers"][0]["uri"] = serde_json::json!("box.bin");
+    let far = [2000.0f32, 0.0, -1000.0];
+    let roots = doc["scenes"][0]["nodes"].clone();
+    let nodes = doc["nodes"].as_array_mut().unwrap();
+    nodes.push(serde_json::json!({"name": "far", "translation": far, "children": roots}));
+    doc["scenes"][0]["nodes"] = serde_json::json!([nodes.len() - 1]);
+    std::fs::write(scenes.join("far.gltf"), serde_json::to_vec(&doc).unwrap()).unwrap();
+
+    let server = start(&dir.path().join("db"), &scenes);
+    let id = create_job(
+        &server,
+        r#"{"scene":"far.gltf","method":"ic","frames":"0..1","size":"16x16","spp":1}"#,
+    );
+    wait_done(&server, &id);
+    let get = |q: &str| {
+        let (status, body) = http(&server, "GET", &format!("/api/jobs/{id}/records?{q}"), "");
+        assert_eq!(status, 200);
+        json(&body)
+    };
+    let all = get("frame=0");
+    let records = all["records"].as_array().unwrap();
+    assert!(!records.is_empty());
+    for r in records {
+        let p: Vec<f32> = (0..3)
+            .map(|a| r["position"][a].as_f64().unwrap() as f32 - far[a])
+            .collect();
+        for a in 0..3 {
+            assert!(lo[a] - 1e-2 <= p[a] && p[a] <= hi[a] + 1e-2, "{r}");
+        }
+        let s = r["screen"].as_array().expect("a record in view projects");
+        for c in s {
+            assert!((-0.5..=16.5).contains(&c.as_f64().unwrap()), "{r}");
+        }
+    }
+    let around = |o: [f32; 3]| {
+        let (a, b) = (lo.to_array(), hi.to_array());
+        let corner = |c: [f32; 3], d: f32| (0..3).map(move |i| (c[i] + o[i] + d).to_string());
+        let bbox: Vec<String> = corner(a, -0.1).chain(corner(b, 0.1)).collect();
+        get(&format!("frame=0&bbox={}", bbox.join(",")))["count"].clone()
+    };
+    assert_eq!(around(far), records.len());
+    assert_eq!(around([0.0; 3]), 0);
+}

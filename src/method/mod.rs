@@ -224,8 +224,9 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // hit's t, u and v are computed anew (2026-11-30). 4 (all
         // methods): in a scene under a unit across, rays leave surfaces by
         // 1e-4 of the scene's size rather than of a unit
-        // (`integrator::RayOffset`, 2026-12-01); larger scenes keep their
-        // frames.
+        // (`integrator::RayOffset`), and a scene far from the origin is
+        // rendered moved to it (`Scene::move_to_origin`, 2026-12-01);
+        // other scenes keep their frames.
         _ => 4,
     }
 }

@@ -237,6 +237,10 @@ pub struct Scene {
     pub animation: Animation,
     /// Number of frames the animation is meant to be rendered for.
     pub frame_count: u32,
+    /// What [`Scene::move_to_origin`] added to every position of the file
+    /// (zero where it did not move the scene): the scene's own
+    /// coordinates are these positions less it.
+    pub moved_by: Vec3,
 }
 
 /// World-space triangle with per-vertex shading normals.
@@ -439,6 +443,52 @@ impl Scene {
                 (lo.min(p), hi.max(p))
             });
         lo.cmple(hi).all().then_some((lo, hi))
+    }
+
+    /// Moves a scene whose box at time 0 lies far from the origin (its
+    /// centre farther away than the box's diagonal) so that the box is
+    /// centred on it, and returns the move, added to every position
+    /// (also kept in [`Scene::moved_by`]); `None` leaves the scene as it is.
+    ///
+    /// Why: 32-bit coordinates are spaced in proportion to their size, and
+    /// rays leave a surface by 1e-4 of its point's coordinates
+    /// ([`crate::integrator::RayOffset`]), 0.1 units a kilometre from the
+    /// origin. `l_hall` moved 100, 1,000 and 10,000 units away rendered with
+    /// `path` at 64 spp a block bias of 0.37 %, 3.5 % and 35 % against its
+    /// frames at the origin (light through the corners, contact shadows
+    /// gone). Moved back, it renders as at the origin. A coordinate less
+    /// the centre near it is exact (Sterbenz's lemma), so nothing the file
+    /// holds is lost.
+    ///
+    /// How: every root node, with its translation keys, is moved (every
+    /// mesh, light and the camera hang from one). A scene around the
+    /// origin, as most are, keeps its bits.
+    pub fn move_to_origin(&mut self) -> Option<Vec3> {
+        let (lo, hi) = self.bounds_at(0.0)?;
+        let centre = 0.5 * lo + 0.5 * hi;
+        let far = centre.length() > (hi - lo).length();
+        if !far {
+            return None;
+        }
+        let by = -centre;
+        let roots: Vec<bool> = self.nodes.iter().map(|n| n.parent.is_none()).collect();
+        for node in self.nodes.iter_mut().filter(|n| n.parent.is_none()) {
+            node.rest.translation += by;
+        }
+        let moved = |c: &&mut Channel| c.property == Property::Translation && roots[c.node];
+        for channel in self.animation.channels.iter_mut().filter(moved) {
+            // A cubic spline's keys are (in-tangent, value, out-tangent):
+            // only the values are places.
+            let (first, step) = match channel.interpolation {
+                Interpolation::CubicSpline => (1, 3),
+                _ => (0, 1),
+            };
+            for value in channel.values.iter_mut().skip(first).step_by(step) {
+                *value += by.extend(0.0);
+            }
+        }
+        self.moved_by += by;
+        Some(by)
     }
 
     /// Loads a scene from a `.gltf`/`.glb` file that, with every file its

@@ -197,12 +197,14 @@ impl RecordsQuery {
     }
 }
 
-/// Record `r` as the API shows it at `frame`, with where it lies on the
+/// Record `r` as the API shows it at `frame`, at `position` (the scene
+/// file's coordinates), with where it lies on the
 /// image (`screen`, pixels; `None` behind the camera) and, for a radiance
 /// record, how many sources it has (`source_count`; `null` for an
 /// irradiance record) and, when `list_sources`, the sources.
 fn record_json(
     r: &RecordValue,
+    position: [f32; 3],
     frame: u32,
     screen: Option<[f32; 2]>,
     sources: Option<&[SourceValue]>,
@@ -210,7 +212,7 @@ fn record_json(
 ) -> Value {
     let mut row = json!({
         "id": r.id,
-        "position": r.position,
+        "position": position,
         "normal": r.normal,
         "radius": r.radius,
         "irradiance": r.irradiance,
@@ -353,7 +355,10 @@ fn answer(
     let mut out = Vec::new();
     let mut count = 0usize;
     for (written, r) in alive.alive() {
-        if q.bbox.as_ref().is_some_and(|b| !inside(&r.position, b)) {
+        // Records are stored where the scene was rendered; the API speaks
+        // the file's coordinates (`Scene::move_to_origin`).
+        let position = (glam::Vec3::from_array(r.position) - scene.moved_by).to_array();
+        if q.bbox.as_ref().is_some_and(|b| !inside(&position, b)) {
             continue;
         }
         count += 1;
@@ -364,7 +369,14 @@ fn answer(
             .project(glam::Vec3::from_array(r.position), w / h)
             .map(|(sx, sy)| [sx * w, sy * h]);
         let sources = sources.of(*written, r.id)?;
-        out.push(record_json(r, frame, screen, sources, q.list_sources));
+        out.push(record_json(
+            r,
+            position,
+            frame,
+            screen,
+            sources,
+            q.list_sources,
+        ));
     }
     let body = json!({
         "id": id,

@@ -106,6 +106,7 @@ pub fn scene(
         },
         animation: Animation { channels },
         frame_count: 2,
+        moved_by: Vec3::ZERO,
     }
 }
 

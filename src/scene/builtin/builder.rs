@@ -66,6 +66,7 @@ impl Builder {
                 },
                 animation: Animation::default(),
                 frame_count,
+                moved_by: Vec3::ZERO,
             },
             has_camera: false,
         }

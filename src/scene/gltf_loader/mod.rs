@@ -176,10 +176,23 @@ fn load_bytes(path: &Path, bytes: &[u8], confined_to: Option<&Path>) -> Res<Scen
         lights,
         camera,
         animation,
+        moved_by: Vec3::ZERO,
     };
     drop_coincident_objects(&mut scene, &gnodes);
     check_first_frame(&scene)?;
     check_camera_over_time(&scene)?;
+    if let Some(by) = scene.move_to_origin() {
+        eprintln!(
+            "note: {}: the scene lies {:.3e} units from the origin, and is rendered moved by \
+             ({}, {}, {}) to it, where coordinates are finer (the API's record positions are \
+             the file's)",
+            path.display(),
+            by.length(),
+            by.x,
+            by.y,
+            by.z
+        );
+    }
     Ok(scene)
 }
 
