@@ -938,6 +938,76 @@ impl Snapshot {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec4;
+
+    /// A scene hung from a far root node whose translation is keyed as a
+    /// cubic spline is moved to the origin: every vertex, light and the
+    /// camera at any time lie where they did, less the centre (within the
+    /// coordinates' spacing there), and the spline's tangents are kept.
+    #[test]
+    fn a_far_scene_moved_to_the_origin_keeps_its_shape_and_motion() {
+        let mut scene = Scene::builtin("moving-light").unwrap();
+        let far = Vec3::new(3000.0, -800.0, 1200.0);
+        let root = scene.nodes.len();
+        for node in scene.nodes.iter_mut().filter(|n| n.parent.is_none()) {
+            node.parent = Some(root);
+        }
+        scene.nodes.push(Node {
+            name: "far".into(),
+            parent: None,
+            rest: Trs::default(),
+        });
+        let (tangent_in, tangent_out) = (
+            Vec4::new(0.5, 0.0, -1.0, 0.0),
+            Vec4::new(2.0, 1.0, 0.0, 0.0),
+        );
+        scene.animation.channels.push(Channel {
+            node: root,
+            property: Property::Translation,
+            interpolation: Interpolation::CubicSpline,
+            times: vec![0.0, 1.0],
+            values: vec![
+                tangent_in,
+                far.extend(0.0),
+                tangent_out,
+                tangent_in,
+                (far + Vec3::X).extend(0.0),
+                tangent_out,
+            ],
+        });
+        let times = [0.0, 0.3, 0.75];
+        let before: Vec<Snapshot> = times.iter().map(|&t| scene.snapshot(t)).collect();
+        let by = scene.move_to_origin().expect("3.3 km away");
+        assert_eq!(scene.moved_by, by);
+        let (lo, hi) = scene.bounds_at(0.0).unwrap();
+        assert!((lo + hi).abs().max_element() < 1e-2, "{lo} {hi}");
+        let spline = scene.animation.channels.last().unwrap();
+        assert_eq!(
+            [spline.values[0], spline.values[2], spline.values[5]],
+            [tangent_in, tangent_out, tangent_out]
+        );
+        let near = |a: Vec3, b: Vec3| (a + by - b).abs().max_element() < 4e-3;
+        for (&t, was) in times.iter().zip(&before) {
+            let now = scene.snapshot(t);
+            let corners =
+                |s: &Snapshot| s.triangles.iter().flat_map(|tri| tri.p).collect::<Vec<_>>();
+            assert!(
+                corners(was)
+                    .into_iter()
+                    .zip(corners(&now))
+                    .all(|(a, b)| near(a, b)),
+                "t = {t}"
+            );
+            assert!(near(was.camera.position, now.camera.position), "t = {t}");
+            let lights = was.lights.iter().zip(&now.lights);
+            assert!(lights.clone().count() > 0 || scene.lights.is_empty());
+            assert!(
+                lights.clone().all(|(a, b)| near(a.position, b.position)),
+                "t = {t}"
+            );
+        }
+        assert!(scene.move_to_origin().is_none(), "moved once");
+    }
 
     /// A snapshot made in an earlier one, whose static triangles it keeps,
     /// is the snapshot made afresh, bit for bit (their `Debug` texts
