@@ -456,13 +456,16 @@ impl Scene {
     /// origin. `l_hall` moved 100, 1,000 and 10,000 units away rendered with
     /// `path` at 64 spp a block bias of 0.37 %, 3.5 % and 35 % against its
     /// frames at the origin (light through the corners, contact shadows
-    /// gone). Moved back, it renders as at the origin. A coordinate less
-    /// the centre near it is exact (Sterbenz's lemma), so nothing the file
-    /// holds is lost.
+    /// gone). Moved back, it renders as at the origin. Nothing the file
+    /// holds is lost: the move is composed with each root's transform
+    /// first (`T(by)·M`, whose translation is `t + by`, and so is a vertex
+    /// a root places), and a coordinate less a centre near it is exact
+    /// (Sterbenz's lemma).
     ///
-    /// How: every root node, with its translation keys, is moved (every
-    /// mesh, light and the camera hang from one). A scene around the
-    /// origin, as most are, keeps its bits.
+    /// How: the scene's root nodes are hung from one more node, last, that
+    /// moves them (every mesh, light and the camera hang from a root), so
+    /// the file's own nodes and keys stay as it gives them. A scene around
+    /// the origin, as most are, keeps its bits.
     pub fn move_to_origin(&mut self) -> Option<Vec3> {
         let (lo, hi) = self.bounds_at(0.0)?;
         let centre = 0.5 * lo + 0.5 * hi;
@@ -471,22 +474,18 @@ impl Scene {
             return None;
         }
         let by = -centre;
-        let roots: Vec<bool> = self.nodes.iter().map(|n| n.parent.is_none()).collect();
+        let mover = self.nodes.len();
         for node in self.nodes.iter_mut().filter(|n| n.parent.is_none()) {
-            node.rest.translation += by;
+            node.parent = Some(mover);
         }
-        let moved = |c: &&mut Channel| c.property == Property::Translation && roots[c.node];
-        for channel in self.animation.channels.iter_mut().filter(moved) {
-            // A cubic spline's keys are (in-tangent, value, out-tangent):
-            // only the values are places.
-            let (first, step) = match channel.interpolation {
-                Interpolation::CubicSpline => (1, 3),
-                _ => (0, 1),
-            };
-            for value in channel.values.iter_mut().skip(first).step_by(step) {
-                *value += by.extend(0.0);
-            }
-        }
+        self.nodes.push(Node {
+            name: "(moved to the origin)".into(),
+            parent: None,
+            rest: Trs {
+                translation: by,
+                ..Trs::default()
+            },
+        });
         self.moved_by += by;
         Some(by)
     }
