@@ -82,9 +82,26 @@ pub struct RadianceResult {
 }
 
 /// Relative offset of secondary ray origins along the geometric normal,
-/// against self-intersection: of the hit point's largest coordinate and of
-/// [`RayOffset`]'s floor.
+/// against self-intersection: of the hit point's largest coordinate (up
+/// to [`NEAR_COORDINATES`] floors) and of [`RayOffset`]'s floor.
 pub const RAY_OFFSET: f32 = 1e-4;
+
+/// The offset's share of a coordinate's part beyond [`NEAR_COORDINATES`]
+/// floors: still some 170 times the spacing of 32-bit floats there.
+///
+/// Why not [`RAY_OFFSET`] all the way: 1,700 times that spacing, it grew
+/// past what the rounding of a hit needs and into the scene's detail
+/// where the coordinates are large. A room 1.3 km from the origin, at the
+/// edge of a 2 km ground (`l_hall` moved there, `path` at 64 spp), had a
+/// block bias of 3.5 % against its frames at the origin, light through
+/// its corners and contact shadows gone, with offsets of 0.1 units;
+/// 0.35 % with this share (`tests/scene_scale.rs`).
+pub const FAR_RAY_OFFSET: f32 = 1e-5;
+
+/// How far from the origin, in floors, coordinates take [`RAY_OFFSET`] of
+/// themselves: the scenes every measurement here was made in (rooms a few
+/// units across around the origin) keep their offsets, and their frames.
+pub const NEAR_COORDINATES: f32 = 16.0;
 
 /// How far rays leaving a surface start off it in one frame:
 /// [`RAY_OFFSET`] of the point's largest coordinate and of a floor, the
@@ -131,7 +148,12 @@ impl RayOffset {
     /// How far a ray leaving `p` starts off its surface.
     #[inline]
     pub fn distance(self, p: Vec3) -> f32 {
-        RAY_OFFSET * (self.floor + p.abs().max_element())
+        let (m, near) = (p.abs().max_element(), NEAR_COORDINATES * self.floor);
+        if m <= near {
+            RAY_OFFSET * (self.floor + m)
+        } else {
+            RAY_OFFSET * (self.floor + near) + FAR_RAY_OFFSET * (m - near)
+        }
     }
 
     /// Origin for a ray leaving surface point `p` (geometric normal `ng`)
@@ -633,6 +655,19 @@ mod tests {
         let outside = RayOffset::around(room, Vec3::new(0.01, 0.01, 0.5));
         assert!(at(outside) > 0.49, "{outside:?}");
         assert_eq!(RayOffset::around(None, Vec3::ZERO), RayOffset::UNIT_FLOOR);
+        // Beyond 16 floors a coordinate adds a tenth as much.
+        let unit = RayOffset::UNIT_FLOOR;
+        let (at_16, at_116) = (
+            unit.distance(Vec3::X * 16.0),
+            unit.distance(Vec3::X * 116.0),
+        );
+        assert_eq!(at_16, RAY_OFFSET * 17.0);
+        assert!(
+            (at_116 - at_16 - FAR_RAY_OFFSET * 100.0).abs() < 1e-7,
+            "{at_116}"
+        );
+        let tiny = RayOffset::for_extent(0.01);
+        assert!((tiny.distance(Vec3::Y * 1.16) - RAY_OFFSET * 0.17 - FAR_RAY_OFFSET).abs() < 1e-9);
         // Towards `w`, on its side of the surface.
         let o = RayOffset::for_extent(0.5).origin(Vec3::ZERO, Vec3::Y, -Vec3::Y);
         assert_eq!(o, Vec3::new(0.0, -RAY_OFFSET * 0.5, 0.0));

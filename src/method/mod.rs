@@ -224,8 +224,11 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // hit's t, u and v are computed anew (2026-11-30). 4 (all
         // methods): in a scene under a unit across, rays leave surfaces by
         // 1e-4 of the scene's size rather than of a unit
-        // (`integrator::RayOffset`), and a scene far from the origin is
-        // rendered moved to it (`Scene::move_to_origin`, 2026-12-01);
+        // (`integrator::RayOffset`), beyond 16 units a coordinate adds
+        // 1e-5 of itself (`integrator::FAR_RAY_OFFSET`), a scene far from
+        // the origin is rendered moved to it (`Scene::move_to_origin`),
+        // and `movies` sizes its grids by what the camera sees where that
+        // is smaller than the scene (`global::meshing_size`, 2026-12-01);
         // other scenes keep their frames.
         _ => 4,
     }

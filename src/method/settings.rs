@@ -133,7 +133,8 @@ pub mod limits {
         max: 1_048_576,
     };
     /// `movies`' global-pass grid spacing, a fraction of the static
-    /// scene's diagonal (`spacing`, `--movies-spacing`). At 1 every static
+    /// scene's diagonal, or of what its camera sees
+    /// (`global::meshing_size`; `spacing`, `--movies-spacing`). At 1 every static
     /// triangle is one cell already; below 0.001 the pass would coarsen
     /// the grid anyway to keep its links within `global::MAX_LINKS`.
     pub const GRID_SPACING: Limits<f32> = Limits {

@@ -52,6 +52,7 @@
 //! open side), the global pass traces again the links from its vertices
 //! and those landing on it, and finds its static shadows again.
 
+use crate::accel::SceneBvh;
 use crate::integrator::RayOffset;
 use crate::scene::{Scene, Snapshot};
 use glam::Vec3;
@@ -78,19 +79,19 @@ impl SolvedSides {
     /// their objects' own space, [`object_space_corners`]: the same
     /// whatever frame they are found at, also where an object is scaled to
     /// nothing), the sides `snapshot`'s camera sets, and the parts solved
-    /// on both sides as `meshed` (the snapshot the pass is meshed at)
-    /// places them, its rays leaving them by `offset`.
+    /// on both sides as `meshed` (the snapshot the pass is meshed at, `bvh`
+    /// built over it) places them, its rays leaving them by `offset`.
     pub fn new(
         corners: &[ObjectCorners],
         snapshot: &Snapshot,
-        meshed: &Snapshot,
+        (meshed, bvh): (&Snapshot, &SceneBvh),
         offset: RayOffset,
     ) -> Self {
         let triangles: Vec<(u32, [Vec3; 3])> = (corners.iter())
             .map(|(object, c)| (*object, c.map(|(p, _)| p)))
             .collect();
         let parts = parts(&triangles);
-        let both = both_sides(&triangles, &parts.component, meshed, offset);
+        let both = both_sides(&triangles, &parts.component, (meshed, bvh), offset);
         SolvedSides {
             both,
             ..Self::of_parts(parts, snapshot)
@@ -324,7 +325,7 @@ const GAP_RAYS: usize = 16;
 /// Per component of `triangles` (object space, in snapshot order), whether
 /// both its sides are solved: it is flat (its triangles share one plane
 /// and one orientation, in object space, so that the answer holds in
-/// every frame), and behind it, as `meshed` places it, lies a surface
+/// every frame), and behind it, as `meshed` places it (`bvh` over it), lies a surface
 /// farther than [`GAP_SHARE`] of its size: the median of the distances
 /// along its back normal from up to [`GAP_RAYS`] of its triangles'
 /// centres, leaving them by `offset` (a miss counts as no gap: nothing
@@ -332,7 +333,7 @@ const GAP_RAYS: usize = 16;
 fn both_sides(
     triangles: &[(u32, [Vec3; 3])],
     component: &[u32],
-    meshed: &Snapshot,
+    (meshed, bvh): (&Snapshot, &SceneBvh),
     offset: RayOffset,
 ) -> Vec<bool> {
     let count = component.iter().max().map_or(0, |&c| c as usize + 1);
@@ -346,22 +347,15 @@ fn both_sides(
             members[c as usize].push(id);
         }
     }
-    let mut bvh = crate::accel::SceneBvh::new();
-    bvh.update(meshed);
     members
         .par_iter()
-        .map(|ids| !ids.is_empty() && gap_behind(&bvh, meshed, offset, ids) > 0.0)
+        .map(|ids| !ids.is_empty() && gap_behind(bvh, meshed, offset, ids) > 0.0)
         .collect()
 }
 
 /// How far the median gap behind the flat part of triangles `ids` reaches
 /// past [`GAP_SHARE`] of the part's size (positive: both sides solved).
-fn gap_behind(
-    bvh: &crate::accel::SceneBvh,
-    meshed: &Snapshot,
-    offset: RayOffset,
-    ids: &[usize],
-) -> f32 {
+fn gap_behind(bvh: &SceneBvh, meshed: &Snapshot, offset: RayOffset, ids: &[usize]) -> f32 {
     let size = super::global::diagonal(ids.iter().flat_map(|&id| meshed.triangles[id].p));
     let step = ids.len().div_ceil(GAP_RAYS);
     let mut gaps: Vec<f32> = ids
@@ -477,6 +471,12 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
 
+    fn bvh_of(snapshot: &Snapshot) -> SceneBvh {
+        let mut bvh = SceneBvh::new();
+        bvh.update(snapshot);
+        bvh
+    }
+
     /// The two triangles of the quad `o + s·u + t·v`, front along `u × v`.
     fn quad(o: Vec3, u: Vec3, v: Vec3) -> [[Vec3; 3]; 2] {
         [[o, o + u, o + u + v], [o, o + u + v, o + v]]
@@ -552,7 +552,12 @@ mod tests {
             for frame in [0, scene.frame_count / 2, scene.frame_count - 1] {
                 let snapshot = scene.snapshot(frame as f32 / crate::scene::DEFAULT_FPS);
                 let corners = object_space_corners(&scene, &meshed);
-                let sides = SolvedSides::new(&corners, &snapshot, &meshed, RayOffset::UNIT_FLOOR);
+                let sides = SolvedSides::new(
+                    &corners,
+                    &snapshot,
+                    (&meshed, &bvh_of(&meshed)),
+                    RayOffset::UNIT_FLOOR,
+                );
                 assert!(!sides.back.contains(&true), "{name} frame {frame}");
                 assert!(!sides.both.contains(&true), "{name}: both sides of a part");
                 assert!(sides.back.len() > 1, "{name}: one component");
@@ -771,7 +776,12 @@ mod tests {
         let component = parts(&tagged).component;
         let snapshot = snapshot_of(&triangles, &objects, Vec3::new(0.5, 0.0, 0.5));
         assert_eq!(
-            both_sides(&tagged, &component, &snapshot, RayOffset::UNIT_FLOOR),
+            both_sides(
+                &tagged,
+                &component,
+                (&snapshot, &bvh_of(&snapshot)),
+                RayOffset::UNIT_FLOOR
+            ),
             [false, true, false, false]
         );
     }
