@@ -474,20 +474,27 @@ impl Scene {
             return None;
         }
         let by = -centre;
-        let mover = self.nodes.len();
+        self.hang_roots_from("(moved to the origin)", by);
+        self.moved_by += by;
+        Some(by)
+    }
+
+    /// Hangs every root node from a new static root, last, named `name`
+    /// and placed at `translation`; returns its index.
+    pub fn hang_roots_from(&mut self, name: &str, translation: Vec3) -> usize {
+        let root = self.nodes.len();
         for node in self.nodes.iter_mut().filter(|n| n.parent.is_none()) {
-            node.parent = Some(mover);
+            node.parent = Some(root);
         }
         self.nodes.push(Node {
-            name: "(moved to the origin)".into(),
+            name: name.into(),
             parent: None,
             rest: Trs {
-                translation: by,
+                translation,
                 ..Trs::default()
             },
         });
-        self.moved_by += by;
-        Some(by)
+        root
     }
 
     /// Loads a scene from a `.gltf`/`.glb` file that, with every file its
@@ -947,15 +954,7 @@ mod tests {
     fn a_far_scene_moved_to_the_origin_keeps_its_shape_and_motion() {
         let mut scene = Scene::builtin("moving-light").unwrap();
         let far = Vec3::new(3000.0, -800.0, 1200.0);
-        let root = scene.nodes.len();
-        for node in scene.nodes.iter_mut().filter(|n| n.parent.is_none()) {
-            node.parent = Some(root);
-        }
-        scene.nodes.push(Node {
-            name: "far".into(),
-            parent: None,
-            rest: Trs::default(),
-        });
+        let root = scene.hang_roots_from("far", Vec3::ZERO);
         let (tangent_in, tangent_out) = (
             Vec4::new(0.5, 0.0, -1.0, 0.0),
             Vec4::new(2.0, 1.0, 0.0, 0.0),
