@@ -92,10 +92,10 @@ pub const RAY_OFFSET: f32 = 1e-4;
 /// Why not [`RAY_OFFSET`] all the way: 1,700 times that spacing, it grew
 /// past what the rounding of a hit needs and into the scene's detail
 /// where the coordinates are large. A room 1.3 km from the origin, at the
-/// edge of a 2 km ground (`l_hall` moved there, `path` at 64 spp), had a
-/// block bias of 3.5 % against its frames at the origin, light through
-/// its corners and contact shadows gone, with offsets of 0.1 units;
-/// 0.35 % with this share (`tests/scene_scale.rs`).
+/// edge of a 2 km ground (`l_hall` moved there by `benches/scenes/place.py
+/// ... ground 1000 950`, `path` at 64 spp), had a block bias of 3.5 %
+/// against its frames at the origin, light through its corners and
+/// contact shadows gone, with offsets of 0.1 units; 0.35 % with this share (`tests/scene_scale.rs`).
 pub const FAR_RAY_OFFSET: f32 = 1e-5;
 
 /// How far from the origin, in floors, coordinates take [`RAY_OFFSET`] of
@@ -112,8 +112,9 @@ pub const NEAR_COORDINATES: f32 = 16.0;
 /// world's origin bound neither. Why the scene's size: a floor of one unit
 /// is ample in metres but a percent of a scene a few millimetres across,
 /// where light leaked and contact shadows thinned (`l_hall` scaled to
-/// 9 mm: `path` at 64 spp has a block bias of 3.7 % against its frames in
-/// metres, 0.04 % with this floor). Scaled with a scene under a unit, the offset is the
+/// 9 mm by `benches/scenes/place.py ... scale 0.001`: `path` at 64 spp
+/// has a block bias of 3.7 % against its frames in metres, 0.04 % with
+/// this floor). Scaled with a scene under a unit, the offset is the
 /// same share of it at any size (`tests/scene_scale.rs`); a scene of a
 /// unit or more keeps the floor of one unit, and its frames their bits.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1084,7 +1084,8 @@ const VIEW_SIZES: f32 = 2.0;
 /// scene).
 ///
 /// Why: a scene may reach far past what its camera looks at. A room at the
-/// edge of a 2 km ground it never shows (`l_hall` so placed, frames 0..4 at
+/// edge of a 2 km ground it never shows (`l_hall` so placed by
+/// `benches/scenes/place.py ... ground 1000 950`, frames 0..4 at
 /// 96×60) was meshed at a 32nd of 2.8 km, one cell a wall, and rendered
 /// with a block bias of 33 % against `path` (at 64 spp); with this bound,
 /// 1.8 % (at the origin, alone: 1.6 %). A room seen from inside has the
