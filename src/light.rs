@@ -2,14 +2,14 @@
 //! probability proportional to its emitted power, then a point on it.
 //! Area lights are the emissive triangles of the snapshot, sampled
 //! uniformly in the solid angle they subtend (Arvo 1995) or, when that is
-//! tiny or nearly a hemisphere, by area; point and spot lights are delta
-//! lights.
+//! tiny or nearly a hemisphere, by area; point, spot and directional
+//! lights are delta lights.
 
 use crate::material::luminance;
 use crate::sampling::{
     uniform_triangle, ArvoMap, LightChoice, SphericalTriangle, ONE_MINUS_EPSILON,
 };
-use crate::scene::{Snapshot, Triangle};
+use crate::scene::{PlacedLight, Snapshot, Triangle};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -79,6 +79,10 @@ pub enum TriangleSampling {
 #[derive(Clone, Debug, Default)]
 pub struct LightSampler {
     sources: Vec<Source>,
+    /// A sphere (centre, radius) around every triangle, where the
+    /// snapshot has a directional light: its power is what the sphere's
+    /// disc intercepts, and its shadow rays end outside the sphere.
+    reach: Option<(Vec3, f32)>,
     /// Cumulative pick probabilities, last entry 1.
     cdf: Vec<f32>,
     /// Pick probability of each snapshot triangle (0 for non-emitters), so
@@ -109,10 +113,20 @@ impl LightSampler {
                 power.push(triangle_power(tri, m.emission, m.double_sided));
             }
         }
+        let reach = (snapshot.lights.iter().any(PlacedLight::is_directional))
+            .then(|| snapshot.bounds())
+            .flatten()
+            .map(|(lo, hi)| ((lo + hi) * 0.5, (hi - lo).length() * 0.5));
         for (i, light) in snapshot.lights.iter().enumerate() {
             // 4π·I for a point light; spots are weighted the same way, which
-            // only changes variance, not the expectation.
-            let p = 4.0 * PI * luminance(light.intensity);
+            // only changes variance, not the expectation. A directional
+            // light's power is what falls on the disc of the scene's
+            // bounding sphere, π·r²·E (as PBRT weighs it).
+            let p = match reach {
+                Some((_, r)) if light.is_directional() => PI * r * r * luminance(light.intensity),
+                _ if light.is_directional() => 0.0,
+                _ => 4.0 * PI * luminance(light.intensity),
+            };
             if p > 0.0 {
                 sources.push(Source::Point(i));
                 power.push(p);
@@ -136,6 +150,7 @@ impl LightSampler {
         }
         LightSampler {
             sources,
+            reach,
             cdf,
             triangle_pick,
         }
@@ -302,7 +317,12 @@ impl LightSampler {
                     is_delta: false,
                 })
             }
-            Source::Point(i) => point_light_sample(&snapshot.lights[i], p, pick_pdf),
+            Source::Point(i) => match self.reach {
+                Some(reach) if snapshot.lights[i].is_directional() => {
+                    directional_light_sample(&snapshot.lights[i], p, pick_pdf, reach)
+                }
+                _ => point_light_sample(&snapshot.lights[i], p, pick_pdf),
+            },
         }
     }
 
@@ -369,13 +389,9 @@ impl PointLights<'_> {
     }
 }
 
-/// The sample of punctual light `light` for shading point `p`, picked with
-/// probability `pick_pdf`; `None` where it sends no light towards `p`.
-fn point_light_sample(
-    light: &crate::scene::PointLight,
-    p: Vec3,
-    pick_pdf: f32,
-) -> Option<LightSample> {
+/// The sample of point or spot light `light` for shading point `p`, picked
+/// with probability `pick_pdf`; `None` where it sends no light towards `p`.
+fn point_light_sample(light: &PlacedLight, p: Vec3, pick_pdf: f32) -> Option<LightSample> {
     let to_light = light.position - p;
     let d2 = to_light.length_squared();
     if d2 <= 0.0 {
@@ -392,6 +408,36 @@ fn point_light_sample(
         wi,
         distance,
         radiance,
+        pdf: pick_pdf,
+        is_delta: true,
+    })
+}
+
+/// The sample of directional light `light` for shading point `p`, picked
+/// with probability `pick_pdf`: its irradiance from against its direction,
+/// through a point past the sphere `reach` (centre, radius) around the
+/// scene, where its shadow ray ends. `None` where it has no direction.
+fn directional_light_sample(
+    light: &PlacedLight,
+    p: Vec3,
+    pick_pdf: f32,
+    (centre, radius): (Vec3, f32),
+) -> Option<LightSample> {
+    let wi = -light.direction;
+    // Every triangle lies within `radius` of `centre`, so within
+    // `|p − centre| + radius` of `p`; twice that is past them all.
+    let distance = 2.0 * ((p - centre).length() + radius);
+    if wi == Vec3::ZERO || !(distance > 0.0 && distance.is_finite()) {
+        return None;
+    }
+    if light.intensity.max_element() <= 0.0 {
+        return None;
+    }
+    Some(LightSample {
+        position: p + wi * distance,
+        wi,
+        distance,
+        radiance: light.intensity,
         pdf: pick_pdf,
         is_delta: true,
     })
@@ -513,6 +559,56 @@ mod tests {
     use super::*;
     use crate::sampling::tests::lambert;
     use crate::scene::Scene;
+
+    /// A sun added to `cube-in-box`: picked by the power its light sends
+    /// through the disc of the sphere around the scene, against the
+    /// panel's `π·A·L`, and sampled from against its direction, with its
+    /// irradiance, through a point past every triangle.
+    #[test]
+    fn a_sun_is_picked_by_the_light_it_sends_the_scene_and_sampled_past_it() {
+        let scene = Scene::builtin("cube-in-box").unwrap();
+        let mut snapshot = scene.snapshot(0.0);
+        let panel = LightSampler::new(&snapshot, &scene.materials);
+        let down = Vec3::new(0.2, -1.0, 0.1).normalize();
+        let e = Vec3::new(3.0, 2.0, 1.0);
+        snapshot.lights.push(PlacedLight {
+            position: Vec3::splat(1e3),
+            direction: down,
+            intensity: e,
+            kind: crate::scene::LightKind::Directional,
+        });
+        let lights = LightSampler::new(&snapshot, &scene.materials);
+        let (lo, hi) = snapshot.bounds().unwrap();
+        let r = (hi - lo).length() / 2.0;
+        let sun_power = PI * r * r * luminance(e);
+        let panel_power: f32 = (0..panel.sources.len())
+            .map(|k| match panel.sources[k] {
+                Source::Triangle { area, radiance, .. } => PI * area * luminance(radiance),
+                Source::Point(_) => unreachable!("cube-in-box has no punctual light"),
+            })
+            .sum();
+        let sun = lights.sources.len() - 1;
+        let expected = sun_power / (sun_power + panel_power);
+        assert!((lights.pick_probability(sun) - expected).abs() < 1e-5);
+        let choice = LightChoice {
+            pick: 1.0 - 1e-6,
+            u: Vec2::splat(0.5),
+        };
+        for p in [(lo + hi) / 2.0, lo, hi, Vec3::new(lo.x, hi.y, lo.z)] {
+            let s = lights
+                .sample(&snapshot, p, choice, TriangleSampling::Area)
+                .unwrap();
+            assert!(s.is_delta && s.wi == -down && s.radiance == e, "{s:?}");
+            assert!((s.pdf - expected).abs() < 1e-5);
+            assert!((s.position - p - s.wi * s.distance).length() < 1e-4 * s.distance);
+            let outside = s.position.cmplt(lo).any() || s.position.cmpgt(hi).any();
+            assert!(
+                outside,
+                "{p}: the shadow ray ends at {} in the scene",
+                s.position
+            );
+        }
+    }
 
     /// `choose` sends each source the share of the unit square its pick
     /// probability says, and spreads the rescaled coordinate of the points

@@ -3,7 +3,7 @@
 //! problem instead of a panic.
 
 use glam::{Mat4, Quat, Vec3};
-use radcache::scene::Scene;
+use radcache::scene::{LightKind, Scene};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -269,51 +269,59 @@ fn data_uri_buffer_and_extras_load() {
         "data:application/octet-stream;base64,{}",
         encode(&tri_bin(TRI, [0, 1, 2]))
     );
-    let path =
-        write_case(
-            dir.path(),
-            "embedded",
-            |d| {
-                d["buffers"][0]["uri"] = json!(uri);
-                // A primitive without material gets the default white diffuse,
-                // a point light keeps the scene lit, a matrix node is decomposed.
-                d["meshes"][0]["primitives"][0]
-                    .as_object_mut()
-                    .unwrap()
-                    .remove("material");
-                d["extensionsUsed"] = json!(["KHR_lights_punctual"]);
-                d["extensions"] = json!({"KHR_lights_punctual": {"lights": [
-                    {"type": "spot", "color": [1.0, 0.5, 0.25], "intensity": 4.0,
-                     "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}},
-                    {"type": "directional", "intensity": 1.0}
-                ]}});
-                d["nodes"][0]["matrix"] = json!([
-                    2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 1.0, 2.0, 3.0, 1.0
-                ]);
-                d["nodes"].as_array_mut().unwrap().push(
-                    json!({"name": "lamp", "extensions": {"KHR_lights_punctual": {"light": 0}}}),
-                );
-                d["nodes"].as_array_mut().unwrap().push(
-                    json!({"name": "sun", "extensions": {"KHR_lights_punctual": {"light": 1}}}),
-                );
-                d["scenes"][0]["nodes"] = json!([0, 1, 2, 3]);
-                // `extras` of any JSON type, as the spec allows (objects
-                // alone loaded before).
-                d["extras"] = json!([1, 2]);
-                d["nodes"][0]["extras"] = json!("a note");
-                d["materials"][0]["extras"] = json!(42);
-            },
-            None,
-        );
+    let path = write_case(
+        dir.path(),
+        "embedded",
+        |d| {
+            d["buffers"][0]["uri"] = json!(uri);
+            // A primitive without material gets the default white diffuse,
+            // a point light keeps the scene lit, a matrix node is decomposed.
+            d["meshes"][0]["primitives"][0]
+                .as_object_mut()
+                .unwrap()
+                .remove("material");
+            d["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+            d["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+                {"type": "spot", "color": [1.0, 0.5, 0.25], "intensity": 4.0,
+                 "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}},
+                {"type": "directional", "intensity": 1.0}
+            ]}});
+            d["nodes"][0]["matrix"] = json!([
+                2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 1.0, 2.0, 3.0, 1.0
+            ]);
+            d["nodes"]
+                .as_array_mut()
+                .unwrap()
+                .push(json!({"name": "lamp", "extensions": {"KHR_lights_punctual": {"light": 0}}}));
+            d["nodes"].as_array_mut().unwrap().push(
+                json!({"name": "sun", "rotation": [-0.70710677, 0.0, 0.0, 0.70710677],
+                           "extensions": {"KHR_lights_punctual": {"light": 1}}}),
+            );
+            d["scenes"][0]["nodes"] = json!([0, 1, 2, 3]);
+            // `extras` of any JSON type, as the spec allows (objects
+            // alone loaded before).
+            d["extras"] = json!([1, 2]);
+            d["nodes"][0]["extras"] = json!("a note");
+            d["materials"][0]["extras"] = json!(42);
+        },
+        None,
+    );
     let scene = Scene::load(&path).unwrap();
     let default = &scene.materials[scene.objects[0].mesh.materials[0] as usize];
     assert!(close(default.diffuse, Vec3::splat(0.8), 1e-6));
-    assert_eq!(scene.lights.len(), 1, "the directional light is skipped");
+    assert_eq!(scene.lights.len(), 2);
     let lamp = &scene.lights[0];
     assert_eq!(scene.nodes[lamp.node].name, "lamp");
     assert!(close(lamp.intensity, Vec3::new(4.0, 2.0, 1.0), 1e-6));
-    let spot = lamp.spot.unwrap();
+    let spot = lamp.kind.spot().unwrap();
     assert!((spot.inner_cone - 0.2).abs() < 1e-6 && (spot.outer_cone - 0.5).abs() < 1e-6);
+    // The sun, turned a quarter round X, shines straight down.
+    let sun = &scene.lights[1];
+    assert_eq!(scene.nodes[sun.node].name, "sun");
+    assert_eq!(sun.kind, LightKind::Directional);
+    assert!(close(sun.intensity, Vec3::ONE, 1e-6));
+    let placed = scene.snapshot(0.0).lights[1];
+    assert!(close(placed.direction, Vec3::NEG_Y, 1e-6), "{placed:?}");
     let rest = scene.nodes[0].rest;
     assert!(close(rest.translation, Vec3::new(1.0, 2.0, 3.0), 1e-6));
     assert!(close(rest.scale, Vec3::splat(2.0), 1e-6));
@@ -2356,7 +2364,10 @@ fn lights_gltf_forbids_or_radcache_ignores_are_named() {
         )
         .unwrap(),
     );
-    let spot = Scene::load(&rounded).unwrap().lights[0].spot.unwrap();
+    let spot = Scene::load(&rounded).unwrap().lights[0]
+        .kind
+        .spot()
+        .unwrap();
     assert_eq!(
         (spot.inner_cone, spot.outer_cone),
         (std::f32::consts::FRAC_PI_2, std::f32::consts::FRAC_PI_2)
@@ -2377,7 +2388,7 @@ fn lights_gltf_forbids_or_radcache_ignores_are_named() {
         ]),
     );
     let scene = Scene::load(&ignored).unwrap();
-    assert_eq!(scene.lights[1].spot.unwrap().inner_cone, 0.0);
+    assert_eq!(scene.lights[1].kind.spot().unwrap().inner_cone, 0.0);
     let stderr = render_warnings(&ignored);
     assert_warned(
         &stderr,

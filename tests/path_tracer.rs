@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{furnace_box, inward_box, plane_under_point_light, push_quad, scene};
+use common::{furnace_box, ground, inward_box, plane_under_point_light, push_quad, scene};
 use glam::Vec3;
 use radcache::method::path::{PathSettings, PathTracer};
 use radcache::render::Renderer;
@@ -125,14 +125,7 @@ fn two_rectangular_lights_over_plane_match_the_form_factor() {
     let (albedo, h) = (0.6, 1.0);
     // (x0, x1, z0, z1, radiance) of each light at height h, facing down.
     let lights = [(-0.5, 0.5, -0.3, 0.3, 2.0), (0.7, 1.5, -1.0, 0.2, 7.0)];
-    let mut plane = Mesh::default();
-    push_quad(
-        &mut plane,
-        Vec3::new(-10.0, 0.0, -10.0),
-        Vec3::Z * 20.0,
-        Vec3::X * 20.0,
-        0,
-    );
+    let plane = ground(10.0, 0);
     let mut emitters = Mesh::default();
     for (i, &(x0, x1, z0, z1, _)) in lights.iter().enumerate() {
         // X × Z = −Y: the emitting side faces the plane.

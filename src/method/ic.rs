@@ -282,19 +282,7 @@ impl IrradianceCaching {
 }
 
 pub(crate) fn scene_bounds(ctx: &FrameContext) -> (Vec3, Vec3) {
-    let mut min = Vec3::splat(f32::INFINITY);
-    let mut max = Vec3::splat(f32::NEG_INFINITY);
-    for tri in &ctx.snapshot.triangles {
-        for p in tri.p {
-            min = min.min(p);
-            max = max.max(p);
-        }
-    }
-    if min.x > max.x {
-        (Vec3::splat(-1.0), Vec3::ONE)
-    } else {
-        (min, max)
-    }
+    (ctx.snapshot.bounds()).unwrap_or((Vec3::splat(-1.0), Vec3::ONE))
 }
 
 impl IrradianceCaching {

@@ -29,8 +29,11 @@ impl Blockers {
     pub fn new(ctx: &FrameContext) -> Self {
         let snapshot = ctx.snapshot;
         let dynamic = ctx.scene.dynamic_nodes();
-        let static_point_light: Vec<bool> =
-            ctx.scene.lights.iter().map(|l| !dynamic[l.node]).collect();
+        // A directional light is taken as moving: its shadow rays reach
+        // past the scene, not to a point a box of still lights could hold.
+        let static_point_light: Vec<bool> = (ctx.scene.lights.iter())
+            .map(|l| !dynamic[l.node] && l.kind != crate::scene::LightKind::Directional)
+            .collect();
         let mut static_lights: Option<Aabb> = None;
         let mut grow = |p: Vec3| {
             let (lo, hi) = static_lights.get_or_insert((p, p));

@@ -5,7 +5,7 @@
 //! lights have left stale.
 
 use super::FrameContext;
-use crate::scene::{Material, Snapshot};
+use crate::scene::{Material, PlacedLight, Snapshot};
 use glam::Vec3;
 use std::collections::{BTreeMap, HashMap};
 use std::ops::RangeInclusive;
@@ -64,7 +64,7 @@ enum Emitter {
         double_sided: bool,
     },
     /// A punctual light.
-    Point(crate::scene::PointLight),
+    Point(PlacedLight),
 }
 
 impl UnshadowedLights {
@@ -118,11 +118,25 @@ impl UnshadowedLights {
     #[cfg(test)]
     pub(crate) fn point(position: Vec3, intensity: Vec3) -> Self {
         UnshadowedLights {
-            emitters: vec![Emitter::Point(crate::scene::PointLight {
+            emitters: vec![Emitter::Point(PlacedLight {
                 position,
                 direction: Vec3::NEG_Z,
                 intensity,
-                spot: None,
+                kind: crate::scene::LightKind::Point,
+            })],
+        }
+    }
+
+    /// One directional light of irradiance `intensity` along `direction`
+    /// (unit), for unit tests.
+    #[cfg(test)]
+    pub(crate) fn sun(direction: Vec3, intensity: Vec3) -> Self {
+        UnshadowedLights {
+            emitters: vec![Emitter::Point(PlacedLight {
+                position: Vec3::ZERO,
+                direction,
+                intensity,
+                kind: crate::scene::LightKind::Directional,
             })],
         }
     }
@@ -158,7 +172,7 @@ impl UnshadowedLights {
                         nearly_equal(l0.position, l1.position)
                             && nearly_equal(l0.direction, l1.direction)
                             && nearly_equal(l0.intensity, l1.intensity)
-                            && l0.spot == l1.spot
+                            && l0.kind == l1.kind
                     }
                     _ => false,
                 })
@@ -172,7 +186,11 @@ impl UnshadowedLights {
     }
 
     /// The power the lights emit (W): `π·L_e·A` an area light (each side
-    /// that emits), `4π·I` a punctual one (spots taken as points).
+    /// that emits), `4π·I` a point or spot light (spots taken as points),
+    /// and what a directional light sends through one square unit, `E`
+    /// (the scene's size is not known here: these lights may be those of
+    /// a snapshot of the emitters alone). The total is compared only with
+    /// itself at other frames.
     pub(crate) fn power(&self) -> Vec3 {
         use std::f32::consts::PI;
         let each = |l: &Emitter| match *l {
@@ -181,6 +199,7 @@ impl UnshadowedLights {
                 double_sided,
                 ..
             } => power * PI * if double_sided { 2.0 } else { 1.0 },
+            Emitter::Point(light) if light.is_directional() => light.intensity,
             Emitter::Point(light) => light.intensity * 4.0 * PI,
         };
         self.emitters.iter().map(each).sum()
@@ -193,9 +212,35 @@ impl UnshadowedLights {
 
     /// The unshadowed light arriving at `p` from every direction (each
     /// light's irradiance on a surface facing it): where the normal at `p`
-    /// is not known, any change of the lights shows in it.
+    /// is not known, a light that comes nearer, goes farther or changes
+    /// shows in it. A directional light gives the same anywhere, whichever
+    /// way it turns: [`Self::directional_shift`] is what it misses.
     pub(crate) fn arriving_at(&self, p: Vec3) -> Vec3 {
         self.arriving(p, |_| 1.0)
+    }
+
+    /// The directional lights, in order.
+    fn suns(&self) -> impl Iterator<Item = PlacedLight> + '_ {
+        (self.emitters.iter()).filter_map(|e| match e {
+            Emitter::Point(light) if light.is_directional() => Some(*light),
+            _ => None,
+        })
+    }
+
+    /// The most the directional lights' unshadowed irradiance may differ
+    /// between these lights and `other` (the same lights at another
+    /// time) on a surface of any normal `n`, anywhere: `Σ |E′·w′ − E·w|`
+    /// per colour channel, `w` towards each light, which bounds
+    /// `|E′·max(0, n·w′) − E·max(0, n·w)|` (`max(0, ·)` moves nothing
+    /// farther apart). 0 where none turns or changes.
+    pub(crate) fn directional_shift(&self, other: &Self) -> Vec3 {
+        (self.suns().zip(other.suns()))
+            .map(|(a, b)| {
+                let (wa, wb) = (-a.direction, -b.direction);
+                let channel = |k: usize| (wb * b.intensity[k] - wa * a.intensity[k]).length();
+                Vec3::new(channel(0), channel(1), channel(2))
+            })
+            .sum()
     }
 
     /// Σ over the lights of what each sends to `p` from direction `w`
@@ -216,6 +261,9 @@ impl UnshadowedLights {
                     let cos_l = -normal.dot(w);
                     let cos_l = if double_sided { cos_l.abs() } else { cos_l };
                     e += power * (cos_l.max(0.0) * cos_at(w) / d2);
+                }
+                Emitter::Point(light) if light.is_directional() => {
+                    e += light.intensity * cos_at(-light.direction);
                 }
                 Emitter::Point(light) => {
                     let d = light.position - p;
@@ -372,6 +420,7 @@ fn nearly_equal(a: Vec3, b: Vec3) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f32::consts::TAU;
 
     /// A ball of radius `r` at `centre`: a cube whose faces are split in
     /// `k × k` squares (two triangles each, fronts out), its corners
@@ -482,6 +531,47 @@ mod tests {
         }
     }
 
+    /// A sun turned by θ: the bound is `2E·sin(θ/2)`, it holds on every
+    /// normal of a grid over the sphere (and is met on one), and what
+    /// arrives from every direction does not see the turn.
+    #[test]
+    fn a_turning_sun_shifts_any_surfaces_light_by_at_most_its_bound() {
+        let e = Vec3::new(2.0, 1.0, 0.5);
+        let before = Vec3::new(0.3, -1.0, 0.2).normalize();
+        let theta = 0.3f32;
+        let turn = glam::Quat::from_axis_angle(Vec3::Z, theta);
+        let (a, b) = (
+            UnshadowedLights::sun(before, e),
+            UnshadowedLights::sun(turn * before, e),
+        );
+        assert_eq!(a.arriving_at(Vec3::ONE), b.arriving_at(Vec3::X));
+        let bound = a.directional_shift(&b);
+        let expected = e * (before - turn * before).length();
+        assert!(
+            (bound - expected).abs().max_element() < 1e-6,
+            "{bound} {expected}"
+        );
+        assert!(a.directional_shift(&a) == Vec3::ZERO);
+        let mut largest = Vec3::ZERO;
+        for i in 0..64 {
+            for j in 0..32 {
+                let (phi, cos) = (i as f32 / 64.0 * TAU, 1.0 - 2.0 * (j as f32 + 0.5) / 32.0);
+                let sin = (1.0 - cos * cos).sqrt();
+                let n = Vec3::new(sin * phi.cos(), cos, sin * phi.sin());
+                let change = (b.irradiance(Vec3::ZERO, n) - a.irradiance(Vec3::ZERO, n)).abs();
+                assert!(
+                    change.cmple(bound * 1.0001).all(),
+                    "{n}: {change} over {bound}"
+                );
+                largest = largest.max(change);
+            }
+        }
+        assert!(
+            largest.cmpgt(bound * 0.95).all(),
+            "{largest} against {bound}"
+        );
+    }
+
     fn lit_by(position: Vec3, intensity: Vec3) -> UnshadowedLights {
         UnshadowedLights::point(position, intensity)
     }
@@ -504,7 +594,7 @@ mod tests {
         let spot = |outer_cone: f32| {
             let mut lights = lit_by(p, i);
             if let Emitter::Point(light) = &mut lights.emitters[0] {
-                light.spot = Some(crate::scene::Spot {
+                light.kind = crate::scene::LightKind::Spot(crate::scene::Spot {
                     inner_cone: 0.1,
                     outer_cone,
                 });

@@ -203,14 +203,39 @@ pub struct Spot {
     pub outer_cone: f32,
 }
 
-/// A point or spot light attached to a node; it shines down the node's −Z.
+/// How a punctual light sends its light from its node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    /// From the node's origin in every direction.
+    Point,
+    /// From the node's origin within a cone about its −Z.
+    Spot(Spot),
+    /// Parallel along the node's −Z, from infinitely far (a sun): where
+    /// the node is does not matter, only which way it turns.
+    Directional,
+}
+
+impl LightKind {
+    /// The spot's cone, if this is a spot light.
+    pub fn spot(self) -> Option<Spot> {
+        match self {
+            LightKind::Spot(spot) => Some(spot),
+            _ => None,
+        }
+    }
+}
+
+/// A point, spot or directional light attached to a node; it shines down
+/// the node's −Z.
 #[derive(Clone, Debug)]
 pub struct PunctualLight {
     pub name: String,
     pub node: usize,
-    /// Radiant intensity (W·sr⁻¹) per colour channel.
+    /// Per colour channel: the radiant intensity (W·sr⁻¹) of a point or
+    /// spot light, the irradiance (W·m⁻²) a directional light gives a
+    /// surface facing it.
     pub intensity: Vec3,
-    pub spot: Option<Spot>,
+    pub kind: LightKind,
 }
 
 /// Perspective camera attached to a node; looks down the node's −Z.
@@ -283,21 +308,28 @@ impl Triangle {
 
 /// A punctual light evaluated at one time.
 #[derive(Clone, Copy, Debug)]
-pub struct PointLight {
+pub struct PlacedLight {
+    /// The node's origin (of no account for a directional light).
     pub position: Vec3,
-    /// Unit direction the spot points to (node −Z).
+    /// Unit direction the light points to (node −Z).
     pub direction: Vec3,
+    /// As [`PunctualLight::intensity`].
     pub intensity: Vec3,
-    pub spot: Option<Spot>,
+    pub kind: LightKind,
 }
 
-impl PointLight {
-    /// Intensity toward unit direction `w` (from the light), with the glTF
-    /// spot falloff (smooth between the outer and inner cone).
+impl PlacedLight {
+    pub fn is_directional(&self) -> bool {
+        self.kind == LightKind::Directional
+    }
+
+    /// Intensity of a point or spot light toward unit direction `w` (from
+    /// the light), with the glTF spot falloff (smooth between the outer
+    /// and inner cone).
     pub fn intensity_toward(&self, w: Vec3) -> Vec3 {
-        match self.spot {
-            None => self.intensity,
-            Some(spot) => {
+        match self.kind {
+            LightKind::Point | LightKind::Directional => self.intensity,
+            LightKind::Spot(spot) => {
                 let cos = self.direction.dot(w);
                 let (ci, co) = (spot.inner_cone.cos(), spot.outer_cone.cos());
                 let s = if ci - co > 1e-6 {
@@ -389,8 +421,20 @@ pub struct Snapshot {
     pub static_count: usize,
     /// World transform of every object at `time`.
     pub object_to_world: Vec<Mat4>,
-    pub lights: Vec<PointLight>,
+    pub lights: Vec<PlacedLight>,
     pub camera: Camera,
+}
+
+impl Snapshot {
+    /// The bounding box (least and greatest corner) of the triangles;
+    /// `None` without triangles.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let (lo, hi) = (self.triangles.iter().flat_map(|t| t.p))
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p), hi.max(p))
+            });
+        lo.cmple(hi).all().then_some((lo, hi))
+    }
 }
 
 impl Scene {
@@ -834,13 +878,15 @@ impl Scene {
                     let position = m.transform_point3(Vec3::ZERO);
                     // Carried past what can be traced (as triangles are
                     // collapsed, below), a light sends nothing: its
-                    // position would make NaN light samples.
+                    // position would make NaN light samples. A
+                    // directional light's position is not read.
                     let traceable = within_world(position);
-                    PointLight {
+                    let shines = traceable || l.kind == LightKind::Directional;
+                    PlacedLight {
                         position: if traceable { position } else { Vec3::ZERO },
                         direction: m.transform_vector3(-Vec3::Z).normalize_or_zero(),
-                        intensity: if traceable { l.intensity } else { Vec3::ZERO },
-                        spot: l.spot,
+                        intensity: if shines { l.intensity } else { Vec3::ZERO },
+                        kind: l.kind,
                     }
                 })
                 .collect(),
@@ -1082,7 +1128,7 @@ mod tests {
             name: "lamp".into(),
             node: parent + 1,
             intensity: Vec3::ONE,
-            spot: None,
+            kind: LightKind::Point,
         });
         scene.animation.channels.push(animation::Channel {
             node: parent + 1,

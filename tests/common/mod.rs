@@ -90,7 +90,7 @@ pub fn scene(
             name: format!("light{i}"),
             node: nodes.len() - 1,
             intensity,
-            spot: None,
+            kind: radcache::scene::LightKind::Point,
         });
     }
     Scene {
@@ -309,20 +309,26 @@ pub fn furnace_box(albedo: f32, le: f32) -> Scene {
     )
 }
 
+/// The square `[−half, half]²` of the plane y = 0, facing up, of
+/// `material`.
+pub fn ground(half: f32, material: u32) -> Mesh {
+    let mut plane = Mesh::default();
+    push_quad(
+        &mut plane,
+        Vec3::new(-half, 0.0, -half),
+        Vec3::Z * 2.0 * half,
+        Vec3::X * 2.0 * half,
+        material,
+    );
+    plane
+}
+
 /// A 20 m Lambertian plane (y = 0) of albedo `albedo` under a point light
 /// of intensity `intensity` at `light`, seen straight down from `eye`
 /// (vertical field of view 1 rad).
 pub fn plane_under_point_light(albedo: f32, intensity: f32, light: Vec3, eye: Vec3) -> Scene {
-    let mut plane = Mesh::default();
-    push_quad(
-        &mut plane,
-        Vec3::new(-10.0, 0.0, -10.0),
-        Vec3::Z * 20.0,
-        Vec3::X * 20.0,
-        0,
-    );
     scene(
-        vec![plane],
+        vec![ground(10.0, 0)],
         vec![Material::diffuse("plane", Vec3::splat(albedo))],
         vec![],
         eye,

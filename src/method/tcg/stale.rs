@@ -89,6 +89,7 @@ impl LightHistory {
                     lights,
                     objects: &self.objects[&t.saturating_sub(1 + a)],
                     power_changed: relative_change(lights.power(), power) > STALE_LIGHT,
+                    directional_shift: lights.directional_shift(now),
                 })
             })
             .collect();
@@ -108,6 +109,10 @@ struct Then<'a> {
     /// whose hit no light reaches directly too (a ceiling lit only by the
     /// floor when a panel facing down is switched off).
     power_changed: bool,
+    /// How much the directional lights may have changed any surface's
+    /// light since then ([`UnshadowedLights::directional_shift`]): a sun
+    /// that turns leaves what arrives from every direction as it was.
+    directional_shift: Vec3,
 }
 
 /// Which samples' light has changed since they were shot, in one frame.
@@ -155,18 +160,25 @@ impl Staleness<'_> {
         }
         let dir = cell_direction(frame, strata, cell as u32, Vec2::splat(0.5));
         let hit = point.position + dir * s.distance();
-        // The hit's normal is not stored: the light arriving from anywhere.
+        // The hit's normal is not stored: the light arriving from anywhere,
+        // and the most a turning sun may have changed on any normal.
         let (before, after) = (then.lights.arriving_at(hit), self.now.arriving_at(hit));
-        relative_change(before, after) > STALE_LIGHT
+        let change = (after - before).abs() + then.directional_shift;
+        relative(change, before.max(after)) > STALE_LIGHT
     }
 }
 
 /// `|b − a| / max(a, b)`, the largest over the colour channels; 0 where
 /// both are (nearly) dark.
 fn relative_change(a: Vec3, b: Vec3) -> f32 {
-    let scale = a.max(b);
-    let change = (b - a).abs() / scale.max(Vec3::splat(1e-12));
-    Vec3::select(scale.cmpgt(Vec3::splat(1e-12)), change, Vec3::ZERO).max_element()
+    relative((b - a).abs(), a.max(b))
+}
+
+/// `change / scale`, the largest over the colour channels; 0 where
+/// `scale` is (nearly) dark.
+fn relative(change: Vec3, scale: Vec3) -> f32 {
+    let share = change / scale.max(Vec3::splat(1e-12));
+    Vec3::select(scale.cmpgt(Vec3::splat(1e-12)), share, Vec3::ZERO).max_element()
 }
 
 #[cfg(test)]
@@ -209,6 +221,7 @@ mod tests {
                     lights: &lights_then,
                     objects: objects_then,
                     power_changed: false,
+                    directional_shift: Vec3::ZERO,
                 })],
             };
             staleness.stale_cells(&record, strata)

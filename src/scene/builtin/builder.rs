@@ -104,7 +104,7 @@ impl Builder {
             name: name.to_string(),
             node,
             intensity,
-            spot: None,
+            kind: crate::scene::LightKind::Point,
         });
         node
     }

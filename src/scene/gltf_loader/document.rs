@@ -326,9 +326,10 @@ pub(super) fn warn_of_ignored_features(root: &gltf::json::Root) {
     let from_blender = (root.asset.generator.as_deref()).is_some_and(|g| g.contains("Blender"));
     if punctual && from_blender {
         eprintln!(
-            "warning: this file comes from Blender; its point and spot light intensities are \
-             read as W/sr, but Blender's exporter writes candela (683 × W/sr) unless its \
-             Lighting Mode is 'Unitless': exported in candela, they render 683 times too bright"
+            "warning: this file comes from Blender; its light intensities are read as W/sr \
+             (W/m² for a sun), but Blender's exporter writes candela and lux (683 × W/sr, \
+             683 × W/m²) unless its Lighting Mode is 'Unitless': exported so, they render 683 \
+             times too bright"
         );
     }
 }

@@ -1,12 +1,14 @@
-//! Punctual lights (`KHR_lights_punctual`): point and spot lights on the
-//! scene's nodes, their intensity bounded by [`MAX_EMISSION`] and their
-//! cones as the extension bounds them; directional lights are skipped,
-//! and a light's `range` (not read) and a negative inner cone (read as 0)
-//! are warned of.
+//! Punctual lights (`KHR_lights_punctual`): point, spot and directional
+//! lights on the scene's nodes, their intensity bounded by
+//! [`MAX_EMISSION`] and their cones as the extension bounds them; a
+//! light's `range` (not read) and a negative inner cone (read as 0) are
+//! warned of. A point or spot light's intensity (candela) is read as
+//! W·sr⁻¹, a directional light's (lux) as W·m⁻², as radiance is read from
+//! the materials' emission: the photometric units without the 683 lm/W.
 
 use super::nodes::node_name;
 use super::{all_finite, Res, MAX_EMISSION};
-use crate::scene::{PunctualLight, Spot};
+use crate::scene::{LightKind, PunctualLight, Spot};
 use glam::Vec3;
 use std::collections::HashSet;
 use std::f32::consts::FRAC_PI_2;
@@ -26,16 +28,13 @@ pub(super) fn build_lights(gnodes: &[gltf::Node], file: &Path) -> Res<Vec<Punctu
             .unwrap_or_else(|| node_name(gnode));
         let intensity = checked_intensity(&light, &name)?;
         let mut warnings = Vec::new();
-        let spot = match light.kind() {
-            Kind::Directional => {
-                eprintln!("warning: directional light '{name}' is not supported and is skipped");
-                continue;
-            }
-            Kind::Point => None,
+        let kind = match light.kind() {
+            Kind::Directional => LightKind::Directional,
+            Kind::Point => LightKind::Point,
             Kind::Spot {
                 inner_cone_angle,
                 outer_cone_angle,
-            } => Some(spot_cone(
+            } => LightKind::Spot(spot_cone(
                 &name,
                 inner_cone_angle,
                 outer_cone_angle,
@@ -60,7 +59,7 @@ pub(super) fn build_lights(gnodes: &[gltf::Node], file: &Path) -> Res<Vec<Punctu
             name,
             node,
             intensity,
-            spot,
+            kind,
         });
     }
     Ok(lights)
