@@ -191,17 +191,20 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // estimate kept from going negative (2026-11-30). 7: as every
         // method's next. 8: under moving lights, a light of more than 48
         // triangles is taken as at most 48 points (`unshadowed::Clusters`,
-        // 2026-12-01). 9: as every method's next.
-        "trc" => 9,
-        // 2: as `trc`'s 4, the records all three gather. 3, 4, 5: as below.
-        "ic" => 5,
+        // 2026-12-01). 9, 10: as every method's next.
+        "trc" => 10,
+        // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6: as
+        // below.
+        "ic" => 6,
         // `tcg` 4: samples' ages count past 15 frames (to 1038), so the
         // `2^age` draw tells the oldest apart (2026-11-30). 5: a moving
         // record's samples are tested for stale light from where the
         // record was when they were shot (`tcg::stale`, 2026-11-30). 6: as
         // every method's next. 7: as `trc`'s 8, for the light refresh. 8:
-        // as every method's next.
-        "tcg" => 8,
+        // as every method's next. 9: as every method's next, and a
+        // sample is stale where a directional light turns
+        // (`UnshadowedLights::directional_shift`, 2026-12-01).
+        "tcg" => 9,
         // `movies` 3: a kept link that missed everything covers its whole
         // ray, so an object that later moves far into it is seen
         // (`global::LinkReach`, 2026-11-30). 4: as every method's next.
@@ -212,8 +215,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // shading normal is turned to that side (`sides`, `direct`), and
         // the corners of an object scaled to nothing at time 0 are told
         // apart in its own space (`global::PassMesh`, 2026-12-01). 7: as
-        // every method's next.
-        "movies" => 7,
+        // every method's next. 8: as every method's next, and a flat part
+        // with nothing straight behind it is solved on the camera's side
+        // (`sides::backs_solved`, 2026-12-01).
+        "movies" => 8,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with
@@ -229,8 +234,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // the origin is rendered moved to it (`Scene::move_to_origin`),
         // and `movies` sizes its grids by what the camera sees where that
         // is smaller than the scene (`global::meshing_size`, 2026-12-01);
-        // other scenes keep their frames.
-        _ => 4,
+        // other scenes keep their frames. 5 (all methods): directional
+        // lights are read and lit by, where files with them rendered as
+        // if they had none (2026-12-01).
+        _ => 5,
     }
 }
 
