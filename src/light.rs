@@ -27,7 +27,7 @@ enum Source {
         double_sided: bool,
     },
     /// Punctual light (index into `Snapshot::lights`).
-    Point(usize),
+    Punctual(usize),
 }
 
 /// A light as [`LightSampler::source_of`] names it.
@@ -36,7 +36,7 @@ pub enum LightSource {
     /// An emitting triangle (snapshot triangle id).
     Triangle(u32),
     /// A punctual light (index into `Snapshot::lights`, as into `Scene::lights`).
-    Point(usize),
+    Punctual(usize),
 }
 
 /// A point on a light as seen from a shading point.
@@ -128,7 +128,7 @@ impl LightSampler {
                 _ => 4.0 * PI * luminance(light.intensity),
             };
             if p > 0.0 {
-                sources.push(Source::Point(i));
+                sources.push(Source::Punctual(i));
                 power.push(p);
             }
         }
@@ -164,7 +164,7 @@ impl LightSampler {
     pub fn emitting_triangles(&self) -> impl Iterator<Item = usize> + '_ {
         self.sources.iter().filter_map(|s| match s {
             Source::Triangle { id, .. } => Some(*id as usize),
-            Source::Point(_) => None,
+            Source::Punctual(_) => None,
         })
     }
 
@@ -204,7 +204,7 @@ impl LightSampler {
     pub fn source_of(&self, pick: f32) -> Option<LightSource> {
         self.source_at(pick).map(|k| match self.sources[k] {
             Source::Triangle { id, .. } => LightSource::Triangle(id),
-            Source::Point(i) => LightSource::Point(i),
+            Source::Punctual(i) => LightSource::Punctual(i),
         })
     }
 
@@ -317,7 +317,7 @@ impl LightSampler {
                     is_delta: false,
                 })
             }
-            Source::Point(i) => match self.reach {
+            Source::Punctual(i) => match self.reach {
                 Some(reach) if snapshot.lights[i].is_directional() => {
                     directional_light_sample(&snapshot.lights[i], p, pick_pdf, reach)
                 }
@@ -584,7 +584,7 @@ mod tests {
         let panel_power: f32 = (0..panel.sources.len())
             .map(|k| match panel.sources[k] {
                 Source::Triangle { area, radiance, .. } => PI * area * luminance(radiance),
-                Source::Point(_) => unreachable!("cube-in-box has no punctual light"),
+                Source::Punctual(_) => unreachable!("cube-in-box has no punctual light"),
             })
             .sum();
         let sun = lights.sources.len() - 1;

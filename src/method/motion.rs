@@ -21,7 +21,7 @@ pub struct Blockers {
     /// Bounding box of the lights that do not move (`None`: there are none).
     pub static_lights: Option<Aabb>,
     static_count: usize,
-    static_point_light: Vec<bool>,
+    static_punctual: Vec<bool>,
     pub pick_fingerprint: u64,
 }
 
@@ -31,7 +31,7 @@ impl Blockers {
         let dynamic = ctx.scene.dynamic_nodes();
         // A directional light is taken as moving: its shadow rays reach
         // past the scene, not to a point a box of still lights could hold.
-        let static_point_light: Vec<bool> = (ctx.scene.lights.iter())
+        let static_punctual: Vec<bool> = (ctx.scene.lights.iter())
             .map(|l| !dynamic[l.node] && l.kind != crate::scene::LightKind::Directional)
             .collect();
         let mut static_lights: Option<Aabb> = None;
@@ -45,7 +45,7 @@ impl Blockers {
                 snapshot.triangles[id].p.into_iter().for_each(&mut grow);
             }
         }
-        for (light, &fixed) in snapshot.lights.iter().zip(&static_point_light) {
+        for (light, &fixed) in snapshot.lights.iter().zip(&static_punctual) {
             if fixed {
                 grow(light.position);
             }
@@ -54,7 +54,7 @@ impl Blockers {
             moving: ObjectBoxes::new(ctx, |_| true),
             static_lights,
             static_count: snapshot.static_count,
-            static_point_light,
+            static_punctual,
             pick_fingerprint: ctx.lights.pick_fingerprint(),
         }
     }
@@ -62,7 +62,7 @@ impl Blockers {
     pub fn is_static(&self, source: LightSource) -> bool {
         match source {
             LightSource::Triangle(id) => (id as usize) < self.static_count,
-            LightSource::Point(i) => self.static_point_light.get(i).copied().unwrap_or(false),
+            LightSource::Punctual(i) => self.static_punctual.get(i).copied().unwrap_or(false),
         }
     }
 

@@ -64,7 +64,7 @@ enum Emitter {
         double_sided: bool,
     },
     /// A punctual light.
-    Point(PlacedLight),
+    Punctual(PlacedLight),
 }
 
 impl UnshadowedLights {
@@ -110,7 +110,7 @@ impl UnshadowedLights {
             });
         }
         emitters.extend(clusters.into_emitters(materials));
-        emitters.extend(snapshot.lights.iter().map(|l| Emitter::Point(*l)));
+        emitters.extend(snapshot.lights.iter().map(|l| Emitter::Punctual(*l)));
         UnshadowedLights { emitters }
     }
 
@@ -118,7 +118,7 @@ impl UnshadowedLights {
     #[cfg(test)]
     pub(crate) fn point(position: Vec3, intensity: Vec3) -> Self {
         UnshadowedLights {
-            emitters: vec![Emitter::Point(PlacedLight {
+            emitters: vec![Emitter::Punctual(PlacedLight {
                 position,
                 direction: Vec3::NEG_Z,
                 intensity,
@@ -132,7 +132,7 @@ impl UnshadowedLights {
     #[cfg(test)]
     pub(crate) fn sun(direction: Vec3, intensity: Vec3) -> Self {
         UnshadowedLights {
-            emitters: vec![Emitter::Point(PlacedLight {
+            emitters: vec![Emitter::Punctual(PlacedLight {
                 position: Vec3::ZERO,
                 direction,
                 intensity,
@@ -168,7 +168,7 @@ impl UnshadowedLights {
                             ..
                         },
                     ) => nearly_equal(*c0, *c1) && nearly_equal(*n0, *n1) && nearly_equal(*p0, *p1),
-                    (Emitter::Point(l0), Emitter::Point(l1)) => {
+                    (Emitter::Punctual(l0), Emitter::Punctual(l1)) => {
                         nearly_equal(l0.position, l1.position)
                             && nearly_equal(l0.direction, l1.direction)
                             && nearly_equal(l0.intensity, l1.intensity)
@@ -199,8 +199,8 @@ impl UnshadowedLights {
                 double_sided,
                 ..
             } => power * PI * if double_sided { 2.0 } else { 1.0 },
-            Emitter::Point(light) if light.is_directional() => light.intensity,
-            Emitter::Point(light) => light.intensity * 4.0 * PI,
+            Emitter::Punctual(light) if light.is_directional() => light.intensity,
+            Emitter::Punctual(light) => light.intensity * 4.0 * PI,
         };
         self.emitters.iter().map(each).sum()
     }
@@ -222,7 +222,7 @@ impl UnshadowedLights {
     /// The directional lights, in order.
     fn suns(&self) -> impl Iterator<Item = PlacedLight> + '_ {
         (self.emitters.iter()).filter_map(|e| match e {
-            Emitter::Point(light) if light.is_directional() => Some(*light),
+            Emitter::Punctual(light) if light.is_directional() => Some(*light),
             _ => None,
         })
     }
@@ -262,10 +262,10 @@ impl UnshadowedLights {
                     let cos_l = if double_sided { cos_l.abs() } else { cos_l };
                     e += power * (cos_l.max(0.0) * cos_at(w) / d2);
                 }
-                Emitter::Point(light) if light.is_directional() => {
+                Emitter::Punctual(light) if light.is_directional() => {
                     e += light.intensity * cos_at(-light.direction);
                 }
-                Emitter::Point(light) => {
+                Emitter::Punctual(light) => {
                     let d = light.position - p;
                     let d2 = d.length_squared().max(1e-8);
                     let w = d / d2.sqrt();
@@ -593,7 +593,7 @@ mod tests {
         assert!(lit_by(p, Vec3::ZERO).same_as(&lit_by(p, Vec3::ZERO)));
         let spot = |outer_cone: f32| {
             let mut lights = lit_by(p, i);
-            if let Emitter::Point(light) = &mut lights.emitters[0] {
+            if let Emitter::Punctual(light) = &mut lights.emitters[0] {
                 light.kind = crate::scene::LightKind::Spot(crate::scene::Spot {
                     inner_cone: 0.1,
                     outer_cone,
