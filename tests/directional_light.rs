@@ -226,3 +226,51 @@ fn sunlit_corner(facing_the_sun: bool) -> Scene {
     add_sun(&mut s, E, &directions);
     s
 }
+
+/// Where a sun's node is does not matter, only which way it turns: a sun
+/// carried along by its node (a translation key per frame) renders the
+/// same frames, bit for bit, as one held still, with every method, and
+/// the temporal ones trace no more rays for it at the second frame (they
+/// keep work where the lights of consecutive frames are the same; a sun's
+/// place taken as its node's made it a moving light).
+#[test]
+fn a_sun_carried_by_a_moving_node_renders_as_a_still_one() {
+    let still = {
+        let mut s = plane_under_a_square();
+        let sun = s.lights[0].node;
+        s.animation.channels.retain(|c| c.node != sun);
+        s
+    };
+    let mut carried = still.clone();
+    carried.animation.channels.push(Channel {
+        node: carried.lights[0].node,
+        property: Property::Translation,
+        interpolation: Interpolation::Linear,
+        times: vec![0.0, 1.0 / DEFAULT_FPS],
+        values: vec![Vec4::ZERO, Vec4::new(5.0, 1.0, -3.0, 0.0)],
+    });
+    for method in ["path", "ic", "trc", "tcg", "movies"] {
+        let a = render_counting_rays(still.clone(), method, 12, 2);
+        let b = render_counting_rays(carried.clone(), method, 12, 2);
+        for (f, ((a, a_rays), (b, b_rays))) in a.iter().zip(&b).enumerate() {
+            assert!(a.pixels == b.pixels, "{method}, frame {f}");
+            assert_eq!(a_rays, b_rays, "{method}, frame {f}: rays traced");
+        }
+    }
+}
+
+/// [`render`], with the rays each frame traced.
+fn render_counting_rays(s: Scene, method: &str, size: u32, frames: u32) -> Vec<(Film, u64)> {
+    let settings = method_settings(method, None).unwrap();
+    let mut method = settings.instantiate();
+    let mut r = common::cpu_renderer(s, settings.instantiate(), size);
+    (0..frames)
+        .map(|f| {
+            r.with_frame_context(f, |ctx| {
+                let before = ctx.backend.ray_counts().total();
+                let film = method.render_frame(ctx);
+                (film, ctx.backend.ray_counts().total() - before)
+            })
+        })
+        .collect()
+}

@@ -309,7 +309,9 @@ impl Triangle {
 /// A punctual light evaluated at one time.
 #[derive(Clone, Copy, Debug)]
 pub struct PlacedLight {
-    /// The node's origin (of no account for a directional light).
+    /// The node's origin; zero for a directional light, whose place is of
+    /// no account (so that a sun carried by a moving node is a still
+    /// light to what compares lights from frame to frame).
     pub position: Vec3,
     /// Unit direction the light points to (node −Z).
     pub direction: Vec3,
@@ -879,11 +881,16 @@ impl Scene {
                     // Carried past what can be traced (as triangles are
                     // collapsed, below), a light sends nothing: its
                     // position would make NaN light samples. A
-                    // directional light's position is not read.
+                    // directional light has no position.
+                    let directional = l.kind == LightKind::Directional;
                     let traceable = within_world(position);
-                    let shines = traceable || l.kind == LightKind::Directional;
+                    let shines = traceable || directional;
                     PlacedLight {
-                        position: if traceable { position } else { Vec3::ZERO },
+                        position: if traceable && !directional {
+                            position
+                        } else {
+                            Vec3::ZERO
+                        },
                         direction: m.transform_vector3(-Vec3::Z).normalize_or_zero(),
                         intensity: if shines { l.intensity } else { Vec3::ZERO },
                         kind: l.kind,
