@@ -18,8 +18,12 @@ pub type Aabb = (Vec3, Vec3);
 /// (their shadow samples may be kept).
 pub struct Blockers {
     moving: ObjectBoxes,
-    /// Bounding box of the lights that do not move (`None`: there are none).
+    /// Bounding box of the point and spot lights and emitting triangles
+    /// that do not move (`None`: there are none).
     pub static_lights: Option<Aabb>,
+    /// Whether a directional light does not turn: its shadow rays reach
+    /// past the scene, so no box holds what they cross.
+    pub static_directional: bool,
     static_count: usize,
     static_punctual: Vec<bool>,
     pub pick_fingerprint: u64,
@@ -29,11 +33,8 @@ impl Blockers {
     pub fn new(ctx: &FrameContext) -> Self {
         let snapshot = ctx.snapshot;
         let dynamic = ctx.scene.dynamic_nodes();
-        // A directional light is taken as moving: its shadow rays reach
-        // past the scene, not to a point a box of still lights could hold.
-        let static_punctual: Vec<bool> = (ctx.scene.lights.iter())
-            .map(|l| !dynamic[l.node] && l.kind != crate::scene::LightKind::Directional)
-            .collect();
+        let static_punctual: Vec<bool> =
+            ctx.scene.lights.iter().map(|l| !dynamic[l.node]).collect();
         let mut static_lights: Option<Aabb> = None;
         let mut grow = |p: Vec3| {
             let (lo, hi) = static_lights.get_or_insert((p, p));
@@ -45,14 +46,18 @@ impl Blockers {
                 snapshot.triangles[id].p.into_iter().for_each(&mut grow);
             }
         }
+        let mut static_directional = false;
         for (light, &fixed) in snapshot.lights.iter().zip(&static_punctual) {
-            if fixed {
-                grow(light.position);
+            match fixed && light.is_directional() {
+                true => static_directional = true,
+                false if fixed => grow(light.position),
+                false => {}
             }
         }
         Blockers {
             moving: ObjectBoxes::new(ctx, |_| true),
             static_lights,
+            static_directional,
             static_count: snapshot.static_count,
             static_punctual,
             pick_fingerprint: ctx.lights.pick_fingerprint(),
