@@ -672,7 +672,7 @@ mod tests {
             .collect();
         for id in lights.emitting_triangles() {
             let tri = &snapshot.triangles[id];
-            let centre = (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0;
+            let centre = tri.centroid();
             points.push(centre - 0.01 * tri.geometric_normal());
         }
         let (mut drawn, mut refused) = (0, 0);

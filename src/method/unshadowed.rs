@@ -103,7 +103,7 @@ impl UnshadowedLights {
                 &materials[snapshot.tri_material[id] as usize],
             );
             emitters.push(Emitter::Area {
-                center: (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0,
+                center: tri.centroid(),
                 normal: tri.geometric_normal(),
                 power: m.emission * tri.area(),
                 double_sided: m.double_sided,
@@ -367,7 +367,7 @@ impl Clusters {
         let tri = &snapshot.triangles[id];
         let LargeLight { centre, parts, .. } = &mut self.lights[light];
         let (area, normal) = (tri.area(), tri.geometric_normal());
-        let at = (tri.p[0] + tri.p[1] + tri.p[2]) / 3.0;
+        let at = tri.centroid();
         let octant = u8::from(at.x > centre.x)
             | u8::from(at.y > centre.y) << 1
             | u8::from(at.z > centre.z) << 2;

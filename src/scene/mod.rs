@@ -289,6 +289,11 @@ impl Triangle {
         self.cross().normalize_or_zero()
     }
 
+    /// The mean of the corners.
+    pub fn centroid(&self) -> Vec3 {
+        (self.p[0] + self.p[1] + self.p[2]) / 3.0
+    }
+
     /// Point at barycentrics (u, v): `p0·(1−u−v) + p1·u + p2·v`.
     pub fn point(&self, u: f32, v: f32) -> Vec3 {
         self.p[0] * (1.0 - u - v) + self.p[1] * u + self.p[2] * v

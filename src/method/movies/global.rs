@@ -1042,8 +1042,10 @@ fn may_cross(blockers: &ShadowBlockers, link: &Link) -> bool {
     blockers.ray_may_hit(link.from, dir, f32::INFINITY, None)
 }
 
-/// Barycentrics `(u, v)` moved a thousandth of the way to the centroid.
-fn pulled(u: f32, v: f32) -> (f32, f32) {
+/// Barycentrics `(u, v)` moved a thousandth of the way to the centroid,
+/// off the edges: a vertex or texel there does not gather from the edge
+/// it sits on (`GlobalPass::points`, `Movie::texel_st`).
+pub(super) fn pulled(u: f32, v: f32) -> (f32, f32) {
     let k = 1e-3;
     (u + (1.0 / 3.0 - u) * k, v + (1.0 / 3.0 - v) * k)
 }

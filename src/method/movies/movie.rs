@@ -101,8 +101,7 @@ impl Movie {
             u /= s;
             v /= s;
         }
-        let k = 1e-3;
-        (u + (1.0 / 3.0 - u) * k, v + (1.0 / 3.0 - v) * k)
+        super::global::pulled(u, v)
     }
 
     fn texel_point(&self, tri: &Triangle, index: usize, (u, v): (f32, f32)) -> ShadePoint {
