@@ -29,11 +29,17 @@ GLB_MAGIC, JSON_CHUNK, BIN_CHUNK = 0x46546C67, 0x4E4F534A, 0x004E4942
 
 
 def read_glb(path):
-    data = open(path, "rb").read()
+    try:
+        data = open(path, "rb").read()
+    except OSError as e:
+        sys.exit(f"{path}: cannot be read: {e.strerror}")
     if data[:4] != b"glTF":
         sys.exit(f"{path}: not a binary glTF (.glb) file")
-    json_len = struct.unpack_from("<I", data, 12)[0]
-    document = json.loads(data[20 : 20 + json_len])
+    try:
+        json_len = struct.unpack_from("<I", data, 12)[0]
+        document = json.loads(data[20 : 20 + json_len])
+    except (struct.error, ValueError) as e:
+        sys.exit(f"{path}: not a well-formed .glb file ({e})")
     at = 20 + json_len
     binary = b""
     if at < len(data):

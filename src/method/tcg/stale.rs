@@ -12,7 +12,10 @@
 //! stored distance, the record posed as it was in the frame the sample
 //! was shot in, which its age gives) has changed by more than
 //! [`STALE_LIGHT`] since that frame, and every sample where the lights'
-//! power has (a light switched off). Stale samples are drawn
+//! power has (a light switched off). A directional light sends the same
+//! from every direction wherever it turns, so the most its turn may
+//! change a surface of any normal is added to that change
+//! (`UnshadowedLights::directional_shift`, a bound of ours). Stale samples are drawn
 //! before the others (`select::pick_cells`). A hit that no light reaches
 //! directly (a ceiling above a panel facing down) shows indirect light
 //! only, which the moving light changes too: such samples are still shot
