@@ -11,15 +11,15 @@ mod common;
 
 use common::{
     furnace_box, inward_box, jumping_block_room, lit_room, plane_under_point_light, region_error,
-    scene,
+    scaling_block_room, scene,
 };
 use glam::Vec3;
 use radcache::film::Film;
 use radcache::method::movies::{MoviesSettings, TextureMovies};
 use radcache::method::{FrameStats, Method};
 use radcache::render::Renderer;
-use radcache::scene::Scene;
 use radcache::scene::{Channel, Interpolation, Property};
+use radcache::scene::{Scene, DEFAULT_FPS};
 use std::f32::consts::{FRAC_PI_2, PI};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -487,10 +487,11 @@ fn a_block_turned_inside_out_is_lit_as_path_lights_it() {
 /// of its size at time 0).
 #[test]
 fn a_block_grown_from_nothing_is_lit_as_path_lights_it() {
-    let s = room_with_scaling_block(
+    let s = scaling_block_room(
         (Vec3::new(-0.95, 0.0, -0.95), Vec3::new(-0.2, 1.0, -0.2)),
         Vec3::new(0.9, 0.1, 0.1),
-        [0.0, 1.0],
+        DEFAULT_FPS,
+        &[(0.0, 0.0), (4.0, 1.0)],
     );
     let reference = common::converged_sequence(s.clone(), 24, 6..7);
     let mut movies = TextureMovies::new(MoviesSettings::default());
@@ -498,27 +499,6 @@ fn a_block_grown_from_nothing_is_lit_as_path_lights_it() {
     let corner = region_error(&film, &reference[0]);
     println!("block grown from nothing: corner off by {corner:.4}");
     assert!(corner < 0.06, "the block's corner off by {corner}");
-}
-
-/// [`common::lit_room`] with a block (`corners`, a diffuse `colour`) whose
-/// scale goes linearly from `scales[0]` at time 0 to `scales[1]` at frame
-/// 4 (at the default frame rate), about the room's origin, and stays.
-fn room_with_scaling_block(corners: (Vec3, Vec3), colour: Vec3, scales: [f32; 2]) -> Scene {
-    let fps = radcache::scene::DEFAULT_FPS;
-    let mut s = common::lit_room(None, fps);
-    s.materials
-        .push(radcache::scene::Material::diffuse("block", colour));
-    let material = (s.materials.len() - 1) as u32;
-    let block = common::outward_box(corners.0, corners.1, material);
-    common::add_static_object(&mut s, "block", block);
-    s.animation.channels.push(Channel {
-        node: s.nodes.len() - 1,
-        property: Property::Scale,
-        interpolation: Interpolation::Linear,
-        times: vec![0.0, 4.0 / fps],
-        values: scales.map(|k| glam::Vec4::new(k, k, k, 0.0)).to_vec(),
-    });
-    s
 }
 
 /// A thin partition (`tests/data/scenes/thin_partition.gltf`: one
@@ -917,10 +897,11 @@ fn an_object_that_moves_far_into_a_missed_links_ray_is_seen() {
 fn a_render_resumed_while_an_object_grows_equals_the_uninterrupted_one() {
     use radcache::method::movies::global::GlobalSettings;
     let scene = || {
-        room_with_scaling_block(
+        scaling_block_room(
             (Vec3::new(-0.25, 0.0, -0.45), Vec3::new(0.15, 0.3, -0.05)),
             Vec3::new(0.9, 0.3, 0.1),
-            [0.5, 2.0],
+            DEFAULT_FPS,
+            &[(0.0, 0.5), (4.0, 2.0)],
         )
     };
     let settings = MoviesSettings {

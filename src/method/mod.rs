@@ -191,8 +191,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // estimate kept from going negative (2026-11-30). 7: as every
         // method's next. 8: under moving lights, a light of more than 48
         // triangles is taken as at most 48 points (`unshadowed::Clusters`,
-        // 2026-12-01). 9, 10: as every method's next.
-        "trc" => 10,
+        // 2026-12-01). 9, 10: as every method's next. 11: an object none
+        // of a record's samples hit that comes into their paths ends its
+        // life (`later::LaterFrames::arrival_share`, 2026-12-01).
+        "trc" => 11,
         // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6: as
         // below.
         "ic" => 6,

@@ -271,6 +271,30 @@ fn block_room_jumping(k: u32, fps: f32, [before, after]: [Vec4; 2]) -> Scene {
     s
 }
 
+/// The lit room with a block (`corners`, a diffuse `colour`) scaled about
+/// the room's origin by its node: linearly between `keys` (frame at
+/// `fps`, scale), and held before the first and after the last. A scale
+/// of 0 is a block not there yet.
+pub fn scaling_block_room(
+    corners: (Vec3, Vec3),
+    colour: Vec3,
+    fps: f32,
+    keys: &[(f32, f32)],
+) -> Scene {
+    let mut s = lit_room(None, fps);
+    s.materials.push(Material::diffuse("block", colour));
+    let block = outward_box(corners.0, corners.1, (s.materials.len() - 1) as u32);
+    add_static_object(&mut s, "block", block);
+    s.animation.channels.push(Channel {
+        node: s.nodes.len() - 1,
+        property: Property::Scale,
+        interpolation: Interpolation::Linear,
+        times: keys.iter().map(|&(frame, _)| frame / fps).collect(),
+        values: keys.iter().map(|&(_, k)| Vec4::new(k, k, k, 0.0)).collect(),
+    });
+    s
+}
+
 /// The bias of `test` over the lower left quarter of the image (where the
 /// block stood): the difference of the region's mean radiance from the
 /// reference's, relative to the reference's, worst colour channel. A ghost

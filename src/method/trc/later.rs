@@ -29,15 +29,20 @@
 //!   lights moving at t0 keep the paper's extrapolation otherwise, but the
 //!   frames an object departs in are reprojected with the lights then.
 //!
-//! Limits: only what the record's samples hit at t0 is followed (an object
-//! that comes into its view later is not, as for t0+1); shadows that move
-//! over what it sees are not seen (as for t0+1 without `next_direct`); the
-//! gate's half cell is the cells' mean size, and cells near the normal are
-//! narrower in φ, and the object's nearest hit is taken at t0 (one that
-//! comes nearer turns by more than its displacement over that distance);
-//! and a life longer than
-//! [`LATER_FRAMES`] frames is checked over its first frames only.
+//! An object none of the samples hit that comes into their paths is seen
+//! by no reprojection; [`super::arrivals`] ends those lives.
+//!
+//! Limits: an object that a few samples hit and that then grows or comes
+//! nearer is followed through those samples alone (the other cells it
+//! comes to cover keep what they saw, as for t0+1); shadows that
+//! move over what the record sees are not seen (as for t0+1 without
+//! `next_direct`); the gate's half cell is the cells' mean size, and cells
+//! near the normal are narrower in φ, and the object's nearest hit is
+//! taken at t0 (one that comes nearer turns by more than its displacement
+//! over that distance); and a life longer than [`LATER_FRAMES`] frames is
+//! checked over its first frames only.
 
+use super::arrivals::{Arrivals, OwnBounds};
 use super::estimate::{reproject, rigid_motion, NextFrame};
 use super::Gathered;
 use crate::cache::gather::{HemisphereSamples, Strata};
@@ -62,6 +67,9 @@ pub(super) struct LaterFrames {
     frames: BTreeMap<u32, LaterFrame>,
     /// Which objects move.
     dynamic: Vec<bool>,
+    /// The moving objects in the frames of the life, for those that come
+    /// into the samples' paths.
+    arrivals: Arrivals,
 }
 
 /// A frame after t0+1 where the motion departs from the extrapolated one.
@@ -94,23 +102,29 @@ impl LaterFrames {
         let last = t0.saturating_add(max_life.min(LATER_FRAMES).saturating_sub(1));
         ahead.keep(t0 + 1..=last);
         let lights_move = lights_may_move(scene);
-        let mut frames = BTreeMap::new();
-        if last < t0.saturating_add(2) || (!lights_move && !dynamic.contains(&true)) {
-            return LaterFrames {
-                t0,
-                frames,
-                dynamic,
-            };
+        let mut later = LaterFrames {
+            t0,
+            frames: BTreeMap::new(),
+            dynamic,
+            arrivals: Arrivals::default(),
+        };
+        if last <= t0 || (!lights_move && !later.dynamic.contains(&true)) {
+            return later;
         }
         let x0 = &ctx.snapshot.object_to_world;
-        let x1 = ahead.placed(ctx, t0 + 1);
-        let mut extrapolated: Vec<Option<Extrapolated>> = ahead
-            .corners(scene, &dynamic)
+        let own = ahead.bounds(scene, &later.dynamic).to_vec();
+        let placed: Vec<_> = (t0 + 1..=last).map(|t| ahead.placed(ctx, t)).collect();
+        later.arrivals = Arrivals::new(t0, &own, x0, placed.iter().map(|x| &x[..]));
+        if last < t0 + 2 {
+            return later;
+        }
+        let x1 = &placed[0];
+        let mut extrapolated: Vec<Option<Extrapolated>> = own
             .iter()
             .enumerate()
-            .map(|(o, corners)| Some(Extrapolated::new((*corners)?, x0[o], x1[o])))
+            .map(|(o, own)| Some(Extrapolated::new((*own)?.corners, x0[o], x1[o])))
             .collect();
-        for t in t0.saturating_add(2)..=last {
+        for t in t0 + 2..=last {
             let xt = ahead.placed(ctx, t);
             let departure: Vec<f32> = extrapolated
                 .iter_mut()
@@ -131,7 +145,7 @@ impl LaterFrames {
                 true => !lights.same_power(next.lights_now()),
             };
             if lights_changed || departure.iter().any(|&d| d > 0.0) {
-                let motion = x0.iter().zip(xt.iter()).zip(&dynamic);
+                let motion = x0.iter().zip(xt.iter()).zip(&later.dynamic);
                 let moved = |((w0, wt), &d): ((&Mat4, &Mat4), &bool)| {
                     d.then(|| rigid_motion(*w0, *wt)).flatten()
                 };
@@ -143,35 +157,44 @@ impl LaterFrames {
                     departure,
                     lights_changed,
                 };
-                frames.insert(t, frame);
+                later.frames.insert(t, frame);
             }
         }
-        LaterFrames {
-            t0,
-            frames,
-            dynamic,
-        }
+        later
     }
 
     /// The last frame, up to `last_valid` (Eq. 10–11's), that gather `g`
     /// (made at t0) may be used in: the frame before the first later frame
-    /// that departs from τ's extrapolation as `g` sees it and where its
-    /// samples, reprojected there, `exceed` the temporal accuracy.
+    /// where more than `a_t` of its samples' paths are crossed by an object
+    /// none of them hit ([`Arrivals::share`]), or that departs from τ's
+    /// extrapolation as `g` sees it and where its samples, reprojected
+    /// there, `exceed` the temporal accuracy.
     pub(super) fn last_valid(
         &self,
         ctx: &FrameContext,
         g: &Gathered,
-        strata: Strata,
+        (strata, a_t): (Strata, f32),
         last_valid: u32,
         exceed: impl Fn(&HemisphereSamples) -> bool,
     ) -> u32 {
-        let first = self.t0.saturating_add(2);
-        if last_valid < first || self.frames.is_empty() {
+        if last_valid <= self.t0 || self.arrivals.is_empty() && self.frames.is_empty() {
             return last_valid;
         }
         let seen = nearest_hits(&g.samples, &self.dynamic);
+        let mut unseen = self.dynamic.clone();
+        for o in seen.iter().map(|&(o, _)| o).chain([g.candidate.object]) {
+            if let Some(u) = unseen.get_mut(o as usize) {
+                *u = false;
+            }
+        }
         let cell = resolvable_angle(strata);
-        for (&t, f) in self.frames.range(first..=last_valid) {
+        for t in self.t0 + 1..=last_valid {
+            if self.arrivals.share(t, g, (strata, &unseen), a_t) > a_t {
+                return t - 1;
+            }
+            let Some(f) = self.frames.get(&t) else {
+                continue;
+            };
             let departs = f.lights_changed
                 || seen
                     .iter()
@@ -190,8 +213,8 @@ impl LaterFrames {
 pub(super) struct Ahead {
     placed: BTreeMap<u32, Arc<Vec<Mat4>>>,
     lights: LightsByFrame,
-    /// Each moving object's box in its own frame (found once).
-    corners: Option<Vec<Option<[Vec3; 8]>>>,
+    /// Each moving object's bounds in its own frame (found once).
+    bounds: Option<Vec<Option<OwnBounds>>>,
 }
 
 impl Ahead {
@@ -200,12 +223,12 @@ impl Ahead {
         self.lights.keep(frames);
     }
 
-    /// The corners of each moving object's box in its own frame.
-    fn corners(&mut self, scene: &Scene, dynamic: &[bool]) -> &[Option<[Vec3; 8]>] {
-        self.corners.get_or_insert_with(|| {
+    /// Each moving object's bounds in its own frame.
+    fn bounds(&mut self, scene: &Scene, dynamic: &[bool]) -> &[Option<OwnBounds>] {
+        self.bounds.get_or_insert_with(|| {
             let objects = scene.objects.iter().zip(dynamic);
             objects
-                .map(|(o, &d)| corners(&o.mesh.positions).filter(|_| d))
+                .map(|(o, &d)| OwnBounds::of(&o.mesh.positions).filter(|_| d))
                 .collect()
         })
     }
@@ -262,22 +285,6 @@ fn nearest_hits(samples: &HemisphereSamples, dynamic: &[bool]) -> Vec<(u32, f32)
         }
     }
     nearest
-}
-
-/// The corners of the box around `positions` (an object's own frame);
-/// `None` for an object without vertices.
-fn corners(positions: &[Vec3]) -> Option<[Vec3; 8]> {
-    let first = *positions.first()?;
-    let (min, max) = positions
-        .iter()
-        .fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p)));
-    Some(std::array::from_fn(|i| {
-        Vec3::new(
-            if i & 1 == 0 { min.x } else { max.x },
-            if i & 2 == 0 { min.y } else { max.y },
-            if i & 4 == 0 { min.z } else { max.z },
-        )
-    }))
 }
 
 /// An object's motion from t0 to t0+1, continued, two ways: its
@@ -387,7 +394,7 @@ mod tests {
     }
 
     fn extrapolated(x0: Mat4, x1: Mat4) -> Extrapolated {
-        Extrapolated::new(corners(&CUBE).unwrap(), x0, x1)
+        Extrapolated::new(OwnBounds::of(&CUBE).unwrap().corners, x0, x1)
     }
 
     /// A steady slide while turning and growing is what the continued

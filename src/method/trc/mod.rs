@@ -13,8 +13,9 @@
 //! later, or a light switched off later; as the animation is known ahead,
 //! the record is also reprojected to the later frames of its life where
 //! the motion departs from that extrapolation, and its life ends before
-//! the first where it has changed by more than `a^t` (`later`). Each
-//! frame:
+//! the first where it has changed by more than `a^t`, or where an object
+//! none of its samples hit comes into more than `a^t` of their paths
+//! (`later`). Each frame:
 //! 1. *age records*: a record still valid is reused; one that is no longer
 //!    valid but contributed to the previous frame is replaced by a new
 //!    record gathered at the same point (§4.4, "p_l = p_K"); one that
@@ -75,6 +76,7 @@
 //! Where the light moves, reprojection helps as in the paper (test
 //! `reprojection_follows_a_moving_light_better_than_constant`).
 
+mod arrivals;
 mod direct;
 mod estimate;
 pub mod estimate_error;
@@ -311,7 +313,7 @@ impl TemporalRadianceCaching {
         let age = frames_of_validity(next.change, a_t, self.settings.max_life);
         let mut last_valid = ctx.frame + age;
         if let Some(later) = &making.later {
-            last_valid = later.last_valid(ctx, g, strata, last_valid, |samples| {
+            last_valid = later.last_valid(ctx, g, (strata, a_t), last_valid, |samples| {
                 self.change_to(g, Some(samples)).change > a_t
             });
         }
