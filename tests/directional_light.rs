@@ -353,11 +353,12 @@ fn movies_on_a_large_ground_of_two_triangles() {
 /// Where a sun's node is does not matter, only which way it turns: a sun
 /// carried along by its node (a translation key per frame) renders the
 /// same frames, bit for bit, as one held still, with every method, and
-/// `trc` and `tcg` trace no more rays for it at the second frame (they
-/// keep work where the lights of consecutive frames are the same; a sun's
-/// place taken as its node's made it a moving light). `movies` keeps the
-/// shadows of lights whose nodes stand still, and takes a sun on a moving
-/// node as moving: its frames are the same, its shadow rays traced again.
+/// no method traces more rays for it at the second frame: `trc` and `tcg`
+/// keep work where the lights of consecutive frames are the same (a sun's
+/// place taken as its node's made it a moving light), and `movies` keeps
+/// the shadows of the lights the animation does not move or turn
+/// (`Scene::moving_lights`; it took a sun on a moving node as moving and
+/// traced its shadow rays again: 68,032 rays at frame 1 against 2,304).
 #[test]
 fn a_sun_carried_by_a_moving_node_renders_as_a_still_one() {
     let still = { plane_under_a_square(&TURNING[..1]) };
@@ -374,9 +375,7 @@ fn a_sun_carried_by_a_moving_node_renders_as_a_still_one() {
         let b = render_counting_rays(carried.clone(), method, 12, 2);
         for (f, ((a, a_rays), (b, b_rays))) in a.iter().zip(&b).enumerate() {
             assert!(a.pixels == b.pixels, "{method}, frame {f}");
-            if method != "movies" {
-                assert_eq!(a_rays, b_rays, "{method}, frame {f}: rays traced");
-            }
+            assert_eq!(a_rays, b_rays, "{method}, frame {f}: rays traced");
         }
     }
 }

@@ -32,9 +32,7 @@ pub struct Blockers {
 impl Blockers {
     pub fn new(ctx: &FrameContext) -> Self {
         let snapshot = ctx.snapshot;
-        let dynamic = ctx.scene.dynamic_nodes();
-        let static_punctual: Vec<bool> =
-            ctx.scene.lights.iter().map(|l| !dynamic[l.node]).collect();
+        let static_punctual: Vec<bool> = ctx.scene.moving_lights().iter().map(|m| !m).collect();
         let mut static_lights: Option<Aabb> = None;
         let mut grow = |p: Vec3| {
             let (lo, hi) = static_lights.get_or_insert((p, p));

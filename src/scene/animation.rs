@@ -212,8 +212,14 @@ impl Animation {
 
     /// Per node of `count`, whether a channel targets it.
     pub fn animated_nodes(&self, count: usize) -> Vec<bool> {
+        self.nodes_animated_in(count, |_| true)
+    }
+
+    /// Per node of `count`, whether a channel of a property that `which`
+    /// takes targets it.
+    pub fn nodes_animated_in(&self, count: usize, which: impl Fn(Property) -> bool) -> Vec<bool> {
         let mut animated = vec![false; count];
-        for channel in &self.channels {
+        for channel in self.channels.iter().filter(|c| which(c.property)) {
             if let Some(a) = animated.get_mut(channel.node) {
                 *a = true;
             }

@@ -588,7 +588,33 @@ impl Scene {
     /// and channels (asking node by node scans every channel for each of
     /// a node's ancestors).
     pub fn dynamic_nodes(&self) -> Vec<bool> {
-        let animated = self.animation.animated_nodes(self.nodes.len());
+        self.under_any(self.animation.animated_nodes(self.nodes.len()))
+    }
+
+    /// Per node, whether the turn or scale of its world transform can
+    /// change: a rotation or scale channel targets it or an ancestor (a
+    /// translation carries a subtree along and turns none of it).
+    pub fn turning_nodes(&self) -> Vec<bool> {
+        let turns = |p: Property| matches!(p, Property::Rotation | Property::Scale);
+        let animated = self.animation.nodes_animated_in(self.nodes.len(), turns);
+        self.under_any(animated)
+    }
+
+    /// Per punctual light, whether the animation changes the light it
+    /// sends: a point or spot light on a node that moves, a directional
+    /// light on one that turns (it has a direction and no place).
+    pub fn moving_lights(&self) -> Vec<bool> {
+        let (dynamic, turning) = (self.dynamic_nodes(), self.turning_nodes());
+        (self.lights.iter())
+            .map(|l| match l.kind {
+                LightKind::Directional => turning[l.node],
+                LightKind::Point | LightKind::Spot(_) => dynamic[l.node],
+            })
+            .collect()
+    }
+
+    /// Per node, whether it or an ancestor is `marked` (by node).
+    fn under_any(&self, marked: Vec<bool>) -> Vec<bool> {
         // Resolved top-down as world transforms are: a node's answer is
         // its own or its nearest resolved ancestor's.
         let mut dynamic: Vec<Option<bool>> = vec![None; self.nodes.len()];
@@ -606,7 +632,7 @@ impl Scene {
                 next = self.nodes[n].parent;
             }
             for &n in unresolved.iter().rev() {
-                above |= animated[n];
+                above |= marked[n];
                 dynamic[n] = Some(above);
             }
         }
@@ -1114,6 +1140,64 @@ mod tests {
                 ),
             );
         }
+    }
+
+    /// A translation carries its subtree and turns none of it; a rotation
+    /// or scale turns its subtree. A point light is moved by either, a
+    /// sun only by a turn. Nodes: a root keyed by `root` with a child,
+    /// each holding a point light and a sun.
+    #[test]
+    fn only_a_turn_moves_a_sun_and_either_moves_a_point_light() {
+        // Appended to a built-in scene, whose own nodes and lights are
+        // left out of the answers compared.
+        let base = Scene::builtin("cube-in-box").unwrap();
+        let (root, lights) = (base.nodes.len(), base.lights.len());
+        let scene_with = |property: Property| {
+            let mut scene = base.clone();
+            for (name, parent) in [("root", None), ("child", Some(root))] {
+                scene.nodes.push(Node {
+                    name: name.into(),
+                    parent,
+                    rest: Trs::default(),
+                });
+            }
+            for node in [root, root + 1] {
+                for kind in [LightKind::Point, LightKind::Directional] {
+                    let name = format!("{node} {kind:?}");
+                    let intensity = Vec3::ONE;
+                    scene.lights.push(PunctualLight {
+                        name,
+                        node,
+                        intensity,
+                        kind,
+                    });
+                }
+            }
+            let values = vec![Vec4::new(0.0, 0.0, 0.0, 1.0), Vec4::new(0.0, 1.0, 0.0, 1.0)];
+            scene.animation.channels.push(animation::Channel {
+                node: root,
+                property,
+                interpolation: Interpolation::Linear,
+                times: vec![0.0, 1.0],
+                values,
+            });
+            scene
+        };
+        let carried = scene_with(Property::Translation);
+        assert_eq!(carried.dynamic_nodes()[root..], [true, true]);
+        assert_eq!(carried.turning_nodes()[root..], [false, false]);
+        assert_eq!(
+            carried.moving_lights()[lights..],
+            [true, false, true, false]
+        );
+        for turn in [Property::Rotation, Property::Scale] {
+            let turned = scene_with(turn);
+            assert_eq!(turned.turning_nodes()[root..], [true, true], "{turn:?}");
+            assert_eq!(turned.moving_lights()[lights..], [true; 4], "{turn:?}");
+        }
+        let mut still = scene_with(Property::Translation);
+        still.animation.channels.pop();
+        assert_eq!(still.moving_lights()[lights..], [false; 4]);
     }
 
     /// A light its animation carries past what can be traced sends nothing

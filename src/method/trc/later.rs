@@ -246,11 +246,12 @@ impl Ahead {
     }
 }
 
-/// Whether any light can move or change: a punctual light on an animated
-/// node, or an emissive material on a moving object.
+/// Whether any light can move or change: a punctual light the animation
+/// moves or turns ([`Scene::moving_lights`]), or an emissive material on a
+/// moving object.
 fn lights_may_move(scene: &Scene) -> bool {
     let dynamic = scene.dynamic_nodes();
-    scene.lights.iter().any(|l| dynamic[l.node])
+    scene.moving_lights().contains(&true)
         || scene.objects.iter().any(|object| {
             dynamic[object.node]
                 && object
