@@ -662,10 +662,7 @@ mod tests {
         let scene = Scene::builtin("chairs-room").unwrap();
         let snapshot = scene.snapshot(0.0);
         let lights = LightSampler::new(&snapshot, &scene.materials);
-        let (lo, hi) = snapshot.triangles.iter().flat_map(|t| t.p).fold(
-            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-            |(lo, hi), p| (lo.min(p), hi.max(p)),
-        );
+        let (lo, hi) = snapshot.bounds().unwrap();
         let mut rng = crate::sampling::Rng::from_seed(11, 0);
         let mut points: Vec<Vec3> = (0..40)
             .map(|_| lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()))

@@ -436,12 +436,18 @@ impl Snapshot {
     /// The bounding box (least and greatest corner) of the triangles;
     /// `None` without triangles.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        let (lo, hi) = (self.triangles.iter().flat_map(|t| t.p))
-            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-                (lo.min(p), hi.max(p))
-            });
-        lo.cmple(hi).all().then_some((lo, hi))
+        bounding_box(self.triangles.iter().flat_map(|t| t.p))
     }
+}
+
+/// The smallest box `(min, max)` around `points`; `None` where there are
+/// none (or none but NaN).
+pub fn bounding_box(points: impl IntoIterator<Item = Vec3>) -> Option<(Vec3, Vec3)> {
+    let (lo, hi) = (points.into_iter())
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p), hi.max(p))
+        });
+    lo.cmple(hi).all().then_some((lo, hi))
 }
 
 impl Scene {
@@ -481,19 +487,13 @@ impl Scene {
     /// vertices at time `t`; `None` for a scene without vertices.
     pub fn bounds_at(&self, t: f32) -> Option<(Vec3, Vec3)> {
         let world = self.node_world_transforms(t);
-        let (lo, hi) = self
-            .objects
-            .iter()
-            .flat_map(|o| {
-                o.mesh
-                    .positions
-                    .iter()
-                    .map(|p| world[o.node].transform_point3(*p))
-            })
-            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-                (lo.min(p), hi.max(p))
-            });
-        lo.cmple(hi).all().then_some((lo, hi))
+        bounding_box(self.objects.iter().flat_map(|o| {
+            let placed = world[o.node];
+            o.mesh
+                .positions
+                .iter()
+                .map(move |p| placed.transform_point3(*p))
+        }))
     }
 
     /// Moves a scene whose box at time 0 lies far from the origin (its

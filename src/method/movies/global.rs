@@ -1147,16 +1147,10 @@ fn converged(before: &[Vec3], after: &[Vec3]) -> bool {
 /// The diagonal of the box around `points` (1 where it is empty, flat to a
 /// point or not finite).
 pub(super) fn diagonal(points: impl Iterator<Item = Vec3>) -> f32 {
-    let (lo, hi) = points.fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), p| (lo.min(p), hi.max(p)),
-    );
-    let d = (hi - lo).length();
-    if d.is_finite() && d > 0.0 {
-        d
-    } else {
-        1.0
-    }
+    crate::scene::bounding_box(points)
+        .map(|(lo, hi)| (hi - lo).length())
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .unwrap_or(1.0)
 }
 
 #[cfg(test)]

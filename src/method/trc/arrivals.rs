@@ -24,6 +24,7 @@ use super::Gathered;
 use crate::cache::gather::Strata;
 use crate::method::motion::{segment_hits_box, Aabb};
 use crate::sampling::Frame;
+use crate::scene::bounding_box;
 use glam::{Mat3, Mat4, Vec3};
 use std::f32::consts::{FRAC_PI_2, TAU};
 
@@ -40,10 +41,7 @@ pub(super) struct OwnBounds {
 impl OwnBounds {
     /// The bounds of `positions`; `None` for an object without vertices.
     pub(super) fn of(positions: &[Vec3]) -> Option<Self> {
-        let first = *positions.first()?;
-        let (min, max) = positions
-            .iter()
-            .fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let (min, max) = bounding_box(positions.iter().copied())?;
         let centre = (min + max) / 2.0;
         let radius = positions
             .iter()
