@@ -240,7 +240,7 @@ pub struct TrcArgs {
     /// Temporal gradients (TRC §4.5): none, extrapolated from the estimate of E(t0+1) (Eq. 15–17, one pass), or interpolated towards the record's replacement (Eq. 18–20, two passes: frames come out up to δt_max frames of first pass late).
     #[arg(long, value_enum, default_value = "extrapolated")]
     pub trc_gradients: TrcGradientsArg,
-    /// Estimate E(t0+1) by reprojecting the record's hemisphere samples (TRC §4.7), and check the record's life by reprojecting them to the later frames whose motion departs from the extrapolated one (an object that starts, stops or jumps, a light switched off or moved); off: E constant, no check.
+    /// Estimate E(t0+1) by reprojecting the record's hemisphere samples (TRC §4.7), and check the record's life by reprojecting them to the later frames whose motion departs from the extrapolated one (an object that starts, stops or jumps, a light switched off or moved), and against objects none of its samples hit that come into their paths (one that jumps in or grows from nothing); off: E constant, no check.
     #[arg(long, value_enum, default_value = "on")]
     pub trc_reprojection: OnOff,
     /// With reprojection, evaluate each hemisphere sample's direct light again at t0+1 (one light sample, shadowed in the next frame's geometry), so that E(t0+1) sees moving shadows and moving lights (TRC §5: the incoming lighting at t+1 of each visible point). Costs 12–48 % more time on our animated scenes; on cube-in-box it lowers the error by 4 %, elsewhere not (benches/RESULTS.md).

@@ -158,9 +158,10 @@ pub struct TrcSettings {
     pub max_life: u32,
     pub gradients: TemporalGradients,
     /// Estimate E(t0+1) by reprojection (§4.7), and check each record's
-    /// life against the later frames by reprojection too (`trc::later`);
-    /// off: E(t0+1) = E(t0), the "no reprojection" column of Table 1
-    /// (then every record lives `δt_max` frames).
+    /// life against the later frames by reprojection too (`trc::later`)
+    /// and against objects that come into its samples' paths
+    /// (`trc::arrivals`); off: E(t0+1) = E(t0), the "no reprojection"
+    /// column of Table 1 (then every record lives `δt_max` frames).
     pub reprojection: bool,
     /// With reprojection, also evaluate each sample's direct light again at
     /// t0+1 (one light sample, shadowed in the next frame's geometry,
