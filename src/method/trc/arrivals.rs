@@ -240,15 +240,17 @@ impl Arrivals {
     }
 }
 
-/// Each cell (`j·N + k`, as [`crate::cache::gather::cell_direction`] lays
-/// them out in `frame`)
-/// of a hemisphere of `strata` that a direction from `p` through the
-/// sphere of `placed` may fall in: the rings its cone's polar angles span,
-/// and in each the cells its azimuths do (`asin(sin α / sin θ_c)` either
-/// side of its axis; all of them where the cone holds the pole). A little
-/// wide, for rounding.
+/// Each cell of a hemisphere of `strata` (`j·N + k`, laid out in `frame`
+/// as [`crate::cache::gather::cell_direction`] lays them) that a direction
+/// from `p` through the sphere of `placed` may fall in: the rings its
+/// cone's polar angles span, and in each the cells its azimuths do
+/// (`asin(sin α / sin θ_c)` either side of its axis; all of them where the
+/// cone holds the pole). A little wide, for rounding.
 fn cone_cells(frame: &Frame, strata: Strata, p: Vec3, placed: &Placed, mut each: impl FnMut(u32)) {
     let (m, n) = (strata.theta, strata.phi);
+    if m == 0 || n == 0 {
+        return;
+    }
     let to_centre = frame.to_local(placed.centre - p);
     let d = to_centre.length();
     let every_cell = 0..m * n;
