@@ -723,12 +723,7 @@ fn jumping_object_leaves_no_ghost() {
     let scene = || jumping_block_room(k, 24.0);
     let ic_frames = same_pattern_ic(scene(), frames.clone());
     let errors = |gradients, reprojection| {
-        let trc = TrcSettings {
-            max_life,
-            gradients,
-            reprojection,
-            ..TrcSettings::default()
-        };
+        let trc = (max_life, gradients, reprojection);
         region_errors_against(scene(), trc, frames.clone(), &ic_frames)
     };
     // Before the jump nothing moves, so every mode renders the same frames
@@ -790,22 +785,22 @@ fn same_pattern_ic(scene: Scene, frames: std::ops::Range<u32>) -> Vec<Film> {
         .collect()
 }
 
-/// `trc` with `settings` (its `ic` replaced by [`ghost_ic`]) over `frames`
-/// of `scene` as [`same_pattern_ic`] renders it: per frame, the
+/// `trc` with [`ghost_ic`]'s records, `δt_max`, gradients and
+/// reprojection as given and its other settings the defaults, over
+/// `frames` of `scene` as [`same_pattern_ic`] renders it: per frame, the
 /// [`region_error`] against `reference`'s frame.
 fn region_errors_against(
     scene: Scene,
-    settings: TrcSettings,
+    (max_life, gradients, reprojection): (u32, TemporalGradients, bool),
     frames: std::ops::Range<u32>,
     reference: &[Film],
 ) -> Vec<f64> {
-    let what = format!(
-        "{:?}, reprojection {}",
-        settings.gradients, settings.reprojection
-    );
     let trc = TemporalRadianceCaching::new(TrcSettings {
         ic: ghost_ic(),
-        ..settings
+        max_life,
+        gradients,
+        reprojection,
+        ..TrcSettings::default()
     });
     let mut r = Renderer::new(
         scene,
@@ -823,7 +818,9 @@ fn region_errors_against(
     let errors: Vec<f64> = frames
         .map(|f| region_error(&r.render_frame(f), &reference[f as usize]))
         .collect();
-    eprintln!("{what}: bias near the block per frame: {errors:.4?}");
+    eprintln!(
+        "{gradients:?}, reprojection {reprojection}: bias near the block per frame: {errors:.4?}"
+    );
     errors
 }
 
@@ -862,12 +859,7 @@ fn an_object_that_jumps_in_or_grows_is_seen_at_once() {
             .map(|(film, path)| region_error(film, path))
             .collect();
         let errors = |gradients, reprojection| {
-            let trc = TrcSettings {
-                max_life,
-                gradients,
-                reprojection,
-                ..TrcSettings::default()
-            };
+            let trc = (max_life, gradients, reprojection);
             region_errors_against(scene(), trc, frames.clone(), &reference)
         };
         eprintln!("{what}: ic {ic:.4?}");

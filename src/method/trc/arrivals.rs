@@ -148,6 +148,9 @@ pub(super) struct Arrivals {
     moved: Vec<Vec<(u32, Placed)>>,
     /// By object, its bounds at t0 (`None`: it does not move).
     then: Vec<Option<Placed>>,
+    /// Whether an object moves in any of the frames (found once, asked
+    /// for every record).
+    any_moved: bool,
 }
 
 impl Arrivals {
@@ -161,7 +164,7 @@ impl Arrivals {
         later: impl Iterator<Item = &'a [Mat4]>,
     ) -> Self {
         let placed = |x: &[Mat4], o: usize| own[o]?.placed(*x.get(o)?);
-        let moved = later
+        let moved: Vec<Vec<(u32, Placed)>> = later
             .map(|xt| {
                 let moved = (0..own.len()).filter(|&o| xt.get(o) != x0.get(o));
                 moved
@@ -171,13 +174,14 @@ impl Arrivals {
             .collect();
         Arrivals {
             t0,
+            any_moved: moved.iter().any(|m| !m.is_empty()),
             moved,
             then: (0..own.len()).map(|o| placed(x0, o)).collect(),
         }
     }
 
     pub(super) fn is_empty(&self) -> bool {
-        self.moved.iter().all(Vec::is_empty)
+        !self.any_moved
     }
 
     /// The share of `g`'s samples (one in each cell of `strata`) whose

@@ -181,15 +181,19 @@ impl LaterFrames {
             return last_valid;
         }
         let seen = nearest_hits(&g.samples, &self.dynamic);
-        let mut unseen = self.dynamic.clone();
-        for o in seen.iter().map(|&(o, _)| o).chain([g.candidate.object]) {
-            if let Some(u) = unseen.get_mut(o as usize) {
-                *u = false;
+        // The moving objects no sample hit, other than the record's own.
+        let mut unseen = Vec::new();
+        if !self.arrivals.is_empty() {
+            unseen.clone_from(&self.dynamic);
+            for o in seen.iter().map(|&(o, _)| o).chain([g.candidate.object]) {
+                if let Some(u) = unseen.get_mut(o as usize) {
+                    *u = false;
+                }
             }
         }
         let cell = resolvable_angle(strata);
         for t in self.t0 + 1..=last_valid {
-            if self.arrivals.share(t, g, (strata, &unseen), a_t) > a_t {
+            if !unseen.is_empty() && self.arrivals.share(t, g, (strata, &unseen), a_t) > a_t {
                 return t - 1;
             }
             let Some(f) = self.frames.get(&t) else {
