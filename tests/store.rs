@@ -1002,42 +1002,38 @@ fn spec_of(name: &str, method: &MethodSettings, without: &[&str]) -> JobSpec {
 
 /// A job stored before a setting existed resumes under the value it ran
 /// with, the setting's serde default, and is refused, naming the setting,
-/// under another: `tcg` before its light and occlusion rules ran the
-/// paper's rule (off), `trc` before kept paths traced them again (its
+/// under another: `tcg` before its light, occlusion and arrival rules ran
+/// the paper's rule (off), `trc` before kept paths traced them again (its
 /// frames are the same with them on, so on is the default it resumes
 /// with).
 #[test]
 fn a_job_stored_before_a_setting_existed_resumes_under_the_value_it_ran() {
     let dir = tempfile::tempdir().unwrap();
     let store = Store::open(&dir.path().join("db")).unwrap();
-    let tcg = |light_refresh, occlusion_refresh| {
+    let tcg = |light_refresh, occlusion_refresh, arrivals| {
         MethodSettings::Tcg(TcgSettings {
             light_refresh,
             occlusion_refresh,
+            arrivals,
             ..TcgSettings::default()
         })
     };
+    let rules = ["light_refresh", "occlusion_refresh", "arrivals"];
     let old = store
-        .begin_job(
-            &spec_of(
-                "t",
-                &tcg(false, false),
-                &["light_refresh", "occlusion_refresh"],
-            ),
-            false,
-        )
+        .begin_job(&spec_of("t", &tcg(false, false, false), &rules), false)
         .unwrap();
-    let msg = err_text(store.begin_job(&spec_of("t", &tcg(true, false), &[]), false));
-    assert!(
-        msg.contains("light_refresh: stored false, given true"),
-        "{msg}"
-    );
-    let msg = err_text(store.begin_job(&spec_of("t", &tcg(false, true), &[]), false));
-    assert!(
-        msg.contains("occlusion_refresh: stored false, given true"),
-        "{msg}"
-    );
-    let resumed = store.begin_job(&spec_of("t", &tcg(false, false), &[]), false);
+    for (given, rule) in [
+        (tcg(true, false, false), rules[0]),
+        (tcg(false, true, false), rules[1]),
+        (tcg(false, false, true), rules[2]),
+    ] {
+        let msg = err_text(store.begin_job(&spec_of("t", &given, &[]), false));
+        assert!(
+            msg.contains(&format!("{rule}: stored false, given true")),
+            "{msg}"
+        );
+    }
+    let resumed = store.begin_job(&spec_of("t", &tcg(false, false, false), &[]), false);
     assert_eq!(resumed.unwrap().id, old.id);
 
     let trc = MethodSettings::Trc(TrcSettings::default());

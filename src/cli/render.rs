@@ -208,6 +208,7 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
             max_neighbours: args.tcg.tcg_max_neighbours,
             light_refresh: args.tcg.tcg_light_refresh == OnOff::On,
             occlusion_refresh: args.tcg.tcg_occlusion_refresh == OnOff::On,
+            arrivals: args.tcg.tcg_arrivals == OnOff::On,
         }),
         MethodName::Movies => MethodSettings::Movies(MoviesSettings {
             spp: args.spp.unwrap_or(MoviesSettings::default().spp),

@@ -3,6 +3,7 @@
 //! the scene only through a [`FrameContext`] and trace rays only through the
 //! batched [`RayBackend`] interface.
 
+mod arrivals;
 mod carried;
 pub mod ic;
 mod lookups;

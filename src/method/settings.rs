@@ -233,6 +233,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("max_neighbours", "10"),
             ("light_refresh", "0"),
             ("occlusion_refresh", "1"),
+            ("arrivals", "0"),
             ("spp", "4"),
             ("accuracy", "0.2"),
             ("strata", "16x48"),
@@ -483,6 +484,7 @@ pub fn named_settings(settings: &MethodSettings) -> serde_json::Map<String, serd
             out.number("max_neighbours", s.max_neighbours);
             out.flag("light_refresh", s.light_refresh);
             out.flag("occlusion_refresh", s.occlusion_refresh);
+            out.flag("arrivals", s.arrivals);
             out.ic(&s.ic);
             out.flag("gradients", s.ic.gradients);
         }
@@ -674,6 +676,7 @@ fn tcg_setting(method: &str, key: &str, v: &str, s: &mut TcgSettings) -> Result<
         "max_neighbours" => s.max_neighbours = value(method, key, v, limits::MAX_NEIGHBOURS)?,
         "light_refresh" => s.light_refresh = flag(method, key, v)?,
         "occlusion_refresh" => s.occlusion_refresh = flag(method, key, v)?,
+        "arrivals" => s.arrivals = flag(method, key, v)?,
         _ => {
             return Ok(ic_setting(method, key, v, &mut s.ic)?
                 || glossy_setting(method, key, v, &mut s.ic)?)

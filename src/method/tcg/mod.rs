@@ -13,7 +13,10 @@
 //!    in the previous frame is dropped. Departure: the paper keeps every
 //!    record and updates it; dropping the unseen ones (`trc`'s rule, TRC
 //!    §5) keeps the work on what the camera sees, and a record covered by
-//!    a moving object is not refreshed for nothing. Then redundant records
+//!    a moving object is not refreshed for nothing. So is one that moving
+//!    objects none of its samples hit came into the view of (departure,
+//!    `arrived`: the paper's Eq. 2 would let them in at `τ_min`; `fill`
+//!    makes a record there again where a pixel needs one). Then redundant records
 //!    are removed (§4.2): in id order, one with more than
 //!    [`TcgSettings::max_neighbours`] other records usable at its point
 //!    is removed, and hidden from the counts of the records after it;
@@ -53,6 +56,7 @@
 //! whose light changed (`benches/RESULTS.md`, "`tcg` against `ic` and
 //! `trc`").
 
+mod arrived;
 mod crossed;
 mod select;
 mod stale;
@@ -60,6 +64,7 @@ mod state;
 
 pub use state::{downgrade_to_schema_6_record, is_radiance_record, upgrade_schema_6_record};
 
+use super::arrivals::{moving_bounds, OwnBounds};
 use super::carried;
 use super::ic::{
     primary_candidates, scene_bounds, Candidate, Gathered, IcSettings, IrradianceCaching,
@@ -114,6 +119,12 @@ pub struct TcgSettings {
     /// `crossed`, which says what it costs); off, as the paper has it.
     #[serde(default = "occlusion_refresh_default")]
     pub occlusion_refresh: bool,
+    /// Whether a record is dropped where moving objects that none of its
+    /// samples hit newly cross more than 5 % (`arrived::ARRIVAL_SHARE`) of
+    /// its samples' paths in one frame (departure, on by default: the
+    /// module `arrived`); off, as the paper has it.
+    #[serde(default = "arrivals_default")]
+    pub arrivals: bool,
 }
 
 /// [`TcgSettings::light_refresh`] for settings stored before it existed:
@@ -130,6 +141,12 @@ fn occlusion_refresh_default() -> bool {
     false
 }
 
+/// [`TcgSettings::arrivals`] for settings stored before it existed: off,
+/// for the reason of [`light_refresh_default`].
+fn arrivals_default() -> bool {
+    false
+}
+
 impl Default for TcgSettings {
     fn default() -> Self {
         TcgSettings {
@@ -139,6 +156,7 @@ impl Default for TcgSettings {
             max_neighbours: 10,
             light_refresh: true,
             occlusion_refresh: false,
+            arrivals: true,
         }
     }
 }
@@ -315,6 +333,9 @@ pub struct TemporallyCoherentGathering {
     still: StillSamples,
     /// The lights of the last frames, to find the samples they left stale.
     lights: stale::LightHistory,
+    /// Each moving object's bounds in its own frame (found once), for
+    /// `arrived`.
+    bounds: Option<Vec<Option<OwnBounds>>>,
 }
 
 impl TemporallyCoherentGathering {
@@ -330,6 +351,7 @@ impl TemporallyCoherentGathering {
             kept: None,
             still: StillSamples::default(),
             lights: stale::LightHistory::default(),
+            bounds: None,
         }
     }
 
@@ -366,6 +388,10 @@ impl TemporallyCoherentGathering {
             let buried = moved.buried(ctx, alive.iter().map(|(r, (point, _))| (r, point)));
             alive = without_marked(alive, buried, removed);
         }
+        if let Some(arrived) = follows.then(|| self.arrived(ctx)).flatten() {
+            let marked = arrived.marked(&alive, self.settings.ic.strata);
+            alive = without_marked(alive, marked, removed);
+        }
         let points: Vec<&IrradianceRecord> = alive.iter().map(|(r, _)| &r.record).collect();
         let redundant = redundant(
             &points,
@@ -376,6 +402,16 @@ impl TemporallyCoherentGathering {
         let kept = without_marked(alive, redundant, removed);
         stats.records_dropped = removed.len() as u64;
         kept
+    }
+
+    /// The objects that moved into this frame, where `arrivals` is on.
+    fn arrived(&mut self, ctx: &FrameContext) -> Option<arrived::Arrived> {
+        if !self.settings.arrivals {
+            return None;
+        }
+        let bounds = (self.bounds)
+            .get_or_insert_with(|| moving_bounds(ctx.scene, &ctx.scene.dynamic_objects()));
+        arrived::Arrived::of(ctx, bounds)
     }
 
     /// Step 2 (§3.2–3.3): shoots each record's picked cells again, ages the

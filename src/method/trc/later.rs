@@ -30,7 +30,7 @@
 //!   frames an object departs in are reprojected with the lights then.
 //!
 //! An object none of the samples hit that comes into their paths is seen
-//! by no reprojection; [`super::arrivals`] ends those lives.
+//! by no reprojection; [`crate::method::arrivals`] ends those lives.
 //!
 //! Limits: an object that a few samples hit and that then grows or comes
 //! nearer is followed through those samples alone (the other cells it
@@ -42,12 +42,13 @@
 //! over that distance); and a life longer than [`LATER_FRAMES`] frames is
 //! checked over its first frames only.
 
-use super::arrivals::{Arrivals, OwnBounds};
 use super::estimate::{reproject, rigid_motion, NextFrame};
 use super::Gathered;
 use crate::cache::gather::{HemisphereSamples, Strata};
+use crate::method::arrivals::{moving_bounds, Arrivals, OwnBounds};
 use crate::method::unshadowed::LightsByFrame;
 use crate::method::FrameContext;
+use crate::sampling::Frame;
 use crate::scene::Scene;
 use glam::{Mat4, Quat, Vec3};
 use std::collections::BTreeMap;
@@ -192,8 +193,12 @@ impl LaterFrames {
             }
         }
         let cell = resolvable_angle(strata);
+        let frame = Frame::new(g.candidate.point.normal);
+        let pose = (&g.candidate.point, &frame);
         for t in self.t0 + 1..=last_valid {
-            if !unseen.is_empty() && self.arrivals.share(t, g, (strata, &unseen), a_t) > a_t {
+            let is_unseen = |o: u32| unseen.get(o as usize).copied().unwrap_or(false);
+            let arrivals = || (self.arrivals).share(t, pose, &g.samples, (strata, is_unseen), a_t);
+            if !unseen.is_empty() && arrivals() > a_t {
                 return t - 1;
             }
             let Some(f) = self.frames.get(&t) else {
@@ -229,12 +234,8 @@ impl Ahead {
 
     /// Each moving object's bounds in its own frame.
     fn bounds(&mut self, scene: &Scene, dynamic: &[bool]) -> &[Option<OwnBounds>] {
-        self.bounds.get_or_insert_with(|| {
-            let objects = scene.objects.iter().zip(dynamic);
-            objects
-                .map(|(o, &d)| OwnBounds::of(&o.mesh.positions).filter(|_| d))
-                .collect()
-        })
+        self.bounds
+            .get_or_insert_with(|| moving_bounds(scene, dynamic))
     }
 
     /// Each object's world transform at frame `t`.

@@ -76,7 +76,6 @@
 //! Where the light moves, reprojection helps as in the paper (test
 //! `reprojection_follows_a_moving_light_better_than_constant`).
 
-mod arrivals;
 mod direct;
 mod estimate;
 pub mod estimate_error;
@@ -160,7 +159,7 @@ pub struct TrcSettings {
     /// Estimate E(t0+1) by reprojection (§4.7), and check each record's
     /// life against the later frames by reprojection too (`trc::later`)
     /// and against objects that come into its samples' paths
-    /// (`trc::arrivals`); off: E(t0+1) = E(t0), the "no reprojection"
+    /// (`method::arrivals`); off: E(t0+1) = E(t0), the "no reprojection"
     /// column of Table 1 (then every record lives `δt_max` frames).
     pub reprojection: bool,
     /// With reprojection, also evaluate each sample's direct light again at

@@ -1,30 +1,31 @@
-//! Objects that come into a record's view after t0. A departure from TRC,
-//! named in the parent module's documentation, beside [`super::later`]'s.
+//! Objects that come into the paths of a record's samples after they
+//! were shot: a departure from TRC and from Tawara et al., whose records
+//! learn of a moving object only through the samples that hit it.
 //!
-//! The reprojection (§4.7) moves what the record's samples hit. An object
-//! none of them hit that comes into their paths (a block that jumps in
-//! from outside the room, one that grows from nothing, one that slides in
-//! from behind a wall) is in no reprojected sample: the paper's estimate
-//! gives the record its whole life with the light as it was. Here its
-//! life also ends before the first frame of it where the share of its
-//! samples whose path such an object's bounds newly cross exceeds `a^t`.
-//! As the samples are spread by the cosine, that share is the part of the
-//! cosine-weighted hemisphere the object may now cover, and the record's
-//! change were the object to show a radiance as far from what it hides as
-//! the mean; what it does show is unknown until gathered. Like `later`'s
-//! checks, not done with `--trc-reprojection off`.
+//! An object none of a record's samples hit that comes into their paths
+//! (a block that jumps in from outside the room, one that grows from
+//! nothing, one that slides in from behind a wall) is in no sample: `trc`'s
+//! reprojection (§4.7) moves only what the samples hit, and `tcg`'s Eq. 2
+//! shoots again at `τ_max` only the samples that hit moving objects. So
+//! the record keeps the light as it was. [`Arrivals::share`] is the share
+//! of its samples whose path such an object's bounds newly cross: as the
+//! samples are spread by the cosine, the part of the cosine-weighted
+//! hemisphere the object may now cover, and the record's change were the
+//! object to show a radiance as far from what it hides as the mean (what
+//! it does show is unknown until gathered). `trc` ends a record's life
+//! before the first frame where it exceeds `a^t` (`trc::later`); `tcg`
+//! drops a record where it exceeds [`crate::method::tcg`]'s bound in one
+//! frame.
 //!
-//! In the room a block jumps into, the corner's bias against `path` fell
+//! In the room a block jumps into, `trc`'s corner bias against `path` fell
 //! from 3.9× `ic`'s to 1.1× (`tests/trc.rs`,
 //! `an_object_that_jumps_in_or_grows_is_seen_at_once`). An object that a
-//! few samples hit and that then grows is left to the reprojection of
-//! those samples (`later`).
+//! few samples hit and that then grows is left to what those samples see.
 
-use super::Gathered;
-use crate::cache::gather::Strata;
+use crate::cache::gather::{GatherPoint, HemisphereSamples, Strata};
 use crate::method::motion::{segment_hits_box, Aabb};
 use crate::sampling::Frame;
-use crate::scene::bounding_box;
+use crate::scene::{bounding_box, Scene};
 use glam::{Mat3, Mat4, Vec3};
 use std::f32::consts::{FRAC_PI_2, TAU};
 
@@ -32,15 +33,15 @@ use std::f32::consts::{FRAC_PI_2, TAU};
 /// sphere around its vertices (a ball's is the ball, where its box's
 /// would cover three times the view).
 #[derive(Clone, Copy, Debug)]
-pub(super) struct OwnBounds {
-    pub(super) corners: [Vec3; 8],
+pub(crate) struct OwnBounds {
+    pub(crate) corners: [Vec3; 8],
     centre: Vec3,
     radius: f32,
 }
 
 impl OwnBounds {
     /// The bounds of `positions`; `None` for an object without vertices.
-    pub(super) fn of(positions: &[Vec3]) -> Option<Self> {
+    pub(crate) fn of(positions: &[Vec3]) -> Option<Self> {
         let (min, max) = bounding_box(positions.iter().copied())?;
         let centre = (min + max) / 2.0;
         let radius = positions
@@ -75,6 +76,15 @@ impl OwnBounds {
             aabb: (lo, hi),
         })
     }
+}
+
+/// Each object's bounds in its own frame where `moving` (by object) says
+/// it moves, else `None`.
+pub(crate) fn moving_bounds(scene: &Scene, moving: &[bool]) -> Vec<Option<OwnBounds>> {
+    let objects = scene.objects.iter().zip(moving);
+    objects
+        .map(|(o, &m)| OwnBounds::of(&o.mesh.positions).filter(|_| m))
+        .collect()
 }
 
 /// The most `m` lengthens a vector: the longest column where they are
@@ -141,7 +151,7 @@ impl Placed {
 /// The frames t0+1 … of the records made at t0: where each moving object
 /// is in the frames it has moved in since t0, and where it was at t0.
 #[derive(Default)]
-pub(super) struct Arrivals {
+pub(crate) struct Arrivals {
     t0: u32,
     /// By frame from t0+1 on, the bounds of each moving object placed
     /// anywhere but at t0 (only these can come into a path).
@@ -157,7 +167,7 @@ impl Arrivals {
     /// The moving objects (`own`: their bounds, by object; `None` for one
     /// that does not move) placed by `x0` at `t0` and by each of `later`
     /// at t0+1, t0+2, … in turn.
-    pub(super) fn new<'a>(
+    pub(crate) fn new<'a>(
         t0: u32,
         own: &[Option<OwnBounds>],
         x0: &[Mat4],
@@ -180,38 +190,44 @@ impl Arrivals {
         }
     }
 
-    pub(super) fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         !self.any_moved
     }
 
-    /// The share of `g`'s samples (one in each cell of `strata`) whose
-    /// path, from its point to its hit, the bounds at frame `t` of an
-    /// object that none of them hit and that is not the record's own
-    /// (`unseen`, by object) cross, where they did not cross its bounds at
-    /// t0. 0 where the objects' spheres cover at most `bound` of the
-    /// hemisphere together, which turns away most records without testing
-    /// a path; past it only the cells within each sphere's cone are tested
-    /// (66 balls, each a few thousandths of a view: a few cells each).
-    pub(super) fn share(
+    /// Whether object `o`'s bounds at t0 hold `point`, within `slack`
+    /// (its sphere's, the nearer of its bounds to a point on its surface).
+    pub(crate) fn held_then(&self, o: u32, point: Vec3, slack: f32) -> bool {
+        let then = self.then.get(o as usize).copied().flatten();
+        then.is_some_and(|b| b.centre.distance(point) <= b.radius + slack)
+    }
+
+    /// The share of a record's samples (their `paths` from `point`, one in
+    /// each cell of `strata` laid out in `frame` where there are as many)
+    /// whose path the bounds at frame `t` of an object that none of them
+    /// hit and that is not the record's own (`unseen`, asked only of the
+    /// objects above the record's horizon) cross, where they did not cross
+    /// its bounds at t0. 0 where the objects' spheres cover at most
+    /// `bound` of the hemisphere together, which turns away most records
+    /// without testing a path; past it only the cells within each sphere's
+    /// cone are tested (66 balls, each a few thousandths of a view: a few
+    /// cells each).
+    pub(crate) fn share(
         &self,
         t: u32,
-        g: &Gathered,
-        (strata, unseen): (Strata, &[bool]),
+        (point, frame): (&GatherPoint, &Frame),
+        paths: &impl SamplePaths,
+        (strata, unseen): (Strata, impl Fn(u32) -> bool),
         bound: f32,
     ) -> f32 {
         let Some(moved) = (t.checked_sub(self.t0 + 1)).and_then(|i| self.moved.get(i as usize))
         else {
             return 0.0;
         };
-        let point = g.candidate.point;
         let p = point.position;
         let (mut near, mut covered) = (Vec::new(), 0.0);
         for &(o, placed) in moved {
-            if !unseen.get(o as usize).copied().unwrap_or(false) {
-                continue;
-            }
             let share = placed.share(p, point.normal);
-            if share > 0.0 {
+            if share > 0.0 && unseen(o) {
                 let then = self.then.get(o as usize).copied().flatten();
                 near.push((placed, then));
                 covered += share;
@@ -220,14 +236,12 @@ impl Arrivals {
         if covered <= bound {
             return 0.0;
         }
-        let samples = &g.samples;
-        let n = samples.direction.len();
+        let n = paths.count();
         let newly_crossed = |i: usize, now: &Placed, then: &Option<Placed>| {
-            let (dir, distance) = (samples.direction[i], samples.distance[i]);
+            let (dir, distance) = paths.path(i);
             now.crossed(p, dir, distance) && !then.is_some_and(|b| b.crossed(p, dir, distance))
         };
         let mut crossed = vec![false; n];
-        let frame = Frame::new(point.normal);
         for (now, then) in &near {
             let mut test = |i: usize| {
                 if !crossed[i] && newly_crossed(i, now, then) {
@@ -235,12 +249,29 @@ impl Arrivals {
                 }
             };
             if n == strata.count() {
-                cone_cells(&frame, strata, p, now, |cell| test(cell as usize));
+                cone_cells(frame, strata, p, now, |cell| test(cell as usize));
             } else {
                 (0..n).for_each(test);
             }
         }
         crossed.iter().filter(|&&c| c).count() as f32 / n.max(1) as f32
+    }
+}
+
+/// The paths of a record's samples from its point: each one's unit
+/// direction and how far it went (∞ for a miss).
+pub(crate) trait SamplePaths {
+    fn count(&self) -> usize;
+    fn path(&self, i: usize) -> (Vec3, f32);
+}
+
+impl SamplePaths for HemisphereSamples {
+    fn count(&self) -> usize {
+        self.direction.len()
+    }
+
+    fn path(&self, i: usize) -> (Vec3, f32) {
+        (self.direction[i], self.distance[i])
     }
 }
 
@@ -292,33 +323,51 @@ fn cone_cells(frame: &Frame, strata: Strata, p: Vec3, placed: &Placed, mut each:
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cache::gather::{cell_direction, GatherPoint, HemisphereSamples};
+    use crate::cache::gather::cell_direction;
 
-    /// A record at the origin facing +y, on object 0, with one sample at
-    /// the centre of each cell of a 16 × 48 hemisphere, each hitting
-    /// static object 9 three units away.
-    fn gathered() -> Gathered {
-        let strata = STRATA;
-        let frame = Frame::new(Vec3::Y);
-        let direction: Vec<Vec3> = (0..strata.count() as u32)
-            .map(|c| cell_direction(&frame, strata, c, glam::Vec2::splat(0.5)))
-            .collect();
-        let n = direction.len();
-        let point = GatherPoint {
-            position: Vec3::ZERO,
-            normal: Vec3::Y,
-            geometric_normal: Vec3::Y,
-        };
-        Gathered {
-            candidate: crate::method::ic::Candidate::at(point),
-            record: crate::cache::IrradianceRecord::flat(0, Vec3::ZERO, Vec3::ONE),
-            samples: HemisphereSamples {
-                direction,
-                radiance: vec![Vec3::ONE; n],
-                distance: vec![3.0; n],
-                object: vec![9; n],
-            },
-            results: Vec::new(),
+    /// A record at the origin facing +y, with one sample at the centre of
+    /// each cell of a 16 × 48 hemisphere, each hitting static object 9
+    /// three units away.
+    struct Record {
+        point: GatherPoint,
+        frame: Frame,
+        samples: HemisphereSamples,
+    }
+
+    impl Record {
+        fn new() -> Record {
+            let frame = Frame::new(Vec3::Y);
+            let direction: Vec<Vec3> = (0..STRATA.count() as u32)
+                .map(|c| cell_direction(&frame, STRATA, c, glam::Vec2::splat(0.5)))
+                .collect();
+            let n = direction.len();
+            Record {
+                point: GatherPoint {
+                    position: Vec3::ZERO,
+                    normal: Vec3::Y,
+                    geometric_normal: Vec3::Y,
+                },
+                frame,
+                samples: HemisphereSamples {
+                    direction,
+                    radiance: vec![Vec3::ONE; n],
+                    distance: vec![3.0; n],
+                    object: vec![9; n],
+                },
+            }
+        }
+
+        /// [`Arrivals::share`] of this record's samples at frame `t`.
+        fn share(
+            &self,
+            a: &Arrivals,
+            t: u32,
+            (strata, unseen): (Strata, &[bool]),
+            bound: f32,
+        ) -> f32 {
+            let unseen = |o: u32| unseen[o as usize];
+            let pose = (&self.point, &self.frame);
+            a.share(t, pose, &self.samples, (strata, unseen), bound)
         }
     }
 
@@ -343,25 +392,25 @@ mod tests {
     /// the bound.
     #[test]
     fn an_object_moved_into_the_samples_paths_counts_by_the_share_it_crosses() {
-        let g = gathered();
+        let r = Record::new();
         let (over, under) = (Vec3::Y, Vec3::new(0.0, -20.0, 0.0));
-        let share = cube_moving(under, over).share(1, &g, UNSEEN, 0.05);
+        let share = r.share(&cube_moving(under, over), 1, UNSEEN, 0.05);
         // The near face's form factor from the point: four corner
         // rectangles of X = Y = 1 (a half side over the height),
         // 4 · (1/2π) · 2 · (X/√(1+X²)) · atan(Y/√(1+X²)) = 0.554.
         assert!((share - 0.554).abs() < 0.03, "{share}");
-        assert_eq!(cube_moving(over, over).share(1, &g, UNSEEN, 0.05), 0.0);
-        assert_eq!(cube_moving(under, over).share(1, &g, OWN, 0.05), 0.0);
+        assert_eq!(r.share(&cube_moving(over, over), 1, UNSEEN, 0.05), 0.0);
+        assert_eq!(r.share(&cube_moving(under, over), 1, OWN, 0.05), 0.0);
         assert_eq!(
-            cube_moving(under, 4.0 * Vec3::Y).share(1, &g, UNSEEN, 0.0),
+            r.share(&cube_moving(under, 4.0 * Vec3::Y), 1, UNSEEN, 0.0),
             0.0
         );
         let far = Vec3::new(0.0, 2.9, 0.0);
-        assert_eq!(cube_moving(under, far).share(1, &g, UNSEEN, 0.2), 0.0);
-        assert!(cube_moving(under, far).share(1, &g, UNSEEN, 0.0) > 0.0);
+        assert_eq!(r.share(&cube_moving(under, far), 1, UNSEEN, 0.2), 0.0);
+        assert!(r.share(&cube_moving(under, far), 1, UNSEEN, 0.0) > 0.0);
         // Frames outside those it holds count for nothing.
-        assert_eq!(cube_moving(under, over).share(0, &g, UNSEEN, 0.05), 0.0);
-        assert_eq!(cube_moving(under, over).share(2, &g, UNSEEN, 0.05), 0.0);
+        assert_eq!(r.share(&cube_moving(under, over), 0, UNSEEN, 0.05), 0.0);
+        assert_eq!(r.share(&cube_moving(under, over), 2, UNSEEN, 0.05), 0.0);
     }
 
     /// Every cell one of whose directions (eight jittered in each) meets
