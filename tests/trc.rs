@@ -865,6 +865,9 @@ fn an_object_that_jumps_in_or_grows_is_seen_at_once() {
         eprintln!("{what}: ic {ic:.4?}");
         for gradients in GRADIENT_MODES {
             let (missed, checked) = (errors(gradients, false), errors(gradients, true));
+            eprintln!(
+                "{what}, {gradients:?}: checked {checked:.4?}, constant estimate {missed:.4?}"
+            );
             let f = k as usize + 1;
             assert!(
                 missed[f] > 2.0 * ic[f],

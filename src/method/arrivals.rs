@@ -12,15 +12,21 @@
 //! samples are spread by the cosine, the part of the cosine-weighted
 //! hemisphere the object may now cover, and the record's change were the
 //! object to show a radiance as far from what it hides as the mean (what
-//! it does show is unknown until gathered). `trc` ends a record's life
-//! before the first frame where it exceeds `a^t` (`trc::later`); `tcg`
-//! drops a record where it exceeds [`crate::method::tcg`]'s bound in one
-//! frame.
+//! it does show is unknown until gathered). An object that a few samples
+//! hit counts too where the share of the view its bounding sphere covers
+//! grew by more than the bound since they were shot (it jumped nearer, or
+//! grew): those few samples cannot stand for all it covers now. `trc`
+//! ends a record's life before the first frame where the share exceeds
+//! `a^t` (`trc::later`); `tcg` drops a record where it exceeds 5 % in one
+//! frame (`tcg::arrived`).
 //!
 //! In the room a block jumps into, `trc`'s corner bias against `path` fell
 //! from 3.9× `ic`'s to 1.1× (`tests/trc.rs`,
-//! `an_object_that_jumps_in_or_grows_is_seen_at_once`). An object that a
-//! few samples hit and that then grows is left to what those samples see.
+//! `an_object_that_jumps_in_or_grows_is_seen_at_once`), `tcg`'s at the
+//! jump from 3.1× to 0.3× (`tests/tcg.rs`,
+//! `a_block_that_jumps_in_or_grows_is_seen_at_once`). An object whose
+//! bounding sphere holds the record's point covers all of its view at
+//! either frame, so its growth there is left to what its samples see.
 
 use crate::cache::gather::{GatherPoint, HemisphereSamples, Strata};
 use crate::method::motion::{segment_hits_box, Aabb};
@@ -204,19 +210,22 @@ impl Arrivals {
     /// The share of a record's samples (their `paths` from `point`, one in
     /// each cell of `strata` laid out in `frame` where there are as many)
     /// whose path the bounds at frame `t` of an object that none of them
-    /// hit and that is not the record's own (`unseen`, asked only of the
-    /// objects above the record's horizon) cross, where they did not cross
-    /// its bounds at t0. 0 where the objects' spheres cover at most
-    /// `bound` of the hemisphere together, which turns away most records
-    /// without testing a path; past it only the cells within each sphere's
-    /// cone are tested (66 balls, each a few thousandths of a view: a few
-    /// cells each).
+    /// hit (`unseen`, asked only of the objects above the record's
+    /// horizon) and that is not the record's own (`own`) cross, where they did not cross
+    /// its bounds at t0. An object they hit counts too where its sphere's
+    /// share of the view grew by more than `bound` since t0 (it jumped or
+    /// came nearer, or grew): the few samples that hit it far away cannot
+    /// stand for all it covers now. 0 where the objects' spheres cover at
+    /// most `bound` of the hemisphere together, which turns away most
+    /// records without testing a path; past it only the cells within each
+    /// sphere's cone are tested (66 balls, each a few thousandths of a
+    /// view: a few cells each).
     pub(crate) fn share(
         &self,
         t: u32,
         (point, frame): (&GatherPoint, &Frame),
         paths: &impl SamplePaths,
-        (strata, unseen): (Strata, impl Fn(u32) -> bool),
+        (strata, own, unseen): (Strata, u32, impl Fn(u32) -> bool),
         bound: f32,
     ) -> f32 {
         let Some(moved) = (t.checked_sub(self.t0 + 1)).and_then(|i| self.moved.get(i as usize))
@@ -227,8 +236,12 @@ impl Arrivals {
         let (mut near, mut covered) = (Vec::new(), 0.0);
         for &(o, placed) in moved {
             let share = placed.share(p, point.normal);
-            if share > 0.0 && unseen(o) {
-                let then = self.then.get(o as usize).copied().flatten();
+            if share <= 0.0 || o == own {
+                continue;
+            }
+            let then = self.then.get(o as usize).copied().flatten();
+            let grown = share - then.map_or(0.0, |b| b.share(p, point.normal));
+            if grown > bound || unseen(o) {
                 near.push((placed, then));
                 covered += share;
             }
@@ -357,17 +370,13 @@ mod tests {
             }
         }
 
-        /// [`Arrivals::share`] of this record's samples at frame `t`.
-        fn share(
-            &self,
-            a: &Arrivals,
-            t: u32,
-            (strata, unseen): (Strata, &[bool]),
-            bound: f32,
-        ) -> f32 {
-            let unseen = |o: u32| unseen[o as usize];
+        /// [`Arrivals::share`] of this record's samples at frame `t`, the
+        /// record on object `own`, the cube (object 1) hit by its samples
+        /// if `seen`.
+        fn share(&self, a: &Arrivals, t: u32, (own, seen): (u32, bool), bound: f32) -> f32 {
+            let unseen = |o: u32| o == 1 && !seen;
             let pose = (&self.point, &self.frame);
-            a.share(t, pose, &self.samples, (strata, unseen), bound)
+            a.share(t, pose, &self.samples, (STRATA, own, unseen), bound)
         }
     }
 
@@ -381,15 +390,20 @@ mod tests {
     }
 
     const STRATA: Strata = Strata { theta: 16, phi: 48 };
-    const UNSEEN: (Strata, &[bool]) = (STRATA, &[false, true]);
-    const OWN: (Strata, &[bool]) = (STRATA, &[true, false]);
+    /// The record on object 0, and the cube unseen; the cube the record's
+    /// own; the cube seen by its samples.
+    const UNSEEN: (u32, bool) = (0, false);
+    const OWN: (u32, bool) = (1, false);
+    const SEEN: (u32, bool) = (0, true);
 
     /// A unit cube that comes from under the floor to stand over the
     /// record, its near face half a unit up, crosses the paths of the
-    /// samples within the face's view: about the face's form factor. Where
-    /// it stood at t0 already, lies past the samples' hits, is seen (or
-    /// the record's own), it counts for none; a far one is turned away by
-    /// the bound.
+    /// samples within the face's view: about the face's form factor, seen
+    /// by the samples or not (seen, the share of the view it covers grew).
+    /// Where it stood at t0 already, lies past the samples' hits, or is the
+    /// record's own, it counts for none; seen, a step aside at the same
+    /// distance counts for none, unseen it does; a far one is turned away
+    /// by the bound.
     #[test]
     fn an_object_moved_into_the_samples_paths_counts_by_the_share_it_crosses() {
         let r = Record::new();
@@ -401,6 +415,11 @@ mod tests {
         assert!((share - 0.554).abs() < 0.03, "{share}");
         assert_eq!(r.share(&cube_moving(over, over), 1, UNSEEN, 0.05), 0.0);
         assert_eq!(r.share(&cube_moving(under, over), 1, OWN, 0.05), 0.0);
+        let seen = r.share(&cube_moving(under, over), 1, SEEN, 0.05);
+        assert!((seen - share).abs() < 1e-6, "{seen} against {share}");
+        let (left, right) = (Vec3::new(-0.3, 1.2, 0.0), Vec3::new(0.3, 1.2, 0.0));
+        assert_eq!(r.share(&cube_moving(left, right), 1, SEEN, 0.05), 0.0);
+        assert!(r.share(&cube_moving(left, right), 1, UNSEEN, 0.05) > 0.05);
         assert_eq!(
             r.share(&cube_moving(under, 4.0 * Vec3::Y), 1, UNSEEN, 0.0),
             0.0

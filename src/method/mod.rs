@@ -194,8 +194,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // triangles is taken as at most 48 points (`unshadowed::Clusters`,
         // 2026-12-01). 9, 10: as every method's next. 11: an object none
         // of a record's samples hit that comes into their paths ends its
-        // life (`later::LaterFrames::arrival_share`, 2026-12-01).
-        "trc" => 11,
+        // life (`later::LaterFrames::arrival_share`, 2026-12-01). 12: so
+        // does one they hit whose share of the view grew by more than
+        // `a_t` (`method::arrivals`, 2026-12-02).
+        "trc" => 12,
         // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6: as
         // below.
         "ic" => 6,
@@ -206,8 +208,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // every method's next. 7: as `trc`'s 8, for the light refresh. 8:
         // as every method's next. 9: as every method's next, and a
         // sample is stale where a directional light turns
-        // (`UnshadowedLights::directional_shift`, 2026-12-01).
-        "tcg" => 9,
+        // (`UnshadowedLights::directional_shift`, 2026-12-01). 10: with
+        // `arrivals`, a seen object whose share of the view grew counts
+        // too (`tcg::arrived`, 2026-12-02).
+        "tcg" => 10,
         // `movies` 3: a kept link that missed everything covers its whole
         // ray, so an object that later moves far into it is seen
         // (`global::LinkReach`, 2026-11-30). 4: as every method's next.

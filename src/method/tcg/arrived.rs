@@ -5,16 +5,20 @@
 //! is in none of the samples of the records that now see it, so its
 //! light, and its shadows on what their samples hit, came in over some
 //! `1/τ_min` frames (`tests/tcg.rs`). Here a record is dropped where, in
-//! one frame, moving objects that none of its samples hit in the last
-//! frame newly cross more than [`ARRIVAL_SHARE`] of its samples' paths
-//! ([`crate::method::arrivals`], `trc`'s test, over each cell's centre
-//! direction): the share of its cosine-weighted view they may newly
-//! cover. Where a pixel still needs a record, `fill` makes one there that
-//! sees the scene as it is. An object that some samples hit is left to
-//! Eq. 2 (those samples are shot again at `τ_max`), as `trc` leaves it
-//! to its reprojection: dropping the records beside every moving ball of
-//! `spheres` as well took 2.6 times the records and 16 % more time there,
-//! for the same error (`benches/RESULTS.md`).
+//! one frame, moving objects newly cross more than [`ARRIVAL_SHARE`] of
+//! its samples' paths ([`crate::method::arrivals`], `trc`'s test, over
+//! each cell's centre direction): the share of its cosine-weighted view
+//! they may newly cover. Objects that none of its samples hit in the last
+//! frame count, and so do those they hit where the share of the view the
+//! object's bounding sphere covers grew by more than [`ARRIVAL_SHARE`]
+//! (it jumped nearer, or grew). Where a pixel still needs a record, `fill`
+//! makes one there that sees the scene as it is.
+//!
+//! An object that some samples hit and that stays as large in the view is
+//! left to Eq. 2 (those samples are shot again at `τ_max`), as `trc`
+//! leaves it to its reprojection: dropping the records beside every
+//! moving ball of `spheres` as well took 2.6 times the records and 16 %
+//! more time there, for the same error (`benches/RESULTS.md`).
 //!
 //! Records on moving objects are left to the paper's rule: their samples'
 //! paths moved too, so what crossed them in the last frame is not known
@@ -90,9 +94,9 @@ impl Arrived {
                     let held = |&(hit, slack): &(Vec3, f32)| self.arrivals.held_then(o, hit, slack);
                     !seen.iter().any(held)
                 };
-                let pose = (point, frame);
+                let (pose, objects) = ((point, frame), (strata, own as u32, unseen));
                 self.arrivals
-                    .share(self.frame, pose, &paths, (strata, unseen), ARRIVAL_SHARE)
+                    .share(self.frame, pose, &paths, objects, ARRIVAL_SHARE)
                     > ARRIVAL_SHARE
             })
             .collect()

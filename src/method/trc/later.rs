@@ -197,7 +197,8 @@ impl LaterFrames {
         let pose = (&g.candidate.point, &frame);
         for t in self.t0 + 1..=last_valid {
             let is_unseen = |o: u32| unseen.get(o as usize).copied().unwrap_or(false);
-            let arrivals = || (self.arrivals).share(t, pose, &g.samples, (strata, is_unseen), a_t);
+            let objects = (strata, g.candidate.object, is_unseen);
+            let arrivals = || (self.arrivals).share(t, pose, &g.samples, objects, a_t);
             if !unseen.is_empty() && arrivals() > a_t {
                 return t - 1;
             }
