@@ -70,8 +70,9 @@ impl Arrived {
     /// Whether each record (with its pose of this frame) is one moving
     /// objects came into the view of: more than [`ARRIVAL_SHARE`] of its
     /// samples' paths newly crossed by objects none of them hit in the
-    /// last frame (those it saw, Eq. 2 follows at `τ_max`). Records on
-    /// moving objects are not.
+    /// last frame, or that they hit and that now cover more of the view
+    /// by over [`ARRIVAL_SHARE`] (the others Eq. 2 follows at `τ_max`).
+    /// Records on moving objects are not.
     pub(super) fn marked(
         &self,
         records: &[(TcgRecord, (GatherPoint, Frame))],

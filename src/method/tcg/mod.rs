@@ -14,10 +14,11 @@
 //!    record and updates it; dropping the unseen ones (`trc`'s rule, TRC
 //!    §5) keeps the work on what the camera sees, and a record covered by
 //!    a moving object is not refreshed for nothing. So is one that moving
-//!    objects none of its samples hit came into the view of (departure,
-//!    `arrived`: the paper's Eq. 2 would let them in at `τ_min`; `fill`
-//!    makes a record there again where a pixel needs one). Then redundant records
-//!    are removed (§4.2): in id order, one with more than
+//!    objects came into the view of, none of its samples having hit them
+//!    or they having come nearer (departure, `arrived`: the paper's Eq. 2
+//!    would let them in at `τ_min`; `fill` makes a record there again
+//!    where a pixel needs one). Then redundant records are removed
+//!    (§4.2): in id order, one with more than
 //!    [`TcgSettings::max_neighbours`] other records usable at its point
 //!    is removed, and hidden from the counts of the records after it;
 //! 2. *update* (§3.2–3.3): each record shoots again `N_update` cells
@@ -119,10 +120,11 @@ pub struct TcgSettings {
     /// `crossed`, which says what it costs); off, as the paper has it.
     #[serde(default = "occlusion_refresh_default")]
     pub occlusion_refresh: bool,
-    /// Whether a record is dropped where moving objects that none of its
-    /// samples hit newly cross more than 5 % (`arrived::ARRIVAL_SHARE`) of
-    /// its samples' paths in one frame (departure, on by default: the
-    /// module `arrived`); off, as the paper has it.
+    /// Whether a record is dropped where moving objects that come into its
+    /// view (none of its samples hit them, or they came nearer) newly
+    /// cross more than 5 % (`arrived::ARRIVAL_SHARE`) of its samples'
+    /// paths in one frame (departure, on by default: the module
+    /// `arrived`); off, as the paper has it.
     #[serde(default = "arrivals_default")]
     pub arrivals: bool,
 }

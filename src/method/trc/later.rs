@@ -30,11 +30,13 @@
 //!   frames an object departs in are reprojected with the lights then.
 //!
 //! An object none of the samples hit that comes into their paths is seen
-//! by no reprojection; [`crate::method::arrivals`] ends those lives.
+//! by no reprojection; [`crate::method::arrivals`] ends those lives, and
+//! those where an object the samples hit covers more of the view by over
+//! `a_t` (it jumped nearer, or grew).
 //!
 //! Limits: an object that a few samples hit and that then grows or comes
-//! nearer is followed through those samples alone (the other cells it
-//! comes to cover keep what they saw, as for t0+1); shadows that
+//! nearer by less is followed through those samples alone (the other
+//! cells it comes to cover keep what they saw, as for t0+1); shadows that
 //! move over what the record sees are not seen (as for t0+1 without
 //! `next_direct`); the gate's half cell is the cells' mean size, and cells
 //! near the normal are narrower in φ, and the object's nearest hit is
