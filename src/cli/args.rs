@@ -269,7 +269,7 @@ pub struct TcgArgs {
     /// Samples whose path an object moved into since the last frame (a ray-box test along their cell's centre) are shot again as those that hit moving objects are, and records a moved object buried are dropped (not in the paper). For objects that jump or appear: off, their indirect shadow comes in over some 1/τ_min frames; on, it costs 1.3× the time on cube-in-box and 1.6× on spheres (benches/RESULTS.md).
     #[arg(long, value_enum, default_value = "off")]
     pub tcg_occlusion_refresh: OnOff,
-    /// A record whose samples' paths moving objects newly cross by more than 5 % in one frame is dropped, and made again where a pixel needs it (not in the paper, whose records learn of a moving object only through the samples that hit it). For objects that jump in, grow or slide into a record's view: off, their light and shadow come in over some 1/τ_min frames.
+    /// A record whose samples' paths moving objects newly cross by more than 5 % in one frame is dropped, and made again where a pixel needs it: objects none of its samples hit, or that they hit and that came nearer (not in the paper, whose records learn of a moving object only through the samples that hit it). For objects that jump in, grow or slide into a record's view: off, their light and shadow come in over some 1/τ_min frames.
     #[arg(long, value_enum, default_value = "on")]
     pub tcg_arrivals: OnOff,
 }

@@ -14,8 +14,9 @@
 //! the record is also reprojected to the later frames of its life where
 //! the motion departs from that extrapolation, and its life ends before
 //! the first where it has changed by more than `a^t`, or where an object
-//! none of its samples hit comes into more than `a^t` of their paths
-//! (`later`). Each frame:
+//! none of its samples hit (or one they hit that now covers more of the
+//! view by over `a^t`) comes into more than `a^t` of their paths
+//! (`later`, `method::arrivals`). Each frame:
 //! 1. *age records*: a record still valid is reused; one that is no longer
 //!    valid but contributed to the previous frame is replaced by a new
 //!    record gathered at the same point (§4.4, "p_l = p_K"); one that
