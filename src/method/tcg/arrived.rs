@@ -35,6 +35,7 @@ use crate::sampling::Frame;
 use crate::store::rgbe::PackedSample;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+use std::cell::OnceCell;
 use std::f32::consts::TAU;
 
 /// The share of a record's samples whose paths moving objects may newly
@@ -90,8 +91,11 @@ impl Arrived {
                     frame,
                     strata,
                 };
-                let seen = paths.hits_on_moving_objects(point.position);
+                // Found only for a record some moving object is above the
+                // horizon of (most records never ask).
+                let seen = OnceCell::new();
                 let unseen = |o: u32| {
+                    let seen = seen.get_or_init(|| paths.hits_on_moving_objects(point.position));
                     let held = |&(hit, slack): &(Vec3, f32)| self.arrivals.held_then(o, hit, slack);
                     !seen.iter().any(held)
                 };

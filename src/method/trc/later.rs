@@ -184,11 +184,12 @@ impl LaterFrames {
             return last_valid;
         }
         let seen = nearest_hits(&g.samples, &self.dynamic);
-        // The moving objects no sample hit, other than the record's own.
+        // The moving objects no sample hit.
         let mut unseen = Vec::new();
         if !self.arrivals.is_empty() {
             unseen.clone_from(&self.dynamic);
-            for o in seen.iter().map(|&(o, _)| o).chain([g.candidate.object]) {
+            // The record's own object is left out by `Arrivals::share`.
+            for o in seen.iter().map(|&(o, _)| o) {
                 if let Some(u) = unseen.get_mut(o as usize) {
                     *u = false;
                 }
@@ -197,9 +198,9 @@ impl LaterFrames {
         let cell = resolvable_angle(strata);
         let frame = Frame::new(g.candidate.point.normal);
         let pose = (&g.candidate.point, &frame);
+        let is_unseen = |o: u32| unseen.get(o as usize).copied().unwrap_or(false);
+        let objects = (strata, g.candidate.object, is_unseen);
         for t in self.t0 + 1..=last_valid {
-            let is_unseen = |o: u32| unseen.get(o as usize).copied().unwrap_or(false);
-            let objects = (strata, g.candidate.object, is_unseen);
             let arrivals = || (self.arrivals).share(t, pose, &g.samples, objects, a_t);
             if !unseen.is_empty() && arrivals() > a_t {
                 return t - 1;
