@@ -263,7 +263,7 @@ pub struct TcgArgs {
     /// §4.2: a record with more usable neighbours than this is removed as redundant (their example: 10).
     #[arg(long, default_value_t = 10, allow_negative_numbers = true, value_parser = limits::MAX_NEIGHBOURS.parser())]
     pub tcg_max_neighbours: u32,
-    /// Samples whose light moving lights changed by more than 5 % since they were shot are shot again as those that hit moving objects are (not in the paper, whose Eq. 2 counts only the latter; off, a moving light's indirect light lags by up to 1/τ_min frames).
+    /// Samples whose light moving lights may have changed by more than 5 % since they were shot (on a surface of any normal at their hit, unshadowed), and their neighbours across an edge, are shot again as those that hit moving objects are (not in the paper, whose Eq. 2 counts only the latter; off, a moving light's indirect light lags by up to 1/τ_min frames).
     #[arg(long, value_enum, default_value = "on")]
     pub tcg_light_refresh: OnOff,
     /// Samples whose path an object moved into since the last frame (a ray-box test along their cell's centre) are shot again as those that hit moving objects are, and records a moved object buried are dropped (not in the paper). For objects that jump or appear: off, their indirect shadow comes in over some 1/τ_min frames; on, it costs 1.3× the time on cube-in-box and 1.6× on spheres (benches/RESULTS.md).

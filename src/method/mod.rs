@@ -210,8 +210,11 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // sample is stale where a directional light turns
         // (`UnshadowedLights::directional_shift`, 2026-12-01). 10: with
         // `arrivals`, a seen object whose share of the view grew counts
-        // too (`tcg::arrived`, 2026-12-02).
-        "tcg" => 10,
+        // too (`tcg::arrived`, 2026-12-02). 11: a sample is stale where its
+        // light may have changed on any normal (`UnshadowedLights::change_at`),
+        // and so are its neighbours across an edge
+        // (`tcg::select::with_neighbours`, 2026-12-02).
+        "tcg" => 11,
         // `movies` 3: a kept link that missed everything covers its whole
         // ray, so an object that later moves far into it is seen
         // (`global::LinkReach`, 2026-11-30). 4: as every method's next.

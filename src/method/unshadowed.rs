@@ -210,70 +210,77 @@ impl UnshadowedLights {
         self.arriving(p, |w| n.dot(w).max(0.0))
     }
 
-    /// The unshadowed light arriving at `p` from every direction (each
-    /// light's irradiance on a surface facing it): where the normal at `p`
-    /// is not known, a light that comes nearer, goes farther or changes
-    /// shows in it. A directional light gives the same anywhere, whichever
-    /// way it turns: [`Self::directional_shift`] is what it misses.
-    pub(crate) fn arriving_at(&self, p: Vec3) -> Vec3 {
-        self.arriving(p, |_| 1.0)
-    }
-
-    /// The directional lights, in order.
-    fn suns(&self) -> impl Iterator<Item = PlacedLight> + '_ {
-        (self.emitters.iter()).filter_map(|e| match e {
-            Emitter::Punctual(light) if light.is_directional() => Some(*light),
-            _ => None,
-        })
-    }
-
-    /// The most the directional lights' unshadowed irradiance may differ
-    /// between these lights and `other` (the same lights at another
-    /// time) on a surface of any normal `n`, anywhere: `Σ |E′·w′ − E·w|`
-    /// per colour channel, `w` towards each light, which bounds
-    /// `|E′·max(0, n·w′) − E·max(0, n·w)|` (`max(0, ·)` moves nothing
-    /// farther apart). 0 where none turns or changes.
-    pub(crate) fn directional_shift(&self, other: &Self) -> Vec3 {
-        (self.suns().zip(other.suns()))
-            .map(|(a, b)| {
-                let (wa, wb) = (-a.direction, -b.direction);
-                let channel = |k: usize| (wb * b.intensity[k] - wa * a.intensity[k]).length();
-                Vec3::new(channel(0), channel(1), channel(2))
-            })
-            .sum()
+    /// How much the unshadowed direct irradiance at `p` may differ between
+    /// these lights and `other` (the same lights at another time) on a
+    /// surface of any normal there, and what they give a surface facing
+    /// each light (the larger of the two times), by colour channel: where
+    /// the normal at `p` is not known (a gather sample's hit), the first
+    /// over the second bounds the relative change of its light. The change
+    /// is `Σ |E′·w′ − E·w|` over the lights, `E` what one gives a surface
+    /// facing it and `w` the unit direction to it, which bounds
+    /// `|Σ E′·max(0, n·w′) − Σ E·max(0, n·w)|` for every unit `n`
+    /// (`max(0, ·)` moves nothing farther apart): a light that comes
+    /// nearer, goes farther, dims, or only turns about `p` (a sun, or a
+    /// far point light swinging across the sky at the same distance)
+    /// shows in it. Lights that do not pair up (one dropped out, a
+    /// triangle scaled to nothing) count as changed wholly.
+    pub(crate) fn change_at(&self, other: &Self, p: Vec3) -> (Vec3, Vec3) {
+        let (mut change, mut before, mut after) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
+        let paired = self.emitters.len() == other.emitters.len();
+        for (a, b) in self.emitters.iter().zip(&other.emitters) {
+            let ((ea, wa), (eb, wb)) = (a.arriving(p), b.arriving(p));
+            let channel = |k: usize| (wb * eb[k] - wa * ea[k]).length();
+            change += Vec3::new(channel(0), channel(1), channel(2));
+            (before, after) = (before + ea, after + eb);
+        }
+        if !paired {
+            let facing = |lights: &Self| lights.emitters.iter().map(|e| e.arriving(p).0).sum();
+            let (all_before, all_after): (Vec3, Vec3) = (facing(self), facing(other));
+            return (all_before + all_after, all_before.max(all_after));
+        }
+        (change, before.max(after))
     }
 
     /// Σ over the lights of what each sends to `p` from direction `w`
     /// (unit, towards the light), times `cos_at(w)`.
     fn arriving(&self, p: Vec3, cos_at: impl Fn(Vec3) -> f32) -> Vec3 {
-        let mut e = Vec3::ZERO;
-        for l in &self.emitters {
-            match *l {
-                Emitter::Area {
-                    center,
-                    normal,
-                    power,
-                    double_sided,
-                } => {
-                    let d = center - p;
-                    let d2 = d.length_squared().max(1e-8);
-                    let w = d / d2.sqrt();
-                    let cos_l = -normal.dot(w);
-                    let cos_l = if double_sided { cos_l.abs() } else { cos_l };
-                    e += power * (cos_l.max(0.0) * cos_at(w) / d2);
-                }
-                Emitter::Punctual(light) if light.is_directional() => {
-                    e += light.intensity * cos_at(-light.direction);
-                }
-                Emitter::Punctual(light) => {
-                    let d = light.position - p;
-                    let d2 = d.length_squared().max(1e-8);
-                    let w = d / d2.sqrt();
-                    e += light.intensity_toward(-w) * (cos_at(w) / d2);
-                }
+        (self.emitters.iter())
+            .map(|l| {
+                let (e, w) = l.arriving(p);
+                e * cos_at(w)
+            })
+            .sum()
+    }
+}
+
+impl Emitter {
+    /// What it gives a surface at `p` facing it (unshadowed), and the unit
+    /// direction from `p` to it.
+    fn arriving(&self, p: Vec3) -> (Vec3, Vec3) {
+        match *self {
+            Emitter::Area {
+                center,
+                normal,
+                power,
+                double_sided,
+            } => {
+                let d = center - p;
+                let d2 = d.length_squared().max(1e-8);
+                let w = d / d2.sqrt();
+                let cos_l = -normal.dot(w);
+                let cos_l = if double_sided { cos_l.abs() } else { cos_l };
+                (power * (cos_l.max(0.0) / d2), w)
+            }
+            Emitter::Punctual(light) if light.is_directional() => {
+                (light.intensity, -light.direction)
+            }
+            Emitter::Punctual(light) => {
+                let d = light.position - p;
+                let d2 = d.length_squared().max(1e-8);
+                let w = d / d2.sqrt();
+                (light.intensity_toward(-w) / d2, w)
             }
         }
-        e
     }
 }
 
@@ -531,45 +538,135 @@ mod tests {
         }
     }
 
+    /// Unit normals over the sphere, a 64 × 32 grid (equal area).
+    fn normals() -> impl Iterator<Item = Vec3> {
+        (0..64).flat_map(|i| {
+            (0..32).map(move |j| {
+                let (phi, cos) = (i as f32 / 64.0 * TAU, 1.0 - 2.0 * (j as f32 + 0.5) / 32.0);
+                let sin = (1.0 - cos * cos).sqrt();
+                Vec3::new(sin * phi.cos(), cos, sin * phi.sin())
+            })
+        })
+    }
+
+    /// The largest change of the irradiance at `p` between `a` and `b`
+    /// over [`normals`], by channel.
+    fn largest_change(a: &UnshadowedLights, b: &UnshadowedLights, p: Vec3) -> Vec3 {
+        normals()
+            .map(|n| (b.irradiance(p, n) - a.irradiance(p, n)).abs())
+            .fold(Vec3::ZERO, Vec3::max)
+    }
+
+    /// That `largest` (a change over the normals) is within `bound` and
+    /// meets it to 5 % (the grid's steps).
+    fn assert_met(bound: Vec3, largest: Vec3) {
+        assert!(
+            largest.cmple(bound * 1.0001).all(),
+            "{largest} over {bound}"
+        );
+        assert!(
+            largest.cmpgt(bound * 0.95).all(),
+            "{largest} against {bound}"
+        );
+    }
+
     /// A sun turned by θ: the bound is `2E·sin(θ/2)`, it holds on every
-    /// normal of a grid over the sphere (and is met on one), and what
-    /// arrives from every direction does not see the turn.
+    /// normal of a grid over the sphere, and is met on one; the scale is
+    /// what it gives a surface facing it.
     #[test]
-    fn a_turning_sun_shifts_any_surfaces_light_by_at_most_its_bound() {
+    fn a_turning_sun_changes_any_surfaces_light_by_at_most_its_bound() {
         let e = Vec3::new(2.0, 1.0, 0.5);
         let before = Vec3::new(0.3, -1.0, 0.2).normalize();
-        let theta = 0.3f32;
-        let turn = glam::Quat::from_axis_angle(Vec3::Z, theta);
+        let turn = glam::Quat::from_axis_angle(Vec3::Z, 0.3);
         let (a, b) = (
             UnshadowedLights::sun(before, e),
             UnshadowedLights::sun(turn * before, e),
         );
-        assert_eq!(a.arriving_at(Vec3::ONE), b.arriving_at(Vec3::X));
-        let bound = a.directional_shift(&b);
+        let (bound, scale) = a.change_at(&b, Vec3::ONE);
         let expected = e * (before - turn * before).length();
         assert!(
             (bound - expected).abs().max_element() < 1e-6,
             "{bound} {expected}"
         );
-        assert!(a.directional_shift(&a) == Vec3::ZERO);
-        let mut largest = Vec3::ZERO;
-        for i in 0..64 {
-            for j in 0..32 {
-                let (phi, cos) = (i as f32 / 64.0 * TAU, 1.0 - 2.0 * (j as f32 + 0.5) / 32.0);
-                let sin = (1.0 - cos * cos).sqrt();
-                let n = Vec3::new(sin * phi.cos(), cos, sin * phi.sin());
-                let change = (b.irradiance(Vec3::ZERO, n) - a.irradiance(Vec3::ZERO, n)).abs();
-                assert!(
-                    change.cmple(bound * 1.0001).all(),
-                    "{n}: {change} over {bound}"
-                );
-                largest = largest.max(change);
-            }
+        assert_eq!(scale, e);
+        assert_eq!(a.change_at(&a, Vec3::ONE).0, Vec3::ZERO);
+        assert_met(bound, largest_change(&a, &b, Vec3::ZERO));
+    }
+
+    /// A far point light swung 15° about a point at the same distance (a
+    /// sun made of a point light): the light arriving there from it is the
+    /// same, but a surface at an angle to it sees it change, by about the
+    /// bound on the worst normal. So for a point light moved nearer, a
+    /// spot turned away, an area light moved and tilted, all at once: the
+    /// bound holds on every normal.
+    #[test]
+    fn a_light_that_only_turns_about_a_point_changes_its_light_within_the_bound() {
+        let p = Vec3::new(0.5, 0.2, -0.3);
+        let i = Vec3::new(1600.0, 800.0, 400.0);
+        let swung = glam::Quat::from_rotation_z(15f32.to_radians());
+        let far = Vec3::new(0.0, 40.0, 0.0);
+        let (a, b) = (lit_by(p + far, i), lit_by(p + swung * far, i));
+        let (bound, scale) = a.change_at(&b, p);
+        assert!((scale - i / 1600.0).abs().max_element() < 1e-6, "{scale}");
+        let largest = largest_change(&a, &b, p);
+        assert_met(bound, largest);
+        assert!(largest.max_element() > 0.2 * scale.max_element());
+
+        let spot = |position: Vec3, direction: Vec3| PlacedLight {
+            position,
+            direction,
+            intensity: Vec3::splat(3.0),
+            kind: crate::scene::LightKind::Spot(crate::scene::Spot {
+                inner_cone: 0.3,
+                outer_cone: 0.6,
+            }),
+        };
+        let panel = |center: Vec3, normal: Vec3| Emitter::Area {
+            center,
+            normal,
+            power: Vec3::new(2.0, 2.0, 1.0),
+            double_sided: false,
+        };
+        let lights = |k: f32| UnshadowedLights {
+            emitters: vec![
+                Emitter::Punctual(PlacedLight {
+                    position: Vec3::new(2.0 - k, 1.0, 0.0),
+                    direction: Vec3::NEG_Z,
+                    intensity: Vec3::new(1.0, 2.0, 3.0),
+                    kind: crate::scene::LightKind::Point,
+                }),
+                Emitter::Punctual(spot(
+                    Vec3::new(0.0, 2.0, 0.0),
+                    Vec3::new(k, -1.0, 0.0).normalize(),
+                )),
+                panel(
+                    Vec3::new(-1.0 + k, 1.5, 0.5),
+                    Vec3::new(0.2 * k, -1.0, 0.0).normalize(),
+                ),
+            ],
+        };
+        let (a, b) = (lights(0.0), lights(0.4));
+        for q in [Vec3::ZERO, p, Vec3::new(-0.5, 0.0, 1.0)] {
+            let (bound, _) = a.change_at(&b, q);
+            let largest = largest_change(&a, &b, q);
+            assert!(
+                largest.cmple(bound * 1.0001).all(),
+                "{q}: {largest} over {bound}"
+            );
+            assert!(largest.max_element() > 0.0, "{q}");
         }
-        assert!(
-            largest.cmpgt(bound * 0.95).all(),
-            "{largest} against {bound}"
-        );
+    }
+
+    /// Lights that do not pair up (one more in the second) count as changed
+    /// wholly: the change is at least the scale.
+    #[test]
+    fn lights_that_do_not_pair_up_change_wholly() {
+        let a = lit_by(Vec3::Y, Vec3::ONE);
+        let mut b = a.clone();
+        b.emitters
+            .extend(lit_by(Vec3::new(5.0, 5.0, 0.0), Vec3::splat(1e-3)).emitters);
+        let (change, scale) = a.change_at(&b, Vec3::ZERO);
+        assert!(change.cmpge(scale).all() && scale.cmpgt(Vec3::ZERO).all());
     }
 
     fn lit_by(position: Vec3, intensity: Vec3) -> UnshadowedLights {

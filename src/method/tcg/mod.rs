@@ -25,7 +25,8 @@
 //!    (Eq. 2, `select::cells_to_update`; departure: its `x` also counts
 //!    the samples whose light moving lights changed, `stale`, and, with
 //!    `occlusion_refresh` on, those whose path an object moved into,
-//!    `crossed`), drawn
+//!    `crossed`, and the cells beside those across an edge,
+//!    `select::with_neighbours`), drawn
 //!    without repetition with
 //!    probability ∝ `2^age` (`select::pick_cells`), each with a new
 //!    jittered direction in its cell; its other samples age by a frame.
@@ -443,6 +444,7 @@ impl TemporallyCoherentGathering {
                 if let Some(moved) = moved {
                     moved.mark(r, pose, strata, &mut stale);
                 }
+                let stale = select::with_neighbours(&stale, &r.samples, strata);
                 let is_stale = |cell: usize| stale.get(cell).copied().unwrap_or(false);
                 let count = select::cells_to_update(&self.settings, &r.samples, is_stale);
                 let mut rng = Rng::new(self.key(ctx, streams::RECORD_PICK, r, 0));

@@ -3,6 +3,7 @@
 //! drawn without repetition with probability ∝ `2^age`.
 
 use super::TcgSettings;
+use crate::cache::gather::Strata;
 use crate::sampling::Rng;
 use crate::store::rgbe::PackedSample;
 
@@ -24,6 +25,68 @@ pub(super) fn cells_to_update(
     let n =
         (settings.tau_max - settings.tau_min) * dynamic as f32 + settings.tau_min * total as f32;
     (n.max(0.0).ceil() as usize).min(total)
+}
+
+/// `stale` (by cell of `strata`'s `θ × φ` grid, one of `samples` each)
+/// grown by one cell along θ and φ (φ wraps round) across edges: a cell
+/// beside a stale one becomes stale where their samples lie apart
+/// ([`apart`]: one missed and the other hit, or their hits' distances
+/// differ by over [`EDGE`]).
+///
+/// Why: which cells are stale depends on what their samples hit, so a
+/// cell across the edge of what is stale (a wall's top edge against the
+/// sky under a light that turns: the wall's hits are stale, the sky's
+/// misses are not) would be shot again while its sample hits the stale
+/// side and kept once a new direction in it missed that side, until
+/// `τ_min`'s share came round: its sample drifts to the side that is not
+/// stale, and the record with it (on a courtyard under a swinging light,
+/// `tests/tcg.rs`, 2.3 times the block bias of shooting every sample again
+/// each frame). With its neighbours across the edge, such a cell is stale
+/// whichever side its own sample hit, so whether it is shot again no
+/// longer follows its own sample. Where neighbouring hits lie on one
+/// surface, what is stale changes smoothly along it (the light test
+/// depends on the hit's place and age only) and a cell's drift changes
+/// little: growing there too cost 23 % more rays under the built-in
+/// moving light for no less error (`benches/RESULTS.md`). A grid that is
+/// not `strata`'s (a damaged state) is left as it is.
+pub(super) fn with_neighbours(
+    stale: &[bool],
+    samples: &[PackedSample],
+    strata: Strata,
+) -> Vec<bool> {
+    let (m, n) = (strata.theta as usize, strata.phi as usize);
+    if stale.len() != m * n || samples.len() != m * n || !stale.contains(&true) {
+        return stale.to_vec();
+    }
+    let mut grown = stale.to_vec();
+    for cell in (0..m * n).filter(|&c| stale[c]) {
+        let (j, k) = (cell / n, cell % n);
+        let (up, down) = ((j > 0).then(|| cell - n), (j + 1 < m).then(|| cell + n));
+        let along = [j * n + (k + 1) % n, j * n + (k + n - 1) % n].map(Some);
+        for other in along.into_iter().chain([up, down]).flatten() {
+            grown[other] |= apart(&samples[cell], &samples[other]);
+        }
+    }
+    grown
+}
+
+/// The relative difference of two neighbouring hits' distances past which
+/// an edge lies between them ([`with_neighbours`]): well above what the
+/// step of a cell makes along a surface facing the record, below the
+/// steps of a silhouette.
+const EDGE: f32 = 0.1;
+
+/// Whether two neighbouring cells' samples lie across an edge: one missed
+/// and the other hit, or their hits' distances differ by more than
+/// [`EDGE`] of the nearer.
+fn apart(a: &PackedSample, b: &PackedSample) -> bool {
+    match (a.is_miss(), b.is_miss()) {
+        (false, false) => {
+            let (da, db) = (a.distance(), b.distance());
+            (da - db).abs() > EDGE * da.min(db)
+        }
+        (miss_a, miss_b) => miss_a != miss_b,
+    }
 }
 
 /// `count` distinct cells of `samples`, in increasing order, drawn one
@@ -132,6 +195,48 @@ mod tests {
             ..TcgSettings::default()
         };
         assert_eq!(cells_to_update(&none, &still, fresh), 0);
+    }
+
+    /// A stale cell makes its four neighbours stale (φ wrapping round, θ
+    /// not past the pole or the horizon) where their samples lie across an
+    /// edge from its own (a miss beside a hit, a hit 20 % farther), and
+    /// nothing else: not a neighbour on the same surface (5 % farther), nor
+    /// a miss beside a miss; no stale cell, or a grid that is not the
+    /// strata's, changes nothing.
+    #[test]
+    fn a_stale_cell_makes_its_neighbours_across_an_edge_stale() {
+        let strata = Strata { theta: 3, phi: 4 };
+        let cells = |marked: &[usize]| {
+            let mut v = vec![false; 12];
+            marked.iter().for_each(|&c| v[c] = true);
+            v
+        };
+        let hit = |d: f32| PackedSample::pack(Vec3::ONE, d, 0, false, 0);
+        let miss = PackedSample::pack(Vec3::ZERO, f32::INFINITY, u32::MAX, false, 0);
+        assert!(miss.is_miss() && !hit(1.0).is_miss());
+        // All across an edge from cell 4 (1, 0) and cell 2 (0, 2).
+        let mut samples = vec![miss; 12];
+        samples[4] = hit(1.0);
+        samples[2] = hit(1.0);
+        // (1, 0): (1, 1), (1, 3) round φ, (0, 0) and (2, 0).
+        let stale = with_neighbours(&cells(&[4]), &samples, strata);
+        assert_eq!(stale, cells(&[4, 5, 7, 0, 8]));
+        // (0, 2): no row above the first.
+        let stale = with_neighbours(&cells(&[2]), &samples, strata);
+        assert_eq!(stale, cells(&[2, 1, 3, 6]));
+        // Hits beside cell 4: 1.2 away across an edge, 1.05 on its surface.
+        samples = vec![hit(1.05); 12];
+        samples[4] = hit(1.0);
+        samples[5] = hit(1.2);
+        let stale = with_neighbours(&cells(&[4]), &samples, strata);
+        assert_eq!(stale, cells(&[4, 5]));
+        let stale = with_neighbours(&cells(&[4]), &[miss; 12], strata);
+        assert_eq!(stale, cells(&[4]));
+        assert_eq!(with_neighbours(&cells(&[]), &samples, strata), cells(&[]));
+        assert_eq!(
+            with_neighbours(&[true, false], &samples, strata),
+            [true, false]
+        );
     }
 
     /// The picks are distinct cells, as many as asked.

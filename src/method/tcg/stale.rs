@@ -10,12 +10,16 @@
 //! also counts in Eq. 2's `x` where the unshadowed direct light at its hit
 //! point (the record's point plus its cell's centre direction times its
 //! stored distance, the record posed as it was in the frame the sample
-//! was shot in, which its age gives) has changed by more than
+//! was shot in, which its age gives) may have changed by more than
 //! [`STALE_LIGHT`] since that frame, and every sample where the lights'
-//! power has (a light switched off). A directional light sends the same
-//! from every direction wherever it turns, so the most its turn may
-//! change a surface of any normal is added to that change
-//! (`UnshadowedLights::directional_shift`, a bound of ours). Stale samples are drawn
+//! power has (a light switched off). The hit's normal is not stored, so
+//! the change is bounded over every normal
+//! (`UnshadowedLights::change_at`, a bound of ours): a light that only
+//! turns about the hit changes the light of a surface at an angle to it
+//! as much as one that comes nearer (a sun turning; a far point light
+//! swinging across the sky, which a test of the light arriving from
+//! every direction, this module's before 2026-12-02, missed: `tests/tcg.rs`,
+//! where that lagged the light as the paper's rule does). Stale samples are drawn
 //! before the others (`select::pick_cells`). A hit that no light reaches
 //! directly (a ceiling above a panel facing down) shows indirect light
 //! only, which the moving light changes too: such samples are still shot
@@ -92,7 +96,6 @@ impl LightHistory {
                     lights,
                     objects: &self.objects[&t.saturating_sub(1 + a)],
                     power_changed: relative_change(lights.power(), power) > STALE_LIGHT,
-                    directional_shift: lights.directional_shift(now),
                 })
             })
             .collect();
@@ -112,10 +115,6 @@ struct Then<'a> {
     /// whose hit no light reaches directly too (a ceiling lit only by the
     /// floor when a panel facing down is switched off).
     power_changed: bool,
-    /// How much the directional lights may have changed any surface's
-    /// light since then ([`UnshadowedLights::directional_shift`]): a sun
-    /// that turns leaves what arrives from every direction as it was.
-    directional_shift: Vec3,
 }
 
 /// Which samples' light has changed since they were shot, in one frame.
@@ -163,11 +162,10 @@ impl Staleness<'_> {
         }
         let dir = cell_direction(frame, strata, cell as u32, Vec2::splat(0.5));
         let hit = point.position + dir * s.distance();
-        // The hit's normal is not stored: the light arriving from anywhere,
-        // and the most a turning sun may have changed on any normal.
-        let (before, after) = (then.lights.arriving_at(hit), self.now.arriving_at(hit));
-        let change = (after - before).abs() + then.directional_shift;
-        relative(change, before.max(after)) > STALE_LIGHT
+        // The hit's normal is not stored: the most its light may have
+        // changed on any normal, against the most it may be.
+        let (change, scale) = then.lights.change_at(self.now, hit);
+        relative(change, scale) > STALE_LIGHT
     }
 }
 
@@ -190,11 +188,13 @@ mod tests {
 
     /// A record made at the origin on an object that has since moved by
     /// `Δ` = (0.5, 0, 0), one sample of age 0 hitting 1 away along its
-    /// first cell, and a light that has moved from 1 on one side of where
-    /// that hit would be now to 1 on the other. The hit was made from
-    /// where the record was (0.5 nearer the old light's side), so its
-    /// light changed from 1/1.5² to 1/0.5²: stale. Placed from where the
-    /// record is now (as before this test), both lights read the same.
+    /// first cell, and a light 0.1 above where that hit was made that has
+    /// moved 0.01 sideways (along z, square to the lines from it to both
+    /// places of the hit). The hit was made from where the record was, and
+    /// there the light turned by about 0.1 rad: stale (a surface at an
+    /// angle to it may see 10 % more or less). Placed from where the
+    /// record is now, 0.51 from the light, it turned by 0.02 rad and came
+    /// no nearer: not stale.
     #[test]
     fn a_moving_records_hit_is_placed_where_the_record_was() {
         let strata = Strata::default();
@@ -212,10 +212,10 @@ mod tests {
         };
         let delta = Vec3::new(0.5, 0.0, 0.0);
         let dir = cell_direction(&Frame::new(Vec3::Y), strata, 0, Vec2::splat(0.5));
-        let hit_now = dir + delta;
+        let light = dir + 0.1 * Vec3::Y;
         let (lights_then, lights_now) = (
-            UnshadowedLights::point(hit_now + Vec3::X, Vec3::ONE),
-            UnshadowedLights::point(hit_now - Vec3::X, Vec3::ONE),
+            UnshadowedLights::point(light, Vec3::ONE),
+            UnshadowedLights::point(light + 0.01 * Vec3::Z, Vec3::ONE),
         );
         let stale = |objects_then: &[Mat4]| {
             let staleness = Staleness {
@@ -224,7 +224,6 @@ mod tests {
                     lights: &lights_then,
                     objects: objects_then,
                     power_changed: false,
-                    directional_shift: Vec3::ZERO,
                 })],
             };
             staleness.stale_cells(&record, strata)
