@@ -9,7 +9,7 @@ use radcache::method::ic::{GlossyLobe, IcSettings};
 use radcache::method::movies::{Movie, MoviesSettings, TextureMovies};
 use radcache::method::path::PathSettings;
 use radcache::method::tcg::TcgSettings;
-use radcache::method::trc::{TemporalGradients, TrcSettings};
+use radcache::method::trc::{NextDirect, TemporalGradients, TrcSettings};
 use radcache::method::{FrameStats, Method};
 use radcache::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob};
 use radcache::store::migrate::{self, Migration};
@@ -1042,6 +1042,42 @@ fn a_job_stored_before_a_setting_existed_resumes_under_the_value_it_ran() {
         .unwrap();
     let resumed = store.begin_job(&spec_of("r", &trc, &[]), false);
     assert_eq!(resumed.unwrap().id, old.id);
+}
+
+/// `trc`'s `next_direct` was a flag before it had a mode between: a job
+/// stored with `false` (the default then) resumes under `off` and is
+/// refused under today's default (`moving-lights`), naming the setting;
+/// one stored with `true` resumes under `on`.
+#[test]
+fn a_trc_job_stored_with_next_direct_as_a_flag_reads_it_as_off_or_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let trc = |next_direct| {
+        MethodSettings::Trc(TrcSettings {
+            next_direct,
+            ..TrcSettings::default()
+        })
+    };
+    for (name, flag, mode) in [
+        ("off", false, NextDirect::Off),
+        ("on", true, NextDirect::On),
+    ] {
+        let mut spec = spec_of(name, &trc(mode), &[]);
+        let mut json: serde_json::Value = serde_json::from_str(&spec.settings).unwrap();
+        json["Trc"]["next_direct"] = flag.into();
+        spec.settings = json.to_string();
+        let old = store.begin_job(&spec, false).unwrap();
+        let resumed = store.begin_job(&spec_of(name, &trc(mode), &[]), false);
+        assert_eq!(resumed.unwrap().id, old.id);
+        if !flag {
+            let given = spec_of(name, &trc(NextDirect::MovingLights), &[]);
+            let msg = err_text(store.begin_job(&given, false));
+            assert!(
+                msg.contains("next_direct: stored off, given moving-lights"),
+                "{msg}"
+            );
+        }
+    }
 }
 
 /// A job refused for another spp names it once: it is one of the method's

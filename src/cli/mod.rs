@@ -15,8 +15,8 @@ use crate::store::{self, Store};
 use anyhow::{bail, Context, Result};
 pub use args::{
     BackendArg, BenchArgs, CompactArgs, CompareArgs, DeleteArgs, GlossyArg, IcArgs, InspectArgs,
-    MethodName, MoviesArgs, OnOff, RenderArgs, ServeArgs, TcgArgs, TrcArgs, TrcGradientsArg,
-    DEFAULT_DB,
+    MethodName, MoviesArgs, NextDirectArg, OnOff, RenderArgs, ServeArgs, TcgArgs, TrcArgs,
+    TrcGradientsArg, DEFAULT_DB,
 };
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use output::{out, outln};

@@ -5,8 +5,8 @@
 use super::interrupt::{stop_on_ctrl_c, CtrlCWords, Interrupted};
 use super::output::outln;
 use super::{
-    backend_choice, GlossyArg, IcArgs, MethodName, MoviesArgs, OnOff, RenderArgs, TcgArgs, TrcArgs,
-    TrcGradientsArg, DEFAULT_DB,
+    backend_choice, GlossyArg, IcArgs, MethodName, MoviesArgs, NextDirectArg, OnOff, RenderArgs,
+    TcgArgs, TrcArgs, TrcGradientsArg, DEFAULT_DB,
 };
 use crate::integrator::PathLength;
 use crate::method::ic::{GlossyLobe, IcSettings};
@@ -14,7 +14,7 @@ use crate::method::movies::global::GlobalSettings;
 use crate::method::movies::MoviesSettings;
 use crate::method::path::PathSettings;
 use crate::method::tcg::TcgSettings;
-use crate::method::trc::{TemporalGradients, TrcSettings};
+use crate::method::trc::{NextDirect, TemporalGradients, TrcSettings};
 use crate::render::{self, memory, FrameSettings, MethodSettings, Renderer, SceneSource};
 use crate::store::{self, Store};
 use crate::system_memory;
@@ -198,7 +198,11 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
                 TrcGradientsArg::Interpolated => TemporalGradients::Interpolated,
             },
             reprojection: args.trc.trc_reprojection == OnOff::On,
-            next_direct: args.trc.trc_next_direct == OnOff::On,
+            next_direct: match args.trc.trc_next_direct {
+                NextDirectArg::Off => NextDirect::Off,
+                NextDirectArg::MovingLights => NextDirect::MovingLights,
+                NextDirectArg::On => NextDirect::On,
+            },
             keep_paths: args.trc.trc_keep_paths == OnOff::On,
         }),
         MethodName::Tcg => MethodSettings::Tcg(TcgSettings {

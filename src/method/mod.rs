@@ -196,8 +196,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // of a record's samples hit that comes into their paths ends its
         // life (`later::LaterFrames::arrival_share`, 2026-12-01). 12: so
         // does one they hit whose share of the view grew by more than
-        // `a_t` (`method::arrivals`, 2026-12-02).
-        "trc" => 12,
+        // `a_t` (`method::arrivals`, 2026-12-02). 13: the direct light at
+        // t0+1 is evaluated by default at frames after which a light moves
+        // (`trc::NextDirect::MovingLights`, 2026-12-02).
+        "trc" => 13,
         // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6: as
         // below.
         "ic" => 6,

@@ -9,7 +9,7 @@ use crate::method::ic::{GlossyLobe, IcSettings};
 use crate::method::movies::MoviesSettings;
 use crate::method::path::PathSettings;
 use crate::method::tcg::TcgSettings;
-use crate::method::trc::{TemporalGradients, TrcSettings};
+use crate::method::trc::{NextDirect, TemporalGradients, TrcSettings};
 use crate::render::MethodSettings;
 use std::fmt::Display;
 use std::str::FromStr;
@@ -212,7 +212,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("max_life", "20"),
             ("gradients", "extrapolated"),
             ("reprojection", "1"),
-            ("next_direct", "0"),
+            ("next_direct", "moving-lights"),
             ("keep_paths", "0"),
             ("spatial_gradients", "0"),
             ("spp", "4"),
@@ -472,7 +472,7 @@ pub fn named_settings(settings: &MethodSettings) -> serde_json::Map<String, serd
             out.number("max_life", s.max_life);
             out.text("gradients", s.gradients.name());
             out.flag("reprojection", s.reprojection);
-            out.flag("next_direct", s.next_direct);
+            out.text("next_direct", s.next_direct.name());
             out.flag("keep_paths", s.keep_paths);
             // `gradients` names the temporal ones here.
             out.flag("spatial_gradients", s.ic.gradients);
@@ -654,7 +654,23 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
             }
         }
         "reprojection" => s.reprojection = flag(method, key, v)?,
-        "next_direct" => s.next_direct = flag(method, key, v)?,
+        "next_direct" => {
+            s.next_direct = match v.trim() {
+                "moving-lights" => NextDirect::MovingLights,
+                _ => match flag(method, key, v) {
+                    Ok(true) => NextDirect::On,
+                    Ok(false) => NextDirect::Off,
+                    Err(_) => {
+                        return Err(MethodError::BadValue {
+                            method: method.into(),
+                            key: key.into(),
+                            value: v.into(),
+                            problem: "expected off, moving-lights or on (or 0/1)".into(),
+                        })
+                    }
+                },
+            }
+        }
         "keep_paths" => s.keep_paths = flag(method, key, v)?,
         // `ic`'s `gradients` (spatial), which `gradients` names no more here.
         "spatial_gradients" => s.ic.gradients = flag(method, key, v)?,

@@ -521,3 +521,45 @@ pub fn rays_at_edges(
     }
     rays
 }
+
+/// A courtyard (a white ground, a wall left, right and behind, no roof)
+/// under a point light 40 m away that swings over it from low on the left
+/// to low on the right, 15° a frame (a sun made of a point light, as some
+/// exporters write one): each wall's inner face goes from lit to dark or
+/// the other way, and the back wall, which the light grazes, is lit by
+/// them only. Still at its last place with `swings` false.
+pub fn courtyard_under_a_swinging_light(frames: u32, swings: bool) -> Scene {
+    const DISTANCE: f32 = 40.0;
+    let white = 0u32;
+    let slab = |min: Vec3, max: Vec3| outward_box(min, max, white);
+    let at = |f: u32| {
+        let angle = (150.0 - 15.0 * f.min(frames - 2) as f32).to_radians();
+        Vec3::new(angle.cos(), angle.sin(), 0.0) * DISTANCE
+    };
+    let mut s = scene(
+        vec![
+            ground(3.0, white),
+            slab(Vec3::new(-1.1, 0.0, -1.0), Vec3::new(-1.0, 2.0, 1.0)),
+            slab(Vec3::new(1.0, 0.0, -1.0), Vec3::new(1.1, 2.0, 1.0)),
+            slab(Vec3::new(-1.1, 0.0, -1.1), Vec3::new(1.1, 2.0, -1.0)),
+        ],
+        vec![Material::diffuse("white", Vec3::splat(0.7))],
+        vec![],
+        Vec3::new(0.0, 1.0, 2.6),
+        Vec3::new(0.0, -0.1, -1.0),
+        1.0,
+        vec![(at(frames - 2), Vec3::splat(2.0 * DISTANCE * DISTANCE))],
+    );
+    if swings {
+        let light = s.lights[0].node;
+        s.animation.channels.push(Channel {
+            node: light,
+            property: Property::Translation,
+            interpolation: Interpolation::Linear,
+            times: (0..frames).map(|f| f as f32 / 24.0).collect(),
+            values: (0..frames).map(|f| at(f).extend(0.0)).collect(),
+        });
+    }
+    s.frame_count = frames;
+    s
+}

@@ -4,7 +4,7 @@
 //! gathered again is measured in the parent module's documentation.
 
 use super::direct::{DirectChange, FirstHit, StaticGeometry};
-use super::Gathered;
+use super::{Gathered, NextDirect};
 use crate::backend::Hit;
 use crate::cache::gather::HemisphereSamples;
 use crate::method::unshadowed::UnshadowedLights;
@@ -32,35 +32,44 @@ pub(super) struct NextFrame {
 }
 
 impl NextFrame {
-    /// What changes after `ctx`'s frame; with `next_direct`, also the
-    /// geometry the samples' direct light at t+1 needs, `statics` keeping
-    /// the static triangles' BVH from frame to frame.
-    pub(super) fn new(ctx: &FrameContext, next_direct: bool, statics: &mut StaticGeometry) -> Self {
+    /// What changes after `ctx`'s frame; where `next_direct` evaluates the
+    /// direct light again, also the geometry the samples' direct light at
+    /// t+1 needs, `statics` keeping the static triangles' BVH from frame to
+    /// frame.
+    pub(super) fn new(
+        ctx: &FrameContext,
+        next_direct: NextDirect,
+        statics: &mut StaticGeometry,
+    ) -> Self {
         let now = ctx.snapshot;
         // The next frame's geometry only where its direct light is
         // evaluated: otherwise its lights and the objects' motion.
         let t = ctx.time_of(ctx.frame + 1);
-        let later = match next_direct {
-            true => ctx.scene.snapshot(t),
-            false => ctx.scene.emitters_snapshot(t),
+        let mut later = match next_direct {
+            NextDirect::On => ctx.scene.snapshot(t),
+            _ => ctx.scene.emitters_snapshot(t),
         };
+        let (l0, l1) = (
+            Arc::new(UnshadowedLights::of(&ctx.scene.materials, now)),
+            Arc::new(UnshadowedLights::of(&ctx.scene.materials, &later)),
+        );
+        let lights_move = !l0.same_as(&l1);
+        let evaluated = next_direct.evaluates(lights_move);
+        if evaluated && next_direct != NextDirect::On {
+            later = ctx.scene.snapshot(t);
+        }
         let motion: Vec<Option<Mat4>> = now
             .object_to_world
             .iter()
             .zip(&later.object_to_world)
             .map(|(w0, w1)| rigid_motion(*w0, *w1))
             .collect();
-        let (l0, l1) = (
-            Arc::new(UnshadowedLights::of(&ctx.scene.materials, now)),
-            Arc::new(UnshadowedLights::of(&ctx.scene.materials, &later)),
-        );
-        let lights_move = !l0.same_as(&l1);
         let objects_move = motion.iter().any(Option::is_some);
         NextFrame {
             motion,
             lights_move,
             lights: (l0, l1),
-            direct: next_direct
+            direct: evaluated
                 .then(|| DirectChange::new(ctx, later, (objects_move, lights_move), statics))
                 .flatten(),
         }

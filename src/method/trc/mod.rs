@@ -144,6 +144,65 @@ impl TemporalGradients {
     }
 }
 
+/// When the E(t0+1) estimate evaluates each hemisphere sample's direct
+/// light again at t0+1 (`direct`: one light sample, shadowed in the next
+/// frame's geometry), so that it sees shadows move on what the record sees.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum NextDirect {
+    /// Never: the estimate sees moving lights through the unshadowed light
+    /// at the samples' hits only (`estimate::light_change`).
+    Off,
+    /// At frames after which some light moves. Why: a light that moves
+    /// moves every shadow it casts, of static objects too, and the
+    /// unshadowed light sees none of them: under a far point light swinging
+    /// across a courtyard, records lived on while the walls' shadows
+    /// crossed the ground they saw (block bias 4× `ic`'s; with it, `ic`'s;
+    /// `benches/RESULTS.md`). Where only objects move, their shadows are
+    /// left to the reprojection and `trc::later`, as the paper has it: the
+    /// shadow rays cost more there than they gain (`direct`).
+    #[default]
+    MovingLights,
+    /// At every frame where something moves.
+    On,
+}
+
+impl NextDirect {
+    /// The name `--trc-next-direct` and the `next_direct` setting take.
+    pub fn name(self) -> &'static str {
+        match self {
+            NextDirect::Off => "off",
+            NextDirect::MovingLights => "moving-lights",
+            NextDirect::On => "on",
+        }
+    }
+
+    /// Whether the direct light is evaluated again after a frame, some
+    /// light moving after it or not.
+    pub(crate) fn evaluates(self, lights_move: bool) -> bool {
+        match self {
+            NextDirect::Off => false,
+            NextDirect::MovingLights => lights_move,
+            NextDirect::On => true,
+        }
+    }
+}
+
+/// [`TrcSettings::next_direct`] as stored: a flag before it had a mode
+/// between (`false`: off, which such jobs ran; `true`: on), or its mode.
+fn next_direct_or_flag<'de, D: serde::Deserializer<'de>>(d: D) -> Result<NextDirect, D::Error> {
+    #[derive(serde::Deserialize)]
+    #[serde(untagged)]
+    enum Stored {
+        Flag(bool),
+        Mode(NextDirect),
+    }
+    Ok(match serde::Deserialize::deserialize(d)? {
+        Stored::Flag(true) => NextDirect::On,
+        Stored::Flag(false) => NextDirect::Off,
+        Stored::Mode(mode) => mode,
+    })
+}
+
 /// Settings of `trc`, with their sources.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrcSettings {
@@ -163,12 +222,15 @@ pub struct TrcSettings {
     /// (`method::arrivals`); off: E(t0+1) = E(t0), the "no reprojection"
     /// column of Table 1 (then every record lives `δt_max` frames).
     pub reprojection: bool,
-    /// With reprojection, also evaluate each sample's direct light again at
-    /// t0+1 (one light sample, shadowed in the next frame's geometry,
+    /// With reprojection, when to evaluate each sample's direct light again
+    /// at t0+1 (one light sample, shadowed in the next frame's geometry,
     /// `direct`): the estimate then sees moving shadows and moving lights
-    /// on the surfaces the record sees. Off by default: it costs more than
-    /// it gains on two of our three animated scenes (measured in `direct`).
-    pub next_direct: bool,
+    /// on the surfaces the record sees. By default at frames after which a
+    /// light moves ([`NextDirect::MovingLights`]); at every frame it costs
+    /// more than it gains on two of our three animated scenes (measured in
+    /// `direct`).
+    #[serde(deserialize_with = "next_direct_or_flag")]
+    pub next_direct: NextDirect,
     /// A replacement takes the results of the paths of K's gather that
     /// nothing moving met, then or now, rather than tracing them again
     /// (`trc::paths`): the same records, faster. Off: every path is traced
@@ -190,7 +252,7 @@ impl Default for TrcSettings {
             max_life: 20,
             gradients: TemporalGradients::default(),
             reprojection: true,
-            next_direct: false,
+            next_direct: NextDirect::MovingLights,
             keep_paths: true,
         }
     }
