@@ -66,6 +66,14 @@ fn region_errors(scene: Scene, size: u32, settings: TcgSettings, against: &[Film
         .collect()
 }
 
+/// `settings` under the paper's rule for lights (`light_refresh` off).
+fn without_light_refresh(settings: TcgSettings) -> TcgSettings {
+    TcgSettings {
+        light_refresh: false,
+        ..settings
+    }
+}
+
 /// `tcg` with `settings` over frames `0..frames` of `scene` at `size`: the
 /// block bias (8-pixel blocks) of the last against `path` at 256 spp.
 fn last_frame_bias(
@@ -341,13 +349,7 @@ fn a_moving_light_is_followed_with_light_refresh() {
     let bias_of =
         |moves: bool, settings: TcgSettings| last_frame_bias(|| scene(moves), frames, 16, settings);
     let following = bias_of(true, small(4));
-    let lagging = bias_of(
-        true,
-        TcgSettings {
-            light_refresh: false,
-            ..small(4)
-        },
-    );
+    let lagging = bias_of(true, without_light_refresh(small(4)));
     let still = bias_of(false, small(4));
     eprintln!(
         "block bias at the last frame: {following:.4} with light_refresh, {lagging:.4} without, \
@@ -604,13 +606,7 @@ fn a_light_that_swings_at_the_same_distance_is_followed() {
             ..small(4)
         },
     );
-    let lagging = bias_of(
-        true,
-        TcgSettings {
-            light_refresh: false,
-            ..small(4)
-        },
-    );
+    let lagging = bias_of(true, without_light_refresh(small(4)));
     let still = bias_of(false, small(4));
     eprintln!(
         "block bias at the last frame: {following:.4} with light_refresh, {every_sample:.4} \
