@@ -177,19 +177,14 @@ pub struct Stratified2d {
 
 impl Stratified2d {
     pub fn new(spp: u32, scramble: Option<u32>, shuffle: u32) -> Self {
-        let spp = spp.max(1);
-        // The largest divisor of `spp` not above its square root.
-        let root = (spp as f64).sqrt() as u32;
-        let rows = (1..=root).rev().find(|d| spp % d == 0).unwrap_or(1);
-        let columns = spp / rows;
-        // Kensler's multipliers for the two shuffles of one key.
+        let (columns, rows) = Self::shape(spp);
         let permutation = |len: u32, key: u32| (0..len).map(|i| permute(i, len, key)).collect();
         Stratified2d {
             columns,
             rows,
             scramble,
-            sub_columns: permutation(rows, shuffle.wrapping_mul(0x63d8_3595)),
-            sub_rows: permutation(columns, shuffle.wrapping_mul(0xa511_e9b3)),
+            sub_columns: permutation(rows, Self::sub_column_key(shuffle)),
+            sub_rows: permutation(columns, Self::sub_row_key(shuffle)),
         }
     }
 
@@ -204,6 +199,51 @@ impl Stratified2d {
         let (column, row) = (cell % columns, cell / columns);
         let sub_column = self.sub_columns[row as usize];
         let sub_row = self.sub_rows[column as usize];
+        Self::place((columns, rows), (column, row), (sub_column, sub_row), u)
+    }
+
+    /// Sample `i` of `Stratified2d::new(spp, None, shuffle)`, the same
+    /// point, without tabulating the shuffles: for a set whose samples are
+    /// drawn one at a time and seldom together (a global-pass vertex's
+    /// links, traced again one by one where motion may have changed them),
+    /// where tabulating per sample would cost more than it saves.
+    pub fn sample_of(spp: u32, shuffle: u32, i: u32, u: Vec2) -> Vec2 {
+        let (columns, rows) = Self::shape(spp);
+        if i >= columns * rows {
+            return u;
+        }
+        let (column, row) = (i % columns, i / columns);
+        let sub_column = permute(row, rows, Self::sub_column_key(shuffle));
+        let sub_row = permute(column, columns, Self::sub_row_key(shuffle));
+        Self::place((columns, rows), (column, row), (sub_column, sub_row), u)
+    }
+
+    /// The grid of `spp` samples, `(columns, rows)`: `rows` the largest
+    /// divisor of `spp` not above its square root.
+    fn shape(spp: u32) -> (u32, u32) {
+        let spp = spp.max(1);
+        let root = (spp as f64).sqrt() as u32;
+        let rows = (1..=root).rev().find(|d| spp % d == 0).unwrap_or(1);
+        (spp / rows, rows)
+    }
+
+    // Kensler's multipliers for the two shuffles of one key.
+    fn sub_column_key(shuffle: u32) -> u32 {
+        shuffle.wrapping_mul(0x63d8_3595)
+    }
+
+    fn sub_row_key(shuffle: u32) -> u32 {
+        shuffle.wrapping_mul(0xa511_e9b3)
+    }
+
+    /// The point `u` places in sub-cell `(sub_column, sub_row)` of cell
+    /// `(column, row)`.
+    fn place(
+        (columns, rows): (u32, u32),
+        (column, row): (u32, u32),
+        (sub_column, sub_row): (u32, u32),
+        u: Vec2,
+    ) -> Vec2 {
         let x = (column as f32 + (sub_column as f32 + u.x) / rows as f32) / columns as f32;
         let y = (row as f32 + (sub_row as f32 + u.y) / columns as f32) / rows as f32;
         Vec2::new(x, y).min(Vec2::splat(ONE_MINUS_EPSILON))
@@ -547,6 +587,23 @@ pub(crate) mod tests {
             }
             let past = layout.sample(spp, Vec2::new(0.3, 0.7));
             assert_eq!(past, Vec2::new(0.3, 0.7), "samples past the set are plain");
+        }
+    }
+
+    /// `sample_of` is the unscrambled set, sample for sample, without its
+    /// tables.
+    #[test]
+    fn samples_drawn_one_at_a_time_are_the_tabulated_set() {
+        for (spp, shuffle) in [(1, 0), (8, 3), (17, 1), (96, 0xdead_beef), (128, 42)] {
+            let layout = Stratified2d::new(spp, None, shuffle);
+            for i in 0..spp + 2 {
+                let u = Vec2::new((i as f32 * 0.37).fract(), (i as f32 * 0.61).fract());
+                assert_eq!(
+                    Stratified2d::sample_of(spp, shuffle, i, u),
+                    layout.sample(i, u),
+                    "spp {spp}, sample {i}"
+                );
+            }
         }
     }
 

@@ -30,7 +30,7 @@ use super::sides::{object_space_corners, ObjectCorners, SolvedSides};
 use super::FrameContext;
 use crate::accel::SceneBvh;
 use crate::backend::{Hit, Ray};
-use crate::sampling::{cosine_hemisphere, streams, Frame, Rng, SampleKey};
+use crate::sampling::{cosine_hemisphere, streams, Frame, Rng, SampleKey, Stratified2d};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -665,15 +665,28 @@ impl GlobalPass {
             .collect()
     }
 
-    /// The rays of vertex `i`'s links (direction from its stream).
-    fn link_ray(ctx: &FrameContext, point: &ShadePoint, link: u32) -> Option<Ray> {
-        let mut rng = Rng::new(SampleKey {
+    /// The ray of link `link` of the `links` of the vertex at `point`:
+    /// the vertex's links are one multi-jittered set over its cosine
+    /// hemisphere ([`Stratified2d`]), each jittered within its sub-cell by
+    /// its own stream. Independent directions left a vertex's gathered
+    /// light noisy enough that Gouraud interpolation smeared the noise into
+    /// blotches a few cells across (a courtyard's shaded ground, lit only
+    /// by its sunlit walls). A link's direction depends on its vertex, its
+    /// number and their count only, so a link traced again goes where it
+    /// went.
+    fn link_ray(ctx: &FrameContext, point: &ShadePoint, link: u32, links: u32) -> Option<Ray> {
+        let key = |sample| SampleKey {
             seed: ctx.seed,
             frame: None,
             item: streams::GLOBAL_LINK | point.item,
-            sample: link,
-        });
-        let wi = Frame::new(point.n).to_world(cosine_hemisphere(rng.next_2d()));
+            sample,
+        };
+        // The set's shuffle takes a sample number no link has (a vertex
+        // has at most `links` ≤ 1024 of them).
+        let shuffle = Rng::new(key(u32::MAX)).next_u32();
+        let u = Rng::new(key(link)).next_2d();
+        let u = Stratified2d::sample_of(links, shuffle, link, u);
+        let wi = Frame::new(point.n).to_world(cosine_hemisphere(u));
         (wi.dot(point.ng) > 0.0).then(|| {
             Ray::new(
                 ctx.ray_offset.origin(point.p, point.ng, wi),
@@ -707,7 +720,10 @@ impl GlobalPass {
         }
         let rays: Vec<(usize, Option<Ray>)> = stale
             .par_iter()
-            .map(|&(index, i, k)| (index, Self::link_ray(ctx, &points[i as usize], k)))
+            .map(|&(index, i, k)| {
+                let links = self.vertices[i as usize].links;
+                (index, Self::link_ray(ctx, &points[i as usize], k, links))
+            })
             .collect();
         working.hold(&rays);
         let drawn_bytes = std::mem::size_of_val(&rays[..]);
