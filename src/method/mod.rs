@@ -230,8 +230,12 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // every method's next. 8: as every method's next, and a flat part
         // with nothing straight behind it is solved on the camera's side
         // (`sides::backs_solved`, 2026-12-01). 9: a vertex's links are
-        // one multi-jittered set (`GlobalPass::link_ray`, 2026-12-02).
-        "movies" => 9,
+        // one multi-jittered set (`GlobalPass::link_ray`, 2026-12-02). 10:
+        // the direct light a glossy lobe reflects goes along each link
+        // where the lobe points, its indirect light spread with the lobe's
+        // hemispherical albedo (`GlobalPass::glossy_direct`,
+        // `spread_albedo`, 2026-12-02).
+        "movies" => 10,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with

@@ -207,7 +207,7 @@ impl UnshadowedLights {
 
     /// Unshadowed direct irradiance at `p` (normal `n`).
     pub(crate) fn irradiance(&self, p: Vec3, n: Vec3) -> Vec3 {
-        self.arriving(p, |w| n.dot(w).max(0.0))
+        self.reflected(p, |w| Vec3::splat(n.dot(w).max(0.0)))
     }
 
     /// How much the unshadowed direct irradiance at `p` may differ between
@@ -241,13 +241,15 @@ impl UnshadowedLights {
         (change, before.max(after))
     }
 
-    /// Σ over the lights of what each sends to `p` from direction `w`
-    /// (unit, towards the light), times `cos_at(w)`.
-    fn arriving(&self, p: Vec3, cos_at: impl Fn(Vec3) -> f32) -> Vec3 {
+    /// Σ over the lights of what each gives a surface at `p` facing it,
+    /// times `weight(w)` for `w` the unit direction to it: the irradiance
+    /// for `weight` the cosine to a normal, the radiance a surface there
+    /// reflects for its BSDF times that cosine.
+    pub(crate) fn reflected(&self, p: Vec3, weight: impl Fn(Vec3) -> Vec3) -> Vec3 {
         (self.emitters.iter())
             .map(|l| {
                 let (e, w) = l.arriving(p);
-                e * cos_at(w)
+                e * weight(w)
             })
             .sum()
     }

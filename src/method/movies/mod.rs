@@ -22,7 +22,11 @@
 //!    diffuse part; a glossy lobe is path-traced, as `ic` does.
 //!
 //! Departures, each named where it is made: the global pass is point
-//! collocation, not hierarchical radiosity ([`global`]); static and
+//! collocation, not hierarchical radiosity ([`global`]), and carries
+//! glossy surfaces, which the paper's diffuse radiosity has not: the
+//! direct light a lobe reflects goes along each link where the lobe
+//! points, its indirect light is spread evenly
+//! (`GlobalPass::glossy_direct`, `spread_albedo`); static and
 //! moving shadows merge per sample, exactly, rather than by the paper's
 //! formula ([`direct`]); a patch is split where the texels it needs are
 //! fine, not where it is partly hidden (the paper's criterion is the
@@ -669,7 +673,7 @@ mod tests {
         let drawing = vertices * (size_of::<ShadePoint>() + size_of::<bool>())
             + links * (size_of::<(usize, u32, u32)>() + size_of::<(usize, Option<Ray>)>());
         let solving =
-            vertices * (size_of::<ShadePoint>() + 2 * size_of::<bool>() + 5 * size_of::<Vec3>());
+            vertices * (size_of::<ShadePoint>() + 2 * size_of::<bool>() + 7 * size_of::<Vec3>());
         let kept = movies.movies().map(Movie::memory_bytes).sum::<usize>() + global.memory_bytes();
         let reported = movies.last_frame_stats().cache_bytes as usize;
         assert!(
