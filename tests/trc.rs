@@ -1380,14 +1380,14 @@ fn kept_paths_give_the_records_and_frames_of_tracing_them_again() {
 /// direct light at t0+1 evaluated where lights move (the default,
 /// `NextDirect::MovingLights`), records that see the shadows move end
 /// their life: over the frames the light swings, `trc`'s mean block bias
-/// against `path` at 256 spp is under 0.8× that with it off and within 2×
-/// `ic`'s with the same spatial settings. Measured at 2026-12-02: 0.036,
-/// off 0.051, `ic` 0.021. What is left is the last two frames (0.058 and
-/// 0.118 against `ic`'s 0.022 and 0.036; with `max_life` 1, 0.012 and
-/// 0.020): as the light sinks the walls' shadows lengthen ever
-/// faster, and records made when an edge was still far from what they see
-/// live on, since `trc::later` checks the later frames with the
-/// unshadowed light only (a limit in the README).
+/// against `path` at 256 spp is under 0.8× that with it off and within
+/// 1.3× `ic`'s with the same spatial settings. Measured at 2026-12-02:
+/// 0.022, off 0.051, `ic` 0.021. With the direct light evaluated at t0+1
+/// only it was 0.036, all of the difference in the last two frames (0.058
+/// and 0.118 against `ic`'s 0.022 and 0.036): as the light sinks the
+/// walls' shadows lengthen ever faster, and records made when an edge was
+/// still far from what they see lived on; `trc::later` now evaluates the
+/// direct light at the end of each life too (`LitFrames`).
 #[test]
 fn a_swinging_light_moves_the_shadows_the_records_see() {
     let (frames, size) = (9u32, 16u32);
@@ -1419,5 +1419,5 @@ fn a_swinging_light_moves_the_shadows_the_records_see() {
     let off = mean_bias(&mut TemporalRadianceCaching::new(trc(NextDirect::Off)));
     eprintln!("mean block bias: trc {default:.4}, next_direct off {off:.4}, ic {ic:.4}");
     assert!(default < 0.8 * off, "trc {default}, next_direct off {off}");
-    assert!(default < 2.0 * ic, "trc {default}, ic {ic}");
+    assert!(default < 1.3 * ic, "trc {default}, ic {ic}");
 }

@@ -198,8 +198,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // does one they hit whose share of the view grew by more than
         // `a_t` (`method::arrivals`, 2026-12-02). 13: the direct light at
         // t0+1 is evaluated by default at frames after which a light moves
-        // (`trc::NextDirect::MovingLights`, 2026-12-02).
-        "trc" => 13,
+        // (`trc::NextDirect::MovingLights`, 2026-12-02). 14: and at the end
+        // of a record's life, and between where it changed by more than
+        // `a_t` there (`later::LitFrames`, 2026-12-02).
+        "trc" => 14,
         // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6: as
         // below.
         "ic" => 6,

@@ -45,8 +45,9 @@ pub(super) use crate::accel::StaticGeometry;
 /// sample's first hit depends on.
 pub(super) struct DirectChange {
     statics: Option<Arc<TriangleBvh>>,
-    /// The moving objects' triangles at t0 and at t0+1.
-    moving: [Option<TriangleBvh>; 2],
+    /// The moving objects' triangles at t0 and at t0+1 (t0's shared with
+    /// the later frames' comparisons, [`Self::to_frame`]).
+    moving: [Option<Arc<TriangleBvh>>; 2],
     later: Snapshot,
     later_lights: LightSampler,
     lights_move: bool,
@@ -86,14 +87,26 @@ impl DirectChange {
         if !objects_move && !lights_move {
             return None;
         }
-        let moving = |s: &Snapshot| TriangleBvh::build(s, s.static_count..s.triangles.len());
         Some(DirectChange {
             statics: statics.of(now),
-            moving: [moving(now), moving(&later)],
+            moving: [moving_bvh(now), moving_bvh(&later)],
             later_lights: LightSampler::new(&later, &ctx.scene.materials),
             later,
             lights_move,
         })
+    }
+
+    /// The same comparison from t0 to the later frame whose geometry and
+    /// lights `later` holds (`super::later`'s check of moving lights):
+    /// t0's side and the static geometry are shared.
+    pub(super) fn to_frame(&self, ctx: &FrameContext, later: Snapshot) -> Self {
+        DirectChange {
+            statics: self.statics.clone(),
+            moving: [self.moving[0].clone(), moving_bvh(&later)],
+            later_lights: LightSampler::new(&later, &ctx.scene.materials),
+            later,
+            lights_move: true,
+        }
     }
 
     /// `D(t0+1) − ratio·D(t0)` for the sample of `g` whose first hit is
@@ -195,6 +208,11 @@ impl DirectChange {
         self.moving[t].as_ref().is_some_and(|b| b.occludes(ray))
             || self.statics.as_ref().is_some_and(|b| b.occludes(ray))
     }
+}
+
+/// The BVH of `s`'s moving triangles (`None`: there are none).
+fn moving_bvh(s: &Snapshot) -> Option<Arc<TriangleBvh>> {
+    TriangleBvh::build(s, s.static_count..s.triangles.len()).map(Arc::new)
 }
 
 /// The first hit `hit` (of triangle `hit.triangle` in `snapshot`) at `p`,

@@ -91,6 +91,30 @@ impl NextFrame {
         }
     }
 
+    /// [`Self::later`] with the direct light at the samples' first hits
+    /// evaluated again at frame `t`, with its shadows, as this frame's
+    /// `next_direct` evaluates it at t0+1 (`super::later`'s check of lights
+    /// that move on). `None` where this frame does not evaluate it.
+    pub(super) fn later_lit(
+        &self,
+        ctx: &FrameContext,
+        t: u32,
+        motion: Vec<Option<Mat4>>,
+        lights: Arc<UnshadowedLights>,
+    ) -> Option<Self> {
+        let direct = self.direct.as_ref()?;
+        let later = ctx.scene.snapshot(ctx.time_of(t));
+        Some(NextFrame {
+            direct: Some(direct.to_frame(ctx, later)),
+            ..Self::later(motion, (self.lights.0.clone(), lights))
+        })
+    }
+
+    /// Whether the direct light at t0+1 is evaluated (`next_direct`).
+    pub(super) fn evaluates_direct(&self) -> bool {
+        self.direct.is_some()
+    }
+
     /// The lights at t0.
     pub(super) fn lights_now(&self) -> &Arc<UnshadowedLights> {
         &self.lights.0

@@ -34,28 +34,34 @@
 //! those where an object the samples hit covers more of the view by over
 //! `a_t` (it jumped nearer, or grew).
 //!
+//! Where lights move and `next_direct` evaluates the samples' direct light
+//! at t0+1, it is evaluated at the end of the life too, and where the
+//! change there exceeds `a_t`, between ([`LitFrames`]): the shadows the
+//! lights move on are seen, as at t0+1.
+//!
 //! Limits: an object that a few samples hit and that then grows or comes
 //! nearer by less is followed through those samples alone (the other
 //! cells it comes to cover keep what they saw, as for t0+1); shadows that
-//! move over what the record sees are not seen (as for t0+1 without
-//! `next_direct`); the gate's half cell is the cells' mean size, and cells
-//! near the normal are narrower in φ, and the object's nearest hit is
-//! taken at t0 (one that comes nearer turns by more than its displacement
-//! over that distance); and a life longer than [`LATER_FRAMES`] frames is
-//! checked over its first frames only.
+//! moving objects cast later over what the record sees are not seen (as
+//! for t0+1 without `next_direct`), nor a moving light's change that
+//! comes and goes within the life; the gate's half cell is the cells'
+//! mean size, and cells near the normal are narrower in φ, and the
+//! object's nearest hit is taken at t0 (one that comes nearer turns by
+//! more than its displacement over that distance); and a life longer than
+//! [`LATER_FRAMES`] frames is checked over its first frames only.
 
 use super::estimate::{reproject, rigid_motion, NextFrame};
 use super::Gathered;
 use crate::cache::gather::{HemisphereSamples, Strata};
 use crate::method::arrivals::{moving_bounds, Arrivals, OwnBounds};
-use crate::method::unshadowed::LightsByFrame;
+use crate::method::unshadowed::{LightsByFrame, UnshadowedLights};
 use crate::method::FrameContext;
 use crate::sampling::Frame;
 use crate::scene::Scene;
 use glam::{Mat4, Quat, Vec3};
 use std::collections::BTreeMap;
 use std::f32::consts::TAU;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// The longest life the check covers (`δt_max` may be up to 100,000): a
 /// longer one is checked over its first `LATER_FRAMES` frames, and is the
@@ -73,6 +79,79 @@ pub(super) struct LaterFrames {
     /// The moving objects in the frames of the life, for those that come
     /// into the samples' paths.
     arrivals: Arrivals,
+    /// Where lights move and `next_direct` evaluates the direct light at
+    /// t0+1: the frames of the life after it, to evaluate it there too.
+    lit: Option<LitFrames>,
+}
+
+/// The frames t0+2 … of a life under lights that move, where a record's
+/// samples' direct light is evaluated again, with its shadows, as
+/// `next_direct` evaluates it at t0+1: the record's change there is
+/// checked against `a_t` at the end of the life τ gives it and, where it
+/// exceeds it, by bisection for the last frame that does not. The
+/// paper's extrapolation takes shadows to move on at their t0→t0+1 rate;
+/// a light sinking to the horizon lengthens them ever faster, and the
+/// records that saw an edge still far at t0 kept their light until their
+/// life ran out (block bias 3.3× `ic`'s at the last frame of
+/// `tests/trc.rs::a_swinging_light_moves_the_shadows_the_records_see`).
+/// A change that comes and goes between t0+1 and the life's end is not
+/// seen, as the paper's own rule does not see it.
+struct LitFrames {
+    /// By frame: the objects' motion from t0 and the lights then, and
+    /// what the reprojection there needs, built on the first record that
+    /// asks for it.
+    frames: BTreeMap<u32, LitFrame>,
+}
+
+/// One frame of [`LitFrames`].
+struct LitFrame {
+    /// Per object, its rigid motion from t0 (`None`: it stays).
+    motion: Vec<Option<Mat4>>,
+    /// The lights then.
+    lights: Arc<UnshadowedLights>,
+    /// The reprojection's input, with the direct light's geometry then
+    /// (built once, by the first record whose check reaches the frame).
+    next: OnceLock<Option<NextFrame>>,
+}
+
+impl LitFrames {
+    /// The last frame from `last_valid` back to t0+1 where `g`'s samples,
+    /// reprojected with their direct light evaluated again, do not
+    /// `exceed` the temporal accuracy: `last_valid` itself where they do
+    /// not there, else found by bisection (t0+1 is known to be within it).
+    fn last_valid(
+        &self,
+        ctx: &FrameContext,
+        next: &NextFrame,
+        g: &Gathered,
+        strata: Strata,
+        last_valid: u32,
+        exceed: impl Fn(&HemisphereSamples) -> bool,
+    ) -> u32 {
+        let exceeds = |t: u32| {
+            self.frames.get(&t).is_some_and(|f| {
+                let next = f
+                    .next
+                    .get_or_init(|| next.later_lit(ctx, t, f.motion.clone(), f.lights.clone()));
+                next.as_ref()
+                    .is_some_and(|n| exceed(&reproject(ctx, n, g, strata.theta, strata.phi)))
+            })
+        };
+        let t1 = ctx.frame + 1;
+        if last_valid <= t1 || !exceeds(last_valid) {
+            return last_valid;
+        }
+        let (mut within, mut beyond) = (t1, last_valid);
+        while beyond - within > 1 {
+            let mid = within + (beyond - within) / 2;
+            if exceeds(mid) {
+                beyond = mid;
+            } else {
+                within = mid;
+            }
+        }
+        within
+    }
 }
 
 /// A frame after t0+1 where the motion departs from the extrapolated one.
@@ -110,6 +189,7 @@ impl LaterFrames {
             frames: BTreeMap::new(),
             dynamic,
             arrivals: Arrivals::default(),
+            lit: None,
         };
         if last <= t0 || (!lights_move && !later.dynamic.contains(&true)) {
             return later;
@@ -121,6 +201,8 @@ impl LaterFrames {
         if last < t0 + 2 {
             return later;
         }
+        let check_lit = next.lights_move() && next.evaluates_direct();
+        let mut lit = BTreeMap::new();
         let x1 = &placed[0];
         let mut extrapolated: Vec<Option<Extrapolated>> = own
             .iter()
@@ -147,22 +229,31 @@ impl LaterFrames {
                 false => !lights.same_as(next.lights_now()),
                 true => !lights.same_power(next.lights_now()),
             };
-            if lights_changed || departure.iter().any(|&d| d > 0.0) {
+            let motion = || -> Vec<Option<Mat4>> {
                 let motion = x0.iter().zip(xt.iter()).zip(&later.dynamic);
                 let moved = |((w0, wt), &d): ((&Mat4, &Mat4), &bool)| {
                     d.then(|| rigid_motion(*w0, *wt)).flatten()
                 };
+                motion.map(moved).collect()
+            };
+            if check_lit {
+                let frame = LitFrame {
+                    motion: motion(),
+                    lights: lights.clone(),
+                    next: OnceLock::new(),
+                };
+                lit.insert(t, frame);
+            }
+            if lights_changed || departure.iter().any(|&d| d > 0.0) {
                 let frame = LaterFrame {
-                    next: NextFrame::later(
-                        motion.map(moved).collect(),
-                        (next.lights_now().clone(), lights),
-                    ),
+                    next: NextFrame::later(motion(), (next.lights_now().clone(), lights)),
                     departure,
                     lights_changed,
                 };
                 later.frames.insert(t, frame);
             }
         }
+        later.lit = check_lit.then_some(LitFrames { frames: lit });
         later
     }
 
@@ -175,10 +266,28 @@ impl LaterFrames {
     pub(super) fn last_valid(
         &self,
         ctx: &FrameContext,
+        next: &NextFrame,
         g: &Gathered,
         (strata, a_t): (Strata, f32),
         last_valid: u32,
         exceed: impl Fn(&HemisphereSamples) -> bool,
+    ) -> u32 {
+        let last = self.last_departed(ctx, g, (strata, a_t), last_valid, &exceed);
+        match &self.lit {
+            Some(lit) => lit.last_valid(ctx, next, g, strata, last, exceed),
+            None => last,
+        }
+    }
+
+    /// [`Self::last_valid`] but for lights that move on
+    /// ([`LitFrames`]): the arrivals and the frames that depart.
+    fn last_departed(
+        &self,
+        ctx: &FrameContext,
+        g: &Gathered,
+        (strata, a_t): (Strata, f32),
+        last_valid: u32,
+        exceed: &impl Fn(&HemisphereSamples) -> bool,
     ) -> u32 {
         if last_valid <= self.t0 || self.arrivals.is_empty() && self.frames.is_empty() {
             return last_valid;

@@ -376,9 +376,10 @@ impl TemporalRadianceCaching {
         let age = frames_of_validity(next.change, a_t, self.settings.max_life);
         let mut last_valid = ctx.frame + age;
         if let Some(later) = &making.later {
-            last_valid = later.last_valid(ctx, g, (strata, a_t), last_valid, |samples| {
-                self.change_to(g, Some(samples)).change > a_t
-            });
+            last_valid =
+                later.last_valid(ctx, &making.next, g, (strata, a_t), last_valid, |samples| {
+                    self.change_to(g, Some(samples)).change > a_t
+                });
         }
         let e1 = next.gather.irradiance;
         let sub = |a: [Vec3; 3], b: [Vec3; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
