@@ -118,7 +118,8 @@ impl LitFrames {
     /// The last frame from `last_valid` back to t0+1 where `g`'s samples,
     /// reprojected with their direct light evaluated again, do not
     /// `exceed` the temporal accuracy: `last_valid` itself where they do
-    /// not there, else found by bisection (t0+1 is known to be within it).
+    /// not there (or at the last frame kept, for a longer life), else
+    /// found by bisection (t0+1 is known to be within it).
     fn last_valid(
         &self,
         ctx: &FrameContext,
@@ -137,11 +138,18 @@ impl LitFrames {
                     .is_some_and(|n| exceed(&reproject(ctx, n, g, strata.theta, strata.phi)))
             })
         };
+        // A life past the frames kept ([`LATER_FRAMES`]) is checked at the
+        // last of them.
         let t1 = ctx.frame + 1;
-        if last_valid <= t1 || !exceeds(last_valid) {
+        let end = self
+            .frames
+            .keys()
+            .next_back()
+            .map_or(t1, |&t| last_valid.min(t));
+        if end <= t1 || !exceeds(end) {
             return last_valid;
         }
-        let (mut within, mut beyond) = (t1, last_valid);
+        let (mut within, mut beyond) = (t1, end);
         while beyond - within > 1 {
             let mid = within + (beyond - within) / 2;
             if exceeds(mid) {
