@@ -54,13 +54,16 @@ pub(super) struct Arrived {
 
 impl Arrived {
     /// The moving objects (`own`: their bounds, by object; `None` for one
-    /// that does not move) placed in the frame before `ctx.frame` and in
-    /// it; `None` in frame 0 or where none moved.
-    pub(super) fn of(ctx: &FrameContext, own: &[Option<OwnBounds>]) -> Option<Self> {
-        let before = ctx.frame.checked_sub(1)?;
-        let then = ctx.scene.object_transforms(ctx.time_of(before));
+    /// that does not move) placed in the frame before `ctx.frame` (`then`,
+    /// [`super::Before`]) and in it; `None` in frame 0 or where none moved.
+    pub(super) fn of(
+        ctx: &FrameContext,
+        own: &[Option<OwnBounds>],
+        then: Option<&super::Before>,
+    ) -> Option<Self> {
+        let then = then?;
         let now = &ctx.snapshot.object_to_world[..];
-        let arrivals = Arrivals::new(before, own, &then, [now].into_iter());
+        let arrivals = Arrivals::new(then.frame, own, &then.transforms, [now].into_iter());
         (!arrivals.is_empty()).then(|| Arrived {
             arrivals,
             frame: ctx.frame,

@@ -44,10 +44,10 @@ pub(super) struct MovedObjects {
 
 impl MovedObjects {
     /// The objects whose world transform in frame `ctx.frame` differs from
-    /// the one in the frame before; `None` in frame 0 or where none moved.
-    pub(super) fn of(ctx: &FrameContext) -> Option<Self> {
-        let before = ctx.frame.checked_sub(1)?;
-        let then = ctx.scene.object_transforms(ctx.time_of(before));
+    /// the one in the frame before (`then`, [`super::Before`]); `None` in
+    /// frame 0 or where none moved.
+    pub(super) fn of(ctx: &FrameContext, then: Option<&super::Before>) -> Option<Self> {
+        let then = &then?.transforms;
         let now = &ctx.snapshot.object_to_world;
         let moved = |object: u32| then.get(object as usize) != now.get(object as usize);
         let boxes = ObjectBoxes::new(ctx, moved);

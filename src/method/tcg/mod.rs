@@ -341,6 +341,25 @@ pub struct TemporallyCoherentGathering {
     bounds: Option<Vec<Option<OwnBounds>>>,
 }
 
+/// The objects' world transforms in the frame before the one rendered,
+/// evaluated once a frame for what asks what moved since
+/// (`crossed::MovedObjects`, `arrived::Arrived`).
+pub(super) struct Before {
+    frame: u32,
+    transforms: Vec<glam::Mat4>,
+}
+
+impl Before {
+    /// `None` in frame 0.
+    fn of(ctx: &FrameContext) -> Option<Self> {
+        let frame = ctx.frame.checked_sub(1)?;
+        Some(Before {
+            frame,
+            transforms: ctx.scene.object_transforms(ctx.time_of(frame)),
+        })
+    }
+}
+
 impl TemporallyCoherentGathering {
     pub fn new(settings: TcgSettings) -> Self {
         TemporallyCoherentGathering {
@@ -370,7 +389,7 @@ impl TemporallyCoherentGathering {
     fn survivors(
         &mut self,
         ctx: &FrameContext,
-        moved: Option<&crossed::MovedObjects>,
+        (moved, before): (Option<&crossed::MovedObjects>, Option<&Before>),
         stats: &mut FrameStats,
         removed: &mut Vec<RecordId>,
     ) -> Vec<(TcgRecord, (GatherPoint, Frame))> {
@@ -391,7 +410,7 @@ impl TemporallyCoherentGathering {
             let buried = moved.buried(ctx, alive.iter().map(|(r, (point, _))| (r, point)));
             alive = without_marked(alive, buried, removed);
         }
-        if let Some(arrived) = follows.then(|| self.arrived(ctx)).flatten() {
+        if let Some(arrived) = follows.then(|| self.arrived(ctx, before)).flatten() {
             let marked = arrived.marked(&alive, self.settings.ic.strata);
             alive = without_marked(alive, marked, removed);
         }
@@ -408,13 +427,13 @@ impl TemporallyCoherentGathering {
     }
 
     /// The objects that moved into this frame, where `arrivals` is on.
-    fn arrived(&mut self, ctx: &FrameContext) -> Option<arrived::Arrived> {
+    fn arrived(&mut self, ctx: &FrameContext, before: Option<&Before>) -> Option<arrived::Arrived> {
         if !self.settings.arrivals {
             return None;
         }
         let bounds = (self.bounds)
             .get_or_insert_with(|| moving_bounds(ctx.scene, &ctx.scene.dynamic_objects()));
-        arrived::Arrived::of(ctx, bounds)
+        arrived::Arrived::of(ctx, bounds, before)
     }
 
     /// Step 2 (§3.2–3.3): shoots each record's picked cells again, ages the
@@ -606,10 +625,16 @@ impl Method for TemporallyCoherentGathering {
         };
         let mut removed = Vec::new();
         let start = Instant::now();
+        let before = Before::of(ctx);
         let moved = (self.settings.occlusion_refresh)
-            .then(|| crossed::MovedObjects::of(ctx))
+            .then(|| crossed::MovedObjects::of(ctx, before.as_ref()))
             .flatten();
-        let alive = self.survivors(ctx, moved.as_ref(), &mut stats, &mut removed);
+        let alive = self.survivors(
+            ctx,
+            (moved.as_ref(), before.as_ref()),
+            &mut stats,
+            &mut removed,
+        );
         let dynamic = ctx.scene.dynamic_objects();
         let mut records = self.update(ctx, alive, moved.as_ref(), &dynamic, &mut stats);
         stats.records_reused = records.len() as u64;
