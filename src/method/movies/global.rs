@@ -437,7 +437,8 @@ pub struct GlobalPass {
     /// Per vertex, whether it lies in open space ([`BURIED_SHARE`]).
     valid: Vec<bool>,
     /// Per material, the albedo its surfaces reflect indirect light
-    /// with ([`spread_albedo`]).
+    /// with ([`spread_albedo`]): found once, as it takes a quadrature of
+    /// the lobe per glossy material.
     spread_albedo: Vec<Vec3>,
     /// Per vertex, its row of the transport ([`GlobalPass::row`]), kept
     /// across frames: a row changes only with its vertex's links or the
@@ -969,7 +970,15 @@ impl GlobalPass {
     /// ([`UnshadowedLights`]), times the transmittance where it lands:
     /// its vertices' direct light over their unshadowed direct light, as
     /// the paper weights a link's unoccluded light by a transmittance
-    /// texture (§3.1) rather than tracing shadow rays per link.
+    /// texture (§3.1) rather than tracing shadow rays per link. The two
+    /// differ in more than shadows near an area light (the direct light
+    /// samples its area, the unshadowed one takes it as a point), so the
+    /// ratio is held to [0, 1]. Every glossy link is evaluated each frame,
+    /// though its lobe changes only with the lights or where it was traced
+    /// again: keeping it would take 12 more bytes a link, for little
+    /// (`spheres`, the most glossy links of our scenes, took 5.51 s before
+    /// this light and 5.62 s with it over 12 frames at 64 × 64, one
+    /// invocation each: `benches/RESULTS.md`).
     fn glossy_direct(
         &self,
         ctx: &FrameContext,
