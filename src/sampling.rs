@@ -47,14 +47,18 @@ pub mod streams {
     /// light (the same vertex's link `k` and light sample `k` drew the
     /// same numbers): ORed onto a vertex's item.
     pub const GLOBAL_LINK: u64 = GLOBAL_VERTEX | (1 << 57);
+    /// The direct light at the hits of the global pass's links (one item
+    /// a link, by its number in the pass).
+    pub const GLOBAL_LANDING: u64 = 1 << 57;
     /// Every tag, for the test that they are apart.
-    pub const ALL: [u64; 6] = [
+    pub const ALL: [u64; 7] = [
         RECORD,
         RECORD_PICK,
         MOVIE_TEXEL,
         COHERENT_PIXEL,
         GLOBAL_VERTEX,
         GLOBAL_LINK,
+        GLOBAL_LANDING,
     ];
 }
 

@@ -237,7 +237,7 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // where the lobe points, its indirect light spread with the lobe's
         // hemispherical albedo (`GlobalPass::glossy_direct`,
         // `spread_albedo`, 2026-12-02).
-        "movies" => 10,
+        "movies" => 11,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with

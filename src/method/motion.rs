@@ -27,6 +27,7 @@ pub struct Blockers {
     static_count: usize,
     static_punctual: Vec<bool>,
     pub pick_fingerprint: u64,
+    lights_still: bool,
 }
 
 impl Blockers {
@@ -52,6 +53,8 @@ impl Blockers {
                 false => {}
             }
         }
+        let lights_still = static_punctual.iter().all(|&fixed| fixed)
+            && (ctx.lights.emitting_triangles()).all(|id| id < snapshot.static_count);
         Blockers {
             moving: ObjectBoxes::new(ctx, |_| true),
             static_lights,
@@ -59,7 +62,23 @@ impl Blockers {
             static_count: snapshot.static_count,
             static_punctual,
             pick_fingerprint: ctx.lights.pick_fingerprint(),
+            lights_still,
         }
+    }
+
+    /// Whether no moving object's box may stand between `p` and the
+    /// lights that do not move (none where a directional one does: its
+    /// shadow rays leave every box), so that their light at `p` is what
+    /// the static scene alone lets through.
+    pub fn static_view_clear(&self, p: Vec3) -> bool {
+        !self.static_directional
+            && (self.static_lights).is_none_or(|(lo, hi)| !self.box_may_hit((lo.min(p), hi.max(p))))
+    }
+
+    /// Whether every light stands still: none moves, and none is a
+    /// triangle of a moving object.
+    pub fn lights_still(&self) -> bool {
+        self.lights_still
     }
 
     pub fn is_static(&self, source: LightSource) -> bool {

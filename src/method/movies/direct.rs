@@ -518,10 +518,7 @@ fn kept_points(
     let mut kept = 0u64;
     for (i, (point, kept_shadows)) in points.iter().zip(&shadows.points).enumerate() {
         let open = shadows.open_of(i);
-        let shaft_clear = !blockers.static_directional
-            && (blockers.static_lights)
-                .is_none_or(|(lo, hi)| !blockers.box_may_hit((lo.min(point.p), hi.max(point.p))));
-        if shaft_clear && kept_shadows.moving == 0 {
+        if blockers.static_view_clear(point.p) && kept_shadows.moving == 0 {
             shortcut[i] = true;
             kept += u64::from(samples);
             continue;

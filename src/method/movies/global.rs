@@ -11,7 +11,10 @@
 //! cosine-distributed rays, its *links*, and the radiosity is solved by
 //! Jacobi iteration over them (`bounces` of them), so that a texel reads
 //! its indirect irradiance by Gouraud interpolation of the vertex values,
-//! as the paper renders its good links. Temporal coherence as in §4.2: a
+//! as the paper renders its good links; a link that lands in a cell
+//! across which the direct light changes sharply takes the direct light
+//! at its own hit instead ([`super::sharp`], where the paper refines its
+//! hierarchy). Temporal coherence as in §4.2: a
 //! link is traced again only where motion may have changed it (its
 //! vertex or its hit lies on a moving object, or its segment crosses a
 //! moving object's box: the paper's shaft culling), and the energy
@@ -26,11 +29,12 @@
 //! ([`super::sides`]).
 
 use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, StaticShadows, Statics};
+use super::sharp::{is_sharp, Landing, SharpLandings};
 use super::sides::{object_space_corners, ObjectCorners, SolvedSides};
 use super::FrameContext;
 use crate::accel::SceneBvh;
 use crate::backend::{Hit, Ray};
-use crate::material::Bsdf;
+use crate::material::{luminance, Bsdf};
 use crate::method::unshadowed::UnshadowedLights;
 use crate::sampling::{cosine_hemisphere, streams, Frame, Rng, SampleKey, Stratified2d};
 use glam::Vec3;
@@ -432,6 +436,8 @@ pub struct GlobalPass {
     links: Vec<Link>,
     /// Static shadows at the vertices that do not move.
     shadows: StaticShadows,
+    /// The direct light at the hits of links landing in sharp cells.
+    sharp: SharpLandings,
     /// Per vertex, indirect irradiance of the last solution.
     indirect: Vec<Vec3>,
     /// Per vertex, whether it lies in open space ([`BURIED_SHARE`]).
@@ -502,6 +508,7 @@ impl GlobalPass {
             + std::mem::size_of_val(&self.vertices[..])
             + std::mem::size_of_val(&self.links[..])
             + self.shadows.bytes()
+            + self.sharp.bytes()
             + std::mem::size_of_val(&self.indirect[..])
             + std::mem::size_of_val(&self.valid[..])
             + std::mem::size_of_val(&self.spread_albedo[..])
@@ -518,7 +525,8 @@ impl GlobalPass {
     /// bytes (a stale entry, a drawn ray, then its index and ray, as they
     /// are unzipped). The shadow
     /// rays of the direct light, made and traced a bounded batch at a time,
-    /// are left out.
+    /// are left out; the links landing in sharp cells, with their points
+    /// and light ([`super::sharp`]), are in.
     pub fn working_bytes(&self) -> usize {
         self.working_bytes
     }
@@ -554,6 +562,7 @@ impl GlobalPass {
             vertices,
             links: Vec::new(),
             shadows: StaticShadows::default(),
+            sharp: SharpLandings::default(),
             indirect: vec![Vec3::ZERO; count],
             valid: vec![true; count],
             spread_albedo: ctx.scene.materials.iter().map(spread_albedo).collect(),
@@ -651,9 +660,9 @@ impl GlobalPass {
             .collect();
         working.hold(&moving);
         let (direct, shadow_rays) = self.direct(ctx, blockers, &points, &moving, &mut working);
-        self.solve(ctx, &points, &direct, &retraced, &mut working);
+        let sharp_rays = self.solve(ctx, blockers, &points, &direct, &retraced, &mut working);
         self.working_bytes = working.peak;
-        shadow_rays
+        shadow_rays + sharp_rays
     }
 
     /// Every vertex as a shading point on its triangle's solved side, in
@@ -807,6 +816,7 @@ impl GlobalPass {
     /// there; its segment, to the hit, or its ray where it hit nothing.
     fn land_links(&mut self, ctx: &FrameContext, indices: &[usize], rays: &[Ray], hits: Vec<Hit>) {
         for ((index, ray), hit) in indices.iter().zip(rays).zip(hits) {
+            self.sharp.forget(*index as u32);
             // The side hit is the one the ray meets: its back where it
             // runs along the triangle's geometric normal (neither where it
             // grazes it).
@@ -900,16 +910,19 @@ impl GlobalPass {
     /// about as evenly), rather than lost from the light that bounces on.
     /// A link that lands on a side not solved or on an emitter's
     /// emission gathers nothing: emitted light is the direct light,
-    /// counted once. `retraced` marks the vertices whose links were traced
-    /// again this frame.
+    /// counted once. A link landing where the direct light changes
+    /// sharply takes its hit's own ([`Self::sharp_direct`]). `retraced`
+    /// marks the vertices whose links were traced again this frame.
+    /// Returns the shadow rays traced.
     fn solve(
         &mut self,
         ctx: &FrameContext,
+        blockers: &ShadowBlockers,
         points: &[ShadePoint],
         direct: &[Vec3],
         retraced: &[bool],
         working: &mut Working,
-    ) {
+    ) -> u64 {
         let albedo: Vec<(Vec3, Vec3)> = self
             .vertices
             .iter()
@@ -920,7 +933,13 @@ impl GlobalPass {
             .collect();
         working.hold(&albedo);
         self.update_rows(retraced, working);
-        let glossy = self.glossy_direct(ctx, points, direct, working);
+        let mut constant = self.glossy_direct(ctx, points, direct, working);
+        let (sharp, sharp_rays) = self.sharp_direct(ctx, blockers, direct, &albedo, working);
+        for (c, s) in constant.iter_mut().zip(&sharp) {
+            *c += *s;
+        }
+        working.release(&sharp);
+        drop(sharp);
         // Three buffers for the whole iteration (up to `bounces` steps):
         // each step writes the radiance leaving every vertex into `b` and
         // the indirect light gathered from it into `next`, then swaps
@@ -940,7 +959,7 @@ impl GlobalPass {
             {
                 *b = FRAC_1_PI * (rho_d * d + rho * i);
             }
-            (next.par_iter_mut().zip(&self.rows).zip(&glossy)).for_each(|((out, row), &g)| {
+            (next.par_iter_mut().zip(&self.rows).zip(&constant)).for_each(|((out, row), &g)| {
                 *out = row.iter().fold(g, |acc, &(j, w)| acc + b[j as usize] * w);
             });
             let converged = converged(&indirect, &next);
@@ -953,9 +972,88 @@ impl GlobalPass {
         working.release(&b);
         // Kept: counted by `memory_bytes` from here.
         working.release(&indirect);
-        working.release(&glossy);
+        working.release(&constant);
         working.release(&albedo);
         self.indirect = indirect;
+        sharp_rays
+    }
+
+    /// Per vertex, what taking the direct light at its links' own hits
+    /// adds to the Gouraud interpolation of it that its row gathers, for
+    /// the links that land in a sharp cell ([`super::sharp`]): the hit's
+    /// `ρ_d·E_direct/π` less the interpolated one, times π over the
+    /// vertex's links, as the row weighs each link. Also the shadow rays
+    /// traced.
+    fn sharp_direct(
+        &mut self,
+        ctx: &FrameContext,
+        blockers: &ShadowBlockers,
+        direct: &[Vec3],
+        albedo: &[(Vec3, Vec3)],
+        working: &mut Working,
+    ) -> (Vec<Vec3>, u64) {
+        let brightness: Vec<f32> = direct.par_iter().map(|&d| luminance(d)).collect();
+        working.hold(&brightness);
+        let pass = &*self;
+        // Each sharp landing, and the vertex whose link it is.
+        let (owners, landings): (Vec<u32>, Vec<Landing>) = (pass.vertices.par_iter().enumerate())
+            .flat_map_iter(|(i, v)| {
+                let brightness = &brightness;
+                (v.first_link..v.first_link + v.links).filter_map(move |link| {
+                    let l = &pass.links[link as usize];
+                    let landed = l.live && l.on_solved_side && l.hit.is_hit();
+                    let sharp = landed
+                        && is_sharp(
+                            renormalised(&pass.valid, &l.landing)
+                                .map(|(j, _)| brightness[j as usize]),
+                        );
+                    sharp.then(|| (i as u32, pass.landing(ctx, blockers, link)))
+                })
+            })
+            .unzip();
+        working.hold(&owners);
+        working.hold(&landings);
+        working.release(&brightness);
+        drop(brightness);
+        let (e, rays) = self.sharp.irradiance(ctx, blockers, &landings);
+        working.hold(&e);
+        let mut added = vec![Vec3::ZERO; self.vertices.len()];
+        working.hold(&added);
+        let diffuse = |id: u32| {
+            let material = ctx.snapshot.tri_material[id as usize] as usize;
+            ctx.scene.materials[material].diffuse
+        };
+        for ((&i, landing), e) in owners.iter().zip(&landings).zip(&e) {
+            let l = &self.links[landing.link as usize];
+            let interpolated = renormalised(&self.valid, &l.landing)
+                .fold(Vec3::ZERO, |acc, (j, w)| {
+                    acc + albedo[j as usize].0 * direct[j as usize] * w
+                });
+            let v = &self.vertices[i as usize];
+            let scale = 1.0 / v.links.max(1) as f32;
+            added[i as usize] += (diffuse(l.hit.triangle) * *e - interpolated) * scale;
+        }
+        working.release(&owners);
+        working.release(&landings);
+        working.release(&e);
+        (added, rays)
+    }
+
+    /// Link `link` as a [`Landing`]: the point it hit, on the side it hit.
+    fn landing(&self, ctx: &FrameContext, blockers: &ShadowBlockers, link: u32) -> Landing {
+        let l = &self.links[link as usize];
+        let tri = &ctx.snapshot.triangles[l.hit.triangle as usize];
+        let side = if tri.geometric_normal().dot(l.to - l.from) > 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let item = streams::GLOBAL_LANDING | u64::from(link);
+        Landing {
+            link,
+            point: ShadePoint::on_side(tri, (l.hit.u, l.hit.v), side, item),
+            moving: blockers.is_moving_triangle(l.hit.triangle),
+        }
     }
 
     /// Per vertex, the direct light that glossy surfaces reflect to it

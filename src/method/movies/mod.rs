@@ -22,7 +22,10 @@
 //!    diffuse part; a glossy lobe is path-traced, as `ic` does.
 //!
 //! Departures, each named where it is made: the global pass is point
-//! collocation, not hierarchical radiosity ([`global`]), and carries
+//! collocation, not hierarchical radiosity ([`global`]), whose links
+//! take the direct light at their hits where it changes sharply across
+//! the cell they land in rather than refining the mesh ([`sharp`]), and
+//! carries
 //! glossy surfaces, which the paper's diffuse radiosity has not: the
 //! direct light a lobe reflects goes along each link where the lobe
 //! points, its indirect light is spread evenly
@@ -61,6 +64,7 @@ pub mod direct;
 pub mod global;
 pub mod movie;
 pub mod patch;
+pub mod sharp;
 pub mod sides;
 
 use super::pixels::FirstLightSampler;
