@@ -136,6 +136,44 @@ fn point_light_over_plane_matches_inverse_square_law() {
     }
 }
 
+/// Under a point light every shadow sample of a point makes the same
+/// segment, and they share one ray: with 16 samples a texel and a vertex
+/// of the global pass the frame traces as many rays as with one, and its
+/// pixels are those of one sample, to rounding. (Each sample traced its
+/// own ray before: the courtyard under its point light traced 7× the
+/// rays it needed.)
+#[test]
+fn a_point_lights_samples_share_one_shadow_ray() {
+    let s = plane_under_point_light(
+        0.7,
+        5.0,
+        Vec3::new(0.3, 1.0, -0.2),
+        Vec3::new(0.0, 3.0, 0.0),
+    );
+    let with = |samples: u32| {
+        let settings = MoviesSettings {
+            shadow_samples: samples,
+            global: radcache::method::movies::global::GlobalSettings {
+                shadow_samples: samples,
+                ..Default::default()
+            },
+            ..MoviesSettings::default()
+        };
+        let mut movies = TextureMovies::new(settings.clone());
+        let mut r = common::cpu_renderer(s.clone(), Box::new(TextureMovies::new(settings)), 16);
+        let (film, _, rays) = render(&mut r, &mut movies, 0);
+        (film, rays)
+    };
+    let (one, one_rays) = with(1);
+    let (many, many_rays) = with(16);
+    assert_eq!(
+        many_rays, one_rays,
+        "16 samples traced {many_rays} rays, one {one_rays}"
+    );
+    let worst = worst_difference(&one, &many);
+    assert!(worst < 1e-5, "16 samples and one differ by {worst}");
+}
+
 /// Nothing moves: after the first frame no movie opens or closes, no
 /// shadow ray and no link of the global pass is traced again (only the
 /// camera rays), and every texel is the same, bit for bit.

@@ -392,30 +392,64 @@ fn join(parts: Vec<(Vec<Vec3>, ShadowCounts)>) -> (Vec<Vec3>, ShadowCounts) {
     (e, counts)
 }
 
-/// Shadow rays waiting to be traced, each with the slot (point · sample)
-/// it answers for.
-#[derive(Default)]
+/// Shadow rays waiting to be traced, each with the slots (point ·
+/// sample) it answers for. A point's samples that make the same segment
+/// share one ray: every sample on a point, spot or directional light
+/// does (the light has one position), so a texel's 16 samples of a sun
+/// traced one ray, not 16, and answer as they did.
 struct Pending {
+    /// Samples a point.
+    per: usize,
     rays: Vec<Ray>,
-    slots: Vec<usize>,
+    /// Each slot pushed, in push order, with the ray that answers it.
+    slots: Vec<(usize, u32)>,
+    /// The rays of the point pushed last start here.
+    point_rays: usize,
 }
 
 impl Pending {
-    fn push(&mut self, ray: Ray, slot: usize) {
-        self.rays.push(ray);
-        self.slots.push(slot);
+    fn new(per: usize) -> Self {
+        Pending {
+            per,
+            rays: Vec::new(),
+            slots: Vec::new(),
+            point_rays: 0,
+        }
     }
 
-    /// Traces against every blocker: per point (of `points`, `per`
-    /// samples each), the samples stopped (bit `s`: sample `s`), and the
-    /// rays traced.
-    fn stopped(self, ctx: &FrameContext, points: usize, per: usize) -> (Vec<u64>, u64) {
+    /// Pushes `slot`'s segment, or has the same segment, pushed already
+    /// for its point, answer for it. A point's slots are pushed together.
+    fn push(&mut self, ray: Ray, slot: usize) {
+        let new_point = self
+            .slots
+            .last()
+            .is_none_or(|&(last, _)| last / self.per != slot / self.per);
+        if new_point {
+            self.point_rays = self.rays.len();
+        }
+        // The direction first: it tells apart the samples of an area light,
+        // which share the origin.
+        let same =
+            (self.rays[self.point_rays..].iter()).position(|r| r.dir == ray.dir && *r == ray);
+        let index = match same {
+            Some(k) => self.point_rays + k,
+            None => {
+                self.rays.push(ray);
+                self.rays.len() - 1
+            }
+        };
+        self.slots.push((slot, index as u32));
+    }
+
+    /// Traces against every blocker: per point (of `points`), the samples
+    /// stopped (bit `s`: sample `s`), and the rays traced.
+    fn stopped(self, ctx: &FrameContext, points: usize) -> (Vec<u64>, u64) {
         let mut occluded = vec![false; self.rays.len()];
         ctx.backend.any_hit(&self.rays, &mut occluded);
         let mut stopped = vec![0u64; points];
-        for (slot, blocked) in self.slots.into_iter().zip(occluded) {
-            if blocked {
-                stopped[slot / per] |= 1 << (slot % per);
+        for &(slot, ray) in &self.slots {
+            if occluded[ray as usize] {
+                stopped[slot / self.per] |= 1 << (slot % self.per);
             }
         }
         (stopped, self.rays.len() as u64)
@@ -475,8 +509,8 @@ fn moving_points(
     points: &[ShadePoint],
     samples: u32,
 ) -> (Vec<Vec3>, ShadowCounts) {
-    let mut pending = Pending::default();
     let per = samples as usize;
+    let mut pending = Pending::new(per);
     let mut slots = vec![Vec3::ZERO; points.len() * per];
     for (i, point) in points.iter().enumerate() {
         let mut sampler = PointSampler::new(ctx, point, samples);
@@ -489,7 +523,7 @@ fn moving_points(
         }
     }
     // Nothing to merge: every blocker is in the one trace.
-    let (stopped, traced) = pending.stopped(ctx, points.len(), per);
+    let (stopped, traced) = pending.stopped(ctx, points.len());
     let e = slots
         .chunks(per)
         .zip(stopped)
@@ -514,7 +548,7 @@ fn kept_points(
     let mut slots = vec![Vec3::ZERO; points.len() * per];
     let mut by_static = vec![0u64; points.len()];
     let mut shortcut = vec![false; points.len()];
-    let mut pending = Pending::default();
+    let mut pending = Pending::new(per);
     let mut kept = 0u64;
     for (i, (point, kept_shadows)) in points.iter().zip(&shadows.points).enumerate() {
         let open = shadows.open_of(i);
@@ -550,7 +584,7 @@ fn kept_points(
             }
         }
     }
-    let (by_dynamic, traced) = pending.stopped(ctx, points.len(), per);
+    let (by_dynamic, traced) = pending.stopped(ctx, points.len());
     let mut e = merged_means(&slots, per, &by_static, &by_dynamic);
     for (i, _) in shortcut.iter().enumerate().filter(|(_, &s)| s) {
         e[i] = shadows.points[i].clear;
@@ -570,10 +604,10 @@ fn first_static_points(
     let n = points.len();
     let per = samples as usize;
     let mut found = vec![PointShadows::default(); n];
-    let mut pending = Pending::default();
+    let mut pending = Pending::new(per);
     let mut slots = vec![Vec3::ZERO; n * per];
-    // Samples on static lights: (slot, ray).
-    let mut probes: Vec<(usize, Ray)> = Vec::new();
+    // Samples on static lights.
+    let mut probes = Pending::new(per);
     for (i, point) in points.iter().enumerate() {
         let mut sampler = PointSampler::new(ctx, point, samples);
         for s in 0..samples {
@@ -592,19 +626,19 @@ fn first_static_points(
                     pending.push(ray, slot);
                 }
             } else if let Some((_, ray)) = drawn.lit {
-                probes.push((slot, ray));
+                probes.push(ray, slot);
             }
         }
     }
-    let rays: Vec<Ray> = probes.iter().map(|p| p.1).collect();
-    let (probe_static, probe_any) = static_and_any_blocked(ctx, blockers, &rays);
+    let (probe_static, probe_any) = static_and_any_blocked(ctx, blockers, &probes.rays);
     let mut by_static = vec![0u64; n];
-    let (mut by_dynamic, traced) = pending.stopped(ctx, n, per);
+    let (mut by_dynamic, traced) = pending.stopped(ctx, n);
     // Allocated at its length: what is kept is what is counted.
     let mut open = Vec::with_capacity(probe_static.iter().filter(|&&s| !s).count());
     let mut next = 0;
-    for (k, &(slot, ray)) in probes.iter().enumerate() {
-        let (i, s) = (slot / per, slot % per);
+    for &(slot, k) in &probes.slots {
+        let (i, s, k) = (slot / per, slot % per, k as usize);
+        let ray = probes.rays[k];
         // The probes run point after point: a point's open samples start
         // where the last point's ended.
         while next <= i {
@@ -629,7 +663,7 @@ fn first_static_points(
     for f in &mut found[next..] {
         f.first = open.len() as u32;
     }
-    let traced = probes.len() as u64 + traced;
+    let traced = probes.rays.len() as u64 + traced;
     for (i, f) in found.iter_mut().enumerate() {
         // What a point gets where nothing moves near it: its samples on
         // static lights that no static blocker stops.
