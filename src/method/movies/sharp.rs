@@ -26,8 +26,9 @@ use std::collections::HashMap;
 /// share of its brightest one's direct light (luminance). At 64 × 64 over
 /// 12 frames of seven scenes, 1/4 took the courtyard's block bias from
 /// 0.0122 to 0.0085 and `l_hall`'s from 0.0068 to 0.0061 (next to its
-/// light), the others within 2 %; 1/2 did as well on the courtyard for
-/// more links, 1/8 lost `l_hall`'s gain (`benches/RESULTS.md`).
+/// light); the others' moved by at most 8 % (`wall_light`'s up,
+/// 0.0032 → 0.0034); 1/2 did as well on the courtyard for more links,
+/// 1/8 lost `l_hall`'s gain (`benches/RESULTS.md`).
 pub const SHARP_RATIO: f32 = 0.25;
 
 /// Shadow samples at a sharp landing. A link's light is averaged with
