@@ -992,29 +992,7 @@ impl GlobalPass {
         albedo: &[(Vec3, Vec3)],
         working: &mut Working,
     ) -> (Vec<Vec3>, u64) {
-        let brightness: Vec<f32> = direct.par_iter().map(|&d| luminance(d)).collect();
-        working.hold(&brightness);
-        let pass = &*self;
-        // Each sharp landing, and the vertex whose link it is.
-        let (owners, landings): (Vec<u32>, Vec<Landing>) = (pass.vertices.par_iter().enumerate())
-            .flat_map_iter(|(i, v)| {
-                let brightness = &brightness;
-                (v.first_link..v.first_link + v.links).filter_map(move |link| {
-                    let l = &pass.links[link as usize];
-                    let landed = l.live && l.on_solved_side && l.hit.is_hit();
-                    let sharp = landed
-                        && is_sharp(
-                            renormalised(&pass.valid, &l.landing)
-                                .map(|(j, _)| brightness[j as usize]),
-                        );
-                    sharp.then(|| (i as u32, pass.landing(ctx, blockers, link)))
-                })
-            })
-            .unzip();
-        working.hold(&owners);
-        working.hold(&landings);
-        working.release(&brightness);
-        drop(brightness);
+        let (owners, landings) = self.sharp_landings(ctx, blockers, direct, working);
         let (e, rays) = self.sharp.irradiance(ctx, blockers, &landings);
         working.hold(&e);
         let mut added = vec![Vec3::ZERO; self.vertices.len()];
@@ -1037,6 +1015,39 @@ impl GlobalPass {
         working.release(&landings);
         working.release(&e);
         (added, rays)
+    }
+
+    /// The links that land in a sharp cell ([`is_sharp`] of the direct
+    /// light at its vertices) as [`Landing`]s, and the vertex whose link
+    /// each is, held in `working` until the caller lets them go.
+    fn sharp_landings(
+        &self,
+        ctx: &FrameContext,
+        blockers: &ShadowBlockers,
+        direct: &[Vec3],
+        working: &mut Working,
+    ) -> (Vec<u32>, Vec<Landing>) {
+        let brightness: Vec<f32> = direct.par_iter().map(|&d| luminance(d)).collect();
+        working.hold(&brightness);
+        let (owners, landings): (Vec<u32>, Vec<Landing>) = (self.vertices.par_iter().enumerate())
+            .flat_map_iter(|(i, v)| {
+                let brightness = &brightness;
+                (v.first_link..v.first_link + v.links).filter_map(move |link| {
+                    let l = &self.links[link as usize];
+                    let landed = l.live && l.on_solved_side && l.hit.is_hit();
+                    let sharp = landed
+                        && is_sharp(
+                            renormalised(&self.valid, &l.landing)
+                                .map(|(j, _)| brightness[j as usize]),
+                        );
+                    sharp.then(|| (i as u32, self.landing(ctx, blockers, link)))
+                })
+            })
+            .unzip();
+        working.hold(&owners);
+        working.hold(&landings);
+        working.release(&brightness);
+        (owners, landings)
     }
 
     /// Link `link` as a [`Landing`]: the point it hit, on the side it hit.
