@@ -322,8 +322,9 @@ fn a_switched_off_light_leaves_at_once_with_light_refresh() {
 /// frames): the samples whose direct light it changed are shot again as it
 /// moves, so `tcg`'s block bias at the last frame stays that of the same
 /// room under a still light (at this tiny size and few rays, 0.028 against
-/// `ic`'s 0.012), where the paper's rule (`light_refresh` off) lags the
-/// light (measured 0.013 with the rule, 0.058 without; 0.022 with the rule
+/// `ic`'s 0.017 with the same settings), where the paper's rule
+/// (`light_refresh` off) lags the light (measured 0.013 with the rule,
+/// 0.058 without, `ic` 0.023 under the moving light; 0.022 with the rule
 /// before its bound over every normal and its neighbours across edges,
 /// 2026-12-02).
 #[test]
