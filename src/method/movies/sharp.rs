@@ -20,6 +20,7 @@
 use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, Statics};
 use super::FrameContext;
 use glam::Vec3;
+use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// A landing cell is sharp where its dimmest vertex has less than this
@@ -98,11 +99,15 @@ impl SharpLandings {
             self.kept.clear();
             self.fingerprint = blockers.pick_fingerprint;
         }
-        let clear = |l: &Landing| keep && !l.moving && blockers.static_view_clear(l.point.p);
+        // Whether each landing's light depends on the static scene alone
+        // (found once: a box test each, in parallel).
+        let clear: Vec<bool> = (landings.par_iter())
+            .map(|l| keep && !l.moving && blockers.static_view_clear(l.point.p))
+            .collect();
         let mut found = vec![Vec3::ZERO; landings.len()];
         let mut missing = Vec::new();
         for (i, l) in landings.iter().enumerate() {
-            match self.kept.get(&l.link).filter(|_| clear(l)) {
+            match self.kept.get(&l.link).filter(|_| clear[i]) {
                 Some(&e) => found[i] = e,
                 None => missing.push(i),
             }
@@ -111,10 +116,10 @@ impl SharpLandings {
         let (e, counts) = direct_irradiance(ctx, blockers, &points, SHARP_SAMPLES, Statics::Moving);
         for (&i, e) in missing.iter().zip(e) {
             found[i] = e;
-            let l = &landings[i];
-            match clear(l) {
-                true => self.kept.insert(l.link, e),
-                false => self.kept.remove(&l.link),
+            let link = landings[i].link;
+            match clear[i] {
+                true => self.kept.insert(link, e),
+                false => self.kept.remove(&link),
             };
         }
         (found, counts.traced)
