@@ -236,8 +236,13 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // the direct light a glossy lobe reflects goes along each link
         // where the lobe points, its indirect light spread with the lobe's
         // hemispherical albedo (`GlobalPass::glossy_direct`,
-        // `spread_albedo`, 2026-12-02).
-        "movies" => 11,
+        // `spread_albedo`, 2026-12-02). 11: the direct light at the hits
+        // of links landing in sharp cells (`sharp`, 2026-12-02). 12: a
+        // large triangle the camera sees is split into pieces
+        // (`pieces`), patches go seven levels down (`patch::MAX_LEVEL`),
+        // and rays that meet the sky no longer lift the grid spacing's
+        // bound (`global::meshing_size`, 2026-12-02).
+        "movies" => 12,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with

@@ -24,7 +24,9 @@
 //! Departures, each named where it is made: the global pass is point
 //! collocation, not hierarchical radiosity ([`global`]), whose links
 //! take the direct light at their hits where it changes sharply across
-//! the cell they land in rather than refining the mesh ([`sharp`]), and
+//! the cell they land in rather than refining the mesh ([`sharp`]),
+//! whose triangles too large for one grid are split towards what the
+//! camera sees rather than by the links' error ([`pieces`]), and
 //! carries
 //! glossy surfaces, which the paper's diffuse radiosity has not: the
 //! direct light a lobe reflects goes along each link where the lobe
@@ -64,6 +66,7 @@ pub mod direct;
 pub mod global;
 pub mod movie;
 pub mod patch;
+pub mod pieces;
 pub mod sharp;
 pub mod sides;
 

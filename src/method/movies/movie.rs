@@ -12,7 +12,7 @@ use super::direct::{
 use super::global::{GlobalPass, Gouraud};
 use super::patch::Patch;
 use super::FrameContext;
-use crate::sampling::streams;
+use crate::sampling::{mix64, streams};
 use crate::scene::Triangle;
 use glam::Vec3;
 
@@ -106,12 +106,7 @@ impl Movie {
 
     fn texel_point(&self, tri: &Triangle, index: usize, (u, v): (f32, f32)) -> ShadePoint {
         let side = if self.key.back { -1.0 } else { 1.0 };
-        let item = streams::MOVIE_TEXEL
-            | u64::from(self.key.triangle) << 28
-            | u64::from(self.key.back) << 27
-            | u64::from(self.key.patch.code()) << 20
-            | index as u64;
-        ShadePoint::on_side(tri, (u, v), side, item)
+        ShadePoint::on_side(tri, (u, v), side, texel_item(&self.key, index))
     }
 
     /// The movie's frame of `ctx`: direct light per texel (static shadows
@@ -262,6 +257,25 @@ pub fn texels_needed(tri: &Triangle, t: f32, pixel_angle: f32, texels_per_pixel:
     }
 }
 
+/// The random streams' item of texel `index` (below 2^20: at most 1024²
+/// texels) of movie `key`: the triangle from bit 28, the side at 27, the
+/// patch's code (below 2^7 to level 3) from 20. A patch deeper than that
+/// has no room there: its code, mixed, flips the bits from 20 to 56
+/// instead, so that its texels draw other numbers than its triangle's
+/// other patches' (two items could meet, with a chance of about one in
+/// 2^37 a pair; their texels would then draw the same numbers, each still
+/// unbiased).
+fn texel_item(key: &MovieKey, index: usize) -> u64 {
+    let code = u64::from(key.patch.code());
+    let item = u64::from(key.triangle) << 28 | u64::from(key.back) << 27 | index as u64;
+    let item = if code < 1 << 7 {
+        item | code << 20
+    } else {
+        item ^ (mix64(code) & ((1 << 57) - (1 << 20)))
+    };
+    streams::MOVIE_TEXEL | item
+}
+
 /// A movie's resolution for `needed` texels along an edge: the next power
 /// of two (so that small changes of size are no event), at most `max`.
 pub fn resolution_for(needed: f32, max: u32) -> u32 {
@@ -281,6 +295,32 @@ mod tests {
             triangle: 3,
             back: false,
             patch: Patch::ROOT,
+        }
+    }
+
+    /// The texels of a triangle's patches draw apart down to the deepest
+    /// level, and to level 3 as before the patches went deeper.
+    #[test]
+    fn texels_of_every_patch_draw_their_own_numbers() {
+        let mut items = std::collections::HashSet::new();
+        let mut level = vec![Patch::ROOT];
+        for _ in 0..=crate::method::movies::patch::MAX_LEVEL {
+            for &patch in &level {
+                let key = MovieKey { patch, ..key() };
+                for index in [0, 1, 65535] {
+                    let item = texel_item(&key, index);
+                    assert!(items.insert(item), "{patch:?} texel {index}");
+                    assert_eq!(item & !((1 << 57) - 1), streams::MOVIE_TEXEL);
+                    if patch.level <= 3 {
+                        let before = 3u64 << 28 | u64::from(patch.code()) << 20 | index as u64;
+                        assert_eq!(item, streams::MOVIE_TEXEL | before);
+                    }
+                }
+            }
+            level = level
+                .iter()
+                .flat_map(|p| (0..4).map(|k| p.child(k)))
+                .collect();
         }
     }
 

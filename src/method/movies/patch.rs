@@ -10,8 +10,15 @@
 //! coordinates: 0 the corner at `(0, 0)`, 1 at `(1, 0)`, 2 at `(0, 1)`, 3
 //! the middle one, turned half a turn.
 
-/// The deepest level: 4³ = 64 patches a triangle.
-pub const MAX_LEVEL: u8 = 3;
+/// The deepest level: 4⁷ = 16,384 patches a triangle, so a triangle's
+/// texels reach 128 × [`MoviesSettings::max_resolution`] an edge (32,768
+/// at the default). At 3 levels, 2,048: a ground 600 m across, two
+/// triangles, had texels of 41 cm where the camera 3 m away asked for
+/// 3 cm at 128 × 128, and the shadow of a wall on it, blurred over a
+/// texel, leaked along the wall's foot (`tests/directional_light.rs`).
+///
+/// [`MoviesSettings::max_resolution`]: super::MoviesSettings::max_resolution
+pub const MAX_LEVEL: u8 = 7;
 
 /// A patch texture finer than this many texels along an edge is split
 /// (while the level allows): past it, a quarter of the patch is cheaper
@@ -23,7 +30,7 @@ pub const SPLIT_RESOLUTION: f32 = 32.0;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct Patch {
     pub level: u8,
-    pub path: u8,
+    pub path: u16,
 }
 
 impl Patch {
@@ -33,13 +40,13 @@ impl Patch {
     pub fn child(self, k: u8) -> Patch {
         Patch {
             level: self.level + 1,
-            path: (self.path << 2) | k,
+            path: (self.path << 2) | u16::from(k),
         }
     }
 
     /// The child at each level, first level first.
     fn steps(self) -> impl Iterator<Item = u8> {
-        (0..self.level).map(move |l| (self.path >> (2 * (self.level - 1 - l))) & 3)
+        (0..self.level).map(move |l| ((self.path >> (2 * (self.level - 1 - l))) & 3) as u8)
     }
 
     /// A code unique among a triangle's patches (`1` for the root), below
@@ -53,7 +60,7 @@ impl Patch {
         let level = (0..=MAX_LEVEL).find(|&l| code >> (2 * l) == 1)?;
         Some(Patch {
             level,
-            path: (code & ((1 << (2 * level)) - 1)) as u8,
+            path: (code & ((1 << (2 * level)) - 1)) as u16,
         })
     }
 
@@ -75,7 +82,7 @@ impl Patch {
 }
 
 /// Child `k`'s `(s, t)` in its parent's coordinates.
-fn to_parent(k: u8, (s, t): (f32, f32)) -> (f32, f32) {
+pub fn to_parent(k: u8, (s, t): (f32, f32)) -> (f32, f32) {
     match k {
         0 => (0.5 * s, 0.5 * t),
         1 => (0.5 + 0.5 * s, 0.5 * t),

@@ -6,6 +6,11 @@ some exporters write one). It moves every shadow the walls cast, so the
 methods' temporal reuse is tested on shadows that no moving object casts.
 
     python3 tests/data/scenes/courtyard_swinging_light.py
+    python3 tests/data/scenes/courtyard_swinging_light.py --ground HALF OUT.glb
+
+The second writes the same courtyard on a ground 2·HALF across (still two
+triangles) to OUT.glb: the scene behind the figures on `movies`' large
+triangles (`src/method/movies/pieces.rs`).
 """
 import json, math, os, struct, sys
 
@@ -15,12 +20,12 @@ from gen import Scene, box  # noqa: E402
 from scenes import look_at_quat, oquad  # noqa: E402
 
 
-def courtyard():
+def courtyard(half=4.0):
     S = Scene()
     white = S.mat('white', (0.7, 0.7, 0.7))
     red = S.mat('red', (0.7, 0.15, 0.1))
     green = S.mat('green', (0.15, 0.6, 0.2))
-    ground = oquad([(-4, 0, -4), (4, 0, -4), (4, 0, 4), (-4, 0, 4)], (0, 1, 0))
+    ground = oquad([(-half, 0, -half), (half, 0, -half), (half, 0, half), (-half, 0, half)], (0, 1, 0))
     S.node('ground', mesh=S.mesh('ground', [(*ground, 'u16', white)]))
     for name, centre, half, m in [
             ('left', (-1.55, 1.0, 0.0), (0.05, 1.0, 1.5), red),
@@ -63,7 +68,12 @@ def with_point_light(path, node_name, colour, intensity):
 
 
 if __name__ == '__main__':
-    path = os.path.join(HERE, 'courtyard_swinging_light.glb')
-    courtyard().write_glb(path)
+    if len(sys.argv) == 4 and sys.argv[1] == '--ground':
+        half, path = float(sys.argv[2]), sys.argv[3]
+    elif len(sys.argv) == 1:
+        half, path = 4.0, os.path.join(HERE, 'courtyard_swinging_light.glb')
+    else:
+        sys.exit(__doc__)
+    courtyard(half).write_glb(path)
     with_point_light(path, 'sun', [1.0, 0.95, 0.85], 3000.0)
     print(path)

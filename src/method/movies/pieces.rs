@@ -1,0 +1,279 @@
+//! The global pass's triangles that are too large for one grid, split into
+//! pieces where the camera looks ([`super::global`]).
+//!
+//! The pass grids a triangle with at most [`MAX_GRID`](super::global::MAX_GRID)
+//! cells an edge. A
+//! triangle far larger than that many spacings (a ground of two triangles
+//! under a house) was one coarse grid, whose cells, metres across, smeared
+//! the light a wall bounces onto the ground beside it: `movies` rendered
+//! a sunlit corner on a ground 60 m and 600 m across at 0.055 and 0.075
+//! relative RMSE against `path`, `ic` at 0.018 (`tests/directional_light.rs`).
+//! Such a triangle is now split in four at its edges' midpoints, as
+//! [`super::patch`] splits a movie, and each piece again, while a piece
+//! is still over the cap at the spacing wanted where it lies: the pass's
+//! spacing within the box of what the camera sees of the triangle at time
+//! 0 ([`super::global::MESHED_AT`]), growing in proportion to the
+//! distance beyond it, so that a cell spans about the same angle seen
+//! from the view wherever it is. A triangle the camera does not see is not
+//! split: it only sends light, which a vertex's links average over, and
+//! refining it only took links from the triangles seen (a 2 km ground
+//! hidden under a room coarsened the room's grids as the pass kept to its
+//! budget, `tests/movies.rs`: block bias 0.017 → 0.027). The paper refines its hierarchy by the links'
+//! error; this grades the mesh by where the viewer is, as importance-driven
+//! radiosity does (Smits, Arvo & Salesin 1992), and leaves a triangle
+//! within the cap one grid, as before. A camera that later travels far
+//! from where it stands at time 0 leaves the finer pieces behind.
+//!
+//! Pieces meet as triangles do: corners and the vertices along a shared
+//! edge are one vertex where both sides grid it alike; where a piece meets
+//! a finer one, the finer one's edge vertices are not the coarser one's
+//! (a T-junction: the Gouraud shading steps there, as it does between
+//! triangles of unlike grids).
+
+use super::global::Grid;
+use super::patch::{child_at, from_parent, to_parent};
+use crate::scene::Triangle;
+use glam::Vec3;
+use std::collections::HashMap;
+
+/// Deepest split: a piece a 4096th of its triangle's edge.
+pub const MAX_DEPTH: u32 = 12;
+
+/// What the camera sees at time 0: per triangle it sees, the box around
+/// the points it sees of it, and the size of all it sees (the diagonal of
+/// the box around it and those points).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct View {
+    seen: HashMap<u32, (Vec3, Vec3)>,
+    size: f32,
+}
+
+impl View {
+    /// The view of a camera at `eye` that sees the points `hits`, each on
+    /// its triangle; `None` where it sees nothing, or its box is flat to
+    /// a point or not finite.
+    pub fn new(eye: Vec3, hits: &[(u32, Vec3)]) -> Option<View> {
+        let (lo, hi) = hits
+            .iter()
+            .fold((eye, eye), |(lo, hi), &(_, p)| (lo.min(p), hi.max(p)));
+        let size = (hi - lo).length();
+        if hits.is_empty() || !(size.is_finite() && size > 0.0) {
+            return None;
+        }
+        let mut seen: HashMap<u32, (Vec3, Vec3)> = HashMap::new();
+        for &(triangle, p) in hits {
+            let b = seen.entry(triangle).or_insert((p, p));
+            *b = (b.0.min(p), b.1.max(p));
+        }
+        Some(View { seen, size })
+    }
+
+    /// The diagonal of the box around the camera and what it sees.
+    pub fn size(&self) -> f32 {
+        self.size
+    }
+
+    /// The spacing wanted over the part of `triangle` in the box
+    /// `(lo, hi)`: `spacing` within [`View::size`] of what the camera
+    /// sees of the triangle, and in proportion to the distance past that;
+    /// `None` on a triangle it does not see, which is not split (hidden,
+    /// it is a source of light alone, whose coarse cells the links
+    /// average over).
+    pub fn spacing_at(&self, spacing: f32, triangle: u32, piece: (Vec3, Vec3)) -> Option<f32> {
+        let (lo, hi) = self.seen.get(&triangle)?;
+        let gap = (piece.0 - *hi).max(*lo - piece.1).max(Vec3::ZERO);
+        Some(spacing * (gap.length() / self.size).max(1.0))
+    }
+}
+
+/// A piece of a triangle: its corners' barycentrics `(u, v)` in the
+/// triangle, corner `k` of the piece at its own `(s, t)` of
+/// `(0, 0)`, `(1, 0)`, `(0, 1)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Piece {
+    pub corners: [(f32, f32); 3],
+    pub depth: u32,
+}
+
+impl Piece {
+    /// The whole triangle.
+    pub const WHOLE: Piece = Piece {
+        corners: [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)],
+        depth: 0,
+    };
+
+    /// The triangle's `(u, v)` at the piece's `(s, t)`.
+    pub fn to_triangle(&self, (s, t): (f32, f32)) -> (f32, f32) {
+        let [c0, c1, c2] = self.corners;
+        (
+            c0.0 + s * (c1.0 - c0.0) + t * (c2.0 - c0.0),
+            c0.1 + s * (c1.1 - c0.1) + t * (c2.1 - c0.1),
+        )
+    }
+
+    /// Its four children, numbered as [`super::patch`] numbers a patch's.
+    /// Their corners are the parent's corners and edge midpoints, exact
+    /// (dyadic) barycentrics, so neighbours agree on them bit for bit.
+    pub fn children(&self) -> [Piece; 4] {
+        let corner = |k: u8, local: (f32, f32)| self.to_triangle(to_parent(k, local));
+        let child = |k: u8| Piece {
+            corners: [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)].map(|c| corner(k, c)),
+            depth: self.depth + 1,
+        };
+        [child(0), child(1), child(2), child(3)]
+    }
+
+    /// Its corners in the world, on triangle `tri`.
+    pub fn world_corners(&self, tri: &Triangle) -> [Vec3; 3] {
+        self.corners.map(|c| on_triangle(tri, c))
+    }
+
+    /// The triangle's `(u, v)` of grid vertex `(a, b)` of an `n`-segment
+    /// grid over the piece. The whole triangle's are `(a/n, b/n)`; a
+    /// piece's on an edge are found from the edge's ends taken in one
+    /// order, so that the piece across the edge, gridded alike, finds
+    /// the same bits.
+    pub fn grid_point(&self, n: u32, a: u32, b: u32) -> (f32, f32) {
+        if *self == Piece::WHOLE {
+            return (a as f32 / n as f32, b as f32 / n as f32);
+        }
+        let c = self.corners;
+        let along = |from: (f32, f32), to: (f32, f32), k: u32| {
+            let ((p, q), k) = if bits(from) <= bits(to) {
+                ((from, to), k)
+            } else {
+                ((to, from), n - k)
+            };
+            let f = k as f32 / n as f32;
+            (p.0 + (q.0 - p.0) * f, p.1 + (q.1 - p.1) * f)
+        };
+        match (a, b) {
+            (_, 0) => along(c[0], c[1], a),
+            (0, _) => along(c[0], c[2], b),
+            _ if a + b == n => along(c[1], c[2], b),
+            _ => self.to_triangle((a as f32 / n as f32, b as f32 / n as f32)),
+        }
+    }
+}
+
+/// The bits of barycentrics, to compare and key them exactly.
+pub fn bits((u, v): (f32, f32)) -> (u32, u32) {
+    (u.to_bits(), v.to_bits())
+}
+
+/// The point at barycentrics `(u, v)` of `tri` (its corners exactly at
+/// the corners' barycentrics).
+pub fn on_triangle(tri: &Triangle, (u, v): (f32, f32)) -> Vec3 {
+    tri.p[0] * (1.0 - u - v) + tri.p[1] * u + tri.p[2] * v
+}
+
+/// How one side of a triangle is gridded: one grid over all of it or a
+/// piece of it, or split in four, its children at `pieces[i..i + 4]` of
+/// the pass.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Cells {
+    Grid(Grid),
+    Split(u32),
+}
+
+/// The grid over triangle barycentrics `(u, v)` in the tiling whose root
+/// is `root` (children in `pieces`), and the point's `(s, t)` in it.
+pub fn leaf(pieces: &[Cells], root: Cells, (u, v): (f32, f32)) -> (Grid, (f32, f32)) {
+    let (mut cells, mut local) = (root, (u, v));
+    loop {
+        match cells {
+            Cells::Grid(grid) => return (grid, local),
+            Cells::Split(first) => {
+                let k = child_at(local);
+                local = from_parent(k, local);
+                cells = pieces[first as usize + k as usize];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Children tile their parent, and a point found by the descent maps
+    /// back to itself through the pieces' corners.
+    #[test]
+    fn the_descent_finds_the_piece_that_holds_the_point() {
+        let mut pieces = Vec::new();
+        // The whole split once, its child 3 (the middle) again.
+        let root = Cells::Split(0);
+        for k in 0..4u32 {
+            pieces.push(if k == 3 {
+                Cells::Split(4)
+            } else {
+                Cells::Grid(Grid { n: 1, first: k })
+            });
+        }
+        for k in 0..4u32 {
+            pieces.push(Cells::Grid(Grid {
+                n: 1,
+                first: 10 + k,
+            }));
+        }
+        let middle = Piece::WHOLE.children()[3];
+        for i in 0..=30 {
+            for j in 0..=30 - i {
+                let (u, v) = (i as f32 / 30.0, j as f32 / 30.0);
+                let (grid, local) = leaf(&pieces, root, (u, v));
+                let piece = match grid.first {
+                    f @ 0..=2 => Piece::WHOLE.children()[f as usize],
+                    f => middle.children()[(f - 10) as usize],
+                };
+                let back = piece.to_triangle(local);
+                assert!(
+                    (back.0 - u).abs() < 1e-5 && (back.1 - v).abs() < 1e-5,
+                    "({u}, {v})"
+                );
+                assert!(local.0 >= -1e-5 && local.1 >= -1e-5 && local.0 + local.1 <= 1.0 + 1e-5);
+            }
+        }
+    }
+
+    /// Two pieces across an edge, gridded alike, put the same bits at the
+    /// edge's vertices, whichever way round each walks it.
+    #[test]
+    fn pieces_across_an_edge_agree_on_its_vertices() {
+        let [c0, _, _, middle] = Piece::WHOLE.children();
+        // Child 0's edge from corner 1 to corner 2 is the middle's edge
+        // from corner 1 to corner 2, walked the other way.
+        let n = 7;
+        for k in 0..=n {
+            let on_0 = c0.grid_point(n, n - k, k);
+            let on_middle = middle.grid_point(n, k, n - k);
+            assert_eq!(bits(on_0), bits(on_middle), "vertex {k}");
+        }
+    }
+
+    /// The spacing wanted is the pass's within a view's size of what the
+    /// camera sees of a triangle, and grows with the distance past that;
+    /// a triangle it does not see is not split.
+    #[test]
+    fn the_spacing_grows_with_the_distance_from_what_is_seen() {
+        let hits = [
+            (7, Vec3::ZERO),
+            (7, Vec3::new(1.0, 0.0, 0.0)),
+            (2, Vec3::new(3.0, 4.0, 0.0)),
+        ];
+        let view = View::new(Vec3::ZERO, &hits).unwrap();
+        assert_eq!(view.size(), 5.0);
+        let at = |x: f32| {
+            view.spacing_at(
+                0.1,
+                7,
+                (Vec3::new(x, 0.0, 0.0), Vec3::new(x + 1.0, 1.0, 1.0)),
+            )
+        };
+        assert_eq!(at(0.5), Some(0.1));
+        assert_eq!(at(6.0), Some(0.1));
+        assert!((at(21.0).unwrap() - 0.4).abs() < 1e-6);
+        assert_eq!(view.spacing_at(0.1, 3, (Vec3::ZERO, Vec3::ONE)), None);
+        assert_eq!(View::new(Vec3::ONE, &[(0, Vec3::ONE)]), None);
+        assert_eq!(View::new(Vec3::ONE, &[]), None);
+    }
+}
