@@ -650,7 +650,7 @@ impl GlobalPass {
         let both: Vec<bool> = (0..meshed.triangles.len() as u32)
             .map(|id| sides.both(id))
             .collect();
-        let size = meshing_size(meshed, &bvh, ctx.aspect());
+        let size = meshing_size(ctx.scene, meshed, &bvh, ctx.aspect());
         let meshing = Meshing::fitting(&meshed.triangles, &both, &settings, size);
         let PassMesh {
             grids,
@@ -1436,39 +1436,71 @@ const VIEW_SIZES: f32 = 2.0;
 /// `tests/data/scenes/courtyard_swinging_light.py`), whose camera sees
 /// the sky above the walls, was meshed at a 32nd of 71 m, 2.2 m, its walls
 /// two cells high, and `movies` rendered it at 64×64 with 19× `ic`'s
-/// block bias (0.115 against 0.0059; 0.014 now). A ray that meets
+/// block bias (0.115 against 0.0059; 0.013 now). A ray that meets
 /// nothing sees nothing to mesh.
 fn meshing_size(
+    scene: &crate::scene::Scene,
     meshed: &crate::scene::Snapshot,
     bvh: &SceneBvh,
     aspect: f32,
 ) -> (f32, Option<View>) {
     let diagonal = static_diagonal(meshed);
     let camera = &meshed.camera;
-    let side = VIEW_RAYS as f32;
-    let mut seen = (camera.position, camera.position);
-    let mut hits = Vec::new();
-    for i in 0..VIEW_RAYS * VIEW_RAYS {
-        let (sx, sy) = ((i % VIEW_RAYS) as f32 + 0.5, (i / VIEW_RAYS) as f32 + 0.5);
-        let ray = Ray::new(
-            camera.position,
-            camera.direction(sx / side, sy / side, aspect),
-            0.0,
-            f32::INFINITY,
-        );
-        let hit = bvh.closest_hit(&ray);
-        if !hit.is_hit() {
-            continue;
-        }
-        let p = ray.at(hit.t);
-        seen = (seen.0.min(p), seen.1.max(p));
-        hits.push((hit.triangle, p));
-    }
-    let view = View::new(camera.position, &hits);
+    let view = View::new(camera.position, &seen_by(camera, bvh, aspect));
     let size = view
         .as_ref()
         .map_or(diagonal, |view| diagonal.min(VIEW_SIZES * view.size()));
-    (size, view)
+    (
+        size,
+        view.map(|view| seen_later(view, scene, camera, (bvh, aspect))),
+    )
+}
+
+/// Times over the animation, beside 0, from which the camera's view adds
+/// to what large triangles are split towards ([`seen_later`]).
+const VIEW_TIMES: u32 = 8;
+
+/// `view` with what the camera sees at [`VIEW_TIMES`] times evenly over
+/// the animation (of `scene`, whose camera at time 0 is `at_zero`), seen
+/// in the scene as it stands at time 0 (`bvh`): a camera that travels over
+/// a large ground has it split along its way, not only where it starts.
+/// The meshing stays that of time 0 and of the animation alone, whatever
+/// frames a render takes ([`MESHED_AT`]). A camera that does not move adds
+/// nothing.
+fn seen_later(
+    mut view: View,
+    scene: &crate::scene::Scene,
+    at_zero: &crate::scene::Camera,
+    (bvh, aspect): (&SceneBvh, f32),
+) -> View {
+    let duration = scene.animation.duration();
+    for k in 1..=VIEW_TIMES {
+        let camera = scene.camera_at(duration * k as f32 / VIEW_TIMES as f32);
+        if camera.position != at_zero.position || camera.basis != at_zero.basis {
+            view.add(&seen_by(&camera, bvh, aspect));
+        }
+    }
+    view
+}
+
+/// What `camera` sees (each point with its triangle) along a grid of
+/// [`VIEW_RAYS`]² rays through a film of width-to-height `aspect`, in the
+/// scene `bvh` is built over; the rays that meet nothing left out.
+fn seen_by(camera: &crate::scene::Camera, bvh: &SceneBvh, aspect: f32) -> Vec<(u32, Vec3)> {
+    let side = VIEW_RAYS as f32;
+    (0..VIEW_RAYS * VIEW_RAYS)
+        .filter_map(|i| {
+            let (sx, sy) = ((i % VIEW_RAYS) as f32 + 0.5, (i / VIEW_RAYS) as f32 + 0.5);
+            let ray = Ray::new(
+                camera.position,
+                camera.direction(sx / side, sy / side, aspect),
+                0.0,
+                f32::INFINITY,
+            );
+            let hit = bvh.closest_hit(&ray);
+            hit.is_hit().then(|| (hit.triangle, ray.at(hit.t)))
+        })
+        .collect()
 }
 
 /// The diagonal of `snapshot`'s static triangles' box (of all triangles
