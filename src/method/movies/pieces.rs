@@ -1,36 +1,38 @@
 //! The global pass's triangles that are too large for one grid, split into
 //! pieces where the camera looks ([`super::global`]).
 //!
-//! The pass grids a triangle with at most [`MAX_GRID`](super::global::MAX_GRID)
-//! cells an edge. A
-//! triangle far larger than that many spacings (a ground of two triangles
-//! under a house) was one coarse grid, whose cells, metres across, smeared
-//! the light a wall bounces onto the ground beside it: `movies` rendered
-//! a sunlit corner on a ground 60 m and 600 m across at 0.055 and 0.075
-//! relative RMSE against `path`, `ic` at 0.018 (`tests/directional_light.rs`).
+//! The pass grids a triangle with at most
+//! [`MAX_GRID`](super::global::MAX_GRID) cells an edge. A triangle far
+//! larger than that many spacings (a ground of two triangles under a
+//! house) was one coarse grid, whose cells, metres across, smeared the
+//! light a wall bounces onto the ground beside it: `movies` rendered a
+//! sunlit corner on a ground 60 m and 600 m across at 0.055 and 0.075
+//! relative RMSE against `path`, `ic` at 0.018
+//! (`tests/directional_light.rs`).
+//!
 //! Such a triangle is now split in four at its edges' midpoints, as
-//! [`super::patch`] splits a movie, and each piece again, while a piece
-//! is still over the cap at the spacing wanted where it lies: the pass's
-//! spacing within the box of what the camera sees of the triangle (the
-//! scene as it stands at time 0, [`super::global::MESHED_AT`]), and
-//! beyond it that spacing times `1 + d / size`, `d` the distance from the
-//! box and `size` the view's: twice as coarse a view's size away, so that
-//! far away a cell spans about the same angle seen from the view. (Coarse
-//! only past a view's size, `max(1, d / size)`, took 2–3 times the links
-//! on the tests' grounds for errors within 4 % of these, and crowded out
-//! the rest of the scene under the pass's budget where the camera
-//! travels.) A triangle the camera does not see is not
-//! split: it only sends light, which a vertex's links average over, and
-//! refining it only took links from the triangles seen (a 2 km ground
-//! hidden under a room coarsened the room's grids as the pass kept to its
-//! budget, `tests/movies.rs`: block bias 0.017 → 0.027). The paper refines its hierarchy by the links'
-//! error; this grades the mesh by where the viewer is, as importance-driven
+//! [`super::patch`] splits a movie, and each piece again, while a piece is
+//! still over the cap at the spacing wanted where it lies: the pass's
+//! spacing at what the camera sees of the triangle, and that spacing times
+//! `1 + d / size` at a distance `d` from it (`size` the view's), so that
+//! far away a cell spans about the same angle seen from the view. Keeping
+//! the pass's spacing out to a view's size, `max(1, d / size)`, took 2–3
+//! times the links on the tests' grounds for errors within 4 % of these,
+//! and crowded out the rest of the scene under the pass's budget where the
+//! camera travels. The paper refines its hierarchy by the links' error;
+//! this grades the mesh by where the viewer is, as importance-driven
 //! radiosity does (Smits, Arvo & Salesin 1992), and leaves a triangle
-//! within the cap one grid, as before. What the camera sees is taken at
-//! time 0 and at eight times over the animation (in the scene as it
-//! stands at time 0, as the pass is meshed), so a camera that travels over
-//! a large ground has it split along its way; the spacing and the size
-//! the distance is measured in stay those of time 0.
+//! within the cap one grid, as before.
+//!
+//! What the camera sees is taken at time 0 and at eight times over the
+//! animation, in the scene as it stands at time 0, as the pass is meshed
+//! ([`super::global::MESHED_AT`]): a camera that travels over a large
+//! ground has it split along its way. The spacing and the size the
+//! distance is measured in stay those of time 0. A triangle the camera
+//! does not see is not split: it only sends light, which a vertex's links
+//! average over, and refining it only took links from the triangles seen
+//! (a 2 km ground hidden under a room coarsened the room's grids as the
+//! pass kept to its budget, `tests/movies.rs`: block bias 0.017 → 0.027).
 //!
 //! Pieces meet as triangles do: corners and the vertices along a shared
 //! edge are one vertex where both sides grid it alike; where a piece meets
