@@ -14,7 +14,7 @@
 /// texels reach 128 × [`MoviesSettings::max_resolution`] an edge (32,768
 /// at the default). At 3 levels, 2,048: a ground 600 m across, two
 /// triangles, had texels of 41 cm where the camera 3 m away asked for
-/// 3 cm at 128 × 128, and the shadow of a wall on it, blurred over a
+/// about 3 cm at 128 × 128, and the shadow of a wall on it, blurred over a
 /// texel, leaked along the wall's foot (`tests/directional_light.rs`).
 ///
 /// [`MoviesSettings::max_resolution`]: super::MoviesSettings::max_resolution
