@@ -285,6 +285,11 @@ impl Triangle {
         0.5 * self.cross().length()
     }
 
+    /// The length of its longest edge ([`longest_edge`]).
+    pub fn longest_edge(&self) -> f32 {
+        longest_edge(&self.p)
+    }
+
     pub fn geometric_normal(&self) -> Vec3 {
         self.cross().normalize_or_zero()
     }
@@ -442,6 +447,13 @@ impl Snapshot {
 
 /// The smallest box `(min, max)` around `points`; `None` where there are
 /// none (or none but NaN).
+/// The length of the longest edge of the triangle with corners `p`.
+pub fn longest_edge(p: &[Vec3; 3]) -> f32 {
+    (0..3)
+        .map(|k| (p[(k + 1) % 3] - p[k]).length())
+        .fold(0.0f32, f32::max)
+}
+
 pub fn bounding_box(points: impl IntoIterator<Item = Vec3>) -> Option<(Vec3, Vec3)> {
     let (lo, hi) = (points.into_iter())
         .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {

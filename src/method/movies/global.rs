@@ -184,14 +184,12 @@ impl Meshing {
     /// of that spacing, wherever it lies.
     fn grid(&self, (id, tri): (u32, &Triangle), piece: &Piece) -> Option<(u32, u32)> {
         let corners = piece.world_corners(tri);
-        let longest = (0..3)
-            .map(|k| (corners[(k + 1) % 3] - corners[k]).length())
-            .fold(0.0f32, f32::max);
+        let longest = crate::scene::longest_edge(&corners);
         let mut spacing = self.spacing;
         if longest / spacing > MAX_GRID as f32 {
-            let lo = corners[0].min(corners[1]).min(corners[2]);
-            let hi = corners[0].max(corners[1]).max(corners[2]);
-            let wanted = (self.view.as_ref()).and_then(|v| v.spacing_at(spacing, id, (lo, hi)));
+            let wanted = (self.view.as_ref())
+                .zip(crate::scene::bounding_box(corners))
+                .and_then(|(v, piece_box)| v.spacing_at(spacing, id, piece_box));
             if let Some(wanted) = wanted {
                 spacing = wanted;
                 if longest / spacing > MAX_GRID as f32 && piece.depth < MAX_DEPTH {
@@ -439,9 +437,10 @@ impl PassMesh {
                     self.link_count += links;
                     self.vertices.len() as u32 - 1
                 };
-                let corner = (Piece::WHOLE.corners.iter())
-                    .position(|&c| pieces::bits(c) == pieces::bits(point));
+                // Triangle corners and piece edges lie on a grid's edge.
                 let on_edge = a == 0 || b == 0 || a + b == n;
+                let corner = (Piece::WHOLE.corners.iter())
+                    .position(|&c| on_edge && pieces::bits(c) == pieces::bits(point));
                 let vertex = match corner {
                     Some(k) => {
                         let (p, n) = if collapsed {

@@ -245,9 +245,7 @@ impl Movie {
 /// there (§3.1: "at least one texel covers one image pixel"), times
 /// `texels_per_pixel`.
 pub fn texels_needed(tri: &Triangle, t: f32, pixel_angle: f32, texels_per_pixel: f32) -> f32 {
-    let longest = (0..3)
-        .map(|k| (tri.p[(k + 1) % 3] - tri.p[k]).length())
-        .fold(0.0f32, f32::max);
+    let longest = tri.longest_edge();
     let footprint = (t * pixel_angle).max(1e-9);
     let texels = longest * texels_per_pixel / footprint;
     if texels.is_finite() {

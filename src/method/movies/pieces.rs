@@ -17,7 +17,7 @@
 //! `1 + d / size` at a distance `d` from it (`size` the view's), so that
 //! far away a cell spans about the same angle seen from the view. Keeping
 //! the pass's spacing out to a view's size, `max(1, d / size)`, took 2–3
-//! times the links on the tests' grounds for errors within 4 % of these,
+//! times the links on the tests' grounds for errors within 5 % of these,
 //! and crowded out the rest of the scene under the pass's budget where the
 //! camera travels. The paper refines its hierarchy by the links' error;
 //! this grades the mesh by where the viewer is, as importance-driven

@@ -418,9 +418,7 @@ fn flat_components(triangles: &[(u32, [Vec3; 3])], component: &[u32], count: usi
     for (id, (_, p)) in triangles.iter().enumerate() {
         let c = component[id] as usize;
         let normal = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
-        let size = (0..3)
-            .map(|k| (p[(k + 1) % 3] - p[k]).length())
-            .fold(0.0f32, f32::max);
+        let size = crate::scene::longest_edge(p);
         if normal == Vec3::ZERO || !size.is_finite() {
             flat[c] = false;
             continue;
