@@ -35,6 +35,7 @@ use crate::sampling::streams;
 use crate::sampling::{LightChoice, Rng, SampleKey};
 use crate::scene::Snapshot;
 use glam::{Mat4, Vec3};
+use std::cell::OnceCell;
 use std::sync::Arc;
 
 /// The static triangles' BVH, built once a render and shared by every
@@ -113,23 +114,20 @@ impl DirectChange {
     /// `at`: `D` one light sample's direct light reflected by the hit
     /// towards the record, shadowed in the geometry of its time. `ratio` is
     /// what the caller scaled the whole sample by for moving lights
-    /// (`estimate::light_change`'s ratio): the direct part it scaled is replaced by `D(t0+1)`.
+    /// (`estimate::light_change`'s ratio): the direct part it scaled is
+    /// replaced by `D(t0+1)`. `before` keeps `D(t0)` once found: every
+    /// comparison from t0 ([`Self::to_frame`]) finds the same.
     pub(super) fn change(
         &self,
         ctx: &FrameContext,
         g: &Gathered,
         at: &FirstHit,
-        ratio: Vec3,
+        (ratio, before): (Vec3, &OnceCell<Vec3>),
     ) -> Vec3 {
         let choice = self.light_choice(ctx, g, at.sample);
         if at.moved.is_none() && !self.lights_move {
             return self.shadow_change(ctx, g, at, choice);
         }
-        let before = shading(ctx, ctx.snapshot, at.hit, at.point, g.record.position)
-            .and_then(|s| unoccluded(ctx.snapshot, ctx.lights, ctx.ray_offset, &s, choice));
-        let p1 = at.moved.map_or(at.point, |(_, p)| p);
-        let after = shading(ctx, &self.later, at.hit, p1, g.record.position)
-            .and_then(|s| unoccluded(&self.later, &self.later_lights, ctx.ray_offset, &s, choice));
         let lit = |sample: Option<(Ray, Vec3)>, t: usize| {
             sample.map_or(Vec3::ZERO, |(ray, d)| {
                 if self.occluded(&ray, t) {
@@ -139,7 +137,17 @@ impl DirectChange {
                 }
             })
         };
-        lit(after, 1) - ratio * lit(before, 0)
+        let before = *before.get_or_init(|| {
+            let s = shading(ctx, ctx.snapshot, at.hit, at.point, g.record.position);
+            lit(
+                s.and_then(|s| unoccluded(ctx.snapshot, ctx.lights, ctx.ray_offset, &s, choice)),
+                0,
+            )
+        });
+        let p1 = at.moved.map_or(at.point, |(_, p)| p);
+        let after = shading(ctx, &self.later, at.hit, p1, g.record.position)
+            .and_then(|s| unoccluded(&self.later, &self.later_lights, ctx.ray_offset, &s, choice));
+        lit(after, 1) - ratio * before
     }
 
     /// [`Self::change`] for a hit that stays under lights that stay: the

@@ -6,12 +6,13 @@
 use super::direct::{DirectChange, FirstHit, StaticGeometry};
 use super::{Gathered, NextDirect};
 use crate::backend::Hit;
-use crate::cache::gather::HemisphereSamples;
+use crate::cache::gather::{HemisphereSamples, Strata};
 use crate::method::unshadowed::UnshadowedLights;
 use crate::method::FrameContext;
 use crate::sampling::Frame;
 use crate::scene::{Snapshot, Triangle};
 use glam::{Mat4, Vec3};
+use std::cell::OnceCell;
 use std::f32::consts::{FRAC_1_PI, PI, TAU};
 use std::sync::Arc;
 
@@ -133,41 +134,161 @@ pub(super) fn rigid_motion(w0: Mat4, w1: Mat4) -> Option<Mat4> {
     (!m.abs_diff_eq(Mat4::IDENTITY, 1e-7)).then_some(m)
 }
 
-/// TRC §4.7 (Fig. 6): the record's hemisphere samples at t0 moved to
-/// t0+1. The record stays where it is (§4.4: record locations are fixed in
-/// world space, also on dynamic objects). Each sample's first hit moves
-/// with its object (static hits and misses stay), is projected back onto
-/// the record's stratified hemisphere (its cell `(j, k)` from
-/// `sin²θ` and `φ`, as in `cache::gather`), overlaps are resolved by a
-/// depth test (nearest wins), and empty cells are filled from the farthest
-/// neighbouring sample (the local background, Walter et al. 1999), pass
-/// after pass until none is left. Moving lights: each sample's radiance is
-/// scaled by the ratio of unshadowed direct irradiance at its hit point
-/// after and before ("accounting for the rotation and displacement of both
-/// objects and light sources"): shadowing is assumed unchanged and the hit's
-/// own indirect light assumed to scale with its direct light. A hit that
-/// had no direct light and has some (a light switched on, a surface
-/// turned towards one) gains its diffuse reflection of it, unshadowed: no
-/// ratio scales light from nothing.
-pub(super) fn reproject(
-    ctx: &FrameContext,
-    next: &NextFrame,
-    g: &Gathered,
-    m: u32,
-    n: u32,
-) -> HemisphereSamples {
-    let mut grid = HemisphereGrid::new(m as usize, n as usize);
-    let frame = Frame::new(g.record.normal);
-    let mut own = g.samples.radiance.clone();
-    for (i, own) in own.iter_mut().enumerate() {
-        if let Some((cell, sample)) = reproject_sample(ctx, next, g, &frame, &grid, i) {
-            *own = sample.radiance;
-            grid.keep_nearest(cell, sample);
+/// A record's hemisphere samples at t0, to be reprojected to t0+1 and to
+/// the later frames `trc::later` checks its life against. What the samples
+/// saw at t0 that every reprojection needs alike (the unshadowed direct
+/// irradiance at each hit, each hit's light sample with its shadow) is
+/// found at the first reprojection and kept for the others: under a moving
+/// light a record is reprojected to two or more frames, and finding D(t0)
+/// again each time was half of the direct light's work there.
+pub(super) struct Reprojection<'g> {
+    g: &'g Gathered,
+    strata: Strata,
+    start: Vec<AtStart>,
+}
+
+/// What one sample's first hit was lit by at t0, found once a record.
+#[derive(Default)]
+struct AtStart {
+    /// The unshadowed direct irradiance ([`light_change`]'s `D(t0)`).
+    unshadowed: OnceCell<Vec3>,
+    /// Its light sample's direct light, shadowed ([`DirectChange::change`]'s
+    /// `D(t0)`).
+    direct: OnceCell<Vec3>,
+}
+
+impl<'g> Reprojection<'g> {
+    /// The samples of `g`, gathered on `strata`.
+    pub(super) fn new(g: &'g Gathered, strata: Strata) -> Self {
+        Reprojection {
+            g,
+            strata,
+            start: (0..g.samples.radiance.len())
+                .map(|_| AtStart::default())
+                .collect(),
         }
     }
-    grid.keep_own_samples(&own, &g.samples.object);
-    grid.fill_holes();
-    grid.into_samples(&g.samples)
+
+    /// The gather whose samples these are.
+    pub(super) fn gathered(&self) -> &'g Gathered {
+        self.g
+    }
+
+    /// The hemisphere's cells the samples were gathered in.
+    pub(super) fn strata(&self) -> Strata {
+        self.strata
+    }
+
+    /// TRC §4.7 (Fig. 6): the record's hemisphere samples at t0 moved to
+    /// t0+1 (or to the later frame `next` describes). The record stays where it is (§4.4: record locations are fixed in
+    /// world space, also on dynamic objects). Each sample's first hit moves
+    /// with its object (static hits and misses stay), is projected back onto
+    /// the record's stratified hemisphere (its cell `(j, k)` from
+    /// `sin²θ` and `φ`, as in `cache::gather`), overlaps are resolved by a
+    /// depth test (nearest wins), and empty cells are filled from the farthest
+    /// neighbouring sample (the local background, Walter et al. 1999), pass
+    /// after pass until none is left. Moving lights: each sample's radiance is
+    /// scaled by the ratio of unshadowed direct irradiance at its hit point
+    /// after and before ("accounting for the rotation and displacement of both
+    /// objects and light sources"): shadowing is assumed unchanged and the hit's
+    /// own indirect light assumed to scale with its direct light. A hit that
+    /// had no direct light and has some (a light switched on, a surface
+    /// turned towards one) gains its diffuse reflection of it, unshadowed: no
+    /// ratio scales light from nothing.
+    pub(super) fn to(&self, ctx: &FrameContext, next: &NextFrame) -> HemisphereSamples {
+        let g = self.g;
+        let (m, n) = (self.strata.theta as usize, self.strata.phi as usize);
+        let mut grid = HemisphereGrid::new(m, n);
+        let frame = Frame::new(g.record.normal);
+        let mut own = g.samples.radiance.clone();
+        for (i, own) in own.iter_mut().enumerate() {
+            if let Some((cell, sample)) = self.reproject_sample(ctx, next, &frame, &grid, i) {
+                *own = sample.radiance;
+                grid.keep_nearest(cell, sample);
+            }
+        }
+        grid.keep_own_samples(&own, &g.samples.object);
+        grid.fill_holes();
+        grid.into_samples(&g.samples)
+    }
+
+    /// Sample `i` of the gather at t0+1: its cell and what the cell sees, or
+    /// `None` where it moved below the record's horizon. Its first hit moves
+    /// with its object (static hits and misses stay in their cells), and its
+    /// radiance follows moving lights ([`light_change`]).
+    fn reproject_sample(
+        &self,
+        ctx: &FrameContext,
+        next: &NextFrame,
+        frame: &Frame,
+        grid: &HemisphereGrid,
+        i: usize,
+    ) -> Option<(usize, CellSample)> {
+        let (g, start) = (self.g, &self.start[i]);
+        let s = &g.samples;
+        let origin = g.record.position;
+        let (dir, dist, object) = (s.direction[i].normalize(), s.distance[i], s.object[i]);
+        let motion = next
+            .motion
+            .get(object as usize)
+            .copied()
+            .flatten()
+            .filter(|_| dist.is_finite());
+        let hit_point = origin + dir * dist;
+        let (cell, depth, moved) = match motion {
+            Some(mat) => {
+                let moved = mat.transform_point3(hit_point);
+                let d = moved - origin;
+                let depth = d.length();
+                let after = frame.to_local(d / depth.max(1e-12));
+                if !(after.z > 0.0 && depth > 0.0) {
+                    return None; // moved below the record's horizon
+                }
+                let cell = grid.moved_cell(i, frame.to_local(dir), after)?;
+                (cell, depth, Some((mat, moved)))
+            }
+            None => (i, dist, None),
+        };
+        let mut radiance = s.radiance[i];
+        if let Some(hit) = g.results.get(i).map(|r| &r.hit).filter(|h| h.is_hit()) {
+            let change = if next.lights_move {
+                let (l0, l1) = &next.lights;
+                let d0 = &start.unshadowed;
+                light_change(ctx.snapshot, hit, dir, (hit_point, d0), moved, l0, l1)
+            } else {
+                LightChange::NONE
+            };
+            let ratio = change.ratio;
+            radiance *= ratio;
+            if next.direct.is_none() {
+                // Light where there was none (a light switched on, a surface
+                // turned towards one): the hit's diffuse reflection of it,
+                // unshadowed. `direct` evaluates it with its shadow instead.
+                let m = ctx.snapshot.tri_material[hit.triangle as usize] as usize;
+                radiance += ctx.scene.materials[m].diffuse * FRAC_1_PI * change.from_dark;
+            }
+            if let Some(direct) = &next.direct {
+                let at = FirstHit {
+                    sample: i,
+                    hit,
+                    point: hit_point,
+                    moved,
+                };
+                // The change subtracts D(t0) estimated with a light sample of
+                // its own, not the path's: where a shadow arrives it can take
+                // more than the sample held. Radiance is never negative (a
+                // negative E(t0+1) made |τ − 1| > 1 and the gradients overshoot).
+                radiance =
+                    (radiance + direct.change(ctx, g, &at, (ratio, &start.direct))).max(Vec3::ZERO);
+            }
+        }
+        let sample = CellSample {
+            depth,
+            radiance,
+            object,
+        };
+        Some((cell, sample))
+    }
 }
 
 /// What a cell of the reprojected hemisphere sees.
@@ -305,81 +426,6 @@ impl HemisphereGrid {
     }
 }
 
-/// Sample `i` of the gather at t0+1: its cell and what the cell sees, or
-/// `None` where it moved below the record's horizon. Its first hit moves
-/// with its object (static hits and misses stay in their cells), and its
-/// radiance follows moving lights ([`light_change`]).
-fn reproject_sample(
-    ctx: &FrameContext,
-    next: &NextFrame,
-    g: &Gathered,
-    frame: &Frame,
-    grid: &HemisphereGrid,
-    i: usize,
-) -> Option<(usize, CellSample)> {
-    let s = &g.samples;
-    let origin = g.record.position;
-    let (dir, dist, object) = (s.direction[i].normalize(), s.distance[i], s.object[i]);
-    let motion = next
-        .motion
-        .get(object as usize)
-        .copied()
-        .flatten()
-        .filter(|_| dist.is_finite());
-    let hit_point = origin + dir * dist;
-    let (cell, depth, moved) = match motion {
-        Some(mat) => {
-            let moved = mat.transform_point3(hit_point);
-            let d = moved - origin;
-            let depth = d.length();
-            let after = frame.to_local(d / depth.max(1e-12));
-            if !(after.z > 0.0 && depth > 0.0) {
-                return None; // moved below the record's horizon
-            }
-            let cell = grid.moved_cell(i, frame.to_local(dir), after)?;
-            (cell, depth, Some((mat, moved)))
-        }
-        None => (i, dist, None),
-    };
-    let mut radiance = s.radiance[i];
-    if let Some(hit) = g.results.get(i).map(|r| &r.hit).filter(|h| h.is_hit()) {
-        let change = if next.lights_move {
-            let (l0, l1) = &next.lights;
-            light_change(ctx.snapshot, hit, dir, hit_point, moved, l0, l1)
-        } else {
-            LightChange::NONE
-        };
-        let ratio = change.ratio;
-        radiance *= ratio;
-        if next.direct.is_none() {
-            // Light where there was none (a light switched on, a surface
-            // turned towards one): the hit's diffuse reflection of it,
-            // unshadowed. `direct` evaluates it with its shadow instead.
-            let m = ctx.snapshot.tri_material[hit.triangle as usize] as usize;
-            radiance += ctx.scene.materials[m].diffuse * FRAC_1_PI * change.from_dark;
-        }
-        if let Some(direct) = &next.direct {
-            let at = FirstHit {
-                sample: i,
-                hit,
-                point: hit_point,
-                moved,
-            };
-            // The change subtracts D(t0) estimated with a light sample of
-            // its own, not the path's: where a shadow arrives it can take
-            // more than the sample held. Radiance is never negative (a
-            // negative E(t0+1) made |τ − 1| > 1 and the gradients overshoot).
-            radiance = (radiance + direct.change(ctx, g, &at, ratio)).max(Vec3::ZERO);
-        }
-    }
-    let sample = CellSample {
-        depth,
-        radiance,
-        object,
-    };
-    Some((cell, sample))
-}
-
 /// How the unshadowed direct irradiance `D` at a sample's hit point
 /// (moved with its object) changes from t0 to t0+1, per channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -398,12 +444,13 @@ impl LightChange {
     };
 }
 
-/// The [`LightChange`] at a sample's hit point.
+/// The [`LightChange`] at a sample's hit point `p0`, `d0` holding its
+/// `D(t0)` once found (the same for every later frame).
 fn light_change(
     snapshot: &Snapshot,
     hit: &Hit,
     dir: Vec3,
-    p0: Vec3,
+    (p0, d0): (Vec3, &OnceCell<Vec3>),
     moved: Option<(Mat4, Vec3)>,
     l0: &UnshadowedLights,
     l1: &UnshadowedLights,
@@ -417,7 +464,10 @@ fn light_change(
         Some((mat, p1)) => (p1, moved_normal(triangle, mat, n0)),
         None => (p0, n0),
     };
-    let (d0, d1) = (l0.irradiance(p0, n0), l1.irradiance(p1, n1));
+    let (d0, d1) = (
+        *d0.get_or_init(|| l0.irradiance(p0, n0)),
+        l1.irradiance(p1, n1),
+    );
     let lit = d0.cmpgt(Vec3::splat(1e-12));
     LightChange {
         ratio: Vec3::select(lit, d1 / d0, Vec3::ONE),

@@ -50,8 +50,7 @@
 //! more than its displacement over that distance); and a life longer than
 //! [`LATER_FRAMES`] frames is checked over its first frames only.
 
-use super::estimate::{reproject, rigid_motion, NextFrame};
-use super::Gathered;
+use super::estimate::{rigid_motion, NextFrame, Reprojection};
 use crate::cache::gather::{HemisphereSamples, Strata};
 use crate::method::arrivals::{moving_bounds, Arrivals, OwnBounds};
 use crate::method::unshadowed::{LightsByFrame, UnshadowedLights};
@@ -124,8 +123,7 @@ impl LitFrames {
         &self,
         ctx: &FrameContext,
         next: &NextFrame,
-        g: &Gathered,
-        strata: Strata,
+        record: &Reprojection,
         last_valid: u32,
         exceed: impl Fn(&HemisphereSamples) -> bool,
     ) -> u32 {
@@ -134,8 +132,7 @@ impl LitFrames {
                 let next = f
                     .next
                     .get_or_init(|| next.later_lit(ctx, t, f.motion.clone(), f.lights.clone()));
-                next.as_ref()
-                    .is_some_and(|n| exceed(&reproject(ctx, n, g, strata.theta, strata.phi)))
+                next.as_ref().is_some_and(|n| exceed(&record.to(ctx, n)))
             })
         };
         // A life past the frames kept ([`LATER_FRAMES`]) is checked at the
@@ -275,14 +272,14 @@ impl LaterFrames {
         &self,
         ctx: &FrameContext,
         next: &NextFrame,
-        g: &Gathered,
-        (strata, a_t): (Strata, f32),
+        record: &Reprojection,
+        a_t: f32,
         last_valid: u32,
         exceed: impl Fn(&HemisphereSamples) -> bool,
     ) -> u32 {
-        let last = self.last_departed(ctx, g, (strata, a_t), last_valid, &exceed);
+        let last = self.last_departed(ctx, record, a_t, last_valid, &exceed);
         match &self.lit {
-            Some(lit) => lit.last_valid(ctx, next, g, strata, last, exceed),
+            Some(lit) => lit.last_valid(ctx, next, record, last, exceed),
             None => last,
         }
     }
@@ -292,11 +289,12 @@ impl LaterFrames {
     fn last_departed(
         &self,
         ctx: &FrameContext,
-        g: &Gathered,
-        (strata, a_t): (Strata, f32),
+        record: &Reprojection,
+        a_t: f32,
         last_valid: u32,
         exceed: &impl Fn(&HemisphereSamples) -> bool,
     ) -> u32 {
+        let (g, strata) = (record.gathered(), record.strata());
         if last_valid <= self.t0 || self.arrivals.is_empty() && self.frames.is_empty() {
             return last_valid;
         }
@@ -329,7 +327,7 @@ impl LaterFrames {
                 || seen
                     .iter()
                     .any(|&(o, nearest)| f.departure[o as usize] > cell * nearest);
-            if departs && exceed(&reproject(ctx, &f.next, g, strata.theta, strata.phi)) {
+            if departs && exceed(&record.to(ctx, &f.next)) {
                 return t - 1;
             }
         }

@@ -107,7 +107,7 @@ use crate::cache::{IrradianceCache, RecordId};
 use crate::film::Film;
 use crate::integrator::RadianceResult;
 use crate::store::SampleBlock;
-use estimate::{reproject, NextFrame};
+use estimate::{NextFrame, Reprojection};
 use glam::Vec3;
 use later::LaterFrames;
 use paths::KeptPaths;
@@ -368,18 +368,19 @@ impl TemporalRadianceCaching {
         let (ctx, strata) = (making.ctx, self.settings.ic.strata);
         let a_t = self.settings.temporal_accuracy;
         let e0 = g.record.irradiance;
+        let reprojection = Reprojection::new(g, strata);
         let next_samples = self
             .settings
             .reprojection
-            .then(|| reproject(ctx, &making.next, g, strata.theta, strata.phi));
+            .then(|| reprojection.to(ctx, &making.next));
         let next = self.change_to(g, next_samples.as_ref());
         let age = frames_of_validity(next.change, a_t, self.settings.max_life);
         let mut last_valid = ctx.frame + age;
         if let Some(later) = &making.later {
+            let exceeds =
+                |samples: &HemisphereSamples| self.change_to(g, Some(samples)).change > a_t;
             last_valid =
-                later.last_valid(ctx, &making.next, g, (strata, a_t), last_valid, |samples| {
-                    self.change_to(g, Some(samples)).change > a_t
-                });
+                later.last_valid(ctx, &making.next, &reprojection, a_t, last_valid, exceeds);
         }
         let e1 = next.gather.irradiance;
         let sub = |a: [Vec3; 3], b: [Vec3; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
@@ -1039,10 +1040,73 @@ fn keep_for_store(kept: &mut FrameRecords, r: &TemporalRecord, new: bool, change
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accel::StaticGeometry;
     use crate::backend::cpu::CpuBackend;
+    use crate::cache::gather::GatherPoint;
+    use crate::method::ic::Candidate;
+    use crate::method::unshadowed::UnshadowedLights;
     use crate::render::{FrameSettings, NoMethod, Renderer};
     use crate::scene::Scene;
+    use rayon::iter::ParallelIterator;
     use std::collections::HashSet;
+
+    /// A record reprojected to t0+1 and then to a later frame, under a
+    /// moving light, keeps the direct light its samples' hits had at t0
+    /// from the first reprojection ([`Reprojection`]): the later frame's
+    /// samples equal, bit for bit, those of a record reprojected there
+    /// alone, and the light's move changes them.
+    #[test]
+    fn a_record_reprojected_again_finds_what_it_found_alone() {
+        let scene = Scene::builtin("moving-light").unwrap();
+        let mut settings = TrcSettings::default();
+        settings.ic.strata = crate::cache::gather::Strata { theta: 6, phi: 18 };
+        let strata = settings.ic.strata;
+        let trc = TemporalRadianceCaching::new(settings);
+        let mut renderer = Renderer::new(
+            scene,
+            Box::new(NoMethod),
+            Box::new(CpuBackend::new()),
+            FrameSettings {
+                width: 8,
+                height: 8,
+                ..FrameSettings::default()
+            },
+        );
+        renderer.with_frame_context(0, |ctx| {
+            let next = NextFrame::new(ctx, NextDirect::On, &mut StaticGeometry::default());
+            assert!(next.lights_move() && next.evaluates_direct());
+            let t = 12;
+            let later_snapshot = ctx.scene.snapshot(ctx.time_of(t));
+            let motion = (ctx.snapshot.object_to_world.iter())
+                .zip(&later_snapshot.object_to_world)
+                .map(|(w0, wt)| estimate::rigid_motion(*w0, *wt))
+                .collect();
+            let emitters = ctx.scene.emitters_snapshot(ctx.time_of(t));
+            let lights = Arc::new(UnshadowedLights::of(&ctx.scene.materials, &emitters));
+            let later = next
+                .later_lit(ctx, t, motion, lights)
+                .expect("lit later frame");
+            let up = Vec3::Y;
+            let point = GatherPoint {
+                position: Vec3::new(0.4, 0.0, 0.6),
+                normal: up,
+                geometric_normal: up,
+            };
+            let g: Vec<Gathered> = trc
+                .ic
+                .gather_parallel(ctx, &[Candidate::at(point)])
+                .collect();
+            let again = Reprojection::new(&g[0], strata);
+            again.to(ctx, &next);
+            let (kept, alone) = (
+                again.to(ctx, &later),
+                Reprojection::new(&g[0], strata).to(ctx, &later),
+            );
+            assert_eq!(kept.radiance, alone.radiance);
+            assert_eq!(kept.distance, alone.distance);
+            assert_ne!(alone.radiance, g[0].samples.radiance);
+        });
+    }
 
     /// With interpolated gradients, every record a frame uses that is
     /// replaced within the range knows its successor when the frame is
