@@ -320,7 +320,7 @@ impl TriangleBvh {
 
     /// Whether this BVH was built over exactly snapshot triangles `range`:
     /// the same vertices to the bit, with the same objects.
-    fn holds(&self, snapshot: &Snapshot, range: std::ops::Range<usize>) -> bool {
+    pub fn holds(&self, snapshot: &Snapshot, range: std::ops::Range<usize>) -> bool {
         let bits = |t: &ObTriangle| [t.v0, t.v1, t.v2].map(|v| v.to_array().map(f32::to_bits));
         let same = |((&id, tri), &object): ((&u32, &ObTriangle), &u32)| {
             let id = id as usize;

@@ -3,7 +3,7 @@
 //! and lights (TRC §4.7, Fig. 6). How well it does against E(t0+1)
 //! gathered again is measured in the parent module's documentation.
 
-use super::direct::{DirectChange, FirstHit, StaticGeometry};
+use super::direct::{DirectChange, FirstHit, ShadowGeometry};
 use super::{Gathered, NextDirect};
 use crate::backend::Hit;
 use crate::cache::gather::{HemisphereSamples, Strata};
@@ -35,12 +35,11 @@ pub(super) struct NextFrame {
 impl NextFrame {
     /// What changes after `ctx`'s frame; where `next_direct` evaluates the
     /// direct light again, also the geometry the samples' direct light at
-    /// t+1 needs, `statics` keeping the static triangles' BVH from frame to
-    /// frame.
+    /// t+1 needs, `geometry` keeping its BVHs from frame to frame.
     pub(super) fn new(
         ctx: &FrameContext,
         next_direct: NextDirect,
-        statics: &mut StaticGeometry,
+        geometry: &mut ShadowGeometry,
     ) -> Self {
         let now = ctx.snapshot;
         // The next frame's geometry only where its direct light is
@@ -71,7 +70,7 @@ impl NextFrame {
             lights_move,
             lights: (l0, l1),
             direct: evaluated
-                .then(|| DirectChange::new(ctx, later, (objects_move, lights_move), statics))
+                .then(|| DirectChange::new(ctx, later, (objects_move, lights_move), geometry))
                 .flatten(),
         }
     }

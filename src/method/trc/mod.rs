@@ -305,8 +305,8 @@ pub struct TemporalRadianceCaching {
     /// Records forgotten by a first pass that went back (interpolated
     /// gradients), to report as removed with the next state changes.
     forgotten: Vec<RecordId>,
-    /// The static triangles' BVH for the E(t0+1) estimate's shadow rays.
-    statics: direct::StaticGeometry,
+    /// The BVHs of the E(t0+1) estimate's shadow rays.
+    shadow_geometry: direct::ShadowGeometry,
     /// The last frame's pixel samples, for the render pass to take again
     /// where nothing moving met them.
     still: StillSamples,
@@ -334,7 +334,7 @@ impl TemporalRadianceCaching {
             keep: false,
             kept: None,
             forgotten: Vec::new(),
-            statics: direct::StaticGeometry::default(),
+            shadow_geometry: direct::ShadowGeometry::default(),
             still: StillSamples::default(),
             first_pass_still: StillSamples::default(),
             paths_pay: paths::PathsPay::default(),
@@ -443,7 +443,7 @@ impl TemporalRadianceCaching {
     /// cache and its records in cache order (new ones not numbered yet).
     fn age_and_fill(&mut self, ctx: &FrameContext) -> (IrradianceCache, Aged) {
         let start = Instant::now();
-        let next = NextFrame::new(ctx, self.settings.next_direct, &mut self.statics);
+        let next = NextFrame::new(ctx, self.settings.next_direct, &mut self.shadow_geometry);
         let later = self
             .settings
             .reprojection
@@ -1040,7 +1040,6 @@ fn keep_for_store(kept: &mut FrameRecords, r: &TemporalRecord, new: bool, change
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::accel::StaticGeometry;
     use crate::backend::cpu::CpuBackend;
     use crate::cache::gather::GatherPoint;
     use crate::method::ic::Candidate;
@@ -1073,7 +1072,7 @@ mod tests {
             },
         );
         renderer.with_frame_context(0, |ctx| {
-            let next = NextFrame::new(ctx, NextDirect::On, &mut StaticGeometry::default());
+            let next = NextFrame::new(ctx, NextDirect::On, &mut direct::ShadowGeometry::default());
             assert!(next.lights_move() && next.evaluates_direct());
             let t = 12;
             let later_snapshot = ctx.scene.snapshot(ctx.time_of(t));
