@@ -179,21 +179,22 @@ impl<'g> Reprojection<'g> {
     }
 
     /// TRC §4.7 (Fig. 6): the record's hemisphere samples at t0 moved to
-    /// t0+1 (or to the later frame `next` describes). The record stays where it is (§4.4: record locations are fixed in
-    /// world space, also on dynamic objects). Each sample's first hit moves
-    /// with its object (static hits and misses stay), is projected back onto
-    /// the record's stratified hemisphere (its cell `(j, k)` from
-    /// `sin²θ` and `φ`, as in `cache::gather`), overlaps are resolved by a
-    /// depth test (nearest wins), and empty cells are filled from the farthest
-    /// neighbouring sample (the local background, Walter et al. 1999), pass
-    /// after pass until none is left. Moving lights: each sample's radiance is
-    /// scaled by the ratio of unshadowed direct irradiance at its hit point
-    /// after and before ("accounting for the rotation and displacement of both
-    /// objects and light sources"): shadowing is assumed unchanged and the hit's
-    /// own indirect light assumed to scale with its direct light. A hit that
-    /// had no direct light and has some (a light switched on, a surface
-    /// turned towards one) gains its diffuse reflection of it, unshadowed: no
-    /// ratio scales light from nothing.
+    /// t0+1 (or to the later frame `next` describes). The record stays
+    /// where it is (§4.4: record locations are fixed in world space, also
+    /// on dynamic objects). Each sample's first hit moves with its object
+    /// (static hits and misses stay), is projected back onto the record's
+    /// stratified hemisphere (its cell `(j, k)` from `sin²θ` and `φ`, as in
+    /// `cache::gather`), overlaps are resolved by a depth test (nearest
+    /// wins), and empty cells are filled from the farthest neighbouring
+    /// sample (the local background, Walter et al. 1999), pass after pass
+    /// until none is left. Moving lights: each sample's radiance is scaled
+    /// by the ratio of unshadowed direct irradiance at its hit point after
+    /// and before ("accounting for the rotation and displacement of both
+    /// objects and light sources"): shadowing is assumed unchanged and the
+    /// hit's own indirect light assumed to scale with its direct light. A
+    /// hit that had no direct light and has some (a light switched on, a
+    /// surface turned towards one) gains its diffuse reflection of it,
+    /// unshadowed: no ratio scales light from nothing.
     pub(super) fn to(&self, ctx: &FrameContext, next: &NextFrame) -> HemisphereSamples {
         let g = self.g;
         let (m, n) = (self.strata.theta as usize, self.strata.phi as usize);

@@ -5,7 +5,7 @@
 //!
 //! Records live across frames (TRC Algorithm 1). When a record K is gathered
 //! at frame t0, its incoming light at t0+1 is estimated by reprojecting its
-//! hemisphere samples (§4.7, `reproject`); the ratio `τ = E(t0+1)/E(t0)`
+//! hemisphere samples (§4.7, `Reprojection::to`); the ratio `τ = E(t0+1)/E(t0)`
 //! sets how many frames K may be used (Eq. 9–11) and the difference gives
 //! its extrapolated temporal gradients (Eq. 15–17), applied at lookup by
 //! Eq. 14. Departure: the paper extrapolates the change to t0+1 over the
