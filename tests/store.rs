@@ -1299,6 +1299,19 @@ fn resumed_trc_render_is_bit_identical() {
     resume_matches_uninterrupted(MethodSettings::Trc(trc));
 }
 
+/// `trc` under the built-in moving light, where each record's samples'
+/// direct light is evaluated at t0+1 and at the end of its life, and
+/// what one frame found is kept for the next (the moving triangles' BVH
+/// at t0+1, `trc::direct::ShadowGeometry`): a resumed render starts with
+/// none of it and gives the same frames.
+#[test]
+fn resumed_trc_render_under_a_moving_light_is_bit_identical() {
+    let mut trc = TrcSettings::default();
+    trc.ic.strata = Strata { theta: 4, phi: 12 };
+    trc.ic.spp = 1;
+    resume_matches_uninterrupted_on("moving-light", MethodSettings::Trc(trc));
+}
+
 /// `trc` with radiance records (`--ic-glossy eas`) on `glossy-cornell`,
 /// stopped after frame 2 of 0..6: the resume starts from the stored state,
 /// whose records' material, sources and their temporal gradients come
