@@ -300,25 +300,14 @@ fn unoccluded(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::backend::cpu::CpuBackend;
-    use crate::render::{FrameSettings, NoMethod, Renderer};
-    use crate::scene::Scene;
+    use crate::render::test_renderer;
 
     /// The moving triangles' BVH built for t0+1 is the next frame's t0
     /// BVH, the same one; kept for another frame, or over other
     /// triangles, it is built again.
     #[test]
     fn the_next_frames_moving_bvh_is_taken_only_for_its_own_triangles() {
-        let mut renderer = Renderer::new(
-            Scene::builtin("moving-light").unwrap(),
-            Box::new(NoMethod),
-            Box::new(CpuBackend::new()),
-            FrameSettings {
-                width: 4,
-                height: 4,
-                ..FrameSettings::default()
-            },
-        );
+        let mut renderer = test_renderer("moving-light", 4);
         let mut geometry = ShadowGeometry::default();
         let at = |ctx: &FrameContext, geometry: &mut ShadowGeometry| {
             let later = ctx.scene.snapshot(ctx.time_of(ctx.frame + 1));

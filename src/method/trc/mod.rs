@@ -1056,21 +1056,11 @@ mod tests {
     /// alone, and the light's move changes them.
     #[test]
     fn a_record_reprojected_again_finds_what_it_found_alone() {
-        let scene = Scene::builtin("moving-light").unwrap();
         let mut settings = TrcSettings::default();
         settings.ic.strata = crate::cache::gather::Strata { theta: 6, phi: 18 };
         let strata = settings.ic.strata;
         let trc = TemporalRadianceCaching::new(settings);
-        let mut renderer = Renderer::new(
-            scene,
-            Box::new(NoMethod),
-            Box::new(CpuBackend::new()),
-            FrameSettings {
-                width: 8,
-                height: 8,
-                ..FrameSettings::default()
-            },
-        );
+        let mut renderer = crate::render::test_renderer("moving-light", 8);
         renderer.with_frame_context(0, |ctx| {
             let next = NextFrame::new(ctx, NextDirect::On, &mut direct::ShadowGeometry::default());
             assert!(next.lights_move() && next.evaluates_direct());
