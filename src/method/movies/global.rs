@@ -29,9 +29,10 @@
 //! ([`super::sides`]).
 
 use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, StaticShadows, Statics};
-use super::pieces::{self, Cells, Piece, View, MAX_DEPTH};
+use super::pieces::{self, Cells, Piece, MAX_DEPTH};
 use super::sharp::{is_sharp, Landing, SharpLandings};
 use super::sides::{object_space_corners, ObjectCorners, SolvedSides};
+use super::view::{meshing_size, View};
 use super::FrameContext;
 use crate::accel::SceneBvh;
 use crate::backend::{Hit, Ray};
@@ -1405,113 +1406,6 @@ pub(super) fn pulled(u: f32, v: f32) -> (f32, f32) {
 /// (coarser than `spacing` asks; one cell a triangle where it was scaled
 /// to nothing, its corners told apart in its own space: `PassMesh::new`).
 pub const MESHED_AT: f32 = 0.0;
-
-/// Camera rays a side of the grid along which [`meshing_size`] finds what
-/// the camera at time 0 sees.
-const VIEW_RAYS: u32 = 16;
-
-/// The size the grid spacing is a share of is at most this many times
-/// the diagonal of what the camera at time 0 sees ([`meshing_size`]).
-const VIEW_SIZES: f32 = 2.0;
-
-/// The size the grid spacing is a share of ([`GlobalSettings::spacing`]):
-/// the diagonal of the static scene ([`static_diagonal`]), but at most
-/// [`VIEW_SIZES`] times that of the box around the camera at time 0 and
-/// what it sees of the scene (`meshed`, with `bvh` built over it) along a
-/// grid of [`VIEW_RAYS`]² rays through a film of width-to-height `aspect`
-/// (the rays that meet nothing left out). And what those rays see, as the
-/// [`View`] large triangles are split towards ([`super::pieces`]).
-///
-/// Why: a scene may reach far past what its camera looks at. A room at the
-/// edge of a 2 km ground it never shows (`l_hall` so placed by
-/// `benches/scenes/place.py ... ground 1000 950`, frames 0..4 at
-/// 96×60) was meshed at a 32nd of 2.8 km, one cell a wall, and rendered
-/// with a block bias of 33 % against `path` (at 64 spp); with this bound,
-/// 1.8 % (at the origin, alone: 1.6 %). A room seen from inside has the
-/// smaller diagonal (the bound is 1.6–2.0 times it in the built-in and
-/// test scenes), so it is meshed as before. The sky does not lift the
-/// bound: where a ray met nothing the scene's diagonal was taken, so the
-/// test courtyard set on a ground 50 m across (`--ground 25` of
-/// `tests/data/scenes/courtyard_swinging_light.py`), whose camera sees
-/// the sky above the walls, was meshed at a 32nd of 71 m, 2.2 m, its walls
-/// two cells high, and `movies` rendered it at 64×64 with 19× `ic`'s
-/// block bias (0.115 against 0.0059; 0.013 now). A ray that meets
-/// nothing sees nothing to mesh.
-fn meshing_size(
-    scene: &crate::scene::Scene,
-    meshed: &crate::scene::Snapshot,
-    bvh: &SceneBvh,
-    aspect: f32,
-) -> (f32, Option<View>) {
-    let diagonal = static_diagonal(meshed);
-    let camera = &meshed.camera;
-    let view = View::new(camera.position, &seen_by(camera, bvh, aspect));
-    let size = view
-        .as_ref()
-        .map_or(diagonal, |view| diagonal.min(VIEW_SIZES * view.size()));
-    (
-        size,
-        view.map(|view| seen_later(view, scene, camera, (bvh, aspect))),
-    )
-}
-
-/// Times over the animation, beside 0, from which the camera's view adds
-/// to what large triangles are split towards ([`seen_later`]).
-const VIEW_TIMES: u32 = 8;
-
-/// `view` with what the camera sees at [`VIEW_TIMES`] times evenly over
-/// the animation (of `scene`, whose camera at time 0 is `at_zero`), seen
-/// in the scene as it stands at time 0 (`bvh`): a camera that travels over
-/// a large ground has it split along its way, not only where it starts.
-/// The meshing stays that of time 0 and of the animation alone, whatever
-/// frames a render takes ([`MESHED_AT`]). A camera that does not move adds
-/// nothing.
-fn seen_later(
-    mut view: View,
-    scene: &crate::scene::Scene,
-    at_zero: &crate::scene::Camera,
-    (bvh, aspect): (&SceneBvh, f32),
-) -> View {
-    let duration = scene.animation.duration();
-    for k in 1..=VIEW_TIMES {
-        let camera = scene.camera_at(duration * k as f32 / VIEW_TIMES as f32);
-        if camera.position != at_zero.position || camera.basis != at_zero.basis {
-            view.add(&seen_by(&camera, bvh, aspect));
-        }
-    }
-    view
-}
-
-/// What `camera` sees (each point with its triangle) along a grid of
-/// [`VIEW_RAYS`]² rays through a film of width-to-height `aspect`, in the
-/// scene `bvh` is built over; the rays that meet nothing left out.
-fn seen_by(camera: &crate::scene::Camera, bvh: &SceneBvh, aspect: f32) -> Vec<(u32, Vec3)> {
-    let side = VIEW_RAYS as f32;
-    (0..VIEW_RAYS * VIEW_RAYS)
-        .filter_map(|i| {
-            let (sx, sy) = ((i % VIEW_RAYS) as f32 + 0.5, (i / VIEW_RAYS) as f32 + 0.5);
-            let ray = Ray::new(
-                camera.position,
-                camera.direction(sx / side, sy / side, aspect),
-                0.0,
-                f32::INFINITY,
-            );
-            let hit = bvh.closest_hit(&ray);
-            hit.is_hit().then(|| (hit.triangle, ray.at(hit.t)))
-        })
-        .collect()
-}
-
-/// The diagonal of `snapshot`'s static triangles' box (of all triangles
-/// where none is static).
-fn static_diagonal(snapshot: &crate::scene::Snapshot) -> f32 {
-    let tris = if snapshot.static_count > 0 {
-        &snapshot.triangles[..snapshot.static_count]
-    } else {
-        &snapshot.triangles[..]
-    };
-    diagonal(tris.iter().flat_map(|t| t.p))
-}
 
 /// Whether a Jacobi iteration from `before` to `after` changed the
 /// indirect light by at most [`CONVERGED`] of it. Summed in order, in

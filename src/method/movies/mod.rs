@@ -69,6 +69,7 @@ pub mod patch;
 pub mod pieces;
 pub mod sharp;
 pub mod sides;
+pub mod view;
 
 use super::pixels::FirstLightSampler;
 use super::render_pass::{direct_light, glossy_query, PixelStreams, PrimarySamples, Surface};

@@ -24,9 +24,9 @@
 //! radiosity does (Smits, Arvo & Salesin 1992), and leaves a triangle
 //! within the cap one grid, as before.
 //!
-//! What the camera sees is taken at time 0 and at eight times over the
-//! animation, in the scene as it stands at time 0, as the pass is meshed
-//! ([`super::global::MESHED_AT`]): a camera that travels over a large
+//! What the camera sees ([`super::view`]) is taken at time 0 and at eight
+//! times over the animation, in the scene as it stands at time 0, as the
+//! pass is meshed ([`super::global::MESHED_AT`]): a camera that travels over a large
 //! ground has it split along its way. The spacing and the size the
 //! distance is measured in stay those of time 0. A triangle the camera
 //! does not see is not split: it only sends light, which a vertex's links
@@ -44,65 +44,9 @@ use super::global::Grid;
 use super::patch::{child_at, from_parent, to_parent};
 use crate::scene::Triangle;
 use glam::Vec3;
-use std::collections::HashMap;
 
 /// Deepest split: a piece a 4096th of its triangle's edge.
 pub const MAX_DEPTH: u32 = 12;
-
-/// What the camera sees: per triangle it sees, the box around the points
-/// it sees of it, and the size of what it sees at time 0 (the diagonal of
-/// the box around it and those points).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct View {
-    seen: HashMap<u32, (Vec3, Vec3)>,
-    size: f32,
-}
-
-impl View {
-    /// The view of a camera at `eye` that sees the points `hits`, each on
-    /// its triangle; `None` where it sees nothing, or its box is flat to
-    /// a point or not finite.
-    pub fn new(eye: Vec3, hits: &[(u32, Vec3)]) -> Option<View> {
-        let (lo, hi) = hits
-            .iter()
-            .fold((eye, eye), |(lo, hi), &(_, p)| (lo.min(p), hi.max(p)));
-        let size = (hi - lo).length();
-        if hits.is_empty() || !(size.is_finite() && size > 0.0) {
-            return None;
-        }
-        let mut view = View {
-            seen: HashMap::new(),
-            size,
-        };
-        view.add(hits);
-        Some(view)
-    }
-
-    /// Adds the points `hits` to what it sees, its size kept.
-    pub fn add(&mut self, hits: &[(u32, Vec3)]) {
-        for &(triangle, p) in hits {
-            let b = self.seen.entry(triangle).or_insert((p, p));
-            *b = (b.0.min(p), b.1.max(p));
-        }
-    }
-
-    /// The diagonal of the box around the camera and what it sees.
-    pub fn size(&self) -> f32 {
-        self.size
-    }
-
-    /// The spacing wanted over the part of `triangle` in the box
-    /// `(lo, hi)`: `spacing` at what the camera sees of the triangle,
-    /// times `1 + d / size` at a distance `d` from it ([`View::size`]);
-    /// `None` on a triangle it does not see, which is not split (hidden,
-    /// it is a source of light alone, whose coarse cells the links
-    /// average over).
-    pub fn spacing_at(&self, spacing: f32, triangle: u32, piece: (Vec3, Vec3)) -> Option<f32> {
-        let (lo, hi) = self.seen.get(&triangle)?;
-        let gap = (piece.0 - *hi).max(*lo - piece.1).max(Vec3::ZERO);
-        Some(spacing * (1.0 + gap.length() / self.size))
-    }
-}
 
 /// A piece of a triangle: its corners' barycentrics `(u, v)` in the
 /// triangle, corner `k` of the piece at its own `(s, t)` of
@@ -266,32 +210,5 @@ mod tests {
             let on_middle = middle.grid_point(n, k, n - k);
             assert_eq!(bits(on_0), bits(on_middle), "vertex {k}");
         }
-    }
-
-    /// The spacing wanted is the pass's at what the camera sees of a
-    /// triangle, and grows with the distance from it; a triangle it does
-    /// not see is not split.
-    #[test]
-    fn the_spacing_grows_with_the_distance_from_what_is_seen() {
-        let hits = [
-            (7, Vec3::ZERO),
-            (7, Vec3::new(1.0, 0.0, 0.0)),
-            (2, Vec3::new(3.0, 4.0, 0.0)),
-        ];
-        let view = View::new(Vec3::ZERO, &hits).unwrap();
-        assert_eq!(view.size(), 5.0);
-        let at = |x: f32| {
-            view.spacing_at(
-                0.1,
-                7,
-                (Vec3::new(x, 0.0, 0.0), Vec3::new(x + 1.0, 1.0, 1.0)),
-            )
-        };
-        assert_eq!(at(0.5), Some(0.1));
-        assert!((at(6.0).unwrap() - 0.2).abs() < 1e-6);
-        assert!((at(21.0).unwrap() - 0.5).abs() < 1e-6);
-        assert_eq!(view.spacing_at(0.1, 3, (Vec3::ZERO, Vec3::ONE)), None);
-        assert_eq!(View::new(Vec3::ONE, &[(0, Vec3::ONE)]), None);
-        assert_eq!(View::new(Vec3::ONE, &[]), None);
     }
 }

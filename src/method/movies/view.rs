@@ -1,0 +1,206 @@
+//! What the camera sees, for the global pass's mesh ([`super::global`]):
+//! the size its grid spacing is a share of, and the triangles that large
+//! ones are split towards ([`super::pieces`]). Looked at in the scene as
+//! it stands when the pass is meshed
+//! ([`MESHED_AT`](super::global::MESHED_AT)), along a coarse grid of
+//! camera rays, at time 0 and at a few times over the animation.
+
+use super::global::diagonal;
+use crate::accel::SceneBvh;
+use crate::backend::Ray;
+use glam::Vec3;
+use std::collections::HashMap;
+
+/// What the camera sees: per triangle it sees, the box around the points
+/// it sees of it, and the size of what it sees at time 0 (the diagonal of
+/// the box around it and those points).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct View {
+    seen: HashMap<u32, (Vec3, Vec3)>,
+    size: f32,
+}
+
+impl View {
+    /// The view of a camera at `eye` that sees the points `hits`, each on
+    /// its triangle; `None` where it sees nothing, or its box is flat to
+    /// a point or not finite.
+    pub fn new(eye: Vec3, hits: &[(u32, Vec3)]) -> Option<View> {
+        let (lo, hi) = hits
+            .iter()
+            .fold((eye, eye), |(lo, hi), &(_, p)| (lo.min(p), hi.max(p)));
+        let size = (hi - lo).length();
+        if hits.is_empty() || !(size.is_finite() && size > 0.0) {
+            return None;
+        }
+        let mut view = View {
+            seen: HashMap::new(),
+            size,
+        };
+        view.add(hits);
+        Some(view)
+    }
+
+    /// Adds the points `hits` to what it sees, its size kept.
+    pub fn add(&mut self, hits: &[(u32, Vec3)]) {
+        for &(triangle, p) in hits {
+            let b = self.seen.entry(triangle).or_insert((p, p));
+            *b = (b.0.min(p), b.1.max(p));
+        }
+    }
+
+    /// The diagonal of the box around the camera and what it sees.
+    pub fn size(&self) -> f32 {
+        self.size
+    }
+
+    /// The spacing wanted over the part of `triangle` in the box
+    /// `(lo, hi)`: `spacing` at what the camera sees of the triangle,
+    /// times `1 + d / size` at a distance `d` from it ([`View::size`]);
+    /// `None` on a triangle it does not see, which is not split (hidden,
+    /// it is a source of light alone, whose coarse cells the links
+    /// average over).
+    pub fn spacing_at(&self, spacing: f32, triangle: u32, piece: (Vec3, Vec3)) -> Option<f32> {
+        let (lo, hi) = self.seen.get(&triangle)?;
+        let gap = (piece.0 - *hi).max(*lo - piece.1).max(Vec3::ZERO);
+        Some(spacing * (1.0 + gap.length() / self.size))
+    }
+}
+
+/// Camera rays a side of the grid along which [`meshing_size`] finds what
+/// the camera at time 0 sees.
+const VIEW_RAYS: u32 = 16;
+
+/// The size the grid spacing is a share of is at most this many times
+/// the diagonal of what the camera at time 0 sees ([`meshing_size`]).
+const VIEW_SIZES: f32 = 2.0;
+
+/// The size the grid spacing is a share of ([`GlobalSettings::spacing`]):
+/// the diagonal of the static scene ([`static_diagonal`]), but at most
+/// [`VIEW_SIZES`] times that of the box around the camera at time 0 and
+/// what it sees of the scene (`meshed`, with `bvh` built over it) along a
+/// grid of [`VIEW_RAYS`]² rays through a film of width-to-height `aspect`
+/// (the rays that meet nothing left out). And what those rays see, as the
+/// [`View`] large triangles are split towards ([`super::pieces`]).
+///
+/// Why: a scene may reach far past what its camera looks at. A room at the
+/// edge of a 2 km ground it never shows (`l_hall` so placed by
+/// `benches/scenes/place.py ... ground 1000 950`, frames 0..4 at
+/// 96×60) was meshed at a 32nd of 2.8 km, one cell a wall, and rendered
+/// with a block bias of 33 % against `path` (at 64 spp); with this bound,
+/// 1.8 % (at the origin, alone: 1.6 %). A room seen from inside has the
+/// smaller diagonal (the bound is 1.6–2.0 times it in the built-in and
+/// test scenes), so it is meshed as before. The sky does not lift the
+/// bound: where a ray met nothing the scene's diagonal was taken, so the
+/// test courtyard set on a ground 50 m across (`--ground 25` of
+/// `tests/data/scenes/courtyard_swinging_light.py`), whose camera sees
+/// the sky above the walls, was meshed at a 32nd of 71 m, 2.2 m, its walls
+/// two cells high, and `movies` rendered it at 64×64 with 19× `ic`'s
+/// block bias (0.115 against 0.0059; 0.013 now). A ray that meets
+/// nothing sees nothing to mesh.
+pub(super) fn meshing_size(
+    scene: &crate::scene::Scene,
+    meshed: &crate::scene::Snapshot,
+    bvh: &SceneBvh,
+    aspect: f32,
+) -> (f32, Option<View>) {
+    let diagonal = static_diagonal(meshed);
+    let camera = &meshed.camera;
+    let view = View::new(camera.position, &seen_by(camera, bvh, aspect));
+    let size = view
+        .as_ref()
+        .map_or(diagonal, |view| diagonal.min(VIEW_SIZES * view.size()));
+    (
+        size,
+        view.map(|view| seen_later(view, scene, camera, (bvh, aspect))),
+    )
+}
+
+/// Times over the animation, beside 0, from which the camera's view adds
+/// to what large triangles are split towards ([`seen_later`]).
+const VIEW_TIMES: u32 = 8;
+
+/// `view` with what the camera sees at [`VIEW_TIMES`] times evenly over
+/// the animation (of `scene`, whose camera at time 0 is `at_zero`), seen
+/// in the scene as it stands at time 0 (`bvh`): a camera that travels over
+/// a large ground has it split along its way, not only where it starts.
+/// The meshing stays that of time 0 and of the animation alone, whatever
+/// frames a render takes ([`MESHED_AT`](super::global::MESHED_AT)). A camera that does not move adds
+/// nothing.
+fn seen_later(
+    mut view: View,
+    scene: &crate::scene::Scene,
+    at_zero: &crate::scene::Camera,
+    (bvh, aspect): (&SceneBvh, f32),
+) -> View {
+    let duration = scene.animation.duration();
+    for k in 1..=VIEW_TIMES {
+        let camera = scene.camera_at(duration * k as f32 / VIEW_TIMES as f32);
+        if camera.position != at_zero.position || camera.basis != at_zero.basis {
+            view.add(&seen_by(&camera, bvh, aspect));
+        }
+    }
+    view
+}
+
+/// What `camera` sees (each point with its triangle) along a grid of
+/// [`VIEW_RAYS`]² rays through a film of width-to-height `aspect`, in the
+/// scene `bvh` is built over; the rays that meet nothing left out.
+fn seen_by(camera: &crate::scene::Camera, bvh: &SceneBvh, aspect: f32) -> Vec<(u32, Vec3)> {
+    let side = VIEW_RAYS as f32;
+    (0..VIEW_RAYS * VIEW_RAYS)
+        .filter_map(|i| {
+            let (sx, sy) = ((i % VIEW_RAYS) as f32 + 0.5, (i / VIEW_RAYS) as f32 + 0.5);
+            let ray = Ray::new(
+                camera.position,
+                camera.direction(sx / side, sy / side, aspect),
+                0.0,
+                f32::INFINITY,
+            );
+            let hit = bvh.closest_hit(&ray);
+            hit.is_hit().then(|| (hit.triangle, ray.at(hit.t)))
+        })
+        .collect()
+}
+
+/// The diagonal of `snapshot`'s static triangles' box (of all triangles
+/// where none is static).
+fn static_diagonal(snapshot: &crate::scene::Snapshot) -> f32 {
+    let tris = if snapshot.static_count > 0 {
+        &snapshot.triangles[..snapshot.static_count]
+    } else {
+        &snapshot.triangles[..]
+    };
+    diagonal(tris.iter().flat_map(|t| t.p))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The spacing wanted is the pass's at what the camera sees of a
+    /// triangle, and grows with the distance from it; a triangle it does
+    /// not see is not split.
+    #[test]
+    fn the_spacing_grows_with_the_distance_from_what_is_seen() {
+        let hits = [
+            (7, Vec3::ZERO),
+            (7, Vec3::new(1.0, 0.0, 0.0)),
+            (2, Vec3::new(3.0, 4.0, 0.0)),
+        ];
+        let view = View::new(Vec3::ZERO, &hits).unwrap();
+        assert_eq!(view.size(), 5.0);
+        let at = |x: f32| {
+            view.spacing_at(
+                0.1,
+                7,
+                (Vec3::new(x, 0.0, 0.0), Vec3::new(x + 1.0, 1.0, 1.0)),
+            )
+        };
+        assert_eq!(at(0.5), Some(0.1));
+        assert!((at(6.0).unwrap() - 0.2).abs() < 1e-6);
+        assert!((at(21.0).unwrap() - 0.5).abs() < 1e-6);
+        assert_eq!(view.spacing_at(0.1, 3, (Vec3::ZERO, Vec3::ONE)), None);
+        assert_eq!(View::new(Vec3::ONE, &[(0, Vec3::ONE)]), None);
+        assert_eq!(View::new(Vec3::ONE, &[]), None);
+    }
+}
