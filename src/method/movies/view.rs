@@ -74,7 +74,8 @@ const VIEW_RAYS: u32 = 16;
 /// the diagonal of what the camera at time 0 sees ([`meshing_size`]).
 const VIEW_SIZES: f32 = 2.0;
 
-/// The size the grid spacing is a share of ([`GlobalSettings::spacing`]):
+/// The size the grid spacing is a share of
+/// ([`GlobalSettings::spacing`](super::global::GlobalSettings::spacing)):
 /// the diagonal of the static scene ([`static_diagonal`]), but at most
 /// [`VIEW_SIZES`] times that of the box around the camera at time 0 and
 /// what it sees of the scene (`meshed`, with `bvh` built over it) along a
