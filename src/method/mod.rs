@@ -228,7 +228,7 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // closed part turned inside out is solved on its outside, a side's
         // shading normal is turned to that side (`sides`, `direct`), and
         // the corners of an object scaled to nothing at time 0 are told
-        // apart in its own space (`global::PassMesh`, 2026-12-01). 7: as
+        // apart in its own space (`mesh::PassMesh`, 2026-12-01). 7: as
         // every method's next. 8: as every method's next, and a flat part
         // with nothing straight behind it is solved on the camera's side
         // (`sides::backs_solved`, 2026-12-01). 9: a vertex's links are

@@ -136,7 +136,7 @@ pub mod limits {
     /// scene's diagonal, or of what its camera sees
     /// (`global::meshing_size`; `spacing`, `--movies-spacing`). At 1 every static
     /// triangle is one cell already; below 0.001 the pass would coarsen
-    /// the grid anyway to keep its links within `global::MAX_LINKS`.
+    /// the grid anyway to keep its links within `mesh::MAX_LINKS`.
     pub const GRID_SPACING: Limits<f32> = Limits {
         min: 0.001,
         max: 1.0,

@@ -64,6 +64,7 @@
 
 pub mod direct;
 pub mod global;
+pub mod mesh;
 pub mod movie;
 pub mod patch;
 pub mod pieces;

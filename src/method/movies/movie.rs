@@ -9,7 +9,8 @@ use super::direct::{
     chunk_points, direct_irradiance, ShadePoint, ShadowBlockers, ShadowCounts, StaticShadows,
     Statics,
 };
-use super::global::{GlobalPass, Gouraud};
+use super::global::GlobalPass;
+use super::mesh::Gouraud;
 use super::patch::Patch;
 use super::FrameContext;
 use crate::sampling::{mix64, streams};

@@ -2,7 +2,7 @@
 //! pieces where the camera looks ([`super::global`]).
 //!
 //! The pass grids a triangle with at most
-//! [`MAX_GRID`](super::global::MAX_GRID) cells an edge. A triangle far
+//! [`MAX_GRID`](super::mesh::MAX_GRID) cells an edge. A triangle far
 //! larger than that many spacings (a ground of two triangles under a
 //! house) was one coarse grid, whose cells, metres across, smeared the
 //! light a wall bounces onto the ground beside it: `movies` rendered a
@@ -40,7 +40,7 @@
 //! (a T-junction: the Gouraud shading steps there, as it does between
 //! triangles of unlike grids).
 
-use super::global::Grid;
+use super::mesh::Grid;
 use super::patch::{child_at, from_parent, to_parent};
 use crate::scene::Triangle;
 use glam::Vec3;

@@ -125,8 +125,8 @@ const VIEW_TIMES: u32 = 8;
 /// in the scene as it stands at time 0 (`bvh`): a camera that travels over
 /// a large ground has it split along its way, not only where it starts.
 /// The meshing stays that of time 0 and of the animation alone, whatever
-/// frames a render takes ([`MESHED_AT`](super::global::MESHED_AT)). A camera that does not move adds
-/// nothing.
+/// frames a render takes ([`MESHED_AT`](super::global::MESHED_AT)). A
+/// camera that does not move adds nothing.
 fn seen_later(
     mut view: View,
     scene: &crate::scene::Scene,

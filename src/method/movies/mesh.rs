@@ -1,0 +1,595 @@
+//! The global pass's mesh ([`super::global`]): each solved side of a
+//! triangle is a regular grid of vertices, finer for larger triangles and
+//! split into pieces where it is past [`MAX_GRID`] cells an edge
+//! ([`super::pieces`]); each vertex gathers along its links. The spacing
+//! and the links a vertex are fitted to the pass's link budget
+//! ([`MAX_LINKS`]). A texel or a link's landing reads the vertices by
+//! Gouraud interpolation over the cell that holds it ([`Grid::weights`]).
+
+use super::global::GlobalSettings;
+use super::pieces::{self, Cells, Piece, MAX_DEPTH};
+use super::sides::ObjectCorners;
+use super::view::View;
+use crate::scene::Triangle;
+use glam::Vec3;
+use std::collections::HashMap;
+
+/// The finest grid: segments along a triangle's edge.
+pub const MAX_GRID: u32 = 32;
+/// The fewest links a vertex gathers along (unless [`MAX_LINKS`] leaves
+/// fewer).
+pub const MIN_LINKS: u32 = 8;
+/// The most links a pass keeps: each is 72 bytes (`Link`), and adds at
+/// most three 8-byte entries to its vertex's transport row, so 4 M links
+/// hold at most 400 MB. The built-in scenes need 0.25–0.5 M at the defaults;
+/// where a scene would need more (many triangles, or a static part so
+/// small that the spacing it sets is tiny), the grids coarsen and then the
+/// links thin until they fit, rather than the pass asking for gigabytes.
+/// A vertex keeps one link at least, so past about 1.4 M triangles the
+/// pass grows with the scene (three links a triangle at most).
+pub const MAX_LINKS: u64 = 1 << 22;
+
+/// How finely the pass meshes a snapshot: the grid spacing (world units),
+/// the links of a vertex on a cell a spacing across, and the fewest links
+/// of a vertex.
+#[derive(Clone, Debug)]
+pub(super) struct Meshing {
+    spacing: f32,
+    links: u32,
+    min_links: u32,
+    /// What the camera sees at time 0, which a triangle too large for one
+    /// grid is split towards ([`super::pieces`]); `None`: it sees nothing.
+    view: Option<View>,
+}
+
+impl Meshing {
+    /// The settings' meshing, coarsened until
+    /// [`links_needed`](Self::links_needed) is at most [`MAX_LINKS`]
+    /// (`both[i]`: triangle `i` has a grid on each side; missing: one).
+    pub(super) fn fitting(
+        triangles: &[crate::scene::Triangle],
+        both: &[bool],
+        settings: &GlobalSettings,
+        (diagonal, view): (f32, Option<View>),
+    ) -> Self {
+        let mut m = Meshing {
+            spacing: settings.spacing.max(1e-4) * diagonal,
+            links: settings.links.max(1),
+            min_links: MIN_LINKS.min(settings.links).max(1),
+            view,
+        };
+        for _ in 0..64 {
+            let needed = m.links_needed(triangles, both);
+            if needed <= MAX_LINKS {
+                break;
+            }
+            let excess = (needed as f64 / MAX_LINKS as f64) as f32;
+            let coarsest = (triangles.iter().enumerate()).all(|(i, t)| {
+                m.grid((i as u32, t), &Piece::WHOLE)
+                    .is_some_and(|(n, _)| n == 1)
+            });
+            if coarsest {
+                // One cell a triangle already: fewer links a vertex.
+                let scale = excess.recip();
+                m.links = ((m.links as f32 * scale) as u32).max(1);
+                m.min_links = ((m.min_links as f32 * scale) as u32).clamp(1, m.links);
+            } else {
+                m.spacing *= excess.sqrt().max(1.1);
+            }
+        }
+        m
+    }
+
+    /// The links `triangles` need, counting each triangle's corners as its
+    /// own (shared corners are one vertex in the pass: an upper bound),
+    /// twice for a triangle `both` says has a grid on each side.
+    fn links_needed(&self, triangles: &[crate::scene::Triangle], both: &[bool]) -> u64 {
+        triangles
+            .iter()
+            .enumerate()
+            .map(|(i, t)| {
+                let sides = 1 + u64::from(both.get(i).copied().unwrap_or(false));
+                self.piece_links((i as u32, t), &Piece::WHOLE) * sides
+            })
+            .sum()
+    }
+
+    /// The links of piece `piece` of `tri` and of the pieces it splits
+    /// into.
+    fn piece_links(&self, tri: (u32, &Triangle), piece: &Piece) -> u64 {
+        match self.grid(tri, piece) {
+            Some((n, links)) => u64::from(Grid::vertex_count(n)) * u64::from(links),
+            None => (piece.children().iter())
+                .map(|c| self.piece_links(tri, c))
+                .sum(),
+        }
+    }
+
+    /// Piece `piece` of triangle `tri`: its grid's segments an edge and
+    /// links a vertex, or `None` where it is split ([`super::pieces`]): it
+    /// is past [`MAX_GRID`] cells an edge at the spacing wanted where it
+    /// lies. A triangle within the cap at the pass's spacing is one grid
+    /// of that spacing, wherever it lies.
+    fn grid(&self, (id, tri): (u32, &Triangle), piece: &Piece) -> Option<(u32, u32)> {
+        let corners = piece.world_corners(tri);
+        let longest = crate::scene::longest_edge(&corners);
+        let mut spacing = self.spacing;
+        if longest / spacing > MAX_GRID as f32 {
+            let wanted = (self.view.as_ref())
+                .zip(crate::scene::bounding_box(corners))
+                .and_then(|(v, piece_box)| v.spacing_at(spacing, id, piece_box));
+            if let Some(wanted) = wanted {
+                spacing = wanted;
+                if longest / spacing > MAX_GRID as f32 && piece.depth < MAX_DEPTH {
+                    return None;
+                }
+            }
+        }
+        let n = ((longest / spacing).ceil() as u32).clamp(1, MAX_GRID);
+        // A piece at depth d is a 4^d-th of its triangle.
+        let area = tri.area() / (1u64 << (2 * piece.depth)) as f32;
+        let cell = area / (n * n) as f32;
+        // Links as a vertex on a cell of the spacing wanted here would
+        // have, times the share of the pass's spacing in that spacing,
+        // squared: past what the camera sees, a vertex sends its light to
+        // what it sees through a solid angle that falls with the distance
+        // squared, and its noise is averaged over the many links that land
+        // near it. (1 within the view: a triangle within the cap keeps its
+        // links.)
+        let reference_cell = 0.5 * spacing * spacing;
+        let importance = (self.spacing / spacing).powi(2);
+        let links = ((self.links as f32 * cell / reference_cell * importance).ceil() as u32)
+            .clamp(self.min_links, self.links);
+        Some((n, links))
+    }
+}
+
+/// The regular subdivision of one triangle into `n²` cells; its vertices
+/// `(a, b)`, `a + b ≤ n`, at barycentrics `(a/n, b/n)`, numbered row by
+/// row. Their numbers are *slots*: a vertex shared by several triangles
+/// (a mesh vertex) fills a slot in each.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Grid {
+    pub n: u32,
+    /// Slot of vertex (0, 0) among all the pass's slots.
+    pub first: u32,
+}
+
+impl Grid {
+    pub fn vertex_count(n: u32) -> u32 {
+        (n + 1) * (n + 2) / 2
+    }
+
+    /// The three vertices and weights that interpolate at barycentrics
+    /// `(u, v)` (Gouraud shading over the cell that holds the point).
+    pub fn weights(&self, u: f32, v: f32) -> [(u32, f32); 3] {
+        let n = self.n;
+        let nf = n as f32;
+        let (x, y) = ((u * nf).clamp(0.0, nf), (v * nf).clamp(0.0, nf));
+        let a0 = (x.floor() as u32).min(n - 1);
+        let b0 = (y.floor() as u32).min(n - 1 - a0);
+        let (mut fx, mut fy) = (
+            (x - a0 as f32).clamp(0.0, 1.0),
+            (y - b0 as f32).clamp(0.0, 1.0),
+        );
+        let at = |a: u32, b: u32| self.first + row_start(n, b) + a;
+        if fx + fy <= 1.0 || a0 + b0 + 2 > n {
+            let s = fx + fy;
+            if s > 1.0 {
+                fx /= s;
+                fy /= s;
+            }
+            [
+                (at(a0, b0), 1.0 - fx - fy),
+                (at(a0 + 1, b0), fx),
+                (at(a0, b0 + 1), fy),
+            ]
+        } else {
+            [
+                (at(a0 + 1, b0 + 1), fx + fy - 1.0),
+                (at(a0, b0 + 1), 1.0 - fx),
+                (at(a0 + 1, b0), 1.0 - fy),
+            ]
+        }
+    }
+}
+
+/// Where a point falls among the global pass's vertices: the three that
+/// interpolate at it and their weights (Gouraud shading).
+pub type Gouraud = [(u32, f32); 3];
+
+/// Gouraud interpolation of per-vertex `values` over the vertices marked
+/// `valid` alone, their weights renormalised (all three where none is
+/// valid).
+pub fn blend(values: &[Vec3], valid: &[bool], g: &Gouraud) -> Vec3 {
+    renormalised(valid, g).fold(Vec3::ZERO, |acc, (i, w)| acc + values[i as usize] * w)
+}
+
+/// The vertices of `g` marked `valid` with their weights renormalised
+/// (all three where none is valid).
+pub(super) fn renormalised<'a>(
+    valid: &'a [bool],
+    g: &'a Gouraud,
+) -> impl Iterator<Item = (u32, f32)> + 'a {
+    let total: f32 = g
+        .iter()
+        .filter(|(i, _)| valid[*i as usize])
+        .map(|(_, w)| w)
+        .sum();
+    let all = total <= 1e-6;
+    let scale = if all { 1.0 } else { 1.0 / total };
+    g.iter()
+        .filter(move |(i, _)| all || valid[*i as usize])
+        .map(move |&(i, w)| (i, w * scale))
+}
+
+/// Index of the first vertex of row `b` of a grid of `n` segments.
+fn row_start(n: u32, b: u32) -> u32 {
+    // Rows 0..b hold (n+1) + n + … + (n−b+2) vertices.
+    b * (n + 1) - b * (b.max(1) - 1) / 2
+}
+
+/// The pass's vertices over the grids of a snapshot's triangles.
+pub(super) struct PassMesh {
+    /// Per triangle, its cells.
+    pub(super) grids: Vec<Cells>,
+    /// Per triangle solved on both sides, the cells of the side opposite
+    /// its first cells'.
+    pub(super) reverse_grids: Vec<Option<Cells>>,
+    /// The pieces of the triangles split ([`Cells::Split`]).
+    pub(super) pieces: Vec<Cells>,
+    /// The vertex in each slot of the grids.
+    pub(super) vertex_of: Vec<u32>,
+    pub(super) vertices: Vec<Vertex>,
+    /// The links of all vertices: at most `MAX_LINKS`, or three a
+    /// triangle, so within `u32`.
+    pub(super) link_count: u32,
+}
+
+impl PassMesh {
+    /// The grids of `snapshot`'s triangles (`corners_in_object`: their
+    /// corners in their objects' own space), a second one on the triangles
+    /// `both` names.
+    pub(super) fn new(
+        snapshot: &crate::scene::Snapshot,
+        corners_in_object: &[ObjectCorners],
+        meshing: &Meshing,
+        both: &[bool],
+    ) -> Self {
+        let mut mesh = PassMesh {
+            grids: Vec::with_capacity(snapshot.triangles.len()),
+            reverse_grids: Vec::with_capacity(snapshot.triangles.len()),
+            pieces: Vec::new(),
+            vertex_of: Vec::new(),
+            vertices: Vec::new(),
+            link_count: 0,
+        };
+        // Mesh vertices: a triangle corner at the same point of the same
+        // object with the same shading normal (on the same side) is one
+        // vertex, so that the Gouraud shading is continuous across the
+        // mesh and a finely tessellated object (a sphere) has a vertex per
+        // mesh vertex, not three per triangle. Keyed by object, not by
+        // component ([`SolvedSides`]): parts of one object that touch only
+        // at corners (a chair's leg flush with its seat) share those
+        // vertices, which keying by component would split (`chairs-room`:
+        // 780 corner vertices instead of 732). Where such parts have their
+        // sides solved apart, a shared corner gathers on the side of the
+        // part that made it first. Where an animation scales an object to
+        // nothing (in some direction) at time 0, its corners are compared
+        // in its own space: placed, they are all at one point then, with
+        // no normal, and made one vertex for all its faces (a box grown
+        // from nothing, once grown, was 76 % off `path` in its corner of
+        // the frame, now 4.4 %: `tests/movies.rs`).
+        let mut corners: HashMap<CornerKey, u32> = HashMap::new();
+        let mut add = |mesh: &mut PassMesh, id: usize, reverse: bool| {
+            let at = &corners_in_object[id].1;
+            mesh.add_cells(snapshot, at, meshing, &mut corners, id, reverse)
+        };
+        for id in 0..snapshot.triangles.len() {
+            let grid = add(&mut mesh, id, false);
+            mesh.grids.push(grid);
+            let reverse = both.get(id).copied().unwrap_or(false);
+            let reverse = reverse.then(|| add(&mut mesh, id, true));
+            mesh.reverse_grids.push(reverse);
+        }
+        mesh
+    }
+
+    /// Adds the cells of triangle `id` (its corners `at` in its object's
+    /// space) on its first side, or with `reverse` on the other: one grid,
+    /// or the pieces it is split into ([`super::pieces`]).
+    fn add_cells(
+        &mut self,
+        snapshot: &crate::scene::Snapshot,
+        at: &[(Vec3, Vec3); 3],
+        meshing: &Meshing,
+        corners: &mut HashMap<CornerKey, u32>,
+        id: usize,
+        reverse: bool,
+    ) -> Cells {
+        let mut side = GridSide {
+            snapshot,
+            at,
+            corners,
+            // The vertices on the pieces' edges, by their barycentrics.
+            edges: HashMap::new(),
+            id,
+            reverse,
+        };
+        self.add_piece(&mut side, meshing, &Piece::WHOLE)
+    }
+
+    /// Adds `piece` of a triangle side: its grid where `meshing` grids it
+    /// whole, else its four children's cells (in `pieces`, their
+    /// descendants after them).
+    fn add_piece(&mut self, side: &mut GridSide, meshing: &Meshing, piece: &Piece) -> Cells {
+        let tri = &side.snapshot.triangles[side.id];
+        if let Some((n, links)) = meshing.grid((side.id as u32, tri), piece) {
+            return Cells::Grid(self.add_grid(side, piece, n, links));
+        }
+        let first = self.pieces.len();
+        self.pieces.extend([Cells::Split(0); 4]);
+        for (k, child) in piece.children().iter().enumerate() {
+            self.pieces[first + k] = self.add_piece(side, meshing, child);
+        }
+        Cells::Split(first as u32)
+    }
+
+    /// Adds the grid of `n` segments an edge over `piece` of a triangle
+    /// side, `links` a vertex: its slots, and the vertices they do not
+    /// share.
+    fn add_grid(&mut self, side: &mut GridSide, piece: &Piece, n: u32, links: u32) -> Grid {
+        let GridSide {
+            snapshot,
+            at,
+            id,
+            reverse,
+            ..
+        } = *side;
+        let tri = &snapshot.triangles[id];
+        let grid = Grid {
+            n,
+            first: self.vertex_of.len() as u32,
+        };
+        let object = snapshot.tri_object[id];
+        let placing = snapshot.object_to_world[object as usize].determinant();
+        let collapsed = placing == 0.0 || !placing.is_finite();
+        for b in 0..=n {
+            for a in 0..=n - b {
+                let point = piece.grid_point(n, a, b);
+                let mut new_vertex = || {
+                    self.vertices.push(Vertex {
+                        triangle: id as u32,
+                        at: point,
+                        reverse,
+                        links,
+                        first_link: self.link_count,
+                    });
+                    self.link_count += links;
+                    self.vertices.len() as u32 - 1
+                };
+                // Triangle corners and piece edges lie on a grid's edge.
+                let on_edge = a == 0 || b == 0 || a + b == n;
+                let corner = (Piece::WHOLE.corners.iter())
+                    .position(|&c| on_edge && pieces::bits(c) == pieces::bits(point));
+                let vertex = match corner {
+                    Some(k) => {
+                        let (p, n) = if collapsed {
+                            at[k]
+                        } else {
+                            (tri.p[k], tri.n[k])
+                        };
+                        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                        *side
+                            .corners
+                            .entry((object, bits(p), bits(n), reverse, collapsed))
+                            .or_insert_with(new_vertex)
+                    }
+                    None if on_edge && *piece != Piece::WHOLE => *side
+                        .edges
+                        .entry(pieces::bits(point))
+                        .or_insert_with(new_vertex),
+                    None => new_vertex(),
+                };
+                self.vertex_of.push(vertex);
+            }
+        }
+        grid
+    }
+}
+
+/// The side of a triangle [`PassMesh::add_cells`] grids, and the vertices
+/// its grids share.
+struct GridSide<'a> {
+    snapshot: &'a crate::scene::Snapshot,
+    /// The triangle's corners in its object's own space.
+    at: &'a [(Vec3, Vec3); 3],
+    /// The mesh's vertices at triangle corners.
+    corners: &'a mut HashMap<CornerKey, u32>,
+    /// The vertices on the edges of its pieces, by their barycentrics'
+    /// bits.
+    edges: HashMap<(u32, u32), u32>,
+    id: usize,
+    reverse: bool,
+}
+
+/// A mesh vertex of the pass: object, position and normal (their bits),
+/// the side, and whether the position and normal are in the object's own
+/// space (its transform is singular at time 0) rather than placed.
+type CornerKey = (u32, [u32; 3], [u32; 3], bool, bool);
+
+/// Where a vertex of the pass lies: a triangle and its barycentrics there
+/// (for a vertex shared by several triangles, the first of them).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Vertex {
+    pub(super) triangle: u32,
+    pub(super) at: (f32, f32),
+    /// On the side opposite its triangle's first grid's (a triangle
+    /// solved on both sides).
+    pub(super) reverse: bool,
+    pub(super) links: u32,
+    /// Index of its first link.
+    pub(super) first_link: u32,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scene within the budget keeps the settings' meshing; one far over
+    /// it (a static part a thousandth of its size, so a tiny spacing; or
+    /// more triangles than the budget has links) is coarsened to fit.
+    #[test]
+    fn meshing_fits_the_link_budget() {
+        let settings = GlobalSettings::default();
+        let quad = |x: f32, size: f32| crate::scene::Triangle {
+            p: [
+                Vec3::new(x, 0.0, 0.0),
+                Vec3::new(x + size, 0.0, 0.0),
+                Vec3::new(x, size, 0.0),
+            ],
+            n: [Vec3::Z; 3],
+        };
+        let room: Vec<_> = (0..100).map(|i| quad(i as f32, 1.0)).collect();
+        let m = Meshing::fitting(&room, &[], &settings, (10.0, None));
+        assert_eq!(
+            (m.spacing, m.links, m.min_links),
+            (10.0 / 32.0, 128, MIN_LINKS)
+        );
+        // A triangle solved on both sides needs its links twice.
+        let one_side = m.links_needed(&room, &[]);
+        let half: Vec<bool> = (0..100).map(|i| i % 2 == 0).collect();
+        assert_eq!(m.links_needed(&room, &half), one_side * 3 / 2);
+        let tiny_static = Meshing::fitting(&room, &[], &settings, (0.01, None));
+        assert!(tiny_static.links_needed(&room, &[]) <= MAX_LINKS);
+        let both = vec![true; room.len()];
+        let tiny_both = Meshing::fitting(&room, &both, &settings, (0.01, None));
+        assert!(tiny_both.links_needed(&room, &both) <= MAX_LINKS);
+        assert!(
+            Meshing {
+                spacing: 0.01 / 32.0,
+                ..m
+            }
+            .links_needed(&room, &[])
+                > MAX_LINKS
+        );
+        let many: Vec<_> = (0..1_000_000)
+            .map(|i| quad(i as f32 * 1e-3, 1e-3))
+            .collect();
+        let thinned = Meshing::fitting(&many, &[], &settings, (1000.0, None));
+        assert!(thinned.links_needed(&many, &[]) <= MAX_LINKS, "{thinned:?}");
+        assert!(thinned.links >= 1 && thinned.min_links >= 1);
+    }
+
+    /// A triangle 600 m across that the camera sees near its corner is
+    /// split there into pieces gridded at the pass's spacing and left
+    /// coarse far away; one it does not see, as large, is one grid; and the
+    /// budget counts the pieces' links.
+    #[test]
+    fn a_large_triangle_is_split_where_it_is_seen() {
+        let big = |y: f32| Triangle {
+            p: [
+                Vec3::new(0.0, y, 0.0),
+                Vec3::new(600.0, y, 0.0),
+                Vec3::new(0.0, y, 600.0),
+            ],
+            n: [Vec3::Y; 3],
+        };
+        let triangles = [big(0.0), big(-1.0)];
+        let hits: Vec<(u32, Vec3)> = (0..4)
+            .map(|i| (0, Vec3::new(1.0 + i as f32, 0.0, 2.0)))
+            .collect();
+        let view = View::new(Vec3::new(0.0, 2.0, 0.0), &hits);
+        let settings = GlobalSettings::default();
+        let m = Meshing::fitting(&triangles, &[], &settings, (8.0, view));
+        assert_eq!(m.spacing, 8.0 / 32.0);
+        assert_eq!(m.grid((0, &triangles[0]), &Piece::WHOLE), None);
+        assert_eq!(
+            m.grid((1, &triangles[1]), &Piece::WHOLE).map(|(n, _)| n),
+            Some(MAX_GRID)
+        );
+        // Down to the piece that holds a seen point: cells a spacing
+        // across at most there.
+        let mut piece = Piece::WHOLE;
+        let (n, links) = loop {
+            match m.grid((0, &triangles[0]), &piece) {
+                Some(grid) => break grid,
+                None => piece = piece.children()[0],
+            }
+        };
+        let c = piece.world_corners(&triangles[0]);
+        let longest = (c[1] - c[0])
+            .length()
+            .max((c[2] - c[0]).length())
+            .max((c[2] - c[1]).length());
+        assert!(
+            longest / n as f32 <= m.spacing,
+            "{piece:?}: {n} cells of {longest}"
+        );
+        // As many links as a triangle within the cap would get for cells
+        // of that area.
+        let cell = 600.0 * 600.0 / 2.0 / 4f32.powi(piece.depth as i32) / (n * n) as f32;
+        let expected = (settings.links as f32 * cell / (0.5 * m.spacing * m.spacing)).ceil();
+        assert_eq!(links, expected as u32);
+        // The far corner: one coarse piece, fewer links a vertex.
+        let far = Piece::WHOLE.children()[1];
+        let (far_n, far_links) = m.grid((0, &triangles[0]), &far).expect("far piece whole");
+        assert!(
+            far_n <= MAX_GRID && far_links < links,
+            "{far_n} {far_links}"
+        );
+        let seen_only = m.piece_links((0, &triangles[0]), &Piece::WHOLE);
+        assert_eq!(
+            m.links_needed(&triangles, &[]),
+            seen_only + Grid::vertex_count(MAX_GRID) as u64 * 128
+        );
+        assert!(seen_only > Grid::vertex_count(MAX_GRID) as u64 * 128);
+    }
+
+    #[test]
+    fn grid_rows_number_every_vertex_once() {
+        for n in 1..=MAX_GRID {
+            let mut seen = vec![false; Grid::vertex_count(n) as usize];
+            for b in 0..=n {
+                for a in 0..=n - b {
+                    let i = (row_start(n, b) + a) as usize;
+                    assert!(!seen[i], "n {n}: ({a}, {b}) numbered twice");
+                    seen[i] = true;
+                }
+            }
+            assert!(seen.iter().all(|&s| s), "n {n}");
+        }
+    }
+
+    /// Gouraud interpolation of a linear function is exact, everywhere in
+    /// the triangle, its edges and corners included.
+    #[test]
+    fn grid_interpolation_reproduces_a_linear_function() {
+        for n in 1..=5 {
+            let grid = Grid { n, first: 0 };
+            let identity: Vec<u32> = (0..Grid::vertex_count(n)).collect();
+            let valid = vec![true; identity.len()];
+            let f = |u: f32, v: f32| Vec3::new(1.0 + 2.0 * u - 3.0 * v, u, v);
+            let mut values = vec![Vec3::ZERO; Grid::vertex_count(n) as usize];
+            for b in 0..=n {
+                for a in 0..=n - b {
+                    values[(row_start(n, b) + a) as usize] =
+                        f(a as f32 / n as f32, b as f32 / n as f32);
+                }
+            }
+            for i in 0..=20 {
+                for j in 0..=20 - i {
+                    let (u, v) = (i as f32 / 20.0, j as f32 / 20.0);
+                    let g = grid
+                        .weights(u, v)
+                        .map(|(slot, w)| (identity[slot as usize], w));
+                    let got = blend(&values, &valid, &g);
+                    assert!(
+                        (got - f(u, v)).abs().max_element() < 1e-4,
+                        "n {n} at ({u}, {v}): {got}"
+                    );
+                }
+            }
+        }
+    }
+}
