@@ -114,8 +114,8 @@ struct LitFrame {
 }
 
 impl LitFrames {
-    /// The last frame from `last_valid` back to t0+1 where `g`'s samples,
-    /// reprojected with their direct light evaluated again, do not
+    /// The last frame from `last_valid` back to t0+1 where `record`'s
+    /// samples, reprojected with their direct light evaluated again, do not
     /// `exceed` the temporal accuracy: `last_valid` itself where they do
     /// not there (or at the last frame kept, for a longer life), else
     /// found by bisection (t0+1 is known to be within it).
@@ -262,12 +262,12 @@ impl LaterFrames {
         later
     }
 
-    /// The last frame, up to `last_valid` (Eq. 10–11's), that gather `g`
-    /// (made at t0) may be used in: the frame before the first later frame
-    /// where more than `a_t` of its samples' paths are crossed by an object
-    /// none of them hit ([`Arrivals::share`]), or that departs from τ's
-    /// extrapolation as `g` sees it and where its samples, reprojected
-    /// there, `exceed` the temporal accuracy.
+    /// The last frame, up to `last_valid` (Eq. 10–11's), that the gather
+    /// of `record` (made at t0) may be used in: the frame before the first
+    /// later frame where more than `a_t` of its samples' paths are crossed
+    /// by an object none of them hit ([`Arrivals::share`]), or that departs
+    /// from τ's extrapolation as the gather sees it and where its samples,
+    /// reprojected there, `exceed` the temporal accuracy.
     pub(super) fn last_valid(
         &self,
         ctx: &FrameContext,
