@@ -72,6 +72,13 @@ impl ShadowGeometry {
             _ => moving_bvh(now),
         }
     }
+
+    /// Lets the kept moving BVH go (a frame that evaluates no direct light
+    /// at t0+1 makes none for the next, and a large one would be held for
+    /// nothing until a light moves again).
+    pub(super) fn forget_moving(&mut self) {
+        self.next_moving = None;
+    }
 }
 
 /// The geometry and lights of t0 and t0+1 that the direct light at a
@@ -300,11 +307,14 @@ fn unoccluded(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::method::trc::estimate::NextFrame;
+    use crate::method::trc::NextDirect;
     use crate::render::test_renderer;
 
     /// The moving triangles' BVH built for t0+1 is the next frame's t0
     /// BVH, the same one; kept for another frame, or over other
-    /// triangles, it is built again.
+    /// triangles, it is built again; a frame that does not evaluate the
+    /// direct light at t0+1 lets it go.
     #[test]
     fn the_next_frames_moving_bvh_is_taken_only_for_its_own_triangles() {
         let mut renderer = test_renderer("moving-light", 4);
@@ -328,12 +338,16 @@ mod tests {
             geometry.next_moving = kept.clone().map(|(_, bvh)| (offered, bvh));
             let moving = renderer.with_frame_context(frame, |ctx| geometry.moving_now(ctx));
             assert!(!same(&moving, &kept.as_ref().unwrap().1), "frame {frame}");
-            let fresh = renderer.with_frame_context(frame, |ctx| moving_bvh(ctx.snapshot));
             renderer.with_frame_context(frame, |ctx| {
                 let range = ctx.snapshot.static_count..ctx.snapshot.triangles.len();
-                assert!(moving.as_ref().unwrap().holds(ctx.snapshot, range.clone()));
-                assert!(fresh.unwrap().holds(ctx.snapshot, range));
+                assert!(moving.as_ref().unwrap().holds(ctx.snapshot, range));
             });
         }
+        renderer.with_frame_context(4, |ctx| at(ctx, &mut geometry));
+        assert!(geometry.next_moving.is_some());
+        renderer.with_frame_context(5, |ctx| {
+            NextFrame::new(ctx, NextDirect::Off, &mut geometry);
+        });
+        assert!(geometry.next_moving.is_none(), "kept with no estimate");
     }
 }

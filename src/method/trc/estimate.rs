@@ -65,13 +65,19 @@ impl NextFrame {
             .map(|(w0, w1)| rigid_motion(*w0, *w1))
             .collect();
         let objects_move = motion.iter().any(Option::is_some);
+        let direct = evaluated
+            .then(|| DirectChange::new(ctx, later, (objects_move, lights_move), geometry))
+            .flatten();
+        if direct.is_none() {
+            // No estimate of t0+1's direct light: nothing takes the BVH
+            // kept for this frame, and none is kept for the next.
+            geometry.forget_moving();
+        }
         NextFrame {
             motion,
             lights_move,
             lights: (l0, l1),
-            direct: evaluated
-                .then(|| DirectChange::new(ctx, later, (objects_move, lights_move), geometry))
-                .flatten(),
+            direct,
         }
     }
 
