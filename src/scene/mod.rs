@@ -445,8 +445,6 @@ impl Snapshot {
     }
 }
 
-/// The smallest box `(min, max)` around `points`; `None` where there are
-/// none (or none but NaN).
 /// The length of the longest edge of the triangle with corners `p`.
 pub fn longest_edge(p: &[Vec3; 3]) -> f32 {
     (0..3)
@@ -454,6 +452,8 @@ pub fn longest_edge(p: &[Vec3; 3]) -> f32 {
         .fold(0.0f32, f32::max)
 }
 
+/// The smallest box `(min, max)` around `points`; `None` where there are
+/// none (or none but NaN).
 pub fn bounding_box(points: impl IntoIterator<Item = Vec3>) -> Option<(Vec3, Vec3)> {
     let (lo, hi) = (points.into_iter())
         .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
