@@ -252,8 +252,7 @@ impl TriangleBvh {
         if range.is_empty() {
             return None;
         }
-        let source: Vec<ObTriangle> = snapshot.triangles[range.clone()]
-            .iter()
+        let source: Vec<ObTriangle> = (snapshot.triangles.range(range.clone()))
             .map(to_obvhs)
             .collect();
         let params = if range.len() > 10_000 {
@@ -543,7 +542,7 @@ mod tests {
     fn still_snapshot(offset: f32) -> Snapshot {
         let mut snap = Scene::builtin("cube-in-box").unwrap().snapshot(0.0);
         snap.static_count = snap.triangles.len();
-        for tri in &mut snap.triangles {
+        for tri in snap.triangles.iter_mut() {
             tri.p = tri.p.map(|p| p + glam::Vec3::splat(offset));
         }
         snap

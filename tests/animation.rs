@@ -340,7 +340,7 @@ fn snapshot_orders_static_first() {
     let scene = hierarchy_scene();
     let snap = scene.snapshot(1.0);
     assert_eq!(snap.static_count, 1);
-    assert_eq!(snap.tri_object, [0, 1]);
+    assert_eq!(snap.tri_object.to_vec(), [0, 1]);
     assert!(close3(snap.camera.position, Vec3::new(0.0, 0.0, 5.0)));
 }
 

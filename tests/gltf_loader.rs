@@ -1864,7 +1864,7 @@ fn only_a_skins_first_inverse_bind_matrix_is_read() {
         .iter()
         .all(|o| scene.nodes[o.node].name == "joint"));
     // At the bind pose, each lies where the file put it.
-    for triangle in scene.snapshot(0.0).triangles {
+    for triangle in scene.snapshot(0.0).triangles.to_vec() {
         for (c, want) in triangle.p.iter().zip(TRI) {
             assert!(close(*c, Vec3::from(want), 1e-6), "{c} vs {want:?}");
         }

@@ -495,7 +495,7 @@ impl Renderer {
     pub fn with_frame_context<R>(&mut self, frame: u32, f: impl FnOnce(&FrameContext) -> R) -> R {
         let t = frame as f32 / self.settings.fps;
         let snapshot = match self.last_snapshot.take() {
-            Some(earlier) => self.scene.snapshot_from(t, earlier),
+            Some(earlier) => self.scene.snapshot_from(t, &earlier),
             None => self.scene.snapshot(t),
         };
         self.backend.set_geometry(&snapshot);

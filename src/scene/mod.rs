@@ -11,8 +11,10 @@
 pub mod animation;
 pub mod builtin;
 pub mod gltf_loader;
+mod placed;
 
 use glam::{Mat3, Mat4, Quat, Vec3};
+pub use placed::Placed;
 use std::path::Path;
 
 pub use animation::{Animation, Channel, Interpolation, Property};
@@ -421,14 +423,16 @@ impl Camera {
 /// The scene evaluated at one time `t`: world-space triangles (static objects
 /// first, then dynamic ones, in object order so that triangle ids are stable
 /// across frames), lights and camera.
+/// Its static triangles (and their objects and materials) are shared with
+/// the snapshot it was made from ([`Scene::snapshot_from`], [`Placed`]).
 #[derive(Clone, Debug)]
 pub struct Snapshot {
     pub time: f32,
-    pub triangles: Vec<Triangle>,
+    pub triangles: Placed<Triangle>,
     /// Object id of each triangle.
-    pub tri_object: Vec<u32>,
+    pub tri_object: Placed<u32>,
     /// Material id of each triangle.
-    pub tri_material: Vec<u32>,
+    pub tri_material: Placed<u32>,
     /// Triangles `0..static_count` belong to objects that never move.
     pub static_count: usize,
     /// World transform of every object at `time`.
@@ -854,15 +858,15 @@ impl Scene {
         self.snapshot_keeping(t, |m| self.materials[m as usize].is_emissive())
     }
 
-    /// [`Scene::snapshot`] at `t`, made in `earlier`, a snapshot of this
+    /// [`Scene::snapshot`] at `t`, made from `earlier`, a snapshot of this
     /// scene at another time: its static triangles, which no animation
-    /// moves ([`Scene::dynamic_objects`]), are kept as they are, bit for
-    /// bit what placing them again gives, and only the moving ones are
-    /// placed. A frame of a large scene otherwise moves every vertex: a
-    /// static 2M-triangle mesh took 0.15 s a frame of 0.22 s (`trc`,
-    /// 64 × 64). An `earlier` whose static part is not this scene's whole
-    /// one (an [`Scene::emitters_snapshot`]) is not taken.
-    pub fn snapshot_from(&self, t: f32, earlier: Snapshot) -> Snapshot {
+    /// moves ([`Scene::dynamic_objects`]), are shared with it, bit for bit
+    /// what placing them again gives, and only the moving ones are placed.
+    /// A frame of a large scene otherwise moves every vertex: a static
+    /// 2M-triangle mesh took 0.15 s a frame of 0.22 s (`trc`, 64 × 64).
+    /// An `earlier` whose static part is not this scene's whole one (an
+    /// [`Scene::emitters_snapshot`]) is not taken.
+    pub fn snapshot_from(&self, t: f32, earlier: &Snapshot) -> Snapshot {
         let dynamic = self.dynamic_objects();
         let static_triangles: usize = (self.objects.iter().zip(&dynamic))
             .filter(|(_, &moves)| !moves)
@@ -872,37 +876,43 @@ impl Scene {
             return self.snapshot(t);
         }
         let world = self.node_world_transforms(t);
-        let mut snap = Snapshot {
-            triangles: earlier.triangles,
-            tri_object: earlier.tri_object,
-            tri_material: earlier.tri_material,
-            ..self.posed(t, &world)
-        };
-        snap.triangles.truncate(static_triangles);
-        snap.tri_object.truncate(static_triangles);
-        snap.tri_material.truncate(static_triangles);
-        snap.static_count = static_triangles;
-        let moving = (0..dynamic.len()).filter(|&o| dynamic[o]);
-        for object in moving {
+        let mut moving = Triangles::default();
+        for object in (0..dynamic.len()).filter(|&o| dynamic[o]) {
             let o = &self.objects[object];
-            append_object(&mut snap, object as u32, &o.mesh, &world[o.node], |_| true);
+            moving.append(object as u32, &o.mesh, &world[o.node], |_| true);
         }
-        snap
+        Snapshot {
+            triangles: Placed::new(earlier.triangles.prefix(static_triangles), moving.triangles),
+            tri_object: Placed::new(earlier.tri_object.prefix(static_triangles), moving.objects),
+            tri_material: Placed::new(
+                earlier.tri_material.prefix(static_triangles),
+                moving.materials,
+            ),
+            static_count: static_triangles,
+            ..self.posed(t, &world)
+        }
     }
 
     /// The snapshot at `t` with the triangles whose material `keep` takes.
     fn snapshot_keeping(&self, t: f32, keep: impl Fn(u32) -> bool) -> Snapshot {
         let world = self.node_world_transforms(t);
-        let mut snap = self.posed(t, &world);
         let dynamic = self.dynamic_objects();
+        let mut placed = Triangles::default();
+        let mut static_count = 0;
         for object in static_first(&dynamic) {
             let o = &self.objects[object];
-            append_object(&mut snap, object as u32, &o.mesh, &world[o.node], &keep);
+            placed.append(object as u32, &o.mesh, &world[o.node], &keep);
             if !dynamic[object] {
-                snap.static_count = snap.triangles.len();
+                static_count = placed.triangles.len();
             }
         }
-        snap
+        Snapshot {
+            triangles: Placed::sharing_first(placed.triangles, static_count),
+            tri_object: Placed::sharing_first(placed.objects, static_count),
+            tri_material: Placed::sharing_first(placed.materials, static_count),
+            static_count,
+            ..self.posed(t, &world)
+        }
     }
 
     /// A snapshot at `t` (nodes placed by `world`) with no triangles: its
@@ -910,9 +920,9 @@ impl Scene {
     fn posed(&self, t: f32, world: &[Mat4]) -> Snapshot {
         Snapshot {
             time: t,
-            triangles: Vec::new(),
-            tri_object: Vec::new(),
-            tri_material: Vec::new(),
+            triangles: Placed::default(),
+            tri_object: Placed::default(),
+            tri_material: Placed::default(),
             static_count: 0,
             object_to_world: self.objects_in(world),
             lights: self
@@ -964,39 +974,44 @@ fn camera_at(m: &Mat4, yfov: f32) -> Camera {
     }
 }
 
-/// Appends to `snap` the triangles of `object` (its `mesh` placed by
-/// `to_world`) whose material `keep` takes.
-fn append_object(
-    snap: &mut Snapshot,
-    object: u32,
-    mesh: &Mesh,
-    to_world: &Mat4,
-    keep: impl Fn(u32) -> bool,
-) {
-    // Normals transform with the inverse transpose (non-uniform scale).
-    let normal_matrix = Mat3::from_mat4(*to_world).inverse().transpose();
-    let flip = to_world.determinant() < 0.0;
-    let kept = mesh.triangles.iter().zip(&mesh.materials);
-    for (tri, &material) in kept.filter(|(_, &m)| keep(m)) {
-        let mut idx = tri.map(|i| i as usize);
-        if flip {
-            // A mirroring transform reverses winding; keep the front face.
-            idx.swap(1, 2);
+/// Triangles placed in world space, with their objects and materials, as
+/// a snapshot is assembled.
+#[derive(Default)]
+struct Triangles {
+    triangles: Vec<Triangle>,
+    objects: Vec<u32>,
+    materials: Vec<u32>,
+}
+
+impl Triangles {
+    /// Appends the triangles of `object` (its `mesh` placed by `to_world`)
+    /// whose material `keep` takes.
+    fn append(&mut self, object: u32, mesh: &Mesh, to_world: &Mat4, keep: impl Fn(u32) -> bool) {
+        // Normals transform with the inverse transpose (non-uniform scale).
+        let normal_matrix = Mat3::from_mat4(*to_world).inverse().transpose();
+        let flip = to_world.determinant() < 0.0;
+        let kept = mesh.triangles.iter().zip(&mesh.materials);
+        for (tri, &material) in kept.filter(|(_, &m)| keep(m)) {
+            let mut idx = tri.map(|i| i as usize);
+            if flip {
+                // A mirroring transform reverses winding; keep the front face.
+                idx.swap(1, 2);
+            }
+            let mut p = idx.map(|i| to_world.transform_point3(mesh.positions[i]));
+            if !p.iter().all(|v| within_world(*v)) {
+                // Collapsed to a point, which no ray hits; its index stays.
+                p = [Vec3::ZERO; 3];
+            }
+            let n = idx.map(|i| {
+                mesh.normals
+                    .get(i)
+                    .map(|&n| (normal_matrix * n).normalize_or_zero())
+                    .unwrap_or(Vec3::ZERO)
+            });
+            self.triangles.push(Triangle { p, n });
+            self.objects.push(object);
+            self.materials.push(material);
         }
-        let mut p = idx.map(|i| to_world.transform_point3(mesh.positions[i]));
-        if !p.iter().all(|v| within_world(*v)) {
-            // Collapsed to a point, which no ray hits; its index stays.
-            p = [Vec3::ZERO; 3];
-        }
-        let n = idx.map(|i| {
-            mesh.normals
-                .get(i)
-                .map(|&n| (normal_matrix * n).normalize_or_zero())
-                .unwrap_or(Vec3::ZERO)
-        });
-        snap.triangles.push(Triangle { p, n });
-        snap.tri_object.push(object);
-        snap.tri_material.push(material);
     }
 }
 
@@ -1023,9 +1038,7 @@ impl Snapshot {
     pub fn static_fingerprint(&self) -> u64 {
         let mut h = crate::hash::Fnv1a::default();
         let mut eat = |x: u32| h.write_word(x);
-        let statics = self.triangles[..self.static_count]
-            .iter()
-            .zip(&self.tri_object);
+        let statics = (self.triangles.range(0..self.static_count)).zip(&self.tri_object);
         for (tri, &object) in statics {
             for p in tri.p {
                 for x in p.to_array() {
@@ -1119,10 +1132,10 @@ mod tests {
             for pair in times.windows(2) {
                 let [earlier, t] = [pair[0], pair[1]];
                 let whole = scene.snapshot(t);
-                let from = scene.snapshot_from(t, scene.snapshot(earlier));
+                let from = scene.snapshot_from(t, &scene.snapshot(earlier));
                 assert_eq!(text(&from), text(&whole), "{name} at {t}");
                 let emitters = scene.emitters_snapshot(earlier);
-                let from_emitters = scene.snapshot_from(t, emitters);
+                let from_emitters = scene.snapshot_from(t, &emitters);
                 assert_eq!(text(&from_emitters), text(&whole), "{name} at {t}");
             }
             let (whole, emitters) = (scene.snapshot(0.3), scene.emitters_snapshot(0.3));

@@ -142,8 +142,7 @@ impl Part {
         snapshot: &Snapshot,
         range: std::ops::Range<usize>,
     ) -> Result<Self, GpuError> {
-        let source: Vec<ObTriangle> = snapshot.triangles[range.clone()]
-            .iter()
+        let source: Vec<ObTriangle> = (snapshot.triangles.range(range.clone()))
             .map(|t| ObTriangle {
                 v0: t.p[0].into(),
                 v1: t.p[1].into(),

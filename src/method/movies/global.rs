@@ -225,7 +225,8 @@ impl GlobalPass {
     /// The pass over the scene of `ctx`, meshed as the scene stands at
     /// time 0 ([`MESHED_AT`]) and with the sides `ctx`'s camera sets.
     pub fn new(ctx: &FrameContext, settings: GlobalSettings) -> Self {
-        let at_zero = (ctx.snapshot.time != MESHED_AT).then(|| ctx.scene.snapshot(MESHED_AT));
+        let at_zero = (ctx.snapshot.time != MESHED_AT)
+            .then(|| ctx.scene.snapshot_from(MESHED_AT, ctx.snapshot));
         let meshed = at_zero.as_ref().unwrap_or(ctx.snapshot);
         let corners = object_space_corners(ctx.scene, meshed);
         let mut bvh = SceneBvh::new();

@@ -10,7 +10,7 @@ use super::global::GlobalSettings;
 use super::pieces::{self, Cells, Piece, MAX_DEPTH};
 use super::sides::ObjectCorners;
 use super::view::View;
-use crate::scene::Triangle;
+use crate::scene::{Placed, Triangle};
 use glam::Vec3;
 use std::collections::HashMap;
 
@@ -47,7 +47,7 @@ impl Meshing {
     /// [`links_needed`](Self::links_needed) is at most [`MAX_LINKS`]
     /// (`both[i]`: triangle `i` has a grid on each side; missing: one).
     pub(super) fn fitting(
-        triangles: &[crate::scene::Triangle],
+        triangles: &Placed<Triangle>,
         both: &[bool],
         settings: &GlobalSettings,
         (diagonal, view): (f32, Option<View>),
@@ -83,7 +83,7 @@ impl Meshing {
     /// The links `triangles` need, counting each triangle's corners as its
     /// own (shared corners are one vertex in the pass: an upper bound),
     /// twice for a triangle `both` says has a grid on each side.
-    fn links_needed(&self, triangles: &[crate::scene::Triangle], both: &[bool]) -> u64 {
+    fn links_needed(&self, triangles: &Placed<Triangle>, both: &[bool]) -> u64 {
         triangles
             .iter()
             .enumerate()
@@ -450,7 +450,10 @@ mod tests {
             ],
             n: [Vec3::Z; 3],
         };
-        let room: Vec<_> = (0..100).map(|i| quad(i as f32, 1.0)).collect();
+        let room: Placed<_> = (0..100)
+            .map(|i| quad(i as f32, 1.0))
+            .collect::<Vec<_>>()
+            .into();
         let m = Meshing::fitting(&room, &[], &settings, (10.0, None));
         assert_eq!(
             (m.spacing, m.links, m.min_links),
@@ -476,6 +479,7 @@ mod tests {
         let many: Vec<_> = (0..1_000_000)
             .map(|i| quad(i as f32 * 1e-3, 1e-3))
             .collect();
+        let many: Placed<_> = many.into();
         let thinned = Meshing::fitting(&many, &[], &settings, (1000.0, None));
         assert!(thinned.links_needed(&many, &[]) <= MAX_LINKS, "{thinned:?}");
         assert!(thinned.links >= 1 && thinned.min_links >= 1);
@@ -495,7 +499,7 @@ mod tests {
             ],
             n: [Vec3::Y; 3],
         };
-        let triangles = [big(0.0), big(-1.0)];
+        let triangles: Placed<_> = [big(0.0), big(-1.0)].into_iter().collect();
         let hits: Vec<(u32, Vec3)> = (0..4)
             .map(|i| (0, Vec3::new(1.0 + i as f32, 0.0, 2.0)))
             .collect();

@@ -451,10 +451,9 @@ fn backs_solved(
     open: &[bool],
 ) -> Vec<bool> {
     let eye = snapshot.camera.position.as_dvec3();
-    let seen: Vec<(f64, f64)> = snapshot
-        .triangles
-        .par_iter()
-        .map(|t| seen_from(eye, t.p))
+    let seen: Vec<(f64, f64)> = (0..snapshot.triangles.len())
+        .into_par_iter()
+        .map(|i| seen_from(eye, snapshot.triangles[i].p))
         .collect();
     let mut winding = vec![0.0f64; closed.len()];
     let mut volume = vec![0.0f64; closed.len()];
@@ -755,7 +754,7 @@ mod tests {
                 n: [Vec3::ZERO; 3],
             })
             .collect();
-        snapshot.tri_object = objects.to_vec();
+        snapshot.tri_object = objects.to_vec().into();
         snapshot.static_count = triangles.len();
         snapshot.camera.position = eye;
         snapshot

@@ -166,12 +166,11 @@ fn seen_by(camera: &crate::scene::Camera, bvh: &SceneBvh, aspect: f32) -> Vec<(u
 /// The diagonal of `snapshot`'s static triangles' box (of all triangles
 /// where none is static).
 fn static_diagonal(snapshot: &crate::scene::Snapshot) -> f32 {
-    let tris = if snapshot.static_count > 0 {
-        &snapshot.triangles[..snapshot.static_count]
-    } else {
-        &snapshot.triangles[..]
+    let tris = match snapshot.static_count {
+        0 => 0..snapshot.triangles.len(),
+        n => 0..n,
     };
-    diagonal(tris.iter().flat_map(|t| t.p))
+    diagonal(snapshot.triangles.range(tris).flat_map(|t| t.p))
 }
 
 #[cfg(test)]

@@ -46,7 +46,7 @@ impl NextFrame {
         // evaluated: otherwise its lights and the objects' motion.
         let t = ctx.time_of(ctx.frame + 1);
         let mut later = match next_direct {
-            NextDirect::On => ctx.scene.snapshot(t),
+            NextDirect::On => ctx.scene.snapshot_from(t, now),
             _ => ctx.scene.emitters_snapshot(t),
         };
         let (l0, l1) = (
@@ -56,7 +56,7 @@ impl NextFrame {
         let lights_move = !l0.same_as(&l1);
         let evaluated = next_direct.evaluates(lights_move);
         if evaluated && next_direct != NextDirect::On {
-            later = ctx.scene.snapshot(t);
+            later = ctx.scene.snapshot_from(t, now);
         }
         let motion: Vec<Option<Mat4>> = now
             .object_to_world
@@ -109,7 +109,7 @@ impl NextFrame {
         lights: Arc<UnshadowedLights>,
     ) -> Option<Self> {
         let direct = self.direct.as_ref()?;
-        let later = ctx.scene.snapshot(ctx.time_of(t));
+        let later = ctx.scene.snapshot_from(ctx.time_of(t), ctx.snapshot);
         Some(NextFrame {
             direct: Some(direct.to_frame(ctx, later)),
             ..Self::later(motion, (self.lights.0.clone(), lights))

@@ -507,7 +507,10 @@ mod tests {
             for snap in &snaps[1..] {
                 let n = snap.static_count;
                 assert_eq!(n, snaps[0].static_count);
-                let same = snap.triangles[..n].iter().zip(&snaps[0].triangles[..n]);
+                let same = snap
+                    .triangles
+                    .range(0..n)
+                    .zip(snaps[0].triangles.range(0..n));
                 assert!(same.into_iter().all(|(a, b)| a.p == b.p && a.n == b.n));
             }
         }
