@@ -4,11 +4,13 @@ its triangles: a closed room (2 x 3 x 4 m) lit by a ceiling panel, a
 static UV sphere of 4 * N * (N - 1) triangles and a block that slides along
 the floor for one second (24 frames at 24 fps).
 
-    python3 benches/scenes/static_sphere.py N OUT.glb [--moving-light]
+    python3 benches/scenes/static_sphere.py N OUT.glb [--moving-light | --moving-panel]
 
 N = 700 gives 1,957,226 triangles in all. With --moving-light the sphere is
 the only light instead (radius 0.15 m, emitting), and it slides through the
-room above the block. Standard library only.
+room above the block. With --moving-panel the sphere stays as it is and the
+ceiling panel light slides 1.2 m across the ceiling: a large static mesh
+under a moving light. Standard library only.
 """
 import json
 import math
@@ -77,6 +79,7 @@ def panel(y, half):
 def main():
     n, out = int(sys.argv[1]), sys.argv[2]
     moving_light = "--moving-light" in sys.argv[3:]
+    moving_panel = "--moving-panel" in sys.argv[3:]
     meshes = [
         box((-1.0, 0.0, -2.0), (1.0, 3.0, 2.0), True),
         sphere(n, 0.15, (0.0, 0.0, 0.0)) if moving_light else sphere(n, 0.6, (0.3, 0.6, -0.8)),
@@ -119,6 +122,11 @@ def main():
     channels = [{"sampler": 0, "target": {"node": 2, "path": "translation"}}]
     if moving_light:
         channels.append({"sampler": 1, "target": {"node": 1, "path": "translation"}})
+    if moving_panel:
+        slide = [(-0.6 + 0.05 * i, 0.0, 0.0) for i in range(25)]
+        accessors.append({"bufferView": view(floats(slide)), "componentType": 5126, "count": 25, "type": "VEC3"})
+        samplers.append({"input": samplers[0]["input"], "output": len(accessors) - 1, "interpolation": "LINEAR"})
+        channels.append({"sampler": 2, "target": {"node": 3, "path": "translation"}})
     doc = {
         "asset": {"version": "2.0"},
         "extensionsUsed": ["KHR_materials_emissive_strength"],
