@@ -17,16 +17,19 @@ use std::ops::{Index, IndexMut, Range};
 use std::sync::Arc;
 
 /// Values `0..shared.len()` shared (behind an `Arc`), the rest owned.
+/// The shared part is a slice, not a `Vec`, so its length and address sit
+/// in this struct: an index is a comparison away from the value, as in a
+/// `Vec` (the shading of every path vertex reads a triangle by id).
 #[derive(Clone)]
 pub struct Placed<T> {
-    shared: Arc<Vec<T>>,
+    shared: Arc<[T]>,
     own: Vec<T>,
 }
 
 impl<T> Default for Placed<T> {
     fn default() -> Self {
         Placed {
-            shared: Arc::new(Vec::new()),
+            shared: Arc::new([]),
             own: Vec::new(),
         }
     }
@@ -34,7 +37,7 @@ impl<T> Default for Placed<T> {
 
 impl<T> Placed<T> {
     /// `shared` followed by `own`.
-    pub fn new(shared: Arc<Vec<T>>, own: Vec<T>) -> Self {
+    pub fn new(shared: Arc<[T]>, own: Vec<T>) -> Self {
         Placed { shared, own }
     }
 
@@ -43,7 +46,7 @@ impl<T> Placed<T> {
     pub fn sharing_first(mut values: Vec<T>, n: usize) -> Self {
         let own = values.split_off(n.min(values.len()));
         Placed {
-            shared: Arc::new(values),
+            shared: values.into(),
             own,
         }
     }
@@ -104,11 +107,11 @@ impl<T: Clone> Placed<T> {
 
     /// The first `n` values, shared with `self` where they are its whole
     /// shared prefix (copied otherwise).
-    pub fn prefix(&self, n: usize) -> Arc<Vec<T>> {
+    pub fn prefix(&self, n: usize) -> Arc<[T]> {
         if self.shared.len() == n {
             self.shared.clone()
         } else {
-            Arc::new(self.range(0..n).cloned().collect())
+            self.range(0..n).cloned().collect()
         }
     }
 
@@ -116,7 +119,7 @@ impl<T: Clone> Placed<T> {
     pub fn truncate(&mut self, n: usize) {
         let s = self.shared.len();
         if n < s {
-            Arc::make_mut(&mut self.shared).truncate(n);
+            self.shared = self.shared[..n].into();
             self.own.clear();
         } else {
             self.own.truncate(n - s);
@@ -172,7 +175,7 @@ impl<T> From<Vec<T>> for Placed<T> {
     /// All of `values` owned, none shared.
     fn from(values: Vec<T>) -> Self {
         Placed {
-            shared: Arc::new(Vec::new()),
+            shared: Arc::new([]),
             own: values,
         }
     }
