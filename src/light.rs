@@ -85,9 +85,12 @@ pub struct LightSampler {
     reach: Option<(Vec3, f32)>,
     /// Cumulative pick probabilities, last entry 1.
     cdf: Vec<f32>,
-    /// Pick probability of each snapshot triangle (0 for non-emitters), so
-    /// that a BSDF ray hitting an emitter can compute the light pdf for MIS.
-    triangle_pick: Vec<f32>,
+    /// Pick probability of each emitting triangle, by snapshot id in
+    /// increasing order, so that a BSDF ray hitting an emitter can compute
+    /// the light pdf for MIS. Not one entry per triangle: a snapshot of a
+    /// large scene took a zeroed vector of all its triangles, for each
+    /// sampler (`trc` makes several a frame).
+    triangle_pick: Vec<(u32, f32)>,
 }
 
 /// Emitted power of a one- or two-sided Lambertian emitter: `π·A·L`.
@@ -100,9 +103,15 @@ impl LightSampler {
     pub fn new(snapshot: &Snapshot, materials: &[crate::scene::Material]) -> Self {
         let mut sources = Vec::new();
         let mut power = Vec::new();
-        for (i, tri) in snapshot.triangles.iter().enumerate() {
-            let m = &materials[snapshot.tri_material[i] as usize];
-            if m.is_emissive() && tri.area() > 0.0 {
+        // By material first: a large scene's triangles are read only where
+        // they emit.
+        for (i, &material) in snapshot.tri_material.iter().enumerate() {
+            let m = &materials[material as usize];
+            if !m.is_emissive() {
+                continue;
+            }
+            let tri = &snapshot.triangles[i];
+            if tri.area() > 0.0 {
                 sources.push(Source::Triangle {
                     id: i as u32,
                     area: tri.area(),
@@ -142,12 +151,12 @@ impl LightSampler {
         if let Some(last) = cdf.last_mut() {
             *last = 1.0;
         }
-        let mut triangle_pick = vec![0.0; snapshot.triangles.len()];
-        for (k, source) in sources.iter().enumerate() {
-            if let Source::Triangle { id, .. } = source {
-                triangle_pick[*id as usize] = power[k] / total;
-            }
-        }
+        let triangle_pick = (sources.iter().zip(&power))
+            .filter_map(|(source, p)| match source {
+                Source::Triangle { id, .. } => Some((*id, p / total)),
+                Source::Punctual(_) => None,
+            })
+            .collect();
         LightSampler {
             sources,
             reach,
@@ -337,11 +346,9 @@ impl LightSampler {
         hit: Vec3,
         sampling: TriangleSampling,
     ) -> f32 {
-        let pick = self
-            .triangle_pick
-            .get(triangle as usize)
-            .copied()
-            .unwrap_or(0.0);
+        let pick = (self.triangle_pick)
+            .binary_search_by_key(&triangle, |&(id, _)| id)
+            .map_or(0.0, |k| self.triangle_pick[k].1);
         if pick <= 0.0 {
             return 0.0;
         }
