@@ -16,6 +16,7 @@ mod placed;
 use glam::{Mat3, Mat4, Quat, Vec3};
 pub use placed::Placed;
 use std::path::Path;
+use std::sync::{Arc, OnceLock};
 
 pub use animation::{Animation, Channel, Interpolation, Property};
 
@@ -439,6 +440,31 @@ pub struct Snapshot {
     pub object_to_world: Vec<Mat4>,
     pub lights: Vec<PlacedLight>,
     pub camera: Camera,
+    /// [`Snapshot::static_fingerprint`], found once for the snapshots
+    /// that share a static part.
+    statics_seen: Arc<StaticsSeen>,
+}
+
+/// A static part's fingerprint, once found.
+#[derive(Default)]
+struct StaticsSeen(OnceLock<Fingerprinted>);
+
+/// A fingerprint with the shared triangles and objects it was taken of and
+/// their count (held, so that no other part is ever taken for them: a
+/// shared part is never changed in place, [`Placed`]).
+struct Fingerprinted {
+    triangles: Arc<[Triangle]>,
+    objects: Arc<[u32]>,
+    count: usize,
+    fingerprint: u64,
+}
+
+impl std::fmt::Debug for StaticsSeen {
+    /// Nothing: derived from the triangles, it would only tell snapshots
+    /// apart by what was asked of them.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("StaticsSeen")
+    }
 }
 
 impl Snapshot {
@@ -881,14 +907,24 @@ impl Scene {
             let o = &self.objects[object];
             moving.append(object as u32, &o.mesh, &world[o.node], |_| true);
         }
+        let (triangles, objects) = (
+            earlier.triangles.prefix(static_triangles),
+            earlier.tri_object.prefix(static_triangles),
+        );
+        let shared = Arc::ptr_eq(&triangles, earlier.triangles.shared())
+            && Arc::ptr_eq(&objects, earlier.tri_object.shared());
         Snapshot {
-            triangles: Placed::new(earlier.triangles.prefix(static_triangles), moving.triangles),
-            tri_object: Placed::new(earlier.tri_object.prefix(static_triangles), moving.objects),
+            triangles: Placed::new(triangles, moving.triangles),
+            tri_object: Placed::new(objects, moving.objects),
             tri_material: Placed::new(
                 earlier.tri_material.prefix(static_triangles),
                 moving.materials,
             ),
             static_count: static_triangles,
+            statics_seen: match shared {
+                true => earlier.statics_seen.clone(),
+                false => Arc::default(),
+            },
             ..self.posed(t, &world)
         }
     }
@@ -925,6 +961,7 @@ impl Scene {
             tri_material: Placed::default(),
             static_count: 0,
             object_to_world: self.objects_in(world),
+            statics_seen: Arc::default(),
             lights: self
                 .lights
                 .iter()
@@ -1035,7 +1072,34 @@ impl Snapshot {
     /// FNV-1a over the static triangles' vertex bits and object ids: ray
     /// backends rebuild (and re-upload) their static part only when this
     /// changes (a new scene), without keeping a copy of the geometry.
+    /// Found once for the snapshots sharing a static part (a frame's and
+    /// those made from it, [`Scene::snapshot_from`]): a 2M-triangle part
+    /// took some 20 ms to hash, and the backend and `trc` asked for it
+    /// every frame.
     pub fn static_fingerprint(&self) -> u64 {
+        let (triangles, objects) = (self.triangles.shared(), self.tri_object.shared());
+        let whole = triangles.len() == self.static_count && objects.len() == self.static_count;
+        let seen = |f: &Fingerprinted| {
+            Arc::ptr_eq(&f.triangles, triangles)
+                && Arc::ptr_eq(&f.objects, objects)
+                && f.count == self.static_count
+        };
+        if !whole || self.statics_seen.0.get().is_some_and(|s| !seen(s)) {
+            return self.hash_statics();
+        }
+        self.statics_seen
+            .0
+            .get_or_init(|| Fingerprinted {
+                triangles: triangles.clone(),
+                objects: objects.clone(),
+                count: self.static_count,
+                fingerprint: self.hash_statics(),
+            })
+            .fingerprint
+    }
+
+    /// [`Snapshot::static_fingerprint`], hashed.
+    fn hash_statics(&self) -> u64 {
         let mut h = crate::hash::Fnv1a::default();
         let mut eat = |x: u32| h.write_word(x);
         let statics = (self.triangles.range(0..self.static_count)).zip(&self.tri_object);
@@ -1115,6 +1179,32 @@ mod tests {
             );
         }
         assert!(scene.move_to_origin().is_none(), "moved once");
+    }
+
+    /// The fingerprint found once for a static part is the hash of that
+    /// part: a snapshot made from another shares its part and its
+    /// fingerprint, and one whose static triangle or count is changed
+    /// afterwards gets the hash of what it now holds, not the one kept.
+    #[test]
+    fn a_static_fingerprint_kept_is_the_hash_of_the_part_it_was_found_of() {
+        let scene = Scene::builtin("chairs-room").unwrap();
+        let first = scene.snapshot(0.0);
+        assert!(first.static_count > 0);
+        let fingerprint = first.static_fingerprint();
+        assert_eq!(fingerprint, first.hash_statics());
+        let next = scene.snapshot_from(0.5, &first);
+        assert!(Arc::ptr_eq(&next.statics_seen, &first.statics_seen));
+        assert_eq!(next.static_fingerprint(), fingerprint);
+
+        let mut moved = scene.snapshot_from(0.5, &first);
+        moved.triangles[0].p[0].x += 1.0;
+        assert_ne!(moved.static_fingerprint(), fingerprint);
+        assert_eq!(moved.static_fingerprint(), moved.hash_statics());
+        let mut fewer = scene.snapshot_from(0.5, &first);
+        fewer.static_count -= 1;
+        assert_ne!(fewer.static_fingerprint(), fingerprint);
+        assert_eq!(fewer.static_fingerprint(), fewer.hash_statics());
+        assert_eq!(first.static_fingerprint(), fingerprint);
     }
 
     /// A snapshot made in an earlier one, whose static triangles it keeps,

@@ -89,6 +89,11 @@ impl<T> Placed<T> {
         (&self.shared, &self.own)
     }
 
+    /// The shared prefix.
+    pub fn shared(&self) -> &Arc<[T]> {
+        &self.shared
+    }
+
     pub fn push(&mut self, value: T) {
         self.own.push(value);
     }
@@ -117,21 +122,29 @@ impl<T: Clone> Placed<T> {
 
     /// Keeps the first `n` values.
     pub fn truncate(&mut self, n: usize) {
-        let s = self.shared.len();
-        if n < s {
-            self.shared = self.shared[..n].into();
-            self.own.clear();
-        } else {
-            self.own.truncate(n - s);
+        if n < self.shared.len() {
+            self.unshare();
         }
+        self.own.truncate(n - self.shared.len());
     }
 
-    /// Every value, mutably (the shared ones copied first where another
-    /// snapshot shares them).
+    /// Every value, mutably (all of them made this one's own first).
     pub fn iter_mut(&mut self) -> impl Iterator<Item = &mut T> {
-        Arc::make_mut(&mut self.shared)
-            .iter_mut()
-            .chain(self.own.iter_mut())
+        self.unshare();
+        self.own.iter_mut()
+    }
+
+    /// Makes every value this one's own, none shared. A change is never
+    /// made to a shared part, even one no other holder has: what was found
+    /// of a shared part (`Snapshot::static_fingerprint`) holds while it
+    /// is the same allocation.
+    fn unshare(&mut self) {
+        if !self.shared.is_empty() {
+            let mut all = self.shared.to_vec();
+            all.append(&mut self.own);
+            self.own = all;
+            self.shared = Arc::new([]);
+        }
     }
 }
 
@@ -150,15 +163,13 @@ impl<T> Index<usize> for Placed<T> {
 }
 
 impl<T: Clone> IndexMut<usize> for Placed<T> {
-    /// The value of id `i`, copying the shared ones first where another
-    /// snapshot shares them.
+    /// The value of id `i`, the shared ones made this one's own first.
     fn index_mut(&mut self, i: usize) -> &mut T {
-        let s = self.shared.len();
-        if i < s {
-            &mut Arc::make_mut(&mut self.shared)[i]
-        } else {
-            &mut self.own[i - s]
+        if i < self.shared.len() {
+            self.unshare();
         }
+        let s = self.shared.len();
+        &mut self.own[i - s]
     }
 }
 
@@ -237,8 +248,13 @@ mod tests {
             vec![0, 100, 2, 3, 40, 50, 60]
         );
         assert_eq!(a[1], 1, "the other snapshot's shared value is unchanged");
+        assert!(b.shared.is_empty(), "a change makes every value its own");
         b.truncate(2);
         assert_eq!(b.iter().copied().collect::<Vec<_>>(), vec![0, 100]);
         assert_eq!(a.len(), 10);
+        let mut c = Placed::new(a.prefix(4), vec![]);
+        c.truncate(3);
+        assert_eq!(c.to_vec(), vec![0, 1, 2]);
+        assert_eq!(a.to_vec(), (0..10).collect::<Vec<_>>());
     }
 }
