@@ -8,7 +8,7 @@
 //! snapshot held and placed its own copy of every static triangle. In a
 //! room around a static sphere of 1.96M triangles under a sliding panel
 //! light (`python3 benches/scenes/static_sphere.py 700 panel.glb
-//! --moving-panel`, 64 × 64, 24 frames) that made `trc` 4× `ic`'s time,
+//! --moving-panel`, 64 × 64, 24 frames) that made `trc` 3.5× `ic`'s time,
 //! most of it placing vertices and clearing fresh pages, and 4.4× its
 //! memory (`benches/RESULTS.md`, "A large static scene under a moving
 //! light"). Shared, a later snapshot costs what its moving triangles cost.
