@@ -449,13 +449,13 @@ pub struct Snapshot {
 #[derive(Default)]
 struct StaticsSeen(OnceLock<Fingerprinted>);
 
-/// A fingerprint with the shared triangles and objects it was taken of and
-/// their count (held, so that no other part is ever taken for them: a
-/// shared part is never changed in place, [`Placed`]).
+/// A fingerprint with the shared triangles and objects it was taken of
+/// (held, so that no other part is ever taken for them: a shared part is
+/// never changed in place, [`Placed`]). Their length is the static count
+/// it was taken with.
 struct Fingerprinted {
     triangles: Arc<[Triangle]>,
     objects: Arc<[u32]>,
-    count: usize,
     fingerprint: u64,
 }
 
@@ -1079,10 +1079,9 @@ impl Snapshot {
     pub fn static_fingerprint(&self) -> u64 {
         let (triangles, objects) = (self.triangles.shared(), self.tri_object.shared());
         let whole = triangles.len() == self.static_count && objects.len() == self.static_count;
+        // With `whole`, the same allocations are the same static count.
         let seen = |f: &Fingerprinted| {
-            Arc::ptr_eq(&f.triangles, triangles)
-                && Arc::ptr_eq(&f.objects, objects)
-                && f.count == self.static_count
+            Arc::ptr_eq(&f.triangles, triangles) && Arc::ptr_eq(&f.objects, objects)
         };
         if !whole || self.statics_seen.0.get().is_some_and(|s| !seen(s)) {
             return self.hash_statics();
@@ -1092,7 +1091,6 @@ impl Snapshot {
             .get_or_init(|| Fingerprinted {
                 triangles: triangles.clone(),
                 objects: objects.clone(),
-                count: self.static_count,
                 fingerprint: self.hash_statics(),
             })
             .fingerprint
@@ -1194,6 +1192,20 @@ mod tests {
         assert_eq!(fingerprint, first.hash_statics());
         let next = scene.snapshot_from(0.5, &first);
         assert!(Arc::ptr_eq(&next.statics_seen, &first.statics_seen));
+        // Shared, not copied: the change's point.
+        assert!(Arc::ptr_eq(
+            next.triangles.shared(),
+            first.triangles.shared()
+        ));
+        assert!(Arc::ptr_eq(
+            next.tri_object.shared(),
+            first.tri_object.shared()
+        ));
+        assert!(Arc::ptr_eq(
+            next.tri_material.shared(),
+            first.tri_material.shared()
+        ));
+        assert_eq!(next.triangles.shared().len(), first.static_count);
         assert_eq!(next.static_fingerprint(), fingerprint);
 
         let mut moved = scene.snapshot_from(0.5, &first);

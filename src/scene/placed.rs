@@ -85,7 +85,7 @@ impl<T> Placed<T> {
     }
 
     /// The shared prefix and the owned rest.
-    pub fn parts(&self) -> (&[T], &[T]) {
+    fn parts(&self) -> (&[T], &[T]) {
         (&self.shared, &self.own)
     }
 
@@ -94,6 +94,7 @@ impl<T> Placed<T> {
         &self.shared
     }
 
+    /// Appends `value` to the owned part.
     pub fn push(&mut self, value: T) {
         self.own.push(value);
     }
@@ -240,9 +241,8 @@ mod tests {
         );
         assert_eq!(*a.prefix(6), vec![0, 1, 2, 3, 4, 5]);
 
-        let mut b = Placed::new(a.prefix(4), vec![40, 50]);
+        let mut b = Placed::new(a.prefix(4), vec![40, 50, 60]);
         b[1] = 100;
-        b.push(60);
         assert_eq!(
             b.iter().copied().collect::<Vec<_>>(),
             vec![0, 100, 2, 3, 40, 50, 60]
