@@ -77,9 +77,13 @@ def panel(y, half):
 
 
 def main():
+    options = sys.argv[3:]
+    if len(sys.argv) < 3 or not sys.argv[1].isdigit() or int(sys.argv[1]) < 2 or len(options) > 1 \
+            or any(o not in ("--moving-light", "--moving-panel") for o in options):
+        sys.exit(__doc__)
     n, out = int(sys.argv[1]), sys.argv[2]
-    moving_light = "--moving-light" in sys.argv[3:]
-    moving_panel = "--moving-panel" in sys.argv[3:]
+    moving_light = "--moving-light" in options
+    moving_panel = "--moving-panel" in options
     meshes = [
         box((-1.0, 0.0, -2.0), (1.0, 3.0, 2.0), True),
         sphere(n, 0.15, (0.0, 0.0, 0.0)) if moving_light else sphere(n, 0.6, (0.3, 0.6, -0.8)),
