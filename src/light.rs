@@ -103,17 +103,13 @@ impl LightSampler {
     pub fn new(snapshot: &Snapshot, materials: &[crate::scene::Material]) -> Self {
         let mut sources = Vec::new();
         let mut power = Vec::new();
-        // By material first: a large scene's triangles are read only where
-        // they emit.
-        for (i, &material) in snapshot.tri_material.iter().enumerate() {
-            let m = &materials[material as usize];
-            if !m.is_emissive() {
-                continue;
-            }
-            let tri = &snapshot.triangles[i];
+        // A large scene's triangles are read only where they emit.
+        for id in snapshot.emitting_triangles(materials) {
+            let m = &materials[snapshot.tri_material[id as usize] as usize];
+            let tri = &snapshot.triangles[id as usize];
             if tri.area() > 0.0 {
                 sources.push(Source::Triangle {
-                    id: i as u32,
+                    id,
                     area: tri.area(),
                     normal: tri.geometric_normal(),
                     radiance: m.emission,

@@ -86,11 +86,9 @@ impl UnshadowedLights {
     fn merging_over(materials: &[Material], snapshot: &Snapshot, clustered_over: usize) -> Self {
         // The emitting triangles, found once: the passes below run over
         // them, not over every triangle of the frame.
-        let emitting: Vec<usize> = (0..snapshot.triangles.len())
-            .filter(|&id| {
-                let m = &materials[snapshot.tri_material[id] as usize];
-                m.is_emissive() && snapshot.triangles[id].area() > 0.0
-            })
+        let emitting: Vec<usize> = (snapshot.emitting_triangles(materials).into_iter())
+            .map(|id| id as usize)
+            .filter(|&id| snapshot.triangles[id].area() > 0.0)
             .collect();
         let mut clusters = Clusters::of_large_lights(snapshot, &emitting, clustered_over);
         let mut emitters = Vec::new();
