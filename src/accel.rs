@@ -2,7 +2,9 @@
 //! obvhs. The scene is split in two BVHs: the static triangles (built once
 //! per render, rebuilt only if they change) and the dynamic ones (rebuilt
 //! every frame — dynamic parts are small; `cargo bench --bench rays`
-//! measures the rebuild). A ray is traced through both and keeps the nearer
+//! measures the rebuild). Each is shared with a method that built the same
+//! triangles' BVH for its own rays ([`shared_static_bvh`],
+//! [`shared_dynamic_bvh`]). A ray is traced through both and keeps the nearer
 //! hit. A small static part is not worth a second traversal per ray: up to
 //! [`MERGE_STATIC_TRIANGLES`] static triangles, a frame with moving parts
 //! gets one BVH over all its triangles ([`static_part_len`], the rule the
@@ -18,6 +20,7 @@ use obvhs::cwbvh::builder::build_cwbvh_from_tris;
 use obvhs::cwbvh::CwBvh;
 use obvhs::triangle::Triangle as ObTriangle;
 use obvhs::BvhBuildParams;
+use std::ops::Range;
 use std::sync::{Arc, Mutex, PoisonError, Weak};
 use std::time::{Duration, Instant};
 
@@ -248,7 +251,7 @@ fn children_crossed(
 
 impl TriangleBvh {
     /// Builds a BVH over snapshot triangles `range`; `None` when empty.
-    pub fn build(snapshot: &Snapshot, range: std::ops::Range<usize>) -> Option<Self> {
+    pub fn build(snapshot: &Snapshot, range: Range<usize>) -> Option<Self> {
         if range.is_empty() {
             return None;
         }
@@ -319,7 +322,7 @@ impl TriangleBvh {
 
     /// Whether this BVH was built over exactly snapshot triangles `range`:
     /// the same vertices to the bit, with the same objects.
-    pub fn holds(&self, snapshot: &Snapshot, range: std::ops::Range<usize>) -> bool {
+    pub fn holds(&self, snapshot: &Snapshot, range: Range<usize>) -> bool {
         let bits = |t: &ObTriangle| [t.v0, t.v1, t.v2].map(|v| v.to_array().map(f32::to_bits));
         let same = |((&id, tri), &object): ((&u32, &ObTriangle), &u32)| {
             let id = id as usize;
@@ -414,7 +417,9 @@ pub struct SceneBvh {
     static_part: Option<Arc<TriangleBvh>>,
     /// [`static_part_fingerprint`] of the triangles `static_part` holds.
     static_fingerprint: Option<u64>,
-    dynamic_part: Option<TriangleBvh>,
+    /// Shared with whoever built these triangles' BVH for this frame
+    /// already ([`shared_dynamic_bvh`]).
+    dynamic_part: Option<Arc<TriangleBvh>>,
 }
 
 impl SceneBvh {
@@ -437,7 +442,7 @@ impl SceneBvh {
             times.static_build = Some(start.elapsed());
         }
         let start = Instant::now();
-        self.dynamic_part = TriangleBvh::build(snapshot, static_len..snapshot.triangles.len());
+        self.dynamic_part = shared_dynamic_bvh(snapshot, static_len..snapshot.triangles.len());
         times.dynamic_build = start.elapsed();
         times
     }
@@ -496,39 +501,56 @@ impl StaticGeometry {
     }
 }
 
-/// The BVHs over all of a snapshot's static triangles that some holder
-/// still keeps, by [`Snapshot::static_fingerprint`].
-static SHARED_STATIC: Mutex<Vec<(u64, Weak<TriangleBvh>)>> = Mutex::new(Vec::new());
+/// BVHs that some holder still keeps, each with a key that narrows the
+/// search (a static part's [`Snapshot::static_fingerprint`], a moving
+/// part's range): a kept BVH is taken only if it holds exactly the
+/// triangles asked for (checked, not trusted to the key), so sharing never
+/// changes a hit.
+static SHARED: Mutex<Vec<(u64, Weak<TriangleBvh>)>> = Mutex::new(Vec::new());
 
 /// The BVH of `snapshot`'s static triangles (`None`: there are none), one
 /// build for every holder alive at once. Why: the CPU backend's static
 /// part ([`SceneBvh`]) and a method's [`StaticGeometry`] are the same
 /// triangles wherever the backend splits them off (past
 /// [`MERGE_STATIC_TRIANGLES`] or in a still scene), and each built its own:
-/// twice the build time and memory for the largest part of a scene. A
-/// kept BVH is taken only if it holds exactly these triangles (checked, not
-/// trusted to the fingerprint), so sharing never changes a hit.
+/// twice the build time and memory for the largest part of a scene.
 fn shared_static_bvh(snapshot: &Snapshot) -> Option<Arc<TriangleBvh>> {
-    let fingerprint = snapshot.static_fingerprint();
     let statics = 0..snapshot.static_count;
+    shared_bvh(snapshot.static_fingerprint(), snapshot, statics)
+}
+
+/// The BVH of `snapshot`'s triangles `range`, a part rebuilt every frame
+/// (its moving triangles, with or without the static ones; `None`: empty),
+/// one build for every holder alive at once. Why: `trc`
+/// builds the moving triangles' BVH of the frame after the one it renders
+/// (its estimate's shadows at t0+1), and the CPU backend built the same
+/// again as its dynamic part when that frame came: on a 1,046,528-triangle
+/// ball turning under a moving light, a fifth of `trc`'s time.
+pub fn shared_dynamic_bvh(snapshot: &Snapshot, range: Range<usize>) -> Option<Arc<TriangleBvh>> {
+    let key = (range.start as u64) << 32 ^ range.len() as u64;
+    shared_bvh(key, snapshot, range)
+}
+
+/// A kept BVH of snapshot triangles `range` found under `key`, or one
+/// built (and kept for others while a holder has it).
+fn shared_bvh(key: u64, snapshot: &Snapshot, range: Range<usize>) -> Option<Arc<TriangleBvh>> {
     let kept = || {
-        let mut shared = SHARED_STATIC.lock().unwrap_or_else(PoisonError::into_inner);
+        let mut shared = SHARED.lock().unwrap_or_else(PoisonError::into_inner);
         shared.retain(|(_, bvh)| bvh.strong_count() > 0);
-        shared
-            .iter()
-            .filter(|(fp, _)| *fp == fingerprint)
+        (shared.iter())
+            .filter(|(k, _)| *k == key)
             .filter_map(|(_, bvh)| bvh.upgrade())
-            .find(|bvh| bvh.holds(snapshot, statics.clone()))
+            .find(|bvh| bvh.holds(snapshot, range.clone()))
     };
     if let Some(bvh) = kept() {
         return Some(bvh);
     }
     // Built outside the lock: a render building a large part does not hold
-    // up another's. Two renders of one scene starting together may both
-    // build it; each then keeps its own.
-    let bvh = Arc::new(TriangleBvh::build(snapshot, statics)?);
-    let mut shared = SHARED_STATIC.lock().unwrap_or_else(PoisonError::into_inner);
-    shared.push((fingerprint, Arc::downgrade(&bvh)));
+    // up another's. Two holders asking together may both build it; each
+    // then keeps its own.
+    let bvh = Arc::new(TriangleBvh::build(snapshot, range)?);
+    let mut shared = SHARED.lock().unwrap_or_else(PoisonError::into_inner);
+    shared.push((key, Arc::downgrade(&bvh)));
     Some(bvh)
 }
 
@@ -569,11 +591,37 @@ mod tests {
         assert!(!Arc::ptr_eq(static_part(&other), &of_method));
 
         drop((backend, method, of_method));
-        assert!(SHARED_STATIC
+        assert!(SHARED
             .lock()
             .unwrap()
             .iter()
             .all(|(fp, bvh)| *fp != snap.static_fingerprint() || bvh.strong_count() == 0));
+    }
+
+    /// The backend's dynamic part is the BVH a method built of the same
+    /// frame's moving triangles (`trc`'s t0+1), and the other way round;
+    /// another time's moving triangles get a BVH of their own.
+    #[test]
+    fn the_backend_and_a_method_share_one_dynamic_bvh() {
+        let scene = Scene::builtin("cube-in-box").unwrap();
+        let dynamic = |s: &Snapshot| static_part_len(s)..s.triangles.len();
+        // Times no render's frame has: a test rendering the scene at
+        // the same time in parallel would share its own.
+        let next = scene.snapshot(0.5123);
+        assert!(!dynamic(&next).is_empty());
+        let built_ahead = shared_dynamic_bvh(&next, dynamic(&next)).unwrap();
+        let mut backend = SceneBvh::new();
+        backend.update(&scene.snapshot_from(0.5123, &next));
+        let part = backend.dynamic_part.clone().unwrap();
+        assert!(Arc::ptr_eq(&part, &built_ahead));
+
+        let other = scene.snapshot(0.7777);
+        backend.update(&other);
+        let part = backend.dynamic_part.clone().unwrap();
+        assert!(!Arc::ptr_eq(&part, &built_ahead));
+        assert!(part.holds(&other, dynamic(&other)));
+        let taken = shared_dynamic_bvh(&other, dynamic(&other)).unwrap();
+        assert!(Arc::ptr_eq(&part, &taken));
     }
 
     /// A kept BVH whose fingerprint matches another scene's (forced here)

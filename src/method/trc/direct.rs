@@ -25,7 +25,7 @@
 //! through 63,000 moving triangles) for no gain there.
 
 use super::Gathered;
-use crate::accel::{StaticGeometry, TriangleBvh};
+use crate::accel::{shared_dynamic_bvh, static_part_len, StaticGeometry, TriangleBvh};
 use crate::backend::{Hit, Ray};
 use crate::integrator::RayOffset;
 use crate::light::{LightSampler, TriangleSampling};
@@ -41,7 +41,8 @@ use std::sync::Arc;
 /// The BVHs the E(t0+1) estimates' shadow rays run through, kept from
 /// frame to frame: the static triangles' (built once a render, shared with
 /// the backend's where it has one) and the moving ones' at the frame after
-/// the last estimate's, which is the next frame's t0. A frame's moving
+/// the last estimate's, which is the next frame's t0 (and, kept, the CPU
+/// backend's dynamic part for that frame: [`moving_bvh`]). A frame's moving
 /// triangles were otherwise gathered into a BVH twice, as t0+1 and then as
 /// t0: on a scene with a 1,046,528-triangle ball turning under a moving light
 /// those builds were a third of `trc`'s time.
@@ -56,10 +57,11 @@ pub(super) struct ShadowGeometry {
 impl ShadowGeometry {
     /// The moving triangles' BVH of `ctx`'s frame: the one kept as the last
     /// estimate's t0+1 where it was built over exactly these triangles,
-    /// else built.
+    /// else the backend's dynamic part where it holds them, else built
+    /// ([`moving_bvh`]).
     fn moving_now(&mut self, ctx: &FrameContext) -> Option<Arc<TriangleBvh>> {
         let now = ctx.snapshot;
-        let moving = now.static_count..now.triangles.len();
+        let moving = moving_range(now);
         match self.next_moving.take() {
             Some((frame, kept))
                 if frame == ctx.frame
@@ -84,6 +86,8 @@ impl ShadowGeometry {
 /// The geometry and lights of t0 and t0+1 that the direct light at a
 /// sample's first hit depends on.
 pub(super) struct DirectChange {
+    /// The static triangles' BVH where the CPU backend would split them
+    /// off (`None`: none, or few enough to be in `moving`, [`moving_bvh`]).
     statics: Option<Arc<TriangleBvh>>,
     /// The moving objects' triangles at t0 and at t0+1 (t0's shared with
     /// the later frames' comparisons, [`Self::to_frame`]).
@@ -129,7 +133,9 @@ impl DirectChange {
         let moving = [geometry.moving_now(ctx), moving_bvh(&later)];
         geometry.next_moving = Some((ctx.frame + 1, moving[1].clone()));
         Some(DirectChange {
-            statics: geometry.statics.of(ctx.snapshot),
+            statics: (static_part_len(ctx.snapshot) > 0)
+                .then(|| geometry.statics.of(ctx.snapshot))
+                .flatten(),
             moving,
             later_lights: LightSampler::new(&later, &ctx.scene.materials),
             later,
@@ -258,9 +264,20 @@ impl DirectChange {
     }
 }
 
-/// The BVH of `s`'s moving triangles (`None`: there are none).
+/// The BVH of `s`'s moving triangles (`None`: there are none), split from
+/// the static ones as the CPU backend splits its own
+/// ([`static_part_len`]: a small static part goes with them), so that the
+/// one built for t0+1 is the backend's dynamic part when that frame comes
+/// ([`shared_dynamic_bvh`]), and the other way round. Where the static
+/// triangles are in both BVHs, a ray they block is blocked at both times,
+/// as it was by the static BVH alone.
 fn moving_bvh(s: &Snapshot) -> Option<Arc<TriangleBvh>> {
-    TriangleBvh::build(s, s.static_count..s.triangles.len()).map(Arc::new)
+    shared_dynamic_bvh(s, moving_range(s))
+}
+
+/// The triangles of `s` in [`moving_bvh`].
+fn moving_range(s: &Snapshot) -> std::ops::Range<usize> {
+    static_part_len(s)..s.triangles.len()
 }
 
 /// The first hit `hit` (of triangle `hit.triangle` in `snapshot`) at `p`,
@@ -339,11 +356,17 @@ mod tests {
             let moving = renderer.with_frame_context(frame, |ctx| geometry.moving_now(ctx));
             assert!(!same(&moving, &kept.as_ref().unwrap().1), "frame {frame}");
             renderer.with_frame_context(frame, |ctx| {
-                let range = ctx.snapshot.static_count..ctx.snapshot.triangles.len();
+                let range = moving_range(ctx.snapshot);
                 assert!(moving.as_ref().unwrap().holds(ctx.snapshot, range));
             });
         }
-        renderer.with_frame_context(4, |ctx| at(ctx, &mut geometry));
+        renderer.with_frame_context(4, |ctx| {
+            // The frame's moving BVH is the CPU backend's dynamic part (it
+            // holds one more), not one of its own.
+            let now = moving_bvh(ctx.snapshot).unwrap();
+            assert!(Arc::strong_count(&now) > 1, "not the backend's");
+            at(ctx, &mut geometry)
+        });
         assert!(geometry.next_moving.is_some());
         renderer.with_frame_context(5, |ctx| {
             NextFrame::new(ctx, NextDirect::Off, &mut geometry);
