@@ -3,7 +3,7 @@
 //! per render, rebuilt only if they change) and the dynamic ones (rebuilt
 //! every frame — dynamic parts are small; `cargo bench --bench rays`
 //! measures the rebuild). Each is shared with a method that built the same
-X
+//! triangles' BVH for its own rays ([`StaticGeometry`],
 //! [`shared_dynamic_bvh`]). A ray is traced through both and keeps the nearer
 //! hit. A small static part is not worth a second traversal per ray: up to
 //! [`MERGE_STATIC_TRIANGLES`] static triangles, a frame with moving parts
