@@ -24,6 +24,7 @@ use crate::light::LightSampler;
 use crate::sampling::SampleKey;
 use crate::scene::{Scene, Snapshot};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::OnceLock;
 
 /// Everything a method may read while rendering one frame.
 pub struct FrameContext<'a> {
@@ -52,6 +53,11 @@ pub struct FrameContext<'a> {
     pub abandon: &'a AtomicBool,
     /// How far rays leaving a surface start off it, for this scene's size.
     pub ray_offset: RayOffset,
+    /// Where a method that made the snapshot of the next frame's time
+    /// (`Scene::snapshot_from` of this frame's, unchanged) may leave it:
+    /// the renderer takes it as that frame's instead of placing the moving
+    /// triangles again (`trc` makes it for its estimate of t0+1).
+    pub next_snapshot: &'a OnceLock<Snapshot>,
 }
 
 impl FrameContext<'_> {

@@ -23,7 +23,7 @@ use std::collections::BTreeSet;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
 mod job;
@@ -289,6 +289,10 @@ pub struct Renderer {
     /// takes ([`Scene::snapshot_from`]): `scene` must not change between
     /// frames.
     last_snapshot: Option<Snapshot>,
+    /// A snapshot a method made of a later frame's time
+    /// ([`FrameContext::next_snapshot`]), taken as that frame's if it comes
+    /// next.
+    offered_snapshot: OnceLock<Snapshot>,
     /// The box around the scene's vertices at time 0, which with each
     /// frame's camera sizes its [`RayOffset`] (found once: a large mesh
     /// takes milliseconds to bound).
@@ -312,6 +316,7 @@ impl Renderer {
             frame_end: None,
             abandon: Arc::default(),
             last_snapshot: None,
+            offered_snapshot: OnceLock::new(),
             scene_bounds: scene.bounds_at(0.0),
             scene,
         }
@@ -494,9 +499,13 @@ impl Renderer {
     /// stages directly.
     pub fn with_frame_context<R>(&mut self, frame: u32, f: impl FnOnce(&FrameContext) -> R) -> R {
         let t = frame as f32 / self.settings.fps;
-        let snapshot = match self.last_snapshot.take() {
-            Some(earlier) => self.scene.snapshot_from(t, &earlier),
-            None => self.scene.snapshot(t),
+        // The scene's snapshot at `t` however it was made (bit for bit:
+        // `Scene::snapshot_from`).
+        let offered = (self.offered_snapshot.take()).filter(|s| s.time.to_bits() == t.to_bits());
+        let snapshot = match (offered, self.last_snapshot.take()) {
+            (Some(offered), _) => offered,
+            (None, Some(earlier)) => self.scene.snapshot_from(t, &earlier),
+            (None, None) => self.scene.snapshot(t),
         };
         self.backend.set_geometry(&snapshot);
         let lights = LightSampler::new(&snapshot, &self.scene.materials);
@@ -515,6 +524,7 @@ impl Renderer {
             emitters_in_view: Vec::new(),
             abandon: &self.abandon,
             ray_offset: RayOffset::around(self.scene_bounds, snapshot.camera.position),
+            next_snapshot: &self.offered_snapshot,
         };
         ctx.emitters_in_view =
             crate::method::pixels::emitters_in_view(&snapshot, &lights, ctx.aspect());
@@ -980,6 +990,42 @@ mod tests {
             cache_unit: "records",
             lifespans_counted: "computed",
             out_dir: PathBuf::from("out"),
+        }
+    }
+
+    /// A snapshot a method offers for the next frame's time is taken as
+    /// that frame's (marked here by a camera moved away, which no offer
+    /// would do), and not for a frame of another time; `trc` offers the one
+    /// it made of t0+1 under a moving light, and its frames are those of a
+    /// renderer that takes no offer.
+    #[test]
+    fn the_next_frames_snapshot_is_taken_only_at_its_time() {
+        let mut renderer = test_renderer("moving-light", 4);
+        let marked = |ctx: &FrameContext, frame: u32| {
+            let mut s = ctx.scene.snapshot_from(ctx.time_of(frame), ctx.snapshot);
+            s.camera.position.x += 100.0;
+            ctx.next_snapshot.set(s).unwrap();
+        };
+        let x = |ctx: &FrameContext| ctx.snapshot.camera.position.x;
+        let unmarked = renderer.with_frame_context(1, x);
+        renderer.with_frame_context(0, |ctx| marked(ctx, 1));
+        assert_eq!(renderer.with_frame_context(1, x), unmarked + 100.0);
+        renderer.with_frame_context(0, |ctx| marked(ctx, 2));
+        assert_eq!(renderer.with_frame_context(1, x), unmarked);
+        assert!(renderer.offered_snapshot.get().is_none(), "let go");
+
+        let trc_renderer = || {
+            let mut r = test_renderer("moving-light", 4);
+            r.method = MethodSettings::Trc(Default::default()).instantiate();
+            r
+        };
+        let (mut taking, mut taking_none) = (trc_renderer(), trc_renderer());
+        for frame in 0..3 {
+            let film = taking.render_frame(frame);
+            let offered = taking.offered_snapshot.get().map(|s| s.time);
+            assert_eq!(offered, Some((frame + 1) as f32 / taking.settings.fps));
+            taking_none.offered_snapshot.take();
+            assert_eq!(film, taking_none.render_frame(frame), "frame {frame}");
         }
     }
 

@@ -143,6 +143,11 @@ impl DirectChange {
         })
     }
 
+    /// The snapshot of t0+1, given up.
+    pub(super) fn into_later(self) -> Snapshot {
+        self.later
+    }
+
     /// The same comparison from t0 to the later frame whose geometry and
     /// lights `later` holds (`super::later`'s check of moving lights):
     /// t0's side and the static geometry are shared.

@@ -116,6 +116,13 @@ impl NextFrame {
         })
     }
 
+    /// The whole snapshot of t0+1 made for the direct light there, given
+    /// up (`None`: none was made): the renderer's for that frame
+    /// ([`crate::method::FrameContext::next_snapshot`]).
+    pub(super) fn into_later_snapshot(self) -> Option<Snapshot> {
+        self.direct.map(DirectChange::into_later)
+    }
+
     /// Whether the direct light at t0+1 is evaluated (`next_direct`).
     pub(super) fn evaluates_direct(&self) -> bool {
         self.direct.is_some()

@@ -484,6 +484,10 @@ impl TemporalRadianceCaching {
         self.fill(&making, &mut cache, &mut aged);
         let phases = &mut aged.stats.phase_seconds;
         phases.push(("fill".into(), start.elapsed().as_secs_f64()));
+        if let Some(later) = making.next.into_later_snapshot() {
+            // Already set only if another pass made it first: equal.
+            let _ = ctx.next_snapshot.set(later);
+        }
         (cache, aged)
     }
 
