@@ -105,7 +105,7 @@ struct RecordsQuery {
 
 /// A query's parameters by name, each given once (`frame=0&frame=1` is a
 /// 400, not one of them quietly taken) and each one of the route's `known`
-/// names or `token` (the API token, which [`super::check_token`] reads):
+/// names or `token` (the API token, which [`super::layers::check_token`] reads):
 /// a misspelt parameter (`limt=5`) is a 400 naming the route's
 /// parameters, not a default quietly used.
 pub(super) fn query_params(
