@@ -58,17 +58,29 @@ impl Meshing {
             min_links: MIN_LINKS.min(settings.links).max(1),
             view,
         };
+        // Once every triangle is one cell it stays so: only the links
+        // change from then on, not the spacing.
+        let mut coarsest = false;
         for _ in 0..64 {
             let needed = m.links_needed(triangles, both);
             if needed <= MAX_LINKS {
                 break;
             }
             let excess = (needed as f64 / MAX_LINKS as f64) as f32;
-            let coarsest = (triangles.iter().enumerate()).all(|(i, t)| {
-                m.grid((i as u32, t), &Piece::WHOLE)
-                    .is_some_and(|(n, _)| n == 1)
-            });
+            coarsest = coarsest
+                || (triangles.iter().enumerate()).all(|(i, t)| {
+                    m.grid((i as u32, t), &Piece::WHOLE)
+                        .is_some_and(|(n, _)| n == 1)
+                });
             if coarsest {
+                if m.links == 1 {
+                    // One cell a triangle and one link a vertex: nothing
+                    // left to thin. More corners than the budget has links
+                    // (a mesh of millions of triangles) keep this much;
+                    // the bound counts shared corners once per triangle,
+                    // so the pass itself holds fewer.
+                    break;
+                }
                 // One cell a triangle already: fewer links a vertex.
                 let scale = excess.recip();
                 m.links = ((m.links as f32 * scale) as u32).max(1);
@@ -483,6 +495,16 @@ mod tests {
         let thinned = Meshing::fitting(&many, &[], &settings, (1000.0, None));
         assert!(thinned.links_needed(&many, &[]) <= MAX_LINKS, "{thinned:?}");
         assert!(thinned.links >= 1 && thinned.min_links >= 1);
+        // More corners than the budget has links, at one link each: the
+        // least there is, kept, rather than a spacing coarsened for nothing.
+        let over: Placed<_> = (0..MAX_LINKS / 2)
+            .map(|i| quad(i as f32 * 1e-3, 1e-3))
+            .collect::<Vec<_>>()
+            .into();
+        let least = Meshing::fitting(&over, &[], &settings, (1000.0, None));
+        assert_eq!((least.links, least.min_links), (1, 1), "{least:?}");
+        assert_eq!(least.links_needed(&over, &[]), 3 * (MAX_LINKS / 2));
+        assert_eq!(least.spacing, 1000.0 / 32.0, "each a cell already");
     }
 
     /// A triangle 600 m across that the camera sees near its corner is

@@ -65,7 +65,6 @@ use crate::integrator::RayOffset;
 use crate::scene::{Scene, Snapshot};
 use glam::Vec3;
 use rayon::prelude::*;
-use std::collections::HashMap;
 
 /// The side the global pass solves of each triangle of a snapshot.
 #[derive(Clone, Debug, PartialEq)]
@@ -218,30 +217,32 @@ fn degenerate(p: &[Vec3; 3]) -> bool {
     (p[1] - p[0]).cross(p[2] - p[0]).length_squared() == 0.0
 }
 
-/// Per directed edge of the triangles with area, its first triangle and
-/// how many run it.
-type EdgeRuns = HashMap<DirectedEdge, (u32, u32)>;
-
-fn edge_runs(triangles: &[(u32, [Vec3; 3])]) -> EdgeRuns {
-    let mut along = EdgeRuns::new();
-    for (id, triangle) in triangles.iter().enumerate() {
-        if !degenerate(&triangle.1) {
-            for edge in directed_edges(triangle) {
-                along.entry(edge).or_insert((id as u32, 0)).1 += 1;
-            }
-        }
-    }
-    along
+/// One triangle's run along an edge. The edge is named by its corners
+/// in bit order, whichever way the triangle runs it, so that the runs of
+/// an edge each way sort together.
+struct EdgeRun {
+    edge: DirectedEdge,
+    /// Whether the triangle runs it from the second corner to the first.
+    backwards: bool,
+    triangle: u32,
 }
 
-/// The triangle joined to another across `edge`: the one that runs it
-/// back, where one triangle runs it each way.
-fn joined_across(along: &EdgeRuns, edge: DirectedEdge) -> Option<u32> {
-    let (object, a, b) = edge;
-    match (along.get(&edge), along.get(&(object, b, a))) {
-        (Some(&(_, 1)), Some(&(other, 1))) => Some(other),
-        _ => None,
-    }
+/// Every edge run of the triangles with area, those of one edge
+/// together. A sort rather than a hash map of edges: a mesh of millions
+/// of triangles has millions of edges, and hashing each took seconds.
+fn edge_runs(triangles: &[(u32, [Vec3; 3])]) -> Vec<EdgeRun> {
+    let mut runs: Vec<EdgeRun> = (triangles.iter().enumerate())
+        .filter(|(_, triangle)| !degenerate(&triangle.1))
+        .flat_map(|(id, triangle)| {
+            directed_edges(triangle).map(|(object, a, b)| EdgeRun {
+                edge: (object, a.min(b), a.max(b)),
+                backwards: a > b,
+                triangle: id as u32,
+            })
+        })
+        .collect();
+    runs.par_sort_unstable_by_key(|run| run.edge);
+    runs
 }
 
 /// The triangles of a scene joined into components ([`parts`]).
@@ -272,31 +273,34 @@ struct Parts {
 /// box without its lid, or one whose corners differ in their bits, is not.
 fn parts(triangles: &[(u32, [Vec3; 3])]) -> Parts {
     let count = triangles.len();
-    let along = edge_runs(triangles);
     let mut parent: Vec<u32> = (0..count as u32).collect();
-    // Per triangle, whether each of its edges is joined.
-    let mut sealed = vec![false; count];
-    for (id, triangle) in triangles.iter().enumerate() {
-        if degenerate(&triangle.1) {
-            continue;
-        }
-        sealed[id] = true;
-        for edge in directed_edges(triangle) {
-            match joined_across(&along, edge) {
-                Some(other) => union(&mut parent, id as u32, other),
-                None => sealed[id] = false,
+    // Per triangle, whether each of its edges is joined: only an edge one
+    // triangle runs each way joins.
+    let mut sealed: Vec<bool> = triangles.iter().map(|t| !degenerate(&t.1)).collect();
+    for runs in edge_runs(triangles).chunk_by(|a, b| a.edge == b.edge) {
+        match runs {
+            [one, other] if one.backwards != other.backwards => {
+                union(&mut parent, one.triangle, other.triangle)
             }
+            _ => runs
+                .iter()
+                .for_each(|run| sealed[run.triangle as usize] = false),
         }
     }
-    let mut number: HashMap<u32, u32> = HashMap::new();
+    // Components numbered in the order of their first triangles.
+    let mut number = vec![u32::MAX; count];
+    let mut numbered = 0;
     let component: Vec<u32> = (0..count as u32)
         .map(|id| {
-            let root = find(&mut parent, id);
-            let next = number.len() as u32;
-            *number.entry(root).or_insert(next)
+            let root = find(&mut parent, id) as usize;
+            if number[root] == u32::MAX {
+                number[root] = numbered;
+                numbered += 1;
+            }
+            number[root]
         })
         .collect();
-    let mut closed = vec![true; number.len()];
+    let mut closed = vec![true; numbered as usize];
     for (&c, &sealed) in component.iter().zip(&sealed) {
         closed[c as usize] &= sealed;
     }
