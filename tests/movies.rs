@@ -763,20 +763,11 @@ fn a_frame_abandoned_while_its_movies_are_shaded_ends_and_keeps_none() {
     });
 }
 
-/// The merge of static and dynamic shadows that the movies make, through
-/// their own paths (the static shadows of a set of floor points found at
-/// frame 0 and kept, the moving blocker tested each frame after), against
-/// every sample traced afresh against every blocker, where nothing is
-/// merged: a panel light over a floor, a static shelf half way up, and a
-/// block sliding under the shelf and on past its shadow, so that samples
-/// stopped by the shelf, by the block and by both occur. Seen failing
-/// with the merge a sample dark only where both stop it, and with the
-/// block's shadow left out.
-#[test]
-fn kept_static_shadows_merged_with_moving_ones_equal_every_sample_traced() {
-    use radcache::method::movies::direct::{
-        direct_irradiance, ShadePoint, ShadowBlockers, StaticGeometry, StaticShadows, Statics,
-    };
+/// A panel light over a floor, a static shelf half way up, and a block
+/// sliding under the shelf and on past its shadow over frames 0..9; and
+/// 24 × 24 points on the floor.
+fn shelf_scene_and_floor_points() -> (Scene, Vec<radcache::method::movies::direct::ShadePoint>) {
+    use radcache::method::movies::direct::ShadePoint;
     let fps = 24.0;
     let mut floor = radcache::scene::Mesh::default();
     common::push_quad(
@@ -838,6 +829,24 @@ fn kept_static_shadows_merged_with_moving_ones_equal_every_sample_traced() {
             item: i as u64,
         })
         .collect();
+    (s, points)
+}
+
+/// The merge of static and dynamic shadows that the movies make, through
+/// their own paths (the static shadows of a set of floor points found at
+/// frame 0 and kept, the moving blocker tested each frame after), against
+/// every sample traced afresh against every blocker, where nothing is
+/// merged: a panel light over a floor, a static shelf half way up, and a
+/// block sliding under the shelf and on past its shadow, so that samples
+/// stopped by the shelf, by the block and by both occur. Seen failing
+/// with the merge a sample dark only where both stop it, and with the
+/// block's shadow left out.
+#[test]
+fn kept_static_shadows_merged_with_moving_ones_equal_every_sample_traced() {
+    use radcache::method::movies::direct::{
+        direct_irradiance, ShadowBlockers, StaticGeometry, StaticShadows, Statics,
+    };
+    let (s, points) = shelf_scene_and_floor_points();
     let mut r = renderer(s, 8);
     let mut statics = StaticGeometry::default();
     let mut kept = StaticShadows::default();
@@ -864,6 +873,73 @@ fn kept_static_shadows_merged_with_moving_ones_equal_every_sample_traced() {
     }
     assert!(shadowed > 0, "no shadow on the floor");
     assert!(retraced > 0, "the block never crossed a kept sample");
+}
+
+/// Direct light asked at some points only ([`direct_irradiance_where`],
+/// as the global pass asks it at the vertices its links land by): at
+/// those points the same bits as asked at every point, zero at the
+/// others, whichever way the static shadows are taken. Kept shadows are
+/// not found for a batch of points none of which is asked, and found
+/// once one is, after the block has moved, still giving what shadows
+/// found for every point at frame 0 give.
+///
+/// [`direct_irradiance_where`]: radcache::method::movies::direct::direct_irradiance_where
+#[test]
+fn direct_light_asked_at_some_points_is_what_it_is_asked_at_all() {
+    use radcache::method::movies::direct::{
+        direct_irradiance, direct_irradiance_where, ShadowBlockers, StaticGeometry, StaticShadows,
+        Statics,
+    };
+    let (s, points) = shelf_scene_and_floor_points();
+    let mut r = renderer(s, 8);
+    let mut statics = StaticGeometry::default();
+    let (mut all_kept, mut some_kept) = (StaticShadows::default(), StaticShadows::default());
+    let mut lit = 0;
+    for frame in 0..9 {
+        // The first batch of points alone (a batch is 64 points on the
+        // CPU), then every third point, in every batch.
+        let wanted: Vec<bool> = (0..points.len())
+            .map(|i| if frame < 3 { i < 64 } else { i % 3 == 0 })
+            .collect();
+        r.with_frame_context(frame, |ctx| {
+            let blockers = ShadowBlockers::new(ctx, &mut statics);
+            let asked = |statics: Statics, wanted: Option<&[bool]>| {
+                direct_irradiance_where(ctx, &blockers, (&points, wanted), 16, statics).0
+            };
+            let pairs = [
+                (
+                    asked(Statics::Kept(&mut all_kept), None),
+                    asked(Statics::Kept(&mut some_kept), Some(&wanted)),
+                ),
+                (
+                    asked(Statics::Moving, None),
+                    asked(Statics::Moving, Some(&wanted)),
+                ),
+                (
+                    asked(Statics::Unkept, None),
+                    asked(Statics::Unkept, Some(&wanted)),
+                ),
+            ];
+            for (way, (all, some)) in pairs.iter().enumerate() {
+                for (i, &w) in wanted.iter().enumerate() {
+                    let expected = if w { all[i] } else { Vec3::ZERO };
+                    assert_eq!(some[i], expected, "frame {frame}, way {way}, point {i}");
+                }
+            }
+            lit += (pairs[0].1.iter()).filter(|e| e.x > 0.0).count();
+            let plain = direct_irradiance(ctx, &blockers, &points, 16, Statics::Moving).0;
+            assert_eq!(plain, pairs[1].0, "direct_irradiance is all points asked");
+            if frame == 0 {
+                assert!(
+                    some_kept.bytes() * 4 < all_kept.bytes(),
+                    "{} bytes kept for one batch of nine, {} for all",
+                    some_kept.bytes(),
+                    all_kept.bytes()
+                );
+            }
+        });
+    }
+    assert!(lit > 0, "no point asked was lit");
 }
 
 /// A link of the global pass that hit nothing covers its whole ray: a

@@ -119,9 +119,12 @@ pub struct StaticShadows {
     fingerprint: u64,
     /// The points of each batch they were found in ([`chunk_points`]).
     chunk: usize,
+    /// The points of all batches.
+    points: usize,
     /// Each batch's shadows, kept as found: joining them into one list
-    /// would hold them twice while it is made.
-    chunks: Vec<ShadowChunk>,
+    /// would hold them twice while it is made. `None`: not found yet, as
+    /// no point of the batch was wanted ([`direct_irradiance_where`]).
+    chunks: Vec<Option<ShadowChunk>>,
 }
 
 /// The kept shadows of one batch of points, their open samples in one
@@ -186,16 +189,14 @@ impl StaticShadows {
     pub fn valid_for(&self, blockers: &ShadowBlockers, points: usize, chunk: usize) -> bool {
         self.fingerprint == blockers.pick_fingerprint
             && self.chunk == chunk
-            && self.chunks.iter().map(|c| c.points.len()).sum::<usize>() == points
+            && self.points == points
     }
 
     /// Bytes held on the heap: every list by its capacity.
     pub fn bytes(&self) -> usize {
         use std::mem::size_of;
-        self.chunks.capacity() * size_of::<ShadowChunk>()
-            + self
-                .chunks
-                .iter()
+        self.chunks.capacity() * size_of::<Option<ShadowChunk>>()
+            + (self.chunks.iter().flatten())
                 .map(|c| {
                     c.points.capacity() * size_of::<PointShadows>()
                         + c.open.capacity() * size_of::<OpenSample>()
@@ -210,7 +211,7 @@ impl StaticShadows {
     pub fn bound(points: usize, samples: u32, chunk: usize) -> usize {
         use std::mem::size_of;
         let samples = samples.clamp(1, MAX_SHADOW_SAMPLES) as usize;
-        points.div_ceil(chunk.max(1)) * size_of::<ShadowChunk>()
+        points.div_ceil(chunk.max(1)) * size_of::<Option<ShadowChunk>>()
             + points * (size_of::<PointShadows>() + samples * size_of::<OpenSample>())
     }
 }
@@ -302,7 +303,9 @@ pub enum Statics<'a> {
     /// The points move: every sample is traced against every blocker.
     Moving,
     /// The points do not move, and their static shadows are kept here:
-    /// used where still valid, found (and kept) where not.
+    /// used where still valid, found (and kept) where not, a batch of
+    /// points at a time, and not found while no point of the batch is
+    /// wanted ([`direct_irradiance_where`]).
     Kept(&'a mut StaticShadows),
     /// The points do not move, but there is no room to keep their static
     /// shadows: they are found as for points seen the first time, batch
@@ -328,17 +331,33 @@ pub fn direct_irradiance(
     samples: u32,
     statics: Statics,
 ) -> (Vec<Vec3>, ShadowCounts) {
+    direct_irradiance_where(ctx, blockers, (points, None), samples, statics)
+}
+
+/// [`direct_irradiance`] at the points `wanted` marks (`None`: all), zero
+/// at the others. A point's irradiance is the same whichever others are
+/// wanted with it (its samples are its own streams'), so a point skipped
+/// in one frame and wanted in the next gets what it would have had. Kept
+/// static shadows are found a batch at a time ([`chunk_points`]), for
+/// every point of a batch once one of them is wanted.
+pub fn direct_irradiance_where(
+    ctx: &FrameContext,
+    blockers: &ShadowBlockers,
+    (points, wanted): (&[ShadePoint], Option<&[bool]>),
+    samples: u32,
+    statics: Statics,
+) -> (Vec<Vec3>, ShadowCounts) {
     let samples = samples.clamp(1, MAX_SHADOW_SAMPLES);
     let chunk = chunk_points(ctx, samples);
     match statics {
-        Statics::Moving => {
+        Statics::Moving => only_wanted(points, wanted, |points| {
             let parts: Vec<(Vec<Vec3>, ShadowCounts)> = points
                 .par_chunks(chunk)
                 .map(|p| moving_points(ctx, p, samples))
                 .collect();
             join(parts)
-        }
-        Statics::Unkept => {
+        }),
+        Statics::Unkept => only_wanted(points, wanted, |points| {
             let parts: Vec<(Vec<Vec3>, ShadowCounts)> = points
                 .par_chunks(chunk)
                 .map(|p| {
@@ -347,39 +366,84 @@ pub fn direct_irradiance(
                 })
                 .collect();
             join(parts)
-        }
-        Statics::Kept(kept) if kept.valid_for(blockers, points.len(), chunk) => {
-            let parts: Vec<(Vec<Vec3>, ShadowCounts)> = points
-                .par_chunks(chunk)
-                .zip(kept.chunks.par_iter())
-                .map(|(p, shadows)| kept_points(ctx, blockers, p, samples, shadows))
+        }),
+        Statics::Kept(kept) => {
+            if !kept.valid_for(blockers, points.len(), chunk) {
+                // Let go of the shadows no longer valid before their
+                // successors are found: the two are never held at once.
+                *kept = StaticShadows {
+                    fingerprint: blockers.pick_fingerprint,
+                    chunk,
+                    points: points.len(),
+                    chunks: (0..points.len().div_ceil(chunk)).map(|_| None).collect(),
+                };
+            }
+            let parts: Vec<(Vec<Vec3>, ShadowCounts)> = (points.par_chunks(chunk).enumerate())
+                .zip(kept.chunks.par_iter_mut())
+                .map(|((k, p), shadows)| {
+                    let wanted = wanted.map(|w| &w[k * chunk..k * chunk + p.len()]);
+                    kept_batch(ctx, blockers, (p, wanted), samples, shadows)
+                })
                 .collect();
             join(parts)
         }
-        Statics::Kept(kept) => {
-            // Let go of the shadows no longer valid before their successors
-            // are found: the two are never held at once.
-            *kept = StaticShadows::default();
-            let parts: Vec<(Vec<Vec3>, ShadowCounts, ShadowChunk)> = points
-                .par_chunks(chunk)
-                .map(|p| first_static_points(ctx, blockers, p, samples))
-                .collect();
-            let mut e = Vec::with_capacity(points.len());
-            let mut counts = ShadowCounts::default();
-            let mut chunks = Vec::with_capacity(parts.len());
-            for (part_e, part_counts, part) in parts {
-                e.extend(part_e);
-                counts += part_counts;
-                chunks.push(part);
-            }
-            *kept = StaticShadows {
-                fingerprint: blockers.pick_fingerprint,
-                chunk,
-                chunks,
-            };
-            (e, counts)
+    }
+}
+
+/// One batch of points that do not move, their static shadows kept in
+/// `shadows`: taken from there where found, found and kept where not and
+/// a point is wanted, not found while none is.
+fn kept_batch(
+    ctx: &FrameContext,
+    blockers: &ShadowBlockers,
+    (points, wanted): (&[ShadePoint], Option<&[bool]>),
+    samples: u32,
+    shadows: &mut Option<ShadowChunk>,
+) -> (Vec<Vec3>, ShadowCounts) {
+    if let Some(found) = shadows {
+        return kept_points(ctx, blockers, (points, wanted), samples, found);
+    }
+    if !(0..points.len()).any(|i| is_wanted(wanted, i)) {
+        return (vec![Vec3::ZERO; points.len()], ShadowCounts::default());
+    }
+    let (mut e, counts, found) = first_static_points(ctx, blockers, points, samples);
+    *shadows = Some(found);
+    for (i, e) in e.iter_mut().enumerate() {
+        if !is_wanted(wanted, i) {
+            *e = Vec3::ZERO;
         }
     }
+    (e, counts)
+}
+
+/// Whether point `i` is one `wanted` marks (`None`: all are).
+fn is_wanted(wanted: Option<&[bool]>, i: usize) -> bool {
+    wanted.is_none_or(|w| w[i])
+}
+
+/// `irradiance` of the `wanted` ones of `points`, put back in their
+/// places, zero at the others.
+fn only_wanted(
+    points: &[ShadePoint],
+    wanted: Option<&[bool]>,
+    irradiance: impl FnOnce(&[ShadePoint]) -> (Vec<Vec3>, ShadowCounts),
+) -> (Vec<Vec3>, ShadowCounts) {
+    let Some(wanted) = wanted else {
+        return irradiance(points);
+    };
+    let picked: Vec<ShadePoint> = (points.iter().zip(wanted))
+        .filter(|(_, &w)| w)
+        .map(|(p, _)| *p)
+        .collect();
+    let (picked_e, counts) = irradiance(&picked);
+    let mut picked_e = picked_e.into_iter();
+    let e = (wanted.iter())
+        .map(|&w| match w {
+            true => picked_e.next().unwrap_or(Vec3::ZERO),
+            false => Vec3::ZERO,
+        })
+        .collect();
+    (e, counts)
 }
 
 fn join(parts: Vec<(Vec<Vec3>, ShadowCounts)>) -> (Vec<Vec3>, ShadowCounts) {
@@ -540,7 +604,7 @@ fn moving_points(
 fn kept_points(
     ctx: &FrameContext,
     blockers: &ShadowBlockers,
-    points: &[ShadePoint],
+    (points, wanted): (&[ShadePoint], Option<&[bool]>),
     samples: u32,
     shadows: &ShadowChunk,
 ) -> (Vec<Vec3>, ShadowCounts) {
@@ -551,6 +615,10 @@ fn kept_points(
     let mut pending = Pending::new(per);
     let mut kept = 0u64;
     for (i, (point, kept_shadows)) in points.iter().zip(&shadows.points).enumerate() {
+        if !is_wanted(wanted, i) {
+            // No samples: its irradiance is zero.
+            continue;
+        }
         let open = shadows.open_of(i);
         if blockers.static_view_clear(point.p) && kept_shadows.moving == 0 {
             shortcut[i] = true;

@@ -28,7 +28,9 @@
 //! scene on both sides of it, on both, each with a grid of its own
 //! ([`super::sides`]).
 
-use super::direct::{direct_irradiance, ShadePoint, ShadowBlockers, StaticShadows, Statics};
+use super::direct::{
+    direct_irradiance, direct_irradiance_where, ShadePoint, ShadowBlockers, StaticShadows, Statics,
+};
 use super::mesh::{blend, renormalised, Gouraud, Meshing, PassMesh, Vertex};
 use super::pieces::{self, Cells};
 use super::sharp::{is_sharp, Landing, SharpLandings};
@@ -335,10 +337,23 @@ impl GlobalPass {
 
     /// The frame of `ctx`: the sides its camera sets, links traced again
     /// where motion or a side that changed may have changed them, the
-    /// direct light at the vertices, and the radiosity solved. Returns the
-    /// shadow rays traced.
+    /// direct light at the vertices links land by (`landed`), and
+    /// the radiosity solved. Returns the shadow rays traced.
     /// Its working buffers' peak is then [`working_bytes`](Self::working_bytes).
     pub fn update(&mut self, ctx: &FrameContext, blockers: &ShadowBlockers, first: bool) -> u64 {
+        self.update_lighting(ctx, blockers, first, Self::landed)
+    }
+
+    /// [`Self::update`], with the direct light found at the vertices
+    /// `direct_at` marks (the test that the solution is the same with it
+    /// found at every vertex marks them all).
+    fn update_lighting(
+        &mut self,
+        ctx: &FrameContext,
+        blockers: &ShadowBlockers,
+        first: bool,
+        direct_at: fn(&Self) -> Vec<bool>,
+    ) -> u64 {
         let mut working = Working::default();
         let turned = self.sides.update(ctx.snapshot);
         if turned.contains(&true) {
@@ -355,7 +370,10 @@ impl GlobalPass {
             .map(|v| blockers.is_moving_triangle(v.triangle))
             .collect();
         working.hold(&moving);
-        let (direct, shadow_rays) = self.direct(ctx, blockers, &points, &moving, &mut working);
+        let landed = direct_at(self);
+        working.hold(&landed);
+        let (direct, shadow_rays) =
+            self.direct(ctx, blockers, &points, (&moving, &landed), &mut working);
         let sharp_rays = self.solve(ctx, blockers, &points, &direct, &retraced, &mut working);
         self.working_bytes = working.peak;
         shadow_rays + sharp_rays
@@ -539,18 +557,40 @@ impl GlobalPass {
         }
     }
 
-    /// Direct irradiance at every vertex (static shadows kept for the
-    /// vertices that do not move), held in `working` until the frame's
-    /// end.
+    /// Per vertex, whether a link lands by it: one of the three vertices a
+    /// live link on a solved side gathers from (all three, as
+    /// [`renormalised`] may take any of them). The solution reads a
+    /// vertex's direct light there only: in its radiance `B` that the
+    /// links landing by it gather, in the glossy and sharp light of those
+    /// links. A vertex's own indirect light, which its texels read, does
+    /// not need it. On a mesh far finer than the links (a sphere of a
+    /// million corners at one link each) few vertices are landed by.
+    fn landed(&self) -> Vec<bool> {
+        let mut landed = vec![false; self.vertices.len()];
+        for link in self.links.iter().filter(|l| l.live && l.on_solved_side) {
+            for &(j, _) in &link.landing {
+                landed[j as usize] = true;
+            }
+        }
+        landed
+    }
+
+    /// Direct irradiance at the vertices `landed` marks, zero at the
+    /// others (static shadows kept for the vertices that do not move,
+    /// every one of them), held in `working` until the frame's end.
     fn direct(
         &mut self,
         ctx: &FrameContext,
         blockers: &ShadowBlockers,
         points: &[ShadePoint],
-        moving: &[bool],
+        (moving, landed): (&[bool], &[bool]),
         working: &mut Working,
     ) -> (Vec<Vec3>, u64) {
-        let (still, moved): (Vec<usize>, Vec<usize>) = (0..points.len()).partition(|&i| !moving[i]);
+        let (still, mut moved): (Vec<usize>, Vec<usize>) =
+            (0..points.len()).partition(|&i| !moving[i]);
+        moved.retain(|&i| landed[i]);
+        let still_landed: Vec<bool> = still.iter().map(|&i| landed[i]).collect();
+        working.hold(&still_landed);
         working.hold(&still);
         working.hold(&moved);
         // Each set's points, held while their light is found.
@@ -561,13 +601,15 @@ impl GlobalPass {
         };
         let samples = self.settings.shadow_samples;
         let still_points = pick(&still, working);
-        let (e_still, c_still) = direct_irradiance(
+        let (e_still, c_still) = direct_irradiance_where(
             ctx,
             blockers,
-            &still_points,
+            (&still_points, Some(&still_landed)),
             samples,
             Statics::Kept(&mut self.shadows),
         );
+        working.release(&still_landed);
+        drop(still_landed);
         working.hold(&e_still);
         working.release(&still_points);
         drop(still_points);
@@ -1045,6 +1087,49 @@ mod tests {
             );
             assert!(pass.indirect.iter().all(|e| e.is_finite()));
         });
+    }
+
+    /// The direct light found only at the vertices links land by gives
+    /// the solution found with it at every vertex, bit for bit, with fewer
+    /// shadow rays: on the moving cube, at a link or two a vertex so that
+    /// many vertices are landed by none.
+    #[test]
+    fn direct_light_at_the_landed_vertices_solves_as_at_every_one() {
+        let mut renderer = crate::render::test_renderer("cube-in-box", 8);
+        let settings = GlobalSettings {
+            spacing: 1.0 / 12.0,
+            links: 2,
+            bounces: 4,
+            shadow_samples: 2,
+        };
+        let (mut landed, mut every) = (None::<GlobalPass>, None::<GlobalPass>);
+        let (mut unlanded, mut rays) = (0, [0, 0]);
+        for frame in 0..4 {
+            renderer.with_frame_context(frame * 4, |ctx| {
+                let every_vertex = |p: &GlobalPass| vec![true; p.vertices.len()];
+                let ways: [fn(&GlobalPass) -> Vec<bool>; 2] = [GlobalPass::landed, every_vertex];
+                for (k, (pass, direct_at)) in [(&mut landed, ways[0]), (&mut every, ways[1])]
+                    .into_iter()
+                    .enumerate()
+                {
+                    let pass = pass.get_or_insert_with(|| GlobalPass::new(ctx, settings));
+                    let blockers = ShadowBlockers::new(ctx, &mut Default::default());
+                    rays[k] += pass.update_lighting(ctx, &blockers, frame == 0, direct_at);
+                }
+                let (a, b) = (landed.as_ref().unwrap(), every.as_ref().unwrap());
+                let differ = (a.indirect.iter().zip(&b.indirect)).filter(|(x, y)| x != y);
+                assert_eq!(
+                    differ.count(),
+                    0,
+                    "vertices differing at frame {}",
+                    frame * 4
+                );
+                assert!(a.indirect.iter().any(|e| e.max_element() > 0.0));
+                unlanded += a.landed().iter().filter(|&&l| !l).count();
+            });
+        }
+        assert!(unlanded > 0, "every vertex was landed by");
+        assert!(rays[0] < rays[1], "shadow rays {rays:?}");
     }
 
     #[test]
