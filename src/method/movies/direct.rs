@@ -347,6 +347,7 @@ pub fn direct_irradiance_where(
     samples: u32,
     statics: Statics,
 ) -> (Vec<Vec3>, ShadowCounts) {
+    debug_assert!(wanted.is_none_or(|w| w.len() == points.len()));
     let samples = samples.clamp(1, MAX_SHADOW_SAMPLES);
     let chunk = chunk_points(ctx, samples);
     match statics {
