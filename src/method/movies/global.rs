@@ -576,8 +576,9 @@ impl GlobalPass {
     }
 
     /// Direct irradiance at the vertices `landed` marks, zero at the
-    /// others (static shadows kept for the vertices that do not move,
-    /// every one of them), held in `working` until the frame's end.
+    /// others (static shadows kept for the vertices that do not move, in
+    /// the batches where one is landed by: `direct_irradiance_where`),
+    /// held in `working` until the frame's end.
     fn direct(
         &mut self,
         ctx: &FrameContext,
