@@ -221,6 +221,8 @@ fn degenerate(p: &[Vec3; 3]) -> bool {
 /// in bit order, whichever way the triangle runs it, so that the runs of
 /// an edge each way sort together.
 struct EdgeRun {
+    /// Its object and its corners' bits, the lesser first (a
+    /// [`DirectedEdge`] put in order).
     edge: DirectedEdge,
     /// Whether the triangle runs it from the second corner to the first.
     backwards: bool,
