@@ -57,7 +57,9 @@ pub struct GlobalSettings {
     pub spacing: f32,
     /// Links of a vertex on a triangle whose grid cells are at least a
     /// spacing across; smaller cells get fewer, in proportion to their
-    /// area, and at least [`MIN_LINKS`](super::mesh::MIN_LINKS).
+    /// area, and at least [`MIN_LINKS`](super::mesh::MIN_LINKS) (the
+    /// corners of triangles too small for that are clustered, one vertex
+    /// of a cluster gathering for its area: [`super::mesh`]).
     pub links: u32,
     /// Most Jacobi iterations (bounces of indirect light); the iteration
     /// stops sooner once converged ([`CONVERGED`]).
@@ -125,6 +127,10 @@ pub struct GlobalPass {
     /// The vertex in each slot of the grids.
     vertex_of: Vec<u32>,
     vertices: Vec<Vertex>,
+    /// Each clustered vertex that gathers along no link, and the vertex
+    /// of its cluster that gathers for it ([`PassMesh::cluster`]): it
+    /// takes that one's indirect light and open-space flag.
+    clustered: Vec<(u32, u32)>,
     links: Vec<Link>,
     /// Static shadows at the vertices that do not move.
     shadows: StaticShadows,
@@ -180,6 +186,16 @@ impl Working {
     }
 }
 
+/// A frame's vertices as shading points, the direct irradiance found at
+/// them and whether a link lands by each (where the direct light was
+/// found: zero at the others).
+#[derive(Clone, Copy)]
+struct Lighting<'a> {
+    points: &'a [ShadePoint],
+    direct: &'a [Vec3],
+    landed: &'a [bool],
+}
+
 /// Bytes of transport rows: the list and each row.
 fn rows_bytes(rows: &[Vec<(u32, f32)>]) -> usize {
     std::mem::size_of_val(rows)
@@ -199,6 +215,7 @@ impl GlobalPass {
             + std::mem::size_of_val(&self.pieces[..])
             + std::mem::size_of_val(&self.vertex_of[..])
             + std::mem::size_of_val(&self.vertices[..])
+            + std::mem::size_of_val(&self.clustered[..])
             + std::mem::size_of_val(&self.links[..])
             + self.shadows.bytes()
             + self.sharp.bytes()
@@ -246,7 +263,9 @@ impl GlobalPass {
             vertex_of,
             vertices,
             link_count,
-        } = PassMesh::new(meshed, &corners, &meshing, &both);
+            clustered,
+            ..
+        } = PassMesh::new(meshed, (&corners, sides.components()), &meshing, &both);
         let count = vertices.len();
         GlobalPass {
             settings,
@@ -256,6 +275,7 @@ impl GlobalPass {
             pieces,
             vertex_of,
             vertices,
+            clustered,
             links: Vec::new(),
             shadows: StaticShadows::default(),
             sharp: SharpLandings::default(),
@@ -374,7 +394,12 @@ impl GlobalPass {
         working.hold(&landed);
         let (direct, shadow_rays) =
             self.direct(ctx, blockers, &points, (&moving, &landed), &mut working);
-        let sharp_rays = self.solve(ctx, blockers, &points, &direct, &retraced, &mut working);
+        let lit = Lighting {
+            points: &points,
+            direct: &direct,
+            landed: &landed,
+        };
+        let sharp_rays = self.solve(ctx, blockers, lit, &retraced, &mut working);
         self.working_bytes = working.peak;
         shadow_rays + sharp_rays
     }
@@ -656,11 +681,11 @@ impl GlobalPass {
         &mut self,
         ctx: &FrameContext,
         blockers: &ShadowBlockers,
-        points: &[ShadePoint],
-        direct: &[Vec3],
+        lit: Lighting,
         retraced: &[bool],
         working: &mut Working,
     ) -> u64 {
+        let direct = lit.direct;
         let albedo: Vec<(Vec3, Vec3)> = self
             .vertices
             .iter()
@@ -671,7 +696,7 @@ impl GlobalPass {
             .collect();
         working.hold(&albedo);
         self.update_rows(retraced, working);
-        let mut constant = self.glossy_direct(ctx, points, direct, working);
+        let mut constant = self.glossy_direct(ctx, lit, working);
         let (sharp, sharp_rays) = self.sharp_direct(ctx, blockers, direct, &albedo, working);
         for (c, s) in constant.iter_mut().zip(&sharp) {
             *c += *s;
@@ -700,6 +725,9 @@ impl GlobalPass {
             (next.par_iter_mut().zip(&self.rows).zip(&constant)).for_each(|((out, row), &g)| {
                 *out = row.iter().fold(g, |acc, &(j, w)| acc + b[j as usize] * w);
             });
+            for &(member, head) in &self.clustered {
+                next[member as usize] = next[head as usize];
+            }
             let converged = converged(&indirect, &next);
             std::mem::swap(&mut indirect, &mut next);
             if converged {
@@ -825,14 +853,9 @@ impl GlobalPass {
     /// again: keeping it would take 12 more bytes a link, for little
     /// (`spheres`, the most glossy links of our scenes, took 5.51 s before
     /// this light and 5.62 s with it over 12 frames at 64 × 64, one
-    /// invocation each: `benches/RESULTS.md`).
-    fn glossy_direct(
-        &self,
-        ctx: &FrameContext,
-        points: &[ShadePoint],
-        direct: &[Vec3],
-        working: &mut Working,
-    ) -> Vec<Vec3> {
+    /// invocation each: `benches/RESULTS.md`). The transmittance is found
+    /// only at the vertices links land by, the only ones it is read at.
+    fn glossy_direct(&self, ctx: &FrameContext, lit: Lighting, working: &mut Working) -> Vec<Vec3> {
         let materials = &ctx.scene.materials;
         let material_of = |id: u32| &materials[ctx.snapshot.tri_material[id as usize] as usize];
         let is_glossy = |id: u32| material_of(id).is_glossy();
@@ -842,8 +865,11 @@ impl GlobalPass {
             return none;
         }
         let lights = UnshadowedLights::of(materials, ctx.snapshot);
-        let transmittance: Vec<Vec3> = (points.par_iter().zip(direct))
-            .map(|(point, &shadowed)| {
+        let transmittance: Vec<Vec3> = (lit.points.par_iter().zip(lit.direct).zip(lit.landed))
+            .map(|((point, &shadowed), &landed)| {
+                if !landed {
+                    return Vec3::ZERO;
+                }
                 let open = lights.irradiance(point.p, point.n);
                 let ratio = |k: usize| match open[k] > 0.0 {
                     true => (shadowed[k] / open[k]).clamp(0.0, 1.0),
@@ -887,11 +913,14 @@ impl GlobalPass {
     /// would build, so the solution is the same as with every row built
     /// again (`kept_rows_equal_rows_built_again` checks it).
     fn update_rows(&mut self, retraced: &[bool], working: &mut Working) {
-        let valid: Vec<bool> = self
+        let mut valid: Vec<bool> = self
             .vertices
             .par_iter()
             .map(|v| self.in_open_space(v))
             .collect();
+        for &(member, head) in &self.clustered {
+            valid[member as usize] = valid[head as usize];
+        }
         working.hold(&valid);
         let flipped: Vec<bool> = valid.iter().zip(&self.valid).map(|(a, b)| a != b).collect();
         working.hold(&flipped);
@@ -1059,7 +1088,7 @@ pub(super) fn diagonal(points: impl Iterator<Item = Vec3>) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::method::movies::mesh::MAX_LINKS;
+    use crate::method::movies::mesh::{MAX_LINKS, MIN_LINKS};
 
     /// The rows kept across frames are those built again from scratch, on
     /// a scene whose moving cube changes links and open-space flags every
@@ -1096,7 +1125,19 @@ mod tests {
     /// many vertices are landed by none.
     #[test]
     fn direct_light_at_the_landed_vertices_solves_as_at_every_one() {
-        let mut renderer = crate::render::test_renderer("cube-in-box", 8);
+        direct_light_at_the_landed_vertices_solves_as_at_every_one_in("cube-in-box");
+    }
+
+    /// The same where glossy surfaces reflect the direct light along
+    /// links ([`GlobalPass::glossy_direct`], whose transmittance is found
+    /// at the landed vertices only).
+    #[test]
+    fn glossy_light_at_the_landed_vertices_solves_as_at_every_one() {
+        direct_light_at_the_landed_vertices_solves_as_at_every_one_in("glossy-cornell");
+    }
+
+    fn direct_light_at_the_landed_vertices_solves_as_at_every_one_in(scene: &str) {
+        let mut renderer = crate::render::test_renderer(scene, 8);
         let settings = GlobalSettings {
             spacing: 1.0 / 12.0,
             links: 2,
@@ -1104,7 +1145,7 @@ mod tests {
             shadow_samples: 2,
         };
         let (mut landed, mut every) = (None::<GlobalPass>, None::<GlobalPass>);
-        let (mut unlanded, mut rays) = (0, [0, 0]);
+        let (mut unlanded, mut rays, mut glossy) = (0, [0, 0], false);
         for frame in 0..4 {
             renderer.with_frame_context(frame * 4, |ctx| {
                 let every_vertex = |p: &GlobalPass| vec![true; p.vertices.len()];
@@ -1122,15 +1163,99 @@ mod tests {
                 assert_eq!(
                     differ.count(),
                     0,
-                    "vertices differing at frame {}",
+                    "{scene}: vertices differing at frame {}",
                     frame * 4
                 );
                 assert!(a.indirect.iter().any(|e| e.max_element() > 0.0));
                 unlanded += a.landed().iter().filter(|&&l| !l).count();
+                glossy |= (a.links.iter().filter(|l| l.live && l.hit.is_hit())).any(|l| {
+                    let material = ctx.snapshot.tri_material[l.hit.triangle as usize];
+                    ctx.scene.materials[material as usize].is_glossy()
+                });
             });
         }
-        assert!(unlanded > 0, "every vertex was landed by");
-        assert!(rays[0] < rays[1], "shadow rays {rays:?}");
+        assert!(unlanded > 0, "{scene}: every vertex was landed by");
+        assert!(rays[0] < rays[1], "{scene}: shadow rays {rays:?}");
+        assert_eq!(
+            glossy,
+            scene == "glossy-cornell",
+            "{scene}: links landing on glossy"
+        );
+    }
+
+    /// The balls of `spheres` are finely tessellated: their corners are
+    /// clustered, one vertex of each cluster gathering for it along links
+    /// in proportion to its area and the others along none, near it and
+    /// facing its way, with its light and open-space flag. The links are
+    /// numbered in vertex order, and fewer than a clustered vertex each
+    /// with the fewest links would take.
+    #[test]
+    fn fine_triangles_corners_are_clustered_and_read_their_gathering_ones_light() {
+        let mut renderer = crate::render::test_renderer("spheres", 8);
+        let settings = GlobalSettings {
+            bounces: 4,
+            shadow_samples: 1,
+            ..GlobalSettings::default()
+        };
+        renderer.with_frame_context(0, |ctx| {
+            let mut pass = GlobalPass::new(ctx, settings);
+            assert!(
+                pass.clustered.len() > pass.vertices.len() / 2,
+                "{}",
+                pass.clustered.len()
+            );
+            let mut first_link = 0;
+            for v in &pass.vertices {
+                assert_eq!(v.first_link, first_link);
+                first_link += v.links;
+            }
+            assert_eq!(first_link as usize, pass.links.len());
+            let heads: std::collections::HashSet<u32> =
+                pass.clustered.iter().map(|&(_, head)| head).collect();
+            let unclustered = pass.vertices.len() - pass.clustered.len() - heads.len();
+            assert!(
+                (pass.links.len() as u64)
+                    < (pass.clustered.len() + heads.len()) as u64 * u64::from(MIN_LINKS)
+                        + unclustered as u64 * u64::from(settings.links),
+                "{} links",
+                pass.links.len()
+            );
+            let point = |i: u32| {
+                let v = &pass.vertices[i as usize];
+                let tri = &ctx.snapshot.triangles[v.triangle as usize];
+                let flip = if v.reverse { -1.0 } else { 1.0 };
+                (tri.point(v.at.0, v.at.1), tri.geometric_normal() * flip)
+            };
+            // At most the settings' share of the whole scene's diagonal
+            // (the pass's is the static part's or the view's, and within
+            // the budget here).
+            let spacing =
+                diagonal(ctx.snapshot.triangles.iter().flat_map(|t| t.p)) * settings.spacing;
+            for &(member, head) in &pass.clustered {
+                let (m, h) = (
+                    &pass.vertices[member as usize],
+                    &pass.vertices[head as usize],
+                );
+                assert_eq!(m.links, 0);
+                assert!(h.links >= MIN_LINKS && h.links <= settings.links);
+                assert!(!heads.contains(&member));
+                let ((pm, nm), (ph, nh)) = (point(member), point(head));
+                assert!(pm.distance(ph) < 3f32.sqrt() * spacing, "{pm} {ph}");
+                assert!(nm.dot(nh) > 0.5, "{nm} {nh}");
+            }
+            let blockers = ShadowBlockers::new(ctx, &mut Default::default());
+            pass.update(ctx, &blockers, true);
+            for &(member, head) in &pass.clustered {
+                let (m, h) = (member as usize, head as usize);
+                assert_eq!(
+                    (pass.indirect[m], pass.valid[m]),
+                    (pass.indirect[h], pass.valid[h])
+                );
+            }
+            assert!(heads
+                .iter()
+                .any(|&h| pass.indirect[h as usize].max_element() > 0.0));
+        });
     }
 
     #[test]

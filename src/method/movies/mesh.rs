@@ -5,6 +5,15 @@
 //! and the links a vertex are fitted to the pass's link budget
 //! ([`MAX_LINKS`]). A texel or a link's landing reads the vertices by
 //! Gouraud interpolation over the cell that holds it ([`Grid::weights`]).
+//!
+//! Departure, named: triangles far smaller than the spacing (a finely
+//! tessellated sphere, a scanned mesh) are not each given a vertex a
+//! corner that gathers: their corners are clustered, a cluster a cube of
+//! the spacing (`PassMesh::cluster`), and one vertex of each gathers for
+//! all. The paper's global pass is hierarchical radiosity *without*
+//! clustering, and its §6.1 estimates what clustering would save; without
+//! it a mesh of a million corners took the whole link budget at one link
+//! a corner, and coarsened every other surface to one cell a triangle.
 
 use super::global::GlobalSettings;
 use super::pieces::{self, Cells, Piece, MAX_DEPTH};
@@ -23,10 +32,10 @@ pub const MIN_LINKS: u32 = 8;
 /// most three 8-byte entries to its vertex's transport row, so 4 M links
 /// hold at most 400 MB. The built-in scenes need 0.25–0.5 M at the defaults;
 /// where a scene would need more (many triangles, or a static part so
-/// small that the spacing it sets is tiny), the grids coarsen and then the
-/// links thin until they fit, rather than the pass asking for gigabytes.
-/// A vertex keeps one link at least, so past about 1.4 M triangles the
-/// pass grows with the scene (three links a triangle at most).
+/// small that the spacing it sets is tiny), the grids coarsen, clustering
+/// more of the triangles, until they fit, rather than the pass asking for
+/// gigabytes; links thin only where the clusters' fewest links are past it
+/// (`PassMesh::number_links`; a vertex not clustered keeps one at least).
 pub const MAX_LINKS: u64 = 1 << 22;
 
 /// How finely the pass meshes a snapshot: the grid spacing (world units),
@@ -58,52 +67,61 @@ impl Meshing {
             min_links: MIN_LINKS.min(settings.links).max(1),
             view,
         };
-        // Once every triangle is one cell it stays so: only the links
-        // change from then on, not the spacing.
-        let mut coarsest = false;
+        // Coarser spacing makes more triangles fine, clustered, and counted
+        // by their area: the links needed fall with the spacing squared
+        // once all are, so this ends (a cluster's rounding up to the fewest
+        // links, not counted, is thinned by `PassMesh::number_links`).
         for _ in 0..64 {
             let needed = m.links_needed(triangles, both);
             if needed <= MAX_LINKS {
                 break;
             }
             let excess = (needed as f64 / MAX_LINKS as f64) as f32;
-            coarsest = coarsest
-                || (triangles.iter().enumerate()).all(|(i, t)| {
-                    m.grid((i as u32, t), &Piece::WHOLE)
-                        .is_some_and(|(n, _)| n == 1)
-                });
-            if coarsest {
-                if m.links == 1 {
-                    // One cell a triangle and one link a vertex: nothing
-                    // left to thin. More corners than the budget has links
-                    // (a mesh of millions of triangles) keep this much;
-                    // the bound counts shared corners once per triangle,
-                    // so the pass itself holds fewer.
-                    break;
-                }
-                // One cell a triangle already: fewer links a vertex.
-                let scale = excess.recip();
-                m.links = ((m.links as f32 * scale) as u32).max(1);
-                m.min_links = ((m.min_links as f32 * scale) as u32).clamp(1, m.links);
-            } else {
-                m.spacing *= excess.sqrt().max(1.1);
-            }
+            m.spacing *= excess.sqrt().max(1.1);
         }
         m
     }
 
-    /// The links `triangles` need, counting each triangle's corners as its
-    /// own (shared corners are one vertex in the pass: an upper bound),
-    /// twice for a triangle `both` says has a grid on each side.
+    /// The links `triangles` need, counting each gridded triangle's
+    /// corners as its own (shared corners are one vertex in the pass: an
+    /// upper bound) and each fine one ([`Self::fine`]) by its area, as its
+    /// cluster's gathering vertex counts it ([`PassMesh::cluster`]); twice
+    /// for a triangle `both` says has a grid on each side.
     fn links_needed(&self, triangles: &Placed<Triangle>, both: &[bool]) -> u64 {
-        triangles
-            .iter()
-            .enumerate()
-            .map(|(i, t)| {
+        let (gridded, fine) =
+            (triangles.iter().enumerate()).fold((0u64, 0f64), |(gridded, fine), (i, t)| {
                 let sides = 1 + u64::from(both.get(i).copied().unwrap_or(false));
-                self.piece_links((i as u32, t), &Piece::WHOLE) * sides
-            })
-            .sum()
+                match self.fine(t) {
+                    true => (
+                        gridded,
+                        fine + f64::from(self.area_links(t.area())) * sides as f64,
+                    ),
+                    false => (
+                        gridded + self.piece_links((i as u32, t), &Piece::WHOLE) * sides,
+                        fine,
+                    ),
+                }
+            });
+        gridded + fine.ceil() as u64
+    }
+
+    /// Whether `tri` is *fine*: one cell at the pass's spacing, so small
+    /// that the links its grid's vertices would have in proportion to its
+    /// area are fewer than the fewest a vertex has. Its corners are
+    /// clustered ([`PassMesh::cluster`]) rather than each raised to the
+    /// fewest links.
+    pub(super) fn fine(&self, tri: &Triangle) -> bool {
+        tri.longest_edge() <= self.spacing
+            && self.area_links(2.0 * tri.area()) < self.min_links as f32
+    }
+
+    /// The links a vertex gathering for `area` of surface has, in
+    /// proportion: a vertex of a grid whose cells are a spacing across
+    /// has `links`, and stands for about two of its cells (a third of
+    /// each of six), a spacing squared. (`grid` counts a cell's vertex the
+    /// same way.)
+    fn area_links(&self, area: f32) -> f32 {
+        self.links as f32 * area / (self.spacing * self.spacing)
     }
 
     /// The links of piece `piece` of `tri` and of the pieces it splits
@@ -241,6 +259,27 @@ fn row_start(n: u32, b: u32) -> u32 {
     b * (n + 1) - b * (b.max(1) - 1) / 2
 }
 
+/// Which way `normal` faces, as one of [`FACINGS`]² cells of its
+/// octahedral map (the unit sphere folded onto a square): cells some 30°
+/// across, so that a cluster on a ball about as small as the spacing
+/// holds the corners that face about one way, not half the ball.
+fn facing(normal: Vec3) -> u16 {
+    let n = normal / normal.abs().element_sum().max(f32::MIN_POSITIVE);
+    let folded = if n.z >= 0.0 {
+        glam::Vec2::new(n.x, n.y)
+    } else {
+        (glam::Vec2::ONE - glam::Vec2::new(n.y, n.x).abs())
+            * glam::Vec2::new(n.x.signum(), n.y.signum())
+    };
+    let cell = ((folded + 1.0) * 0.5 * FACINGS as f32)
+        .floor()
+        .clamp(glam::Vec2::ZERO, glam::Vec2::splat(FACINGS as f32 - 1.0));
+    cell.y as u16 * FACINGS + cell.x as u16
+}
+
+/// Cells an edge of [`facing`]'s octahedral map.
+const FACINGS: u16 = 8;
+
 /// The pass's vertices over the grids of a snapshot's triangles.
 pub(super) struct PassMesh {
     /// Per triangle, its cells.
@@ -256,15 +295,24 @@ pub(super) struct PassMesh {
     /// The links of all vertices: at most `MAX_LINKS`, or three a
     /// triangle, so within `u32`.
     pub(super) link_count: u32,
+    /// Each vertex of a cluster but the one that gathers for it, and that
+    /// one ([`Self::cluster`]).
+    pub(super) clustered: Vec<(u32, u32)>,
+    /// Per vertex while the grids are made: the area it stands for of the
+    /// fine triangles it is a corner of (a third of each), `None` where a
+    /// triangle not fine has it too.
+    fine_area: Vec<Option<f32>>,
 }
 
 impl PassMesh {
     /// The grids of `snapshot`'s triangles (`corners_in_object`: their
     /// corners in their objects' own space), a second one on the triangles
-    /// `both` names.
+    /// `both` names, the corners of fine ones clustered within each
+    /// component (`component`: per triangle, its [`super::sides`]
+    /// component).
     pub(super) fn new(
         snapshot: &crate::scene::Snapshot,
-        corners_in_object: &[ObjectCorners],
+        (corners_in_object, component): (&[ObjectCorners], &[u32]),
         meshing: &Meshing,
         both: &[bool],
     ) -> Self {
@@ -275,6 +323,8 @@ impl PassMesh {
             vertex_of: Vec::new(),
             vertices: Vec::new(),
             link_count: 0,
+            clustered: Vec::new(),
+            fine_area: Vec::new(),
         };
         // Mesh vertices: a triangle corner at the same point of the same
         // object with the same shading normal (on the same side) is one
@@ -304,7 +354,100 @@ impl PassMesh {
             let reverse = reverse.then(|| add(&mut mesh, id, true));
             mesh.reverse_grids.push(reverse);
         }
+        mesh.cluster(snapshot, meshing, component);
+        mesh.number_links();
         mesh
+    }
+
+    /// Clusters the vertices that only fine triangles have
+    /// ([`Meshing::fine`]): those of one component, on one side, facing
+    /// about one way (their triangle's normal in one cell of [`facing`])
+    /// and within one cube a spacing across (time 0's places)
+    /// are a cluster. Its vertex nearest its centre gathers for all, along
+    /// links in proportion to their area as a grid's vertex has; the others gather
+    /// along none and take its light ([`Self::clustered`]). Keyed by
+    /// component, the cluster's sides are solved together; by facing, the
+    /// two sides of a thin part, or a box's faces meeting at an edge, are
+    /// apart.
+    fn cluster(&mut self, snapshot: &crate::scene::Snapshot, meshing: &Meshing, component: &[u32]) {
+        let place = |v: &Vertex| {
+            let tri = &snapshot.triangles[v.triangle as usize];
+            (tri.point(v.at.0, v.at.1), tri.geometric_normal())
+        };
+        let mut index: HashMap<(u32, bool, [i32; 3], u16), usize> = HashMap::new();
+        let mut clusters: Vec<Vec<u32>> = Vec::new();
+        for (i, v) in self.vertices.iter().enumerate() {
+            if self.fine_area[i].is_none() {
+                continue;
+            }
+            let (p, normal) = place(v);
+            let normal = if v.reverse { -normal } else { normal };
+            let cube = (p / meshing.spacing).floor().as_ivec3().to_array();
+            let key = (
+                component[v.triangle as usize],
+                v.reverse,
+                cube,
+                facing(normal),
+            );
+            let k = *index.entry(key).or_insert_with(|| {
+                clusters.push(Vec::new());
+                clusters.len() - 1
+            });
+            clusters[k].push(i as u32);
+        }
+        for members in clusters {
+            let area = |i: u32| self.fine_area[i as usize].unwrap_or(0.0);
+            let total: f32 = members.iter().map(|&i| area(i)).sum();
+            // The area-weighted centre (the mean place where the cluster
+            // has no area), and the vertex nearest it gathers: a first
+            // vertex in mesh order sat at a cube's corner, and the light it
+            // gathered there was off the cluster's mean (a room of tiny
+            // triangles read 0.5 % dark against `path`).
+            let weight = |i: u32| if total > 0.0 { area(i) } else { 1.0 };
+            let centre = members
+                .iter()
+                .map(|&i| place(&self.vertices[i as usize]).0 * weight(i))
+                .sum::<Vec3>()
+                / members.iter().map(|&i| weight(i)).sum::<f32>();
+            let distance = |i: u32| place(&self.vertices[i as usize]).0.distance_squared(centre);
+            let head = (members.iter().copied())
+                .min_by(|&a, &b| distance(a).total_cmp(&distance(b)).then(a.cmp(&b)))
+                .expect("a cluster has a vertex");
+            for &m in members.iter().filter(|&&m| m != head) {
+                self.clustered.push((m, head));
+                self.fine_area[m as usize] = Some(0.0);
+            }
+            self.fine_area[head as usize] = Some(total);
+        }
+        for (v, area) in self.vertices.iter_mut().zip(&self.fine_area) {
+            if let Some(area) = area {
+                v.links = (meshing.area_links(*area).ceil() as u32)
+                    .clamp(meshing.min_links, meshing.links);
+            }
+        }
+        for &(member, _) in &self.clustered {
+            self.vertices[member as usize].links = 0;
+        }
+        self.fine_area = Vec::new();
+    }
+
+    /// Numbers the vertices' links in vertex order, thinned first where
+    /// they are past [`MAX_LINKS`] (the budget counts a cluster by its
+    /// area, not the fewest links it has: [`Meshing::links_needed`]).
+    fn number_links(&mut self) {
+        let total: u64 = self.vertices.iter().map(|v| u64::from(v.links)).sum();
+        if total > MAX_LINKS {
+            let scale = MAX_LINKS as f64 / total as f64;
+            for v in self.vertices.iter_mut().filter(|v| v.links > 0) {
+                v.links = ((f64::from(v.links) * scale) as u32).max(1);
+            }
+        }
+        let mut next = 0;
+        for v in &mut self.vertices {
+            v.first_link = next;
+            next += v.links;
+        }
+        self.link_count = next;
     }
 
     /// Adds the cells of triangle `id` (its corners `at` in its object's
@@ -337,7 +480,8 @@ impl PassMesh {
     fn add_piece(&mut self, side: &mut GridSide, meshing: &Meshing, piece: &Piece) -> Cells {
         let tri = &side.snapshot.triangles[side.id];
         if let Some((n, links)) = meshing.grid((side.id as u32, tri), piece) {
-            return Cells::Grid(self.add_grid(side, piece, n, links));
+            let fine = *piece == Piece::WHOLE && meshing.fine(tri);
+            return Cells::Grid(self.add_grid(side, piece, (n, links), fine));
         }
         let first = self.pieces.len();
         self.pieces.extend([Cells::Split(0); 4]);
@@ -349,8 +493,15 @@ impl PassMesh {
 
     /// Adds the grid of `n` segments an edge over `piece` of a triangle
     /// side, `links` a vertex: its slots, and the vertices they do not
-    /// share.
-    fn add_grid(&mut self, side: &mut GridSide, piece: &Piece, n: u32, links: u32) -> Grid {
+    /// share. `fine`: the triangle is fine ([`Meshing::fine`]), its
+    /// vertices clustered unless another triangle has them too.
+    fn add_grid(
+        &mut self,
+        side: &mut GridSide,
+        piece: &Piece,
+        (n, links): (u32, u32),
+        fine: bool,
+    ) -> Grid {
         let GridSide {
             snapshot,
             at,
@@ -366,6 +517,10 @@ impl PassMesh {
         let object = snapshot.tri_object[id];
         let placing = snapshot.object_to_world[object as usize].determinant();
         let collapsed = placing == 0.0 || !placing.is_finite();
+        // Not clustered where the object is collapsed: its corners, all at
+        // one point, are told apart in its own space only.
+        let fine = fine && !collapsed;
+        let third = tri.area() / 3.0;
         for b in 0..=n {
             for a in 0..=n - b {
                 let point = piece.grid_point(n, a, b);
@@ -375,9 +530,9 @@ impl PassMesh {
                         at: point,
                         reverse,
                         links,
-                        first_link: self.link_count,
+                        // Numbered once the mesh is clustered.
+                        first_link: 0,
                     });
-                    self.link_count += links;
                     self.vertices.len() as u32 - 1
                 };
                 // Triangle corners and piece edges lie on a grid's edge.
@@ -404,6 +559,9 @@ impl PassMesh {
                     None => new_vertex(),
                 };
                 self.vertex_of.push(vertex);
+                self.fine_area.resize(self.vertices.len(), Some(0.0));
+                let area = &mut self.fine_area[vertex as usize];
+                *area = area.filter(|_| fine).map(|a| a + third);
             }
         }
         grid
@@ -448,6 +606,37 @@ pub(super) struct Vertex {
 mod tests {
     use super::*;
 
+    /// Every facing cell is some direction's, and two directions in one
+    /// cell are within 60° of each other (over a dense set of directions).
+    #[test]
+    fn one_facing_cell_holds_directions_about_one_way() {
+        let dirs: Vec<Vec3> = (0..200)
+            .flat_map(|i| (0..100).map(move |j| (i, j)))
+            .map(|(i, j)| {
+                let phi = i as f32 / 200.0 * std::f32::consts::TAU;
+                let z = (j as f32 + 0.5) / 50.0 - 1.0;
+                let r = (1.0 - z * z).sqrt();
+                Vec3::new(r * phi.cos(), r * phi.sin(), z)
+            })
+            .chain([Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z])
+            .collect();
+        let mut cells: HashMap<u16, Vec<Vec3>> = HashMap::new();
+        for d in dirs {
+            cells.entry(facing(d)).or_default().push(d);
+        }
+        assert_eq!(cells.len(), usize::from(FACINGS * FACINGS));
+        for (cell, dirs) in &cells {
+            let widest = (dirs
+                .iter()
+                .flat_map(|a| dirs.iter().map(move |b| a.dot(*b))))
+            .fold(1.0f32, f32::min);
+            assert!(
+                widest > 0.5,
+                "cell {cell}: directions {widest} apart (cosine)"
+            );
+        }
+    }
+
     /// A scene within the budget keeps the settings' meshing; one far over
     /// it (a static part a thousandth of its size, so a tiny spacing; or
     /// more triangles than the budget has links) is coarsened to fit.
@@ -488,23 +677,29 @@ mod tests {
             .links_needed(&room, &[])
                 > MAX_LINKS
         );
+        // A million triangles a thousandth of the spacing: fine, counted by
+        // their area, the settings' meshing kept.
         let many: Vec<_> = (0..1_000_000)
             .map(|i| quad(i as f32 * 1e-3, 1e-3))
             .collect();
         let many: Placed<_> = many.into();
-        let thinned = Meshing::fitting(&many, &[], &settings, (1000.0, None));
-        assert!(thinned.links_needed(&many, &[]) <= MAX_LINKS, "{thinned:?}");
-        assert!(thinned.links >= 1 && thinned.min_links >= 1);
-        // More corners than the budget has links, at one link each: the
-        // least there is, kept, rather than a spacing coarsened for nothing.
-        let over: Placed<_> = (0..MAX_LINKS / 2)
-            .map(|i| quad(i as f32 * 1e-3, 1e-3))
+        let kept = Meshing::fitting(&many, &[], &settings, (1000.0, None));
+        assert_eq!((kept.spacing, kept.links), (1000.0 / 32.0, 128));
+        let area = 1e6 * 0.5e-6;
+        let by_area = 128.0 * area / (kept.spacing * kept.spacing);
+        assert_eq!(kept.links_needed(&many, &[]), by_area.ceil() as u64);
+        // Two million triangles a spacing across, one cell each but not
+        // fine: the spacing coarsens until they are, the links a vertex
+        // kept.
+        let coarse: Placed<_> = (0..2_000_000)
+            .map(|i| quad(i as f32 * 10.0, 10.0))
             .collect::<Vec<_>>()
             .into();
-        let least = Meshing::fitting(&over, &[], &settings, (1000.0, None));
-        assert_eq!((least.links, least.min_links), (1, 1), "{least:?}");
-        assert_eq!(least.links_needed(&over, &[]), 3 * (MAX_LINKS / 2));
-        assert_eq!(least.spacing, 1000.0 / 32.0, "each a cell already");
+        let clustered = Meshing::fitting(&coarse, &[], &settings, (320.0, None));
+        assert!(clustered.spacing > 10.0, "{clustered:?}");
+        assert!(clustered.fine(&coarse[0]), "{clustered:?}");
+        assert_eq!((clustered.links, clustered.min_links), (128, MIN_LINKS));
+        assert!(clustered.links_needed(&coarse, &[]) <= MAX_LINKS);
     }
 
     /// A triangle 600 m across that the camera sees near its corner is

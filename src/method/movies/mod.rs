@@ -26,7 +26,9 @@
 //! take the direct light at their hits where it changes sharply across
 //! the cell they land in rather than refining the mesh ([`sharp`]),
 //! whose triangles too large for one grid are split towards what the
-//! camera sees rather than by the links' error ([`pieces`]), and
+//! camera sees rather than by the links' error ([`pieces`]), whose
+//! triangles far smaller than its spacing have their corners clustered,
+//! one vertex gathering for each cluster ([`mesh`]), and
 //! carries
 //! glossy surfaces, which the paper's diffuse radiosity has not: the
 //! direct light a lobe reflects goes along each link where the lobe

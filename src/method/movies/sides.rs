@@ -150,6 +150,11 @@ impl SolvedSides {
         changed
     }
 
+    /// Per triangle, its component.
+    pub fn components(&self) -> &[u32] {
+        &self.component
+    }
+
     /// The component of triangle `id`.
     pub fn component(&self, id: u32) -> usize {
         self.component[id as usize] as usize
