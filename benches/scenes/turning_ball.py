@@ -42,8 +42,10 @@ def turning_ball(n):
     q = oquad([(-0.2, 1.98, -0.2), (0.2, 1.98, -0.2), (0.2, 1.98, 0.2), (-0.2, 1.98, 0.2)], (0, -1, 0))
     panel = S.node('light', mesh=S.mesh('light', [(*q, 'u16', light)]))
     S.anim(panel, 'translation', [0, 1], [(-0.4, 0, 0), (0.4, 0, 0)])
-    eye = (0, 1, 2.9)
-    S.node('camera', t=eye, r=look_at_quat(eye, (0, 0.8, 0)), camera=True)
+    # Inside the room, by its front wall: from outside (z = 2.9, before
+    # 2026-12-04) the camera saw the closed room's unlit outside, black.
+    eye = (0, 1, 0.95)
+    S.node('camera', t=eye, r=look_at_quat(eye, (0, 0.5, 0)), camera=True)
     S.camera = dict(yfov=0.9, aspect=1.0, znear=0.05, zfar=100.0)
     return S
 
