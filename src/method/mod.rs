@@ -206,11 +206,12 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // t0+1 is evaluated by default at frames after which a light moves
         // (`trc::NextDirect::MovingLights`, 2026-12-02). 14: and at the end
         // of a record's life, and between where it changed by more than
-        // `a_t` there (`later::LitFrames`, 2026-12-02).
-        "trc" => 14,
-        // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6: as
+        // `a_t` there (`later::LitFrames`, 2026-12-02). 15: as every
+        // method's next.
+        "trc" => 15,
+        // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6, 7: as
         // below.
-        "ic" => 6,
+        "ic" => 7,
         // `tcg` 4: samples' ages count past 15 frames (to 1038), so the
         // `2^age` draw tells the oldest apart (2026-11-30). 5: a moving
         // record's samples are tested for stale light from where the
@@ -223,8 +224,9 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // too (`tcg::arrived`, 2026-12-02). 11: a sample is stale where its
         // light may have changed on any normal (`UnshadowedLights::change_at`),
         // and so are its neighbours across an edge
-        // (`tcg::select::with_neighbours`, 2026-12-02).
-        "tcg" => 11,
+        // (`tcg::select::with_neighbours`, 2026-12-02). 12: as every
+        // method's next.
+        "tcg" => 12,
         // `movies` 3: a kept link that missed everything covers its whole
         // ray, so an object that later moves far into it is seen
         // (`global::LinkReach`, 2026-11-30). 4: as every method's next.
@@ -247,8 +249,9 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // large triangle the camera sees is split into pieces
         // (`pieces`), patches go seven levels down (`patch::MAX_LEVEL`),
         // and rays that meet the sky no longer lift the grid spacing's
-        // bound (`global::meshing_size`, 2026-12-02).
-        "movies" => 12,
+        // bound (`global::meshing_size`, 2026-12-02). 13: as every
+        // method's next.
+        "movies" => 13,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with
@@ -266,8 +269,13 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // is smaller than the scene (`global::meshing_size`, 2026-12-01);
         // other scenes keep their frames. 5 (all methods): directional
         // lights are read and lit by, where files with them rendered as
-        // if they had none (2026-12-01).
-        _ => 5,
+        // if they had none (2026-12-01). 6 (all methods): a camera ray sees
+        // the emitter it meets unless a surface hides it nearer than
+        // `SHADOW_EPSILON` of its distance, not one ulp: on a GPU whose t
+        // is a few ulps below the CPU's the emitter hid itself
+        // (`pixels::short_of_emitter`, 2026-12-04); frames change only
+        // where a surface lies that close in front of a seen light.
+        _ => 6,
     }
 }
 

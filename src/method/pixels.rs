@@ -31,7 +31,7 @@
 
 use super::FrameContext;
 use crate::accel::ray_hits_triangle;
-use crate::backend::{Hit, Ray};
+use crate::backend::{Hit, Ray, SHADOW_EPSILON};
 use crate::light::{emitting_cosine, LightSampler};
 use crate::sampling::{streams, LightChoice, Rng, SampleKey, Stratified2d};
 use crate::scene::Snapshot;
@@ -151,10 +151,10 @@ const EMITTERS_TESTED_ONE_BY_ONE: usize = 16;
 /// stopped just short of the emitter, cheaper than a closest-hit one. On a
 /// light's rim about half of the coverage rays miss it, and the coverage
 /// rays are the render pass's largest ray count after the primary and
-/// shadow rays. The answer is [`sees_emitter`]'s but for exact ties: a
-/// surface at exactly the emitter's distance along the ray (coplanar with
-/// it) hides it from the closest-hit query or not by traversal order, and
-/// never here.
+/// shadow rays. The answer is [`sees_emitter`]'s but for near ties: a
+/// surface within [`SHADOW_EPSILON`] of the emitter's distance along the
+/// ray (coplanar with it) hides it from the closest-hit query or not by
+/// traversal order, and never here (`short_of_emitter`).
 pub fn sees_emitter_first(ctx: &FrameContext, rays: &[Ray]) -> Vec<bool> {
     let emitters = &ctx.emitters_in_view;
     if emitters.is_empty() {
@@ -183,7 +183,7 @@ pub fn sees_emitter_first(ctx: &FrameContext, rays: &[Ray]) -> Vec<bool> {
             .min_by(|a, b| a.0.total_cmp(&b.0));
         if let Some((t, _)) = nearest.filter(|&(_, e)| emits_towards(ctx, e, ray)) {
             unless_occluded.push(Ray {
-                tmax: just_below(t),
+                tmax: short_of_emitter(t),
                 ..*ray
             });
             of_ray.push(i);
@@ -412,15 +412,19 @@ impl EmitterEdges {
     }
 }
 
-/// The largest `f32` below a positive finite `t` (`f32::next_down`, which
-/// needs a newer Rust than the crate's minimum); `t` itself when it is 0
-/// (a camera on an emitter).
-fn just_below(t: f32) -> f32 {
-    if t > 0.0 {
-        f32::from_bits(t.to_bits() - 1)
-    } else {
-        t
-    }
+/// Where the any-hit query of a ray that meets an emitter at `t` stops:
+/// short of it by [`SHADOW_EPSILON`] of `t`, as a shadow segment stops
+/// short of the light it aims at. The emitter's `t` is the CPU's
+/// (`ray_hits_triangle`), the query the backend's: a GPU that fuses
+/// multiply-adds finds the same emitter a few ulps nearer, and a query
+/// stopped one ulp short (as it once was) then counted the emitter as its
+/// own occluder on about half of these rays (on an H200, cube-in-box's
+/// light rim lost coverage and flickered; lavapipe's t equals the CPU's).
+/// A surface within 1e-4 of `t` in front of the emitter no longer hides
+/// it; such a surface would z-fight with it anyway. 0 stays 0 (a camera
+/// on an emitter).
+fn short_of_emitter(t: f32) -> f32 {
+    t * (1.0 - SHADOW_EPSILON)
 }
 
 /// The emitting triangles of `snapshot` that may show on a film of aspect
