@@ -322,6 +322,9 @@ fn tiny_end_to_end_run() {
     bench::run(&other).unwrap();
     let info = std::fs::read_to_string(&json).unwrap();
     assert!(info.contains("\"spp\": 32"), "{info}");
+    // Rendered on the CPU whatever the runs use: a GPU's defect would
+    // otherwise be in its own reference too.
+    assert!(info.contains("\"backend\": \"cpu\""), "{info}");
 
     // One an earlier `path` rendered (no revision recorded) is rendered
     // again: only a render writes reference.json.

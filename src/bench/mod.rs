@@ -97,7 +97,8 @@ pub struct BenchOptions {
     pub store_size: bool,
     /// The ray backends every run is rendered with, one run per backend
     /// (`--backends cpu,gpu`: GPU against CPU in one invocation, the
-    /// ratio read off one table). The reference is rendered with `auto`.
+    /// ratio read off one table). The reference is rendered on the CPU
+    /// (`reference::REFERENCE_BACKEND`).
     pub backends: Vec<BackendChoice>,
     /// Refuse, before anything renders, a bench one of whose runs has an
     /// estimated peak memory (`render::memory::peak_bytes`, on its scene's

@@ -43,7 +43,21 @@ struct ReferenceInfo {
     /// is rendered again, as its frames are no longer what `path` makes.
     #[serde(default)]
     path_revision: u64,
+    /// The backend the reference was rendered on ([`REFERENCE_BACKEND`]; a
+    /// reference from before it was fixed, rendered with `auto`, perhaps on
+    /// a GPU, is rendered again).
+    #[serde(default)]
+    backend: String,
 }
+
+/// The backend every reference is rendered on: the CPU, whatever the runs
+/// are rendered on. A reference must not share the defects of what it
+/// measures: on an H200 the GPU's light rims were wrong (fixed since,
+/// `pixels::short_of_emitter`), its reference (`auto` then) had the same
+/// rims, and the GPU's runs came out 2.5 times more accurate than the
+/// CPU's same runs. The GPU exists to be checked against the CPU, not
+/// the other way round.
+const REFERENCE_BACKEND: BackendChoice = BackendChoice::Cpu;
 
 /// Renders the reference of `scene` into `dir` unless a matching one is
 /// there already.
@@ -63,6 +77,7 @@ pub(super) fn ensure_reference(opts: &BenchOptions, scene: &BenchScene, dir: &Pa
         light_masks: true,
         edge_coverage_factor: frame_settings(opts, true).edge_coverage_factor,
         path_revision: crate::method::algorithm_revision("path"),
+        backend: REFERENCE_BACKEND.name().into(),
     };
     let json = dir.join("reference.json");
     let have = std::fs::read_to_string(&json)
@@ -104,7 +119,7 @@ pub(super) fn ensure_reference(opts: &BenchOptions, scene: &BenchScene, dir: &Pa
     let mut renderer = Renderer::new(
         scene.scene.clone(),
         settings.instantiate(),
-        render::make_backend(BackendChoice::Auto)?,
+        render::make_backend(REFERENCE_BACKEND)?,
         frame_settings(opts, true),
     );
     // Stopped, it leaves no reference.json: the next bench renders it again.
