@@ -70,12 +70,16 @@ pub(crate) fn read_back(
         })?;
     let waited = start.elapsed();
     let start = Instant::now();
-    // Once the wait has returned, the callback has run or is running on
-    // the thread whose poll took it up: it comes.
-    match rx.recv() {
-        Ok(Ok(())) => {}
-        Ok(Err(e)) => return Err(format!("cannot map the {what}: {e}")),
-        Err(_) => return Err(format!("the {what} were never mapped")),
+    match mapped(device, &rx, limit) {
+        Some(Ok(())) => {}
+        Some(Err(e)) => return Err(format!("cannot map the {what}: {e}")),
+        None => {
+            return Err(format!(
+                "the {what} were not mapped within {:.3} s of the GPU finishing them: \
+                 the device or its driver hangs",
+                limit.as_secs_f64()
+            ))
+        }
     }
     if let Some(e) = errors.lock().ok().and_then(|s| s.clone()) {
         staging.unmap();
@@ -89,6 +93,36 @@ pub(crate) fn read_back(
     }
     staging.unmap();
     Ok((waited, start.elapsed()))
+}
+
+/// The answer of a `map_async` whose submission is done: wgpu runs the
+/// callback in whichever thread's poll finds the buffer ready, which is
+/// normally the wait just made or another thread's poll at the same time.
+/// Should neither take it up (a driver that signals the submission before
+/// the buffer is free), this thread polls again, without blocking, until
+/// it comes or `limit` has passed (`None`: the backend then fails rather
+/// than wait for ever, as `WAIT_LIMIT` is for). A dropped sender (the
+/// buffer destroyed) is an error too.
+fn mapped(
+    device: &wgpu::Device,
+    rx: &std::sync::mpsc::Receiver<Result<(), wgpu::BufferAsyncError>>,
+    limit: Duration,
+) -> Option<Result<(), String>> {
+    use std::sync::mpsc::RecvTimeoutError;
+    const RETRY: Duration = Duration::from_millis(1);
+    let start = Instant::now();
+    loop {
+        match rx.recv_timeout(RETRY) {
+            Ok(answer) => return Some(answer.map_err(|e| e.to_string())),
+            Err(RecvTimeoutError::Disconnected) => {
+                return Some(Err("the mapping was cancelled".into()))
+            }
+            Err(RecvTimeoutError::Timeout) if start.elapsed() >= limit => return None,
+            Err(RecvTimeoutError::Timeout) => {
+                let _ = device.poll(wgpu::PollType::Poll);
+            }
+        }
+    }
 }
 
 pub(crate) fn layout_entry(
