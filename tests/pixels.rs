@@ -7,7 +7,7 @@ mod common;
 
 use glam::Vec3;
 use radcache::backend::cpu::CpuBackend;
-use radcache::backend::{Hit, Ray, RayBackend, RayCounts};
+use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::cache::gather::Strata;
 use radcache::film::Film;
 use radcache::method::ic::{IcSettings, IrradianceCaching};
@@ -16,7 +16,7 @@ use radcache::method::pixels::{sees_emitter, sees_emitter_first, DEFAULT_EDGE_CO
 use radcache::method::Method;
 use radcache::render::{FrameSettings, Renderer};
 use radcache::sampling::{cosine_hemisphere, Rng};
-use radcache::scene::{Material, Mesh, Scene, Snapshot};
+use radcache::scene::{Material, Mesh, Scene};
 
 const SIZE: u32 = 24;
 
@@ -98,46 +98,9 @@ fn only_pixels_on_a_seen_lights_edge_take_more_samples_and_their_error_falls() {
     }
 }
 
-/// The CPU backend as a GPU that fuses multiply-adds looks to the camera
-/// pass: its any-hit queries reach a few ulps past their `tmax`, as they
-/// do where its `t` of a surface comes out a few ulps below the CPU's (on
-/// an H200, the `t` of 58 % of the hits of `benches/gpu_rays.rs` differ
-/// from the CPU's in their last bits).
-struct NearerHits(CpuBackend);
-
-/// How far past `tmax` [`NearerHits`] finds surfaces, relative to it.
-const NEARER_BY: f32 = 8.0 * f32::EPSILON;
-
-impl RayBackend for NearerHits {
-    fn name(&self) -> String {
-        "cpu, hits a few ulps nearer".into()
-    }
-    fn set_geometry(&mut self, snapshot: &Snapshot) {
-        self.0.set_geometry(snapshot);
-    }
-    fn closest_hit(&self, rays: &[Ray], hits: &mut [Hit]) {
-        self.0.closest_hit(rays, hits);
-    }
-    fn any_hit(&self, rays: &[Ray], occluded: &mut [bool]) {
-        let longer: Vec<Ray> = rays
-            .iter()
-            .map(|r| Ray {
-                tmax: r.tmax + r.tmax.abs() * NEARER_BY,
-                ..*r
-            })
-            .collect();
-        self.0.any_hit(&longer, occluded);
-    }
-    fn ray_counts(&self) -> RayCounts {
-        self.0.ray_counts()
-    }
-    fn preferred_batch(&self) -> usize {
-        self.0.preferred_batch()
-    }
-}
-
 /// The light's rim does not hang on the last bits of the backend's `t`:
-/// on [`NearerHits`] every pixel of cube-in-box (its ceiling light in
+/// on `common::UlpHits` (any-hit queries that reach a few ulps further)
+/// every pixel of cube-in-box (its ceiling light in
 /// view) is what the CPU backend renders, bit for bit. When the coverage
 /// rays' any-hit query stopped one ulp short of the emitter, the emitter
 /// hid itself from about half of them on such a backend (an H200): the rim
@@ -150,7 +113,7 @@ fn a_backend_whose_hits_differ_by_ulps_sees_the_same_light_rim() {
         let nearer = render_on(
             method(4),
             DEFAULT_EDGE_COVERAGE_FACTOR,
-            Box::new(NearerHits(CpuBackend::new())),
+            Box::new(common::UlpHits::any_hit_only()),
         );
         let differ = (0..cpu.pixels.len())
             .filter(|&i| cpu.pixels[i] != nearer.pixels[i])
