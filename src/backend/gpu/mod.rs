@@ -293,7 +293,7 @@ fn usize_of(x: u64) -> usize {
 
 impl GpuBackend {
     /// [`Self::with_layout`] with the layout `RADCACHE_GPU_BVH` names
-    /// (BVH2 when unset).
+    /// (the default, CWBVH, when unset).
     pub fn new(policy: AdapterPolicy) -> Result<Self, GpuError> {
         Self::with_layout(policy, GpuLayout::from_env()?)
     }
