@@ -5,6 +5,7 @@
 
 use super::direct::{DirectChange, FirstHit, ShadowGeometry};
 use super::{Gathered, NextDirect};
+use crate::accel::TriangleBvh;
 use crate::backend::Hit;
 use crate::cache::gather::{HemisphereSamples, Strata};
 use crate::method::unshadowed::UnshadowedLights;
@@ -121,6 +122,12 @@ impl NextFrame {
     /// ([`crate::method::FrameContext::next_snapshot`]).
     pub(super) fn into_later_snapshot(self) -> Option<Snapshot> {
         self.direct.map(DirectChange::into_later)
+    }
+
+    /// The moving triangles' BVH of the frame the direct light is
+    /// evaluated again at (`None`: it is not, or nothing moves).
+    pub(super) fn later_moving_bvh(&self) -> Option<&Arc<TriangleBvh>> {
+        self.direct.as_ref()?.later_moving()
     }
 
     /// Whether the direct light at t0+1 is evaluated (`next_direct`).

@@ -51,6 +51,7 @@
 //! [`LATER_FRAMES`] frames is checked over its first frames only.
 
 use super::estimate::{rigid_motion, NextFrame, Reprojection};
+use crate::accel::TriangleBvh;
 use crate::cache::gather::{HemisphereSamples, Strata};
 use crate::method::arrivals::{moving_bounds, Arrivals, OwnBounds};
 use crate::method::unshadowed::{LightsByFrame, UnshadowedLights};
@@ -114,6 +115,13 @@ struct LitFrame {
 }
 
 impl LitFrames {
+    /// The moving triangles' BVHs of the frames some record's check built.
+    fn moving_bvhs(&self) -> Vec<Arc<TriangleBvh>> {
+        (self.frames.values())
+            .filter_map(|f| f.next.get()?.as_ref()?.later_moving_bvh().cloned())
+            .collect()
+    }
+
     /// The last frame from `last_valid` back to t0+1 where `record`'s
     /// samples, reprojected with their direct light evaluated again, do not
     /// `exceed` the temporal accuracy: `last_valid` itself where they do
@@ -174,6 +182,13 @@ struct LaterFrame {
 }
 
 impl LaterFrames {
+    /// The moving triangles' BVHs the records' checks of their direct
+    /// light at later frames built (`direct::ShadowGeometry` holds them
+    /// for the next frame's).
+    pub(super) fn lit_moving_bvhs(&self) -> Vec<Arc<TriangleBvh>> {
+        self.lit.as_ref().map_or(Vec::new(), LitFrames::moving_bvhs)
+    }
+
     /// The frames after `ctx.frame + 1` in a life of `max_life` frames
     /// from `ctx.frame` (at most [`LATER_FRAMES`]), `next` its view of
     /// `ctx.frame + 1`; `ahead` keeps the later frames' transforms and
