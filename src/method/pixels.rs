@@ -416,10 +416,10 @@ impl EmitterEdges {
 /// short of it by [`SHADOW_EPSILON`] of `t`, as a shadow segment stops
 /// short of the light it aims at. The emitter's `t` is the CPU's
 /// (`ray_hits_triangle`), the query the backend's: a GPU that fuses
-/// multiply-adds finds the same emitter a few ulps nearer, and a query
+/// multiply-adds may find the same emitter a few ulps nearer, and a query
 /// stopped one ulp short (as it once was) then counted the emitter as its
-/// own occluder on about half of these rays (on an H200, cube-in-box's
-/// light rim lost coverage and flickered; lavapipe's t equals the CPU's).
+/// own occluder (on an H200, cube-in-box's light rim lost coverage and
+/// flickered; lavapipe's t equals the CPU's).
 /// A surface within 1e-4 of `t` in front of the emitter no longer hides
 /// it; such a surface would z-fight with it anyway. 0 stays 0 (a camera
 /// on an emitter).
