@@ -52,16 +52,6 @@ pub(super) struct ShadowGeometry {
     /// The moving triangles' BVH of frame `.0` (`None` inside: there are
     /// none).
     next_moving: Option<(u32, Option<Arc<TriangleBvh>>)>,
-    /// The moving triangles' BVHs of the later frames the last frame's
-    /// records checked their direct light at (`super::later`'s lit
-    /// frames), held through the next frame so that its checks take them
-    /// ([`moving_bvh`] finds a BVH some holder keeps) instead of building
-    /// them again: the records of consecutive frames check mostly the same
-    /// frames. On a 1,046,528-triangle ball turning under a moving light
-    /// (camera inside its room) frame 0 built 19 of them and frames 1–4
-    /// between 5 and 17, 80 % of `trc`'s time; now a frame builds only
-    /// those the last one did not check.
-    pub(super) later_moving: Vec<Arc<TriangleBvh>>,
 }
 
 impl ShadowGeometry {
@@ -91,13 +81,6 @@ impl ShadowGeometry {
     pub(super) fn forget_moving(&mut self) {
         self.next_moving = None;
     }
-
-    /// Holds `bvhs`, the later frames' moving BVHs of the frame just made,
-    /// through the next frame, letting go of the ones held before (those
-    /// the frame just made took again are among `bvhs`).
-    pub(super) fn keep_later_moving(&mut self, bvhs: Vec<Arc<TriangleBvh>>) {
-        self.later_moving = bvhs;
-    }
 }
 
 /// The geometry and lights of t0 and t0+1 that the direct light at a
@@ -106,12 +89,43 @@ pub(super) struct DirectChange {
     /// The static triangles' BVH where the CPU backend would split them
     /// off (`None`: none, or few enough to be in `moving`, [`moving_bvh`]).
     statics: Option<Arc<TriangleBvh>>,
-    /// The moving objects' triangles at t0 and at t0+1 (t0's shared with
-    /// the later frames' comparisons, [`Self::to_frame`]).
-    moving: [Option<Arc<TriangleBvh>>; 2],
-    later: Snapshot,
-    later_lights: LightSampler,
+    /// The moving objects' triangles at t0 (shared with the later frames'
+    /// comparisons, [`Self::to_frame`]).
+    moving_now: Option<Arc<TriangleBvh>>,
+    /// The frame compared with t0.
+    later: Arc<LaterGeometry>,
     lights_move: bool,
+}
+
+/// A frame's geometry and lights as the direct light at a sample's first
+/// hit needs them there: made once for each frame that some record checks
+/// (`super::later::Ahead` holds them while a later frame's records may
+/// still check that frame). Each was otherwise made again by every frame
+/// whose records checked it, its BVH by those after the next: on a
+/// 1,046,528-triangle ball turning under a moving light (camera inside
+/// its room), placing the ball's triangles and building their BVHs for
+/// the later frames took 70 % of `trc`'s time.
+pub(super) struct LaterGeometry {
+    snapshot: Snapshot,
+    /// Its moving triangles' BVH ([`moving_bvh`]).
+    moving: Option<Arc<TriangleBvh>>,
+    lights: LightSampler,
+}
+
+impl LaterGeometry {
+    /// The geometry of `snapshot`, a frame of `ctx`'s scene.
+    pub(super) fn new(ctx: &FrameContext, snapshot: Snapshot) -> Self {
+        LaterGeometry {
+            moving: moving_bvh(&snapshot),
+            lights: LightSampler::new(&snapshot, &ctx.scene.materials),
+            snapshot,
+        }
+    }
+
+    /// Whether this is the geometry of frame `t` of `ctx`'s render.
+    pub(super) fn is_at(&self, ctx: &FrameContext, t: u32) -> bool {
+        self.snapshot.time == ctx.time_of(t)
+    }
 }
 
 /// The first hit of a record's hemisphere sample.
@@ -147,38 +161,36 @@ impl DirectChange {
         if !objects_move && !lights_move {
             return None;
         }
-        let moving = [geometry.moving_now(ctx), moving_bvh(&later)];
-        geometry.next_moving = Some((ctx.frame + 1, moving[1].clone()));
+        let moving_now = geometry.moving_now(ctx);
+        let later = Arc::new(LaterGeometry::new(ctx, later));
+        geometry.next_moving = Some((ctx.frame + 1, later.moving.clone()));
         Some(DirectChange {
             statics: (static_part_len(ctx.snapshot) > 0)
                 .then(|| geometry.statics.of(ctx.snapshot))
                 .flatten(),
-            moving,
-            later_lights: LightSampler::new(&later, &ctx.scene.materials),
+            moving_now,
             later,
             lights_move,
         })
     }
 
-    /// The snapshot of t0+1, given up.
-    pub(super) fn into_later(self) -> Snapshot {
-        self.later
+    /// The snapshot of t0+1, given up (`None`: it is shared).
+    pub(super) fn into_later(self) -> Option<Snapshot> {
+        Arc::into_inner(self.later).map(|g| g.snapshot)
     }
 
-    /// The moving triangles' BVH of the frame compared with t0 (`None`:
-    /// none move).
-    pub(super) fn later_moving(&self) -> Option<&Arc<TriangleBvh>> {
-        self.moving[1].as_ref()
+    /// The geometry of the frame compared with t0.
+    pub(super) fn later(&self) -> &Arc<LaterGeometry> {
+        &self.later
     }
 
-    /// The same comparison from t0 to the later frame whose geometry and
-    /// lights `later` holds (`super::later`'s check of moving lights):
-    /// t0's side and the static geometry are shared.
-    pub(super) fn to_frame(&self, ctx: &FrameContext, later: Snapshot) -> Self {
+    /// The same comparison from t0 to the later frame `later`
+    /// (`super::later`'s check of moving lights): t0's side and the static
+    /// geometry are shared.
+    pub(super) fn to_frame(&self, later: Arc<LaterGeometry>) -> Self {
         DirectChange {
             statics: self.statics.clone(),
-            moving: [self.moving[0].clone(), moving_bvh(&later)],
-            later_lights: LightSampler::new(&later, &ctx.scene.materials),
+            moving_now: self.moving_now.clone(),
             later,
             lights_move: true,
         }
@@ -219,8 +231,9 @@ impl DirectChange {
             )
         });
         let p1 = at.moved.map_or(at.point, |(_, p)| p);
-        let after = shading(ctx, &self.later, at.hit, p1, g.record.position)
-            .and_then(|s| unoccluded(&self.later, &self.later_lights, ctx.ray_offset, &s, choice));
+        let later = &self.later;
+        let after = shading(ctx, &later.snapshot, at.hit, p1, g.record.position)
+            .and_then(|s| unoccluded(&later.snapshot, &later.lights, ctx.ray_offset, &s, choice));
         lit(after, 1) - ratio * before
     }
 
@@ -274,7 +287,7 @@ impl DirectChange {
     /// +1 where `ray` is blocked at t0 and clear at t0+1, −1 the other way
     /// round, 0 where nothing changed.
     fn visibility_change(&self, ray: &Ray) -> f32 {
-        let blocked = |t: usize| self.moving[t].as_ref().is_some_and(|b| b.occludes(ray));
+        let blocked = |t: usize| self.moving(t).is_some_and(|b| b.occludes(ray));
         let (before, after) = (blocked(0), blocked(1));
         if before == after || self.statics.as_ref().is_some_and(|b| b.occludes(ray)) {
             0.0
@@ -285,9 +298,17 @@ impl DirectChange {
         }
     }
 
+    /// The moving triangles' BVH at t0 (`t` = 0) or t0+1 (`t` = 1).
+    fn moving(&self, t: usize) -> Option<&Arc<TriangleBvh>> {
+        match t {
+            0 => self.moving_now.as_ref(),
+            _ => self.later.moving.as_ref(),
+        }
+    }
+
     /// Whether `ray` is blocked at t0 (`t` = 0) or t0+1 (`t` = 1).
     fn occluded(&self, ray: &Ray, t: usize) -> bool {
-        self.moving[t].as_ref().is_some_and(|b| b.occludes(ray))
+        self.moving(t).is_some_and(|b| b.occludes(ray))
             || self.statics.as_ref().is_some_and(|b| b.occludes(ray))
     }
 }
@@ -367,7 +388,8 @@ mod tests {
         let at = |ctx: &FrameContext, geometry: &mut ShadowGeometry| {
             let later = ctx.scene.snapshot(ctx.time_of(ctx.frame + 1));
             let change = DirectChange::new(ctx, later, (false, true), geometry);
-            change.expect("the light moves").moving
+            let change = change.expect("the light moves");
+            [0, 1].map(|t| change.moving(t).cloned())
         };
         let frame_0 = renderer.with_frame_context(0, |ctx| at(ctx, &mut geometry));
         let kept = geometry.next_moving.clone();

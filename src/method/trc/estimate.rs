@@ -3,9 +3,8 @@
 //! and lights (TRC §4.7, Fig. 6). How well it does against E(t0+1)
 //! gathered again is measured in the parent module's documentation.
 
-use super::direct::{DirectChange, FirstHit, ShadowGeometry};
+use super::direct::{DirectChange, FirstHit, LaterGeometry, ShadowGeometry};
 use super::{Gathered, NextDirect};
-use crate::accel::TriangleBvh;
 use crate::backend::Hit;
 use crate::cache::gather::{HemisphereSamples, Strata};
 use crate::method::unshadowed::UnshadowedLights;
@@ -101,18 +100,23 @@ impl NextFrame {
     /// [`Self::later`] with the direct light at the samples' first hits
     /// evaluated again at frame `t`, with its shadows, as this frame's
     /// `next_direct` evaluates it at t0+1 (`super::later`'s check of lights
-    /// that move on). `None` where this frame does not evaluate it.
+    /// that move on), in frame `t`'s geometry: `held` where an earlier
+    /// frame's check made it, else made. `None` where this frame does not
+    /// evaluate it.
     pub(super) fn later_lit(
         &self,
         ctx: &FrameContext,
         t: u32,
-        motion: Vec<Option<Mat4>>,
-        lights: Arc<UnshadowedLights>,
+        (motion, lights): (Vec<Option<Mat4>>, Arc<UnshadowedLights>),
+        held: Option<&Arc<LaterGeometry>>,
     ) -> Option<Self> {
         let direct = self.direct.as_ref()?;
-        let later = ctx.scene.snapshot_from(ctx.time_of(t), ctx.snapshot);
+        let geometry = held.cloned().unwrap_or_else(|| {
+            let later = ctx.scene.snapshot_from(ctx.time_of(t), ctx.snapshot);
+            Arc::new(LaterGeometry::new(ctx, later))
+        });
         Some(NextFrame {
-            direct: Some(direct.to_frame(ctx, later)),
+            direct: Some(direct.to_frame(geometry)),
             ..Self::later(motion, (self.lights.0.clone(), lights))
         })
     }
@@ -121,13 +125,13 @@ impl NextFrame {
     /// up (`None`: none was made): the renderer's for that frame
     /// ([`crate::method::FrameContext::next_snapshot`]).
     pub(super) fn into_later_snapshot(self) -> Option<Snapshot> {
-        self.direct.map(DirectChange::into_later)
+        self.direct.and_then(DirectChange::into_later)
     }
 
-    /// The moving triangles' BVH of the frame the direct light is
-    /// evaluated again at (`None`: it is not, or nothing moves).
-    pub(super) fn later_moving_bvh(&self) -> Option<&Arc<TriangleBvh>> {
-        self.direct.as_ref()?.later_moving()
+    /// The geometry of the frame the direct light is evaluated again at
+    /// (`None`: it is not).
+    pub(super) fn later_geometry(&self) -> Option<&Arc<LaterGeometry>> {
+        Some(self.direct.as_ref()?.later())
     }
 
     /// Whether the direct light at t0+1 is evaluated (`next_direct`).

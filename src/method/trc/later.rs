@@ -50,8 +50,8 @@
 //! more than its displacement over that distance); and a life longer than
 //! [`LATER_FRAMES`] frames is checked over its first frames only.
 
+use super::direct::LaterGeometry;
 use super::estimate::{rigid_motion, NextFrame, Reprojection};
-use crate::accel::TriangleBvh;
 use crate::cache::gather::{HemisphereSamples, Strata};
 use crate::method::arrivals::{moving_bounds, Arrivals, OwnBounds};
 use crate::method::unshadowed::{LightsByFrame, UnshadowedLights};
@@ -109,16 +109,20 @@ struct LitFrame {
     motion: Vec<Option<Mat4>>,
     /// The lights then.
     lights: Arc<UnshadowedLights>,
+    /// The direct light's geometry then, as an earlier frame's check made
+    /// it ([`Ahead`] holds it).
+    held: Option<Arc<LaterGeometry>>,
     /// The reprojection's input, with the direct light's geometry then
     /// (built once, by the first record whose check reaches the frame).
     next: OnceLock<Option<NextFrame>>,
 }
 
 impl LitFrames {
-    /// The moving triangles' BVHs of the frames some record's check built.
-    fn moving_bvhs(&self) -> Vec<Arc<TriangleBvh>> {
-        (self.frames.values())
-            .filter_map(|f| f.next.get()?.as_ref()?.later_moving_bvh().cloned())
+    /// The direct light's geometry, by frame, of the frames some record's
+    /// check reached.
+    fn geometries(&self) -> Vec<(u32, Arc<LaterGeometry>)> {
+        (self.frames.iter())
+            .filter_map(|(&t, f)| Some((t, f.next.get()?.as_ref()?.later_geometry()?.clone())))
             .collect()
     }
 
@@ -137,9 +141,10 @@ impl LitFrames {
     ) -> u32 {
         let exceeds = |t: u32| {
             self.frames.get(&t).is_some_and(|f| {
-                let next = f
-                    .next
-                    .get_or_init(|| next.later_lit(ctx, t, f.motion.clone(), f.lights.clone()));
+                let next = f.next.get_or_init(|| {
+                    let at_t = (f.motion.clone(), f.lights.clone());
+                    next.later_lit(ctx, t, at_t, f.held.as_ref())
+                });
                 next.as_ref().is_some_and(|n| exceed(&record.to(ctx, n)))
             })
         };
@@ -182,11 +187,14 @@ struct LaterFrame {
 }
 
 impl LaterFrames {
-    /// The moving triangles' BVHs the records' checks of their direct
-    /// light at later frames built (`direct::ShadowGeometry` holds them
-    /// for the next frame's).
-    pub(super) fn lit_moving_bvhs(&self) -> Vec<Arc<TriangleBvh>> {
-        self.lit.as_ref().map_or(Vec::new(), LitFrames::moving_bvhs)
+    /// Holds the direct light's geometry of the later frames the records'
+    /// checks reached in `ahead`, for the next frames' checks (letting go
+    /// of all where they check none: no light moves).
+    pub(super) fn hold_lit_geometry(&self, ahead: &mut Ahead) {
+        match &self.lit {
+            Some(lit) => ahead.lit.extend(lit.geometries()),
+            None => ahead.lit.clear(),
+        }
     }
 
     /// The frames after `ctx.frame + 1` in a life of `max_life` frames
@@ -260,6 +268,7 @@ impl LaterFrames {
                 let frame = LitFrame {
                     motion: motion(),
                     lights: lights.clone(),
+                    held: ahead.lit.get(&t).filter(|g| g.is_at(ctx, t)).cloned(),
                     next: OnceLock::new(),
                 };
                 lit.insert(t, frame);
@@ -356,6 +365,11 @@ impl LaterFrames {
 pub(super) struct Ahead {
     placed: BTreeMap<u32, Arc<Vec<Mat4>>>,
     lights: LightsByFrame,
+    /// The direct light's geometry of the frames [`LitFrames`] checked
+    /// (`LaterFrames::hold_lit_geometry`): each frame's is made once a
+    /// render. At most [`LATER_FRAMES`] (or `δt_max`) frames, as many as
+    /// one frame's checks make at once.
+    pub(super) lit: BTreeMap<u32, Arc<LaterGeometry>>,
     /// Each moving object's bounds in its own frame (found once).
     bounds: Option<Vec<Option<OwnBounds>>>,
 }
@@ -363,6 +377,7 @@ pub(super) struct Ahead {
 impl Ahead {
     fn keep(&mut self, frames: std::ops::RangeInclusive<u32>) {
         self.placed.retain(|f, _| frames.contains(f));
+        self.lit.retain(|f, _| frames.contains(f));
         self.lights.keep(frames);
     }
 
@@ -526,6 +541,10 @@ impl Extrapolated {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::method::trc::direct::ShadowGeometry;
+    use crate::method::trc::{NextDirect, TemporalRadianceCaching, TrcSettings};
+    use crate::method::Method;
+    use std::sync::Weak;
 
     const CUBE: [Vec3; 2] = [Vec3::splat(-0.5), Vec3::splat(0.5)];
 
@@ -606,5 +625,44 @@ mod tests {
         };
         let dynamic = [false, true, true];
         assert_eq!(nearest_hits(&samples, &dynamic), vec![(1, 1.5), (2, 2.0)]);
+    }
+
+    /// Under a moving light the records check their direct light at later
+    /// frames, each in that frame's geometry (its snapshot, its moving
+    /// triangles' BVH). Each frame's is made once a render: held while
+    /// later frames' records may check it ([`Ahead`]) and handed to their
+    /// checks. Two frames on, every frame that frame 0's records checked
+    /// and that is still ahead comes with the geometry frame 0 made.
+    #[test]
+    fn a_later_frames_geometry_is_made_once_a_render() {
+        // A loose temporal accuracy: lives long enough to check.
+        let mut settings = TrcSettings {
+            temporal_accuracy: 1.0,
+            ..TrcSettings::default()
+        };
+        settings.ic.strata = Strata { theta: 4, phi: 12 };
+        settings.ic.spp = 1;
+        let mut trc = TemporalRadianceCaching::new(settings);
+        let mut renderer = crate::render::test_renderer("moving-light", 16);
+        // The first pass of frames 0 and 1 (aging, replacement and fill).
+        renderer.with_frame_context(0, |ctx| trc.prepare_frame(ctx));
+        // Weak: the test holds none of them itself.
+        let made: Vec<(u32, Weak<LaterGeometry>)> = (trc.ahead.lit.iter())
+            .filter(|(&t, _)| t > 2)
+            .map(|(&t, g)| (t, Arc::downgrade(g)))
+            .collect();
+        assert!(made.len() > 1, "frame 0 checked no later frame");
+        renderer.with_frame_context(1, |ctx| trc.prepare_frame(ctx));
+        assert!(trc.ahead.lit.keys().all(|&t| t > 2), "a frame past held");
+        renderer.with_frame_context(2, |ctx| {
+            let next = NextFrame::new(ctx, NextDirect::On, &mut ShadowGeometry::default());
+            let later = LaterFrames::new(ctx, &next, 20, &mut trc.ahead);
+            let lit = later.lit.expect("lights move: checked");
+            for (t, g) in made {
+                let held = lit.frames[&t].held.as_ref();
+                let held = held.unwrap_or_else(|| panic!("frame {t}'s not held"));
+                assert!(std::ptr::eq(g.as_ptr(), &**held), "frame {t}'s made again");
+            }
+        });
     }
 }

@@ -343,9 +343,9 @@ impl TemporalRadianceCaching {
         self.fill(&making, &mut cache, &mut aged);
         let phases = &mut aged.stats.phase_seconds;
         phases.push(("fill".into(), start.elapsed().as_secs_f64()));
-        let lit = making.later.as_ref();
-        (self.shadow_geometry)
-            .keep_later_moving(lit.map_or(Vec::new(), LaterFrames::lit_moving_bvhs));
+        if let Some(later) = &making.later {
+            later.hold_lit_geometry(&mut self.ahead);
+        }
         if let Some(later) = making.next.into_later_snapshot() {
             // Already set only if another pass made it first: equal.
             let _ = ctx.next_snapshot.set(later);
@@ -932,14 +932,14 @@ mod tests {
             assert!(next.lights_move() && next.evaluates_direct());
             let t = 12;
             let later_snapshot = ctx.scene.snapshot(ctx.time_of(t));
-            let motion = (ctx.snapshot.object_to_world.iter())
+            let motion: Vec<_> = (ctx.snapshot.object_to_world.iter())
                 .zip(&later_snapshot.object_to_world)
                 .map(|(w0, wt)| estimate::rigid_motion(*w0, *wt))
                 .collect();
             let emitters = ctx.scene.emitters_snapshot(ctx.time_of(t));
             let lights = Arc::new(UnshadowedLights::of(&ctx.scene.materials, &emitters));
             let later = next
-                .later_lit(ctx, t, motion, lights)
+                .later_lit(ctx, t, (motion, lights), None)
                 .expect("lit later frame");
             let up = Vec3::Y;
             let point = GatherPoint {
@@ -961,41 +961,6 @@ mod tests {
             assert_eq!(kept.distance, alone.distance);
             assert_ne!(alone.radiance, g[0].samples.radiance);
         });
-    }
-
-    /// Under a moving light the records check their direct light at later
-    /// frames, each with the moving triangles' BVH of that frame. Those
-    /// BVHs outlive the frame (`ShadowGeometry` holds them), so that the
-    /// next frame's records, which check mostly the same frames, take them
-    /// rather than build them again: asked for the moving triangles of
-    /// each later frame afterwards, the shared BVHs answer with the held
-    /// ones.
-    #[test]
-    fn the_later_frames_moving_bvhs_outlive_the_frame_that_built_them() {
-        // A loose temporal accuracy: lives long enough to check.
-        let mut settings = TrcSettings {
-            temporal_accuracy: 1.0,
-            ..TrcSettings::default()
-        };
-        settings.ic.strata = crate::cache::gather::Strata { theta: 4, phi: 12 };
-        settings.ic.spp = 1;
-        let mut trc = TemporalRadianceCaching::new(settings);
-        let mut renderer = crate::render::test_renderer("moving-light", 16);
-        // The first pass of frame 0 (aging, replacement and fill).
-        renderer.with_frame_context(0, |ctx| trc.prepare_frame(ctx));
-        let held = trc.shadow_geometry.later_moving.clone();
-        assert!(!held.is_empty(), "frame 0 checked no later frame");
-        let found = renderer.with_frame_context(1, |ctx| {
-            (2..20)
-                .filter_map(|t| {
-                    let s = ctx.scene.snapshot_from(ctx.time_of(t), ctx.snapshot);
-                    let moving = crate::accel::static_part_len(&s)..s.triangles.len();
-                    crate::accel::shared_dynamic_bvh(&s, moving)
-                })
-                .filter(|b| held.iter().any(|h| Arc::ptr_eq(h, b)))
-                .count()
-        });
-        assert_eq!(found, held.len());
     }
 
     /// With interpolated gradients, every record a frame uses that is
