@@ -359,8 +359,9 @@ impl LaterFrames {
     }
 }
 
-/// The frames ahead of the one rendered: each object's transform and the
-/// lights, evaluated once while the frames that look at them come by.
+/// The frames ahead of the one rendered: each object's transform, the
+/// lights and the direct light's geometry, made once while the frames that
+/// look at them come by.
 #[derive(Default)]
 pub(super) struct Ahead {
     placed: BTreeMap<u32, Arc<Vec<Mat4>>>,
