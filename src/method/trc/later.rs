@@ -633,7 +633,8 @@ mod tests {
     /// triangles' BVH). Each frame's is made once a render: held while
     /// later frames' records may check it ([`Ahead`]) and handed to their
     /// checks. Two frames on, every frame that frame 0's records checked
-    /// and that is still ahead comes with the geometry frame 0 made.
+    /// and that is still ahead comes with the geometry frame 0 made; a
+    /// frame that checks none lets them go.
     #[test]
     fn a_later_frames_geometry_is_made_once_a_render() {
         // A loose temporal accuracy: lives long enough to check.
@@ -664,6 +665,12 @@ mod tests {
                 let held = held.unwrap_or_else(|| panic!("frame {t}'s not held"));
                 assert!(std::ptr::eq(g.as_ptr(), &**held), "frame {t}'s made again");
             }
+            // A frame whose records check no later frame's direct light
+            // (here: none evaluated at t0+1) lets them all go.
+            let next = NextFrame::new(ctx, NextDirect::Off, &mut ShadowGeometry::default());
+            let later = LaterFrames::new(ctx, &next, 20, &mut trc.ahead);
+            later.hold_lit_geometry(&mut trc.ahead);
+            assert!(trc.ahead.lit.is_empty(), "held with nothing checked");
         });
     }
 }
