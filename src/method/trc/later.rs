@@ -542,9 +542,12 @@ impl Extrapolated {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cache::gather::GatherPoint;
+    use crate::method::ic::Candidate;
     use crate::method::trc::direct::ShadowGeometry;
-    use crate::method::trc::{NextDirect, TemporalRadianceCaching, TrcSettings};
+    use crate::method::trc::{Gathered, NextDirect, TemporalRadianceCaching, TrcSettings};
     use crate::method::Method;
+    use rayon::iter::ParallelIterator;
     use std::sync::Weak;
 
     const CUBE: [Vec3; 2] = [Vec3::splat(-0.5), Vec3::splat(0.5)];
@@ -633,8 +636,10 @@ mod tests {
     /// triangles' BVH). Each frame's is made once a render: held while
     /// later frames' records may check it ([`Ahead`]) and handed to their
     /// checks. Two frames on, every frame that frame 0's records checked
-    /// and that is still ahead comes with the geometry frame 0 made; a
-    /// frame that checks none lets them go.
+    /// and that is still ahead comes with the geometry frame 0 made, and a
+    /// record reprojected there with it finds, bit for bit, what it finds
+    /// with that frame's geometry made anew; a frame that checks none lets
+    /// them go.
     #[test]
     fn a_later_frames_geometry_is_made_once_a_render() {
         // A loose temporal accuracy: lives long enough to check.
@@ -660,10 +665,31 @@ mod tests {
             let next = NextFrame::new(ctx, NextDirect::On, &mut ShadowGeometry::default());
             let later = LaterFrames::new(ctx, &next, 20, &mut trc.ahead);
             let lit = later.lit.expect("lights move: checked");
-            for (t, g) in made {
-                let held = lit.frames[&t].held.as_ref();
+            let point = GatherPoint {
+                position: Vec3::new(0.4, 0.0, 0.6),
+                normal: Vec3::Y,
+                geometric_normal: Vec3::Y,
+            };
+            let g: Vec<Gathered> = (trc.ic)
+                .gather_parallel(ctx, &[Candidate::at(point)])
+                .collect();
+            let strata = trc.settings.ic.strata;
+            for (t, g_t) in made {
+                let frame = &lit.frames[&t];
+                let held = frame.held.as_ref();
                 let held = held.unwrap_or_else(|| panic!("frame {t}'s not held"));
-                assert!(std::ptr::eq(g.as_ptr(), &**held), "frame {t}'s made again");
+                assert!(
+                    std::ptr::eq(g_t.as_ptr(), &**held),
+                    "frame {t}'s made again"
+                );
+                let to = |held: Option<&Arc<LaterGeometry>>| {
+                    let at_t = (frame.motion.clone(), frame.lights.clone());
+                    let later = next.later_lit(ctx, t, at_t, held).expect("lit");
+                    Reprojection::new(&g[0], strata).to(ctx, &later)
+                };
+                let (kept, anew) = (to(Some(held)), to(None));
+                assert_eq!(kept.radiance, anew.radiance, "frame {t}");
+                assert_eq!(kept.distance, anew.distance, "frame {t}");
             }
             // A frame whose records check no later frame's direct light
             // (here: none evaluated at t0+1) lets them all go.
