@@ -1302,8 +1302,9 @@ fn resumed_trc_render_is_bit_identical() {
 /// `trc` under the built-in moving light, where each record's samples'
 /// direct light is evaluated at t0+1 and at the end of its life, and
 /// what one frame found is kept for the next (the moving triangles' BVH
-/// at t0+1, `trc::direct::ShadowGeometry`): a resumed render starts with
-/// none of it and gives the same frames.
+/// at t0+1, `trc::direct::ShadowGeometry`; each later frame's geometry
+/// the records' checks made, `trc::later::Ahead`): a resumed render
+/// starts with none of it and gives the same frames.
 #[test]
 fn resumed_trc_render_under_a_moving_light_is_bit_identical() {
     let mut trc = TrcSettings::default();

@@ -101,10 +101,12 @@ pub(super) struct DirectChange {
 /// hit needs them there: made once for each frame that some record checks
 /// (`super::later::Ahead` holds them while a later frame's records may
 /// still check that frame). Each was otherwise made again by every frame
-/// whose records checked it, its BVH by those after the next: on a
-/// 1,046,528-triangle ball turning under a moving light (camera inside
-/// its room), placing the ball's triangles and building their BVHs for
-/// the later frames took 70 % of `trc`'s time.
+/// whose records checked it: on a 1,046,528-triangle ball turning under a
+/// moving light (camera inside its room), placing the ball's triangles
+/// for the later frames and building their BVHs took 70 % of the samples
+/// of `perf record` over 24 frames even with the BVHs held while their
+/// frame was ahead (`benches/RESULTS.md`, "Each later frame's geometry
+/// made once a render").
 pub(super) struct LaterGeometry {
     snapshot: Snapshot,
     /// Its moving triangles' BVH ([`moving_bvh`]).
