@@ -172,8 +172,10 @@ impl RayOffset {
 
 /// State of one path between bounces (its radiance so far is summed in
 /// its query's result).
-struct PathState {
+struct PathState<'a> {
     query: usize,
+    /// What the path traced before ([`Replay`]; empty: nothing).
+    replay: Replay<'a>,
     first_light: Option<LightChoice>,
     rng: Rng,
     throughput: Vec3,
@@ -234,6 +236,10 @@ pub struct PathTracks {
     /// Path `i`'s segments are `segments[ends[i - 1]..ends[i]]`.
     ends: Vec<u32>,
     segments: Vec<[Vec3; 2]>,
+    /// Path `i`'s extension rays, each with its hit, are
+    /// `extensions[extension_ends[i - 1]..extension_ends[i]]`.
+    extension_ends: Vec<u32>,
+    extensions: Vec<(Ray, Hit)>,
     hit_moving: Vec<bool>,
 }
 
@@ -248,8 +254,13 @@ impl PathTracks {
 
     /// Path `i`'s segments.
     pub fn segments(&self, i: usize) -> &[[Vec3; 2]] {
-        let start = if i == 0 { 0 } else { self.ends[i - 1] as usize };
-        &self.segments[start..self.ends[i] as usize]
+        &self.segments[span(&self.ends, i).expect("a path of the batch")]
+    }
+
+    /// Path `i`'s extension rays with their hits, bounce by bounce: what a
+    /// later trace of the path may take ([`Replay`]).
+    pub fn extensions(&self, i: usize) -> &[(Ray, Hit)] {
+        &self.extensions[span(&self.extension_ends, i).expect("a path of the batch")]
     }
 
     /// Whether path `i` hit a triangle of a moving object.
@@ -262,8 +273,51 @@ impl PathTracks {
         let base = self.segments.len() as u32;
         self.ends.extend(other.ends.into_iter().map(|e| e + base));
         self.segments.extend(other.segments);
+        let base = self.extensions.len() as u32;
+        (self.extension_ends).extend(other.extension_ends.into_iter().map(|e| e + base));
+        self.extensions.extend(other.extensions);
         self.hit_moving.extend(other.hit_moving);
     }
+}
+
+/// Item `i`'s range in a list whose items' ends are `ends` (`None`: there
+/// is no item `i`).
+pub(crate) fn span(ends: &[u32], i: usize) -> Option<std::ops::Range<usize>> {
+    let end = *ends.get(i)? as usize;
+    let start = if i == 0 { 0 } else { ends[i - 1] as usize };
+    Some(start..end)
+}
+
+/// The extension rays a path traced before, each with its hit, bounce by
+/// bounce (empty: none). Where the path traces the very same ray again (to
+/// the bit: the same random stream from the same point), it takes that hit
+/// instead of tracing the ray; the shadow rays of its light samples are
+/// traced, in the lights of the frame. The caller vouches that the
+/// geometry along those rays is the same ([`crate::method::motion::Blockers`]:
+/// no moving object's box meets them, and the path hit no moving object).
+/// The hit is then the one tracing would find (the nearest, ties to the
+/// lower triangle id, in any BVH), and the path's radiance the same bits.
+pub type Replay<'a> = &'a [(Ray, Hit)];
+
+/// What is known of a query's path from an earlier trace.
+#[derive(Clone, Copy, Debug)]
+pub enum KnownPath<'a> {
+    /// Its result: nothing it met, nor the lights, changed.
+    Result(RadianceResult),
+    /// Its extension rays' hits: the lights changed.
+    Hits(Replay<'a>),
+}
+
+/// The segment an extension ray traced to `hit`, or far past the scene
+/// where it left it: what a moving object's box must not meet for the
+/// ray to find the same hit in another frame.
+pub fn extension_segment(ray: &Ray, hit: &Hit) -> [Vec3; 2] {
+    let end = if hit.is_hit() {
+        ray.at(hit.t)
+    } else {
+        ray.origin() + ray.dir() * (ESCAPE_DISTANCE / ray.dir().length().max(1e-30))
+    };
+    [ray.origin(), end]
 }
 
 /// How far past its origin a ray that hit nothing is followed when its
@@ -288,6 +342,7 @@ impl SegmentSink for () {
 /// all paths interleaved), to be sorted into [`PathTracks`].
 struct TrackSink {
     traced: Vec<(u32, [Vec3; 2])>,
+    extensions: Vec<(u32, (Ray, Hit))>,
     hit_moving: Vec<bool>,
     /// Triangles at or past this index belong to moving objects.
     static_count: usize,
@@ -295,12 +350,9 @@ struct TrackSink {
 
 impl SegmentSink for TrackSink {
     fn extension(&mut self, query: usize, ray: &Ray, hit: &Hit) {
-        let end = if hit.is_hit() {
-            ray.at(hit.t)
-        } else {
-            ray.origin() + ray.dir() * (ESCAPE_DISTANCE / ray.dir().length().max(1e-30))
-        };
-        self.traced.push((query as u32, [ray.origin(), end]));
+        self.traced
+            .push((query as u32, extension_segment(ray, hit)));
+        self.extensions.push((query as u32, (*ray, *hit)));
         self.hit_moving[query] |= hit.is_hit() && hit.triangle as usize >= self.static_count;
     }
 
@@ -312,32 +364,54 @@ impl SegmentSink for TrackSink {
 }
 
 impl TrackSink {
-    /// The segments path by path, each path's in the order traced.
+    fn new(queries: usize, static_count: usize) -> Self {
+        TrackSink {
+            traced: Vec::with_capacity(queries * 6),
+            extensions: Vec::with_capacity(queries * 2),
+            hit_moving: vec![false; queries],
+            static_count,
+        }
+    }
+
+    /// The segments and extension rays path by path, each path's in the
+    /// order traced.
     fn into_tracks(self) -> PathTracks {
         let n = self.hit_moving.len();
-        let mut ends = vec![0u32; n];
-        for &(q, _) in &self.traced {
-            ends[q as usize] += 1;
-        }
-        let mut next = Vec::with_capacity(n);
-        let mut total = 0;
-        for e in ends.iter_mut() {
-            next.push(total);
-            total += *e;
-            *e = total;
-        }
-        let mut segments = vec![[Vec3::ZERO; 2]; total as usize];
-        for (q, segment) in self.traced {
-            let slot = &mut next[q as usize];
-            segments[*slot as usize] = segment;
-            *slot += 1;
-        }
+        let (ends, segments) = by_path(n, self.traced, [Vec3::ZERO; 2]);
+        let blank = (Ray::new(Vec3::ZERO, Vec3::ZERO, 0.0, 0.0), Hit::MISS);
+        let (extension_ends, extensions) = by_path(n, self.extensions, blank);
         PathTracks {
             ends,
             segments,
+            extension_ends,
+            extensions,
             hit_moving: self.hit_moving,
         }
     }
+}
+
+/// `items` of `paths` paths, each tagged with its path, sorted by path
+/// (each path's in the order given), with each path's end; `blank` fills
+/// the slots before they are.
+fn by_path<T: Copy>(paths: usize, items: Vec<(u32, T)>, blank: T) -> (Vec<u32>, Vec<T>) {
+    let mut ends = vec![0u32; paths];
+    for &(q, _) in &items {
+        ends[q as usize] += 1;
+    }
+    let mut next = Vec::with_capacity(paths);
+    let mut total = 0;
+    for e in ends.iter_mut() {
+        next.push(total);
+        total += *e;
+        *e = total;
+    }
+    let mut sorted = vec![blank; total as usize];
+    for (q, item) in items {
+        let slot = &mut next[q as usize];
+        sorted[*slot as usize] = item;
+        *slot += 1;
+    }
+    (ends, sorted)
 }
 
 /// [`trace_radiance_parallel`], also returning where each query's path
@@ -347,18 +421,39 @@ pub fn trace_radiance_tracked(
     length: PathLength,
     queries: Vec<RadianceQuery>,
 ) -> (Vec<RadianceResult>, PathTracks) {
-    let per_task = QUERIES_PER_TASK.max(ctx.backend.min_batch());
+    trace_radiance_replayed(ctx, length, queries, &[], true)
+}
+
+/// [`trace_radiance_parallel`] where each query's path may take the hits
+/// of `replays` (one per query, or none at all: [`Replay`]), also
+/// returning, with `track`, where each path went (else no tracks).
+pub fn trace_radiance_replayed(
+    ctx: &FrameContext,
+    length: PathLength,
+    queries: Vec<RadianceQuery>,
+    replays: &[Replay],
+    track: bool,
+) -> (Vec<RadianceResult>, PathTracks) {
     let n = queries.len();
+    assert!(
+        replays.is_empty() || replays.len() == n,
+        "one replay per query"
+    );
+    let per_task = QUERIES_PER_TASK.max(ctx.backend.min_batch());
     let traced: Vec<(Vec<RadianceResult>, PathTracks)> = queries
         .into_par_iter()
+        .enumerate()
         .chunks(per_task)
         .map(|chunk| {
-            let mut sink = TrackSink {
-                traced: Vec::with_capacity(chunk.len() * 6),
-                hit_moving: vec![false; chunk.len()],
-                static_count: ctx.snapshot.static_count,
-            };
-            let results = trace_radiance_into(ctx, length, chunk, &mut sink);
+            let first = chunk.first().map_or(0, |&(i, _)| i);
+            let queries: Vec<RadianceQuery> = chunk.into_iter().map(|(_, q)| q).collect();
+            let replays = replays.get(first..first + queries.len()).unwrap_or(&[]);
+            if !track {
+                let results = trace_radiance_into(ctx, length, queries, replays, &mut ());
+                return (results, PathTracks::default());
+            }
+            let mut sink = TrackSink::new(queries.len(), ctx.snapshot.static_count);
+            let results = trace_radiance_into(ctx, length, queries, replays, &mut sink);
             (results, sink.into_tracks())
         })
         .collect();
@@ -413,14 +508,17 @@ pub fn trace_radiance(
     length: PathLength,
     queries: Vec<RadianceQuery>,
 ) -> Vec<RadianceResult> {
-    trace_radiance_into(ctx, length, queries, &mut ())
+    trace_radiance_into(ctx, length, queries, &[], &mut ())
 }
 
-/// [`trace_radiance`], telling `sink` every segment traced.
+/// [`trace_radiance`], each query's path taking the hits of its replay
+/// (`replays`: one per query, or none at all), telling `sink` every
+/// segment traced.
 fn trace_radiance_into(
     ctx: &FrameContext,
     length: PathLength,
     queries: Vec<RadianceQuery>,
+    replays: &[Replay],
     sink: &mut impl SegmentSink,
 ) -> Vec<RadianceResult> {
     let mut results = vec![
@@ -436,6 +534,7 @@ fn trace_radiance_into(
         rays.push(q.ray);
         paths.push(PathState {
             query: i,
+            replay: replays.get(i).copied().unwrap_or(&[]),
             first_light: q.first_light,
             rng: q.rng,
             throughput: q.weight,
@@ -446,14 +545,11 @@ fn trace_radiance_into(
     let mut hits = Vec::new();
     let mut continuations = Vec::new();
     let mut shadows = PendingShadows::default();
+    let mut untaken = Untaken::default();
     // An abandoned frame's paths end at the next bounce: their results are
     // thrown away.
     while !paths.is_empty() && !ctx.abandoned() {
-        hits.clear();
-        hits.resize(rays.len(), Hit::MISS);
-        shadows.prepare();
-        ctx.backend
-            .closest_and_any_hit(&rays, &mut hits, &shadows.rays, &mut shadows.occluded);
+        untaken.trace(ctx, &paths, &rays, &mut hits, &mut shadows);
         shadows.tell(sink);
         shadows.resolve(&mut results);
         continuations.clear();
@@ -483,6 +579,77 @@ fn trace_radiance_into(
     shadows.tell(sink);
     shadows.resolve(&mut results);
     results
+}
+
+/// The extension rays of a bounce that no path's [`Replay`] gives a hit
+/// for, traced together.
+#[derive(Default)]
+struct Untaken {
+    taken: Vec<bool>,
+    rays: Vec<Ray>,
+    hits: Vec<Hit>,
+}
+
+impl Untaken {
+    /// Fills `hits` for `rays` (one per path of `paths`): a path's replay
+    /// gives the hit of the ray it traced before at this bounce, where
+    /// the ray is the same to the bit; the others are traced, with the
+    /// shadow rays queued in `shadows`.
+    fn trace(
+        &mut self,
+        ctx: &FrameContext,
+        paths: &[PathState],
+        rays: &[Ray],
+        hits: &mut Vec<Hit>,
+        shadows: &mut PendingShadows,
+    ) {
+        hits.clear();
+        hits.resize(rays.len(), Hit::MISS);
+        shadows.prepare();
+        self.taken.clear();
+        for ((path, ray), hit) in paths.iter().zip(rays).zip(hits.iter_mut()) {
+            let replayed = path.replay.get(path.bounces as usize);
+            let same = replayed.filter(|(before, _)| same_ray(before, ray));
+            if let Some(&(_, before)) = same {
+                *hit = before;
+            }
+            self.taken.push(same.is_some());
+        }
+        if !self.taken.contains(&true) {
+            ctx.backend
+                .closest_and_any_hit(rays, hits, &shadows.rays, &mut shadows.occluded);
+            return;
+        }
+        self.rays.clear();
+        let untaken = rays.iter().zip(&self.taken).filter(|(_, &taken)| !taken);
+        self.rays.extend(untaken.map(|(ray, _)| *ray));
+        self.hits.clear();
+        self.hits.resize(self.rays.len(), Hit::MISS);
+        ctx.backend.closest_and_any_hit(
+            &self.rays,
+            &mut self.hits,
+            &shadows.rays,
+            &mut shadows.occluded,
+        );
+        let mut traced = self.hits.iter();
+        for (hit, _) in hits
+            .iter_mut()
+            .zip(&self.taken)
+            .filter(|(_, &taken)| !taken)
+        {
+            *hit = *traced.next().expect("one hit per ray traced");
+        }
+    }
+}
+
+/// Whether two rays are the same to the bit.
+fn same_ray(a: &Ray, b: &Ray) -> bool {
+    let bits = |r: &Ray| {
+        let [x, y, z] = r.origin.map(f32::to_bits);
+        let [u, v, w] = r.dir.map(f32::to_bits);
+        [x, y, z, u, v, w, r.tmin.to_bits(), r.tmax.to_bits()]
+    };
+    bits(a) == bits(b)
 }
 
 /// Emission seen along `ray` at `hit` on `tri`, weighted as `mode` says.
@@ -672,5 +839,64 @@ mod tests {
         // Towards `w`, on its side of the surface.
         let o = RayOffset::for_extent(0.5).origin(Vec3::ZERO, Vec3::Y, -Vec3::Y);
         assert_eq!(o, Vec3::new(0.0, -RAY_OFFSET * 0.5, 0.0));
+    }
+
+    /// A path takes the hits of its replay where it traces the same ray
+    /// (the same result, bit for bit, as tracing it; a replayed hit made
+    /// up is used), and traces a ray that differs from the one replayed,
+    /// whatever hit that one had.
+    #[test]
+    fn a_path_takes_a_replayed_hit_only_for_the_same_ray() {
+        let mut r = crate::render::test_renderer("cube-in-box", 8);
+        r.with_frame_context(0, |ctx| {
+            let queries: Vec<RadianceQuery> = (0..64)
+                .map(|i| RadianceQuery {
+                    ray: Ray::new(
+                        Vec3::new(0.1, 0.5, 0.2),
+                        Vec3::new((i as f32 * 0.7).sin(), 0.3, (i as f32 * 0.7).cos()).normalize(),
+                        0.0,
+                        f32::INFINITY,
+                    ),
+                    first_light: None,
+                    rng: Rng::from_seed(i, 3),
+                    weight: Vec3::ONE,
+                    first_hit: FirstHitEmission::Include,
+                })
+                .collect();
+            let length = PathLength::default();
+            let trace = |replays: &[Replay]| {
+                let (results, _) =
+                    trace_radiance_replayed(ctx, length, queries.clone(), replays, false);
+                results
+                    .iter()
+                    .map(|r| r.radiance.to_array().map(f32::to_bits))
+                    .collect::<Vec<_>>()
+            };
+            let (_, tracks) = trace_radiance_replayed(ctx, length, queries.clone(), &[], true);
+            let alone = trace(&[]);
+            let kept: Vec<Replay> = (0..queries.len()).map(|i| tracks.extensions(i)).collect();
+            assert_eq!(trace(&kept), alone, "the same hits");
+            // Every first hit moved away: taken, it changes what is seen.
+            let made_up: Vec<Vec<(Ray, Hit)>> = (0..queries.len())
+                .map(|i| {
+                    let mut e = tracks.extensions(i).to_vec();
+                    e[0].1 = Hit::MISS;
+                    e
+                })
+                .collect();
+            let replays: Vec<Replay> = made_up.iter().map(Vec::as_slice).collect();
+            assert_ne!(trace(&replays), alone, "made-up hits taken");
+            // The same made-up hits for rays a hair apart: traced.
+            let apart: Vec<Vec<(Ray, Hit)>> = made_up
+                .iter()
+                .map(|e| {
+                    let mut e = e.clone();
+                    e[0].0.tmax = f32::MAX;
+                    e
+                })
+                .collect();
+            let replays: Vec<Replay> = apart.iter().map(Vec::as_slice).collect();
+            assert_eq!(trace(&replays), alone, "other rays traced");
+        });
     }
 }

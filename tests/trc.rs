@@ -1330,6 +1330,51 @@ fn reprojection_follows_a_moving_light_better_than_constant() {
     assert!(median_r < median_c, "median {median_r} vs {median_c}");
 }
 
+/// What a `trc` run of `frames` frames of the built-in `scene` (24×24,
+/// `δt_max` = 3) gave, with or without [`TrcSettings::keep_paths`].
+struct KeptPathsRun {
+    frames: Vec<Vec<Vec3>>,
+    records: Vec<IrradianceRecord>,
+    samples_reshot: u64,
+    replaced: u64,
+    closest_rays: u64,
+}
+
+fn kept_paths_run(scene: &str, frames: u32, keep_paths: bool) -> KeptPathsRun {
+    let settings = TrcSettings {
+        ic: small_ic(),
+        max_life: 3,
+        keep_paths,
+        ..TrcSettings::default()
+    };
+    let mut r = renderer(Scene::builtin(scene).unwrap(), 24, 24.0, false);
+    let mut trc = TemporalRadianceCaching::new(settings);
+    let mut run = KeptPathsRun {
+        frames: Vec::new(),
+        records: Vec::new(),
+        samples_reshot: 0,
+        replaced: 0,
+        closest_rays: 0,
+    };
+    for f in 0..frames {
+        run.frames.push(render_trc(&mut r, &mut trc, f).pixels);
+        let stats = trc.last_frame_stats();
+        run.samples_reshot += stats.samples_reshot;
+        run.replaced += stats.records_replaced;
+    }
+    run.records = trc.records().iter().map(|k| k.record.clone()).collect();
+    run.closest_rays = r.backend().ray_counts().closest;
+    run
+}
+
+/// The same records and frames, bit for bit.
+fn assert_same_records_and_frames(a: &KeptPathsRun, b: &KeptPathsRun) {
+    assert_eq!(a.records, b.records);
+    for (f, (a, b)) in a.frames.iter().zip(&b.frames).enumerate() {
+        assert!(a == b, "frame {f} differs");
+    }
+}
+
 /// Replacements that take the paths nothing moving met ([`TrcSettings::
 /// keep_paths`]) give, on cube-in-box with its moving cube, the very
 /// records and frames that tracing every path again gives, bit for bit,
@@ -1337,40 +1382,39 @@ fn reprojection_follows_a_moving_light_better_than_constant() {
 /// again, so some are shot).
 #[test]
 fn kept_paths_give_the_records_and_frames_of_tracing_them_again() {
-    let run = |keep_paths: bool| {
-        let settings = TrcSettings {
-            ic: small_ic(),
-            max_life: 3,
-            keep_paths,
-            ..TrcSettings::default()
-        };
-        let mut r = renderer(Scene::builtin("cube-in-box").unwrap(), 24, 24.0, false);
-        let mut trc = TemporalRadianceCaching::new(settings);
-        let mut frames = Vec::new();
-        let (mut reshot, mut replaced) = (0, 0);
-        for f in 0..12 {
-            frames.push(render_trc(&mut r, &mut trc, f).pixels);
-            let stats = trc.last_frame_stats();
-            reshot += stats.samples_reshot;
-            replaced += stats.records_replaced;
-        }
-        let records: Vec<IrradianceRecord> =
-            trc.records().iter().map(|k| k.record.clone()).collect();
-        (frames, records, reshot, replaced)
-    };
-    let (kept, kept_records, kept_reshot, replaced) = run(true);
-    let (traced, traced_records, traced_reshot, _) = run(false);
+    let kept = kept_paths_run("cube-in-box", 12, true);
+    let traced = kept_paths_run("cube-in-box", 12, false);
+    let replaced = kept.replaced;
     assert!(replaced > 10, "{replaced} replacements");
     // (Replacements gathered inside the cube, then dropped, shot theirs too.)
-    assert!(traced_reshot >= replaced * small_ic().strata.count() as u64);
+    assert!(traced.samples_reshot >= replaced * small_ic().strata.count() as u64);
     assert!(
-        kept_reshot > 0 && kept_reshot < traced_reshot / 2,
-        "{kept_reshot} samples shot against {traced_reshot}"
+        kept.samples_reshot > 0 && kept.samples_reshot < traced.samples_reshot / 2,
+        "{} samples shot against {}",
+        kept.samples_reshot,
+        traced.samples_reshot
     );
-    assert_eq!(kept_records, traced_records);
-    for (f, (a, b)) in kept.iter().zip(&traced).enumerate() {
-        assert!(a == b, "frame {f} differs");
-    }
+    assert_same_records_and_frames(&kept, &traced);
+}
+
+/// Under a moving light a replacement cannot take its record's paths
+/// whole (their light samples see the light elsewhere), but it takes the
+/// hits of their extension rays that no moving box meets, and traces only
+/// the shadow rays ([`radcache::integrator::Replay`]). On the built-in
+/// moving light the records and frames are those of tracing every path
+/// again, bit for bit, with fewer closest-hit rays traced.
+#[test]
+fn kept_hits_give_under_a_moving_light_the_records_and_frames_of_tracing_them_again() {
+    let kept = kept_paths_run("moving-light", 8, true);
+    let traced = kept_paths_run("moving-light", 8, false);
+    assert!(kept.replaced > 10, "{} replacements", kept.replaced);
+    assert!(
+        (kept.closest_rays as f64) < 0.9 * traced.closest_rays as f64,
+        "{} closest-hit rays against {}",
+        kept.closest_rays,
+        traced.closest_rays
+    );
+    assert_same_records_and_frames(&kept, &traced);
 }
 
 /// A far point light swinging across a courtyard

@@ -246,7 +246,7 @@ pub struct TrcArgs {
     /// With reprojection, evaluate each hemisphere sample's direct light again at t0+1 (one light sample, shadowed in the next frame's geometry), so that E(t0+1) sees moving shadows and moving lights (TRC §5: the incoming lighting at t+1 of each visible point): moving-lights, at frames after which a light moves (a moving light moves the shadows of static objects too, which nothing else in the estimate sees); on, at every frame (costs 12–48 % more time on our animated scenes; on cube-in-box it lowers the error by 4 %, elsewhere not; benches/RESULTS.md); off, never.
     #[arg(long, value_enum, default_value = "moving-lights")]
     pub trc_next_direct: NextDirectArg,
-    /// A replacement record takes the results of the paths of the record it replaces that nothing moving met, then or now, rather than tracing them again: the same records, faster (not in the paper, which traces them all again).
+    /// A replacement record takes the results of the paths of the record it replaces that nothing moving met, then or now, rather than tracing them again; where the lights moved, the hits of their extension rays, tracing only their shadow rays: the same records, faster (not in the paper, which traces them all again).
     #[arg(long, value_enum, default_value = "on")]
     pub trc_keep_paths: OnOff,
 }

@@ -23,8 +23,8 @@ use crate::cache::gather::{
 use crate::cache::{eas, IrradianceCache, IrradianceRecord, LookupPoint, RecordId};
 use crate::film::Film;
 use crate::integrator::{
-    trace_radiance_parallel, trace_radiance_tracked, PathLength, PathTracks, RadianceQuery,
-    RadianceResult,
+    trace_radiance_parallel, trace_radiance_replayed, KnownPath, PathLength, PathTracks,
+    RadianceQuery, RadianceResult, Replay,
 };
 use crate::material::{luminance, Bsdf, LUMINANCE};
 use crate::sampling::{streams, SampleKey};
@@ -433,7 +433,7 @@ impl IrradianceCaching {
         &'a self,
         ctx: &'a FrameContext,
         candidates: &'a [Candidate],
-        known: &'a [Option<Vec<Option<RadianceResult>>>],
+        known: &'a [Option<Vec<Option<KnownPath<'a>>>>],
         track: &'a TrackPaths<'a>,
     ) -> impl ParallelIterator<Item = (Gathered, Option<GatherTracks>)> + 'a {
         assert_eq!(candidates.len(), known.len(), "one entry per candidate");
@@ -693,14 +693,14 @@ pub(crate) struct GatherTracks {
 }
 
 /// The results of `queries` (a chunk's candidates' gather queries, in
-/// order): those `known` gives (per candidate, per query), the others
-/// traced; which were traced, and (with `track`; else none) the tracks of
-/// those, in order.
+/// order): those `known` gives whole (per candidate, per query), the
+/// others traced, taking the hits it gives ([`KnownPath`]); which were
+/// traced, and (with `track`; else none) the tracks of those, in order.
 fn trace_unknown(
     ctx: &FrameContext,
     length: PathLength,
     queries: &[RadianceQuery],
-    known: &[Option<Vec<Option<RadianceResult>>>],
+    known: &[Option<Vec<Option<KnownPath>>>],
     track: bool,
 ) -> (Vec<RadianceResult>, (Vec<bool>, PathTracks)) {
     let per_candidate = (queries.len() / known.len().max(1)).max(1);
@@ -709,22 +709,27 @@ fn trace_unknown(
             .as_ref()
             .and_then(|k| k.get(i % per_candidate).copied().flatten())
     };
-    let results: Vec<Option<RadianceResult>> = (0..queries.len()).map(known_at).collect();
-    let traced: Vec<bool> = results.iter().map(Option::is_none).collect();
-    let unknown: Vec<RadianceQuery> = queries
-        .iter()
-        .zip(&traced)
-        .filter(|(_, &t)| t)
-        .map(|(q, _)| q.clone())
+    let known: Vec<Option<KnownPath>> = (0..queries.len()).map(known_at).collect();
+    let results: Vec<Option<RadianceResult>> = (known.iter())
+        .map(|k| match k {
+            Some(KnownPath::Result(r)) => Some(*r),
+            _ => None,
+        })
         .collect();
-    let (mut fresh, tracks) = if track {
-        trace_radiance_tracked(ctx, length, unknown)
-    } else {
-        (
-            trace_radiance_parallel(ctx, length, unknown),
-            PathTracks::default(),
-        )
-    };
+    let traced: Vec<bool> = results.iter().map(Option::is_none).collect();
+    let mut unknown = Vec::new();
+    let mut replays: Vec<Replay> = Vec::new();
+    for ((q, k), _) in queries.iter().zip(&known).zip(&traced).filter(|(_, &t)| t) {
+        unknown.push(q.clone());
+        replays.push(match k {
+            Some(KnownPath::Hits(hits)) => hits,
+            _ => &[],
+        });
+    }
+    if replays.iter().all(|r| r.is_empty()) {
+        replays.clear();
+    }
+    let (mut fresh, tracks) = trace_radiance_replayed(ctx, length, unknown, &replays, track);
     fresh.reverse();
     let results = results
         .into_iter()

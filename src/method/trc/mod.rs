@@ -106,7 +106,7 @@ use crate::cache::eas;
 use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance, HemisphereSamples};
 use crate::cache::{IrradianceCache, RecordId};
 use crate::film::Film;
-use crate::integrator::RadianceResult;
+use crate::integrator::KnownPath;
 use crate::store::SampleBlock;
 use estimate::{NextFrame, Reprojection};
 use glam::Vec3;
@@ -307,18 +307,20 @@ impl TemporalRadianceCaching {
             .settings
             .reprojection
             .then(|| LaterFrames::new(ctx, &next, self.settings.max_life, &mut self.ahead));
+        let motion = FrameMotion {
+            blockers: Blockers::new(ctx),
+            lights: lights_fingerprint(ctx),
+            lights_move: next.lights_move(),
+            track: self.settings.keep_paths
+                && self.paths_pay.track(ctx.frame, self.settings.max_life),
+            moving: ctx.scene.dynamic_objects(),
+        };
         let making = RecordMaking {
             ctx,
             next,
             later,
             keep: self.keep,
-            motion: FrameMotion {
-                blockers: Blockers::new(ctx),
-                lights: lights_fingerprint(ctx),
-                track: self.settings.keep_paths
-                    && self.paths_pay.track(ctx.frame, self.settings.max_life),
-                moving: ctx.scene.dynamic_objects(),
-            },
+            motion,
         };
         let (min, max) = scene_bounds(ctx);
         let mut cache = IrradianceCache::new(min, max, self.settings.ic.accuracy);
@@ -778,6 +780,9 @@ impl Aged {
 struct FrameMotion {
     blockers: Blockers,
     lights: u64,
+    /// The lights move on to the next frame: the paths kept are most
+    /// likely traced again in other lights, for their hits only.
+    lights_move: bool,
     track: bool,
     /// Which objects move.
     moving: Vec<bool>,
@@ -796,27 +801,25 @@ impl FrameMotion {
     }
 
     /// What the kept paths of the `expired` records give their
-    /// replacements (per record, per query, the result of each path that
-    /// nothing moving meets now: [`KeptPaths::known`]; `None` where the
-    /// record kept none or the lights moved), and how many paths were
-    /// offered and taken. Paths kept under other lights count as offered
-    /// and not taken.
-    fn known_paths(&self, expired: &[TemporalRecord]) -> (Vec<KnownResults>, paths::Offered) {
+    /// replacements (per record, per query, what is known of each path:
+    /// [`KeptPaths::known`]; `None` where the record kept none), and how
+    /// many paths were offered, taken whole and taken for their hits.
+    fn known_paths<'a>(
+        &self,
+        expired: &'a [TemporalRecord],
+    ) -> (Vec<KnownPaths<'a>>, paths::Offered) {
         use rayon::prelude::*;
-        let known: Vec<KnownResults> = expired
+        let known: Vec<KnownPaths> = expired
             .par_iter()
-            .map(|r| {
-                r.paths
-                    .as_deref()
-                    .and_then(|p| p.known(&self.blockers, self.lights))
-            })
+            .map(|r| (r.paths.as_deref()).map(|p| p.known(&self.blockers, self.lights)))
             .collect();
+        let all = || known.iter().flatten().flatten();
         let offered = paths::Offered {
-            taken: known
-                .iter()
-                .flatten()
-                .flatten()
-                .filter(|r| r.is_some())
+            taken: all()
+                .filter(|k| matches!(k, Some(KnownPath::Result(_))))
+                .count(),
+            relit: all()
+                .filter(|k| matches!(k, Some(KnownPath::Hits(_))))
                 .count(),
             paths: expired
                 .iter()
@@ -835,13 +838,14 @@ impl FrameMotion {
         tracks: &GatherTracks,
         taken_from: Option<&KeptPaths>,
     ) -> KeptPaths {
-        KeptPaths::of(&g.results, tracks, taken_from, &self.blockers, self.lights)
+        let lights = (self.lights, !self.lights_move);
+        KeptPaths::of(&g.results, tracks, taken_from, &self.blockers, lights)
     }
 }
 
-/// Per query of a replacement's gather, the result its record's kept path
-/// gives (`None`: traced again); `None` for a replacement given none.
-type KnownResults = Option<Vec<Option<RadianceResult>>>;
+/// Per query of a replacement's gather, what its record's kept path gives
+/// (`None`: traced again); `None` for a replacement given none.
+type KnownPaths<'a> = Option<Vec<Option<KnownPath<'a>>>>;
 
 /// Above this share of gather rays that hit the back of a surface, a
 /// replacement's point is taken to lie inside an object (see

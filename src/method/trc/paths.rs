@@ -13,6 +13,20 @@
 //! bit for bit), so frames, stores and resumed renders (which start with
 //! nothing kept and trace everything) are unchanged.
 //!
+//! Where the lights move, no result can be taken: the path's light samples
+//! see them elsewhere. Its extension rays are the same (the same random
+//! stream from the same point: the BSDF samples and the roulette do not
+//! depend on the lights), and where its hits were static and no moving
+//! object's box meets their segments now, each is still the nearest: the
+//! path takes them ([`crate::integrator::Replay`]) and traces only its
+//! shadow rays. Paths kept in frames after which the lights move keep
+//! their hits alone (their shadow rays' segments would not be taken).
+//! On a room around a static sphere of 1.96M triangles under a sliding
+//! panel, `trc` took 0.87–0.91× the time; on scenes of a few thousand
+//! triangles, where a ray is cheap, tracking the paths costs more than
+//! their hits save (1.03–1.09× on `wall_light`) (`benches/RESULTS.md`, "Under moving lights, the
+//! paths' hits").
+//!
 //! Not in the paper, whose GPU renderer gathers a record by rasterising
 //! its hemisphere: this is the CPU counterpart of the render pass's kept
 //! samples (`render_pass::StillSamples`), for the records' gathers, which
@@ -24,7 +38,8 @@
 //! `accel::NEAR_SHIFT`, a path with a segment under 1e-3 was not kept
 //! either: another frame's BVH might have missed its hit.)
 
-use crate::integrator::RadianceResult;
+use crate::backend::{Hit, Ray};
+use crate::integrator::{extension_segment, span, KnownPath, RadianceResult};
 use crate::method::ic::GatherTracks;
 use crate::method::motion::Blockers;
 use glam::Vec3;
@@ -34,7 +49,8 @@ use glam::Vec3;
 pub(crate) const BUDGET_BYTES: usize = 256 << 20;
 
 /// One record's gather: each query's result, and the segments of those
-/// kept (the queries whose path nothing moving met).
+/// kept (the queries whose path nothing moving met); the extension rays,
+/// with their hits, of those whose extension rays nothing moving met.
 pub(crate) struct KeptPaths {
     /// The lights' fingerprint when the paths were traced.
     lights: u64,
@@ -43,6 +59,11 @@ pub(crate) struct KeptPaths {
     /// traces at least its first ray, so a query not kept is one with none.
     ends: Vec<u32>,
     segments: Vec<[Vec3; 2]>,
+    /// Query `i`'s extension rays and hits are
+    /// `extensions[extension_ends[i - 1]..extension_ends[i]]` (none: not
+    /// kept).
+    extension_ends: Vec<u32>,
+    extensions: Vec<(Ray, Hit)>,
 }
 
 impl std::fmt::Debug for KeptPaths {
@@ -56,6 +77,7 @@ impl std::fmt::Debug for KeptPaths {
                     .count(),
             )
             .field("segments", &self.segments.len())
+            .field("extensions", &self.extensions.len())
             .finish()
     }
 }
@@ -64,57 +86,80 @@ impl KeptPaths {
     /// The paths of a gather this frame: `results` for each query,
     /// `tracks` of those traced (the others were taken from `taken_from`,
     /// which kept them), `blockers` this frame's moving objects, `lights`
-    /// the lights' fingerprint.
+    /// the lights' fingerprint and whether the results may be taken (where
+    /// the lights move on, the paths are kept for their hits alone: their
+    /// shadow rays need not be tested, nor held).
     pub(crate) fn of(
         results: &[RadianceResult],
         tracks: &GatherTracks,
         taken_from: Option<&KeptPaths>,
         blockers: &Blockers,
-        lights: u64,
+        (lights, whole): (u64, bool),
     ) -> Self {
         // About two segments a path (an extension ray and a shadow ray),
         // or as many as the paths taken from kept: no regrowing.
-        let segments = taken_from.map_or(2 * results.len(), |old| old.segments.len());
+        let (segments, extensions) = taken_from.map_or((2 * results.len(), results.len()), |old| {
+            (old.segments.len(), old.extensions.len())
+        });
         let mut paths = KeptPaths {
             lights,
             results: results.to_vec(),
             ends: Vec::with_capacity(results.len()),
             segments: Vec::with_capacity(segments),
+            extension_ends: Vec::with_capacity(results.len()),
+            extensions: Vec::with_capacity(extensions),
         };
         let mut path = tracks.first;
         for (i, &traced) in tracks.traced.iter().enumerate() {
-            let segments = if traced {
-                let segments = tracks.tracks.segments(path);
-                let moving = tracks.tracks.hit_moving(path);
+            let (segments, extensions) = if traced {
+                let (tracks, p) = (&tracks.tracks, path);
                 path += 1;
-                (!moving && blockers.path_clear(segments)).then_some(segments)
+                let (segments, extensions) = (tracks.segments(p), tracks.extensions(p));
+                let stays = !tracks.hit_moving(p);
+                // The extension rays' segments are among the path's.
+                let all_clear = whole && stays && blockers.path_clear(segments);
+                // Its hits were static: no moving object was nearer. While
+                // no moving box meets their segments (`known`), none is.
+                let clear = !whole && stays;
+                (all_clear.then_some(segments), clear.then_some(extensions))
             } else {
                 // Taken: nothing moving met it then or now.
-                taken_from.and_then(|old| old.segments_of(i))
+                taken_from.map_or((None, None), |old| {
+                    (old.segments_of(i), old.extensions_of(i))
+                })
+            };
+            let (segments, extensions) = match whole {
+                true => (segments, None),
+                false => (None, extensions),
             };
             paths.segments.extend_from_slice(segments.unwrap_or(&[]));
             paths.ends.push(paths.segments.len() as u32);
+            paths
+                .extensions
+                .extend_from_slice(extensions.unwrap_or(&[]));
+            paths.extension_ends.push(paths.extensions.len() as u32);
         }
         paths
     }
 
-    /// The results a gather at this frame (with `blockers` and `lights`)
-    /// may take, per query (`None`: trace it); `None` when the lights
-    /// changed.
-    pub(crate) fn known(
-        &self,
-        blockers: &Blockers,
-        lights: u64,
-    ) -> Option<Vec<Option<RadianceResult>>> {
-        (lights == self.lights).then(|| {
-            (0..self.results.len())
-                .map(|i| {
-                    self.segments_of(i)
-                        .filter(|segments| blockers.path_clear(segments))
-                        .map(|_| self.results[i])
-                })
-                .collect()
-        })
+    /// What a gather at this frame (with `blockers` and `lights`) may take
+    /// of each query's path (`None`: trace it): its result where the
+    /// lights are the same and no moving box meets its segments; else its
+    /// extension rays' hits where none meets those.
+    pub(crate) fn known(&self, blockers: &Blockers, lights: u64) -> Vec<Option<KnownPath<'_>>> {
+        let same_lights = lights == self.lights;
+        (0..self.results.len())
+            .map(|i| {
+                if same_lights {
+                    let clear = |s: &&[[Vec3; 2]]| blockers.path_clear(s);
+                    let result = self.segments_of(i).filter(clear);
+                    return result.map(|_| KnownPath::Result(self.results[i]));
+                }
+                (self.extensions_of(i))
+                    .filter(|e| extensions_clear(blockers, e))
+                    .map(KnownPath::Hits)
+            })
+            .collect()
     }
 
     /// The gather's paths (kept or not).
@@ -128,22 +173,35 @@ impl KeptPaths {
             + self.results.len() * std::mem::size_of::<RadianceResult>()
             + self.ends.len() * 4
             + self.segments.len() * std::mem::size_of::<[Vec3; 2]>()
+            + self.extension_ends.len() * 4
+            + self.extensions.len() * std::mem::size_of::<(Ray, Hit)>()
     }
 
     fn segments_of(&self, i: usize) -> Option<&[[Vec3; 2]]> {
-        let end = *self.ends.get(i)? as usize;
-        let start = if i == 0 { 0 } else { self.ends[i - 1] as usize };
-        let segments = &self.segments[start..end];
+        let segments = self.segments.get(span(&self.ends, i)?)?;
         (!segments.is_empty()).then_some(segments)
+    }
+
+    fn extensions_of(&self, i: usize) -> Option<&[(Ray, Hit)]> {
+        let extensions = self.extensions.get(span(&self.extension_ends, i)?)?;
+        (!extensions.is_empty()).then_some(extensions)
     }
 }
 
+/// Whether no moving box meets the segments `extensions` traced.
+fn extensions_clear(blockers: &Blockers, extensions: &[(Ray, Hit)]) -> bool {
+    (extensions.iter()).all(|(ray, hit)| blockers.path_clear(&[extension_segment(ray, hit)]))
+}
+
 /// What one frame's replacements were offered by the paths their records
-/// kept: how many paths, and how many of those they took.
+/// kept: how many paths, how many of those they took whole, and how many
+/// they took the hits of (traced again in other lights, or where a moving
+/// object's box now meets a shadow ray).
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Offered {
     pub(crate) paths: usize,
     pub(crate) taken: usize,
+    pub(crate) relit: usize,
 }
 
 /// Whether keeping paths pays in this animation. Tracking a gather's paths
@@ -151,7 +209,7 @@ pub(crate) struct Offered {
 /// cross most paths (`spheres`' 66 balls) few are taken, and keeping them
 /// made `trc` 16 % slower. So new records keep their paths only while the
 /// replacements of the last frames took at least half of the paths offered
-/// them (counts decayed by [`PathsPay::DECAY`] a frame, so that one frame
+/// them, whole or for their hits (counts decayed by [`PathsPay::DECAY`] a frame, so that one frame
 /// whose few replacements all lay by a moving object does not decide),
 /// and, so that a scene whose motion calms down is noticed, in every
 /// `δt_max`-th frame (whose records are replaced about `δt_max` frames
@@ -174,7 +232,8 @@ impl PathsPay {
     /// Takes what a frame's replacements were offered and took.
     pub(crate) fn measure(&mut self, offered: Offered) {
         self.offered = self.offered * Self::DECAY + offered.paths as f64;
-        self.taken = self.taken * Self::DECAY + offered.taken as f64;
+        let taken = offered.taken + offered.relit;
+        self.taken = self.taken * Self::DECAY + taken as f64;
     }
 }
 
@@ -183,7 +242,11 @@ mod tests {
     use super::*;
 
     fn offered(paths: usize, taken: usize) -> Offered {
-        Offered { paths, taken }
+        Offered {
+            paths,
+            taken,
+            relit: 0,
+        }
     }
 
     /// Paths are kept from the start, stop being kept when under half of
