@@ -21,11 +21,11 @@
 //! path takes them ([`crate::integrator::Replay`]) and traces only its
 //! shadow rays. Paths kept in frames after which the lights move keep
 //! their hits alone (their shadow rays' segments would not be taken).
-//! On a room around a static sphere of 1.96M triangles under a sliding
-//! panel, `trc` took 0.87–0.91× the time; on scenes of a few thousand
-//! triangles, where a ray is cheap, tracking the paths costs more than
-//! their hits save (1.03–1.09× on `wall_light`) (`benches/RESULTS.md`, "Under moving lights, the
-//! paths' hits").
+//! Under a sliding panel, in rooms of 40K to 2M triangles, `trc` took
+//! 0.86–0.91× the time; on `wall_light`, where a third of the records
+//! are dropped unused rather than replaced, tracking every new record's
+//! paths costs more than their hits save (1.03–1.09×;
+//! `benches/RESULTS.md`, "Under moving lights, the paths' hits").
 //!
 //! Not in the paper, whose GPU renderer gathers a record by rasterising
 //! its hemisphere: this is the CPU counterpart of the render pass's kept
@@ -103,7 +103,8 @@ impl KeptPaths {
         });
         let mut paths = KeptPaths {
             lights,
-            results: results.to_vec(),
+            // Where the lights move on, no result will be taken.
+            results: if whole { results.to_vec() } else { Vec::new() },
             ends: Vec::with_capacity(results.len()),
             segments: Vec::with_capacity(segments),
             extension_ends: Vec::with_capacity(results.len()),
@@ -147,8 +148,8 @@ impl KeptPaths {
     /// lights are the same and no moving box meets its segments; else its
     /// extension rays' hits where none meets those.
     pub(crate) fn known(&self, blockers: &Blockers, lights: u64) -> Vec<Option<KnownPath<'_>>> {
-        let same_lights = lights == self.lights;
-        (0..self.results.len())
+        let same_lights = lights == self.lights && self.results.len() == self.len();
+        (0..self.len())
             .map(|i| {
                 if same_lights {
                     let clear = |s: &&[[Vec3; 2]]| blockers.path_clear(s);
@@ -164,7 +165,7 @@ impl KeptPaths {
 
     /// The gather's paths (kept or not).
     pub(crate) fn len(&self) -> usize {
-        self.results.len()
+        self.ends.len()
     }
 
     /// Bytes held.
