@@ -444,11 +444,18 @@ impl TemporalRadianceCaching {
         let pixels = primary_candidates(ctx, &self.settings.ic);
         let mut created = Vec::new();
         let track = |c: &Candidate| making.motion.tracks(c);
+        // Where the lights move on, only their hits would be taken, and a
+        // new record is often dropped unused instead of replaced (a third
+        // of them on `wall_light`): the paths of those that were replaced
+        // once are kept (`benches/RESULTS.md`, "Under moving lights, the
+        // paths' hits").
+        let motion = &making.motion;
+        let new_records_keep = motion.track && !motion.lights_move;
         self.ic.fill_from(
             ctx,
             cache,
             &pixels,
-            making.motion.track.then_some(&track as &TrackPaths),
+            new_records_keep.then_some(&track as &TrackPaths),
             |g, tracks| self.make_record(making, g, tracks.as_ref(), None),
             &mut created,
         );

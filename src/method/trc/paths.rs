@@ -20,12 +20,13 @@
 //! object's box meets their segments now, each is still the nearest: the
 //! path takes them ([`crate::integrator::Replay`]) and traces only its
 //! shadow rays. Paths kept in frames after which the lights move keep
-//! their hits alone (their shadow rays' segments would not be taken).
-//! Under a sliding panel, in rooms of 40K to 2M triangles, `trc` took
-//! 0.86–0.91× the time; on `wall_light`, where a third of the records
-//! are dropped unused rather than replaced, tracking every new record's
-//! paths costs more than their hits save (1.03–1.09×;
-//! `benches/RESULTS.md`, "Under moving lights, the paths' hits").
+//! their hits alone (their shadow rays' segments would not be taken),
+//! and only replacements keep them there: new records are often dropped
+//! unused (a third on `wall_light`), where tracking theirs cost more than
+//! it saved. Under a sliding panel, in rooms of 40K to 2M triangles,
+//! `trc` took 0.86–0.91× the time, under the courtyard's swinging light
+//! 0.94×, on `wall_light` the same (`benches/RESULTS.md`, "Under moving
+//! lights, the paths' hits").
 //!
 //! Not in the paper, whose GPU renderer gathers a record by rasterising
 //! its hemisphere: this is the CPU counterpart of the render pass's kept
