@@ -258,7 +258,8 @@ impl PathTracks {
     }
 
     /// Path `i`'s extension rays with their hits, bounce by bounce: what a
-    /// later trace of the path may take ([`Replay`]).
+    /// later trace of the path may take ([`Replay`]); none where they were
+    /// not asked for ([`trace_radiance_tracked`]).
     pub fn extensions(&self, i: usize) -> &[(Ray, Hit)] {
         &self.extensions[span(&self.extension_ends, i).expect("a path of the batch")]
     }
@@ -342,7 +343,9 @@ impl SegmentSink for () {
 /// all paths interleaved), to be sorted into [`PathTracks`].
 struct TrackSink {
     traced: Vec<(u32, [Vec3; 2])>,
-    extensions: Vec<(u32, (Ray, Hit))>,
+    /// The extension rays with their hits, where they are asked for
+    /// (`None`: the caller keeps segments alone).
+    extensions: Option<Vec<(u32, (Ray, Hit))>>,
     hit_moving: Vec<bool>,
     /// Triangles at or past this index belong to moving objects.
     static_count: usize,
@@ -352,7 +355,9 @@ impl SegmentSink for TrackSink {
     fn extension(&mut self, query: usize, ray: &Ray, hit: &Hit) {
         self.traced
             .push((query as u32, extension_segment(ray, hit)));
-        self.extensions.push((query as u32, (*ray, *hit)));
+        if let Some(extensions) = &mut self.extensions {
+            extensions.push((query as u32, (*ray, *hit)));
+        }
         self.hit_moving[query] |= hit.is_hit() && hit.triangle as usize >= self.static_count;
     }
 
@@ -364,10 +369,10 @@ impl SegmentSink for TrackSink {
 }
 
 impl TrackSink {
-    fn new(queries: usize, static_count: usize) -> Self {
+    fn new(queries: usize, static_count: usize, hits: bool) -> Self {
         TrackSink {
             traced: Vec::with_capacity(queries * 6),
-            extensions: Vec::with_capacity(queries * 2),
+            extensions: hits.then(|| Vec::with_capacity(queries * 2)),
             hit_moving: vec![false; queries],
             static_count,
         }
@@ -379,7 +384,7 @@ impl TrackSink {
         let n = self.hit_moving.len();
         let (ends, segments) = by_path(n, self.traced, [Vec3::ZERO; 2]);
         let blank = (Ray::new(Vec3::ZERO, Vec3::ZERO, 0.0, 0.0), Hit::MISS);
-        let (extension_ends, extensions) = by_path(n, self.extensions, blank);
+        let (extension_ends, extensions) = by_path(n, self.extensions.unwrap_or_default(), blank);
         PathTracks {
             ends,
             segments,
@@ -421,18 +426,45 @@ pub fn trace_radiance_tracked(
     length: PathLength,
     queries: Vec<RadianceQuery>,
 ) -> (Vec<RadianceResult>, PathTracks) {
-    trace_radiance_replayed(ctx, length, queries, &[], true)
+    trace_paths(ctx, length, queries, &[], Tracking::Segments)
 }
 
 /// [`trace_radiance_parallel`] where each query's path may take the hits
 /// of `replays` (one per query, or none at all: [`Replay`]), also
-/// returning, with `track`, where each path went (else no tracks).
+/// returning, with `track`, where each path went, its extension rays'
+/// hits included (else no tracks).
 pub fn trace_radiance_replayed(
     ctx: &FrameContext,
     length: PathLength,
     queries: Vec<RadianceQuery>,
     replays: &[Replay],
     track: bool,
+) -> (Vec<RadianceResult>, PathTracks) {
+    let tracking = match track {
+        true => Tracking::WithHits,
+        false => Tracking::Off,
+    };
+    trace_paths(ctx, length, queries, replays, tracking)
+}
+
+/// What [`trace_paths`] records of where the paths went.
+#[derive(Clone, Copy, PartialEq)]
+enum Tracking {
+    Off,
+    /// Their segments ([`PathTracks::segments`]).
+    Segments,
+    /// Their segments and their extension rays' hits
+    /// ([`PathTracks::extensions`]).
+    WithHits,
+}
+
+/// [`trace_radiance_replayed`], recording what `tracking` asks for.
+fn trace_paths(
+    ctx: &FrameContext,
+    length: PathLength,
+    queries: Vec<RadianceQuery>,
+    replays: &[Replay],
+    tracking: Tracking,
 ) -> (Vec<RadianceResult>, PathTracks) {
     let n = queries.len();
     assert!(
@@ -448,11 +480,12 @@ pub fn trace_radiance_replayed(
             let first = chunk.first().map_or(0, |&(i, _)| i);
             let queries: Vec<RadianceQuery> = chunk.into_iter().map(|(_, q)| q).collect();
             let replays = replays.get(first..first + queries.len()).unwrap_or(&[]);
-            if !track {
+            if tracking == Tracking::Off {
                 let results = trace_radiance_into(ctx, length, queries, replays, &mut ());
                 return (results, PathTracks::default());
             }
-            let mut sink = TrackSink::new(queries.len(), ctx.snapshot.static_count);
+            let hits = tracking == Tracking::WithHits;
+            let mut sink = TrackSink::new(queries.len(), ctx.snapshot.static_count, hits);
             let results = trace_radiance_into(ctx, length, queries, replays, &mut sink);
             (results, sink.into_tracks())
         })
