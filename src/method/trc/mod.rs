@@ -177,6 +177,9 @@ pub struct TemporalRadianceCaching {
     /// The transforms and lights of the frames after the next, for the
     /// records' life checks ([`later`]).
     ahead: later::Ahead,
+    /// Records replaced together at most ([`REPLACE_BATCH`]; tests set
+    /// others).
+    replace_batch: usize,
 }
 
 impl TemporalRadianceCaching {
@@ -198,6 +201,7 @@ impl TemporalRadianceCaching {
             first_pass_still: StillSamples::default(),
             paths_pay: paths::PathsPay::default(),
             ahead: later::Ahead::default(),
+            replace_batch: REPLACE_BATCH,
         }
     }
 
@@ -336,7 +340,7 @@ impl TemporalRadianceCaching {
             after_departure: HashSet::new(),
         };
         let expired = self.age(ctx.frame, &mut cache, &mut aged);
-        let offered = self.replace(&making, &expired, &mut cache, &mut aged);
+        let offered = self.replace(&making, expired, &mut cache, &mut aged);
         self.paths_pay.measure(offered);
         let phases = &mut aged.stats.phase_seconds;
         phases.push(("age".into(), start.elapsed().as_secs_f64()));
@@ -389,7 +393,34 @@ impl TemporalRadianceCaching {
     /// meets now ([`paths`]); a replacement gathered inside a moving object
     /// ([`back_face_share`]) is dropped instead. Returns how many paths the
     /// replacements were offered and took.
+    ///
+    /// In batches of [`REPLACE_BATCH`] records, each batch's kept paths let
+    /// go once its replacements are made: every record made in one frame
+    /// expires at once where nothing shortened its life (at `δt_max`), and
+    /// such a wave held the old records' kept paths, what they offered
+    /// and the new records' paths all at once, up to twice
+    /// [`paths::BUDGET_BYTES`] (411 MB of kept paths at frame 20 of the
+    /// default 256 × 256 render, `heaptrack`). Batches change no record.
     fn replace(
+        &self,
+        making: &RecordMaking,
+        mut expired: Vec<TemporalRecord>,
+        cache: &mut IrradianceCache,
+        aged: &mut Aged,
+    ) -> paths::Offered {
+        let mut offered = paths::Offered::default();
+        aged.stats.samples_reshot = 0;
+        for batch in expired.chunks_mut(self.replace_batch.max(1)) {
+            offered += self.replace_batch(making, batch, cache, aged);
+            for old in batch {
+                old.paths = None;
+            }
+        }
+        offered
+    }
+
+    /// [`Self::replace`] of one batch of the `expired` records.
+    fn replace_batch(
         &self,
         making: &RecordMaking,
         expired: &[TemporalRecord],
@@ -402,21 +433,17 @@ impl TemporalRadianceCaching {
         let (known, offered) = motion.known_paths(expired);
         // Each replacement traces again the rays of the record it replaces
         // that it cannot take.
-        aged.stats.samples_reshot =
+        aged.stats.samples_reshot +=
             (candidates.len() * self.settings.ic.strata.count() - offered.taken) as u64;
         let track = |c: &Candidate| motion.tracks(c);
-        let gathered: Vec<(Gathered, Option<GatherTracks>)> = self
+        let make = |i: usize, g: Gathered, tracks: Option<GatherTracks>| {
+            let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
+            let old = expired[i].paths.as_deref();
+            (!inside).then(|| self.make_record(making, &g, tracks.as_ref(), old))
+        };
+        let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = self
             .ic
-            .gather_parallel_tracked(ctx, &candidates, &known, &track)
-            .collect();
-        let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = gathered
-            .into_par_iter()
-            .zip(expired.par_iter())
-            .map(|((g, tracks), old)| {
-                let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
-                (!inside)
-                    .then(|| self.make_record(making, &g, tracks.as_ref(), old.paths.as_deref()))
-            })
+            .gather_parallel_tracked(ctx, &candidates, &known, &track, &make)
             .collect();
         for (gathered, old) in gathered.into_iter().zip(expired) {
             let Some((mut new, samples)) = gathered else {
@@ -854,6 +881,11 @@ impl FrameMotion {
 /// (`None`: traced again); `None` for a replacement given none.
 type KnownPaths<'a> = Option<Vec<Option<KnownPath<'a>>>>;
 
+/// Records replaced together at most ([`TemporalRadianceCaching::replace`]):
+/// their kept paths, about 100 KB a record, and what those offer held at
+/// once; enough records for every thread's gathers.
+const REPLACE_BATCH: usize = 256;
+
 /// Above this share of gather rays that hit the back of a surface, a
 /// replacement's point is taken to lie inside an object (see
 /// [`back_face_share`]).
@@ -972,6 +1004,54 @@ mod tests {
             assert_eq!(kept.distance, alone.distance);
             assert_ne!(alone.radiance, g[0].samples.radiance);
         });
+    }
+
+    /// Replacing records in batches, each batch's kept paths let go before
+    /// the next ([`TemporalRadianceCaching::replace`]), changes no record
+    /// and no frame: a run replacing one record at a time equals, bit for
+    /// bit, one replacing all of a frame's at once, over waves of
+    /// replacements (`δt_max` = 3) that take paths kept by the records
+    /// they replace.
+    #[test]
+    fn replacing_in_batches_changes_no_record() {
+        let run = |batch: usize| {
+            let mut settings = TrcSettings {
+                max_life: 3,
+                ..TrcSettings::default()
+            };
+            settings.ic.strata = crate::cache::gather::Strata { theta: 4, phi: 12 };
+            settings.ic.spp = 1;
+            let mut trc = TemporalRadianceCaching::new(settings);
+            trc.replace_batch = batch;
+            let mut renderer = crate::render::test_renderer("cube-in-box", 16);
+            let (mut frames, mut records, mut reshot, mut replaced) = (vec![], vec![], 0, 0);
+            for f in 0..8 {
+                frames.push(renderer.with_frame_context(f, |ctx| trc.render_frame(ctx)));
+                let stats = trc.last_frame_stats();
+                reshot += stats.samples_reshot;
+                replaced += stats.records_replaced;
+                records.extend(
+                    trc.records
+                        .iter()
+                        .map(|r| (r.record.id, r.record.irradiance)),
+                );
+            }
+            (frames, records, reshot, replaced)
+        };
+        let (one, all) = (run(1), run(usize::MAX));
+        let strata = 4 * 12;
+        assert!(one.3 > 20, "{} records replaced", one.3);
+        // (Which records keep paths may differ: a task's records are
+        // tracked together. That changes no record either.)
+        for (reshot, replaced) in [(one.2, one.3), (all.2, all.3)] {
+            assert!(
+                reshot < replaced * strata,
+                "no kept path taken: {reshot} re-shot"
+            );
+        }
+        assert_eq!(one.3, all.3, "records replaced");
+        assert_eq!(one.1, all.1, "records");
+        assert!(one.0 == all.0, "frames");
     }
 
     /// With interpolated gradients, every record a frame uses that is

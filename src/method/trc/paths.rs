@@ -206,6 +206,14 @@ pub(crate) struct Offered {
     pub(crate) relit: usize,
 }
 
+impl std::ops::AddAssign for Offered {
+    fn add_assign(&mut self, other: Offered) {
+        self.paths += other.paths;
+        self.taken += other.taken;
+        self.relit += other.relit;
+    }
+}
+
 /// Whether keeping paths pays in this animation. Tracking a gather's paths
 /// and testing their segments costs time of its own; where moving objects
 /// cross most paths (`spheres`' 66 balls) few are taken, and keeping them
