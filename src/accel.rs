@@ -263,7 +263,15 @@ impl TriangleBvh {
         } else {
             BvhBuildParams::fast_build()
         };
-        let bvh = build_cwbvh_from_tris(&source, params, &mut Duration::default());
+        let mut bvh = build_cwbvh_from_tris(&source, params, &mut Duration::default());
+        // obvhs reserves a CWBVH node (80 bytes) for every primitive and
+        // fills a fraction of them. A BVH held for long (`trc` holds the
+        // moving triangles' BVHs of the later frames its records check)
+        // held that room too: `trc` on a ball of 261,120 triangles turning
+        // under a moving light peaked at ~1.45 GB of RSS, ~1.1 GB without
+        // (`benches/RESULTS.md`, "What a frame of replacements holds").
+        bvh.nodes.shrink_to_fit();
+        bvh.primitive_indices.shrink_to_fit();
         let order = &bvh.primitive_indices;
         let ids: Vec<u32> = order
             .iter()
