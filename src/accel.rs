@@ -269,7 +269,8 @@ impl TriangleBvh {
         // moving triangles' BVHs of the later frames its records check)
         // held that room too: `trc` on a ball of 261,120 triangles turning
         // under a moving light peaked at ~1.45 GB of RSS, ~1.1 GB without
-        // (`benches/RESULTS.md`, "What a frame of replacements holds").
+        // (`benches/RESULTS.md`, "What a frame of replacements holds at
+        // once").
         bvh.nodes.shrink_to_fit();
         bvh.primitive_indices.shrink_to_fit();
         let order = &bvh.primitive_indices;
