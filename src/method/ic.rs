@@ -426,7 +426,9 @@ impl IrradianceCaching {
     /// `known` gives (per candidate, per gather query: `None` traces it),
     /// each record handed to `make` with its candidate's index and, where
     /// `track` picks it, where its traced paths went ([`GatherTracks`]; a
-    /// task's records are tracked together, where one of them is picked).
+    /// task's paths are tracked together where one of its records is
+    /// picked, and handed only to those picked, so that which records get
+    /// tracks does not depend on how the candidates split into tasks).
     /// A path's result depends only on its query and the scene it meets, so
     /// a path taken where it would have met the same leaves the record as
     /// tracing it would.
@@ -459,16 +461,15 @@ impl IrradianceCaching {
                 });
                 let tracks = Arc::new(tracks);
                 let mut first = 0;
-                let per_record: Vec<Option<GatherTracks>> = traced
-                    .chunks(rays)
-                    .map(|traced| {
+                let per_record: Vec<Option<GatherTracks>> = (traced.chunks(rays).zip(chunk))
+                    .map(|(traced, c)| {
                         let own = GatherTracks {
                             traced: traced.to_vec(),
                             tracks: tracks.clone(),
                             first,
                         };
                         first += traced.iter().filter(|&&t| t).count();
-                        tracked.then_some(own)
+                        track(c).then_some(own)
                     })
                     .collect();
                 let made: Vec<X> = (gathered.into_par_iter().zip(per_record))
