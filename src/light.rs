@@ -165,6 +165,26 @@ impl LightSampler {
         self.sources.is_empty()
     }
 
+    /// This sampler, made of a whole snapshot, for that snapshot's
+    /// [`crate::scene::Scene::emitters_snapshot`], whose triangles are
+    /// `emitting` (the whole snapshot's
+    /// [`Snapshot::emitting_triangles`]) in order: the same samples, bit
+    /// for bit, read from the emitters alone, so that a frame's lights are
+    /// held without its other triangles (`trc`'s frames ahead). Made of
+    /// the whole snapshot for its bounds, which weigh a directional light.
+    pub fn for_emitters(mut self, emitting: &[u32]) -> Self {
+        let renumber = |id: &mut u32| *id = emitting.partition_point(|&e| e < *id) as u32;
+        for source in &mut self.sources {
+            if let Source::Triangle { id, .. } = source {
+                renumber(id);
+            }
+        }
+        for (id, _) in &mut self.triangle_pick {
+            renumber(id);
+        }
+        self
+    }
+
     /// The snapshot ids of the emitting triangles.
     pub fn emitting_triangles(&self) -> impl Iterator<Item = usize> + '_ {
         self.sources.iter().filter_map(|s| match s {
@@ -655,6 +675,60 @@ mod tests {
         }
     }
 
+    /// A light sample's bits.
+    type SampleBits = ([[u32; 3]; 3], u32, u32, bool);
+
+    fn bits(s: Option<LightSample>) -> Option<SampleBits> {
+        s.map(|s| {
+            let v = [s.position, s.wi, s.radiance].map(|v| v.to_array().map(f32::to_bits));
+            (v, s.distance.to_bits(), s.pdf.to_bits(), s.is_delta)
+        })
+    }
+
+    /// A sampler made of a whole snapshot and renumbered for its emitters
+    /// alone ([`LightSampler::for_emitters`]) draws, from the emitters'
+    /// snapshot, the samples it draws from the whole one, bit for bit: on
+    /// chairs-room (a panel after other triangles, and a bulb) with a sun
+    /// added, whose power the whole scene's bounds weigh (a sampler made of
+    /// the emitters alone picks it otherwise).
+    #[test]
+    fn a_sampler_for_the_emitters_alone_samples_as_over_the_whole_snapshot() {
+        let scene = Scene::builtin("chairs-room").unwrap();
+        let sun = PlacedLight {
+            position: Vec3::ZERO,
+            direction: Vec3::new(0.3, -1.0, 0.2).normalize(),
+            intensity: Vec3::splat(2.0),
+            kind: crate::scene::LightKind::Directional,
+        };
+        let (mut whole, mut emitters) = (scene.snapshot(0.0), scene.emitters_snapshot(0.0));
+        whole.lights.push(sun);
+        emitters.lights.push(sun);
+        let emitting = whole.emitting_triangles(&scene.materials);
+        assert!(emitting[0] > 0, "the emitters' ids are the whole's");
+        let lights = LightSampler::new(&whole, &scene.materials);
+        let renumbered = lights.clone().for_emitters(&emitting);
+        let of_emitters = LightSampler::new(&emitters, &scene.materials);
+        let sun_k = lights.sources.len() - 1;
+        assert_ne!(
+            lights.pick_probability(sun_k),
+            of_emitters.pick_probability(sun_k)
+        );
+        let (lo, hi) = whole.bounds().unwrap();
+        let mut rng = crate::sampling::Rng::from_seed(5, 0);
+        let mut drawn = 0;
+        for _ in 0..400 {
+            let p = lo + (hi - lo) * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let choice = lights.choose(rng.next_2d());
+            for sampling in [TriangleSampling::SolidAngle, TriangleSampling::Area] {
+                let one = lights.sample(&whole, p, choice, sampling);
+                let other = renumbered.sample(&emitters, p, choice, sampling);
+                assert_eq!(bits(one), bits(other), "at {p} with {choice:?}");
+                drawn += one.is_some_and(|s| !s.is_delta) as u32;
+            }
+        }
+        assert!(drawn > 200, "{drawn} drawn from the lights' triangles");
+    }
+
     /// Many samples at one point through [`PointLights`] are those of
     /// [`LightSampler::sample`], bit for bit: on chairs-room (a panel of
     /// two triangles and a bulb), at points across the room and just
@@ -683,13 +757,6 @@ mod tests {
                     let choice = lights.choose(rng.next_2d());
                     let one = lights.sample(&snapshot, p, choice, sampling);
                     let many = at_point.sample(choice);
-                    let bits = |s: Option<LightSample>| {
-                        s.map(|s| {
-                            let v = [s.position, s.wi, s.radiance]
-                                .map(|v| v.to_array().map(f32::to_bits));
-                            (v, s.distance.to_bits(), s.pdf.to_bits(), s.is_delta)
-                        })
-                    };
                     assert_eq!(bits(one), bits(many), "at {p} with {choice:?}");
                     if one.is_some() {
                         drawn += 1;

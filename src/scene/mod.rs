@@ -562,7 +562,6 @@ impl Scene {
         static_first(&self.dynamic_objects())
     }
 
-    /// Evaluates the scene at time `t`.
     /// Every object's world transform at time `t` (as a snapshot has them,
     /// without its triangles).
     pub fn object_transforms(&self, t: f32) -> Vec<Mat4> {

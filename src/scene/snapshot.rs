@@ -246,6 +246,29 @@ impl Scene {
         }
     }
 
+    /// Per object, the id of its first triangle in a snapshot of the whole
+    /// scene ([`Scene::snapshot`]: objects static first, each mesh's
+    /// triangles in order), for [`Scene::place_triangle`].
+    pub fn first_triangles(&self) -> Vec<usize> {
+        let mut first = vec![0; self.objects.len()];
+        let mut next = 0;
+        for object in self.object_order() {
+            first[object] = next;
+            next += self.objects[object].mesh.triangles.len();
+        }
+        first
+    }
+
+    /// Triangle `index` of `object`'s mesh placed by `to_world` (the
+    /// object's transform at some time, [`Snapshot::object_to_world`]):
+    /// bit for bit that triangle of a snapshot at that time, without
+    /// placing the others (`trc` shades a few triangles of each of the
+    /// frames ahead it looks at).
+    pub fn place_triangle(&self, object: usize, index: usize, to_world: &Mat4) -> Triangle {
+        let mesh = &self.objects[object].mesh;
+        Placing::new(to_world).place(mesh, mesh.triangles[index])
+    }
+
     /// A snapshot at `t` (nodes placed by `world`) with no triangles: its
     /// object transforms, lights and camera.
     fn posed(&self, t: f32, world: &[Mat4]) -> Snapshot {
@@ -300,31 +323,53 @@ impl Triangles {
     /// Appends the triangles of `object` (its `mesh` placed by `to_world`)
     /// whose material `keep` takes.
     fn append(&mut self, object: u32, mesh: &Mesh, to_world: &Mat4, keep: impl Fn(u32) -> bool) {
-        // Normals transform with the inverse transpose (non-uniform scale).
-        let normal_matrix = Mat3::from_mat4(*to_world).inverse().transpose();
-        let flip = to_world.determinant() < 0.0;
+        let placing = Placing::new(to_world);
         let kept = mesh.triangles.iter().zip(&mesh.materials);
-        for (tri, &material) in kept.filter(|(_, &m)| keep(m)) {
-            let mut idx = tri.map(|i| i as usize);
-            if flip {
-                // A mirroring transform reverses winding; keep the front face.
-                idx.swap(1, 2);
-            }
-            let mut p = idx.map(|i| to_world.transform_point3(mesh.positions[i]));
-            if !p.iter().all(|v| within_world(*v)) {
-                // Collapsed to a point, which no ray hits; its index stays.
-                p = [Vec3::ZERO; 3];
-            }
-            let n = idx.map(|i| {
-                mesh.normals
-                    .get(i)
-                    .map(|&n| (normal_matrix * n).normalize_or_zero())
-                    .unwrap_or(Vec3::ZERO)
-            });
-            self.triangles.push(Triangle { p, n });
+        for (&tri, &material) in kept.filter(|(_, &m)| keep(m)) {
+            self.triangles.push(placing.place(mesh, tri));
             self.objects.push(object);
             self.materials.push(material);
         }
+    }
+}
+
+/// A transform as it places a mesh's triangles in world space.
+struct Placing<'a> {
+    to_world: &'a Mat4,
+    /// Normals transform with the inverse transpose (non-uniform scale).
+    normal_matrix: Mat3,
+    /// A mirroring transform reverses winding.
+    flip: bool,
+}
+
+impl<'a> Placing<'a> {
+    fn new(to_world: &'a Mat4) -> Self {
+        Placing {
+            to_world,
+            normal_matrix: Mat3::from_mat4(*to_world).inverse().transpose(),
+            flip: to_world.determinant() < 0.0,
+        }
+    }
+
+    /// Triangle `tri` (its vertex indices) of `mesh`, placed.
+    fn place(&self, mesh: &Mesh, tri: [u32; 3]) -> Triangle {
+        let mut idx = tri.map(|i| i as usize);
+        if self.flip {
+            // Keep the front face.
+            idx.swap(1, 2);
+        }
+        let mut p = idx.map(|i| self.to_world.transform_point3(mesh.positions[i]));
+        if !p.iter().all(|v| within_world(*v)) {
+            // Collapsed to a point, which no ray hits; its index stays.
+            p = [Vec3::ZERO; 3];
+        }
+        let n = idx.map(|i| {
+            mesh.normals
+                .get(i)
+                .map(|&n| (self.normal_matrix * n).normalize_or_zero())
+                .unwrap_or(Vec3::ZERO)
+        });
+        Triangle { p, n }
     }
 }
 
@@ -505,7 +550,8 @@ mod tests {
     /// agree), from an earlier time or a later one, and an emitters
     /// snapshot is not taken for one. The emitters snapshot has the
     /// emitting triangles of the whole one, in their order, and its lights,
-    /// transforms and camera.
+    /// transforms and camera; and each triangle placed alone
+    /// ([`Scene::place_triangle`]) is the whole one's.
     #[test]
     fn snapshots_made_in_earlier_ones_and_of_emitters_agree_with_whole_ones() {
         let text = |s: &Snapshot| format!("{s:?}");
@@ -522,6 +568,13 @@ mod tests {
                 assert_eq!(text(&from_emitters), text(&whole), "{name} at {t}");
             }
             let (whole, emitters) = (scene.snapshot(0.3), scene.emitters_snapshot(0.3));
+            let first = scene.first_triangles();
+            for (id, (tri, &object)) in whole.triangles.iter().zip(&whole.tri_object).enumerate() {
+                let object = object as usize;
+                let to_world = &emitters.object_to_world[object];
+                let alone = scene.place_triangle(object, id - first[object], to_world);
+                assert_eq!(format!("{alone:?}"), format!("{tri:?}"), "{name}: {id}");
+            }
             let emitting: Vec<String> = (whole.triangles.iter().zip(&whole.tri_material))
                 .filter(|(_, &m)| scene.materials[m as usize].is_emissive())
                 .map(|(t, _)| format!("{t:?}"))

@@ -33,7 +33,7 @@ use crate::material::Bsdf;
 use crate::method::FrameContext;
 use crate::sampling::streams;
 use crate::sampling::{LightChoice, Rng, SampleKey};
-use crate::scene::Snapshot;
+use crate::scene::{Snapshot, Triangle};
 use glam::{Mat4, Vec3};
 use std::cell::OnceCell;
 use std::sync::Arc;
@@ -94,6 +94,10 @@ pub(super) struct DirectChange {
     moving_now: Option<Arc<TriangleBvh>>,
     /// The frame compared with t0.
     later: Arc<LaterGeometry>,
+    /// The whole snapshot of t0+1 it was made of, for the renderer to take
+    /// when that frame comes ([`Self::into_later`]; `None` for the later
+    /// frames' comparisons, [`Self::to_frame`]).
+    later_snapshot: Option<Snapshot>,
     lights_move: bool,
 }
 
@@ -107,8 +111,21 @@ pub(super) struct DirectChange {
 /// of `perf record` over 24 frames even with the BVHs held while their
 /// frame was ahead (`benches/RESULTS.md`, "Each later frame's geometry
 /// made once a render").
+///
+/// The frame's triangles are not held: its moving ones are in `moving`,
+/// and the few a sample hits are placed again when shaded
+/// ([`Self::triangle`]). Its whole snapshot was held too, up to 19 frames
+/// ahead: on a 261,120-triangle ball turning under a moving light, 440 MB
+/// of an 888 MB peak heap (`benches/RESULTS.md`, "What a frame of
+/// replacements holds at once").
 pub(super) struct LaterGeometry {
-    snapshot: Snapshot,
+    /// The frame's emitting triangles, lights and object transforms
+    /// ([`crate::scene::Scene::emitters_snapshot`]), which `lights`
+    /// samples.
+    emitters: Snapshot,
+    /// Per object, the id of its first triangle
+    /// ([`crate::scene::Scene::first_triangles`]).
+    first_triangles: Vec<usize>,
     /// Its moving triangles' BVH ([`moving_bvh`]).
     moving: Option<Arc<TriangleBvh>>,
     lights: LightSampler,
@@ -116,17 +133,32 @@ pub(super) struct LaterGeometry {
 
 impl LaterGeometry {
     /// The geometry of `snapshot`, a frame of `ctx`'s scene.
-    pub(super) fn new(ctx: &FrameContext, snapshot: Snapshot) -> Self {
+    pub(super) fn new(ctx: &FrameContext, snapshot: &Snapshot) -> Self {
+        let scene = ctx.scene;
+        let emitting = snapshot.emitting_triangles(&scene.materials);
         LaterGeometry {
-            moving: moving_bvh(&snapshot),
-            lights: LightSampler::new(&snapshot, &ctx.scene.materials),
-            snapshot,
+            moving: moving_bvh(snapshot),
+            lights: LightSampler::new(snapshot, &scene.materials).for_emitters(&emitting),
+            emitters: scene.emitters_snapshot(snapshot.time),
+            first_triangles: scene.first_triangles(),
         }
     }
 
     /// Whether this is the geometry of frame `t` of `ctx`'s render.
     pub(super) fn is_at(&self, ctx: &FrameContext, t: u32) -> bool {
-        self.snapshot.time == ctx.time_of(t)
+        self.emitters.time == ctx.time_of(t)
+    }
+
+    /// Triangle `id` of `ctx`'s snapshot as it lies in this frame: bit for
+    /// bit this frame's snapshot's triangle `id`.
+    fn triangle(&self, ctx: &FrameContext, id: u32) -> Triangle {
+        let (now, id) = (ctx.snapshot, id as usize);
+        if id < now.static_count {
+            return now.triangles[id];
+        }
+        let object = now.tri_object[id] as usize;
+        let index = id - self.first_triangles[object];
+        (ctx.scene).place_triangle(object, index, &self.emitters.object_to_world[object])
     }
 }
 
@@ -164,21 +196,23 @@ impl DirectChange {
             return None;
         }
         let moving_now = geometry.moving_now(ctx);
-        let later = Arc::new(LaterGeometry::new(ctx, later));
-        geometry.next_moving = Some((ctx.frame + 1, later.moving.clone()));
+        let geometry_later = Arc::new(LaterGeometry::new(ctx, &later));
+        geometry.next_moving = Some((ctx.frame + 1, geometry_later.moving.clone()));
         Some(DirectChange {
             statics: (static_part_len(ctx.snapshot) > 0)
                 .then(|| geometry.statics.of(ctx.snapshot))
                 .flatten(),
             moving_now,
-            later,
+            later: geometry_later,
+            later_snapshot: Some(later),
             lights_move,
         })
     }
 
-    /// The snapshot of t0+1, given up (`None`: it is shared).
+    /// The whole snapshot of t0+1, given up (`None`: this compares t0
+    /// with a later frame).
     pub(super) fn into_later(self) -> Option<Snapshot> {
-        Arc::into_inner(self.later).map(|g| g.snapshot)
+        self.later_snapshot
     }
 
     /// The geometry of the frame compared with t0.
@@ -194,6 +228,7 @@ impl DirectChange {
             statics: self.statics.clone(),
             moving_now: self.moving_now.clone(),
             later,
+            later_snapshot: None,
             lights_move: true,
         }
     }
@@ -226,7 +261,8 @@ impl DirectChange {
             })
         };
         let before = *before.get_or_init(|| {
-            let s = shading(ctx, ctx.snapshot, at.hit, at.point, g.record.position);
+            let tri = &ctx.snapshot.triangles[at.hit.triangle as usize];
+            let s = shading(ctx, tri, at.hit, at.point, g.record.position);
             lit(
                 s.and_then(|s| unoccluded(ctx.snapshot, ctx.lights, ctx.ray_offset, &s, choice)),
                 0,
@@ -234,8 +270,9 @@ impl DirectChange {
         });
         let p1 = at.moved.map_or(at.point, |(_, p)| p);
         let later = &self.later;
-        let after = shading(ctx, &later.snapshot, at.hit, p1, g.record.position)
-            .and_then(|s| unoccluded(&later.snapshot, &later.lights, ctx.ray_offset, &s, choice));
+        let tri = later.triangle(ctx, at.hit.triangle);
+        let after = shading(ctx, &tri, at.hit, p1, g.record.position)
+            .and_then(|s| unoccluded(&later.emitters, &later.lights, ctx.ray_offset, &s, choice));
         lit(after, 1) - ratio * before
     }
 
@@ -251,7 +288,8 @@ impl DirectChange {
         choice: LightChoice,
     ) -> Vec3 {
         let snapshot = ctx.snapshot;
-        let ng = snapshot.triangles[at.hit.triangle as usize].geometric_normal();
+        let tri = &snapshot.triangles[at.hit.triangle as usize];
+        let ng = tri.geometric_normal();
         let Some(ls) = ctx
             .lights
             .sample(snapshot, at.point, choice, TriangleSampling::Area)
@@ -265,7 +303,7 @@ impl DirectChange {
         if sign == 0.0 {
             return Vec3::ZERO;
         }
-        shading(ctx, snapshot, at.hit, at.point, g.record.position)
+        shading(ctx, tri, at.hit, at.point, g.record.position)
             .and_then(|s| unoccluded(snapshot, ctx.lights, ctx.ray_offset, &s, choice))
             .map_or(Vec3::ZERO, |(_, d)| sign * d)
     }
@@ -331,17 +369,18 @@ fn moving_range(s: &Snapshot) -> std::ops::Range<usize> {
     static_part_len(s)..s.triangles.len()
 }
 
-/// The first hit `hit` (of triangle `hit.triangle` in `snapshot`) at `p`,
-/// seen from the record at `record`; `None` where it reflects nothing.
+/// The first hit `hit` (on `tri`, triangle `hit.triangle` as it lies at
+/// the time shaded) at `p`, seen from the record at `record`; `None` where
+/// it reflects nothing.
 fn shading(
     ctx: &FrameContext,
-    snapshot: &Snapshot,
+    tri: &Triangle,
     hit: &Hit,
     p: Vec3,
     record: Vec3,
 ) -> Option<Shading> {
-    let tri = &snapshot.triangles[hit.triangle as usize];
-    let material = &ctx.scene.materials[snapshot.tri_material[hit.triangle as usize] as usize];
+    let material = ctx.snapshot.tri_material[hit.triangle as usize];
+    let material = &ctx.scene.materials[material as usize];
     let wo = (record - p).normalize_or_zero();
     let bsdf = Bsdf::new(material, tri.shading_normal(hit.u, hit.v), wo);
     (!bsdf.is_black()).then(|| Shading {

@@ -113,7 +113,7 @@ impl NextFrame {
         let direct = self.direct.as_ref()?;
         let geometry = held.cloned().unwrap_or_else(|| {
             let later = ctx.scene.snapshot_from(ctx.time_of(t), ctx.snapshot);
-            Arc::new(LaterGeometry::new(ctx, later))
+            Arc::new(LaterGeometry::new(ctx, &later))
         });
         Some(NextFrame {
             direct: Some(direct.to_frame(geometry)),
