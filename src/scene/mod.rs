@@ -18,7 +18,7 @@ mod snapshot;
 pub use camera::Camera;
 use glam::{Mat4, Quat, Vec3};
 pub use placed::Placed;
-pub use snapshot::{PlacedLight, Snapshot, Triangle};
+pub use snapshot::{PlacedLight, Placing, Snapshot, Triangle};
 use std::path::Path;
 
 pub use animation::{Animation, Channel, Interpolation, Property};

@@ -259,14 +259,14 @@ impl Scene {
         first
     }
 
-    /// Triangle `index` of `object`'s mesh placed by `to_world` (the
+    /// Triangle `index` of `object`'s mesh placed by `placing` (the
     /// object's transform at some time, [`Snapshot::object_to_world`]):
     /// bit for bit that triangle of a snapshot at that time, without
     /// placing the others (`trc` shades a few triangles of each of the
     /// frames ahead it looks at).
-    pub fn place_triangle(&self, object: usize, index: usize, to_world: &Mat4) -> Triangle {
+    pub fn place_triangle(&self, object: usize, index: usize, placing: &Placing) -> Triangle {
         let mesh = &self.objects[object].mesh;
-        Placing::new(to_world).place(mesh, mesh.triangles[index])
+        placing.place(mesh, mesh.triangles[index])
     }
 
     /// A snapshot at `t` (nodes placed by `world`) with no triangles: its
@@ -323,7 +323,7 @@ impl Triangles {
     /// Appends the triangles of `object` (its `mesh` placed by `to_world`)
     /// whose material `keep` takes.
     fn append(&mut self, object: u32, mesh: &Mesh, to_world: &Mat4, keep: impl Fn(u32) -> bool) {
-        let placing = Placing::new(to_world);
+        let placing = Placing::new(*to_world);
         let kept = mesh.triangles.iter().zip(&mesh.materials);
         for (&tri, &material) in kept.filter(|(_, &m)| keep(m)) {
             self.triangles.push(placing.place(mesh, tri));
@@ -333,20 +333,21 @@ impl Triangles {
     }
 }
 
-/// A transform as it places a mesh's triangles in world space.
-struct Placing<'a> {
-    to_world: &'a Mat4,
+/// A transform as it places a mesh's triangles in world space (what it
+/// takes of the transform found once, not for each triangle).
+pub struct Placing {
+    to_world: Mat4,
     /// Normals transform with the inverse transpose (non-uniform scale).
     normal_matrix: Mat3,
     /// A mirroring transform reverses winding.
     flip: bool,
 }
 
-impl<'a> Placing<'a> {
-    fn new(to_world: &'a Mat4) -> Self {
+impl Placing {
+    pub fn new(to_world: Mat4) -> Self {
         Placing {
             to_world,
-            normal_matrix: Mat3::from_mat4(*to_world).inverse().transpose(),
+            normal_matrix: Mat3::from_mat4(to_world).inverse().transpose(),
             flip: to_world.determinant() < 0.0,
         }
     }
@@ -571,8 +572,8 @@ mod tests {
             let first = scene.first_triangles();
             for (id, (tri, &object)) in whole.triangles.iter().zip(&whole.tri_object).enumerate() {
                 let object = object as usize;
-                let to_world = &emitters.object_to_world[object];
-                let alone = scene.place_triangle(object, id - first[object], to_world);
+                let placing = Placing::new(emitters.object_to_world[object]);
+                let alone = scene.place_triangle(object, id - first[object], &placing);
                 assert_eq!(format!("{alone:?}"), format!("{tri:?}"), "{name}: {id}");
             }
             let emitting: Vec<String> = (whole.triangles.iter().zip(&whole.tri_material))

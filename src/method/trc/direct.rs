@@ -33,7 +33,7 @@ use crate::material::Bsdf;
 use crate::method::FrameContext;
 use crate::sampling::streams;
 use crate::sampling::{LightChoice, Rng, SampleKey};
-use crate::scene::{Snapshot, Triangle};
+use crate::scene::{Placing, Snapshot, Triangle};
 use glam::{Mat4, Vec3};
 use std::cell::OnceCell;
 use std::sync::Arc;
@@ -119,10 +119,13 @@ pub(super) struct DirectChange {
 /// of an 888 MB peak heap (`benches/RESULTS.md`, "What a frame of
 /// replacements holds at once").
 pub(super) struct LaterGeometry {
-    /// The frame's emitting triangles, lights and object transforms
+    /// The frame's emitting triangles and lights
     /// ([`crate::scene::Scene::emitters_snapshot`]), which `lights`
     /// samples.
     emitters: Snapshot,
+    /// Each object's transform then, as it places triangles (its normal
+    /// matrix found once a frame, not for every sample shaded).
+    placings: Vec<Placing>,
     /// Per object, the id of its first triangle
     /// ([`crate::scene::Scene::first_triangles`]).
     first_triangles: Vec<usize>,
@@ -136,7 +139,9 @@ impl LaterGeometry {
     pub(super) fn new(ctx: &FrameContext, snapshot: &Snapshot) -> Self {
         let scene = ctx.scene;
         let emitting = snapshot.emitting_triangles(&scene.materials);
+        let placings = snapshot.object_to_world.iter();
         LaterGeometry {
+            placings: placings.map(|&w| Placing::new(w)).collect(),
             moving: moving_bvh(snapshot),
             lights: LightSampler::new(snapshot, &scene.materials).for_emitters(&emitting),
             emitters: scene.emitters_snapshot(snapshot.time),
@@ -158,7 +163,7 @@ impl LaterGeometry {
         }
         let object = now.tri_object[id] as usize;
         let index = id - self.first_triangles[object];
-        (ctx.scene).place_triangle(object, index, &self.emitters.object_to_world[object])
+        (ctx.scene).place_triangle(object, index, &self.placings[object])
     }
 }
 
@@ -417,6 +422,32 @@ mod tests {
     use crate::method::trc::estimate::NextFrame;
     use crate::method::trc::NextDirect;
     use crate::render::test_renderer;
+
+    /// A later frame's triangles placed one at a time as samples are
+    /// shaded ([`LaterGeometry::triangle`]) are, bit for bit, that frame's
+    /// whole snapshot's, static and moving, on scenes whose objects move
+    /// (cube-in-box's cube, the bouncing spheres), three frames ahead.
+    #[test]
+    fn a_later_frames_triangles_placed_alone_are_its_snapshots() {
+        for name in ["cube-in-box", "spheres"] {
+            let mut renderer = test_renderer(name, 4);
+            renderer.with_frame_context(1, |ctx| {
+                let later = ctx.scene.snapshot(ctx.time_of(4));
+                let geometry = LaterGeometry::new(ctx, &later);
+                assert!(
+                    later.dynamic_count() > 0 && later.static_count > 0,
+                    "{name}"
+                );
+                let mut moved = 0;
+                for (id, tri) in later.triangles.iter().enumerate() {
+                    let alone = geometry.triangle(ctx, id as u32);
+                    assert_eq!(format!("{alone:?}"), format!("{tri:?}"), "{name}: {id}");
+                    moved += (alone.p != ctx.snapshot.triangles[id].p) as usize;
+                }
+                assert!(moved > 0, "{name}: nothing moved");
+            });
+        }
+    }
 
     /// The moving triangles' BVH built for t0+1 is the next frame's t0
     /// BVH, the same one; kept for another frame, or over other
