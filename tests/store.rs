@@ -2281,6 +2281,54 @@ fn torn_sample_log_tail_is_cut_by_the_next_write() {
     assert!(store.sample_log_bytes() > committed);
 }
 
+/// A sled database recovered with none of its commits (its schema there,
+/// its jobs and the log's committed length not) looks like a store whose
+/// first frame was never acknowledged: opening it keeps every byte of its
+/// log as well, and the next write cuts them as above.
+#[test]
+fn a_log_no_commit_references_is_kept_until_the_next_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let log = path.join("samples.log");
+    drop(Store::open(&path).unwrap());
+    let header = std::fs::metadata(&log).unwrap().len();
+    {
+        use std::io::Write;
+        let mut f = std::fs::OpenOptions::new().append(true).open(&log).unwrap();
+        f.write_all(&[0xcd; 5000]).unwrap();
+    }
+    for _ in 0..2 {
+        let store = Store::open_existing(&path).unwrap();
+        assert_eq!(store.sample_log_bytes(), header);
+        assert!(store.job("j").unwrap().is_none());
+        // `inspect` says what is there.
+        let report = radcache::store::inspect::report(&store, None, None).unwrap();
+        assert_eq!(report.sample_log_tail_bytes, 5000);
+        let text = radcache::store::inspect::to_text(&report, false);
+        assert!(
+            text.contains("5000 bytes past its committed length"),
+            "{text}"
+        );
+    }
+    assert_eq!(std::fs::metadata(&log).unwrap().len(), header + 5000);
+    {
+        let store = Store::open_existing(&path).unwrap();
+        commit_frames(&store, "j", 0..2);
+    }
+    // The tail was cut, not written after.
+    let bytes = std::fs::read(&log).unwrap();
+    assert!(!bytes.windows(5000).any(|w| w.iter().all(|&b| b == 0xcd)));
+    let store = Store::open_existing(&path).unwrap();
+    let report = radcache::store::inspect::report(&store, None, None).unwrap();
+    assert_eq!(report.sample_log_tail_bytes, 0);
+    let id = store.job("j").unwrap().unwrap().id;
+    for frame in 0..2 {
+        for r in store.frame_records(id, frame).unwrap() {
+            assert_eq!(store.record_samples(id, frame, r.id).unwrap().len(), 48);
+        }
+    }
+}
+
 #[test]
 fn sample_log_shorter_than_referenced_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();

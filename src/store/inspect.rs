@@ -24,6 +24,10 @@ pub struct InspectReport {
     /// more (what `radcache compact` reclaims).
     pub sample_log_referenced_bytes: u64,
     pub sample_log_unreferenced_bytes: u64,
+    /// Bytes of the file past its committed length: a frame a crash cut
+    /// off between its appends and its commit, or frames whose commits the
+    /// database lost. The store's next write cuts them off.
+    pub sample_log_tail_bytes: u64,
     /// Key and value bytes per tree (logical: before sled's own overhead).
     pub trees: Vec<TreeReport>,
     /// `size_on_disk` / Σ (key + value bytes): sled's space amplification.
@@ -265,6 +269,7 @@ pub fn report(
     }
     let usage = super::compact::log_usage(store)?;
     let log_file = store.sample_log_file();
+    let file_len = std::fs::metadata(&log_file).map_or(0, |m| m.len());
     Ok(InspectReport {
         path: store.path().display().to_string(),
         schema_version: store.schema_version()?,
@@ -276,6 +281,7 @@ pub fn report(
         sample_log_bytes: usage.committed,
         sample_log_referenced_bytes: usage.referenced,
         sample_log_unreferenced_bytes: usage.unreferenced,
+        sample_log_tail_bytes: file_len.saturating_sub(usage.committed),
         trees,
         space_amplification: size_on_disk as f64 / logical.max(1) as f64,
         frame,
@@ -524,6 +530,15 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
             ""
         }
     );
+    if r.sample_log_tail_bytes > 0 {
+        let _ = writeln!(
+            s,
+            "sample log {}: {} bytes past its committed length, which no value references \
+             (a frame a crash cut off, or commits the database lost); the store's next \
+             write cuts them off",
+            r.sample_log_file, r.sample_log_tail_bytes
+        );
+    }
     let _ = writeln!(
         s,
         "{:<8} {:>10} {:>12} {:>14}",

@@ -20,10 +20,12 @@
 //!   written in each frame's sled transaction after the frame's EXR and
 //!   blocks (samples, then records) were appended and synced. Bytes beyond it belong to a frame that was never
 //!   acknowledged (a crash between the append and the transaction): the
-//!   store's first append cuts them off, opening it leaves them (so that
-//!   `inspect` of a store whose sled database lost commits, which looks the
-//!   same, destroys nothing). A log shorter than its committed length has
-//!   lost acknowledged data: opening the store fails, naming the file.
+//!   store's first append cuts them off, and says so; opening it leaves
+//!   them (so that `inspect` of a store whose sled database lost commits,
+//!   which looks the same, destroys nothing, and shows them). Where `meta`
+//!   holds no committed length, the tail is what follows the header. A log
+//!   shorter than its committed length has lost acknowledged data: opening
+//!   the store fails, naming the file.
 //! - Schema 5 (`migrations/0005_log_generations.md`): `radcache compact`
 //!   ([`super::compact`]) rewrites the log without its unreferenced bytes
 //!   into a new file, so the log has a generation: `meta.samples_log_generation`
@@ -247,13 +249,35 @@ pub struct SampleLog {
     foreign_tail: bool,
 }
 
+/// Makes `file`, a log in store directory `dir`, its header alone, durably.
+fn write_header(file: &File, dir: &Path) -> Result<(), String> {
+    file.set_len(0)
+        .and_then(|()| file.write_all_at(MAGIC, 0))
+        .and_then(|()| file.sync_all())
+        .map_err(|e| e.to_string())?;
+    // The file's name too: the first frame committed will reference it.
+    sync_dir(dir)
+}
+
+/// Checks that `file` begins with a log's header.
+fn check_header(file: &File) -> Result<(), String> {
+    let mut head = [0u8; 8];
+    file.read_exact_at(&mut head, 0)
+        .map_err(|e| format!("cannot read its header: {e}"))?;
+    if &head != MAGIC {
+        return Err("not a radcache sample log (bad header)".into());
+    }
+    Ok(())
+}
+
 impl SampleLog {
     /// Opens (or creates) the log of generation `generation` ([`file_name`])
     /// in store directory `dir`, whose `meta` says `committed` bytes are
     /// referenced (`None`: nothing ever was: the file is created, or
-    /// emptied). A tail beyond `committed` is kept until the first append
-    /// ([`Self::append`]); a file shorter than `committed`, or without the
-    /// header, is an error.
+    /// begun again where it holds no more than its header). A tail beyond
+    /// `committed` (beyond the header for `None`) is kept until the first
+    /// append ([`Self::append`]); a file shorter than `committed`, or
+    /// without the header, is an error.
     pub fn open(dir: &Path, generation: u64, committed: Option<u64>) -> Result<SampleLog, String> {
         let path = dir.join(file_name(generation));
         let file = OpenOptions::new()
@@ -269,56 +293,45 @@ impl SampleLog {
                 None => format!("cannot open it: {e}"),
             })?;
         let actual = file.metadata().map_err(|e| e.to_string())?.len();
-        let mut log = SampleLog {
+        let header = MAGIC.len() as u64;
+        // Nothing committed and no sample there (a new store, or one whose
+        // creation was cut off): the file starts as its header.
+        let fresh = committed.is_none() && actual <= header;
+        let committed = match committed {
+            // Nothing committed, yet samples there: a first frame's appends
+            // that were never acknowledged, or a database sled recovered with
+            // none of its commits (the rest of `meta` intact), which looks
+            // the same. Kept past the header, as any tail below.
+            None => header,
+            // Appends at `c` would overwrite the header.
+            Some(c) if c < header => {
+                return Err(format!(
+                    "the store references {c} bytes of it, less than its own header (damaged meta)"
+                ));
+            }
+            Some(c) if actual < c => {
+                return Err(format!(
+                    "it is {actual} bytes, shorter than the {c} bytes the store's records reference (truncated or replaced?)"
+                ));
+            }
+            Some(c) => c,
+        };
+        if fresh {
+            write_header(&file, dir)?;
+        } else {
+            check_header(&file)?;
+        }
+        Ok(SampleLog {
             path,
             file,
-            committed: 0,
-            end: 0,
-            foreign_tail: false,
-        };
-        match committed {
-            None => {
-                // Nothing committed: whatever is there was never
-                // acknowledged.
-                log.file.set_len(0).map_err(|e| e.to_string())?;
-                log.file
-                    .write_all_at(MAGIC, 0)
-                    .and_then(|()| log.file.sync_all())
-                    .map_err(|e| e.to_string())?;
-                // The file's name too: the first frame committed will
-                // reference it.
-                sync_dir(dir)?;
-                log.committed = MAGIC.len() as u64;
-            }
-            Some(c) => {
-                if c < MAGIC.len() as u64 {
-                    // Appends at `c` would overwrite the header.
-                    return Err(format!(
-                        "the store references {c} bytes of it, less than its own header (damaged meta)"
-                    ));
-                }
-                if actual < c {
-                    return Err(format!(
-                        "it is {actual} bytes, shorter than the {c} bytes the store's records reference (truncated or replaced?)"
-                    ));
-                }
-                let mut head = [0u8; 8];
-                log.file
-                    .read_exact_at(&mut head, 0)
-                    .map_err(|e| format!("cannot read its header: {e}"))?;
-                if &head != MAGIC {
-                    return Err("not a radcache sample log (bad header)".into());
-                }
-                // The tail of a frame that was never acknowledged, or of
-                // frames whose commits sled lost (a damaged database it
-                // recovered in part): only a write cuts it, so that a store
-                // opened to be read changes nothing.
-                log.foreign_tail = actual > c;
-                log.committed = c;
-            }
-        }
-        log.end = log.committed;
-        Ok(log)
+            committed,
+            end: committed,
+            // The tail of a frame that was never acknowledged, or of frames
+            // whose commits sled lost (a damaged database it recovered in
+            // part): only a write cuts it, so that a store opened to be read
+            // changes nothing.
+            foreign_tail: !fresh && actual > committed,
+        })
     }
 
     pub fn path(&self) -> &Path {
@@ -338,8 +351,15 @@ impl SampleLog {
     /// Appends `bytes` (not yet synced nor committed); returns their offset.
     pub fn append(&mut self, bytes: &[u8]) -> std::io::Result<u64> {
         if self.foreign_tail {
+            let tail = self.file.metadata()?.len().saturating_sub(self.end);
             self.file.set_len(self.end)?;
             self.foreign_tail = false;
+            // Said, because it may be all a damaged database's frames.
+            eprintln!(
+                "warning: {}: cut off {tail} bytes past its committed length (a frame a crash \
+                 cut off, or commits the database lost)",
+                self.path.display()
+            );
         }
         let offset = self.end;
         self.file.write_all_at(bytes, offset)?;
