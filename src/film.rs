@@ -142,7 +142,7 @@ pub enum DeclaredSizeError {
 // ---------------------------------------------------------------- EXR
 
 /// The four bytes every OpenEXR file starts with.
-const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
+pub(crate) const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
 
 /// Writes `film` as a scanline, ZIP-compressed RGB f32 EXR (atomically).
 pub fn write_exr(film: &Film, path: &Path) -> Result<(), FilmError> {

@@ -23,6 +23,18 @@ mod store_fixtures;
 use store_fixtures::{open_raw, record, samples, spec};
 
 fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
+    commit_frames_with(store, name, frames, |frame| {
+        vec![frame as u8; 1000 + frame as usize]
+    });
+}
+
+/// [`commit_frames`] with the EXR file of each frame made by `exr`.
+fn commit_frames_with(
+    store: &Store,
+    name: &str,
+    frames: std::ops::Range<u32>,
+    exr: impl Fn(u32) -> Vec<u8>,
+) {
     let mut job = store.begin_job(&spec(name), false).unwrap();
     let strata = Strata { theta: 4, phi: 12 };
     for frame in frames {
@@ -37,7 +49,7 @@ fn commit_frames(store: &Store, name: &str, frames: std::ops::Range<u32>) {
                 )
             })
             .collect();
-        let exr = vec![frame as u8; 1000 + frame as usize];
+        let exr = exr(frame);
         let stats = FrameStats {
             frame,
             records_created: 3,
@@ -2327,6 +2339,91 @@ fn a_log_no_commit_references_is_kept_until_the_next_write() {
             assert_eq!(store.record_samples(id, frame, r.id).unwrap().len(), 48);
         }
     }
+}
+
+/// The files of a store directory copied to `to` (the store closed).
+fn copy_store(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        if entry.file_type().unwrap().is_dir() {
+            copy_store(&entry.path(), &to.join(entry.file_name()));
+        } else {
+            std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+        }
+    }
+}
+
+/// A database that lost the commits of frames whose files are in the log
+/// (sled recovers a damaged database as the part before the damage) is
+/// refused for writing: a crash leaves one frame's appends past the
+/// committed length at most, so two frames' files there are frames the
+/// database lost, which the next write would cut off. One frame's are
+/// cut, as after a crash. Reading it goes on, and says so.
+#[test]
+fn a_log_holding_frames_its_database_lost_takes_no_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, two, three) = (
+        dir.path().join("db"),
+        dir.path().join("two"),
+        dir.path().join("three"),
+    );
+    let log = |store: &Path| store.join("samples.log");
+    // The frames' EXR files as a render makes them (their first bytes tell
+    // them from the other blocks).
+    let exr = |frame: u32| {
+        let mut film = radcache::film::Film::new(16, 16);
+        film.pixels.fill(glam::Vec3::splat(frame as f32));
+        radcache::film::encode_exr(&film).unwrap()
+    };
+    let store = Store::open(&path).unwrap();
+    commit_frames_with(&store, "j", 0..2, exr);
+    drop(store);
+    copy_store(&path, &two);
+    let store = Store::open_existing(&path).unwrap();
+    commit_frames_with(&store, "j", 2..3, exr);
+    drop(store);
+    copy_store(&path, &three);
+    let store = Store::open_existing(&path).unwrap();
+    commit_frames_with(&store, "j", 3..4, exr);
+    drop(store);
+    // Each database as it was, with the log of all four frames.
+    for older in [&two, &three] {
+        std::fs::copy(log(&path), log(older)).unwrap();
+    }
+    let full = std::fs::metadata(log(&path)).unwrap().len();
+
+    // Two frames lost: refused, every byte kept.
+    {
+        let store = Store::open_existing(&two).unwrap();
+        assert!(store.sample_log_holds_lost_frames());
+        let report = radcache::store::inspect::report(&store, None, None).unwrap();
+        assert!(report.sample_log_tail_lost_frames);
+        let text = radcache::store::inspect::to_text(&report, false);
+        assert!(text.contains("the database lost commits"), "{text}");
+        let msg = err_text(store.begin_job(&spec("j"), false));
+        assert!(
+            msg.contains("damaged") && msg.contains("two or more frames"),
+            "{msg}"
+        );
+        let mut store = store;
+        let progress = indicatif::ProgressBar::hidden();
+        let msg = err_text(radcache::store::compact::compact(&mut store, &progress));
+        assert!(msg.contains("damaged"), "{msg}");
+    }
+    assert_eq!(std::fs::metadata(log(&two)).unwrap().len(), full);
+
+    // One frame lost, as a crash leaves it: cut by the next write.
+    let store = Store::open_existing(&three).unwrap();
+    assert!(!store.sample_log_holds_lost_frames());
+    commit_frames_with(&store, "j", 3..4, exr);
+    let id = store.job("j").unwrap().unwrap().id;
+    for frame in 0..4 {
+        for r in store.frame_records(id, frame).unwrap() {
+            assert_eq!(store.record_samples(id, frame, r.id).unwrap().len(), 48);
+        }
+    }
+    assert_eq!(store.sample_log_bytes(), full);
 }
 
 #[test]

@@ -156,6 +156,8 @@ pub fn compact_with(
     progress: &indicatif::ProgressBar,
     stop_after: Option<Step>,
 ) -> Result<CompactReport, StoreError> {
+    // The new log would leave out the frames past the old one's end.
+    store.refuse_if_frames_lost()?;
     let orphaned_jobs_removed = store.remove_orphaned_job_data()?;
     let blocks = referenced_blocks(store)?;
     let before = usage(store, &blocks)?;

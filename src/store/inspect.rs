@@ -28,6 +28,9 @@ pub struct InspectReport {
     /// off between its appends and its commit, or frames whose commits the
     /// database lost. The store's next write cuts them off.
     pub sample_log_tail_bytes: u64,
+    /// Whether that tail holds two or more frames' files, which no crash
+    /// leaves: the database lost commits, and the store takes no write.
+    pub sample_log_tail_lost_frames: bool,
     /// Key and value bytes per tree (logical: before sled's own overhead).
     pub trees: Vec<TreeReport>,
     /// `size_on_disk` / Σ (key + value bytes): sled's space amplification.
@@ -282,6 +285,7 @@ pub fn report(
         sample_log_referenced_bytes: usage.referenced,
         sample_log_unreferenced_bytes: usage.unreferenced,
         sample_log_tail_bytes: file_len.saturating_sub(usage.committed),
+        sample_log_tail_lost_frames: store.sample_log_holds_lost_frames(),
         trees,
         space_amplification: size_on_disk as f64 / logical.max(1) as f64,
         frame,
@@ -530,7 +534,15 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
             ""
         }
     );
-    if r.sample_log_tail_bytes > 0 {
+    if r.sample_log_tail_lost_frames {
+        let _ = writeln!(
+            s,
+            "sample log {}: {} bytes past its committed length, holding the files of two \
+             or more frames, which no crash leaves: the database lost commits (damaged); \
+             the store takes no write",
+            r.sample_log_file, r.sample_log_tail_bytes
+        );
+    } else if r.sample_log_tail_bytes > 0 {
         let _ = writeln!(
             s,
             "sample log {}: {} bytes past its committed length, which no value references \

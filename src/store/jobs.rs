@@ -161,6 +161,7 @@ impl Store {
     /// is then deleted): also the way out for a job whose stored frames are
     /// damaged.
     pub fn begin_job(&self, spec: &JobSpec, force: bool) -> Result<JobValue, StoreError> {
+        self.refuse_if_frames_lost()?;
         let key = keys::job(&spec.name);
         let now = now_unix();
         if let Some(mut job) = self.job(&spec.name)? {

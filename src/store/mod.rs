@@ -54,6 +54,7 @@ pub mod rgbe;
 pub mod samples;
 pub mod schema;
 mod state;
+mod tail;
 pub mod v1;
 pub mod v2;
 pub mod v3;
@@ -500,6 +501,30 @@ impl Store {
         self.log.lock().unwrap_or_else(|e| e.into_inner())
     }
 
+    /// Whether the sample log holds, past its committed length, frames the
+    /// database lost ([`SampleLog::hold_lost_frames`]): the store then
+    /// takes no write.
+    pub fn sample_log_holds_lost_frames(&self) -> bool {
+        self.lock_log().holds_lost_frames()
+    }
+
+    /// Refuses to write to a store whose sample log holds frames its
+    /// database lost ([`SampleLog::hold_lost_frames`]): a write would cut
+    /// them off. Reading it (`inspect`) goes on.
+    pub(crate) fn refuse_if_frames_lost(&self) -> Result<(), StoreError> {
+        if !self.sample_log_holds_lost_frames() {
+            return Ok(());
+        }
+        Err(StoreError::Damaged {
+            path: self.path.clone(),
+            detail: format!(
+                "its sample log {}: {}",
+                self.sample_log_file().display(),
+                samples::LOST_FRAMES
+            ),
+        })
+    }
+
     fn log_error(&self, detail: impl ToString) -> StoreError {
         StoreError::SampleLog {
             path: self.path.clone(),
@@ -663,7 +688,9 @@ fn open_sample_log(path: &Path, meta: &sled::Tree) -> Result<(u64, SampleLog), S
         file: path.join(samples::file_name(generation)),
         detail,
     };
-    let log = SampleLog::open(path, generation, committed).map_err(log_error)?;
+    let mut log = SampleLog::open(path, generation, committed).map_err(log_error)?;
+    (log.hold_lost_frames())
+        .map_err(|e| log_error(format!("cannot read past its committed length: {e}")))?;
     samples::remove_stale_logs(path, generation).map_err(log_error)?;
     Ok((generation, log))
 }

@@ -23,7 +23,9 @@
 //!   store's first append cuts them off, and says so; opening it leaves
 //!   them (so that `inspect` of a store whose sled database lost commits,
 //!   which looks the same, destroys nothing, and shows them). Where `meta`
-//!   holds no committed length, the tail is what follows the header. A log
+//!   holds no committed length, the tail is what follows the header. A
+//!   tail holding two or more frames' files is no crash's
+//!   ([`super::tail`]): the store then takes no write. A log
 //!   shorter than its committed length has lost acknowledged data: opening
 //!   the store fails, naming the file.
 //! - Schema 5 (`migrations/0005_log_generations.md`): `radcache compact`
@@ -247,7 +249,15 @@ pub struct SampleLog {
     /// Whether the file holds bytes past `committed` that no write of this
     /// process made: cut off by the first append.
     foreign_tail: bool,
+    /// Whether that tail holds two or more frames' files, which no crash
+    /// leaves ([`Self::hold_lost_frames`]): then nothing is appended.
+    lost_frames: bool,
 }
+
+/// Why a log that holds frames the database lost takes no append.
+pub const LOST_FRAMES: &str = "past its committed length it holds the files of two or more \
+     frames, which no crash leaves (at most one frame is appended before each commit): the \
+     database lost commits; nothing was changed";
 
 /// Makes `file`, a log in store directory `dir`, its header alone, durably.
 fn write_header(file: &File, dir: &Path) -> Result<(), String> {
@@ -331,6 +341,7 @@ impl SampleLog {
             // part): only a write cuts it, so that a store opened to be read
             // changes nothing.
             foreign_tail: !fresh && actual > committed,
+            lost_frames: false,
         })
     }
 
@@ -348,8 +359,30 @@ impl SampleLog {
         self.end
     }
 
+    /// Looks for frames the database lost in the tail past the committed
+    /// length ([`super::tail`]: two EXR files or more, where a crash leaves
+    /// one frame's appends at most) and, where it finds them, refuses every
+    /// append from then on rather than cut them off. Returns whether it
+    /// found them. The store calls it on open; a migration, whose batches
+    /// append many frames' files before each commit, does not.
+    pub fn hold_lost_frames(&mut self) -> std::io::Result<bool> {
+        if self.foreign_tail {
+            let end = self.file.metadata()?.len();
+            self.lost_frames = super::tail::exr_files(&self.file, self.committed, end, 2) >= 2;
+        }
+        Ok(self.lost_frames)
+    }
+
+    /// Whether [`Self::hold_lost_frames`] found frames the database lost.
+    pub fn holds_lost_frames(&self) -> bool {
+        self.lost_frames
+    }
+
     /// Appends `bytes` (not yet synced nor committed); returns their offset.
     pub fn append(&mut self, bytes: &[u8]) -> std::io::Result<u64> {
+        if self.lost_frames {
+            return Err(std::io::Error::other(LOST_FRAMES));
+        }
         if self.foreign_tail {
             let tail = self.file.metadata()?.len().saturating_sub(self.end);
             self.file.set_len(self.end)?;
