@@ -502,14 +502,14 @@ impl Store {
     }
 
     /// Whether the sample log holds, past its committed length, frames the
-    /// database lost ([`SampleLog::hold_lost_frames`]): the store then
+    /// database lost ([`SampleLog::look_for_lost_frames`]): the store then
     /// takes no write.
     pub fn sample_log_holds_lost_frames(&self) -> bool {
         self.lock_log().holds_lost_frames()
     }
 
     /// Refuses to write to a store whose sample log holds frames its
-    /// database lost ([`SampleLog::hold_lost_frames`]): a write would cut
+    /// database lost ([`SampleLog::look_for_lost_frames`]): a write would cut
     /// them off. Reading it (`inspect`) goes on.
     pub(crate) fn refuse_if_frames_lost(&self) -> Result<(), StoreError> {
         if !self.sample_log_holds_lost_frames() {
@@ -689,7 +689,7 @@ fn open_sample_log(path: &Path, meta: &sled::Tree) -> Result<(u64, SampleLog), S
         detail,
     };
     let mut log = SampleLog::open(path, generation, committed).map_err(log_error)?;
-    (log.hold_lost_frames())
+    (log.look_for_lost_frames())
         .map_err(|e| log_error(format!("cannot read past its committed length: {e}")))?;
     samples::remove_stale_logs(path, generation).map_err(log_error)?;
     Ok((generation, log))

@@ -250,7 +250,7 @@ pub struct SampleLog {
     /// process made: cut off by the first append.
     foreign_tail: bool,
     /// Whether that tail holds two or more frames' files, which no crash
-    /// leaves ([`Self::hold_lost_frames`]): then nothing is appended.
+    /// leaves ([`Self::look_for_lost_frames`]): then nothing is appended.
     lost_frames: bool,
 }
 
@@ -365,7 +365,7 @@ impl SampleLog {
     /// append from then on rather than cut them off. Returns whether it
     /// found them. The store calls it on open; a migration, whose batches
     /// append many frames' files before each commit, does not.
-    pub fn hold_lost_frames(&mut self) -> std::io::Result<bool> {
+    pub fn look_for_lost_frames(&mut self) -> std::io::Result<bool> {
         if self.foreign_tail {
             let end = self.file.metadata()?.len();
             self.lost_frames = super::tail::exr_files(&self.file, self.committed, end, 2) >= 2;
@@ -373,7 +373,7 @@ impl SampleLog {
         Ok(self.lost_frames)
     }
 
-    /// Whether [`Self::hold_lost_frames`] found frames the database lost.
+    /// Whether [`Self::look_for_lost_frames`] found frames the database lost.
     pub fn holds_lost_frames(&self) -> bool {
         self.lost_frames
     }
