@@ -25,7 +25,7 @@
 //!   which looks the same, destroys nothing, and shows them). Where `meta`
 //!   holds no committed length, the tail is what follows the header. A
 //!   tail holding two or more frames' files is no crash's
-//!   ([`super::tail`]): the store then takes no write. A log
+//!   (`store::tail`): the store then takes no write. A log
 //!   shorter than its committed length has lost acknowledged data: opening
 //!   the store fails, naming the file.
 //! - Schema 5 (`migrations/0005_log_generations.md`): `radcache compact`
@@ -360,7 +360,7 @@ impl SampleLog {
     }
 
     /// Looks for frames the database lost in the tail past the committed
-    /// length ([`super::tail`]: two EXR files or more, where a crash leaves
+    /// length (`store::tail`: two EXR files or more, where a crash leaves
     /// one frame's appends at most) and, where it finds them, refuses every
     /// append from then on rather than cut them off. Returns whether it
     /// found them. The store calls it on open; a migration, whose batches
