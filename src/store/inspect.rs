@@ -29,7 +29,7 @@ pub struct InspectReport {
     /// database lost. The store's next write cuts them off.
     pub sample_log_tail_bytes: u64,
     /// Whether that tail holds two or more frames' files, which no crash
-    /// leaves: the database lost commits, and the store takes no write.
+    /// leaves: the database lost commits, and the store refuses jobs and compaction.
     pub sample_log_tail_lost_frames: bool,
     /// Key and value bytes per tree (logical: before sled's own overhead).
     pub trees: Vec<TreeReport>,
@@ -539,7 +539,7 @@ pub fn to_text(r: &InspectReport, frames: bool) -> String {
             s,
             "sample log {}: {} bytes past its committed length, holding the files of two \
              or more frames, which no crash leaves: the database lost commits (damaged); \
-             the store takes no write",
+             the store refuses jobs and compaction",
             r.sample_log_file, r.sample_log_tail_bytes
         );
     } else if r.sample_log_tail_bytes > 0 {

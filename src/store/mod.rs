@@ -503,7 +503,7 @@ impl Store {
 
     /// Whether the sample log holds, past its committed length, frames the
     /// database lost ([`SampleLog::look_for_lost_frames`]): the store then
-    /// takes no write.
+    /// refuses jobs and compaction (deleting a job, which appends nothing, still works).
     pub fn sample_log_holds_lost_frames(&self) -> bool {
         self.lock_log().holds_lost_frames()
     }

@@ -25,7 +25,7 @@
 //!   which looks the same, destroys nothing, and shows them). Where `meta`
 //!   holds no committed length, the tail is what follows the header. A
 //!   tail holding two or more frames' files is no crash's
-//!   (`store::tail`): the store then takes no write. A log
+//!   (`store::tail`): the store then refuses jobs and compaction (deleting a job still works). A log
 //!   shorter than its committed length has lost acknowledged data: opening
 //!   the store fails, naming the file.
 //! - Schema 5 (`migrations/0005_log_generations.md`): `radcache compact`
