@@ -50,8 +50,9 @@ use std::f32::consts::FRAC_1_PI;
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GlobalSettings {
     /// Grid spacing as a fraction of the static scene's diagonal, or of
-    /// twice that of what the camera sees at time 0 where smaller
-    /// (`meshing_size`): a triangle's grid has `⌈longest edge / spacing⌉`
+    /// twice that of what the camera sees at time 0 where smaller, on
+    /// films up to 128 × 128 pixels, and a share smaller in proportion to
+    /// a larger film's diagonal (`meshing_size`, `film_share`): a triangle's grid has `⌈longest edge / spacing⌉`
     /// segments an edge (at most [`MAX_GRID`](super::mesh::MAX_GRID)), its
     /// edges as they are at time 0 ([`MESHED_AT`]).
     pub spacing: f32,
@@ -254,7 +255,7 @@ impl GlobalPass {
         let both: Vec<bool> = (0..meshed.triangles.len() as u32)
             .map(|id| sides.both(id))
             .collect();
-        let size = meshing_size(ctx.scene, meshed, &bvh, ctx.aspect());
+        let size = meshing_size(ctx.scene, meshed, &bvh, (ctx.width, ctx.height));
         let meshing = Meshing::fitting(&meshed.triangles, &both, &settings, size);
         let PassMesh {
             grids,
@@ -1117,6 +1118,25 @@ mod tests {
             );
             assert!(pass.indirect.iter().all(|e| e.is_finite()));
         });
+    }
+
+    /// A film past 128 × 128 pixels is meshed finer, in proportion to its
+    /// diagonal ([`super::super::view::film_share`]): at 256 × 256 the
+    /// spacing halves, and cube-in-box's walls, a grid each side of a
+    /// triangle, hold about four times the vertices. Smaller films of
+    /// one shape are meshed alike.
+    #[test]
+    fn a_larger_film_is_meshed_finer() {
+        let vertices = |size: u32| {
+            let mut renderer = crate::render::test_renderer("cube-in-box", size);
+            renderer.with_frame_context(0, |ctx| {
+                GlobalPass::new(ctx, GlobalSettings::default()).vertex_count()
+            })
+        };
+        let (small, full, large) = (vertices(64), vertices(128), vertices(256));
+        assert_eq!(small, full);
+        let ratio = large as f64 / full as f64;
+        assert!((3.0..5.0).contains(&ratio), "{full} → {large} vertices");
     }
 
     /// The direct light found only at the vertices links land by gives

@@ -74,14 +74,44 @@ const VIEW_RAYS: u32 = 16;
 /// the diagonal of what the camera at time 0 sees ([`meshing_size`]).
 const VIEW_SIZES: f32 = 2.0;
 
+/// Films up to this many pixels a side (up to a square one's diagonal)
+/// are meshed at the spacing the settings give; a larger one at a spacing
+/// smaller in proportion to its diagonal ([`film_share`]).
+const FULL_SPACING_PIXELS: u32 = 128;
+
+/// The share of the size the spacing is a share of that a film of `width`
+/// × `height` pixels is meshed at: 1 up to [`FULL_SPACING_PIXELS`] a side
+/// (by the diagonal), less in proportion to the diagonal past it (½ at
+/// 256 × 256), so that a grid cell covers about as many pixels at any
+/// film size.
+///
+/// Why: the spacing was a share of what the camera sees alone, so a cell
+/// was about 8 pixels across at 128 × 128 and 16 at 256 × 256, and the
+/// Gouraud-interpolated light of the grid's vertices, each gathered along
+/// 128 links, showed as blotches across the larger frames. On the seven
+/// scenes of `benches/RESULTS.md` ("The global pass's spacing follows the
+/// film") at 256 × 256 half the spacing lowered the block bias against
+/// `path` by 36–55 % for 4–31 % more time; at 64 × 64 it cost 1.2–2.0
+/// times the time for 8–51 % (the global pass is then most of a frame),
+/// which is why the settings' spacing stays for small films.
+pub(super) fn film_share(width: u32, height: u32) -> f32 {
+    let full = 2 * u64::from(FULL_SPACING_PIXELS).pow(2);
+    let diagonal_squared = u64::from(width).pow(2) + u64::from(height).pow(2);
+    if diagonal_squared <= full {
+        return 1.0; // exactly: small films keep their meshing bit for bit
+    }
+    (full as f64 / diagonal_squared as f64).sqrt() as f32
+}
+
 /// The size the grid spacing is a share of
 /// ([`GlobalSettings::spacing`](super::global::GlobalSettings::spacing)):
 /// the diagonal of the static scene ([`static_diagonal`]), but at most
 /// [`VIEW_SIZES`] times that of the box around the camera at time 0 and
 /// what it sees of the scene (`meshed`, with `bvh` built over it) along a
-/// grid of [`VIEW_RAYS`]² rays through a film of width-to-height `aspect`
-/// (the rays that meet nothing left out). And what those rays see, as the
-/// [`View`] large triangles are split towards ([`super::pieces`]).
+/// grid of [`VIEW_RAYS`]² rays through a film of `width × height` pixels
+/// (the rays that meet nothing left out), times the film's
+/// [`film_share`]. And what those rays see, as the [`View`] large
+/// triangles are split towards ([`super::pieces`]).
 ///
 /// Why: a scene may reach far past what its camera looks at. A room at the
 /// edge of a 2 km ground it never shows (`l_hall` so placed by
@@ -102,8 +132,9 @@ pub(super) fn meshing_size(
     scene: &crate::scene::Scene,
     meshed: &crate::scene::Snapshot,
     bvh: &SceneBvh,
-    aspect: f32,
+    (width, height): (u32, u32),
 ) -> (f32, Option<View>) {
+    let aspect = width as f32 / height as f32;
     let diagonal = static_diagonal(meshed);
     let camera = &meshed.camera;
     let view = View::new(camera.position, &seen_by(camera, bvh, aspect));
@@ -111,7 +142,7 @@ pub(super) fn meshing_size(
         .as_ref()
         .map_or(diagonal, |view| diagonal.min(VIEW_SIZES * view.size()));
     (
-        size,
+        size * film_share(width, height),
         view.map(|view| seen_later(view, scene, camera, (bvh, aspect))),
     )
 }
@@ -202,5 +233,19 @@ mod tests {
         assert_eq!(view.spacing_at(0.1, 3, (Vec3::ZERO, Vec3::ONE)), None);
         assert_eq!(View::new(Vec3::ONE, &[(0, Vec3::ONE)]), None);
         assert_eq!(View::new(Vec3::ONE, &[]), None);
+    }
+
+    /// Films up to 128 × 128 pixels (by the diagonal) keep the settings'
+    /// share, exactly; a larger one's shrinks as its diagonal grows.
+    #[test]
+    fn a_larger_film_takes_a_smaller_share_by_its_diagonal() {
+        for (w, h) in [(128, 128), (64, 64), (1, 1), (150, 100), (181, 1)] {
+            assert_eq!(film_share(w, h), 1.0, "{w}x{h}");
+        }
+        assert_eq!(film_share(256, 256), 0.5);
+        assert_eq!(film_share(512, 512), 0.25);
+        let hd = film_share(1920, 1080);
+        assert!((hd - 181.019_34 / 2202.907).abs() < 1e-6, "{hd}");
+        assert!(film_share(4096, 4096) > 0.0);
     }
 }
