@@ -85,13 +85,13 @@ const FULL_SPACING_PIXELS: u32 = 128;
 /// 256 × 256), so that a grid cell covers about as many pixels at any
 /// film size.
 ///
-/// Why: the spacing was a share of what the camera sees alone, so a cell
+/// Why: the spacing was a share of the scene's or the view's size alone, so a cell
 /// was about 8 pixels across at 128 × 128 and 16 at 256 × 256, and the
 /// Gouraud-interpolated light of the grid's vertices, each gathered along
 /// 128 links, showed as blotches across the larger frames. On the seven
 /// scenes of `benches/RESULTS.md` ("The global pass's spacing follows the
 /// film") at 256 × 256 half the spacing lowered the block bias against
-/// `path` by 36–55 % for 4–31 % more time; at 64 × 64 it cost 1.2–2.0
+/// `path` by 34–55 % for 3–25 % more time; at 64 × 64 it cost 1.2–2.0
 /// times the time for 8–51 % (the global pass is then most of a frame),
 /// which is why the settings' spacing stays for small films.
 pub(super) fn film_share(width: u32, height: u32) -> f32 {
