@@ -289,7 +289,7 @@ pub struct MoviesArgs {
     /// Memory for the movies' kept static shadows, in MiB (past it the largest give theirs up and find them again).
     #[arg(long, default_value_t = 512, allow_negative_numbers = true, value_parser = limits::MEMORY_MIB.parser())]
     pub movies_memory_mib: u32,
-    /// Global pass: grid spacing as a fraction of the static scene's diagonal (or of twice that of what the camera sees at time 0, where smaller), 0.001 to 1, at up to 128x128 pixels; a larger image is meshed finer in proportion to its diagonal (half the spacing at 256x256).
+    /// Global pass: grid spacing as a fraction of the static scene's diagonal (or of twice that of what the camera sees at time 0, where smaller), 0.001 to 1, at images up to 128 pixels high; a higher image is meshed finer in proportion to its height (half the spacing at 256x256).
     #[arg(long, default_value_t = 1.0 / 32.0, allow_negative_numbers = true, value_parser = limits::GRID_SPACING.parser())]
     pub movies_spacing: f32,
     /// Global pass: links (gather rays) of a grid vertex, at most 1024.

@@ -133,8 +133,8 @@ pub mod limits {
         max: 1_048_576,
     };
     /// `movies`' global-pass grid spacing, a fraction of the static
-    /// scene's diagonal, or of what its camera sees, at films up to 128 ×
-    /// 128 (finer past that: `view::film_share`)
+    /// scene's diagonal, or of what its camera sees, at films up to 128
+    /// pixels high (finer past that: `view::film_share`)
     /// (`global::meshing_size`; `spacing`, `--movies-spacing`). At 1 every static
     /// triangle is one cell already; below 0.001 the pass would coarsen
     /// the grid anyway to keep its links within `mesh::MAX_LINKS`.

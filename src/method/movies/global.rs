@@ -51,8 +51,9 @@ use std::f32::consts::FRAC_1_PI;
 pub struct GlobalSettings {
     /// Grid spacing as a fraction of the static scene's diagonal, or of
     /// twice that of what the camera sees at time 0 where smaller, on
-    /// films up to 128 × 128 pixels, and a share smaller in proportion to
-    /// a larger film's diagonal (`meshing_size`, `film_share`): a triangle's grid has `⌈longest edge / spacing⌉`
+    /// films up to 128 pixels high, and a share smaller in proportion to
+    /// a higher film's height (`meshing_size`, `film_share`): a
+    /// triangle's grid has `⌈longest edge / spacing⌉`
     /// segments an edge (at most [`MAX_GRID`](super::mesh::MAX_GRID)), its
     /// edges as they are at time 0 ([`MESHED_AT`]).
     pub spacing: f32,
@@ -1120,8 +1121,8 @@ mod tests {
         });
     }
 
-    /// A film past 128 × 128 pixels is meshed finer, in proportion to its
-    /// diagonal ([`super::super::view::film_share`]): at 256 × 256 the
+    /// A film past 128 pixels high is meshed finer, in proportion to its
+    /// height ([`super::super::view::film_share`]): at 256 × 256 the
     /// spacing halves, and cube-in-box's walls, a grid each side of a
     /// triangle, hold about four times the vertices. Smaller films of
     /// one shape are meshed alike.

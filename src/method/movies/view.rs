@@ -74,16 +74,20 @@ const VIEW_RAYS: u32 = 16;
 /// the diagonal of what the camera at time 0 sees ([`meshing_size`]).
 const VIEW_SIZES: f32 = 2.0;
 
-/// Films up to this many pixels a side (up to a square one's diagonal)
-/// are meshed at the spacing the settings give; a larger one at a spacing
-/// smaller in proportion to its diagonal ([`film_share`]).
+/// Films up to this many pixels high are meshed at the spacing the
+/// settings give; a higher one at a spacing smaller in proportion to its
+/// height ([`film_share`]).
 const FULL_SPACING_PIXELS: u32 = 128;
 
 /// The share of the size the spacing is a share of that a film of `width`
-/// × `height` pixels is meshed at: 1 up to [`FULL_SPACING_PIXELS`] a side
-/// (by the diagonal), less in proportion to the diagonal past it (½ at
-/// 256 × 256), so that a grid cell covers about as many pixels at any
-/// film size.
+/// × `height` pixels is meshed at: 1 up to [`FULL_SPACING_PIXELS`] high,
+/// less in proportion to the height past it (½ at 256 × 256), so that a
+/// grid cell covers about as many pixels at any film size. By the height,
+/// as the camera keeps its vertical field of view whatever the film's
+/// shape (`Camera::direction`): the pixels an angle spans follow the
+/// height alone, and a wider film sees more, not finer. (By the diagonal,
+/// a film of 2048 × 8 pixels was meshed at a twelfth of the spacing and
+/// held the pass's whole link budget, 0.6 GB, for 16,384 pixels.)
 ///
 /// Why: the spacing was a share of the scene's or the view's size alone, so a cell
 /// was about 8 pixels across at 128 × 128 and 16 at 256 × 256, and the
@@ -94,13 +98,11 @@ const FULL_SPACING_PIXELS: u32 = 128;
 /// `path` by 34–55 % for 3–25 % more time; at 64 × 64 it cost 1.2–2.0
 /// times the time for 8–51 % (the global pass is then most of a frame),
 /// which is why the settings' spacing stays for small films.
-pub(super) fn film_share(width: u32, height: u32) -> f32 {
-    let full = 2 * u64::from(FULL_SPACING_PIXELS).pow(2);
-    let diagonal_squared = u64::from(width).pow(2) + u64::from(height).pow(2);
-    if diagonal_squared <= full {
+pub(super) fn film_share(height: u32) -> f32 {
+    if height <= FULL_SPACING_PIXELS {
         return 1.0; // exactly: small films keep their meshing bit for bit
     }
-    (full as f64 / diagonal_squared as f64).sqrt() as f32
+    (f64::from(FULL_SPACING_PIXELS) / f64::from(height)) as f32
 }
 
 /// The size the grid spacing is a share of
@@ -110,7 +112,7 @@ pub(super) fn film_share(width: u32, height: u32) -> f32 {
 /// what it sees of the scene (`meshed`, with `bvh` built over it) along a
 /// grid of [`VIEW_RAYS`]² rays through a film of `width × height` pixels
 /// (the rays that meet nothing left out), times the film's
-/// [`film_share`]. And what those rays see, as the [`View`] large
+/// [`film_share`] (by its height). And what those rays see, as the [`View`] large
 /// triangles are split towards ([`super::pieces`]).
 ///
 /// Why: a scene may reach far past what its camera looks at. A room at the
@@ -142,7 +144,7 @@ pub(super) fn meshing_size(
         .as_ref()
         .map_or(diagonal, |view| diagonal.min(VIEW_SIZES * view.size()));
     (
-        size * film_share(width, height),
+        size * film_share(height),
         view.map(|view| seen_later(view, scene, camera, (bvh, aspect))),
     )
 }
@@ -235,17 +237,17 @@ mod tests {
         assert_eq!(View::new(Vec3::ONE, &[]), None);
     }
 
-    /// Films up to 128 × 128 pixels (by the diagonal) keep the settings'
-    /// share, exactly; a larger one's shrinks as its diagonal grows.
+    /// Films up to 128 pixels high keep the settings' share, exactly; a
+    /// higher one's shrinks as its height grows, whatever its width.
     #[test]
-    fn a_larger_film_takes_a_smaller_share_by_its_diagonal() {
-        for (w, h) in [(128, 128), (64, 64), (1, 1), (150, 100), (181, 1)] {
-            assert_eq!(film_share(w, h), 1.0, "{w}x{h}");
+    fn a_higher_film_takes_a_smaller_share_by_its_height() {
+        for h in [1, 8, 64, 128] {
+            assert_eq!(film_share(h), 1.0, "{h} high");
         }
-        assert_eq!(film_share(256, 256), 0.5);
-        assert_eq!(film_share(512, 512), 0.25);
-        let hd = film_share(1920, 1080);
-        assert!((hd - 181.019_34 / 2202.907).abs() < 1e-6, "{hd}");
-        assert!(film_share(4096, 4096) > 0.0);
+        assert_eq!(film_share(256), 0.5);
+        assert_eq!(film_share(512), 0.25);
+        assert_eq!(film_share(1024), 0.125);
+        assert!((film_share(1080) - 128.0 / 1080.0).abs() < 1e-7);
+        assert!(film_share(4096) > 0.0);
     }
 }
