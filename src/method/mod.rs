@@ -250,9 +250,9 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // (`pieces`), patches go seven levels down (`patch::MAX_LEVEL`),
         // and rays that meet the sky no longer lift the grid spacing's
         // bound (`global::meshing_size`, 2026-12-02). 13: as every
-        // method's next. 14: films past 128 × 128 are meshed at a spacing
-        // smaller in proportion to their diagonal (`view::film_share`,
-        // 2026-12-05).
+        // method's next. 14: films past 128 pixels high are meshed at a
+        // spacing smaller in proportion to their height
+        // (`view::film_share`, 2026-12-05).
         "movies" => 14,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
