@@ -57,6 +57,7 @@
 //! larger films, `movies::view::film_share`: 555, 1,295, 2,939 and 1,000
 //! MiB before; the pass is within its link budget, which the estimate
 //! leaves out with the rest of what the scene decides.)
+//!
 //! Before the render pass freed them, `ic` peaked at 117, 279 and 921 MiB
 //! at 256², 512² and 1024², `trc` at 1,705 and `tcg` at 1,428 MiB at
 //! 1024². Below the estimate: the program's 10.5 MiB at 1×1 on `--backend cpu`

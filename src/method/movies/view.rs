@@ -79,18 +79,18 @@ const VIEW_SIZES: f32 = 2.0;
 /// height ([`film_share`]).
 const FULL_SPACING_PIXELS: u32 = 128;
 
-/// The share of the size the spacing is a share of that a film of `width`
-/// × `height` pixels is meshed at: 1 up to [`FULL_SPACING_PIXELS`] high,
-/// less in proportion to the height past it (½ at 256 × 256), so that a
-/// grid cell covers about as many pixels at any film size. By the height,
-/// as the camera keeps its vertical field of view whatever the film's
-/// shape (`Camera::direction`): the pixels an angle spans follow the
-/// height alone, and a wider film sees more, not finer. (By the diagonal,
-/// a film of 2048 × 8 pixels was meshed at a twelfth of the spacing and
-/// held the pass's whole link budget, 0.6 GB, for 16,384 pixels.)
+/// The share of the size the spacing is a share of that a film `height`
+/// pixels high is meshed at: 1 up to [`FULL_SPACING_PIXELS`], less in
+/// proportion to the height past it (½ at 256), so that a grid cell
+/// covers about as many pixels at any film size. By the height, as the
+/// camera keeps its vertical field of view whatever the film's shape
+/// (`Camera::direction`): the pixels an angle spans follow the height
+/// alone, and a wider film sees more, not finer. (By the diagonal, as
+/// first written, a film of 2048 × 8 pixels was meshed at about an
+/// eleventh of the spacing and its render peaked at 632 MB, 142 MB now.)
 ///
-/// Why: the spacing was a share of the scene's or the view's size alone, so a cell
-/// was about 8 pixels across at 128 × 128 and 16 at 256 × 256, and the
+/// Why: the spacing was a share of the scene's or the view's size alone,
+/// so a cell was about 8 pixels across at 128 × 128 and 16 at 256 × 256, and the
 /// Gouraud-interpolated light of the grid's vertices, each gathered along
 /// 128 links, showed as blotches across the larger frames. On the seven
 /// scenes of `benches/RESULTS.md` ("The global pass's spacing follows the
@@ -112,8 +112,8 @@ pub(super) fn film_share(height: u32) -> f32 {
 /// what it sees of the scene (`meshed`, with `bvh` built over it) along a
 /// grid of [`VIEW_RAYS`]² rays through a film of `width × height` pixels
 /// (the rays that meet nothing left out), times the film's
-/// [`film_share`] (by its height). And what those rays see, as the [`View`] large
-/// triangles are split towards ([`super::pieces`]).
+/// [`film_share`] (by its height). And what those rays see, as the
+/// [`View`] large triangles are split towards ([`super::pieces`]).
 ///
 /// Why: a scene may reach far past what its camera looks at. A room at the
 /// edge of a 2 km ground it never shows (`l_hall` so placed by
