@@ -22,8 +22,10 @@
 //!   before the pass, their fill stage holds a ray, hit and candidate a pixel
 //!   (`ic::primary_candidates`), then the candidates, their clearances and
 //!   a visited flag (`ic`'s `fill_from`);
-//! - `movies`: its item buffer, every camera sample with its ray, stream
-//!   and hit, held for the whole frame (`TextureMovies::trace_tiles`);
+//! - `movies`: its item buffer, every camera sample's hit and whether it
+//!   sees an emitter, held for the whole frame
+//!   (`TextureMovies::trace_tiles`; the samples' rays and streams are
+//!   drawn again tile by tile to render, `PrimarySamples::again`);
 //! - per triangle, the frame's snapshot of it, the mesh's indices and
 //!   material, and the BVH's copy of it in leaf order with its ids.
 //!
@@ -74,7 +76,6 @@
 use crate::backend::{Hit, Ray};
 use crate::cache::LookupPoint;
 use crate::method::ic::Candidate;
-use crate::method::pixels::PixelSample;
 use crate::method::render_pass::StillSamples;
 use crate::render::MethodSettings;
 use crate::sampling::Rng;
@@ -103,10 +104,9 @@ const KEPT_SAMPLE_BYTES: u64 = (size_of::<Ray>()
     + size_of::<Vec3>()
     + size_of::<u32>()) as u64;
 
-/// A camera sample of `movies`' item buffer: the sample, its ray, its
-/// stream and its hit.
-const ITEM_SAMPLE_BYTES: u64 =
-    (size_of::<PixelSample>() + size_of::<Ray>() + size_of::<Rng>() + size_of::<Hit>()) as u64;
+/// A camera sample of `movies`' item buffer: its hit, and whether it sees
+/// an emitter (`EmitterEdges`).
+const ITEM_SAMPLE_BYTES: u64 = (size_of::<Hit>() + size_of::<bool>()) as u64;
 
 /// The fill stage's bytes a pixel: a candidate, beside first the pixel
 /// centre's ray and hit, then its clearance and visited flag.

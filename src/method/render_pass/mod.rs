@@ -345,6 +345,32 @@ impl PrimarySamples {
         (primary, edges, taken)
     }
 
+    /// The samples [`Self::trace`] gave for the same tile, from their hits
+    /// alone: the samples, camera rays and streams drawn again, no ray
+    /// traced. The camera draws each from its sample's key alone
+    /// ([`CameraSampler::query`]), so they are bit for bit those the hits
+    /// were traced along. A method that holds a whole frame's samples can
+    /// keep their hits alone (20 of a sample's 84 bytes).
+    pub(crate) fn again(
+        ctx: &FrameContext,
+        streams: PixelStreams,
+        (first, count, spp): (u32, u32, u32),
+        edges: &EmitterEdges,
+        hits: Vec<Hit>,
+    ) -> Self {
+        let mut samples = pixels::tile_samples(first, count, spp);
+        samples.extend_from_slice(edges.extra_samples());
+        debug_assert_eq!(samples.len(), hits.len());
+        let mut camera = CameraSampler::new(streams);
+        let (rays, rngs) = samples.iter().map(|s| camera.query(ctx, s)).unzip();
+        PrimarySamples {
+            samples,
+            rays,
+            rngs,
+            hits,
+        }
+    }
+
     /// Appends `samples`, tracing their camera rays.
     fn add(&mut self, ctx: &FrameContext, streams: PixelStreams, samples: &[PixelSample]) {
         let start = self.rays.len();
@@ -658,6 +684,30 @@ mod tests {
             };
             assert_eq!(u64::from(still.taken > 0), kept, "{streams:?}");
             assert_eq!(u64::from(first_pass.taken > 0), kept, "{streams:?}");
+        }
+    }
+
+    /// The samples drawn again from a tile's hits are those traced, bit
+    /// for bit, the extra samples of pixels on a light's edge included
+    /// (cube-in-box shows its light), with either kind of streams.
+    #[test]
+    fn samples_drawn_again_from_their_hits_are_those_traced() {
+        let mut renderer = crate::render::test_renderer("cube-in-box", 24);
+        for streams in [PixelStreams::PerFrame, PixelStreams::Coherent] {
+            renderer.with_frame_context(3, |ctx| {
+                let (first, count, spp) = (0, 24 * 24, 3);
+                let (traced, edges) = PrimarySamples::trace(ctx, streams, first, count, spp);
+                assert!(
+                    !edges.extra_samples().is_empty(),
+                    "no light edge in the tile"
+                );
+                let hits = traced.hits.clone();
+                let again = PrimarySamples::again(ctx, streams, (first, count, spp), &edges, hits);
+                assert_eq!(again.samples, traced.samples);
+                assert_eq!(again.rays, traced.rays);
+                assert_eq!(again.rngs, traced.rngs);
+                assert_eq!(again.hits, traced.hits);
+            });
         }
     }
 }
