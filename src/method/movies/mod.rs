@@ -180,15 +180,13 @@ impl TextureMovies {
         let mut values = Vec::with_capacity(self.movies.len());
         let mut bytes = Vec::new();
         for m in self.movies.values_mut() {
-            let band: Vec<[u8; 4]> = m.direct.iter().map(|&e| rgbe::encode(e)).collect();
-            let unchanged = m.stored.as_ref().is_some_and(|(_, last)| *last == band);
-            let (texels, stored_at) = if unchanged {
-                (0, m.stored.as_ref().map_or(frame, |s| s.0))
-            } else {
-                bytes.extend(band.iter().flatten());
-                let n = band.len() as u32;
-                m.stored = Some((frame, band));
-                (n, frame)
+            let (texels, stored_at) = match m.stored_at {
+                Some(at) => (0, at),
+                None => {
+                    bytes.extend(m.direct.iter().flatten());
+                    m.stored_at = Some(frame);
+                    (m.direct.len() as u32, frame)
+                }
             };
             values.push(MovieValue {
                 triangle: m.key.triangle,
@@ -305,9 +303,8 @@ struct Tile {
 }
 
 /// The sides of triangles a tile's samples see with a diffuse part, each
-/// with its samples' points and the texels they need there
-/// ([`patch::partition`]'s input), in sample order.
-type SeenSides = BTreeMap<(u32, bool), Vec<patch::PatchSample>>;
+/// with the texels its samples ask where.
+type SeenSides = BTreeMap<(u32, bool), patch::Needs>;
 
 impl Method for TextureMovies {
     fn name(&self) -> &'static str {
@@ -481,29 +478,28 @@ impl TextureMovies {
             let tri = &ctx.snapshot.triangles[hit.triangle as usize];
             let distance = hit.t * ray.dir().length();
             let needed = movie::texels_needed(tri, distance, pixel_angle, per_pixel);
-            sides.entry(side).or_default().push((hit.u, hit.v, needed));
+            sides.entry(side).or_default().add((hit.u, hit.v), needed);
         }
+        sides.values_mut().for_each(patch::Needs::settle);
         sides
     }
 
     /// Which patches of which sides of which triangles the samples see
     /// with a diffuse part, and the resolution each needs (the finest any
     /// of its samples asks): each side split where its finest texels are
-    /// asked ([`patch::partition`]).
-    /// The tiles' seen sides are taken (merged in tile order, so each
-    /// side's samples are in sample order, as one pass over the frame
-    /// would find them).
+    /// asked ([`patch::Needs::partition`]).
+    /// The tiles' seen sides are taken.
     fn wanted_movies(&self, tiles: &mut [Tile]) -> BTreeMap<MovieKey, u32> {
         let s = &self.settings;
         let mut sides = SeenSides::new();
         for tile in tiles {
-            for (side, samples) in std::mem::take(&mut tile.seen) {
-                sides.entry(side).or_default().extend(samples);
+            for (side, needs) in std::mem::take(&mut tile.seen) {
+                sides.entry(side).or_default().merge(needs);
             }
         }
         let mut wanted = BTreeMap::new();
-        for ((triangle, back), samples) in sides {
-            for (patch, needed) in patch::partition(&samples) {
+        for ((triangle, back), needs) in sides {
+            for (patch, needed) in needs.partition() {
                 let key = MovieKey {
                     triangle,
                     back,
@@ -517,7 +513,7 @@ impl TextureMovies {
 
     /// The movie that holds the point a camera ray along `dir` hit, and
     /// the point in its patch's coordinates: the patches of the hit's side
-    /// descended as [`patch::partition`] split them.
+    /// descended as [`patch::Needs::partition`] split them.
     fn movie_at(&self, ctx: &FrameContext, dir: Vec3, hit: &Hit) -> Option<(&Movie, (f32, f32))> {
         let (triangle, back) = seen_side(ctx, dir, hit)?;
         let mut key = MovieKey {

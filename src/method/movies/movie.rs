@@ -10,11 +10,11 @@ use super::direct::{
     Statics,
 };
 use super::global::GlobalPass;
-use super::mesh::Gouraud;
 use super::patch::Patch;
 use super::FrameContext;
 use crate::sampling::{mix64, streams};
 use crate::scene::Triangle;
+use crate::store::rgbe;
 use glam::Vec3;
 
 /// A movie's identity: which side of which patch of which triangle.
@@ -41,24 +41,36 @@ pub struct Movie {
     /// Whether the memory budget gives it room to keep them this frame
     /// ([`Movie::make_room`]); none until it is given.
     room: bool,
-    /// Irradiance per texel (`j·R + i`; zero outside the band).
+    /// Irradiance per band texel, in storage order ([`Movie::band`]; row
+    /// `j` from [`band_offset`]).
     pub texels: Vec<Vec3>,
-    /// Its direct part alone, per band texel in storage order (the "bad
-    /// links" layer, §3.1: what the movie computes itself; the rest is the
-    /// global pass's, Gouraud-interpolated).
-    pub direct: Vec<Vec3>,
-    /// The texels as last stored, RGBE, and the frame they were stored
-    /// with (a frame whose texels encode the same is not stored again).
-    pub(super) stored: Option<(u32, Vec<[u8; 4]>)>,
-    /// Per band texel: its index, where it is evaluated, and the global
-    /// pass's vertices it interpolates (fixed for the movie's life: the
-    /// vertices are the same whichever side of the triangle is solved).
-    layout: Vec<(usize, (f32, f32), Gouraud)>,
+    /// Its direct part alone, per band texel in storage order, RGBE-packed
+    /// as the store keeps it (the "bad links" layer, §3.1: what the movie
+    /// computes itself; the rest is the global pass's, Gouraud-interpolated
+    /// from the stored vertices).
+    pub(super) direct: Vec<[u8; 4]>,
+    /// The frame the store holds [`Movie::direct`] with, where it holds
+    /// them: a frame whose texels encode as the last frame's is not stored
+    /// again.
+    pub(super) stored_at: Option<u32>,
 }
 
 /// Texel `(i, j)` is stored when `i + j ≤ R + 1`.
 fn in_band(resolution: u32, i: u32, j: u32) -> bool {
     i + j <= resolution + 1
+}
+
+/// Where row `j` of the band starts in storage order: rows 0 to 2 hold
+/// `R` texels, row `k ≥ 2` holds `R + 2 − k` (the texels `i` with
+/// `i + k ≤ R + 1`). Row `R` starts past the end: the band's length.
+fn band_offset(resolution: u32, j: u32) -> usize {
+    let (r, j) = (resolution as usize, j as usize);
+    if j <= 2 {
+        j * r
+    } else {
+        // 2R, then the rows 2 … j − 1: Σ (R + 2 − k) = (j − 2)(R + 2) − (Σ k).
+        2 * r + (j - 2) * (r + 2) - ((j - 1) * j / 2 - 1)
+    }
 }
 
 impl Movie {
@@ -71,12 +83,12 @@ impl Movie {
             room: false,
             texels: Vec::new(),
             direct: Vec::new(),
-            stored: None,
-            layout: Vec::new(),
+            stored_at: None,
         }
     }
 
-    /// The band's texels, `(index, i, j)`, in storage order.
+    /// The band's texels, `(index, i, j)`, in storage order; `index`
+    /// (`j·R + i`) keys the texel's random numbers ([`texel_item`]).
     fn band(&self) -> impl Iterator<Item = (usize, u32, u32)> + '_ {
         let r = self.resolution;
         (0..r).flat_map(move |j| {
@@ -120,20 +132,17 @@ impl Movie {
         samples: u32,
     ) -> ShadowCounts {
         let tri = &ctx.snapshot.triangles[self.key.triangle as usize];
-        if self.layout.is_empty() {
-            self.layout = self
-                .band()
-                .map(|(index, i, j)| {
-                    let (u, v) = self.texel_uv(i, j);
-                    let g = global.gouraud(self.key.triangle, self.key.back, u, v);
-                    (index, (u, v), g)
-                })
-                .collect();
-        }
-        let points: Vec<ShadePoint> = self
-            .layout
+        // Where each band texel is evaluated, found again each frame rather
+        // than kept with the movie: with the vertices each interpolates,
+        // 40 bytes a texel kept were 0.75 GB of a 1920×1080 frame's movies,
+        // and finding them is a small part of shading them.
+        let band: Vec<(usize, (f32, f32))> = self
+            .band()
+            .map(|(index, i, j)| (index, self.texel_uv(i, j)))
+            .collect();
+        let points: Vec<ShadePoint> = band
             .iter()
-            .map(|&(index, uv, _)| self.texel_point(tri, index, uv))
+            .map(|&(index, uv)| self.texel_point(tri, index, uv))
             .collect();
         let statics = match &mut self.shadows {
             None => Statics::Moving,
@@ -141,9 +150,6 @@ impl Movie {
             Some(_) => Statics::Unkept,
         };
         let (direct, counts) = direct_irradiance(ctx, blockers, &points, samples, statics);
-        let r = self.resolution as usize;
-        self.texels.clear();
-        self.texels.resize(r * r, Vec3::ZERO);
         // The global pass solves one side of most triangles (a link
         // landing on the other gathers nothing: it neither takes nor gives
         // light there, as one-sided radiosity polygons), both of a flat
@@ -152,15 +158,22 @@ impl Movie {
         // the outside of closed rooms with the light of the inside. A side
         // not solved that the camera sees gets its direct light only.
         let solved = global.solves(self.key.triangle, self.key.back);
-        for (&(index, _, g), &e) in self.layout.iter().zip(&direct) {
-            let indirect = if solved {
-                global.indirect_with(&g)
-            } else {
-                Vec3::ZERO
-            };
-            self.texels[index] = e + indirect;
+        let (triangle, back) = (self.key.triangle, self.key.back);
+        self.texels.clear();
+        self.texels
+            .extend(band.iter().zip(&direct).map(|(&(_, (u, v)), &e)| {
+                let indirect = if solved {
+                    global.indirect_with(&global.gouraud(triangle, back, u, v))
+                } else {
+                    Vec3::ZERO
+                };
+                e + indirect
+            }));
+        let direct: Vec<[u8; 4]> = direct.iter().map(|&e| rgbe::encode(e)).collect();
+        if direct != self.direct {
+            self.direct = direct;
+            self.stored_at = None;
         }
-        self.direct = direct;
         counts
     }
 
@@ -176,22 +189,22 @@ impl Movie {
         };
         let (i0, i1, fx) = axis(u);
         let (j0, j1, fy) = axis(v);
-        let at = |i: u32, j: u32| self.texels[(j * r + i) as usize];
+        // Zero outside the band, which a lookup inside the triangle never
+        // reads.
+        let at = |i: u32, j: u32| match in_band(r, i, j) {
+            true => self.texels[band_offset(r, j) + i as usize],
+            false => Vec3::ZERO,
+        };
         (at(i0, j0) * (1.0 - fx) + at(i1, j0) * fx) * (1.0 - fy)
             + (at(i0, j1) * (1.0 - fx) + at(i1, j1) * fx) * fy
     }
 
-    /// Bytes it holds: itself, its texels (linear and as last stored),
-    /// their layout and its kept static shadows.
+    /// Bytes it holds: itself, its texels (linear, and their direct part
+    /// RGBE) and its kept static shadows.
     pub fn memory_bytes(&self) -> usize {
         std::mem::size_of::<Self>()
             + std::mem::size_of_val(&self.texels[..])
             + std::mem::size_of_val(&self.direct[..])
-            + self
-                .stored
-                .as_ref()
-                .map_or(0, |(_, rgbe)| std::mem::size_of_val(&rgbe[..]))
-            + std::mem::size_of_val(&self.layout[..])
             + self.shadow_bytes()
     }
 
@@ -202,9 +215,7 @@ impl Movie {
 
     /// Its texels in the band: the points it shades.
     fn band_len(&self) -> usize {
-        let r = self.resolution as usize;
-        // Row j holds the texels i < R with i + j ≤ R + 1.
-        (0..r).map(|j| r.min(r + 2 - j)).sum()
+        band_offset(self.resolution, self.resolution)
     }
 
     /// Whether it keeps static shadows valid for the frame of `blockers`
@@ -328,10 +339,7 @@ mod tests {
     fn lookups_inside_the_triangle_read_only_band_texels() {
         for r in [1u32, 2, 3, 8, 16] {
             let mut movie = Movie::open(key(), r, 0, false);
-            movie.texels = vec![Vec3::ZERO; (r * r) as usize];
-            for (index, _, _) in movie.band().collect::<Vec<_>>() {
-                movie.texels[index] = Vec3::ONE;
-            }
+            movie.texels = vec![Vec3::ONE; movie.band_len()];
             for a in 0..=40 {
                 for b in 0..=40 - a {
                     let (u, v) = (a as f32 / 40.0, b as f32 / 40.0);
@@ -351,10 +359,10 @@ mod tests {
     fn a_lookup_between_texel_centres_is_bilinear() {
         let r = 8u32;
         let mut movie = Movie::open(key(), r, 0, false);
-        movie.texels = vec![Vec3::ZERO; (r * r) as usize];
-        for (index, i, j) in movie.band().collect::<Vec<_>>() {
-            movie.texels[index] = Vec3::new(i as f32, j as f32, 1.0);
-        }
+        let band = movie
+            .band()
+            .map(|(_, i, j)| Vec3::new(i as f32, j as f32, 1.0));
+        movie.texels = band.collect();
         let (u, v) = ((2.5 + 0.5) / 8.0, (1.25 + 0.5) / 8.0);
         let got = movie.lookup(u, v);
         assert!(
@@ -363,11 +371,15 @@ mod tests {
         );
     }
 
-    /// The band's length in closed form is the band counted texel by texel.
+    /// The band's rows start, in closed form, where the band counted
+    /// texel by texel puts them, and its length is the count.
     #[test]
-    fn band_len_counts_the_band() {
+    fn band_offsets_count_the_band() {
         for r in 1u32..40 {
             let movie = Movie::open(key(), r, 0, false);
+            for (at, (_, i, j)) in movie.band().enumerate() {
+                assert_eq!(band_offset(r, j) + i as usize, at, "R {r} ({i}, {j})");
+            }
             assert_eq!(movie.band_len(), movie.band().count(), "R {r}");
         }
     }
