@@ -50,15 +50,18 @@
 //! | `tcg` | 256² | 229 | 125 | 0.55 |
 //! | `tcg` | 512² | 655 | 476 | 0.73 |
 //! | `tcg` | 1024² | 811 | 535 | 0.66 |
-//! | `movies` | 256² | 589 | 93 | 0.16 |
-//! | `movies` | 512² | 1,623 | 347 | 0.21 |
-//! | `movies` | 1024² | 3,548 | 1,364 | 0.38 |
-//! | `movies --movies-texels-per-pixel 2` | 256² | 1,039 | 93 | 0.09 |
+//! | `movies` | 256² | 463 | 30 | 0.06 |
+//! | `movies` | 512² | 1,087 | 96 | 0.09 |
+//! | `movies` | 1024² | 1,451 | 357 | 0.25 |
+//! | `movies --movies-texels-per-pixel 2` | 256² | 752 | 30 | 0.04 |
 //!
-//! (`movies` measured again once its global pass was meshed finer for
-//! larger films, `movies::view::film_share`: 555, 1,295, 2,939 and 1,000
-//! MiB before; the pass is within its link budget, which the estimate
-//! leaves out with the rest of what the scene decides.)
+//! (`movies` measured again once its item buffer held its samples' hits
+//! alone and its movies their texels in the band, their direct part RGBE
+//! and no layout: 589, 1,623, 3,548 and 1,039 MiB before, estimated 93,
+//! 347, 1,364 and 93. Before that, once its global pass was meshed finer
+//! for larger films, `movies::view::film_share`: 555, 1,295, 2,939 and
+//! 1,000 MiB before; the pass is within its link budget, which the
+//! estimate leaves out with the rest of what the scene decides.)
 //!
 //! Before the render pass freed them, `ic` peaked at 117, 279 and 921 MiB
 //! at 256², 512² and 1024², `trc` at 1,705 and `tcg` at 1,428 MiB at

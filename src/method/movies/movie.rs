@@ -177,6 +177,12 @@ impl Movie {
         counts
     }
 
+    /// Its direct part per band texel in storage order, as the store keeps
+    /// it (RGBE).
+    pub fn direct(&self) -> impl Iterator<Item = Vec3> + '_ {
+        self.direct.iter().map(|&e| rgbe::decode(e))
+    }
+
     /// Bilinear lookup at `(s, t)` of the movie's patch.
     pub fn lookup(&self, u: f32, v: f32) -> Vec3 {
         let r = self.resolution;
