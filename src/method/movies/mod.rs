@@ -90,7 +90,6 @@ pub use direct::{paper_merge, MAX_SHADOW_SAMPLES};
 use glam::Vec3;
 use global::{GlobalPass, GlobalSettings};
 pub use movie::{Movie, MovieKey};
-use patch::Patch;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::f32::consts::FRAC_1_PI;
@@ -516,23 +515,14 @@ impl TextureMovies {
     /// descended as [`patch::Needs::partition`] split them.
     fn movie_at(&self, ctx: &FrameContext, dir: Vec3, hit: &Hit) -> Option<(&Movie, (f32, f32))> {
         let (triangle, back) = seen_side(ctx, dir, hit)?;
-        let mut key = MovieKey {
-            triangle,
-            back,
-            patch: Patch::ROOT,
-        };
-        let mut local = (hit.u, hit.v);
-        loop {
-            if let Some(m) = self.movies.get(&key) {
-                return Some((m, local));
-            }
-            if key.patch.level >= patch::MAX_LEVEL {
-                return None;
-            }
-            let k = patch::child_at(local);
-            local = patch::from_parent(k, local);
-            key.patch = key.patch.child(k);
-        }
+        patch::descent((hit.u, hit.v)).find_map(|(patch, local)| {
+            let key = MovieKey {
+                triangle,
+                back,
+                patch,
+            };
+            Some((self.movies.get(&key)?, local))
+        })
     }
 
     /// §4.1's events: movies no longer seen close, movies whose needed

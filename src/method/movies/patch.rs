@@ -114,6 +114,17 @@ pub fn child_at((s, t): (f32, f32)) -> u8 {
     }
 }
 
+/// The patches that hold the triangle's point `(u, v)`, from the root
+/// down to [`MAX_LEVEL`], each with the point in its own coordinates.
+pub fn descent((u, v): (f32, f32)) -> impl Iterator<Item = (Patch, (f32, f32))> {
+    std::iter::successors(Some((Patch::ROOT, (u, v))), |&(patch, local)| {
+        (patch.level < MAX_LEVEL).then(|| {
+            let k = child_at(local);
+            (patch.child(k), from_parent(k, local))
+        })
+    })
+}
+
 /// The texels a side's camera samples ask, kept as the most any of them
 /// asks in each of the side's deepest patches (level [`MAX_LEVEL`]): all
 /// [`Needs::partition`] reads, since a patch needs the most its samples
@@ -131,17 +142,11 @@ pub struct Needs {
 impl Needs {
     /// A camera sample's hit at the triangle's `(u, v)`, where the whole
     /// triangle would need `needed` texels along an edge.
-    pub fn add(&mut self, (u, v): (f32, f32), needed: f32) {
-        let mut local = (u, v);
-        let mut leaf = Patch::ROOT;
-        // The descent `split` and `TextureMovies::movie_at` take, to the
-        // bottom: the same steps on the same numbers, so a sample lands in
-        // the patch it landed in when each level descended on its own.
-        while leaf.level < MAX_LEVEL {
-            let k = child_at(local);
-            local = from_parent(k, local);
-            leaf = leaf.child(k);
-        }
+    pub fn add(&mut self, uv: (f32, f32), needed: f32) {
+        // To the bottom: `TextureMovies::movie_at` takes the same steps on
+        // the same numbers, so the sample's patch at each level is the one
+        // a lookup there finds.
+        let (leaf, _) = descent(uv).last().expect("the root at least");
         self.leaves.push((leaf.path, needed));
     }
 
@@ -222,13 +227,8 @@ mod tests {
         for i in 0..=40 {
             for j in 0..=40 - i {
                 let (u, v) = (i as f32 / 40.0, j as f32 / 40.0);
-                let mut p = Patch::ROOT;
-                let mut local = (u, v);
-                while p.level < MAX_LEVEL {
-                    let k = child_at(local);
-                    local = from_parent(k, local);
-                    p = p.child(k);
-                }
+                let (p, local) = descent((u, v)).last().unwrap();
+                assert_eq!(p.level, MAX_LEVEL);
                 assert!(local.0 >= -1e-5 && local.1 >= -1e-5 && local.0 + local.1 <= 1.0 + 1e-5);
                 let (bu, bv) = p.to_triangle(local);
                 assert!((bu - u).abs() < 1e-5 && (bv - v).abs() < 1e-5, "({u}, {v})");
@@ -309,9 +309,9 @@ mod tests {
 
     /// On samples scattered over the triangle or crowded in a corner,
     /// asking from a few texels to far past the deepest split (NaN among
-    /// them), the partition from
-    /// the leaves' maxima is the one made from every sample, bit for bit,
-    /// and the same whichever way the samples were split among tiles.
+    /// them), the partition from the leaves' maxima is the one made from
+    /// every sample, bit for bit, and the same whichever way the samples
+    /// were split among tiles.
     #[test]
     fn a_partition_from_the_leaves_is_the_one_from_every_sample() {
         use crate::sampling::{Rng, SampleKey};
