@@ -486,8 +486,8 @@ impl TextureMovies {
     /// Which patches of which sides of which triangles the samples see
     /// with a diffuse part, and the resolution each needs (the finest any
     /// of its samples asks): each side split where its finest texels are
-    /// asked ([`patch::Needs::partition`]).
-    /// The tiles' seen sides are taken.
+    /// asked ([`patch::Needs::partition`]). Takes the tiles' seen sides,
+    /// which they hold no longer.
     fn wanted_movies(&self, tiles: &mut [Tile]) -> BTreeMap<MovieKey, u32> {
         let s = &self.settings;
         let mut sides = SeenSides::new();

@@ -41,8 +41,8 @@ pub struct Movie {
     /// Whether the memory budget gives it room to keep them this frame
     /// ([`Movie::make_room`]); none until it is given.
     room: bool,
-    /// Irradiance per band texel, in storage order ([`Movie::band`]; row
-    /// `j` from [`band_offset`]).
+    /// Irradiance per band texel, in storage order (`Movie::band`; row
+    /// `j` from `band_offset`).
     pub texels: Vec<Vec3>,
     /// Its direct part alone, per band texel in storage order, RGBE-packed
     /// as the store keeps it (the "bad links" layer, §3.1: what the movie
