@@ -143,9 +143,9 @@ impl Needs {
     /// A camera sample's hit at the triangle's `(u, v)`, where the whole
     /// triangle would need `needed` texels along an edge.
     pub fn add(&mut self, uv: (f32, f32), needed: f32) {
-        // To the bottom: `TextureMovies::movie_at` takes the same steps on
-        // the same numbers, so the sample's patch at each level is the one
-        // a lookup there finds.
+        // To the bottom of the descent the lookup (`TextureMovies::movie_at`)
+        // takes, so the sample's patch at each level is the one a lookup
+        // there finds.
         let (leaf, _) = descent(uv).last().expect("the root at least");
         self.leaves.push((leaf.path, needed));
     }
