@@ -34,8 +34,8 @@ fn assert_refused(code: i32, stderr: &str, flag_hint: &str) {
     assert!(!stderr.contains("memory allocation"), "{stderr}");
 }
 
-/// 16384² `movies` at 65536 spp needs a petabyte by the estimate (its
-/// item buffer holds every camera sample of the frame): it is refused at
+/// 16384² `movies` at 65536 spp needs 16 TiB by the estimate (its item
+/// buffer holds a flag for every camera sample of the frame): it is refused at
 /// once, whatever the machine, and nothing is written.
 #[cfg(target_os = "linux")]
 #[test]

@@ -22,9 +22,10 @@
 //!   before the pass, their fill stage holds a ray, hit and candidate a pixel
 //!   (`ic::primary_candidates`), then the candidates, their clearances and
 //!   a visited flag (`ic`'s `fill_from`);
-//! - `movies`: its item buffer, every camera sample's hit and whether it
-//!   sees an emitter, held for the whole frame
-//!   (`TextureMovies::trace_tiles`; the samples' rays and streams are
+//! - `movies`: its item buffer, every camera sample's hit (within
+//!   [`HELD_HITS_BYTES`]; past it the camera rays are traced again tile by
+//!   tile to render) and whether it sees an emitter, held for the whole
+//!   frame (`TextureMovies::trace_tiles`; the samples' rays and streams are
 //!   drawn again tile by tile to render, `PrimarySamples::again`);
 //! - per triangle, the frame's snapshot of it, the mesh's indices and
 //!   material, and the BVH's copy of it in leaf order with its ids.
@@ -79,6 +80,7 @@
 use crate::backend::{Hit, Ray};
 use crate::cache::LookupPoint;
 use crate::method::ic::Candidate;
+use crate::method::movies::HELD_HITS_BYTES;
 use crate::method::render_pass::StillSamples;
 use crate::render::MethodSettings;
 use crate::sampling::Rng;
@@ -107,9 +109,11 @@ const KEPT_SAMPLE_BYTES: u64 = (size_of::<Ray>()
     + size_of::<Vec3>()
     + size_of::<u32>()) as u64;
 
-/// A camera sample of `movies`' item buffer: its hit, and whether it sees
-/// an emitter (`EmitterEdges`).
-const ITEM_SAMPLE_BYTES: u64 = (size_of::<Hit>() + size_of::<bool>()) as u64;
+/// A camera sample of `movies`' item buffer: its hit (within
+/// [`HELD_HITS_BYTES`] a frame), and whether it sees an emitter
+/// (`EmitterEdges`).
+const ITEM_HIT_BYTES: u64 = size_of::<Hit>() as u64;
+const ITEM_FLAG_BYTES: u64 = size_of::<bool>() as u64;
 
 /// The fill stage's bytes a pixel: a candidate, beside first the pixel
 /// centre's ray and hit, then its clearance and visited flag.
@@ -151,7 +155,12 @@ pub fn peak_bytes(method: &MethodSettings, width: u32, height: u32, triangles: u
             let kept = samples.min(StillSamples::BUDGET_BYTES as u64 / KEPT_SAMPLE_BYTES);
             (kept * KEPT_SAMPLE_BYTES, 0, FILL_BYTES)
         }
-        MethodSettings::Movies(_) => (0, samples.saturating_mul(ITEM_SAMPLE_BYTES), 0),
+        MethodSettings::Movies(_) => {
+            let hits = samples
+                .saturating_mul(ITEM_HIT_BYTES)
+                .min(HELD_HITS_BYTES as u64);
+            (0, hits + samples.saturating_mul(ITEM_FLAG_BYTES), 0)
+        }
     };
     let render = carried
         .saturating_add(pixels.saturating_mul(FILM_BYTES))

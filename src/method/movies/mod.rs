@@ -93,6 +93,7 @@ pub use movie::{Movie, MovieKey};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::f32::consts::FRAC_1_PI;
+use std::mem::size_of;
 use std::time::Instant;
 
 /// Settings of `movies`, with their sources.
@@ -155,7 +156,17 @@ pub struct TextureMovies {
     /// Whether to hand each frame's movies to the store.
     keep: bool,
     kept: Option<FrameRecords>,
+    /// The most bytes of hits the item buffer holds ([`HELD_HITS_BYTES`]).
+    held_hits_bytes: usize,
 }
+
+/// The most bytes of its camera samples' hits a frame's item buffer holds
+/// from the trace to the render; a frame with more traces its camera rays
+/// again as each tile is rendered. A 3840×2160 frame at 16 spp has
+/// 2.65 GB of hits, half its peak memory; tracing them again is about a
+/// tenth more time there. 1 GiB holds the hits of 1920×1080 at 16 spp,
+/// 0.66 GB, with room to spare.
+pub const HELD_HITS_BYTES: usize = 1 << 30;
 
 impl TextureMovies {
     pub fn new(settings: MoviesSettings) -> Self {
@@ -169,6 +180,7 @@ impl TextureMovies {
             shadow_bytes: 0,
             keep: false,
             kept: None,
+            held_hits_bytes: HELD_HITS_BYTES,
         }
     }
 
@@ -288,15 +300,18 @@ impl TextureMovies {
 }
 
 /// A tile of pixels: its camera samples' first hits, held from the trace
-/// to the render (the item buffer), and the sides they see until
-/// [`TextureMovies::wanted_movies`] takes them. The samples' camera rays
-/// and streams are not held: [`PrimarySamples::again`] draws them again
-/// to render the tile (84 bytes a sample held for the whole frame were
-/// 2.8 GB of a 1920×1080 frame at 16 spp; its hits alone are 0.7 GB).
+/// to the render (the item buffer) within [`HELD_HITS_BYTES`] a frame,
+/// and the sides they see until [`TextureMovies::wanted_movies`] takes
+/// them. The samples' camera rays and streams are not held:
+/// [`PrimarySamples::again`] draws them again to render the tile (84
+/// bytes a sample held for the whole frame were 2.8 GB of a 1920×1080
+/// frame at 16 spp; its hits alone are 0.7 GB).
 struct Tile {
     first: u32,
     count: u32,
-    hits: Vec<Hit>,
+    /// `None` where the frame's hits are past [`HELD_HITS_BYTES`]: the
+    /// tile's camera rays are traced again to render it.
+    hits: Option<Vec<Hit>>,
     edges: EmitterEdges,
     seen: SeenSides,
 }
@@ -445,6 +460,9 @@ impl TextureMovies {
         let spp = self.settings.spp.max(1);
         let per_tile = self.tile_pixels(ctx);
         let n_pixels = ctx.width * ctx.height;
+        // The base samples' hits; a light's edge pixels add a few.
+        let hit_bytes = (n_pixels as usize * spp as usize).saturating_mul(size_of::<Hit>());
+        let hold = hit_bytes <= self.held_hits_bytes;
         let starts: Vec<u32> = (0..n_pixels).step_by(per_tile as usize).collect();
         starts
             .into_par_iter()
@@ -457,7 +475,7 @@ impl TextureMovies {
                     first,
                     count,
                     seen: self.seen_sides(ctx, &primary),
-                    hits: primary.hits,
+                    hits: hold.then_some(primary.hits),
                     edges,
                 }
             })
@@ -588,9 +606,16 @@ impl TextureMovies {
 
     fn render_tile(&self, ctx: &FrameContext, tile: Tile, out: &mut [Vec3]) -> u64 {
         let spp = self.settings.spp.max(1);
-        let shape = (tile.first, tile.count, spp);
-        let mut primary =
-            PrimarySamples::again(ctx, PixelStreams::PerFrame, shape, &tile.edges, tile.hits);
+        let streams = PixelStreams::PerFrame;
+        let mut primary = match tile.hits {
+            Some(hits) => {
+                let shape = (tile.first, tile.count, spp);
+                PrimarySamples::again(ctx, streams, shape, &tile.edges, hits)
+            }
+            // The same samples, rays and hits as the first trace (its edge
+            // pixels too: the trace is keyed by the samples alone).
+            None => PrimarySamples::trace(ctx, streams, tile.first, tile.count, spp).0,
+        };
         let surfaces: Vec<Option<Surface>> = primary.surfaces(ctx);
         let mut radiance = vec![Vec3::ZERO; surfaces.len()];
         let mut lights = FirstLightSampler::default();
@@ -707,6 +732,42 @@ mod tests {
             reported >= kept + drawing.max(solving),
             "reported {reported} bytes; kept {kept}, drawing {drawing}, solving {solving}"
         );
+    }
+
+    /// A frame whose hits are past the item buffer's budget traces its
+    /// camera rays again to render, and is, bit for bit, the frame that
+    /// held them (cube-in-box shows its light: its edge pixels' extra
+    /// samples are traced again too).
+    #[test]
+    fn a_frame_past_the_held_hits_traces_them_again_to_the_same_film() {
+        let run = |held_hits_bytes: usize| {
+            let mut renderer = crate::render::test_renderer("cube-in-box", 24);
+            let mut movies = TextureMovies::new(MoviesSettings {
+                spp: 2,
+                shadow_samples: 1,
+                global: coarse_global(),
+                ..MoviesSettings::default()
+            });
+            movies.held_hits_bytes = held_hits_bytes;
+            (0..2)
+                .map(|frame| {
+                    renderer.with_frame_context(frame, |ctx| {
+                        let before = ctx.backend.ray_counts().closest;
+                        let film = movies.render_frame(ctx);
+                        (film.pixels, ctx.backend.ray_counts().closest - before)
+                    })
+                })
+                .collect::<Vec<_>>()
+        };
+        let (held, traced_again) = (run(HELD_HITS_BYTES), run(0));
+        let camera_samples = 24 * 24 * 2;
+        for ((film, rays), (film_again, rays_again)) in held.iter().zip(&traced_again) {
+            assert_eq!(film, film_again);
+            assert!(
+                *rays_again >= rays + camera_samples,
+                "{rays} then {rays_again}"
+            );
+        }
     }
 
     /// The budget of the movies' static shadows holds at its peak in every
