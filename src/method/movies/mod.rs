@@ -162,10 +162,11 @@ pub struct TextureMovies {
 
 /// The most bytes of its camera samples' hits a frame's item buffer holds
 /// from the trace to the render; a frame with more traces its camera rays
-/// again as each tile is rendered. A 3840×2160 frame at 16 spp has
-/// 2.65 GB of hits, half its peak memory; tracing them again is about a
-/// tenth more time there. 1 GiB holds the hits of 1920×1080 at 16 spp,
-/// 0.66 GB, with room to spare.
+/// again as each tile is rendered. A 3840×2160 frame of cube-in-box at
+/// 16 spp has 2.65 GB of hits, half its peak memory (4.98 GB); traced
+/// again, it peaks at 2.40 GB and takes 4 % more time (`benches/RESULTS.md`).
+/// 1 GiB holds the hits of 1920×1080 at 16 spp, 0.66 GB, with room to
+/// spare.
 pub const HELD_HITS_BYTES: usize = 1 << 30;
 
 impl TextureMovies {
