@@ -159,7 +159,11 @@ pub fn peak_bytes(method: &MethodSettings, width: u32, height: u32, triangles: u
             let hits = samples
                 .saturating_mul(ITEM_HIT_BYTES)
                 .min(HELD_HITS_BYTES as u64);
-            (0, hits.saturating_add(samples.saturating_mul(ITEM_FLAG_BYTES)), 0)
+            (
+                0,
+                hits.saturating_add(samples.saturating_mul(ITEM_FLAG_BYTES)),
+                0,
+            )
         }
     };
     let render = carried
