@@ -196,13 +196,15 @@ impl Movie {
         let (i0, i1, fx) = axis(u);
         let (j0, j1, fy) = axis(v);
         // Zero outside the band, which a lookup inside the triangle never
-        // reads.
-        let at = |i: u32, j: u32| match in_band(r, i, j) {
-            true => self.texels[band_offset(r, j) + i as usize],
+        // reads. Each of the two rows' start found once (a lookup runs per
+        // camera sample).
+        let at = |i: u32, (j, start): (u32, usize)| match in_band(r, i, j) {
+            true => self.texels[start + i as usize],
             false => Vec3::ZERO,
         };
-        (at(i0, j0) * (1.0 - fx) + at(i1, j0) * fx) * (1.0 - fy)
-            + (at(i0, j1) * (1.0 - fx) + at(i1, j1) * fx) * fy
+        let (row0, row1) = ((j0, band_offset(r, j0)), (j1, band_offset(r, j1)));
+        (at(i0, row0) * (1.0 - fx) + at(i1, row0) * fx) * (1.0 - fy)
+            + (at(i0, row1) * (1.0 - fx) + at(i1, row1) * fx) * fy
     }
 
     /// Bytes it holds: itself, its texels (linear, and their direct part
