@@ -703,6 +703,17 @@ mod tests {
         }
     }
 
+    /// Movies over [`coarse_global`] at `spp` camera samples a pixel and
+    /// one shadow sample a texel.
+    fn cheap_movies(spp: u32) -> TextureMovies {
+        TextureMovies::new(MoviesSettings {
+            spp,
+            shadow_samples: 1,
+            global: coarse_global(),
+            ..MoviesSettings::default()
+        })
+    }
+
     /// The memory a frame reports holds the global pass's working buffers
     /// as well as what it keeps: on a first frame (every link traced) at
     /// least the buffers held at once while the links are drawn (a shading
@@ -713,12 +724,7 @@ mod tests {
     #[test]
     fn reported_memory_holds_the_global_pass_working_buffers() {
         let mut renderer = crate::render::test_renderer("cube-in-box", 8);
-        let mut movies = TextureMovies::new(MoviesSettings {
-            spp: 1,
-            shadow_samples: 1,
-            global: coarse_global(),
-            ..MoviesSettings::default()
-        });
+        let mut movies = cheap_movies(1);
         renderer.with_frame_context(0, |ctx| movies.render_frame(ctx));
         let global = movies.global.as_ref().expect("built in the frame");
         let (vertices, links) = (global.vertex_count(), global.link_count());
@@ -743,12 +749,7 @@ mod tests {
     fn a_frame_past_the_held_hits_traces_them_again_to_the_same_film() {
         let run = |held_hits_bytes: usize| {
             let mut renderer = crate::render::test_renderer("cube-in-box", 24);
-            let mut movies = TextureMovies::new(MoviesSettings {
-                spp: 2,
-                shadow_samples: 1,
-                global: coarse_global(),
-                ..MoviesSettings::default()
-            });
+            let mut movies = cheap_movies(2);
             movies.held_hits_bytes = held_hits_bytes;
             (0..2)
                 .map(|frame| {
