@@ -57,11 +57,16 @@ pub struct GlobalSettings {
     /// segments an edge (at most [`MAX_GRID`](super::mesh::MAX_GRID)), its
     /// edges as they are at time 0 ([`MESHED_AT`]).
     pub spacing: f32,
-    /// Links of a vertex on a triangle whose grid cells are at least a
-    /// spacing across; smaller cells get fewer, in proportion to their
-    /// area, and at least [`MIN_LINKS`](super::mesh::MIN_LINKS) (the
-    /// corners of triangles too small for that are clustered, one vertex
-    /// of a cluster gathering for its area: [`super::mesh`]).
+    /// Links of a vertex that stands for a spacing squared of surface
+    /// (two cells whose short sides are a spacing); one that stands for
+    /// less gets fewer, in proportion, and at least
+    /// [`MIN_LINKS`](super::mesh::MIN_LINKS) (the corners of triangles too
+    /// small for that are clustered, one vertex of a cluster gathering for
+    /// its area: [`super::mesh`]). A grid's cells are at most a spacing
+    /// along their longest edge, so a grid vertex stands for less: at the
+    /// default 128, most of the courtyard's and `l_hall`'s vertices
+    /// gather along 51–63 (`benches/RESULTS.md`, "Links a vertex,
+    /// doubled").
     pub links: u32,
     /// Most Jacobi iterations (bounces of indirect light); the iteration
     /// stops sooner once converged ([`CONVERGED`]).
