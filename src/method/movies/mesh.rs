@@ -116,10 +116,14 @@ impl Meshing {
     }
 
     /// The links a vertex gathering for `area` of surface has, in
-    /// proportion: a vertex of a grid whose cells are a spacing across
-    /// has `links`, and stands for about two of its cells (a third of
-    /// each of six), a spacing squared. (`grid` counts a cell's vertex the
-    /// same way.)
+    /// proportion: `links` for a spacing squared. A grid's vertex stands
+    /// for about two of its cells (a third of each of six), which `grid`
+    /// counts the same way. A grid's cells are at most a spacing along
+    /// their longest edge, so two of them are less than a spacing squared
+    /// (half of it for right isosceles cells whose long sides are a
+    /// spacing, 0.87 for equilateral ones): a grid vertex has fewer than
+    /// `links`, about half on the right-angled triangles of rooms and
+    /// grounds.
     fn area_links(&self, area: f32) -> f32 {
         self.links as f32 * area / (self.spacing * self.spacing)
     }
@@ -159,8 +163,8 @@ impl Meshing {
         // A piece at depth d is a 4^d-th of its triangle.
         let area = tri.area() / (1u64 << (2 * piece.depth)) as f32;
         let cell = area / (n * n) as f32;
-        // Links as a vertex on a cell of the spacing wanted here would
-        // have, times the share of the pass's spacing in that spacing,
+        // Links as a vertex standing for two cells of this size at the
+        // spacing wanted here would have (`area_links`), times the share of the pass's spacing in that spacing,
         // squared: past what the camera sees, a vertex sends its light to
         // what it sees through a solid angle that falls with the distance
         // squared, and its noise is averaged over the many links that land

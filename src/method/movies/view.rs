@@ -92,7 +92,8 @@ const FULL_SPACING_PIXELS: u32 = 128;
 /// Why: the spacing was a share of the scene's or the view's size alone,
 /// so a cell was about 8 pixels across at 128 × 128 and 16 at 256 × 256, and the
 /// Gouraud-interpolated light of the grid's vertices, each gathered along
-/// 128 links, showed as blotches across the larger frames. On the seven
+/// about 60 links (the default 128 for a spacing squared of surface:
+/// `GlobalSettings::links`), showed as blotches across the larger frames. On the seven
 /// scenes of `benches/RESULTS.md` ("The global pass's spacing follows the
 /// film") at 256 × 256 half the spacing lowered the block bias against
 /// `path` by 34–55 % for 3–25 % more time; at 64 × 64 it cost 1.2–2.0
