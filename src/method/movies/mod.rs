@@ -342,15 +342,7 @@ impl Method for TextureMovies {
         let blockers = direct::ShadowBlockers::new(ctx, &mut self.statics);
 
         let start = Instant::now();
-        let fresh = !self
-            .global
-            .as_ref()
-            .is_some_and(|g| g.fits(ctx.snapshot.triangles.len()));
-        if fresh {
-            self.global = Some(GlobalPass::new(ctx, self.settings.global));
-        }
-        let global = self.global.as_mut().expect("built above");
-        global.update(ctx, &blockers, fresh);
+        self.update_global(ctx, &blockers);
         stats
             .phase_seconds
             .push(("global".into(), start.elapsed().as_secs_f64()));
@@ -363,28 +355,12 @@ impl Method for TextureMovies {
         }
         let wanted = self.wanted_movies(&mut tiles);
         self.apply_events(ctx, wanted, &blockers, &mut stats);
-        self.make_room_for_shadows(ctx, &blockers);
-        let global = self.global.as_ref().expect("built above");
-        let samples = self.settings.shadow_samples;
-        let counts: Vec<ShadowCounts> = self
-            .movies
-            .par_iter_mut()
-            .map(|(_, m)| match ctx.abandoned() {
-                true => ShadowCounts::default(),
-                false => m.shade(ctx, &blockers, global, samples),
-            })
-            .collect();
-        if ctx.abandoned() {
+        if !self.shade_movies(ctx, &blockers) {
             // The movies the loop skipped are half built: one opened this
             // frame has no texels (a lookup would index nothing), a kept one
             // the last frame's. None may be rendered or kept.
             return self.abandon_frame(ctx);
         }
-        self.shadows = ShadowCounts::default();
-        counts.into_iter().for_each(|c| self.shadows += c);
-        // Shadows are only let go of before the movies are shaded, and
-        // found while they are: their most in the frame is now.
-        self.shadow_bytes = self.movies.values().map(Movie::shadow_bytes).sum();
         stats
             .phase_seconds
             .push(("movies".into(), start.elapsed().as_secs_f64()));
@@ -400,16 +376,7 @@ impl Method for TextureMovies {
             .phase_seconds
             .push((RENDER_PHASE.into(), start.elapsed().as_secs_f64()));
         stats.records_alive = self.movies.len() as u64;
-        // The global pass's solution is part of the cache, and it needs
-        // its working buffers beside it each frame (about one and a half
-        // times its links' bytes on a frame that traces them all): their
-        // peak counts.
-        stats.cache_bytes = (self.movies.values().map(Movie::memory_bytes).sum::<usize>()
-            + self
-                .global
-                .as_ref()
-                .map_or(0, |g| g.memory_bytes() + g.working_bytes()))
-            as u64;
+        stats.cache_bytes = self.cache_bytes();
         self.stats = stats;
         self.kept = self.keep.then(|| FrameRecords {
             movies: Some(self.stored_movies(ctx.frame)),
@@ -432,6 +399,55 @@ impl Method for TextureMovies {
 }
 
 impl TextureMovies {
+    /// The global pass of `ctx`'s frame: built where there is none or the
+    /// scene's triangles changed in number, then updated.
+    fn update_global(&mut self, ctx: &FrameContext, blockers: &direct::ShadowBlockers) {
+        let fresh = !self
+            .global
+            .as_ref()
+            .is_some_and(|g| g.fits(ctx.snapshot.triangles.len()));
+        if fresh {
+            self.global = Some(GlobalPass::new(ctx, self.settings.global));
+        }
+        let global = self.global.as_mut().expect("built above");
+        global.update(ctx, blockers, fresh);
+    }
+
+    /// The frame's movies' texels (their direct light, and the global
+    /// pass's indirect light), their shadows kept within the budget.
+    /// `false` where the frame was abandoned part way.
+    fn shade_movies(&mut self, ctx: &FrameContext, blockers: &direct::ShadowBlockers) -> bool {
+        self.make_room_for_shadows(ctx, blockers);
+        let global = self.global.as_ref().expect("updated before");
+        let samples = self.settings.shadow_samples;
+        let counts: Vec<ShadowCounts> = self
+            .movies
+            .par_iter_mut()
+            .map(|(_, m)| match ctx.abandoned() {
+                true => ShadowCounts::default(),
+                false => m.shade(ctx, blockers, global, samples),
+            })
+            .collect();
+        if ctx.abandoned() {
+            return false;
+        }
+        self.shadows = ShadowCounts::default();
+        counts.into_iter().for_each(|c| self.shadows += c);
+        // Shadows are only let go of before the movies are shaded, and
+        // found while they are: their most in the frame is now.
+        self.shadow_bytes = self.movies.values().map(Movie::shadow_bytes).sum();
+        true
+    }
+
+    /// The bytes of the cache a frame holds: the movies, and the global
+    /// pass's solution with the working buffers it needs beside it each
+    /// frame (about one and a half times its links' bytes on a frame that
+    /// traces them all), whose peak counts.
+    fn cache_bytes(&self) -> u64 {
+        let global = (self.global.as_ref()).map_or(0, |g| g.memory_bytes() + g.working_bytes());
+        (self.movies.values().map(Movie::memory_bytes).sum::<usize>() + global) as u64
+    }
+
     /// The end of an abandoned frame ([`FrameContext::abandoned`]), which
     /// the renderer throws away: an empty film, no frame records, and no
     /// movie left, so that nothing half built is rendered, kept or stored
