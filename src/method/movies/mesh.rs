@@ -164,12 +164,12 @@ impl Meshing {
         let area = tri.area() / (1u64 << (2 * piece.depth)) as f32;
         let cell = area / (n * n) as f32;
         // Links as a vertex standing for two cells of this size at the
-        // spacing wanted here would have (`area_links`), times the share of the pass's spacing in that spacing,
-        // squared: past what the camera sees, a vertex sends its light to
-        // what it sees through a solid angle that falls with the distance
-        // squared, and its noise is averaged over the many links that land
-        // near it. (1 within the view: a triangle within the cap keeps its
-        // links.)
+        // spacing wanted here would have (`area_links`), times the share
+        // of the pass's spacing in that spacing, squared: past what the
+        // camera sees, a vertex sends its light to what it sees through a
+        // solid angle that falls with the distance squared, and its noise
+        // is averaged over the many links that land near it. (1 within the
+        // view: a triangle within the cap keeps its links.)
         let reference_cell = 0.5 * spacing * spacing;
         let importance = (self.spacing / spacing).powi(2);
         let links = ((self.links as f32 * cell / reference_cell * importance).ceil() as u32)
