@@ -56,11 +56,12 @@ impl LightsByFrame {
 /// A light reduced to what the unshadowed direct light needs.
 #[derive(Clone, Copy, Debug)]
 enum Emitter {
-    /// An emissive triangle: centroid, unit normal, `L_e · area`.
+    /// An emissive triangle: centroid, unit normal, `L_e · area`, area.
     Area {
         center: Vec3,
         normal: Vec3,
         power: Vec3,
+        area: f32,
         double_sided: bool,
     },
     /// A punctual light.
@@ -104,6 +105,7 @@ impl UnshadowedLights {
                 center: tri.centroid(),
                 normal: tri.geometric_normal(),
                 power: m.emission * tri.area(),
+                area: tri.area(),
                 double_sided: m.double_sided,
             });
         }
@@ -205,7 +207,7 @@ impl UnshadowedLights {
 
     /// Unshadowed direct irradiance at `p` (normal `n`).
     pub(crate) fn irradiance(&self, p: Vec3, n: Vec3) -> Vec3 {
-        self.reflected(p, |w| Vec3::splat(n.dot(w).max(0.0)))
+        self.reflected(p, |w, _| Vec3::splat(n.dot(w).max(0.0)))
     }
 
     /// How much the unshadowed direct irradiance at `p` may differ between
@@ -226,7 +228,7 @@ impl UnshadowedLights {
         let (mut change, mut before, mut after) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
         let paired = self.emitters.len() == other.emitters.len();
         for (a, b) in self.emitters.iter().zip(&other.emitters) {
-            let ((ea, wa), (eb, wb)) = (a.arriving(p), b.arriving(p));
+            let ((ea, wa, _), (eb, wb, _)) = (a.arriving(p), b.arriving(p));
             let channel = |k: usize| (wb * eb[k] - wa * ea[k]).length();
             change += Vec3::new(channel(0), channel(1), channel(2));
             (before, after) = (before + ea, after + eb);
@@ -240,28 +242,33 @@ impl UnshadowedLights {
     }
 
     /// Σ over the lights of what each gives a surface at `p` facing it,
-    /// times `weight(w)` for `w` the unit direction to it: the irradiance
-    /// for `weight` the cosine to a normal, the radiance a surface there
-    /// reflects for its BSDF times that cosine.
-    pub(crate) fn reflected(&self, p: Vec3, weight: impl Fn(Vec3) -> Vec3) -> Vec3 {
+    /// times `weight(w, Ω)` for `w` the unit direction to it and `Ω` the
+    /// solid angle it covers there (0 for a punctual light): the
+    /// irradiance for `weight` the cosine to a normal, the radiance a
+    /// surface there reflects for its BSDF (averaged over `Ω`) times that
+    /// cosine.
+    pub(crate) fn reflected(&self, p: Vec3, weight: impl Fn(Vec3, f32) -> Vec3) -> Vec3 {
         (self.emitters.iter())
             .map(|l| {
-                let (e, w) = l.arriving(p);
-                e * weight(w)
+                let (e, w, solid_angle) = l.arriving(p);
+                e * weight(w, solid_angle)
             })
             .sum()
     }
 }
 
 impl Emitter {
-    /// What it gives a surface at `p` facing it (unshadowed), and the unit
-    /// direction from `p` to it.
-    fn arriving(&self, p: Vec3) -> (Vec3, Vec3) {
+    /// What it gives a surface at `p` facing it (unshadowed), the unit
+    /// direction from `p` to it, and the solid angle it covers seen from
+    /// `p` (its area projected and over the distance squared, at most a
+    /// hemisphere; 0 for a punctual light).
+    fn arriving(&self, p: Vec3) -> (Vec3, Vec3, f32) {
         match *self {
             Emitter::Area {
                 center,
                 normal,
                 power,
+                area,
                 double_sided,
             } => {
                 let d = center - p;
@@ -269,16 +276,17 @@ impl Emitter {
                 let w = d / d2.sqrt();
                 let cos_l = -normal.dot(w);
                 let cos_l = if double_sided { cos_l.abs() } else { cos_l };
-                (power * (cos_l.max(0.0) / d2), w)
+                let solid_angle = (area * cos_l.max(0.0) / d2).min(std::f32::consts::TAU);
+                (power * (cos_l.max(0.0) / d2), w, solid_angle)
             }
             Emitter::Punctual(light) if light.is_directional() => {
-                (light.intensity, -light.direction)
+                (light.intensity, -light.direction, 0.0)
             }
             Emitter::Punctual(light) => {
                 let d = light.position - p;
                 let d2 = d.length_squared().max(1e-8);
                 let w = d / d2.sqrt();
-                (light.intensity_toward(-w) / d2, w)
+                (light.intensity_toward(-w) / d2, w, 0.0)
             }
         }
     }
@@ -397,6 +405,7 @@ impl Clusters {
                 center: part.weighted_centre / part.area,
                 normal: part.vector_area.normalize_or_zero(),
                 power: m.emission * part.area,
+                area: part.area,
                 double_sided: m.double_sided,
             }));
         }
@@ -427,7 +436,85 @@ fn nearly_equal(a: Vec3, b: Vec3) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::Triangle;
     use std::f32::consts::TAU;
+
+    /// A narrow glossy lobe under a small area light, looked at along the
+    /// light's mirror direction: the radiance `reflected` gives with the
+    /// lobe averaged over the light's solid angle is the lobe integrated
+    /// over the light's triangle (brute force), where the lobe taken at the
+    /// light's centre alone, as a point's, gives tens of times too much
+    /// (the fireflies `movies`' global pass showed on the glossy balls of
+    /// `tests/data/scenes/spheres.glb`). A punctual light covers no solid
+    /// angle: the lobe at its direction.
+    #[test]
+    fn a_glossy_lobe_reflects_an_area_light_integrated_over_its_area() {
+        use crate::material::Bsdf;
+        let centre = Vec3::new(0.5, 0.0, 1.0);
+        let w_c = centre.normalize();
+        let (n, wo) = (Vec3::Z, Vec3::new(-w_c.x, -w_c.y, w_c.z));
+        // An equilateral triangle facing the origin, a quarter of its
+        // distance from its centre to each corner.
+        let (u, v) = (w_c.cross(Vec3::Y).normalize() * 0.25, Vec3::Y * 0.25);
+        let r = centre.length();
+        let corners = [u, v * 0.87 - u * 0.5, -v * 0.87 - u * 0.5].map(|c| centre + c * r);
+        let light = Triangle {
+            p: corners,
+            n: [-w_c; 3],
+        };
+        let radiance = Vec3::new(3.0, 2.0, 1.0);
+        let lights = UnshadowedLights {
+            emitters: vec![Emitter::Area {
+                center: light.centroid(),
+                normal: -w_c,
+                power: radiance * light.area(),
+                area: light.area(),
+                double_sided: false,
+            }],
+        };
+        let glossy = crate::scene::Material::glossy("lobe", Vec3::ZERO, Vec3::splat(0.9), 2000.0);
+        let bsdf = Bsdf::new(&glossy, n, wo);
+        let cos = |w: Vec3| n.dot(w).max(0.0);
+        let averaged = lights.reflected(Vec3::ZERO, |w, solid_angle| {
+            bsdf.mean_specular(wo, w, solid_angle) * cos(w)
+        });
+        let as_point = lights.reflected(Vec3::ZERO, |w, _| bsdf.eval_specular(wo, w) * cos(w));
+        let integrated =
+            radiance * integrated_over(&light, |w| bsdf.eval_specular(wo, w).x * cos(w));
+        let ratio = averaged / integrated;
+        assert!(
+            ratio.min_element() > 0.9 && ratio.max_element() < 1.1,
+            "{averaged} {integrated}"
+        );
+        assert!(
+            as_point.x > 10.0 * integrated.x,
+            "{as_point} against {integrated}"
+        );
+        for tilt in [0.0, 0.01, 0.03, 0.1] {
+            let w = (w_c + u * tilt).normalize();
+            let (mean, at) = (bsdf.mean_specular(wo, w, 0.0), bsdf.eval_specular(wo, w));
+            let off = (mean - at).abs().max_element();
+            assert!(off <= 0.01 * at.x + 1e-6, "{tilt}: {mean} {at}");
+        }
+    }
+
+    /// `∫ f(w) dω` over the solid angle `light` covers seen from the
+    /// origin, by a 400 × 400 grid of points on it.
+    fn integrated_over(light: &Triangle, f: impl Fn(Vec3) -> f32) -> f32 {
+        let (k, [a, b, c]) = (400, light.p);
+        let facing = light.geometric_normal();
+        let mut sum = 0.0;
+        for (i, j) in (0..k).flat_map(|i| (0..k).map(move |j| (i, j))) {
+            let (mut s, mut t) = ((i as f32 + 0.5) / k as f32, (j as f32 + 0.5) / k as f32);
+            if s + t > 1.0 {
+                (s, t) = (1.0 - s, 1.0 - t);
+            }
+            let q = a + (b - a) * s + (c - a) * t;
+            let w = q.normalize();
+            sum += f(w) * (-facing.dot(w)).max(0.0) / q.length_squared();
+        }
+        sum * light.area() / (k * k) as f32
+    }
 
     /// A ball of radius `r` at `centre`: a cube whose faces are split in
     /// `k × k` squares (two triangles each, fronts out), its corners
@@ -625,6 +712,7 @@ mod tests {
             center,
             normal,
             power: Vec3::new(2.0, 2.0, 1.0),
+            area: 1.0,
             double_sided: false,
         };
         let lights = |k: f32| UnshadowedLights {

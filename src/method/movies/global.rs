@@ -849,7 +849,15 @@ impl GlobalPass {
     /// brighter than `path`'s at 24 × 24, and left out, that of `spheres`
     /// 16 % darker). A link's share is the lobe at its hit,
     /// seen from its vertex, over the lights taken as points
-    /// ([`UnshadowedLights`]), times the transmittance where it lands:
+    /// ([`UnshadowedLights`]), the lobe averaged over the solid angle an
+    /// area light covers there (`Bsdf::mean_specular`, the EAS's cone
+    /// average), times the transmittance where it lands. (Taken at the
+    /// light's centre alone, a lobe narrower than the light gave a link
+    /// up to its peak over the whole light, tens of times the light it
+    /// reflects: fireflies on `tests/data/scenes/spheres.glb`'s glossy balls
+    /// near its ceiling light, a frame at 0.69 relative RMSE against
+    /// `path` with 256 links a vertex, and a block bias over 24 frames of
+    /// 0.0056 with the default links, 0.0044 now.) The transmittance is
     /// its vertices' direct light over their unshadowed direct light, as
     /// the paper weights a link's unoccluded light by a transmittance
     /// texture (§3.1) rather than tracing shadow rays per link. The two
@@ -899,8 +907,9 @@ impl GlobalPass {
                             wo,
                         );
                         let n = bsdf.normal();
-                        let lobe = lights
-                            .reflected(l.to, |w| bsdf.eval_specular(wo, w) * n.dot(w).max(0.0));
+                        let lobe = lights.reflected(l.to, |w, solid_angle| {
+                            bsdf.mean_specular(wo, w, solid_angle) * n.dot(w).max(0.0)
+                        });
                         lobe * blend(&transmittance, &self.valid, &l.landing)
                     })
                     .sum();
