@@ -64,9 +64,10 @@ pub struct GlobalSettings {
     /// small for that are clustered, one vertex of a cluster gathering for
     /// its area: [`super::mesh`]). A grid's cells are at most a spacing
     /// along their longest edge, so a grid vertex stands for less: at the
-    /// default 128, most of the courtyard's and `l_hall`'s vertices
-    /// gather along 51–63 (`benches/RESULTS.md`, "Links a vertex,
-    /// doubled").
+    /// default 128, most of the courtyard's and `l_hall`'s vertices have
+    /// 51–63 by their area (`benches/RESULTS.md`, "Links a vertex,
+    /// doubled"), which a grid on a triangle the camera sees doubles and
+    /// one on a triangle it does not see halves (`mesh::SEEN_LINKS`).
     pub links: u32,
     /// Most Jacobi iterations (bounces of indirect light); the iteration
     /// stops sooner once converged ([`CONVERGED`]).
@@ -444,7 +445,7 @@ impl GlobalPass {
             sample,
         };
         // The set's shuffle takes a sample number no link has (a vertex
-        // has at most `links` ≤ 1024 of them).
+        // has at most twice the settings' `links` ≤ 1024 of them).
         let shuffle = Rng::new(key(u32::MAX)).next_u32();
         let u = Rng::new(key(link)).next_2d();
         let u = Stratified2d::sample_of(links, shuffle, link, u);

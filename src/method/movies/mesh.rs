@@ -34,9 +34,32 @@ pub const MIN_LINKS: u32 = 8;
 /// where a scene would need more (many triangles, or a static part so
 /// small that the spacing it sets is tiny), the grids coarsen, clustering
 /// more of the triangles, until they fit, rather than the pass asking for
-/// gigabytes; links thin only where the clusters' fewest links are past it
+/// gigabytes; links thin only where the clusters' fewest links, or the
+/// links the view adds on seen triangles (`SEEN_LINKS`), are past it
 /// (`PassMesh::number_links`; a vertex not clustered keeps one at least).
 pub const MAX_LINKS: u64 = 1 << 22;
+
+/// Links a grid vertex on a triangle the camera sees has, as a share of
+/// those its cells' size gives it ([`Meshing::grid`]); [`UNSEEN_LINKS`] on
+/// one it does not see.
+///
+/// Why (importance-driven refinement, as the pass already grades its
+/// pieces by the view: [`super::pieces`]): a seen vertex's gather noise
+/// is what a texel shows, spread by the Gouraud interpolation into
+/// blotches a cell or two across, frozen across frames; an unseen
+/// vertex's indirect light (its direct light is its own shadow samples')
+/// reaches the frame only along the links of others, each averaging the
+/// many links that land near it. Measured (`benches/RESULTS.md`, "Links
+/// where the camera looks"): on six scenes at 128 × 128 the error of twice
+/// the links everywhere (`l_hall` in between) for 4 % more time in all,
+/// where twice the links took 12 %; at 512 × 512, where the pass's budget
+/// binds and the links are thinned, the block bias fell by 26 and 45 % on
+/// the courtyard and `l_hall` and rose by 16 % on cube-in-box, whose view
+/// takes in nearly all of it.
+const SEEN_LINKS: f32 = 2.0;
+/// Links a grid vertex on a triangle the camera does not see has, as a
+/// share of those its cells' size gives it ([`SEEN_LINKS`]).
+const UNSEEN_LINKS: f32 = 0.5;
 
 /// How finely the pass meshes a snapshot: the grid spacing (world units),
 /// the links of a vertex on a cell a spacing across, and the fewest links
@@ -49,6 +72,10 @@ pub(super) struct Meshing {
     /// What the camera sees at time 0, which a triangle too large for one
     /// grid is split towards ([`super::pieces`]); `None`: it sees nothing.
     view: Option<View>,
+    /// Whether the grids' links follow what the camera sees
+    /// ([`SEEN_LINKS`]): not while the spacing is fitted to the budget
+    /// ([`Self::fitting`]).
+    by_view: bool,
 }
 
 impl Meshing {
@@ -66,6 +93,7 @@ impl Meshing {
             links: settings.links.max(1),
             min_links: MIN_LINKS.min(settings.links).max(1),
             view,
+            by_view: false,
         };
         // Coarser spacing makes more triangles fine, clustered, and counted
         // by their area: the links needed fall with the spacing squared
@@ -79,6 +107,13 @@ impl Meshing {
             let excess = (needed as f64 / MAX_LINKS as f64) as f32;
             m.spacing *= excess.sqrt().max(1.1);
         }
+        // The view moves links between triangles once the spacing is set,
+        // and where that is past the budget they are thinned
+        // (`PassMesh::number_links`) rather than the grids coarsened: a
+        // finer grid lowers the error more than more links a vertex
+        // (`benches/RESULTS.md`: half the spacing, block bias −34 to −55 %
+        // at 256 × 256; twice the links, −8 to −25 %).
+        m.by_view = true;
         m
     }
 
@@ -172,9 +207,24 @@ impl Meshing {
         // view: a triangle within the cap keeps its links.)
         let reference_cell = 0.5 * spacing * spacing;
         let importance = (self.spacing / spacing).powi(2);
-        let links = ((self.links as f32 * cell / reference_cell * importance).ceil() as u32)
-            .clamp(self.min_links, self.links);
+        let (share, most) = self.seen_share(id);
+        let links = ((self.links as f32 * cell / reference_cell * importance * share).ceil()
+            as u32)
+            .clamp(self.min_links, most.max(self.min_links));
         Some((n, links))
+    }
+
+    /// The share of its links a grid's vertex on triangle `id` has, and
+    /// the most it has: [`SEEN_LINKS`] times them on a triangle the camera
+    /// sees ([`View::glimpses`]), [`UNSEEN_LINKS`] on one it does not; the
+    /// settings' where it sees nothing, or while the spacing is fitted.
+    fn seen_share(&self, id: u32) -> (f32, u32) {
+        let view = self.view.as_ref().filter(|_| self.by_view);
+        match view.map(|view| view.glimpses(id)) {
+            Some(true) => (SEEN_LINKS, self.links.saturating_mul(SEEN_LINKS as u32)),
+            Some(false) => (UNSEEN_LINKS, self.links),
+            None => (1.0, self.links),
+        }
     }
 }
 
@@ -437,7 +487,8 @@ impl PassMesh {
 
     /// Numbers the vertices' links in vertex order, thinned first where
     /// they are past [`MAX_LINKS`] (the budget counts a cluster by its
-    /// area, not the fewest links it has: [`Meshing::links_needed`]).
+    /// area, not the fewest links it has: [`Meshing::links_needed`], and
+    /// the grids by their links before the view's shares: [`SEEN_LINKS`]).
     fn number_links(&mut self) {
         let total: u64 = self.vertices.iter().map(|v| u64::from(v.links)).sum();
         if total > MAX_LINKS {
@@ -724,7 +775,10 @@ mod tests {
         let hits: Vec<(u32, Vec3)> = (0..4)
             .map(|i| (0, Vec3::new(1.0 + i as f32, 0.0, 2.0)))
             .collect();
-        let view = View::new(Vec3::new(0.0, 2.0, 0.0), &hits);
+        let view = View::new(Vec3::new(0.0, 2.0, 0.0), &hits).map(|mut view| {
+            view.glimpse([0]);
+            view
+        });
         let settings = GlobalSettings::default();
         let m = Meshing::fitting(&triangles, &[], &settings, (8.0, view));
         assert_eq!(m.spacing, 8.0 / 32.0);
@@ -751,11 +805,11 @@ mod tests {
             longest / n as f32 <= m.spacing,
             "{piece:?}: {n} cells of {longest}"
         );
-        // As many links as a triangle within the cap would get for cells
-        // of that area.
+        // As many links as a seen triangle within the cap would get for
+        // cells of that area.
         let cell = 600.0 * 600.0 / 2.0 / 4f32.powi(piece.depth as i32) / (n * n) as f32;
-        let expected = (settings.links as f32 * cell / (0.5 * m.spacing * m.spacing)).ceil();
-        assert_eq!(links, expected as u32);
+        let by_area = settings.links as f32 * cell / (0.5 * m.spacing * m.spacing);
+        assert_eq!(links, (by_area * SEEN_LINKS).ceil() as u32);
         // The far corner: one coarse piece, fewer links a vertex.
         let far = Piece::WHOLE.children()[1];
         let (far_n, far_links) = m.grid((0, &triangles[0]), &far).expect("far piece whole");
@@ -763,12 +817,85 @@ mod tests {
             far_n <= MAX_GRID && far_links < links,
             "{far_n} {far_links}"
         );
+        // The unseen one's cells are far larger than a spacing squared:
+        // the most links a vertex has, half of them or not.
         let seen_only = m.piece_links((0, &triangles[0]), &Piece::WHOLE);
         assert_eq!(
             m.links_needed(&triangles, &[]),
             seen_only + Grid::vertex_count(MAX_GRID) as u64 * 128
         );
         assert!(seen_only > Grid::vertex_count(MAX_GRID) as u64 * 128);
+    }
+
+    /// Of two like triangles, the one the camera sees has its grid's
+    /// vertices gather along [`SEEN_LINKS`] times the links a view-less
+    /// meshing gives (up to that many times the settings'), the other
+    /// [`UNSEEN_LINKS`] times (down to the fewest), and the budget counts
+    /// what each has. (A fine triangle's corners are clustered and
+    /// gather by their area, seen or not.)
+    #[test]
+    fn a_seen_triangle_gathers_along_more_links_than_a_hidden_one() {
+        let tri = |z: f32, legs: f32| Triangle {
+            p: [
+                Vec3::new(0.0, 0.0, z),
+                Vec3::new(legs, 0.0, z),
+                Vec3::new(0.0, legs, z),
+            ],
+            n: [Vec3::Z; 3],
+        };
+        let settings = GlobalSettings::default();
+        let eye = Vec3::new(0.0, 0.0, 1.0);
+        let sees_first = || {
+            let mut view = View::new(eye, &[(0, Vec3::new(0.01, 0.01, 0.0))])?;
+            view.glimpse([0]);
+            Some(view)
+        };
+        assert!(sees_first().is_some_and(|v| v.glimpses(0) && !v.glimpses(1)));
+        let spacing = 10.0 / 32.0;
+        // Cells of 0.22, 0.25 and 0.125 spacings squared: 57, 64 and 32
+        // links by their area.
+        for legs in [4.0, 12.0, 1.0] {
+            let legs = legs * spacing;
+            let triangles: Placed<_> = [tri(0.0, legs), tri(-1.0, legs)].into_iter().collect();
+            let viewed = Meshing::fitting(&triangles, &[], &settings, (10.0, sees_first()));
+            let blind = Meshing::fitting(&triangles, &[], &settings, (10.0, None));
+            let grid = |m: &Meshing, id: u32| {
+                m.grid((id, &triangles[id as usize]), &Piece::WHOLE)
+                    .expect("within the cap")
+            };
+            let (n, links) = grid(&blind, 0);
+            assert_eq!(grid(&blind, 1), (n, links));
+            let by_area = settings.links as f32 * (legs * legs / 2.0 / (n * n) as f32)
+                / (0.5 * spacing * spacing);
+            let within =
+                |share: f32, most: u32| ((by_area * share).ceil() as u32).clamp(MIN_LINKS, most);
+            assert_eq!(links, within(1.0, settings.links), "legs {legs}");
+            let (seen, hidden) = (grid(&viewed, 0), grid(&viewed, 1));
+            assert_eq!(seen, (n, within(SEEN_LINKS, 2 * settings.links)));
+            assert_eq!(hidden, (n, within(UNSEEN_LINKS, settings.links)));
+            assert!(seen.1 > 3 * hidden.1, "legs {legs}: {seen:?} {hidden:?}");
+            let vertices = u64::from(Grid::vertex_count(n));
+            assert_eq!(
+                viewed.links_needed(&triangles, &[]),
+                vertices * u64::from(seen.1 + hidden.1)
+            );
+        }
+        // Past the budget, the view moves links but does not coarsen the
+        // grids: the spacing is the one fitted without it.
+        let many: Placed<_> = (0..40_000)
+            .map(|i| tri(i as f32, 4.0 * spacing))
+            .collect::<Vec<_>>()
+            .into();
+        let glimpsed = || {
+            let mut view = sees_first()?;
+            view.glimpse(0..20_000);
+            Some(view)
+        };
+        let viewed = Meshing::fitting(&many, &[], &settings, (10.0, glimpsed()));
+        let blind = Meshing::fitting(&many, &[], &settings, (10.0, None));
+        assert!(blind.spacing > spacing, "{blind:?}");
+        assert_eq!(viewed.spacing, blind.spacing);
+        assert!(viewed.links_needed(&many, &[]) > MAX_LINKS);
     }
 
     #[test]
