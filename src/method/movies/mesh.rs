@@ -34,8 +34,7 @@ pub const MIN_LINKS: u32 = 8;
 /// where a scene would need more (many triangles, or a static part so
 /// small that the spacing it sets is tiny), the grids coarsen, clustering
 /// more of the triangles, until they fit, rather than the pass asking for
-/// gigabytes; links thin only where the clusters' fewest links, or the
-/// links the view adds on seen triangles (`SEEN_LINKS`), are past it
+/// gigabytes; links thin only where the clusters' fewest links are past it
 /// (`PassMesh::number_links`; a vertex not clustered keeps one at least).
 pub const MAX_LINKS: u64 = 1 << 22;
 
@@ -53,9 +52,8 @@ pub const MAX_LINKS: u64 = 1 << 22;
 /// where the camera looks"): on six scenes at 128 × 128 the error of twice
 /// the links everywhere (`l_hall` in between) for 4 % more time in all,
 /// where twice the links took 12 %; at 512 × 512, where the pass's budget
-/// binds and the links are thinned, the block bias fell by 26 and 45 % on
-/// the courtyard and `l_hall` and rose by 16 % on cube-in-box, whose view
-/// takes in nearly all of it.
+/// binds (`Meshing::seen_share_within_budget`), the block bias fell by
+/// 26, 32 and 8 % on the courtyard, `l_hall` and cube-in-box.
 const SEEN_LINKS: f32 = 2.0;
 /// Links a grid vertex on a triangle the camera does not see has, as a
 /// share of those its cells' size gives it ([`SEEN_LINKS`]).
@@ -76,6 +74,9 @@ pub(super) struct Meshing {
     /// ([`SEEN_LINKS`]): not while the spacing is fitted to the budget
     /// ([`Self::fitting`]).
     by_view: bool,
+    /// The share of their links grids on seen triangles have:
+    /// [`SEEN_LINKS`], or less where the budget has no room for it.
+    seen_share: f32,
 }
 
 impl Meshing {
@@ -94,6 +95,7 @@ impl Meshing {
             min_links: MIN_LINKS.min(settings.links).max(1),
             view,
             by_view: false,
+            seen_share: SEEN_LINKS,
         };
         // Coarser spacing makes more triangles fine, clustered, and counted
         // by their area: the links needed fall with the spacing squared
@@ -108,13 +110,36 @@ impl Meshing {
             m.spacing *= excess.sqrt().max(1.1);
         }
         // The view moves links between triangles once the spacing is set,
-        // and where that is past the budget they are thinned
-        // (`PassMesh::number_links`) rather than the grids coarsened: a
-        // finer grid lowers the error more than more links a vertex
-        // (`benches/RESULTS.md`: half the spacing, block bias −34 to −55 %
-        // at 256 × 256; twice the links, −8 to −25 %).
+        // and where that is past the budget the seen triangles get what
+        // room is left (at least their own links), rather than the grids
+        // coarsened: a finer grid lowers the error more than more links a
+        // vertex (`benches/RESULTS.md`: half the spacing, block bias −34
+        // to −55 % at 256 × 256; twice the links, −8 to −25 %).
         m.by_view = true;
+        if m.links_needed(triangles, both) > MAX_LINKS {
+            m.seen_share = m.seen_share_within_budget(triangles, both);
+        }
         m
+    }
+
+    /// The largest share of their links, from 1 to [`SEEN_LINKS`], that
+    /// grids on seen triangles can have with the links needed within
+    /// [`MAX_LINKS`] (to a 256th of the range, by bisection; 1 where none
+    /// fits). Thinning every vertex's links to fit instead
+    /// (`PassMesh::number_links`) left the unseen ones a quarter of theirs
+    /// where the view takes in most of a scene: cube-in-box at 512 × 512
+    /// had a block bias 16 % higher than without the view, 8 % lower so
+    /// (`benches/RESULTS.md`, "Links where the camera looks").
+    fn seen_share_within_budget(&mut self, triangles: &Placed<Triangle>, both: &[bool]) -> f32 {
+        let (mut fits, mut over) = (1.0, SEEN_LINKS);
+        for _ in 0..8 {
+            self.seen_share = 0.5 * (fits + over);
+            match self.links_needed(triangles, both) <= MAX_LINKS {
+                true => fits = self.seen_share,
+                false => over = self.seen_share,
+            }
+        }
+        fits
     }
 
     /// The links `triangles` need, counting each gridded triangle's
@@ -215,13 +240,16 @@ impl Meshing {
     }
 
     /// The share of its links a grid's vertex on triangle `id` has, and
-    /// the most it has: [`SEEN_LINKS`] times them on a triangle the camera
-    /// sees ([`View::glimpses`]), [`UNSEEN_LINKS`] on one it does not; the
+    /// the most it has: [`SEEN_LINKS`] times them (or what the budget
+    /// leaves room for) on a triangle the camera sees ([`View::glimpses`]), [`UNSEEN_LINKS`] on one it does not; the
     /// settings' where it sees nothing, or while the spacing is fitted.
     fn seen_share(&self, id: u32) -> (f32, u32) {
         let view = self.view.as_ref().filter(|_| self.by_view);
         match view.map(|view| view.glimpses(id)) {
-            Some(true) => (SEEN_LINKS, self.links.saturating_mul(SEEN_LINKS as u32)),
+            Some(true) => (
+                self.seen_share,
+                (self.links as f32 * self.seen_share) as u32,
+            ),
             Some(false) => (UNSEEN_LINKS, self.links),
             None => (1.0, self.links),
         }
@@ -487,8 +515,7 @@ impl PassMesh {
 
     /// Numbers the vertices' links in vertex order, thinned first where
     /// they are past [`MAX_LINKS`] (the budget counts a cluster by its
-    /// area, not the fewest links it has: [`Meshing::links_needed`], and
-    /// the grids by their links before the view's shares: [`SEEN_LINKS`]).
+    /// area, not the fewest links it has: [`Meshing::links_needed`]).
     fn number_links(&mut self) {
         let total: u64 = self.vertices.iter().map(|v| u64::from(v.links)).sum();
         if total > MAX_LINKS {
@@ -881,7 +908,8 @@ mod tests {
             );
         }
         // Past the budget, the view moves links but does not coarsen the
-        // grids: the spacing is the one fitted without it.
+        // grids: the spacing is the one fitted without it, and the seen
+        // triangles get what room is left.
         let many: Placed<_> = (0..40_000)
             .map(|i| tri(i as f32, 4.0 * spacing))
             .collect::<Vec<_>>()
@@ -895,7 +923,14 @@ mod tests {
         let blind = Meshing::fitting(&many, &[], &settings, (10.0, None));
         assert!(blind.spacing > spacing, "{blind:?}");
         assert_eq!(viewed.spacing, blind.spacing);
-        assert!(viewed.links_needed(&many, &[]) > MAX_LINKS);
+        assert!(viewed.links_needed(&many, &[]) <= MAX_LINKS);
+        let (seen, hidden) = (
+            viewed.grid((0, &many[0]), &Piece::WHOLE).unwrap(),
+            viewed.grid((30_000, &many[30_000]), &Piece::WHOLE).unwrap(),
+        );
+        let own = blind.grid((0, &many[0]), &Piece::WHOLE).unwrap();
+        assert!(seen.1 > own.1 && seen.1 < 2 * own.1, "{seen:?} {own:?}");
+        assert_eq!(hidden.1, (own.1 as f32 * UNSEEN_LINKS).ceil() as u32);
     }
 
     #[test]
