@@ -292,7 +292,7 @@ pub struct MoviesArgs {
     /// Global pass: grid spacing as a fraction of the static scene's diagonal (or of twice that of what the camera sees at time 0, where smaller), 0.001 to 1, at images up to 128 pixels high; a higher image is meshed finer in proportion to its height (half the spacing at 256x256).
     #[arg(long, default_value_t = 1.0 / 32.0, allow_negative_numbers = true, value_parser = limits::GRID_SPACING.parser())]
     pub movies_spacing: f32,
-    /// Global pass: links (gather rays) of a vertex that stands for a spacing squared of surface, at most 1024; one that stands for less (as most grid vertices do: their cells are at most a spacing along their longest edge) gets fewer in proportion, about half as many on most grids; then twice that on triangles the camera sees, half on those it does not.
+    /// Global pass: links (gather rays) of a vertex that stands for a spacing squared of surface, at most 1024; one that stands for less (as most grid vertices do: their cells are at most a spacing along their longest edge) gets fewer in proportion, about half as many on most grids; then twice that on triangles the camera sees (less where the pass's link budget has no room), half on those it does not.
     #[arg(long, default_value_t = 128, allow_negative_numbers = true, value_parser = limits::LINKS.parser())]
     pub movies_links: u32,
     /// Global pass: most bounces of indirect light (Jacobi iterations, at most 64; it stops sooner once they change it by under 0.1 %).
