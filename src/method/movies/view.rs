@@ -251,15 +251,15 @@ impl Looking<'_> {
     /// of what it hides at time 0 do not depend on it: a block that jumps
     /// out of a room leaves the room's frames those of the room that never
     /// had it, bit for bit (`tests/movies.rs`).
-    fn glimpsed_by(&self, camera: &crate::scene::Camera) -> Vec<u32> {
-        let mut met = Vec::new();
+    fn glimpsed_by(&self, camera: &crate::scene::Camera) -> HashSet<u32> {
+        let mut met = HashSet::new();
         for mut ray in camera_rays(camera, self.aspect, SEEN_RAYS) {
             for _ in 0..=THROUGH_MOVING {
                 let hit = self.bvh.closest_hit(&ray);
                 if !hit.is_hit() {
                     break;
                 }
-                met.push(hit.triangle);
+                met.insert(hit.triangle);
                 if (hit.triangle as usize) < self.static_count {
                     break;
                 }
@@ -352,5 +352,57 @@ mod tests {
         assert_eq!(film_share(1024), 0.125);
         assert!((film_share(1080) - 128.0 / 1080.0).abs() < 1e-7);
         assert!(film_share(4096) > 0.0);
+    }
+
+    /// The two triangles of the square `[-r, r]²` at depth `z`, facing +z.
+    fn square(r: f32, z: f32) -> [[Vec3; 3]; 2] {
+        let [a, b, c, d] = [(-r, -r), (r, -r), (r, r), (-r, r)].map(|(x, y)| Vec3::new(x, y, z));
+        [[a, b, c], [a, c, d]]
+    }
+
+    /// The triangles glimpsed from z = 5 looking down −z at, from the
+    /// back: a square hidden behind a wall (2, 3 behind 0, 1), a patch in
+    /// front of the wall (4, 5) and a block in front of the patch that
+    /// covers it whole (6, 7), moving or not.
+    fn glimpsed(block_moves: bool) -> HashSet<u32> {
+        let triangles = [
+            square(10.0, -1.0),
+            square(1.0, -2.0),
+            square(0.25, 0.0),
+            square(0.5, 2.0),
+        ]
+        .concat();
+        let scene = crate::scene::Scene::builtin("cube-in-box").unwrap();
+        let mut snapshot = scene.snapshot(0.0);
+        snapshot.triangles = triangles
+            .iter()
+            .map(|&p| crate::scene::Triangle { p, n: [Vec3::Z; 3] })
+            .collect();
+        snapshot.tri_object = vec![0; triangles.len()].into();
+        snapshot.static_count = if block_moves { 6 } else { 8 };
+        snapshot.camera.position = Vec3::new(0.0, 0.0, 5.0);
+        snapshot.camera.basis = glam::Mat3::IDENTITY;
+        let mut bvh = SceneBvh::new();
+        bvh.update(&snapshot);
+        let looking = Looking {
+            bvh: &bvh,
+            static_count: snapshot.static_count,
+            aspect: 1.0,
+        };
+        looking.glimpsed_by(&snapshot.camera)
+    }
+
+    /// The finer grid's rays pass through a moving block to the static
+    /// patch it covers, and stop at a static one: the patch a static
+    /// block covers, and the square behind the wall, are not glimpsed.
+    #[test]
+    fn rays_glimpse_through_moving_triangles_to_the_first_static_one() {
+        let sorted = |set: HashSet<u32>| {
+            let mut ids: Vec<u32> = set.into_iter().collect();
+            ids.sort_unstable();
+            ids
+        };
+        assert_eq!(sorted(glimpsed(true)), [0, 1, 4, 5, 6, 7]);
+        assert_eq!(sorted(glimpsed(false)), [0, 1, 6, 7]);
     }
 }
