@@ -66,7 +66,10 @@ pub struct GlobalSettings {
     /// along their longest edge, so a grid vertex stands for less: at the
     /// default 128, most of the courtyard's and `l_hall`'s vertices have
     /// 51–63 by their area (`benches/RESULTS.md`, "Links a vertex,
-    /// doubled"), which a grid on a triangle the camera sees doubles and
+    /// doubled"; on right isosceles triangles 57 where the legs are 4
+    /// spacings and 64 where they are 12, as `mesh`'s test
+    /// `a_seen_triangle_gathers_along_more_links_than_a_hidden_one`
+    /// computes them), which a grid on a triangle the camera sees doubles and
     /// one on a triangle it does not see halves (`mesh::SEEN_LINKS`).
     pub links: u32,
     /// Most Jacobi iterations (bounces of indirect light); the iteration
