@@ -4,9 +4,10 @@ room 2 m across, a UV sphere of N * (N - 2) triangles (radius 0.35 m)
 turning about its vertical axis, a block sliding on the floor, and a
 ceiling panel light sliding 0.8 m, all over one second (24 frames at
 24 fps). Every frame moves the sphere's triangles and the light, so
-`trc` evaluates its records' direct light at t0+1 and builds the moving
-triangles' BVH every frame (`benches/RESULTS.md`, "What these checks find
-once").
+`trc` evaluates its records' direct light at t0+1 and at the later frames
+its records check, the moving triangles traced in each of those frames
+(`benches/RESULTS.md`, "What these checks find once", "The moving objects
+traced as instances").
 
     python3 benches/scenes/turning_ball.py N OUT.glb
 

@@ -25,7 +25,7 @@
 //! through 63,000 moving triangles) for no gain there.
 
 use super::Gathered;
-use crate::accel::{shared_dynamic_bvh, static_part_len, StaticGeometry, TriangleBvh};
+use crate::accel::{Instances, MovingObjects, StaticGeometry, TriangleBvh};
 use crate::backend::{Hit, Ray};
 use crate::integrator::RayOffset;
 use crate::light::{LightSampler, TriangleSampling};
@@ -38,60 +38,41 @@ use glam::{Mat4, Vec3};
 use std::cell::OnceCell;
 use std::sync::Arc;
 
-/// The BVHs the E(t0+1) estimates' shadow rays run through, kept from
-/// frame to frame: the static triangles' (built once a render, shared with
-/// the backend's where it has one) and the moving ones' at the frame after
-/// the last estimate's, which is the next frame's t0 (and, kept, the CPU
-/// backend's dynamic part for that frame: [`moving_bvh`]). A frame's moving
-/// triangles were otherwise gathered into a BVH twice, as t0+1 and then as
-/// t0: on a scene with a 1,046,528-triangle ball turning under a moving light
-/// those builds were a third of `trc`'s time.
+/// The geometry the E(t0+1) estimates' shadow rays run through, kept from
+/// frame to frame: the static triangles' BVH (built once a render, shared
+/// with the backend's where it has one) and the moving objects' BVHs in
+/// their own spaces (built once a render), placed at each time compared
+/// ([`MovingObjects::placed`]). Each frame compared had a BVH over its
+/// moving triangles, and a frame's was held while later records could
+/// check it: on a 1,046,528-triangle ball turning under a moving light,
+/// 3.4 GB, and building them half of `trc`'s time (`benches/RESULTS.md`,
+/// "The moving objects traced as instances").
 #[derive(Default)]
 pub(super) struct ShadowGeometry {
     statics: StaticGeometry,
-    /// The moving triangles' BVH of frame `.0` (`None` inside: there are
-    /// none).
-    next_moving: Option<(u32, Option<Arc<TriangleBvh>>)>,
+    moving: Option<Arc<MovingObjects>>,
 }
 
 impl ShadowGeometry {
-    /// The moving triangles' BVH of `ctx`'s frame: the one kept as the last
-    /// estimate's t0+1 where it was built over exactly these triangles,
-    /// else the backend's dynamic part where it holds them, else built
-    /// ([`moving_bvh`]).
-    fn moving_now(&mut self, ctx: &FrameContext) -> Option<Arc<TriangleBvh>> {
-        let now = ctx.snapshot;
-        let moving = moving_range(now);
-        match self.next_moving.take() {
-            Some((frame, kept))
-                if frame == ctx.frame
-                    && kept
-                        .as_ref()
-                        .map_or(moving.is_empty(), |b| b.holds(now, moving.clone())) =>
-            {
-                kept
-            }
-            _ => moving_bvh(now),
-        }
-    }
-
-    /// Lets the kept moving BVH go (a frame that evaluates no direct light
-    /// at t0+1 makes none for the next, and a large one would be held for
-    /// nothing until a light moves again).
-    pub(super) fn forget_moving(&mut self) {
-        self.next_moving = None;
+    /// The BVHs of `ctx`'s scene's moving objects, built on first use.
+    fn moving_objects(&mut self, ctx: &FrameContext) -> Arc<MovingObjects> {
+        let kept = self.moving.take().filter(|m| m.are_of(ctx.scene));
+        let objects = kept.unwrap_or_else(|| Arc::new(MovingObjects::of(ctx.scene)));
+        self.moving = Some(objects.clone());
+        objects
     }
 }
 
 /// The geometry and lights of t0 and t0+1 that the direct light at a
 /// sample's first hit depends on.
 pub(super) struct DirectChange {
-    /// The static triangles' BVH where the CPU backend would split them
-    /// off (`None`: none, or few enough to be in `moving`, [`moving_bvh`]).
+    /// The static triangles' BVH (`None`: there are none).
     statics: Option<Arc<TriangleBvh>>,
-    /// The moving objects' triangles at t0 (shared with the later frames'
+    /// The moving objects' BVHs, which every time compared places.
+    objects: Arc<MovingObjects>,
+    /// The moving objects at t0 (shared with the later frames'
     /// comparisons, [`Self::to_frame`]).
-    moving_now: Option<Arc<TriangleBvh>>,
+    moving_now: Arc<Instances>,
     /// The frame compared with t0.
     later: Arc<LaterGeometry>,
     /// The whole snapshot of t0+1 it was made of, for the renderer to take
@@ -112,8 +93,9 @@ pub(super) struct DirectChange {
 /// frame was ahead (`benches/RESULTS.md`, "Each later frame's geometry
 /// made once a render").
 ///
-/// The frame's triangles are not held: its moving ones are in `moving`,
-/// and the few a sample hits are placed again when shaded
+/// The frame's triangles are not held: its moving objects are traced as
+/// instances of the render's one BVH of each ([`MovingObjects`]), and the
+/// few triangles a sample hits are placed again when shaded
 /// ([`Self::triangle`]). Its whole snapshot was held too, up to 19 frames
 /// ahead: on a 261,120-triangle ball turning under a moving light, 440 MB
 /// of an 888 MB peak heap (`benches/RESULTS.md`, "What a frame of
@@ -129,20 +111,21 @@ pub(super) struct LaterGeometry {
     /// Per object, the id of its first triangle
     /// ([`crate::scene::Scene::first_triangles`]).
     first_triangles: Vec<usize>,
-    /// Its moving triangles' BVH ([`moving_bvh`]).
-    moving: Option<Arc<TriangleBvh>>,
+    /// Its moving objects, placed.
+    moving: Instances,
     lights: LightSampler,
 }
 
 impl LaterGeometry {
-    /// The geometry of `snapshot`, a frame of `ctx`'s scene.
-    pub(super) fn new(ctx: &FrameContext, snapshot: &Snapshot) -> Self {
+    /// The geometry of `snapshot`, a frame of `ctx`'s scene, whose moving
+    /// objects are `objects`.
+    fn new(ctx: &FrameContext, snapshot: &Snapshot, objects: &Arc<MovingObjects>) -> Self {
         let scene = ctx.scene;
         let emitting = snapshot.emitting_triangles(&scene.materials);
         let placings = snapshot.object_to_world.iter();
         LaterGeometry {
             placings: placings.map(|&w| Placing::new(w)).collect(),
-            moving: moving_bvh(snapshot),
+            moving: objects.placed(snapshot),
             lights: LightSampler::new(snapshot, &scene.materials).for_emitters(&emitting),
             emitters: scene.emitters_snapshot(snapshot.time),
             first_triangles: scene.first_triangles(),
@@ -200,15 +183,14 @@ impl DirectChange {
         if !objects_move && !lights_move {
             return None;
         }
-        let moving_now = geometry.moving_now(ctx);
-        let geometry_later = Arc::new(LaterGeometry::new(ctx, &later));
-        geometry.next_moving = Some((ctx.frame + 1, geometry_later.moving.clone()));
+        let objects = geometry.moving_objects(ctx);
         Some(DirectChange {
-            statics: (static_part_len(ctx.snapshot) > 0)
+            statics: (ctx.snapshot.static_count > 0)
                 .then(|| geometry.statics.of(ctx.snapshot))
                 .flatten(),
-            moving_now,
-            later: geometry_later,
+            moving_now: Arc::new(objects.placed(ctx.snapshot)),
+            later: Arc::new(LaterGeometry::new(ctx, &later, &objects)),
+            objects,
             later_snapshot: Some(later),
             lights_move,
         })
@@ -225,12 +207,19 @@ impl DirectChange {
         &self.later
     }
 
+    /// The geometry of `snapshot`, a later frame to compare t0 with
+    /// ([`Self::to_frame`]).
+    pub(super) fn geometry_of(&self, ctx: &FrameContext, snapshot: &Snapshot) -> LaterGeometry {
+        LaterGeometry::new(ctx, snapshot, &self.objects)
+    }
+
     /// The same comparison from t0 to the later frame `later`
     /// (`super::later`'s check of moving lights): t0's side and the static
     /// geometry are shared.
     pub(super) fn to_frame(&self, later: Arc<LaterGeometry>) -> Self {
         DirectChange {
             statics: self.statics.clone(),
+            objects: self.objects.clone(),
             moving_now: self.moving_now.clone(),
             later,
             later_snapshot: None,
@@ -332,7 +321,7 @@ impl DirectChange {
     /// +1 where `ray` is blocked at t0 and clear at t0+1, −1 the other way
     /// round, 0 where nothing changed.
     fn visibility_change(&self, ray: &Ray) -> f32 {
-        let blocked = |t: usize| self.moving(t).is_some_and(|b| b.occludes(ray));
+        let blocked = |t: usize| self.moving(t).occludes(ray);
         let (before, after) = (blocked(0), blocked(1));
         if before == after || self.statics.as_ref().is_some_and(|b| b.occludes(ray)) {
             0.0
@@ -343,35 +332,18 @@ impl DirectChange {
         }
     }
 
-    /// The moving triangles' BVH at t0 (`t` = 0) or t0+1 (`t` = 1).
-    fn moving(&self, t: usize) -> Option<&Arc<TriangleBvh>> {
+    /// The moving objects at t0 (`t` = 0) or t0+1 (`t` = 1).
+    fn moving(&self, t: usize) -> &Instances {
         match t {
-            0 => self.moving_now.as_ref(),
-            _ => self.later.moving.as_ref(),
+            0 => &self.moving_now,
+            _ => &self.later.moving,
         }
     }
 
     /// Whether `ray` is blocked at t0 (`t` = 0) or t0+1 (`t` = 1).
     fn occluded(&self, ray: &Ray, t: usize) -> bool {
-        self.moving(t).is_some_and(|b| b.occludes(ray))
-            || self.statics.as_ref().is_some_and(|b| b.occludes(ray))
+        self.moving(t).occludes(ray) || self.statics.as_ref().is_some_and(|b| b.occludes(ray))
     }
-}
-
-/// The BVH of `s`'s moving triangles (`None`: there are none), split from
-/// the static ones as the CPU backend splits its own
-/// ([`static_part_len`]: a small static part goes with them), so that the
-/// one built for t0+1 is the backend's dynamic part when that frame comes
-/// ([`shared_dynamic_bvh`]), and the other way round. Where the static
-/// triangles are in both BVHs, a ray they block is blocked at both times,
-/// as it was by the static BVH alone.
-fn moving_bvh(s: &Snapshot) -> Option<Arc<TriangleBvh>> {
-    shared_dynamic_bvh(s, moving_range(s))
-}
-
-/// The triangles of `s` in [`moving_bvh`].
-fn moving_range(s: &Snapshot) -> std::ops::Range<usize> {
-    static_part_len(s)..s.triangles.len()
 }
 
 /// The first hit `hit` (on `tri`, triangle `hit.triangle` as it lies at
@@ -419,8 +391,6 @@ fn unoccluded(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::method::trc::estimate::NextFrame;
-    use crate::method::trc::NextDirect;
     use crate::render::test_renderer;
 
     /// A later frame's triangles placed one at a time as samples are
@@ -433,7 +403,8 @@ mod tests {
             let mut renderer = test_renderer(name, 4);
             renderer.with_frame_context(1, |ctx| {
                 let later = ctx.scene.snapshot(ctx.time_of(4));
-                let geometry = LaterGeometry::new(ctx, &later);
+                let objects = Arc::new(MovingObjects::of(ctx.scene));
+                let geometry = LaterGeometry::new(ctx, &later, &objects);
                 assert!(
                     later.dynamic_count() > 0 && later.static_count > 0,
                     "{name}"
@@ -449,50 +420,36 @@ mod tests {
         }
     }
 
-    /// The moving triangles' BVH built for t0+1 is the next frame's t0
-    /// BVH, the same one; kept for another frame, or over other
-    /// triangles, it is built again; a frame that does not evaluate the
-    /// direct light at t0+1 lets it go.
+    /// The moving objects' BVHs are built once a render, and each frame
+    /// compared places them: t0+1's and the next frame's t0 are the same
+    /// transforms.
     #[test]
-    fn the_next_frames_moving_bvh_is_taken_only_for_its_own_triangles() {
-        let mut renderer = test_renderer("moving-light", 4);
+    fn the_moving_objects_bvhs_are_built_once_a_render() {
+        let mut renderer = test_renderer("cube-in-box", 4);
         let mut geometry = ShadowGeometry::default();
-        let at = |ctx: &FrameContext, geometry: &mut ShadowGeometry| {
-            let later = ctx.scene.snapshot(ctx.time_of(ctx.frame + 1));
-            let change = DirectChange::new(ctx, later, (false, true), geometry);
-            let change = change.expect("the light moves");
-            [0, 1].map(|t| change.moving(t).cloned())
-        };
-        let frame_0 = renderer.with_frame_context(0, |ctx| at(ctx, &mut geometry));
-        let kept = geometry.next_moving.clone();
-        let frame_1 = renderer.with_frame_context(1, |ctx| at(ctx, &mut geometry));
-        let same = |a: &Option<Arc<TriangleBvh>>, b: &Option<Arc<TriangleBvh>>| {
-            Arc::ptr_eq(a.as_ref().unwrap(), b.as_ref().unwrap())
-        };
-        assert!(same(&frame_0[1], &frame_1[0]), "t0+1's BVH taken as t0's");
-        assert!(!same(&frame_0[0], &frame_0[1]));
-        // Frame 1's t0+1 BVH, offered at frame 3 as if it were frame 3's
-        // own, or offered for frame 2 at frame 2 with the light moved on.
-        for (frame, offered) in [(3, 2), (3, 3)] {
-            geometry.next_moving = kept.clone().map(|(_, bvh)| (offered, bvh));
-            let moving = renderer.with_frame_context(frame, |ctx| geometry.moving_now(ctx));
-            assert!(!same(&moving, &kept.as_ref().unwrap().1), "frame {frame}");
+        let mut at = |frame: u32| {
             renderer.with_frame_context(frame, |ctx| {
-                let range = moving_range(ctx.snapshot);
-                assert!(moving.as_ref().unwrap().holds(ctx.snapshot, range));
-            });
-        }
-        renderer.with_frame_context(4, |ctx| {
-            // The frame's moving BVH is the CPU backend's dynamic part (it
-            // holds one more), not one of its own.
-            let now = moving_bvh(ctx.snapshot).unwrap();
-            assert!(Arc::strong_count(&now) > 1, "not the backend's");
-            at(ctx, &mut geometry)
+                let later = ctx.scene.snapshot(ctx.time_of(frame + 1));
+                let change = DirectChange::new(ctx, later, (true, false), &mut geometry);
+                let change = change.expect("the cube moves");
+                let transforms = |i: &Instances| i.placed_transforms();
+                (
+                    change.objects.clone(),
+                    transforms(change.moving(0)),
+                    transforms(change.moving(1)),
+                )
+            })
+        };
+        let (objects_0, _, next_0) = at(0);
+        let (objects_1, now_1, next_1) = at(1);
+        assert!(Arc::ptr_eq(&objects_0, &objects_1), "built again");
+        assert!(!next_0.is_empty() && next_0 == now_1);
+        assert_ne!(now_1, next_1, "the cube moves");
+        // Another scene's objects are built for it.
+        let mut other = test_renderer("spheres", 4);
+        other.with_frame_context(0, |ctx| {
+            assert!(!objects_1.are_of(ctx.scene));
+            assert!(!Arc::ptr_eq(&geometry.moving_objects(ctx), &objects_1));
         });
-        assert!(geometry.next_moving.is_some());
-        renderer.with_frame_context(5, |ctx| {
-            NextFrame::new(ctx, NextDirect::Off, &mut geometry);
-        });
-        assert!(geometry.next_moving.is_none(), "kept with no estimate");
     }
 }

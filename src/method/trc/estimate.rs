@@ -68,11 +68,6 @@ impl NextFrame {
         let direct = evaluated
             .then(|| DirectChange::new(ctx, later, (objects_move, lights_move), geometry))
             .flatten();
-        if direct.is_none() {
-            // No estimate of t0+1's direct light: nothing takes the BVH
-            // kept for this frame, and none is kept for the next.
-            geometry.forget_moving();
-        }
         NextFrame {
             motion,
             lights_move,
@@ -113,7 +108,7 @@ impl NextFrame {
         let direct = self.direct.as_ref()?;
         let geometry = held.cloned().unwrap_or_else(|| {
             let later = ctx.scene.snapshot_from(ctx.time_of(t), ctx.snapshot);
-            Arc::new(LaterGeometry::new(ctx, &later))
+            Arc::new(direct.geometry_of(ctx, &later))
         });
         Some(NextFrame {
             direct: Some(direct.to_frame(geometry)),

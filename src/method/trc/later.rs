@@ -632,8 +632,8 @@ mod tests {
     }
 
     /// Under a moving light the records check their direct light at later
-    /// frames, each in that frame's geometry (its snapshot, its moving
-    /// triangles' BVH). Each frame's is made once a render: held while
+    /// frames, each in that frame's geometry (its lights, its moving
+    /// objects placed). Each frame's is made once a render: held while
     /// later frames' records may check it ([`Ahead`]) and handed to their
     /// checks. Two frames on, every frame that frame 0's records checked
     /// and that is still ahead comes with the geometry frame 0 made, and a

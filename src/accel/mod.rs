@@ -2,16 +2,22 @@
 //! obvhs. The scene is split in two BVHs: the static triangles (built once
 //! per render, rebuilt only if they change) and the dynamic ones (rebuilt
 //! every frame — dynamic parts are small; `cargo bench --bench rays`
-//! measures the rebuild). Each is shared with a method that built the same
-//! triangles' BVH for its own rays ([`StaticGeometry`],
-//! [`shared_dynamic_bvh`]). A ray is traced through both and keeps the nearer
-//! hit. A small static part is not worth a second traversal per ray: up to
+//! measures the rebuild). The static one is shared with a method that
+//! built the same triangles' BVH for its own rays ([`StaticGeometry`]). A
+//! ray is traced through both and keeps the nearer hit. A small static part is not worth a second traversal per ray: up to
 //! [`MERGE_STATIC_TRIANGLES`] static triangles, a frame with moving parts
 //! gets one BVH over all its triangles ([`static_part_len`], the rule the
 //! GPU backend splits by too).
 //!
+//! Methods that look at many times at once trace the moving objects as
+//! instances instead ([`MovingObjects`], [`Instances`]).
+//!
 //! We use obvhs's compressed wide BVH (CWBVH, Ylitie et al. 2017) on the CPU:
 //! STACK.md measured it faster than BVH2 for incoherent rays.
+
+mod instances;
+
+pub use instances::{Instances, MovingObjects};
 
 use crate::backend::{Hit, Ray};
 use crate::scene::Snapshot;
@@ -252,20 +258,29 @@ fn children_crossed(
 impl TriangleBvh {
     /// Builds a BVH over snapshot triangles `range`; `None` when empty.
     pub fn build(snapshot: &Snapshot, range: Range<usize>) -> Option<Self> {
-        if range.is_empty() {
-            return None;
-        }
         let source: Vec<ObTriangle> = (snapshot.triangles.range(range.clone()))
             .map(to_obvhs)
             .collect();
-        let params = if range.len() > 10_000 {
+        Self::over(source, |i| {
+            let id = range.start + i;
+            (id as u32, snapshot.tri_object[id])
+        })
+    }
+
+    /// Builds a BVH over `source`, triangle `i` of it snapshot triangle
+    /// `id_of(i).0` of object `id_of(i).1`; `None` when empty.
+    fn over(source: Vec<ObTriangle>, id_of: impl Fn(usize) -> (u32, u32)) -> Option<Self> {
+        if source.is_empty() {
+            return None;
+        }
+        let params = if source.len() > 10_000 {
             BvhBuildParams::medium_build()
         } else {
             BvhBuildParams::fast_build()
         };
         let mut bvh = build_cwbvh_from_tris(&source, params, &mut Duration::default());
         // obvhs reserves a CWBVH node (80 bytes) for every primitive and
-        // fills a fraction of them. A BVH held for long (`trc` holds the
+        // fills a fraction of them. A BVH held for long (`trc` held the
         // moving triangles' BVHs of the later frames its records check)
         // held that room too: `trc` on a ball of 261,120 triangles turning
         // under a moving light peaked at ~1.45 GB of RSS, ~1.1 GB without
@@ -274,17 +289,11 @@ impl TriangleBvh {
         bvh.nodes.shrink_to_fit();
         bvh.primitive_indices.shrink_to_fit();
         let order = &bvh.primitive_indices;
-        let ids: Vec<u32> = order
-            .iter()
-            .map(|&i| (range.start + i as usize) as u32)
-            .collect();
+        let (ids, objects) = order.iter().map(|&i| id_of(i as usize)).unzip();
         Some(TriangleBvh {
             triangles: order.iter().map(|&i| source[i as usize]).collect(),
-            objects: ids
-                .iter()
-                .map(|&i| snapshot.tri_object[i as usize])
-                .collect(),
             ids,
+            objects,
             bvh,
         })
     }
@@ -426,8 +435,6 @@ pub struct SceneBvh {
     static_part: Option<Arc<TriangleBvh>>,
     /// [`static_part_fingerprint`] of the triangles `static_part` holds.
     static_fingerprint: Option<u64>,
-    /// Shared with whoever built these triangles' BVH for this frame
-    /// already ([`shared_dynamic_bvh`]).
     dynamic_part: Option<Arc<TriangleBvh>>,
 }
 
@@ -451,7 +458,8 @@ impl SceneBvh {
             times.static_build = Some(start.elapsed());
         }
         let start = Instant::now();
-        self.dynamic_part = shared_dynamic_bvh(snapshot, static_len..snapshot.triangles.len());
+        self.dynamic_part =
+            TriangleBvh::build(snapshot, static_len..snapshot.triangles.len()).map(Arc::new);
         times.dynamic_build = start.elapsed();
         times
     }
@@ -511,8 +519,7 @@ impl StaticGeometry {
 }
 
 /// BVHs that some holder still keeps, each with a key that narrows the
-/// search (a static part's [`Snapshot::static_fingerprint`], a moving
-/// part's range): a kept BVH is taken only if it holds exactly the
+/// search (a static part's [`Snapshot::static_fingerprint`]): a kept BVH is taken only if it holds exactly the
 /// triangles asked for (checked, not trusted to the key), so sharing never
 /// changes a hit.
 static SHARED: Mutex<Vec<(u64, Weak<TriangleBvh>)>> = Mutex::new(Vec::new());
@@ -526,18 +533,6 @@ static SHARED: Mutex<Vec<(u64, Weak<TriangleBvh>)>> = Mutex::new(Vec::new());
 fn shared_static_bvh(snapshot: &Snapshot) -> Option<Arc<TriangleBvh>> {
     let statics = 0..snapshot.static_count;
     shared_bvh(snapshot.static_fingerprint(), snapshot, statics)
-}
-
-/// The BVH of `snapshot`'s triangles `range`, a part rebuilt every frame
-/// (its moving triangles, with or without the static ones; `None`: empty),
-/// one build for every holder alive at once. Why: `trc`
-/// builds the moving triangles' BVH of the frame after the one it renders
-/// (its estimate's shadows at t0+1), and the CPU backend built the same
-/// again as its dynamic part when that frame came: on a 1,046,528-triangle
-/// ball turning under a moving light, a fifth of `trc`'s time.
-pub fn shared_dynamic_bvh(snapshot: &Snapshot, range: Range<usize>) -> Option<Arc<TriangleBvh>> {
-    let key = (range.start as u64) << 32 ^ range.len() as u64;
-    shared_bvh(key, snapshot, range)
 }
 
 /// A kept BVH of snapshot triangles `range` found under `key`, or one
@@ -605,32 +600,6 @@ mod tests {
             .unwrap()
             .iter()
             .all(|(fp, bvh)| *fp != snap.static_fingerprint() || bvh.strong_count() == 0));
-    }
-
-    /// The backend's dynamic part is the BVH a method built of the same
-    /// frame's moving triangles (`trc`'s t0+1), and the other way round;
-    /// another time's moving triangles get a BVH of their own.
-    #[test]
-    fn the_backend_and_a_method_share_one_dynamic_bvh() {
-        let scene = Scene::builtin("cube-in-box").unwrap();
-        let dynamic = |s: &Snapshot| static_part_len(s)..s.triangles.len();
-        // Times no render's frame has: a test rendering the scene at
-        // the same time in parallel would share its own.
-        let next = scene.snapshot(0.5123);
-        assert!(!dynamic(&next).is_empty());
-        let built_ahead = shared_dynamic_bvh(&next, dynamic(&next)).unwrap();
-        let mut backend = SceneBvh::new();
-        backend.update(&scene.snapshot_from(0.5123, &next));
-        let part = backend.dynamic_part.clone().unwrap();
-        assert!(Arc::ptr_eq(&part, &built_ahead));
-
-        let other = scene.snapshot(0.7777);
-        backend.update(&other);
-        let part = backend.dynamic_part.clone().unwrap();
-        assert!(!Arc::ptr_eq(&part, &built_ahead));
-        assert!(part.holds(&other, dynamic(&other)));
-        let taken = shared_dynamic_bvh(&other, dynamic(&other)).unwrap();
-        assert!(Arc::ptr_eq(&part, &taken));
     }
 
     /// A kept BVH whose fingerprint matches another scene's (forced here)
