@@ -6,7 +6,7 @@
 //! at once: `trc`'s estimate of the direct light at t0+1 and at the later
 //! frames its records check under a moving light. Each of those frames had
 //! a BVH over its moving triangles, built and held while later records
-//! could check it: up to `δt_max` of them, 3.4 GB of a render on a
+//! could check it: up to `δt_max` of them, 2.2 GB at the peak of a render on a
 //! 1,046,528-triangle turning ball (`benches/RESULTS.md`, "The moving
 //! objects traced as instances").
 //!
@@ -211,11 +211,6 @@ impl Instances {
             );
         }
         occluded
-    }
-
-    /// How many objects are placed.
-    pub fn len(&self) -> usize {
-        self.placed.len()
     }
 
     /// Whether no object is placed.
