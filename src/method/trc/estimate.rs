@@ -106,10 +106,9 @@ impl NextFrame {
         held: Option<&Arc<LaterGeometry>>,
     ) -> Option<Self> {
         let direct = self.direct.as_ref()?;
-        let geometry = held.cloned().unwrap_or_else(|| {
-            let later = ctx.scene.snapshot_from(ctx.time_of(t), ctx.snapshot);
-            Arc::new(direct.geometry_of(ctx, &later))
-        });
+        let geometry = held
+            .cloned()
+            .unwrap_or_else(|| Arc::new(direct.geometry_at(ctx, t)));
         Some(NextFrame {
             direct: Some(direct.to_frame(geometry)),
             ..Self::later(motion, (self.lights.0.clone(), lights))
