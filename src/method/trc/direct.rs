@@ -134,8 +134,9 @@ impl LaterGeometry {
     /// are neither placed nor read (its moving objects are instances).
     /// A directional light's power is weighed by the whole frame's bounds,
     /// so there the whole frame is placed. On a 1,046,528-triangle ball
-    /// turning under a moving light, placing each later frame checked was
-    /// some 6 % of `trc`'s time.
+    /// turning under a moving light, placing each later frame checked
+    /// made `trc` 9–15 % slower (`benches/RESULTS.md`, "The moving
+    /// objects traced as instances").
     fn at(ctx: &FrameContext, t: f32, objects: &Arc<MovingObjects>) -> Self {
         let emitters = ctx.scene.emitters_snapshot(t);
         if emitters.lights.iter().any(|l| l.is_directional()) {
