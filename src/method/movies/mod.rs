@@ -57,12 +57,14 @@
 //!
 //! # Measured
 //! `radcache bench --scenes cube-in-box --size 64x64 --frames 0..400
-//! --reference-spp 256 --methods ic movies` (at e9e482c): 3.09× faster
-//! than `ic`, 1.01× its error, 0.41× its flicker (0.25× on lit surfaces,
-//! the least of all methods). Where what moves is everywhere its coherence
-//! goes, as the paper says: under the moving light 0.91× `ic`'s speed
-//! (every shadow sample lands on a moving light), on the 66 moving balls
-//! of `spheres` 1.15× (`benches/RESULTS.md`, "`movies` against `ic`").
+//! --reference-spp 256 --methods ic movies` (at 04e1861): 2.05× faster
+//! than `ic`, 0.89× its error (block bias 0.0017 against 0.0031), 0.40×
+//! its flicker (0.24× on lit surfaces). Where what moves is everywhere its
+//! coherence goes, as the paper says: under the moving light 0.97× `ic`'s
+//! speed (every shadow sample lands on a moving light), on the 66 moving
+//! balls of `spheres` 1.70×, both with less error than `ic`
+//! (`benches/RESULTS.md`, "`movies` against `ic`"; 3.09× on cube-in-box
+//! at e9e482c, with 1.01× `ic`'s error).
 
 pub mod direct;
 pub mod global;
