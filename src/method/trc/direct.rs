@@ -44,9 +44,9 @@ use std::sync::Arc;
 /// their own spaces (built once a render), placed at each time compared
 /// ([`MovingObjects::placed`]). Each frame compared had a BVH over its
 /// moving triangles, and a frame's was held while later records could
-/// check it: on a 1,046,528-triangle ball turning under a moving light,
-/// 3.4 GB, and building them half of `trc`'s time (`benches/RESULTS.md`,
-/// "The moving objects traced as instances").
+/// check it: on a 1,046,528-triangle ball turning under a moving light
+/// the render peaked at 2.2 GB, with instances at 0.72 GB
+/// (`benches/RESULTS.md`, "The moving objects traced as instances").
 #[derive(Default)]
 pub(super) struct ShadowGeometry {
     statics: StaticGeometry,
