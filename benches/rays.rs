@@ -13,7 +13,7 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use glam::{Vec3, Vec3A};
+use glam::Vec3;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::bvh2::Bvh2;
@@ -22,7 +22,7 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::ray::RayHit;
 use obvhs::triangle::Triangle as ObTriangle;
 use obvhs::BvhBuildParams;
-use radcache::accel::NEAR_SHIFT;
+use radcache::accel::to_obvhs_ray;
 use radcache::backend::cpu::CpuBackend;
 use radcache::backend::{Hit, Ray, RayBackend};
 use radcache::sampling::Rng;
@@ -318,20 +318,6 @@ fn refit(bvh: &mut Bvh2, tris: &[ObTriangle]) -> Vec<ObTriangle> {
     ordered
 }
 
-/// `ray` as the renderer's traversal takes it (`accel::to_obvhs_ray`): −0
-/// direction components made +0, and the origin moved back by
-/// [`NEAR_SHIFT`], so that the CWBVH's near cut drops no hit the BVH2
-/// finds and their hit counts compare.
-fn ob_ray(ray: &Ray) -> obvhs::ray::Ray {
-    let dir = Vec3A::from_array(ray.dir) + Vec3A::ZERO;
-    obvhs::ray::Ray::new(
-        Vec3A::from_array(ray.origin) - dir * NEAR_SHIFT,
-        dir,
-        ray.tmin + NEAR_SHIFT,
-        ray.tmax + NEAR_SHIFT,
-    )
-}
-
 fn trace_bvh2(bvh: &Bvh2, tris: &[ObTriangle], rays: &[Ray]) -> (Duration, usize) {
     let start = Instant::now();
     let hits = rays
@@ -339,7 +325,7 @@ fn trace_bvh2(bvh: &Bvh2, tris: &[ObTriangle], rays: &[Ray]) -> (Duration, usize
         .with_min_len(256)
         .filter(|ray| {
             let mut hit = RayHit::none();
-            bvh.ray_traverse(ob_ray(ray), &mut hit, |r, i| tris[i].intersect(r))
+            bvh.ray_traverse(to_obvhs_ray(ray), &mut hit, |r, i| tris[i].intersect(r))
         })
         .count();
     (start.elapsed(), hits)
@@ -352,7 +338,7 @@ fn trace_cwbvh(bvh: &CwBvh, tris: &[ObTriangle], rays: &[Ray]) -> (Duration, usi
         .with_min_len(256)
         .filter(|ray| {
             let mut hit = RayHit::none();
-            bvh.ray_traverse(ob_ray(ray), &mut hit, |r, i| tris[i].intersect(r))
+            bvh.ray_traverse(to_obvhs_ray(ray), &mut hit, |r, i| tris[i].intersect(r))
         })
         .count();
     (start.elapsed(), hits)

@@ -77,8 +77,10 @@ fn to_obvhs(tri: &crate::scene::Triangle) -> ObTriangle {
 pub const NEAR_SHIFT: f32 = 2e-4;
 
 /// `ray` as obvhs traverses it: its origin moved back by [`NEAR_SHIFT`]
-/// (in units of its direction) and its range moved along.
-fn to_obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
+/// (in units of its direction) and its range moved along. Public for the
+/// ray benchmark, whose obvhs BVH2 baseline takes the same rays
+/// (`benches/rays.rs`).
+pub fn to_obvhs_ray(ray: &Ray) -> obvhs::ray::Ray {
     // `+ 0.0` turns −0.0 components into +0.0. obvhs 0.4 takes the slab
     // order from `direction < 0.0` (false for −0.0) but the inverse from
     // `signum` (−1 for −0.0): with a −0.0 component the two disagree and the
