@@ -18,7 +18,7 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, '..', '..', 'tests', 'data', 'reference', 'mitsuba'))
 from gen import Scene, box, axis_angle  # noqa: E402
-from scenes import oquad, look_at_quat  # noqa: E402
+from lit_room import room, light_and_camera  # noqa: E402
 
 
 def many_cubes(n):
@@ -26,11 +26,7 @@ def many_cubes(n):
     white = S.mat('white', (0.7, 0.7, 0.7))
     red = S.mat('red', (0.7, 0.1, 0.1))
     light = S.mat('light', (0, 0, 0), emissive=(1, 1, 1), strength=20.0)
-    # The room: a box seen from inside (normals and winding turned in).
-    P, N, I = box((0, 1, 0), (1, 1, 1))
-    N = -N
-    I = I.reshape(-1, 3)[:, ::-1].reshape(-1)
-    S.node('room', mesh=S.mesh('room', [(P, N, I, 'u16', white)]))
+    room(S, white)
     P, N, I = box((0, 0, 0), (0.03, 0.03, 0.03))
     cube = S.mesh('cube', [(P, N, I, 'u16', red)])
     step = 1.8 / n
@@ -41,12 +37,7 @@ def many_cubes(n):
             c = S.node('cube%d_%d' % (i, j), t=(x, y, z), mesh=cube)
             S.anim(c, 'translation', [0, 1], [(x, y, z), (x, y + 0.3, z)])
             S.anim(c, 'rotation', [0, 1], [axis_angle((0, 1, 0), 0), axis_angle((0, 1, 0), 2.0)])
-    q = oquad([(-0.2, 1.98, -0.2), (0.2, 1.98, -0.2), (0.2, 1.98, 0.2), (-0.2, 1.98, 0.2)], (0, -1, 0))
-    panel = S.node('light', mesh=S.mesh('light', [(*q, 'u16', light)]))
-    S.anim(panel, 'translation', [0, 1], [(-0.4, 0, 0), (0.4, 0, 0)])
-    eye = (0, 1, 0.95)
-    S.node('camera', t=eye, r=look_at_quat(eye, (0, 0.5, 0)), camera=True)
-    S.camera = dict(yfov=0.9, aspect=1.0, znear=0.05, zfar=100.0)
+    light_and_camera(S, light)
     return S
 
 

@@ -20,7 +20,7 @@ import sys
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, '..', '..', 'tests', 'data', 'reference', 'mitsuba'))
 from gen import Scene, box, uv_sphere, axis_angle  # noqa: E402
-from scenes import oquad, look_at_quat  # noqa: E402
+from lit_room import room, light_and_camera  # noqa: E402
 
 
 def turning_ball(n):
@@ -29,25 +29,14 @@ def turning_ball(n):
     red = S.mat('red', (0.7, 0.1, 0.1))
     green = S.mat('green', (0.1, 0.6, 0.1))
     light = S.mat('light', (0, 0, 0), emissive=(1, 1, 1), strength=20.0)
-    # The room: a box seen from inside (normals and winding turned in).
-    P, N, I = box((0, 1, 0), (1, 1, 1))
-    N = -N
-    I = I.reshape(-1, 3)[:, ::-1].reshape(-1)
-    S.node('room', mesh=S.mesh('room', [(P, N, I, 'u16', white)]))
+    room(S, white)
     P, N, I = uv_sphere((0, 0, 0), 0.35, n, n // 2)
     ball = S.node('ball', t=(0.2, 0.35, 0.0), mesh=S.mesh('ball', [(P, N, I, 'u32', red)]))
     S.anim(ball, 'rotation', [0, 1], [axis_angle((0, 1, 0), 0), axis_angle((0, 1, 0), 3.0)])
     P, N, I = box((0, 0, 0), (0.15, 0.3, 0.15))
     block = S.node('block', t=(-0.5, 0.3, -0.3), mesh=S.mesh('block', [(P, N, I, 'u16', green)]))
     S.anim(block, 'translation', [0, 1], [(-0.5, 0.3, -0.3), (-0.2, 0.3, 0.3)])
-    q = oquad([(-0.2, 1.98, -0.2), (0.2, 1.98, -0.2), (0.2, 1.98, 0.2), (-0.2, 1.98, 0.2)], (0, -1, 0))
-    panel = S.node('light', mesh=S.mesh('light', [(*q, 'u16', light)]))
-    S.anim(panel, 'translation', [0, 1], [(-0.4, 0, 0), (0.4, 0, 0)])
-    # Inside the room, by its front wall: from outside (z = 2.9, before
-    # 2026-12-04) the camera saw the closed room's unlit outside, black.
-    eye = (0, 1, 0.95)
-    S.node('camera', t=eye, r=look_at_quat(eye, (0, 0.5, 0)), camera=True)
-    S.camera = dict(yfov=0.9, aspect=1.0, znear=0.05, zfar=100.0)
+    light_and_camera(S, light)
     return S
 
 
