@@ -914,18 +914,7 @@ fn a_record_covered_by_a_moving_object_is_not_replaced_inside_it() {
 fn no_replacement_inside_a_moving_block(double_sided: bool) {
     let (fps, frames, step) = (24.0, 16u32, 0.05);
     let (min, max) = (Vec3::new(-0.9, 0.0, -0.6), Vec3::new(-0.5, 0.3, -0.2));
-    let mut s = lit_room(None, fps);
-    let end = (frames - 1) as f32;
-    add_moving_block(
-        &mut s,
-        (min, max),
-        Vec3::splat(0.6),
-        Interpolation::Linear,
-        (
-            vec![0.0, end / fps],
-            vec![Vec4::ZERO, Vec4::new(step * end, 0.0, 0.0, 0.0)],
-        ),
-    );
+    let mut s = room_with_sliding_block((min, max), step, frames, fps);
     s.materials.last_mut().unwrap().double_sided = double_sided;
     let mut r = renderer(s, 24, fps, false);
     let mut trc = TemporalRadianceCaching::new(TrcSettings {
@@ -955,6 +944,89 @@ fn no_replacement_inside_a_moving_block(double_sided: bool) {
         replaced > 100,
         "only {replaced} replacements: the test proves little"
     );
+}
+
+/// A record that lived one frame is dropped when it expires, not replaced
+/// at its point (`TemporalRecord::replaced_when_expired`): it served frame
+/// t0 alone, where its temporal gradients weigh nothing. In the lit room
+/// with a block sliding fast (many records near it change by more than
+/// `a^t` in a frame), every replacement replaces a record that lived two
+/// frames or more, while many one-frame records a pixel used do expire;
+/// with `δt_max = 1`, where every record lives one frame, the paper's
+/// replacement in place is kept.
+#[test]
+fn a_record_that_lived_one_frame_is_dropped_not_replaced() {
+    let (one_frame, longer, expired_one_frame) = replacements_by_predecessor_life(5);
+    assert!(
+        expired_one_frame > 20,
+        "only {expired_one_frame} used one-frame records expired: the test proves little"
+    );
+    assert_eq!(
+        one_frame, 0,
+        "one-frame records replaced ({longer} longer ones)"
+    );
+    assert!(longer > 20, "only {longer} replacements");
+    let (one_frame, _, expired_one_frame) = replacements_by_predecessor_life(1);
+    assert!(
+        one_frame * 10 >= expired_one_frame * 9 && one_frame > 20,
+        "δt_max = 1: {one_frame} of {expired_one_frame} used records replaced"
+    );
+}
+
+/// With `δt_max = max_life`, in the lit room with a fast sliding block
+/// (24×24, 12 frames): the replacements of records that lived one frame,
+/// those of records that lived longer, and the records that lived one
+/// frame, were used and expired.
+fn replacements_by_predecessor_life(max_life: u32) -> (usize, usize, usize) {
+    let (fps, frames) = (24.0, 12u32);
+    let block = (Vec3::new(-0.9, 0.0, -0.6), Vec3::new(-0.3, 0.6, 0.0));
+    let s = room_with_sliding_block(block, 0.15, frames, fps);
+    let mut r = renderer(s, 24, fps, false);
+    let mut trc = TemporalRadianceCaching::new(TrcSettings {
+        ic: small_ic(),
+        max_life,
+        ..TrcSettings::default()
+    });
+    let (mut one_frame, mut longer, mut expired_one_frame) = (0, 0, 0);
+    for f in 0..frames {
+        let before: std::collections::HashMap<u64, (u32, bool)> = trc
+            .records()
+            .iter()
+            .map(|k| (k.record.id, (k.lifespan(), k.used)))
+            .collect();
+        expired_one_frame += trc
+            .records()
+            .iter()
+            .filter(|k| k.used && k.lifespan() == 1 && k.last_valid + 1 == f)
+            .count();
+        let _ = render_trc(&mut r, &mut trc, f);
+        for k in trc.records().iter().filter(|k| k.record.created_frame == f) {
+            match k.replaces.map(|old| before[&old].0) {
+                Some(1) => one_frame += 1,
+                Some(_) => longer += 1,
+                None => {}
+            }
+        }
+    }
+    (one_frame, longer, expired_one_frame)
+}
+
+/// The lit room with a grey block (`min`, `max` at frame 0) sliding along
+/// +x by `step` a frame over `frames` frames.
+fn room_with_sliding_block((min, max): (Vec3, Vec3), step: f32, frames: u32, fps: f32) -> Scene {
+    let mut s = lit_room(None, fps);
+    let end = (frames - 1) as f32;
+    add_moving_block(
+        &mut s,
+        (min, max),
+        Vec3::splat(0.6),
+        Interpolation::Linear,
+        (
+            vec![0.0, end / fps],
+            vec![Vec4::ZERO, Vec4::new(step * end, 0.0, 0.0, 0.0)],
+        ),
+    );
+    s
 }
 
 /// The replacements `trc` makes in the static lit room whose room mesh is

@@ -21,11 +21,13 @@
 //!    valid but contributed to the previous frame is replaced by a new
 //!    record gathered at the same point (§4.4, "p_l = p_K"); one that
 //!    contributed to no pixel is dropped (§5, "Replacement/deletion
-//!    method": no trail of records behind moving objects). Departure: a
+//!    method": no trail of records behind moving objects). Departures: a
 //!    replacement whose gather rays mostly hit the back faces of moving
 //!    objects is dropped too (`back_face_share`): a moving object has come
 //!    over its point, and gathered inside the object it would darken the
-//!    pixels around it;
+//!    pixels around it; and a record that lived one frame is dropped, not
+//!    replaced (`TemporalRecord::replaced_when_expired`): the fill covers
+//!    its point if no other record does;
 //! 2. *fill*: `ic`'s fill stage adds records where none is usable;
 //! 3. *render*: `ic`'s render pass, flagging every record a pixel sample
 //!    used (our stand-in for the paper's occlusion query; with the GPU
@@ -362,7 +364,8 @@ impl TemporalRadianceCaching {
     /// Ages the records at frame `t` (TRC Algorithm 1, §4.4, §5
     /// replacement/deletion): one still valid goes into the cache as it
     /// is; an expired one is returned, to be replaced, if a pixel used it
-    /// in frame `t − 1`, and dropped otherwise.
+    /// in frame `t − 1` and it lived more than that frame
+    /// ([`TemporalRecord::replaced_when_expired`]), and dropped otherwise.
     fn age(&mut self, t: u32, cache: &mut IrradianceCache, aged: &mut Aged) -> Vec<TemporalRecord> {
         let follows = self.last_frame.is_some_and(|f| f + 1 == t);
         let mut expired = Vec::new();
@@ -377,7 +380,7 @@ impl TemporalRadianceCaching {
             if self.keep {
                 aged.removed.push(r.record.id);
             }
-            if follows && r.used {
+            if follows && r.used && r.replaced_when_expired(self.settings.max_life) {
                 expired.push(r);
             } else {
                 aged.stats.records_dropped += 1;
