@@ -175,14 +175,13 @@ impl TemporalRecord {
     /// that fast a point's accuracy changes every frame anyway. Replaced,
     /// such records were put back whether or not other records cover their
     /// points, every frame: dropped, `ic`'s fill makes a record only where
-    /// none is usable. On a scene where everything moves
-    /// (`benches/scenes/many_cubes.py 20`, 24 frames) `trc` computed 14,847
-    /// records instead of 19,753 (`ic` 14,457), in 17.3 s instead of 23.3
-    /// s, the error and flicker unchanged to 1 %; on the built-in
-    /// `spheres` 29,960 instead of 42,103 in 21.9 s instead of 30.9 s;
-    /// cube-in-box (400 frames) and moving-light unchanged
-    /// (`benches/RESULTS.md`, "Records that lived one frame are not
-    /// replaced").
+    /// none is usable. Where everything moves (`benches/scenes/
+    /// many_cubes.py 20`, 24 frames) `trc` computed 14,847 records instead
+    /// of 19,753 (`ic` 14,457) in about 0.8× the time; on the built-in
+    /// `spheres` 29,960 instead of 42,103 in 0.7× the time; the error and
+    /// flicker within 1 % of before on both, and on cube-in-box (400
+    /// frames) and moving-light too (`benches/RESULTS.md`, "Records that
+    /// lived one frame are not replaced").
     pub(super) fn replaced_when_expired(&self, max_life: u32) -> bool {
         self.lifespan() > 1 || max_life <= 1
     }
