@@ -233,7 +233,7 @@ impl<'g> Reprojection<'g> {
     /// Sample `i` of the gather at t0+1: its cell and what the cell sees, or
     /// `None` where it moved below the record's horizon. Its first hit moves
     /// with its object (static hits and misses stay in their cells), and its
-    /// radiance follows moving lights ([`light_change`]).
+    /// radiance follows moving lights ([`Self::radiance_at_next`]).
     fn reproject_sample(
         &self,
         ctx: &FrameContext,
@@ -242,71 +242,115 @@ impl<'g> Reprojection<'g> {
         grid: &HemisphereGrid,
         i: usize,
     ) -> Option<(usize, CellSample)> {
-        let (g, start) = (self.g, &self.start[i]);
-        let s = &g.samples;
-        let origin = g.record.position;
-        let (dir, dist, object) = (s.direction[i].normalize(), s.distance[i], s.object[i]);
+        let s = &self.g.samples;
+        let dir = s.direction[i].normalize();
+        let hit_point = self.g.record.position + dir * s.distance[i];
+        let at = self.moved_hit(next, frame, grid, i, (dir, hit_point))?;
+        let sample = CellSample {
+            depth: at.depth,
+            radiance: self.radiance_at_next(ctx, next, i, (dir, hit_point), at.moved),
+            object: s.object[i],
+        };
+        Some((at.cell, sample))
+    }
+
+    /// Where sample `i`'s first hit (its direction and point) lies at
+    /// t0+1; `None` where it moved below the record's horizon.
+    fn moved_hit(
+        &self,
+        next: &NextFrame,
+        frame: &Frame,
+        grid: &HemisphereGrid,
+        i: usize,
+        (dir, hit_point): (Vec3, Vec3),
+    ) -> Option<HitAtNext> {
+        let (s, origin) = (&self.g.samples, self.g.record.position);
+        let (dist, object) = (s.distance[i], s.object[i]);
         let motion = next
             .motion
             .get(object as usize)
             .copied()
             .flatten()
             .filter(|_| dist.is_finite());
-        let hit_point = origin + dir * dist;
-        let (cell, depth, moved) = match motion {
-            Some(mat) => {
-                let moved = mat.transform_point3(hit_point);
-                let d = moved - origin;
-                let depth = d.length();
-                let after = frame.to_local(d / depth.max(1e-12));
-                if !(after.z > 0.0 && depth > 0.0) {
-                    return None; // moved below the record's horizon
-                }
-                let cell = grid.moved_cell(i, frame.to_local(dir), after)?;
-                (cell, depth, Some((mat, moved)))
-            }
-            None => (i, dist, None),
+        let Some(mat) = motion else {
+            return Some(HitAtNext {
+                cell: i,
+                depth: dist,
+                moved: None,
+            });
         };
-        let mut radiance = s.radiance[i];
-        if let Some(hit) = g.results.get(i).map(|r| &r.hit).filter(|h| h.is_hit()) {
-            let change = if next.lights_move {
-                let (l0, l1) = &next.lights;
-                let d0 = &start.unshadowed;
-                light_change(ctx.snapshot, hit, dir, (hit_point, d0), moved, l0, l1)
-            } else {
-                LightChange::NONE
-            };
-            let ratio = change.ratio;
-            radiance *= ratio;
-            if next.direct.is_none() {
-                // Light where there was none (a light switched on, a surface
-                // turned towards one): the hit's diffuse reflection of it,
-                // unshadowed. `direct` evaluates it with its shadow instead.
-                let m = ctx.snapshot.tri_material[hit.triangle as usize] as usize;
-                radiance += ctx.scene.materials[m].diffuse * FRAC_1_PI * change.from_dark;
-            }
-            if let Some(direct) = &next.direct {
-                let at = FirstHit {
-                    sample: i,
-                    hit,
-                    point: hit_point,
-                    moved,
-                };
-                // The change subtracts D(t0) estimated with a light sample of
-                // its own, not the path's: where a shadow arrives it can take
-                // more than the sample held. Radiance is never negative (a
-                // negative E(t0+1) made |τ − 1| > 1 and the gradients overshoot).
-                radiance =
-                    (radiance + direct.change(ctx, g, &at, (ratio, &start.direct))).max(Vec3::ZERO);
-            }
+        let moved = mat.transform_point3(hit_point);
+        let d = moved - origin;
+        let depth = d.length();
+        let after = frame.to_local(d / depth.max(1e-12));
+        if !(after.z > 0.0 && depth > 0.0) {
+            return None; // moved below the record's horizon
         }
-        let sample = CellSample {
+        let cell = grid.moved_cell(i, frame.to_local(dir), after)?;
+        Some(HitAtNext {
+            cell,
             depth,
-            radiance,
-            object,
-        };
-        Some((cell, sample))
+            moved: Some((mat, moved)),
+        })
     }
+
+    /// Sample `i`'s radiance at t0+1, its first hit in direction `dir` at
+    /// `hit_point` (moved to `moved` with its object's motion, if it
+    /// moves): scaled as moving lights change the hit's unshadowed light
+    /// ([`light_change`]), and its direct light evaluated again where
+    /// `next` does.
+    fn radiance_at_next(
+        &self,
+        ctx: &FrameContext,
+        next: &NextFrame,
+        i: usize,
+        (dir, hit_point): (Vec3, Vec3),
+        moved: Option<(Mat4, Vec3)>,
+    ) -> Vec3 {
+        let (g, start) = (self.g, &self.start[i]);
+        let mut radiance = g.samples.radiance[i];
+        let Some(hit) = g.results.get(i).map(|r| &r.hit).filter(|h| h.is_hit()) else {
+            return radiance;
+        };
+        let change = if next.lights_move {
+            let (l0, l1) = &next.lights;
+            let d0 = &start.unshadowed;
+            light_change(ctx.snapshot, hit, dir, (hit_point, d0), moved, l0, l1)
+        } else {
+            LightChange::NONE
+        };
+        let ratio = change.ratio;
+        radiance *= ratio;
+        let Some(direct) = &next.direct else {
+            // Light where there was none (a light switched on, a surface
+            // turned towards one): the hit's diffuse reflection of it,
+            // unshadowed. `direct` evaluates it with its shadow instead.
+            let m = ctx.snapshot.tri_material[hit.triangle as usize] as usize;
+            return radiance + ctx.scene.materials[m].diffuse * FRAC_1_PI * change.from_dark;
+        };
+        let at = FirstHit {
+            sample: i,
+            hit,
+            point: hit_point,
+            moved,
+        };
+        // The change subtracts D(t0) estimated with a light sample of its
+        // own, not the path's: where a shadow arrives it can take more than
+        // the sample held. Radiance is never negative (a negative E(t0+1)
+        // made |τ − 1| > 1 and the gradients overshoot).
+        (radiance + direct.change(ctx, g, &at, (ratio, &start.direct))).max(Vec3::ZERO)
+    }
+}
+
+/// Where a sample's first hit lies at t0+1 ([`Reprojection::moved_hit`]).
+struct HitAtNext {
+    /// Its cell of the record's hemisphere.
+    cell: usize,
+    /// Its distance from the record.
+    depth: f32,
+    /// Its object's motion from t0 to t0+1 and the point moved, if the
+    /// object moves.
+    moved: Option<(Mat4, Vec3)>,
 }
 
 /// What a cell of the reprojected hemisphere sees.
