@@ -244,26 +244,8 @@ impl LaterFrames {
                 .zip(xt.iter())
                 .map(|(e, &xt)| e.as_mut().map_or(0.0, |e| e.departure(xt, t - t0)))
                 .collect();
-            // The lights then, also where an object departs: moving
-            // lights move in the reprojection too.
-            let lights = if lights_move {
-                ahead.lights.at(ctx, t)
-            } else {
-                next.lights_now().clone()
-            };
-            // Lights that moved from t0 to t0+1 move in τ's extrapolation;
-            // one switched off, on or dimmed later does not.
-            let lights_changed = match next.lights_move() {
-                false => !lights.same_as(next.lights_now()),
-                true => !lights.same_power(next.lights_now()),
-            };
-            let motion = || -> Vec<Option<Mat4>> {
-                let motion = x0.iter().zip(xt.iter()).zip(&later.dynamic);
-                let moved = |((w0, wt), &d): ((&Mat4, &Mat4), &bool)| {
-                    d.then(|| rigid_motion(*w0, *wt)).flatten()
-                };
-                motion.map(moved).collect()
-            };
+            let (lights, lights_changed) = ahead.lights_changed(ctx, next, t, lights_move);
+            let motion = || motion_since(x0, &xt, &later.dynamic);
             if check_lit {
                 let frame = LitFrame {
                     motion: motion(),
@@ -388,6 +370,30 @@ impl Ahead {
             .get_or_insert_with(|| moving_bounds(scene, dynamic))
     }
 
+    /// The lights at frame `t` (`lights_move`: some light may move or
+    /// change), also where an object departs: moving lights move in the
+    /// reprojection too; and whether they changed otherwise than τ's
+    /// extrapolation carries them on: lights that moved from t0 to t0+1
+    /// move in it, one switched off, on or dimmed later does not.
+    fn lights_changed(
+        &mut self,
+        ctx: &FrameContext,
+        next: &NextFrame,
+        t: u32,
+        lights_move: bool,
+    ) -> (Arc<UnshadowedLights>, bool) {
+        let lights = if lights_move {
+            self.lights.at(ctx, t)
+        } else {
+            next.lights_now().clone()
+        };
+        let changed = match next.lights_move() {
+            false => !lights.same_as(next.lights_now()),
+            true => !lights.same_power(next.lights_now()),
+        };
+        (lights, changed)
+    }
+
     /// Each object's world transform at frame `t`.
     fn placed(&mut self, ctx: &FrameContext, t: u32) -> Arc<Vec<Mat4>> {
         self.placed
@@ -399,6 +405,16 @@ impl Ahead {
             })
             .clone()
     }
+}
+
+/// Each moving object's motion from its world transform at t0 (`x0`) to
+/// the one at a later frame (`xt`) ([`rigid_motion`]); `None` for static
+/// objects and those that stay.
+fn motion_since(x0: &[Mat4], xt: &[Mat4], dynamic: &[bool]) -> Vec<Option<Mat4>> {
+    let motion = x0.iter().zip(xt).zip(dynamic);
+    let moved =
+        |((w0, wt), &d): ((&Mat4, &Mat4), &bool)| d.then(|| rigid_motion(*w0, *wt)).flatten();
+    motion.map(moved).collect()
 }
 
 /// Whether any light can move or change: a punctual light the animation
