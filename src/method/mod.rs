@@ -207,8 +207,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // (`trc::NextDirect::MovingLights`, 2026-12-02). 14: and at the end
         // of a record's life, and between where it changed by more than
         // `a_t` there (`later::LitFrames`, 2026-12-02). 15: as every
-        // method's next.
-        "trc" => 15,
+        // method's next. 16: a record that lived one frame is dropped when
+        // it expires, not replaced (`TemporalRecord::replaced_when_expired`,
+        // 2026-12-06).
+        "trc" => 16,
         // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6, 7: as
         // below.
         "ic" => 7,
