@@ -286,13 +286,10 @@ fn to_ob(p: [Vec3; 3]) -> ObTriangle {
     }
 }
 
-/// The preset `accel::TriangleBvh::build` uses for a part of this size.
+/// The preset `accel::TriangleBvh::build` uses for the moving part of
+/// this size, rebuilt every frame.
 fn preset(n: usize) -> BvhBuildParams {
-    if n > 10_000 {
-        BvhBuildParams::medium_build()
-    } else {
-        BvhBuildParams::fast_build()
-    }
+    radcache::accel::BvhLife::Frame.params(n)
 }
 
 /// Refits `bvh` to `tris` (input order): leaf boxes from their triangles,

@@ -18,7 +18,7 @@
 //! rounding differs), so two times compared with each other are both
 //! traced here.
 
-use super::{children_crossed, to_obvhs_ray, TriangleBvh};
+use super::{children_crossed, to_obvhs_ray, BvhLife, TriangleBvh};
 use crate::backend::Ray;
 use crate::scene::{Scene, Snapshot};
 use glam::{Affine3A, UVec2, Vec3, Vec3A};
@@ -26,7 +26,6 @@ use obvhs::aabb::Aabb;
 use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::CwBvh;
 use obvhs::triangle::Triangle as ObTriangle;
-use obvhs::BvhBuildParams;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -60,7 +59,8 @@ impl MovingObjects {
                         v2: at(c),
                     })
                     .collect();
-                TriangleBvh::over(source, |i| ((first[o] + i) as u32, o as u32))
+                let id_of = |i| ((first[o] + i) as u32, o as u32);
+                TriangleBvh::over(source, BvhLife::Render, id_of)
             })
             .collect();
         MovingObjects {
@@ -96,11 +96,8 @@ impl MovingObjects {
             .collect();
         let boxes: Vec<Aabb> = placed.iter().map(|i| i.world_box).collect();
         let top = (!boxes.is_empty()).then(|| {
-            build_cwbvh(
-                &boxes,
-                BvhBuildParams::fast_build(),
-                &mut Duration::default(),
-            )
+            let params = BvhLife::Frame.params(boxes.len());
+            build_cwbvh(&boxes, params, &mut Duration::default())
         });
         Instances {
             objects: self.clone(),
@@ -248,7 +245,8 @@ mod tests {
             for (k, t) in [0.0, 0.37, 1.1].into_iter().enumerate() {
                 let snapshot = scene.snapshot(t);
                 let moving = snapshot.static_count..snapshot.triangles.len();
-                let placed = TriangleBvh::build(&snapshot, moving.clone()).expect("moving");
+                let placed =
+                    TriangleBvh::build(&snapshot, moving.clone(), BvhLife::Frame).expect("moving");
                 let instances = objects.placed(&snapshot);
                 assert!(!instances.is_empty() && objects.are_of(&scene));
                 // Around the moving triangles, as far again each way.

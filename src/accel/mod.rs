@@ -257,29 +257,66 @@ fn children_crossed(
     hit_mask
 }
 
+/// How long a BVH serves, which picks obvhs's build preset for it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BvhLife {
+    /// Built once and traversed by every ray of a render (the static part,
+    /// each moving object's mesh in its own space): obvhs's medium preset
+    /// above [`MEDIUM_BUILD_ABOVE`] triangles, whose better tree repays its
+    /// longer build.
+    Render,
+    /// Built again every frame (the moving triangles placed at the frame's
+    /// time): the fast preset at any size. Its tree served as well: on a
+    /// turning ball of 1M triangles (`benches/scenes/turning_ball.py
+    /// 1024`) it took 0.67–0.70 s a frame to build against the medium
+    /// preset's 0.78–0.80 s, and `ic` over 24 frames at 64×64 took 25.65 /
+    /// 23.36 s against 29.36 / 25.50 s (alternating); on the built-in
+    /// `spheres` (63,374 moving triangles) 26–42 ms against 28–47 ms, and
+    /// no change measurable in whole renders. Frames are the same bits
+    /// (hits do not depend on the tree: ties go to the lower triangle id).
+    Frame,
+}
+
+/// Triangles above which a BVH built once a render takes obvhs's medium
+/// preset ([`BvhLife::Render`]).
+pub const MEDIUM_BUILD_ABOVE: usize = 10_000;
+
+impl BvhLife {
+    /// obvhs's build preset for a BVH of this life over `triangles`.
+    pub fn params(self, triangles: usize) -> BvhBuildParams {
+        match self {
+            BvhLife::Render if triangles > MEDIUM_BUILD_ABOVE => BvhBuildParams::medium_build(),
+            _ => BvhBuildParams::fast_build(),
+        }
+    }
+}
+
 impl TriangleBvh {
-    /// Builds a BVH over snapshot triangles `range`; `None` when empty.
-    pub fn build(snapshot: &Snapshot, range: Range<usize>) -> Option<Self> {
+    /// Builds a BVH over snapshot triangles `range`, to serve for `life`;
+    /// `None` when empty.
+    pub fn build(snapshot: &Snapshot, range: Range<usize>, life: BvhLife) -> Option<Self> {
         let source: Vec<ObTriangle> = (snapshot.triangles.range(range.clone()))
             .map(to_obvhs)
             .collect();
-        Self::over(source, |i| {
+        let id_of = |i| {
             let id = range.start + i;
             (id as u32, snapshot.tri_object[id])
-        })
+        };
+        Self::over(source, life, id_of)
     }
 
-    /// Builds a BVH over `source`, triangle `i` of it snapshot triangle
-    /// `id_of(i).0` of object `id_of(i).1`; `None` when empty.
-    fn over(source: Vec<ObTriangle>, id_of: impl Fn(usize) -> (u32, u32)) -> Option<Self> {
+    /// Builds a BVH over `source`, to serve for `life`, triangle `i` of it
+    /// snapshot triangle `id_of(i).0` of object `id_of(i).1`; `None` when
+    /// empty.
+    fn over(
+        source: Vec<ObTriangle>,
+        life: BvhLife,
+        id_of: impl Fn(usize) -> (u32, u32),
+    ) -> Option<Self> {
         if source.is_empty() {
             return None;
         }
-        let params = if source.len() > 10_000 {
-            BvhBuildParams::medium_build()
-        } else {
-            BvhBuildParams::fast_build()
-        };
+        let params = life.params(source.len());
         let mut bvh = build_cwbvh_from_tris(&source, params, &mut Duration::default());
         // obvhs reserves a CWBVH node (80 bytes) for every primitive and
         // fills a fraction of them. A BVH held for long (`trc` held the
@@ -460,8 +497,12 @@ impl SceneBvh {
             times.static_build = Some(start.elapsed());
         }
         let start = Instant::now();
-        self.dynamic_part =
-            TriangleBvh::build(snapshot, static_len..snapshot.triangles.len()).map(Arc::new);
+        self.dynamic_part = TriangleBvh::build(
+            snapshot,
+            static_len..snapshot.triangles.len(),
+            BvhLife::Frame,
+        )
+        .map(Arc::new);
         times.dynamic_build = start.elapsed();
         times
     }
@@ -554,7 +595,7 @@ fn shared_bvh(key: u64, snapshot: &Snapshot, range: Range<usize>) -> Option<Arc<
     // Built outside the lock: a render building a large part does not hold
     // up another's. Two holders asking together may both build it; each
     // then keeps its own.
-    let bvh = Arc::new(TriangleBvh::build(snapshot, range)?);
+    let bvh = Arc::new(TriangleBvh::build(snapshot, range, BvhLife::Render)?);
     let mut shared = SHARED.lock().unwrap_or_else(PoisonError::into_inner);
     shared.push((key, Arc::downgrade(&bvh)));
     Some(bvh)
@@ -609,7 +650,7 @@ mod tests {
     #[test]
     fn a_kept_bvh_is_taken_only_for_its_own_triangles() {
         let snap = still_snapshot(2.0);
-        let bvh = TriangleBvh::build(&snap, 0..snap.static_count).unwrap();
+        let bvh = TriangleBvh::build(&snap, 0..snap.static_count, BvhLife::Render).unwrap();
         assert!(bvh.holds(&snap, 0..snap.static_count));
         let moved = still_snapshot(3.0);
         assert!(!bvh.holds(&moved, 0..moved.static_count));

@@ -5,13 +5,14 @@
 //!   repacked as [`GpuNode`], traversed by `shaders/bvh2_traverse.wgsl`.
 //! - [`GpuLayout::Cwbvh`]: obvhs's compressed wide BVH8
 //!   (`build_cwbvh_from_tris`), the very tree the CPU backend traverses
-//!   (`src/accel.rs`), its 80-byte nodes uploaded as they are, traversed by
+//!   (`src/accel`), its 80-byte nodes uploaded as they are, traversed by
 //!   `shaders/cwbvh_traverse.wgsl`.
 //!
 //! Both lay triangles out in the BVH's `primitive_indices` order, so that
 //! leaves index the triangle buffer directly.
 
 use super::{GpuError, GpuTriangle};
+use crate::accel::BvhLife;
 use crate::scene::Snapshot;
 use bytemuck::{Pod, Zeroable};
 use obvhs::bvh2::builder::build_bvh2_from_tris;
@@ -20,7 +21,6 @@ use obvhs::cwbvh::builder::build_cwbvh_from_tris;
 use obvhs::cwbvh::node::CwBvhNode;
 use obvhs::cwbvh::CwBvh;
 use obvhs::triangle::Triangle as ObTriangle;
-use obvhs::BvhBuildParams;
 use std::time::Duration;
 
 /// Entries of the BVH2 traversal stack. Must match `STACK_SIZE` in
@@ -30,10 +30,6 @@ pub const STACK_SIZE: usize = 64;
 /// Node groups the CWBVH traversal can keep pending. Must match
 /// `STACK_SIZE` in `shaders/cwbvh_traverse.wgsl`; deeper BVHs are refused.
 pub const CWBVH_STACK_SIZE: usize = 32;
-
-/// Triangles above which a part is built with obvhs's medium preset
-/// (better trees for the big static part), as `src/accel.rs` does.
-const MEDIUM_BUILD_ABOVE: usize = 10_000;
 
 /// Environment variable that picks the layout of [`GpuLayout::from_env`]:
 /// `cwbvh` (default) or `bvh2`.
@@ -135,12 +131,14 @@ pub(super) struct Part {
 }
 
 impl Part {
-    /// A BVH in `layout` over snapshot triangles `range`, triangles in leaf
-    /// order. Refuses a BVH deeper than its traversal's stack.
+    /// A BVH in `layout` over snapshot triangles `range`, built with the
+    /// preset the CPU's takes for `life`, triangles in leaf order. Refuses
+    /// a BVH deeper than its traversal's stack.
     pub fn build(
         layout: GpuLayout,
         snapshot: &Snapshot,
         range: std::ops::Range<usize>,
+        life: BvhLife,
     ) -> Result<Self, GpuError> {
         let source: Vec<ObTriangle> = (snapshot.triangles.range(range.clone()))
             .map(|t| ObTriangle {
@@ -154,8 +152,8 @@ impl Part {
         let (nodes, order) = match layout {
             GpuLayout::Bvh2 if range.is_empty() => (Nodes::Bvh2(Vec::new()), Vec::new()),
             GpuLayout::Cwbvh if range.is_empty() => (Nodes::Cwbvh(Vec::new()), Vec::new()),
-            GpuLayout::Bvh2 => bvh2_nodes(&source)?,
-            GpuLayout::Cwbvh => cwbvh_nodes(&source)?,
+            GpuLayout::Bvh2 => bvh2_nodes(&source, life)?,
+            GpuLayout::Cwbvh => cwbvh_nodes(&source, life)?,
         };
         let triangles = order
             .iter()
@@ -208,14 +206,6 @@ impl Part {
     }
 }
 
-fn build_params(triangles: usize) -> BvhBuildParams {
-    if triangles > MEDIUM_BUILD_ABOVE {
-        BvhBuildParams::medium_build()
-    } else {
-        BvhBuildParams::fast_build()
-    }
-}
-
 fn too_deep(depth: usize, stack: usize) -> Result<(), GpuError> {
     if depth > stack {
         return Err(GpuError::Geometry(format!(
@@ -226,8 +216,9 @@ fn too_deep(depth: usize, stack: usize) -> Result<(), GpuError> {
 }
 
 /// BVH2 nodes and the triangle order of their leaves.
-fn bvh2_nodes(source: &[ObTriangle]) -> Result<(Nodes, Vec<u32>), GpuError> {
-    let bvh = build_bvh2_from_tris(source, build_params(source.len()), &mut Duration::default());
+fn bvh2_nodes(source: &[ObTriangle], life: BvhLife) -> Result<(Nodes, Vec<u32>), GpuError> {
+    let params = life.params(source.len());
+    let bvh = build_bvh2_from_tris(source, params, &mut Duration::default());
     too_deep(bvh2_depth(&bvh), STACK_SIZE)?;
     let nodes = bvh
         .nodes
@@ -243,10 +234,11 @@ fn bvh2_nodes(source: &[ObTriangle]) -> Result<(Nodes, Vec<u32>), GpuError> {
     Ok((Nodes::Bvh2(nodes), bvh.primitive_indices))
 }
 
-/// CWBVH nodes (built exactly as `src/accel.rs` builds the CPU's) and the
+/// CWBVH nodes (built exactly as `src/accel` builds the CPU's) and the
 /// triangle order of their leaves.
-fn cwbvh_nodes(source: &[ObTriangle]) -> Result<(Nodes, Vec<u32>), GpuError> {
-    let bvh = build_cwbvh_from_tris(source, build_params(source.len()), &mut Duration::default());
+fn cwbvh_nodes(source: &[ObTriangle], life: BvhLife) -> Result<(Nodes, Vec<u32>), GpuError> {
+    let params = life.params(source.len());
+    let bvh = build_cwbvh_from_tris(source, params, &mut Duration::default());
     too_deep(cwbvh_depth(&bvh), CWBVH_STACK_SIZE)?;
     Ok((Nodes::Cwbvh(bvh.nodes), bvh.primitive_indices))
 }

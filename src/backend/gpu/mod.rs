@@ -450,12 +450,17 @@ impl GpuBackend {
             });
 
         let static_part = if self.geometry.static_fingerprint != fp {
-            Some(Part::build(self.bvh, snapshot, 0..static_len)?)
+            Some(Part::build(
+                self.bvh,
+                snapshot,
+                0..static_len,
+                accel::BvhLife::Render,
+            )?)
         } else {
             None
         };
         let dynamic_range = static_len..snapshot.triangles.len();
-        let dynamic_part = Part::build(self.bvh, snapshot, dynamic_range)?;
+        let dynamic_part = Part::build(self.bvh, snapshot, dynamic_range, accel::BvhLife::Frame)?;
         let bvh_build = build_start.elapsed();
 
         let g = &self.geometry;
