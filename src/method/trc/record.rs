@@ -278,6 +278,24 @@ pub(super) fn frames_of_validity(change: f32, temporal_accuracy: f32, max_life: 
 mod tests {
     use super::*;
 
+    /// An expired record is replaced at its point if it lived more than one
+    /// frame; one that lived a single frame is dropped unless every life is
+    /// one frame (`δt_max = 1`), where the paper's rule stands.
+    #[test]
+    fn only_records_that_lived_more_than_a_frame_are_replaced() {
+        let mut k = TemporalRecord::test_record(Vec3::ONE, 0.2);
+        k.record.created_frame = 7;
+        let replaced = |k: &TemporalRecord, max_life| k.replaced_when_expired(max_life);
+        k.last_valid = 7;
+        assert_eq!(k.lifespan(), 1);
+        assert!(!replaced(&k, 20));
+        assert!(!replaced(&k, 2));
+        assert!(replaced(&k, 1));
+        k.last_valid = 8;
+        assert!(replaced(&k, 20));
+        assert!(replaced(&k, 2));
+    }
+
     /// The worst channel decides; a channel that lights up from black is an
     /// infinite change, one black at both frames none.
     #[test]
