@@ -138,10 +138,12 @@ impl LaterGeometry {
     /// made `trc` 9–15 % slower (`benches/RESULTS.md`, "The moving
     /// objects traced as instances").
     fn at(ctx: &FrameContext, t: f32, objects: &Arc<MovingObjects>) -> Self {
-        let emitters = ctx.scene.emitters_snapshot(t);
-        if emitters.lights.iter().any(|l| l.is_directional()) {
+        // Placed lights are the scene's, one for one, at any time.
+        let directional = crate::scene::LightKind::Directional;
+        if ctx.scene.lights.iter().any(|l| l.kind == directional) {
             return Self::new(ctx, &ctx.scene.snapshot_from(t, ctx.snapshot), objects);
         }
+        let emitters = ctx.scene.emitters_snapshot(t);
         let lights = LightSampler::new(&emitters, &ctx.scene.materials);
         Self::lit_by(ctx, emitters, lights, objects)
     }
