@@ -200,14 +200,27 @@ fn from_planar(raw: &[u8], n: usize) -> Vec<PackedSample> {
 /// of its content: a damaged block is an error on reading, never other
 /// bytes of the right length (blocks written before the checksum read as
 /// they did).
+///
+/// Each thread keeps one compressor: a record's block is a few KB, and
+/// making a zstd context for each (its tables allocated and freed again)
+/// took 38 µs a 6 KB block against 22.5 µs reused, with the same bytes
+/// out (a scratch benchmark of 20,000 blocks).
 pub(crate) fn compress(bytes: &[u8]) -> Vec<u8> {
-    let mut compressor = zstd::bulk::Compressor::new(ZSTD_LEVEL).expect("zstd level 3 exists");
-    compressor
-        .set_parameter(zstd::zstd_safe::CParameter::ChecksumFlag(true))
-        .expect("zstd takes the checksum flag");
-    compressor
-        .compress(bytes)
-        .expect("zstd compression to memory cannot fail")
+    thread_local! {
+        static COMPRESSOR: std::cell::RefCell<zstd::bulk::Compressor<'static>> = {
+            let mut compressor =
+                zstd::bulk::Compressor::new(ZSTD_LEVEL).expect("zstd level 3 exists");
+            compressor
+                .set_parameter(zstd::zstd_safe::CParameter::ChecksumFlag(true))
+                .expect("zstd takes the checksum flag");
+            std::cell::RefCell::new(compressor)
+        };
+    }
+    COMPRESSOR.with_borrow_mut(|compressor| {
+        compressor
+            .compress(bytes)
+            .expect("zstd compression to memory cannot fail")
+    })
 }
 
 /// Decompresses exactly `len` bytes.
