@@ -197,12 +197,29 @@ pub(super) struct FirstHit<'a> {
 }
 
 /// A first hit as the direct light there needs it.
+#[derive(Clone, Copy)]
 struct Shading {
     p: Vec3,
     ng: Vec3,
     /// Towards the record.
     wo: Vec3,
     bsdf: Bsdf,
+}
+
+/// What [`DirectChange::change`] finds for a sample at t0 and keeps for
+/// every later frame it is compared with (under a moving light a record
+/// is compared with t0+1, the end of its life and the frames a bisection
+/// reaches): `D(t0)`, and, where the first hit lies on a static triangle
+/// (the same triangle at every time, so the same shading bit for bit), the
+/// hit's shading. Shading the hit again for each frame was a fifth of the
+/// direct light's work on the built-in moving-light.
+#[derive(Default)]
+pub(super) struct SampleAtStart {
+    /// One light sample's direct light, shadowed, at t0.
+    direct: OnceCell<Vec3>,
+    /// The first hit's shading where its triangle is static (`None`: it
+    /// reflects nothing).
+    still: OnceCell<Option<Shading>>,
 }
 
 impl DirectChange {
@@ -266,14 +283,15 @@ impl DirectChange {
     /// towards the record, shadowed in the geometry of its time. `ratio` is
     /// what the caller scaled the whole sample by for moving lights
     /// (`estimate::light_change`'s ratio): the direct part it scaled is
-    /// replaced by `D(t0+1)`. `before` keeps `D(t0)` once found: every
-    /// comparison from t0 ([`Self::to_frame`]) finds the same.
+    /// replaced by `D(t0+1)`. `start` keeps `D(t0)` once found, and the
+    /// shading of a hit on a static triangle: every comparison from t0
+    /// ([`Self::to_frame`]) finds the same.
     pub(super) fn change(
         &self,
         ctx: &FrameContext,
         g: &Gathered,
         at: &FirstHit,
-        (ratio, before): (Vec3, &OnceCell<Vec3>),
+        (ratio, start): (Vec3, &SampleAtStart),
     ) -> Vec3 {
         let choice = self.light_choice(ctx, g, at.sample);
         if at.moved.is_none() && !self.lights_move {
@@ -288,19 +306,27 @@ impl DirectChange {
                 }
             })
         };
-        let before = *before.get_or_init(|| {
+        let at_start = || {
             let tri = &ctx.snapshot.triangles[at.hit.triangle as usize];
-            let s = shading(ctx, tri, at.hit, at.point, g.record.position);
+            shading(ctx, tri, at.hit, at.point, g.record.position)
+        };
+        let still = (at.hit.triangle as usize) < ctx.snapshot.static_count;
+        let kept = still.then(|| *start.still.get_or_init(at_start));
+        let before = *start.direct.get_or_init(|| {
+            let s = kept.unwrap_or_else(at_start);
             lit(
                 s.and_then(|s| unoccluded(ctx.snapshot, ctx.lights, ctx.ray_offset, &s, choice)),
                 0,
             )
         });
-        let p1 = at.moved.map_or(at.point, |(_, p)| p);
         let later = &self.later;
-        let tri = later.triangle(ctx, at.hit.triangle);
-        let after = shading(ctx, &tri, at.hit, p1, g.record.position)
-            .and_then(|s| unoccluded(&later.emitters, &later.lights, ctx.ray_offset, &s, choice));
+        let s = kept.unwrap_or_else(|| {
+            let p1 = at.moved.map_or(at.point, |(_, p)| p);
+            let tri = later.triangle(ctx, at.hit.triangle);
+            shading(ctx, &tri, at.hit, p1, g.record.position)
+        });
+        let after =
+            s.and_then(|s| unoccluded(&later.emitters, &later.lights, ctx.ray_offset, &s, choice));
         lit(after, 1) - ratio * before
     }
 

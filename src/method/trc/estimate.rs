@@ -3,7 +3,7 @@
 //! and lights (TRC §4.7, Fig. 6). How well it does against E(t0+1)
 //! gathered again is measured in the parent module's documentation.
 
-use super::direct::{DirectChange, FirstHit, LaterGeometry, ShadowGeometry};
+use super::direct::{DirectChange, FirstHit, LaterGeometry, SampleAtStart, ShadowGeometry};
 use super::{Gathered, NextDirect};
 use crate::backend::Hit;
 use crate::cache::gather::{HemisphereSamples, Strata};
@@ -170,8 +170,8 @@ struct AtStart {
     /// The unshadowed direct irradiance ([`light_change`]'s `D(t0)`).
     unshadowed: OnceCell<Vec3>,
     /// Its light sample's direct light, shadowed ([`DirectChange::change`]'s
-    /// `D(t0)`).
-    direct: OnceCell<Vec3>,
+    /// `D(t0)`), and what that needs again at the later frames.
+    direct: SampleAtStart,
 }
 
 impl<'g> Reprojection<'g> {
