@@ -911,6 +911,47 @@ fn a_default_runs_point_has_no_empty_label() {
 /// runs it finished, names the others in order, and starts none of them.
 /// The `bench.csv` and charts an earlier bench left are gone, also those
 /// of the scene it reached no run of.
+/// With `repeat`, every run is rendered once a round: its seconds are the
+/// median of its rounds, its errors, records, rays and frames those of a
+/// one-round bench (the later rounds trace the same rays, checked in debug
+/// builds, and write no frames); one CSV line a run, each row handed on
+/// once its rounds are done.
+#[test]
+fn repeated_runs_report_the_median_of_their_rounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let (once_dir, thrice_dir) = (dir.path().join("once"), dir.path().join("thrice"));
+    let once = bench::run(&tiny_bench(&once_dir, &["ic", "trc"])).unwrap();
+    let opts = BenchOptions {
+        repeat: 3,
+        ..tiny_bench(&thrice_dir, &["ic", "trc"])
+    };
+    let mut handed = Vec::new();
+    let report = bench::run_with(&opts, &mut |row| handed.push(row.seconds)).unwrap();
+    assert_eq!(report.rows.len(), 2);
+    assert_eq!(report.round_seconds.len(), 2);
+    let rows = report.rows.iter().zip(&report.round_seconds);
+    for ((row, rounds), one) in rows.zip(&once.rows) {
+        assert_eq!(rounds.len(), 3, "{rounds:?}");
+        assert!(rounds.iter().all(|&s| s > 0.0), "{rounds:?}");
+        let mut sorted = rounds.clone();
+        sorted.sort_by(f64::total_cmp);
+        assert_eq!(row.seconds, sorted[1], "{rounds:?}");
+        let measured = |r: &BenchRow| (r.rel_rmse, r.flicker, r.records, r.rays);
+        assert_eq!(measured(row), measured(one), "{}", row.method);
+        let frame = format!("runs/cube-in-box/{}-default/frame_0001.exr", row.method);
+        let bytes = |d: &std::path::Path| std::fs::read(d.join(&frame)).unwrap();
+        assert!(bytes(&thrice_dir) == bytes(&once_dir), "{frame}");
+    }
+    let medians: Vec<f64> = report.rows.iter().map(|r| r.seconds).collect();
+    assert_eq!(handed, medians);
+    assert!(once.round_seconds.iter().all(|r| r.len() == 1));
+    let csv = std::fs::read_to_string(thrice_dir.join("bench.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    let text = bench::rounds_text(&report.rows, &report.round_seconds);
+    assert_eq!(text.lines().count(), 2, "{text}");
+    assert!(bench::rounds_text(&once.rows, &once.round_seconds).is_empty());
+}
+
 #[test]
 fn a_stopped_bench_writes_the_runs_it_finished_and_names_the_others() {
     use std::sync::atomic::Ordering;

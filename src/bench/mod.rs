@@ -53,8 +53,8 @@ pub use charts::plot_scene;
 pub use methods::{method_settings, MethodError, MethodInfo, MethodSweep, RunSpec, METHODS};
 pub use report::{
     backend_pairs, backend_text, equal_error_table, equal_error_text, estimate_error_text,
-    interpolate_time_at_error, temporal_pairs, temporal_text, to_csv, to_table, BenchRow,
-    EqualError, ErrorMeasure, PathBound, CSV_HEADER,
+    interpolate_time_at_error, rounds_text, temporal_pairs, temporal_text, to_csv, to_table,
+    BenchRow, EqualError, ErrorMeasure, PathBound, CSV_HEADER,
 };
 pub use run::{peak_memory_mb, reset_peak_memory, run, run_with, BenchReport};
 
@@ -105,6 +105,11 @@ pub struct BenchOptions {
     /// triangles) over what this process may take (`radcache bench`
     /// without `--no-memory-check`).
     pub check_memory: bool,
+    /// Rounds of a scene's runs (at least 1): each run is rendered once a
+    /// round and its reported times are the medians over the rounds
+    /// ([`BenchReport::round_seconds`] keeps them all); everything else is
+    /// measured in the first round.
+    pub repeat: u32,
     /// Set (from any thread: Ctrl-C in `radcache bench`) to stop the bench
     /// early: the run or reference in progress is abandoned mid-frame, and
     /// [`run()`] returns the runs finished before, with their CSV and charts,
@@ -152,6 +157,7 @@ impl Default for BenchOptions {
             store_size: false,
             backends: vec![BackendChoice::Auto],
             check_memory: true,
+            repeat: 1,
             stop: Arc::default(),
         }
     }

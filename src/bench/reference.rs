@@ -125,7 +125,13 @@ pub(super) fn ensure_reference(opts: &BenchOptions, scene: &BenchScene, dir: &Pa
     // Stopped, it leaves no reference.json: the next bench renders it again.
     renderer.set_abandon_flag(opts.stop.clone());
     let what = format!("reference {}", scene.label);
-    render_frames(&mut renderer, opts.frames.clone(), dir, &what, opts.quiet)?;
+    render_frames(
+        &mut renderer,
+        opts.frames.clone(),
+        Some(dir),
+        &what,
+        opts.quiet,
+    )?;
     for frame in opts.frames.clone() {
         let mask = renderer.with_frame_context(frame, seen_lights);
         metrics::write_light_mask(

@@ -577,6 +577,31 @@ pub fn backend_pairs(rows: &[BenchRow]) -> Vec<(&BenchRow, &BenchRow)> {
         .collect()
 }
 
+/// Lines for people where the runs were timed in several rounds
+/// ([`super::BenchOptions::repeat`]): one per row, its seconds in each
+/// round, in order, and the median the tables give (a bench stopped in a
+/// later round has fewer rounds for its later runs). Empty for one round.
+pub fn rounds_text(rows: &[BenchRow], rounds: &[Vec<f64>]) -> String {
+    let mut out = String::new();
+    if rounds.iter().all(|t| t.len() <= 1) {
+        return out;
+    }
+    for (row, times) in rows.iter().zip(rounds) {
+        let times: Vec<String> = times.iter().map(|t| format!("{t:.3}")).collect();
+        let _ = writeln!(
+            out,
+            "{} {} {} on {}: {} s → {:.3} s",
+            row.scene,
+            row.method,
+            row.settings,
+            row.backend,
+            times.join(" / "),
+            row.seconds,
+        );
+    }
+    out
+}
+
 /// Lines for people: one per [`backend_pairs`] pair, the later backend's
 /// speed-up over the first (first's seconds ÷ its own) and the change of
 /// the error, which the backends should leave alone (the same hits).

@@ -59,6 +59,10 @@ pub struct BenchReport {
     /// abandoned half rendered): `<scene> <method> <settings>`, with ` on
     /// <backend>` when the bench has several. Empty when it ran them all.
     pub unfinished: Vec<String>,
+    /// Per row, the seconds of each round it was rendered in
+    /// ([`BenchOptions::repeat`]), in round order: the row's `seconds` is
+    /// their median.
+    pub round_seconds: Vec<Vec<f64>>,
 }
 
 /// Runs the whole bench: references, runs, CSV, charts.
@@ -76,6 +80,7 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
     remove_earlier_outputs(&opts.out, &labels)?;
     let per_run = reset_peak_memory();
     let mut rows = Vec::new();
+    let mut round_seconds = Vec::new();
     let mut charts = Vec::new();
     // A file that cannot be written (a full disk, a folder in its place)
     // does not lose the measurements: they are still printed.
@@ -87,7 +92,8 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
             scene: source.load()?,
         };
         let first = rows.len();
-        let stopped = match bench_scene(opts, &scene, per_run, &mut rows, after_run) {
+        let measured = (&mut rows, &mut round_seconds);
+        let stopped = match bench_scene(opts, &scene, per_run, measured, after_run) {
             Ok(()) => false,
             Err(e) if e.is::<Stopped>() => true,
             Err(e) => return Err(e),
@@ -121,6 +127,7 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
         unwritten,
         peak_mem_per_run: per_run,
         unfinished,
+        round_seconds,
     })
 }
 
@@ -351,32 +358,92 @@ pub(super) struct BenchScene<'a> {
 }
 
 /// Benches `scene`: its reference, then its runs, each row pushed onto
-/// `rows` as its run finishes; [`Stopped`] where [`BenchOptions::stop`]
-/// stopped it.
+/// `rows` (with its rounds' seconds onto `rounds`) as its run finishes;
+/// [`Stopped`] where [`BenchOptions::stop`] stopped it. With several
+/// rounds ([`BenchOptions::repeat`]) the later rounds render every run
+/// again for its time alone, and the rows (their times the medians of the
+/// rounds done) are finished once the rounds are, or a stop ends them.
 fn bench_scene(
     opts: &BenchOptions,
     scene: &BenchScene,
     per_run: bool,
-    rows: &mut Vec<BenchRow>,
+    (rows, rounds): (&mut Vec<BenchRow>, &mut Vec<Vec<f64>>),
     after_run: &mut dyn FnMut(&BenchRow),
 ) -> Result<()> {
     check_stop(opts)?;
     let ref_dir = opts.out.join("reference").join(scene.label);
     ensure_reference(opts, scene, &ref_dir)?;
-    for (spec, backend) in scene_runs(opts) {
-        check_stop(opts)?;
-        let run = Run {
-            spec: &spec,
-            backend,
-            // One folder per backend only when there are several,
-            // so a one-backend bench keeps its folder names.
-            backend_in_dir: opts.backends.len() > 1,
-        };
-        let row = bench_run(opts, scene, &run, per_run)?;
-        after_run(&row);
-        rows.push(row);
+    let first = rows.len();
+    let mut times: Vec<Vec<RunTime>> = Vec::new();
+    let runs = scene_runs(opts);
+    let mut round = |r: u32, times: &mut Vec<Vec<RunTime>>| -> Result<()> {
+        for (i, (spec, backend)) in runs.iter().enumerate() {
+            check_stop(opts)?;
+            let run = Run {
+                spec,
+                backend: *backend,
+                // One folder per backend only when there are several,
+                // so a one-backend bench keeps its folder names.
+                backend_in_dir: opts.backends.len() > 1,
+            };
+            if r > 0 {
+                times[i].push(time_run(opts, scene, &run, rows[first + i].rays)?);
+                continue;
+            }
+            let row = bench_run(opts, scene, &run, per_run)?;
+            times.push(vec![RunTime::of(&row)]);
+            if opts.repeat <= 1 {
+                after_run(&row);
+            }
+            rows.push(row);
+        }
+        Ok(())
+    };
+    let done = (0..opts.repeat.max(1)).try_for_each(|r| round(r, &mut times));
+    for (row, times) in rows[first..].iter_mut().zip(&times) {
+        RunTime::median_into(times, row);
+        rounds.push(times.iter().map(|t| t.seconds).collect());
+        if opts.repeat > 1 {
+            after_run(row);
+        }
     }
-    Ok(())
+    done
+}
+
+/// A run's times in one round.
+#[derive(Clone, Copy)]
+struct RunTime {
+    seconds: f64,
+    render_pass_seconds: Option<f64>,
+}
+
+impl RunTime {
+    fn of(row: &BenchRow) -> Self {
+        RunTime {
+            seconds: row.seconds,
+            render_pass_seconds: row.render_pass_seconds,
+        }
+    }
+
+    /// Sets `row`'s times to the medians of `times` (each time its own
+    /// median: the render pass's may come from another round).
+    fn median_into(times: &[RunTime], row: &mut BenchRow) {
+        row.seconds = median(times.iter().map(|t| t.seconds));
+        let passes: Option<Vec<f64>> = times.iter().map(|t| t.render_pass_seconds).collect();
+        row.render_pass_seconds = passes.map(|p| median(p.into_iter()));
+    }
+}
+
+/// The median of `values` (the mean of the middle two of an even count);
+/// NaN for none.
+fn median(values: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = values.collect();
+    v.sort_by(f64::total_cmp);
+    match v.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => v[n / 2],
+        n => (v[n / 2 - 1] + v[n / 2]) / 2.0,
+    }
 }
 
 /// One run of a bench: a method's settings on one backend.
@@ -411,31 +478,25 @@ fn bench_run(
     run: &Run,
     per_run: bool,
 ) -> Result<BenchRow> {
-    let label = scene.label;
-    let spec = run.spec;
+    let (label, spec) = (scene.label, run.spec);
     let settings = spec.settings()?;
     let dir = opts.out.join("runs").join(label).join(run.folder());
     let ref_dir = opts.out.join("reference").join(label);
-    clear_frames(&dir)?;
-    let mut renderer = Renderer::new(
-        scene.scene.clone(),
-        settings.instantiate(),
-        render::make_backend(run.backend)?,
-        frame_settings(opts, opts.same_pattern),
-    );
-    renderer.set_abandon_flag(opts.stop.clone());
-    let backend = renderer.backend().name();
-    if per_run {
-        reset_peak_memory();
-    }
-    let what = format!("{label} {} {} on {backend}", spec.method, spec.label());
-    let stats = render_frames(&mut renderer, opts.frames.clone(), &dir, &what, opts.quiet)?;
-    let peak_mem_mb = peak_memory_mb();
-    drop(renderer);
+    let Rendered {
+        stats,
+        backend,
+        what,
+        peak_mem_mb,
+    } = render_run(opts, scene, run, (per_run, true))?;
     let cmp = metrics::compare_dirs(&ref_dir, &dir)
         .with_context(|| format!("comparing {} with {}", dir.display(), ref_dir.display()))?;
     let (next_error, store_bytes) = untimed_measures(opts, scene, run, &settings, &dir, &what)?;
-    say_run_done(opts, &what, stats.render_time.as_secs_f64(), cmp.rel_rmse);
+    say_run_done(
+        opts,
+        &what,
+        stats.render_time.as_secs_f64(),
+        Some(cmp.rel_rmse),
+    );
     Ok(BenchRow {
         scene: label.into(),
         method: spec.method.clone(),
@@ -457,16 +518,76 @@ fn bench_run(
     })
 }
 
+/// A run rendered into its folder.
+struct Rendered {
+    stats: RunStats,
+    /// The backend, as it names itself.
+    backend: String,
+    /// The run's name in progress messages.
+    what: String,
+    peak_mem_mb: Option<f64>,
+}
+
+/// Renders `run` of `scene`, timed, into its folder where `write` says
+/// (`per_run`: its peak memory its own).
+fn render_run(
+    opts: &BenchOptions,
+    scene: &BenchScene,
+    run: &Run,
+    (per_run, write): (bool, bool),
+) -> Result<Rendered> {
+    let (label, spec) = (scene.label, run.spec);
+    let dir = opts.out.join("runs").join(label).join(run.folder());
+    if write {
+        clear_frames(&dir)?;
+    }
+    let mut renderer = Renderer::new(
+        scene.scene.clone(),
+        spec.settings()?.instantiate(),
+        render::make_backend(run.backend)?,
+        frame_settings(opts, opts.same_pattern),
+    );
+    renderer.set_abandon_flag(opts.stop.clone());
+    let backend = renderer.backend().name();
+    if per_run {
+        reset_peak_memory();
+    }
+    let what = format!("{label} {} {} on {backend}", spec.method, spec.label());
+    let dir = write.then_some(dir.as_path());
+    let stats = render_frames(&mut renderer, opts.frames.clone(), dir, &what, opts.quiet)?;
+    Ok(Rendered {
+        stats,
+        backend,
+        what,
+        peak_mem_mb: peak_memory_mb(),
+    })
+}
+
+/// `run` rendered again for its time alone (a later round of
+/// [`BenchOptions::repeat`]), its frames not written: the first round's,
+/// whose `rays` it traces again, are the same.
+fn time_run(opts: &BenchOptions, scene: &BenchScene, run: &Run, rays: u64) -> Result<RunTime> {
+    let Rendered { stats, what, .. } = render_run(opts, scene, run, (false, false))?;
+    debug_assert_eq!(stats.rays, rays, "{what}: another round traced other rays");
+    let seconds = stats.render_time.as_secs_f64();
+    say_run_done(opts, &format!("{what} (again)"), seconds, None);
+    Ok(RunTime {
+        seconds,
+        render_pass_seconds: stats.render_pass_seconds,
+    })
+}
+
 /// Off a terminal (a log, `nohup`, CI), where the bars are not drawn, a
 /// line a finished run, so that a bench of hours is seen to go on (as
 /// `render` says each frame); on a terminal its bar shows it, and `quiet`
 /// says nothing.
-fn say_run_done(opts: &BenchOptions, what: &str, seconds: f64, rel_rmse: f64) {
+fn say_run_done(opts: &BenchOptions, what: &str, seconds: f64, rel_rmse: Option<f64>) {
     use std::io::{IsTerminal, Write};
     if opts.quiet || std::io::stderr().is_terminal() {
         return;
     }
-    let line = format!("bench: {what}: {seconds:.3} s, relative RMSE {rel_rmse:.5}");
+    let error = rel_rmse.map_or(String::new(), |e| format!(", relative RMSE {e:.5}"));
+    let line = format!("bench: {what}: {seconds:.3} s{error}");
     // Progress is not worth failing (or panicking) over a closed stderr.
     let _ = writeln!(std::io::stderr(), "{line}");
 }
@@ -667,16 +788,17 @@ pub(super) struct RunStats {
     records: u64,
 }
 
-/// Renders `frames` into `dir` with a progress bar (off a terminal, a
-/// line every half minute the run lasts); the time counts rendering
-/// only, not writing files. [`Stopped`] where the renderer's abandon flag
+/// Renders `frames` into `dir` (`None`: not written, a later round of
+/// [`BenchOptions::repeat`]) with a progress bar (off a terminal, a line
+/// every half minute the run lasts); the time counts rendering only, not
+/// writing files. [`Stopped`] where the renderer's abandon flag
 /// ([`BenchOptions::stop`]) abandoned a frame, which is not written, and
 /// the frames written before it are removed: a folder holds a whole run
 /// (or reference) or none of it, never a start that looks like one.
 pub(super) fn render_frames(
     renderer: &mut Renderer,
     frames: Range<u32>,
-    dir: &Path,
+    dir: Option<&Path>,
     what: &str,
     quiet: bool,
 ) -> Result<RunStats> {
@@ -696,7 +818,9 @@ pub(super) fn render_frames(
             .map_err(|e| anyhow::anyhow!("{what}: {e}"))?;
         if renderer.abandoned() {
             bar.finish_and_clear();
-            clear_frames(dir)?;
+            if let Some(dir) = dir {
+                clear_frames(dir)?;
+            }
             return Err(Stopped.into());
         }
         render_time += start.elapsed();
@@ -710,7 +834,9 @@ pub(super) fn render_frames(
         {
             *render_pass_seconds.get_or_insert(0.0) += secs;
         }
-        crate::film::write_frame(&film, dir, frame)?;
+        if let Some(dir) = dir {
+            crate::film::write_frame(&film, dir, frame)?;
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -725,6 +851,16 @@ pub(super) fn render_frames(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The median of an odd count is its middle value, of an even count
+    /// the mean of the middle two, whatever the order; of none NaN.
+    #[test]
+    fn median_of_rounds() {
+        assert_eq!(median([3.0, 1.0, 2.0].into_iter()), 2.0);
+        assert_eq!(median([4.0, 1.0, 3.0, 2.0].into_iter()), 2.5);
+        assert_eq!(median([7.5].into_iter()), 7.5);
+        assert!(median(std::iter::empty()).is_nan());
+    }
 
     #[test]
     fn status_field() {

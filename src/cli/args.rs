@@ -396,6 +396,14 @@ pub struct BenchArgs {
     /// (`cpu,gpu` compares them in one invocation; the reference uses auto).
     #[arg(long, value_enum, value_delimiter = ',', default_value = "auto")]
     pub backends: Vec<BackendArg>,
+    /// Time every run N times, in N rounds over all of a scene's runs (the
+    /// machine's drift then falls on every run alike), and report each
+    /// run's median time; frames, errors and records are the first
+    /// round's (the later rounds render the same frames for their time
+    /// alone). A Ctrl-C in a later round keeps the rounds done.
+    #[arg(long, value_name = "N", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub repeat: u32,
     /// Run even where a run's estimated peak memory at --size on its scene (a lower bound, as for `render`) is over the memory available, which is otherwise refused before anything renders.
     #[arg(long)]
     pub no_memory_check: bool,

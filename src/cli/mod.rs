@@ -160,6 +160,7 @@ fn bench_options(args: BenchArgs) -> bench::BenchOptions {
         store_size: args.store_size,
         backends: args.backends.into_iter().map(backend_choice).collect(),
         check_memory: !args.no_memory_check,
+        repeat: args.repeat,
         stop: Default::default(),
     }
 }
@@ -181,6 +182,15 @@ fn run_bench(args: BenchArgs) -> Result<()> {
     // in `radcache bench | tee log` also ends `tee`).
     if !report.unfinished.is_empty() {
         return Err(bench_interrupted(&report).into());
+    }
+    // Stopped in a later round of --repeat: every run was measured, over
+    // fewer rounds than asked.
+    if opts.stop.load(std::sync::atomic::Ordering::Relaxed) {
+        return Err(interrupt::Interrupted(
+            "interrupted: every run was measured (above), some over fewer rounds than --repeat asked"
+                .into(),
+        )
+        .into());
     }
     printed?;
     if !report.unwritten.is_empty() {
@@ -230,6 +240,11 @@ fn print_bench(report: &bench::BenchReport) -> Result<()> {
 /// The table of the runs, and the comparisons between them it holds.
 fn print_bench_tables(report: &bench::BenchReport) -> Result<()> {
     out!("{}", bench::to_table(&report.rows))?;
+    let rounds = bench::rounds_text(&report.rows, &report.round_seconds);
+    if !rounds.is_empty() {
+        outln!("\nseconds in each round (the tables give their median):")?;
+        out!("{rounds}")?;
+    }
     for (measure, what) in [
         (bench::ErrorMeasure::AllPixels, "all pixels"),
         (
