@@ -24,6 +24,12 @@
 //! `DIR/<scene>_surface_error_vs_time.svg` and
 //! `DIR/<scene>_surface_flicker_vs_time.svg` chart them.
 //!
+//! With [`BenchOptions::repeat`] above 1 a scene's runs are rendered in
+//! rounds, each run once a round, and each run's time is the median of
+//! its rounds: a ratio of two runs then leans less on the minute each
+//! happened to run in (the machine drifts; `benches/HISTORY.md` has single
+//! invocations of the same command 1.3× apart).
+//!
 //! A bench begins by removing the `bench.csv` and charts an earlier bench
 //! left in `DIR`, so that none describes runs this one did not make; one
 //! stopped early ([`BenchOptions::stop`]) writes them for the runs it
