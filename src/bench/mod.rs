@@ -27,8 +27,8 @@
 //! With [`BenchOptions::repeat`] above 1 a scene's runs are rendered in
 //! rounds, each run once a round, and each run's time is the median of
 //! its rounds: a ratio of two runs then leans less on the minute each
-//! happened to run in (the machine drifts; `benches/HISTORY.md` has single
-//! invocations of the same command 1.3× apart).
+//! happened to run in (the machine drifts: the same `ic` run took
+//! 54.6 s and 68.9 s within an hour, `benches/HISTORY.md`).
 //!
 //! A bench begins by removing the `bench.csv` and charts an earlier bench
 //! left in `DIR`, so that none describes runs this one did not make; one
