@@ -1050,26 +1050,59 @@ fn a_bench_stopped_before_it_starts_renders_nothing() {
     assert!(!dir.path().join("reference").exists());
 }
 
-/// Runs `radcache bench ARGS --out OUT -q`, sends it one SIGINT (Ctrl-C)
-/// once `started` exists under OUT, checks that it exits with status 130
-/// and returns its output and how long it took after the signal.
+/// When [`interrupt_bench`] sends its SIGINT.
 #[cfg(unix)]
-fn interrupt_bench(args: &[&str], out: &std::path::Path, started: &str) -> Interrupted {
+enum Cue<'a> {
+    /// Once this path exists under the bench's `--out` (the bench runs
+    /// with `-q`).
+    Made(&'a str),
+    /// Once the bench has said a line containing this on stderr (it runs
+    /// without `-q`, so that it says each run finished: off a terminal a
+    /// line a run).
+    Said(&'a str),
+}
+
+/// Runs `radcache bench ARGS --out OUT`, sends it one SIGINT (Ctrl-C) at
+/// `cue`, checks that it exits with status 130 and returns its output and
+/// how long it took after the signal.
+#[cfg(unix)]
+fn interrupt_bench(args: &[&str], out: &std::path::Path, cue: Cue) -> Interrupted {
+    use std::io::BufRead;
     use std::time::{Duration, Instant};
-    let child = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
         .arg("bench")
         .args(args)
-        .args(["-q", "--out"])
+        .args(matches!(cue, Cue::Made(_)).then_some("-q"))
+        .arg("--out")
         .arg(out)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
+    // Stderr is read as it comes, so that a line can be the cue and a full
+    // pipe never stalls the bench.
+    let said = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+    let reader = {
+        let (said, stderr) = (said.clone(), child.stderr.take().unwrap());
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(stderr).lines() {
+                let line = line.unwrap();
+                let mut said = said.lock().unwrap();
+                said.push_str(&line);
+                said.push('\n');
+            }
+        })
+    };
+    let cued = || match cue {
+        Cue::Made(path) => out.join(path).exists(),
+        Cue::Said(words) => said.lock().unwrap().contains(words),
+    };
     let start = Instant::now();
-    while !out.join(started).exists() {
+    while !cued() {
         assert!(
             start.elapsed() < Duration::from_secs(120),
-            "no {started} under {out:?}"
+            "no cue under {out:?}; the bench said:\n{}",
+            said.lock().unwrap()
         );
         std::thread::sleep(Duration::from_millis(2));
     }
@@ -1081,7 +1114,8 @@ fn interrupt_bench(args: &[&str], out: &std::path::Path, started: &str) -> Inter
     assert!(kill.success());
     let signalled = Instant::now();
     let output = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    reader.join().unwrap();
+    let stderr = said.lock().unwrap().clone();
     assert_eq!(output.status.code(), Some(130), "{stderr}");
     Interrupted {
         stdout: String::from_utf8_lossy(&output.stdout).into_owned(),
@@ -1126,7 +1160,11 @@ fn ctrl_c_during_a_run_keeps_the_runs_finished() {
         stdout,
         stderr,
         after,
-    } = interrupt_bench(&args, dir.path(), "runs/cube-in-box/path-spp=100000");
+    } = interrupt_bench(
+        &args,
+        dir.path(),
+        Cue::Made("runs/cube-in-box/path-spp=100000"),
+    );
     assert!(!stderr.contains("error:"), "{stderr}");
     assert!(stderr.contains("Ctrl-C again to stop now"), "{stderr}");
     assert!(
@@ -1173,7 +1211,7 @@ fn ctrl_c_during_the_reference_finishes_no_run() {
         stdout,
         stderr,
         after,
-    } = interrupt_bench(&args, dir.path(), "reference/cube-in-box");
+    } = interrupt_bench(&args, dir.path(), Cue::Made("reference/cube-in-box"));
     assert!(
         stderr.contains("interrupted: 0 of 1 runs finished")
             && stderr.contains("not finished: cube-in-box path spp=1"),
@@ -1187,4 +1225,73 @@ fn ctrl_c_during_the_reference_finishes_no_run() {
     assert!(!reference.join("reference.json").exists());
     assert!(!reference.join("frame_0000.exr").exists());
     assert!(!dir.path().join("runs").exists());
+}
+
+/// Ctrl-C in a later round of `--repeat` (every run measured in the
+/// first) keeps the rounds done: each run's table row with its seconds the
+/// median of the rounds it finished (fewer than asked), written to
+/// `bench.csv`, and every round printed; the bench says every run was
+/// measured over fewer rounds than asked, and exits with status 130.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_in_a_later_round_keeps_the_rounds_done() {
+    let dir = tempfile::tempdir().unwrap();
+    let args = [
+        "--size",
+        "16x16",
+        "--frames",
+        "0..2",
+        "--reference-spp",
+        "2",
+        "--backends",
+        "cpu",
+        "--methods",
+        "path:spp=1,64",
+        "--repeat",
+        "100",
+    ];
+    // Said once the first run is timed again, in the second round.
+    let Interrupted {
+        stdout,
+        stderr,
+        after,
+    } = interrupt_bench(&args, dir.path(), Cue::Said("(again)"));
+    assert!(!stderr.contains("error:"), "{stderr}");
+    assert!(
+        stderr.contains(
+            "interrupted: every run was measured (above), some over fewer rounds than \
+             --repeat asked"
+        ),
+        "{stderr}"
+    );
+    assert!(after.as_secs() < 30, "stopped {after:?} after Ctrl-C");
+    // Each run's rounds, printed after the table: "… spp=1 on cpu …:
+    // 0.010 / 0.009 s → 0.010 s". The first run finished at least two, and
+    // no run all a hundred.
+    let rounds = |settings: &str| -> Vec<f64> {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(&format!("cube-in-box path {settings} on cpu")))
+            .unwrap_or_else(|| panic!("no rounds of {settings}:\n{stdout}"));
+        let (_, times) = line.split_once(": ").unwrap();
+        let (times, _) = times.split_once(" s →").unwrap();
+        times.split(" / ").map(|t| t.parse().unwrap()).collect()
+    };
+    let (first, second) = (rounds("spp=1"), rounds("spp=64"));
+    assert!((2..100).contains(&first.len()), "{stdout}");
+    assert!((1..100).contains(&second.len()), "{stdout}");
+    assert!(first.len() - second.len() <= 1, "{stdout}");
+    let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(lines.len(), 3, "{csv}");
+    assert!(lines[1].starts_with("cube-in-box,path,spp=1,"), "{csv}");
+    assert!(lines[2].starts_with("cube-in-box,path,spp=64,"), "{csv}");
+    // The table's seconds are the median of the rounds done.
+    let median = |mut t: Vec<f64>| {
+        t.sort_by(f64::total_cmp);
+        let n = t.len();
+        (t[(n - 1) / 2] + t[n / 2]) / 2.0
+    };
+    let seconds: f64 = lines[2].split(',').nth(5).unwrap().parse().unwrap();
+    assert!((seconds - median(second)).abs() < 1e-3, "{csv}\n{stdout}");
 }
