@@ -1246,11 +1246,13 @@ fn ctrl_c_in_a_later_round_keeps_the_rounds_done() {
         "--backends",
         "cpu",
         "--methods",
-        "path:spp=1,64",
+        "path:spp=1,256",
         "--repeat",
         "100",
     ];
-    // Said once the first run is timed again, in the second round.
+    // Said once the first run is timed again, in the second round; a
+    // round takes about a tenth of a second (the second run's), so the
+    // hundred would take seconds.
     let Interrupted {
         stdout,
         stderr,
@@ -1277,7 +1279,7 @@ fn ctrl_c_in_a_later_round_keeps_the_rounds_done() {
         let (times, _) = times.split_once(" s →").unwrap();
         times.split(" / ").map(|t| t.parse().unwrap()).collect()
     };
-    let (first, second) = (rounds("spp=1"), rounds("spp=64"));
+    let (first, second) = (rounds("spp=1"), rounds("spp=256"));
     assert!((2..100).contains(&first.len()), "{stdout}");
     assert!((1..100).contains(&second.len()), "{stdout}");
     assert!(first.len() - second.len() <= 1, "{stdout}");
@@ -1285,7 +1287,7 @@ fn ctrl_c_in_a_later_round_keeps_the_rounds_done() {
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), 3, "{csv}");
     assert!(lines[1].starts_with("cube-in-box,path,spp=1,"), "{csv}");
-    assert!(lines[2].starts_with("cube-in-box,path,spp=64,"), "{csv}");
+    assert!(lines[2].starts_with("cube-in-box,path,spp=256,"), "{csv}");
     // The table's seconds are the median of the rounds done.
     let median = |mut t: Vec<f64>| {
         t.sort_by(f64::total_cmp);
