@@ -1377,8 +1377,9 @@ fn bench_charts_come_from_the_bench_directory_when_given() {
             .count();
         assert!(runs >= 3, "{runs} trc runs with {setting} in\n{csv}");
     }
-    // Every method is charted where things move too.
-    for scene in ["moving-light", "spheres"] {
+    // Every method is charted where things move too, and where everything
+    // does.
+    for scene in ["moving-light", "spheres", "many-cubes"] {
         let name = format!("{scene}_error_vs_time.svg");
         assert!(
             charts.as_array().unwrap().iter().any(|c| c["name"] == name),
