@@ -1062,16 +1062,26 @@ enum Cue<'a> {
     Said(&'a str),
 }
 
-/// Runs `radcache bench ARGS --out OUT`, sends it one SIGINT (Ctrl-C) at
-/// `cue`, checks that it exits with status 130 and returns its output and
-/// how long it took after the signal.
+/// Runs `radcache bench` of cube-in-box's frames 0..2 at 16×16 on the CPU
+/// with `--reference-spp REFERENCE_SPP --methods METHODS`, then `more`,
+/// into `out`; sends it one SIGINT (Ctrl-C) at `cue`, checks that it exits
+/// with status 130 and returns its output and how long it took after the
+/// signal.
 #[cfg(unix)]
-fn interrupt_bench(args: &[&str], out: &std::path::Path, cue: Cue) -> Interrupted {
+fn interrupt_bench(
+    (reference_spp, methods): (&str, &str),
+    more: &[&str],
+    out: &std::path::Path,
+    cue: Cue,
+) -> Interrupted {
     use std::io::BufRead;
     use std::time::{Duration, Instant};
+    let tiny = ["--size", "16x16", "--frames", "0..2", "--backends", "cpu"];
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
         .arg("bench")
-        .args(args)
+        .args(tiny)
+        .args(["--reference-spp", reference_spp, "--methods", methods])
+        .args(more)
         .args(matches!(cue, Cue::Made(_)).then_some("-q"))
         .arg("--out")
         .arg(out)
@@ -1143,25 +1153,14 @@ struct Interrupted {
 fn ctrl_c_during_a_run_keeps_the_runs_finished() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("bench.csv"), "an earlier bench's").unwrap();
-    let args = [
-        "--size",
-        "16x16",
-        "--frames",
-        "0..2",
-        "--reference-spp",
-        "2",
-        "--backends",
-        "cpu",
-        "--methods",
-        "path:spp=1,100000",
-    ];
     // The second run's folder is made once the first run is measured.
     let Interrupted {
         stdout,
         stderr,
         after,
     } = interrupt_bench(
-        &args,
+        ("2", "path:spp=1,100000"),
+        &[],
         dir.path(),
         Cue::Made("runs/cube-in-box/path-spp=100000"),
     );
@@ -1197,21 +1196,16 @@ fn ctrl_c_during_a_run_keeps_the_runs_finished() {
 #[test]
 fn ctrl_c_during_the_reference_finishes_no_run() {
     let dir = tempfile::tempdir().unwrap();
-    let args = [
-        "--size",
-        "16x16",
-        "--frames",
-        "0..2",
-        "--reference-spp",
-        "100000",
-        "--methods",
-        "path:spp=1",
-    ];
     let Interrupted {
         stdout,
         stderr,
         after,
-    } = interrupt_bench(&args, dir.path(), Cue::Made("reference/cube-in-box"));
+    } = interrupt_bench(
+        ("100000", "path:spp=1"),
+        &[],
+        dir.path(),
+        Cue::Made("reference/cube-in-box"),
+    );
     assert!(
         stderr.contains("interrupted: 0 of 1 runs finished")
             && stderr.contains("not finished: cube-in-box path spp=1"),
@@ -1236,20 +1230,6 @@ fn ctrl_c_during_the_reference_finishes_no_run() {
 #[test]
 fn ctrl_c_in_a_later_round_keeps_the_rounds_done() {
     let dir = tempfile::tempdir().unwrap();
-    let args = [
-        "--size",
-        "16x16",
-        "--frames",
-        "0..2",
-        "--reference-spp",
-        "2",
-        "--backends",
-        "cpu",
-        "--methods",
-        "path:spp=1,256",
-        "--repeat",
-        "100",
-    ];
     // Said once the first run is timed again, in the second round; a
     // round takes about a tenth of a second (the second run's), so the
     // hundred would take seconds.
@@ -1257,7 +1237,12 @@ fn ctrl_c_in_a_later_round_keeps_the_rounds_done() {
         stdout,
         stderr,
         after,
-    } = interrupt_bench(&args, dir.path(), Cue::Said("(again)"));
+    } = interrupt_bench(
+        ("2", "path:spp=1,256"),
+        &["--repeat", "100"],
+        dir.path(),
+        Cue::Said("(again)"),
+    );
     assert!(!stderr.contains("error:"), "{stderr}");
     assert!(
         stderr.contains(
@@ -1282,7 +1267,7 @@ fn ctrl_c_in_a_later_round_keeps_the_rounds_done() {
     let (first, second) = (rounds("spp=1"), rounds("spp=256"));
     assert!((2..100).contains(&first.len()), "{stdout}");
     assert!((1..100).contains(&second.len()), "{stdout}");
-    assert!(first.len() - second.len() <= 1, "{stdout}");
+    assert!(first.len().abs_diff(second.len()) <= 1, "{stdout}");
     let csv = std::fs::read_to_string(dir.path().join("bench.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
     assert_eq!(lines.len(), 3, "{csv}");
