@@ -332,12 +332,13 @@ pub(super) fn resume(
     Ok(done)
 }
 
-/// Commits rendered `frame` to job `j` in one batch: its EXR, statistics,
-/// the records the method `kept` with their samples, and its state changes.
+/// Commits rendered `frame` to job `j` in one batch: its EXR (`exr`,
+/// [`film::encode_exr`] of `film`), statistics, the records the method
+/// `kept` with their samples, and its state changes.
 pub(super) fn store_frame(
     renderer: &Renderer,
     j: &mut StoreJob,
-    film: &Film,
+    (film, exr): (&Film, &[u8]),
     frame: u32,
     stats: &FrameStats,
     kept: Option<FrameRecords>,
@@ -345,8 +346,6 @@ pub(super) fn store_frame(
     // that looks ahead, its end: what the stored state is valid for.
     (chain_start, chain_end): (u32, Option<u32>),
 ) -> Result<()> {
-    let exr = film::encode_exr(film)
-        .map_err(|e| anyhow::anyhow!("cannot encode frame {frame} as EXR: {e}"))?;
     let mut kept = kept.unwrap_or_default();
     let mut samples = std::mem::take(&mut kept.samples).into_iter();
     let records = kept
@@ -373,7 +372,7 @@ pub(super) fn store_frame(
         frame,
         width: film.width,
         height: film.height,
-        exr: &exr,
+        exr,
         records,
         stats,
         state: kept.state.as_ref().map(|changes| StateCommit {

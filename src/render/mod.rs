@@ -597,9 +597,14 @@ pub fn render_job_to_dir_with(
         warn_if_not_finite(&progress, frame, &film);
         let stats = renderer.last_frame_stats();
         let kept = renderer.take_frame_records();
+        // Encoded once: the store keeps the bytes the file holds.
+        let exr = film::encode_exr(&film).map_err(|e| {
+            progress.abandon();
+            anyhow::anyhow!("cannot encode frame {frame} as EXR: {e}")
+        })?;
         if let Some(j) = job.as_deref_mut() {
             remove_frame_files(out_dir, frame)?;
-            store_frame(renderer, j, &film, frame, &stats, kept, chain).map_err(|e| {
+            store_frame(renderer, j, (&film, &exr), frame, &stats, kept, chain).map_err(|e| {
                 progress.abandon();
                 anyhow::anyhow!(
                     "{e:#}\nframe {frame} was not saved, the frames finished before it were: \
@@ -608,7 +613,7 @@ pub fn render_job_to_dir_with(
                 )
             })?;
         }
-        film::write_frame(&film, out_dir, frame).map_err(|e| {
+        film::write_encoded_frame(&film, &exr, out_dir, frame).map_err(|e| {
             progress.abandon();
             match job {
                 Some(_) => anyhow::anyhow!(
