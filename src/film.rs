@@ -19,7 +19,6 @@
 use crate::material::luminance;
 use crate::system_memory::{self, bytes_text};
 use glam::Vec3;
-use rayon::prelude::*;
 use std::fs;
 use std::io::{self, Cursor, Write};
 use std::path::{Path, PathBuf};
@@ -414,13 +413,10 @@ fn tonemap_pixel(c: Vec3) -> [u8; 3] {
 
 /// The sRGB 8-bit preview of a linear film (exposure 1, [`tone_curve`]).
 pub fn tonemap_srgb(film: &Film) -> image::RgbImage {
-    // In parallel: three `powf`s a pixel, which otherwise run on the
-    // render's one thread between frames while the others wait.
-    let bytes: Vec<u8> = film
-        .pixels
-        .par_iter()
-        .flat_map_iter(|&c| tonemap_pixel(c))
-        .collect();
+    // On the caller's thread, not rayon's pool: `serve` encodes previews
+    // while its renders keep that pool busy, and a preview waiting for a
+    // render's parallel pass to end would stall the dashboard.
+    let bytes: Vec<u8> = film.pixels.iter().flat_map(|&c| tonemap_pixel(c)).collect();
     image::RgbImage::from_raw(film.width, film.height, bytes)
         .expect("film has width × height pixels")
 }
