@@ -162,11 +162,11 @@ pub fn encode_exr(film: &Film) -> Result<Vec<u8>, exr::error::Error> {
     });
     // RLE, not ZIP: the low bytes of rendered f32 radiance are noise, so
     // ZIP16 made a 256×256 frame of the default render 4 % smaller (a
-    // converged reference 3 %) in 9 ms, 6 % of the default render's
-    // time; RLE takes 1.8 ms and still folds runs of
-    // equal pixels (half a frame black: 51 % of the size, ZIP16 48 %).
-    // The store's zstd takes another 11 % off RLE's frames (none off
-    // ZIP's). Measured at 9264e01 (`benches/HISTORY.md`).
+    // converged reference 3 %) in 9 ms, 6 % of the default render's time;
+    // RLE takes 1.8 ms and still folds runs of equal pixels (half a frame
+    // black: 51 % of the size, ZIP16 48 %). The store's zstd takes
+    // another 11 % off RLE's frames (none off ZIP's). Measured at 9264e01
+    // (`benches/HISTORY.md`).
     let encoding = Encoding {
         compression: Compression::RLE,
         blocks: Blocks::ScanLines,
