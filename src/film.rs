@@ -163,10 +163,11 @@ pub fn encode_exr(film: &Film) -> Result<Vec<u8>, exr::error::Error> {
     // RLE, not ZIP: the low bytes of rendered f32 radiance are noise, so
     // ZIP16 made a 256×256 frame of the default render 4 % smaller (a
     // converged reference 3 %) in 9 ms, 6 % of the default render's time;
-    // RLE takes 1.8 ms and still folds runs of equal pixels (half a frame
-    // black: 51 % of the size, ZIP16 48 %). The store's zstd takes
-    // another 11 % off RLE's frames (none off ZIP's). Measured at 9264e01
-    // (`benches/HISTORY.md`).
+    // RLE takes 1.8 ms and folds black away (half a frame black: 51 %
+    // of the size, ZIP16 48 %); only a flat colour, which renders do not
+    // make, does ZIP far better (RLE 52 %, ZIP16 0.4 %). The store's
+    // zstd takes another 11 % off RLE's frames (none off ZIP's).
+    // Measured at 9264e01 (`benches/HISTORY.md`).
     let encoding = Encoding {
         compression: Compression::RLE,
         blocks: Blocks::ScanLines,
@@ -515,7 +516,7 @@ fn temp_path(path: &Path) -> PathBuf {
 }
 
 /// Removes from `dir` the temporary frame files (`.frame_NNNN.png.tmp-PID-N`,
-/// `.frame_NNNN.exr.restore-PID`) of processes that no longer run: a
+/// and earlier builds' `.frame_NNNN.exr.restore-PID`) of processes that no longer run: a
 /// render killed while it wrote a frame leaves its temporary file, which
 /// nothing else would ever remove. Those of running processes (another
 /// render into the same folder) are left alone; where liveness cannot be
@@ -539,8 +540,10 @@ pub fn remove_stale_temporaries(dir: &Path) -> usize {
 }
 
 /// The process id in a temporary frame file's name ([`temp_path`]'s
-/// `.frame_NNNN.EXT.tmp-PID-N`, or `.frame_NNNN.exr.restore-PID` of a
-/// resumed job's restored files); `None` for any other name.
+/// `.frame_NNNN.EXT.tmp-PID-N`, or `.frame_NNNN.exr.restore-PID`, which
+/// earlier builds wrote when they restored a resumed job's files from the
+/// store and which such a build killed may have left); `None` for any
+/// other name.
 fn temporary_owner(name: &str) -> Option<u32> {
     let rest = name.strip_prefix(".frame_")?;
     let (digits, rest) = rest.split_at_checked(4)?;
@@ -642,6 +645,24 @@ mod tests {
                 b.to_array().map(f32::to_bits)
             );
         }
+    }
+
+    /// RLE folds black away, halves a flat colour (runs of its equal
+    /// high bytes) and stores noise at about its raw size.
+    #[test]
+    fn rle_folds_black_halves_flat_colour_and_keeps_noise_near_raw() {
+        let raw = 64 * 64 * 12;
+        let black = encode_exr(&Film::new(64, 64)).unwrap().len();
+        assert!(black * 10 < raw, "black film: {black} of {raw} bytes");
+        let mut flat = Film::new(64, 64);
+        flat.pixels.fill(Vec3::new(0.25, 0.5, 1.0));
+        let flat = encode_exr(&flat).unwrap().len();
+        assert!(flat * 10 < raw * 6, "flat film: {flat} of {raw} bytes");
+        let noisy = encode_exr(&random_film(64, 64, 3)).unwrap().len();
+        assert!(
+            noisy > raw * 9 / 10 && noisy < raw * 11 / 10,
+            "{noisy} of {raw}"
+        );
     }
 
     #[test]

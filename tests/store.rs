@@ -1194,8 +1194,10 @@ fn resume_matches_uninterrupted_on(scene: &str, method: MethodSettings) {
             std::fs::read(film::frame_path(&plain, f, "exr")).unwrap()
         );
     }
-    // Files deleted from --out come back from the store on the next run.
+    // Files deleted from --out come back from the store on the next run,
+    // with no temporary file left beside them.
     std::fs::remove_file(film::frame_path(&resumed, 2, "exr")).unwrap();
+    std::fs::remove_file(film::frame_path(&resumed, 3, "png")).unwrap();
     let mut sj = StoreJob {
         store: &store,
         job: store.begin_job(&job_spec, false).unwrap(),
@@ -1204,6 +1206,16 @@ fn resume_matches_uninterrupted_on(scene: &str, method: MethodSettings) {
         .unwrap();
     assert_eq!((s.resumed, s.frames), (6, 0));
     assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
+    assert_eq!(
+        std::fs::read(film::frame_path(&plain, 3, "png")).unwrap(),
+        std::fs::read(film::frame_path(&resumed, 3, "png")).unwrap()
+    );
+    let hidden: Vec<_> = std::fs::read_dir(&resumed)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect();
+    assert!(hidden.is_empty(), "{hidden:?}");
 }
 
 #[test]

@@ -440,12 +440,6 @@ fn restore_frame_files(job: &StoreJob, frame: u32, out_dir: &Path) -> Result<()>
     let Some(bytes) = job.store.frame_exr(job.job.id, frame)? else {
         return Ok(());
     };
-    // PNG first, EXR last (renamed into place): as `film::write_frame`, the
-    // EXR's presence means the frame's files are complete.
-    let temp = out_dir.join(format!(
-        ".frame_{frame:04}.exr.restore-{}",
-        std::process::id()
-    ));
     let film = film::decode_exr(&bytes).with_context(|| {
         format!(
             "store {}: the stored EXR of frame {frame} of job {:?} is damaged \
@@ -454,12 +448,9 @@ fn restore_frame_files(job: &StoreJob, frame: u32, out_dir: &Path) -> Result<()>
             job.job.spec.name
         )
     })?;
-    std::fs::write(&temp, &bytes)
-        .and_then(|()| std::fs::File::open(&temp)?.sync_all())
-        .with_context(|| format!("cannot write {}", temp.display()))?;
-    film::write_png(&film, &film::frame_path(out_dir, frame, "png"))?;
-    std::fs::rename(&temp, &exr_path)
-        .with_context(|| format!("cannot write {}", exr_path.display()))?;
+    // PNG first, the stored EXR bytes last (renamed into place), as a
+    // render writes them.
+    film::write_encoded_frame(&film, &bytes, out_dir, frame)?;
     Ok(())
 }
 
