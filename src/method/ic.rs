@@ -343,18 +343,21 @@ impl IrradianceCaching {
             // Four interleaved sub-batches per level: candidates of one batch
             // are 2·step pixels apart, so few of them cover each other.
             for (ox, oy) in [(0, 0), (1, 1), (1, 0), (0, 1)] {
-                let mut batch = Vec::new();
+                // Pixel indices only: the candidates are read in parallel
+                // by `create_records`, not copied here on one thread.
+                let mut pixels = Vec::new();
                 for y in (oy * step..h).step_by(2 * step) {
                     for x in (ox * step..w).step_by(2 * step) {
                         let i = y * w + x;
                         if !visited[i] {
                             visited[i] = true;
-                            if let (Some(c), Some(at)) = (candidates[i], clearances[i]) {
-                                batch.push((c, at));
-                            }
+                            pixels.push(i);
                         }
                     }
                 }
+                let batch = pixels
+                    .par_iter()
+                    .filter_map(|&i| Some((candidates[i]?, clearances[i]?)));
                 self.create_records(ctx, cache, batch, track, &annotate, inserted);
             }
             step /= 2;
@@ -367,13 +370,13 @@ impl IrradianceCaching {
         &self,
         ctx: &FrameContext,
         cache: &mut IrradianceCache,
-        batch: Vec<(Candidate, LookupPoint)>,
+        batch: impl ParallelIterator<Item = (Candidate, LookupPoint)>,
         track: Option<&TrackPaths<'_>>,
         annotate: &(impl Fn(&Gathered, Option<GatherTracks>) -> X + Sync),
         inserted: &mut Vec<X>,
     ) {
+        // In the batch's order (rayon's `collect` keeps it).
         let needed: Vec<Candidate> = batch
-            .into_par_iter()
             .filter(|(_, at)| !cache.covers(at))
             .map(|(c, _)| c)
             .collect();
@@ -685,9 +688,8 @@ fn candidate_clearances(
     candidates: &[Option<Candidate>],
 ) -> Vec<Option<LookupPoint>> {
     let points: Vec<ShadingPoint> = candidates
-        .iter()
-        .flatten()
-        .map(|c| (c.point.position, c.point.normal))
+        .par_iter()
+        .filter_map(|c| c.as_ref().map(|c| (c.point.position, c.point.normal)))
         .collect();
     let mut lookups = measure_clearance(ctx, &points).into_iter();
     candidates

@@ -16,6 +16,7 @@ use crate::backend::gpu::cache_splat::{CacheSplat, GpuLookup, PreparedCache};
 use crate::backend::{Hit, Ray};
 use crate::cache::{Interpolated, IrradianceCache, LookupPoint};
 use glam::Vec3;
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// A shading point and its unit normal.
@@ -25,15 +26,19 @@ pub(crate) type ShadingPoint = (Vec3, Vec3);
 /// by one ray from `p` along `n` (the nearest hit's distance, or
 /// [`LookupPoint::OPEN`] on a miss): what keeps a record from being used
 /// under a surface it never saw ([`crate::cache::IrradianceRecord::weight`]).
+///
+/// The rays are made and read in parallel, as they are traced: the fill
+/// stage measures a whole frame's pixel centres at once, and on the
+/// render's one thread that kept the other threads waiting.
 pub(crate) fn measure_clearance(ctx: &FrameContext, points: &[ShadingPoint]) -> Vec<LookupPoint> {
     let rays: Vec<Ray> = points
-        .iter()
+        .par_iter()
         .map(|&(p, n)| Ray::new(ctx.ray_offset.origin(p, n, n), n, 0.0, f32::INFINITY))
         .collect();
     let mut hits = vec![Hit::MISS; rays.len()];
     ctx.backend.closest_hit(&rays, &mut hits);
     points
-        .iter()
+        .par_iter()
         .zip(&hits)
         .map(|(&(p, n), hit)| {
             let clearance = if hit.is_hit() {
