@@ -688,8 +688,9 @@ fn candidate_clearances(
     candidates: &[Option<Candidate>],
 ) -> Vec<Option<LookupPoint>> {
     let points: Vec<ShadingPoint> = candidates
-        .par_iter()
-        .filter_map(|c| c.as_ref().map(|c| (c.point.position, c.point.normal)))
+        .iter()
+        .flatten()
+        .map(|c| (c.point.position, c.point.normal))
         .collect();
     let mut lookups = measure_clearance(ctx, &points).into_iter();
     candidates
