@@ -82,7 +82,7 @@ use crate::cache::gather::{
 };
 use crate::cache::{IrradianceCache, IrradianceRecord, LookupPoint, RecordId};
 use crate::film::Film;
-use crate::integrator::trace_radiance_parallel;
+use crate::integrator::{trace_radiance_parallel, RadianceQuery};
 use crate::material::Bsdf;
 use crate::sampling::{streams, Frame, Rng, SampleKey};
 use crate::store::rgbe::PackedSample;
@@ -471,17 +471,27 @@ impl TemporallyCoherentGathering {
             })
             .collect();
         let mut ranges: Vec<Range<usize>> = Vec::with_capacity(picks.len());
-        let mut queries = Vec::new();
-        for ((r, (point, frame)), cells) in alive.iter().zip(&picks) {
-            let start = queries.len();
-            for &cell in cells {
-                let rng = Rng::new(self.key(ctx, streams::RECORD, r, cell));
-                queries.push(cell_query(point, ctx.ray_offset, frame, strata, cell, rng));
-            }
-            ranges.push(start..queries.len());
+        let mut shots: Vec<(usize, u32)> = Vec::new();
+        for (i, cells) in picks.iter().enumerate() {
+            ranges.push(shots.len()..shots.len() + cells.len());
+            shots.extend(cells.iter().map(|&cell| (i, cell)));
         }
+        // Made in parallel (on the render's one thread they kept the other
+        // threads waiting), collected from an indexed iterator: an
+        // unindexed `collect` gathers pieces in the worker threads' heaps,
+        // which kept them and raised the peak memory.
+        let queries: Vec<RadianceQuery> = shots
+            .par_iter()
+            .map(|&(i, cell)| {
+                let (r, (point, frame)) = &alive[i];
+                let rng = Rng::new(self.key(ctx, streams::RECORD, r, cell));
+                cell_query(point, ctx.ray_offset, frame, strata, cell, rng)
+            })
+            .collect();
         stats.samples_reshot = queries.len() as u64;
-        let results = trace_radiance_parallel(ctx, self.settings.ic.gather_length, queries.clone());
+        // A hit's distance is its `t` times its ray's length.
+        let ray_lengths: Vec<f32> = queries.par_iter().map(|q| q.ray.dir().length()).collect();
+        let results = trace_radiance_parallel(ctx, self.settings.ic.gather_length, queries);
         alive
             .into_par_iter()
             .zip(picks)
@@ -490,13 +500,13 @@ impl TemporallyCoherentGathering {
                 for s in &mut r.samples {
                     *s = s.older();
                 }
-                for (&cell, (q, result)) in cells
+                for (&cell, (length, result)) in cells
                     .iter()
-                    .zip(queries[range.clone()].iter().zip(&results[range]))
+                    .zip(ray_lengths[range.clone()].iter().zip(&results[range]))
                 {
                     let hit = result.hit;
                     let (distance, object) = if hit.is_hit() {
-                        (hit.t * q.ray.dir().length(), hit.object)
+                        (hit.t * length, hit.object)
                     } else {
                         (f32::INFINITY, u32::MAX)
                     };
