@@ -34,27 +34,28 @@
 //! Peak resident memory of `radcache render --method M --size S --frames
 //! 0..2 -q --out DIR` (built-in cube-in-box, release build, CPU backend
 //! after `auto`'s GPU probe, 2 threads, `/usr/bin/time -f %M`, one run
-//! each) against [`peak_bytes`], MiB; `ic`, `trc` and `tcg` since the
-//! render pass frees the rays and hits it does not keep, the others before
-//! (their rows did not change with it):
+//! each) against [`peak_bytes`], MiB, measured again at c986b14 (before,
+//! from earlier builds: `path` 70 and 94, `ic` 78, 119 and 234, `trc` 377,
+//! 935 and 1,233, `tcg` 229, 655 and 811, `movies` 463, 1,087, 1,451 and
+//! 752):
 //!
 //! | method | size | measured | estimated | ratio |
 //! | --- | ---: | ---: | ---: | ---: |
-//! | `path` | 256² | 70 | 9 | 0.13 |
-//! | `path` | 1024² | 94 | 23 | 0.24 |
-//! | `ic` | 256² | 78 | 15 | 0.19 |
-//! | `ic` | 512² | 119 | 37 | 0.31 |
+//! | `path` | 256² | 68 | 9 | 0.13 |
+//! | `path` | 1024² | 99 | 23 | 0.23 |
+//! | `ic` | 256² | 76 | 15 | 0.20 |
+//! | `ic` | 512² | 118 | 37 | 0.31 |
 //! | `ic` | 1024² | 234 | 124 | 0.53 |
-//! | `trc` | 256² | 377 | 125 | 0.33 |
-//! | `trc` | 512² | 935 | 476 | 0.51 |
-//! | `trc` | 1024² | 1,233 | 535 | 0.43 |
-//! | `tcg` | 256² | 229 | 125 | 0.55 |
+//! | `trc` | 256² | 448 | 125 | 0.28 |
+//! | `trc` | 512² | 1,059 | 476 | 0.45 |
+//! | `trc` | 1024² | 1,365 | 535 | 0.39 |
+//! | `tcg` | 256² | 218 | 125 | 0.57 |
 //! | `tcg` | 512² | 655 | 476 | 0.73 |
-//! | `tcg` | 1024² | 811 | 535 | 0.66 |
-//! | `movies` | 256² | 463 | 30 | 0.06 |
-//! | `movies` | 512² | 1,087 | 96 | 0.09 |
-//! | `movies` | 1024² | 1,451 | 357 | 0.25 |
-//! | `movies --movies-texels-per-pixel 2` | 256² | 752 | 30 | 0.04 |
+//! | `tcg` | 1024² | 818 | 535 | 0.65 |
+//! | `movies` | 256² | 552 | 30 | 0.05 |
+//! | `movies` | 512² | 1,130 | 96 | 0.08 |
+//! | `movies` | 1024² | 1,502 | 357 | 0.24 |
+//! | `movies --movies-texels-per-pixel 2` | 256² | 841 | 30 | 0.04 |
 //!
 //! (`movies` measured again once its item buffer held its samples' hits
 //! alone and its movies their texels in the band, their direct part RGBE
