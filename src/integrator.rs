@@ -576,7 +576,7 @@ fn trace_radiance_into(
         });
     }
     let mut hits = Vec::new();
-    let mut continuations = Vec::new();
+    let mut continuations = Vec::with_capacity(paths.len());
     let mut shadows = PendingShadows::default();
     let mut untaken = Untaken::default();
     // An abandoned frame's paths end at the next bounce: their results are
@@ -595,16 +595,17 @@ fn trace_radiance_into(
             let next = shade(ctx, length, path, ray, hit, radiance, &mut shadows);
             continuations.push(next);
         }
-        // Compact: continuing paths and their rays stay, the others are done.
+        // Compact in place (`retain` visits the paths once, in order):
+        // continuing paths and their rays stay, the others are done.
         rays.clear();
-        paths = paths
-            .drain(..)
-            .zip(continuations.drain(..))
-            .filter_map(|(path, next)| {
-                rays.extend(next);
-                next.map(|_| path)
-            })
-            .collect();
+        let mut next = continuations.iter();
+        paths.retain(|_| match next.next() {
+            Some(&Some(ray)) => {
+                rays.push(ray);
+                true
+            }
+            _ => false,
+        });
     }
     // The last bounce's light samples.
     shadows.prepare();

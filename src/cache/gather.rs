@@ -130,7 +130,13 @@ pub fn samples_from_results(
     queries: &[RadianceQuery],
     results: &[RadianceResult],
 ) -> HemisphereSamples {
-    let mut s = HemisphereSamples::default();
+    let n = queries.len();
+    let mut s = HemisphereSamples {
+        direction: Vec::with_capacity(n),
+        radiance: Vec::with_capacity(n),
+        distance: Vec::with_capacity(n),
+        object: Vec::with_capacity(n),
+    };
     for (q, r) in queries.iter().zip(results) {
         let dir = q.ray.dir();
         s.direction.push(dir);
