@@ -55,42 +55,46 @@ fn render_defaults_to_trc() {
 }
 
 /// `--threads N` sets how many worker threads render, and the frames do
-/// not depend on it: `trc` on the moving cube (its records live across
-/// frames; its render tiles and gather tasks are cut per thread, here 192,
-/// 96 and 64 pixels a tile) writes the same EXR bytes on 1, 2 and 3
-/// threads.
+/// not depend on it: `trc` and `tcg` on the moving cube (their records
+/// live across frames; their render tiles and gather tasks are cut per
+/// thread, here 192, 96 and 64 pixels a tile, and `tcg`'s shots are made
+/// in parallel) write the same EXR bytes on 1, 2 and 3 threads.
 #[test]
 fn frames_are_the_same_on_any_number_of_threads() {
     let dir = tempfile::tempdir().unwrap();
-    let mut frames = Vec::new();
-    for threads in ["1", "2", "3"] {
-        let out = dir.path().join(threads);
-        let (code, stdout, stderr) = radcache(&[
-            "render",
-            "--threads",
-            threads,
-            "--backend",
-            "cpu",
-            "--frames",
-            "0..3",
-            "--size",
-            "24x16",
-            "--spp",
-            "2",
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        assert_eq!(code, 0, "{threads} threads: {stderr}");
-        let noun = if threads == "1" { "thread" } else { "threads" };
-        let said = format!("{stdout}{stderr}");
-        assert!(said.contains(&format!("cpu ({threads} {noun})")), "{said}");
-        let bytes: Vec<Vec<u8>> = (0..3)
-            .map(|f| std::fs::read(out.join(format!("frame_{f:04}.exr"))).unwrap())
-            .collect();
-        frames.push(bytes);
+    for method in ["trc", "tcg"] {
+        let mut frames = Vec::new();
+        for threads in ["1", "2", "3"] {
+            let out = dir.path().join(method).join(threads);
+            let (code, stdout, stderr) = radcache(&[
+                "render",
+                "--method",
+                method,
+                "--threads",
+                threads,
+                "--backend",
+                "cpu",
+                "--frames",
+                "0..3",
+                "--size",
+                "24x16",
+                "--spp",
+                "2",
+                "--out",
+                out.to_str().unwrap(),
+            ]);
+            assert_eq!(code, 0, "{method} on {threads} threads: {stderr}");
+            let noun = if threads == "1" { "thread" } else { "threads" };
+            let said = format!("{stdout}{stderr}");
+            assert!(said.contains(&format!("cpu ({threads} {noun})")), "{said}");
+            let bytes: Vec<Vec<u8>> = (0..3)
+                .map(|f| std::fs::read(out.join(format!("frame_{f:04}.exr"))).unwrap())
+                .collect();
+            frames.push(bytes);
+        }
+        assert!(frames[0] == frames[1], "{method}: 1 and 2 threads differ");
+        assert!(frames[0] == frames[2], "{method}: 1 and 3 threads differ");
     }
-    assert!(frames[0] == frames[1], "1 and 2 threads differ");
-    assert!(frames[0] == frames[2], "1 and 3 threads differ");
 }
 
 #[test]

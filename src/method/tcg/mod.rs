@@ -471,10 +471,11 @@ impl TemporallyCoherentGathering {
             })
             .collect();
         let mut ranges: Vec<Range<usize>> = Vec::with_capacity(picks.len());
-        let mut shots: Vec<(usize, u32)> = Vec::new();
+        // (record, cell) of each shot: 8 bytes, made on this thread.
+        let mut shots: Vec<(u32, u32)> = Vec::new();
         for (i, cells) in picks.iter().enumerate() {
             ranges.push(shots.len()..shots.len() + cells.len());
-            shots.extend(cells.iter().map(|&cell| (i, cell)));
+            shots.extend(cells.iter().map(|&cell| (i as u32, cell)));
         }
         // Made in parallel (on the render's one thread they kept the other
         // threads waiting), collected from an indexed iterator: an
@@ -483,7 +484,7 @@ impl TemporallyCoherentGathering {
         let queries: Vec<RadianceQuery> = shots
             .par_iter()
             .map(|&(i, cell)| {
-                let (r, (point, frame)) = &alive[i];
+                let (r, (point, frame)) = &alive[i as usize];
                 let rng = Rng::new(self.key(ctx, streams::RECORD, r, cell));
                 cell_query(point, ctx.ray_offset, frame, strata, cell, rng)
             })
