@@ -358,12 +358,12 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
-/// A synthetic step 9 → 10: checks that it runs after the real steps
-/// from 1 to 9 (the stored version is 9).
+/// A synthetic step 10 → 11: checks that it runs after the real steps
+/// from 1 to 10 (the stored version is 10).
 fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 9u32.to_be_bytes() {
+    if version.as_ref() != 10u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -373,8 +373,8 @@ fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 10: the
-    // real 1 → 2, …, 8 → 9, then 9 → 10, in order.
+    // A version-1 store (fixture) brought to a synthetic version 11: the
+    // real 1 → 2, …, 9 → 10, then 10 → 11, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -383,15 +383,15 @@ fn older_schema_is_migrated_in_order() {
     });
     v1_fixture(&path, &method);
     let mut steps = migrate::MIGRATIONS.to_vec();
-    assert_eq!(steps.len(), 8);
+    assert_eq!(steps.len(), 9);
     steps.push(Migration {
-        from: 9,
+        from: 10,
         name: "synthetic",
         run: add_marker,
     });
-    // Without the step for 9 → 10 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 10, &steps[..8]));
-    assert!(msg.contains("no migration from schema 9 to 10"), "{msg}");
+    // Without the step for 10 → 11 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 11, &steps[..9]));
+    assert!(msg.contains("no migration from schema 10 to 11"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -400,8 +400,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 10, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 10);
+        let store = Store::open_with(&path, false, 11, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 11);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -410,9 +410,9 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 9) now refuses the upgraded store.
+    // This build (version 10) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 10 is newer"), "{msg}");
+    assert!(msg.contains("schema version 11 is newer"), "{msg}");
 }
 
 /// A `trc` and a `tcg` job, each stopped after frame 2 of 0..6, their
@@ -466,22 +466,12 @@ fn schema_6_carried_state_is_migrated_and_resumes_bit_identically() {
     };
     let converted = {
         let db = open_raw(&path);
-        let state = db.open_tree("state").unwrap();
+        let job_index = |job| ids.iter().position(|&id| id == job).unwrap();
         let mut n = [0; 2];
-        for item in state.iter() {
-            let (k, v) = item.unwrap();
-            let Some((job, _)) = keys::parse_state_record(&k) else {
-                continue;
-            };
-            let mut aligned = rkyv::util::AlignedVec::<16>::new();
-            aligned.extend_from_slice(&v);
-            let mut value: radcache::store::schema::StateRecordValue =
-                rkyv::from_bytes::<_, rkyv::rancor::Error>(&aligned).unwrap();
-            let i = ids.iter().position(|&id| id == job).unwrap();
-            value.data = (jobs[i].2)(&value.data).unwrap();
-            let bytes = rkyv::to_bytes::<rkyv::rancor::Error>(&value).unwrap();
-            state.insert(k, bytes.as_slice()).unwrap();
-            n[i] += 1;
+        for job in rewrite_state_records(&db, |job, _, data| {
+            Some((jobs[job_index(job)].2)(data).unwrap())
+        }) {
+            n[job_index(job)] += 1;
         }
         radcache::store::v7::downgrade_stats_to_schema_7(&db).unwrap();
         migrate::write_version(&path, &db.open_tree("meta").unwrap(), 6).unwrap();
@@ -609,19 +599,12 @@ fn schema_6_state_bytes_under_schema_7_are_a_clear_error() {
     run().unwrap();
     {
         let db = open_raw(&path);
-        let state = db.open_tree("state").unwrap();
-        let (k, v) = state
-            .iter()
-            .map(Result::unwrap)
-            .find(|(k, _)| keys::parse_state_record(k).is_some())
-            .unwrap();
-        let mut aligned = rkyv::util::AlignedVec::<16>::new();
-        aligned.extend_from_slice(&v);
-        let mut value: radcache::store::schema::StateRecordValue =
-            rkyv::from_bytes::<_, rkyv::rancor::Error>(&aligned).unwrap();
-        value.data = radcache::method::trc::downgrade_to_schema_6_record(&value.data).unwrap();
-        let bytes = rkyv::to_bytes::<rkyv::rancor::Error>(&value).unwrap();
-        state.insert(k, bytes.as_slice()).unwrap();
+        let mut first = true;
+        let converted = rewrite_state_records(&db, |_, _, data| {
+            let downgrade = radcache::method::trc::downgrade_to_schema_6_record;
+            std::mem::take(&mut first).then(|| downgrade(data).unwrap())
+        });
+        assert_eq!(converted.len(), 1);
         db.flush().unwrap();
     }
     // A longer range resumes from the state of frame 2.
@@ -642,6 +625,69 @@ fn schema_6_state_bytes_under_schema_7_are_a_clear_error() {
         msg.contains("tree `state`") && msg.contains("record"),
         "{msg}"
     );
+}
+
+/// A `tcg` job's state refers to the samples of the records its frame
+/// stored: with frame 2's record block gone, a resume after frame 2 is
+/// refused naming the record. The same state holding its records' samples,
+/// as schemas 6–9 wrote it, resumes once the store is opened (and brought
+/// to the current schema), with no record block to read, and renders the
+/// frames an uninterrupted render does, byte for byte.
+#[test]
+fn a_schema_9_tcg_state_holding_its_samples_resumes_bit_identically() {
+    let method = MethodSettings::Tcg(TcgSettings {
+        ic: small_ic_settings(),
+        ..TcgSettings::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let fs = renderer(&method).settings.clone();
+    let spec = render::job_spec("g", &source, &method, &fs, 0..6).unwrap();
+    let out = |kind: &str| dir.path().join(kind);
+    let run = |range: std::ops::Range<u32>| {
+        let store = Store::open(&path).unwrap();
+        let job = store.begin_job(&spec, false).unwrap();
+        let mut sj = StoreJob { store: &store, job };
+        let mut r = renderer(&method);
+        render::render_job_to_dir(&mut r, range, &out("resumed"), true, Some(&mut sj))
+    };
+    render::render_to_dir(&mut renderer(&method), 0..6, &out("plain"), true).unwrap();
+    run(0..3).unwrap();
+    let (job, stored) = {
+        let store = Store::open(&path).unwrap();
+        let job = store.job("g").unwrap().unwrap().id;
+        (job, store.frame_record_samples(job, 2).unwrap())
+    };
+    assert!(!stored.is_empty());
+    {
+        let db = open_raw(&path);
+        let records = db.open_tree("records").unwrap();
+        assert!(records.remove(keys::frame(job, 2)).unwrap().is_some());
+        db.flush().unwrap();
+    }
+    let msg = format!("{:#}", run(0..6).map(|_| ()).unwrap_err());
+    assert!(
+        msg.contains("tree `state`") && msg.contains("has no samples among those its frame stored"),
+        "{msg}"
+    );
+    {
+        let db = open_raw(&path);
+        let converted = rewrite_state_records(&db, |_, id, data| {
+            Some(radcache::method::tcg::with_samples_as_schema_9(data, &stored[&id]).unwrap())
+        });
+        assert_eq!(converted.len(), stored.len());
+        migrate::write_version(&path, &db.open_tree("meta").unwrap(), 9).unwrap();
+        db.flush().unwrap();
+    }
+    let s = run(0..6).unwrap();
+    assert_eq!((s.resumed, s.frames), (3, 3));
+    assert_eq!(
+        exr_files(&out("plain"), 0..6),
+        exr_files(&out("resumed"), 0..6)
+    );
+    let version = Store::open(&path).unwrap().schema_version().unwrap();
+    assert_eq!(version, migrate::CURRENT_VERSION);
 }
 
 #[test]
@@ -2616,6 +2662,31 @@ where
     let mut aligned = rkyv::util::AlignedVec::<16>::new();
     aligned.extend_from_slice(bytes);
     rkyv::from_bytes::<T, rkyv::rancor::Error>(&aligned).unwrap()
+}
+
+/// Puts `convert(job, id, bytes)` in place of the method's bytes of each
+/// carried state record of `db` for which it gives some; the jobs of those
+/// it converted, one entry a record.
+fn rewrite_state_records(
+    db: &sled::Db,
+    mut convert: impl FnMut(u64, u64, &[u8]) -> Option<Vec<u8>>,
+) -> Vec<u64> {
+    let state = db.open_tree("state").unwrap();
+    let mut converted = Vec::new();
+    for item in state.iter() {
+        let (k, v) = item.unwrap();
+        let Some((job, id)) = keys::parse_state_record(&k) else {
+            continue;
+        };
+        let mut value: radcache::store::schema::StateRecordValue = decoded(&v);
+        if let Some(data) = convert(job, id, &value.data) {
+            value.data = data;
+            let bytes = rkyv::to_bytes::<rkyv::rancor::Error>(&value).unwrap();
+            state.insert(k, bytes.as_slice()).unwrap();
+            converted.push(job);
+        }
+    }
+    converted
 }
 
 /// A schema-3 store at `path` (the schema-1 fixture brought to 3 by the

@@ -354,6 +354,14 @@ pub trait Method: Send {
         false
     }
 
+    /// Whether the method's state refers to the samples of the records
+    /// its frames store rather than holding a copy (`tcg`, which puts every
+    /// record's samples in both each frame): a resume then hands it those
+    /// of the state's frame in [`MethodState::record_samples`].
+    fn state_refers_to_record_samples(&self) -> bool {
+        false
+    }
+
     /// Continues from `state`, the state after frame `state.frame` as
     /// the method reported it frame by frame: the next frame rendered is
     /// `state.frame + 1`, exactly as if the frames before had just been
@@ -415,6 +423,10 @@ pub struct MethodState {
     pub frame: u32,
     pub global: Vec<u8>,
     pub records: Vec<(crate::cache::RecordId, Vec<u8>)>,
+    /// The samples of the records frame `frame` stored, by id, for a
+    /// method whose state refers to them
+    /// ([`Method::state_refers_to_record_samples`]); empty for the others.
+    pub record_samples: std::collections::BTreeMap<u64, Vec<crate::store::rgbe::PackedSample>>,
 }
 
 /// A state [`Method::restore_state`] cannot continue from.

@@ -302,7 +302,11 @@ pub(super) fn resume(
         let looks_ahead = renderer.looks_ahead();
         if prefix as usize == frames.len() && rendered_as_one_chain(j, frames, looks_ahead)? {
             // Every frame done by this range's chain: nothing to render.
-        } else if let Some((state, resumed)) = resumable_state(j, frames, prefix, looks_ahead)? {
+        } else if let Some((mut state, resumed)) = resumable_state(j, frames, prefix, looks_ahead)?
+        {
+            if renderer.state_refers_to_record_samples() {
+                state.record_samples = j.store.frame_record_samples(j.job.id, state.frame)?;
+            }
             renderer
                 .restore_state(state)
                 .map_err(|e| j.store.state_error(j.job.id, e))?;

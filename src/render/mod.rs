@@ -145,6 +145,12 @@ impl Renderer {
         self.method.looks_ahead()
     }
 
+    /// Whether the method's state refers to its records' stored samples
+    /// ([`Method::state_refers_to_record_samples`]).
+    pub fn state_refers_to_record_samples(&self) -> bool {
+        self.method.state_refers_to_record_samples()
+    }
+
     /// Continues the method from a stored state ([`Method::restore_state`]).
     pub fn restore_state(
         &mut self,

@@ -9,8 +9,9 @@
 //! frame's texture movies), `0007_radiance_records_in_state.md` (no key
 //! changed; `trc`'s and `tcg`'s state records hold radiance records),
 //! `0008_frame_footprint.md` (no key changed; a frame's `stats` value
-//! grew) and `0009_record_sources.md` (`sources` holds the sources of a
-//! frame's radiance records). The version this build writes is
+//! grew), `0009_record_sources.md` (`sources` holds the sources of a
+//! frame's radiance records) and `0010_tcg_state_refers_to_samples.md`
+//! (no key changed; a `tcg` record's state no longer holds its samples). The version this build writes is
 //! [`super::migrate::CURRENT_VERSION`].
 //!
 //! | tree      | key                                   | bytes |

@@ -13,7 +13,7 @@ use super::{keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 9;
+pub const CURRENT_VERSION: u32 = 10;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -67,6 +67,11 @@ pub const MIGRATIONS: &[Migration] = &[
         from: 8,
         name: "0009_record_sources",
         run: super::v8::migrate_to_v9,
+    },
+    Migration {
+        from: 9,
+        name: "0010_tcg_state_refers_to_samples",
+        run: super::v9::migrate_to_v10,
     },
 ];
 

@@ -10,7 +10,8 @@
 //!   `migrations/0005_log_generations.md`, `migrations/0006_movies.md`,
 //!   `migrations/0007_radiance_records_in_state.md`,
 //!   `migrations/0008_frame_footprint.md`,
-//!   `migrations/0009_record_sources.md`).
+//!   `migrations/0009_record_sources.md`,
+//!   `migrations/0010_tcg_state_refers_to_samples.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
 //! - Bulk values are zstd-compressed and live in the sample log, whose
@@ -32,7 +33,9 @@
 //!   the next frame, as of the job's last frame: each frame writes only
 //!   its changes (records put and removed, and the head), and a resume
 //!   loads it ([`Store::load_state`]) instead of rendering the finished
-//!   frames again.
+//!   frames again. A `tcg` record's state refers to the samples its
+//!   version in the same frame's record block holds
+//!   ([`Store::frame_record_samples`]): each frame stores them all.
 //! - Bytes of the log no value references any more (a job restarted with
 //!   `--force`, a frame written again) stay until [`compact`] rewrites the
 //!   log without them.
@@ -63,6 +66,7 @@ pub mod v5;
 pub mod v6;
 pub mod v7;
 pub mod v8;
+pub mod v9;
 
 use meta::read_meta_u64;
 use rkyv::api::high::{HighDeserializer, HighSerializer, HighValidator};

@@ -4,6 +4,7 @@
 use super::samples::{self, decompress, SampleBlock};
 use super::schema::{FrameRecordsValue, RecordBlock, RecordValue};
 use super::{decode_value, keys, PackedSample, Store, StoreError, MAX_BLOCK_RECORDS};
+use std::collections::BTreeMap;
 
 impl Store {
     /// Where the records written in `frame` of `job` lie in the sample log
@@ -177,6 +178,19 @@ impl Store {
             Ok(i) => self.samples_of(&records[i], &keys::record(job, frame, id)),
             Err(_) => Ok(Vec::new()),
         }
+    }
+
+    /// The samples of every record written in `frame` of `job`, by id
+    /// (a `tcg` job's resume: its state refers to them,
+    /// `migrations/0010_tcg_state_refers_to_samples.md`).
+    pub fn frame_record_samples(
+        &self,
+        job: u64,
+        frame: u32,
+    ) -> Result<BTreeMap<u64, Vec<PackedSample>>, StoreError> {
+        (self.frame_records(job, frame)?.iter())
+            .map(|r| Ok((r.id, self.samples_of_record(job, frame, r)?)))
+            .collect()
     }
 
     /// The samples of record `r`, read from `frame`'s records of `job`

@@ -32,6 +32,7 @@ impl Store {
             frame: head.frame,
             global: head.global,
             records,
+            record_samples: Default::default(),
         }))
     }
 

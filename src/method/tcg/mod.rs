@@ -64,7 +64,10 @@ mod select;
 mod stale;
 mod state;
 
-pub use state::{downgrade_to_schema_6_record, is_radiance_record, upgrade_schema_6_record};
+pub use state::{
+    downgrade_to_schema_6_record, is_radiance_record, upgrade_schema_6_record,
+    with_samples_as_schema_9,
+};
 
 use super::arrivals::{moving_bounds, OwnBounds};
 use super::carried;
@@ -599,15 +602,18 @@ impl TemporallyCoherentGathering {
         stats.cache_bytes = (cache.memory_bytes()
             + records.iter().map(TcgRecord::memory_bytes).sum::<usize>()
             + self.still.memory_bytes()) as u64;
+        // Every record's samples may have changed: all are stored again,
+        // compressed on every core, and the states refer to them.
+        // Compressed twice on the render's thread alone (the state held a
+        // copy), a job of the default render took 1.9–2.0× its time without `--job`
+        // (`benches/HISTORY.md`, "tcg's samples stored once").
         self.kept = self.keep.then(|| FrameRecords {
             records: records.iter().map(|r| r.record.clone()).collect(),
-            samples: records
-                .iter()
+            samples: (records.par_iter())
                 .map(|r| SampleBlock::from_packed(&r.samples))
                 .collect(),
             strata: self.settings.ic.strata,
             last_frames: Vec::new(),
-            // Every record's samples may have changed: all are put again.
             state: Some(StateChanges {
                 global: carried::encode_next_id(self.next_id),
                 put: records
@@ -714,6 +720,12 @@ impl Method for TemporallyCoherentGathering {
         true
     }
 
+    /// Every frame stores each record's samples in its version, which the
+    /// state refers to instead of holding a copy.
+    fn state_refers_to_record_samples(&self) -> bool {
+        true
+    }
+
     /// Continues after frame `state.frame` from the records alive then, in
     /// id order (cache order: survivors keep their order and new records
     /// get increasing ids).
@@ -722,7 +734,7 @@ impl Method for TemporallyCoherentGathering {
         let (records, next_id) = carried::restore(
             "tcg",
             &s,
-            |bytes| state::decode_record(bytes, cells),
+            |bytes| state::decode_record(bytes, cells, &s.record_samples),
             |r| r.record.id,
         )?;
         self.records = records;

@@ -3,10 +3,12 @@
 //! validated when read back. A record's state is what its next frame is
 //! computed from: where it was made (its candidate and its object's
 //! transform then), its radius as last clamped, whether a pixel used it,
-//! and its samples, zstd-compressed in their 8-byte form. Its irradiance
-//! and gradients are not kept: every frame computes them again from the
-//! samples. The layout is part of the store schema (`migrations/`):
-//! changing it needs a migration. Schema 7
+//! and its samples: since schema 10
+//! (`migrations/0010_tcg_state_refers_to_samples.md`) those of the
+//! record's version the same frame stores, before that a copy in the
+//! state. Its irradiance and gradients are not kept: every frame computes
+//! them again from the samples. The layout is part of the store schema
+//! (`migrations/`): changing it needs a migration. Schema 7
 //! (`migrations/0007_radiance_records_in_state.md`) added a radiance record's
 //! material after what schema 6 stored; [`upgrade_schema_6_record`]
 //! converts a schema-6 record.
@@ -16,10 +18,12 @@ use crate::cache::gather::GatherPoint;
 use crate::cache::IrradianceRecord;
 use crate::method::carried::check_record_geometry;
 use crate::method::ic::Candidate;
+use crate::store::rgbe::PackedSample;
 use crate::store::samples::SampleBlock;
 use crate::store::{aligned, decode_value, encode};
 use glam::{Mat4, Vec3};
 use rkyv::rancor;
+use std::collections::BTreeMap;
 
 #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
 struct RecordState {
@@ -50,9 +54,12 @@ struct SampledState {
     samples_zstd: Vec<u8>,
 }
 
+/// The state of `r` but its samples, which the record's version stored by
+/// the same frame holds (schema 10: a sample count of 0 and no bytes say
+/// so; a frame stores every record's version, and states before schema 10
+/// held a copy of the samples, `migrations/0010_tcg_state_refers_to_samples.md`).
 pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
     let c = &r.candidate;
-    let block = SampleBlock::from_packed(&r.samples);
     let sampled = SampledState {
         id: r.record.id,
         created_frame: r.record.created_frame,
@@ -66,8 +73,8 @@ pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
         footprint: c.footprint,
         object_to_world: r.object_to_world.to_cols_array(),
         used: r.used,
-        sample_count: block.count,
-        samples_zstd: block.zstd,
+        sample_count: 0,
+        samples_zstd: Vec::new(),
     };
     encode(&RecordState {
         sampled,
@@ -75,20 +82,35 @@ pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
     })
 }
 
-/// A record back from its bytes; its samples must be `cells` (the job's
-/// strata). Position, normal and irradiance are its creation point's and
-/// zero until its next frame computes them.
-pub(super) fn decode_record(bytes: &[u8], cells: usize) -> Result<TcgRecord, String> {
+/// A record back from its bytes; its samples are its own stored version's
+/// in `stored` (by id: those of the records its frame stored) or, in a
+/// state from before schema 10, held in the bytes; they must be `cells`
+/// (the job's strata). Position, normal and irradiance are its creation
+/// point's and zero until its next frame computes them.
+pub(super) fn decode_record(
+    bytes: &[u8],
+    cells: usize,
+    stored: &BTreeMap<u64, Vec<PackedSample>>,
+) -> Result<TcgRecord, String> {
     let RecordState { sampled: s, glossy } =
         decode_value::<RecordState>(bytes).map_err(|e| format!("tcg record state: {e}"))?;
-    if s.sample_count as usize != cells {
+    let samples = if s.sample_count == 0 && s.samples_zstd.is_empty() {
+        (stored.get(&s.id).cloned()).ok_or_else(|| {
+            format!(
+                "tcg record state: record {} has no samples among those its frame stored",
+                s.id
+            )
+        })?
+    } else {
+        SampleBlock::unpack_bytes(&s.samples_zstd, s.sample_count)
+            .map_err(|e| format!("tcg record state: samples: {e}"))?
+    };
+    if samples.len() != cells {
         return Err(format!(
             "tcg record state: {} samples, the job's strata have {cells} cells",
-            s.sample_count
+            samples.len()
         ));
     }
-    let samples = SampleBlock::unpack_bytes(&s.samples_zstd, s.sample_count)
-        .map_err(|e| format!("tcg record state: samples: {e}"))?;
     let object_to_world = Mat4::from_cols_array(&s.object_to_world);
     let point = GatherPoint {
         position: s.point_position.into(),
@@ -147,6 +169,16 @@ pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
     }))
 }
 
+/// A record's state holding `samples`, its samples, as schemas 6–9 wrote
+/// it, for tests of the resume from such a state.
+#[doc(hidden)]
+pub fn with_samples_as_schema_9(bytes: &[u8], samples: &[PackedSample]) -> Result<Vec<u8>, String> {
+    let mut s = decode_value::<RecordState>(bytes).map_err(|e| format!("tcg record state: {e}"))?;
+    let block = SampleBlock::from_packed(samples);
+    (s.sampled.sample_count, s.sampled.samples_zstd) = (block.count, block.zstd);
+    Ok(encode(&s))
+}
+
 /// A schema-7 irradiance record's bytes in the schema-6 layout, for tests
 /// of the migration.
 #[doc(hidden)]
@@ -161,7 +193,6 @@ pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::rgbe::PackedSample;
 
     fn record() -> TcgRecord {
         let point = GatherPoint {
@@ -198,31 +229,53 @@ mod tests {
         }
     }
 
-    /// What the next frame is computed from comes back as it was; a state
-    /// of other strata, a NaN point, a normal that is not a unit vector or
-    /// a radius of zero is refused with a message, and garbage too.
+    /// `r`'s samples as the store hands them to a resume: by id.
+    fn stored(r: &TcgRecord) -> BTreeMap<u64, Vec<PackedSample>> {
+        BTreeMap::from([(r.record.id, r.samples.clone())])
+    }
+
+    /// `r`'s state as schemas 6–9 stored it, holding its samples.
+    fn encoded_with_samples(r: &TcgRecord) -> Vec<u8> {
+        with_samples_as_schema_9(&encode_record(r), &r.samples).unwrap()
+    }
+
+    /// What the next frame is computed from comes back as it was, its
+    /// samples from its stored version (or, from before schema 10, from
+    /// the state itself); a state of other strata, one whose samples are
+    /// not stored, a NaN point, a normal that is not a unit vector or a
+    /// radius of zero is refused with a message, and garbage too.
     #[test]
     fn a_record_state_round_trips_and_bad_ones_are_refused() {
         let r = record();
-        let back = decode_record(&encode_record(&r), 12).unwrap();
-        assert_eq!(back.samples, r.samples);
-        assert_eq!(back.object_to_world, r.object_to_world);
-        assert_eq!(back.candidate.point.position, r.candidate.point.position);
-        assert_eq!(
-            (back.record.id, back.record.radius, back.used),
-            (7, 0.3, true)
-        );
-        assert!(decode_record(&encode_record(&r), 48)
+        let no_samples = BTreeMap::new();
+        for (bytes, samples) in [
+            (encode_record(&r), stored(&r)),
+            (encoded_with_samples(&r), no_samples.clone()),
+        ] {
+            let back = decode_record(&bytes, 12, &samples).unwrap();
+            assert_eq!(back.samples, r.samples);
+            assert_eq!(back.object_to_world, r.object_to_world);
+            assert_eq!(back.candidate.point.position, r.candidate.point.position);
+            assert_eq!(
+                (back.record.id, back.record.radius, back.used),
+                (7, 0.3, true)
+            );
+            assert!(decode_record(&bytes, 48, &samples)
+                .unwrap_err()
+                .contains("12 samples"));
+        }
+        assert!(encode_record(&r).len() < encoded_with_samples(&r).len());
+        assert!(decode_record(&encode_record(&r), 12, &no_samples)
             .unwrap_err()
-            .contains("12 samples"));
+            .contains("record 7 has no samples among those its frame stored"));
         let bad = |change: fn(&mut TcgRecord)| {
             let mut r = record();
             change(&mut r);
-            decode_record(&encode_record(&r), 12).unwrap_err()
+            decode_record(&encode_record(&r), 12, &stored(&r)).unwrap_err()
         };
         assert!(bad(|r| r.candidate.point.position.x = f32::NAN).contains("not finite"));
         assert!(bad(|r| r.candidate.point.normal = Vec3::ZERO).contains("unit length"));
         assert!(bad(|r| r.record.radius = 0.0).contains("radius"));
-        assert!(decode_record(b"garbage", 12).is_err());
+        assert!(decode_record(b"garbage", 12, &no_samples).is_err());
     }
 }
