@@ -7,6 +7,7 @@
 use radcache::cache::gather::Strata;
 use radcache::film;
 use radcache::method::ic::IcSettings;
+use radcache::method::tcg::TcgSettings;
 use radcache::method::trc::TrcSettings;
 use radcache::render::{self, FrameSettings, MethodSettings, Renderer, SceneSource, StoreJob};
 use radcache::store::compact::{self, Step};
@@ -28,6 +29,13 @@ fn trc() -> MethodSettings {
     t.ic.strata = Strata { theta: 4, phi: 8 };
     t.ic.spp = 1;
     MethodSettings::Trc(t)
+}
+
+fn tcg() -> MethodSettings {
+    let mut t = TcgSettings::default();
+    t.ic.strata = Strata { theta: 4, phi: 8 };
+    t.ic.spp = 1;
+    MethodSettings::Tcg(t)
 }
 
 fn renderer(method: &MethodSettings) -> Renderer {
@@ -348,11 +356,14 @@ fn exr_files(dir: &Path, frames: std::ops::Range<u32>) -> Vec<Vec<u8>> {
         .collect()
 }
 
-#[test]
-fn a_render_resumed_after_compaction_is_bit_identical_to_an_uninterrupted_one() {
+/// `method` (a stateful one) interrupted after frame 1, with orphans
+/// before its bytes in the log, is compacted and resumed: bit-identical to
+/// an uninterrupted render (a `tcg` state refers to the samples of its
+/// frame's records, which compaction moves).
+fn resumed_after_compaction_is_bit_identical(method: MethodSettings) {
     let dir = tempfile::tempdir().unwrap();
     let plain = dir.path().join("plain");
-    render::render_to_dir(&mut renderer(&trc()), 0..4, &plain, true).unwrap();
+    render::render_to_dir(&mut renderer(&method), 0..4, &plain, true).unwrap();
     let path = dir.path().join("db");
     let resumed = dir.path().join("resumed");
     {
@@ -362,14 +373,14 @@ fn a_render_resumed_after_compaction_is_bit_identical_to_an_uninterrupted_one() 
         // the resume).
         render_job(&store, "x", &ic(8), 0..2, &dir.path().join("x"), false);
         render_job(&store, "x", &ic(12), 0..2, &dir.path().join("x"), true);
-        render_job(&store, "t", &trc(), 2..3, &resumed, false);
-        render_job(&store, "t", &trc(), 0..2, &resumed, false);
+        render_job(&store, "t", &method, 2..3, &resumed, false);
+        render_job(&store, "t", &method, 0..2, &resumed, false);
         let report = compact::compact(&mut store, &hidden()).unwrap();
         assert!(report.before.unreferenced > 0);
         assert!(report.bytes_after < report.before.committed);
     }
     let store = Store::open(&path).unwrap();
-    render_job(&store, "t", &trc(), 0..4, &resumed, false);
+    render_job(&store, "t", &method, 0..4, &resumed, false);
     assert_eq!(exr_files(&plain, 0..4), exr_files(&resumed, 0..4));
     let job = store.job("t").unwrap().unwrap();
     for f in 0..4 {
@@ -380,6 +391,16 @@ fn a_render_resumed_after_compaction_is_bit_identical_to_an_uninterrupted_one() 
     }
     // The new frames went to the compacted log.
     assert_eq!(log_files(&path), vec!["samples.1.log".to_string()]);
+}
+
+#[test]
+fn a_trc_render_resumed_after_compaction_is_bit_identical_to_an_uninterrupted_one() {
+    resumed_after_compaction_is_bit_identical(trc());
+}
+
+#[test]
+fn a_tcg_render_resumed_after_compaction_is_bit_identical_to_an_uninterrupted_one() {
+    resumed_after_compaction_is_bit_identical(tcg());
 }
 
 fn radcache(args: &[&str], db: &Path) -> std::process::Output {
