@@ -11,8 +11,8 @@
 //! `0008_frame_footprint.md` (no key changed; a frame's `stats` value
 //! grew), `0009_record_sources.md` (`sources` holds the sources of a
 //! frame's radiance records) and `0010_tcg_state_refers_to_samples.md`
-//! (no key changed; a `tcg` record's state no longer holds its samples). The version this build writes is
-//! [`super::migrate::CURRENT_VERSION`].
+//! (no key changed; a `tcg` record's state no longer holds its samples).
+//! The version this build writes is [`super::migrate::CURRENT_VERSION`].
 //!
 //! | tree      | key                                   | bytes |
 //! |-----------|---------------------------------------|-------|

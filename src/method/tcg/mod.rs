@@ -605,8 +605,9 @@ impl TemporallyCoherentGathering {
         // Every record's samples may have changed: all are stored again,
         // compressed on every core, and the states refer to them.
         // Compressed twice on the render's thread alone (the state held a
-        // copy), a job of the default render took 1.9–2.0× its time without `--job`
-        // (`benches/HISTORY.md`, "tcg's samples stored once").
+        // copy), a job of the default render took 1.9–2.0× its time
+        // without `--job` (`benches/HISTORY.md`, "tcg's samples stored
+        // once").
         self.kept = self.keep.then(|| FrameRecords {
             records: records.iter().map(|r| r.record.clone()).collect(),
             samples: (records.par_iter())
