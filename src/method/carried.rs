@@ -26,7 +26,7 @@ pub(crate) fn encode_next_id(next_id: RecordId) -> Vec<u8> {
 pub(crate) fn restore<R>(
     method: &str,
     state: &MethodState,
-    decode: impl Fn(&[u8]) -> Result<R, String>,
+    mut decode: impl FnMut(&[u8]) -> Result<R, String>,
     id_of: impl Fn(&R) -> RecordId,
 ) -> Result<(Vec<R>, RecordId), StateError> {
     let next_id = decode_value::<GlobalState>(&state.global)

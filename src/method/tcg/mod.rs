@@ -730,12 +730,14 @@ impl Method for TemporallyCoherentGathering {
     /// Continues after frame `state.frame` from the records alive then, in
     /// id order (cache order: survivors keep their order and new records
     /// get increasing ids).
-    fn restore_state(&mut self, s: MethodState) -> Result<(), StateError> {
+    fn restore_state(&mut self, mut s: MethodState) -> Result<(), StateError> {
         let cells = self.settings.ic.strata.count();
+        // Each record takes its samples out: a resume holds them once.
+        let mut stored = std::mem::take(&mut s.record_samples);
         let (records, next_id) = carried::restore(
             "tcg",
             &s,
-            |bytes| state::decode_record(bytes, cells, &s.record_samples),
+            |bytes| state::decode_record(bytes, cells, &mut stored),
             |r| r.record.id,
         )?;
         self.records = records;

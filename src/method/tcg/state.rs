@@ -82,20 +82,20 @@ pub(super) fn encode_record(r: &TcgRecord) -> Vec<u8> {
     })
 }
 
-/// A record back from its bytes; its samples are its own stored version's
-/// in `stored` (by id: those of the records its frame stored) or, in a
-/// state from before schema 10, held in the bytes; they must be `cells`
-/// (the job's strata). Position, normal and irradiance are its creation
+/// A record back from its bytes; its samples are its own stored version's,
+/// taken out of `stored` (by id: those of the records its frame stored),
+/// or, in a state from before schema 10, held in the bytes; they must be
+/// `cells` (the job's strata). Position, normal and irradiance are its creation
 /// point's and zero until its next frame computes them.
 pub(super) fn decode_record(
     bytes: &[u8],
     cells: usize,
-    stored: &BTreeMap<u64, Vec<PackedSample>>,
+    stored: &mut BTreeMap<u64, Vec<PackedSample>>,
 ) -> Result<TcgRecord, String> {
     let RecordState { sampled: s, glossy } =
         decode_value::<RecordState>(bytes).map_err(|e| format!("tcg record state: {e}"))?;
     let samples = if s.sample_count == 0 && s.samples_zstd.is_empty() {
-        (stored.get(&s.id).cloned()).ok_or_else(|| {
+        stored.remove(&s.id).ok_or_else(|| {
             format!(
                 "tcg record state: record {} has no samples among those its frame stored",
                 s.id
@@ -252,7 +252,7 @@ mod tests {
             (encode_record(&r), stored(&r)),
             (encoded_with_samples(&r), no_samples.clone()),
         ] {
-            let back = decode_record(&bytes, 12, &samples).unwrap();
+            let back = decode_record(&bytes, 12, &mut samples.clone()).unwrap();
             assert_eq!(back.samples, r.samples);
             assert_eq!(back.object_to_world, r.object_to_world);
             assert_eq!(back.candidate.point.position, r.candidate.point.position);
@@ -260,22 +260,24 @@ mod tests {
                 (back.record.id, back.record.radius, back.used),
                 (7, 0.3, true)
             );
-            assert!(decode_record(&bytes, 48, &samples)
+            assert!(decode_record(&bytes, 48, &mut samples.clone())
                 .unwrap_err()
                 .contains("12 samples"));
         }
         assert!(encode_record(&r).len() < encoded_with_samples(&r).len());
-        assert!(decode_record(&encode_record(&r), 12, &no_samples)
-            .unwrap_err()
-            .contains("record 7 has no samples among those its frame stored"));
+        assert!(
+            decode_record(&encode_record(&r), 12, &mut no_samples.clone())
+                .unwrap_err()
+                .contains("record 7 has no samples among those its frame stored")
+        );
         let bad = |change: fn(&mut TcgRecord)| {
             let mut r = record();
             change(&mut r);
-            decode_record(&encode_record(&r), 12, &stored(&r)).unwrap_err()
+            decode_record(&encode_record(&r), 12, &mut stored(&r)).unwrap_err()
         };
         assert!(bad(|r| r.candidate.point.position.x = f32::NAN).contains("not finite"));
         assert!(bad(|r| r.candidate.point.normal = Vec3::ZERO).contains("unit length"));
         assert!(bad(|r| r.record.radius = 0.0).contains("radius"));
-        assert!(decode_record(b"garbage", 12, &no_samples).is_err());
+        assert!(decode_record(b"garbage", 12, &mut no_samples.clone()).is_err());
     }
 }
