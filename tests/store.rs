@@ -1937,6 +1937,65 @@ fn range_rendered_again_and_stopped(method: MethodSettings) {
     assert_eq!(run(5..10, u32::MAX), (5, 0), "done");
 }
 
+/// Frames are stored and written on a thread of their own while the next
+/// one renders. `after_frame` is told of each frame in order, once it is
+/// stored and its files are written. A frame whose files cannot be
+/// replaced (a directory put in the place of frame 3's EXR while frame 2
+/// is told of) ends the render with an error naming the file, and neither
+/// it nor the frame rendering meanwhile is stored or written; once the
+/// directory is gone the job resumes at frame 3 and its frames equal an
+/// uninterrupted render's.
+#[test]
+fn a_frame_that_cannot_be_written_ends_the_render_there_and_the_job_resumes_at_it() {
+    let method = quick_trc(TemporalGradients::Extrapolated);
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, out) = (dir.path().join("plain"), dir.path().join("out"));
+    render::render_to_dir(&mut renderer(&method), 0..6, &plain, true).unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let settings = renderer(&method).settings;
+    let spec = render::job_spec("j", &source, &method, &settings, 0..6).unwrap();
+    let mut sj = StoreJob {
+        store: &store,
+        job: store.begin_job(&spec, false).unwrap(),
+    };
+    let id = sj.job.id;
+    let blocker = film::frame_path(&out, 3, "exr");
+    let (mut told, mut stored_when_told) = (Vec::new(), Vec::new());
+    let err = render::render_job_to_dir_with(
+        &mut renderer(&method),
+        0..6,
+        &out,
+        true,
+        Some(&mut sj),
+        &mut |f| {
+            told.push(f);
+            let files = ["exr", "png"].map(|e| film::frame_path(&out, f, e).is_file());
+            stored_when_told
+                .push(files == [true, true] && store.frames_done(id).unwrap().contains(&f));
+            if f == 2 {
+                std::fs::create_dir(&blocker).unwrap();
+                std::fs::write(blocker.join("keep"), b"").unwrap();
+            }
+            true
+        },
+    )
+    .unwrap_err();
+    let said = format!("{err:#}");
+    assert!(said.contains("frame_0003.exr"), "{said}");
+    assert_eq!(told, [0, 1, 2]);
+    assert_eq!(stored_when_told, [true; 3]);
+    assert_eq!(store.frames_done(id).unwrap(), [0, 1, 2]);
+    assert_eq!(store.load_state(id).unwrap().unwrap().frame, 2);
+    assert!(!film::frame_path(&out, 4, "exr").exists());
+
+    std::fs::remove_dir_all(&blocker).unwrap();
+    let summary =
+        render::render_job_to_dir(&mut renderer(&method), 0..6, &out, true, Some(&mut sj)).unwrap();
+    assert_eq!((summary.resumed, summary.frames), (3, 3));
+    assert_eq!(exr_files(&plain, 0..6), exr_files(&out, 0..6));
+}
+
 #[test]
 fn trc_resumes_mid_window_from_stored_state_without_replay() {
     trc_resumes_from_stored_state(TemporalGradients::Extrapolated);

@@ -51,6 +51,10 @@ pub struct FrameContext<'a> {
     /// Set from another thread to abandon the frame in progress
     /// ([`crate::render::Renderer::abandon_flag`]).
     pub abandon: &'a AtomicBool,
+    /// Set when the render stopped after an earlier frame while this one
+    /// was in progress (that frame's write failed, or its caller said to
+    /// stop): this frame would be thrown away too.
+    pub render_stopped: &'a AtomicBool,
     /// How far rays leaving a surface start off it, for this scene's size.
     pub ray_offset: RayOffset,
     /// Where a method that made the snapshot of the next frame's time
@@ -92,7 +96,7 @@ impl FrameContext<'_> {
     /// is left of their work. One frame of an extreme request (4096² pixels
     /// at 65,536 spp) is days of work; a cancel must not wait for it.
     pub fn abandoned(&self) -> bool {
-        self.abandon.load(Ordering::Relaxed)
+        self.abandon.load(Ordering::Relaxed) || self.render_stopped.load(Ordering::Relaxed)
     }
 }
 

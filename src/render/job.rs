@@ -338,9 +338,9 @@ pub(super) fn resume(
 
 /// Commits rendered `frame` to job `j` in one batch: its EXR (`exr`,
 /// [`film::encode_exr`] of `film`), statistics, the records the method
-/// `kept` with their samples, and its state changes.
+/// `kept` with their samples, and its state changes, which a method that
+/// carries state (`stateful_method`, its name) must have kept.
 pub(super) fn store_frame(
-    renderer: &Renderer,
     j: &mut StoreJob,
     (film, exr): (&Film, &[u8]),
     frame: u32,
@@ -349,6 +349,7 @@ pub(super) fn store_frame(
     // The first frame of the render's chain of frames and, for a method
     // that looks ahead, its end: what the stored state is valid for.
     (chain_start, chain_end): (u32, Option<u32>),
+    stateful_method: Option<&str>,
 ) -> Result<()> {
     let mut kept = kept.unwrap_or_default();
     let mut samples = std::mem::take(&mut kept.samples).into_iter();
@@ -365,11 +366,8 @@ pub(super) fn store_frame(
             c
         })
         .collect();
-    if renderer.carries_state() && kept.state.is_none() {
-        bail!(
-            "method {} carries state but reported no state changes for frame {frame}",
-            renderer.method_name()
-        );
+    if let (Some(method), None) = (stateful_method, &kept.state) {
+        bail!("method {method} carries state but reported no state changes for frame {frame}");
     }
     let sources = FrameSourcesValue::of(&kept.records);
     let commit = FrameCommit {

@@ -13,7 +13,9 @@
 //! not have fitted, on any scene, and the refusal never stops one that
 //! would. At a frame's peak these are held at once:
 //! - the film, a [`Vec3`] a pixel, then beside it the PNG preview's 3
-//!   bytes a pixel while the frame is written;
+//!   bytes a pixel while the frame is written (on the writer thread, while
+//!   the next frame renders: counted once, as that write usually ends
+//!   before the next frame's film is made);
 //! - `trc` and `tcg`: the samples of still tiles kept for the next frame
 //!   ([`StillSamples`], within its budget of
 //!   [`StillSamples::BUDGET_BYTES`]), from frame to frame (the render

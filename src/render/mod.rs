@@ -16,24 +16,27 @@ use std::collections::BTreeSet;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::mpsc::{self, SyncSender};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 mod job;
 pub mod memory;
 mod progress;
 mod settings;
+mod writer;
 
+use job::resume;
 pub use job::{
     job_spec, job_spec_confined, job_spec_of, scene_identity, scene_identity_confined, StoreJob,
 };
-use job::{resume, store_frame};
 use progress::FrameProgress;
 pub(crate) use progress::{progress_bar, Heartbeat};
 pub use settings::{
     frame_runs, make_backend, parse_frame_range, parse_image_size, BackendChoice, FrameSettings,
     MethodSettings, SceneSource, FPS_RANGE, FRAME_LIMIT,
 };
+use writer::{FrameWriter, RenderedFrame};
 
 /// Renders frames of one scene with one method and one backend.
 pub struct Renderer {
@@ -49,6 +52,9 @@ pub struct Renderer {
     frame_end: Option<u32>,
     /// [`Self::abandon_flag`].
     abandon: Arc<AtomicBool>,
+    /// [`FrameContext::render_stopped`]: set by the writer of
+    /// [`render_job_to_dir_with`] when it stops, cleared as each starts.
+    render_stopped: Arc<AtomicBool>,
     /// The last frame's snapshot, whose static triangles the next frame
     /// takes ([`Scene::snapshot_from`]): `scene` must not change between
     /// frames.
@@ -79,6 +85,7 @@ impl Renderer {
             counts: MethodCalls::default(),
             frame_end: None,
             abandon: Arc::default(),
+            render_stopped: Arc::default(),
             last_snapshot: None,
             offered_snapshot: OnceLock::new(),
             scene_bounds: scene.bounds_at(0.0),
@@ -293,6 +300,7 @@ impl Renderer {
             edge_coverage_factor: self.settings.edge_coverage_factor,
             emitters_in_view: Vec::new(),
             abandon: &self.abandon,
+            render_stopped: &self.render_stopped,
             ray_offset: RayOffset::around(self.scene_bounds, snapshot.camera.position),
             next_snapshot: &self.offered_snapshot,
         };
@@ -570,13 +578,19 @@ pub fn render_job_to_dir(
 /// server's cancel and shutdown). So does [`Renderer::abandon_flag`], in the
 /// middle of a frame, which is then neither stored nor written. A stopped
 /// render is resumed like a crashed one.
+///
+/// Frames are stored and written on a thread of their own while the next
+/// one renders (module `writer`); `after_frame` runs there. A stop
+/// abandons the frame then rendering, which leaves the method's state
+/// garbage, as any abandoned frame does: only a fresh renderer (a resume)
+/// goes on.
 pub fn render_job_to_dir_with(
     renderer: &mut Renderer,
     frames: Range<u32>,
     out_dir: &Path,
     quiet: bool,
-    mut job: Option<&mut StoreJob>,
-    after_frame: &mut dyn FnMut(u32) -> bool,
+    job: Option<&mut StoreJob>,
+    after_frame: &mut (dyn FnMut(u32) -> bool + Send),
 ) -> Result<RenderSummary> {
     prepare_out_dir(out_dir)?;
     let done = match job.as_deref() {
@@ -585,56 +599,29 @@ pub fn render_job_to_dir_with(
     };
     check_frame_files_writable(out_dir, &frames, &done)?;
     renderer.keep_frame_records(job.is_some());
-    let mut progress = FrameProgress::new(frames.len() as u64, done.len() as u64, quiet);
+    let progress = Mutex::new(FrameProgress::new(
+        frames.len() as u64,
+        done.len() as u64,
+        quiet,
+    ));
     let start = Instant::now();
     let counts_before = renderer.backend().ray_counts();
-    let mut frame_stats = Vec::new();
     renderer.set_frame_end(Some(frames.end));
-    let chain = (frames.start, renderer.looks_ahead().then_some(frames.end));
-    for frame in frames.clone().filter(|f| !done.contains(f)) {
-        progress.start_frame(frame);
-        let film = renderer.try_render_frame(frame).map_err(|e| {
-            progress.abandon();
-            frame_failed_error(&e, job.is_some())
-        })?;
-        if renderer.abandoned() {
-            break; // Half rendered: neither stored nor written.
-        }
-        warn_if_not_finite(&progress, frame, &film);
-        let stats = renderer.last_frame_stats();
-        let kept = renderer.take_frame_records();
-        // Encoded once: the store keeps the bytes the file holds.
-        let exr = film::encode_exr(&film).map_err(|e| {
-            progress.abandon();
-            anyhow::anyhow!("cannot encode frame {frame} as EXR: {e}")
-        })?;
-        if let Some(j) = job.as_deref_mut() {
-            remove_frame_files(out_dir, frame)?;
-            store_frame(renderer, j, (&film, &exr), frame, &stats, kept, chain).map_err(|e| {
-                progress.abandon();
-                anyhow::anyhow!(
-                    "{e:#}\nframe {frame} was not saved, the frames finished before it were: \
-                     running the job again (once the cause is fixed, e.g. space freed) \
-                     resumes at frame {frame}"
-                )
-            })?;
-        }
-        film::write_encoded_frame(&film, &exr, out_dir, frame).map_err(|e| {
-            progress.abandon();
-            match job {
-                Some(_) => anyhow::anyhow!(
-                    "{e:#}\nframe {frame} is saved in the store: running the job again \
-                     writes its files from there and resumes after it"
-                ),
-                None => anyhow::Error::new(e),
-            }
-        })?;
-        frame_stats.push(stats);
-        progress.finish_frame(frame);
-        if !after_frame(frame) {
-            break;
-        }
-    }
+    renderer.render_stopped.store(false, Ordering::Relaxed);
+    let stopped = renderer.render_stopped.clone();
+    let frame_writer = FrameWriter {
+        out_dir,
+        job,
+        chain: (frames.start, renderer.looks_ahead().then_some(frames.end)),
+        stateful_method: renderer.carries_state().then(|| renderer.method_name()),
+        progress: &progress,
+        after_frame,
+        stopped: &stopped,
+    };
+    let to_render = frames.clone().filter(|f| !done.contains(f));
+    let written = render_and_write(renderer, to_render, frame_writer);
+    let progress = progress.into_inner().unwrap_or_else(|p| p.into_inner());
+    let frame_stats = written.inspect_err(|_| progress.abandon())?;
     progress.finish_and_clear();
     let counts = renderer.backend().ray_counts();
     Ok(RenderSummary {
@@ -648,6 +635,65 @@ pub fn render_job_to_dir_with(
         cache_unit: renderer.cache_unit(),
         lifespans_counted: renderer.lifespans_counted(),
     })
+}
+
+/// Renders `frames` on this thread while `frame_writer` stores and writes
+/// them on another; the statistics of the frames written, or the first
+/// error: the writer's, as it names the first frame not kept.
+fn render_and_write(
+    renderer: &mut Renderer,
+    frames: impl Iterator<Item = u32>,
+    frame_writer: FrameWriter,
+) -> Result<Vec<FrameStats>> {
+    let (progress, in_job) = (frame_writer.progress, frame_writer.job.is_some());
+    let (rendered, written) = std::thread::scope(|scope| {
+        // No queue: a rendered frame waits until the one before it is
+        // written, so at most two are held.
+        let (hand_over, rendered_frames) = mpsc::sync_channel(0);
+        let writing = std::thread::Builder::new()
+            .name("radcache-writer".into())
+            .spawn_scoped(scope, move || frame_writer.write_all(rendered_frames))
+            .context("cannot start the thread that writes the frames")?;
+        let rendered = render_frames(renderer, frames, progress, hand_over, in_job);
+        let written = writing.join();
+        anyhow::Ok((rendered, written.unwrap_or_else(|p| std::panic::resume_unwind(p))))
+    })?;
+    written.and_then(|stats| rendered.map(|()| stats))
+}
+
+/// Renders `frames` in order and hands each to the writer, until one fails
+/// (its error, for a job saying that the frames before it are kept), the
+/// writer stops, or the renderer is abandoned (the frame in progress is
+/// then thrown away).
+fn render_frames(
+    renderer: &mut Renderer,
+    frames: impl Iterator<Item = u32>,
+    progress: &Mutex<FrameProgress>,
+    hand_over: SyncSender<RenderedFrame>,
+    in_job: bool,
+) -> Result<()> {
+    for frame in frames {
+        let started = Instant::now();
+        writer::lock(progress).start_frame(frame);
+        let film = renderer.try_render_frame(frame);
+        writer::lock(progress).end_render();
+        let film = film.map_err(|e| frame_failed_error(&e, in_job))?;
+        if renderer.abandoned() || renderer.render_stopped.load(Ordering::Relaxed) {
+            break; // Half rendered: neither stored nor written.
+        }
+        warn_if_not_finite(&writer::lock(progress), frame, &film);
+        let rendered = RenderedFrame {
+            frame,
+            film,
+            stats: renderer.last_frame_stats(),
+            kept: renderer.take_frame_records(),
+            started,
+        };
+        if hand_over.send(rendered).is_err() {
+            break; // The writer stopped; it says why.
+        }
+    }
+    Ok(())
 }
 
 /// Makes `out_dir` (a file there is an error) and clears the temporaries
@@ -707,23 +753,6 @@ fn warn_if_not_finite(progress: &FrameProgress, frame: u32, film: &Film) {
             film.pixels.len()
         ));
     }
-}
-
-/// Removes the files of an earlier render of `frame`, EXR first, before
-/// the store takes the new one: an EXR in `out_dir` says the frame's files
-/// are complete, so a crash between the two leaves them missing (written
-/// back from the store on resume), not stale.
-fn remove_frame_files(out_dir: &Path, frame: u32) -> Result<()> {
-    for ext in ["exr", "png"] {
-        let old = film::frame_path(out_dir, frame, ext);
-        match std::fs::remove_file(&old) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                return Err(e).with_context(|| format!("cannot replace {}", old.display()));
-            }
-            _ => {}
-        }
-    }
-    Ok(())
 }
 
 /// A CPU renderer of built-in `scene` at `size × size`, for unit tests

@@ -27,7 +27,6 @@ pub(super) enum FrameProgress {
         /// rendering: the ETA is their mean time per frame.
         finished: u64,
         start: Instant,
-        frame_start: Instant,
         heartbeat: Heartbeat,
     },
     Quiet,
@@ -41,13 +40,11 @@ impl FrameProgress {
             return Self::Quiet;
         }
         if !std::io::stderr().is_terminal() {
-            let now = Instant::now();
             return Self::Lines {
                 len,
                 position: done,
                 finished: 0,
-                start: now,
-                frame_start: now,
+                start: Instant::now(),
                 heartbeat: Heartbeat::to_stderr(HEARTBEAT_PERIOD),
             };
         }
@@ -57,22 +54,27 @@ impl FrameProgress {
         Self::Bar(bar)
     }
 
+    /// Frame `frame` starts rendering.
     pub(super) fn start_frame(&mut self, frame: u32) {
         match self {
             Self::Bar(bar) => bar.set_message(format!("frame {frame}")),
-            Self::Lines {
-                frame_start,
-                heartbeat,
-                ..
-            } => {
-                *frame_start = Instant::now();
+            Self::Lines { heartbeat, .. } => {
                 heartbeat.begin(format!("frame {frame} still rendering"));
             }
             Self::Quiet => {}
         }
     }
 
-    pub(super) fn finish_frame(&mut self, frame: u32) {
+    /// The frame started last is rendered (or failed): the writer has it.
+    pub(super) fn end_render(&mut self) {
+        if let Self::Lines { heartbeat, .. } = self {
+            heartbeat.end();
+        }
+    }
+
+    /// Frame `frame`, whose render began at `started`, is stored and
+    /// written (the next one may be rendering by then).
+    pub(super) fn finish_frame(&mut self, frame: u32, started: Instant) {
         match self {
             Self::Bar(bar) => bar.inc(1),
             Self::Lines {
@@ -80,15 +82,13 @@ impl FrameProgress {
                 position,
                 finished,
                 start,
-                frame_start,
-                heartbeat,
+                ..
             } => {
-                heartbeat.end();
                 *position += 1;
                 *finished += 1;
                 let mut line = format!(
                     "frame {frame} done ({position}/{len}) in {:.2} s",
-                    frame_start.elapsed().as_secs_f64()
+                    started.elapsed().as_secs_f64()
                 );
                 let left = len.saturating_sub(*position);
                 if left > 0 {
