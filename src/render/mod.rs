@@ -53,7 +53,7 @@ pub struct Renderer {
     /// [`Self::abandon_flag`].
     abandon: Arc<AtomicBool>,
     /// [`FrameContext::render_stopped`]: set by the writer of
-    /// [`render_job_to_dir_with`] when it stops, cleared as each starts.
+    /// [`render_job_to_dir_with`] when it stops, cleared as that returns.
     render_stopped: Arc<AtomicBool>,
     /// The last frame's snapshot, whose static triangles the next frame
     /// takes ([`Scene::snapshot_from`]): `scene` must not change between
@@ -607,7 +607,6 @@ pub fn render_job_to_dir_with(
     let start = Instant::now();
     let counts_before = renderer.backend().ray_counts();
     renderer.set_frame_end(Some(frames.end));
-    renderer.render_stopped.store(false, Ordering::Relaxed);
     let stopped = renderer.render_stopped.clone();
     let frame_writer = FrameWriter {
         out_dir,
@@ -620,6 +619,8 @@ pub fn render_job_to_dir_with(
     };
     let to_render = frames.clone().filter(|f| !done.contains(f));
     let written = render_and_write(renderer, to_render, frame_writer);
+    // Only the frame in progress when the writer stopped is abandoned.
+    renderer.render_stopped.store(false, Ordering::Relaxed);
     let progress = progress.into_inner().unwrap_or_else(|p| p.into_inner());
     let frame_stats = written.inspect_err(|_| progress.abandon())?;
     progress.finish_and_clear();
@@ -774,6 +775,22 @@ pub(crate) fn test_renderer(scene: &str, size: u32) -> Renderer {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A render that `after_frame` stops writes the frames up to the stop,
+    /// and abandons only the frame then rendering: the renderer's next
+    /// frame is whole (path tracing keeps no state, so it equals a fresh
+    /// renderer's).
+    #[test]
+    fn a_stopped_render_abandons_only_the_frame_then_rendering() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut r = test_renderer("cube-in-box", 8);
+        let s = render_job_to_dir_with(&mut r, 0..4, dir.path(), true, None, &mut |f| f < 1);
+        assert_eq!(s.unwrap().frames, 2);
+        assert!(film::frame_path(dir.path(), 1, "exr").exists());
+        assert!(!film::frame_path(dir.path(), 2, "exr").exists());
+        let fresh = test_renderer("cube-in-box", 8).render_frame(3);
+        assert_eq!(r.render_frame(3).pixels, fresh.pixels);
+    }
 
     fn summary(phase_times: &[f64]) -> RenderSummary {
         RenderSummary {
