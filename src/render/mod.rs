@@ -656,8 +656,10 @@ fn render_and_write(
             .spawn_scoped(scope, move || frame_writer.write_all(rendered_frames))
             .context("cannot start the thread that writes the frames")?;
         let rendered = render_frames(renderer, frames, progress, hand_over, in_job);
-        let written = writing.join();
-        anyhow::Ok((rendered, written.unwrap_or_else(|p| std::panic::resume_unwind(p))))
+        let written = writing
+            .join()
+            .unwrap_or_else(|p| std::panic::resume_unwind(p));
+        anyhow::Ok((rendered, written))
     })?;
     written.and_then(|stats| rendered.map(|()| stats))
 }
