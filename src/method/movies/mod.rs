@@ -91,6 +91,7 @@ pub use direct::ShadowCounts;
 pub use direct::{paper_merge, MAX_SHADOW_SAMPLES};
 use glam::Vec3;
 use global::{GlobalPass, GlobalSettings};
+use movie::MovieIndex;
 pub use movie::{Movie, MovieKey};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -550,7 +551,12 @@ impl TextureMovies {
     /// The movie that holds the point a camera ray along `dir` hit, and
     /// the point in its patch's coordinates: the patches of the hit's side
     /// descended as [`patch::Needs::partition`] split them.
-    fn movie_at(&self, ctx: &FrameContext, dir: Vec3, hit: &Hit) -> Option<(&Movie, (f32, f32))> {
+    fn movie_at<'m>(
+        movies: &MovieIndex<'m>,
+        ctx: &FrameContext,
+        dir: Vec3,
+        hit: &Hit,
+    ) -> Option<(&'m Movie, (f32, f32))> {
         let (triangle, back) = seen_side(ctx, dir, hit)?;
         patch::descent((hit.u, hit.v)).find_map(|(patch, local)| {
             let key = MovieKey {
@@ -558,7 +564,7 @@ impl TextureMovies {
                 back,
                 patch,
             };
-            Some((self.movies.get(&key)?, local))
+            Some((movies.get(&key)?, local))
         })
     }
 
@@ -610,20 +616,27 @@ impl TextureMovies {
     fn render(&self, ctx: &FrameContext, tiles: Vec<Tile>, stats: &mut FrameStats) -> Film {
         let mut film = Film::new(ctx.width, ctx.height);
         let per_tile = self.tile_pixels(ctx) as usize;
+        let movies = MovieIndex::new(self.movies.values());
         let lookups: Vec<u64> = film
             .pixels
             .par_chunks_mut(per_tile)
             .zip(tiles)
             .map(|(out, tile)| {
                 debug_assert_eq!(out.len(), tile.count as usize);
-                self.render_tile(ctx, tile, out)
+                self.render_tile(ctx, &movies, tile, out)
             })
             .collect();
         stats.lookups = lookups.iter().sum();
         film
     }
 
-    fn render_tile(&self, ctx: &FrameContext, tile: Tile, out: &mut [Vec3]) -> u64 {
+    fn render_tile(
+        &self,
+        ctx: &FrameContext,
+        movies: &MovieIndex,
+        tile: Tile,
+        out: &mut [Vec3],
+    ) -> u64 {
         let spp = self.settings.spp.max(1);
         let streams = PixelStreams::PerFrame;
         let mut primary = match tile.hits {
@@ -652,7 +665,7 @@ impl TextureMovies {
                 continue;
             }
             let (ray, hit) = (&primary.rays[i], &primary.hits[i]);
-            if let Some((movie, (u, v))) = self.movie_at(ctx, ray.dir(), hit) {
+            if let Some((movie, (u, v))) = Self::movie_at(movies, ctx, ray.dir(), hit) {
                 lookups += 1;
                 radiance[i] += s.bsdf.diffuse_albedo() * FRAC_1_PI * movie.lookup(u, v);
             }

@@ -55,6 +55,44 @@ pub struct Movie {
     pub(super) stored_at: Option<u32>,
 }
 
+/// The movies of a frame, found by triangle: the render pass looks one up
+/// for every camera sample, at each level down the patch hierarchy, where
+/// the ordered map's searches took 7 % of `movies`' CPU time (`perf` of
+/// the default scene; this index's, 3.5 %). The movies are in [`MovieKey`]
+/// order, each triangle's together, so a triangle's are a slice searched
+/// by side and patch.
+pub(super) struct MovieIndex<'a> {
+    /// Triangle `t`'s movies are `movies[starts[t]..starts[t + 1]]`.
+    starts: Vec<u32>,
+    movies: Vec<&'a Movie>,
+}
+
+impl<'a> MovieIndex<'a> {
+    /// Indexes `movies`, in key order.
+    pub fn new(movies: impl Iterator<Item = &'a Movie>) -> Self {
+        let movies: Vec<&Movie> = movies.collect();
+        debug_assert!(movies.windows(2).all(|w| w[0].key < w[1].key));
+        let triangles = movies.last().map_or(0, |m| m.key.triangle as usize + 1);
+        let mut starts = vec![0u32; triangles + 1];
+        for m in &movies {
+            starts[m.key.triangle as usize + 1] += 1;
+        }
+        for t in 0..triangles {
+            starts[t + 1] += starts[t];
+        }
+        MovieIndex { starts, movies }
+    }
+
+    /// The movie of `key`, if the frame has it.
+    pub fn get(&self, key: &MovieKey) -> Option<&'a Movie> {
+        let t = key.triangle as usize;
+        let range = *self.starts.get(t)? as usize..*self.starts.get(t + 1)? as usize;
+        let of_triangle = &self.movies[range];
+        let found = of_triangle.binary_search_by(|m| m.key.cmp(key)).ok()?;
+        Some(of_triangle[found])
+    }
+}
+
 /// Texel `(i, j)` is stored when `i + j ≤ R + 1`.
 fn in_band(resolution: u32, i: u32, j: u32) -> bool {
     i + j <= resolution + 1
@@ -313,6 +351,47 @@ mod tests {
             triangle: 3,
             back: false,
             patch: Patch::ROOT,
+        }
+    }
+
+    /// The index finds exactly the movies the ordered map holds: each of
+    /// them, and none of the keys it lacks (other patches, the other side,
+    /// triangles without movies or past the frame's).
+    #[test]
+    fn movie_index_finds_what_the_map_holds() {
+        let patches = [
+            Patch::ROOT,
+            Patch::ROOT.child(1),
+            Patch::ROOT.child(3).child(2),
+        ];
+        let mut map = std::collections::BTreeMap::new();
+        for (triangle, back, patch) in [
+            (0, false, 0),
+            (0, true, 1),
+            (0, true, 2),
+            (2, false, 2),
+            (5, true, 0),
+        ] {
+            let key = MovieKey {
+                triangle,
+                back,
+                patch: patches[patch],
+            };
+            map.insert(key, Movie::open(key, 2, 0, false));
+        }
+        let index = MovieIndex::new(map.values());
+        for triangle in 0..8 {
+            for back in [false, true] {
+                for patch in patches.into_iter().chain([Patch::ROOT.child(0)]) {
+                    let key = MovieKey {
+                        triangle,
+                        back,
+                        patch,
+                    };
+                    let found = index.get(&key).map(|m| m.key);
+                    assert_eq!(found, map.get(&key).map(|m| m.key), "{key:?}");
+                }
+            }
         }
     }
 
