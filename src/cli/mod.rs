@@ -32,9 +32,9 @@ use std::process::ExitCode;
 )]
 pub struct Cli {
     /// Worker threads for rendering (render, bench, serve), 1 to 1024
-    /// [default: one per CPU core, or RAYON_NUM_THREADS]; the other commands
-    /// take the flag and render nothing. Frames are the same, bit for bit,
-    /// for any count.
+    /// [default: one per CPU core, or RAYON_NUM_THREADS]; one more stores
+    /// and writes finished frames. The other commands take the flag and
+    /// render nothing. Frames are the same, bit for bit, for any count.
     #[arg(long, global = true, allow_negative_numbers = true,
           value_parser = clap::value_parser!(u16).range(1..=MAX_THREADS as i64))]
     pub threads: Option<u16>,
