@@ -415,6 +415,22 @@ fn older_schema_is_migrated_in_order() {
     assert!(msg.contains("schema version 11 is newer"), "{msg}");
 }
 
+/// One `radcache render --job` run: the store at `path` opened, the job of
+/// `spec` begun (or continued) and its frames `range` rendered into `out`
+/// by a fresh renderer of `method`; the store is closed again after.
+fn run_stored_job(
+    path: &Path,
+    spec: &JobSpec,
+    method: &MethodSettings,
+    range: std::ops::Range<u32>,
+    out: &Path,
+) -> anyhow::Result<render::RenderSummary> {
+    let store = Store::open(path).unwrap();
+    let job = store.begin_job(spec, false).unwrap();
+    let mut sj = StoreJob { store: &store, job };
+    render::render_job_to_dir(&mut renderer(method), range, out, true, Some(&mut sj))
+}
+
 /// A `trc` and a `tcg` job, each stopped after frame 2 of 0..6, their
 /// carried state put back in the schema-6 layout (as a schema-6 build
 /// wrote it), are migrated when the store is opened, and the resumes
@@ -449,11 +465,7 @@ fn schema_6_carried_state_is_migrated_and_resumes_bit_identically() {
     let out = |name: &str, kind: &str| dir.path().join(format!("{name}-{kind}"));
     let run = |name: &str, method: &MethodSettings, range: std::ops::Range<u32>| {
         let spec = render::job_spec(name, &source, method, &fs, 0..6).unwrap();
-        let store = Store::open(&path).unwrap();
-        let job = store.begin_job(&spec, false).unwrap();
-        let mut sj = StoreJob { store: &store, job };
-        let dir = out(name, "resumed");
-        render::render_job_to_dir(&mut renderer(method), range, &dir, true, Some(&mut sj))
+        run_stored_job(&path, &spec, method, range, &out(name, "resumed"))
     };
     for (name, method, _) in &jobs {
         render::render_to_dir(&mut renderer(method), 0..6, &out(name, "plain"), true).unwrap();
@@ -583,20 +595,8 @@ fn schema_6_state_bytes_under_schema_7_are_a_clear_error() {
     let source = SceneSource::Builtin("cube-in-box".into());
     let fs = renderer(&method).settings.clone();
     let spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
-    let run = || {
-        let store = Store::open(&path).unwrap();
-        let job = store.begin_job(&spec, false).unwrap();
-        let mut sj = StoreJob { store: &store, job };
-        render::render_job_to_dir(
-            &mut renderer(&method),
-            0..3,
-            &dir.path().join("o"),
-            true,
-            Some(&mut sj),
-        )
-        .map(|_| ())
-    };
-    run().unwrap();
+    let out = dir.path().join("o");
+    run_stored_job(&path, &spec, &method, 0..3, &out).unwrap();
     {
         let db = open_raw(&path);
         let mut first = true;
@@ -608,19 +608,9 @@ fn schema_6_state_bytes_under_schema_7_are_a_clear_error() {
         db.flush().unwrap();
     }
     // A longer range resumes from the state of frame 2.
-    let store = Store::open(&path).unwrap();
-    let job = store.begin_job(&spec, false).unwrap();
-    let mut sj = StoreJob { store: &store, job };
-    let msg = render::render_job_to_dir(
-        &mut renderer(&method),
-        0..6,
-        &dir.path().join("o"),
-        true,
-        Some(&mut sj),
-    )
-    .map(|_| ())
-    .unwrap_err()
-    .to_string();
+    let msg = run_stored_job(&path, &spec, &method, 0..6, &out)
+        .unwrap_err()
+        .to_string();
     assert!(
         msg.contains("tree `state`") && msg.contains("record"),
         "{msg}"
@@ -645,13 +635,7 @@ fn a_schema_9_tcg_state_holding_its_samples_resumes_bit_identically() {
     let fs = renderer(&method).settings.clone();
     let spec = render::job_spec("g", &source, &method, &fs, 0..6).unwrap();
     let out = |kind: &str| dir.path().join(kind);
-    let run = |range: std::ops::Range<u32>| {
-        let store = Store::open(&path).unwrap();
-        let job = store.begin_job(&spec, false).unwrap();
-        let mut sj = StoreJob { store: &store, job };
-        let mut r = renderer(&method);
-        render::render_job_to_dir(&mut r, range, &out("resumed"), true, Some(&mut sj))
-    };
+    let run = |range| run_stored_job(&path, &spec, &method, range, &out("resumed"));
     render::render_to_dir(&mut renderer(&method), 0..6, &out("plain"), true).unwrap();
     run(0..3).unwrap();
     let (job, stored) = {
