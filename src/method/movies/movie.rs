@@ -57,7 +57,7 @@ pub struct Movie {
 
 /// The movies of a frame, found by triangle: the render pass looks one up
 /// for every camera sample, at each level down the patch hierarchy, where
-/// the ordered map's searches took 7 % of `movies`' CPU time (`perf` of
+/// the ordered map's searches took 5 % of `movies`' CPU time (`perf` of
 /// the default scene; this index's, 3.5 %). The movies are in [`MovieKey`]
 /// order, each triangle's together, so a triangle's are a slice searched
 /// by side and patch.
