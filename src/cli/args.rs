@@ -295,7 +295,7 @@ pub struct MoviesArgs {
     /// Global pass: links (gather rays) of a vertex that stands for a spacing squared of surface, at most 1024; one that stands for less (as most grid vertices do: their cells are at most a spacing along their longest edge) gets fewer in proportion, about half as many on most grids; then twice that on triangles the camera sees (less where the pass's link budget has no room), half on those it does not.
     #[arg(long, default_value_t = 128, allow_negative_numbers = true, value_parser = limits::LINKS.parser())]
     pub movies_links: u32,
-    /// Global pass: most bounces of indirect light (Jacobi iterations, at most 64; it stops sooner once they change it by under 0.1 %).
+    /// Global pass: most bounces of indirect light (Jacobi iterations, at most 64; it stops sooner once they change it by under 0.1 %); the bounces after the last are added as a geometric series once their decay has settled.
     #[arg(long, default_value_t = 64, allow_negative_numbers = true, value_parser = limits::BOUNCES.parser())]
     pub movies_bounces: u32,
 }

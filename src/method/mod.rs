@@ -258,8 +258,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // bound (`global::meshing_size`, 2026-12-02). 13: as every
         // method's next. 14: films past 128 pixels high are meshed at a
         // spacing smaller in proportion to their height
-        // (`view::film_share`, 2026-12-05).
-        "movies" => 14,
+        // (`view::film_share`, 2026-12-05). 15: the bounces the global
+        // pass's iteration stops before are added as a geometric series
+        // (`global::GeometricTail`, 2026-12-07).
+        "movies" => 15,
         // 2 (all methods): rays find the surfaces they meet nearer than
         // 1e-4, which the BVH traversal culled (`accel::NEAR_SHIFT`,
         // 2026-11-30); so `trc` and the render pass keep paths with
