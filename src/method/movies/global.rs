@@ -1097,12 +1097,11 @@ pub(super) fn pulled(u: f32, v: f32) -> (f32, f32) {
 /// to nothing, its corners told apart in its own space: `PassMesh::new`).
 pub const MESHED_AT: f32 = 0.0;
 
-/// Whether a Jacobi iteration from `before` to `after` changed the
-/// indirect light by at most [`CONVERGED`] of it. Summed in order, in
-/// `f64`: where it stops must not depend on the thread count.
 /// What one Jacobi iteration changed: per channel, the sum over vertices
 /// of the indirect light it added, and the sums of its size and of the
-/// indirect light after it.
+/// indirect light after it. Summed in order, in `f64`: where the
+/// iteration stops, and the tail it then adds, must not depend on the
+/// thread count.
 #[derive(Clone, Copy, Debug, Default)]
 struct Step {
     added: [f64; 3],
