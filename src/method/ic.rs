@@ -55,10 +55,15 @@ pub struct IcSettings {
     pub gradients: bool,
     /// Path length of pixel paths (glossy lobe, fallbacks).
     pub length: PathLength,
-    /// Path length of the record-gathering paths. Their first hit's direct
-    /// light carries most of a record's irradiance; deeper bounces carry
-    /// less, so roulette starts at once with a lower survival (unbiased,
-    /// about 2.5× fewer rays per gather sample in a typical room).
+    /// Path length of the record-gathering paths. Roulette starts at the
+    /// first hit, on the path's whole throughput (survival `min(max β,
+    /// 0.95)`): a dark surface ends most paths at once, a bright room keeps
+    /// them. Half the throughput (the default before `ic` revision 8) left
+    /// records noisier than the time it saved was worth: on cube-in-box
+    /// 1.36× the block bias and flicker in 0.76× the time, where more
+    /// strata would take 1.8× the time to quiet them as much,
+    /// and in a room of albedo 0.9 1.6× the block bias
+    /// (`benches/RESULTS.md`, "Roulette on the gather paths").
     pub gather_length: PathLength,
     /// How glossy lobes get their indirect light.
     #[serde(default)]
@@ -112,7 +117,7 @@ impl Default for IcSettings {
             length: PathLength::default(),
             gather_length: PathLength {
                 rr_start: 0,
-                survival: 0.5,
+                survival: 1.0,
                 ..PathLength::default()
             },
             glossy: GlossyLobe::Path,

@@ -213,11 +213,13 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // `a_t` there (`later::LitFrames`, 2026-12-02). 15: as every
         // method's next. 16: a record that lived one frame is dropped when
         // it expires, not replaced (`TemporalRecord::replaced_when_expired`,
-        // 2026-12-06).
-        "trc" => 16,
+        // 2026-12-06). 17: as `ic`'s 8.
+        "trc" => 17,
         // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6, 7: as
-        // below.
-        "ic" => 7,
+        // below. 8: the gather paths' roulette survives on their whole
+        // throughput, not half of it (`IcSettings::gather_length`,
+        // 2026-12-07).
+        "ic" => 8,
         // `tcg` 4: samples' ages count past 15 frames (to 1038), so the
         // `2^age` draw tells the oldest apart (2026-11-30). 5: a moving
         // record's samples are tested for stale light from where the
@@ -231,8 +233,8 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // light may have changed on any normal (`UnshadowedLights::change_at`),
         // and so are its neighbours across an edge
         // (`tcg::select::with_neighbours`, 2026-12-02). 12: as every
-        // method's next.
-        "tcg" => 12,
+        // method's next. 13: as `ic`'s 8.
+        "tcg" => 13,
         // `movies` 3: a kept link that missed everything covers its whole
         // ray, so an object that later moves far into it is seen
         // (`global::LinkReach`, 2026-11-30). 4: as every method's next.
