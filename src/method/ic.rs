@@ -60,7 +60,7 @@ pub struct IcSettings {
     /// 0.95)`): a dark surface ends most paths at once, a bright room keeps
     /// them. Half the throughput (the default before `ic` revision 8) left
     /// records noisier than the time it saved was worth: on cube-in-box
-    /// 1.36× the block bias and flicker in 0.76× the time, where more
+    /// 1.36× the block bias and flicker in 0.74× the CPU time, where more
     /// strata would take 1.8× the time to quiet them as much,
     /// and in a room of albedo 0.9 1.6× the block bias
     /// (`benches/RESULTS.md`, "Roulette on the gather paths").
