@@ -422,11 +422,11 @@ fn ic_keeps_the_ceiling_above_the_light_dark() {
 /// `π·ρ·Le/(1 − ρ)`: its error is the noise of its gathering paths alone.
 /// At ρ = 0.9 nine tenths of that light has bounced more than once, so the
 /// paths' Russian roulette decides it: ending them early (as a survival
-/// of half the throughput did) left them 5.5 % rms from the closed form, which the
-/// interpolation turns into blotches that do not average out. The bound
-/// is the noise of roulette on the whole throughput (3.6 % rms over these
-/// 30 records) with a quarter to spare; a mean error of 2 % is 3σ of the
-/// 30 records' mean.
+/// of half the throughput did, before `ic` revision 8) left the records
+/// 5.5 % rms from the closed form, noise the interpolation turns into
+/// blotches that do not average out. The bound is the noise of roulette
+/// on the whole throughput (3.6 % rms over these 30 records) with a
+/// quarter to spare; a mean error of 2 % is 3σ of the 30 records' mean.
 #[test]
 fn records_in_a_bright_furnace_are_unbiased_and_quiet() {
     let (albedo, le) = (0.9f32, 1.0f32);

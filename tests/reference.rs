@@ -241,7 +241,7 @@ fn caching_methods_match_spheres_reference() {
 /// 1.1–1.9 %, `tcg` 1.1–2.0 %, `movies` 0.9–1.2 % (`path` at 64 spp:
 /// 0.5 %); the bound is 1.5 times the largest. On 2026-12-07, at the
 /// frames this test takes: `ic` 0.6–0.9 %, `trc` 0.9–1.1 %, `tcg`
-/// 0.9–1.9 %, `movies` 0.6–0.7 %.
+/// 0.9–1.9 %, `movies` 0.5–0.7 %.
 #[test]
 fn caching_methods_match_l_hall_reference() {
     check_caching_methods("l_hall.glb", "l_hall", &[0, 11, 23], 0.03);
