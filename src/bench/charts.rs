@@ -219,7 +219,7 @@ fn plot(
         .draw()
         .map_err(|e| draw_err(&e))?;
 
-    let mut any = false;
+    let mut drawn: Vec<(f64, f64, String)> = Vec::new();
     for (i, (name, sweep)) in series(rows).into_iter().enumerate() {
         let mut points: Vec<(f64, f64, String)> = sweep
             .iter()
@@ -230,12 +230,13 @@ fn plot(
         if points.is_empty() {
             continue;
         }
-        any = true;
         points.sort_by(|a, b| a.0.total_cmp(&b.0));
         draw_sweep(&mut chart, name, Palette99::pick(i).to_rgba(), &points)
             .map_err(|e| draw_err(&e))?;
+        drawn.extend(points);
     }
-    if any {
+    draw_point_labels(&mut chart, &drawn).map_err(|e| draw_err(&e))?;
+    if !drawn.is_empty() {
         chart
             .configure_series_labels()
             .position(SeriesLabelPosition::UpperRight)
@@ -312,8 +313,8 @@ fn log_log_chart<'a>(
 }
 
 /// One method sweep: its points `(seconds, y, label)` joined in time
-/// order, each marked and labelled with its swept value, and a legend
-/// entry `name`.
+/// order and each marked, and a legend entry `name` (the labels are
+/// [`draw_point_labels`]'s, once every sweep's points are known).
 fn draw_sweep(
     chart: &mut LogLogChart,
     name: String,
@@ -333,12 +334,83 @@ fn draw_sweep(
                 + Circle::new((11, 0), 4, color.filled())
         });
     chart.draw_series((points.iter()).map(|&(x, y, _)| Circle::new((x, y), 4, color.filled())))?;
-    // A default run's point has no label: no empty text element for it.
-    let labelled = points.iter().filter(|p| !p.2.is_empty());
-    chart.draw_series(labelled.map(|(x, y, label)| {
-        EmptyElement::at((*x, *y)) + Text::new(label.clone(), (6, -16), ("sans-serif", 13))
+    Ok(())
+}
+
+/// Every sweep's points labelled with their swept values, each label where
+/// [`place_labels`] finds room (a default run's point has none: no empty
+/// text element for it).
+fn draw_point_labels(
+    chart: &mut LogLogChart,
+    points: &[(f64, f64, String)],
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
+    use plotters::prelude::*;
+    let at: Vec<(i32, i32)> = points
+        .iter()
+        .map(|p| chart.backend_coord(&(p.0, p.1)))
+        .collect();
+    let labels: Vec<(usize, &str)> = (points.iter().enumerate())
+        .filter(|(_, p)| !p.2.is_empty())
+        .map(|(i, p)| (i, p.2.as_str()))
+        .collect();
+    let offsets = place_labels(&at, &labels);
+    chart.draw_series(labels.iter().zip(offsets).map(|(&(i, label), offset)| {
+        let (x, y, _) = &points[i];
+        EmptyElement::at((*x, *y)) + Text::new(label.to_string(), offset, ("sans-serif", 13))
     }))?;
     Ok(())
+}
+
+/// Height of a point label in pixels (13-pixel sans-serif) and the width
+/// of one of its characters, about: digits are 0.56 em wide in the usual
+/// sans-serif faces.
+const LABEL_HEIGHT: i32 = 13;
+const LABEL_CHAR_WIDTH: i32 = 8;
+
+/// A box in pixels: left, top, right, bottom.
+type PixelBox = [i32; 4];
+
+fn overlaps(a: &PixelBox, b: &PixelBox) -> bool {
+    a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3]
+}
+
+/// Where each label goes, as the offset of its top-left corner from its
+/// point (`labels`: the index of the point in `points`, pixel positions,
+/// and the text). A label takes the first place around its point, in a
+/// fixed order (above right first), that covers no label placed before it
+/// and no point's marker; where none is free, the first place. Points of
+/// two sweeps close in time and error (`trc` and `tcg` among the moving
+/// balls) printed their values over each other with one place for all.
+fn place_labels(points: &[(i32, i32)], labels: &[(usize, &str)]) -> Vec<(i32, i32)> {
+    let markers: Vec<PixelBox> = (points.iter())
+        .map(|&(x, y)| [x - 5, y - 5, x + 5, y + 5])
+        .collect();
+    let mut placed: Vec<PixelBox> = Vec::with_capacity(labels.len());
+    let mut offsets = Vec::with_capacity(labels.len());
+    for &(i, text) in labels {
+        let (x, y) = points[i];
+        let width = LABEL_CHAR_WIDTH * text.chars().count() as i32;
+        let places = [
+            (6, -16),
+            (6, 4),
+            (-6 - width, -16),
+            (-6 - width, 4),
+            (-width / 2, -22),
+            (-width / 2, 9),
+        ];
+        let boxed = |(dx, dy): (i32, i32)| [x + dx, y + dy, x + dx + width, y + dy + LABEL_HEIGHT];
+        let free = |&place: &(i32, i32)| {
+            let b = boxed(place);
+            !placed
+                .iter()
+                .chain(&markers)
+                .any(|other| overlaps(&b, other))
+        };
+        let place = places.iter().copied().find(free).unwrap_or(places[0]);
+        placed.push(boxed(place));
+        offsets.push(place);
+    }
+    offsets
 }
 
 #[cfg(test)]
@@ -376,6 +448,33 @@ mod tests {
             sweep_of("at=0.1 max_life=5").0
         );
         assert_eq!(sweep_of("default"), ("", ""));
+    }
+
+    #[test]
+    fn labels_of_points_close_together_do_not_overlap() {
+        // Two sweeps' points 10 pixels apart, as `trc`'s and `tcg`'s
+        // among the moving balls, and one far away.
+        let points = [(300, 200), (310, 200), (600, 400)];
+        let labels = [(0, "0.2"), (1, "20"), (2, "5")];
+        let offsets = place_labels(&points, &labels);
+        let boxes: Vec<PixelBox> = (labels.iter().zip(&offsets))
+            .map(|(&(i, text), &(dx, dy))| {
+                let (x, y) = (points[i].0 + dx, points[i].1 + dy);
+                let width = LABEL_CHAR_WIDTH * text.len() as i32;
+                [x, y, x + width, y + LABEL_HEIGHT]
+            })
+            .collect();
+        assert!(!overlaps(&boxes[0], &boxes[1]), "{boxes:?}");
+        for (b, &(x, y)) in boxes.iter().zip(&points) {
+            for &(px, py) in &points {
+                assert!(
+                    !overlaps(b, &[px - 5, py - 5, px + 5, py + 5]),
+                    "{b:?} at ({x}, {y})"
+                );
+            }
+        }
+        // A lone point keeps the usual place, above right.
+        assert_eq!(offsets[2], (6, -16));
     }
 
     #[test]
