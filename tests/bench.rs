@@ -2,10 +2,11 @@
 //! a tiny end-to-end run.
 
 use radcache::bench::{
-    self, equal_error_table, interpolate_time_at_error, method_settings, temporal_pairs,
+    self, equal_error_table, from_csv, interpolate_time_at_error, method_settings, temporal_pairs,
     temporal_text, to_csv, BenchOptions, BenchRow, ErrorMeasure, MethodError, MethodSweep,
     CSV_HEADER,
 };
+use radcache::method::trc::estimate_error::EstimateError;
 use radcache::method::trc::TrcSettings;
 use radcache::render::SceneSource;
 
@@ -89,6 +90,123 @@ fn csv_quotes_fields_with_commas() {
         csv.lines().nth(1).unwrap().starts_with("\"a,b\",path"),
         "{csv}"
     );
+}
+
+/// `bench.csv` reads back into the rows that wrote it (`--replot`): every
+/// field, the optional ones empty or not, and names with commas, quotes
+/// and a newline.
+#[test]
+fn csv_reads_back_into_its_rows() {
+    let mut rows = vec![
+        row("path", "spp=4", 1.5, 0.25),
+        row("trc", "at=0.05 max_life=5", 0.75, 0.125),
+    ];
+    rows[0].scene = "a, \"quoted\"\nscene".into();
+    rows[1].render_pass_seconds = Some(0.5);
+    rows[1].records = 1234;
+    rows[1].peak_mem_mb = None;
+    rows[1].store_bytes = Some(987_654_321);
+    rows[1].flicker = Some(0.03125);
+    rows[1].flicker_surfaces = Some(0.0625);
+    rows[1].next_error = Some(EstimateError {
+        records: 77,
+        estimate: (0.5, 0.25),
+        constant: (0.75, 0.125),
+        lifespan: (3.5, 2.25),
+    });
+    assert_eq!(from_csv(&to_csv(&rows)).unwrap(), rows);
+    // Windows line ends read as well.
+    let crlf = to_csv(&rows[1..]).replace('\n', "\r\n");
+    assert_eq!(from_csv(&crlf).unwrap(), rows[1..]);
+}
+
+/// A CSV that is not what this build writes is refused, naming the line
+/// and the field, not read into the wrong fields.
+#[test]
+fn a_csv_that_does_not_read_is_a_clear_error() {
+    let good = to_csv(&[row("path", "spp=4", 1.5, 0.25)]);
+    let cases = [
+        (good.replace("rel_rmse,", "error,"), "line 1"),
+        (
+            good.replace(",1.500000,", ",fast,"),
+            "line 2: seconds is not a number: 'fast'",
+        ),
+        (
+            good.replace(",1.500000,", ",NaN,"),
+            "seconds is not a number",
+        ),
+        (good.replace(",100,", ",-3,"), "rays is not a whole number"),
+        (good.replace(",0.250000,", ",,"), "rel_rmse is empty"),
+        (
+            good.replace("cpu (2 threads)", "cpu, (2 threads)"),
+            "24 fields, the header has 23",
+        ),
+        (good.replace("\ns,", "\n\"s,"), "not closed"),
+    ];
+    for (text, expected) in cases {
+        let e = format!("{:#}", from_csv(&text).unwrap_err());
+        assert!(e.contains(expected), "{e} (expected {expected})");
+    }
+}
+
+/// `radcache bench --replot` draws an earlier bench's charts again from
+/// its CSV alone and prints its tables; a scene that is not a bench's
+/// name (it names chart files) and options that would render are refused.
+#[test]
+fn replot_draws_the_charts_of_a_csv_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = [
+        row("path", "spp=4", 1.5, 0.25),
+        row("path", "spp=16", 6.0, 0.125),
+        row("ic", "default", 2.0, 0.1),
+    ];
+    std::fs::write(dir.path().join("bench.csv"), to_csv(&rows)).unwrap();
+    let replot = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args(["bench", "--replot", "--out"])
+            .arg(dir.path())
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = replot(&[]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("spp=16") && stdout.contains("faster than path"),
+        "{stdout}"
+    );
+    for chart in ["error", "surface_error", "flicker", "surface_flicker"] {
+        let path = dir.path().join(format!("s_{chart}_vs_time.svg"));
+        let svg = std::fs::read_to_string(&path).unwrap();
+        assert!(svg.contains("<svg"), "{}", path.display());
+    }
+    assert!(
+        !stdout.contains("wrote") || !stdout.contains("bench.csv"),
+        "{stdout}"
+    );
+
+    let out = replot(&["--frames", "0..2"]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("cannot be used with"), "{stderr}");
+
+    let mut outside = rows[0].clone();
+    outside.scene = "../escaped".into();
+    std::fs::write(dir.path().join("bench.csv"), to_csv(&[outside])).unwrap();
+    let out = replot(&[]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("scene '../escaped' is not a name"),
+        "{stderr}"
+    );
+    let parent = dir.path().parent().unwrap();
+    assert!(!parent.join("escaped_error_vs_time.svg").exists());
 }
 
 #[test]

@@ -59,10 +59,10 @@ pub use charts::plot_scene;
 pub use methods::{method_settings, MethodError, MethodInfo, MethodSweep, RunSpec, METHODS};
 pub use report::{
     backend_pairs, backend_text, equal_error_table, equal_error_text, estimate_error_text,
-    interpolate_time_at_error, rounds_text, temporal_pairs, temporal_text, to_csv, to_table,
-    BenchRow, EqualError, ErrorMeasure, PathBound, CSV_HEADER,
+    from_csv, interpolate_time_at_error, rounds_text, temporal_pairs, temporal_text, to_csv,
+    to_table, BenchRow, EqualError, ErrorMeasure, PathBound, CSV_HEADER,
 };
-pub use run::{peak_memory_mb, reset_peak_memory, run, run_with, BenchReport};
+pub use run::{peak_memory_mb, replot, reset_peak_memory, run, run_with, BenchReport};
 
 use crate::render::{BackendChoice, SceneSource};
 use anyhow::{bail, Result};

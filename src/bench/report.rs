@@ -115,6 +115,123 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
     out
 }
 
+/// The rows of a `bench.csv` that [`to_csv`] wrote, for `radcache bench
+/// --replot`. Its first line must be [`CSV_HEADER`] (a CSV of another
+/// version is refused rather than read into the wrong fields); a field
+/// that does not read is an error naming its line and column.
+pub fn from_csv(text: &str) -> anyhow::Result<Vec<BenchRow>> {
+    let mut records = csv_records(text)?.into_iter();
+    let header = records.next().unwrap_or_default();
+    let expected: Vec<&str> = CSV_HEADER.split(',').collect();
+    if header != expected {
+        anyhow::bail!(
+            "line 1 is not the header this build writes (a bench.csv of another version?): \
+             expected {CSV_HEADER}"
+        );
+    }
+    (records.enumerate())
+        .filter(|(_, fields)| fields.iter().any(|f| !f.is_empty()))
+        .map(|(i, fields)| row_of(&fields).map_err(|e| anyhow::anyhow!("line {}: {e}", i + 2)))
+        .collect()
+}
+
+/// A CSV text's records, each a list of fields: fields in double quotes may
+/// hold commas, newlines and doubled quotes, as [`csv_field`] writes them.
+fn csv_records(text: &str) -> anyhow::Result<Vec<Vec<String>>> {
+    let (mut records, mut fields, mut field) = (Vec::new(), Vec::new(), String::new());
+    let mut chars = text.chars().peekable();
+    let mut quoted = false;
+    while let Some(c) = chars.next() {
+        match (quoted, c) {
+            (true, '"') if chars.peek() == Some(&'"') => {
+                chars.next();
+                field.push('"');
+            }
+            (true, '"') => quoted = false,
+            (true, c) => field.push(c),
+            (false, '"') if field.is_empty() => quoted = true,
+            (false, ',') => fields.push(std::mem::take(&mut field)),
+            (false, '\n') => {
+                fields.push(std::mem::take(&mut field));
+                records.push(std::mem::take(&mut fields));
+            }
+            (false, '\r') if chars.peek() == Some(&'\n') => {}
+            (false, c) => field.push(c),
+        }
+    }
+    if quoted {
+        anyhow::bail!("a quoted field is not closed before the end of the file");
+    }
+    if !field.is_empty() || !fields.is_empty() {
+        fields.push(field);
+        records.push(fields);
+    }
+    Ok(records)
+}
+
+/// One row from its CSV fields, in [`CSV_HEADER`]'s order.
+fn row_of(fields: &[String]) -> anyhow::Result<BenchRow> {
+    let columns: Vec<&str> = CSV_HEADER.split(',').collect();
+    if fields.len() != columns.len() {
+        anyhow::bail!("{} fields, the header has {}", fields.len(), columns.len());
+    }
+    let parse = |i: usize| -> anyhow::Result<Option<f64>> {
+        let f = fields[i].trim();
+        if f.is_empty() {
+            return Ok(None);
+        }
+        match f.parse::<f64>() {
+            Ok(v) if !v.is_nan() => Ok(Some(v)),
+            _ => anyhow::bail!("{} is not a number: '{f}'", columns[i]),
+        }
+    };
+    let need = |i: usize| parse(i)?.ok_or_else(|| anyhow::anyhow!("{} is empty", columns[i]));
+    let whole = |i: usize| -> anyhow::Result<Option<u64>> {
+        let f = fields[i].trim();
+        if f.is_empty() {
+            return Ok(None);
+        }
+        f.parse()
+            .map(Some)
+            .map_err(|_| anyhow::anyhow!("{} is not a whole number: '{f}'", columns[i]))
+    };
+    let need_whole = |i: usize| whole(i)?.ok_or_else(|| anyhow::anyhow!("{} is empty", columns[i]));
+    let next_error = match whole(15)? {
+        None => None,
+        Some(records) => {
+            let pair = |a: usize, b: usize| -> anyhow::Result<(f32, f32)> {
+                Ok((need(a)? as f32, need(b)? as f32))
+            };
+            Some(EstimateError {
+                records,
+                estimate: pair(16, 17)?,
+                constant: pair(18, 19)?,
+                lifespan: pair(20, 21)?,
+            })
+        }
+    };
+    Ok(BenchRow {
+        scene: fields[0].clone(),
+        method: fields[1].clone(),
+        settings: fields[2].clone(),
+        backend: fields[3].clone(),
+        frames: u32::try_from(need_whole(4)?)
+            .map_err(|_| anyhow::anyhow!("frames is out of range: '{}'", fields[4]))?,
+        seconds: need(5)?,
+        render_pass_seconds: parse(6)?,
+        rays: need_whole(7)?,
+        records: need_whole(8)?,
+        peak_mem_mb: parse(9)?,
+        rel_rmse: need(10)?,
+        rel_rmse_surfaces: parse(11)?,
+        block_bias: need(12)?,
+        flicker: parse(13)?,
+        flicker_surfaces: parse(14)?,
+        next_error,
+        store_bytes: whole(22)?,
+    })
+}
+
 /// The rows as an aligned table for the terminal.
 pub fn to_table(rows: &[BenchRow]) -> String {
     let header = [

@@ -131,6 +131,55 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
     })
 }
 
+/// `radcache bench --replot`: reads `dir/bench.csv` that an earlier bench
+/// wrote and draws its scenes' charts into `dir` again, rendering nothing
+/// (the charts' drawing may have changed since, or the CSV been edited or
+/// merged from several benches). The report's rows are the CSV's, in its
+/// order; it has no round times and writes no CSV.
+pub fn replot(dir: &Path) -> Result<BenchReport> {
+    let csv = dir.join("bench.csv");
+    let text =
+        std::fs::read_to_string(&csv).with_context(|| format!("cannot read {}", csv.display()))?;
+    let rows = super::from_csv(&text).with_context(|| format!("{}", csv.display()))?;
+    let mut scenes: Vec<&str> = Vec::new();
+    for row in &rows {
+        // The scene names chart files: a name a bench gave it, never a path.
+        if row.scene.is_empty() || sanitize(&row.scene) != row.scene {
+            bail!(
+                "{}: scene '{}' is not a name a bench gives (letters, digits, `._=-`)",
+                csv.display(),
+                row.scene
+            );
+        }
+        if !scenes.contains(&row.scene.as_str()) {
+            scenes.push(&row.scene);
+        }
+    }
+    let (mut charts, mut unwritten) = (Vec::new(), Vec::new());
+    for scene in scenes {
+        let of_scene: Vec<BenchRow> = (rows.iter())
+            .filter(|r| r.scene == scene)
+            .cloned()
+            .collect();
+        match plot_scene(dir, scene, &of_scene) {
+            Ok(written) => charts.extend(written),
+            Err(e) => unwritten.push(format!("{e:#}")),
+        }
+    }
+    Ok(BenchReport {
+        round_seconds: vec![Vec::new(); rows.len()],
+        rows,
+        csv: None,
+        charts,
+        unwritten,
+        // The CSV's figures are its bench's, which said so under its own
+        // tables where they were not per run: nothing to add of this
+        // process, which measured none.
+        peak_mem_per_run: true,
+        unfinished: Vec::new(),
+    })
+}
+
 /// Refuses, before anything renders, a bench that cannot run or would
 /// fail on the way; returns the scenes' labels.
 fn check_bench(opts: &BenchOptions) -> Result<Vec<String>> {

@@ -407,6 +407,16 @@ pub struct BenchArgs {
     /// Run even where a run's estimated peak memory at --size on its scene (a lower bound, as for `render`) is over the memory available, which is otherwise refused before anything renders.
     #[arg(long)]
     pub no_memory_check: bool,
+    /// Render nothing: read --out's bench.csv, which an earlier bench
+    /// wrote, print its tables and draw its charts into --out again (after
+    /// the CSV was edited or merged, or the charts' drawing changed). Goes
+    /// with --out and --quiet only.
+    #[arg(long, conflicts_with_all = [
+        "scenes", "methods", "frames", "size", "reference_spp", "fps", "seed",
+        "same_pattern", "estimate_error", "store_size", "backends", "repeat",
+        "no_memory_check",
+    ])]
+    pub replot: bool,
 }
 
 fn parse_bench_scene(s: &str) -> Result<SceneSource, String> {

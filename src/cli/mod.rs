@@ -169,6 +169,17 @@ fn bench_options(args: BenchArgs) -> bench::BenchOptions {
 /// with [`interrupt::Interrupted`] where a Ctrl-C stopped it before its
 /// last run.
 fn run_bench(args: BenchArgs) -> Result<()> {
+    if args.replot {
+        let report = bench::replot(&args.out)?;
+        print_bench(&report)?;
+        if !report.unwritten.is_empty() {
+            bail!(
+                "not every chart was written:\n  {}",
+                report.unwritten.join("\n  ")
+            );
+        }
+        return Ok(());
+    }
     let mut opts = bench_options(args);
     opts.stop = interrupt::stop_on_ctrl_c(interrupt::CtrlCWords {
         first: "stopping: the run in progress is abandoned; the runs finished are printed \
