@@ -237,7 +237,7 @@ pub struct TrcArgs {
     /// δt_max: longest life of a record in frames, t − t0 < δt_max (TRC Eq. 11; the paper uses 20 on Cube in a Box, 5 on Spheres).
     #[arg(long, default_value_t = 20, allow_negative_numbers = true, value_parser = limits::MAX_LIFE.parser())]
     pub trc_max_life: u32,
-    /// Temporal gradients (TRC §4.5): none, extrapolated from the estimate of E(t0+1) (Eq. 15–17, one pass), or interpolated towards the record's replacement (Eq. 18–20, two passes: frames come out up to δt_max frames of first pass late).
+    /// Temporal gradients (TRC §4.5): none, extrapolated from the estimate of E(t0+1) (Eq. 15, E's change alone, one pass), or interpolated towards the record's replacement (Eq. 18–20, two passes: frames come out up to δt_max frames of first pass late).
     #[arg(long, value_enum, default_value = "extrapolated")]
     pub trc_gradients: TrcGradientsArg,
     /// Estimate E(t0+1) by reprojecting the record's hemisphere samples (TRC §4.7), and check the record's life by reprojecting them to the later frames whose motion departs from the extrapolated one (an object that starts, stops or jumps, a light switched off or moved), and against objects none of its samples hit that come into their paths (one that jumps in or grows from nothing); off: E constant, no check.

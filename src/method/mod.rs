@@ -213,8 +213,11 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // `a_t` there (`later::LitFrames`, 2026-12-02). 15: as every
         // method's next. 16: a record that lived one frame is dropped when
         // it expires, not replaced (`TemporalRecord::replaced_when_expired`,
-        // 2026-12-06). 17: as `ic`'s 8.
-        "trc" => 17,
+        // 2026-12-06). 17: as `ic`'s 8. 18: extrapolated gradients carry
+        // E alone, not the spatial gradients' change, and a record's
+        // later frames are checked against what it shows there
+        // (2026-12-07).
+        "trc" => 18,
         // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6, 7: as
         // below. 8: the gather paths' roulette survives on their whole
         // throughput, not half of it (`IcSettings::gather_length`,

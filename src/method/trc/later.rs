@@ -17,9 +17,12 @@
 //! creation a record is also reprojected, exactly as for t0+1, to each
 //! later frame of its life where the motion departs from the extrapolated
 //! one by more than its hemisphere resolves, and its life ends before the
-//! first such frame where its reprojected irradiance has changed by more
-//! than `a^t` (Eq. 10's bound on the total change, with the change itself
-//! in place of its extrapolation). A frame departs for a record when
+//! first such frame where its reprojected irradiance is more than `a^t`
+//! from what the record shows there (Eq. 10's bound, with the change
+//! itself in place of its extrapolation: against E(t0), or with
+//! extrapolated gradients E(t0) carried on by them, whose overshoot where
+//! the change turns counts as a change missed does). A frame departs for
+//! a record when
 //! - an object it sees lies more than half a hemisphere cell, as seen
 //!   from the record, from where the object's t0→t0+1 motion, continued
 //!   (translation, turn and scale each at its own rate, as keyframes
@@ -137,7 +140,7 @@ impl LitFrames {
         next: &NextFrame,
         record: &Reprojection,
         last_valid: u32,
-        exceed: impl Fn(&HemisphereSamples) -> bool,
+        exceed: impl Fn(u32, &HemisphereSamples) -> bool,
     ) -> u32 {
         let exceeds = |t: u32| {
             self.frames.get(&t).is_some_and(|f| {
@@ -145,7 +148,7 @@ impl LitFrames {
                     let at_t = (f.motion.clone(), f.lights.clone());
                     next.later_lit(ctx, t, at_t, f.held.as_ref())
                 });
-                next.as_ref().is_some_and(|n| exceed(&record.to(ctx, n)))
+                next.as_ref().is_some_and(|n| exceed(t, &record.to(ctx, n)))
             })
         };
         // A life past the frames kept ([`LATER_FRAMES`]) is checked at the
@@ -281,7 +284,7 @@ impl LaterFrames {
         record: &Reprojection,
         a_t: f32,
         last_valid: u32,
-        exceed: impl Fn(&HemisphereSamples) -> bool,
+        exceed: impl Fn(u32, &HemisphereSamples) -> bool,
     ) -> u32 {
         let last = self.last_departed(ctx, record, a_t, last_valid, &exceed);
         match &self.lit {
@@ -298,7 +301,7 @@ impl LaterFrames {
         record: &Reprojection,
         a_t: f32,
         last_valid: u32,
-        exceed: &impl Fn(&HemisphereSamples) -> bool,
+        exceed: &impl Fn(u32, &HemisphereSamples) -> bool,
     ) -> u32 {
         let (g, strata) = (record.gathered(), record.strata());
         if last_valid <= self.t0 || self.arrivals.is_empty() && self.frames.is_empty() {
@@ -333,7 +336,7 @@ impl LaterFrames {
                 || seen
                     .iter()
                     .any(|&(o, nearest)| f.departure[o as usize] > cell * nearest);
-            if departs && exceed(&record.to(ctx, &f.next)) {
+            if departs && exceed(t, &record.to(ctx, &f.next)) {
                 return t - 1;
             }
         }

@@ -8,12 +8,14 @@
 //! hemisphere samples (§4.7, `Reprojection::to`); the ratio `τ = E(t0+1)/E(t0)`
 //! sets how many frames K may be used (Eq. 9–11) and the difference gives
 //! its extrapolated temporal gradients (Eq. 15–17), applied at lookup by
-//! Eq. 14. Departure: the paper extrapolates the change to t0+1 over the
+//! Eq. 14 (E's alone: departure, `TemporalRecord::at_frame`). Departure:
+//! the paper extrapolates the change to t0+1 over the
 //! whole life, blind to an object at rest that starts moving or jumps
 //! later, or a light switched off later; as the animation is known ahead,
 //! the record is also reprojected to the later frames of its life where
 //! the motion departs from that extrapolation, and its life ends before
-//! the first where it has changed by more than `a^t`, or where an object
+//! the first where it is more than `a^t` from what it shows there (E(t0),
+//! or with extrapolated gradients E(t0) carried on), or where an object
 //! none of its samples hit (or one they hit that now covers more of the
 //! view by over `a^t`) comes into more than `a^t` of their paths
 //! (`later`, `method::arrivals`). Each frame:
@@ -88,7 +90,7 @@ mod record;
 mod settings;
 mod state;
 
-use record::{frames_of_validity, relative_change, sources_change};
+use record::{frames_of_validity, relative_change, shown_irradiance, sources_change};
 pub use record::{Successor, TemporalRecord};
 pub use settings::{NextDirect, TemporalGradients, TrcSettings};
 pub use state::{downgrade_to_schema_6_record, sources_in, upgrade_schema_6_record};
@@ -241,13 +243,20 @@ impl TemporalRadianceCaching {
         let next = self.change_to(g, next_samples.as_ref());
         let age = frames_of_validity(next.change, a_t, self.settings.max_life);
         let mut last_valid = ctx.frame + age;
+        let e1 = next.gather.irradiance;
         if let Some(later) = &making.later {
-            let exceeds =
-                |samples: &HemisphereSamples| self.change_to(g, Some(samples)).change > a_t;
+            let shown = |t: u32| shown_irradiance(self.settings.gradients, e0, e1, t - ctx.frame);
+            // Against what the record will show there, not E(t0): where
+            // the change turns, extrapolated gradients carry it on past
+            // the light they were to follow.
+            let exceeds = |t: u32, samples: &HemisphereSamples| {
+                let later = self.change_to(g, Some(samples));
+                let shown_change = relative_change(shown(t), later.gather.irradiance);
+                shown_change.max(sources_change(&g.record, later.d_eas.as_deref())) > a_t
+            };
             last_valid =
                 later.last_valid(ctx, &making.next, &reprojection, a_t, last_valid, exceeds);
         }
-        let e1 = next.gather.irradiance;
         let sub = |a: [Vec3; 3], b: [Vec3; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
         TemporalRecord {
             record: g.record.clone(),

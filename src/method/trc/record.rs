@@ -49,7 +49,8 @@ pub struct TemporalRecord {
     pub change: f32,
     /// Last frame K may contribute to (Eq. 10 and 11).
     pub last_valid: u32,
-    /// Extrapolated temporal gradients ∇t_E, ∇t_∇r, ∇t_∇p (Eq. 15–17).
+    /// Extrapolated temporal gradients ∇t_E, ∇t_∇r, ∇t_∇p (Eq. 15–17);
+    /// [`Self::at_frame`] applies the first alone (why there).
     pub d_irradiance: Vec3,
     pub d_grad_rotation: [Vec3; 3],
     pub d_grad_translation: [Vec3; 3],
@@ -85,10 +86,25 @@ impl TemporalRecord {
             + self.paths.as_deref().map_or(0, KeptPaths::memory_bytes)
     }
 
-    /// TRC Eq. 14: the record as it is used at frame `t` (temporal
-    /// gradients applied to E and to both spatial gradients): extrapolated
-    /// (Eq. 15–17), or interpolated towards its replacement `successor`
-    /// (Eq. 18–20) when the gradients are interpolated and it is known.
+    /// TRC Eq. 14: the record as it is used at frame `t`: interpolated
+    /// towards its replacement `successor` (Eq. 18–20, E and both spatial
+    /// gradients) when the gradients are interpolated and it is known,
+    /// else E extrapolated (Eq. 15).
+    ///
+    /// Departure: the paper extrapolates the spatial gradients too (Eq.
+    /// 16–17, their change from t0 to the estimate of t0+1). Those changes
+    /// come from the reprojected samples, whose cells move in whole cells
+    /// and whose holes take their farthest neighbour's distance, so a
+    /// frame's change of a gradient is a jump, not a rate: carried over a
+    /// life of up to `δt_max` frames, and bounded by nothing (Eq. 9–10
+    /// bound E's change alone), it tilted records into discs 5 % too
+    /// bright on one side in the default render of cube-in-box (frame 12
+    /// at 256 × 256, against `path` at 512 spp). Without it `trc`'s error,
+    /// block bias and flicker fell on cube-in-box, under the moving light
+    /// and among the balls, and its records were the same
+    /// (`benches/RESULTS.md`, "Extrapolated gradients: E alone"). They
+    /// are still computed and stored (`d_grad_*`), as the paper defines
+    /// them.
     pub(super) fn at_frame(
         &self,
         t: u32,
@@ -115,14 +131,10 @@ impl TemporalRecord {
                     d(l.grad_translation, r.grad_translation),
                 )
             }
-            _ => (
-                self.d_irradiance,
-                self.d_grad_rotation,
-                self.d_grad_translation,
-            ),
+            _ => (self.d_irradiance, [Vec3::ZERO; 3], [Vec3::ZERO; 3]),
         };
+        r.irradiance = extrapolated(r.irradiance, d_e, t.saturating_sub(t0));
         let dt = t.saturating_sub(t0) as f32;
-        r.irradiance = (r.irradiance + d_e * dt).max(Vec3::ZERO);
         for c in 0..3 {
             r.grad_rotation[c] += d_r[c] * dt;
             r.grad_translation[c] += d_p[c] * dt;
@@ -258,6 +270,25 @@ pub(super) fn sources_change(record: &IrradianceRecord, d_eas: Option<&[Vec3]>) 
         .fold(0.0f32, f32::max)
 }
 
+/// The irradiance a record made at t0 with `e0` (and E(t0+1) estimated
+/// as `e1`) shows `dt` frames later as its lifespan is judged at its
+/// creation (Eq. 14 with Eq. 15's gradient, as [`TemporalRecord::at_frame`]
+/// applies it): `e0` without temporal gradients, and with interpolated
+/// ones too, which lead towards the replacement not yet made (it is made
+/// anew where the life ends, so their value meets the light there).
+pub(super) fn shown_irradiance(gradients: TemporalGradients, e0: Vec3, e1: Vec3, dt: u32) -> Vec3 {
+    match gradients {
+        TemporalGradients::Extrapolated => extrapolated(e0, e1 - e0, dt),
+        TemporalGradients::None | TemporalGradients::Interpolated => e0,
+    }
+}
+
+/// `e0` carried `dt` frames along the change `d_e` a frame, never below
+/// zero.
+fn extrapolated(e0: Vec3, d_e: Vec3, dt: u32) -> Vec3 {
+    (e0 + d_e * dt as f32).max(Vec3::ZERO)
+}
+
 /// How many frames after t0 a record whose irradiance changes by `change`
 /// a frame stays valid. Eq. 9–10: `1/(|τ−1|(t−t0)) ≥ 1/a^t ⇔ t − t0 ≤
 /// a^t/|τ−1|`; Eq. 11: `t − t0 < δt_max`.
@@ -336,6 +367,47 @@ mod tests {
         assert_eq!(sources_change(&record, None), 0.0);
         record.eas = None;
         assert_eq!(sources_change(&record, Some(&d)), 0.0);
+    }
+
+    /// Extrapolated gradients carry E alone; the spatial gradients stay
+    /// the record's own (`at_frame`'s departure), and what the lifespan's
+    /// check takes the record to show is what it shows. Interpolated ones
+    /// with a successor carry all three towards it (Eq. 18–20).
+    #[test]
+    fn extrapolated_gradients_carry_e_alone() {
+        let mut k = TemporalRecord::test_record(Vec3::splat(2.0), 0.01);
+        k.record.created_frame = 10;
+        k.record.grad_translation = [Vec3::X; 3];
+        k.d_irradiance = Vec3::splat(0.02);
+        k.d_grad_translation = [Vec3::Y; 3];
+        k.d_grad_rotation = [Vec3::Z; 3];
+        let at = k.at_frame(14, TemporalGradients::Extrapolated, None);
+        assert_eq!(at.irradiance, Vec3::splat(2.08));
+        assert_eq!(at.grad_translation, [Vec3::X; 3]);
+        assert_eq!(at.grad_rotation, [Vec3::ZERO; 3]);
+        let e1 = k.record.irradiance + k.d_irradiance;
+        let shown = |g| shown_irradiance(g, k.record.irradiance, e1, 4);
+        assert_eq!(shown(TemporalGradients::Extrapolated), at.irradiance);
+        assert_eq!(shown(TemporalGradients::None), Vec3::splat(2.0));
+        // Never below zero.
+        k.d_irradiance = Vec3::splat(-1.0);
+        let at = k.at_frame(14, TemporalGradients::Extrapolated, None);
+        assert_eq!(at.irradiance, Vec3::ZERO);
+
+        let l = Successor {
+            frame: 20,
+            id: 1,
+            irradiance: Vec3::splat(3.0),
+            grad_rotation: [Vec3::ZERO; 3],
+            grad_translation: [Vec3::splat(11.0); 3],
+        };
+        let at = k.at_frame(15, TemporalGradients::Interpolated, Some(&l));
+        assert!(at.irradiance.abs_diff_eq(Vec3::splat(2.5), 1e-5));
+        let expected = Vec3::new(6.0, 5.5, 5.5);
+        assert!(at
+            .grad_translation
+            .iter()
+            .all(|g| g.abs_diff_eq(expected, 1e-5)));
     }
 
     /// Eq. 9–11 with `a^t = 0.05`, `δt_max = 20`: 1 % a frame stays valid 5

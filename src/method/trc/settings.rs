@@ -9,7 +9,9 @@ use crate::method::ic::IcSettings;
 pub enum TemporalGradients {
     /// A record's value is constant over its life (Fig. 4c).
     None,
-    /// Extrapolated from the estimate of E(t0+1), Eq. 15–17 (Fig. 4d).
+    /// Extrapolated from the estimate of E(t0+1), Eq. 15 (Fig. 4d): E's
+    /// change alone, not the spatial gradients' of Eq. 16–17
+    /// (`TemporalRecord::at_frame` says why).
     #[default]
     Extrapolated,
     /// Interpolated between K and the record l that replaces it at the same
