@@ -50,7 +50,7 @@ pub struct TemporalRecord {
     /// Last frame K may contribute to (Eq. 10 and 11).
     pub last_valid: u32,
     /// Extrapolated temporal gradients ∇t_E, ∇t_∇r, ∇t_∇p (Eq. 15–17);
-    /// [`Self::at_frame`] applies the first alone (why there).
+    /// `at_frame` applies the first alone (why there).
     pub d_irradiance: Vec3,
     pub d_grad_rotation: [Vec3; 3],
     pub d_grad_translation: [Vec3; 3],
