@@ -8,9 +8,10 @@
 //! hemisphere samples (§4.7, `Reprojection::to`); the ratio `τ = E(t0+1)/E(t0)`
 //! sets how many frames K may be used (Eq. 9–11) and the difference gives
 //! its extrapolated temporal gradients (Eq. 15–17), applied at lookup by
-//! Eq. 14 (E's alone: departure, `TemporalRecord::at_frame`). Departure:
-//! the paper extrapolates the change to t0+1 over the
-//! whole life, blind to an object at rest that starts moving or jumps
+//! Eq. 14 (E's alone, not the spatial gradients' of Eq. 16–17: a
+//! departure, `TemporalRecord::at_frame` says why). Another: the paper
+//! extrapolates the change to t0+1 over the whole life, blind to an
+//! object at rest that starts moving or jumps
 //! later, or a light switched off later; as the animation is known ahead,
 //! the record is also reprojected to the later frames of its life where
 //! the motion departs from that extrapolation, and its life ends before
