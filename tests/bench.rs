@@ -195,6 +195,12 @@ fn replot_draws_the_charts_of_a_csv_again() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("cannot be used with"), "{stderr}");
 
+    std::fs::write(dir.path().join("bench.csv"), to_csv(&[])).unwrap();
+    let out = replot(&[]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("holds no run"), "{stderr}");
+
     let mut outside = rows[0].clone();
     outside.scene = "../escaped".into();
     std::fs::write(dir.path().join("bench.csv"), to_csv(&[outside])).unwrap();

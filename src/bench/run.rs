@@ -141,6 +141,9 @@ pub fn replot(dir: &Path) -> Result<BenchReport> {
     let text =
         std::fs::read_to_string(&csv).with_context(|| format!("cannot read {}", csv.display()))?;
     let rows = super::from_csv(&text).with_context(|| format!("{}", csv.display()))?;
+    if rows.is_empty() {
+        bail!("{} holds no run: nothing to draw", csv.display());
+    }
     let mut scenes: Vec<&str> = Vec::new();
     for row in &rows {
         // The scene names chart files: a name a bench gave it, never a path.
