@@ -116,57 +116,41 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
 }
 
 /// The rows of a `bench.csv` that [`to_csv`] wrote, for `radcache bench
-/// --replot`. Its first line must be [`CSV_HEADER`] (a CSV of another
-/// version is refused rather than read into the wrong fields); a field
-/// that does not read is an error naming its line and column.
+/// --replot` (read by the `csv` crate: quoted fields may hold commas,
+/// quotes and newlines, as [`to_csv`] writes them). Its first line must
+/// be [`CSV_HEADER`] (a CSV of another version is refused rather than read
+/// into the wrong fields); a field that does not read is an error naming
+/// its line and column.
 pub fn from_csv(text: &str) -> anyhow::Result<Vec<BenchRow>> {
-    let mut records = csv_records(text)?.into_iter();
-    let header = records.next().unwrap_or_default();
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .from_reader(text.as_bytes());
+    let mut records = reader.records();
+    let header = records.next().transpose().map_err(csv_error)?;
     let expected: Vec<&str> = CSV_HEADER.split(',').collect();
-    if header != expected {
+    if header
+        .as_ref()
+        .is_none_or(|h| h.iter().ne(expected.iter().copied()))
+    {
         anyhow::bail!(
             "line 1 is not the header this build writes (a bench.csv of another version?): \
              expected {CSV_HEADER}"
         );
     }
-    (records.enumerate())
-        .filter(|(_, fields)| fields.iter().any(|f| !f.is_empty()))
-        .map(|(i, fields)| row_of(&fields).map_err(|e| anyhow::anyhow!("line {}: {e}", i + 2)))
-        .collect()
+    let mut rows = Vec::new();
+    for record in records {
+        let record = record.map_err(csv_error)?;
+        let line = record.position().map_or(0, |p| p.line());
+        let fields: Vec<String> = record.iter().map(str::to_string).collect();
+        rows.push(row_of(&fields).map_err(|e| anyhow::anyhow!("line {line}: {e}"))?);
+    }
+    Ok(rows)
 }
 
-/// A CSV text's records, each a list of fields: fields in double quotes may
-/// hold commas, newlines and doubled quotes, as [`csv_field`] writes them.
-fn csv_records(text: &str) -> anyhow::Result<Vec<Vec<String>>> {
-    let (mut records, mut fields, mut field) = (Vec::new(), Vec::new(), String::new());
-    let mut chars = text.chars().peekable();
-    let mut quoted = false;
-    while let Some(c) = chars.next() {
-        match (quoted, c) {
-            (true, '"') if chars.peek() == Some(&'"') => {
-                chars.next();
-                field.push('"');
-            }
-            (true, '"') => quoted = false,
-            (true, c) => field.push(c),
-            (false, '"') if field.is_empty() => quoted = true,
-            (false, ',') => fields.push(std::mem::take(&mut field)),
-            (false, '\n') => {
-                fields.push(std::mem::take(&mut field));
-                records.push(std::mem::take(&mut fields));
-            }
-            (false, '\r') if chars.peek() == Some(&'\n') => {}
-            (false, c) => field.push(c),
-        }
-    }
-    if quoted {
-        anyhow::bail!("a quoted field is not closed before the end of the file");
-    }
-    if !field.is_empty() || !fields.is_empty() {
-        fields.push(field);
-        records.push(fields);
-    }
-    Ok(records)
+/// A CSV reading error as the `csv` crate says it (it names the line).
+fn csv_error(e: csv::Error) -> anyhow::Error {
+    anyhow::anyhow!("{e}")
 }
 
 /// One row from its CSV fields, in [`CSV_HEADER`]'s order.

@@ -97,9 +97,10 @@ impl TemporalRecord {
     /// and whose holes take their farthest neighbour's distance, so a
     /// frame's change of a gradient is a jump, not a rate: carried over a
     /// life of up to `δt_max` frames, and bounded by nothing (Eq. 9–10
-    /// bound E's change alone), it tilted records into discs 5 % too
-    /// bright on one side in the default render of cube-in-box (frame 12
-    /// at 256 × 256, against `path` at 512 spp). Without it `trc`'s error,
+    /// bound E's change alone), it tilted records into discs up to 10 of
+    /// 255 too bright in the PNG of the default render of cube-in-box
+    /// (frame 12 at 256 × 256, against `path` at 512 spp), and moved the
+    /// light by three times `a_t` (`tests/trc.rs`). Without it `trc`'s error,
     /// block bias and flicker fell on cube-in-box, under the moving light
     /// and among the balls, and its records were the same
     /// (`benches/RESULTS.md`, "Extrapolated gradients: E alone"). They
