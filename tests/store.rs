@@ -358,12 +358,12 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
-/// A synthetic step 10 → 11: checks that it runs after the real steps
-/// from 1 to 10 (the stored version is 10).
+/// A synthetic step 11 → 12: checks that it runs after the real steps
+/// from 1 to 11 (the stored version is 11).
 fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 10u32.to_be_bytes() {
+    if version.as_ref() != 11u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -373,8 +373,8 @@ fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 11: the
-    // real 1 → 2, …, 9 → 10, then 10 → 11, in order.
+    // A version-1 store (fixture) brought to a synthetic version 12: the
+    // real 1 → 2, …, 10 → 11, then 11 → 12, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -383,15 +383,15 @@ fn older_schema_is_migrated_in_order() {
     });
     v1_fixture(&path, &method);
     let mut steps = migrate::MIGRATIONS.to_vec();
-    assert_eq!(steps.len(), 9);
+    assert_eq!(steps.len(), 10);
     steps.push(Migration {
-        from: 10,
+        from: 11,
         name: "synthetic",
         run: add_marker,
     });
-    // Without the step for 10 → 11 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 11, &steps[..9]));
-    assert!(msg.contains("no migration from schema 10 to 11"), "{msg}");
+    // Without the step for 11 → 12 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 12, &steps[..10]));
+    assert!(msg.contains("no migration from schema 11 to 12"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -400,8 +400,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 11, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 11);
+        let store = Store::open_with(&path, false, 12, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 12);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -410,9 +410,9 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 10) now refuses the upgraded store.
+    // This build (version 11) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 11 is newer"), "{msg}");
+    assert!(msg.contains("schema version 12 is newer"), "{msg}");
 }
 
 /// One `radcache render --job` run: the store at `path` opened, the job of
@@ -509,6 +509,117 @@ fn schema_6_carried_state_is_migrated_and_resumes_bit_identically() {
     for (name, method, _) in &jobs {
         std::fs::remove_dir_all(out(name, "resumed")).unwrap();
         let s = run(name, method, 0..6).unwrap();
+        assert_eq!((s.resumed, s.frames), (6, 0), "{name}");
+    }
+}
+
+/// Two `trc` jobs (one with radiance records) and a `tcg` job, each
+/// stopped after frame 2 of 0..6, the `trc` state put back in the layout
+/// of schemas 7–10 (as a schema-10 build wrote it, but for the changes of
+/// the spatial gradients, 0 here, which no frame applies), are migrated
+/// when the store is opened: the resumes render the frames uninterrupted
+/// renders do, byte for byte (the `tcg` state, left as it was, too), and
+/// the state is shorter. Running the step again converts nothing twice.
+#[test]
+fn schema_10_trc_state_is_migrated_and_resumes_bit_identically() {
+    let trc = |glossy| {
+        MethodSettings::Trc(TrcSettings {
+            ic: IcSettings {
+                glossy,
+                ..small_ic_settings()
+            },
+            ..TrcSettings::default()
+        })
+    };
+    let tcg = MethodSettings::Tcg(TcgSettings {
+        ic: small_ic_settings(),
+        ..TcgSettings::default()
+    });
+    let jobs = [
+        ("t", "cube-in-box", trc(IcSettings::default().glossy)),
+        ("e", "glossy-cornell", trc(GlossyLobe::Eas)),
+        ("g", "cube-in-box", tcg),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let out = |name: &str, kind: &str| dir.path().join(format!("{name}-{kind}"));
+    let run = |(name, scene, method): &(&str, &str, MethodSettings), range| {
+        let fs = renderer_of(scene, method).settings.clone();
+        let source = SceneSource::Builtin(scene.to_string());
+        let spec = render::job_spec(name, &source, method, &fs, 0..6).unwrap();
+        let store = Store::open(&path).unwrap();
+        let job = store.begin_job(&spec, false).unwrap();
+        let mut sj = StoreJob { store: &store, job };
+        let mut renderer = renderer_of(scene, method);
+        render::render_job_to_dir(
+            &mut renderer,
+            range,
+            &out(name, "resumed"),
+            true,
+            Some(&mut sj),
+        )
+    };
+    for job in &jobs {
+        let (name, scene, method) = job;
+        let mut plain = renderer_of(scene, method);
+        render::render_to_dir(&mut plain, 0..6, &out(name, "plain"), true).unwrap();
+        run(job, 0..3).unwrap();
+    }
+    let state_rows = |db: &sled::Db| -> Vec<(Vec<u8>, Vec<u8>)> {
+        let state = db.open_tree("state").unwrap();
+        let rows = state.iter().map(|item| item.unwrap());
+        rows.map(|(k, v)| (k.to_vec(), v.to_vec())).collect()
+    };
+    let size = |rows: &[(Vec<u8>, Vec<u8>)]| rows.iter().map(|(_, v)| v.len()).sum::<usize>();
+    let (trc_ids, before) = {
+        let store = Store::open(&path).unwrap();
+        let id = |name: &str| store.job(name).unwrap().unwrap().id;
+        let ids = [id("t"), id("e")];
+        drop(store);
+        let db = open_raw(&path);
+        let before = state_rows(&db);
+        let downgrade = radcache::method::trc::downgrade_to_schema_10_record;
+        let converted = rewrite_state_records(&db, |job, _, data| {
+            ids.contains(&job).then(|| downgrade(data).unwrap())
+        });
+        for id in ids {
+            assert!(converted.contains(&id), "job {id}: {converted:?}");
+        }
+        assert!(size(&state_rows(&db)) > size(&before));
+        migrate::write_version(&path, &db.open_tree("meta").unwrap(), 10).unwrap();
+        db.flush().unwrap();
+        (ids, before)
+    };
+    // Opened, the store is migrated: the state as this build wrote it.
+    drop(Store::open(&path).unwrap());
+    assert!(state_rows(&open_raw(&path)) == before);
+    for job in &jobs {
+        let name = job.0;
+        let s = run(job, 0..6).unwrap();
+        assert_eq!((s.resumed, s.frames), (3, 3), "{name}");
+        let files = |kind| exr_files(&out(name, kind), 0..6);
+        assert_eq!(files("plain"), files("resumed"), "{name}");
+    }
+    // The step again (a crash before the version bump): nothing converted
+    // twice, the state still reads.
+    {
+        let db = open_raw(&path);
+        let through = db
+            .open_tree("meta")
+            .unwrap()
+            .get(keys::META_MIGRATE_0011_THROUGH);
+        let through = through.unwrap().expect("the step's progress");
+        let last = u64::from_be_bytes(through.as_ref().try_into().unwrap());
+        assert_eq!(Some(last), trc_ids.into_iter().max());
+        radcache::store::v10::migrate_to_v11(&db, &path).unwrap();
+        db.flush().unwrap();
+    }
+    let version = Store::open(&path).unwrap().schema_version().unwrap();
+    assert_eq!(version, migrate::CURRENT_VERSION);
+    for job in &jobs {
+        let name = job.0;
+        std::fs::remove_dir_all(out(name, "resumed")).unwrap();
+        let s = run(job, 0..6).unwrap();
         assert_eq!((s.resumed, s.frames), (6, 0), "{name}");
     }
 }

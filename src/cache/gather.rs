@@ -209,6 +209,18 @@ pub fn irradiance_and_gradients(
     )
 }
 
+/// `E = π/(MN) Σ L_{j,k}` of a gathered hemisphere alone (for what needs
+/// no gradients: `trc`'s estimates of E at later frames).
+pub fn irradiance(samples: &HemisphereSamples, strata: Strata) -> Vec3 {
+    irradiance_of_cells(&samples.radiance, strata)
+}
+
+/// `E = π/(MN) Σ L_{j,k}` of each cell's radiance `l`.
+fn irradiance_of_cells(l: &[Vec3], strata: Strata) -> Vec3 {
+    let sum: Vec3 = l.iter().copied().sum();
+    sum * (PI / strata.count() as f32)
+}
+
 /// [`irradiance_and_gradients`] of cells laid out in `frame` (normal
 /// `frame.n`), from each cell's radiance `l` and hit distance `r` in cell
 /// order: `tcg`'s records keep their cells' frame as their object turns.
@@ -223,8 +235,7 @@ pub fn irradiance_and_gradients_in(
     let base = |phi: f32| frame.to_world(Vec3::new(phi.cos(), phi.sin(), 0.0));
     let rings = RingTerms::new(m, n);
 
-    let sum: Vec3 = l.iter().copied().sum();
-    let irradiance = sum * (PI / (m * n) as f32);
+    let irradiance = irradiance_of_cells(l, strata);
 
     let mut rotation = [Vec3::ZERO; 3];
     let mut translation = rotation;

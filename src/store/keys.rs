@@ -10,8 +10,10 @@
 //! changed; `trc`'s and `tcg`'s state records hold radiance records),
 //! `0008_frame_footprint.md` (no key changed; a frame's `stats` value
 //! grew), `0009_record_sources.md` (`sources` holds the sources of a
-//! frame's radiance records) and `0010_tcg_state_refers_to_samples.md`
-//! (no key changed; a `tcg` record's state no longer holds its samples).
+//! frame's radiance records), `0010_tcg_state_refers_to_samples.md`
+//! (no key changed; a `tcg` record's state no longer holds its samples)
+//! and `0011_trc_state_without_spatial_gradient_changes.md` (no key
+//! changed; a `trc` record's state is 72 bytes shorter).
 //! The version this build writes is [`super::migrate::CURRENT_VERSION`].
 //!
 //! | tree      | key                                   | bytes |
@@ -72,6 +74,10 @@ pub const META_MIGRATE_0007_THROUGH: &[u8] = b"migrate_0007_through";
 /// (u64 big-endian) whose `stats` values it rewrote (see
 /// `migrations/0008_frame_footprint.md`).
 pub const META_MIGRATE_0008_THROUGH: &[u8] = b"migrate_0008_through";
+/// `meta` key of the 0010 → 0011 migration's progress: the last `trc` job
+/// id (u64 big-endian) whose state records it converted (see
+/// `migrations/0011_trc_state_without_spatial_gradient_changes.md`).
+pub const META_MIGRATE_0011_THROUGH: &[u8] = b"migrate_0011_through";
 
 /// `meta` key of the highest `job-N` number `radcache serve` has given
 /// (u64 big-endian; no schema change: older builds ignore it), so that a

@@ -9,11 +9,12 @@
 //! One `migrations/NNNN_*.md` per version documents its layout.
 
 use super::meta::{read_meta_u32, read_meta_u64, MetaError};
-use super::{keys, StoreError};
+use super::schema::{JobValue, StateRecordValue};
+use super::{decode_value, encode, keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 10;
+pub const CURRENT_VERSION: u32 = 11;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -73,6 +74,11 @@ pub const MIGRATIONS: &[Migration] = &[
         name: "0010_tcg_state_refers_to_samples",
         run: super::v9::migrate_to_v10,
     },
+    Migration {
+        from: 10,
+        name: "0011_trc_state_without_spatial_gradient_changes",
+        run: super::v10::migrate_to_v11,
+    },
 ];
 
 /// A `(key, value)` row of a tree.
@@ -113,6 +119,70 @@ pub(super) fn rewrite_job_by_job(
         db.flush().map_err(|e| e.to_string())?;
     }
     Ok(())
+}
+
+/// A method's conversion of one of its state records' bytes.
+pub(super) type Upgrade = fn(&[u8]) -> Result<Vec<u8>, String>;
+
+/// The core of a step that converts carried state: rewrites every state
+/// record of every job whose method `upgrade_of` gives a conversion for,
+/// one transaction per job ([`rewrite_job_by_job`], progress in
+/// `meta[through]`). Other methods' state and every job's head are left
+/// as they are.
+pub(super) fn upgrade_state_records(
+    db: &sled::Db,
+    through: &[u8],
+    upgrade_of: fn(&str) -> Option<Upgrade>,
+) -> Result<(), String> {
+    let state = db.open_tree("state").map_err(|e| e.to_string())?;
+    let jobs = stateful_jobs(
+        &db.open_tree("jobs").map_err(|e| e.to_string())?,
+        upgrade_of,
+    )?;
+    let ids: Vec<u64> = jobs.iter().map(|(id, _)| *id).collect();
+    rewrite_job_by_job(db, "state", through, &ids, |job| {
+        let (_, upgrade) = jobs
+            .iter()
+            .find(|(id, _)| *id == job)
+            .expect("listed above");
+        upgraded_records(&state, job, *upgrade)
+    })
+}
+
+/// The ids of the jobs whose method `upgrade_of` converts, each with its
+/// conversion, in increasing id.
+fn stateful_jobs(
+    jobs: &sled::Tree,
+    upgrade_of: fn(&str) -> Option<Upgrade>,
+) -> Result<Vec<(u64, Upgrade)>, String> {
+    let mut found: Vec<(u64, Upgrade)> = Vec::new();
+    for item in jobs.iter() {
+        let (k, v) = item.map_err(|e| e.to_string())?;
+        let job: JobValue =
+            decode_value(&v).map_err(|e| format!("tree `jobs` key {}: {e}", keys::describe(&k)))?;
+        if let Some(upgrade) = upgrade_of(job.method.as_str()) {
+            found.push((job.id, upgrade));
+        }
+    }
+    found.sort_unstable_by_key(|(id, _)| *id);
+    Ok(found)
+}
+
+/// Job `job`'s state records, keys and values, their bytes converted by
+/// `upgrade`.
+fn upgraded_records(state: &sled::Tree, job: u64, upgrade: Upgrade) -> Result<Vec<Row>, String> {
+    let mut records = Vec::new();
+    for item in state.scan_prefix(keys::job_prefix(job)) {
+        let (k, v) = item.map_err(|e| e.to_string())?;
+        if keys::parse_state_record(&k).is_none() {
+            continue; // the head: unchanged
+        }
+        let at = || format!("tree `state` key {}", keys::describe(&k));
+        let mut value: StateRecordValue = decode_value(&v).map_err(|e| format!("{}: {e}", at()))?;
+        value.data = upgrade(&value.data).map_err(|e| format!("{}: {e}", at()))?;
+        records.push((k.to_vec(), encode(&value)));
+    }
+    Ok(records)
 }
 
 /// The schema version stored in `meta`, if any.

@@ -59,6 +59,7 @@ pub mod schema;
 mod state;
 mod tail;
 pub mod v1;
+pub mod v10;
 pub mod v2;
 pub mod v3;
 pub mod v4;

@@ -94,13 +94,14 @@ mod state;
 use record::{frames_of_validity, relative_change, shown_irradiance, sources_change};
 pub use record::{Successor, TemporalRecord};
 pub use settings::{NextDirect, TemporalGradients, TrcSettings};
-pub use state::{downgrade_to_schema_6_record, sources_in, upgrade_schema_6_record};
+pub use state::{
+    downgrade_to_schema_10_record, downgrade_to_schema_6_record, sources_in,
+    upgrade_schema_10_record, upgrade_schema_6_record,
+};
 
 use super::carried;
 use super::ic::IrradianceCaching;
-use super::ic::{
-    limit_gradient, primary_candidates, scene_bounds, Candidate, GatherTracks, Gathered, TrackPaths,
-};
+use super::ic::{primary_candidates, scene_bounds, Candidate, GatherTracks, Gathered, TrackPaths};
 use super::motion::Blockers;
 use super::render_pass::{lights_fingerprint, mark_used, render_pass, PixelStreams, StillSamples};
 use super::{
@@ -108,7 +109,7 @@ use super::{
     StateError, RENDER_PHASE,
 };
 use crate::cache::eas;
-use crate::cache::gather::{irradiance_and_gradients, GatheredIrradiance, HemisphereSamples};
+use crate::cache::gather::{self, HemisphereSamples};
 use crate::cache::{IrradianceCache, RecordId};
 use crate::film::Film;
 use crate::integrator::KnownPath;
@@ -244,7 +245,7 @@ impl TemporalRadianceCaching {
         let next = self.change_to(g, next_samples.as_ref());
         let age = frames_of_validity(next.change, a_t, self.settings.max_life);
         let mut last_valid = ctx.frame + age;
-        let e1 = next.gather.irradiance;
+        let e1 = next.irradiance;
         if let Some(later) = &making.later {
             let shown = |t: u32| shown_irradiance(self.settings.gradients, e0, e1, t - ctx.frame);
             // Against what the record will show there, not E(t0): where
@@ -252,26 +253,20 @@ impl TemporalRadianceCaching {
             // the light they were to follow.
             let exceeds = |t: u32, samples: &HemisphereSamples| {
                 let later = self.change_to(g, Some(samples));
-                let shown_change = relative_change(shown(t), later.gather.irradiance);
+                let shown_change = relative_change(shown(t), later.irradiance);
                 shown_change.max(sources_change(&g.record, later.d_eas.as_deref())) > a_t
             };
             last_valid =
                 later.last_valid(ctx, &making.next, &reprojection, a_t, last_valid, exceeds);
         }
-        let sub = |a: [Vec3; 3], b: [Vec3; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
         TemporalRecord {
             record: g.record.clone(),
             candidate: g.candidate,
             next_irradiance: e1,
             change: next.change,
             last_valid,
-            // Eq. 15–17 (t1 − t0 = 1).
+            // Eq. 15 (t1 − t0 = 1); not Eq. 16–17 (`TemporalRecord::at_frame`).
             d_irradiance: e1 - e0,
-            d_grad_rotation: sub(next.gather.grad_rotation, g.record.grad_rotation),
-            d_grad_translation: sub(
-                limit_gradient(next.gather.grad_translation, e1, g.record.radius),
-                g.record.grad_translation,
-            ),
             d_eas: next.d_eas,
             replaces: None,
             used: false,
@@ -284,15 +279,9 @@ impl TemporalRadianceCaching {
     /// (§4.6.2) and the worst relative change `|τ − 1|` (Eq. 7, 21).
     fn change_to(&self, g: &Gathered, samples: Option<&HemisphereSamples>) -> Change {
         let strata = self.settings.ic.strata;
-        let gather = match samples {
-            Some(samples) => irradiance_and_gradients(samples, g.record.normal, strata),
-            None => GatheredIrradiance {
-                irradiance: g.record.irradiance,
-                grad_translation: g.record.grad_translation,
-                grad_rotation: g.record.grad_rotation,
-                harmonic_distance: 0.0,
-            },
-        };
+        let irradiance = samples.map_or(g.record.irradiance, |samples| {
+            gather::irradiance(samples, strata)
+        });
         let d_eas = g.record.eas.as_ref().map(|sources| {
             let later = samples.and_then(|samples| eas::irradiance_over(sources, samples, strata));
             let d: Arc<[Vec3]> = match later {
@@ -305,10 +294,10 @@ impl TemporalRadianceCaching {
             };
             d
         });
-        let change = relative_change(g.record.irradiance, gather.irradiance)
+        let change = relative_change(g.record.irradiance, irradiance)
             .max(sources_change(&g.record, d_eas.as_deref()));
         Change {
-            gather,
+            irradiance,
             d_eas,
             change,
         }
@@ -789,7 +778,8 @@ impl RecordMaking<'_> {
 
 /// A record's change to a later frame, as its reprojected samples give it.
 struct Change {
-    gather: GatheredIrradiance,
+    /// E at that frame.
+    irradiance: Vec3,
     /// A radiance record's change of each source's irradiance.
     d_eas: Option<Arc<[Vec3]>>,
     /// The worst relative change from t0 (`|τ − 1|` for t0+1).

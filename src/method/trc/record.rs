@@ -49,11 +49,9 @@ pub struct TemporalRecord {
     pub change: f32,
     /// Last frame K may contribute to (Eq. 10 and 11).
     pub last_valid: u32,
-    /// Extrapolated temporal gradients ∇t_E, ∇t_∇r, ∇t_∇p (Eq. 15–17);
-    /// `at_frame` applies the first alone (why there).
+    /// Extrapolated temporal gradient ∇t_E (Eq. 15); not those of the
+    /// spatial gradients (Eq. 16–17: why at `at_frame`).
     pub d_irradiance: Vec3,
-    pub d_grad_rotation: [Vec3; 3],
-    pub d_grad_translation: [Vec3; 3],
     /// A radiance record's (`--ic-glossy eas`) extrapolated temporal
     /// gradient of each of its sources' irradiance, in the order of
     /// `record.eas` (§4.6.2: each coefficient's own Eq. 15).
@@ -103,9 +101,8 @@ impl TemporalRecord {
     /// light by three times `a_t` (`tests/trc.rs`). Without it `trc`'s error,
     /// block bias and flicker fell on cube-in-box, under the moving light
     /// and among the balls, and its records were the same
-    /// (`benches/RESULTS.md`, "Extrapolated gradients: E alone"). They
-    /// are still computed and stored (`d_grad_*`), as the paper defines
-    /// them.
+    /// (`benches/RESULTS.md`, "Extrapolated gradients: E alone"). Neither
+    /// computed nor stored since (store schema 11).
     pub(super) fn at_frame(
         &self,
         t: u32,
@@ -223,8 +220,6 @@ impl TemporalRecord {
             change,
             last_valid: 0,
             d_irradiance: Vec3::ZERO,
-            d_grad_rotation: [Vec3::ZERO; 3],
-            d_grad_translation: [Vec3::ZERO; 3],
             d_eas: None,
             replaces: None,
             used: false,
@@ -380,8 +375,6 @@ mod tests {
         k.record.created_frame = 10;
         k.record.grad_translation = [Vec3::X; 3];
         k.d_irradiance = Vec3::splat(0.02);
-        k.d_grad_translation = [Vec3::Y; 3];
-        k.d_grad_rotation = [Vec3::Z; 3];
         let at = k.at_frame(14, TemporalGradients::Extrapolated, None);
         assert_eq!(at.irradiance, Vec3::splat(2.08));
         assert_eq!(at.grad_translation, [Vec3::X; 3]);

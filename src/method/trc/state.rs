@@ -3,8 +3,12 @@
 //! archives, validated when read back. The layout is part of the store
 //! schema (`migrations/`): changing it needs a migration. Schema 7
 //! (`migrations/0007_radiance_records_in_state.md`) added a radiance record's
-//! material and sources after what schema 6 stored of a record;
-//! [`upgrade_schema_6_record`] converts a schema-6 record.
+//! material and sources after what schema 6 stored of a record
+//! ([`upgrade_schema_6_record`]); schema 11
+//! (`migrations/0011_trc_state_without_spatial_gradient_changes.md`)
+//! dropped the extrapolated changes of the spatial gradients, which no
+//! frame applies ([`TemporalRecord::at_frame`]'s departure from TRC Eq.
+//! 16–17; [`upgrade_schema_10_record`]).
 
 use super::TemporalRecord;
 use crate::cache::eas::Eas;
@@ -16,10 +20,10 @@ use crate::store::{aligned, decode_value, encode};
 use glam::Vec3;
 use rkyv::rancor;
 
-/// Everything of a [`TemporalRecord`], in plain arrays.
+/// Everything of a [`TemporalRecord`], in plain arrays (schema 11).
 #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
 struct RecordState {
-    /// All of an irradiance record: the whole of a schema-6 record.
+    /// All of an irradiance record.
     irradiance: IrradianceState,
     /// The material of a radiance record's surface (`--ic-glossy eas`),
     /// which a replacement gathers again with.
@@ -28,8 +32,7 @@ struct RecordState {
     eas: Option<Vec<EasState>>,
 }
 
-/// Everything of a [`TemporalRecord`] but its radiance-record parts: a
-/// schema-6 record's layout (frozen: changing it changes schema 6).
+/// Everything of a [`TemporalRecord`] but its radiance-record parts.
 #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
 struct IrradianceState {
     id: u64,
@@ -52,10 +55,106 @@ struct IrradianceState {
     change: f32,
     last_valid: u32,
     d_irradiance: [f32; 3],
+    replaces: Option<u64>,
+    used: bool,
+}
+
+/// A record of schemas 7–10 (frozen: the migration to schema 11 reads
+/// it): [`RecordState`] with [`IrradianceStateSchema6`].
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct RecordStateSchema7 {
+    irradiance: IrradianceStateSchema6,
+    glossy: Option<u32>,
+    eas: Option<Vec<EasState>>,
+}
+
+/// A record of schema 6, and the irradiance part of schemas 7–10
+/// (frozen): [`IrradianceState`] with the extrapolated changes of the
+/// spatial gradients (TRC Eq. 16–17) after `d_irradiance`.
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct IrradianceStateSchema6 {
+    id: u64,
+    created_frame: u32,
+    object: u32,
+    position: [f32; 3],
+    normal: [f32; 3],
+    irradiance: [f32; 3],
+    grad_translation: [[f32; 3]; 3],
+    grad_rotation: [[f32; 3]; 3],
+    radius: f32,
+    pixel: u32,
+    stream: u64,
+    point_position: [f32; 3],
+    point_normal: [f32; 3],
+    point_geometric_normal: [f32; 3],
+    footprint: f32,
+    next_irradiance: [f32; 3],
+    change: f32,
+    last_valid: u32,
+    d_irradiance: [f32; 3],
     d_grad_rotation: [[f32; 3]; 3],
     d_grad_translation: [[f32; 3]; 3],
     replaces: Option<u64>,
     used: bool,
+}
+
+impl IrradianceStateSchema6 {
+    /// The record without its spatial gradients' changes (schema 11).
+    fn upgraded(self) -> IrradianceState {
+        IrradianceState {
+            id: self.id,
+            created_frame: self.created_frame,
+            object: self.object,
+            position: self.position,
+            normal: self.normal,
+            irradiance: self.irradiance,
+            grad_translation: self.grad_translation,
+            grad_rotation: self.grad_rotation,
+            radius: self.radius,
+            pixel: self.pixel,
+            stream: self.stream,
+            point_position: self.point_position,
+            point_normal: self.point_normal,
+            point_geometric_normal: self.point_geometric_normal,
+            footprint: self.footprint,
+            next_irradiance: self.next_irradiance,
+            change: self.change,
+            last_valid: self.last_valid,
+            d_irradiance: self.d_irradiance,
+            replaces: self.replaces,
+            used: self.used,
+        }
+    }
+
+    /// `s` as an older build wrote it, its spatial gradients' changes 0
+    /// (for tests of the migrations).
+    fn downgraded(s: IrradianceState) -> Self {
+        IrradianceStateSchema6 {
+            id: s.id,
+            created_frame: s.created_frame,
+            object: s.object,
+            position: s.position,
+            normal: s.normal,
+            irradiance: s.irradiance,
+            grad_translation: s.grad_translation,
+            grad_rotation: s.grad_rotation,
+            radius: s.radius,
+            pixel: s.pixel,
+            stream: s.stream,
+            point_position: s.point_position,
+            point_normal: s.point_normal,
+            point_geometric_normal: s.point_geometric_normal,
+            footprint: s.footprint,
+            next_irradiance: s.next_irradiance,
+            change: s.change,
+            last_valid: s.last_valid,
+            d_irradiance: s.d_irradiance,
+            d_grad_rotation: [[0.0; 3]; 3],
+            d_grad_translation: [[0.0; 3]; 3],
+            replaces: s.replaces,
+            used: s.used,
+        }
+    }
 }
 
 /// One source of a radiance record ([`Eas`]) and its extrapolated temporal
@@ -103,8 +202,6 @@ pub(super) fn encode_record(r: &TemporalRecord) -> Vec<u8> {
         change: r.change,
         last_valid: r.last_valid,
         d_irradiance: a(r.d_irradiance),
-        d_grad_rotation: a3(r.d_grad_rotation),
-        d_grad_translation: a3(r.d_grad_translation),
         replaces: r.replaces,
         used: r.used,
     };
@@ -182,8 +279,6 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
         change: s.change,
         last_valid: s.last_valid,
         d_irradiance: s.d_irradiance.into(),
-        d_grad_rotation: v3(s.d_grad_rotation),
-        d_grad_translation: v3(s.d_grad_translation),
         d_eas,
         replaces: s.replaces,
         used: s.used,
@@ -207,8 +302,6 @@ fn check_values(r: &TemporalRecord) -> Result<(), String> {
         .chain(record.grad_translation)
         .chain(record.grad_rotation)
         .chain([r.next_irradiance, r.d_irradiance])
-        .chain(r.d_grad_rotation)
-        .chain(r.d_grad_translation)
         .chain(r.d_eas.as_deref().unwrap_or(&[]).iter().copied());
     let sources = record.eas.as_deref().unwrap_or(&[]);
     let finite = vectors.into_iter().all(Vec3::is_finite)
@@ -233,28 +326,55 @@ pub fn sources_in(bytes: &[u8]) -> Result<Option<usize>, String> {
     Ok(s.eas.as_ref().map(|sources| sources.len()))
 }
 
-/// A schema-6 record's bytes in the schema-7 layout: the same record, an
-/// irradiance record (schema 6 had no `trc` radiance records).
+/// A schema-6 record's bytes in the schema-7 layout (that of schemas
+/// 7–10): the same record, an irradiance record (schema 6 had no `trc`
+/// radiance records).
 pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
-    let irradiance = decode_value::<IrradianceState>(bytes)
+    let irradiance = decode_value::<IrradianceStateSchema6>(bytes)
         .map_err(|e| format!("schema-6 trc record state: {e}"))?;
-    Ok(encode(&RecordState {
+    Ok(encode(&RecordStateSchema7 {
         irradiance,
         glossy: None,
         eas: None,
     }))
 }
 
-/// A schema-7 irradiance record's bytes in the schema-6 layout: what a
-/// schema-6 build wrote, for tests of the migration. A radiance record has
-/// no schema-6 form.
+/// A record's bytes of schemas 7–10 in the schema-11 layout: the same
+/// record without the changes of its spatial gradients.
+pub fn upgrade_schema_10_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    let s = decode_value::<RecordStateSchema7>(bytes)
+        .map_err(|e| format!("schema-10 trc record state: {e}"))?;
+    Ok(encode(&RecordState {
+        irradiance: s.irradiance.upgraded(),
+        glossy: s.glossy,
+        eas: s.eas,
+    }))
+}
+
+/// A record's bytes in the layout of schemas 7–10, the changes of its
+/// spatial gradients 0: what a schema-10 build wrote, but for those
+/// (which no frame of `trc` revision 18 applies), for tests of the
+/// migration.
+#[doc(hidden)]
+pub fn downgrade_to_schema_10_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    let s = decode_value::<RecordState>(bytes).map_err(|e| format!("trc record state: {e}"))?;
+    Ok(encode(&RecordStateSchema7 {
+        irradiance: IrradianceStateSchema6::downgraded(s.irradiance),
+        glossy: s.glossy,
+        eas: s.eas,
+    }))
+}
+
+/// An irradiance record's bytes in the schema-6 layout, the changes of
+/// its spatial gradients 0: what a schema-6 build wrote, but for those,
+/// for tests of the migration. A radiance record has no schema-6 form.
 #[doc(hidden)]
 pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
     let s = decode_value::<RecordState>(bytes).map_err(|e| format!("trc record state: {e}"))?;
     if s.glossy.is_some() || s.eas.is_some() {
         return Err(format!("record {} is a radiance record", s.irradiance.id));
     }
-    Ok(encode(&s.irradiance))
+    Ok(encode(&IrradianceStateSchema6::downgraded(s.irradiance)))
 }
 
 #[cfg(test)]
@@ -275,7 +395,7 @@ mod tests {
         type Spoil = fn(&mut TemporalRecord);
         let cases: [(&str, Spoil); 6] = [
             ("irradiance", |r| r.record.irradiance.y = f32::NAN),
-            ("gradient", |r| r.d_grad_rotation[1].x = f32::INFINITY),
+            ("gradient", |r| r.record.grad_rotation[1].x = f32::INFINITY),
             ("normal", |r| r.candidate.point.normal = Vec3::ZERO),
             ("radius", |r| r.record.radius = 0.0),
             ("change", |r| r.change = f32::NAN),
