@@ -381,6 +381,35 @@ pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
 mod tests {
     use super::*;
 
+    /// A record of this schema put in the layout of schemas 7–10 (and of
+    /// schema 6) and upgraded again is the same bytes, an irradiance record
+    /// and a radiance record alike; bytes already upgraded are refused, not
+    /// read as another layout.
+    #[test]
+    fn older_layouts_upgrade_to_the_same_bytes() {
+        let mut radiance = TemporalRecord::test_record(Vec3::ONE, 0.01);
+        radiance.candidate.glossy = Some(2);
+        let source = |node, e: f32| Eas {
+            offset: Vec3::new(0.0, 1.0, node as f32),
+            solid_angle: 0.5,
+            irradiance: Vec3::splat(e),
+            node,
+        };
+        radiance.record.eas = Some(vec![source(1, 1.0), source(2, 2.0)].into());
+        radiance.d_eas = Some(vec![Vec3::splat(0.1), Vec3::splat(-0.1)].into());
+        let irradiance = encode_record(&TemporalRecord::test_record(Vec3::ONE, 0.01));
+        for bytes in [irradiance.clone(), encode_record(&radiance)] {
+            let older = downgrade_to_schema_10_record(&bytes).unwrap();
+            assert!(older.len() > bytes.len());
+            assert_eq!(upgrade_schema_10_record(&older).unwrap(), bytes);
+            assert!(upgrade_schema_10_record(&bytes).is_err());
+        }
+        let schema_6 = downgrade_to_schema_6_record(&irradiance).unwrap();
+        let schema_7 = upgrade_schema_6_record(&schema_6).unwrap();
+        assert_eq!(upgrade_schema_10_record(&schema_7).unwrap(), irradiance);
+        assert!(downgrade_to_schema_6_record(&encode_record(&radiance)).is_err());
+    }
+
     /// A record whose bytes decode to values no render could use is
     /// refused with what is wrong, not restored into the cache.
     #[test]
