@@ -624,6 +624,48 @@ fn schema_10_trc_state_is_migrated_and_resumes_bit_identically() {
     }
 }
 
+/// `radcache render` says when it upgrades a store, once: a `trc` job
+/// rendered with `--db` and put back to schema 10 resumes with the step
+/// named on stderr and renders the frames a render without the store
+/// does; the next run says nothing of it.
+#[test]
+fn the_cli_says_when_it_upgrades_a_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db");
+    let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
+    let render = |frames: &str, out: &Path, db: Option<&Path>| -> String {
+        let mut args = vec!["render", "--method", "trc", "--frames", frames];
+        args.extend(["--size", "16x16", "--spp", "1", "-q"]);
+        args.extend(["--out", out.to_str().unwrap()]);
+        if let Some(db) = db {
+            args.extend(["--db", db.to_str().unwrap(), "--job", "j"]);
+        }
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args(&args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&run.stderr).into_owned();
+        assert!(run.status.success(), "{stderr}");
+        stderr
+    };
+    render("0..3", &resumed, Some(&db));
+    {
+        let raw = open_raw(&db);
+        let downgrade = radcache::method::trc::downgrade_to_schema_10_record;
+        let converted = rewrite_state_records(&raw, |_, _, data| Some(downgrade(data).unwrap()));
+        assert!(!converted.is_empty());
+        migrate::write_version(&db, &raw.open_tree("meta").unwrap(), 10).unwrap();
+        raw.flush().unwrap();
+    }
+    let said = render("0..5", &resumed, Some(&db));
+    let step = "upgrading schema 10 to 11 (0011_trc_state_without_spatial_gradient_changes)";
+    assert!(said.contains(step), "{said}");
+    render("0..5", &plain, None);
+    assert_eq!(exr_files(&plain, 0..5), exr_files(&resumed, 0..5));
+    let said = render("0..5", &resumed, Some(&db));
+    assert!(!said.contains("upgrading"), "{said}");
+}
+
 /// Schema-7 statistics (two jobs, the first already converted by a step
 /// that crashed before the second) are rewritten in the schema-8 layout
 /// when the store is opened: every count as it was, what schema 7 did not

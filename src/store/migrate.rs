@@ -234,6 +234,14 @@ pub fn migrate(
     }
     for v in found..target {
         let step = steps.iter().find(|m| m.from == v).expect("checked above");
+        // Said before the step, which may take a while on a large store,
+        // and which older builds cannot undo (they refuse the store after).
+        eprintln!(
+            "store {}: upgrading schema {v} to {} ({})",
+            path.display(),
+            v + 1,
+            step.name
+        );
         (step.run)(db, path).map_err(|detail| StoreError::Migration {
             path: path.to_owned(),
             from: v,

@@ -11,7 +11,8 @@
 //!   `migrations/0007_radiance_records_in_state.md`,
 //!   `migrations/0008_frame_footprint.md`,
 //!   `migrations/0009_record_sources.md`,
-//!   `migrations/0010_tcg_state_refers_to_samples.md`).
+//!   `migrations/0010_tcg_state_refers_to_samples.md`,
+//!   `migrations/0011_trc_state_without_spatial_gradient_changes.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
 //! - Bulk values are zstd-compressed and live in the sample log, whose
