@@ -35,8 +35,10 @@ fn status_kb(status: &str, field: &str) -> Option<u64> {
 
 /// Resets the process's peak RSS to its current RSS (Linux ≥ 4.0,
 /// `echo 5 > /proc/self/clear_refs`), so that [`peak_memory_mb`] after a run
-/// is that run's peak rather than the whole process's. Returns whether it
-/// worked; where it does not, the figure stays the process peak so far.
+/// is that run's peak rather than the whole process's. The current RSS
+/// holds what the allocator kept of earlier runs, so a run after a larger
+/// one reads at least that. Returns whether it worked; where it does not,
+/// the figure stays the process peak so far.
 pub fn reset_peak_memory() -> bool {
     std::fs::write("/proc/self/clear_refs", "5").is_ok()
 }
