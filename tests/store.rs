@@ -624,6 +624,47 @@ fn schema_10_trc_state_is_migrated_and_resumes_bit_identically() {
     }
 }
 
+/// A store stamped schema 10 whose `trc` state does not read in the
+/// layout of schemas 7–10 (here: already in this build's) fails its
+/// upgrade with an error naming the step, tree and key, and is left at
+/// schema 10 with its state as it was, not half read into the wrong
+/// fields.
+#[test]
+fn a_trc_state_that_does_not_read_as_schema_10_fails_the_upgrade_clearly() {
+    let method = MethodSettings::Trc(TrcSettings {
+        ic: small_ic_settings(),
+        ..TrcSettings::default()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("db");
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let fs = renderer(&method).settings.clone();
+    let spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
+    run_stored_job(&path, &spec, &method, 0..3, &dir.path().join("o")).unwrap();
+    let state_before = {
+        let db = open_raw(&path);
+        migrate::write_version(&path, &db.open_tree("meta").unwrap(), 10).unwrap();
+        db.flush().unwrap();
+        let state = db.open_tree("state").unwrap();
+        state.iter().map(|i| i.unwrap()).collect::<Vec<_>>()
+    };
+    let msg = err_text(Store::open(&path));
+    for part in [
+        "migration from schema 10 failed",
+        "0011_trc_state_without_spatial_gradient_changes",
+        "tree `state` key",
+        "schema-10 trc record state",
+    ] {
+        assert!(msg.contains(part), "{part}: {msg}");
+    }
+    let db = open_raw(&path);
+    let version = db.open_tree("meta").unwrap().get(keys::META_SCHEMA_VERSION);
+    assert_eq!(version.unwrap().unwrap().as_ref(), 10u32.to_be_bytes());
+    let state = db.open_tree("state").unwrap();
+    let state_after: Vec<_> = state.iter().map(|i| i.unwrap()).collect();
+    assert!(state_after == state_before);
+}
+
 /// `radcache render` says when it upgrades a store, once: a `trc` job
 /// rendered with `--db` and put back to schema 10 resumes with the step
 /// named on stderr and renders the frames a render without the store
