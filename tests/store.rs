@@ -358,12 +358,12 @@ fn newer_schema_is_refused_and_left_as_it_was() {
     }
 }
 
-/// A synthetic step 11 → 12: checks that it runs after the real steps
-/// from 1 to 11 (the stored version is 11).
+/// A synthetic step 12 → 13: checks that it runs after the real steps
+/// from 1 to 12 (the stored version is 12).
 fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
     let meta = db.open_tree("meta").map_err(|e| e.to_string())?;
     let version = meta.get(keys::META_SCHEMA_VERSION).unwrap().unwrap();
-    if version.as_ref() != 11u32.to_be_bytes() {
+    if version.as_ref() != 12u32.to_be_bytes() {
         return Err(format!("ran at version {version:?}"));
     }
     meta.insert(b"synthetic_step", &b"done"[..])
@@ -373,8 +373,8 @@ fn add_marker(db: &sled::Db, _dir: &Path) -> Result<(), String> {
 
 #[test]
 fn older_schema_is_migrated_in_order() {
-    // A version-1 store (fixture) brought to a synthetic version 12: the
-    // real 1 → 2, …, 10 → 11, then 11 → 12, in order.
+    // A version-1 store (fixture) brought to a synthetic version 13: the
+    // real 1 → 2, …, 11 → 12, then 12 → 13, in order.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
     let method = MethodSettings::Path(PathSettings {
@@ -383,15 +383,15 @@ fn older_schema_is_migrated_in_order() {
     });
     v1_fixture(&path, &method);
     let mut steps = migrate::MIGRATIONS.to_vec();
-    assert_eq!(steps.len(), 10);
+    assert_eq!(steps.len(), 11);
     steps.push(Migration {
-        from: 11,
+        from: 12,
         name: "synthetic",
         run: add_marker,
     });
-    // Without the step for 11 → 12 nothing runs, not even 1 → 2.
-    let msg = err_text(Store::open_with(&path, false, 12, &steps[..10]));
-    assert!(msg.contains("no migration from schema 11 to 12"), "{msg}");
+    // Without the step for 12 → 13 nothing runs, not even 1 → 2.
+    let msg = err_text(Store::open_with(&path, false, 13, &steps[..11]));
+    assert!(msg.contains("no migration from schema 12 to 13"), "{msg}");
     assert_eq!(
         Store::open_with(&path, false, 1, &[])
             .unwrap()
@@ -400,8 +400,8 @@ fn older_schema_is_migrated_in_order() {
         1
     );
     {
-        let store = Store::open_with(&path, false, 12, &steps).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 12);
+        let store = Store::open_with(&path, false, 13, &steps).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 13);
         assert!(store
             .tree("meta")
             .unwrap()
@@ -410,9 +410,9 @@ fn older_schema_is_migrated_in_order() {
         assert_eq!(store.frames_done(7).unwrap(), vec![0, 1]);
         assert_eq!(store.job("old").unwrap().unwrap().frames_done, 2);
     }
-    // This build (version 11) now refuses the upgraded store.
+    // This build (version 12) now refuses the upgraded store.
     let msg = err_text(Store::open(&path));
-    assert!(msg.contains("schema version 12 is newer"), "{msg}");
+    assert!(msg.contains("schema version 13 is newer"), "{msg}");
 }
 
 /// One `radcache render --job` run: the store at `path` opened, the job of
@@ -513,15 +513,61 @@ fn schema_6_carried_state_is_migrated_and_resumes_bit_identically() {
     }
 }
 
+/// A state-record conversion, as `trc`'s downgrades for tests are.
+type Convert = fn(&[u8]) -> Result<Vec<u8>, String>;
+
+/// A migration step with the `meta` key of its progress.
+type Step = (&'static [u8], fn(&sled::Db, &Path) -> Result<(), String>);
+
+/// The layout of schema 11 (as a schema-11 build wrote it) is migrated
+/// as schema 10's is below: the resumes render byte for byte what
+/// uninterrupted renders do.
+#[test]
+fn schema_11_trc_state_is_migrated_and_resumes_bit_identically() {
+    older_trc_state_is_migrated_and_resumes_bit_identically(
+        11,
+        radcache::method::trc::downgrade_to_schema_11_record,
+        &[(
+            keys::META_MIGRATE_0012_THROUGH,
+            radcache::store::v11::migrate_to_v12,
+        )],
+    );
+}
+
 /// Two `trc` jobs (one with radiance records) and a `tcg` job, each
 /// stopped after frame 2 of 0..6, the `trc` state put back in the layout
 /// of schemas 7–10 (as a schema-10 build wrote it, but for the changes of
 /// the spatial gradients, 0 here, which no frame applies), are migrated
-/// when the store is opened: the resumes render the frames uninterrupted
-/// renders do, byte for byte (the `tcg` state, left as it was, too), and
-/// the state is shorter. Running the step again converts nothing twice.
+/// when the store is opened (10 → 11 → 12): the resumes render the frames
+/// uninterrupted renders do, byte for byte (the `tcg` state, left as it
+/// was, too), and the state is shorter. Running the steps again converts
+/// nothing twice.
 #[test]
 fn schema_10_trc_state_is_migrated_and_resumes_bit_identically() {
+    older_trc_state_is_migrated_and_resumes_bit_identically(
+        10,
+        radcache::method::trc::downgrade_to_schema_10_record,
+        &[
+            (
+                keys::META_MIGRATE_0011_THROUGH,
+                radcache::store::v10::migrate_to_v11,
+            ),
+            (
+                keys::META_MIGRATE_0012_THROUGH,
+                radcache::store::v11::migrate_to_v12,
+            ),
+        ],
+    );
+}
+
+/// The two tests above: the `trc` state put back by `downgrade` into the
+/// layout of schema `version`, the store stamped so, then opened, resumed
+/// and each of `steps` run again.
+fn older_trc_state_is_migrated_and_resumes_bit_identically(
+    version: u32,
+    downgrade: Convert,
+    steps: &[Step],
+) {
     let trc = |glossy| {
         MethodSettings::Trc(TrcSettings {
             ic: IcSettings {
@@ -578,7 +624,6 @@ fn schema_10_trc_state_is_migrated_and_resumes_bit_identically() {
         drop(store);
         let db = open_raw(&path);
         let before = state_rows(&db);
-        let downgrade = radcache::method::trc::downgrade_to_schema_10_record;
         let converted = rewrite_state_records(&db, |job, _, data| {
             ids.contains(&job).then(|| downgrade(data).unwrap())
         });
@@ -586,7 +631,7 @@ fn schema_10_trc_state_is_migrated_and_resumes_bit_identically() {
             assert!(converted.contains(&id), "job {id}: {converted:?}");
         }
         assert!(size(&state_rows(&db)) > size(&before));
-        migrate::write_version(&path, &db.open_tree("meta").unwrap(), 10).unwrap();
+        migrate::write_version(&path, &db.open_tree("meta").unwrap(), version).unwrap();
         db.flush().unwrap();
         (ids, before)
     };
@@ -600,18 +645,17 @@ fn schema_10_trc_state_is_migrated_and_resumes_bit_identically() {
         let files = |kind| exr_files(&out(name, kind), 0..6);
         assert_eq!(files("plain"), files("resumed"), "{name}");
     }
-    // The step again (a crash before the version bump): nothing converted
+    // The steps again (a crash before the version bump): nothing converted
     // twice, the state still reads.
     {
         let db = open_raw(&path);
-        let through = db
-            .open_tree("meta")
-            .unwrap()
-            .get(keys::META_MIGRATE_0011_THROUGH);
-        let through = through.unwrap().expect("the step's progress");
-        let last = u64::from_be_bytes(through.as_ref().try_into().unwrap());
-        assert_eq!(Some(last), trc_ids.into_iter().max());
-        radcache::store::v10::migrate_to_v11(&db, &path).unwrap();
+        for (through, step) in steps {
+            let through = db.open_tree("meta").unwrap().get(through);
+            let through = through.unwrap().expect("the step's progress");
+            let last = u64::from_be_bytes(through.as_ref().try_into().unwrap());
+            assert_eq!(Some(last), trc_ids.into_iter().max());
+            step(&db, &path).unwrap();
+        }
         db.flush().unwrap();
     }
     let version = Store::open(&path).unwrap().schema_version().unwrap();
@@ -624,13 +668,12 @@ fn schema_10_trc_state_is_migrated_and_resumes_bit_identically() {
     }
 }
 
-/// A store stamped schema 10 whose `trc` state does not read in the
-/// layout of schemas 7–10 (here: already in this build's) fails its
-/// upgrade with an error naming the step, tree and key, and is left at
-/// schema 10 with its state as it was, not half read into the wrong
-/// fields.
+/// A store stamped schema 10 (or 11) whose `trc` state does not read in
+/// that schema's layout (here: already in this build's) fails its upgrade
+/// with an error naming the step, tree and key, and is left at that
+/// schema with its state as it was, not half read into the wrong fields.
 #[test]
-fn a_trc_state_that_does_not_read_as_schema_10_fails_the_upgrade_clearly() {
+fn a_trc_state_that_does_not_read_as_its_schema_fails_the_upgrade_clearly() {
     let method = MethodSettings::Trc(TrcSettings {
         ic: small_ic_settings(),
         ..TrcSettings::default()
@@ -641,28 +684,34 @@ fn a_trc_state_that_does_not_read_as_schema_10_fails_the_upgrade_clearly() {
     let fs = renderer(&method).settings.clone();
     let spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
     run_stored_job(&path, &spec, &method, 0..3, &dir.path().join("o")).unwrap();
-    let state_before = {
+    let steps = [
+        (10, "0011_trc_state_without_spatial_gradient_changes"),
+        (11, "0012_trc_state_without_derived_change"),
+    ];
+    for (version, step) in steps {
+        let state_before = {
+            let db = open_raw(&path);
+            migrate::write_version(&path, &db.open_tree("meta").unwrap(), version).unwrap();
+            db.flush().unwrap();
+            let state = db.open_tree("state").unwrap();
+            state.iter().map(|i| i.unwrap()).collect::<Vec<_>>()
+        };
+        let msg = err_text(Store::open(&path));
+        for part in [
+            &format!("migration from schema {version} failed"),
+            step,
+            "tree `state` key",
+            &format!("schema-{version} trc record state"),
+        ] {
+            assert!(msg.contains(part), "{part}: {msg}");
+        }
         let db = open_raw(&path);
-        migrate::write_version(&path, &db.open_tree("meta").unwrap(), 10).unwrap();
-        db.flush().unwrap();
+        let stamped = db.open_tree("meta").unwrap().get(keys::META_SCHEMA_VERSION);
+        assert_eq!(stamped.unwrap().unwrap().as_ref(), version.to_be_bytes());
         let state = db.open_tree("state").unwrap();
-        state.iter().map(|i| i.unwrap()).collect::<Vec<_>>()
-    };
-    let msg = err_text(Store::open(&path));
-    for part in [
-        "migration from schema 10 failed",
-        "0011_trc_state_without_spatial_gradient_changes",
-        "tree `state` key",
-        "schema-10 trc record state",
-    ] {
-        assert!(msg.contains(part), "{part}: {msg}");
+        let state_after: Vec<_> = state.iter().map(|i| i.unwrap()).collect();
+        assert!(state_after == state_before, "schema {version}");
     }
-    let db = open_raw(&path);
-    let version = db.open_tree("meta").unwrap().get(keys::META_SCHEMA_VERSION);
-    assert_eq!(version.unwrap().unwrap().as_ref(), 10u32.to_be_bytes());
-    let state = db.open_tree("state").unwrap();
-    let state_after: Vec<_> = state.iter().map(|i| i.unwrap()).collect();
-    assert!(state_after == state_before);
 }
 
 /// `radcache render` says when it upgrades a store, once: a `trc` job
@@ -699,8 +748,12 @@ fn the_cli_says_when_it_upgrades_a_store() {
         raw.flush().unwrap();
     }
     let said = render("0..5", &resumed, Some(&db));
-    let step = "upgrading schema 10 to 11 (0011_trc_state_without_spatial_gradient_changes)";
-    assert!(said.contains(step), "{said}");
+    for step in [
+        "upgrading schema 10 to 11 (0011_trc_state_without_spatial_gradient_changes)",
+        "upgrading schema 11 to 12 (0012_trc_state_without_derived_change)",
+    ] {
+        assert!(said.contains(step), "{said}");
+    }
     render("0..5", &plain, None);
     assert_eq!(exr_files(&plain, 0..5), exr_files(&resumed, 0..5));
     let said = render("0..5", &resumed, Some(&db));

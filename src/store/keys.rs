@@ -12,8 +12,10 @@
 //! grew), `0009_record_sources.md` (`sources` holds the sources of a
 //! frame's radiance records), `0010_tcg_state_refers_to_samples.md`
 //! (no key changed; a `tcg` record's state no longer holds its samples)
-//! and `0011_trc_state_without_spatial_gradient_changes.md` (no key
-//! changed; a `trc` record's state is 72 bytes shorter).
+//! `0011_trc_state_without_spatial_gradient_changes.md` (no key
+//! changed; a `trc` record's state is 72 bytes shorter) and
+//! `0012_trc_state_without_derived_change.md` (no key changed; 16 bytes
+//! shorter again).
 //! The version this build writes is [`super::migrate::CURRENT_VERSION`].
 //!
 //! | tree      | key                                   | bytes |
@@ -78,6 +80,9 @@ pub const META_MIGRATE_0008_THROUGH: &[u8] = b"migrate_0008_through";
 /// id (u64 big-endian) whose state records it converted (see
 /// `migrations/0011_trc_state_without_spatial_gradient_changes.md`).
 pub const META_MIGRATE_0011_THROUGH: &[u8] = b"migrate_0011_through";
+/// The same for the 0011 → 0012 migration (see
+/// `migrations/0012_trc_state_without_derived_change.md`).
+pub const META_MIGRATE_0012_THROUGH: &[u8] = b"migrate_0012_through";
 
 /// `meta` key of the highest `job-N` number `radcache serve` has given
 /// (u64 big-endian; no schema change: older builds ignore it), so that a

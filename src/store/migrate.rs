@@ -14,7 +14,7 @@ use super::{decode_value, encode, keys, StoreError};
 use std::path::Path;
 
 /// The schema this build reads and writes.
-pub const CURRENT_VERSION: u32 = 11;
+pub const CURRENT_VERSION: u32 = 12;
 
 /// One upgrade step, `from` → `from + 1`.
 #[derive(Clone, Copy)]
@@ -78,6 +78,11 @@ pub const MIGRATIONS: &[Migration] = &[
         from: 10,
         name: "0011_trc_state_without_spatial_gradient_changes",
         run: super::v10::migrate_to_v11,
+    },
+    Migration {
+        from: 11,
+        name: "0012_trc_state_without_derived_change",
+        run: super::v11::migrate_to_v12,
     },
 ];
 

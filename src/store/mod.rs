@@ -12,7 +12,8 @@
 //!   `migrations/0008_frame_footprint.md`,
 //!   `migrations/0009_record_sources.md`,
 //!   `migrations/0010_tcg_state_refers_to_samples.md`,
-//!   `migrations/0011_trc_state_without_spatial_gradient_changes.md`).
+//!   `migrations/0011_trc_state_without_spatial_gradient_changes.md`,
+//!   `migrations/0012_trc_state_without_derived_change.md`).
 //! - Values: rkyv archives ([`schema`]), validated on every read; a value
 //!   that fails validation is [`StoreError::Corrupt`] naming tree and key.
 //! - Bulk values are zstd-compressed and live in the sample log, whose
@@ -61,6 +62,7 @@ mod state;
 mod tail;
 pub mod v1;
 pub mod v10;
+pub mod v11;
 pub mod v2;
 pub mod v3;
 pub mod v4;

@@ -118,7 +118,7 @@ impl EstimateErrorTally {
         self.actual_sum += f64::from(mean_irradiance(actual)) * actual.len() as f64;
         for (k, &e1) in records.iter().zip(actual) {
             let actual_change = relative_change(k.record.irradiance, e1);
-            self.lifespan_sums.0 += u64::from(self.lifespan(k.change));
+            self.lifespan_sums.0 += u64::from(self.lifespan(k.change()));
             self.lifespan_sums.1 += u64::from(self.lifespan(actual_change));
         }
     }

@@ -91,12 +91,12 @@ mod record;
 mod settings;
 mod state;
 
-use record::{frames_of_validity, relative_change, shown_irradiance, sources_change};
+use record::{change_of, frames_of_validity, relative_change, shown_irradiance, sources_change};
 pub use record::{Successor, TemporalRecord};
 pub use settings::{NextDirect, TemporalGradients, TrcSettings};
 pub use state::{
-    downgrade_to_schema_10_record, downgrade_to_schema_6_record, sources_in,
-    upgrade_schema_10_record, upgrade_schema_6_record,
+    downgrade_to_schema_10_record, downgrade_to_schema_11_record, downgrade_to_schema_6_record,
+    sources_in, upgrade_schema_10_record, upgrade_schema_11_record, upgrade_schema_6_record,
 };
 
 use super::carried;
@@ -263,10 +263,7 @@ impl TemporalRadianceCaching {
             record: g.record.clone(),
             candidate: g.candidate,
             next_irradiance: e1,
-            change: next.change,
             last_valid,
-            // Eq. 15 (t1 − t0 = 1); not Eq. 16–17 (`TemporalRecord::at_frame`).
-            d_irradiance: e1 - e0,
             d_eas: next.d_eas,
             replaces: None,
             used: false,
@@ -294,8 +291,7 @@ impl TemporalRadianceCaching {
             };
             d
         });
-        let change = relative_change(g.record.irradiance, irradiance)
-            .max(sources_change(&g.record, d_eas.as_deref()));
+        let change = change_of(&g.record, irradiance, d_eas.as_deref());
         Change {
             irradiance,
             d_eas,

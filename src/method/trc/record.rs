@@ -43,15 +43,11 @@ pub struct TemporalRecord {
     pub record: IrradianceRecord,
     /// Where it was gathered (kept for replacement at the same point).
     pub(crate) candidate: Candidate,
-    /// Estimate of `E(t0+1)` (§4.7).
+    /// Estimate of `E(t0+1)` (§4.7), from which its change (Eq. 7) and
+    /// its extrapolated temporal gradient (Eq. 15) follow.
     pub next_irradiance: Vec3,
-    /// Worst channel of `|τ − 1|`, `τ = E(t0+1)/E(t0)` (Eq. 7, 9).
-    pub change: f32,
     /// Last frame K may contribute to (Eq. 10 and 11).
     pub last_valid: u32,
-    /// Extrapolated temporal gradient ∇t_E (Eq. 15); not those of the
-    /// spatial gradients (Eq. 16–17: why at `at_frame`).
-    pub d_irradiance: Vec3,
     /// A radiance record's (`--ic-glossy eas`) extrapolated temporal
     /// gradient of each of its sources' irradiance, in the order of
     /// `record.eas` (§4.6.2: each coefficient's own Eq. 15).
@@ -66,6 +62,19 @@ pub struct TemporalRecord {
 }
 
 impl TemporalRecord {
+    /// Worst channel of `|τ − 1|`, `τ = E(t0+1)/E(t0)` (Eq. 7, 9), and of
+    /// a radiance record's sources (Eq. 21): the change that bounds its
+    /// temporal weight.
+    pub fn change(&self) -> f32 {
+        change_of(&self.record, self.next_irradiance, self.d_eas.as_deref())
+    }
+
+    /// Extrapolated temporal gradient ∇t_E (Eq. 15 with `t1 − t0 = 1`);
+    /// not those of the spatial gradients (Eq. 16–17: why at `at_frame`).
+    pub fn d_irradiance(&self) -> Vec3 {
+        self.next_irradiance - self.record.irradiance
+    }
+
     /// Takes the radius neighbour clamping left in the frame's cache and
     /// whether a pixel used the record; returns whether either changed
     /// (its carried state must then be written again).
@@ -129,7 +138,7 @@ impl TemporalRecord {
                     d(l.grad_translation, r.grad_translation),
                 )
             }
-            _ => (self.d_irradiance, [Vec3::ZERO; 3], [Vec3::ZERO; 3]),
+            _ => (self.d_irradiance(), [Vec3::ZERO; 3], [Vec3::ZERO; 3]),
         };
         r.irradiance = extrapolated(r.irradiance, d_e, t.saturating_sub(t0));
         let dt = t.saturating_sub(t0) as f32;
@@ -170,7 +179,7 @@ impl TemporalRecord {
     /// 18–20, a steady change) must not spread over K's life.
     pub(super) fn ended_at_a_departure(&self, temporal_accuracy: f32, max_life: u32) -> bool {
         let t0 = self.record.created_frame;
-        self.last_valid < t0 + frames_of_validity(self.change, temporal_accuracy, max_life)
+        self.last_valid < t0 + frames_of_validity(self.change(), temporal_accuracy, max_life)
     }
 
     /// Whether K, expired after a frame that used it, is replaced by a new
@@ -217,9 +226,7 @@ impl TemporalRecord {
             record: crate::cache::IrradianceRecord::flat(0, Vec3::ZERO, e0),
             candidate: crate::method::ic::Candidate::at(point),
             next_irradiance: e0 * (1.0 + change),
-            change,
             last_valid: 0,
-            d_irradiance: Vec3::ZERO,
             d_eas: None,
             replaces: None,
             used: false,
@@ -264,6 +271,13 @@ pub(super) fn sources_change(record: &IrradianceRecord, d_eas: Option<&[Vec3]>) 
         .zip(d)
         .map(|(s, d)| relative_change(s.irradiance, s.irradiance + *d))
         .fold(0.0f32, f32::max)
+}
+
+/// The change that bounds the temporal weight of `record` gathered at
+/// t0 whose E at a later frame is `e` and its sources' changes `d_eas`:
+/// the worst of its own (Eq. 7) and its sources' (Eq. 21).
+pub(super) fn change_of(record: &IrradianceRecord, e: Vec3, d_eas: Option<&[Vec3]>) -> f32 {
+    relative_change(record.irradiance, e).max(sources_change(record, d_eas))
 }
 
 /// The irradiance a record made at t0 with `e0` (and E(t0+1) estimated
@@ -374,17 +388,16 @@ mod tests {
         let mut k = TemporalRecord::test_record(Vec3::splat(2.0), 0.01);
         k.record.created_frame = 10;
         k.record.grad_translation = [Vec3::X; 3];
-        k.d_irradiance = Vec3::splat(0.02);
+        k.next_irradiance = Vec3::splat(2.02);
         let at = k.at_frame(14, TemporalGradients::Extrapolated, None);
-        assert_eq!(at.irradiance, Vec3::splat(2.08));
+        assert!(at.irradiance.abs_diff_eq(Vec3::splat(2.08), 1e-5));
         assert_eq!(at.grad_translation, [Vec3::X; 3]);
         assert_eq!(at.grad_rotation, [Vec3::ZERO; 3]);
-        let e1 = k.record.irradiance + k.d_irradiance;
-        let shown = |g| shown_irradiance(g, k.record.irradiance, e1, 4);
+        let shown = |g| shown_irradiance(g, k.record.irradiance, k.next_irradiance, 4);
         assert_eq!(shown(TemporalGradients::Extrapolated), at.irradiance);
         assert_eq!(shown(TemporalGradients::None), Vec3::splat(2.0));
         // Never below zero.
-        k.d_irradiance = Vec3::splat(-1.0);
+        k.next_irradiance = Vec3::splat(1.0);
         let at = k.at_frame(14, TemporalGradients::Extrapolated, None);
         assert_eq!(at.irradiance, Vec3::ZERO);
 

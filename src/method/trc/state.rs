@@ -8,7 +8,12 @@
 //! (`migrations/0011_trc_state_without_spatial_gradient_changes.md`)
 //! dropped the extrapolated changes of the spatial gradients, which no
 //! frame applies ([`TemporalRecord::at_frame`]'s departure from TRC Eq.
-//! 16–17; [`upgrade_schema_10_record`]).
+//! 16–17; [`upgrade_schema_10_record`]); schema 12
+//! (`migrations/0012_trc_state_without_derived_change.md`) dropped the
+//! change to the next frame and the temporal gradient of E, which follow
+//! from E(t0), E(t0+1) and the sources' changes
+//! ([`TemporalRecord::change`], [`TemporalRecord::d_irradiance`];
+//! [`upgrade_schema_11_record`]).
 
 use super::TemporalRecord;
 use crate::cache::eas::Eas;
@@ -20,7 +25,7 @@ use crate::store::{aligned, decode_value, encode};
 use glam::Vec3;
 use rkyv::rancor;
 
-/// Everything of a [`TemporalRecord`], in plain arrays (schema 11).
+/// Everything of a [`TemporalRecord`], in plain arrays (schema 12).
 #[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
 struct RecordState {
     /// All of an irradiance record.
@@ -44,6 +49,41 @@ struct IrradianceState {
     grad_translation: [[f32; 3]; 3],
     grad_rotation: [[f32; 3]; 3],
     /// As clamped by the latest cache the record was in.
+    radius: f32,
+    pixel: u32,
+    stream: u64,
+    point_position: [f32; 3],
+    point_normal: [f32; 3],
+    point_geometric_normal: [f32; 3],
+    footprint: f32,
+    next_irradiance: [f32; 3],
+    last_valid: u32,
+    replaces: Option<u64>,
+    used: bool,
+}
+
+/// A record of schema 11 (frozen: the migration to schema 12 reads it):
+/// [`RecordState`] with [`IrradianceStateSchema11`].
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct RecordStateSchema11 {
+    irradiance: IrradianceStateSchema11,
+    glossy: Option<u32>,
+    eas: Option<Vec<EasState>>,
+}
+
+/// The irradiance part of a record of schema 11 (frozen):
+/// [`IrradianceState`] with the change to the next frame and the temporal
+/// gradient of E, both derived from what the record keeps besides.
+#[derive(rkyv::Archive, rkyv::Serialize, rkyv::Deserialize)]
+struct IrradianceStateSchema11 {
+    id: u64,
+    created_frame: u32,
+    object: u32,
+    position: [f32; 3],
+    normal: [f32; 3],
+    irradiance: [f32; 3],
+    grad_translation: [[f32; 3]; 3],
+    grad_rotation: [[f32; 3]; 3],
     radius: f32,
     pixel: u32,
     stream: u64,
@@ -100,8 +140,8 @@ struct IrradianceStateSchema6 {
 
 impl IrradianceStateSchema6 {
     /// The record without its spatial gradients' changes (schema 11).
-    fn upgraded(self) -> IrradianceState {
-        IrradianceState {
+    fn upgraded(self) -> IrradianceStateSchema11 {
+        IrradianceStateSchema11 {
             id: self.id,
             created_frame: self.created_frame,
             object: self.object,
@@ -128,7 +168,7 @@ impl IrradianceStateSchema6 {
 
     /// `s` as an older build wrote it, its spatial gradients' changes 0
     /// (for tests of the migrations).
-    fn downgraded(s: IrradianceState) -> Self {
+    fn downgraded(s: IrradianceStateSchema11) -> Self {
         IrradianceStateSchema6 {
             id: s.id,
             created_frame: s.created_frame,
@@ -151,6 +191,61 @@ impl IrradianceStateSchema6 {
             d_irradiance: s.d_irradiance,
             d_grad_rotation: [[0.0; 3]; 3],
             d_grad_translation: [[0.0; 3]; 3],
+            replaces: s.replaces,
+            used: s.used,
+        }
+    }
+}
+
+impl IrradianceStateSchema11 {
+    /// The record without what follows from the rest (schema 12).
+    fn upgraded(self) -> IrradianceState {
+        IrradianceState {
+            id: self.id,
+            created_frame: self.created_frame,
+            object: self.object,
+            position: self.position,
+            normal: self.normal,
+            irradiance: self.irradiance,
+            grad_translation: self.grad_translation,
+            grad_rotation: self.grad_rotation,
+            radius: self.radius,
+            pixel: self.pixel,
+            stream: self.stream,
+            point_position: self.point_position,
+            point_normal: self.point_normal,
+            point_geometric_normal: self.point_geometric_normal,
+            footprint: self.footprint,
+            next_irradiance: self.next_irradiance,
+            last_valid: self.last_valid,
+            replaces: self.replaces,
+            used: self.used,
+        }
+    }
+
+    /// `r`'s state `s` as a schema-11 build wrote it, with `r`'s change
+    /// and temporal gradient of E (for tests of the migrations).
+    fn downgraded(s: IrradianceState, r: &TemporalRecord) -> Self {
+        IrradianceStateSchema11 {
+            id: s.id,
+            created_frame: s.created_frame,
+            object: s.object,
+            position: s.position,
+            normal: s.normal,
+            irradiance: s.irradiance,
+            grad_translation: s.grad_translation,
+            grad_rotation: s.grad_rotation,
+            radius: s.radius,
+            pixel: s.pixel,
+            stream: s.stream,
+            point_position: s.point_position,
+            point_normal: s.point_normal,
+            point_geometric_normal: s.point_geometric_normal,
+            footprint: s.footprint,
+            next_irradiance: s.next_irradiance,
+            change: r.change(),
+            last_valid: s.last_valid,
+            d_irradiance: a(r.d_irradiance()),
             replaces: s.replaces,
             used: s.used,
         }
@@ -181,6 +276,11 @@ fn v3(a: [[f32; 3]; 3]) -> [Vec3; 3] {
 }
 
 pub(super) fn encode_record(r: &TemporalRecord) -> Vec<u8> {
+    encode(&state_of(r))
+}
+
+/// `r` in the layout of this schema.
+fn state_of(r: &TemporalRecord) -> RecordState {
     let c = &r.candidate;
     let irradiance = IrradianceState {
         id: r.record.id,
@@ -199,9 +299,7 @@ pub(super) fn encode_record(r: &TemporalRecord) -> Vec<u8> {
         point_geometric_normal: a(c.point.geometric_normal),
         footprint: c.footprint,
         next_irradiance: a(r.next_irradiance),
-        change: r.change,
         last_valid: r.last_valid,
-        d_irradiance: a(r.d_irradiance),
         replaces: r.replaces,
         used: r.used,
     };
@@ -219,11 +317,11 @@ pub(super) fn encode_record(r: &TemporalRecord) -> Vec<u8> {
             })
             .collect()
     });
-    encode(&RecordState {
+    RecordState {
         irradiance,
         glossy: c.glossy,
         eas,
-    })
+    }
 }
 
 pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
@@ -276,9 +374,7 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
             glossy,
         },
         next_irradiance: s.next_irradiance.into(),
-        change: s.change,
         last_valid: s.last_valid,
-        d_irradiance: s.d_irradiance.into(),
         d_eas,
         replaces: s.replaces,
         used: s.used,
@@ -291,8 +387,9 @@ pub(super) fn decode_record(bytes: &[u8]) -> Result<TemporalRecord, String> {
 }
 
 /// What [`check_record_geometry`] checks, and that every irradiance,
-/// gradient and source is finite (a change to the next frame may be
-/// infinite: a channel dark at t0 that lights up, [`super::record`]).
+/// gradient and source is finite (the change to the next frame that
+/// follows may be infinite: a channel dark at t0 that lights up,
+/// [`super::record`]).
 fn check_values(r: &TemporalRecord) -> Result<(), String> {
     let c = &r.candidate;
     check_record_geometry(&c.point, r.record.radius, c.footprint)?;
@@ -301,7 +398,7 @@ fn check_values(r: &TemporalRecord) -> Result<(), String> {
         .into_iter()
         .chain(record.grad_translation)
         .chain(record.grad_rotation)
-        .chain([r.next_irradiance, r.d_irradiance])
+        .chain([r.next_irradiance])
         .chain(r.d_eas.as_deref().unwrap_or(&[]).iter().copied());
     let sources = record.eas.as_deref().unwrap_or(&[]);
     let finite = vectors.into_iter().all(Vec3::is_finite)
@@ -310,9 +407,6 @@ fn check_values(r: &TemporalRecord) -> Result<(), String> {
             .all(|e| e.offset.is_finite() && e.irradiance.is_finite() && e.solid_angle.is_finite());
     if !finite {
         return Err("an irradiance, gradient or source that is not finite".into());
-    }
-    if r.change.is_nan() || r.change < 0.0 {
-        return Err(format!("a change to the next frame of {}", r.change));
     }
     Ok(())
 }
@@ -344,6 +438,19 @@ pub fn upgrade_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
 pub fn upgrade_schema_10_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
     let s = decode_value::<RecordStateSchema7>(bytes)
         .map_err(|e| format!("schema-10 trc record state: {e}"))?;
+    Ok(encode(&RecordStateSchema11 {
+        irradiance: s.irradiance.upgraded(),
+        glossy: s.glossy,
+        eas: s.eas,
+    }))
+}
+
+/// A record's bytes of schema 11 in the schema-12 layout: the same record
+/// without its change to the next frame and temporal gradient of E, which
+/// follow from the rest.
+pub fn upgrade_schema_11_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    let s = decode_value::<RecordStateSchema11>(bytes)
+        .map_err(|e| format!("schema-11 trc record state: {e}"))?;
     Ok(encode(&RecordState {
         irradiance: s.irradiance.upgraded(),
         glossy: s.glossy,
@@ -351,13 +458,30 @@ pub fn upgrade_schema_10_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
     }))
 }
 
+/// A record's bytes in the schema-11 layout: what a schema-11 build wrote,
+/// for tests of the migrations.
+#[doc(hidden)]
+pub fn downgrade_to_schema_11_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    Ok(encode(&schema_11_of(bytes)?))
+}
+
+fn schema_11_of(bytes: &[u8]) -> Result<RecordStateSchema11, String> {
+    let r = decode_record(bytes)?;
+    let s = state_of(&r);
+    Ok(RecordStateSchema11 {
+        irradiance: IrradianceStateSchema11::downgraded(s.irradiance, &r),
+        glossy: s.glossy,
+        eas: s.eas,
+    })
+}
+
 /// A record's bytes in the layout of schemas 7–10, the changes of its
 /// spatial gradients 0: what a schema-10 build wrote, but for those
 /// (which no frame of `trc` revision 18 applies), for tests of the
-/// migration.
+/// migrations.
 #[doc(hidden)]
 pub fn downgrade_to_schema_10_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
-    let s = decode_value::<RecordState>(bytes).map_err(|e| format!("trc record state: {e}"))?;
+    let s = schema_11_of(bytes)?;
     Ok(encode(&RecordStateSchema7 {
         irradiance: IrradianceStateSchema6::downgraded(s.irradiance),
         glossy: s.glossy,
@@ -367,10 +491,10 @@ pub fn downgrade_to_schema_10_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
 
 /// An irradiance record's bytes in the schema-6 layout, the changes of
 /// its spatial gradients 0: what a schema-6 build wrote, but for those,
-/// for tests of the migration. A radiance record has no schema-6 form.
+/// for tests of the migrations. A radiance record has no schema-6 form.
 #[doc(hidden)]
 pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
-    let s = decode_value::<RecordState>(bytes).map_err(|e| format!("trc record state: {e}"))?;
+    let s = schema_11_of(bytes)?;
     if s.glossy.is_some() || s.eas.is_some() {
         return Err(format!("record {} is a radiance record", s.irradiance.id));
     }
@@ -381,8 +505,8 @@ pub fn downgrade_to_schema_6_record(bytes: &[u8]) -> Result<Vec<u8>, String> {
 mod tests {
     use super::*;
 
-    /// A record of this schema put in the layout of schemas 7–10 (and of
-    /// schema 6) and upgraded again is the same bytes, an irradiance record
+    /// A record of this schema put in the layout of schema 11, of schemas
+    /// 7–10 (and of schema 6) and upgraded again is the same bytes, an irradiance record
     /// and a radiance record alike; bytes already upgraded are refused, not
     /// read as another layout.
     #[test]
@@ -399,14 +523,21 @@ mod tests {
         radiance.d_eas = Some(vec![Vec3::splat(0.1), Vec3::splat(-0.1)].into());
         let irradiance = encode_record(&TemporalRecord::test_record(Vec3::ONE, 0.01));
         for bytes in [irradiance.clone(), encode_record(&radiance)] {
-            let older = downgrade_to_schema_10_record(&bytes).unwrap();
-            assert!(older.len() > bytes.len());
-            assert_eq!(upgrade_schema_10_record(&older).unwrap(), bytes);
-            assert!(upgrade_schema_10_record(&bytes).is_err());
+            let schema_11 = downgrade_to_schema_11_record(&bytes).unwrap();
+            assert!(schema_11.len() > bytes.len());
+            assert_eq!(upgrade_schema_11_record(&schema_11).unwrap(), bytes);
+            let schema_10 = downgrade_to_schema_10_record(&bytes).unwrap();
+            assert!(schema_10.len() > schema_11.len());
+            assert_eq!(upgrade_schema_10_record(&schema_10).unwrap(), schema_11);
+            for not_older in [&bytes, &schema_11] {
+                assert!(upgrade_schema_10_record(not_older).is_err());
+            }
+            assert!(upgrade_schema_11_record(&bytes).is_err());
         }
         let schema_6 = downgrade_to_schema_6_record(&irradiance).unwrap();
         let schema_7 = upgrade_schema_6_record(&schema_6).unwrap();
-        assert_eq!(upgrade_schema_10_record(&schema_7).unwrap(), irradiance);
+        let schema_11 = upgrade_schema_10_record(&schema_7).unwrap();
+        assert_eq!(upgrade_schema_11_record(&schema_11).unwrap(), irradiance);
         assert!(downgrade_to_schema_6_record(&encode_record(&radiance)).is_err());
     }
 
@@ -417,9 +548,13 @@ mod tests {
         let good = TemporalRecord::test_record(Vec3::ONE, 0.01);
         let back = decode_record(&encode_record(&good)).expect("a good record decodes");
         assert_eq!(back.record.irradiance, good.record.irradiance);
-        let mut infinite_change = TemporalRecord::test_record(Vec3::ZERO, f32::INFINITY);
+        let mut infinite_change = TemporalRecord::test_record(Vec3::ZERO, 0.0);
         infinite_change.next_irradiance = Vec3::ONE;
-        decode_record(&encode_record(&infinite_change)).expect("an infinite change is one");
+        let back = decode_record(&encode_record(&infinite_change));
+        assert_eq!(
+            back.expect("an infinite change is one").change(),
+            f32::INFINITY
+        );
 
         type Spoil = fn(&mut TemporalRecord);
         let cases: [(&str, Spoil); 6] = [
@@ -427,7 +562,7 @@ mod tests {
             ("gradient", |r| r.record.grad_rotation[1].x = f32::INFINITY),
             ("normal", |r| r.candidate.point.normal = Vec3::ZERO),
             ("radius", |r| r.record.radius = 0.0),
-            ("change", |r| r.change = f32::NAN),
+            ("next frame", |r| r.next_irradiance.z = f32::NAN),
             ("last frame", |r| r.last_valid = u32::MAX),
         ];
         for (what, spoil) in cases {
