@@ -249,6 +249,9 @@ pub struct TrcArgs {
     /// A replacement record takes the results of the paths of the record it replaces that nothing moving met, then or now, rather than tracing them again; where the lights moved, the hits of their extension rays, tracing only their shadow rays: the same records, faster (not in the paper, which traces them all again).
     #[arg(long, value_enum, default_value = "on")]
     pub trc_keep_paths: OnOff,
+    /// A replacement record's estimate of E(t0+1) also follows the change observed over the life of the record it replaces (E of the replacement minus E of the record, a frame), where that change is the larger: the reprojection keeps each sample's radiance and misses light of more than one bounce that moving objects change, so records lived on while it drifted (not in the paper; off: its estimate alone).
+    #[arg(long, value_enum, default_value = "on")]
+    pub trc_history: OnOff,
 }
 
 /// Settings of `--method tcg` (its spatial settings are the `--ic-*` ones).

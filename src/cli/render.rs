@@ -204,6 +204,7 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
                 NextDirectArg::On => NextDirect::On,
             },
             keep_paths: args.trc.trc_keep_paths == OnOff::On,
+            history: args.trc.trc_history == OnOff::On,
         }),
         MethodName::Tcg => MethodSettings::Tcg(TcgSettings {
             ic: ic_settings,

@@ -216,8 +216,10 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // 2026-12-06). 17: as `ic`'s 8. 18: extrapolated gradients carry
         // E alone, not the spatial gradients' change, and a record's
         // later frames are checked against what it shows there
-        // (2026-12-07).
-        "trc" => 18,
+        // (2026-12-07). 19: a replacement's estimate follows the change
+        // observed over the life of the record it replaces where that is
+        // the larger (`TrcSettings::history`, 2026-12-07).
+        "trc" => 19,
         // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6, 7: as
         // below. 8: the gather paths' roulette survives on their whole
         // throughput, not half of it (`IcSettings::gather_length`,

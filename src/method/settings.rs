@@ -215,6 +215,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("reprojection", "1"),
             ("next_direct", "moving-lights"),
             ("keep_paths", "0"),
+            ("history", "0"),
             ("spatial_gradients", "0"),
             ("spp", "4"),
             ("accuracy", "0.2"),
@@ -475,6 +476,7 @@ pub fn named_settings(settings: &MethodSettings) -> serde_json::Map<String, serd
             out.flag("reprojection", s.reprojection);
             out.text("next_direct", s.next_direct.name());
             out.flag("keep_paths", s.keep_paths);
+            out.flag("history", s.history);
             // `gradients` names the temporal ones here.
             out.flag("spatial_gradients", s.ic.gradients);
             out.ic(&s.ic);
@@ -673,6 +675,7 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
             }
         }
         "keep_paths" => s.keep_paths = flag(method, key, v)?,
+        "history" => s.history = flag(method, key, v)?,
         // `ic`'s `gradients` (spatial), which `gradients` names no more here.
         "spatial_gradients" => s.ic.gradients = flag(method, key, v)?,
         _ => {

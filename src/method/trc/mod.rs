@@ -91,7 +91,10 @@ mod record;
 mod settings;
 mod state;
 
-use record::{change_of, frames_of_validity, relative_change, shown_irradiance, sources_change};
+use record::{
+    change_of, frames_of_validity, relative_change, shown_irradiance, sources_change,
+    with_observed_change,
+};
 pub use record::{Successor, TemporalRecord};
 pub use settings::{NextDirect, TemporalGradients, TrcSettings};
 pub use state::{
@@ -232,8 +235,15 @@ impl TemporalRadianceCaching {
 
     /// TRC §4.4–4.7 for a record just gathered at `ctx.frame`: estimate
     /// E(t0+1), derive τ, lifespan and temporal gradients; the lifespan
-    /// then checked against the frames after t0+1 ([`later`]).
-    fn temporal(&self, making: &RecordMaking, g: &Gathered) -> TemporalRecord {
+    /// then checked against the frames after t0+1 ([`later`]). A
+    /// replacement also has the change a frame `observed` over the life of
+    /// the record it replaces (`TrcSettings::history`).
+    fn temporal(
+        &self,
+        making: &RecordMaking,
+        g: &Gathered,
+        observed: Option<Vec3>,
+    ) -> TemporalRecord {
         let (ctx, strata) = (making.ctx, self.settings.ic.strata);
         let a_t = self.settings.temporal_accuracy;
         let e0 = g.record.irradiance;
@@ -242,7 +252,11 @@ impl TemporalRadianceCaching {
             .settings
             .reprojection
             .then(|| reprojection.to(ctx, &making.next));
-        let next = self.change_to(g, next_samples.as_ref());
+        let mut next = self.change_to(g, next_samples.as_ref());
+        if let Some(observed) = observed.filter(|_| self.settings.history) {
+            next.irradiance = with_observed_change(e0, next.irradiance, observed);
+            next.change = change_of(&g.record, next.irradiance, next.d_eas.as_deref());
+        }
         let age = frames_of_validity(next.change, a_t, self.settings.max_life);
         let mut last_valid = ctx.frame + age;
         let e1 = next.irradiance;
@@ -436,8 +450,10 @@ impl TemporalRadianceCaching {
         let track = |c: &Candidate| motion.tracks(c);
         let make = |i: usize, g: Gathered, tracks: Option<GatherTracks>| {
             let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
-            let old = expired[i].paths.as_deref();
-            (!inside).then(|| self.make_record(making, &g, tracks.as_ref(), old))
+            let k = &expired[i];
+            let observed = self.observed_change(k, ctx.frame, &g);
+            let old = k.paths.as_deref();
+            (!inside).then(|| self.make_record(making, &g, tracks.as_ref(), old, observed))
         };
         let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = self
             .ic
@@ -462,6 +478,23 @@ impl TemporalRadianceCaching {
         offered
     }
 
+    /// The change a frame of the light at expired record `k`'s point over
+    /// its life, as its replacement gathered there at frame `t` (`l`)
+    /// observes it: `(E_l − E_K) / (t − t0)`. The two gathers draw the same
+    /// random streams and `l` takes `k`'s paths that nothing moving met,
+    /// so their noise cancels but on the paths that changed. `None` where
+    /// `k`'s life ended at a later frame whose motion departed from the
+    /// extrapolated one ([`TemporalRecord::ended_at_a_departure`]): the
+    /// change before the departure does not go on after it.
+    fn observed_change(&self, k: &TemporalRecord, t: u32, l: &Gathered) -> Option<Vec3> {
+        let settings = &self.settings;
+        if k.ended_at_a_departure(settings.temporal_accuracy, settings.max_life) {
+            return None;
+        }
+        let span = t.saturating_sub(k.record.created_frame).max(1) as f32;
+        Some((l.record.irradiance - k.record.irradiance) / span)
+    }
+
     /// New records where nothing is usable (`ic`'s fill stage), each with
     /// its E(t0+1) estimate.
     fn fill(&self, making: &RecordMaking, cache: &mut IrradianceCache, aged: &mut Aged) {
@@ -481,7 +514,7 @@ impl TemporalRadianceCaching {
             cache,
             &pixels,
             new_records_keep.then_some(&track as &TrackPaths),
-            |g, tracks| self.make_record(making, g, tracks.as_ref(), None),
+            |g, tracks| self.make_record(making, g, tracks.as_ref(), None, None),
             &mut created,
         );
         aged.stats.records_created = created.len() as u64;
@@ -504,8 +537,9 @@ impl TemporalRadianceCaching {
         g: &Gathered,
         tracks: Option<&GatherTracks>,
         taken_from: Option<&KeptPaths>,
+        observed: Option<Vec3>,
     ) -> (TemporalRecord, Option<SampleBlock>) {
-        let mut r = self.temporal(making, g);
+        let mut r = self.temporal(making, g, observed);
         let replaceable = r.replaced_when_expired(self.settings.max_life);
         let tracks = tracks.filter(|_| replaceable);
         r.paths = tracks.map(|tracks| Arc::new(making.motion.paths(g, tracks, taken_from)));

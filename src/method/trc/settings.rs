@@ -127,6 +127,15 @@ pub struct TrcSettings {
     /// again, as the paper's replacement does.
     #[serde(default = "keep_paths_default")]
     pub keep_paths: bool,
+    /// A replacement's estimate of E(t0+1) follows the change observed
+    /// over the life of the record it replaces, where that change is the
+    /// larger (`trc::record::with_observed_change`): the reprojection
+    /// keeps each sample's radiance, so light of more than one bounce that
+    /// a moving object changes goes unseen, and records lived on
+    /// `δt_max` frames while it drifted. Off: the paper's estimate alone.
+    /// Not in settings stored before it existed (whose jobs ran without).
+    #[serde(default)]
+    pub history: bool,
 }
 
 /// [`TrcSettings::keep_paths`] for settings stored before it existed.
@@ -144,6 +153,7 @@ impl Default for TrcSettings {
             reprojection: true,
             next_direct: NextDirect::MovingLights,
             keep_paths: true,
+            history: true,
         }
     }
 }
