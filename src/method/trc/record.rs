@@ -296,11 +296,14 @@ pub(super) fn change_of(record: &IrradianceRecord, e: Vec3, d_eas: Option<&[Vec3
 /// measures that drift, noise all but cancelled (the same random streams,
 /// the paths nothing moving met taken as they were), and where it is the
 /// larger change it sets the life (Eq. 9–10) and the extrapolated gradient
-/// (Eq. 15) as an estimate would. On `l_hall`, against `path` at 1024 spp
-/// over all 24 frames and seeds 0–3, the block bias fell from 0.01161 to
-/// 0.01072 (lower in every seed) for 11 % more records; 2 % lower on the
-/// shared `cube_in_box` for 8 % more; equal under moving lights
-/// (`benches/RESULTS.md`, "The change a replacement observes").
+/// (Eq. 15) as an estimate would. A radiance record's sources keep their
+/// estimated changes (the replacement cuts its own tree, so no source of
+/// it pairs with one of K's, as for Eq. 18–20). On `l_hall`, against
+/// `path` at 1024 spp over all 24 frames and seeds 0–3, the block bias
+/// fell from 0.01161 to 0.01072 (lower in every seed) for 11 % more
+/// records; 2 % lower on the shared `cube_in_box` for 8 % more; equal
+/// under moving lights (`benches/RESULTS.md`, "The change a replacement
+/// observes").
 pub(super) fn with_observed_change(e0: Vec3, estimate: Vec3, observed: Vec3) -> Vec3 {
     let carried_on = extrapolated(e0, observed, 1);
     if relative_change(e0, carried_on) > relative_change(e0, estimate) {
