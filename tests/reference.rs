@@ -245,7 +245,11 @@ fn caching_methods_match_spheres_reference() {
 /// from the check of later frames against what a record shows; over
 /// seeds 0–7 its mean is 1.18 % with that check and 1.00 % without, the
 /// largest 1.64 %: `benches/RESULTS.md`, "The check against the shown,
-/// over seeds"), `tcg` 0.9–1.9 %, `movies` 0.5–0.7 %.
+/// over seeds"), `tcg` 0.9–1.9 %, `movies` 0.5–0.7 %. At `trc` revision
+/// 19 (a replacement follows the change its predecessor observed), over
+/// seeds 0–3 at frames 0 / 11 / 23: 0.87 / 1.10 / 1.06 % (1.34 % at
+/// frame 23 without it; `benches/RESULTS.md`, "The change a replacement
+/// observes").
 #[test]
 fn caching_methods_match_l_hall_reference() {
     check_caching_methods("l_hall.glb", "l_hall", &[0, 11, 23], 0.03);
