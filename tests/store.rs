@@ -668,22 +668,30 @@ fn older_trc_state_is_migrated_and_resumes_bit_identically(
     }
 }
 
+/// A small `trc` job over frames 0..6 of cube-in-box, stored at `path`
+/// with frames 0..3 rendered into `out`: its method and spec, for the
+/// tests that spoil its state and resume it.
+fn trc_job_after_frame_2(path: &Path, out: &Path) -> (MethodSettings, JobSpec) {
+    let method = MethodSettings::Trc(TrcSettings {
+        ic: small_ic_settings(),
+        ..TrcSettings::default()
+    });
+    let source = SceneSource::Builtin("cube-in-box".into());
+    let fs = renderer(&method).settings.clone();
+    let spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
+    run_stored_job(path, &spec, &method, 0..3, out).unwrap();
+    (method, spec)
+}
+
 /// A store stamped schema 10 (or 11) whose `trc` state does not read in
 /// that schema's layout (here: already in this build's) fails its upgrade
 /// with an error naming the step, tree and key, and is left at that
 /// schema with its state as it was, not half read into the wrong fields.
 #[test]
 fn a_trc_state_that_does_not_read_as_its_schema_fails_the_upgrade_clearly() {
-    let method = MethodSettings::Trc(TrcSettings {
-        ic: small_ic_settings(),
-        ..TrcSettings::default()
-    });
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
-    let source = SceneSource::Builtin("cube-in-box".into());
-    let fs = renderer(&method).settings.clone();
-    let spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
-    run_stored_job(&path, &spec, &method, 0..3, &dir.path().join("o")).unwrap();
+    trc_job_after_frame_2(&path, &dir.path().join("o"));
     let steps = [
         (10, "0011_trc_state_without_spatial_gradient_changes"),
         (11, "0012_trc_state_without_derived_change"),
@@ -833,17 +841,10 @@ fn schema_7_statistics_are_migrated_once_and_keep_every_count() {
 /// error naming tree and key, not a panic.
 #[test]
 fn schema_6_state_bytes_under_schema_7_are_a_clear_error() {
-    let method = MethodSettings::Trc(TrcSettings {
-        ic: small_ic_settings(),
-        ..TrcSettings::default()
-    });
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("db");
-    let source = SceneSource::Builtin("cube-in-box".into());
-    let fs = renderer(&method).settings.clone();
-    let spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
     let out = dir.path().join("o");
-    run_stored_job(&path, &spec, &method, 0..3, &out).unwrap();
+    let (method, spec) = trc_job_after_frame_2(&path, &out);
     {
         let db = open_raw(&path);
         let mut first = true;
