@@ -242,7 +242,7 @@ impl TemporalRadianceCaching {
     /// E(t0+1), derive τ, lifespan and temporal gradients; the lifespan
     /// then checked against the frames after t0+1 ([`later`]). A
     /// replacement also has the change a frame `observed` over the life of
-    /// the record it replaces (`TrcSettings::history`).
+    /// the record it replaces (`TrcSettings::history`; `None` where off).
     fn temporal(
         &self,
         making: &RecordMaking,
@@ -258,7 +258,7 @@ impl TemporalRadianceCaching {
             .reprojection
             .then(|| reprojection.to(ctx, &making.next));
         let mut next = self.change_to(g, next_samples.as_ref());
-        if let Some(observed) = observed.filter(|_| self.settings.history) {
+        if let Some(observed) = observed {
             next.irradiance = with_observed_change(e0, next.irradiance, observed);
             next.change = change_of(&g.record, next.irradiance, next.d_eas.as_deref());
         }
@@ -455,10 +455,12 @@ impl TemporalRadianceCaching {
         let track = |c: &Candidate| motion.tracks(c);
         let make = |i: usize, g: Gathered, tracks: Option<GatherTracks>| {
             let inside = back_face_share(ctx, &g) > MAX_BACK_FACE_SHARE;
-            let k = &expired[i];
-            let observed = self.observed_change(k, ctx.frame, &g);
-            let old = k.paths.as_deref();
-            (!inside).then(|| self.make_record(making, &g, tracks.as_ref(), old, observed))
+            (!inside).then(|| {
+                let k = &expired[i];
+                let observed = self.observed_change(k, ctx.frame, &g);
+                let old = k.paths.as_deref();
+                self.make_record(making, &g, tracks.as_ref(), old, observed)
+            })
         };
         let gathered: Vec<Option<(TemporalRecord, Option<SampleBlock>)>> = self
             .ic
@@ -490,10 +492,13 @@ impl TemporalRadianceCaching {
     /// so their noise cancels but on the paths that changed. `None` where
     /// `k`'s life ended at a later frame whose motion departed from the
     /// extrapolated one ([`TemporalRecord::ended_at_a_departure`]): the
-    /// change before the departure does not go on after it.
+    /// change before the departure does not go on after it; and where
+    /// `history` is off, which takes none.
     fn observed_change(&self, k: &TemporalRecord, t: u32, l: &Gathered) -> Option<Vec3> {
         let settings = &self.settings;
-        if k.ended_at_a_departure(settings.temporal_accuracy, settings.max_life) {
+        if !settings.history
+            || k.ended_at_a_departure(settings.temporal_accuracy, settings.max_life)
+        {
             return None;
         }
         let span = t.saturating_sub(k.record.created_frame).max(1) as f32;
