@@ -1336,7 +1336,7 @@ fn a_job_stored_before_a_setting_existed_resumes_under_the_value_it_ran() {
 
 /// `trc`'s `next_direct` was a flag before it had a mode between: a job
 /// stored with `false` (the default then) resumes under `off` and is
-/// refused under today's default (`moving-lights`), naming the setting;
+/// refused under today's default (`long-lives`), naming the setting;
 /// one stored with `true` resumes under `on`.
 #[test]
 fn a_trc_job_stored_with_next_direct_as_a_flag_reads_it_as_off_or_on() {
@@ -1360,10 +1360,10 @@ fn a_trc_job_stored_with_next_direct_as_a_flag_reads_it_as_off_or_on() {
         let resumed = store.begin_job(&spec_of(name, &trc(mode), &[]), false);
         assert_eq!(resumed.unwrap().id, old.id);
         if !flag {
-            let given = spec_of(name, &trc(NextDirect::MovingLights), &[]);
+            let given = spec_of(name, &trc(NextDirect::LongLives), &[]);
             let msg = err_text(store.begin_job(&given, false));
             assert!(
-                msg.contains("next_direct: stored off, given moving-lights"),
+                msg.contains("next_direct: stored off, given long-lives"),
                 "{msg}"
             );
         }

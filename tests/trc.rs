@@ -1610,6 +1610,55 @@ fn a_swinging_light_moves_the_shadows_the_records_see() {
     assert!(default < 1.3 * ic, "trc {default}, ic {ic}");
 }
 
+/// The frames `trc` renders of built-in `scene` (24×24, `small_ic`) under
+/// `next_direct`, and its records at the end.
+fn next_direct_run(
+    scene: &str,
+    frames: u32,
+    next_direct: NextDirect,
+) -> (Vec<Vec<Vec3>>, Vec<IrradianceRecord>) {
+    let settings = TrcSettings {
+        ic: small_ic(),
+        next_direct,
+        ..TrcSettings::default()
+    };
+    let mut r = renderer(Scene::builtin(scene).unwrap(), 24, 24.0, false);
+    let mut trc = TemporalRadianceCaching::new(settings);
+    let films = (0..frames)
+        .map(|f| render_trc(&mut r, &mut trc, f).pixels)
+        .collect();
+    let records = trc.records().iter().map(|k| k.record.clone()).collect();
+    (films, records)
+}
+
+/// The default (`NextDirect::LongLives`) evaluates the direct light at
+/// t0+1 where only objects move exactly where the records alive live long
+/// (`δt_max`/2 and more, as made): on cube-in-box, whose records live
+/// about 15 of 20 frames, it renders what `on` renders, bit for bit; on
+/// the balls, whose records live about 3, what `on` renders from the
+/// first frame only (whose records it makes with the direct light, none
+/// being alive to judge by), then what `moving-lights` would, and so
+/// records and frames unlike `on`'s.
+#[test]
+fn the_direct_light_at_t0_plus_1_is_evaluated_where_records_live_long() {
+    let frames = 6;
+    let default = next_direct_run("cube-in-box", frames, NextDirect::LongLives);
+    let on = next_direct_run("cube-in-box", frames, NextDirect::On);
+    assert_eq!(default.1, on.1, "cube-in-box's records");
+    for (f, (a, b)) in default.0.iter().zip(&on.0).enumerate() {
+        assert!(a == b, "cube-in-box frame {f} differs from on's");
+    }
+    let default = next_direct_run("spheres", frames, NextDirect::LongLives);
+    let on = next_direct_run("spheres", frames, NextDirect::On);
+    assert!(
+        default.0[0] == on.0[0],
+        "the first frame is rendered as on's"
+    );
+    assert_ne!(default.1, on.1, "the balls' records");
+    let differ = (1..frames as usize).filter(|&f| default.0[f] != on.0[f]);
+    assert!(differ.count() >= 3, "the balls' later frames are not on's");
+}
+
 /// The lit room with a white plate at mid-height tilting about x from
 /// level to `degrees` over `frames` frames.
 fn room_with_tilting_plate(frames: u32, degrees: f32) -> Scene {

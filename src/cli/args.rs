@@ -243,8 +243,8 @@ pub struct TrcArgs {
     /// Estimate E(t0+1) by reprojecting the record's hemisphere samples (TRC §4.7), and check the record's life by reprojecting them to the later frames whose motion departs from the extrapolated one (an object that starts, stops or jumps, a light switched off or moved), and against objects none of its samples hit that come into their paths (one that jumps in or grows from nothing); off: E constant, no check.
     #[arg(long, value_enum, default_value = "on")]
     pub trc_reprojection: OnOff,
-    /// With reprojection, evaluate each hemisphere sample's direct light again at t0+1 (one light sample, shadowed in the next frame's geometry), so that E(t0+1) sees moving shadows and moving lights (TRC §5: the incoming lighting at t+1 of each visible point): moving-lights, at frames after which a light moves (a moving light moves the shadows of static objects too, which nothing else in the estimate sees); on, at every frame (costs 12–48 % more time on our animated scenes; on cube-in-box it lowers the error by 4 %, elsewhere not; benches/RESULTS.md); off, never.
-    #[arg(long, value_enum, default_value = "moving-lights")]
+    /// With reprojection, evaluate each hemisphere sample's direct light again at t0+1 (one light sample, shadowed in the next frame's geometry), so that E(t0+1) sees moving shadows and moving lights (TRC §5: the incoming lighting at t+1 of each visible point): moving-lights, at frames after which a light moves (a moving light moves the shadows of static objects too, which nothing else in the estimate sees); long-lives, there and also where only objects move at frames whose records live long (harmonic mean lifespan of the records alive ≥ δt_max/2: there each record's estimate decides many frames); on, at every frame (where records live short it costs up to 27 % more time for nothing; benches/RESULTS.md); off, never.
+    #[arg(long, value_enum, default_value = "long-lives")]
     pub trc_next_direct: NextDirectArg,
     /// A replacement record takes the results of the paths of the record it replaces that nothing moving met, then or now, rather than tracing them again; where the lights moved, the hits of their extension rays, tracing only their shadow rays: the same records, faster (not in the paper, which traces them all again).
     #[arg(long, value_enum, default_value = "on")]
@@ -320,6 +320,7 @@ pub enum TrcGradientsArg {
 pub enum NextDirectArg {
     Off,
     MovingLights,
+    LongLives,
     On,
 }
 

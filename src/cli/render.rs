@@ -201,6 +201,7 @@ fn render_method(args: &RenderArgs) -> Result<MethodSettings> {
             next_direct: match args.trc.trc_next_direct {
                 NextDirectArg::Off => NextDirect::Off,
                 NextDirectArg::MovingLights => NextDirect::MovingLights,
+                NextDirectArg::LongLives => NextDirect::LongLives,
                 NextDirectArg::On => NextDirect::On,
             },
             keep_paths: args.trc.trc_keep_paths == OnOff::On,

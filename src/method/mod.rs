@@ -218,8 +218,11 @@ pub fn algorithm_revision(method: &str) -> u64 {
         // later frames are checked against what it shows there
         // (2026-12-07). 19: a replacement's estimate follows the change
         // observed over the life of the record it replaces where that is
-        // the larger (`TrcSettings::history`, 2026-12-07).
-        "trc" => 19,
+        // the larger (`TrcSettings::history`, 2026-12-07). 20: the direct
+        // light at t0+1 is evaluated by default also where only objects
+        // move, at frames whose records live long
+        // (`trc::NextDirect::LongLives`, 2026-12-07).
+        "trc" => 20,
         // 2: as `trc`'s 4, the records all three gather. 3, 4, 5, 6, 7: as
         // below. 8: the gather paths' roulette survives on their whole
         // throughput, not half of it (`IcSettings::gather_length`,

@@ -213,7 +213,7 @@ pub const METHODS: &[MethodInfo] = &[
             ("max_life", "20"),
             ("gradients", "extrapolated"),
             ("reprojection", "1"),
-            ("next_direct", "moving-lights"),
+            ("next_direct", "long-lives"),
             ("keep_paths", "0"),
             ("history", "0"),
             ("spatial_gradients", "0"),
@@ -660,6 +660,7 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
         "next_direct" => {
             s.next_direct = match v.trim() {
                 "moving-lights" => NextDirect::MovingLights,
+                "long-lives" => NextDirect::LongLives,
                 _ => match flag(method, key, v) {
                     Ok(true) => NextDirect::On,
                     Ok(false) => NextDirect::Off,
@@ -668,7 +669,8 @@ fn trc_setting(method: &str, key: &str, v: &str, s: &mut TrcSettings) -> Result<
                             method: method.into(),
                             key: key.into(),
                             value: v.into(),
-                            problem: "expected off, moving-lights or on (or 0/1)".into(),
+                            problem: "expected off, moving-lights, long-lives or on (or 0/1)"
+                                .into(),
                         })
                     }
                 },

@@ -14,10 +14,13 @@
 //! geometry of each, and the difference added to the sample's radiance.
 //! The light sample's own noise then cancels wherever nothing changed.
 //!
-//! By default only at frames after which a light moves
-//! (`TrcSettings::next_direct`, `NextDirect::MovingLights`): a moving light
-//! moves the shadows of static objects too, which nothing else in the
-//! estimate sees. At every frame (`on`), measured at 5e31e19
+//! By default at frames after which a light moves (`TrcSettings::
+//! next_direct`, `NextDirect::MovingLights`): a moving light moves the
+//! shadows of static objects too, which nothing else in the estimate sees;
+//! and where only objects move, at frames whose records live long
+//! (`NextDirect::LongLives`, the default since `trc` revision 20), where
+//! each record's estimate decides many frames. At every frame (`on`),
+//! measured at 5e31e19
 //! (`benches/RESULTS.md`, "The direct light at t0+1"): it lowers the E(t0+1) error of the
 //! sliding-block test from 27.5 % to 22.6 % in mean, and `trc`'s frame
 //! error on cube-in-box (400 frames) by 3.7 % for 12 % more time, but costs

@@ -101,6 +101,7 @@ use record::{
     with_observed_change,
 };
 pub use record::{Successor, TemporalRecord};
+use settings::lives_are_long;
 pub use settings::{NextDirect, TemporalGradients, TrcSettings};
 pub use state::{
     downgrade_to_schema_10_record, downgrade_to_schema_11_record, downgrade_to_schema_6_record,
@@ -322,7 +323,12 @@ impl TemporalRadianceCaching {
     /// cache and its records in cache order (new ones not numbered yet).
     fn age_and_fill(&mut self, ctx: &FrameContext) -> (IrradianceCache, Aged) {
         let start = Instant::now();
-        let next = NextFrame::new(ctx, self.settings.next_direct, &mut self.shadow_geometry);
+        let lives_long = lives_are_long(
+            self.records.iter().map(TemporalRecord::lifespan),
+            self.settings.max_life,
+        );
+        let next_direct = self.settings.next_direct.at_frame(lives_long);
+        let next = NextFrame::new(ctx, next_direct, &mut self.shadow_geometry);
         let later = self
             .settings
             .reprojection
