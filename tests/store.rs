@@ -1615,6 +1615,40 @@ fn resumed_trc_render_under_a_moving_light_is_bit_identical() {
     resume_matches_uninterrupted_on("moving-light", MethodSettings::Trc(trc));
 }
 
+/// `trc` among the moving balls, whose records live short, stopped after
+/// frame 1 of 0..6: its default decides at each frame from the records
+/// alive whether to evaluate the direct light at t0+1
+/// (`NextDirect::LongLives`: at the first frame, none being alive, it
+/// does; after it, here, not), and the resume, deciding from the restored
+/// records, gives the uninterrupted frames (one that restored none, or
+/// kept a count of its own, would decide at frame 2 as at a first frame).
+#[test]
+fn resumed_trc_render_among_short_lived_records_is_bit_identical() {
+    let mut trc = TrcSettings::default();
+    trc.ic.strata = Strata { theta: 4, phi: 12 };
+    trc.ic.spp = 1;
+    let method = MethodSettings::Trc(trc);
+    let dir = tempfile::tempdir().unwrap();
+    let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
+    let renderer = || renderer_of("spheres", &method);
+    render::render_to_dir(&mut renderer(), 0..6, &plain, true).unwrap();
+    let source = SceneSource::Builtin("spheres".into());
+    let fs = renderer().settings.clone();
+    let job_spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
+    let store = Store::open(&dir.path().join("db")).unwrap();
+    for (part, done_before) in [(0..2, 0), (0..6, 2)] {
+        let mut sj = StoreJob {
+            store: &store,
+            job: store.begin_job(&job_spec, false).unwrap(),
+        };
+        let summary =
+            render::render_job_to_dir(&mut renderer(), part, &resumed, true, Some(&mut sj))
+                .unwrap();
+        assert_eq!(summary.resumed, done_before, "frames taken from the store");
+    }
+    assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
+}
+
 /// `trc` with radiance records (`--ic-glossy eas`) on `glossy-cornell`,
 /// stopped after frame 2 of 0..6: the resume starts from the stored state,
 /// whose records' material, sources and their temporal gradients come
