@@ -1436,8 +1436,39 @@ fn resume_matches_uninterrupted(method: MethodSettings) {
     resume_matches_uninterrupted_on("cube-in-box", method);
 }
 
-/// [`resume_matches_uninterrupted`] on the built-in scene `scene`.
+/// [`resume_matches_uninterrupted`] on the built-in scene `scene`, a job
+/// rendered in parts two ways: frames 0..2, a frame 4 from another range,
+/// then 0..6 (a method that carries state from frame to frame starts
+/// over, the state stored last being another chain's: frames 0..2 come
+/// from the store only where each frame stands alone); and frame 4 first,
+/// then 0..2, then 0..6 (every method resumes after frame 1, one that
+/// carries state from the state stored there, rendering frame 4 again
+/// in its chain).
 fn resume_matches_uninterrupted_on(scene: &str, method: MethodSettings) {
+    let carries_state = method.instantiate().carries_state();
+    let stands_alone = (3, 3);
+    let starts_over = (0, 6);
+    let first = if carries_state {
+        starts_over
+    } else {
+        stands_alone
+    };
+    resume_in_parts(scene, &method, [0..2, 4..5, 0..6], first);
+    let resumes = if carries_state { (2, 4) } else { stands_alone };
+    resume_in_parts(scene, &method, [4..5, 0..2, 0..6], resumes);
+}
+
+/// Renders a job of `method` on built-in `scene` in `parts` into a store,
+/// the last part's (resumed, rendered) frames being `last`, and checks its
+/// frames against an uninterrupted render's, also after files are
+/// deleted from `--out`.
+fn resume_in_parts(
+    scene: &str,
+    method: &MethodSettings,
+    parts: [std::ops::Range<u32>; 3],
+    last: (u32, u32),
+) {
+    let method = method.clone();
     let renderer = |m: &MethodSettings| renderer_of(scene, m);
     let dir = tempfile::tempdir().unwrap();
     let (plain, resumed) = (dir.path().join("plain"), dir.path().join("resumed"));
@@ -1447,8 +1478,7 @@ fn resume_matches_uninterrupted_on(scene: &str, method: MethodSettings) {
     let fs = renderer(&method).settings.clone();
     let job_spec = render::job_spec("j", &source, &method, &fs, 0..6).unwrap();
     let store = Store::open(&path).unwrap();
-    // "Interrupted" after frames 0..2 (and a frame 4 from another range).
-    for part in [0..2, 4..5, 0..6] {
+    for part in &parts {
         let job = store.begin_job(&job_spec, false).unwrap();
         let mut sj = StoreJob { store: &store, job };
         let summary = render::render_job_to_dir(
@@ -1459,8 +1489,8 @@ fn resume_matches_uninterrupted_on(scene: &str, method: MethodSettings) {
             Some(&mut sj),
         )
         .unwrap();
-        if part == (0..6) && matches!(method, MethodSettings::Path(_) | MethodSettings::Ic(_)) {
-            assert_eq!((summary.resumed, summary.frames), (3, 3));
+        if *part == (0..6) {
+            assert_eq!((summary.resumed, summary.frames), last, "after {parts:?}");
         }
     }
     assert_eq!(exr_files(&plain, 0..6), exr_files(&resumed, 0..6));
