@@ -1565,8 +1565,9 @@ fn kept_hits_give_under_a_moving_light_the_records_and_frames_of_tracing_them_ag
 /// (`common::courtyard_under_a_swinging_light`, 15° a frame) moves every
 /// shadow the walls cast on the ground: no object moves, and the
 /// unshadowed light at the samples' hits does not see shadows. With the
-/// direct light at t0+1 evaluated where lights move (the default,
-/// `NextDirect::MovingLights`), records that see the shadows move end
+/// direct light at t0+1 evaluated where lights move
+/// (`NextDirect::MovingLights`, as the default `LongLives` does too),
+/// records that see the shadows move end
 /// their life: over the frames the light swings, `trc`'s mean block bias
 /// against `path` at 256 spp is under 0.8× that with it off and within
 /// 1.3× `ic`'s with the same spatial settings. Measured at 2026-12-02:
