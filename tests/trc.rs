@@ -1635,11 +1635,11 @@ fn next_direct_run(
 /// The default (`NextDirect::LongLives`) evaluates the direct light at
 /// t0+1 where only objects move exactly where the records alive live long
 /// (`δt_max`/2 and more, as made): on cube-in-box, whose records live
-/// about 15 of 20 frames, it renders what `on` renders, bit for bit; on
-/// the balls, whose records live about 3, what `on` renders from the
-/// first frame only (whose records it makes with the direct light, none
-/// being alive to judge by), then what `moving-lights` would, and so
-/// records and frames unlike `on`'s.
+/// long (13–18 of 20 frames at 64×64, `benches/RESULTS.md`), it renders
+/// what `on` renders, bit for bit; among the balls, whose records live
+/// short (2–4 frames there), it renders `on`'s first frame (its records
+/// made with the direct light, none being alive to judge by) and then
+/// frames and records unlike `on`'s.
 #[test]
 fn the_direct_light_at_t0_plus_1_is_evaluated_where_records_live_long() {
     let frames = 6;

@@ -56,7 +56,7 @@ pub enum NextDirect {
     /// alive (`lives_are_long`). Why: where records live long, each new
     /// one's estimate decides many frames, and a moving shadow it misses
     /// lives as long (cube-in-box, 400 frames: rel. RMSE 0.02023 →
-    /// 0.01962 for 9 % more time); where they live short, the shadow rays
+    /// 0.01962 for 9–14 % more time); where they live short, the shadow rays
     /// cost as much and gain nothing (at every frame the balls took 27 %
     /// more time for the same error; `benches/RESULTS.md`).
     #[default]
