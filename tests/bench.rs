@@ -671,6 +671,33 @@ fn same_pattern_runs_flicker_less() {
     assert!(same.rel_rmse > 0.0);
 }
 
+/// The reference draws random numbers no run draws: a same-pattern `path`
+/// run at the reference's own spp (both keyed without the frame) is
+/// another render of the same image, not the reference again, and its
+/// error is that of a run at another seed, in the mean over seeds.
+#[test]
+fn no_run_draws_the_references_random_numbers() {
+    let dir = tempfile::tempdir().unwrap();
+    let error_at = |seed: u64| {
+        let opts = BenchOptions {
+            same_pattern: true,
+            seed,
+            ..tiny_bench(dir.path(), &["path:spp=4"])
+        };
+        bench::run(&opts).unwrap().rows[0].rel_rmse
+    };
+    let errors: Vec<f64> = (0..4).map(error_at).collect();
+    // Each seed has its own reference; its runs are as far from it as
+    // two independent 4-spp renders are from each other.
+    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+    for (seed, e) in errors.iter().enumerate() {
+        assert!(
+            *e > 0.5 * mean,
+            "seed {seed}: {e} against a mean of {mean} ({errors:?})"
+        );
+    }
+}
+
 /// The render pass's share of a run: timed for the cache methods (their
 /// "render" phase, a part of their time), absent for `path`, which has no
 /// cache to set apart from it.

@@ -371,7 +371,8 @@ pub struct BenchArgs {
     /// Frames per second: frame f is rendered at t = f / fps.
     #[arg(long, default_value_t = crate::scene::DEFAULT_FPS, allow_negative_numbers = true, value_parser = parse_fps)]
     pub fps: f32,
-    /// Random seed of the runs and the reference.
+    /// Random seed of the runs; the reference's is derived from it, never
+    /// equal to it, so that no run draws the reference's random numbers.
     #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = parse_seed)]
     pub seed: u64,
     /// Output directory: bench.csv, charts, reference/ and runs/.
