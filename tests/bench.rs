@@ -698,6 +698,102 @@ fn no_run_draws_the_references_random_numbers() {
     }
 }
 
+/// With several seeds a run's row holds the means of its errors over
+/// them, each seed's against the one reference, and each seed's run is
+/// what `radcache render --seed S` renders (compared here with that
+/// reference independently of the bench); the seeds' errors differ.
+#[test]
+fn a_run_at_several_seeds_reports_their_mean_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        seeds: 3,
+        ..tiny_bench(dir.path(), &["trc"])
+    };
+    let report = bench::run(&opts).unwrap();
+    let (row, seeds) = (&report.rows[0], &report.seed_errors[0]);
+    let reference = dir.path().join("reference/cube-in-box");
+    let rendered_at = |seed: u64| {
+        let out = dir.path().join(format!("cli-{seed}"));
+        let status = std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args([
+                "render", "--method", "trc", "--size", "12x12", "--frames", "0..2", "-q",
+            ])
+            .args(["--seed", &seed.to_string(), "--out"])
+            .arg(&out)
+            .status()
+            .unwrap();
+        assert!(status.success());
+        radcache::metrics::compare_dirs(&reference, &out).unwrap()
+    };
+    let by_seed: Vec<_> = (0..3).map(rendered_at).collect();
+    assert_eq!(seeds.iter().map(|s| s.seed).collect::<Vec<_>>(), [0, 1, 2]);
+    for (s, cli) in seeds.iter().zip(&by_seed) {
+        assert_eq!(
+            (s.rel_rmse, s.block_bias),
+            (cli.rel_rmse, cli.block_bias),
+            "seed {}",
+            s.seed
+        );
+    }
+    let mean =
+        |f: fn(&radcache::metrics::CompareReport) -> f64| by_seed.iter().map(f).sum::<f64>() / 3.0;
+    assert!((row.rel_rmse - mean(|c| c.rel_rmse)).abs() < 1e-12);
+    assert!((row.block_bias - mean(|c| c.block_bias)).abs() < 1e-12);
+    let flicker = by_seed.iter().map(|c| c.flicker.unwrap()).sum::<f64>() / 3.0;
+    assert!((row.flicker.unwrap() - flicker).abs() < 1e-12);
+    assert!(seeds[0].rel_rmse != seeds[1].rel_rmse && seeds[1].rel_rmse != seeds[2].rel_rmse);
+    let text = bench::seeds_text(&report.rows, &report.seed_errors);
+    assert!(text.contains("seeds 0, 1, 2"), "{text}");
+}
+
+/// `radcache bench --seeds N` prints each run's errors at each seed after
+/// the tables, the tables giving their means; `--seeds 0` and `--seeds`
+/// with `--replot` are refused.
+#[test]
+fn bench_seeds_flag_prints_the_errors_at_each_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let bench = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+            .args([
+                "bench",
+                "--size",
+                "8x8",
+                "--frames",
+                "0..2",
+                "--reference-spp",
+                "2",
+            ])
+            .args(["--methods", "path:spp=1", "-q", "--out"])
+            .arg(dir.path())
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = bench(&["--seeds", "2"]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (_, after) = stdout
+        .split_once("errors at each seed (the tables give their means):\n")
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(
+        after.starts_with("cube-in-box path spp=1 on cpu")
+            && after.contains("seeds 0, 1: rel_rmse"),
+        "{stdout}"
+    );
+    assert!(dir
+        .path()
+        .join("runs/cube-in-box/path-spp=1/seed-1/frame_0001.exr")
+        .exists());
+    for refused in [&["--seeds", "0"][..], &["--seeds", "2", "--replot"]] {
+        let out = bench(refused);
+        assert_eq!(out.status.code(), Some(2), "{refused:?}");
+    }
+}
+
 /// The render pass's share of a run: timed for the cache methods (their
 /// "render" phase, a part of their time), absent for `path`, which has no
 /// cache to set apart from it.

@@ -59,10 +59,10 @@ pub use charts::plot_scene;
 pub use methods::{method_settings, MethodError, MethodInfo, MethodSweep, RunSpec, METHODS};
 pub use report::{
     backend_pairs, backend_text, equal_error_table, equal_error_text, estimate_error_text,
-    from_csv, interpolate_time_at_error, rounds_text, temporal_pairs, temporal_text, to_csv,
-    to_table, BenchRow, EqualError, ErrorMeasure, PathBound, CSV_HEADER,
+    from_csv, interpolate_time_at_error, rounds_text, seeds_text, temporal_pairs, temporal_text,
+    to_csv, to_table, BenchRow, EqualError, ErrorMeasure, PathBound, CSV_HEADER,
 };
-pub use run::{peak_memory_mb, replot, reset_peak_memory, run, run_with, BenchReport};
+pub use run::{peak_memory_mb, replot, reset_peak_memory, run, run_with, BenchReport, SeedError};
 
 use crate::render::{BackendChoice, SceneSource};
 use anyhow::{bail, Result};
@@ -116,6 +116,16 @@ pub struct BenchOptions {
     /// ([`BenchReport::round_seconds`] keeps them all); everything else is
     /// measured in the first round.
     pub repeat: u32,
+    /// Seeds every run is rendered at (at least 1): `seed`, `seed + 1`, …,
+    /// against the one reference. A run's errors and records are their
+    /// means over the seeds ([`BenchReport::seed_errors`] keeps each
+    /// seed's); its time, rays, memory and the untimed measures are the
+    /// first seed's. Why: `trc` and `tcg` keep their pixel samples'
+    /// streams from frame to frame, so their frames share one draw of
+    /// pixel noise, and where it is most of the error one seed's figure
+    /// is a wide sample (`glossy-cornell`: 0.104–0.127 over six seeds,
+    /// `benches/RESULTS.md`, "`trc`'s error over seeds").
+    pub seeds: u32,
     /// Set (from any thread: Ctrl-C in `radcache bench`) to stop the bench
     /// early: the run or reference in progress is abandoned mid-frame, and
     /// [`run()`] returns the runs finished before, with their CSV and charts,
@@ -164,6 +174,7 @@ impl Default for BenchOptions {
             backends: vec![BackendChoice::Auto],
             check_memory: true,
             repeat: 1,
+            seeds: 1,
             stop: Arc::default(),
         }
     }

@@ -703,6 +703,41 @@ pub fn rounds_text(rows: &[BenchRow], rounds: &[Vec<f64>]) -> String {
     out
 }
 
+/// Lines for people where the runs were rendered at several seeds
+/// ([`super::BenchOptions::seeds`]): one per row, its relative RMSE and
+/// block bias at each seed, in order, and the means the tables give.
+/// Empty for one seed.
+pub fn seeds_text(rows: &[BenchRow], seeds: &[Vec<super::SeedError>]) -> String {
+    let mut out = String::new();
+    if seeds.iter().all(|s| s.len() <= 1) {
+        return out;
+    }
+    for (row, seeds) in rows.iter().zip(seeds) {
+        let each = |f: fn(&super::SeedError) -> f64| {
+            let all: Vec<String> = seeds.iter().map(|s| format!("{:.5}", f(s))).collect();
+            all.join(" / ")
+        };
+        let _ = writeln!(
+            out,
+            "{} {} {} on {}, seeds {}: rel_rmse {} → {:.5}; block_bias {} → {:.5}",
+            row.scene,
+            row.method,
+            row.settings,
+            row.backend,
+            seeds
+                .iter()
+                .map(|s| s.seed.to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+            each(|s| s.rel_rmse),
+            row.rel_rmse,
+            each(|s| s.block_bias),
+            row.block_bias,
+        );
+    }
+    out
+}
+
 /// Lines for people: one per [`backend_pairs`] pair, the later backend's
 /// speed-up over the first (first's seconds ÷ its own) and the change of
 /// the error, which the backends should leave alone (the same hits).

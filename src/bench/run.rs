@@ -2,7 +2,7 @@
 //! backend, measured against it.
 
 use super::charts::{chart_paths, plot_scene};
-use super::reference::ensure_reference;
+use super::reference::{ensure_reference, reference_seed};
 use super::{sanitize, scene_label, to_csv, BenchOptions, BenchRow, MethodSweep, RunSpec};
 use crate::backend::gpu::{AdapterPolicy, GpuBackend};
 use crate::method::trc::estimate_error::{EstimateError, EstimateErrorTally};
@@ -65,6 +65,18 @@ pub struct BenchReport {
     /// ([`BenchOptions::repeat`]), in round order: the row's `seconds` is
     /// their median.
     pub round_seconds: Vec<Vec<f64>>,
+    /// Per row, its errors at each seed it was rendered at
+    /// ([`BenchOptions::seeds`]), in seed order: the row's are their means.
+    /// One for each row of a bench of one seed.
+    pub seed_errors: Vec<Vec<SeedError>>,
+}
+
+/// A run's errors at one seed ([`BenchOptions::seeds`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SeedError {
+    pub seed: u64,
+    pub rel_rmse: f64,
+    pub block_bias: f64,
 }
 
 /// Runs the whole bench: references, runs, CSV, charts.
@@ -83,6 +95,7 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
     let per_run = reset_peak_memory();
     let mut rows = Vec::new();
     let mut round_seconds = Vec::new();
+    let mut seed_errors = Vec::new();
     let mut charts = Vec::new();
     // A file that cannot be written (a full disk, a folder in its place)
     // does not lose the measurements: they are still printed.
@@ -94,7 +107,7 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
             scene: source.load()?,
         };
         let first = rows.len();
-        let measured = (&mut rows, &mut round_seconds);
+        let measured = (&mut rows, &mut round_seconds, &mut seed_errors);
         let stopped = match bench_scene(opts, &scene, per_run, measured, after_run) {
             Ok(()) => false,
             Err(e) if e.is::<Stopped>() => true,
@@ -130,6 +143,7 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
         peak_mem_per_run: per_run,
         unfinished,
         round_seconds,
+        seed_errors,
     })
 }
 
@@ -173,6 +187,7 @@ pub fn replot(dir: &Path) -> Result<BenchReport> {
     }
     Ok(BenchReport {
         round_seconds: vec![Vec::new(); rows.len()],
+        seed_errors: vec![Vec::new(); rows.len()],
         rows,
         csv: None,
         charts,
@@ -203,6 +218,17 @@ fn check_bench(opts: &BenchOptions) -> Result<Vec<String>> {
     }
     if opts.backends.is_empty() {
         bail!("no backends to bench on");
+    }
+    if opts.seeds == 0 {
+        bail!("--seeds 0: a run is rendered at one seed at least");
+    }
+    let reference = reference_seed(opts.seed);
+    if (0..u64::from(opts.seeds)).any(|k| opts.seed.wrapping_add(k) == reference) {
+        bail!(
+            "--seed {} --seeds {}: a run's seed would be the reference's own ({reference})",
+            opts.seed,
+            opts.seeds
+        );
     }
     if opts.estimate_error && !opts.methods.iter().any(|m| m.method == "trc") {
         bail!("--estimate-error measures the records of trc runs, and no method is trc");
@@ -417,11 +443,18 @@ pub(super) struct BenchScene<'a> {
 /// rounds ([`BenchOptions::repeat`]) the later rounds render every run
 /// again for its time alone, and the rows (their times the medians of the
 /// rounds done) are finished once the rounds are, or a stop ends them.
+/// With several seeds ([`BenchOptions::seeds`]) the first round renders
+/// each run at every seed, its row the means of their errors
+/// ([`more_seeds`]), each seed's pushed onto `seed_errors`.
 fn bench_scene(
     opts: &BenchOptions,
     scene: &BenchScene,
     per_run: bool,
-    (rows, rounds): (&mut Vec<BenchRow>, &mut Vec<Vec<f64>>),
+    (rows, rounds, seed_errors): (
+        &mut Vec<BenchRow>,
+        &mut Vec<Vec<f64>>,
+        &mut Vec<Vec<SeedError>>,
+    ),
     after_run: &mut dyn FnMut(&BenchRow),
 ) -> Result<()> {
     check_stop(opts)?;
@@ -439,13 +472,15 @@ fn bench_scene(
                 // One folder per backend only when there are several,
                 // so a one-backend bench keeps its folder names.
                 backend_in_dir: opts.backends.len() > 1,
+                seed: opts.seed,
             };
             if r > 0 {
                 times[i].push(time_run(opts, scene, &run, rows[first + i].rays)?);
                 continue;
             }
-            let row = bench_run(opts, scene, &run, per_run)?;
+            let mut row = bench_run(opts, scene, &run, per_run)?;
             times.push(vec![RunTime::of(&row)]);
+            seed_errors.push(more_seeds(opts, scene, &run, &mut row)?);
             if opts.repeat <= 1 {
                 after_run(&row);
             }
@@ -505,9 +540,22 @@ struct Run<'a> {
     spec: &'a RunSpec,
     backend: BackendChoice,
     backend_in_dir: bool,
+    /// The seed its frames are rendered with.
+    seed: u64,
 }
 
 impl Run<'_> {
+    /// Where its frames go: `runs/<scene>/<folder>/`, and in it
+    /// `seed-<seed>/` for a seed after the bench's first
+    /// ([`BenchOptions::seeds`]).
+    fn dir(&self, opts: &BenchOptions, label: &str) -> PathBuf {
+        let dir = opts.out.join("runs").join(label).join(self.folder());
+        match self.seed == opts.seed {
+            true => dir,
+            false => dir.join(format!("seed-{}", self.seed)),
+        }
+    }
+
     /// The run's folder under `runs/<scene>/`: `<method>-<settings>`, and
     /// `-<backend>` when the bench has several.
     fn folder(&self) -> String {
@@ -534,7 +582,7 @@ fn bench_run(
 ) -> Result<BenchRow> {
     let (label, spec) = (scene.label, run.spec);
     let settings = spec.settings()?;
-    let dir = opts.out.join("runs").join(label).join(run.folder());
+    let dir = run.dir(opts, label);
     let ref_dir = opts.out.join("reference").join(label);
     let Rendered {
         stats,
@@ -572,6 +620,63 @@ fn bench_run(
     })
 }
 
+/// `run` (rendered at the bench's first seed into `row`) rendered at the
+/// bench's other seeds ([`BenchOptions::seeds`]) and compared with the
+/// same reference: `row`'s errors and records become their means over
+/// all seeds; returns each seed's errors, the first seed's first.
+fn more_seeds(
+    opts: &BenchOptions,
+    scene: &BenchScene,
+    run: &Run,
+    row: &mut BenchRow,
+) -> Result<Vec<SeedError>> {
+    let first = SeedError {
+        seed: run.seed,
+        rel_rmse: row.rel_rmse,
+        block_bias: row.block_bias,
+    };
+    if opts.seeds <= 1 {
+        return Ok(vec![first]);
+    }
+    let ref_dir = opts.out.join("reference").join(scene.label);
+    let mut compared = Vec::new();
+    let mut records = row.records;
+    for seed in (1..u64::from(opts.seeds)).map(|k| run.seed.wrapping_add(k)) {
+        check_stop(opts)?;
+        let at_seed = Run { seed, ..*run };
+        let dir = at_seed.dir(opts, scene.label);
+        let rendered = render_run(opts, scene, &at_seed, (false, true))?;
+        let cmp = metrics::compare_dirs(&ref_dir, &dir)
+            .with_context(|| format!("comparing {} with {}", dir.display(), ref_dir.display()))?;
+        let seconds = rendered.stats.render_time.as_secs_f64();
+        let what = format!("{} (seed {seed})", rendered.what);
+        say_run_done(opts, &what, seconds, Some(cmp.rel_rmse));
+        records += rendered.stats.records;
+        compared.push((seed, cmp));
+    }
+    let n = f64::from(opts.seeds);
+    let mean = |first: f64, each: &dyn Fn(&metrics::CompareReport) -> f64| {
+        (first + compared.iter().map(|(_, c)| each(c)).sum::<f64>()) / n
+    };
+    let mean_of = |first: Option<f64>, each: &dyn Fn(&metrics::CompareReport) -> Option<f64>| {
+        let all: Option<Vec<f64>> = compared.iter().map(|(_, c)| each(c)).collect();
+        Some((first? + all?.iter().sum::<f64>()) / n)
+    };
+    let mut seeds = vec![first];
+    seeds.extend(compared.iter().map(|(seed, c)| SeedError {
+        seed: *seed,
+        rel_rmse: c.rel_rmse,
+        block_bias: c.block_bias,
+    }));
+    row.rel_rmse = mean(row.rel_rmse, &|c| c.rel_rmse);
+    row.block_bias = mean(row.block_bias, &|c| c.block_bias);
+    row.rel_rmse_surfaces = mean_of(row.rel_rmse_surfaces, &|c| c.rel_rmse_surfaces);
+    row.flicker = mean_of(row.flicker, &|c| c.flicker);
+    row.flicker_surfaces = mean_of(row.flicker_surfaces, &|c| c.flicker_surfaces);
+    row.records = (records as f64 / n).round() as u64;
+    Ok(seeds)
+}
+
 /// A run rendered into its folder.
 struct Rendered {
     stats: RunStats,
@@ -591,7 +696,7 @@ fn render_run(
     (per_run, write): (bool, bool),
 ) -> Result<Rendered> {
     let (label, spec) = (scene.label, run.spec);
-    let dir = opts.out.join("runs").join(label).join(run.folder());
+    let dir = run.dir(opts, label);
     if write {
         clear_frames(&dir)?;
     }
@@ -599,7 +704,10 @@ fn render_run(
         scene.scene.clone(),
         spec.settings()?.instantiate(),
         render::make_backend(run.backend)?,
-        frame_settings(opts, opts.same_pattern),
+        FrameSettings {
+            seed: run.seed,
+            ..frame_settings(opts, opts.same_pattern)
+        },
     );
     renderer.set_abandon_flag(opts.stop.clone());
     let backend = renderer.backend().name();

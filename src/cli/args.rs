@@ -409,6 +409,15 @@ pub struct BenchArgs {
     #[arg(long, value_name = "N", default_value_t = 1,
           value_parser = clap::value_parser!(u32).range(1..=100))]
     pub repeat: u32,
+    /// Render every run at N seeds (--seed, --seed + 1, …) against the
+    /// one reference, and report the means of its errors and records over
+    /// them (each seed's errors listed after the tables; its time, rays and
+    /// memory stay the first seed's). trc and tcg keep their pixel
+    /// samples' streams from frame to frame, so one seed's error is one
+    /// draw of their pixel noise.
+    #[arg(long, value_name = "N", default_value_t = 1,
+          value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub seeds: u32,
     /// Run even where a run's estimated peak memory at --size on its scene (a lower bound, as for `render`) is over the memory available, which is otherwise refused before anything renders.
     #[arg(long)]
     pub no_memory_check: bool,
@@ -419,7 +428,7 @@ pub struct BenchArgs {
     #[arg(long, conflicts_with_all = [
         "scenes", "methods", "frames", "size", "reference_spp", "fps", "seed",
         "same_pattern", "estimate_error", "store_size", "backends", "repeat",
-        "no_memory_check",
+        "seeds", "no_memory_check",
     ])]
     pub replot: bool,
 }

@@ -161,6 +161,7 @@ fn bench_options(args: BenchArgs) -> bench::BenchOptions {
         backends: args.backends.into_iter().map(backend_choice).collect(),
         check_memory: !args.no_memory_check,
         repeat: args.repeat,
+        seeds: args.seeds,
         stop: Default::default(),
     }
 }
@@ -255,6 +256,11 @@ fn print_bench_tables(report: &bench::BenchReport) -> Result<()> {
     if !rounds.is_empty() {
         outln!("\nseconds in each round (the tables give their median):")?;
         out!("{rounds}")?;
+    }
+    let seeds = bench::seeds_text(&report.rows, &report.seed_errors);
+    if !seeds.is_empty() {
+        outln!("\nerrors at each seed (the tables give their means):")?;
+        out!("{seeds}")?;
     }
     for (measure, what) in [
         (bench::ErrorMeasure::AllPixels, "all pixels"),
