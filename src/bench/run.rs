@@ -479,8 +479,11 @@ fn bench_scene(
                 continue;
             }
             let mut row = bench_run(opts, scene, &run, per_run)?;
+            // A stop among the later seeds leaves the run unfinished:
+            // nothing of it is pushed, so `times` stays beside `rows`.
+            let at_seeds = more_seeds(opts, scene, &run, &mut row)?;
             times.push(vec![RunTime::of(&row)]);
-            seed_errors.push(more_seeds(opts, scene, &run, &mut row)?);
+            seed_errors.push(at_seeds);
             if opts.repeat <= 1 {
                 after_run(&row);
             }
