@@ -4,7 +4,7 @@
 use radcache::bench::{
     self, equal_error_table, from_csv, interpolate_time_at_error, method_settings, temporal_pairs,
     temporal_text, to_csv, BenchOptions, BenchRow, ErrorMeasure, MethodError, MethodSweep,
-    CSV_HEADER,
+    SeedError, CSV_HEADER,
 };
 use radcache::method::trc::estimate_error::EstimateError;
 use radcache::method::trc::TrcSettings;
@@ -788,6 +788,21 @@ fn bench_seeds_flag_prints_the_errors_at_each_seed() {
         .path()
         .join("runs/cube-in-box/path-spp=1/seed-1/frame_0001.exr")
         .exists());
+    // Each seed's errors are kept beside bench.csv, a line per seed, and
+    // the error chart bars their range.
+    let seeds_csv = dir.path().join("bench_seeds.csv");
+    assert!(
+        stdout.contains(&format!("wrote {}", seeds_csv.display())),
+        "{stdout}"
+    );
+    let lines = std::fs::read_to_string(&seeds_csv).unwrap();
+    let lines: Vec<&str> = lines.lines().collect();
+    assert_eq!(lines.len(), 3, "{lines:?}");
+    assert!(lines[1].starts_with("cube-in-box,path,spp=1,") && lines[2].contains(",1,"));
+    let chart = dir.path().join("cube-in-box_error_vs_time.svg");
+    assert!(std::fs::read_to_string(&chart)
+        .unwrap()
+        .contains("bar: their range"));
     let out = bench(&["--seeds", "0"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--seeds"));
@@ -801,10 +816,23 @@ fn bench_seeds_flag_prints_the_errors_at_each_seed() {
             .output()
             .unwrap()
     };
-    assert!(replot(&[]).status.success());
+    // `--replot` reads the seeds back: the same lines, the same bars.
+    std::fs::remove_file(&chart).unwrap();
+    let out = replot(&[]);
+    assert!(out.status.success());
+    let replotted = String::from_utf8_lossy(&out.stdout);
+    let seed_lines = after.split("\n\n").next().unwrap();
+    assert!(replotted.contains(seed_lines), "{replotted}\n---\n{after}");
+    assert!(std::fs::read_to_string(&chart)
+        .unwrap()
+        .contains("bar: their range"));
     let out = replot(&["--seeds", "2"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot be used with"));
+    // A bench of one seed leaves no earlier bench's seeds beside its CSV.
+    assert!(bench(&[]).status.success());
+    assert!(!seeds_csv.exists());
+    assert!(!std::fs::read_to_string(&chart).unwrap().contains("bar:"));
 }
 
 /// The render pass's share of a run: timed for the cache methods (their
@@ -1138,7 +1166,7 @@ fn charts_name_runs_at_zero_and_say_why_they_are_empty() {
     still.flicker = Some(0.0);
     let mut moving = row("ic", "default", 2.0, 0.1);
     moving.flicker = Some(0.02);
-    let charts = bench::plot_scene(dir.path(), "s", &[still, moving]).unwrap();
+    let charts = bench::plot_scene(dir.path(), "s", &[still, moving], &[]).unwrap();
     let svg = |name: &str| std::fs::read_to_string(dir.path().join(name)).unwrap();
     assert!(charts.contains(&dir.path().join("s_flicker_vs_time.svg")));
     assert!(
@@ -1151,6 +1179,80 @@ fn charts_name_runs_at_zero_and_say_why_they_are_empty() {
         .contains("no data: flicker needs two frames or more, and light masks in the reference"));
 }
 
+/// A run rendered at several seeds is drawn on the error chart at its
+/// mean with a bar from its least to its greatest seed's error, the axis
+/// reaching both ends; a run of one seed has no bar.
+#[test]
+fn the_error_chart_bars_each_runs_spread_over_its_seeds() {
+    let dir = tempfile::tempdir().unwrap();
+    let rows = [
+        row("ic", "default", 2.0, 0.1),
+        row("trc", "default", 1.0, 0.1),
+    ];
+    let at = |seed, rel_rmse| SeedError {
+        seed,
+        rel_rmse,
+        block_bias: 0.01,
+    };
+    // trc's seeds spread far beyond both means: the axis must stretch.
+    let seeds = [vec![at(0, 0.1)], vec![at(0, 0.02), at(1, 0.28)]];
+    bench::plot_scene(dir.path(), "s", &rows, &seeds).unwrap();
+    let svg = std::fs::read_to_string(dir.path().join("s_error_vs_time.svg")).unwrap();
+    assert!(svg.contains("mean over seeds (bar: their range)"), "{svg}");
+    let bars = vertical_lines(&svg);
+    assert_eq!(bars.len(), 1, "{bars:?}");
+    // The bar stands at trc's point (1 s), ic's (2 s) has none.
+    let circles = circle_centres(&svg);
+    let (x, top, bottom) = bars[0];
+    let trc = circles.iter().min_by_key(|c| c.0).unwrap();
+    assert_eq!(trc.0, x, "{circles:?}");
+    // Its ends lie on either side of the mean, inside the chart's area.
+    assert!(
+        top < trc.1 && trc.1 < bottom && top > 18 && bottom < 580 - 52,
+        "{bars:?}"
+    );
+    // Without the seeds, the same rows draw no bar.
+    bench::plot_scene(dir.path(), "s", &rows, &[]).unwrap();
+    let svg = std::fs::read_to_string(dir.path().join("s_error_vs_time.svg")).unwrap();
+    assert!(vertical_lines(&svg).is_empty() && !svg.contains("bar:"));
+}
+
+/// The coloured polylines of an SVG (not the axes' and ticks' black or
+/// the grid's greys) of two points one above the other: (x, top y, bottom
+/// y) in pixels.
+fn vertical_lines(svg: &str) -> Vec<(i32, i32, i32)> {
+    let grey = |p: &str| {
+        let Some((_, hex)) = p.split_once("stroke=\"#") else {
+            return true;
+        };
+        hex.get(0..2) == hex.get(2..4) && hex.get(2..4) == hex.get(4..6)
+    };
+    let numbers = |s: &str| -> Vec<i32> {
+        (s.split([' ', ',']))
+            .filter_map(|n| n.parse::<f64>().ok())
+            .map(|n| n.round() as i32)
+            .collect()
+    };
+    (svg.split("<polyline").skip(1))
+        .map(|p| p.split_once("/>").map_or(p, |(p, _)| p))
+        .filter(|p| !grey(p))
+        .filter_map(|p| Some(numbers(p.split_once("points=\"")?.1.split_once('"')?.0)))
+        .filter(|n| n.len() == 4 && n[0] == n[2] && n[1] != n[3])
+        .map(|n| (n[0], n[1].min(n[3]), n[1].max(n[3])))
+        .collect()
+}
+
+/// The centres of an SVG's circles, in pixels.
+fn circle_centres(svg: &str) -> Vec<(i32, i32)> {
+    let attr = |c: &str, name: &str| -> Option<i32> {
+        let v = c.split_once(&format!(" {name}=\""))?.1.split_once('"')?.0;
+        Some(v.parse::<f64>().ok()?.round() as i32)
+    };
+    (svg.split("<circle").skip(1))
+        .filter_map(|c| Some((attr(c, "cx")?, attr(c, "cy")?)))
+        .collect()
+}
+
 /// A sweep's points are labelled with their swept values; a default run's
 /// point has no label, and no empty text element stands for one.
 #[test]
@@ -1161,7 +1263,7 @@ fn a_default_runs_point_has_no_empty_label() {
         row("path", "spp=4", 1.0, 0.2),
         row("path", "spp=16", 3.0, 0.1),
     ];
-    bench::plot_scene(dir.path(), "s", &rows).unwrap();
+    bench::plot_scene(dir.path(), "s", &rows, &[]).unwrap();
     let svg = std::fs::read_to_string(dir.path().join("s_error_vs_time.svg")).unwrap();
     let texts: Vec<&str> = (svg.split("<text").skip(1))
         .filter_map(|t| Some(t.split_once('>')?.1.split_once("</text>")?.0.trim()))

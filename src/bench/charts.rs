@@ -1,6 +1,7 @@
 //! The SVG charts of a scene's runs: error and flicker against time on
 //! log axes, one line per method sweep.
 
+use super::seeds::{spread, SeedError};
 use super::BenchRow;
 use anyhow::Result;
 use std::ops::Range;
@@ -72,11 +73,12 @@ fn log_ticks(range: &Range<f64>) -> (Vec<f64>, Vec<f64>) {
     }
 }
 
-/// The method sweeps of `rows` in order of appearance: (series name, rows).
-fn series(rows: &[BenchRow]) -> Vec<(String, Vec<&BenchRow>)> {
+/// The method sweeps of `rows` in order of appearance: (series name, the
+/// indices of its rows).
+fn series(rows: &[BenchRow]) -> Vec<(String, Vec<usize>)> {
     let several_backends = rows.iter().any(|r| r.backend != rows[0].backend);
-    let mut out: Vec<(String, Vec<&BenchRow>)> = Vec::new();
-    for r in rows {
+    let mut out: Vec<(String, Vec<usize>)> = Vec::new();
+    for (i, r) in rows.iter().enumerate() {
         let (key, _) = sweep_of(&r.settings);
         let mut name = if key.is_empty() {
             r.method.clone()
@@ -89,8 +91,8 @@ fn series(rows: &[BenchRow]) -> Vec<(String, Vec<&BenchRow>)> {
             name = format!("{name} on {kind}");
         }
         match out.iter_mut().find(|(n, _)| *n == name) {
-            Some((_, v)) => v.push(r),
-            None => out.push((name, vec![r])),
+            Some((_, v)) => v.push(i),
+            None => out.push((name, vec![i])),
         }
     }
     out
@@ -116,8 +118,17 @@ pub(super) fn chart_paths(out: &Path, scene: &str) -> [PathBuf; 4] {
         .map(|what| out.join(format!("{scene}_{what}_vs_time.svg")))
 }
 
-/// Writes the four charts of one scene; returns their paths.
-pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<PathBuf>> {
+/// Writes the four charts of one scene; returns their paths. `seeds`,
+/// beside `rows`, holds each run's errors at the seeds it was rendered at
+/// (none or one where it was rendered at one): a run of several is drawn
+/// at its mean error, as its row gives it, with a bar through it from the
+/// least to the greatest of its seeds' errors.
+pub fn plot_scene(
+    out: &Path,
+    scene: &str,
+    rows: &[BenchRow],
+    seeds: &[Vec<SeedError>],
+) -> Result<Vec<PathBuf>> {
     let [error, surfaces, flicker, surface_flicker] = chart_paths(out, scene);
     let chart = |title: &str, y_desc: &str, empty: &'static str| Chart {
         title: format!("{scene}: {title}"),
@@ -126,15 +137,19 @@ pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<Path
     };
     const NO_RUN: &str = "no run has a finite, positive time and value";
     const ONE_FRAME: &str = "flicker needs two frames or more";
+    let spreads: Vec<Option<(f64, f64)>> = (0..rows.len())
+        .map(|i| seeds.get(i).and_then(|s| spread(s)))
+        .collect();
+    let error_desc = match spreads.iter().any(Option::is_some) {
+        true => "relative RMSE against the reference, mean over seeds (bar: their range)",
+        false => "relative RMSE against the reference",
+    };
     plot(
         &error,
-        &chart(
-            "error against time",
-            "relative RMSE against the reference",
-            NO_RUN,
-        ),
+        &chart("error against time", error_desc, NO_RUN),
         rows,
         |r| Some(r.rel_rmse),
+        &spreads,
     )?;
     plot(
         &surfaces,
@@ -145,6 +160,7 @@ pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<Path
         ),
         rows,
         |r| r.rel_rmse_surfaces,
+        &[],
     )?;
     plot(
         &flicker,
@@ -155,6 +171,7 @@ pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<Path
         ),
         rows,
         |r| r.flicker,
+        &[],
     )?;
     plot(
         &surface_flicker,
@@ -165,6 +182,7 @@ pub fn plot_scene(out: &Path, scene: &str, rows: &[BenchRow]) -> Result<Vec<Path
         ),
         rows,
         |r| r.flicker_surfaces,
+        &[],
     )?;
     Ok(vec![error, surfaces, flicker, surface_flicker])
 }
@@ -178,12 +196,14 @@ struct Chart {
 }
 
 /// A chart of `y_of` against time on log axes, one line per method sweep
-/// ([`series`]), written as SVG to `path`.
+/// ([`series`]), written as SVG to `path`; a row with a spread in
+/// `spreads` (beside `rows`, or shorter) gets a bar over it.
 fn plot(
     path: &Path,
     chart: &Chart,
     rows: &[BenchRow],
     y_of: impl Fn(&BenchRow) -> Option<f64>,
+    spreads: &[Option<(f64, f64)>],
 ) -> Result<()> {
     let Chart {
         title,
@@ -196,9 +216,18 @@ fn plot(
         let y = y_of(r);
         r.seconds.is_finite() && r.seconds > 0.0 && y.is_some_and(|y| y.is_finite() && y > 0.0)
     };
+    // A bar of a usable row, where its ends are on the axis too.
+    let bar_of = |i: usize| {
+        let (lo, hi) = spreads.get(i).copied().flatten()?;
+        let on_axis = |v: f64| v.is_finite() && v > 0.0;
+        (usable(&&rows[i]) && on_axis(lo) && on_axis(hi)).then_some((lo, hi))
+    };
     let frames = rows.first().map_or(0, |r| r.frames);
     let x_range = log_range(rows.iter().filter(usable).map(|r| r.seconds));
-    let y_range = log_range(rows.iter().filter(usable).filter_map(&y_of));
+    let bar_ends = (0..rows.len())
+        .filter_map(bar_of)
+        .flat_map(|(lo, hi)| [lo, hi]);
+    let y_range = log_range(rows.iter().filter(usable).filter_map(&y_of).chain(bar_ends));
 
     let root = SVGBackend::new(path, (820, 580)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(&e))?;
@@ -221,9 +250,8 @@ fn plot(
 
     let mut drawn: Vec<(f64, f64, String)> = Vec::new();
     for (i, (name, sweep)) in series(rows).into_iter().enumerate() {
-        let mut points: Vec<(f64, f64, String)> = sweep
-            .iter()
-            .copied()
+        let mut points: Vec<(f64, f64, String)> = (sweep.iter())
+            .map(|&j| &rows[j])
             .filter(usable)
             .map(|r| (r.seconds, y_of(r).unwrap_or(f64::NAN), point_label(r)))
             .collect();
@@ -231,8 +259,12 @@ fn plot(
             continue;
         }
         points.sort_by(|a, b| a.0.total_cmp(&b.0));
-        draw_sweep(&mut chart, name, Palette99::pick(i).to_rgba(), &points)
-            .map_err(|e| draw_err(&e))?;
+        let color = Palette99::pick(i).to_rgba();
+        let bars: Vec<(f64, f64, f64)> = (sweep.iter())
+            .filter_map(|&j| bar_of(j).map(|(lo, hi)| (rows[j].seconds, lo, hi)))
+            .collect();
+        draw_bars(&mut chart, color, &bars).map_err(|e| draw_err(&e))?;
+        draw_sweep(&mut chart, name, color, &points).map_err(|e| draw_err(&e))?;
         drawn.extend(points);
     }
     draw_point_labels(&mut chart, &drawn).map_err(|e| draw_err(&e))?;
@@ -334,6 +366,28 @@ fn draw_sweep(
                 + Circle::new((11, 0), 4, color.filled())
         });
     chart.draw_series((points.iter()).map(|&(x, y, _)| Circle::new((x, y), 4, color.filled())))?;
+    Ok(())
+}
+
+/// Vertical bars `(seconds, lo, hi)` from `lo` to `hi` at `seconds`, each
+/// end capped, thinner than a sweep's line: the spread of a run's error
+/// over its seeds.
+fn draw_bars(
+    chart: &mut LogLogChart,
+    color: plotters::style::RGBAColor,
+    bars: &[(f64, f64, f64)],
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
+    use plotters::prelude::*;
+    let style = color.stroke_width(1);
+    let cap =
+        move |at: (f64, f64)| EmptyElement::at(at) + PathElement::new(vec![(-5, 0), (5, 0)], style);
+    chart.draw_series(
+        (bars.iter()).map(|&(x, lo, hi)| PathElement::new(vec![(x, lo), (x, hi)], style)),
+    )?;
+    chart.draw_series(
+        bars.iter()
+            .flat_map(|&(x, lo, hi)| [cap((x, lo)), cap((x, hi))]),
+    )?;
     Ok(())
 }
 

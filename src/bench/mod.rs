@@ -30,6 +30,10 @@
 //! happened to run in (the machine drifts: the same `ic` run took
 //! 54.6 s and 68.9 s within an hour, `benches/HISTORY.md`).
 //!
+//! With [`BenchOptions::seeds`] above 1 every run is rendered at that many
+//! seeds, its errors the means; each seed's go to `DIR/bench_seeds.csv`,
+//! and the error chart bars their range through the run's point.
+//!
 //! A bench begins by removing the `bench.csv` and charts an earlier bench
 //! left in `DIR`, so that none describes runs this one did not make; one
 //! stopped early ([`BenchOptions::stop`]) writes them for the runs it
@@ -41,6 +45,8 @@
 //! - `run`: the runs, each timed and compared with the reference (and, with
 //!   `--estimate-error`, `trc`'s E(t0+1) estimates measured);
 //! - `report`: the CSV, the table and the ratios printed after it;
+//! - `seeds`: each seed's errors, printed, in `bench_seeds.csv` and as
+//!   the bars of the error chart;
 //! - `charts`: the SVG charts.
 //!
 //! # Adding a method
@@ -54,15 +60,17 @@ mod methods;
 mod reference;
 mod report;
 mod run;
+mod seeds;
 
 pub use charts::plot_scene;
 pub use methods::{method_settings, MethodError, MethodInfo, MethodSweep, RunSpec, METHODS};
 pub use report::{
     backend_pairs, backend_text, equal_error_table, equal_error_text, estimate_error_text,
-    from_csv, interpolate_time_at_error, rounds_text, seeds_text, temporal_pairs, temporal_text,
-    to_csv, to_table, BenchRow, EqualError, ErrorMeasure, PathBound, CSV_HEADER,
+    from_csv, interpolate_time_at_error, rounds_text, temporal_pairs, temporal_text, to_csv,
+    to_table, BenchRow, EqualError, ErrorMeasure, PathBound, CSV_HEADER,
 };
-pub use run::{peak_memory_mb, replot, reset_peak_memory, run, run_with, BenchReport, SeedError};
+pub use run::{peak_memory_mb, replot, reset_peak_memory, run, run_with, BenchReport};
+pub use seeds::{seeds_text, SeedError, SEEDS_CSV};
 
 use crate::render::{BackendChoice, SceneSource};
 use anyhow::{bail, Result};

@@ -92,11 +92,8 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{:.6},{},{},{},{},{:.6},{},{:.6},{},{},{},{}",
-            csv_field(&r.scene),
-            csv_field(&r.method),
-            csv_field(&r.settings),
-            csv_field(&r.backend),
+            "{},{},{:.6},{},{},{},{},{:.6},{},{:.6},{},{},{},{}",
+            run_fields(r),
             r.frames,
             r.seconds,
             opt(r.render_pass_seconds, 6),
@@ -122,30 +119,47 @@ pub fn to_csv(rows: &[BenchRow]) -> String {
 /// into the wrong fields); a field that does not read is an error naming
 /// its line and column.
 pub fn from_csv(text: &str) -> anyhow::Result<Vec<BenchRow>> {
+    let lines = csv_lines(text, CSV_HEADER)?;
+    (lines.into_iter())
+        .map(|(line, fields)| row_of(&fields).map_err(|e| anyhow::anyhow!("line {line}: {e}")))
+        .collect()
+}
+
+/// The lines after the first of a CSV that this build wrote with `header`,
+/// each as (its line number, its fields), read by the `csv` crate; an
+/// error where the first line is not `header` (a file of another version
+/// is refused rather than read into the wrong fields).
+pub(super) fn csv_lines(text: &str, header: &str) -> anyhow::Result<Vec<(u64, Vec<String>)>> {
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
         .from_reader(text.as_bytes());
     let mut records = reader.records();
-    let header = records.next().transpose().map_err(csv_error)?;
-    let expected: Vec<&str> = CSV_HEADER.split(',').collect();
-    if header
+    let first = records.next().transpose().map_err(csv_error)?;
+    if first
         .as_ref()
-        .is_none_or(|h| h.iter().ne(expected.iter().copied()))
+        .is_none_or(|h| h.iter().ne(header.split(',')))
     {
         anyhow::bail!(
-            "line 1 is not the header this build writes (a bench.csv of another version?): \
-             expected {CSV_HEADER}"
+            "line 1 is not the header this build writes (a file of another version?): \
+             expected {header}"
         );
     }
-    let mut rows = Vec::new();
+    let mut lines = Vec::new();
     for record in records {
         let record = record.map_err(csv_error)?;
         let line = record.position().map_or(0, |p| p.line());
-        let fields: Vec<String> = record.iter().map(str::to_string).collect();
-        rows.push(row_of(&fields).map_err(|e| anyhow::anyhow!("line {line}: {e}"))?);
+        lines.push((line, record.iter().map(str::to_string).collect()));
     }
-    Ok(rows)
+    Ok(lines)
+}
+
+/// The four fields that name a row's run in the CSVs,
+/// `scene,method,settings,backend`, quoted where they must be.
+pub(super) fn run_fields(r: &BenchRow) -> String {
+    [&r.scene, &r.method, &r.settings, &r.backend]
+        .map(|f| csv_field(f))
+        .join(",")
 }
 
 /// A CSV reading error as the `csv` crate says it (it names the line).
@@ -698,41 +712,6 @@ pub fn rounds_text(rows: &[BenchRow], rounds: &[Vec<f64>]) -> String {
             row.backend,
             times.join(" / "),
             row.seconds,
-        );
-    }
-    out
-}
-
-/// Lines for people where the runs were rendered at several seeds
-/// ([`super::BenchOptions::seeds`]): one per row, its relative RMSE and
-/// block bias at each seed, in order, and the means the tables give.
-/// Empty for one seed.
-pub fn seeds_text(rows: &[BenchRow], seeds: &[Vec<super::SeedError>]) -> String {
-    let mut out = String::new();
-    if seeds.iter().all(|s| s.len() <= 1) {
-        return out;
-    }
-    for (row, seeds) in rows.iter().zip(seeds) {
-        let each = |f: fn(&super::SeedError) -> f64| {
-            let all: Vec<String> = seeds.iter().map(|s| format!("{:.5}", f(s))).collect();
-            all.join(" / ")
-        };
-        let _ = writeln!(
-            out,
-            "{} {} {} on {}, seeds {}: rel_rmse {} → {:.5}; block_bias {} → {:.5}",
-            row.scene,
-            row.method,
-            row.settings,
-            row.backend,
-            seeds
-                .iter()
-                .map(|s| s.seed.to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
-            each(|s| s.rel_rmse),
-            row.rel_rmse,
-            each(|s| s.block_bias),
-            row.block_bias,
         );
     }
     out

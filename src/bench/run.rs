@@ -3,6 +3,7 @@
 
 use super::charts::{chart_paths, plot_scene};
 use super::reference::{ensure_reference, reference_seed};
+use super::seeds::{seeds_from_csv, seeds_to_csv, SeedError, SEEDS_CSV};
 use super::{sanitize, scene_label, to_csv, BenchOptions, BenchRow, MethodSweep, RunSpec};
 use crate::backend::gpu::{AdapterPolicy, GpuBackend};
 use crate::method::trc::estimate_error::{EstimateError, EstimateErrorTally};
@@ -49,6 +50,9 @@ pub struct BenchReport {
     pub rows: Vec<BenchRow>,
     /// `DIR/bench.csv`, where it was written.
     pub csv: Option<PathBuf>,
+    /// `DIR/bench_seeds.csv` ([`SEEDS_CSV`]), where the runs were rendered
+    /// at several seeds and it was written.
+    pub seeds_csv: Option<PathBuf>,
     /// The charts written.
     pub charts: Vec<PathBuf>,
     /// Why each file that could not be written was not: the CSV or a
@@ -69,14 +73,6 @@ pub struct BenchReport {
     /// ([`BenchOptions::seeds`]), in seed order: the row's are their means.
     /// One for each row of a bench of one seed.
     pub seed_errors: Vec<Vec<SeedError>>,
-}
-
-/// A run's errors at one seed ([`BenchOptions::seeds`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SeedError {
-    pub seed: u64,
-    pub rel_rmse: f64,
-    pub block_bias: f64,
 }
 
 /// Runs the whole bench: references, runs, CSV, charts.
@@ -115,7 +111,7 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
         };
         // Charts of the runs finished only: none for a scene with none.
         if rows.len() > first {
-            match plot_scene(&opts.out, label, &rows[first..]) {
+            match plot_scene(&opts.out, label, &rows[first..], &seed_errors[first..]) {
                 Ok(written) => charts.extend(written),
                 Err(e) => unwritten.push(format!("{e:#}")),
             }
@@ -124,20 +120,27 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
             break;
         }
     }
-    let csv = opts.out.join("bench.csv");
-    let csv = match std::fs::write(&csv, to_csv(&rows)) {
-        Ok(()) => Some(csv),
-        Err(e) => {
-            unwritten.push(format!("cannot write {}: {e}", csv.display()));
-            None
+    let mut write = |name: &str, text: String| {
+        let path = opts.out.join(name);
+        match std::fs::write(&path, text) {
+            Ok(()) => Some(path),
+            Err(e) => {
+                unwritten.push(format!("cannot write {}: {e}", path.display()));
+                None
+            }
         }
     };
+    let csv = write("bench.csv", to_csv(&rows));
+    let seeds_csv = (opts.seeds > 1)
+        .then(|| write(SEEDS_CSV, seeds_to_csv(&rows, &seed_errors)))
+        .flatten();
     // Rows come in the order of the runs, so those after them are the
     // ones a stop left unfinished.
     let unfinished = run_names(opts, &labels).split_off(rows.len());
     Ok(BenchReport {
         rows,
         csv,
+        seeds_csv,
         charts,
         unwritten,
         peak_mem_per_run: per_run,
@@ -151,7 +154,8 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
 /// wrote and draws its scenes' charts into `dir` again, rendering nothing
 /// (the charts' drawing may have changed since, or the CSV been edited or
 /// merged from several benches). The report's rows are the CSV's, in its
-/// order; it has no round times and writes no CSV.
+/// order, with their seeds' errors where `dir/bench_seeds.csv` keeps
+/// them; it has no round times and writes no CSV.
 pub fn replot(dir: &Path) -> Result<BenchReport> {
     let csv = dir.join("bench.csv");
     let text =
@@ -174,22 +178,25 @@ pub fn replot(dir: &Path) -> Result<BenchReport> {
             scenes.push(&row.scene);
         }
     }
+    let seed_errors = read_seed_errors(dir, &rows)?;
     let (mut charts, mut unwritten) = (Vec::new(), Vec::new());
     for scene in scenes {
-        let of_scene: Vec<BenchRow> = (rows.iter())
-            .filter(|r| r.scene == scene)
-            .cloned()
-            .collect();
-        match plot_scene(dir, scene, &of_scene) {
+        let (of_scene, seeds): (Vec<BenchRow>, Vec<Vec<SeedError>>) = (rows.iter())
+            .zip(&seed_errors)
+            .filter(|(r, _)| r.scene == scene)
+            .map(|(r, s)| (r.clone(), s.clone()))
+            .unzip();
+        match plot_scene(dir, scene, &of_scene, &seeds) {
             Ok(written) => charts.extend(written),
             Err(e) => unwritten.push(format!("{e:#}")),
         }
     }
     Ok(BenchReport {
         round_seconds: vec![Vec::new(); rows.len()],
-        seed_errors: vec![Vec::new(); rows.len()],
+        seed_errors,
         rows,
         csv: None,
+        seeds_csv: None,
         charts,
         unwritten,
         // The CSV's figures are its bench's, which said so under its own
@@ -198,6 +205,18 @@ pub fn replot(dir: &Path) -> Result<BenchReport> {
         peak_mem_per_run: true,
         unfinished: Vec::new(),
     })
+}
+
+/// Each of `rows`' errors at its seeds from `dir/bench_seeds.csv`
+/// ([`SEEDS_CSV`]), which a bench of several seeds wrote beside
+/// `bench.csv`; none for any row where there is no such file.
+fn read_seed_errors(dir: &Path, rows: &[BenchRow]) -> Result<Vec<Vec<SeedError>>> {
+    let path = dir.join(SEEDS_CSV);
+    match std::fs::read_to_string(&path) {
+        Ok(text) => seeds_from_csv(&text, rows).with_context(|| format!("{}", path.display())),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(vec![Vec::new(); rows.len()]),
+        Err(e) => Err(e).with_context(|| format!("cannot read {}", path.display())),
+    }
 }
 
 /// Refuses, before anything renders, a bench that cannot run or would
@@ -279,14 +298,16 @@ fn check_bench(opts: &BenchOptions) -> Result<Vec<String>> {
     Ok(labels)
 }
 
-/// Removes the `bench.csv` in `out`, and the charts of the scenes
-/// `labels`, that an earlier bench wrote: beside this bench's runs they
+/// Removes the `bench.csv` and `bench_seeds.csv` in `out`, and the charts
+/// of the scenes `labels`, that an earlier bench wrote: beside this
+/// bench's runs they
 /// would describe runs it did not make, if it is stopped before writing
 /// its own (a second Ctrl-C), or, for a scene it finishes no run of, at
 /// all. A folder in a file's place is left, to fail when written.
 fn remove_earlier_outputs(out: &Path, labels: &[String]) -> Result<()> {
     let charts = labels.iter().flat_map(|l| chart_paths(out, l));
-    for path in std::iter::once(out.join("bench.csv")).chain(charts) {
+    let csvs = ["bench.csv", SEEDS_CSV].map(|name| out.join(name));
+    for path in csvs.into_iter().chain(charts) {
         let is_dir = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir());
         match std::fs::remove_file(&path) {
             Err(e) if !is_dir && e.kind() != std::io::ErrorKind::NotFound => {

@@ -411,8 +411,9 @@ pub struct BenchArgs {
     pub repeat: u32,
     /// Render every run at N seeds (--seed, --seed + 1, …) against the
     /// one reference, and report the means of its errors and records over
-    /// them (each seed's errors listed after the tables; its time, rays and
-    /// memory stay the first seed's). trc and tcg keep their pixel
+    /// them (each seed's errors listed after the tables and in
+    /// bench_seeds.csv, their range a bar on the error chart; its time,
+    /// rays and memory stay the first seed's). trc and tcg keep their pixel
     /// samples' streams from frame to frame, so one seed's error is one
     /// draw of their pixel noise.
     #[arg(long, value_name = "N", default_value_t = 1,
@@ -421,8 +422,8 @@ pub struct BenchArgs {
     /// Run even where a run's estimated peak memory at --size on its scene (a lower bound, as for `render`) is over the memory available, which is otherwise refused before anything renders.
     #[arg(long)]
     pub no_memory_check: bool,
-    /// Render nothing: read --out's bench.csv, which an earlier bench
-    /// wrote, print its tables and draw its charts into --out again (after
+    /// Render nothing: read --out's bench.csv (and bench_seeds.csv, if
+    /// any), which an earlier bench wrote, print its tables and draw its charts into --out again (after
     /// the CSV was edited or merged, or the charts' drawing changed). Goes
     /// with --out and --quiet only.
     #[arg(long, conflicts_with_all = [

@@ -243,7 +243,10 @@ fn print_bench(report: &bench::BenchReport) -> Result<()> {
         print_bench_tables(report)?;
         outln!()?;
     }
-    for written in report.csv.iter().chain(&report.charts) {
+    for written in (report.csv.iter())
+        .chain(&report.seeds_csv)
+        .chain(&report.charts)
+    {
         outln!("wrote {}", written.display())?;
     }
     Ok(())
