@@ -802,7 +802,7 @@ fn bench_seeds_flag_prints_the_errors_at_each_seed() {
     let chart = dir.path().join("cube-in-box_error_vs_time.svg");
     assert!(std::fs::read_to_string(&chart)
         .unwrap()
-        .contains("bar: their range"));
+        .contains("its bar: their range"));
     let out = bench(&["--seeds", "0"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--seeds"));
@@ -825,14 +825,14 @@ fn bench_seeds_flag_prints_the_errors_at_each_seed() {
     assert!(replotted.contains(seed_lines), "{replotted}\n---\n{after}");
     assert!(std::fs::read_to_string(&chart)
         .unwrap()
-        .contains("bar: their range"));
+        .contains("its bar: their range"));
     let out = replot(&["--seeds", "2"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot be used with"));
     // A bench of one seed leaves no earlier bench's seeds beside its CSV.
     assert!(bench(&[]).status.success());
     assert!(!seeds_csv.exists());
-    assert!(!std::fs::read_to_string(&chart).unwrap().contains("bar:"));
+    assert!(!std::fs::read_to_string(&chart).unwrap().contains("its bar"));
 }
 
 /// The render pass's share of a run: timed for the cache methods (their
@@ -1179,42 +1179,58 @@ fn charts_name_runs_at_zero_and_say_why_they_are_empty() {
         .contains("no data: flicker needs two frames or more, and light masks in the reference"));
 }
 
-/// A run rendered at several seeds is drawn on the error chart at its
-/// mean with a bar from its least to its greatest seed's error, the axis
-/// reaching both ends; a run of one seed has no bar.
+/// A run rendered at several seeds is drawn on each chart at its mean
+/// with a bar from its least to its greatest seed's value, the axis
+/// reaching both ends; a run of one seed has no bar, nor a chart of a
+/// value its seeds lack.
 #[test]
-fn the_error_chart_bars_each_runs_spread_over_its_seeds() {
+fn the_charts_bar_each_runs_spread_over_its_seeds() {
     let dir = tempfile::tempdir().unwrap();
-    let rows = [
+    let mut rows = [
         row("ic", "default", 2.0, 0.1),
         row("trc", "default", 1.0, 0.1),
     ];
-    let at = |seed, rel_rmse| SeedError {
+    for r in &mut rows {
+        r.flicker = Some(0.05);
+    }
+    let at = |seed, rel_rmse: f64| SeedError {
         seed,
         rel_rmse,
+        rel_rmse_surfaces: None,
         block_bias: 0.01,
+        flicker: Some(rel_rmse / 2.0),
+        flicker_surfaces: None,
     };
     // trc's seeds spread far beyond both means: the axis must stretch.
     let seeds = [vec![at(0, 0.1)], vec![at(0, 0.02), at(1, 0.28)]];
     bench::plot_scene(dir.path(), "s", &rows, &seeds).unwrap();
-    let svg = std::fs::read_to_string(dir.path().join("s_error_vs_time.svg")).unwrap();
-    assert!(svg.contains("mean over seeds (bar: their range)"), "{svg}");
-    let bars = vertical_lines(&svg);
-    assert_eq!(bars.len(), 1, "{bars:?}");
-    // The bar stands at trc's point (1 s), ic's (2 s) has none.
-    let circles = circle_centres(&svg);
-    let (x, top, bottom) = bars[0];
-    let trc = circles.iter().min_by_key(|c| c.0).unwrap();
-    assert_eq!(trc.0, x, "{circles:?}");
-    // Its ends lie on either side of the mean, inside the chart's area.
-    assert!(
-        top < trc.1 && trc.1 < bottom && top > 18 && bottom < 580 - 52,
-        "{bars:?}"
-    );
+    let svg = |chart: &str| std::fs::read_to_string(dir.path().join(chart)).unwrap();
+    for chart in ["s_error_vs_time.svg", "s_flicker_vs_time.svg"] {
+        let svg = svg(chart);
+        assert!(
+            svg.contains("a point: the mean over seeds, its bar: their range"),
+            "{svg}"
+        );
+        let bars = vertical_lines(&svg);
+        assert_eq!(bars.len(), 1, "{chart}: {bars:?}");
+        // The bar stands at trc's point (1 s), ic's (2 s) has none.
+        let circles = circle_centres(&svg);
+        let (x, top, bottom) = bars[0];
+        let trc = circles.iter().min_by_key(|c| c.0).unwrap();
+        assert_eq!(trc.0, x, "{chart}: {circles:?}");
+        // Its ends lie on either side of the mean, inside the chart's area.
+        assert!(
+            top < trc.1 && trc.1 < bottom && top > 18 && bottom < 580 - 52,
+            "{chart}: {bars:?}"
+        );
+    }
+    // The seeds have no surface error: its chart has no bar.
+    let surfaces = svg("s_surface_error_vs_time.svg");
+    assert!(vertical_lines(&surfaces).is_empty() && !surfaces.contains("its bar"));
     // Without the seeds, the same rows draw no bar.
     bench::plot_scene(dir.path(), "s", &rows, &[]).unwrap();
-    let svg = std::fs::read_to_string(dir.path().join("s_error_vs_time.svg")).unwrap();
-    assert!(vertical_lines(&svg).is_empty() && !svg.contains("bar:"));
+    let error = svg("s_error_vs_time.svg");
+    assert!(vertical_lines(&error).is_empty() && !error.contains("its bar"));
 }
 
 /// The coloured polylines of an SVG (not the axes' and ticks' black or

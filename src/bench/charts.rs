@@ -129,62 +129,60 @@ pub fn plot_scene(
     rows: &[BenchRow],
     seeds: &[Vec<SeedError>],
 ) -> Result<Vec<PathBuf>> {
-    let [error, surfaces, flicker, surface_flicker] = chart_paths(out, scene);
-    let chart = |title: &str, y_desc: &str, empty: &'static str| Chart {
-        title: format!("{scene}: {title}"),
-        y_desc: y_desc.into(),
-        empty,
-    };
-    const NO_RUN: &str = "no run has a finite, positive time and value";
     const ONE_FRAME: &str = "flicker needs two frames or more";
-    let spreads: Vec<Option<(f64, f64)>> = (0..rows.len())
-        .map(|i| seeds.get(i).and_then(|s| spread(s)))
-        .collect();
-    let error_desc = match spreads.iter().any(Option::is_some) {
-        true => "relative RMSE against the reference, mean over seeds (bar: their range)",
-        false => "relative RMSE against the reference",
-    };
-    plot(
-        &error,
-        &chart("error against time", error_desc, NO_RUN),
-        rows,
-        |r| Some(r.rel_rmse),
-        &spreads,
-    )?;
-    plot(
-        &surfaces,
-        &chart(
+    // What each chart (in `chart_paths`' order) draws: its title, its
+    // value's name, why it can be empty, and the value of a row and of a
+    // seed.
+    type Measure = (
+        &'static str,
+        &'static str,
+        &'static str,
+        fn(&BenchRow) -> Option<f64>,
+        fn(&SeedError) -> Option<f64>,
+    );
+    let measures: [Measure; 4] = [
+        (
+            "error against time",
+            "relative RMSE against the reference",
+            "no run has a finite, positive time and value",
+            |r| Some(r.rel_rmse),
+            |s| Some(s.rel_rmse),
+        ),
+        (
             "error of lit surfaces against time",
             "relative RMSE without the pixels at seen lights",
             "the reference has no light masks",
+            |r| r.rel_rmse_surfaces,
+            |s| s.rel_rmse_surfaces,
         ),
-        rows,
-        |r| r.rel_rmse_surfaces,
-        &[],
-    )?;
-    plot(
-        &flicker,
-        &chart(
+        (
             "flicker against time",
             "flicker (RMS of frame-difference error / mean radiance)",
             ONE_FRAME,
+            |r| r.flicker,
+            |s| s.flicker,
         ),
-        rows,
-        |r| r.flicker,
-        &[],
-    )?;
-    plot(
-        &surface_flicker,
-        &chart(
+        (
             "flicker of lit surfaces against time",
             "flicker without the pixels at seen lights",
             "flicker needs two frames or more, and light masks in the reference",
+            |r| r.flicker_surfaces,
+            |s| s.flicker_surfaces,
         ),
-        rows,
-        |r| r.flicker_surfaces,
-        &[],
-    )?;
-    Ok(vec![error, surfaces, flicker, surface_flicker])
+    ];
+    let paths = chart_paths(out, scene);
+    for (path, (title, y_desc, empty, of_row, of_seed)) in paths.iter().zip(measures) {
+        let bars: Vec<Option<(f64, f64)>> = (0..rows.len())
+            .map(|i| seeds.get(i).and_then(|s| spread(s, of_seed)))
+            .collect();
+        let chart = Chart {
+            title: format!("{scene}: {title}"),
+            y_desc: y_desc.into(),
+            empty,
+        };
+        plot(path, &chart, rows, of_row, &bars)?;
+    }
+    Ok(paths.into())
 }
 
 /// What one chart shows: its caption, its value's name, and why it can be
@@ -232,10 +230,16 @@ fn plot(
     let root = SVGBackend::new(path, (820, 580)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(&e))?;
     let mut chart = log_log_chart(&root, title, x_range, y_range).map_err(|e| draw_err(&e))?;
+    // Said under the time axis, which has room where the value's axis
+    // has none.
+    let over_seeds = match (0..rows.len()).any(|i| bar_of(i).is_some()) {
+        true => "; a point: the mean over seeds, its bar: their range",
+        false => "",
+    };
     chart
         .configure_mesh()
         .x_desc(format!(
-            "render time, seconds for {frames} frame{} (log scale)",
+            "render time, seconds for {frames} frame{} (log scale){over_seeds}",
             if frames == 1 { "" } else { "s" }
         ))
         .y_desc(format!("{y_desc} (log scale)"))

@@ -32,7 +32,7 @@
 //!
 //! With [`BenchOptions::seeds`] above 1 every run is rendered at that many
 //! seeds, its errors the means; each seed's go to `DIR/bench_seeds.csv`,
-//! and the error chart bars their range through the run's point.
+//! and the charts bar their range through the run's point.
 //!
 //! A bench begins by removing the `bench.csv` and charts an earlier bench
 //! left in `DIR`, so that none describes runs this one did not make; one
@@ -46,7 +46,7 @@
 //!   `--estimate-error`, `trc`'s E(t0+1) estimates measured);
 //! - `report`: the CSV, the table and the ratios printed after it;
 //! - `seeds`: each seed's errors, printed, in `bench_seeds.csv` and as
-//!   the bars of the error chart;
+//!   the bars of the charts;
 //! - `charts`: the SVG charts.
 //!
 //! # Adding a method

@@ -64,7 +64,7 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-fn opt(v: Option<f64>, decimals: usize) -> String {
+pub(super) fn opt(v: Option<f64>, decimals: usize) -> String {
     v.map_or(String::new(), |v| format!("{v:.decimals$}"))
 }
 

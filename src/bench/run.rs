@@ -654,16 +654,11 @@ fn more_seeds(
     run: &Run,
     row: &mut BenchRow,
 ) -> Result<Vec<SeedError>> {
-    let first = SeedError {
-        seed: run.seed,
-        rel_rmse: row.rel_rmse,
-        block_bias: row.block_bias,
-    };
+    let mut seeds = vec![SeedError::of_row(run.seed, row)];
     if opts.seeds <= 1 {
-        return Ok(vec![first]);
+        return Ok(seeds);
     }
     let ref_dir = opts.out.join("reference").join(scene.label);
-    let mut compared = Vec::new();
     let mut records = row.records;
     for seed in (1..u64::from(opts.seeds)).map(|k| run.seed.wrapping_add(k)) {
         check_stop(opts)?;
@@ -676,28 +671,10 @@ fn more_seeds(
         let what = format!("{} (seed {seed})", rendered.what);
         say_run_done(opts, &what, seconds, Some(cmp.rel_rmse));
         records += rendered.stats.records;
-        compared.push((seed, cmp));
+        seeds.push(SeedError::of_comparison(seed, &cmp));
     }
-    let n = f64::from(opts.seeds);
-    let mean = |first: f64, each: &dyn Fn(&metrics::CompareReport) -> f64| {
-        (first + compared.iter().map(|(_, c)| each(c)).sum::<f64>()) / n
-    };
-    let mean_of = |first: Option<f64>, each: &dyn Fn(&metrics::CompareReport) -> Option<f64>| {
-        let all: Option<Vec<f64>> = compared.iter().map(|(_, c)| each(c)).collect();
-        Some((first? + all?.iter().sum::<f64>()) / n)
-    };
-    let mut seeds = vec![first];
-    seeds.extend(compared.iter().map(|(seed, c)| SeedError {
-        seed: *seed,
-        rel_rmse: c.rel_rmse,
-        block_bias: c.block_bias,
-    }));
-    row.rel_rmse = mean(row.rel_rmse, &|c| c.rel_rmse);
-    row.block_bias = mean(row.block_bias, &|c| c.block_bias);
-    row.rel_rmse_surfaces = mean_of(row.rel_rmse_surfaces, &|c| c.rel_rmse_surfaces);
-    row.flicker = mean_of(row.flicker, &|c| c.flicker);
-    row.flicker_surfaces = mean_of(row.flicker_surfaces, &|c| c.flicker_surfaces);
-    row.records = (records as f64 / n).round() as u64;
+    SeedError::means_into(&seeds, row);
+    row.records = (records as f64 / seeds.len() as f64).round() as u64;
     Ok(seeds)
 }
 

@@ -412,7 +412,7 @@ pub struct BenchArgs {
     /// Render every run at N seeds (--seed, --seed + 1, …) against the
     /// one reference, and report the means of its errors and records over
     /// them (each seed's errors listed after the tables and in
-    /// bench_seeds.csv, their range a bar on the error chart; its time,
+    /// bench_seeds.csv, their range a bar on the charts; its time,
     /// rays and memory stay the first seed's). trc and tcg keep their pixel
     /// samples' streams from frame to frame, so one seed's error is one
     /// draw of their pixel noise.
