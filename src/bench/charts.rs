@@ -236,21 +236,11 @@ fn plot(
         true => "; a point: the mean over seeds, its bar: their range",
         false => "",
     };
-    chart
-        .configure_mesh()
-        .x_desc(format!(
-            "render time, seconds for {frames} frame{} (log scale){over_seeds}",
-            if frames == 1 { "" } else { "s" }
-        ))
-        .y_desc(format!("{y_desc} (log scale)"))
-        .x_label_formatter(&|v| tick(*v))
-        .y_label_formatter(&|v| tick(*v))
-        .label_style(("sans-serif", 14))
-        .axis_desc_style(("sans-serif", 15))
-        .light_line_style(RGBColor(235, 235, 235))
-        .bold_line_style(RGBColor(205, 205, 205))
-        .draw()
-        .map_err(|e| draw_err(&e))?;
+    let x_desc = format!(
+        "render time, seconds for {frames} frame{} (log scale){over_seeds}",
+        if frames == 1 { "" } else { "s" }
+    );
+    draw_axes(&mut chart, &x_desc, &format!("{y_desc} (log scale)")).map_err(|e| draw_err(&e))?;
 
     let mut drawn: Vec<(f64, f64, String)> = Vec::new();
     for (i, (name, sweep)) in series(rows).into_iter().enumerate() {
@@ -289,22 +279,48 @@ fn plot(
         ))
         .map_err(|e| draw_err(&e))?;
     }
-    // A run at exactly 0 (no flicker in a static scene) has no place on a
-    // log axis: named, rather than missing without a word.
-    let at_zero: Vec<String> = (rows.iter())
-        .filter(|r| r.seconds > 0.0 && y_of(r) == Some(0.0))
-        .map(|r| format!("{} {}", r.method, r.settings))
-        .collect();
-    if !at_zero.is_empty() {
-        let text = format!(
-            "not drawn, at 0 (a log axis has none): {}",
-            at_zero.join(", ")
-        );
+    if let Some(text) = at_zero_note(rows, &y_of) {
         root.draw(&Text::new(text, (90, 40), ("sans-serif", 13)))
             .map_err(|e| draw_err(&e))?;
     }
     root.present().map_err(|e| draw_err(&e))?;
     Ok(())
+}
+
+/// The runs at exactly 0 (no flicker in a static scene), which have no
+/// place on a log axis: named in a note on the chart, rather than missing
+/// without a word. `None` where there are none.
+fn at_zero_note(rows: &[BenchRow], y_of: impl Fn(&BenchRow) -> Option<f64>) -> Option<String> {
+    let at_zero: Vec<String> = (rows.iter())
+        .filter(|r| r.seconds > 0.0 && y_of(r) == Some(0.0))
+        .map(|r| format!("{} {}", r.method, r.settings))
+        .collect();
+    (!at_zero.is_empty()).then(|| {
+        format!(
+            "not drawn, at 0 (a log axis has none): {}",
+            at_zero.join(", ")
+        )
+    })
+}
+
+/// The grid, ticks and axis names of `chart`.
+fn draw_axes(
+    chart: &mut LogLogChart,
+    x_desc: &str,
+    y_desc: &str,
+) -> Result<(), plotters::drawing::DrawingAreaErrorKind<std::io::Error>> {
+    use plotters::prelude::*;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .x_label_formatter(&|v| tick(*v))
+        .y_label_formatter(&|v| tick(*v))
+        .label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 15))
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(205, 205, 205))
+        .draw()
 }
 
 /// The SVG chart area, its axes logarithmic over the ranges, with ticks at
