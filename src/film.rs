@@ -493,7 +493,7 @@ static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 /// Writes `bytes` to a temporary file beside `path`, syncs it, and renames it
 /// over `path`: rename within a folder is atomic, so readers see either the
 /// old file or the whole new one, never a partial one.
-fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FilmError> {
+pub(crate) fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FilmError> {
     let temp = temp_path(path);
     let result = fs::File::create(&temp)
         .and_then(|mut f| f.write_all(bytes).and_then(|()| f.sync_all()))

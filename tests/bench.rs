@@ -1378,6 +1378,36 @@ fn a_stopped_bench_writes_the_runs_it_finished_and_names_the_others() {
     assert!(!dir.path().join("reference/spheres").exists());
 }
 
+/// While a bench goes on, `bench.csv` and `bench_seeds.csv` on disk hold
+/// every run finished so far (as the callback of each sees them), so that
+/// a bench killed outright keeps them; no temporary file is left beside
+/// them.
+#[test]
+fn the_csvs_hold_every_finished_run_while_the_bench_goes_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let opts = BenchOptions {
+        seeds: 2,
+        ..tiny_bench(dir.path(), &["path:spp=1,2", "ic"])
+    };
+    let read = |name: &str| std::fs::read_to_string(dir.path().join(name)).unwrap();
+    let mut finished = Vec::new();
+    let report = bench::run_with(&opts, &mut |row| {
+        finished.push(row.clone());
+        assert_eq!(read("bench.csv"), to_csv(&finished));
+        let seeds = read("bench_seeds.csv");
+        assert_eq!(seeds.lines().count(), 1 + 2 * finished.len(), "{seeds}");
+    })
+    .unwrap();
+    assert_eq!(finished.len(), 3);
+    assert_eq!(read("bench.csv"), to_csv(&report.rows));
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("tmp"))
+        .collect();
+    assert!(names.is_empty(), "{names:?}");
+}
+
 /// A run stopped mid-way (its stop flag set once its first frame is
 /// written, as Ctrl-C sets it) is named unfinished and leaves none of its
 /// frames: a run's folder holds a whole run or nothing.

@@ -37,7 +37,8 @@
 //! A bench begins by removing the `bench.csv` and charts an earlier bench
 //! left in `DIR`, so that none describes runs this one did not make; one
 //! stopped early ([`BenchOptions::stop`]) writes them for the runs it
-//! finished.
+//! finished. The CSVs are written again as each run finishes, each whole
+//! or not at all, so one killed outright keeps the runs it finished too.
 //!
 //! # Parts
 //! - `methods`: the methods and settings `--methods` accepts;

@@ -82,7 +82,9 @@ pub fn run(opts: &BenchOptions) -> Result<BenchReport> {
 
 /// [`run`], calling `after_run` with each run's row as the run finishes
 /// (before the next starts: setting [`BenchOptions::stop`] there stops the
-/// bench between two runs).
+/// bench between two runs). By then `bench.csv` (and `bench_seeds.csv`)
+/// hold every run finished so far, so that a bench killed outright (no
+/// Ctrl-C: a crash, `kill -9`, the machine going down) keeps them.
 pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Result<BenchReport> {
     let labels = check_bench(opts)?;
     std::fs::create_dir_all(&opts.out)
@@ -93,9 +95,15 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
     let mut round_seconds = Vec::new();
     let mut seed_errors = Vec::new();
     let mut charts = Vec::new();
-    // A file that cannot be written (a full disk, a folder in its place)
-    // does not lose the measurements: they are still printed.
-    let mut unwritten = Vec::new();
+    let mut unplotted = Vec::new();
+    let mut finished: (Vec<BenchRow>, Vec<Vec<SeedError>>) = Default::default();
+    let mut on_row = |row: &BenchRow, seeds: &[SeedError]| {
+        finished.0.push(row.clone());
+        finished.1.push(seeds.to_vec());
+        // A file not written here is said by the last write, at the end.
+        let _ = write_tables(opts, &finished.0, &finished.1);
+        after_run(row);
+    };
     for (source, label) in opts.scenes.iter().zip(&labels) {
         let scene = BenchScene {
             source,
@@ -104,7 +112,7 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
         };
         let first = rows.len();
         let measured = (&mut rows, &mut round_seconds, &mut seed_errors);
-        let stopped = match bench_scene(opts, &scene, per_run, measured, after_run) {
+        let stopped = match bench_scene(opts, &scene, per_run, measured, &mut on_row) {
             Ok(()) => false,
             Err(e) if e.is::<Stopped>() => true,
             Err(e) => return Err(e),
@@ -113,27 +121,17 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
         if rows.len() > first {
             match plot_scene(&opts.out, label, &rows[first..], &seed_errors[first..]) {
                 Ok(written) => charts.extend(written),
-                Err(e) => unwritten.push(format!("{e:#}")),
+                Err(e) => unplotted.push(format!("{e:#}")),
             }
         }
         if stopped {
             break;
         }
     }
-    let mut write = |name: &str, text: String| {
-        let path = opts.out.join(name);
-        match std::fs::write(&path, text) {
-            Ok(()) => Some(path),
-            Err(e) => {
-                unwritten.push(format!("cannot write {}: {e}", path.display()));
-                None
-            }
-        }
-    };
-    let csv = write("bench.csv", to_csv(&rows));
-    let seeds_csv = (opts.seeds > 1)
-        .then(|| write(SEEDS_CSV, seeds_to_csv(&rows, &seed_errors)))
-        .flatten();
+    // A file that cannot be written (a full disk, a folder in its place)
+    // does not lose the measurements: they are still printed.
+    let (csv, seeds_csv, mut unwritten) = write_tables(opts, &rows, &seed_errors);
+    unwritten.append(&mut unplotted);
     // Rows come in the order of the runs, so those after them are the
     // ones a stop left unfinished.
     let unfinished = run_names(opts, &labels).split_off(rows.len());
@@ -148,6 +146,34 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
         round_seconds,
         seed_errors,
     })
+}
+
+/// Writes `bench.csv` of `rows` into the bench's folder, and beside it
+/// `bench_seeds.csv` of their `seeds` where the runs are rendered at
+/// several; each whole or not at all (a temporary file renamed), so that
+/// the one an earlier call wrote stays until the new one is complete.
+/// Returns the paths written and why each file not written was not.
+fn write_tables(
+    opts: &BenchOptions,
+    rows: &[BenchRow],
+    seeds: &[Vec<SeedError>],
+) -> (Option<PathBuf>, Option<PathBuf>, Vec<String>) {
+    let mut unwritten = Vec::new();
+    let mut write = |name: &str, text: String| {
+        let path = opts.out.join(name);
+        match crate::film::write_atomically(&path, text.as_bytes()) {
+            Ok(()) => Some(path),
+            Err(e) => {
+                unwritten.push(format!("cannot write {e}"));
+                None
+            }
+        }
+    };
+    let csv = write("bench.csv", to_csv(rows));
+    let seeds_csv = (opts.seeds > 1)
+        .then(|| write(SEEDS_CSV, seeds_to_csv(rows, seeds)))
+        .flatten();
+    (csv, seeds_csv, unwritten)
 }
 
 /// `radcache bench --replot`: reads `dir/bench.csv` that an earlier bench
@@ -476,7 +502,7 @@ fn bench_scene(
         &mut Vec<Vec<f64>>,
         &mut Vec<Vec<SeedError>>,
     ),
-    after_run: &mut dyn FnMut(&BenchRow),
+    after_run: &mut dyn FnMut(&BenchRow, &[SeedError]),
 ) -> Result<()> {
     check_stop(opts)?;
     let ref_dir = opts.out.join("reference").join(scene.label);
@@ -504,20 +530,21 @@ fn bench_scene(
             // nothing of it is pushed, so `times` stays beside `rows`.
             let at_seeds = more_seeds(opts, scene, &run, &mut row)?;
             times.push(vec![RunTime::of(&row)]);
-            seed_errors.push(at_seeds);
             if opts.repeat <= 1 {
-                after_run(&row);
+                after_run(&row, &at_seeds);
             }
+            seed_errors.push(at_seeds);
             rows.push(row);
         }
         Ok(())
     };
     let done = (0..opts.repeat.max(1)).try_for_each(|r| round(r, &mut times));
-    for (row, times) in rows[first..].iter_mut().zip(&times) {
+    let finished = rows[first..].iter_mut().zip(&seed_errors[first..]);
+    for ((row, seeds), times) in finished.zip(&times) {
         RunTime::median_into(times, row);
         rounds.push(times.iter().map(|t| t.seconds).collect());
         if opts.repeat > 1 {
-            after_run(row);
+            after_run(row, seeds);
         }
     }
     done
