@@ -522,13 +522,36 @@ fn temp_path(path: &Path) -> PathBuf {
 /// render into the same folder) are left alone; where liveness cannot be
 /// asked (no `/proc`), every one is. Returns how many went.
 pub fn remove_stale_temporaries(dir: &Path) -> usize {
+    remove_stale(dir, temporary_owner)
+}
+
+/// Removes from `dir` the temporary files that [`write_atomically`] left
+/// of `files` (`.NAME.tmp-PID-N`, NAME one of `files`) in processes that
+/// no longer run, as [`remove_stale_temporaries`] does of frames: those
+/// of a bench killed while it wrote `bench.csv`. Returns how many went.
+pub fn remove_stale_temporaries_of(dir: &Path, files: &[&str]) -> usize {
+    remove_stale(dir, |name| {
+        (files.iter()).find_map(|file| written_temporary_owner(name, file))
+    })
+}
+
+/// The process id in `name` where it is [`temp_path`]'s name of `file`
+/// (`.FILE.tmp-PID-N`); `None` otherwise.
+fn written_temporary_owner(name: &str, file: &str) -> Option<u32> {
+    let tail = name.strip_prefix('.')?.strip_prefix(file)?;
+    pid_and_count(tail.strip_prefix(".tmp-")?)
+}
+
+/// Removes the files of `dir` whose names `owner` gives a process id of
+/// a process that no longer runs; returns how many went.
+fn remove_stale(dir: &Path, owner: impl Fn(&str) -> Option<u32>) -> usize {
     let Ok(entries) = fs::read_dir(dir) else {
         return 0;
     };
     let mut removed = 0;
     for entry in entries.flatten() {
         let name = entry.file_name();
-        let Some(pid) = name.to_str().and_then(temporary_owner) else {
+        let Some(pid) = name.to_str().and_then(&owner) else {
             continue;
         };
         let running = pid == std::process::id() || process_may_run(pid);
@@ -550,16 +573,20 @@ fn temporary_owner(name: &str) -> Option<u32> {
     if !digits.bytes().all(|b| b.is_ascii_digit()) {
         return None;
     }
-    let pid = if let Some(tail) = rest
+    match rest
         .strip_prefix(".png.tmp-")
         .or_else(|| rest.strip_prefix(".exr.tmp-"))
     {
-        let (pid, n) = tail.split_once('-')?;
-        n.parse::<u64>().ok()?;
-        pid
-    } else {
-        rest.strip_prefix(".exr.restore-")?
-    };
+        Some(tail) => pid_and_count(tail),
+        None => rest.strip_prefix(".exr.restore-")?.parse().ok(),
+    }
+}
+
+/// The process id of [`temp_path`]'s `PID-N` ending of a temporary
+/// file's name.
+fn pid_and_count(tail: &str) -> Option<u32> {
+    let (pid, n) = tail.split_once('-')?;
+    n.parse::<u64>().ok()?;
     pid.parse().ok()
 }
 
@@ -600,6 +627,37 @@ mod tests {
             fs::write(dir.path().join(name), b"x").unwrap();
         }
         assert_eq!(remove_stale_temporaries(dir.path()), stale.len());
+        for name in &stale {
+            assert!(!dir.path().join(name).exists(), "{name} stayed");
+        }
+        for name in &kept {
+            assert!(dir.path().join(name).exists(), "{name} went");
+        }
+    }
+
+    /// The temporaries of named files left by a process that no longer
+    /// runs go; a running process's, other names' and the files stay.
+    #[test]
+    fn stale_temporaries_of_named_files_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        let gone = 4_194_304 + 17;
+        let me = std::process::id();
+        let stale = [
+            format!(".bench.csv.tmp-{gone}-0"),
+            format!(".bench_seeds.csv.tmp-{gone}-3"),
+        ];
+        let kept = [
+            format!(".bench.csv.tmp-{me}-1"),
+            format!(".other.csv.tmp-{gone}-0"),
+            format!(".bench.csv.tmp-{gone}"),
+            format!(".bench.csvx.tmp-{gone}-0"),
+            "bench.csv".to_string(),
+        ];
+        for name in stale.iter().chain(&kept) {
+            fs::write(dir.path().join(name), b"x").unwrap();
+        }
+        let files = ["bench.csv", "bench_seeds.csv"];
+        assert_eq!(remove_stale_temporaries_of(dir.path(), &files), stale.len());
         for name in &stale {
             assert!(!dir.path().join(name).exists(), "{name} stayed");
         }

@@ -332,6 +332,8 @@ fn check_bench(opts: &BenchOptions) -> Result<Vec<String>> {
 /// all. A folder in a file's place is left, to fail when written.
 fn remove_earlier_outputs(out: &Path, labels: &[String]) -> Result<()> {
     let charts = labels.iter().flat_map(|l| chart_paths(out, l));
+    // Also the half-written CSVs of a bench killed while it wrote them.
+    crate::film::remove_stale_temporaries_of(out, &["bench.csv", SEEDS_CSV]);
     let csvs = ["bench.csv", SEEDS_CSV].map(|name| out.join(name));
     for path in csvs.into_iter().chain(charts) {
         let is_dir = std::fs::symlink_metadata(&path).is_ok_and(|m| m.is_dir());
