@@ -525,7 +525,7 @@ pub fn remove_stale_temporaries(dir: &Path) -> usize {
     remove_stale(dir, temporary_owner)
 }
 
-/// Removes from `dir` the temporary files that [`write_atomically`] left
+/// Removes from `dir` the temporary files that `write_atomically` left
 /// of `files` (`.NAME.tmp-PID-N`, NAME one of `files`) in processes that
 /// no longer run, as [`remove_stale_temporaries`] does of frames: those
 /// of a bench killed while it wrote `bench.csv`. Returns how many went.
