@@ -96,13 +96,12 @@ pub fn run_with(opts: &BenchOptions, after_run: &mut dyn FnMut(&BenchRow)) -> Re
     let mut seed_errors = Vec::new();
     let mut charts = Vec::new();
     let mut unplotted = Vec::new();
-    let mut finished: (Vec<BenchRow>, Vec<Vec<SeedError>>) = Default::default();
-    let mut on_row = |row: &BenchRow, seeds: &[SeedError]| {
-        finished.0.push(row.clone());
-        finished.1.push(seeds.to_vec());
+    let mut on_row = |finished: &[BenchRow], seeds: &[Vec<SeedError>]| {
         // A file not written here is said by the last write, at the end.
-        let _ = write_tables(opts, &finished.0, &finished.1);
-        after_run(row);
+        let _ = write_tables(opts, finished, seeds);
+        if let Some(row) = finished.last() {
+            after_run(row);
+        }
     };
     for (source, label) in opts.scenes.iter().zip(&labels) {
         let scene = BenchScene {
@@ -486,6 +485,10 @@ pub(super) struct BenchScene<'a> {
     pub scene: Scene,
 }
 
+/// What [`bench_scene`] calls as each row is finished: with the rows
+/// finished so far, the new one last, and their seeds' errors.
+type RowsFinished<'a> = dyn FnMut(&[BenchRow], &[Vec<SeedError>]) + 'a;
+
 /// Benches `scene`: its reference, then its runs, each row pushed onto
 /// `rows` (with its rounds' seconds onto `rounds`) as its run finishes;
 /// [`Stopped`] where [`BenchOptions::stop`] stopped it. With several
@@ -494,7 +497,9 @@ pub(super) struct BenchScene<'a> {
 /// rounds done) are finished once the rounds are, or a stop ends them.
 /// With several seeds ([`BenchOptions::seeds`]) the first round renders
 /// each run at every seed, its row the means of their errors
-/// ([`more_seeds`]), each seed's pushed onto `seed_errors`.
+/// ([`more_seeds`]), each seed's pushed onto `seed_errors`. As each row
+/// is finished, `after_run` is given the rows finished so far (every
+/// scene's).
 fn bench_scene(
     opts: &BenchOptions,
     scene: &BenchScene,
@@ -504,7 +509,7 @@ fn bench_scene(
         &mut Vec<Vec<f64>>,
         &mut Vec<Vec<SeedError>>,
     ),
-    after_run: &mut dyn FnMut(&BenchRow, &[SeedError]),
+    after_run: &mut RowsFinished,
 ) -> Result<()> {
     check_stop(opts)?;
     let ref_dir = opts.out.join("reference").join(scene.label);
@@ -532,21 +537,20 @@ fn bench_scene(
             // nothing of it is pushed, so `times` stays beside `rows`.
             let at_seeds = more_seeds(opts, scene, &run, &mut row)?;
             times.push(vec![RunTime::of(&row)]);
-            if opts.repeat <= 1 {
-                after_run(&row, &at_seeds);
-            }
             seed_errors.push(at_seeds);
             rows.push(row);
+            if opts.repeat <= 1 {
+                after_run(rows, seed_errors);
+            }
         }
         Ok(())
     };
     let done = (0..opts.repeat.max(1)).try_for_each(|r| round(r, &mut times));
-    let finished = rows[first..].iter_mut().zip(&seed_errors[first..]);
-    for ((row, seeds), times) in finished.zip(&times) {
-        RunTime::median_into(times, row);
+    for (i, times) in times.iter().enumerate() {
+        RunTime::median_into(times, &mut rows[first + i]);
         rounds.push(times.iter().map(|t| t.seconds).collect());
         if opts.repeat > 1 {
-            after_run(row, seeds);
+            after_run(&rows[..=first + i], &seed_errors[..=first + i]);
         }
     }
     done
