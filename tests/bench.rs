@@ -53,6 +53,17 @@ fn tiny_bench(out: &std::path::Path, methods: &[&str]) -> BenchOptions {
     }
 }
 
+/// `radcache bench ARGS --out DIR`, run to its end.
+fn bench_cli(dir: &std::path::Path, args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
+        .arg("bench")
+        .args(args)
+        .arg("--out")
+        .arg(dir)
+        .output()
+        .unwrap()
+}
+
 #[test]
 fn csv_has_header_and_one_line_per_run() {
     let rows = vec![
@@ -165,14 +176,7 @@ fn replot_draws_the_charts_of_a_csv_again() {
         row("ic", "default", 2.0, 0.1),
     ];
     std::fs::write(dir.path().join("bench.csv"), to_csv(&rows)).unwrap();
-    let replot = |extra: &[&str]| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
-            .args(["bench", "--replot", "--out"])
-            .arg(dir.path())
-            .args(extra)
-            .output()
-            .unwrap()
-    };
+    let replot = |extra: &[&str]| bench_cli(dir.path(), &[&["--replot"], extra].concat());
     let out = replot(&[]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
@@ -752,23 +756,9 @@ fn a_run_at_several_seeds_reports_their_mean_error() {
 #[test]
 fn bench_seeds_flag_prints_the_errors_at_each_seed() {
     let dir = tempfile::tempdir().unwrap();
-    let bench = |extra: &[&str]| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
-            .args([
-                "bench",
-                "--size",
-                "8x8",
-                "--frames",
-                "0..2",
-                "--reference-spp",
-                "2",
-            ])
-            .args(["--methods", "path:spp=1", "-q", "--out"])
-            .arg(dir.path())
-            .args(extra)
-            .output()
-            .unwrap()
-    };
+    let tiny = ["--size", "8x8", "--frames", "0..2", "--reference-spp", "2"];
+    let tiny = [&tiny[..], &["--methods", "path:spp=1", "-q"]].concat();
+    let bench = |extra: &[&str]| bench_cli(dir.path(), &[&tiny[..], extra].concat());
     let out = bench(&["--seeds", "2"]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
@@ -808,14 +798,7 @@ fn bench_seeds_flag_prints_the_errors_at_each_seed() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--seeds"));
     // `--replot` renders nothing, so it takes no seeds (its other flags
     // alone are accepted: the bench above wrote the CSV).
-    let replot = |extra: &[&str]| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_radcache"))
-            .args(["bench", "--replot", "-q", "--out"])
-            .arg(dir.path())
-            .args(extra)
-            .output()
-            .unwrap()
-    };
+    let replot = |extra: &[&str]| bench_cli(dir.path(), &[&["--replot", "-q"], extra].concat());
     // `--replot` reads the seeds back: the same lines, the same bars.
     std::fs::remove_file(&chart).unwrap();
     let out = replot(&[]);
@@ -826,6 +809,19 @@ fn bench_seeds_flag_prints_the_errors_at_each_seed() {
     assert!(std::fs::read_to_string(&chart)
         .unwrap()
         .contains("its bar: their range"));
+    // A seeds file that does not read stops the replot, naming it, its
+    // line and the way out.
+    let text = std::fs::read_to_string(&seeds_csv).unwrap();
+    std::fs::write(&seeds_csv, text.replacen(",0,", ",zero,", 1)).unwrap();
+    let out = replot(&[]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("bench_seeds.csv")
+            && stderr.contains("line 2: seed is not a whole number: 'zero'")
+            && stderr.contains("move it away"),
+        "{stderr}"
+    );
     let out = replot(&["--seeds", "2"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot be used with"));

@@ -238,7 +238,12 @@ pub fn replot(dir: &Path) -> Result<BenchReport> {
 fn read_seed_errors(dir: &Path, rows: &[BenchRow]) -> Result<Vec<Vec<SeedError>>> {
     let path = dir.join(SEEDS_CSV);
     match std::fs::read_to_string(&path) {
-        Ok(text) => seeds_from_csv(&text, rows).with_context(|| format!("{}", path.display())),
+        Ok(text) => seeds_from_csv(&text, rows).with_context(|| {
+            format!(
+                "{} (move it away to draw the charts without the seeds' bars)",
+                path.display()
+            )
+        }),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(vec![Vec::new(); rows.len()]),
         Err(e) => Err(e).with_context(|| format!("cannot read {}", path.display())),
     }
@@ -325,10 +330,10 @@ fn check_bench(opts: &BenchOptions) -> Result<Vec<String>> {
 
 /// Removes the `bench.csv` and `bench_seeds.csv` in `out`, and the charts
 /// of the scenes `labels`, that an earlier bench wrote: beside this
-/// bench's runs they
-/// would describe runs it did not make, if it is stopped before writing
-/// its own (a second Ctrl-C), or, for a scene it finishes no run of, at
-/// all. A folder in a file's place is left, to fail when written.
+/// bench's runs they would describe runs it did not make, if it is
+/// stopped before writing its own (a second Ctrl-C), or, for a scene it
+/// finishes no run of, at all. A folder in a file's place is left, to
+/// fail when written.
 fn remove_earlier_outputs(out: &Path, labels: &[String]) -> Result<()> {
     let charts = labels.iter().flat_map(|l| chart_paths(out, l));
     // Also the half-written CSVs of a bench killed while it wrote them.

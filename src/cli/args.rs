@@ -423,9 +423,9 @@ pub struct BenchArgs {
     #[arg(long)]
     pub no_memory_check: bool,
     /// Render nothing: read --out's bench.csv (and bench_seeds.csv, if
-    /// any), which an earlier bench wrote, print its tables and draw its charts into --out again (after
-    /// the CSV was edited or merged, or the charts' drawing changed). Goes
-    /// with --out and --quiet only.
+    /// any), which an earlier bench wrote, print its tables and draw its
+    /// charts into --out again (after the CSV was edited or merged, or the
+    /// charts' drawing changed). Goes with --out and --quiet only.
     #[arg(long, conflicts_with_all = [
         "scenes", "methods", "frames", "size", "reference_spp", "fps", "seed",
         "same_pattern", "estimate_error", "store_size", "backends", "repeat",
